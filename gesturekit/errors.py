@@ -1,0 +1,61 @@
+"""The one exception family of gesturekit, and its warning category.
+
+Every error a user can cause (a bad file, an impossible setting) is raised as a
+subclass of :class:`GestureKitError` with a message that names the file (when
+there is one) and the problem, so the command line and the app can show it as
+a plain message instead of a traceback.
+"""
+from __future__ import annotations
+
+import os
+
+__all__ = [
+    "GestureKitError",
+    "InputFileError",
+    "AudioFileError",
+    "MotionFileError",
+    "DatabaseError",
+    "ConfigError",
+    "GestureKitWarning",
+]
+
+
+class GestureKitError(Exception):
+    """Base class of every error gesturekit raises on purpose.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, in words a user can act on.
+    path : str or os.PathLike, optional
+        The file concerned; it is put in front of the message.
+    """
+
+    def __init__(self, message: str, *, path: str | os.PathLike | None = None):
+        self.path = None if path is None else os.fspath(path)
+        self.problem = message
+        super().__init__(f"{self.path}: {message}" if self.path is not None else message)
+
+
+class InputFileError(GestureKitError):
+    """An input file cannot be read or holds data we cannot use."""
+
+
+class AudioFileError(InputFileError):
+    """An audio file is missing, empty, not audio, truncated or too short."""
+
+
+class MotionFileError(InputFileError):
+    """A motion file (BVH, joint positions, npz) is malformed or incomplete."""
+
+
+class DatabaseError(GestureKitError):
+    """A matching database is missing, of another format version, or would be overwritten."""
+
+
+class ConfigError(GestureKitError):
+    """A parameter or combination of parameters is invalid."""
+
+
+class GestureKitWarning(UserWarning):
+    """Something was adjusted (trimmed, relaxed, resampled) and the user should know."""

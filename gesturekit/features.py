@@ -1,0 +1,292 @@
+"""Audio and pose features of the matching, declared once.
+
+The feature layout (:class:`FeatureLayout`) is the single place that says how
+many values each feature has and where they sit; search, database, refiner,
+app and tests all read it from here.
+
+Audio (per frame, 14 values, ``m_t``): 13 MFCCs and the log mean energy of a
+Hann window centred on frame ``t``, i.e. at ``t / 15`` s. The centre of every
+frame is computed from ``t`` directly (rounded to the nearest sample), never by
+adding up a rounded hop, so the grid does not drift over hours of audio.
+
+Audio feature (``f_t``, 112): ``[m_t, m_{t+2}, ..., m_{t+14}]``, one second of look-ahead.
+Pose feature (``p_t``, 96): positions of the 8 feature joints at ``t, t+2, t+4, t+6``.
+cGAN audio (28): ``m_t`` and its first time derivative (per frame).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .errors import ConfigError
+from .motion import AUDIO_SR
+from .skeleton import FPS, N_JOINTS, POSE_FEATURE_INDICES, POSE_FEATURE_JOINTS
+
+__all__ = [
+    "FeatureLayout",
+    "LAYOUT",
+    "n_audio_frames",
+    "frame_centres",
+    "audio_frame_features",
+    "stack_audio_features",
+    "pose_features",
+    "cgan_audio_features",
+    "valid_starts",
+    "ZScore",
+]
+
+
+@dataclass(frozen=True)
+class FeatureLayout:
+    """Sizes and positions of every feature block.
+
+    The search feature of a frame is ``[audio (112) | pose (96)]``; its named
+    slices are :attr:`slices`. Changing any field changes :meth:`signature`,
+    which databases and refiners store and compare.
+    """
+
+    sr: int = AUDIO_SR
+    fps: int = FPS
+    n_mfcc: int = 13
+    n_mels: int = 40
+    n_fft: int = 2048
+    audio_offsets: tuple[int, ...] = (0, 2, 4, 6, 8, 10, 12, 14)
+    pose_offsets: tuple[int, ...] = (0, 2, 4, 6)
+    pose_joints: tuple[str, ...] = POSE_FEATURE_JOINTS
+    n_joints: int = N_JOINTS
+
+    @property
+    def frame_dim(self) -> int:
+        """Values of ``m_t``: MFCCs + log mean energy (14)."""
+        return self.n_mfcc + 1
+
+    @property
+    def audio_dim(self) -> int:
+        """Values of ``f_t`` (112)."""
+        return self.frame_dim * len(self.audio_offsets)
+
+    @property
+    def pose_dim(self) -> int:
+        """Values of ``p_t`` (96)."""
+        return len(self.pose_joints) * 3 * len(self.pose_offsets)
+
+    @property
+    def motion_dim(self) -> int:
+        """Values of ``g_t`` (165)."""
+        return self.n_joints * 3
+
+    @property
+    def cgan_audio_dim(self) -> int:
+        """Values of the cGAN's audio input per frame (28)."""
+        return 2 * self.frame_dim
+
+    @property
+    def audio_lookahead(self) -> int:
+        """Frames after ``t`` that ``f_t`` reads (14)."""
+        return max(self.audio_offsets)
+
+    @property
+    def pose_lookahead(self) -> int:
+        """Frames after ``t`` that ``p_t`` reads (6)."""
+        return max(self.pose_offsets)
+
+    @property
+    def slices(self) -> dict[str, slice]:
+        """Named slices of the search feature ``[audio | pose]`` and of ``m_t``."""
+        a, p = self.audio_dim, self.pose_dim
+        return {
+            "audio": slice(0, a),
+            "pose": slice(a, a + p),
+            "mfcc": slice(0, self.n_mfcc),
+            "log_energy": slice(self.n_mfcc, self.n_mfcc + 1),
+        }
+
+    def signature(self) -> dict:
+        """A JSON-able description; two layouts are compatible iff their signatures are equal."""
+        d = asdict(self)
+        d["audio_offsets"] = list(self.audio_offsets)
+        d["pose_offsets"] = list(self.pose_offsets)
+        d["pose_joints"] = list(self.pose_joints)
+        return d
+
+
+LAYOUT = FeatureLayout()
+assert (LAYOUT.frame_dim, LAYOUT.audio_dim, LAYOUT.pose_dim, LAYOUT.motion_dim, LAYOUT.cgan_audio_dim) == (
+    14, 112, 96, 165, 28,
+)
+
+
+def n_audio_frames(n_samples: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> int:
+    """Whole frames at ``fps`` in ``n_samples`` of audio at ``sr`` Hz: ``floor(n_samples * fps / sr)``."""
+    return (int(n_samples) * int(fps)) // int(sr)
+
+
+def frame_centres(n_frames: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> np.ndarray:
+    """Sample index of the centre of each frame, shape (n_frames,), int64.
+
+    Frame ``t`` is centred at ``t / fps`` seconds, i.e. sample ``t * sr / fps``
+    rounded half up, computed exactly in integers for every ``t``.
+    """
+    t = np.arange(n_frames, dtype=np.int64)
+    return (2 * t * sr + fps) // (2 * fps)
+
+
+def audio_frame_features(
+    audio: np.ndarray,
+    *,
+    n_frames: int | None = None,
+    layout: FeatureLayout = LAYOUT,
+    chunk_frames: int = 4096,
+) -> np.ndarray:
+    """Per-frame audio features ``m_t``: 13 MFCCs and the log mean energy.
+
+    Parameters
+    ----------
+    audio : np.ndarray, shape (samples,)
+        Mono audio at ``layout.sr`` Hz (float, nominally in [-1, 1]).
+    n_frames : int, optional
+        Frames to compute; default :func:`n_audio_frames` of the audio.
+        Windows reaching past either end of the audio see zeros.
+    layout : FeatureLayout
+    chunk_frames : int
+        Frames per chunk, bounding memory (a chunk holds ``chunk_frames * n_fft`` floats).
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, 14), float32
+        Columns 0..12 are MFCCs (DCT-II, orthonormal, of the log-power mel
+        spectrum in dB), column 13 is ``log(mean(w * x**2) / mean(w) + 1e-10)``
+        over the Hann window ``w`` of the frame.
+    """
+    import librosa  # heavy import kept local: the layout is usable without it
+
+    audio = np.asarray(audio, dtype=np.float32)
+    if audio.ndim != 1:
+        raise ConfigError(f"audio must be mono, shape (samples,), got {audio.shape}")
+    if n_frames is None:
+        n_frames = n_audio_frames(len(audio), sr=layout.sr, fps=layout.fps)
+    n_fft = layout.n_fft
+    half = n_fft // 2
+    padded = np.concatenate([np.zeros(half, np.float32), audio, np.zeros(n_fft, np.float32)])
+    centres = frame_centres(n_frames, sr=layout.sr, fps=layout.fps)
+    if n_frames and centres[-1] + half > len(padded) - half:
+        # asked for frames past the audio's end: pad further with silence
+        padded = np.concatenate([padded, np.zeros(centres[-1] + half + n_fft - len(padded), np.float32)])
+    window = np.hanning(n_fft + 1)[:-1].astype(np.float32)  # periodic Hann
+    mel = librosa.filters.mel(sr=layout.sr, n_fft=n_fft, n_mels=layout.n_mels, fmin=0.0, fmax=layout.sr / 2)
+    out = np.empty((n_frames, layout.frame_dim), dtype=np.float32)
+    offsets = np.arange(n_fft, dtype=np.int64)
+    for a in range(0, n_frames, chunk_frames):
+        b = min(n_frames, a + chunk_frames)
+        # centre c in the audio is index c + half in `padded`; the window starts half before it
+        frames = padded[centres[a:b, None] + offsets[None, :]]
+        frames_w = frames * window
+        power = np.abs(np.fft.rfft(frames_w, axis=1)) ** 2  # (chunk, n_fft//2+1)
+        mel_db = librosa.power_to_db(power @ mel.T, ref=1.0, amin=1e-10, top_db=None)
+        out[a:b, : layout.n_mfcc] = librosa.feature.mfcc(S=mel_db.T, n_mfcc=layout.n_mfcc).T
+        energy = (frames**2 * window).sum(axis=1) / window.sum()
+        out[a:b, layout.n_mfcc] = np.log(energy + 1e-10)
+    return out
+
+
+def _stack(x: np.ndarray, offsets: tuple[int, ...]) -> np.ndarray:
+    """``[x_{t+o} for o in offsets]`` per frame, with the last frame repeated past the end."""
+    n = x.shape[0]
+    idx = np.minimum(np.arange(n)[:, None] + np.asarray(offsets)[None, :], n - 1)
+    return x[idx].reshape(n, -1)
+
+
+def stack_audio_features(m: np.ndarray, *, layout: FeatureLayout = LAYOUT) -> np.ndarray:
+    """Audio features ``f_t = [m_t, m_{t+2}, ..., m_{t+14}]``.
+
+    Parameters
+    ----------
+    m : np.ndarray, shape (frames, 14)
+        Per-frame audio features from :func:`audio_frame_features`.
+
+    Returns
+    -------
+    np.ndarray, shape (frames, 112), float32
+        Past the last frame the last ``m`` is repeated (padding); see :func:`valid_starts`.
+    """
+    if m.ndim != 2 or m.shape[1] != layout.frame_dim:
+        raise ConfigError(f"per-frame audio features must have shape (frames, {layout.frame_dim}), got {m.shape}")
+    return _stack(m, layout.audio_offsets).astype(np.float32, copy=False)
+
+
+def pose_features(positions: np.ndarray, *, layout: FeatureLayout = LAYOUT) -> np.ndarray:
+    """Pose features ``p_t``: the 8 feature joints at ``t, t+2, t+4, t+6``.
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (frames, 55, 3)
+        Pelvis-relative positions, metres, at 15 fps.
+
+    Returns
+    -------
+    np.ndarray, shape (frames, 96), float32
+        Ordered offset-major: ``[offset][joint][xyz]``. Past the end the last frame repeats.
+    """
+    if positions.ndim != 3 or positions.shape[1:] != (layout.n_joints, 3):
+        raise ConfigError(f"positions must have shape (frames, {layout.n_joints}, 3), got {positions.shape}")
+    joints = positions[:, POSE_FEATURE_INDICES].reshape(positions.shape[0], -1)
+    return _stack(joints, layout.pose_offsets).astype(np.float32, copy=False)
+
+
+def cgan_audio_features(m: np.ndarray) -> np.ndarray:
+    """The cGAN's audio input: ``m_t`` and its time derivative (central differences, per frame).
+
+    Parameters
+    ----------
+    m : np.ndarray, shape (frames, 14)
+
+    Returns
+    -------
+    np.ndarray, shape (frames, 28), float32
+    """
+    if m.shape[0] < 2:
+        d = np.zeros_like(m)
+    else:
+        d = np.gradient(m, axis=0)
+    return np.concatenate([m, d], axis=1).astype(np.float32)
+
+
+def valid_starts(n_frames: int, *, layout: FeatureLayout = LAYOUT) -> np.ndarray:
+    """Frames whose audio and pose features need no padding, shape (n_frames,), bool.
+
+    Frame ``t`` is valid iff ``t + max(lookahead) < n_frames``; only valid frames
+    may start a segment.
+    """
+    look = max(layout.audio_lookahead, layout.pose_lookahead)
+    return np.arange(n_frames) + look < n_frames
+
+
+@dataclass
+class ZScore:
+    """Per-dimension z-scoring statistics.
+
+    Parameters
+    ----------
+    mean, std : np.ndarray, shape (dims,), float32
+        ``std`` is floored at ``1e-6`` so constant dimensions map to 0.
+    """
+
+    mean: np.ndarray
+    std: np.ndarray = field()
+
+    @classmethod
+    def fit(cls, x: np.ndarray, *, floor: float = 1e-6) -> "ZScore":
+        """Statistics of ``x`` of shape (..., dims), accumulated in float64."""
+        x2 = np.asarray(x).reshape(-1, np.asarray(x).shape[-1])
+        mean = x2.mean(axis=0, dtype=np.float64)
+        std = x2.std(axis=0, dtype=np.float64)
+        return cls(mean.astype(np.float32), np.maximum(std, floor).astype(np.float32))
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """``(x - mean) / std``, float32, same shape as ``x``."""
+        return ((np.asarray(x, dtype=np.float32) - self.mean) / self.std).astype(np.float32, copy=False)
+
+    def invert(self, z: np.ndarray) -> np.ndarray:
+        """``z * std + mean``, float32."""
+        return (np.asarray(z, dtype=np.float32) * self.std + self.mean).astype(np.float32, copy=False)
