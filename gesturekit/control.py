@@ -1,0 +1,334 @@
+"""Control attributes of database frames, their thresholds, and time-varying control tracks.
+
+A *control* restricts which database frames the search may use while it is
+active. Each frame of the database has a few scalar *attributes* computed from
+its pose (wrist heights, hand speeds, hand distances from the body axis,
+left/right asymmetry). A *constraint* compares one attribute with a percentile
+threshold of the database (the authors used the 15th and 85th percentiles: "low"
+is below the 15th, "high" above the 85th). A :class:`ControlTrack` says which
+constraints hold over which stretches of the output, e.g.
+``"0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric"``.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ConfigError, InputFileError
+from .skeleton import FPS, joint_index
+
+__all__ = [
+    "ATTRIBUTE_NAMES",
+    "CONSTRAINTS",
+    "frame_attributes",
+    "Segment",
+    "ControlTrack",
+    "parse_control",
+    "load_control_file",
+    "constraint_mask",
+    "step_masks",
+]
+
+#: Per-frame attributes, in the order of the database's ``attributes`` array (units in brackets).
+ATTRIBUTE_NAMES: tuple[str, ...] = (
+    "left_hand_height",   # left wrist height above the pelvis [m]
+    "right_hand_height",  # right wrist height above the pelvis [m]
+    "left_hand_speed",    # left wrist speed [m/s]
+    "right_hand_speed",   # right wrist speed [m/s]
+    "hand_speed",         # mean of both wrist speeds [m/s]
+    "left_hand_width",    # horizontal distance of the left wrist from the body's vertical axis [m]
+    "right_hand_width",   # same, right wrist [m]
+    "hand_width",         # mean of both widths [m]
+    "asymmetry",          # distance between the left wrist and the mirrored right wrist [m]
+)
+
+#: Constraint name -> (attribute(s) it tests, {value: "low"|"high"}). "low" means below the low
+#: percentile of the attribute, "high" above the high percentile; several attributes must all hold.
+CONSTRAINTS: dict[str, tuple[tuple[str, ...], dict[str, str]]] = {
+    "left_hand": (("left_hand_height",), {"low": "low", "high": "high"}),
+    "right_hand": (("right_hand_height",), {"low": "low", "high": "high"}),
+    "both_hands": (("left_hand_height", "right_hand_height"), {"low": "low", "high": "high"}),
+    "speed": (("hand_speed",), {"slow": "low", "fast": "high"}),
+    "left_speed": (("left_hand_speed",), {"slow": "low", "fast": "high"}),
+    "right_speed": (("right_hand_speed",), {"slow": "low", "fast": "high"}),
+    "symmetry": (("asymmetry",), {"symmetric": "low", "asymmetric": "high"}),
+    "width": (("hand_width",), {"narrow": "low", "wide": "high"}),
+}
+
+
+def frame_attributes(positions: np.ndarray, *, fps: float = FPS) -> np.ndarray:
+    """Control attributes of every frame of one take.
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (frames, 55, 3)
+        Pelvis-relative positions in metres, Y up, character facing +Z, at ``fps``.
+    fps : float
+        Frame rate, frames per second (speeds are in m/s).
+
+    Returns
+    -------
+    np.ndarray, shape (frames, len(ATTRIBUTE_NAMES)), float32
+        Columns in the order of :data:`ATTRIBUTE_NAMES`. Speeds use central
+        differences inside the take (one-sided at its ends).
+    """
+    pos = np.asarray(positions, dtype=np.float64)
+    lw, rw = pos[:, joint_index("left_wrist")], pos[:, joint_index("right_wrist")]
+    axis = pos[:, joint_index("upper_chest")]
+    n = pos.shape[0]
+    if n >= 2:
+        lv = np.linalg.norm(np.gradient(lw, axis=0), axis=1) * fps
+        rv = np.linalg.norm(np.gradient(rw, axis=0), axis=1) * fps
+    else:
+        lv = rv = np.zeros(n)
+    lwid = np.hypot(lw[:, 0] - axis[:, 0], lw[:, 2] - axis[:, 2])
+    rwid = np.hypot(rw[:, 0] - axis[:, 0], rw[:, 2] - axis[:, 2])
+    # mirror the right wrist across the body's sagittal plane (x -> 2*axis_x - x)
+    mirrored = rw.copy()
+    mirrored[:, 0] = 2 * axis[:, 0] - rw[:, 0]
+    asym = np.linalg.norm(lw - mirrored, axis=1)
+    cols = [lw[:, 1], rw[:, 1], lv, rv, (lv + rv) / 2, lwid, rwid, (lwid + rwid) / 2, asym]
+    return np.stack(cols, axis=1).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One stretch of a control track.
+
+    Parameters
+    ----------
+    start_s, end_s : float
+        Time range in seconds of the output, ``start_s < end_s``.
+    constraints : tuple of (name, value)
+        E.g. ``(("left_hand", "low"), ("speed", "slow"))``; all must hold.
+    """
+
+    start_s: float
+    end_s: float
+    constraints: tuple[tuple[str, str], ...]
+
+    def __post_init__(self):
+        if not (np.isfinite(self.start_s) and np.isfinite(self.end_s)) or self.start_s < 0:
+            raise ConfigError(f"control segment times must be finite and >= 0, got {self.start_s}-{self.end_s}")
+        if not self.end_s > self.start_s:
+            raise ConfigError(f"control segment {self.start_s}-{self.end_s}: end must be after start")
+        if not self.constraints:
+            raise ConfigError(f"control segment {self.start_s}-{self.end_s} has no constraint")
+        # microsecond resolution, so text, CSV and JSON forms round-trip exactly
+        object.__setattr__(self, "start_s", round(float(self.start_s), 6))
+        object.__setattr__(self, "end_s", round(float(self.end_s), 6))
+        seen = set()
+        for name, value in self.constraints:
+            _check_constraint(name, value)
+            if name in seen:
+                raise ConfigError(f"control segment {self.start_s}-{self.end_s} sets {name!r} twice")
+            seen.add(name)
+
+    def label(self) -> str:
+        """Constraints as text, e.g. ``"left_hand=low+speed=slow"``."""
+        return "+".join(f"{n}={v}" for n, v in self.constraints)
+
+
+def _check_constraint(name: str, value: str) -> None:
+    if name not in CONSTRAINTS:
+        raise ConfigError(f"unknown control {name!r}; known controls: {', '.join(CONSTRAINTS)}")
+    values = CONSTRAINTS[name][1]
+    if value not in values:
+        raise ConfigError(f"control {name!r} takes {' or '.join(values)}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ControlTrack:
+    """Time-varying control: segments of the output with their constraints.
+
+    Frames outside every segment are unconstrained. Segments must not overlap
+    (a segment may set several constraints instead).
+    """
+
+    segments: tuple[Segment, ...] = field(default_factory=tuple)
+
+    def __post_init__(self):
+        segs = tuple(sorted(self.segments, key=lambda s: (s.start_s, s.end_s)))
+        for a, b in zip(segs, segs[1:]):
+            if b.start_s < a.end_s - 1e-9:
+                raise ConfigError(
+                    f"control segments {a.start_s:g}-{a.end_s:g} and {b.start_s:g}-{b.end_s:g} overlap; "
+                    "combine their constraints in one segment instead"
+                )
+        object.__setattr__(self, "segments", segs)
+
+    def __bool__(self) -> bool:
+        return bool(self.segments)
+
+    def frame_labels(self, n_frames: int, *, fps: float = FPS) -> list[tuple[tuple[str, str], ...]]:
+        """The constraints active at each output frame (frame t at time t/fps)."""
+        out: list[tuple[tuple[str, str], ...]] = [()] * n_frames
+        for seg in self.segments:
+            a = int(np.ceil(seg.start_s * fps - 1e-9))
+            b = int(np.ceil(seg.end_s * fps - 1e-9))
+            for t in range(max(a, 0), min(b, n_frames)):
+                out[t] = seg.constraints
+        return out
+
+    def to_text(self) -> str:
+        """The command-line form, e.g. ``"0-3:left_hand=low,3-6:speed=slow"``."""
+        return ",".join(f"{s.start_s:.15g}-{s.end_s:.15g}:{s.label()}" for s in self.segments)
+
+    def to_records(self) -> list[dict]:
+        """One dict per segment: start_s, end_s, constraint (text)."""
+        return [{"start_s": s.start_s, "end_s": s.end_s, "constraint": s.label()} for s in self.segments]
+
+    def to_csv(self) -> str:
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=["start_s", "end_s", "constraint"], lineterminator="\n")
+        w.writeheader()
+        for r in self.to_records():
+            w.writerow(r)
+        return buf.getvalue()
+
+    @classmethod
+    def from_records(cls, records, *, source: str = "control") -> "ControlTrack":
+        """From dicts/rows with start_s, end_s and constraint (``"a=b+c=d"``)."""
+        segs = []
+        for i, r in enumerate(records):
+            try:
+                start, end, text = float(r["start_s"]), float(r["end_s"]), str(r["constraint"])
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ConfigError(f"{source}: row {i + 1} needs start_s, end_s and constraint ({exc})") from None
+            segs.append(Segment(start, end, _parse_constraints(text)))
+        return cls(tuple(segs))
+
+
+_SEGMENT_RE = re.compile(r"^\s*([0-9.]+)\s*-\s*([0-9.]+)\s*:\s*(.+?)\s*$")
+
+
+def _parse_constraints(text: str) -> tuple[tuple[str, str], ...]:
+    out = []
+    for part in re.split(r"[+&]", text):
+        part = part.strip()
+        if not part:
+            continue
+        if "=" not in part:
+            raise ConfigError(f"control {part!r} must look like name=value, e.g. left_hand=high")
+        name, value = (s.strip() for s in part.split("=", 1))
+        _check_constraint(name, value)
+        out.append((name, value))
+    return tuple(out)
+
+
+def parse_control(text: str) -> ControlTrack:
+    """Parse ``"0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric"`` (seconds).
+
+    An empty string gives an empty (unconstrained) track.
+    """
+    if text is None or not text.strip():
+        return ControlTrack(())
+    segs = []
+    for chunk in text.split(","):
+        if not chunk.strip():
+            continue
+        m = _SEGMENT_RE.match(chunk)
+        if not m:
+            raise ConfigError(f"control segment {chunk.strip()!r} must look like START-END:name=value (seconds)")
+        segs.append(Segment(float(m.group(1)), float(m.group(2)), _parse_constraints(m.group(3))))
+    return ControlTrack(tuple(segs))
+
+
+def load_control_file(path: str | os.PathLike) -> ControlTrack:
+    """Read a control track from CSV (columns start_s, end_s, constraint) or JSON (a list of such objects)."""
+    p = os.fspath(path)
+    try:
+        with open(p, encoding="utf-8") as fh:
+            text = fh.read()
+    except OSError as exc:
+        raise InputFileError(f"cannot read control file ({exc.strerror})", path=p) from None
+    try:
+        if p.lower().endswith(".json"):
+            data = json.loads(text)
+            if isinstance(data, dict):
+                data = data.get("segments", [])
+            return ControlTrack.from_records(data, source=p)
+        rows = list(csv.DictReader(io.StringIO(text)))
+        return ControlTrack.from_records(rows, source=p)
+    except json.JSONDecodeError as exc:
+        raise InputFileError(f"not valid JSON ({exc.msg} at line {exc.lineno})", path=p) from None
+    except ConfigError as exc:
+        raise InputFileError(exc.problem, path=p) from None
+
+
+def constraint_mask(
+    attributes: np.ndarray,
+    constraints: tuple[tuple[str, str], ...],
+    thresholds: dict[str, tuple[float, float]],
+) -> np.ndarray:
+    """Frames of the database that satisfy all ``constraints``.
+
+    Parameters
+    ----------
+    attributes : np.ndarray, shape (..., len(ATTRIBUTE_NAMES))
+    constraints : tuple of (name, value)
+    thresholds : dict
+        Attribute name -> (low, high) threshold values (the database's percentiles).
+
+    Returns
+    -------
+    np.ndarray, shape (...), bool
+    """
+    mask = np.ones(attributes.shape[:-1], dtype=bool)
+    for name, value in constraints:
+        _check_constraint(name, value)
+        attrs, values = CONSTRAINTS[name]
+        side = values[value]
+        for a in attrs:
+            col = attributes[..., ATTRIBUTE_NAMES.index(a)]
+            low, high = thresholds[a]
+            mask &= (col < low) if side == "low" else (col > high)
+    return mask
+
+
+def step_masks(
+    track: ControlTrack,
+    attributes: np.ndarray,
+    thresholds: dict[str, tuple[float, float]],
+    *,
+    n_frames: int,
+    step: int,
+    fps: float = FPS,
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """Frame masks for the search, one per distinct constraint set, and each step's index into them.
+
+    Each search step uses the constraints active at its middle output frame.
+
+    Parameters
+    ----------
+    attributes : np.ndarray, shape (M, 64, n_attributes)
+    n_frames : int
+        Output frames; steps cover ``[i*step, min((i+1)*step, n_frames))``.
+
+    Returns
+    -------
+    masks : np.ndarray, shape (n_masks, M, 64), bool, or None when nothing is constrained
+    step_mask : np.ndarray, shape (n_steps,), int64
+        Index into ``masks`` per step, ``-1`` for an unconstrained step.
+    """
+    n_steps = -(-n_frames // step)
+    labels = track.frame_labels(n_frames, fps=fps)
+    keys: list[tuple] = []
+    idx = np.full(n_steps, -1, dtype=np.int64)
+    for i in range(n_steps):
+        a, b = i * step, min((i + 1) * step, n_frames)
+        c = labels[(a + b - 1) // 2]
+        if c:
+            if c not in keys:
+                keys.append(c)
+            idx[i] = keys.index(c)
+    if not keys:
+        return None, idx
+    masks = np.stack([constraint_mask(attributes, k, thresholds) for k in keys])
+    return masks, idx

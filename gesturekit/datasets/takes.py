@@ -1,0 +1,160 @@
+"""Finding takes in a folder and reading them, whatever their kind.
+
+A folder of takes is one of:
+
+- ``bvh``: ``NAME.bvh`` with speech ``NAME.wav`` (or .flac/.ogg/.mp3) beside it (ZEGGS, BEAT,
+  any BVH with a joint map);
+- ``positions``: ``NAME.npy|.npz|.txt`` joint positions (frames x joints x 3) with ``NAME.wav``,
+  read with a JSON joint map and a source frame rate;
+- ``habibie2021``: ``*.npz`` files with keys ``wav`` and ``body`` (several sequences each).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import ConfigError, InputFileError
+from ..motion import Take
+
+__all__ = ["AUDIO_EXTENSIONS", "TakeSource", "discover_takes", "iter_takes", "count_takes"]
+
+AUDIO_EXTENSIONS = (".wav", ".flac", ".ogg", ".mp3")
+_POSITION_EXTENSIONS = (".npy", ".npz", ".txt")
+KINDS = ("auto", "bvh", "positions", "habibie2021")
+
+
+@dataclass(frozen=True)
+class TakeSource:
+    """Files of one take (or, for ``habibie2021``, one file of several takes)."""
+
+    kind: str
+    motion: Path
+    audio: Path | None
+
+
+def _audio_for(path: Path) -> Path | None:
+    for ext in AUDIO_EXTENSIONS:
+        for cand in (path.with_suffix(ext), path.with_suffix(ext.upper())):
+            if cand.is_file():
+                return cand
+    return None
+
+
+def _is_habibie_npz(path: Path) -> bool:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return "wav" in z.files and "body" in z.files
+    except (OSError, ValueError):
+        return False
+
+
+def discover_takes(folder: str | os.PathLike, *, kind: str = "auto") -> list[TakeSource]:
+    """List the takes in ``folder`` (not recursive), sorted by name.
+
+    Parameters
+    ----------
+    folder : path
+    kind : {"auto", "bvh", "positions", "habibie2021"}
+        ``auto`` picks ``bvh`` if there is a BVH file, else ``habibie2021`` if an
+        npz holds ``wav`` and ``body``, else ``positions``.
+
+    Raises
+    ------
+    InputFileError
+        The folder does not exist, holds no takes, or a motion file has no audio beside it.
+    """
+    folder = Path(folder)
+    if kind not in KINDS:
+        raise ConfigError(f"unknown take kind {kind!r}; choose one of {', '.join(KINDS)}")
+    if not folder.is_dir():
+        raise InputFileError("no such folder", path=folder)
+    files = sorted(p for p in folder.iterdir() if p.is_file())
+    if kind == "auto":
+        if any(p.suffix.lower() == ".bvh" for p in files):
+            kind = "bvh"
+        elif any(p.suffix.lower() == ".npz" and _is_habibie_npz(p) for p in files):
+            kind = "habibie2021"
+        else:
+            kind = "positions"
+    if kind == "habibie2021":
+        out = [TakeSource(kind, p, None) for p in files if p.suffix.lower() == ".npz" and _is_habibie_npz(p)]
+    else:
+        exts = (".bvh",) if kind == "bvh" else _POSITION_EXTENSIONS
+        out = []
+        missing = []
+        for p in files:
+            if p.suffix.lower() in exts:
+                a = _audio_for(p)
+                if a is None:
+                    missing.append(p.name)
+                else:
+                    out.append(TakeSource(kind, p, a))
+        if missing:
+            raise InputFileError(
+                f"no speech file ({'/'.join(AUDIO_EXTENSIONS)}) with the same name beside: {', '.join(missing)}",
+                path=folder,
+            )
+    if not out:
+        raise InputFileError(f"no {kind} takes found in this folder", path=folder)
+    return out
+
+
+def count_takes(sources: list[TakeSource]) -> int:
+    """Number of takes the sources hold (an npz of the 2021 layout holds several)."""
+    n = 0
+    for s in sources:
+        if s.kind == "habibie2021":
+            with np.load(s.motion, allow_pickle=False) as z:
+                n += int(z["body"].shape[0]) if z["body"].ndim == 3 else 1
+        else:
+            n += 1
+    return n
+
+
+def iter_takes(
+    sources: list[TakeSource],
+    *,
+    joint_map=None,
+    fps_in: float | None = None,
+    units: str = "auto",
+) -> Iterator[Take]:
+    """Read the takes one at a time.
+
+    Parameters
+    ----------
+    sources : list of TakeSource
+        From :func:`discover_takes`.
+    joint_map : str, path or dict
+        Preset name (``"zeggs"``, ``"beat"``) or JSON joint map; required for ``positions``.
+    fps_in : float
+        Frame rate of joint-position files (they do not carry one).
+    units : {"auto", "cm", "m"}
+        Units of the motion files (``auto`` detects BVH units; position files default to metres).
+    """
+    from .audio import load_audio
+
+    for src in sources:
+        if src.kind == "bvh":
+            from .bvh import load_bvh_motion
+
+            motion = load_bvh_motion(src.motion, joint_map=joint_map or "zeggs", units=units)
+            audio = load_audio(src.audio)
+            yield Take(src.motion.stem, motion, audio, {"motion": str(src.motion), "audio": str(src.audio)})
+        elif src.kind == "positions":
+            from .positions import load_positions_motion
+
+            if joint_map is None or fps_in is None:
+                raise ConfigError("joint-position files need a JSON joint map (--joint-map) and their frame rate (--fps)")
+            motion = load_positions_motion(
+                src.motion, joint_map=joint_map, fps=fps_in, units="m" if units == "auto" else units
+            )
+            audio = load_audio(src.audio)
+            yield Take(src.motion.stem, motion, audio, {"motion": str(src.motion), "audio": str(src.audio)})
+        else:
+            from .habibie2021 import load_habibie2021
+
+            yield from load_habibie2021(src.motion, units="m" if units == "auto" else units)

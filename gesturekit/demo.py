@@ -1,0 +1,72 @@
+"""The embedded default: a matching database of the generated demo speaker."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Callable
+
+from .database import BuildConfig, MatchingDatabase
+from .errors import DatabaseError
+from .paths import default_database_path
+
+__all__ = ["DEMO_MINUTES", "DEMO_SEED", "build_demo_database", "open_default_database"]
+
+DEMO_MINUTES = 20.0
+DEMO_SEED = 0
+DEMO_TAKE_SECONDS = 120.0
+
+
+def build_demo_database(
+    out: str | os.PathLike | None = None,
+    *,
+    minutes: float = DEMO_MINUTES,
+    seed: int = DEMO_SEED,
+    overwrite: bool = False,
+    progress: Callable[[float, float], None] | None = None,
+) -> MatchingDatabase:
+    """Generate the demo speaker and build its database (deterministic, no download).
+
+    Parameters
+    ----------
+    out : path, optional
+        Folder to write; default :func:`gesturekit.paths.default_database_path`.
+    minutes : float
+        Minutes of generated speech and motion.
+    progress : callable(done, total), optional
+        Progress in seconds of generated material, then of processed takes.
+    """
+    from .datasets.synthetic import DEMO_LABEL, generate_demo_takes
+
+    out = Path(out) if out is not None else default_database_path()
+    if out.exists() and not overwrite:
+        raise DatabaseError("a database already exists here; pass overwrite=True (--force) to replace it", path=out)
+    total = minutes * 60.0
+    n_takes = max(1, int(round(total / DEMO_TAKE_SECONDS)))
+
+    def gen_progress(done, tot):
+        if progress is not None:
+            progress(0.5 * done / tot * total, total)
+
+    takes = generate_demo_takes(minutes=minutes, take_seconds=DEMO_TAKE_SECONDS, seed=seed, progress=gen_progress)
+
+    def build_progress(i, name):
+        if progress is not None:
+            progress(total * (0.5 + 0.5 * i / n_takes), total)
+
+    db = MatchingDatabase.build(
+        takes,
+        config=BuildConfig(overlap_stride=8, label=DEMO_LABEL, source=f"demo (seed {seed}, {minutes:g} min)"),
+        progress=build_progress,
+    )
+    db.save(out, overwrite=overwrite)
+    return db
+
+
+def open_default_database(*, build_if_missing: bool = True, progress=None) -> MatchingDatabase:
+    """Open the demo database at the default path, building it first if it is not there."""
+    path = default_database_path()
+    if not (path / "database.json").exists():
+        if not build_if_missing:
+            raise DatabaseError("the demo database has not been built yet (`gesturekit build-db --demo`)", path=path)
+        build_demo_database(path, overwrite=path.exists(), progress=progress)
+    return MatchingDatabase.load(path)

@@ -1,0 +1,45 @@
+"""Shared fixtures: the read-only test data beside the repository, tiny generated takes."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gesturekit.motion import AUDIO_SR, Motion, Take
+from gesturekit.skeleton import N_JOINTS
+
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+ZEGGS_BVH = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
+ZEGGS_WAV = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.wav"
+
+
+@pytest.fixture
+def shared_data() -> Path:
+    """The shared test data folder; the test is skipped when it is absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"shared test data not found at {SHARED_DATA} (it lives beside the repository)")
+    return SHARED_DATA
+
+
+@pytest.fixture
+def zeggs_files(shared_data) -> tuple[Path, Path]:
+    if not (ZEGGS_BVH.is_file() and ZEGGS_WAV.is_file()):
+        pytest.skip(f"ZEGGS take not found in {shared_data / 'zeggs'}")
+    return ZEGGS_BVH, ZEGGS_WAV
+
+
+def make_take(seconds: float, *, seed: int = 0, name: str = "take", fps: float = 15.0) -> Take:
+    """A small random take: smooth joint wander and a noisy, amplitude-modulated tone.
+
+    Not a plausible body (bone lengths vary); enough to exercise features and databases.
+    """
+    rng = np.random.default_rng(seed)
+    n = int(round(seconds * fps))
+    base = rng.normal(0, 0.3, size=(1, N_JOINTS, 3))
+    walk = np.cumsum(rng.normal(0, 0.01, size=(n, N_JOINTS, 3)), axis=0)
+    pos = (base + walk).astype(np.float32)
+    t = np.arange(int(seconds * AUDIO_SR)) / AUDIO_SR
+    env = 0.5 + 0.5 * np.sin(2 * np.pi * (1.5 + seed % 3) * t)
+    audio = (0.3 * env * np.sin(2 * np.pi * (150 + 20 * seed) * t) + 0.01 * rng.normal(size=t.size)).astype(np.float32)
+    return Take(name, Motion(pos, fps), audio, {"generator": "tests"})
