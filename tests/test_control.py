@@ -124,7 +124,7 @@ def test_constraint_mask_and_combination():
 
 def test_step_masks_use_each_steps_middle_frame():
     attrs = np.zeros((2, 64, len(ATTRIBUTE_NAMES)), np.float32)
-    thr = {n: (-1.0, 1.0) for n in ATTRIBUTE_NAMES}
+    thr = {n: (0.5, 0.5) for n in ATTRIBUTE_NAMES}  # every frame is "low", none is "high"
     # 0-1 s = frames 0..14 low left hand; steps of 8: [0,8) mid 3, [8,16) mid 11, [16,24) mid 19
     tr = parse_control("0-1:left_hand=low,2-3:speed=fast")
     masks, idx = step_masks(tr, attrs, thr, n_frames=45, step=8)
