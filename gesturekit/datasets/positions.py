@@ -1,0 +1,314 @@
+"""Joint-position files (.npy, .npz, .txt, .csv) as 55-joint motions.
+
+A position file holds an array of shape (frames, joints, 3) or
+(frames, joints * 3) in some source joint order. A position joint map says
+which source joint is each of ours and which is the pelvis:
+
+.. code-block:: json
+
+    {"pelvis": 0,
+     "joints": {"spine_mid": 3, "chest": "Chest", ...all 55...},
+     "names": ["Hips", "LeftHip", "RightHip", "Spine", "Chest", ...]}
+
+Joints are given by column index (0-based, in joints) or by name; names need
+the optional ``"names"`` list (one per source joint). ``"pelvis"`` may be
+``null`` when the positions are already pelvis-relative. Positions are
+resampled to 15 fps by linear interpolation
+(:func:`gesturekit.motion.resample_positions`), which shortens bones slightly
+between samples when the source rate is not a multiple of 15.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import warnings
+import zipfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+
+from ..errors import ConfigError, InputFileError, MotionFileError
+from ..motion import Motion, resample_positions
+from ..skeleton import FPS, JOINT_NAMES
+from .presets import missing_and_unknown
+
+__all__ = ["PositionJointMap", "load_position_joint_map", "read_position_array", "load_positions_motion"]
+
+_UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+_SUFFIXES = (".npy", ".npz", ".txt", ".csv")
+
+
+@dataclass(frozen=True)
+class PositionJointMap:
+    """Which source column is each of our joints, for position files.
+
+    Parameters
+    ----------
+    name : str
+        Where the map came from (a file path or ``"joint map"``), for messages.
+    pelvis : int, str or None
+        Source joint (index or name) subtracted from every joint; ``None`` when
+        the positions are already pelvis-relative.
+    joints : Mapping[str, int or str]
+        Our joint name (all 55) -> source joint index or name.
+    names : tuple of str or None
+        Source joint names, one per source joint, needed to resolve names.
+    """
+
+    name: str
+    pelvis: int | str | None
+    joints: Mapping[str, int | str]
+    names: tuple[str, ...] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "joints", MappingProxyType(dict(self.joints)))
+        if self.names is not None:
+            object.__setattr__(self, "names", tuple(self.names))
+
+    def resolve(self, n_source: int, *, path=None) -> tuple[np.ndarray, int | None]:
+        """Source indices of our 55 joints (shape (55,)) and of the pelvis (or None).
+
+        Raises
+        ------
+        MotionFileError
+            A name or index does not exist among the ``n_source`` source joints
+            of the file at ``path``, or ``names`` has the wrong length.
+        """
+        if self.names is not None and len(self.names) != n_source:
+            raise MotionFileError(
+                f"joint map {self.name!r} lists {len(self.names)} source joint names "
+                f"but the file has {n_source} joints", path=path)
+        lookup = {} if self.names is None else {n: i for i, n in enumerate(self.names)}
+        problems: list[str] = []
+
+        def one(label, ref):
+            if isinstance(ref, str):
+                if self.names is None:
+                    problems.append(f"{label} -> {ref!r} (a name, but the map has no 'names' list)")
+                    return 0
+                if ref not in lookup:
+                    problems.append(f"{label} -> {ref!r} (no such source joint)")
+                    return 0
+                return lookup[ref]
+            if not 0 <= ref < n_source:
+                problems.append(f"{label} -> {ref} (index out of range for {n_source} joints)")
+                return 0
+            return ref
+
+        idx = np.array([one(n, self.joints[n]) for n in JOINT_NAMES], dtype=np.int64)
+        pelvis = None if self.pelvis is None else one("pelvis", self.pelvis)
+        if problems:
+            raise MotionFileError(
+                f"joint map {self.name!r} does not fit the file: {'; '.join(problems)}", path=path)
+        return idx, pelvis
+
+
+def load_position_joint_map(spec: str | os.PathLike | Mapping | PositionJointMap) -> PositionJointMap:
+    """A complete position joint map from a JSON file or a dict.
+
+    Parameters
+    ----------
+    spec : str, os.PathLike, Mapping or PositionJointMap
+        A path to a JSON file ``{"pelvis": int|str|null, "joints": {...},
+        "names": [...]}`` (see the module docstring), such a dict, or a map.
+
+    Raises
+    ------
+    InputFileError
+        The JSON file is missing, not JSON, or not a complete map (the
+        message names the file and lists missing or unknown joints).
+    ConfigError
+        A dict that is not a complete map.
+    """
+    if isinstance(spec, PositionJointMap):
+        spec = {"pelvis": spec.pelvis, "joints": dict(spec.joints),
+                **({} if spec.names is None else {"names": list(spec.names)})}
+        return _validate(spec, name="joint map", path=None)
+    if isinstance(spec, Mapping):
+        return _validate(spec, name="joint map", path=None)
+    if not isinstance(spec, (str, os.PathLike)):
+        raise ConfigError(f"a position joint map must be a JSON file or a dict, got {type(spec).__name__}")
+    path = Path(spec)
+    if not path.is_file():
+        raise InputFileError("joint map file not found", path=path)
+    try:
+        content = json.loads(path.read_text(encoding="utf-8-sig"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"cannot read joint map: {exc}", path=path) from None
+    except json.JSONDecodeError as exc:
+        raise InputFileError(f"joint map is not valid JSON: {exc}", path=path) from None
+    return _validate(content, name=os.fspath(path), path=path)
+
+
+def _is_index(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+
+
+def _validate(content, *, name: str, path) -> PositionJointMap:
+    def fail(message):
+        if path is not None:
+            raise InputFileError(message, path=path)
+        raise ConfigError(f"{name}: {message}")
+
+    if not isinstance(content, Mapping):
+        fail("a position joint map must be a JSON object with keys 'pelvis', 'joints' and optionally 'names'")
+    extra = sorted(str(k) for k in set(content) - {"pelvis", "joints", "names"})
+    if extra:
+        fail(f"unexpected keys {extra}; a position joint map has 'pelvis', 'joints' and 'names'")
+    if "pelvis" not in content:
+        fail("'pelvis' is required (a source joint index or name, or null if already pelvis-relative)")
+    pelvis = content["pelvis"]
+    if not (pelvis is None or _is_index(pelvis) or (isinstance(pelvis, str) and pelvis)):
+        fail(f"'pelvis' must be a joint index, a joint name or null, got {pelvis!r}")
+    joints = content.get("joints")
+    if not isinstance(joints, Mapping):
+        fail("'joints' must map each of our joint names to a source joint index or name")
+    names = content.get("names")
+    if names is not None and not (isinstance(names, list) and all(isinstance(n, str) for n in names)):
+        fail("'names' must be a list of source joint names")
+    if names is not None and len(set(names)) != len(names):
+        fail("'names' has duplicates")
+    missing, unknown = missing_and_unknown(joints)
+    problems = []
+    if missing:
+        problems.append(f"{len(missing)} of our joints not mapped: {', '.join(missing)}")
+    if unknown:
+        problems.append(f"not joints of our skeleton: {', '.join(unknown)}")
+    bad = sorted(k for k, v in joints.items()
+                 if k in JOINT_NAMES and not (_is_index(v) or (isinstance(v, str) and v)))
+    if bad:
+        problems.append(f"values must be joint indices or names: {', '.join(bad)}")
+    if problems:
+        fail("; ".join(problems))
+    return PositionJointMap(name=name, pelvis=pelvis, joints=dict(joints),
+                            names=None if names is None else tuple(names))
+
+
+def read_position_array(path: str | os.PathLike) -> np.ndarray:
+    """Read joint positions from a file, shape (frames, joints, 3), float64.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npy`` (one array), ``.npz`` (a single array, or the key
+        ``"positions"``), ``.txt`` (whitespace-separated) or ``.csv``
+        (comma-separated) with one frame per row. Arrays of shape
+        (frames, joints * 3) are reshaped.
+
+    Raises
+    ------
+    MotionFileError
+        Missing or unreadable file, unknown suffix, wrong shape, no frames,
+        non-numeric or NaN/infinite values.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in _SUFFIXES:
+        raise MotionFileError(f"unsupported position file type {suffix!r} (expected {', '.join(_SUFFIXES)})",
+                              path=path)
+    if not path.is_file():
+        raise MotionFileError("file not found", path=path)
+    if path.stat().st_size == 0:
+        raise MotionFileError("empty file", path=path)
+    try:
+        if suffix == ".npy":
+            array = np.load(path, allow_pickle=False)
+        elif suffix == ".npz":
+            array = _from_npz(path)
+        else:
+            with warnings.catch_warnings():
+                # a text file of blank lines: reported below as "no frames"
+                warnings.simplefilter("ignore", UserWarning)
+                array = np.loadtxt(path, delimiter="," if suffix == ".csv" else None,
+                                   dtype=np.float64, ndmin=2)
+    except MotionFileError:
+        raise
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise MotionFileError(f"cannot read positions: {exc}", path=path) from None
+    array = np.asarray(array)
+    if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+        raise MotionFileError(f"positions must be numbers, got dtype {array.dtype}", path=path)
+    if array.ndim >= 1 and array.shape[0] == 0:
+        raise MotionFileError("the file has no frames", path=path)
+    if array.ndim == 2 and array.shape[1] % 3 == 0:
+        array = array.reshape(array.shape[0], array.shape[1] // 3, 3)
+    if array.ndim != 3 or array.shape[2] != 3 or array.shape[1] == 0:
+        raise MotionFileError(
+            f"positions must have shape (frames, joints, 3) or (frames, joints*3), got {array.shape}", path=path)
+    array = array.astype(np.float64)
+    finite = np.isfinite(array).all(axis=(1, 2))
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        raise MotionFileError(
+            f"positions contain NaN or infinity in {bad.size} frames (first: frame {bad[0]})", path=path)
+    return array
+
+
+def _from_npz(path: Path) -> np.ndarray:
+    with np.load(path, allow_pickle=False) as npz:
+        keys = list(npz.files)
+        if "positions" in keys:
+            return npz["positions"]
+        if len(keys) == 1:
+            return npz[keys[0]]
+        raise MotionFileError(
+            f"npz holds {len(keys)} arrays ({', '.join(keys) or 'none'}); "
+            "expected one array or one named 'positions'", path=path)
+
+
+def load_positions_motion(
+    path: str | os.PathLike,
+    *,
+    joint_map: str | os.PathLike | Mapping | PositionJointMap,
+    fps: float,
+    units: str = "m",
+) -> Motion:
+    """Read a joint-position file as a 55-joint motion at 15 fps.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Positions of shape (frames, joints, 3) or (frames, joints*3), Y up
+        (see :func:`read_position_array`).
+    joint_map : str, os.PathLike, Mapping or PositionJointMap
+        The position joint map (see :func:`load_position_joint_map`).
+    fps : float
+        Frame rate of the file, frames per second.
+    units : {"m", "cm", "mm"}
+        Length unit of the file.
+
+    Returns
+    -------
+    Motion
+        Positions of shape (frames_out, 55, 3), metres, relative to the
+        pelvis (if the map names one), at 15 fps; ``frames_out =
+        floor(frames / fps * 15)``.
+
+    Raises
+    ------
+    MotionFileError
+        The file is unreadable, malformed, too short for one output frame, or
+        does not have the joints the map names.
+    ConfigError, InputFileError
+        Bad options or joint map.
+    """
+    if units not in _UNIT_SCALE:
+        raise ConfigError(f"units must be 'm', 'cm' or 'mm', got {units!r}")
+    if not (isinstance(fps, (int, float, np.integer, np.floating)) and math.isfinite(fps) and fps > 0):
+        raise ConfigError(f"fps must be a positive number, got {fps!r}")
+    jmap = load_position_joint_map(joint_map)
+    array = read_position_array(path)
+    idx, pelvis = jmap.resolve(array.shape[1], path=path)
+    positions = array[:, idx]
+    if pelvis is not None:
+        positions = positions - array[:, pelvis:pelvis + 1]
+    positions = positions * _UNIT_SCALE[units]
+    out = resample_positions(positions, float(fps), float(FPS))
+    if out.shape[0] == 0:
+        raise MotionFileError(
+            f"too short: {array.shape[0]} frames at {fps:g} fps give no frame at {FPS} fps", path=path)
+    return Motion(out.astype(np.float32), float(FPS))
