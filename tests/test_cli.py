@@ -1,0 +1,70 @@
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from gesturekit.cli import main
+from gesturekit.database import MatchingDatabase
+
+from .conftest import make_take
+
+
+def _positions_folder(tmp_path):
+    """A folder of two joint-position takes with speech and a JSON joint map."""
+    import json
+
+    from gesturekit.skeleton import JOINT_NAMES
+
+    folder = tmp_path / "takes"
+    folder.mkdir()
+    for i in range(2):
+        take = make_take(9.0, seed=i, fps=30.0)
+        np.save(folder / f"t{i}.npy", take.motion.positions)
+        sf.write(folder / f"t{i}.wav", take.audio, 16000, subtype="PCM_16")
+    jm = tmp_path / "map.json"
+    jm.write_text(json.dumps({"pelvis": None, "joints": {n: i for i, n in enumerate(JOINT_NAMES)}}))
+    return folder, jm
+
+
+def test_build_and_info_from_position_files(tmp_path, capsys):
+    folder, jm = _positions_folder(tmp_path)
+    out = tmp_path / "db"
+    assert main(["build-db", str(folder), "--joint-map", str(jm), "--fps", "30", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "takes      2" in printed and "clips      4 x 64 frames" in printed and "built in" in printed
+    db = MatchingDatabase.load(out)
+    assert db.take_names == ["t0", "t1"] and db.n_clips == 4  # 9 s at 15 fps = 135 frames = 2 clips each
+    assert main(["info", str(out), "--takes"]) == 0
+    printed = capsys.readouterr().out
+    assert "t1" in printed and "left_hand_height" in printed
+
+
+def test_errors_are_one_line_with_exit_status_2(tmp_path, capsys):
+    assert main(["build-db", str(tmp_path / "nope"), "--preset", "zeggs", "--out", str(tmp_path / "db")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gesturekit: error: ") and "nope: no such folder" in err and "Traceback" not in err
+    assert main(["info", str(tmp_path / "missing-db")]) == 2
+    assert "no database folder" in capsys.readouterr().err
+
+
+def test_existing_database_needs_force(tmp_path, capsys):
+    folder, jm = _positions_folder(tmp_path)
+    out = tmp_path / "db"
+    args = ["build-db", str(folder), "--joint-map", str(jm), "--fps", "30", "--out", str(out)]
+    assert main(args) == 0
+    assert main(args) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert main(args + ["--force"]) == 0
+
+
+def test_position_files_need_joint_map_and_fps(tmp_path, capsys):
+    folder, _ = _positions_folder(tmp_path)
+    assert main(["build-db", str(folder), "--out", str(tmp_path / "db")]) == 2
+    assert "--joint-map" in capsys.readouterr().err
+
+
+def test_python_dash_m_runs_the_cli():
+    r = subprocess.run([sys.executable, "-m", "gesturekit", "--help"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "build-db" in r.stdout
