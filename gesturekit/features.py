@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import ConfigError
 from .motion import AUDIO_SR
-from .skeleton import FPS, N_JOINTS, POSE_FEATURE_INDICES, POSE_FEATURE_JOINTS
+from .skeleton import FPS, JOINT_NAMES, N_JOINTS, POSE_FEATURE_JOINTS
 
 __all__ = [
     "FeatureLayout",
@@ -159,7 +159,8 @@ def audio_frame_features(
         spectrum in dB), column 13 is ``log(mean(w * x**2) / mean(w) + 1e-10)``
         over the Hann window ``w`` of the frame.
     """
-    import librosa  # heavy import kept local: the layout is usable without it
+    import librosa  # heavy imports kept local: the layout is usable without them
+    import scipy.fft
 
     audio = np.asarray(audio, dtype=np.float32)
     if audio.ndim != 1:
@@ -168,24 +169,25 @@ def audio_frame_features(
         n_frames = n_audio_frames(len(audio), sr=layout.sr, fps=layout.fps)
     n_fft = layout.n_fft
     half = n_fft // 2
-    padded = np.concatenate([np.zeros(half, np.float32), audio, np.zeros(n_fft, np.float32)])
     centres = frame_centres(n_frames, sr=layout.sr, fps=layout.fps)
-    if n_frames and centres[-1] + half > len(padded) - half:
-        # asked for frames past the audio's end: pad further with silence
-        padded = np.concatenate([padded, np.zeros(centres[-1] + half + n_fft - len(padded), np.float32)])
     window = np.hanning(n_fft + 1)[:-1].astype(np.float32)  # periodic Hann
-    mel = librosa.filters.mel(sr=layout.sr, n_fft=n_fft, n_mels=layout.n_mels, fmin=0.0, fmax=layout.sr / 2)
+    mel = librosa.filters.mel(
+        sr=layout.sr, n_fft=n_fft, n_mels=layout.n_mels, fmin=0.0, fmax=layout.sr / 2
+    ).astype(np.float32)
     out = np.empty((n_frames, layout.frame_dim), dtype=np.float32)
-    offsets = np.arange(n_fft, dtype=np.int64)
+    offsets = np.arange(-half, n_fft - half, dtype=np.int64)
+    n = len(audio)
     for a in range(0, n_frames, chunk_frames):
         b = min(n_frames, a + chunk_frames)
-        # centre c in the audio is index c + half in `padded`; the window starts half before it
-        frames = padded[centres[a:b, None] + offsets[None, :]]
-        frames_w = frames * window
-        power = np.abs(np.fft.rfft(frames_w, axis=1)) ** 2  # (chunk, n_fft//2+1)
+        # gather each window from the audio itself (zeros outside it): memory stays per chunk
+        idx = centres[a:b, None] + offsets[None, :]
+        inside = (idx >= 0) & (idx < n)
+        frames = np.where(inside, audio[np.clip(idx, 0, max(n - 1, 0))] if n else 0.0, 0.0).astype(np.float32)
+        spec = scipy.fft.rfft(frames * window, axis=1)  # complex64 for float32 input
+        power = spec.real**2 + spec.imag**2
         mel_db = librosa.power_to_db(power @ mel.T, ref=1.0, amin=1e-10, top_db=None)
         out[a:b, : layout.n_mfcc] = librosa.feature.mfcc(S=mel_db.T, n_mfcc=layout.n_mfcc).T
-        energy = (frames**2 * window).sum(axis=1) / window.sum()
+        energy = (frames**2 * window).sum(axis=1, dtype=np.float64) / window.sum(dtype=np.float64)
         out[a:b, layout.n_mfcc] = np.log(energy + 1e-10)
     return out
 
@@ -230,7 +232,8 @@ def pose_features(positions: np.ndarray, *, layout: FeatureLayout = LAYOUT) -> n
     """
     if positions.ndim != 3 or positions.shape[1:] != (layout.n_joints, 3):
         raise ConfigError(f"positions must have shape (frames, {layout.n_joints}, 3), got {positions.shape}")
-    joints = positions[:, POSE_FEATURE_INDICES].reshape(positions.shape[0], -1)
+    idx = [JOINT_NAMES.index(j) for j in layout.pose_joints]
+    joints = positions[:, idx].reshape(positions.shape[0], -1)
     return _stack(joints, layout.pose_offsets).astype(np.float32, copy=False)
 
 
