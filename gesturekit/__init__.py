@@ -3,6 +3,8 @@
 An implementation of Habibie et al., "A Motion Matching-based Framework for
 Controllable Gesture Synthesis from Speech" (SIGGRAPH 2022).
 """
+__version__ = "0.1.0"
+
 from .errors import (
     AudioFileError,
     ConfigError,
@@ -12,20 +14,24 @@ from .errors import (
     InputFileError,
     MotionFileError,
 )
+from .control import ControlTrack, parse_control
+from .database import BuildConfig, MatchingDatabase
 from .motion import AUDIO_SR, Motion, Take
-
-__version__ = "0.1.0"
 
 __all__ = [
     "AUDIO_SR",
     "AudioFileError",
+    "BuildConfig",
+    "ControlTrack",
     "ConfigError",
     "DatabaseError",
     "GestureKitError",
     "GestureKitWarning",
     "InputFileError",
+    "MatchingDatabase",
     "Motion",
     "MotionFileError",
     "Take",
+    "parse_control",
     "__version__",
 ]

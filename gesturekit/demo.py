@@ -41,7 +41,6 @@ def build_demo_database(
     if out.exists() and not overwrite:
         raise DatabaseError("a database already exists here; pass overwrite=True (--force) to replace it", path=out)
     total = minutes * 60.0
-    n_takes = max(1, int(round(total / DEMO_TAKE_SECONDS)))
 
     def gen_progress(done, tot):
         if progress is not None:
@@ -51,7 +50,7 @@ def build_demo_database(
 
     def build_progress(i, name):
         if progress is not None:
-            progress(total * (0.5 + 0.5 * i / n_takes), total)
+            progress(total * (0.5 + 0.5 * i / len(takes)), total)
 
     db = MatchingDatabase.build(
         takes,
