@@ -61,11 +61,19 @@ def build_demo_database(
     return db
 
 
-def open_default_database(*, build_if_missing: bool = True, progress=None) -> MatchingDatabase:
-    """Open the demo database at the default path, building it first if it is not there."""
+def open_default_database(
+    *, build_if_missing: bool = True, minutes: float = DEMO_MINUTES, progress=None
+) -> MatchingDatabase:
+    """Open the demo database at the default path, building it first if it is not there.
+
+    Parameters
+    ----------
+    minutes : float
+        Minutes of demo speaker to generate if it has to be built.
+    """
     path = default_database_path()
     if not (path / "database.json").exists():
         if not build_if_missing:
             raise DatabaseError("the demo database has not been built yet (`gesturekit build-db --demo`)", path=path)
-        build_demo_database(path, overwrite=path.exists(), progress=progress)
+        build_demo_database(path, minutes=minutes, overwrite=path.exists(), progress=progress)
     return MatchingDatabase.load(path)
