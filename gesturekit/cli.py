@@ -85,6 +85,86 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _parse_range(text: str) -> tuple[str, float, float]:
+    """``TAKE:START-END`` (seconds) -> (take, start, end)."""
+    import re
+
+    m = re.match(r"^(.+):\s*([0-9.]+)\s*-\s*([0-9.]+)\s*$", text)
+    if not m:
+        raise ConfigError(f"--exclude-range {text!r} must look like TAKE:START-END (seconds)")
+    return m.group(1), float(m.group(2)), float(m.group(3))
+
+
+def _speech_files(inputs: list[str]) -> list[Path]:
+    from .datasets.takes import AUDIO_EXTENSIONS
+    from .errors import InputFileError
+
+    files: list[Path] = []
+    for item in inputs:
+        p = Path(item)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
+            if not found:
+                raise InputFileError(f"no speech files ({'/'.join(AUDIO_EXTENSIONS)}) in this folder", path=p)
+            files += found
+        else:
+            files.append(p)
+    return files
+
+
+def _cmd_synthesize(args) -> int:
+    from .control import load_control_file, parse_control
+    from .database import MatchingDatabase
+    from .datasets.audio import load_audio
+    from .demo import open_default_database
+    from .export.files import safe_filename
+    from .synthesize import SynthesisConfig, synthesize_batch
+
+    t0 = time.perf_counter()
+    files = _speech_files(args.speech)
+    db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    control = ""
+    if args.control:
+        if Path(args.control).is_file():
+            control = load_control_file(args.control).to_text()
+        else:
+            control = parse_control(args.control).to_text()
+    config = SynthesisConfig(
+        k=args.k, step=args.step, topk=args.topk, seed=args.seed, init=args.init_pose,
+        mask_rule=args.mask_rule, blend=args.blend, control=control,
+        exclude_takes=tuple(args.exclude_take or ()),
+        exclude_ranges=tuple(_parse_range(r) for r in (args.exclude_range or ())),
+    )
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    stems = [safe_filename(f.stem) for f in files]
+    if len(set(stems)) != len(stems):
+        raise ConfigError("two speech files have the same name; synthesise them in separate runs")
+    kinds = ["npz", "bvh"] + (["mp4"] if args.video else [])
+    targets = {(stem, kind): out / f"{stem}.{kind}" for stem in stems for kind in kinds}
+    existing = [str(p) for p in targets.values() if p.exists()]
+    if existing and not args.force:
+        raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
+    audios = [load_audio(f) for f in files]
+    results = synthesize_batch(audios, db=db, config=config)
+    for f, stem, res in zip(files, stems, results):
+        res.source = f.name
+        res.save_npz(targets[(stem, "npz")], overwrite=args.force)
+        res.save_bvh(targets[(stem, "bvh")], overwrite=args.force)
+        written = [targets[(stem, "npz")], targets[(stem, "bvh")]]
+        if args.video:
+            with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
+                res.save_video(targets[(stem, "mp4")], overwrite=args.force,
+                               progress=lambda done, total: (setattr(bar, "n", done), bar.refresh()))
+            written.append(targets[(stem, "mp4")])
+        relaxed = res.relaxed_steps
+        note = f"; control relaxed at {len(relaxed)} step(s)" if relaxed else ""
+        print(f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
+              f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}")
+    print(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="gesturekit",
@@ -121,6 +201,34 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("database", nargs="?", help="database folder (default: the demo database)")
     i.add_argument("--takes", action="store_true", help="also list the takes")
     i.set_defaults(func=_cmd_info)
+
+    y = sub.add_parser(
+        "synthesize",
+        help="gesture motion for speech: npz + BVH (+ MP4 with --video)",
+        description="Synthesise gesture motion for one or more speech files (or folders of them) by motion "
+        "matching. Several files are searched together, scanning the database once per step.",
+    )
+    y.add_argument("speech", nargs="+", help="speech files (wav, flac, ogg, mp3; any rate) or folders of them")
+    y.add_argument("--db", help="matching database folder (default: the demo database)")
+    y.add_argument("--out", default="out", help="output folder (default: out)")
+    y.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
+    y.add_argument("--step", type=int, default=8, help="frames per search step, N (default 8)")
+    y.add_argument("--topk", type=int, default=10, help="candidates per step to record (default 10)")
+    y.add_argument("--seed", type=int, default=0, help="seed of the random initial pose (default 0)")
+    y.add_argument("--init-pose", choices=["random", "rest"], default="random",
+                   help="initial pose: a random admissible database frame (the paper) or the rest pose")
+    y.add_argument("--control", help='control track: "0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric" '
+                   "(seconds) or a CSV/JSON file with start_s, end_s, constraint")
+    y.add_argument("--mask-rule", choices=["ends", "all"], default="ends",
+                   help="a control must hold at a window's first and last frame (ends: the paper) or every frame")
+    y.add_argument("--blend", choices=["none", "offset"], default="none",
+                   help="none: the paper's hard joins; offset: a short fade at each join (ours)")
+    y.add_argument("--exclude-take", action="append", metavar="TAKE", help="keep a database take out of the search")
+    y.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
+                   help="keep a stretch of a take (seconds) out of the search")
+    y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
+    y.add_argument("--force", action="store_true", help="replace existing output files")
+    y.set_defaults(func=_cmd_synthesize)
     return p
 
 

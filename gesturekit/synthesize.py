@@ -1,0 +1,398 @@
+"""The whole pipeline in one place: speech -> features -> search (controls) -> blend -> motion.
+
+:func:`synthesize` takes speech (a file or samples) and a matching database and
+returns a :class:`SynthesisResult`: the motion, the raw k-NN motion, the search
+record (every step's chosen clip and top-K candidates) and the configuration
+that made it, with methods to export npz, BVH and MP4. :func:`synthesize_batch`
+searches several speeches together, scanning the database once per step.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .blend import BLEND_MODES, blend_segments
+from .control import ControlTrack, parse_control, step_masks
+from .database import MatchingDatabase
+from .errors import ConfigError
+from .features import n_audio_frames
+from .motion import AUDIO_SR, Motion
+from .search import SearchConfig, SearchIndex, SearchResult
+
+__all__ = ["SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
+
+
+@dataclass(frozen=True)
+class SynthesisConfig:
+    """Every option of a synthesis; saved with every output.
+
+    Parameters
+    ----------
+    k : int
+        Take the k-th best of the combined ranking (0 = best).
+    step : int
+        Frames per search step, N (8 in the paper).
+    topk : int
+        Candidates per step recorded for inspection.
+    seed : int
+        Seed of the random initial pose.
+    init : {"random", "rest"}
+        ``random``: a random database frame that satisfies the first step's control
+        (the authors' choice); ``rest``: the database's rest pose (see :func:`rest_pose_frame`).
+    mask_rule : {"ends", "all"}
+        Where a control must hold in a window: its first and last frame (the paper)
+        or every frame (stricter).
+    blend : {"none", "offset"}
+        ``none`` is the paper (the refiner smooths); ``offset`` fades each join over ``blend_frames``.
+    blend_frames : int
+    control : str
+        The control track as text, e.g. ``"0-3:left_hand=low,3-6:speed=slow"`` (seconds).
+    exclude_takes : tuple of str
+        Database takes the search must not use (e.g. the query's own take).
+    exclude_ranges : tuple of (str, float, float)
+        (take, start_s, end_s) stretches the search must not use.
+    pins : dict of int -> (int, int)
+        Step -> (clip, start): force that step's choice ("use this candidate instead").
+    """
+
+    k: int = 0
+    step: int = 8
+    topk: int = 10
+    seed: int = 0
+    init: str = "random"
+    mask_rule: str = "ends"
+    blend: str = "none"
+    blend_frames: int = 4
+    control: str = ""
+    exclude_takes: tuple = ()
+    exclude_ranges: tuple = ()
+    pins: dict = field(default_factory=dict, hash=False)
+
+    def __post_init__(self):
+        if self.init not in ("random", "rest"):
+            raise ConfigError(f"init must be 'random' or 'rest', got {self.init!r}")
+        if self.blend not in BLEND_MODES:
+            raise ConfigError(f"blend must be one of {', '.join(BLEND_MODES)}, got {self.blend!r}")
+        if not isinstance(self.blend_frames, int) or self.blend_frames < 1:
+            raise ConfigError(f"blend_frames must be a positive integer, got {self.blend_frames!r}")
+        object.__setattr__(self, "control", parse_control(self.control).to_text())  # validates, normalises
+        object.__setattr__(self, "exclude_takes", tuple(str(t) for t in self.exclude_takes))
+        ranges = []
+        for r in self.exclude_ranges:
+            try:
+                take, a, b = r
+                ranges.append((str(take), float(a), float(b)))
+            except (TypeError, ValueError):
+                raise ConfigError(f"exclude_ranges entries must be (take, start_s, end_s), got {r!r}") from None
+        object.__setattr__(self, "exclude_ranges", tuple(ranges))
+        # validate k, step, topk, seed, mask_rule and pins once, the way the search reads them
+        SearchConfig(k=self.k, step=self.step, topk=self.topk, seed=self.seed, mask_rule=self.mask_rule, pins=self.pins)
+        object.__setattr__(self, "pins", {int(i): (int(m), int(s)) for i, (m, s) in sorted(self.pins.items())})
+
+    def to_dict(self) -> dict:
+        """A JSON-able dict; :meth:`from_dict` reads it back."""
+        return {
+            "k": self.k,
+            "step": self.step,
+            "topk": self.topk,
+            "seed": self.seed,
+            "init": self.init,
+            "mask_rule": self.mask_rule,
+            "blend": self.blend,
+            "blend_frames": self.blend_frames,
+            "control": self.control,
+            "exclude_takes": list(self.exclude_takes),
+            "exclude_ranges": [list(r) for r in self.exclude_ranges],
+            "pins": {str(i): list(v) for i, v in self.pins.items()},
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SynthesisConfig":
+        known = set(cls.__dataclass_fields__)
+        unknown = set(d) - known
+        if unknown:
+            raise ConfigError(f"unknown synthesis options: {', '.join(sorted(unknown))}")
+        d = dict(d)
+        d["exclude_takes"] = tuple(d.get("exclude_takes", ()))
+        d["exclude_ranges"] = tuple(tuple(r) for r in d.get("exclude_ranges", ()))
+        d["pins"] = {int(i): tuple(v) for i, v in d.get("pins", {}).items()}
+        return cls(**d)
+
+    def with_pin(self, step: int, clip: int, start: int) -> "SynthesisConfig":
+        """A copy with one more pinned choice (replacing any pin at that step)."""
+        pins = dict(self.pins)
+        pins[int(step)] = (int(clip), int(start))
+        return replace(self, pins=pins)
+
+    def without_pin(self, step: int) -> "SynthesisConfig":
+        pins = {i: v for i, v in self.pins.items() if i != int(step)}
+        return replace(self, pins=pins)
+
+
+@dataclass
+class SynthesisResult:
+    """A synthesised motion and everything that made it.
+
+    Attributes
+    ----------
+    motion : Motion
+        The output (k-NN segments, blended if asked), (T, 55, 3) metres at 15 fps.
+    knn_motion : Motion
+        The concatenated k-NN segments before any blending.
+    search : SearchResult
+        Per step: chosen clip and start, relaxations, and the top-K candidate table.
+    audio : np.ndarray, shape (samples,), float32
+        The speech at 16 kHz.
+    config : SynthesisConfig
+    control : ControlTrack
+    database : str
+        Path of the database (or its label when it was not saved).
+    source : str
+        Name of the speech (file name, or "audio").
+    refined_motion : Motion or None
+        The refiner's output, when a refiner was applied.
+    """
+
+    motion: Motion
+    knn_motion: Motion
+    search: SearchResult
+    audio: np.ndarray
+    config: SynthesisConfig
+    control: ControlTrack
+    database: str
+    source: str
+    refined_motion: Motion | None = None
+
+    @property
+    def n_frames(self) -> int:
+        return self.motion.n_frames
+
+    @property
+    def relaxed_steps(self) -> list[int]:
+        """Steps whose control admitted no window and was dropped for that step."""
+        return np.flatnonzero(self.search.relaxed).tolist()
+
+    def steps_table(self):
+        """One row per step: frames, chosen clip and start, position in the ranking, relaxed, pinned."""
+        import pandas as pd
+
+        s = self.search
+        n = s.n_steps
+        N = self.config.step
+        return pd.DataFrame(
+            {
+                "step": np.arange(n),
+                "first_frame": np.arange(n) * N,
+                "start_s": np.arange(n) * N / self.motion.fps,
+                "clip": s.clip,
+                "start": s.start,
+                "position": s.position,
+                "candidates": s.n_candidates,
+                "relaxed": s.relaxed,
+                "pinned": s.pinned,
+            }
+        )
+
+    def metadata(self) -> dict:
+        """The JSON saved with every export: how this result was made."""
+        return {
+            "gesturekit_version": __version__,
+            "database": self.database,
+            "source": self.source,
+            "fps": self.motion.fps,
+            "frames": self.n_frames,
+            "duration_s": self.n_frames / self.motion.fps,
+            "synthesis": self.config.to_dict(),
+            "control_segments": self.control.to_records(),
+            "relaxed_steps": self.relaxed_steps,
+            "init_frame": list(self.search.init_frame),
+            "refined": self.refined_motion is not None,
+        }
+
+    def save_npz(self, path, *, overwrite: bool = False) -> Path:
+        """npz with positions (the final motion), fps, knn_positions, the search record and the config."""
+        from .export.npz import save_npz
+
+        arrays = {"knn_positions": self.knn_motion.positions}
+        if self.refined_motion is not None:
+            arrays["refined_positions"] = self.refined_motion.positions
+        arrays.update({f"search_{k}": np.asarray(v) for k, v in self.search.array_fields().items()})
+        return save_npz(path, motion=self.motion, arrays=arrays, config=self.metadata(), overwrite=overwrite)
+
+    def save_bvh(self, path, *, overwrite: bool = False, units: str = "cm") -> Path:
+        """BVH of the final motion (55-joint hierarchy, rotations that reproduce the positions)."""
+        from .export.bvh import write_bvh
+
+        return write_bvh(path, self.motion, overwrite=overwrite, units=units)
+
+    def save_video(self, path, *, overwrite: bool = False, progress=None, side_by_side: bool = False, resolution=(640, 480)) -> Path:
+        """MP4 of the skeleton with the speech (h264 + aac); k-NN and refined side by side if asked."""
+        from .export.video import render_video
+
+        if side_by_side and self.refined_motion is not None:
+            return render_video(path, self.knn_motion, audio=self.audio, side_by_side=self.refined_motion,
+                                labels=("k-NN", "k-NN + refiner"), overwrite=overwrite, progress=progress,
+                                resolution=resolution)
+        return render_video(path, self.motion, audio=self.audio, overwrite=overwrite, progress=progress,
+                            resolution=resolution)
+
+
+def rest_pose_frame(db: MatchingDatabase) -> tuple[int, int]:
+    """The database frame used as the rest pose: hands lowest among the slowest frames.
+
+    Among valid frames whose mean hand speed is below its low threshold, the one
+    with the lowest sum of wrist heights (ties: first in clip order).
+
+    Returns
+    -------
+    (clip, frame)
+    """
+    speed = np.asarray(db.attribute("hand_speed"))
+    height = np.asarray(db.attribute("left_hand_height")) + np.asarray(db.attribute("right_hand_height"))
+    ok = np.asarray(db.valid) & (speed <= db.thresholds["hand_speed"][0])
+    if not ok.any():
+        ok = np.asarray(db.valid)
+    score = np.where(ok, height, np.inf)
+    return tuple(int(x) for x in np.unravel_index(int(np.argmin(score)), score.shape))
+
+
+def _index(db: MatchingDatabase) -> SearchIndex:
+    idx = db.__dict__.get("_search_index")
+    if idx is None:
+        idx = SearchIndex(db.P, db.F, db.valid)
+        db.__dict__["_search_index"] = idx
+    return idx
+
+
+def _load_speech(audio) -> tuple[np.ndarray, str]:
+    if isinstance(audio, (str, os.PathLike)):
+        from .datasets.audio import load_audio
+
+        return load_audio(audio), Path(audio).name
+    a = np.asarray(audio, dtype=np.float32)
+    if a.ndim != 1:
+        raise ConfigError(f"speech samples must be mono, shape (samples,), got {a.shape}")
+    if len(a) < AUDIO_SR // 15:
+        raise ConfigError("speech is shorter than one frame (1/15 s)")
+    return a, "audio"
+
+
+def _prepare(db, audio, config, control):
+    samples, name = _load_speech(audio)
+    n = n_audio_frames(len(samples))
+    fq, _ = db.query_features(samples, n_frames=n)
+    track = control if control is not None else parse_control(config.control)
+    if isinstance(track, str):
+        track = parse_control(track)
+    masks, smask = step_masks(track, np.asarray(db.attributes), db.thresholds, n_frames=n, step=config.step)
+    init = "random"
+    if config.init == "rest":
+        c, f = rest_pose_frame(db)
+        init = tuple(float(x) for x in db.P[c, f])
+    scfg = SearchConfig(k=config.k, step=config.step, topk=config.topk, seed=config.seed, init=init,
+                        mask_rule=config.mask_rule, pins=config.pins)
+    return samples, name, fq, track, masks, smask, scfg
+
+
+def _exclusion(db, config):
+    if not config.exclude_takes and not config.exclude_ranges:
+        return None
+    return db.exclusion_mask(takes=config.exclude_takes, ranges=config.exclude_ranges)
+
+
+def _finish(db, res: SearchResult, samples, name, config, track) -> SynthesisResult:
+    G = db.G
+    g = np.asarray(G[res.frames[:, 0], res.frames[:, 1]], dtype=np.float32)  # (T, 165)
+    knn = Motion.from_flat(g, db.fps)
+    boundaries = np.arange(1, res.n_steps) * config.step
+    out = Motion.from_flat(blend_segments(g, boundaries, mode=config.blend, frames=config.blend_frames), db.fps)
+    return SynthesisResult(
+        motion=out,
+        knn_motion=knn,
+        search=res,
+        audio=samples,
+        config=config,
+        control=track,
+        database=str(db.path) if db.path is not None else (db.label or "in-memory database"),
+        source=name,
+    )
+
+
+def synthesize(
+    audio,
+    *,
+    db: MatchingDatabase,
+    config: SynthesisConfig | None = None,
+    control: ControlTrack | str | None = None,
+) -> SynthesisResult:
+    """Synthesise gesture motion for speech.
+
+    Parameters
+    ----------
+    audio : path or np.ndarray, shape (samples,)
+        A speech file in any format the readers take, or mono float32 samples at 16 kHz.
+    db : MatchingDatabase
+    config : SynthesisConfig, optional
+    control : ControlTrack or str, optional
+        Overrides ``config.control``.
+
+    Returns
+    -------
+    SynthesisResult
+        The output has exactly ``floor(samples * 15 / 16000)`` frames.
+    """
+    return synthesize_batch([audio], db=db, config=config, controls=[control])[0]
+
+
+def synthesize_batch(
+    audios,
+    *,
+    db: MatchingDatabase,
+    config: SynthesisConfig | list[SynthesisConfig] | None = None,
+    controls=None,
+) -> list[SynthesisResult]:
+    """Synthesise several speeches together: one scan of the database per step serves all.
+
+    Parameters
+    ----------
+    audios : sequence of path or np.ndarray
+    config : SynthesisConfig or one per speech
+        Exclusions must be the same for all speeches in one batch.
+    controls : sequence of ControlTrack, str or None, optional
+
+    Returns
+    -------
+    list of SynthesisResult, identical to calling :func:`synthesize` on each.
+    """
+    audios = list(audios)
+    if not audios:
+        return []
+    configs = config if isinstance(config, (list, tuple)) else [config or SynthesisConfig()] * len(audios)
+    controls = list(controls) if controls is not None else [None] * len(audios)
+    if len(configs) != len(audios) or len(controls) != len(audios):
+        raise ConfigError("give one config and one control per speech (or one config for all)")
+    excl = {(c.exclude_takes, c.exclude_ranges) for c in configs}
+    if len(excl) > 1:
+        raise ConfigError("all speeches of one batch must exclude the same database takes and ranges")
+    prepared = [_prepare(db, a, c, ctl) for a, c, ctl in zip(audios, configs, controls)]
+    # masks differ per speech; the search shares one mask stack, so stack them with offsets
+    stack, step_idx = [], []
+    for p in prepared:
+        masks, smask = p[4], p[5].copy()
+        if masks is not None:
+            smask[smask >= 0] += len(stack)
+            stack.extend(list(masks))
+        step_idx.append(smask)
+    masks = np.stack(stack) if stack else None
+    results = _index(db).search_batch(
+        [p[2] for p in prepared],
+        configs=[p[6] for p in prepared],
+        masks=masks,
+        step_masks=step_idx,
+        exclude=_exclusion(db, configs[0]),
+    )
+    return [_finish(db, r, p[0], p[1], c, p[3]) for r, p, c in zip(results, prepared, configs)]
