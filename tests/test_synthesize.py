@@ -1,0 +1,266 @@
+"""Synthesis: the pipeline, its options and the acceptance items of the command line."""
+import hashlib
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gesturekit.cli import main
+from gesturekit.control import parse_control
+from gesturekit.database import MatchingDatabase
+from gesturekit.demo import build_demo_database
+from gesturekit.errors import ConfigError, GestureKitWarning
+from gesturekit.search_reference import search_reference
+from gesturekit.skeleton import joint_index
+from gesturekit.synthesize import SynthesisConfig, rest_pose_frame, synthesize, synthesize_batch
+
+LW = joint_index("left_wrist")
+
+
+@pytest.fixture(scope="module")
+def demo_db(tmp_path_factory):
+    path = tmp_path_factory.mktemp("demo") / "db"
+    build_demo_database(path, minutes=4.0)
+    return MatchingDatabase.load(path)
+
+
+@pytest.fixture(scope="module")
+def speech():
+    from gesturekit.datasets.synthetic import generate_demo_take
+
+    take, _ = generate_demo_take(seconds=20.0, seed=123, name="query")
+    return take.audio
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.integers(16000, 16000 * 40))
+def test_output_length_is_the_audios_frame_count(demo_db, n_samples):
+    rng = np.random.default_rng(n_samples)
+    audio = (0.1 * rng.normal(size=n_samples)).astype(np.float32)
+    res = synthesize(audio, db=demo_db)
+    assert res.n_frames == n_samples * 15 // 16000
+    assert res.motion.positions.shape == (res.n_frames, 55, 3)
+    assert res.search.n_steps == -(-res.n_frames // 8)
+
+
+def test_sixty_minutes_of_speech(demo_db):
+    rng = np.random.default_rng(0)
+    t = np.arange(16000 * 60 * 60, dtype=np.float32) / 16000
+    audio = (0.2 * np.sin(2 * np.pi * 180 * t) * (np.sin(2 * np.pi * 0.7 * t) > 0)).astype(np.float32)
+    audio += (0.01 * rng.normal(size=audio.size)).astype(np.float32)
+    res = synthesize(audio, db=demo_db)
+    assert res.n_frames == 54000 and res.search.n_steps == 6750
+
+
+def test_matches_the_reference_search(demo_db, speech):
+    cfg = SynthesisConfig(k=1, control="2-8:left_hand=high,10-14:speed=slow", seed=3)
+    res = synthesize(speech, db=demo_db, config=cfg)
+    from gesturekit.control import step_masks
+    from gesturekit.search import SearchConfig
+
+    fq, _ = demo_db.query_features(speech)
+    masks, smask = step_masks(parse_control(cfg.control), np.asarray(demo_db.attributes), demo_db.thresholds,
+                              n_frames=len(fq), step=8)
+    ref = search_reference(np.asarray(demo_db.P), np.asarray(demo_db.F), np.asarray(demo_db.valid), fq,
+                           config=SearchConfig(k=1, seed=3), masks=masks, step_mask=smask)
+    np.testing.assert_array_equal(res.search.clip, ref.clip)
+    np.testing.assert_array_equal(res.search.start, ref.start)
+    g = np.asarray(demo_db.G)[ref.frames[:, 0], ref.frames[:, 1]]
+    np.testing.assert_array_equal(res.knn_motion.flat(), g)
+
+
+def test_excluded_takes_and_ranges_are_never_used(demo_db, speech):
+    table = demo_db.clips_table()
+    take0 = demo_db.take_names[0]
+    res = synthesize(speech, db=demo_db, config=SynthesisConfig(exclude_takes=(take0,)))
+    used_takes = set(table.loc[np.unique(res.search.frames[:, 0]), "take"])
+    assert take0 not in used_takes
+    res = synthesize(speech, db=demo_db, config=SynthesisConfig(exclude_ranges=((take0, 0.0, 60.0),)))
+    clip, frame = res.search.frames.T
+    takes = table["take"].to_numpy()[clip]
+    seconds = (table["start_frame"].to_numpy()[clip] + frame) / 15
+    assert not np.any((takes == take0) & (seconds < 60.0))
+    # without the exclusion the same speech does use that take (so the test can fail)
+    res = synthesize(speech, db=demo_db)
+    assert take0 in set(table.loc[np.unique(res.search.frames[:, 0]), "take"])
+
+
+def test_same_seed_gives_byte_identical_npz(demo_db, speech, tmp_path):
+    cfg = SynthesisConfig(seed=7, control="0-5:right_hand=high")
+    a = synthesize(speech, db=demo_db, config=cfg).save_npz(tmp_path / "a.npz")
+    b = synthesize(speech, db=demo_db, config=cfg).save_npz(tmp_path / "b.npz")
+    assert hashlib.sha256(a.read_bytes()).digest() == hashlib.sha256(b.read_bytes()).digest()
+    c = synthesize(speech, db=demo_db, config=SynthesisConfig(seed=8, control="0-5:right_hand=high"))
+    assert not np.array_equal(c.search.clip, synthesize(speech, db=demo_db, config=cfg).search.clip)
+
+
+def test_npz_holds_motion_record_and_config(demo_db, speech, tmp_path):
+    from gesturekit.export.npz import load_npz
+
+    res = synthesize(speech, db=demo_db, config=SynthesisConfig(blend="offset", control="1-4:width=wide"))
+    motion, arrays, config = load_npz(res.save_npz(tmp_path / "r.npz"))
+    np.testing.assert_array_equal(motion.positions, res.motion.positions)
+    np.testing.assert_array_equal(arrays["knn_positions"], res.knn_motion.positions)
+    np.testing.assert_array_equal(arrays["search_cand_clip"], res.search.cand_clip)
+    assert config["synthesis"]["control"] == "1-4:width=wide" and config["synthesis"]["blend"] == "offset"
+    assert SynthesisConfig.from_dict(config["synthesis"]) == res.config
+
+
+def test_pinning_a_candidate_changes_that_step_only_from_there(demo_db, speech):
+    base = synthesize(speech, db=demo_db)
+    i = 5
+    alt = base.search.cand_clip[i, 3], base.search.cand_start[i, 3]
+    pinned = synthesize(speech, db=demo_db, config=SynthesisConfig().with_pin(i, *alt))
+    assert (pinned.search.clip[i], pinned.search.start[i]) == alt and pinned.search.pinned[i]
+    np.testing.assert_array_equal(pinned.search.clip[:i], base.search.clip[:i])
+    np.testing.assert_array_equal(pinned.motion.positions[: i * 8], base.motion.positions[: i * 8])
+    assert not np.array_equal(pinned.search.clip[i:], base.search.clip[i:])
+    unpinned = synthesize(speech, db=demo_db, config=SynthesisConfig().with_pin(i, *alt).without_pin(i))
+    np.testing.assert_array_equal(unpinned.search.clip, base.search.clip)
+
+
+def test_batch_equals_single_runs(demo_db, speech):
+    audios = [speech, speech[: 16000 * 7], speech[16000 * 3 :]]
+    configs = [SynthesisConfig(), SynthesisConfig(k=2, control="0-3:speed=fast"), SynthesisConfig(seed=4)]
+    batch = synthesize_batch(audios, db=demo_db, config=configs)
+    for a, c, b in zip(audios, configs, batch):
+        single = synthesize(a, db=demo_db, config=c)
+        assert single.search.equals(b.search)
+        np.testing.assert_array_equal(single.motion.positions, b.motion.positions)
+
+
+def test_k_changes_the_choice_and_records_topk(demo_db, speech):
+    r0 = synthesize(speech, db=demo_db, config=SynthesisConfig(k=0, topk=5))
+    r2 = synthesize(speech, db=demo_db, config=SynthesisConfig(k=2, topk=5))
+    assert r0.search.cand_clip.shape[1] == 5
+    assert (r2.search.position == 2).all()
+    assert r0.search.clip[0] != r2.search.clip[0] or r0.search.start[0] != r2.search.start[0]
+    df = r0.search.candidates_frame()
+    assert set(df.columns) >= {"clip", "start", "pose_dist", "audio_dist", "pose_rank", "audio_rank", "combined"}
+    assert (df.groupby("step").size() == 5).all()
+
+
+def test_impossible_control_relaxes_with_warning(demo_db, speech):
+    # both hands high AND slow AND narrow AND symmetric: no window of the demo satisfies all
+    ctl = "0-6:both_hands=high+speed=slow+width=narrow+symmetry=asymmetric"
+    with pytest.warns(GestureKitWarning, match="relaxed"):
+        res = synthesize(speech, db=demo_db, config=SynthesisConfig(control=ctl))
+    assert res.relaxed_steps and max(res.relaxed_steps) * 8 < 6 * 15
+    assert res.metadata()["relaxed_steps"] == res.relaxed_steps
+
+
+def test_rest_init_starts_from_the_rest_frame(demo_db, speech):
+    res = synthesize(speech, db=demo_db, config=SynthesisConfig(init="rest"))
+    c, f = rest_pose_frame(demo_db)
+    np.testing.assert_array_equal(res.search.init_pose, np.asarray(demo_db.P)[c, f])
+    assert demo_db.attribute("hand_speed")[c, f] <= demo_db.thresholds["hand_speed"][0]
+
+
+def test_offset_blend_shrinks_the_jumps_at_joins(demo_db, speech):
+    none = synthesize(speech, db=demo_db)
+    off = synthesize(speech, db=demo_db, config=SynthesisConfig(blend="offset"))
+    b = np.arange(8, none.n_frames, 8)
+
+    def join_jerk(m):
+        g = m.flat()
+        acc = g[b] - 2 * g[b - 1] + g[b - 2]
+        return np.linalg.norm(acc, axis=1).mean()
+
+    assert join_jerk(off.motion) < 0.5 * join_jerk(none.motion)
+    np.testing.assert_array_equal(off.knn_motion.positions, none.knn_motion.positions)
+
+
+def test_bad_options_are_config_errors(demo_db, speech):
+    with pytest.raises(ConfigError, match="init"):
+        SynthesisConfig(init="t-pose")
+    with pytest.raises(ConfigError, match="unknown control"):
+        SynthesisConfig(control="0-2:elbows=up")
+    with pytest.raises(ConfigError, match="no take named"):
+        synthesize(speech, db=demo_db, config=SynthesisConfig(exclude_takes=("nope",)))
+
+
+# ---- acceptance on the real ZEGGS take ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def zeggs_db(tmp_path_factory):
+    from .conftest import ZEGGS_BVH
+
+    if not ZEGGS_BVH.is_file():
+        pytest.skip(f"ZEGGS take not found at {ZEGGS_BVH}")
+    out = tmp_path_factory.mktemp("zeggs") / "db"
+    assert main(["build-db", str(ZEGGS_BVH.parent), "--preset", "zeggs", "--out", str(out)]) == 0
+    return MatchingDatabase.load(out)
+
+
+@pytest.fixture
+def beat_speech(shared_data):
+    p = shared_data / "speech" / "beat_lawrence_0_19_19.wav"
+    if not p.is_file():
+        pytest.skip(f"{p} not found")
+    return p
+
+
+def test_zeggs_left_hand_high_paper_rule(zeggs_db, beat_speech):
+    res = synthesize(beat_speech, db=zeggs_db, config=SynthesisConfig(control="0-1000:left_hand=high"))
+    high = res.motion.positions[:, LW, 1] > zeggs_db.thresholds["left_hand_height"][1]
+    assert high.mean() >= 0.90
+    assert res.relaxed_steps == [] or res.metadata()["relaxed_steps"] == res.relaxed_steps
+
+
+def test_zeggs_left_hand_high_every_frame_rule(zeggs_db, beat_speech):
+    res = synthesize(beat_speech, db=zeggs_db,
+                     config=SynthesisConfig(control="0-1000:left_hand=high", mask_rule="all"))
+    high = res.motion.positions[:, LW, 1] > zeggs_db.thresholds["left_hand_height"][1]
+    relaxed_frames = np.zeros(res.n_frames, bool)
+    for i in res.relaxed_steps:
+        relaxed_frames[i * 8 : (i + 1) * 8] = True
+    assert high[~relaxed_frames].all() and high.mean() == 1.0
+
+
+def test_zeggs_bvh_export_read_back_independently(zeggs_db, shared_data, tmp_path):
+    import bvhio
+
+    speech = shared_data / "speech" / "espeak_en_us.wav"
+    res = synthesize(speech, db=zeggs_db, config=SynthesisConfig(control="2-6:right_hand=high"))
+    path = res.save_bvh(tmp_path / "out.bvh", units="m")
+    root = bvhio.readAsHierarchy(str(path))
+    names = [j.Name for j, _, _ in root.layout()]
+    from gesturekit.skeleton import JOINT_NAMES
+
+    got = np.zeros((res.n_frames, 55, 3))
+    for f in range(res.n_frames):
+        root.loadPose(f)
+        pos = {j.Name: np.asarray(j.PositionWorld) for j, _, _ in root.layout()}
+        got[f] = [pos[n] for n in JOINT_NAMES]
+    assert set(JOINT_NAMES) <= set(names)
+    assert np.abs(got - res.motion.positions).max() < 1e-3
+
+
+def test_cli_synthesize_with_video_and_controls(zeggs_db, shared_data, tmp_path, capsys):
+    from gesturekit.export.video import probe_media
+
+    speech = shared_data / "speech" / "espeak_en_us.wav"
+    control = tmp_path / "control.csv"
+    control.write_text("start_s,end_s,constraint\n0,4,left_hand=low\n4,8,speed=fast+width=wide\n")
+    out = tmp_path / "out"
+    args = ["synthesize", str(speech), "--db", str(zeggs_db.path), "--out", str(out), "--control", str(control),
+            "--k", "1", "--seed", "3", "--video"]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "espeak_en_us.wav: 253 frames" in printed
+    import soundfile as sf
+
+    info = probe_media(out / "espeak_en_us.mp4")
+    duration = sf.info(speech).duration
+    assert info["video"]["codec"] == "h264" and info["audio"]["codec"] == "aac"
+    assert abs(info["video"]["duration"] - duration) <= 1 / 15 + 1e-6
+    assert abs(info["audio"]["duration"] - duration) < 0.05
+    assert main(args) == 2 and "add --force" in capsys.readouterr().err
+    from gesturekit.export.npz import load_npz
+
+    _, _, config = load_npz(out / "espeak_en_us.npz")
+    assert config["synthesis"]["control"] == "0-4:left_hand=low,4-8:speed=fast+width=wide"
+    assert config["synthesis"]["k"] == 1 and config["source"] == "espeak_en_us.wav"
