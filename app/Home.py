@@ -1,0 +1,43 @@
+"""gesturekit's app: start it with ``streamlit run app/Home.py``.
+
+On a machine without a database, this page (like every page) builds the
+generated demo speaker's database at the default path first, with a progress
+bar; nothing is downloaded.
+"""
+import streamlit as st
+
+import common
+
+
+def main() -> None:
+    common.page_setup("gesturekit")
+    st.title("gesturekit")
+    st.markdown(
+        "Speech in, co-speech gestures out, by **motion matching**: the method of Habibie et al., "
+        "*A Motion Matching-based Framework for Controllable Gesture Synthesis from Speech* (SIGGRAPH 2022).\n\n"
+        "A database of recorded motion with its speech is cut into short clips. For new speech, the search "
+        "steps through time, 8 frames at a step, and at each step picks the database segment whose speech "
+        "matches the coming second of the new speech and whose pose continues the motion so far. Controls "
+        "(hands high or low, fast or slow, wide, symmetric...) restrict, for stretches of time, which database "
+        "frames may be used. An optional conditional GAN refines the result into smooth motion."
+    )
+    db = common.sidebar_database()
+
+    st.subheader("Open database")
+    common.show_database_label(db)
+    d = db.describe()
+    st.markdown(
+        f"`{d['path']}`: {d['takes']} takes, {d['clips']} clips of {d['clip_frames']} frames "
+        f"({d['minutes_in_clips']:.1f} minutes at {d['fps']} fps), "
+        f"{'with' if d['has_audio'] else 'without'} audio. Source: {d['source'] or 'unknown'}."
+    )
+    st.caption("Choose another database, or build one from a folder of takes, in the sidebar.")
+
+    st.subheader("Pages")
+    for page in common.PAGES:
+        if page.exists:
+            st.page_link(page.script, label=page.title, icon=page.icon)
+            st.caption(page.purpose)
+
+
+common.run_page(main)

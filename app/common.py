@@ -1,0 +1,501 @@
+"""What every page of the app shares: the database sidebar, cached loading, errors, per-user state.
+
+A page is a short script::
+
+    import streamlit as st
+
+    import common
+
+
+    def main():
+        common.page_setup("My page")
+        st.title("My page")
+        db = common.sidebar_database()  # the user's database, opened (built first if it is the missing demo)
+        ...
+
+
+    common.run_page(main)
+
+``run_page`` shows every :class:`~gesturekit.errors.GestureKitError` (and
+``OSError`` from a file the user named) as ``st.error`` with its message,
+never as a traceback.
+
+State. Databases are opened once per process with ``st.cache_resource``,
+keyed by their folder and the modification time of their ``database.json``
+(a rebuilt database is opened anew); the opened object is shared by all
+sessions and must be treated as read-only. Everything a user chooses lives in
+``st.session_state``, which Streamlit keeps per browser session, so two
+users never see each other's choices. Streamlit forgets a widget's value when
+its page is left; :func:`persistent_key` gives widgets a value that survives
+page switches.
+
+Environment. ``GESTUREKIT_HOME`` moves gesturekit's own folder (see
+:mod:`gesturekit.paths`); ``GESTUREKIT_DEMO_MINUTES`` sets the minutes of the
+demo database the app builds on a machine that has none (default
+:data:`gesturekit.demo.DEMO_MINUTES`; smaller is faster, for tests and
+trials).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+import streamlit as st
+
+from gesturekit.database import BuildConfig, MatchingDatabase
+from gesturekit.demo import DEMO_MINUTES, build_demo_database
+from gesturekit.errors import ConfigError, DatabaseError, GestureKitError, GestureKitWarning
+from gesturekit.paths import default_database_path, home
+
+__all__ = [
+    "APP_DIR",
+    "DATABASE_KEY",
+    "DEMO_MINUTES_ENV",
+    "PAGES",
+    "Page",
+    "build_from_folder",
+    "database_folders",
+    "demo_minutes",
+    "ensure_demo_database",
+    "is_generated",
+    "load_database",
+    "page_setup",
+    "persistent_key",
+    "run_page",
+    "show_database_label",
+    "sidebar_database",
+    "user_errors",
+]
+
+APP_DIR = Path(__file__).resolve().parent
+DEMO_MINUTES_ENV = "GESTUREKIT_DEMO_MINUTES"
+
+#: Session-state key of the user's chosen database folder (a string), shared by all pages.
+DATABASE_KEY = "gk.database"
+_PENDING_KEY = "gk.database_pending"  # a database to select on the next run (after a build)
+_FLASH_KEY = "gk.flash"  # a message to show once on the next run
+_CHOICE_WIDGET = "_gk.database_choice"
+_TYPED_WIDGET = "_gk.database_typed"
+_OTHER = "\0other"  # the "type a path" option of the selector (cannot be a path)
+
+
+@dataclass(frozen=True)
+class Page:
+    """A page of the app: its script (relative to ``app/``), title, icon and one-line purpose."""
+
+    script: str
+    title: str
+    icon: str
+    purpose: str
+
+    @property
+    def exists(self) -> bool:
+        return (APP_DIR / self.script).is_file()
+
+
+#: The pages, in menu order; Home links those whose script exists.
+PAGES: tuple[Page, ...] = (
+    Page("pages/1_Synthesize.py", "Synthesize", "🎙️",
+         "speech in, gestures out: choose controls, run the search, refine, export"),
+    Page("pages/2_Retrieval_inspector.py", "Retrieval inspector", "🔎",
+         "step through the search: the candidates of every step, their distances and clips"),
+    Page("pages/3_Database.py", "Database", "🗂️",
+         "what the matching database holds: takes, clips, control attributes, any clip in 3D with its sound"),
+)
+
+
+# ---- errors -------------------------------------------------------------------------------------
+
+@contextlib.contextmanager
+def user_errors() -> Iterator[None]:
+    """Show errors a user can cause as ``st.error`` in the current container, not as a traceback.
+
+    Catches :class:`GestureKitError` (bad paths, bad folders, existing
+    outputs, invalid settings) and ``OSError`` (a file that cannot be read or
+    written). Anything else is a bug and propagates. Code after the failing
+    statement inside the block does not run; code after the block does.
+    """
+    try:
+        yield
+    except GestureKitError as exc:
+        st.error(str(exc), icon="⚠️")
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        st.error(f"{where}{exc.strerror or exc}", icon="⚠️")
+
+
+def run_page(body: Callable[[], None]) -> None:
+    """Run a page's body, showing user errors as ``st.error`` (see :func:`user_errors`)."""
+    with user_errors():
+        body()
+
+
+@contextlib.contextmanager
+def _warnings_shown() -> Iterator[list[str]]:
+    """Show the :class:`GestureKitWarning` s raised inside the block as ``st.warning``.
+
+    Yields the list their messages are collected in (complete when the block ends).
+    """
+    messages: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", GestureKitWarning)
+        try:
+            yield messages
+        finally:
+            for w in caught:
+                if issubclass(w.category, GestureKitWarning):
+                    messages.append(str(w.message))
+                    st.warning(messages[-1])
+
+
+# ---- state --------------------------------------------------------------------------------------
+
+def persistent_key(name: str, default) -> str:
+    """The widget key for a value that survives page switches.
+
+    Streamlit drops the state of widgets not shown in a run, so a value kept
+    only in a widget is lost when the user visits another page. Use the
+    returned key as the widget's ``key`` and store the value it returns under
+    ``name``::
+
+        st.session_state["synth.seed"] = st.number_input("Seed", key=common.persistent_key("synth.seed", 0))
+
+    Parameters
+    ----------
+    name : str
+        Session-state key of the value; prefix it with the page (``"db.clip"``).
+    default
+        The value before the user chose one.
+    """
+    ss = st.session_state
+    key = f"_w.{name}"
+    if key not in ss:
+        ss[key] = ss.get(name, default)
+    return key
+
+
+# ---- the demo database --------------------------------------------------------------------------
+
+def demo_minutes() -> float:
+    """Minutes of the demo database the app builds: ``$GESTUREKIT_DEMO_MINUTES`` or the default.
+
+    Raises
+    ------
+    ConfigError
+        The variable is set but is not a positive number.
+    """
+    raw = os.environ.get(DEMO_MINUTES_ENV, "").strip()
+    if not raw:
+        return float(DEMO_MINUTES)
+    try:
+        minutes = float(raw)
+    except ValueError:
+        minutes = float("nan")
+    if not minutes > 0 or minutes == float("inf"):
+        raise ConfigError(f"{DEMO_MINUTES_ENV} must be a positive number of minutes, got {raw!r}")
+    return minutes
+
+
+@st.cache_resource(show_spinner=False)
+def _build_lock() -> threading.Lock:
+    # one build at a time in this server: sessions share the process (and the temporary folder name)
+    return threading.Lock()
+
+
+def ensure_demo_database() -> Path:
+    """Build the demo database at the default path if it is not there, showing a progress bar.
+
+    Nothing is downloaded: the demo speaker is generated (deterministically)
+    and its database built, which takes about a second per minute of demo.
+
+    Returns
+    -------
+    Path
+        The default database folder (:func:`gesturekit.paths.default_database_path`).
+    """
+    path = default_database_path()
+    if (path / "database.json").is_file():
+        return path
+    minutes = demo_minutes()
+    with _build_lock():
+        if (path / "database.json").is_file():  # another session built it meanwhile
+            return path
+        note = st.empty()
+        note.info(
+            f"No database yet at `{path}`: building the generated demo speaker's database "
+            f"({minutes:g} minutes of synthetic speech and motion, no download)."
+        )
+        bar = st.progress(0.0, text="generating the demo speaker…")
+
+        def progress(done: float, total: float) -> None:
+            frac = min(1.0, done / total) if total > 0 else 1.0
+            stage = "generating the demo speaker" if frac < 0.5 else "computing features and clips"
+            bar.progress(frac, text=f"{stage}… {100 * frac:.0f}%")
+
+        with _warnings_shown():
+            build_demo_database(path, minutes=minutes, overwrite=path.exists(), progress=progress)
+        bar.progress(1.0, text="demo database ready")
+        note.success(f"Built the demo database at `{path}` ({minutes:g} minutes of generated speaker).")
+    return path
+
+
+def _rebuild_demo(path: Path) -> None:
+    with _build_lock():
+        bar = st.progress(0.0, text="rebuilding the demo database…")
+        with _warnings_shown():
+            build_demo_database(path, minutes=demo_minutes(), overwrite=True,
+                                progress=lambda done, total: bar.progress(min(1.0, done / total)))
+
+
+# ---- opening databases --------------------------------------------------------------------------
+
+@st.cache_resource(max_entries=8, show_spinner="Opening the database…")
+def _open(path: str, stamp: int) -> MatchingDatabase:
+    # ``stamp`` (database.json's mtime) is only part of the cache key: a rebuilt database differs
+    return MatchingDatabase.load(path)
+
+
+def load_database(path: str | os.PathLike) -> MatchingDatabase:
+    """Open a database folder, once per process and version (cached by path and mtime).
+
+    The returned object is shared by every session: do not modify it.
+
+    Raises
+    ------
+    DatabaseError
+        No database there, or one that cannot be read (the message names the folder).
+    """
+    path = Path(path).expanduser().resolve()
+    try:
+        stamp = (path / "database.json").stat().st_mtime_ns
+    except OSError:
+        stamp = -1  # load() raises the precise error; failures are not cached
+    return _open(str(path), stamp)
+
+
+def is_generated(db: MatchingDatabase) -> bool:
+    """Whether the database holds the generated demo speaker rather than recorded motion."""
+    if str(db.meta.get("build", {}).get("source", "")).startswith("demo"):
+        return True
+    return any(
+        str(t.get("sources", {}).get("generator", "")).startswith("gesturekit.datasets.synthetic")
+        for t in db.meta.get("takes", [])
+    )
+
+
+def database_folders() -> dict[str, str]:
+    """Databases the user can pick: folder (as a string) -> label, the default demo first.
+
+    Looks for folders holding a ``database.json`` in ``./db`` (relative to the
+    working directory) and in gesturekit's home ``db`` folder.
+    """
+    default = default_database_path().expanduser().resolve()
+    out = {str(default): "demo database (generated speaker)"}
+    for base in (Path.cwd() / "db", home() / "db"):
+        try:
+            subs = sorted(p for p in base.iterdir() if (p / "database.json").is_file())
+        except OSError:
+            continue
+        for p in subs:
+            key = str(p.resolve())
+            out.setdefault(key, f"{p.name}  ({base})")
+    return out
+
+
+def _select_database() -> Path:
+    """The database selector of the sidebar; returns the chosen folder (not yet opened)."""
+    ss = st.session_state
+    options = database_folders()
+    keys = list(options) + [_OTHER]
+    if _PENDING_KEY in ss:  # a build finished: select its output before the widgets exist
+        ss[DATABASE_KEY] = ss.pop(_PENDING_KEY)
+        ss.pop(_CHOICE_WIDGET, None)
+        ss.pop(_TYPED_WIDGET, None)
+    chosen = ss.get(DATABASE_KEY)
+    if _CHOICE_WIDGET not in ss or ss[_CHOICE_WIDGET] not in keys:
+        if chosen is None or chosen in options:
+            ss[_CHOICE_WIDGET] = chosen or keys[0]
+        else:
+            ss[_CHOICE_WIDGET] = _OTHER
+            ss[_TYPED_WIDGET] = chosen
+    if _TYPED_WIDGET not in ss:
+        ss[_TYPED_WIDGET] = ""
+    choice = st.sidebar.selectbox(
+        "Database", keys, key=_CHOICE_WIDGET,
+        format_func=lambda k: "another folder…" if k == _OTHER else options[k],
+        help="The demo database, databases in ./db or in gesturekit's home db folder, or any folder you type.",
+    )
+    if choice == _OTHER:
+        typed = st.sidebar.text_input("Database folder", key=_TYPED_WIDGET, placeholder="/path/to/database")
+        if not typed.strip():
+            ss.pop(DATABASE_KEY, None)
+            st.info("Type the folder of a database in the sidebar, or pick one from the list.")
+            st.stop()
+        path = Path(typed.strip()).expanduser()
+    else:
+        path = Path(choice)
+    ss[DATABASE_KEY] = str(path)
+    return path
+
+
+def show_database_label(db: MatchingDatabase, *, container=st) -> None:
+    """Say which database is open and what it holds; generated data is flagged as such."""
+    name = db.path.name if db.path is not None else "(in memory)"
+    if is_generated(db):
+        container.warning(f"**Generated data** · {name}: {db.label or 'the demo speaker'}", icon="🧪")
+    else:
+        container.info(f"**{name}**" + (f": {db.label}" if db.label else ""), icon="🗂️")
+
+
+def sidebar_database() -> MatchingDatabase:
+    """The sidebar of every page; returns the user's database, opened.
+
+    Shows the database selector and the "build from a folder" expander. If
+    the choice is the default demo database and it does not exist yet, it is
+    built first (with a progress bar in the page).
+
+    Raises
+    ------
+    GestureKitError
+        The chosen folder is not a readable database (shown by :func:`run_page`).
+    """
+    ss = st.session_state
+    path = _select_database()
+    _build_expander()
+    for kind, text in ss.pop(_FLASH_KEY, []):
+        getattr(st.sidebar, kind)(text)
+    if path.expanduser().resolve() == default_database_path().expanduser().resolve():
+        path = ensure_demo_database()
+        try:
+            db = load_database(path)
+        except DatabaseError as exc:  # e.g. built by an older gesturekit: offer to rebuild it
+            st.error(str(exc), icon="⚠️")
+            if st.button("Rebuild the demo database", key="_gk.rebuild_demo"):
+                _rebuild_demo(path)
+                st.rerun()
+            st.stop()
+    else:
+        db = load_database(path)
+    show_database_label(db, container=st.sidebar)
+    st.sidebar.caption(f"`{db.path}` · {_count(db.n_clips, 'clip')} · {_count(len(db.take_names), 'take')}")
+    return db
+
+
+# ---- building a database from a folder ---------------------------------------------------------
+
+def build_from_folder(
+    folder: str | os.PathLike,
+    *,
+    joint_map: str,
+    out: str | os.PathLike,
+    overwrite: bool = False,
+    fps: float | None = None,
+    label: str = "",
+    progress: Callable[[int, int, str], None] | None = None,
+) -> MatchingDatabase:
+    """Build and save a database from a folder of takes (what ``gesturekit build-db FOLDER`` does).
+
+    Parameters
+    ----------
+    folder : path
+        Folder of takes (see :func:`gesturekit.datasets.takes.discover_takes`).
+    joint_map : str
+        ``"zeggs"``, ``"beat"`` or the path of a JSON joint map.
+    out : path
+        Database folder to write.
+    overwrite : bool
+        Replace an existing database at ``out``.
+    fps : float, optional
+        Frame rate of joint-position files (they do not carry one).
+    label : str
+        Description stored with the database.
+    progress : callable(done, total, take_name), optional
+        Called after each take is read.
+
+    Raises
+    ------
+    GestureKitError
+        Empty or missing folder, an existing output without ``overwrite``, an
+        unreadable joint map or take; the message names the path.
+    """
+    from gesturekit.datasets.presets import load_joint_map
+    from gesturekit.datasets.takes import count_takes, discover_takes, iter_takes
+
+    if not str(folder).strip():
+        raise ConfigError("type the folder of takes to build from")
+    if not str(out).strip():
+        raise ConfigError("type the database folder to write")
+    folder, out = Path(folder).expanduser(), Path(out).expanduser()
+    if out.exists() and not overwrite:
+        raise DatabaseError("a database already exists here; tick 'overwrite' to replace it", path=out)
+    jmap = load_joint_map(joint_map)  # fail before reading any take
+    sources = discover_takes(folder)
+    total = count_takes(sources)
+    config = BuildConfig(label=label, source=str(folder.resolve()), joint_map=str(joint_map))
+    takes = iter_takes(sources, joint_map=jmap, fps_in=fps)
+
+    def on_take(i: int, name: str) -> None:
+        if progress is not None:
+            progress(i, total, name)
+
+    db = MatchingDatabase.build(takes, config=config, progress=on_take)
+    db.save(out, overwrite=overwrite)
+    return db
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+def _build_expander() -> None:
+    """The sidebar's "build from a folder" form; a built database becomes the selection."""
+    with st.sidebar.expander("Build a database from a folder"):
+        folder = st.text_input("Folder of takes", key="_gk.build_folder",
+                               help="BVH + speech files of the same name, joint-position files + speech, "
+                                    "or npz files of the Habibie et al. 2021 layout")
+        naming = st.radio("Skeleton", ["zeggs", "beat", "JSON joint map"], key="_gk.build_naming",
+                          horizontal=True, help="joint naming preset of the BVH files, or a JSON joint map")
+        map_path = ""
+        if naming == "JSON joint map":
+            map_path = st.text_input("Joint map (JSON file)", key="_gk.build_map")
+        fps = st.number_input("Frame rate of joint-position files (0: not needed)", min_value=0.0,
+                              value=0.0, step=1.0, key="_gk.build_fps")
+        out = st.text_input("Database folder to write", key="_gk.build_out",
+                            placeholder=str(home() / "db" / "<folder name>"))
+        label = st.text_input("Label (optional)", key="_gk.build_label")
+        overwrite = st.checkbox("overwrite an existing database", key="_gk.build_overwrite")
+        if not st.button("Build", key="_gk.build_go"):
+            return
+        with user_errors():
+            if naming == "JSON joint map" and not map_path.strip():
+                raise ConfigError("type the path of the JSON joint map")
+            target = out.strip() or (str(home() / "db" / Path(folder.strip()).name) if folder.strip() else "")
+            bar = st.progress(0.0, text="finding takes…")
+
+            def progress(i: int, total: int, name: str) -> None:
+                bar.progress(min(1.0, i / max(total, 1)), text=f"read {i}/{total} takes ({name})")
+
+            with _warnings_shown() as warned, _build_lock():
+                db = build_from_folder(
+                    folder, joint_map=map_path.strip() if naming == "JSON joint map" else naming, out=target,
+                    overwrite=overwrite, fps=fps or None, label=label.strip(), progress=progress,
+                )
+            bar.progress(1.0, text="saved")
+            st.session_state[_PENDING_KEY] = str(Path(db.path).resolve())
+            # the page reruns to open the new database; the messages are shown on that run
+            st.session_state[_FLASH_KEY] = [("success", f"Built {_count(db.n_clips, 'clip')} from "
+                                                        f"{_count(len(db.take_names), 'take')} into {db.path}")]
+            st.session_state[_FLASH_KEY] += [("warning", w) for w in warned]
+            st.rerun()
+
+
+# ---- page frame ---------------------------------------------------------------------------------
+
+def page_setup(title: str, *, icon: str = "🖐️") -> None:
+    """Page title and wide layout; call first on every page."""
+    st.set_page_config(page_title=f"{title} · gesturekit", page_icon=icon, layout="wide")
