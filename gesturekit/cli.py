@@ -165,6 +165,124 @@ def _cmd_synthesize(args) -> int:
     return 0
 
 
+def _control_from_arg(text: str | None) -> str | None:
+    """A --control value (track text or a CSV/JSON file) as normalised track text; None if not given."""
+    from .control import load_control_file, parse_control
+
+    if not text:
+        return None
+    if Path(text).is_file():
+        return load_control_file(text).to_text()
+    return parse_control(text).to_text()
+
+
+def _cmd_evaluate(args) -> int:
+    from .database import MatchingDatabase
+    from .demo import open_default_database
+    from .evaluate.run import run_evaluation
+    from .synthesize import SynthesisConfig
+
+    t0 = time.perf_counter()
+    out = Path(args.out)
+    targets = [out / n for n in ("results.csv", "results.md", "controls.csv", "controls.md", "evaluation.json")]
+    existing = [str(p) for p in targets if p.exists()]
+    if existing and not args.force:
+        raise GestureKitError(f"{existing[0]}: exists already; add --force to replace the evaluation in {out}")
+    db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    config = SynthesisConfig(k=args.k, step=args.step, seed=args.seed, init=args.init_pose,
+                             mask_rule=args.mask_rule, blend=args.blend)
+    with _progress_bar(None, "step", "evaluating") as bar:
+        def progress(done, total, what):
+            bar.total = total
+            bar.n = done
+            bar.set_postfix_str(what[-30:], refresh=False)
+            bar.refresh()
+
+        ev = run_evaluation(db, holdout=args.holdout, systems=args.systems, config=config,
+                            control=_control_from_arg(args.control), fgd_model=args.fgd_model,
+                            refiner=args.refiner, sigma=args.beat_sigma, progress=progress)
+    print(ev.to_markdown())
+    written = ev.save(out, overwrite=args.force)
+    print(f"wrote {', '.join(str(p) for p in written)}")
+    print(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _cmd_train_fgd(args) -> int:
+    from .database import MatchingDatabase
+    from .demo import open_default_database
+    from .evaluate.fgd import FGDConfig, train_fgd_model
+    from .evaluate.run import held_out
+
+    t0 = time.perf_counter()
+    out = Path(args.out)
+    if (out / "fgd.json").exists() and not args.force:
+        raise GestureKitError(f"{out}: an FGD model exists here already; add --force to replace it")
+    db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    takes, ranges = [], []
+    for h in args.holdout or ():
+        ref = held_out(db, h)
+        takes += list(ref.exclude_takes)
+        ranges += list(ref.exclude_ranges)
+    exclude = db.exclusion_mask(takes=takes, ranges=ranges) if (takes or ranges) else None
+    config = FGDConfig(steps=args.steps, seed=args.seed, window=args.window, latent=args.latent)
+    with _progress_bar(config.steps, "step", "training the FGD autoencoder") as bar:
+        def progress(step, steps, loss):
+            bar.n = step
+            bar.set_postfix_str(f"loss {loss:.4f}", refresh=False)
+            bar.refresh()
+
+        model = train_fgd_model(db, config=config, exclude=exclude, progress=progress)
+    model.info["held_out"] = list(args.holdout or ())
+    model.save(out, overwrite=args.force)
+    print(f"FGD autoencoder: {model.info['clips_used']} clips used, {model.info['clips_held_out']} held out, "
+          f"final reconstruction loss {model.info['final_loss']:.4f}")
+    print(f"saved to {out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _cmd_stimuli(args) -> int:
+    from .database import MatchingDatabase
+    from .demo import open_default_database
+    from .export.stimuli import make_stimuli
+
+    t0 = time.perf_counter()
+    import re
+
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", args.resolution)
+    if not m:
+        raise ConfigError(f"--resolution must look like 640x480, got {args.resolution!r}")
+    if not args.audio and not args.holdout:
+        raise ConfigError("give speech with --audio (files or folders) and/or --holdout TAKE:START-END")
+    db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    bars: dict = {}
+
+    def progress(stage, done, total):
+        if stage not in bars:
+            for b in bars.values():
+                b.close()
+            bars[stage] = _progress_bar(total, "stimulus", stage)
+        bars[stage].n = done
+        bars[stage].refresh()
+
+    try:
+        res = make_stimuli(
+            db, out=args.out, audio=args.audio or (), holdouts=args.holdout or (), systems=args.systems,
+            seed=args.seed, participants=args.participants, control=_control_from_arg(args.control) or "",
+            refiner=args.refiner, resolution=(int(m.group(1)), int(m.group(2))), loudness_lufs=args.loudness,
+            workers=args.workers, scheduler=args.scheduler, overwrite=args.force, progress=progress,
+        )
+    finally:
+        for b in bars.values():
+            b.close()
+    print(f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "
+          f"systems) in {res.folder / 'videos'}")
+    print(f"manifest (the key; keep it from raters): {res.folder / 'manifest.csv'}")
+    print(f"presentation order for {res.settings['participants']} participants: {res.folder / 'order.csv'}")
+    print(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="gesturekit",
@@ -229,6 +347,76 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
     y.add_argument("--force", action="store_true", help="replace existing output files")
     y.set_defaults(func=_cmd_synthesize)
+    from .evaluate.baselines import SYSTEMS
+
+    e = sub.add_parser(
+        "evaluate",
+        help="objective measures of every system on a held-out part of a database",
+        description="Keep a take or a time range of one out of the database, synthesise its speech with each "
+        "system, and print and save (CSV + markdown) beat consistency, diversity, FGD, Hellinger distances of "
+        "velocity and acceleration histograms, jerk, acceleration, boundary jumps and control adherence.",
+    )
+    e.add_argument("--db", help="matching database folder (default: the demo database)")
+    e.add_argument("--holdout", required=True, metavar="TAKE[:START-END]",
+                   help="held-out take, or time range of one in seconds (e.g. 067_Speech_2_x_1_0:50-68.8)")
+    e.add_argument("--systems", default=",".join(SYSTEMS),
+                   help=f"comma-separated systems (default: all of {','.join(SYSTEMS)})")
+    e.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
+    e.add_argument("--fgd-model", help="FGD autoencoder from `gesturekit train-fgd` (default: train one now)")
+    e.add_argument("--control", help="control track of the controlled runs (seconds of the held-out speech); "
+                   "default: six equal stretches asking for left hand low/high, slow/fast, symmetric/asymmetric")
+    e.add_argument("--beat-sigma", type=float, default=0.1, help="beat-consistency tolerance, seconds (default 0.1)")
+    e.add_argument("--k", type=int, default=0, help="k of the k-NN (default 0)")
+    e.add_argument("--step", type=int, default=8, help="frames per search step, N (default 8)")
+    e.add_argument("--seed", type=int, default=0, help="seed of the initial pose and the random baseline")
+    e.add_argument("--init-pose", choices=["random", "rest"], default="random")
+    e.add_argument("--mask-rule", choices=["ends", "all"], default="ends")
+    e.add_argument("--blend", choices=["none", "offset"], default="none")
+    e.add_argument("--out", default="evaluation", help="folder for the tables (default: evaluation)")
+    e.add_argument("--force", action="store_true", help="replace existing tables")
+    e.set_defaults(func=_cmd_evaluate)
+
+    f = sub.add_parser(
+        "train-fgd",
+        help="train the motion autoencoder of the FGD measure on a database",
+        description="Train the small convolutional autoencoder whose latent space the Frechet Gesture Distance "
+        "is measured in, on the poses of a matching database, leaving held-out parts out.",
+    )
+    f.add_argument("--db", help="matching database folder (default: the demo database)")
+    f.add_argument("--out", required=True, help="model folder to write")
+    f.add_argument("--holdout", action="append", metavar="TAKE[:START-END]",
+                   help="leave a take or a time range out of training (repeatable)")
+    f.add_argument("--steps", type=int, default=2000, help="training steps (default 2000)")
+    f.add_argument("--window", type=int, default=32, help="frames per window, a multiple of 8 (default 32)")
+    f.add_argument("--latent", type=int, default=32, help="size of the latent feature (default 32)")
+    f.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    f.add_argument("--force", action="store_true", help="replace an existing model")
+    f.set_defaults(func=_cmd_train_fgd)
+
+    s = sub.add_parser(
+        "stimuli",
+        help="user-study videos: every speech x system, opaque ids, manifest and presentation order",
+        description="Render every speech with every system as an MP4 in one identical style (fixed camera, "
+        "resolution, frame rate, loudness-normalised speech), named by opaque ids, with a manifest CSV kept "
+        "apart from the videos and a balanced presentation order per participant (Latin squares).",
+    )
+    s.add_argument("--db", help="matching database folder (default: the demo database)")
+    s.add_argument("--audio", nargs="+", help="speech files or folders of them")
+    s.add_argument("--holdout", action="append", metavar="TAKE[:START-END]",
+                   help="a held-out part of the database as a speech with recorded motion, for gt (repeatable)")
+    s.add_argument("--systems", default="gt,knn,knn+cgan", help="comma-separated systems (default gt,knn,knn+cgan)")
+    s.add_argument("--out", required=True, help="study folder to write")
+    s.add_argument("--seed", type=int, default=0, help="seed of the ids, the order and the synthesis (default 0)")
+    s.add_argument("--participants", type=int, help="participants to plan the order for "
+                   "(default: the rows of the balanced Latin square)")
+    s.add_argument("--control", help="control track for every synthesised stimulus")
+    s.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
+    s.add_argument("--resolution", default="640x480", help="video size WIDTHxHEIGHT (default 640x480)")
+    s.add_argument("--loudness", type=float, default=-23.0, help="loudness of every soundtrack, LUFS (default -23)")
+    s.add_argument("--workers", type=int, help="rendering processes (default: all cores)")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask distributed cluster (tcp://host:8786)")
+    s.add_argument("--force", action="store_true", help="replace an existing study")
+    s.set_defaults(func=_cmd_stimuli)
     return p
 
 

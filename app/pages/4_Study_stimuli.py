@@ -1,0 +1,152 @@
+"""User-study stimuli: speeches x systems as identical-looking videos, a manifest, a balanced order."""
+import os
+import tempfile
+from pathlib import Path
+
+import streamlit as st
+
+import common
+from gesturekit.datasets.takes import AUDIO_EXTENSIONS
+from gesturekit.errors import ConfigError
+from gesturekit.evaluate.baselines import SYSTEM_DESCRIPTIONS, SYSTEMS
+from gesturekit.export.stimuli import make_stimuli, plan_stimuli
+from gesturekit.paths import home
+
+RESULT = "study.result"  # the user's last study: folder, manifest, order (per session)
+RESOLUTIONS = ("320x240", "640x480", "1280x720")
+PREVIEWS = 3
+
+
+def _speech_files(folder: str) -> list[Path]:
+    p = Path(folder.strip()).expanduser()
+    if not folder.strip():
+        return []
+    if not p.is_dir():
+        raise ConfigError("no such folder", path=p)
+    return sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
+
+
+def settings(db) -> dict:
+    """The study's widgets; returns the options of make_stimuli and the speech names."""
+    ss, pk = st.session_state, common.persistent_key
+    left, right = st.columns(2)
+    with left:
+        st.markdown("**Speech**")
+        folder = ss["study.folder"] = st.text_input(
+            "Folder of speech files", key=pk("study.folder", ""),
+            help=f"every {'/'.join(AUDIO_EXTENSIONS)} file in it, in name order")
+        uploads = st.file_uploader("…and/or upload speech files", type=[e[1:] for e in AUDIO_EXTENSIONS],
+                                   accept_multiple_files=True, key="study.uploads")
+        holdouts = ss["study.holdouts"] = st.text_input(
+            "Held-out parts of the database (needed for gt)", key=pk("study.holdouts", ""),
+            placeholder="TAKE:START-END, TAKE:START-END", help="their recorded motion is the ground truth; "
+            "every system's search leaves them out")
+    with right:
+        st.markdown("**Systems and design**")
+        systems = ss["study.systems"] = st.multiselect(
+            "Systems", list(SYSTEMS), key=pk("study.systems", ["knn", "random"]),
+            format_func=lambda s: f"{s}: {SYSTEM_DESCRIPTIONS[s]}")
+        c = st.columns(3)
+        seed = ss["study.seed"] = int(c[0].number_input("Seed", min_value=0, step=1, key=pk("study.seed", 0)))
+        participants = ss["study.participants"] = int(c[1].number_input(
+            "Participants (0: one per row of the Latin square)", min_value=0, step=1,
+            key=pk("study.participants", 0)))
+        resolution = ss["study.resolution"] = c[2].selectbox("Resolution", RESOLUTIONS,
+                                                              key=pk("study.resolution", "640x480"))
+        control = ss["study.control"] = st.text_input(
+            "Control track (optional)", key=pk("study.control", ""), placeholder="0-3:left_hand=high")
+        refiner = ""
+        if "knn+cgan" in systems:
+            refiner = ss["study.refiner"] = st.text_input("Refiner folder (for knn+cgan)",
+                                                          key=pk("study.refiner", ""))
+        c = st.columns([3, 1])
+        out = ss["study.out"] = c[0].text_input("Study folder to write", key=pk("study.out", str(home() / "study")))
+        workers = ss["study.workers"] = int(c[1].number_input("Parallel renders", min_value=1, step=1,
+                                                               key=pk("study.workers", os.cpu_count() or 1)))
+        overwrite = st.checkbox("replace an existing study there", key="study.overwrite")
+    names = [f.name for f in _speech_files(folder)] + [u.name for u in uploads or []]
+    holdout_list = [h.strip() for h in holdouts.split(",") if h.strip()]
+    return {
+        "folder": folder, "uploads": uploads or [], "holdouts": holdout_list, "systems": systems, "seed": seed,
+        "participants": participants or None, "resolution": tuple(int(v) for v in resolution.split("x")),
+        "control": control.strip(), "refiner": refiner.strip() or None, "out": out.strip(), "workers": workers,
+        "overwrite": overwrite, "names": names + holdout_list,
+    }
+
+
+def conditions(opts) -> bool:
+    """The table of conditions the study will have; False when it has none yet."""
+    if not opts["names"] or not opts["systems"]:
+        st.info("Choose speech (a folder, uploads or held-out parts) and at least one system.")
+        return False
+    plan = plan_stimuli(opts["names"], opts["systems"], seed=opts["seed"], participants=opts["participants"],
+                        controls=opts["control"])
+    st.subheader("Conditions")
+    st.caption(f"{len(opts['names'])} speeches × {len(opts['systems'])} systems = {len(plan.conditions)} stimuli, "
+               f"ordered for {plan.order['participant'].nunique()} participants. The ids are the file names; "
+               "this table is the key and stays with the experimenter.")
+    st.dataframe(plan.conditions, hide_index=True, key="study.conditions")
+    return True
+
+
+def run(db, opts) -> None:
+    if not opts["out"]:
+        raise ConfigError("type the study folder to write")
+    bar = st.progress(0.0, text="synthesising…")
+
+    def progress(stage, done, total):
+        # synthesis is quick; rendering takes most of the time
+        frac = 0.1 * done / total if stage == "synthesis" else 0.1 + 0.9 * done / total
+        bar.progress(min(1.0, frac), text=f"{stage}: {done}/{total}")
+
+    with tempfile.TemporaryDirectory(prefix="gesturekit-study-") as tmp:
+        files = _speech_files(opts["folder"])
+        for up in opts["uploads"]:
+            target = Path(tmp) / Path(up.name).name
+            target.write_bytes(up.getvalue())
+            files.append(target)
+        res = make_stimuli(
+            db, out=opts["out"], audio=files, holdouts=opts["holdouts"], systems=opts["systems"],
+            seed=opts["seed"], participants=opts["participants"], control=opts["control"],
+            refiner=opts["refiner"], resolution=opts["resolution"], workers=opts["workers"],
+            overwrite=opts["overwrite"], progress=progress,
+        )
+    bar.progress(1.0, text=f"{len(res.videos)} stimuli written")
+    st.session_state[RESULT] = {"folder": str(res.folder), "manifest": res.manifest, "order": res.order}
+
+
+def show_result() -> None:
+    result = st.session_state.get(RESULT)
+    if result is None:
+        return
+    folder = Path(result["folder"])
+    st.subheader("Study")
+    st.success(f"Videos in `{folder / 'videos'}`; manifest (the key) `{folder / 'manifest.csv'}`; "
+               f"presentation order `{folder / 'order.csv'}`.")
+    first = result["order"][result["order"]["participant"] == 1]["id"].tolist()[:PREVIEWS]
+    st.markdown(f"**Preview**: the first {len(first)} stimuli participant 1 sees, as they will see them")
+    cols = st.columns(max(len(first), 1))
+    for col, sid in zip(cols, first):
+        path = folder / "videos" / f"{sid}.mp4"
+        col.video(path.read_bytes(), format="video/mp4")
+        col.caption(sid)
+    with st.expander("Manifest and presentation order"):
+        st.dataframe(result["manifest"], hide_index=True, key="study.manifest")
+        st.dataframe(result["order"], hide_index=True, key="study.order")
+
+
+def main() -> None:
+    common.page_setup("Study stimuli")
+    st.title("Study stimuli")
+    st.caption("Every speech rendered with every system in one look (fixed camera, same size and frame rate, "
+               "speech at one loudness), named by opaque ids, with a balanced presentation order per participant.")
+    db = common.sidebar_database()
+    opts = settings(db)
+    ready = conditions(opts)
+    if ready and st.button("Make the stimuli", type="primary", key="study.go"):
+        with common.user_errors():
+            run(db, opts)
+    show_result()
+
+
+common.run_page(main)

@@ -1,0 +1,492 @@
+"""The systems an evaluation or a user study compares, all on one matching database.
+
+=============  ==================================================================================
+``gt``         the recorded motion of the held-out speech (ground truth)
+``random``     random database windows of N frames, concatenated (seeded)
+``audio-only`` per step, the window whose audio feature is nearest the speech's (cosine
+               distance, as Algorithm 1 measures audio), whatever the pose
+``pose-only``  per step, the window whose pose feature is nearest the last output pose
+               (Euclidean), whatever the audio: the paper's "simple k-NN"
+``knn``        Algorithm 1 (:func:`gesturekit.synthesize.synthesize`), the paper's k-NN
+``knn+cgan``   the k-NN motion refined by a trained refiner (the paper's full system)
+=============  ==================================================================================
+
+The three baselines search exactly as the k-NN does where they overlap: the
+same windows are admissible (a valid start, the whole window inside its clip
+and outside the held-out frames, a control holding at the window's first and
+last frame, or at every frame), a step's control is dropped when it admits no
+window (the step counts as relaxed), the random initial pose is drawn by the
+same rule from the same seed, and a pose candidate at distance exactly 0 (the
+query's own frame) is skipped. Distances are computed in float64 and ties go
+to the lowest (clip, start), so the results are reproducible.
+"""
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..control import ControlTrack, parse_control, step_masks
+from ..errors import ConfigError
+from ..motion import Motion
+
+__all__ = [
+    "SYSTEMS",
+    "SYSTEM_DESCRIPTIONS",
+    "SystemUnavailable",
+    "SystemOutput",
+    "parse_systems",
+    "admissible_windows",
+    "random_segments",
+    "audio_nearest_segments",
+    "pose_nearest_segments",
+    "refiner_unavailable_reason",
+    "load_refiner_for",
+    "run_system",
+]
+
+SYSTEMS: tuple[str, ...] = ("gt", "random", "audio-only", "pose-only", "knn", "knn+cgan")
+
+SYSTEM_DESCRIPTIONS: dict[str, str] = {
+    "gt": "recorded motion of the speech (ground truth)",
+    "random": "random database segments",
+    "audio-only": "audio-only nearest neighbour per step",
+    "pose-only": "pose-only nearest neighbour per step (the paper's simple k-NN)",
+    "knn": "k-NN motion matching (Algorithm 1)",
+    "knn+cgan": "k-NN refined by the resynchronisation cGAN",
+}
+
+
+class SystemUnavailable(ConfigError):
+    """A system cannot run here (e.g. ``knn+cgan`` without a trained refiner)."""
+
+
+@dataclass
+class SystemOutput:
+    """The motion one system made for one speech.
+
+    Attributes
+    ----------
+    system : str
+    motion : Motion
+        (frames, 55, 3) metres at the database's frame rate.
+    boundaries : np.ndarray, shape (joins,), int64
+        First frame of every segment after the first (for ``gt``: where the others join).
+    relaxed_steps : int
+        Steps whose control was dropped because it admitted no window.
+    """
+
+    system: str
+    motion: Motion
+    boundaries: np.ndarray
+    relaxed_steps: int = 0
+
+
+def parse_systems(systems) -> tuple[str, ...]:
+    """``"gt,knn"`` or a sequence -> a tuple of known system names (order kept, duplicates dropped)."""
+    if isinstance(systems, str):
+        systems = [s.strip() for s in systems.split(",")]
+    out: list[str] = []
+    for s in systems:
+        if not s:
+            continue
+        if s not in SYSTEMS:
+            raise ConfigError(f"unknown system {s!r}; known systems: {', '.join(SYSTEMS)}")
+        if s not in out:
+            out.append(s)
+    if not out:
+        raise ConfigError(f"name at least one system of {', '.join(SYSTEMS)}")
+    return tuple(out)
+
+
+# ---- admissible windows -------------------------------------------------------------------------
+
+
+def _window_all(flags: np.ndarray, n: int) -> np.ndarray:
+    """``out[m, s]``: all of ``flags[m, s:s+n]`` (False where the window leaves the clip)."""
+    M, T = flags.shape
+    out = np.zeros((M, T), bool)
+    if n <= T:
+        bad = np.concatenate([np.zeros((M, 1), np.int64), np.cumsum(~flags, axis=1)], axis=1)
+        out[:, : T - n + 1] = bad[:, n:] == bad[:, : T - n + 1]
+    return out
+
+
+def admissible_windows(valid, *, step: int, exclude=None, mask=None, mask_rule: str = "ends") -> np.ndarray:
+    """Start frames of windows of ``step`` frames the search may use.
+
+    Parameters
+    ----------
+    valid : array, shape (M, T), bool
+        Frames that may start a segment.
+    step : int
+        Window length N, frames.
+    exclude : array, shape (M, T), bool, optional
+        Held-out frames: no window may contain one.
+    mask : array, shape (M, T), bool, optional
+        A control's admissible frames.
+    mask_rule : {"ends", "all"}
+        The control must hold at the window's first and last frame, or at every frame.
+
+    Returns
+    -------
+    np.ndarray, shape (M, T), bool
+    """
+    valid = np.asarray(valid, dtype=bool)
+    M, T = valid.shape
+    if not isinstance(step, (int, np.integer)) or not 1 <= step <= T:
+        raise ConfigError(f"step must be 1..{T} frames, got {step!r}")
+    adm = valid.copy()
+    adm[:, T - step + 1 :] = False
+    if exclude is not None:
+        adm &= _window_all(~np.asarray(exclude, dtype=bool), step)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask_rule == "ends":
+            ends = np.zeros_like(mask)
+            ends[:, : T - step + 1] = mask[:, : T - step + 1] & mask[:, step - 1 :]
+            adm &= ends
+        elif mask_rule == "all":
+            adm &= _window_all(mask, step)
+        else:
+            raise ConfigError(f"mask_rule must be 'ends' or 'all', got {mask_rule!r}")
+    return adm
+
+
+class _Steps:
+    """Admissible windows per step, with the search's relaxation rule, cached per mask."""
+
+    def __init__(self, valid, step, exclude, masks, step_mask, mask_rule, n_steps):
+        self.valid, self.step, self.exclude, self.masks, self.rule = valid, step, exclude, masks, mask_rule
+        self.step_mask = np.full(n_steps, -1, np.int64) if step_mask is None else np.asarray(step_mask, np.int64)
+        if self.step_mask.shape != (n_steps,):
+            raise ConfigError(f"step_mask must have one entry per step ({n_steps}), got {self.step_mask.shape}")
+        if masks is None and np.any(self.step_mask >= 0):
+            raise ConfigError("step_mask refers to control masks, but none were given")
+        self._cache: dict[int, np.ndarray] = {}
+
+    def _adm(self, j: int) -> np.ndarray:
+        if j not in self._cache:
+            self._cache[j] = admissible_windows(self.valid, step=self.step, exclude=self.exclude,
+                                                mask=None if j < 0 else self.masks[j], mask_rule=self.rule)
+        return self._cache[j]
+
+    def __call__(self, i: int) -> tuple[np.ndarray, bool]:
+        adm = self._adm(int(self.step_mask[i]))
+        if adm.any():
+            return adm, False
+        adm = self._adm(-1)
+        if not adm.any():
+            raise ConfigError("no admissible database window (every window is held out or invalid)")
+        return adm, True
+
+
+def _frames(choices: list[tuple[int, int]], n_frames: int, step: int) -> np.ndarray:
+    out = np.empty((n_frames, 2), np.int64)
+    for i, (c, s) in enumerate(choices):
+        a, b = i * step, min((i + 1) * step, n_frames)
+        out[a:b, 0] = c
+        out[a:b, 1] = s + np.arange(b - a)
+    return out
+
+
+def _check_n(n_frames, step):
+    if not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
+        raise ConfigError(f"n_frames must be a positive integer, got {n_frames!r}")
+    return -(-int(n_frames) // int(step))
+
+
+def random_segments(
+    valid, *, n_frames: int, step: int = 8, seed: int = 0, exclude=None, masks=None, step_mask=None,
+    mask_rule: str = "ends",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random admissible windows, one per step.
+
+    Parameters
+    ----------
+    valid : array, shape (M, T), bool
+    n_frames : int
+        Output frames.
+    step : int
+        Frames per window.
+    seed : int
+    exclude, masks, step_mask, mask_rule
+        As for the search: held-out frames (M, T); control masks (n_masks, M, T) and each
+        step's index into them (-1: none).
+
+    Returns
+    -------
+    frames : np.ndarray, shape (n_frames, 2), int64
+        (clip, frame) of every output frame.
+    relaxed : np.ndarray, shape (n_steps,), bool
+    """
+    n_steps = _check_n(n_frames, step)
+    steps = _Steps(np.asarray(valid, bool), step, exclude, masks, step_mask, mask_rule, n_steps)
+    rng = np.random.default_rng(seed)
+    T = np.asarray(valid).shape[1]
+    choices, relaxed = [], np.zeros(n_steps, bool)
+    for i in range(n_steps):
+        adm, relaxed[i] = steps(i)
+        flat = np.flatnonzero(adm)
+        choices.append(divmod(int(flat[rng.integers(flat.size)]), T))
+    return _frames(choices, int(n_frames), step), relaxed
+
+
+def audio_nearest_segments(
+    F, valid, query, *, step: int = 8, exclude=None, masks=None, step_mask=None, mask_rule: str = "ends",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per step, the admissible window whose audio feature is nearest the query's (cosine distance).
+
+    Parameters
+    ----------
+    F : array, shape (M, T, A)
+        z-scored audio features of the database.
+    valid : array, shape (M, T), bool
+    query : array, shape (n_frames, A)
+        z-scored audio features of the speech (step ``i`` matches ``query[i * step]``).
+    step, exclude, masks, step_mask, mask_rule
+        See :func:`random_segments`.
+
+    Returns
+    -------
+    frames : np.ndarray, shape (n_frames, 2), int64
+    relaxed : np.ndarray, shape (n_steps,), bool
+    """
+    F = np.asarray(F)
+    M, T, A = F.shape
+    q = np.asarray(query, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != A:
+        raise ConfigError(f"query must have shape (frames, {A}), got {q.shape}")
+    n_steps = _check_n(q.shape[0], step)
+    steps = _Steps(np.asarray(valid, bool), step, exclude, masks, step_mask, mask_rule, n_steps)
+    rows = F.reshape(M * T, A)
+    Q = q[np.arange(n_steps) * step]
+    qn = np.linalg.norm(Q, axis=1)
+    # cosine distances of every database frame to every step's query, chunk by chunk of rows
+    dist = np.empty((n_steps, M * T))
+    for a in range(0, M * T, 65536):
+        r = np.asarray(rows[a : a + 65536], dtype=np.float64)
+        rn = np.linalg.norm(r, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = 1.0 - (Q @ r.T) / (qn[:, None] * rn[None, :])
+        d[(qn[:, None] == 0) | (rn[None, :] == 0)] = 1.0
+        dist[:, a : a + r.shape[0]] = d
+    choices, relaxed = [], np.zeros(n_steps, bool)
+    for i in range(n_steps):
+        adm, relaxed[i] = steps(i)
+        best = int(np.argmin(np.where(adm.ravel(), dist[i], np.inf)))  # first of equals: lowest index
+        choices.append(divmod(best, T))
+    return _frames(choices, q.shape[0], step), relaxed
+
+
+def _initial_pose(P, adm, seed):
+    """The search's rule: a random admissible frame of step 0, drawn with ``default_rng(seed)``."""
+    flat = np.flatnonzero(adm)
+    pick = int(flat[int(np.random.default_rng(seed).integers(flat.size))])
+    return np.asarray(P.reshape(-1, P.shape[-1])[pick], dtype=np.float32)
+
+
+def pose_nearest_segments(
+    P, valid, *, n_frames: int, step: int = 8, seed: int = 0, init_pose=None, exclude=None, masks=None,
+    step_mask=None, mask_rule: str = "ends",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per step, the admissible window whose pose feature is nearest the last output pose feature.
+
+    Candidates at distance exactly 0 (the query's own frame) are skipped, as in Algorithm 1.
+
+    Parameters
+    ----------
+    P : array, shape (M, T, D)
+        z-scored pose features of the database.
+    valid : array, shape (M, T), bool
+    n_frames : int
+    step : int
+    seed : int
+        Seed of the random initial pose (when ``init_pose`` is None).
+    init_pose : array, shape (D,), optional
+        The initial pose feature instead of a random one.
+    exclude, masks, step_mask, mask_rule
+        See :func:`random_segments`.
+
+    Returns
+    -------
+    frames : np.ndarray, shape (n_frames, 2), int64
+    relaxed : np.ndarray, shape (n_steps,), bool
+    """
+    P = np.asarray(P)
+    M, T, D = P.shape
+    n_steps = _check_n(n_frames, step)
+    steps = _Steps(np.asarray(valid, bool), step, exclude, masks, step_mask, mask_rule, n_steps)
+    rows = P.reshape(M * T, D)
+    if init_pose is None:
+        init_adm, _ = steps(0)
+        p = _initial_pose(P, init_adm, seed)
+    else:
+        p = np.asarray(init_pose, dtype=np.float32)
+        if p.shape != (D,):
+            raise ConfigError(f"init_pose must have shape ({D},), got {p.shape}")
+    choices, relaxed = [], np.zeros(n_steps, bool)
+    for i in range(n_steps):
+        adm, relaxed[i] = steps(i)
+        flat = np.flatnonzero(adm)
+        d2 = np.sum((np.asarray(rows[flat], dtype=np.float64) - p.astype(np.float64)) ** 2, axis=1)
+        d2[d2 == 0.0] = np.inf
+        if not np.isfinite(d2).any():
+            raise ConfigError(f"step {i}: no admissible window other than the query's own frame")
+        c, s = divmod(int(flat[int(np.argmin(d2))]), T)
+        choices.append((c, s))
+        p = np.asarray(P[c, s + step - 1], dtype=np.float32)
+    return _frames(choices, int(n_frames), step), relaxed
+
+
+# ---- running a system ---------------------------------------------------------------------------
+
+
+def refiner_unavailable_reason(refiner) -> str | None:
+    """Why ``knn+cgan`` cannot run with this refiner, or None when it can.
+
+    A refiner is usable when the synthesis takes a ``refiner`` option, or when it is a trained
+    refiner object (``refine_motion``) or a folder the refiner package can open.
+    """
+    from .. import synthesize as synth
+
+    if refiner is None:
+        return ("knn+cgan is unavailable: it needs a trained refiner (give --refiner MODEL; train one with "
+                "`gesturekit train-refiner`)")
+    if ("refiner" in inspect.signature(synth.synthesize_batch).parameters
+            or "refiner" in getattr(synth.SynthesisConfig, "__dataclass_fields__", {})
+            or hasattr(refiner, "refine_motion")):
+        return None
+    try:
+        from ..refine import load_refiner  # noqa: F401
+    except ImportError:
+        return "knn+cgan is unavailable: this gesturekit has no refiner (gesturekit.refine)"
+    return None
+
+
+def load_refiner_for(refiner):
+    """A refiner given as a path, opened with the refiner package's loader; objects pass through."""
+    import os
+
+    if not isinstance(refiner, (str, os.PathLike)):
+        return refiner
+    try:
+        from ..refine import load_refiner
+    except ImportError:
+        raise SystemUnavailable("knn+cgan is unavailable: this gesturekit has no refiner (gesturekit.refine)") from None
+    return load_refiner(refiner)
+
+
+def _refined(db, res, refiner):
+    """The refined motion of a synthesis: the synthesis's own, else the refiner applied to its k-NN motion."""
+    if res.refined_motion is not None:
+        return res.refined_motion
+    if not hasattr(refiner, "refine_motion"):
+        raise SystemUnavailable("knn+cgan is unavailable: the synthesis returned no refined motion")
+    if hasattr(refiner, "check_database"):
+        refiner.check_database(db)
+    _, audio_features = db.query_features(res.audio, n_frames=res.knn_motion.n_frames)
+    return refiner.refine_motion(res.knn_motion, audio_features)
+
+
+def _baseline_inputs(db, audio, config, track):
+    from ..features import n_audio_frames
+
+    n = n_audio_frames(len(audio))
+    fq, _ = db.query_features(audio, n_frames=n)
+    masks, smask = step_masks(track, np.asarray(db.attributes), db.thresholds, n_frames=n, step=config.step)
+    exclude = None
+    if config.exclude_takes or config.exclude_ranges:
+        exclude = db.exclusion_mask(takes=config.exclude_takes, ranges=config.exclude_ranges)
+    return n, fq, masks, smask, exclude
+
+
+def run_system(
+    system: str,
+    *,
+    db,
+    audio: np.ndarray,
+    config=None,
+    control: ControlTrack | str | None = None,
+    gt: Motion | None = None,
+    refiner=None,
+) -> SystemOutput:
+    """Make the motion of one system for one speech.
+
+    Parameters
+    ----------
+    system : str
+        One of :data:`SYSTEMS`.
+    db : MatchingDatabase
+    audio : np.ndarray, shape (samples,), float32
+        The speech at 16 kHz.
+    config : SynthesisConfig, optional
+        k, step, seed, initial pose, mask rule, blending, exclusions (all systems but ``gt``
+        use its step, seed, mask rule and exclusions; ``knn`` uses all of it).
+    control : ControlTrack or str, optional
+        Overrides ``config.control`` (``gt`` ignores controls).
+    gt : Motion, optional
+        The recorded motion (needed for ``gt``).
+    refiner : optional
+        A trained refiner or its path (needed for ``knn+cgan``).
+
+    Returns
+    -------
+    SystemOutput
+        Its motion has ``floor(samples * 15 / 16000)`` frames (``gt``: as recorded).
+
+    Raises
+    ------
+    SystemUnavailable
+        ``gt`` without a recording, ``knn+cgan`` without a usable refiner.
+    """
+    from ..synthesize import SynthesisConfig, synthesize
+
+    if system not in SYSTEMS:
+        raise ConfigError(f"unknown system {system!r}; known systems: {', '.join(SYSTEMS)}")
+    config = config or SynthesisConfig()
+    track = control if control is not None else config.control
+    if isinstance(track, str):
+        track = parse_control(track)
+    audio = np.asarray(audio, dtype=np.float32)
+    N = config.step
+    if system == "gt":
+        if gt is None:
+            raise SystemUnavailable("gt needs the recorded motion of the speech (a held-out part of the database)")
+        return SystemOutput("gt", gt, np.arange(N, gt.n_frames, N, dtype=np.int64))
+    if system in ("knn", "knn+cgan"):
+        kwargs = {}
+        if system == "knn+cgan":
+            reason = refiner_unavailable_reason(refiner)
+            if reason:
+                raise SystemUnavailable(reason)
+            refiner = load_refiner_for(refiner)
+        cfg = replace(config, control=track.to_text())
+        if system == "knn+cgan":
+            # the synthesis applies the refiner when it has the option (an argument or a config field);
+            # otherwise it is applied here to the k-NN motion (see _refined)
+            if "refiner" in inspect.signature(synthesize).parameters:
+                kwargs["refiner"] = refiner
+            elif "refiner" in getattr(SynthesisConfig, "__dataclass_fields__", {}):
+                cfg = replace(cfg, refiner=refiner)
+        res = synthesize(audio, db=db, config=cfg, **kwargs)
+        motion = _refined(db, res, refiner) if system == "knn+cgan" else res.motion
+        return SystemOutput(system, motion, np.arange(N, motion.n_frames, N, dtype=np.int64), len(res.relaxed_steps))
+    n, fq, masks, smask, exclude = _baseline_inputs(db, audio, config, track)
+    valid = np.asarray(db.valid)
+    common = dict(step=N, exclude=exclude, masks=masks, step_mask=smask, mask_rule=config.mask_rule)
+    if system == "random":
+        frames, relaxed = random_segments(valid, n_frames=n, seed=config.seed, **common)
+    elif system == "audio-only":
+        frames, relaxed = audio_nearest_segments(db.F, valid, fq, **common)
+    else:  # pose-only
+        init = None
+        if config.init == "rest":
+            from ..synthesize import rest_pose_frame
+
+            init = np.asarray(db.P[rest_pose_frame(db)], dtype=np.float32)
+        frames, relaxed = pose_nearest_segments(db.P, valid, n_frames=n, seed=config.seed, init_pose=init, **common)
+    g = np.asarray(db.G[frames[:, 0], frames[:, 1]], dtype=np.float32)
+    motion = Motion.from_flat(g, db.fps)
+    return SystemOutput(system, motion, np.arange(N, n, N, dtype=np.int64), int(relaxed.sum()))

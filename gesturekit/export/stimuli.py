@@ -1,0 +1,568 @@
+"""User-study stimuli: every speech x system as an MP4 in one style, named by an opaque id.
+
+:func:`make_stimuli` synthesises each speech with each system
+(:mod:`gesturekit.evaluate.baselines`) and renders every result the same way:
+one camera fixed on the same region for every clip (the house render style
+without fitting the view to the motion), one character, one resolution and
+frame rate, and the speech normalised to one loudness (EBU R 128 integrated
+loudness, measured by ffmpeg's ``ebur128`` filter), so that nothing but the
+motion tells the stimuli apart. No label is drawn on the videos.
+
+A study folder::
+
+    videos/<id>.mp4   the stimuli; an id reveals neither the speech nor the system
+    manifest.csv      id, file, audio, system, controls, seed, duration_s (the key: keep it from raters)
+    order.csv         participant, trial, position, slot, id: the presentation order
+    study.json        every setting that made the folder
+
+Ids are the first hex digits of an HMAC-SHA256, keyed by the seed, of the
+speech and system names: the same seed gives the same ids (and the same
+order), another seed other ids. The order is balanced: each participant hears
+the speeches in the order of a row of a balanced Latin square (Williams
+design) and, for each speech, sees the systems in the order of a row of
+another one, so over a multiple of its rows every system appears equally often
+at every position and directly after every other system.
+
+Rendering runs in parallel: on all cores by default (a process pool), or on a
+Dask distributed cluster given its scheduler address (or a
+``distributed.Client``); both give the same files.
+"""
+from __future__ import annotations
+
+import hashlib
+import hmac
+import json
+import math
+import os
+import re
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..errors import ConfigError, GestureKitError
+from ..motion import AUDIO_SR, Motion
+from .files import atomic_write
+
+__all__ = [
+    "StimulusSpeech",
+    "StudyResult",
+    "stimulus_id",
+    "balanced_latin_square",
+    "plan_stimuli",
+    "measure_loudness",
+    "normalise_loudness",
+    "speech_sources",
+    "stimulus_style",
+    "make_stimuli",
+]
+
+_ID_DIGITS = 10
+_LOUDNESS_RE = re.compile(r"Integrated loudness:\s*I:\s*(-?[0-9.]+|-inf)\s*LUFS", re.S)
+
+
+# ---- the design ---------------------------------------------------------------------------------
+
+
+def stimulus_id(seed: int, speech: str, system: str, *, digits: int = _ID_DIGITS) -> str:
+    """The opaque id of one stimulus: hex digits of HMAC-SHA256(key=seed, speech + system).
+
+    Parameters
+    ----------
+    seed : int
+        The study's seed (non-negative).
+    speech, system : str
+        Names of the speech (as in the manifest) and of the system.
+    digits : int
+        Hex digits kept (4..64).
+    """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
+    if not 4 <= digits <= 64:
+        raise ConfigError(f"digits must be within 4..64, got {digits}")
+    key = f"gesturekit-stimuli:{int(seed)}".encode()
+    msg = f"{speech}\0{system}".encode("utf-8", "surrogatepass")
+    return hmac.new(key, msg, hashlib.sha256).hexdigest()[:digits]
+
+
+def balanced_latin_square(n: int) -> np.ndarray:
+    """A balanced Latin square (Williams design) of ``n`` conditions.
+
+    Every row is an order of ``0 .. n-1``; every condition appears once at every
+    position over ``n`` rows, and directly after every other condition equally
+    often. For odd ``n`` that needs ``2 n`` rows (each row and its reverse).
+
+    Returns
+    -------
+    np.ndarray, shape (n or 2n, n), int64
+    """
+    if not isinstance(n, (int, np.integer)) or n < 1:
+        raise ConfigError(f"a Latin square needs at least one condition, got {n!r}")
+    first, lo, hi = [0], 1, n - 1
+    for k in range(1, n):
+        if k % 2:
+            first.append(lo)
+            lo += 1
+        else:
+            first.append(hi)
+            hi -= 1
+    rows = [[(f + r) % n for f in first] for r in range(n)]
+    if n % 2 and n > 1:
+        rows += [row[::-1] for row in rows]
+    return np.asarray(rows, dtype=np.int64)
+
+
+@dataclass
+class _Plan:
+    conditions: "pd.DataFrame"  # noqa: F821
+    order: "pd.DataFrame"  # noqa: F821
+
+
+def plan_stimuli(
+    speeches: Sequence[str],
+    systems: Sequence[str],
+    *,
+    seed: int = 0,
+    participants: int | None = None,
+    controls: str = "",
+    synthesis_seed: int | None = None,
+) -> _Plan:
+    """The conditions of a study and each participant's presentation order (no rendering).
+
+    Parameters
+    ----------
+    speeches : sequence of str
+        Names of the speeches (unique).
+    systems : sequence of str
+        Names of the systems (unique).
+    seed : int
+        Seed of the ids and of the order.
+    participants : int, optional
+        Participants to plan for; default the rows of the systems' balanced Latin square.
+    controls : str
+        Control track shown in the manifest.
+    synthesis_seed : int, optional
+        Seed of the synthesis shown in the manifest (default ``seed``).
+
+    Returns
+    -------
+    plan
+        ``conditions``: one row per speech x system (``id``, ``file``, ``audio``, ``system``,
+        ``controls``, ``seed``); ``order``: ``participant``, ``trial``, ``position``, ``slot``,
+        ``id`` (1-based), ``trial`` being the speech's turn and ``position`` the system's place in it.
+    """
+    import pandas as pd
+
+    speeches, systems = list(speeches), list(systems)
+    for what, names in (("speech", speeches), ("system", systems)):
+        if not names:
+            raise ConfigError(f"a study needs at least one {what}")
+        if len(set(names)) != len(names):
+            raise ConfigError(f"{what} names must be unique, got {names}")
+    ids = {(a, s): stimulus_id(seed, a, s) for a in speeches for s in systems}
+    if len(set(ids.values())) != len(ids):
+        raise ConfigError("two stimuli got the same id; choose another seed")
+    syn_seed = seed if synthesis_seed is None else int(synthesis_seed)
+    conditions = pd.DataFrame(
+        [{"id": ids[(a, s)], "file": f"videos/{ids[(a, s)]}.mp4", "audio": a, "system": s,
+          "controls": controls or "none", "seed": syn_seed} for a in speeches for s in systems]
+    )
+    sq_sys, sq_sp = balanced_latin_square(len(systems)), balanced_latin_square(len(speeches))
+    if participants is None:
+        participants = len(sq_sys)
+    if isinstance(participants, bool) or not isinstance(participants, (int, np.integer)) or participants < 1:
+        raise ConfigError(f"participants must be a positive integer, got {participants!r}")
+    # the seed decides which condition plays which role in the squares
+    rng = np.random.default_rng([int(seed), 0x57D1])
+    perm_sys, perm_sp = rng.permutation(len(systems)), rng.permutation(len(speeches))
+    rows = []
+    for p in range(int(participants)):
+        slot = 0
+        for trial, a_idx in enumerate(sq_sp[p % len(sq_sp)]):
+            speech = speeches[perm_sp[a_idx]]
+            for position, s_idx in enumerate(sq_sys[(p + trial) % len(sq_sys)]):
+                slot += 1
+                rows.append({"participant": p + 1, "trial": trial + 1, "position": position + 1, "slot": slot,
+                             "id": ids[(speech, systems[perm_sys[s_idx]])]})
+    return _Plan(conditions, pd.DataFrame(rows, columns=["participant", "trial", "position", "slot", "id"]))
+
+
+# ---- loudness -----------------------------------------------------------------------------------
+
+
+def measure_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR) -> float:
+    """Integrated loudness (EBU R 128 / ITU-R BS.1770) of mono audio, LUFS, measured by ffmpeg.
+
+    Returns
+    -------
+    float
+        LUFS, 0.1 LU resolution; about -70 (the gate) for silence or audio under 0.4 s.
+    """
+    from .video import _ffmpeg
+
+    a = np.ascontiguousarray(audio, dtype="<f4")
+    if a.ndim != 1 or a.size == 0:
+        raise ConfigError(f"audio must be mono samples, shape (samples,), got {a.shape}")
+    run = subprocess.run(
+        [_ffmpeg(), "-hide_banner", "-nostdin", "-f", "f32le", "-ar", str(int(sr)), "-ac", "1", "-i", "pipe:0",
+         "-af", "ebur128=framelog=quiet", "-f", "null", "-"],
+        input=a.tobytes(), capture_output=True,
+    )
+    m = _LOUDNESS_RE.search(run.stderr.decode("utf-8", "replace"))
+    if run.returncode != 0 or m is None:
+        raise GestureKitError("ffmpeg could not measure the loudness of the speech: "
+                              + run.stderr.decode("utf-8", "replace").strip()[-300:])
+    return -70.0 if m.group(1) == "-inf" else float(m.group(1))
+
+
+def normalise_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR, target_lufs: float = -23.0,
+                       peak: float = 0.98) -> tuple[np.ndarray, float]:
+    """Scale speech to an integrated loudness, never past a sample peak.
+
+    Parameters
+    ----------
+    audio : np.ndarray, shape (samples,)
+    sr : int
+    target_lufs : float
+        Target loudness, LUFS (EBU R 128 broadcast: -23).
+    peak : float
+        Largest absolute sample allowed after scaling; when the target needs more, the gain
+        stops there (the clip is then quieter than the target).
+
+    Returns
+    -------
+    audio : np.ndarray, shape (samples,), float32
+    gain_db : float
+        The gain applied (0 for silence).
+    """
+    a = np.asarray(audio, dtype=np.float32)
+    level = measure_loudness(a, sr=sr)
+    if level <= -69.0:
+        return a.copy(), 0.0
+    gain = 10 ** ((target_lufs - level) / 20)
+    top = float(np.max(np.abs(a)))
+    if top > 0 and top * gain > peak:
+        gain = peak / top
+    return (a * np.float32(gain)).astype(np.float32), 20 * math.log10(gain)
+
+
+# ---- speeches -----------------------------------------------------------------------------------
+
+
+@dataclass
+class StimulusSpeech:
+    """One speech of a study.
+
+    Attributes
+    ----------
+    name : str
+        As shown in the manifest: the file name, or the held-out part (``TAKE:START-END``).
+    audio : np.ndarray, shape (samples,), float32 at 16 kHz
+    gt : Motion or None
+        The recorded motion (held-out parts of the database only).
+    exclude_takes, exclude_ranges : tuple
+        What every system's search must not use for this speech.
+    """
+
+    name: str
+    audio: np.ndarray
+    gt: Motion | None = None
+    exclude_takes: tuple = ()
+    exclude_ranges: tuple = ()
+
+
+def speech_sources(db, *, audio=(), holdouts=()) -> list[StimulusSpeech]:
+    """The speeches of a study: speech files (or folders of them) and held-out parts of the database.
+
+    Parameters
+    ----------
+    db : MatchingDatabase
+    audio : sequence of path
+        Speech files in any format the readers take, or folders (their speech files, sorted).
+    holdouts : sequence of str or Holdout
+        ``TAKE`` or ``TAKE:START-END``: the database's own speech and recorded motion (``gt``),
+        kept out of every system's search.
+    """
+    from ..datasets.audio import load_audio
+    from ..datasets.takes import AUDIO_EXTENSIONS
+    from ..errors import InputFileError
+    from ..evaluate.run import held_out
+
+    out: list[StimulusSpeech] = []
+    for item in audio:
+        p = Path(item)
+        files = [p]
+        if p.is_dir():
+            files = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
+            if not files:
+                raise InputFileError(f"no speech files ({'/'.join(AUDIO_EXTENSIONS)}) in this folder", path=p)
+        for f in files:
+            out.append(StimulusSpeech(f.name, load_audio(f)))
+    for h in holdouts:
+        ref = held_out(db, h)
+        out.append(StimulusSpeech(ref.holdout.to_text(), ref.audio, ref.motion, ref.exclude_takes, ref.exclude_ranges))
+    names = [s.name for s in out]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ConfigError(f"two speeches have the same name ({', '.join(dup)}); rename one")
+    if not out:
+        raise ConfigError("a study needs speech: give speech files, a folder of them, or held-out parts")
+    return out
+
+
+# ---- rendering ----------------------------------------------------------------------------------
+
+
+def stimulus_style():
+    """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion)."""
+    from ..viz.render import RenderStyle
+
+    return RenderStyle(fit_motion=False)
+
+
+def _render_stimulus(job: dict) -> str:
+    """Render one stimulus (runs in a worker process or on a Dask worker)."""
+    from .video import render_video
+
+    motion = Motion(job["positions"], job["fps"])
+    render_video(job["path"], motion, audio=job["audio"], resolution=tuple(job["resolution"]),
+                 overwrite=True, style=stimulus_style())
+    return job["id"]
+
+
+def _run_jobs(jobs: list[dict], *, workers: int | None, scheduler, progress) -> None:
+    total = len(jobs)
+    done = 0
+
+    def tick():
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    if scheduler is not None:
+        from distributed import Client, as_completed
+
+        client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+        try:
+            futures = client.map(_render_stimulus, jobs, key=[f"stimulus-{j['id']}" for j in jobs], pure=False)
+            for fut in as_completed(futures):
+                fut.result()  # raises the worker's error here
+                tick()
+        finally:
+            if client is not scheduler:
+                client.close()
+        return
+    n = (os.cpu_count() or 1) if workers is None else int(workers)
+    if n < 1:
+        raise ConfigError(f"workers must be a positive integer, got {workers!r}")
+    if n == 1 or total == 1:
+        for job in jobs:
+            _render_stimulus(job)
+            tick()
+        return
+    import concurrent.futures as cf
+    import multiprocessing
+
+    # fresh interpreters: no rendering or threading state is inherited from the caller
+    try:
+        with cf.ProcessPoolExecutor(max_workers=min(n, total),
+                                    mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(_render_stimulus, job) for job in jobs]
+            for fut in cf.as_completed(futures):
+                fut.result()
+                tick()
+    except cf.process.BrokenProcessPool:
+        raise GestureKitError(
+            "a rendering process died; if make_stimuli is called from a script, put the call under "
+            "`if __name__ == \"__main__\":` (worker processes import the main script), or pass workers=1"
+        ) from None
+
+
+# ---- the study ----------------------------------------------------------------------------------
+
+
+@dataclass
+class StudyResult:
+    """A written study folder.
+
+    Attributes
+    ----------
+    folder : Path
+    manifest : pandas.DataFrame
+        ``id, file, audio, system, controls, seed, duration_s``.
+    order : pandas.DataFrame
+        ``participant, trial, position, slot, id``.
+    videos : list of Path
+    settings : dict
+    """
+
+    folder: Path
+    manifest: "pd.DataFrame"  # noqa: F821
+    order: "pd.DataFrame"  # noqa: F821
+    videos: list = field(default_factory=list)
+    settings: dict = field(default_factory=dict)
+
+
+def _write_text(path: Path, text: str) -> None:
+    data = text.encode("utf-8")
+    atomic_write(path, lambda f: f.write(data), overwrite=True)
+
+
+def make_stimuli(
+    db,
+    *,
+    out: str | os.PathLike,
+    audio: Sequence = (),
+    holdouts: Sequence = (),
+    systems=("gt", "knn", "knn+cgan"),
+    seed: int = 0,
+    participants: int | None = None,
+    control: str = "",
+    config=None,
+    refiner=None,
+    resolution: tuple[int, int] = (640, 480),
+    loudness_lufs: float = -23.0,
+    workers: int | None = None,
+    scheduler=None,
+    overwrite: bool = False,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> StudyResult:
+    """Prepare a user study: every speech x system as an MP4, a manifest and the presentation order.
+
+    Parameters
+    ----------
+    db : MatchingDatabase
+    out : path
+        The study folder (see the module documentation).
+    audio : sequence of path
+        Speech files or folders of them.
+    holdouts : sequence of str
+        Held-out parts of the database (``TAKE`` or ``TAKE:START-END``), the speeches with a
+        recorded motion for ``gt``.
+    systems : str or sequence of str
+        Of :data:`gesturekit.evaluate.baselines.SYSTEMS`; ``gt`` needs held-out parts only,
+        ``knn+cgan`` a refiner.
+    seed : int
+        Seed of the ids, the order and (unless ``config`` says otherwise) the synthesis.
+    participants : int, optional
+        See :func:`plan_stimuli`.
+    control : str
+        Control track for every synthesised stimulus (``"0-3:left_hand=high"``), empty for none.
+    config : SynthesisConfig, optional
+        k, step, seed, initial pose, blending of the synthesis.
+    refiner : optional
+        A trained refiner or its path, for ``knn+cgan``.
+    resolution : (int, int)
+        Width and height of every video, pixels (even).
+    loudness_lufs : float
+        Integrated loudness every soundtrack is scaled to.
+    workers : int, optional
+        Processes rendering in parallel (default: all cores).
+    scheduler : str or distributed.Client, optional
+        Render on a Dask distributed cluster instead (e.g. ``"tcp://10.0.0.5:8786"``); its workers
+        need gesturekit installed.
+    overwrite : bool
+        Replace an existing study in ``out`` (its videos not in the new plan are removed).
+    progress : callable(stage, done, total), optional
+        ``stage`` is ``"synthesis"`` or ``"rendering"``.
+
+    Returns
+    -------
+    StudyResult
+        The same inputs and seed give the same ids, order and videos.
+    """
+    from ..control import parse_control
+    from ..evaluate.baselines import (
+        SystemUnavailable,
+        load_refiner_for,
+        parse_systems,
+        refiner_unavailable_reason,
+        run_system,
+    )
+    from ..synthesize import SynthesisConfig
+    from .video import _check_resolution
+
+    t0 = time.perf_counter()
+    systems = parse_systems(systems)
+    width, height = _check_resolution(resolution)
+    track = parse_control(control)
+    refiner_name = None if refiner is None else str(getattr(refiner, "path", None) or refiner)
+    if "knn+cgan" in systems:
+        reason = refiner_unavailable_reason(refiner)
+        if reason:
+            raise SystemUnavailable(reason)
+        refiner = load_refiner_for(refiner)
+    out = Path(out)
+    manifest_path, order_path, study_path = out / "manifest.csv", out / "order.csv", out / "study.json"
+    if out.exists() and not out.is_dir():
+        raise ConfigError("exists and is not a folder", path=out)
+    if manifest_path.exists() and not overwrite:
+        raise ConfigError("a study exists here already; pass overwrite=True (--force) to replace it", path=out)
+    speeches = speech_sources(db, audio=audio, holdouts=holdouts)
+    if "gt" in systems:
+        missing = [s.name for s in speeches if s.gt is None]
+        if missing:
+            raise SystemUnavailable(f"gt needs recorded motion, which only held-out parts of the database have "
+                                    f"(--holdout TAKE:START-END); none for {', '.join(missing)}")
+    base = config or SynthesisConfig(seed=int(seed))
+    plan = plan_stimuli([s.name for s in speeches], systems, seed=seed, participants=participants,
+                        controls=track.to_text(), synthesis_seed=base.seed)
+    (out / "videos").mkdir(parents=True, exist_ok=True)
+
+    # synthesis here (cheap, needs the database); rendering goes to the workers
+    jobs, durations = [], {}
+    ids = dict(zip(zip(plan.conditions["audio"], plan.conditions["system"]), plan.conditions["id"]))
+    n_total, n_done = len(speeches) * len(systems), 0
+    for sp in speeches:
+        cfg = SynthesisConfig.from_dict({**base.to_dict(), "control": "", "pins": {},
+                                         "exclude_takes": list(sp.exclude_takes),
+                                         "exclude_ranges": [list(r) for r in sp.exclude_ranges]})
+        sound, _ = normalise_loudness(sp.audio, target_lufs=loudness_lufs)
+        durations[sp.name] = len(sp.audio) / AUDIO_SR
+        for system in systems:
+            res = run_system(system, db=db, audio=sp.audio, config=cfg, control=track, gt=sp.gt, refiner=refiner)
+            sid = ids[(sp.name, system)]
+            jobs.append({"id": sid, "path": str(out / "videos" / f"{sid}.mp4"), "positions": res.motion.positions,
+                         "fps": float(res.motion.fps), "audio": sound, "resolution": (width, height)})
+            n_done += 1
+            if progress is not None:
+                progress("synthesis", n_done, n_total)
+
+    # videos of an earlier plan in this folder that the new one does not make
+    if manifest_path.exists():
+        import pandas as pd
+
+        old = pd.read_csv(manifest_path, dtype=str)
+        keep = set(plan.conditions["file"])
+        for f in old.get("file", []):
+            if isinstance(f, str) and f not in keep and re.fullmatch(r"videos/[0-9a-f]+\.mp4", f):
+                (out / f).unlink(missing_ok=True)
+
+    _run_jobs(jobs, workers=workers, scheduler=scheduler,
+              progress=None if progress is None else (lambda d, t: progress("rendering", d, t)))
+
+    manifest = plan.conditions.copy()
+    manifest["duration_s"] = [round(durations[a], 6) for a in manifest["audio"]]
+    _write_text(manifest_path, manifest.to_csv(index=False, lineterminator="\n"))
+    _write_text(order_path, plan.order.to_csv(index=False, lineterminator="\n"))
+    settings = {
+        "database": str(db.path) if db.path is not None else (db.label or "in-memory database"),
+        "systems": list(systems),
+        "speeches": [s.name for s in speeches],
+        "seed": int(seed),
+        "participants": int(plan.order["participant"].max()),
+        "control": track.to_text(),
+        "synthesis": base.to_dict(),
+        "resolution": [width, height],
+        "fps": float(db.fps),
+        "loudness_lufs": float(loudness_lufs),
+        "render_style": "gesturekit house style, fixed camera (fit_motion=False), no labels",
+        "refiner": refiner_name,
+    }
+    _write_text(study_path, json.dumps(settings, indent=1) + "\n")
+    settings["seconds"] = round(time.perf_counter() - t0, 3)
+    return StudyResult(out, manifest, plan.order, [out / f for f in manifest["file"]], settings)
