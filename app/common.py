@@ -57,19 +57,26 @@ __all__ = [
     "DATABASE_KEY",
     "DEMO_MINUTES_ENV",
     "PAGES",
+    "PINS_KEY",
     "Page",
+    "SYNTHESIS_KEY",
     "build_from_folder",
     "database_folders",
+    "current_synthesis",
     "demo_minutes",
     "ensure_demo_database",
     "is_generated",
     "load_database",
+    "load_refiner",
     "page_setup",
     "persistent_key",
     "run_page",
+    "run_synthesis",
     "show_database_label",
+    "show_skeletons",
     "sidebar_database",
     "user_errors",
+    "warm_up_search",
 ]
 
 APP_DIR = Path(__file__).resolve().parent
@@ -106,6 +113,8 @@ PAGES: tuple[Page, ...] = (
          "step through the search: the candidates of every step, their distances and clips"),
     Page("pages/3_Database.py", "Database", "🗂️",
          "what the matching database holds: takes, clips, control attributes, any clip in 3D with its sound"),
+    Page("pages/4_Study_stimuli.py", "Study stimuli", "🎬",
+         "user-study videos: speeches x systems in one style, opaque ids, balanced order"),
 )
 
 
@@ -499,3 +508,142 @@ def _build_expander() -> None:
 def page_setup(title: str, *, icon: str = "🖐️") -> None:
     """Page title and wide layout; call first on every page."""
     st.set_page_config(page_title=f"{title} · gesturekit", page_icon=icon, layout="wide")
+
+
+# ---- the user's synthesis, shared by the Synthesize and Retrieval inspector pages ---------------
+
+#: Session-state key of the user's latest synthesis: a dict with ``result`` (SynthesisResult),
+#: ``run`` (a number that changes with every new result), ``database`` (resolved folder),
+#: ``speech`` (the speech's name) and ``refiner`` (what was passed to apply a refiner, or None).
+SYNTHESIS_KEY = "gk.synthesis"
+#: Session-state key of the user's pinned choices, step -> (clip, start) ("use this candidate instead"),
+#: applied by every run until removed.
+PINS_KEY = "gk.pins"
+_RUN_COUNTER = "gk.run_counter"
+
+
+def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=None) -> dict:
+    """Synthesise with a spinner, store the result as the user's synthesis and return that record.
+
+    Parameters
+    ----------
+    db : MatchingDatabase
+    audio : np.ndarray, shape (samples,)
+        Mono float32 speech at 16 kHz.
+    config : SynthesisConfig
+    source : str
+        Name of the speech, stored in the result (download names, metadata).
+    refiner : optional
+        A refiner, passed on by :func:`gesturekit.viz.session.with_refiner`.
+
+    Raises
+    ------
+    GestureKitError
+        Impossible settings (shown by :func:`run_page` / :func:`user_errors`).
+    """
+    from dataclasses import replace
+
+    from gesturekit.synthesize import synthesize
+    from gesturekit.viz.session import with_refiner
+
+    ss = st.session_state
+    config, extra = with_refiner(config, refiner)
+    with st.spinner("Searching the database…"), _warnings_shown():
+        result = synthesize(audio, db=db, config=config, **extra)
+    ss[_RUN_COUNTER] = ss.get(_RUN_COUNTER, 0) + 1
+    record = {"result": replace(result, source=source), "run": ss[_RUN_COUNTER],
+              "database": str(Path(db.path).resolve()) if db.path is not None else result.database,
+              "speech": source, "refiner": refiner}
+    ss[SYNTHESIS_KEY] = record
+    ss[PINS_KEY] = dict(config.pins)
+    return record
+
+
+def current_synthesis(db: MatchingDatabase) -> dict | None:
+    """The user's latest synthesis (see :data:`SYNTHESIS_KEY`) if it was made with ``db``, else None."""
+    record = st.session_state.get(SYNTHESIS_KEY)
+    if record is None:
+        return None
+    here = str(Path(db.path).resolve()) if db.path is not None else None
+    return record if record["database"] == here else None
+
+
+def show_skeletons(fig, *, key: str, motions: int = 1) -> None:
+    """Show a :func:`gesturekit.viz.figures.skeleton_figure` with ``st.plotly_chart``.
+
+    The camera moves closer the more motions stand side by side, since the
+    scene is normalised to its (wide) X extent and would leave them small.
+    """
+    camera = dict(fig.layout.scene.camera.eye.to_plotly_json()) if fig.layout.scene.camera.eye else {}
+    if camera:
+        # distance of the eye from the scene centre, in units of the scene's widest side
+        z = 1.35 if motions <= 2 else min(1.35, max(0.7, 3.5 / motions))
+        camera.update(x=0.0, y=0.08 * z, z=z)
+    if camera:
+        fig.update_layout(scene_camera_eye=camera)
+    st.plotly_chart(fig, key=key, config={"displaylogo": False})
+
+
+@st.cache_resource(show_spinner=False, max_entries=8)
+def _warm_up(path: str, stamp: int) -> threading.Thread:
+    import numpy as np
+
+    from gesturekit.motion import AUDIO_SR
+    from gesturekit.synthesize import SynthesisConfig, synthesize
+
+    db = _open(path, stamp)
+    noise = np.random.default_rng(0).normal(0.0, 0.1, 2 * AUDIO_SR).astype(np.float32)
+    # a failure here is left to the server log: the user's own run reports it on the page
+    thread = threading.Thread(target=synthesize, args=(noise,), kwargs={"db": db, "config": SynthesisConfig(topk=1)},
+                              name="gesturekit-warm-up", daemon=True)
+    thread.start()
+    return thread
+
+
+def warm_up_search(db: MatchingDatabase) -> None:
+    """Prepare the search of a database in the background, once per server and database.
+
+    The first synthesis with a database builds its search index and loads
+    the compiled search code (seconds for a large database); doing that
+    while the user is still choosing speech makes their first run as fast
+    as the later ones.
+    """
+    if db.path is None:
+        return
+    path = Path(db.path).expanduser().resolve()
+    try:
+        stamp = (path / "database.json").stat().st_mtime_ns
+    except OSError:
+        return
+    _warm_up(str(path), stamp)
+
+
+@st.cache_resource(max_entries=4, show_spinner="Loading the refiner…")
+def _open_refiner(path: str, stamp: int):
+    # ``stamp`` (config.json's mtime) is only part of the cache key: a retrained refiner differs
+    from gesturekit.refine import load_refiner as load
+
+    return load(path)
+
+
+def load_refiner(path: str | os.PathLike, db: MatchingDatabase):
+    """Open a trained refiner folder once per process and version, checked against ``db``.
+
+    The returned object is shared by every session: do not modify it.
+
+    Raises
+    ------
+    GestureKitError
+        No refiner there, an unreadable one, or one trained on another feature
+        layout than ``db``'s (the message names the folder).
+    """
+    if not str(path).strip():
+        raise ConfigError("type the folder of a trained refiner, or turn the refiner off")
+    path = Path(path).expanduser().resolve()
+    try:
+        stamp = (path / "config.json").stat().st_mtime_ns
+    except OSError:
+        stamp = -1  # the loader raises the precise error; failures are not cached
+    refiner = _open_refiner(str(path), stamp)
+    refiner.check_database(db)
+    return refiner

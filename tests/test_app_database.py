@@ -86,7 +86,8 @@ def test_home_opens_the_demo_database_and_labels_it_generated(app_env):
     assert any(DEMO_LABEL in w.value and "Generated data" in w.value for w in at.main.warning)
     assert any("Habibie" in m.value for m in at.markdown)
     assert any(str(app_env / "db" / "demo") in m.value for m in at.markdown)
-    assert [link.proto.label for link in at.get("page_link")] == ["Database"]
+    assert [link.proto.label for link in at.get("page_link")] == [
+        "Synthesize", "Retrieval inspector", "Database", "Study stimuli"]
 
 
 def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):

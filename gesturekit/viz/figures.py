@@ -20,6 +20,7 @@ import numpy as np
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
+from ..control import ATTRIBUTE_NAMES, ControlTrack, frame_attributes
 from ..errors import ConfigError
 from ..motion import Motion
 from ..skeleton import BODY_JOINTS, bones, joint_index
@@ -30,6 +31,9 @@ __all__ = [
     "skeleton_figure",
     "attribute_histograms",
     "waveform_figure",
+    "WRIST_ROWS",
+    "wrist_figure",
+    "candidates_figure",
 ]
 
 #: Most animation frames a skeleton figure holds (20 s at 15 fps). Longer motions are
@@ -224,7 +228,7 @@ def skeleton_figure(
         camera=dict(up=dict(x=0, y=1, z=0), eye=dict(x=0.0, y=0.15, z=1.9), center=dict(x=0, y=0, z=0),
                     projection=dict(type="perspective")),
         annotations=annotations,
-        dragmode="turntable"  # rotates about the up (Y) axis,
+        dragmode="orbit"  # "turntable" assumes Z up and would draw this Y-up scene upside down
     )
     frame_ms = 1000.0 * step / grid_fps
     layout = dict(
@@ -444,5 +448,225 @@ def waveform_figure(
         xaxis=dict(title="time [s]", range=[0, n / sr]), yaxis=dict(title="amplitude"),
         legend=dict(orientation="h", y=1.02, x=1, xanchor="right", yanchor="bottom"),
         uirevision="waveform",
+    )
+    return fig
+
+
+#: The rows of :func:`wrist_figure`, top to bottom: (attribute of :mod:`gesturekit.control`, title).
+WRIST_ROWS: tuple[tuple[str, str], ...] = (
+    ("left_hand_height", "left wrist height [m]"),
+    ("right_hand_height", "right wrist height [m]"),
+    ("left_hand_speed", "left wrist speed [m/s]"),
+    ("right_hand_speed", "right wrist speed [m/s]"),
+)
+
+
+def _as_bands(bands) -> list[tuple[float, float, str]]:
+    if bands is None:
+        return []
+    if isinstance(bands, ControlTrack):
+        return [(s.start_s, s.end_s, s.label()) for s in bands.segments]
+    return _band_check(bands)
+
+
+def wrist_figure(
+    motions: Motion | Sequence[Motion],
+    *,
+    labels: Sequence[str] | None = None,
+    bands: ControlTrack | Sequence[tuple[float, float, str]] | None = None,
+    thresholds: dict[str, tuple[float, float]] | None = None,
+    title: str | None = None,
+    height: int = 620,
+) -> go.Figure:
+    """Left and right wrist height and speed over time, with control bands and thresholds.
+
+    The plots of the paper's supplementary Figs. 2 and 3: one row per
+    quantity (see :data:`WRIST_ROWS`), one line per motion (for example the
+    k-NN result and the refined one overlaid), the control segments as shaded
+    time bands and the database's low/high thresholds of each quantity as
+    horizontal dashed lines, so one sees whether the motion stays beyond the
+    threshold while a control is active. The quantities are the control
+    attributes of :func:`gesturekit.control.frame_attributes` (the same
+    numbers the thresholds were computed from): wrist height above the pelvis
+    and wrist speed.
+
+    Parameters
+    ----------
+    motions : Motion or sequence of Motion
+        Pelvis-relative joint positions, shape (frames, 55, 3), metres, each
+        at its own fps.
+    labels : sequence of str, optional
+        One legend name per motion; default ``"motion 1"``, ... (or none for one motion).
+    bands : ControlTrack or sequence of (start_s, end_s, label), optional
+        Time ranges in seconds to shade in every row, labelled once at the
+        top; bands with the same label share a colour (the colours
+        :func:`waveform_figure` gives the same bands in the same order).
+    thresholds : dict of str -> (float, float), optional
+        Attribute name -> (low, high), e.g. ``db.thresholds``; each row gets
+        the lines of its attribute (heights in m, speeds in m/s).
+    title : str, optional
+    height : int
+        Figure height in pixels.
+
+    Returns
+    -------
+    plotly.graph_objects.Figure
+        Four subplots sharing the time axis (seconds). One line trace per
+        motion and row with ``meta = {"part": "wrist", "motion": i,
+        "attribute": name}``; x is ``frame / fps``, y the attribute.
+        Threshold lines are shapes named ``"<attribute> low"`` and
+        ``"<attribute> high"`` (``y0 == y1`` the threshold); bands are
+        rectangle shapes named by their label, one per row.
+
+    Raises
+    ------
+    ConfigError
+        No motion, a motion with no frame, labels of the wrong length, a band
+        whose end is not after its start, or thresholds lacking an attribute
+        of a row.
+    """
+    motions = [motions] if isinstance(motions, Motion) else list(motions)
+    if not motions:
+        raise ConfigError("wrist_figure needs at least one motion")
+    for m in motions:
+        if not isinstance(m, Motion):
+            raise ConfigError(f"wrist_figure takes Motion objects, got {type(m).__name__}")
+        if m.n_frames < 1:
+            raise ConfigError("wrist_figure got a motion with no frame")
+    if labels is None:
+        labels = [f"motion {i + 1}" for i in range(len(motions))] if len(motions) > 1 else [""]
+    labels = [str(s) for s in labels]
+    if len(labels) != len(motions):
+        raise ConfigError(f"wrist_figure got {len(labels)} labels for {len(motions)} motions")
+    bands = _as_bands(bands)
+    if thresholds is not None:
+        missing = [a for a, _ in WRIST_ROWS if a not in thresholds]
+        if missing:
+            raise ConfigError(f"wrist_figure: thresholds lack {', '.join(missing)}")
+
+    columns = [ATTRIBUTE_NAMES.index(a) for a, _ in WRIST_ROWS]
+    n_rows = len(WRIST_ROWS)
+    fig = make_subplots(rows=n_rows, cols=1, shared_xaxes=True, vertical_spacing=0.045,
+                        subplot_titles=[t for _, t in WRIST_ROWS])
+    traces, rows = [], []
+    for i, (m, label) in enumerate(zip(motions, labels)):
+        values = frame_attributes(m.positions, fps=m.fps)[:, columns]
+        t = (np.arange(m.n_frames) / float(m.fps)).astype(np.float32)
+        color = MOTION_COLORS[i % len(MOTION_COLORS)]
+        for r, (attr, _) in enumerate(WRIST_ROWS):
+            unit = _attribute_unit(attr)
+            traces.append(go.Scatter(
+                x=t, y=values[:, r], mode="lines", line=dict(color=color, width=1.6),
+                name=label or "motion", legendgroup=f"motion{i}", showlegend=r == 0 and len(motions) > 1,
+                meta={"part": "wrist", "motion": i, "attribute": attr},
+                hovertemplate=f"{label + ': ' if label else ''}%{{x:.2f}} s, %{{y:.3f}} {unit}<extra></extra>"))
+            rows.append(r + 1)
+    fig.add_traces(traces, rows=rows, cols=[1] * len(rows))
+
+    # shapes are collected and set once: plotly's add_hline/add_vrect copy every shape on each call
+    def axes(r: int) -> tuple[str, str]:
+        return ("x", "y") if r == 0 else (f"x{r + 1}", f"y{r + 1}")
+
+    shapes, notes = [], []
+    if thresholds is not None:
+        for r, (attr, _) in enumerate(WRIST_ROWS):
+            xa, ya = axes(r)
+            lo, hi = thresholds[attr]
+            for which, y, color in (("low", lo, "#1f4e79"), ("high", hi, "#a3222b")):
+                shapes.append(dict(type="line", xref=f"{xa} domain", x0=0, x1=1, yref=ya, y0=float(y), y1=float(y),
+                                   line=dict(color=color, dash="dash", width=1), name=f"{attr} {which}"))
+    colors: dict[str, str] = {}
+    for a, b, label in bands:
+        color = colors.setdefault(label, _BAND_COLORS[len(colors) % len(_BAND_COLORS)])
+        for r in range(n_rows):
+            xa, ya = axes(r)
+            shapes.append(dict(type="rect", xref=xa, x0=a, x1=b, yref=f"{ya} domain", y0=0, y1=1, fillcolor=color,
+                               opacity=0.18, line=dict(width=0), layer="below", name=label))
+        if label:
+            notes.append(dict(x=(a + b) / 2, y=1.0, xref="x", yref="y domain", yanchor="top", text=label,
+                              showarrow=False, font=dict(size=10, color=color)))
+    fig.update_layout(shapes=shapes, annotations=list(fig.layout.annotations) + notes)
+    duration = max(m.duration for m in motions)
+    fig.update_xaxes(range=[0, duration])
+    fig.update_xaxes(title_text="time [s]", row=n_rows, col=1)
+    fig.update_layout(
+        title=dict(text=title) if title else None, height=height,
+        margin=dict(l=10, r=10, t=70 if title else 45, b=10),
+        legend=dict(orientation="h", y=1.06 if title else 1.04, x=1, xanchor="right", yanchor="bottom"),
+        showlegend=len(motions) > 1, uirevision="wrists",
+    )
+    return fig
+
+
+def candidates_figure(search, step: int, *, names: Sequence[str] | None = None, title: str | None = None,
+                      height: int = 320) -> go.Figure:
+    """The candidates of one search step: pose distance against audio distance, the chosen one ringed.
+
+    Parameters
+    ----------
+    search : SearchResult
+        Anything with the candidate tables ``cand_clip``, ``cand_start``,
+        ``cand_pose_dist``, ``cand_audio_dist``, ``cand_pose_rank``,
+        ``cand_audio_rank``, ``cand_combined`` (shape (steps, K), padded with
+        clip -1) and ``position`` (steps,) of :class:`gesturekit.search.SearchResult`.
+    step : int
+        The step, ``0 <= step < steps``.
+    names : sequence of str, optional
+        A description per table column (e.g. the candidate's take and time),
+        shown on hover; length K.
+    title : str, optional
+    height : int
+        Figure height in pixels.
+
+    Returns
+    -------
+    plotly.graph_objects.Figure
+        A marker trace with ``meta["part"] == "candidates"``: one point per
+        recorded candidate, x the pose distance (z-scored feature units), y the
+        audio (cosine) distance, labelled by its position in the combined
+        ranking; and, when the chosen window is in the table, a trace with
+        ``meta["part"] == "chosen"`` of one point on it.
+
+    Raises
+    ------
+    ConfigError
+        ``step`` out of range or ``names`` of the wrong length.
+    """
+    n_steps, width = np.shape(search.cand_clip)
+    if not 0 <= int(step) < n_steps:
+        raise ConfigError(f"step must be in 0..{n_steps - 1}, got {step}")
+    step = int(step)
+    if names is not None and len(names) != width:
+        raise ConfigError(f"candidates_figure got {len(names)} names for {width} candidates")
+    keep = np.flatnonzero(np.asarray(search.cand_clip[step]) >= 0)
+    x = np.asarray(search.cand_pose_dist[step], dtype=np.float64)[keep]
+    y = np.asarray(search.cand_audio_dist[step], dtype=np.float64)[keep]
+    custom = np.stack([np.asarray(getattr(search, f"cand_{c}")[step])[keep]
+                       for c in ("clip", "start", "pose_rank", "audio_rank", "combined")], axis=1)
+    hover = ("#%{text}: clip %{customdata[0]} from frame %{customdata[1]}<br>pose distance %{x:.3f} "
+             "(rank %{customdata[2]})<br>audio distance %{y:.4f} (rank %{customdata[3]})<br>"
+             "combined rank %{customdata[4]}")
+    if names is not None:
+        hover += "<br>%{hovertext}"
+    fig = go.Figure()
+    fig.add_trace(go.Scatter(
+        x=x, y=y, mode="markers+text", text=[str(p) for p in keep], textposition="top center",
+        customdata=custom, hovertext=None if names is None else [str(names[p]) for p in keep],
+        hovertemplate=hover + "<extra></extra>", marker=dict(size=9, color="#6b7f99"),
+        name="candidates", meta={"part": "candidates"},
+    ))
+    chosen = int(search.position[step])
+    if chosen >= 0 and chosen in keep:
+        j = int(np.flatnonzero(keep == chosen)[0])
+        fig.add_trace(go.Scatter(
+            x=[x[j]], y=[y[j]], mode="markers", name="chosen", hoverinfo="skip",
+            marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#c0502d", width=3)),
+            meta={"part": "chosen"},
+        ))
+    fig.update_layout(
+        title=dict(text=title) if title else None, height=height,
+        margin=dict(l=10, r=10, t=40 if title else 10, b=10),
+        xaxis=dict(title="pose distance (z-scored)"), yaxis=dict(title="audio distance (cosine)"),
+        showlegend=False,
     )
     return fig

@@ -1,0 +1,336 @@
+"""Speech in, gestures out: choose speech, draw controls, set the search, run, watch, download."""
+import functools
+import warnings
+
+import numpy as np
+import pandas as pd
+import streamlit as st
+
+import common
+from gesturekit.blend import BLEND_MODES
+from gesturekit.control import ControlTrack
+from gesturekit.errors import ConfigError, GestureKitError, GestureKitWarning
+from gesturekit.motion import AUDIO_SR
+from gesturekit.synthesize import SynthesisConfig
+from gesturekit.viz import session as gs
+from gesturekit.viz.figures import skeleton_figure, waveform_figure, wrist_figure
+
+SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}
+SEGMENTS = "synth.segments"  # the control table as the user last left it (DataFrame)
+EDITOR = "synth.segments_editor"  # the data editor's widget key
+_BASE = "_synth.segments_base"  # the table the editor shows before the user's edits
+_LAST_BOX = "_synth.last_box"  # the box selection already turned into a segment
+_FAILED = "_synth.failed_upload"  # (token, message) of an upload that could not be read
+_DERIVED = "_synth.figures"  # figures of the current result: {"run": n, name: figure}
+_VIDEO = "_synth.video"  # {"run": n, "bytes": mp4}
+
+UPLOAD, EXAMPLE = "Upload a file", "Example speech"
+_INIT_LABELS = {"random": "random database frame (paper)", "rest": "rest pose"}
+_BLEND_LABELS = {"none": "none (paper)", "offset": "offset fade at joins"}
+_MASK_LABELS = {"ends": "first and last frame of a window (paper)", "all": "every frame of a window"}
+
+
+@st.cache_resource(show_spinner="Generating the example speech…", max_entries=4)
+def _example_audio(label: str) -> np.ndarray:
+    audio = gs.example_speech(label)
+    audio.setflags(write=False)  # shared by every session
+    return audio
+
+
+def _set_speech(token, name: str, audio: np.ndarray, summary: str, notes=()) -> None:
+    ss = st.session_state
+    ss[SPEECH] = {"token": token, "name": name, "audio": audio, "summary": summary, "notes": list(notes)}
+    ss[common.PINS_KEY] = {}  # pins were chosen for other speech
+    ss.pop(_LAST_BOX, None)
+
+
+def speech_input() -> dict | None:
+    """Upload or example; returns the user's speech, or None when there is none yet."""
+    ss = st.session_state
+    mode = ss["synth.mode"] = st.radio("Speech", [UPLOAD, EXAMPLE], horizontal=True, label_visibility="collapsed",
+                                       key=common.persistent_key("synth.mode", UPLOAD))
+    if mode == UPLOAD:
+        up = st.file_uploader("Speech file: wav, flac, ogg or mp3, any sample rate and channels",
+                              type=["wav", "flac", "ogg", "mp3"], key="synth.upload")
+        if up is not None:
+            token = ("upload", up.file_id)
+            failed = ss.get(_FAILED)
+            if failed is not None and failed[0] == token:
+                st.error(failed[1], icon="⚠️")
+                return None
+            if ss.get(SPEECH, {}).get("token") != token:
+                try:
+                    with st.spinner("Reading the speech…"), warnings.catch_warnings(record=True) as caught:
+                        warnings.simplefilter("always", GestureKitWarning)
+                        audio, info = gs.read_speech_upload(up.name, up.getvalue())
+                except (GestureKitError, OSError) as exc:
+                    # remembered, so the same upload is not decoded again on every rerun
+                    ss.pop(SPEECH, None)
+                    ss[_FAILED] = (token, str(exc))
+                    st.error(str(exc), icon="⚠️")
+                    return None
+                notes = [str(w.message) for w in caught if issubclass(w.category, GestureKitWarning)]
+                _set_speech(token, up.name, audio, info.summary(), notes)
+    else:
+        labels = list(gs.SPEECH_EXAMPLES)
+        key = common.persistent_key("synth.example", labels[0])
+        label = ss["synth.example"] = st.selectbox("Example", labels, key=key,
+                                                   help="new speech of the generated demo speaker, not in the database")
+        token = ("example", label)
+        if ss.get(SPEECH, {}).get("token") != token:
+            audio = _example_audio(label)
+            _set_speech(token, label, audio, f"generated, {len(audio) / AUDIO_SR:.2f} s")
+    return ss.get(SPEECH)
+
+
+def _editor_base() -> pd.DataFrame:
+    ss = st.session_state
+    if EDITOR not in ss or _BASE not in ss:
+        # the editor's own state is gone (first visit, or the user was on another page):
+        # it starts again from the table as the user left it
+        ss[_BASE] = ss.get(SEGMENTS, gs.empty_segments())
+    return ss[_BASE]
+
+
+def _replace_table(table: pd.DataFrame) -> None:
+    """Give the editor a new table (its edits so far are part of ``table``) and redraw."""
+    ss = st.session_state
+    ss[_BASE] = ss[SEGMENTS] = table
+    st.rerun()
+
+
+def controls(speech: dict) -> ControlTrack | None:
+    """Waveform with bands, box-select to add, the segment table; returns the track (None if invalid)."""
+    ss = st.session_state
+    duration = len(speech["audio"]) / AUDIO_SR
+    new_key = common.persistent_key("synth.new_constraint", "both_hands=high")
+    new_constraint = ss["synth.new_constraint"] = st.selectbox(
+        "Constraint for a box-selected range", gs.CONSTRAINT_CHOICES, key=new_key,
+        help="Drag across the waveform to select a time range: a segment with this constraint is added "
+             "(replacing what it overlaps). Edit, add or delete rows in the table below.")
+    chart_slot = st.container()  # drawn after the table, so the bands show the latest edits
+    table = st.data_editor(
+        _editor_base(), key=EDITOR, num_rows="dynamic", hide_index=True, width="stretch",
+        column_config={
+            "start_s": st.column_config.NumberColumn("start [s]", min_value=0.0, step=0.01, format="%.2f",
+                                                     required=True),
+            "end_s": st.column_config.NumberColumn("end [s]", min_value=0.0, step=0.01, format="%.2f",
+                                                   required=True),
+            "constraint": st.column_config.SelectboxColumn("constraint", options=list(gs.CONSTRAINT_CHOICES),
+                                                           required=True),
+        },
+    )
+    ss[SEGMENTS] = table
+    track, problem = None, None
+    try:
+        track = gs.track_from_segments(table)
+    except ConfigError as exc:
+        problem = str(exc)
+    with chart_slot:
+        bands = [(s.start_s, s.end_s, s.label()) for s in track.segments] if track else []
+        fig = waveform_figure(speech["audio"], AUDIO_SR, bands=bands, height=230)
+        fig.update_layout(dragmode="select", selectdirection="h")
+        event = st.plotly_chart(fig, key="synth.waveform", on_select="rerun", selection_mode="box",
+                                config={"displaylogo": False})
+    selection = event["selection"] if event is not None and "selection" in event else None
+    box = gs.selected_time_range(selection, duration=duration)
+    if box is None:
+        ss[_LAST_BOX] = None
+    elif box != ss.get(_LAST_BOX):
+        ss[_LAST_BOX] = box
+        _replace_table(gs.add_segment(table, box[0], box[1], new_constraint))
+    cols = st.columns([1, 4])
+    if cols[0].button("Clear segments", key="synth.clear_segments", disabled=table.empty):
+        _replace_table(gs.empty_segments())
+    cols[1].caption("Rows with the same start and end form one segment whose constraints must all hold. "
+                    "Low/high compare with the database's percentile thresholds (see the Database page).")
+    if problem:
+        st.error(problem, icon="⚠️")
+    return track
+
+
+def _default_refiner(db) -> str:
+    """The refiner folder offered first: one beside the database, or the shipped one for the demo database."""
+    if db.path is not None and (db.path / "refiner" / "config.json").is_file():
+        return str(db.path / "refiner")
+    try:
+        from gesturekit.refine import default_refiner_path
+    except ImportError:
+        return ""
+    shipped = default_refiner_path()
+    return str(shipped) if common.is_generated(db) and (shipped / "config.json").is_file() else ""
+
+
+def settings(db) -> dict:
+    """The search settings: SynthesisConfig arguments, the refiner (or None), and whether they can run."""
+    ss = st.session_state
+    pk = common.persistent_key
+    c = st.columns(4)
+    out = {
+        "k": c[0].number_input("k (0 = best match)", min_value=0, max_value=100, step=1, key=pk("synth.k", 0),
+                               help="take the k-th best window of the combined ranking at every step"),
+        "step": c[1].number_input("N (frames per step)", min_value=1, max_value=db.clip_frames, step=1,
+                                  key=pk("synth.step", 8), help="8 in the paper: a new search every 0.53 s"),
+        "seed": c[2].number_input("Seed", min_value=0, max_value=2**31 - 1, step=1, key=pk("synth.seed", 0),
+                                  help="of the random initial pose"),
+        "topk": c[3].number_input("Candidates recorded per step", min_value=1, max_value=50, step=1,
+                                  key=pk("synth.topk", 10), help="shown in the Retrieval inspector"),
+    }
+    c = st.columns(4)
+    out["init"] = c[0].selectbox("Initial pose", list(_INIT_LABELS), format_func=_INIT_LABELS.get,
+                                 key=pk("synth.init", "random"))
+    out["blend"] = c[1].selectbox("Blending", list(BLEND_MODES), format_func=lambda m: _BLEND_LABELS.get(m, m),
+                                  key=pk("synth.blend", "none"))
+    out["mask_rule"] = c[2].selectbox("A control must hold at", list(_MASK_LABELS), format_func=_MASK_LABELS.get,
+                                      key=pk("synth.mask_rule", "ends"))
+    for name, value in out.items():
+        ss[f"synth.{name}"] = value
+    refiner, ok = None, True
+    if gs.refiner_hook() is not None:
+        default = _default_refiner(db)
+        on = ss["synth.refine"] = c[3].toggle("Refiner (cGAN)", key=pk("synth.refine", bool(default)),
+                                              help="smooth and re-time the k-NN motion with a trained refiner")
+        folder = ss["synth.refiner_path"] = c[3].text_input(
+            "Refiner folder", key=pk("synth.refiner_path", default), disabled=not on,
+            placeholder="folder written by gesturekit train-refiner")
+        if on:
+            ok = False  # until the refiner is open: a run must not silently go without it
+            with common.user_errors():
+                refiner = common.load_refiner(folder, db)
+                ok = True
+    else:
+        c[3].toggle("Refiner (cGAN)", value=False, disabled=True, key="synth.refine_unavailable",
+                    help="this gesturekit cannot apply a refiner")
+    return {"options": out, "refiner": refiner, "ok": ok}
+
+
+def _figure(record, name: str, build):
+    """A figure of the current result, made once per result (reruns reuse it)."""
+    ss = st.session_state
+    cache = ss.get(_DERIVED)
+    if cache is None or cache["run"] != record["run"]:
+        cache = ss[_DERIVED] = {"run": record["run"]}
+    if name not in cache:
+        cache[name] = build()
+    return cache[name]
+
+
+def video(record) -> None:
+    """The MP4 with sound, rendered on demand."""
+    ss = st.session_state
+    result = record["result"]
+    done = ss.get(_VIDEO)
+    if done is not None and done["run"] == record["run"]:
+        st.video(done["bytes"], format="video/mp4")
+        return
+    st.caption("For exact audio-video sync, render the motion offscreen to an MP4 with the speech as soundtrack.")
+    if st.button("Render MP4 with sound", key="synth.render"):
+        bar = st.progress(0.0, text="rendering…")
+
+        def progress(i: int, n: int) -> None:
+            bar.progress(min(1.0, i / max(n, 1)), text=f"rendering frame {i}/{n}")
+
+        data = gs.render_mp4(result, progress=progress)
+        bar.progress(1.0, text="encoded")
+        ss[_VIDEO] = {"run": record["run"], "bytes": data}
+        st.video(data, format="video/mp4")
+
+
+def show_result(db, record) -> None:
+    ss = st.session_state
+    result = record["result"]
+    st.header("Result")
+    c = result.config
+    parts = [f"k = {c.k}", f"N = {c.step}", f"seed {c.seed}", f"initial pose: {c.init}", f"blend: {c.blend}"]
+    if result.control:
+        parts.append(f"controls: `{result.control.to_text()}`")
+    if c.pins:
+        parts.append(f"{len(c.pins)} pinned step{'s' if len(c.pins) > 1 else ''}")
+    if result.refined_motion is not None:
+        parts.append("refined")
+    st.caption(" · ".join(parts))
+    if result.relaxed_steps:
+        st.warning(f"No database window satisfied the control at step(s) {', '.join(map(str, result.relaxed_steps))}; "
+                   "the control was dropped there.", icon="⚠️")
+    motions, labels = gs.display_motions(result)
+    labels = labels if len(motions) > 1 else None
+    left, right = st.columns([3, 2])
+    with left:
+        title = f"{result.source}: {result.n_frames} frames, {result.n_frames / result.motion.fps:.1f} s"
+        # sent before the wrist plot is made, so the browser draws the 3D view meanwhile
+        skeleton = _figure(record, "skeleton", lambda: skeleton_figure(motions, labels=labels, title=title))
+        common.show_skeletons(skeleton, key="synth.skeleton", motions=len(motions))
+    with right:
+        st.markdown("**Speech**")
+        st.audio(gs.wav_bytes(result.audio), format="audio/wav")
+        st.caption("Start the speech and the 3D view (▶ Play) together, or render the video:")
+        video(record)
+    st.subheader("Wrist height and speed")
+    st.caption("Shaded: the control segments. Dashed: the database's low and high thresholds of each quantity.")
+    wrists = _figure(record, "wrists", lambda: wrist_figure(motions, labels=labels, bands=result.control,
+                                                             thresholds=db.thresholds))
+    st.plotly_chart(wrists, key="synth.wrists", config={"displaylogo": False})
+
+    st.subheader("Downloads")
+    cols = st.columns(5)
+    labels = {"npz": "Motion + search (npz)", "bvh": "Motion (BVH)", "csv": "Control track (CSV)",
+              "json": "Config (JSON)"}
+    for col, kind in zip(cols, ("npz", "bvh", "csv", "json")):
+        # made when clicked: a BVH takes a moment, and most results are never downloaded
+        col.download_button(labels[kind], data=functools.partial(gs.export_bytes, result, kind),
+                            file_name=gs.export_filename(result, kind),
+                            mime=gs.EXPORT_KINDS[kind][1], key=f"synth.download_{kind}", on_click="ignore")
+    done = ss.get(_VIDEO)
+    if done is not None and done["run"] == record["run"]:
+        cols[4].download_button("Video (MP4)", data=done["bytes"], file_name=gs.export_filename(result, "mp4"),
+                                mime="video/mp4", key="synth.download_mp4", on_click="ignore")
+    else:
+        cols[4].caption("MP4: render it above")
+
+
+def main() -> None:
+    common.page_setup("Synthesize")
+    st.title("Synthesize")
+    db = common.sidebar_database()
+    common.warm_up_search(db)
+    ss = st.session_state
+
+    st.subheader("1 · Speech")
+    speech = speech_input()
+    if speech is None:
+        st.info("Upload a speech file, or choose an example.")
+        return
+    st.caption(f"**{speech['name']}** · {speech['summary']}")
+    for note in speech["notes"]:
+        st.warning(note, icon="⚠️")
+    st.audio(gs.wav_bytes(speech["audio"]), format="audio/wav")
+
+    st.subheader("2 · Controls")
+    track = controls(speech)
+
+    st.subheader("3 · Search")
+    chosen = settings(db)
+    record = common.current_synthesis(db)
+    if record is None:
+        ss[common.PINS_KEY] = {}  # pins name clips of the database of the last result
+    pins = dict(ss.get(common.PINS_KEY, {}))
+    if pins:
+        c = st.columns([4, 1])
+        c[0].caption("Pinned choices from the Retrieval inspector (step: clip, start): "
+                     + ", ".join(f"{i}: {m}, {s}" for i, (m, s) in sorted(pins.items())))
+        if c[1].button("Clear pins", key="synth.clear_pins"):
+            ss[common.PINS_KEY] = {}
+            st.rerun()
+    if st.button("Run", type="primary", key="synth.go", disabled=track is None or not chosen["ok"]):
+        with common.user_errors():  # an impossible setting is reported; the last result stays below
+            config = SynthesisConfig(**chosen["options"], control=track.to_text(), pins=pins)
+            common.run_synthesis(db, speech["audio"], config=config, source=speech["name"], refiner=chosen["refiner"])
+
+    record = common.current_synthesis(db)
+    if record is not None:
+        show_result(db, record)
+    elif ss.get(common.SYNTHESIS_KEY) is not None:
+        st.info("The last result was made with another database; run again.")
+
+
+common.run_page(main)

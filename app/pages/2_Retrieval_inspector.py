@@ -1,0 +1,180 @@
+"""Step through the search: each step's candidates, their distances and clips; pin a choice; compare k."""
+import streamlit as st
+
+import common
+from gesturekit.viz import session as gs
+from gesturekit.viz.figures import candidates_figure, skeleton_figure, wrist_figure
+
+STEP = "inspect.step"  # the step shown (per user)
+CANDIDATE = "inspect.candidate"  # the position of the candidate inspected at that step
+COMPARE = "inspect.compare"  # {"run": n, "ks": [...], "results": [...]}
+_LAST_ROW = "_inspect.last_selected_step"  # the steps-table selection already applied
+
+
+def _rerun_with(db, record, config) -> None:
+    """Synthesise again with new pins (everything else as before) and redraw."""
+    result = record["result"]
+    common.run_synthesis(db, result.audio, config=config, source=result.source, refiner=record["refiner"])
+    st.rerun()
+
+
+def pick_step(db, result) -> int:
+    """The steps table (a selected row picks the step) and the step number input."""
+    ss = st.session_state
+    table = gs.steps_overview(result, db)
+    with st.expander(f"All {len(table)} steps", expanded=False):
+        event = st.dataframe(
+            table, hide_index=True, key="inspect.steps_table", on_select="rerun", selection_mode="single-row",
+            height=240, column_config={
+                "start_s": st.column_config.NumberColumn("time [s]", format="%.2f"),
+                "source_s": st.column_config.NumberColumn("source time [s]", format="%.2f"),
+            })
+    rows = list(event.selection.rows) if event is not None else []
+    selected = int(rows[0]) if rows and rows[0] < len(table) else None
+    key = common.persistent_key(STEP, 0)
+    if selected is not None and selected != ss.get(_LAST_ROW):
+        ss[key] = selected
+    ss[_LAST_ROW] = selected
+    ss[key] = int(min(max(int(ss[key]), 0), len(table) - 1))  # a new result may have fewer steps
+    step = st.number_input("Step", min_value=0, max_value=len(table) - 1, step=1, key=key,
+                           help="or select a row of the steps table")
+    ss[STEP] = int(step)
+    return int(step)
+
+
+def step_view(db, record, step: int) -> None:
+    ss = st.session_state
+    result = record["result"]
+    s, N, fps = result.search, result.config.step, result.motion.fps
+    a, b = step * N, min((step + 1) * N, result.n_frames)
+    overview = gs.steps_overview(result, db).iloc[step]
+    flags = (" · **pinned**" if s.pinned[step] else "") + (" · control relaxed" if s.relaxed[step] else "")
+    st.markdown(
+        f"**Step {step}** · output frames {a}–{b - 1} ({a / fps:.2f}–{b / fps:.2f} s) · "
+        f"chosen: clip {int(s.clip[step])} from frame {int(s.start[step])} "
+        f"(take **{overview['take']}** at {overview['source_s']:.2f} s){flags} · "
+        f"{int(s.n_candidates[step])} clips survived"
+    )
+    table = gs.candidates_table(result, db, step)
+    st.dataframe(table, hide_index=True, key="inspect.candidates", column_config={
+        "source_s": st.column_config.NumberColumn("source time [s]", format="%.2f"),
+        "pose_dist": st.column_config.NumberColumn("pose distance", format="%.3f"),
+        "audio_dist": st.column_config.NumberColumn("audio distance", format="%.4f"),
+        "combined": st.column_config.NumberColumn("combined rank"),
+    })
+
+    views, plot = st.columns([3, 2])
+    with plot:
+        names = [f"{r.take} at {r.source_s:.2f} s" for r in table.itertuples()]
+        names += [""] * (s.cand_clip.shape[1] - len(names))
+        st.plotly_chart(candidates_figure(s, step, names=names, height=300), key="inspect.candidates_plot",
+                        config={"displaylogo": False})
+    with views:
+        others = table[~table["chosen"]]
+        shown = 0
+        if len(others):
+            key = common.persistent_key("inspect.n_views", 4)
+            ss[key] = min(int(ss[key]), len(others))
+            shown = ss["inspect.n_views"] = st.slider("Alternatives shown in 3D", min_value=0,
+                                                      max_value=len(others), key=key)
+        motions = [gs.candidate_motion(db, int(s.clip[step]), int(s.start[step]), b - a)]
+        labels = ["chosen" + (" (pinned)" if s.pinned[step] else f" #{int(s.position[step])}")]
+        for r in others.head(shown).itertuples():
+            motions.append(gs.candidate_motion(db, r.clip, r.start, b - a))
+            labels.append(f"#{r.position}")
+        common.show_skeletons(skeleton_figure(motions, labels=labels, height=360), key="inspect.views",
+                              motions=len(motions))
+
+    st.markdown("**Listen and choose**")
+    positions = [int(p) for p in table["position"]]
+    key = common.persistent_key(CANDIDATE, positions[0])
+    if ss[key] not in positions:
+        ss[key] = positions[0]
+    row_of = {int(r.position): r for r in table.itertuples()}
+    pick = ss[CANDIDATE] = st.selectbox(
+        "Candidate", positions, key=key,
+        format_func=lambda p: f"#{p}: clip {row_of[p].clip} from frame {row_of[p].start} "
+                              f"({row_of[p].take} at {row_of[p].source_s:.2f} s)" + (" · chosen" if row_of[p].chosen else ""))
+    r = row_of[pick]
+    c = st.columns(3)
+    with c[0]:
+        st.caption("the input speech of this step")
+        st.audio(gs.wav_bytes(gs.step_speech(result, step)), format="audio/wav")
+    with c[1]:
+        st.caption(f"candidate #{pick}'s own speech in the database")
+        if db.audio is not None:
+            st.audio(gs.wav_bytes(db.segment_audio(r.clip, r.start, b - a)), format="audio/wav")
+        else:
+            st.caption("(this database was built without audio)")
+    with c[2]:
+        if st.button("Use this candidate instead", key="inspect.use", disabled=bool(r.chosen), type="primary",
+                     help="pin it at this step and run the synthesis again; later steps continue from it"):
+            _rerun_with(db, record, result.config.with_pin(step, r.clip, r.start))
+
+
+def pins_view(db, record) -> None:
+    result = record["result"]
+    pins = result.config.pins
+    st.subheader("Pins")
+    if not pins:
+        st.caption("No pinned step: every step took the k-th best candidate.")
+        return
+    for i, (clip, start) in pins.items():
+        take = db.take_names[int(db.clip_take[clip])]
+        c = st.columns([4, 1])
+        c[0].markdown(f"step **{i}**: clip {clip} from frame {start} ({take} at "
+                      f"{(int(db.clip_start[clip]) + start) / db.fps:.2f} s)")
+        if c[1].button("Remove", key=f"inspect.unpin_{i}"):
+            _rerun_with(db, record, result.config.without_pin(i))
+    if len(pins) > 1 and st.button("Remove all pins", key="inspect.unpin_all"):
+        config = result.config
+        for i in list(pins):
+            config = config.without_pin(i)
+        _rerun_with(db, record, config)
+
+
+def compare_view(db, record) -> None:
+    ss = st.session_state
+    result = record["result"]
+    st.subheader("Compare k")
+    st.caption("The same speech, controls, pins and seed, taking the k-th best candidate at every step.")
+    ks = ss["inspect.ks"] = st.multiselect("k", list(range(10)), key=common.persistent_key("inspect.ks", [0, 1, 2]))
+    if st.button("Compare", key="inspect.compare_go", disabled=not ks):
+        with st.spinner("Searching…"):
+            results = gs.compare_k(result.audio, db=db, config=result.config, ks=sorted(ks), refiner=record["refiner"],
+                                   source=result.source)
+        ss[COMPARE] = {"run": record["run"], "ks": sorted(ks), "results": results}
+    done = ss.get(COMPARE)
+    if done is None or done["run"] != record["run"]:
+        return
+    motions = [r.refined_motion if r.refined_motion is not None else r.motion for r in done["results"]]
+    labels = [f"k = {k}" for k in done["ks"]]
+    common.show_skeletons(skeleton_figure(motions, labels=labels, height=420), key="inspect.compare_views",
+                          motions=len(motions))
+    st.dataframe(gs.comparison_table(done["results"], db.thresholds), hide_index=True, key="inspect.compare_table",
+                 column_config={"pose_dist": st.column_config.NumberColumn("mean pose distance", format="%.3f"),
+                                "audio_dist": st.column_config.NumberColumn("mean audio distance", format="%.4f"),
+                                "control_met": st.column_config.NumberColumn("control met", format="percent")})
+    st.plotly_chart(wrist_figure(motions, labels=labels, bands=result.control, thresholds=db.thresholds),
+                    key="inspect.compare_wrists", config={"displaylogo": False})
+
+
+def main() -> None:
+    common.page_setup("Retrieval inspector")
+    st.title("Retrieval inspector")
+    db = common.sidebar_database()
+    record = common.current_synthesis(db)
+    if record is None:
+        st.info("Run a synthesis on the Synthesize page first: this page shows how its search chose every step.")
+        st.page_link("pages/1_Synthesize.py", label="Synthesize", icon="🎙️")
+        return
+    result = record["result"]
+    st.caption(f"**{result.source}** · {result.search.n_steps} steps of {result.config.step} frames · "
+               f"k = {result.config.k} · candidates in the combined ranking of pose rank + audio rank, best first")
+    step = pick_step(db, result)
+    step_view(db, record, step)
+    pins_view(db, record)
+    compare_view(db, record)
+
+
+common.run_page(main)

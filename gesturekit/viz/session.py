@@ -1,0 +1,591 @@
+"""What the app's pages compute, kept free of streamlit so tests and notebooks can use it too.
+
+The Synthesize page edits a control track as a table (one row per
+constraint: ``start_s``, ``end_s``, ``constraint`` such as
+``"left_hand=high"``), adds rows from a time range box-selected on the
+waveform, reads uploaded speech through a temporary folder, offers generated
+example speech and exports a result as bytes for download. The Retrieval
+inspector describes each search step's candidates by their source take and
+time and compares results for several ``k``.
+
+Times are in seconds, motions are :class:`~gesturekit.motion.Motion` objects
+(frames, 55, 3) in metres, audio is mono float32 at 16 kHz.
+"""
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import io
+import json
+import math
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_attributes
+from ..database import MatchingDatabase
+from ..errors import ConfigError, GestureKitError, GestureKitWarning
+from ..export.files import safe_filename
+from ..motion import AUDIO_SR, Motion
+from ..synthesize import SynthesisConfig, SynthesisResult, synthesize, synthesize_batch
+
+__all__ = [
+    "SEGMENT_COLUMNS",
+    "CONSTRAINT_CHOICES",
+    "SPEECH_EXAMPLES",
+    "EXPORT_KINDS",
+    "empty_segments",
+    "segments_frame",
+    "track_from_segments",
+    "add_segment",
+    "selected_time_range",
+    "example_speech",
+    "read_speech_upload",
+    "wav_bytes",
+    "refiner_hook",
+    "with_refiner",
+    "display_motions",
+    "export_filename",
+    "export_bytes",
+    "render_mp4",
+    "steps_overview",
+    "candidates_table",
+    "candidate_motion",
+    "step_speech",
+    "compare_k",
+    "control_adherence",
+    "comparison_table",
+]
+
+#: Columns of the control segment table, in order.
+SEGMENT_COLUMNS: tuple[str, ...] = ("start_s", "end_s", "constraint")
+
+#: Every single constraint a table row can hold, as ``"name=value"`` (see :data:`gesturekit.control.CONSTRAINTS`).
+CONSTRAINT_CHOICES: tuple[str, ...] = tuple(f"{name}={value}" for name, (_, values) in CONSTRAINTS.items()
+                                            for value in values)
+
+#: Example speech the app offers: label -> (seconds, seed) of a take of the generated demo speaker.
+#: The seeds are not among those of the demo database's takes, so the examples are unseen speech.
+SPEECH_EXAMPLES: dict[str, tuple[float, int]] = {
+    "demo speaker, 8 s (generated)": (8.0, 7001),
+    "demo speaker, 20 s (generated)": (20.0, 7002),
+    "demo speaker, 60 s (generated)": (60.0, 7003),
+}
+
+#: Downloadable forms of a result: kind -> (file name suffix, MIME type).
+EXPORT_KINDS: dict[str, tuple[str, str]] = {
+    "npz": (".npz", "application/octet-stream"),
+    "bvh": (".bvh", "text/plain"),
+    "csv": ("_control.csv", "text/csv"),
+    "json": ("_config.json", "application/json"),
+    "mp4": (".mp4", "video/mp4"),
+}
+
+# a box selection shorter than one output frame is a click, not a range
+_MIN_RANGE_S = 1.0 / 15.0
+_TIME_DECIMALS = 2  # box-selected times are rounded to 10 ms
+
+
+# ---- the control segment table ------------------------------------------------------------------
+
+def empty_segments() -> pd.DataFrame:
+    """A control table without rows, with the column types the editor needs."""
+    return pd.DataFrame({"start_s": pd.Series([], dtype="float64"), "end_s": pd.Series([], dtype="float64"),
+                         "constraint": pd.Series([], dtype="object")})
+
+
+def segments_frame(track: ControlTrack) -> pd.DataFrame:
+    """A control track as a table: one row per constraint, sorted by time.
+
+    A segment with several constraints gives several rows with the same
+    times; :func:`track_from_segments` joins them again.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`SEGMENT_COLUMNS`; ``start_s`` and ``end_s`` in seconds.
+    """
+    rows = [{"start_s": float(s.start_s), "end_s": float(s.end_s), "constraint": f"{n}={v}"}
+            for s in track.segments for n, v in s.constraints]
+    return pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS)).astype({"start_s": "float64", "end_s": "float64"}) \
+        if rows else empty_segments()
+
+
+def _is_blank(value) -> bool:
+    if value is None:
+        return True
+    if isinstance(value, str):
+        return not value.strip()
+    try:
+        return bool(pd.isna(value))
+    except (TypeError, ValueError):
+        return False
+
+
+def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack:
+    """The control track a segment table describes.
+
+    Rows whose cells are all empty (a row just added in the editor) are
+    ignored. Rows with the same start and end form one segment whose
+    constraints must all hold.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame or sequence of mappings
+        Columns ``start_s``, ``end_s`` (seconds) and ``constraint``
+        (``"name=value"``, one of :data:`CONSTRAINT_CHOICES`).
+
+    Returns
+    -------
+    ControlTrack
+
+    Raises
+    ------
+    ConfigError
+        A row with a missing or invalid value, end not after start, one
+        control set twice for the same time range, or segments that overlap;
+        the message names the row (counted from 1).
+    """
+    records = table.to_dict("records") if isinstance(table, pd.DataFrame) else [dict(r) for r in table]
+    groups: dict[tuple[float, float], list[tuple[str, str]]] = {}
+    first_row: dict[tuple[float, float], int] = {}
+    for i, r in enumerate(records, start=1):
+        cells = [r.get(c) for c in SEGMENT_COLUMNS]
+        if all(_is_blank(v) for v in cells):
+            continue
+        missing = [c for c, v in zip(SEGMENT_COLUMNS, cells) if _is_blank(v)]
+        if missing:
+            raise ConfigError(f"control row {i}: fill in {', '.join(missing)}")
+        try:
+            start, end = float(r["start_s"]), float(r["end_s"])
+        except (TypeError, ValueError):
+            raise ConfigError(f"control row {i}: start_s and end_s must be numbers of seconds") from None
+        text = str(r["constraint"]).strip()
+        if text not in CONSTRAINT_CHOICES:
+            raise ConfigError(f"control row {i}: unknown constraint {text!r}; choose one of "
+                              f"{', '.join(CONSTRAINT_CHOICES)}")
+        try:
+            Segment(start, end, (tuple(text.split("=", 1)),))
+        except ConfigError as exc:
+            raise ConfigError(f"control row {i}: {exc.problem}") from None
+        key = (round(start, 6), round(end, 6))
+        name = text.split("=", 1)[0]
+        if any(n == name for n, _ in groups.get(key, [])):
+            raise ConfigError(f"control row {i}: {name} is set twice for {start:g}-{end:g} s "
+                              f"(also in row {first_row[key]})")
+        groups.setdefault(key, []).append(tuple(text.split("=", 1)))
+        first_row.setdefault(key, i)
+    return ControlTrack(tuple(Segment(a, b, tuple(c)) for (a, b), c in groups.items()))
+
+
+def add_segment(table: pd.DataFrame, start_s: float, end_s: float, constraint: str) -> pd.DataFrame:
+    """The table with a new constraint over a time range, replacing what it overlaps.
+
+    Rows overlapping ``[start_s, end_s)`` are cut back to the parts outside
+    it (a row covering the whole range is split in two), so the table stays
+    free of overlaps; blank rows are dropped.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Columns :data:`SEGMENT_COLUMNS`.
+    start_s, end_s : float
+        The range, seconds, ``0 <= start_s < end_s``.
+    constraint : str
+        One of :data:`CONSTRAINT_CHOICES`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        A new table sorted by start time with a fresh 0..n-1 index.
+
+    Raises
+    ------
+    ConfigError
+        An invalid range or constraint.
+    """
+    if constraint not in CONSTRAINT_CHOICES:
+        raise ConfigError(f"unknown constraint {constraint!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}")
+    new = Segment(float(start_s), float(end_s), (tuple(constraint.split("=", 1)),))
+    rows = []
+    for r in table.to_dict("records"):
+        if all(_is_blank(r.get(c)) for c in SEGMENT_COLUMNS):
+            continue
+        try:
+            a, b = float(r["start_s"]), float(r["end_s"])
+        except (TypeError, ValueError):
+            rows.append(r)  # an unfinished row: the user's to fix, not ours to drop
+            continue
+        if not (a < new.end_s and b > new.start_s):
+            rows.append(r)
+            continue
+        for lo, hi in ((a, min(b, new.start_s)), (max(a, new.end_s), b)):
+            if hi - lo > 1e-6:
+                rows.append({**r, "start_s": lo, "end_s": hi})
+    rows.append({"start_s": new.start_s, "end_s": new.end_s, "constraint": constraint})
+    out = pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS)).astype({"start_s": "float64", "end_s": "float64"})
+    return out.sort_values(["start_s", "end_s"], kind="stable").reset_index(drop=True)
+
+
+def selected_time_range(selection: Mapping | None, *, duration: float) -> tuple[float, float] | None:
+    """The time range of the latest box selection on a chart whose x axis is time.
+
+    Parameters
+    ----------
+    selection : mapping or None
+        A plotly selection state as Streamlit reports it: ``{"box": [{"x":
+        [x0, x1], ...}, ...], ...}`` (x in seconds).
+    duration : float
+        Length of the speech, seconds; the range is clipped to ``[0, duration]``.
+
+    Returns
+    -------
+    (start_s, end_s) or None
+        Rounded to 10 ms; None without a box or for one shorter than a frame.
+    """
+    boxes = list((selection or {}).get("box") or [])
+    if not boxes:
+        return None
+    xs = [float(v) for v in (boxes[-1].get("x") or []) if v is not None]
+    if len(xs) < 2 or not all(math.isfinite(v) for v in xs):
+        return None
+    a = round(min(max(min(xs), 0.0), duration), _TIME_DECIMALS)
+    b = round(min(max(max(xs), 0.0), duration), _TIME_DECIMALS)
+    if b - a < _MIN_RANGE_S:
+        return None
+    return a, b
+
+
+# ---- speech -------------------------------------------------------------------------------------
+
+def example_speech(label: str) -> np.ndarray:
+    """Generated example speech of the demo speaker (deterministic).
+
+    Parameters
+    ----------
+    label : str
+        A key of :data:`SPEECH_EXAMPLES`.
+
+    Returns
+    -------
+    np.ndarray, shape (samples,), float32
+        Mono speech at 16 kHz.
+    """
+    from ..datasets.synthetic import generate_demo_take
+
+    if label not in SPEECH_EXAMPLES:
+        raise ConfigError(f"no example speech {label!r}; examples: {', '.join(SPEECH_EXAMPLES)}")
+    seconds, seed = SPEECH_EXAMPLES[label]
+    take, _ = generate_demo_take(seconds=seconds, seed=seed, name=safe_filename(label))
+    return take.audio
+
+
+def read_speech_upload(name: str, data: bytes):
+    """Decode an uploaded speech file (any format the audio reader takes) via a temporary folder.
+
+    Parameters
+    ----------
+    name : str
+        The file name the user gave (only its sanitised form is used on disk;
+        the suffix tells the decoder the format).
+    data : bytes
+        The file's content.
+
+    Returns
+    -------
+    audio : np.ndarray, shape (samples,), float32
+        Mono speech at 16 kHz.
+    info : gesturekit.datasets.audio.AudioInfo
+        What the file held (format, rate, channels, duration).
+
+    Raises
+    ------
+    GestureKitError
+        Not audio, truncated, too short, invalid samples...; the message names
+        the uploaded file (not the temporary copy).
+
+    Warns
+    -----
+    GestureKitWarning
+        Silent audio (as :func:`gesturekit.datasets.audio.load_audio`), naming the upload.
+    """
+    from ..datasets.audio import load_audio_with_info
+
+    with tempfile.TemporaryDirectory(prefix="gesturekit-upload-") as tmp:
+        path = Path(tmp) / safe_filename(Path(str(name)).name, default="upload")
+        path.write_bytes(bytes(data))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", GestureKitWarning)
+            try:
+                audio, info = load_audio_with_info(path)
+            except GestureKitError as exc:
+                raise type(exc)(exc.problem, path=str(name)) from None
+    for w in caught:  # passed on, naming the upload rather than its temporary copy
+        message = str(w.message).replace(str(path), str(name))
+        warnings.warn(w.category(message) if issubclass(w.category, GestureKitWarning) else w.message, stacklevel=2)
+    return audio, dataclasses.replace(info, path=str(name))
+
+
+def wav_bytes(audio: np.ndarray, *, sr: int = AUDIO_SR) -> bytes:
+    """Mono audio as a 16-bit PCM WAV file's bytes, at its own level (for an audio player).
+
+    Parameters
+    ----------
+    audio : np.ndarray, shape (samples,)
+        Float samples in [-1, 1] (clipped beyond).
+    sr : int
+        Sample rate, Hz.
+    """
+    import soundfile as sf
+
+    a = np.clip(np.nan_to_num(np.asarray(audio, dtype=np.float32).ravel()), -1.0, 1.0)
+    buf = io.BytesIO()
+    sf.write(buf, a, int(sr), format="WAV", subtype="PCM_16")
+    return buf.getvalue()
+
+
+# ---- the refiner --------------------------------------------------------------------------------
+
+def refiner_hook() -> str | None:
+    """How this gesturekit takes a refiner: ``"argument"`` of :func:`synthesize`, a ``"config"`` field, or None."""
+    if "refiner" in inspect.signature(synthesize).parameters:
+        return "argument"
+    if "refiner" in {f.name for f in dataclasses.fields(SynthesisConfig)}:
+        return "config"
+    return None
+
+
+def with_refiner(config: SynthesisConfig, refiner) -> tuple[SynthesisConfig, dict]:
+    """The config and keyword arguments of :func:`synthesize` that apply ``refiner`` (None: none).
+
+    Returns
+    -------
+    (SynthesisConfig, dict)
+        Unchanged config and ``{}`` without a refiner or without refiner support.
+    """
+    hook = refiner_hook()
+    if refiner is None or hook is None:
+        return config, {}
+    if hook == "argument":
+        return config, {"refiner": refiner}
+    return dataclasses.replace(config, refiner=refiner), {}
+
+
+def display_motions(result: SynthesisResult) -> tuple[list[Motion], list[str]]:
+    """The motions to show for a result: k-NN and refined side by side when refined, else the output."""
+    if result.refined_motion is not None:
+        return [result.knn_motion, result.refined_motion], ["k-NN", "k-NN + refiner"]
+    label = "k-NN" if result.config.blend == "none" else f"k-NN, {result.config.blend} blend"
+    return [result.motion], [label]
+
+
+# ---- exports ------------------------------------------------------------------------------------
+
+def export_filename(result: SynthesisResult, kind: str) -> str:
+    """A safe download name, e.g. ``"speech_k0_seed0.bvh"``, from the speech's name and the settings."""
+    if kind not in EXPORT_KINDS:
+        raise ConfigError(f"unknown export {kind!r}; one of {', '.join(EXPORT_KINDS)}")
+    stem = Path(result.source).stem or "speech"
+    c = result.config
+    return safe_filename(f"{stem}_k{c.k}_seed{c.seed}", max_length=80, default="gesturekit") + EXPORT_KINDS[kind][0]
+
+
+def export_bytes(result: SynthesisResult, kind: str) -> bytes:
+    """A result in one downloadable form.
+
+    Parameters
+    ----------
+    kind : {"npz", "bvh", "csv", "json"}
+        ``npz``: :meth:`SynthesisResult.save_npz`; ``bvh``: the final motion;
+        ``csv``: the control track (start_s, end_s, constraint); ``json``: how
+        the result was made (:meth:`SynthesisResult.metadata`, with the
+        synthesis config under ``"synthesis"``). ``mp4`` is made by
+        :func:`render_mp4`.
+    """
+    if kind == "csv":
+        return result.control.to_csv().encode("utf-8")
+    if kind == "json":
+        return (json.dumps(result.metadata(), indent=2) + "\n").encode("utf-8")
+    if kind not in ("npz", "bvh"):
+        raise ConfigError(f"export_bytes makes npz, bvh, csv or json, not {kind!r}")
+    with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
+        path = Path(tmp) / f"result.{kind}"
+        (result.save_npz if kind == "npz" else result.save_bvh)(path)
+        return path.read_bytes()
+
+
+def render_mp4(result: SynthesisResult, *, progress: Callable[[int, int], None] | None = None,
+               resolution: tuple[int, int] = (640, 480)) -> bytes:
+    """The result as an MP4 (H.264 + AAC, the speech as soundtrack); k-NN and refined side by side if refined.
+
+    Parameters
+    ----------
+    progress : callable(done, total), optional
+        Called after each rendered frame.
+    resolution : (int, int)
+        Width and height in pixels (even numbers).
+    """
+    with tempfile.TemporaryDirectory(prefix="gesturekit-video-") as tmp:
+        path = Path(tmp) / "result.mp4"
+        result.save_video(path, progress=progress, side_by_side=result.refined_motion is not None,
+                          resolution=resolution)
+        return path.read_bytes()
+
+
+# ---- the search record --------------------------------------------------------------------------
+
+def _source(db: MatchingDatabase, clip: int, start: int) -> tuple[str, float]:
+    """Take name and time (seconds into the take) of frame ``start`` of ``clip``."""
+    take = db.take_names[int(db.clip_take[clip])]
+    return take, (int(db.clip_start[clip]) + int(start)) / db.fps
+
+
+def steps_overview(result: SynthesisResult, db: MatchingDatabase) -> pd.DataFrame:
+    """:meth:`SynthesisResult.steps_table` with each chosen window's source take and time (``source_s``)."""
+    table = result.steps_table()
+    src = [_source(db, c, s) for c, s in zip(result.search.clip, result.search.start)]
+    table.insert(5, "take", [t for t, _ in src])
+    table.insert(6, "source_s", [s for _, s in src])
+    return table
+
+
+def candidates_table(result: SynthesisResult, db: MatchingDatabase, step: int) -> pd.DataFrame:
+    """The recorded candidates of one step, best first, with their source take and time.
+
+    Parameters
+    ----------
+    result : SynthesisResult
+    db : MatchingDatabase
+        The database the result was searched in.
+    step : int
+        ``0 <= step < result.search.n_steps``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per recorded candidate (at most ``config.topk``, at least
+        ``k + 1``): ``position`` (in the combined ranking, 0 = best),
+        ``clip``, ``start`` (frame in the clip), ``take``, ``source_s``
+        (seconds into the take), ``pose_dist`` (z-scored units),
+        ``audio_dist`` (cosine, 0..2), ``pose_rank``, ``audio_rank``,
+        ``combined`` (their sum) and ``chosen``.
+    """
+    s = result.search
+    if not 0 <= int(step) < s.n_steps:
+        raise ConfigError(f"step must be in 0..{s.n_steps - 1}, got {step}")
+    step = int(step)
+    rows = []
+    for p in np.flatnonzero(s.cand_clip[step] >= 0):
+        clip, start = int(s.cand_clip[step, p]), int(s.cand_start[step, p])
+        take, t = _source(db, clip, start)
+        rows.append({
+            "position": int(p), "clip": clip, "start": start, "take": take, "source_s": t,
+            "pose_dist": float(s.cand_pose_dist[step, p]), "audio_dist": float(s.cand_audio_dist[step, p]),
+            "pose_rank": int(s.cand_pose_rank[step, p]), "audio_rank": int(s.cand_audio_rank[step, p]),
+            "combined": int(s.cand_combined[step, p]), "chosen": bool(p == s.position[step]),
+        })
+    return pd.DataFrame(rows, columns=["position", "clip", "start", "take", "source_s", "pose_dist", "audio_dist",
+                                       "pose_rank", "audio_rank", "combined", "chosen"])
+
+
+def candidate_motion(db: MatchingDatabase, clip: int, start: int, n_frames: int) -> Motion:
+    """Frames ``start .. start + n_frames`` of a database clip (fewer at the clip's end)."""
+    g = np.asarray(db.G[int(clip), int(start): int(start) + int(n_frames)], dtype=np.float32)
+    if g.shape[0] == 0:
+        raise ConfigError(f"clip {clip} has no frame {start}")
+    return Motion.from_flat(g, db.fps)
+
+
+def step_speech(result: SynthesisResult, step: int) -> np.ndarray:
+    """The input speech under one step's output frames, float32 at 16 kHz."""
+    n = result.config.step
+    fps = result.motion.fps
+    a = int(round(step * n * AUDIO_SR / fps))
+    b = int(round(min((step + 1) * n, result.n_frames) * AUDIO_SR / fps))
+    return np.asarray(result.audio[a:b], dtype=np.float32)
+
+
+def compare_k(audio, *, db: MatchingDatabase, config: SynthesisConfig, ks: Sequence[int], refiner=None,
+              source: str | None = None) -> list[SynthesisResult]:
+    """Results for several ``k`` with everything else (speech, controls, pins, seed) the same.
+
+    One batched search serves all (:func:`synthesize_batch`), unless a refiner
+    must be passed to :func:`synthesize` one speech at a time.
+
+    Parameters
+    ----------
+    audio : path or np.ndarray, shape (samples,)
+        The speech.
+    config : SynthesisConfig
+        The settings; only ``k`` varies.
+    ks : sequence of int
+        The values of ``k`` (>= 0), in the order of the results.
+    refiner : optional
+        Passed on as :func:`with_refiner` does.
+    source : str, optional
+        Name of the speech stored in the results.
+
+    Returns
+    -------
+    list of SynthesisResult, one per ``k``.
+    """
+    ks = [int(k) for k in ks]
+    if not ks:
+        raise ConfigError("choose at least one k to compare")
+    configs, extra = [], {}
+    for k in ks:
+        c, extra = with_refiner(dataclasses.replace(config, k=k), refiner)
+        configs.append(c)
+    if extra and "refiner" not in inspect.signature(synthesize_batch).parameters:
+        results = [synthesize(audio, db=db, config=c, **extra) for c in configs]
+    else:
+        results = synthesize_batch([audio] * len(ks), db=db, config=configs, **extra)
+    if source is not None:
+        results = [dataclasses.replace(r, source=source) for r in results]
+    return results
+
+
+def control_adherence(motion: Motion, control: ControlTrack, thresholds: Mapping[str, tuple[float, float]]) -> float:
+    """Fraction of the constrained output frames whose pose meets their constraints (NaN without controls).
+
+    The attributes are computed on the output motion itself
+    (:func:`gesturekit.control.frame_attributes`), so this measures the
+    result, not the database windows it was made from.
+    """
+    labels = control.frame_labels(motion.n_frames, fps=motion.fps)
+    constrained = [t for t, c in enumerate(labels) if c]
+    if not constrained:
+        return float("nan")
+    attrs = frame_attributes(motion.positions, fps=motion.fps)
+    ok = [bool(constraint_mask(attrs[t], labels[t], dict(thresholds))) for t in constrained]
+    return float(np.mean(ok))
+
+
+def comparison_table(results: Sequence[SynthesisResult], thresholds: Mapping[str, tuple[float, float]]) -> pd.DataFrame:
+    """One row per result: k, the chosen windows' mean pose and audio distance, relaxed steps, control adherence.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``k``, ``pose_dist`` and ``audio_dist`` (means over steps of the
+        chosen window's distances; pinned windows outside the table are
+        left out), ``relaxed_steps``, ``pinned_steps``, ``control_met`` (fraction
+        of constrained frames, NaN without controls).
+    """
+    rows = []
+    for r in results:
+        s = r.search
+        idx = np.flatnonzero(s.position >= 0)
+        rows.append({
+            "k": r.config.k,
+            "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
+            "audio_dist": float(np.mean(s.cand_audio_dist[idx, s.position[idx]])) if idx.size else float("nan"),
+            "relaxed_steps": len(r.relaxed_steps),
+            "pinned_steps": int(np.count_nonzero(s.pinned)),
+            "control_met": control_adherence(r.motion, r.control, thresholds),
+        })
+    return pd.DataFrame(rows)

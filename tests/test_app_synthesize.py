@@ -1,0 +1,290 @@
+"""The Synthesize page, run headless with Streamlit's AppTest: upload, controls, settings, run, result, exports."""
+from __future__ import annotations
+
+import base64
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+from scipy.signal import resample_poly
+from streamlit.testing.v1 import AppTest
+
+from gesturekit.control import frame_attributes
+from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.synthetic import generate_demo_take
+from gesturekit.demo import build_demo_database
+from gesturekit.export.video import probe_media
+from gesturekit.viz.figures import WRIST_ROWS
+
+HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
+PAGE = "pages/1_Synthesize.py"
+TIMEOUT = 90
+EDITOR = "synth.segments_editor"
+
+
+@pytest.fixture(scope="module")
+def demo_home(tmp_path_factory) -> Path:
+    """A gesturekit home holding a 2-minute demo database at the default path."""
+    home = tmp_path_factory.mktemp("gkhome")
+    build_demo_database(home / "db" / "demo", minutes=2)
+    return home
+
+
+@pytest.fixture
+def app_env(demo_home, tmp_path, monkeypatch) -> Path:
+    monkeypatch.setenv("GESTUREKIT_HOME", str(demo_home))
+    monkeypatch.delenv("GESTUREKIT_DEMO_MINUTES", raising=False)
+    monkeypatch.chdir(tmp_path)
+    return demo_home
+
+
+@pytest.fixture(scope="module")
+def db(demo_home) -> MatchingDatabase:
+    return MatchingDatabase.load(demo_home / "db" / "demo")
+
+
+def speech_file(seconds: float = 4.0, *, sr: int = 16000, channels: int = 1, fmt: str = "WAV") -> bytes:
+    """Generated speech of the demo speaker (not in the database) as an audio file's bytes."""
+    take, _ = generate_demo_take(seconds=seconds, seed=777, name="speech")
+    audio = take.audio if sr == 16000 else resample_poly(take.audio, sr // 50, 320).astype(np.float32)
+    data = np.stack([audio] * channels, axis=1) if channels > 1 else audio
+    buf = io.BytesIO()
+    sf.write(buf, data, sr, format=fmt)
+    return buf.getvalue()
+
+
+def open_page() -> AppTest:
+    at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
+    at.switch_page(PAGE).run()
+    assert not at.exception, at.exception
+    return at
+
+
+def upload(at: AppTest, data: bytes, name: str = "speech.wav") -> AppTest:
+    at.file_uploader(key="synth.upload").set_value((name, data, "audio/wav")).run()
+    assert not at.exception, at.exception
+    return at
+
+
+def add_rows(at: AppTest, *rows: dict) -> AppTest:
+    """Type rows into the control table, as the data editor would report them."""
+    at.session_state[EDITOR] = {"edited_rows": {}, "added_rows": list(rows), "deleted_rows": []}
+    return at.run()
+
+
+def box(at: AppTest, x0: float, x1: float) -> AppTest:
+    """Box-select a time range on the waveform, as the browser would report it."""
+    at.session_state["synth.waveform"] = {"selection": {"points": [], "point_indices": [], "lasso": [],
+                                                        "box": [{"xref": "x", "yref": "y", "x": [x0, x1], "y": [-1, 1]}]}}
+    return at.run()
+
+
+def chart(at: AppTest, key: str) -> dict:
+    for el in at.get("plotly_chart"):
+        if el.proto.id.endswith(key):
+            return json.loads(el.proto.spec)
+    raise AssertionError(f"no plotly chart with key {key!r}")
+
+
+def array(value) -> np.ndarray:
+    if isinstance(value, dict):
+        return np.frombuffer(base64.b64decode(value["bdata"]), dtype=np.dtype(value["dtype"])).astype(np.float64)
+    return np.array([np.nan if v is None else v for v in value], dtype=np.float64)
+
+
+def bands(spec: dict) -> list[tuple[float, float, str]]:
+    return sorted({(round(s["x0"], 6), round(s["x1"], 6), s["name"]) for s in spec["layout"].get("shapes", [])
+                   if s["type"] == "rect"})
+
+
+def errors(at: AppTest) -> list[str]:
+    return [e.value for e in at.error]
+
+
+def result(at: AppTest):
+    return at.session_state["gk.synthesis"]["result"]
+
+
+def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
+    at = upload(open_page(), speech_file(4.0, sr=22050, channels=2))
+    assert any("WAV (PCM_16), 22050 Hz, 2 channels, 4.00 s" in c.value for c in at.caption)
+    at = add_rows(at, {"start_s": 1.0, "end_s": 2.5, "constraint": "left_hand=high"})
+    assert not at.exception and not errors(at)
+    assert bands(chart(at, "synth.waveform")) == [(1.0, 2.5, "left_hand=high")]
+
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    res = result(at)
+    assert res.config.control == "1-2.5:left_hand=high" and res.source == "speech.wav"
+    assert res.n_frames == 60
+
+    # the 3D view: every joint of the first frame at the result's positions, one animation frame per frame
+    skel = chart(at, "synth.skeleton")
+    assert {t["meta"]["part"] for t in skel["data"]} == {"body", "hands"}
+    assert len(skel["frames"]) == res.n_frames
+    points = np.concatenate([np.stack([array(t[c]) for c in "xyz"], axis=1) for t in skel["data"]])
+    points = np.unique(np.round(points[np.isfinite(points).all(axis=1)], 5), axis=0)
+    np.testing.assert_allclose(points, np.unique(np.round(res.motion.positions[0], 5), axis=0), atol=2e-5)
+    assert skel["layout"]["scene"]["dragmode"] == "orbit"
+
+    # the wrist plot: the result's own wrist heights and speeds, the control band, the thresholds
+    wrists = chart(at, "synth.wrists")
+    attrs = frame_attributes(res.motion.positions, fps=res.motion.fps)
+    for trace in wrists["data"]:
+        col = db.attribute_names.index(trace["meta"]["attribute"])
+        np.testing.assert_allclose(array(trace["y"]), attrs[:, col], atol=1e-5)
+    assert sorted(t["meta"]["attribute"] for t in wrists["data"]) == sorted(a for a, _ in WRIST_ROWS)
+    assert set(bands(wrists)) == {(1.0, 2.5, "left_hand=high")}
+    lines = {s["name"]: s["y0"] for s in wrists["layout"]["shapes"] if s["type"] == "line"}
+    assert lines["left_hand_height high"] == pytest.approx(db.thresholds["left_hand_height"][1])
+
+    assert len(at.get("audio")) == 2  # the speech, and the player beside the 3D view
+    labels = [d.proto.label for d in at.get("download_button")]
+    assert labels == ["Motion + search (npz)", "Motion (BVH)", "Control track (CSV)", "Config (JSON)"]
+    assert any(c.value == "MP4: render it above" for c in at.caption)
+
+
+def test_box_selecting_on_the_waveform_adds_and_cuts_segments(app_env):
+    at = upload(open_page(), speech_file(4.0))
+    at.selectbox(key="_w.synth.new_constraint").set_value("speed=fast").run()
+    at = box(at, 2.3456, 0.5)  # dragged right to left
+    assert not at.exception and not errors(at)
+    assert at.data_editor[0].value.to_dict("records") == [{"start_s": 0.5, "end_s": 2.35, "constraint": "speed=fast"}]
+    assert bands(chart(at, "synth.waveform")) == [(0.5, 2.35, "speed=fast")]
+
+    at.selectbox(key="_w.synth.new_constraint").set_value("width=wide").run()
+    at = box(at, 2.0, 3.0)
+    assert bands(chart(at, "synth.waveform")) == [(0.5, 2.0, "speed=fast"), (2.0, 3.0, "width=wide")]
+    at.run()  # the same selection again adds nothing
+    assert len(at.data_editor[0].value) == 2
+
+    at.button(key="synth.clear_segments").click().run()
+    assert at.data_editor[0].value.empty and bands(chart(at, "synth.waveform")) == []
+
+
+def test_a_bad_upload_is_an_error_message_not_a_traceback(app_env):
+    at = upload(open_page(), b"these are my notes, not sound" * 20, name="notes.wav")
+    (err,) = errors(at)
+    assert err.startswith("notes.wav: ")
+    assert not at.exception and not at.get("plotly_chart")
+    assert "synth.go" not in [b.key for b in at.button]
+    at.run()  # the same upload is not read again, and still reported
+    assert errors(at) == [err]
+    # an example instead: back to work
+    at.radio(key="_w.synth.mode").set_value("Example speech").run()
+    assert not errors(at) and at.button(key="synth.go")
+
+
+def test_a_silent_upload_is_accepted_with_a_warning(app_env):
+    buf = io.BytesIO()
+    sf.write(buf, np.zeros(32000, np.float32), 16000, format="WAV")
+    at = upload(open_page(), buf.getvalue(), name="quiet.wav")
+    assert [w.value for w in at.main.warning if "silent" in w.value] == ["quiet.wav: the audio is silent (peak level "
+                                                                        "at or below -80 dBFS)"]
+    assert not errors(at) and not at.button(key="synth.go").disabled
+
+
+def test_an_invalid_control_row_blocks_the_run(app_env):
+    at = add_rows(upload(open_page(), speech_file(3.0)), {"start_s": 2.0, "end_s": 1.0, "constraint": "speed=slow"})
+    (err,) = errors(at)
+    assert err.startswith("control row 1:") and "end must be after start" in err
+    assert at.button(key="synth.go").disabled
+    assert not at.exception
+
+
+def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
+    at = open_page()
+    at.radio(key="_w.synth.mode").set_value("Example speech").run()
+    at.number_input(key="_w.synth.k").set_value(2)
+    at.number_input(key="_w.synth.seed").set_value(3)
+    at.number_input(key="_w.synth.topk").set_value(4)
+    at.selectbox(key="_w.synth.init").set_value("rest")
+    at.selectbox(key="_w.synth.blend").set_value("offset")
+    at.selectbox(key="_w.synth.mask_rule").set_value("all").run()
+    at = add_rows(at, {"start_s": 0.0, "end_s": 2.0, "constraint": "both_hands=low"})
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    c = result(at).config
+    assert (c.k, c.seed, c.topk, c.init, c.blend, c.mask_rule) == (2, 3, 4, "rest", "offset", "all")
+    assert c.control == "0-2:both_hands=low"
+    assert result(at).n_frames == 8 * 15  # the 8 s example
+
+    at.switch_page("pages/3_Database.py").run()
+    at.switch_page(PAGE).run()
+    assert not at.exception
+    assert at.number_input(key="_w.synth.k").value == 2 and at.selectbox(key="_w.synth.blend").value == "offset"
+    assert at.data_editor[0].value.to_dict("records") == [{"start_s": 0.0, "end_s": 2.0, "constraint": "both_hands=low"}]
+    assert chart(at, "synth.skeleton")  # the result is still there
+
+    other = open_page()  # another user sees none of it
+    assert "gk.synthesis" not in other.session_state and not other.get("plotly_chart")
+
+
+def test_rendering_the_video_gives_an_mp4_with_the_speech(app_env, tmp_path):
+    at = upload(open_page(), speech_file(2.0))
+    at.button(key="synth.go").click().run()
+    at.button(key="synth.render").click().run()
+    assert not at.exception and not errors(at)
+    assert len(at.get("video")) == 1
+    assert [d.proto.label for d in at.get("download_button")][-1] == "Video (MP4)"
+    mp4 = tmp_path / "result.mp4"
+    mp4.write_bytes(at.session_state["_synth.video"]["bytes"])
+    info = probe_media(mp4)
+    assert info["video"]["codec"] == "h264" and info["audio"]["codec"] == "aac"
+    assert info["video"]["frames"] == result(at).n_frames == 30
+    assert info["audio"]["duration"] == pytest.approx(2.0, abs=0.03)
+
+
+def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_path, monkeypatch):
+    """The page's side of the refiner: a stand-in refiner that smooths the k-NN motion over 5 frames."""
+    import dataclasses
+
+    from scipy.ndimage import uniform_filter1d
+
+    import gesturekit.synthesize as synthesis
+    from gesturekit.motion import Motion
+
+    real = synthesis.synthesize
+    seen = []
+
+    def synthesize(audio, *, db, config=None, control=None, refiner=None):
+        res = real(audio, db=db, config=config, control=control)
+        if refiner is None:
+            return res
+        seen.append(refiner)
+        smooth = Motion(uniform_filter1d(res.knn_motion.positions, 5, axis=0), res.motion.fps)
+        return dataclasses.replace(res, motion=smooth, refined_motion=smooth)
+
+    class StandIn:
+        def check_database(self, db):
+            pass
+
+    folder = tmp_path / "my-refiner"
+    folder.mkdir()
+    (folder / "config.json").write_text("{}", encoding="utf-8")
+    monkeypatch.setattr("gesturekit.synthesize.synthesize", synthesize)
+    monkeypatch.setattr("gesturekit.viz.session.synthesize", synthesize)
+    monkeypatch.setattr("gesturekit.refine.load_refiner", lambda path: StandIn())
+
+    at = upload(open_page(), speech_file(3.0))
+    at.toggle(key="_w.synth.refine").set_value(True).run()
+    at.text_input(key="_w.synth.refiner_path").input(str(folder)).run()
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    assert len(seen) == 1 and isinstance(seen[0], StandIn)
+    skel = chart(at, "synth.skeleton")
+    assert [a["text"] for a in skel["layout"]["scene"]["annotations"]] == ["k-NN", "k-NN + refiner"]
+    wrists = chart(at, "synth.wrists")
+    res = result(at)
+    speeds = {t["meta"]["motion"]: array(t["y"]) for t in wrists["data"] if t["meta"]["attribute"] == "left_hand_speed"}
+    np.testing.assert_allclose(speeds[0], frame_attributes(res.knn_motion.positions)[:, 2], atol=1e-5)
+    np.testing.assert_allclose(speeds[1], frame_attributes(res.refined_motion.positions)[:, 2], atol=1e-5)
+    assert any("refined" in c.value for c in at.caption)
+
+    # the refiner on but not loadable: an error, and no run without it
+    at.text_input(key="_w.synth.refiner_path").input("").run()
+    assert any("folder of a trained refiner" in e for e in errors(at))
+    assert at.button(key="synth.go").disabled

@@ -1,0 +1,83 @@
+"""The app in a real browser: Debian's Chromium driven by Playwright against ``streamlit run app/Home.py``.
+
+Skipped, with the reason, where the playwright package or Chromium is missing
+(``.ci/run`` installs both). Screenshots of the pages go to
+``docs/screenshots`` only when ``GESTUREKIT_SCREENSHOTS=1`` (``python -m
+tests.app_browser`` makes them too); otherwise to the test's temporary folder.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from tests import app_browser
+
+pytestmark = pytest.mark.skipif(app_browser.unavailable() is not None,
+                                reason=f"no browser test: {app_browser.unavailable()}")
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory):
+    """The app on 127.0.0.1 with a fresh home: it builds a one-minute demo database on the first view."""
+    home = tmp_path_factory.mktemp("browser_home")
+    with app_browser.app_server(home, demo_minutes=1.0) as url:
+        yield url, home
+
+
+def _shots(tmp_path: Path) -> Path:
+    if os.environ.get("GESTUREKIT_SCREENSHOTS") == "1":
+        return app_browser.REPO / "docs" / "screenshots"
+    return tmp_path
+
+
+def test_upload_box_select_run_then_inspect(served, tmp_path):
+    url, home = served
+    wav = app_browser.write_speech(tmp_path / "my speech.wav", seconds=6.0)
+    out = _shots(tmp_path)
+    out.mkdir(parents=True, exist_ok=True)
+    with app_browser.browser() as page:
+        app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
+        assert (home / "db" / "demo" / "database.json").is_file()  # built by the app on the first view
+        app_browser.upload(page, wav)
+        assert page.get_by_text("WAV (PCM_16), 16000 Hz, 1 channel, 6.00 s").count() == 1
+
+        # a control segment by dragging across the waveform: its band appears, labelled
+        app_browser.box_select(page, 0.25, 0.6)
+        page.locator('[data-testid="stPlotlyChart"] text', has_text="both_hands=high").first.wait_for()
+        app_browser.wait_idle(page)
+
+        app_browser.run_and_wait(page)
+        app_browser.wait_idle(page)
+        # the 3D view is a WebGL canvas with real size; the wrist plot has its four rows
+        canvas = page.locator('[data-testid="stPlotlyChart"] .gl-container canvas').first.bounding_box()
+        assert canvas["width"] > 200 and canvas["height"] > 200
+        for row in ("left wrist height", "right wrist height", "left wrist speed", "right wrist speed"):
+            assert page.locator('[data-testid="stPlotlyChart"] text', has_text=row).count() >= 1
+        assert page.get_by_text("controls:").count() >= 1
+        for label in ("Motion + search (npz)", "Motion (BVH)", "Control track (CSV)", "Config (JSON)"):
+            assert page.get_by_role("button", name=label).count() == 1
+        assert app_browser.problems(page) == []
+        app_browser.screenshot(page, out / "browser_synthesize.png")
+
+        # the inspector sees this session's result (state kept across pages)
+        app_browser.go_to(page, "Retrieval inspector")
+        page.get_by_text("Step 0").first.wait_for()
+        page.locator('[data-testid="stPlotlyChart"] .gl-container canvas').first.wait_for(state="visible")
+        assert app_browser.problems(page) == []
+        app_browser.screenshot(page, out / "browser_inspector.png")
+    assert (out / "browser_synthesize.png").stat().st_size > 10_000
+
+
+def test_a_file_that_is_not_audio_is_an_error_message(served, tmp_path):
+    url, _ = served
+    bad = tmp_path / "notes.wav"
+    bad.write_bytes(b"these are notes, not sound" * 40)
+    with app_browser.browser() as page:
+        app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
+        page.locator('[data-testid="stFileUploader"] input[type="file"]').set_input_files(str(bad))
+        alert = page.locator('[data-testid="stAlert"]', has_text="notes.wav")
+        alert.first.wait_for()
+        assert app_browser.problems(page) == []
+        assert page.get_by_role("button", name="Run", exact=True).count() == 0
