@@ -1,0 +1,1222 @@
+"""Algorithm 1 (the k-NN motion search), fast and exact.
+
+:func:`search` runs the search of the paper (Algorithm 1 of the supplementary
+material, with the authors' choices and ours, see ``docs/METHOD.md`` and
+:mod:`gesturekit.search_reference`) on plain arrays and returns a
+:class:`SearchResult`: the chosen (clip, start) per step, the output frames as
+(clip, frame) indices, and a record of every step's best candidates.
+:func:`search_batch` serves several query sequences (each with its own
+configuration) with one scan of the database per step.
+
+Exactness. The result equals :func:`gesturekit.search_reference.search_reference`
+decision for decision. Each step scans the database once in float32
+(``||p||^2 - 2 p.q`` by a matrix product), keeps per clip the starts whose
+float32 value lies within a proven error bound of the clip's minimum, and
+decides among those with the exact float64 definitions of
+:mod:`gesturekit.search_reference`. The same bound-and-re-check is applied to
+the ordering of clips by pose and by audio distance, so ties and near-ties are
+always settled by the exact values.
+
+Error bound (pose). For a row ``p`` and the query ``q`` (both float32, D = 96
+values), the float32 estimate ``A = fl(np32 + fl(-2 q.p))`` with ``np32`` the
+float32 rounding of ``|p|^2`` satisfies, for any summation order of the
+product (blocked, SIMD, FMA), ``|A + |q|^2 - d2| <= (gamma_D + 3u)(|p|^2 + |q|^2)``
+with ``u = 2**-24`` and ``gamma_D = D u / (1 - D u)``; we use
+``(D + 32) u (max_clip |p|^2 + |q|^2)``, which also covers the float64 rounding
+of the exact value. Features are limited to magnitudes below 1e15 so that no
+float32 product or sum overflows.
+
+Error bound (audio). The cosine distance is estimated from a float32 dot product
+(any summation order) and float64 norms; its error is below ``(A + 16) u``.
+"""
+from __future__ import annotations
+
+import functools
+import numbers
+import os
+import warnings
+from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import numpy as np
+
+from .errors import ConfigError, GestureKitWarning
+
+__all__ = [
+    "SearchConfig",
+    "SearchResult",
+    "SearchIndex",
+    "search",
+    "search_batch",
+    "exact_pose_sqdist",
+    "exact_cosine_distance",
+]
+
+_U32 = 2.0**-24
+#: Absolute slack for float32 underflow in products.
+_TINY = 1e-30
+#: Largest feature magnitude accepted: float32 products and sums of squares cannot overflow.
+_MAX_ABS = 1e15
+#: Clips scanned per chunk are chosen so that one chunk's float32 result holds this many bytes.
+_CHUNK_BYTES = 16 << 20
+
+
+def _pose_err_factor(dims: int) -> float:
+    """Multiple of ``max|p|^2 + |q|^2`` bounding the float32 pose estimate's error.
+
+    The bound is ``(gamma_D + 3u)``; ``(D + 32) u`` adds room for the float64 rounding
+    of the exact value and of ``|p|^2``, ``|q|^2`` (see the module doc).
+    """
+    return (dims + 32) * _U32
+
+
+def _audio_err(dims: int) -> float:
+    """Bound on the error of the cosine distance estimated from a float32 dot product of
+    A values (``gamma_A |a| |b|``, relative to ``|a| |b|``) and float64 norms."""
+    return (dims + 16) * _U32 + 1e-12
+
+
+# ----------------------------------------------------------------------------------------------
+# configuration and result
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """Options of one search; JSON-able through :meth:`to_dict`, saved with every result.
+
+    Parameters
+    ----------
+    k : int
+        Which candidate of the combined ranking to take (0 = best).
+    step : int
+        Frames per search step, ``N`` (8 in the authors' code).
+    topk : int
+        Candidates per step kept in the record (at least ``k + 1`` are kept).
+    seed : int
+        Seed of the random initial pose.
+    init : "random" or sequence of float
+        ``"random"``: the pose feature of a random admissible database frame
+        satisfying step 0's control (seeded). Otherwise an explicit z-scored
+        pose feature (D values, e.g. a rest pose), stored rounded to float32.
+    mask_rule : {"ends", "all"}
+        Where a control mask must hold in a window: at its first and last
+        frame (the authors' code) or on every frame (ours).
+    pins : dict of int -> (int, int)
+        Step -> (clip, start): forces the choice at that step; later steps
+        continue from the pinned segment.
+    """
+
+    k: int = 0
+    step: int = 8
+    topk: int = 10
+    seed: int = 0
+    init: str | tuple[float, ...] = "random"
+    mask_rule: str = "ends"
+    pins: dict = field(default_factory=dict, hash=False)
+
+    def __post_init__(self):
+        for name, low in (("k", 0), ("step", 1), ("topk", 1), ("seed", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+                raise ConfigError(f"SearchConfig.{name} must be an integer >= {low}, got {value!r}")
+            object.__setattr__(self, name, int(value))
+        if self.mask_rule not in ("ends", "all"):
+            raise ConfigError(f"SearchConfig.mask_rule must be 'ends' or 'all', got {self.mask_rule!r}")
+        init = self.init
+        if isinstance(init, str):
+            if init != "random":
+                raise ConfigError(f"SearchConfig.init must be 'random' or a pose feature vector, got {init!r}")
+        else:
+            try:
+                arr = np.asarray(init, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"SearchConfig.init must be 'random' or a pose feature vector: {exc}") from None
+            if arr.ndim != 1 or arr.size == 0 or not np.all(np.isfinite(arr)):
+                raise ConfigError(f"SearchConfig.init must be a finite 1-D pose feature vector, got shape {arr.shape}")
+            object.__setattr__(self, "init", tuple(float(x) for x in arr.astype(np.float32)))
+        if not isinstance(self.pins, Mapping):
+            raise ConfigError(f"SearchConfig.pins must map step -> (clip, start), got {type(self.pins).__name__}")
+        pins = {}
+        for key, value in self.pins.items():
+            try:
+                step_i = int(key)
+                clip, start = (int(x) for x in value)
+            except (TypeError, ValueError):
+                raise ConfigError(
+                    f"SearchConfig.pins: expected step -> (clip, start), got {key!r}: {value!r}"
+                ) from None
+            if step_i < 0 or clip < 0 or start < 0:
+                raise ConfigError(f"SearchConfig.pins: negative index in {key!r}: {value!r}")
+            pins[step_i] = (clip, start)
+        object.__setattr__(self, "pins", dict(sorted(pins.items())))
+
+    def to_dict(self) -> dict:
+        """A JSON-able dict (pin steps become strings) that :meth:`from_dict` reads back."""
+        return {
+            "k": self.k,
+            "step": self.step,
+            "topk": self.topk,
+            "seed": self.seed,
+            "init": self.init if isinstance(self.init, str) else list(self.init),
+            "mask_rule": self.mask_rule,
+            "pins": {str(i): [m, s] for i, (m, s) in self.pins.items()},
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "SearchConfig":
+        """Inverse of :meth:`to_dict`; unknown keys raise :class:`ConfigError`."""
+        known = {"k", "step", "topk", "seed", "init", "mask_rule", "pins"}
+        unknown = set(d) - known
+        if unknown:
+            raise ConfigError(f"unknown SearchConfig keys: {sorted(unknown)}")
+        return cls(**dict(d))
+
+    @property
+    def table_width(self) -> int:
+        """Candidates recorded per step: ``max(topk, k + 1)``, so the chosen one is always among them."""
+        return max(self.topk, self.k + 1)
+
+
+_CANDIDATE_FIELDS = (
+    "cand_clip",
+    "cand_start",
+    "cand_pose_dist",
+    "cand_audio_dist",
+    "cand_pose_rank",
+    "cand_audio_rank",
+    "cand_combined",
+)
+
+
+@dataclass(eq=False)
+class SearchResult:
+    """The outcome of one search, with a record of every step's best candidates.
+
+    Steps are indexed ``i = 0 .. n_steps - 1``; step ``i`` covers output frames
+    ``[i N, min((i + 1) N, T_out))``. The candidate table of a step lists the
+    surviving clips in combined-rank order (position 0 = best), ``K =
+    config.table_width`` columns, padded with -1 (integers) and NaN (distances)
+    when fewer clips survived.
+
+    Attributes
+    ----------
+    clip, start : np.ndarray, shape (n_steps,), int64
+        The chosen window of each step (database clip and start frame).
+    frames : np.ndarray, shape (T_out, 2), int64
+        ``(clip, frame)`` of the database frame used for each output frame.
+    relaxed : np.ndarray, shape (n_steps,), bool
+        The step's control admitted no window and was dropped for that step.
+    short : np.ndarray, shape (n_steps,), bool
+        Fewer than ``k + 1`` clips survived; the last one was taken.
+    pinned : np.ndarray, shape (n_steps,), bool
+        The choice was forced by ``config.pins``.
+    position : np.ndarray, shape (n_steps,), int64
+        Column of the chosen window in the candidate table (-1: a pin not in the table).
+    n_candidates : np.ndarray, shape (n_steps,), int64
+        Clips that survived the step.
+    cand_clip, cand_start : np.ndarray, shape (n_steps, K), int64
+    cand_pose_dist : np.ndarray, shape (n_steps, K), float64
+        Euclidean distance between the candidate's pose feature and ``p_{t-1}`` (z-scored units).
+    cand_audio_dist : np.ndarray, shape (n_steps, K), float64
+        Cosine distance between the candidate's audio feature and ``f_t``, in [0, 2].
+    cand_pose_rank, cand_audio_rank, cand_combined : np.ndarray, shape (n_steps, K), int64
+        Ordinal ranks (0 = best) among the surviving clips, and their sum.
+    init_pose : np.ndarray, shape (D,), float32
+        ``p_{-1}``.
+    init_frame : tuple of int
+        ``(clip, frame)`` the random initial pose was taken from, ``(-1, -1)`` if given.
+    config : SearchConfig
+    """
+
+    clip: np.ndarray
+    start: np.ndarray
+    frames: np.ndarray
+    relaxed: np.ndarray
+    short: np.ndarray
+    pinned: np.ndarray
+    position: np.ndarray
+    n_candidates: np.ndarray
+    cand_clip: np.ndarray
+    cand_start: np.ndarray
+    cand_pose_dist: np.ndarray
+    cand_audio_dist: np.ndarray
+    cand_pose_rank: np.ndarray
+    cand_audio_rank: np.ndarray
+    cand_combined: np.ndarray
+    init_pose: np.ndarray
+    init_frame: tuple
+    config: SearchConfig
+
+    @classmethod
+    def empty(cls, n_steps: int, n_frames: int, width: int, *, config, init_pose, init_frame) -> "SearchResult":
+        """A result to fill in: every table entry padded, every flag False."""
+
+        def ints(*shape):
+            return np.full(shape, -1, dtype=np.int64)
+
+        def floats(*shape):
+            return np.full(shape, np.nan, dtype=np.float64)
+
+        return cls(
+            clip=ints(n_steps),
+            start=ints(n_steps),
+            frames=ints(n_frames, 2),
+            relaxed=np.zeros(n_steps, bool),
+            short=np.zeros(n_steps, bool),
+            pinned=np.zeros(n_steps, bool),
+            position=ints(n_steps),
+            n_candidates=np.zeros(n_steps, np.int64),
+            cand_clip=ints(n_steps, width),
+            cand_start=ints(n_steps, width),
+            cand_pose_dist=floats(n_steps, width),
+            cand_audio_dist=floats(n_steps, width),
+            cand_pose_rank=ints(n_steps, width),
+            cand_audio_rank=ints(n_steps, width),
+            cand_combined=ints(n_steps, width),
+            init_pose=np.asarray(init_pose, dtype=np.float32).copy(),
+            init_frame=(int(init_frame[0]), int(init_frame[1])),
+            config=config,
+        )
+
+    @property
+    def n_steps(self) -> int:
+        """Search steps taken."""
+        return int(self.clip.shape[0])
+
+    def array_fields(self) -> dict[str, np.ndarray]:
+        """Every array of the result by name (for saving with ``np.savez``; the config goes as JSON)."""
+        names = ("clip", "start", "frames", "relaxed", "short", "pinned", "position", "n_candidates")
+        out = {n: getattr(self, n) for n in names + _CANDIDATE_FIELDS}
+        out["init_pose"] = self.init_pose
+        out["init_frame"] = np.asarray(self.init_frame, dtype=np.int64)
+        return out
+
+    def equals(self, other: "SearchResult") -> bool:
+        """Whether two results are identical (arrays bit for bit, NaN equal to NaN, same config)."""
+        if self.config != other.config:
+            return False
+        a, b = self.array_fields(), other.array_fields()
+        return all(a[n].shape == b[n].shape and np.array_equal(a[n], b[n], equal_nan=a[n].dtype.kind == "f") for n in a)
+
+    def candidates_frame(self):
+        """The candidate record as a pandas DataFrame, one row per (step, position).
+
+        Columns: ``step, position, clip, start, pose_dist, audio_dist, pose_rank,
+        audio_rank, combined, chosen``; padding entries are left out.
+        """
+        import pandas as pd  # kept local: the search itself does not need pandas
+
+        n_steps, width = self.cand_clip.shape
+        steps = np.repeat(np.arange(n_steps), width)
+        pos = np.tile(np.arange(width), n_steps)
+        keep = self.cand_clip.ravel() >= 0
+        chosen = pos == np.repeat(self.position, width)
+        df = pd.DataFrame(
+            {
+                "step": steps,
+                "position": pos,
+                "clip": self.cand_clip.ravel(),
+                "start": self.cand_start.ravel(),
+                "pose_dist": self.cand_pose_dist.ravel(),
+                "audio_dist": self.cand_audio_dist.ravel(),
+                "pose_rank": self.cand_pose_rank.ravel(),
+                "audio_rank": self.cand_audio_rank.ravel(),
+                "combined": self.cand_combined.ravel(),
+                "chosen": chosen,
+            }
+        )
+        return df[keep].reset_index(drop=True)
+
+
+# ----------------------------------------------------------------------------------------------
+# exact distances, vectorised (same operations, same order as gesturekit.search_reference)
+
+
+def exact_pose_sqdist(rows: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Exact squared pose distances of several rows to one query.
+
+    Parameters
+    ----------
+    rows : np.ndarray, shape (n, D), float32
+    q : np.ndarray, shape (D,), float32
+
+    Returns
+    -------
+    np.ndarray, shape (n,), float64
+        Bit-identical to :func:`gesturekit.search_reference.pose_sqdist` per row.
+    """
+    # (D, n), one column per row: float64(a_j) - float64(b_j), rows laid out for the loop below
+    x = np.subtract(np.asarray(rows).T, np.asarray(q, dtype=np.float64)[:, None], dtype=np.float64, order="C")
+    np.multiply(x, x, out=x)
+    acc = np.zeros(x.shape[1])
+    for j in range(x.shape[0]):  # left to right, as the definition says
+        acc += x[j]
+    return acc
+
+
+def exact_cosine_distance(rows: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Exact cosine distances of several rows to one query.
+
+    Parameters
+    ----------
+    rows : np.ndarray, shape (n, A), float32
+    f : np.ndarray, shape (A,), float32
+
+    Returns
+    -------
+    np.ndarray, shape (n,), float64
+        Bit-identical to :func:`gesturekit.search_reference.cosine_distance` per row.
+    """
+    x = np.asarray(rows).T  # (A, n)
+    y = np.asarray(f, dtype=np.float64)
+    n = x.shape[1]
+    terms = np.empty((x.shape[0], 2 * n))  # per dimension: the n products, then the n squares
+    np.multiply(x, y[:, None], out=terms[:, :n], dtype=np.float64)
+    np.multiply(x, x, out=terms[:, n:], dtype=np.float64)
+    acc = np.zeros(2 * n)
+    nb = 0.0
+    for j, yj in enumerate(y.tolist()):  # left to right, as the definition says
+        acc += terms[j]
+        nb += yj * yj
+    dot, na = acc[:n], acc[n:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = 1.0 - dot / np.sqrt(na * nb)
+    out[(na == 0.0) | (nb == 0.0)] = 1.0
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# validation
+
+
+def _validate_db(P, F, valid):
+    P = np.ascontiguousarray(P, dtype=np.float32)
+    F = np.ascontiguousarray(F, dtype=np.float32)
+    valid = np.ascontiguousarray(valid)
+    if P.ndim != 3 or P.shape[0] < 1 or P.shape[1] < 1 or P.shape[2] < 1:
+        raise ConfigError(f"pose features must have shape (clips, frames, dims), got {P.shape}")
+    M, T, _ = P.shape
+    if F.ndim != 3 or F.shape[:2] != (M, T) or F.shape[2] < 1:
+        raise ConfigError(f"audio features must have shape ({M}, {T}, dims) like the pose features, got {F.shape}")
+    if valid.shape != (M, T) or valid.dtype != bool:
+        raise ConfigError(f"valid must be a bool array of shape ({M}, {T}), got {valid.dtype} {valid.shape}")
+    for name, x in (("pose", P), ("audio", F)):
+        flat = x.reshape(M * T, -1)
+        step = max(1, (1 << 22) // flat.shape[1])
+        for a in range(0, flat.shape[0], step):
+            chunk = flat[a : a + step]
+            if not np.isfinite(chunk).all():
+                raise ConfigError(f"{name} features contain NaN or infinite values")
+            if chunk.size and np.abs(chunk).max() > _MAX_ABS:
+                raise ConfigError(f"{name} features exceed {_MAX_ABS:g} in magnitude (are they z-scored?)")
+    return P, F, valid
+
+
+def _validate_call(shape, query, config, masks, step_mask, exclude):
+    M, T, D, A = shape
+    config = SearchConfig() if config is None else config
+    if not isinstance(config, SearchConfig):
+        raise ConfigError(f"config must be a SearchConfig, got {type(config).__name__}")
+    query = np.ascontiguousarray(query, dtype=np.float32)
+    if query.ndim != 2 or query.shape[1] != A or query.shape[0] < 1:
+        raise ConfigError(f"query audio features must have shape (frames >= 1, {A}), got {query.shape}")
+    if not np.isfinite(query).all():
+        raise ConfigError("query audio features contain NaN or infinite values")
+    if np.abs(query).max() > _MAX_ABS:
+        raise ConfigError(f"query audio features exceed {_MAX_ABS:g} in magnitude (are they z-scored?)")
+    N = config.step
+    if N > T:
+        raise ConfigError(f"step {N} is longer than a database clip ({T} frames)")
+    if not isinstance(config.init, str):
+        if len(config.init) != D:
+            raise ConfigError(f"initial pose must have {D} values, got {len(config.init)}")
+        if max(abs(x) for x in config.init) > _MAX_ABS:
+            raise ConfigError(f"initial pose exceeds {_MAX_ABS:g} in magnitude (is it z-scored?)")
+    n_steps = -(-query.shape[0] // N)
+    if masks is not None:
+        masks = np.ascontiguousarray(masks)
+        if masks.ndim != 3 or masks.shape[1:] != (M, T) or masks.dtype != bool:
+            raise ConfigError(
+                f"masks must be a bool array of shape (n_masks, {M}, {T}), got {masks.dtype} {masks.shape}"
+            )
+    if step_mask is not None:
+        step_mask = np.asarray(step_mask)
+        if step_mask.shape != (n_steps,) or step_mask.dtype.kind not in "iu":
+            raise ConfigError(
+                f"step_mask must be {n_steps} integers (one per step of {N} frames), got {step_mask.shape}"
+            )
+        n_masks = 0 if masks is None else masks.shape[0]
+        if step_mask.size and (step_mask.min() < -1 or step_mask.max() >= n_masks):
+            raise ConfigError(f"step_mask entries must be -1 or an index below {n_masks} (the number of masks)")
+        step_mask = step_mask.astype(np.int64)
+    elif masks is not None:
+        raise ConfigError("masks were given without step_mask (which mask each step uses)")
+    if exclude is not None:
+        exclude = np.ascontiguousarray(exclude)
+        if exclude.shape != (M, T) or exclude.dtype != bool:
+            raise ConfigError(f"exclude must be a bool array of shape ({M}, {T}), got {exclude.dtype} {exclude.shape}")
+    for i, (m, s) in config.pins.items():
+        if i >= n_steps:
+            raise ConfigError(f"pin at step {i}, but the query has only {n_steps} steps")
+        if m >= M or s + N > T:
+            raise ConfigError(f"pin at step {i}: window (clip {m}, start {s}) of {N} frames is outside the database")
+        if exclude is not None and exclude[m, s : s + N].any():
+            raise ConfigError(f"pin at step {i}: window (clip {m}, start {s}) contains excluded frames")
+    return SimpleNamespace(
+        query=query, config=config, masks=masks, step_mask=step_mask, exclude=exclude, n_steps=n_steps
+    )
+
+
+def _validate(P, F, valid, query, config, masks, step_mask, exclude):
+    """Shared input checks of the fast and the reference search; returns the normalised inputs."""
+    P, F, valid = _validate_db(P, F, valid)
+    call = _validate_call((*P.shape, F.shape[2]), query, config, masks, step_mask, exclude)
+    call.P, call.F, call.valid = P, F, valid
+    return call
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers of the fast search
+
+
+def _row_sqnorms(x2: np.ndarray) -> np.ndarray:
+    """Squared norms of the rows of a float32 (rows, dims) matrix, float64, in chunks."""
+    out = np.empty(x2.shape[0])
+    step = max(1, (1 << 20) // x2.shape[1])
+    for a in range(0, x2.shape[0], step):
+        c = x2[a : a + step].astype(np.float64)
+        out[a : a + step] = np.einsum("ij,ij->i", c, c)
+    return out
+
+
+def _window_all(flags: np.ndarray, n: int) -> np.ndarray:
+    """``out[m, s]`` = all of ``flags[m, s : s + n]`` for ``s + n <= T``, False beyond; (M, T) bool."""
+    M, T = flags.shape
+    bad = np.zeros((M, T + 1), np.int32)
+    np.cumsum(~flags, axis=1, out=bad[:, 1:])
+    out = np.zeros((M, T), bool)
+    out[:, : T - n + 1] = bad[:, n:] == bad[:, : T - n + 1]
+    return out
+
+
+def _rank_groups(v: np.ndarray, err: np.ndarray):
+    """Order of estimates ``v`` and the ranges of sorted positions whose exact order is unknown.
+
+    Each ``v[i]`` lies within ``err[i]`` of its exact value. Sorted neighbours
+    whose intervals ``[v - err, v + err]`` cannot overlap (also through a chain
+    of others) are in proven order; the chains form groups of sorted positions.
+
+    Returns
+    -------
+    order : (n,) int64
+        ``v`` sorted; the order inside a group is arbitrary until settled.
+    lo, hi : (n,) int64
+        First and last sorted position of each element's group: its exact rank lies in ``[lo, hi]``.
+    """
+    n = v.size
+    if n < 2 or not err.any():  # all exact: equal values in index order
+        order = np.argsort(v, kind="stable")
+        pos = np.empty(n, np.int64)
+        pos[order] = np.arange(n)
+        return order, pos, pos.copy()
+    # Equal estimates always share a group (their intervals overlap), and groups that
+    # matter are re-sorted exactly, so the initial sort need not be stable.
+    order = np.argsort(v)
+    vs, es = v[order], err[order]
+    hi_v = np.maximum.accumulate(vs + es)
+    lo_v = np.minimum.accumulate((vs - es)[::-1])[::-1]
+    split = np.ones(n, bool)
+    split[1:] = hi_v[:-1] < lo_v[1:]  # proven order between sorted neighbours
+    group = np.cumsum(split) - 1
+    first = np.flatnonzero(split)
+    last = np.append(first[1:] - 1, n - 1)
+    lo = np.empty(n, np.int64)
+    hi = np.empty(n, np.int64)
+    lo[order] = first[group]
+    hi[order] = last[group]
+    return order, lo, hi
+
+
+def _settle_groups(v, err, order, lo, hi, wanted, exact) -> None:
+    """Make the order exact inside every group holding a ``wanted`` element.
+
+    The group's estimates are replaced by exact values (``exact(indices)``) and
+    the group re-sorted (equal values by index); ``v``, ``err`` and ``order`` are
+    updated in place. Groups of one element need nothing.
+    """
+    starts = np.unique(lo[wanted & (hi > lo)])
+    if starts.size == 0:
+        return
+    ends = hi[order[starts]]
+    members = np.concatenate([order[a : b + 1] for a, b in zip(starts, ends)])
+    need = members[err[members] > 0]
+    if need.size:
+        v[need] = exact(need)
+        err[need] = 0.0
+    for a, b in zip(starts, ends):
+        m = order[a : b + 1]
+        order[a : b + 1] = m[np.lexsort((m, v[m]))]
+
+
+def _matrix_product(n_queries: int):
+    """``out[:] = rows @ W.T`` for float32 arrays; the fastest routine for the shape on a CPU.
+
+    One query: numpy's matrix-vector product (BLAS sgemv). Several: torch's matrix
+    product (MKL), which handles this tall, thin shape far better than numpy's BLAS,
+    when torch is installed; numpy's otherwise.
+    """
+    if n_queries == 1:
+
+        def product(rows, W, out):
+            np.dot(rows, W[0], out=out.reshape(-1))
+
+        return product
+    try:
+        import torch  # optional and heavy: only for batches
+    except ImportError:  # pragma: no cover - torch is a dependency of the refiner
+        torch = None
+    # the error bound assumes true float32 products: torch may be set to use bfloat16/TF32
+    if torch is None or torch.get_float32_matmul_precision() != "highest":
+
+        def product(rows, W, out):
+            np.dot(rows, W.T, out=out)
+
+        return product
+
+    def product(rows, W, out):
+        with warnings.catch_warnings():  # a read-only (memory-mapped) database is only read here
+            warnings.filterwarnings("ignore", message=".*not writable.*", category=UserWarning)
+            a = torch.from_numpy(rows)
+        torch.mm(a, torch.from_numpy(np.ascontiguousarray(W.T)), out=torch.from_numpy(out))
+
+    return product
+
+
+def _reduce_chunk(G3, nq, npmax, c_err):
+    """Per clip and query of a chunk: the float32 argmin and minimum of ``A`` over the
+    clip's starts, and whether that minimum is not decisive: another start within twice
+    the error bound of it, or a minimum that may be an exact zero.
+
+    Parameters
+    ----------
+    G3 : (nc, T, b) float32
+        ``A`` per clip, start and query (a view; may be strided).
+    nq : (b,) float64
+        ``|q|^2`` per query.
+    npmax : (nc,) float64
+        Largest ``|p|^2`` per clip.
+    c_err : float
+        :func:`_pose_err_factor` of the pose dimension.
+
+    Returns
+    -------
+    s0 : (nc, b) int64, amin : (nc, b) float32, undecided : (nc, b) bool
+    """
+    nc, T, b = G3.shape
+    if b > 1:  # several queries: numpy's reductions along the strided axis are slow
+        s0 = np.empty((nc, b), np.int64)
+        amin = np.empty((nc, b), np.float32)
+        undecided = np.empty((nc, b), bool)
+        _kernels().reduce_many(G3, nq, npmax, c_err, _TINY, s0, amin, undecided)
+        return s0, amin, undecided
+    A = G3[:, :, 0]
+    s0 = A.argmin(axis=1)
+    amin = np.take_along_axis(A, s0[:, None], axis=1)[:, 0]
+    err = c_err * (npmax + nq[0]) + _TINY
+    am64 = amin.astype(np.float64)
+    finite = np.isfinite(amin)
+    with np.errstate(invalid="ignore"):
+        thr = np.where(finite, am64 + 2.0 * err, -np.inf).astype(np.float32)
+    thr = np.nextafter(thr, np.float32(np.inf))  # round the float32 threshold up
+    count = np.count_nonzero(A <= thr[:, None], axis=1)
+    undecided = finite & ((count > 1) | (am64 + nq[0] <= err))
+    return s0[:, None], amin[:, None], undecided[:, None]
+
+
+@functools.cache
+def _kernels() -> SimpleNamespace:
+    """The two compiled loops of the search (numba, a dependency of librosa), built on first use.
+
+    ``reduce_many(G3, nq, npmax, c_err, tiny, s0, amin, undecided)``: :func:`_reduce_chunk`
+    for several queries in one pass over each clip's (T, queries) block (numpy's
+    reductions along the strided axis are slow).
+    ``audio_dots(F2, rows, fq, out)``: ``out[b, i] = F2[rows[b, i]] . fq[b]`` in float32
+    for the survivors of every query (``rows < 0`` skipped).
+    """
+    import numba  # heavy: imported when a search first runs, not with the package
+
+    @numba.njit(cache=True, nogil=True)
+    def reduce_many(G3, nq, npmax, c_err, tiny, s0, amin, undecided):
+        nc, T, nb = G3.shape
+        best = np.empty(nb, dtype=np.float32)
+        thr = np.empty(nb, dtype=np.float32)
+        arg = np.empty(nb, dtype=np.int64)
+        count = np.empty(nb, dtype=np.int64)
+        for c in range(nc):
+            for j in range(nb):
+                best[j] = np.inf
+                count[j] = 0
+                arg[j] = 0
+            for s in range(T):  # the inner loop runs along contiguous queries: vectorised
+                for j in range(nb):
+                    best[j] = min(best[j], G3[c, s, j])
+            for j in range(nb):
+                t64 = np.float64(best[j]) + 2.0 * (c_err * (npmax[c] + nq[j]) + tiny)
+                t32 = np.float32(t64)
+                if t32 < t64:  # round the float32 threshold up
+                    t32 = np.nextafter(t32, np.float32(np.inf))
+                thr[j] = t32
+            for s in range(T - 1, -1, -1):  # backwards: arg ends at the first minimum
+                for j in range(nb):
+                    a = G3[c, s, j]
+                    count[j] += a <= thr[j]
+                    arg[j] = s if a == best[j] else arg[j]
+            for j in range(nb):
+                err = c_err * (npmax[c] + nq[j]) + tiny
+                s0[c, j] = arg[j]
+                amin[c, j] = best[j]
+                undecided[c, j] = np.isfinite(best[j]) and (count[j] > 1 or np.float64(best[j]) + nq[j] <= err)
+
+    # float32 products in any order (reassociation, FMA): the audio error bound allows it
+    @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+    def audio_dots(F2, rows, fq, out):
+        B, n = rows.shape
+        A = fq.shape[1]
+        for i in range(n):  # the i-th survivor of every query: neighbouring clips, read together
+            for b in range(B):
+                r = rows[b, i]
+                if r >= 0:
+                    acc = np.float32(0.0)
+                    for j in range(A):
+                        acc += F2[r, j] * fq[b, j]
+                    out[b, i] = acc
+
+    return SimpleNamespace(reduce_many=reduce_many, audio_dots=audio_dots)
+
+
+# ----------------------------------------------------------------------------------------------
+# the index
+
+
+class SearchIndex:
+    """A database prepared for fast exact search (norms and per-clip bounds computed once).
+
+    Parameters
+    ----------
+    P : np.ndarray, shape (M, T, D), float32
+        z-scored pose features of the clips (D = 96). Kept by reference (not copied)
+        when it is a C-contiguous float32 array.
+    F : np.ndarray, shape (M, T, A), float32
+        z-scored audio features (A = 112), kept by reference likewise.
+    valid : np.ndarray, shape (M, T), bool
+        Frames whose features needed no padding; only these may start a segment.
+
+    Notes
+    -----
+    Extra memory: ``12 M T`` bytes of per-frame norms; per search, a few arrays
+    of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
+    """
+
+    def __init__(self, P, F, valid):
+        self.P, self.F, self.valid = _validate_db(P, F, valid)
+        M, T, D = self.P.shape
+        self.shape = (M, T, D, self.F.shape[2])
+        self._P2 = self.P.reshape(M * T, D)
+        self._F2 = self.F.reshape(M * T, -1)
+        self._pose_c = _pose_err_factor(D)
+        self._audio_e = _audio_err(self.shape[3])
+        np64 = _row_sqnorms(self._P2)
+        self._np32 = np64.astype(np.float32)
+        self._npmax = np64.reshape(M, T).max(axis=1)
+        self._na64 = _row_sqnorms(self._F2)
+
+    # -- admissibility -------------------------------------------------------------------------
+
+    def _admissible(self, cache, n, rule, j, masks, exclude):
+        """Admissible window starts ``(M, T)`` for windows of ``n`` frames under mask ``j``
+        (-1: no control) and mask rule ``rule``, and the cache key they are stored under."""
+        key = (n, rule if j >= 0 else "-", j)
+        if key not in cache:
+            base_key = (n, "-", -1)
+            if base_key not in cache:
+                adm = self.valid.copy()
+                adm[:, self.valid.shape[1] - n + 1 :] = False
+                if exclude is not None:
+                    adm &= _window_all(~exclude, n)
+                cache[base_key] = (adm, None)
+            adm = cache[base_key][0]
+            if j >= 0:
+                mask = masks[j]
+                if rule == "ends":
+                    ctrl = np.zeros_like(mask)
+                    ctrl[:, : mask.shape[1] - n + 1] = mask[:, : mask.shape[1] - n + 1] & mask[:, n - 1 :]
+                else:
+                    ctrl = _window_all(mask, n)
+                adm = adm & ctrl
+            cache[key] = (adm, None)
+        adm, bias = cache[key]
+        return adm, key
+
+    def _bias(self, cache, key):
+        """``|p|^2`` (float32) where a start is admissible under ``key``, +inf elsewhere; (M T,)."""
+        adm, bias = cache[key]
+        if bias is None:
+            bias = np.where(adm.ravel(), self._np32, np.float32(np.inf))
+            cache[key] = (adm, bias)
+        return bias
+
+    # -- one scan of the database for several queries ------------------------------------------
+
+    def _scan(self, Q, biases):
+        """Per query and clip: the float32 argmin, min, and the rows needing an exact look.
+
+        Parameters
+        ----------
+        Q : np.ndarray, shape (B, D), float32
+            Query pose features.
+        biases : list of B arrays, shape (M T,), float32
+            ``|p|^2`` where the window is admissible for that query, else +inf.
+
+        Returns
+        -------
+        s0 : (B, M) int64
+            A start of least float32 estimate per clip.
+        amin : (B, M) float32
+            That estimate ``A = |p|^2 - 2 p.q`` (+inf: no admissible start).
+        nq : (B,) float64
+            ``|q|^2``.
+        complex : list of B (clips, rows) pairs
+            Clips whose minimum is not decisive; ``rows[i]`` holds the estimates of all T
+            starts of clip ``clips[i]``.
+        """
+        M, T, D, _ = self.shape
+        B = Q.shape[0]
+        # queries sharing a bias become one contiguous range of columns
+        groups: dict[int, list[int]] = {}
+        for b, bias in enumerate(biases):
+            groups.setdefault(id(bias), []).append(b)
+        perm = np.concatenate([np.asarray(m, dtype=np.int64) for m in groups.values()])
+        ranges, j = [], 0
+        for members in groups.values():
+            ranges.append((biases[members[0]], j, j + len(members)))
+            j += len(members)
+        Qp = Q[perm]
+        W = np.float32(-2.0) * Qp  # exact scaling: the product gives -2 q.p directly
+        nq = np.einsum("ij,ij->i", Qp.astype(np.float64), Qp.astype(np.float64))
+        per_chunk = max(1, min(M, _CHUNK_BYTES // (4 * T * B)))
+        buf = np.empty(per_chunk * T * B, np.float32)
+        product = _matrix_product(B)
+        s0 = np.empty((M, B), np.int64)
+        amin = np.empty((M, B), np.float32)
+        cx_m, cx_b, cx_rows = [], [], []
+        for c0 in range(0, M, per_chunk):
+            c1 = min(M, c0 + per_chunk)
+            nc = c1 - c0
+            r0, r1 = c0 * T, c1 * T
+            G = buf[: nc * T * B].reshape(nc * T, B)  # rows x queries
+            product(self._P2[r0:r1], W, G)
+            G3 = G.reshape(nc, T, B)
+            for bias, j0, j1 in ranges:
+                G[:, j0:j1] += bias[r0:r1, None]
+                s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], nq[j0:j1], self._npmax[c0:c1], self._pose_c)
+                s0[c0:c1, j0:j1] = s0c
+                amin[c0:c1, j0:j1] = amc
+                ci, bj = np.nonzero(und)
+                if ci.size:
+                    cx_m.append(ci + c0)
+                    cx_b.append(perm[bj + j0])
+                    cx_rows.append(G3[ci, :, bj + j0])
+        complex_ = []
+        if cx_b:
+            mi, bi, rows = np.concatenate(cx_m), np.concatenate(cx_b), np.concatenate(cx_rows)
+            for b in range(B):
+                sel = bi == b
+                complex_.append((mi[sel], rows[sel]))
+        else:
+            complex_ = [(np.zeros(0, np.int64), np.zeros((0, T), np.float32))] * B
+        inv = np.empty(B, np.int64)
+        inv[perm] = np.arange(B)
+        s0, amin, nq = s0[:, inv], amin[:, inv], nq[inv]
+        return s0.T, amin.T, nq, complex_
+
+    # -- exact decisions for one query ----------------------------------------------------------
+
+    def _resolve_complex(self, clips, rows, q, nq, err):
+        """Exact per-clip choice where the float32 minimum is not decisive.
+
+        Parameters
+        ----------
+        clips : (n,) int64
+        rows : (n, T) float32
+            The float32 values ``A`` of every start of those clips (+inf: inadmissible).
+        q : (D,) float32
+        nq : float
+        err : (n,) float64
+            Error bound of ``A + nq`` per clip.
+
+        Returns
+        -------
+        starts : (n,) int64, -1 where the clip drops out; values : (n,) float64, exact d2.
+
+        Notes
+        -----
+        Exact values are computed tier by tier: the starts within ``2 err`` of the
+        smallest unknown estimate, until the best non-zero exact value is proven,
+        i.e. no start still unknown could reach it (``A + nq - err > best``).
+        """
+        a = rows.astype(np.float64) + nq
+        e = err[:, None]
+        known = np.full(a.shape, np.nan)
+        usable = np.isfinite(a)
+        while True:
+            have = ~np.isnan(known)
+            best = np.where(have & (known > 0), known, np.inf).min(axis=1)
+            rest = usable & ~have
+            nearest = np.where(rest, a, np.inf).min(axis=1)
+            proven = np.isfinite(best)[:, None]
+            pend = rest & np.where(proven, a - e <= best[:, None], a <= nearest[:, None] + 2.0 * e)
+            if not pend.any():
+                break
+            ci, si = np.nonzero(pend)
+            known[ci, si] = exact_pose_sqdist(self.P[clips[ci], si], q)
+        hit = (known == best[:, None]) & np.isfinite(best)[:, None]
+        starts = np.where(hit.any(axis=1), hit.argmax(axis=1), -1)  # ties: the smallest start
+        return starts, np.where(starts >= 0, best, np.nan)
+
+    def _survivors(self, s0, amin, nq, complex_, q):
+        """Step 1 of Algorithm 1 for one query: per clip the nearest admissible non-zero start.
+
+        Returns None when no clip survives, else a namespace with ``clips``, ``start``
+        (the chosen starts), ``v`` (squared pose distances: exact, or float32
+        estimates) and ``e`` (their error bounds, 0 for exact values).
+        """
+        err = self._pose_c * (self._npmax + nq) + _TINY
+        start = s0.copy()
+        v = amin.astype(np.float64) + nq
+        e = err.copy()
+        alive = np.isfinite(amin)
+        cclips, crows = complex_
+        if cclips.size:
+            cs, cv = self._resolve_complex(cclips, crows, q, nq, err[cclips])
+            start[cclips] = cs
+            v[cclips] = cv
+            e[cclips] = 0.0
+            alive[cclips] = cs >= 0
+        clips = np.flatnonzero(alive)
+        if clips.size == 0:
+            return None
+        return SimpleNamespace(clips=clips, start=start[clips], v=v[clips], e=e[clips])
+
+    def _rank(self, sv, dots, q, f, width):
+        """Steps 2-4 of Algorithm 1 for one query: audio distances, ranks, the candidate table.
+
+        ``dots`` are the float32 products ``F[clip, start] . f`` of the survivors.
+        Returns a dict of the table columns (top ``width`` in combined order) and ``n``.
+        """
+        T = self.shape[1]
+        clips, s, v, e = sv.clips, sv.start, sv.v, sv.e
+        n = clips.size
+        flat = clips * T + s
+
+        def pose_exact(idx):
+            return exact_pose_sqdist(self.P[clips[idx], s[idx]], q)
+
+        def audio_exact(idx):
+            return exact_cosine_distance(self._F2[flat[idx]], f)
+
+        na = self._na64[flat]
+        f64 = f.astype(np.float64)
+        nb = float(np.einsum("i,i->", f64, f64))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            av = 1.0 - dots.astype(np.float64) / np.sqrt(na * nb)
+        zero = (na == 0.0) | (nb == 0.0)
+        av[zero] = 1.0  # exact: the definition's value for a zero vector
+        ae = np.where(zero, 0.0, self._audio_e)
+
+        # Ranks are known up to groups of near-equal estimates. Only clips that could
+        # make the top `w` of the combined ranking need their groups settled exactly:
+        # a clip whose smallest possible rank sum exceeds the w-th smallest largest
+        # possible rank sum cannot be among the first w.
+        w = min(width, n)
+        pose_order, plo, phi = _rank_groups(v, e)
+        audio_order, alo, ahi = _rank_groups(av, ae)
+        if (phi > plo).any() or (ahi > alo).any():
+            bound = np.partition(phi + ahi, w - 1)[w - 1]
+            contender = plo + alo <= bound
+            _settle_groups(v, e, pose_order, plo, phi, contender, pose_exact)
+            _settle_groups(av, ae, audio_order, alo, ahi, contender, audio_exact)
+
+        pose_rank = np.empty(n, np.int64)
+        pose_rank[pose_order] = np.arange(n)
+        audio_rank = np.empty(n, np.int64)
+        audio_rank[audio_order] = np.arange(n)
+        combined = pose_rank + audio_rank
+        key = combined * n + np.arange(n)  # unique: ties go to the lower clip index
+        if w < n:
+            top = np.argpartition(key, w - 1)[:w]
+            top = top[np.argsort(key[top])]
+        else:
+            top = np.argsort(key)
+        need = top[e[top] > 0]
+        if need.size:
+            v[need] = pose_exact(need)
+        need = top[ae[top] > 0]
+        if need.size:
+            av[need] = audio_exact(need)
+        return {
+            "n": n,
+            "cand_clip": clips[top],
+            "cand_start": s[top],
+            "cand_pose_dist": np.sqrt(v[top]),
+            "cand_audio_dist": av[top],
+            "cand_pose_rank": pose_rank[top],
+            "cand_audio_rank": audio_rank[top],
+            "cand_combined": combined[top],
+        }
+
+    # -- public ---------------------------------------------------------------------------------
+
+    def search(
+        self, query, *, config: SearchConfig | None = None, masks=None, step_mask=None, exclude=None
+    ) -> SearchResult:
+        """Run Algorithm 1 for one query; see :func:`search` for the parameters."""
+        return self.search_batch([query], configs=[config], masks=masks, step_masks=[step_mask], exclude=exclude)[0]
+
+    def search_batch(self, queries, *, configs=None, masks=None, step_masks=None, exclude=None) -> list[SearchResult]:
+        """Run Algorithm 1 for several queries with one scan of the database per step.
+
+        Parameters
+        ----------
+        queries : sequence of np.ndarray, each shape (T_out_b, A)
+            z-scored audio features of each speech to synthesise.
+        configs : SearchConfig or sequence of SearchConfig, optional
+            One for all, or one per query (step length, k, pins ... may differ).
+        masks : np.ndarray, shape (n_masks, M, T), bool, optional
+            Control masks shared by the queries.
+        step_masks : sequence of (np.ndarray of shape (n_steps_b,), int, or None), optional
+            Per query, the mask index of each step (-1: no control).
+        exclude : np.ndarray, shape (M, T), bool, optional
+            Frames no query may use.
+
+        Returns
+        -------
+        list of SearchResult
+            Identical to running :func:`search` on each query.
+
+        Notes
+        -----
+        Each step multiplies the pose matrix by all active queries at once (torch's
+        matrix product when available); the per-query decisions that follow run on a
+        small thread pool when there are four queries or more.
+        """
+        if isinstance(queries, np.ndarray) and queries.ndim == 2:
+            raise ConfigError("search_batch takes a sequence of query arrays; use search for a single query")
+        queries = list(queries)
+        B = len(queries)
+        if B == 0:
+            return []
+        if configs is None or isinstance(configs, SearchConfig):
+            configs = [configs] * B
+        if step_masks is None:
+            step_masks = [None] * B
+        configs, step_masks = list(configs), list(step_masks)
+        if len(configs) != B or len(step_masks) != B:
+            raise ConfigError(f"{B} queries need {B} configs and step masks, got {len(configs)} and {len(step_masks)}")
+        calls = [_validate_call(self.shape, q, c, masks, sm, exclude) for q, c, sm in zip(queries, configs, step_masks)]
+        masks = calls[0].masks
+        exclude = calls[0].exclude
+        M, T, D, _ = self.shape
+        cache: dict = {}
+
+        def step_key(b, i, relaxed=False):
+            c = calls[b]
+            j = -1 if (relaxed or c.step_mask is None) else int(c.step_mask[i])
+            return self._admissible(cache, c.config.step, c.config.mask_rule, j, masks, exclude)
+
+        results, poses = [], np.empty((B, D), np.float32)
+        for b, c in enumerate(calls):
+            cfg = c.config
+            if cfg.init == "random":
+                adm, _ = step_key(b, 0)
+                if not adm.any():
+                    adm, _ = step_key(b, 0, relaxed=True)
+                flat = np.flatnonzero(adm)
+                if flat.size == 0:
+                    raise ConfigError("no admissible database frame to draw the initial pose from")
+                pick = int(flat[int(np.random.default_rng(cfg.seed).integers(flat.size))])
+                init_frame = divmod(pick, T)
+                init_pose = self.P[init_frame]
+            else:
+                init_frame = (-1, -1)
+                init_pose = np.asarray(cfg.init, dtype=np.float32)
+            poses[b] = init_pose
+            results.append(
+                SearchResult.empty(
+                    c.n_steps, c.query.shape[0], cfg.table_width, config=cfg, init_pose=init_pose, init_frame=init_frame
+                )
+            )
+
+        # the per-query decisions of a step are independent: spread them over the cores
+        workers = min(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1, 8)
+        pool = ThreadPoolExecutor(workers) if B >= 4 and workers > 1 else None
+        try:
+            for i in range(max(c.n_steps for c in calls)):
+                active = [b for b in range(B) if i < calls[b].n_steps]
+                keys = {}
+                for b in active:
+                    adm, key = step_key(b, i)
+                    if key[2] >= 0 and not adm.any():  # the control admits no window at all
+                        results[b].relaxed[i] = True
+                        adm, key = step_key(b, i, relaxed=True)
+                    keys[b] = key
+                decided = self._step(active, keys, poses, calls, i, cache, pool)
+                retry = [b for b in active if decided[b] is None and keys[b][2] >= 0]
+                if retry:  # only the query's own frame was admissible under the control
+                    for b in retry:
+                        results[b].relaxed[i] = True
+                        keys[b] = step_key(b, i, relaxed=True)[1]
+                    decided.update(self._step(retry, keys, poses, calls, i, cache, pool))
+                # drop cached masks this step did not use (a long control track has many)
+                used = set(keys.values()) | {(k[0], "-", -1) for k in keys.values()}
+                for key in [key for key in cache if key not in used]:
+                    del cache[key]
+                for b in active:
+                    self._record(results[b], calls[b], i, decided[b], poses, b)
+        finally:
+            if pool is not None:
+                pool.shutdown()
+
+        for r in results:
+            if r.relaxed.any():
+                warnings.warn(
+                    GestureKitWarning(
+                        f"control relaxed at steps {np.flatnonzero(r.relaxed).tolist()}: "
+                        "no database window satisfies it"
+                    ),
+                    stacklevel=3,
+                )
+        return results
+
+    def _step(self, active, keys, poses, calls, i, cache, pool=None):
+        """One search step for several queries: one scan, then the exact decisions per query.
+
+        ``pool`` (a thread pool) spreads the per-query decisions over the cores; they are
+        independent, so the results do not depend on it.
+        """
+        run = map if pool is None else pool.map
+        biases = [self._bias(cache, keys[b]) for b in active]
+        s0, amin, nq, complex_ = self._scan(poses[active], biases)
+        svs = list(
+            run(lambda j: self._survivors(s0[j], amin[j], nq[j], complex_[j], poses[active[j]]), range(len(active)))
+        )
+        fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
+        T = self.shape[1]
+        rows = np.full((len(active), self.shape[0]), -1, np.int64)
+        for j, sv in enumerate(svs):
+            if sv is not None:
+                rows[j, : sv.clips.size] = sv.clips * T + sv.start
+        dots = np.empty(rows.shape, np.float32)
+        _kernels().audio_dots(self._F2, rows, fq, dots)  # all queries together: each clip's rows are read once
+
+        def rank(j):
+            sv, b = svs[j], active[j]
+            if sv is None:
+                return None
+            return self._rank(sv, dots[j, : sv.clips.size], poses[b], fq[j], calls[b].config.table_width)
+
+        return dict(zip(active, run(rank, range(len(active)))))
+
+    def _record(self, res, call, i, d, poses, b):
+        """Write step ``i``'s table and choice (the k-th, or the pin) into ``res``; advance ``p_{t-1}``."""
+        cfg = call.config
+        N = cfg.step
+        if d is None and i not in cfg.pins:
+            raise ConfigError(
+                f"step {i}: no database window is admissible (valid start, {N} frames inside the clip, "
+                "no excluded frame) other than the query's own frame"
+            )
+        n = 0 if d is None else d["n"]
+        if d is not None:
+            w = d["cand_clip"].size
+            for name in _CANDIDATE_FIELDS:
+                getattr(res, name)[i, :w] = d[name]
+        res.n_candidates[i] = n
+        res.short[i] = cfg.k >= n
+        if i in cfg.pins:
+            m, s = cfg.pins[i]
+            res.pinned[i] = True
+            hit = np.flatnonzero((res.cand_clip[i] == m) & (res.cand_start[i] == s))
+            res.position[i] = int(hit[0]) if hit.size else -1
+        else:
+            pos = min(cfg.k, n - 1)
+            m, s = int(d["cand_clip"][pos]), int(d["cand_start"][pos])
+            res.position[i] = pos
+        res.clip[i], res.start[i] = m, s
+        t = i * N
+        L = min(N, call.query.shape[0] - t)
+        res.frames[t : t + L, 0] = m
+        res.frames[t : t + L, 1] = s + np.arange(L)
+        poses[b] = self.P[m, s + N - 1]
+
+
+def search(
+    P, F, valid, query, *, config: SearchConfig | None = None, masks=None, step_mask=None, exclude=None
+) -> SearchResult:
+    """Algorithm 1: the k-NN motion search for one speech query.
+
+    Parameters
+    ----------
+    P : np.ndarray, shape (M, T, 96), float32
+        z-scored pose features of the database clips (T = 64 frames at 15 fps).
+    F : np.ndarray, shape (M, T, 112), float32
+        z-scored audio features of the database clips.
+    valid : np.ndarray, shape (M, T), bool
+        Frames whose features needed no padding (only these may start a segment).
+    query : np.ndarray, shape (T_out, 112)
+        z-scored audio features of the speech to synthesise (cast to float32).
+    config : SearchConfig, optional
+        Defaults: k = 0, N = 8, 10 candidates recorded, random initial pose with seed 0.
+    masks : np.ndarray, shape (n_masks, M, T), bool, optional
+        Control masks: which database frames may be used.
+    step_mask : np.ndarray, shape (n_steps,), int, optional
+        Per step (``n_steps = ceil(T_out / N)``), the index into ``masks``, -1 for no control.
+    exclude : np.ndarray, shape (M, T), bool, optional
+        Frames never to use (held-out takes); a window containing one is inadmissible.
+
+    Returns
+    -------
+    SearchResult
+        Equal to :func:`gesturekit.search_reference.search_reference` on the same inputs.
+
+    Raises
+    ------
+    ConfigError
+        Bad shapes or options, or a step where no window is admissible even without control.
+
+    Warns
+    -----
+    GestureKitWarning
+        When a step's control admits no window and is dropped for that step.
+
+    Notes
+    -----
+    Builds a :class:`SearchIndex` on every call; keep one to search the same database repeatedly.
+    """
+    return SearchIndex(P, F, valid).search(query, config=config, masks=masks, step_mask=step_mask, exclude=exclude)
+
+
+def search_batch(
+    P, F, valid, queries, *, configs=None, masks=None, step_masks=None, exclude=None
+) -> list[SearchResult]:
+    """Algorithm 1 for several queries with one scan of the database per step.
+
+    Parameters are those of :func:`search`, with ``queries`` a sequence of query
+    arrays, ``configs`` one :class:`SearchConfig` or one per query, and
+    ``step_masks`` one step mask (or None) per query. Returns one
+    :class:`SearchResult` per query, identical to separate :func:`search` calls.
+    """
+    return SearchIndex(P, F, valid).search_batch(
+        queries, configs=configs, masks=masks, step_masks=step_masks, exclude=exclude
+    )
