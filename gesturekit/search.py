@@ -31,9 +31,11 @@ Error bound (audio). The cosine distance is estimated from a float32 dot product
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import numbers
 import os
+import sys
 import warnings
 from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -563,25 +565,27 @@ def _settle_groups(v, err, order, lo, hi, wanted, exact) -> None:
 def _matrix_product(n_queries: int):
     """``out[:] = rows @ W.T`` for float32 arrays; the fastest routine for the shape on a CPU.
 
-    One query: numpy's matrix-vector product (BLAS sgemv). Several: torch's matrix
-    product (MKL), which handles this tall, thin shape far better than numpy's BLAS,
-    when torch is installed; numpy's otherwise.
+    One query (or no torch): numpy's BLAS, single-threaded while a search runs (see
+    :func:`_single_threaded_blas`; the search shares the rows out to its own threads).
+    Several queries: torch's matrix product (MKL, one thread), which handles this
+    tall, thin shape far better than numpy's BLAS, when torch is installed. The
+    product is memory-bound: more threads per product would not read faster, and
+    BLAS's idle threads keep spinning and slow down the work that follows.
     """
-    if n_queries == 1:
-
-        def product(rows, W, out):
-            np.dot(rows, W[0], out=out.reshape(-1))
-
-        return product
-    try:
-        import torch  # optional and heavy: only for batches
-    except ImportError:  # pragma: no cover - torch is a dependency of the refiner
-        torch = None
+    torch = None
+    if n_queries > 1:
+        try:
+            import torch  # optional and heavy: only for batches
+        except ImportError:  # pragma: no cover - torch is a dependency of the refiner
+            torch = None
     # the error bound assumes true float32 products: torch may be set to use bfloat16/TF32
     if torch is None or torch.get_float32_matmul_precision() != "highest":
 
         def product(rows, W, out):
-            np.dot(rows, W.T, out=out)
+            if W.shape[0] == 1:
+                np.dot(rows, W[0], out=out.reshape(-1))
+            else:
+                np.dot(rows, W.T, out=out)
 
         return product
 
@@ -594,15 +598,47 @@ def _matrix_product(n_queries: int):
     return product
 
 
-def _reduce_chunk(G3, nq, npmax, c_err):
-    """Per clip and query of a chunk: the float32 argmin and minimum of ``A`` over the
-    clip's starts, and whether that minimum is not decisive: another start within twice
-    the error bound of it, or a minimum that may be an exact zero.
+@functools.cache
+def _blas_controller():
+    """threadpoolctl's controller of the loaded BLAS libraries (None without threadpoolctl)."""
+    try:
+        from threadpoolctl import ThreadpoolController  # comes with scikit-learn (a librosa dependency)
+    except ImportError:  # pragma: no cover
+        return None
+    return ThreadpoolController()
+
+
+@contextlib.contextmanager
+def _single_threaded_blas():
+    """numpy's BLAS, and torch when it is loaded, limited to one thread while a search
+    runs (the search runs its own threads); restored afterwards."""
+    ctl = _blas_controller()
+    limiter = None if ctl is None else ctl.limit(limits=1, user_api="blas")
+    torch = sys.modules.get("torch")
+    threads = None if torch is None else torch.get_num_threads()
+    if threads is not None:
+        torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        if limiter is not None:
+            limiter.restore_original_limits()
+        if threads is not None:
+            torch.set_num_threads(threads)
+
+
+def _reduce_chunk(G3, bias, nq, npmax, c_err):
+    """Per clip and query of a chunk: the float32 argmin and minimum of the estimates
+    ``A = G3 + bias`` over the clip's starts, and whether that minimum is not decisive:
+    another start within twice the error bound of it, or a minimum that may be an exact zero.
 
     Parameters
     ----------
     G3 : (nc, T, b) float32
-        ``A`` per clip, start and query (a view; may be strided).
+        ``-2 q.p`` per clip, start and query (a view; may be strided). With one query
+        it is overwritten with ``A``.
+    bias : (nc, T) float32
+        ``|p|^2``, or +inf where the start is not admissible.
     nq : (b,) float64
         ``|q|^2`` per query.
     npmax : (nc,) float64
@@ -619,8 +655,10 @@ def _reduce_chunk(G3, nq, npmax, c_err):
         s0 = np.empty((nc, b), np.int64)
         amin = np.empty((nc, b), np.float32)
         undecided = np.empty((nc, b), bool)
-        _kernels().reduce_many(G3, nq, npmax, c_err, _TINY, s0, amin, undecided)
+        _kernels().reduce_many(G3, bias, nq, npmax, c_err, _TINY, s0, amin, undecided)
         return s0, amin, undecided
+    A = G3[:, :, 0]
+    A += bias
     A = G3[:, :, 0]
     s0 = A.argmin(axis=1)
     amin = np.take_along_axis(A, s0[:, None], axis=1)[:, 0]
@@ -639,16 +677,18 @@ def _reduce_chunk(G3, nq, npmax, c_err):
 def _kernels() -> SimpleNamespace:
     """The two compiled loops of the search (numba, a dependency of librosa), built on first use.
 
-    ``reduce_many(G3, nq, npmax, c_err, tiny, s0, amin, undecided)``: :func:`_reduce_chunk`
-    for several queries in one pass over each clip's (T, queries) block (numpy's
-    reductions along the strided axis are slow).
-    ``audio_dots(F2, rows, fq, out)``: ``out[b, i] = F2[rows[b, i]] . fq[b]`` in float32
-    for the survivors of every query (``rows < 0`` skipped).
+    ``reduce_many(G3, bias, nq, npmax, c_err, tiny, s0, amin, undecided)``:
+    :func:`_reduce_chunk` for several queries in one pass over each clip's (T, queries)
+    block (numpy's reductions along the strided axis are slow).
+    ``audio_cos(F2, na, rows, fq, nb, e, av, ae)``: estimated cosine distances
+    ``av[b, i]`` of the survivors ``F2[rows[b, i]]`` of every query to ``fq[b]``
+    (float32 products, float64 norms ``na``, ``nb``), with error bounds ``ae`` (``e``;
+    0 where a norm is 0 and the value is exact); ``rows < 0`` are skipped.
     """
     import numba  # heavy: imported when a search first runs, not with the package
 
     @numba.njit(cache=True, nogil=True)
-    def reduce_many(G3, nq, npmax, c_err, tiny, s0, amin, undecided):
+    def reduce_many(G3, bias, nq, npmax, c_err, tiny, s0, amin, undecided):
         nc, T, nb = G3.shape
         best = np.empty(nb, dtype=np.float32)
         thr = np.empty(nb, dtype=np.float32)
@@ -660,8 +700,9 @@ def _kernels() -> SimpleNamespace:
                 count[j] = 0
                 arg[j] = 0
             for s in range(T):  # the inner loop runs along contiguous queries: vectorised
+                p2 = bias[c, s]
                 for j in range(nb):
-                    best[j] = min(best[j], G3[c, s, j])
+                    best[j] = min(best[j], G3[c, s, j] + p2)  # float32, as the error bound assumes
             for j in range(nb):
                 t64 = np.float64(best[j]) + 2.0 * (c_err * (npmax[c] + nq[j]) + tiny)
                 t32 = np.float32(t64)
@@ -669,8 +710,9 @@ def _kernels() -> SimpleNamespace:
                     t32 = np.nextafter(t32, np.float32(np.inf))
                 thr[j] = t32
             for s in range(T - 1, -1, -1):  # backwards: arg ends at the first minimum
+                p2 = bias[c, s]
                 for j in range(nb):
-                    a = G3[c, s, j]
+                    a = G3[c, s, j] + p2
                     count[j] += a <= thr[j]
                     arg[j] = s if a == best[j] else arg[j]
             for j in range(nb):
@@ -681,7 +723,7 @@ def _kernels() -> SimpleNamespace:
 
     # float32 products in any order (reassociation, FMA): the audio error bound allows it
     @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
-    def audio_dots(F2, rows, fq, out):
+    def audio_cos(F2, na, rows, fq, nb, e, av, ae):
         B, n = rows.shape
         A = fq.shape[1]
         for i in range(n):  # the i-th survivor of every query: neighbouring clips, read together
@@ -691,9 +733,15 @@ def _kernels() -> SimpleNamespace:
                     acc = np.float32(0.0)
                     for j in range(A):
                         acc += F2[r, j] * fq[b, j]
-                    out[b, i] = acc
+                    d = na[r] * nb[b]
+                    if d == 0.0:  # a zero vector: the definition's value, exactly
+                        av[b, i] = 1.0
+                        ae[b, i] = 0.0
+                    else:
+                        av[b, i] = 1.0 - np.float64(acc) / np.sqrt(d)
+                        ae[b, i] = e
 
-    return SimpleNamespace(reduce_many=reduce_many, audio_dots=audio_dots)
+    return SimpleNamespace(reduce_many=reduce_many, audio_cos=audio_cos)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -731,6 +779,8 @@ class SearchIndex:
         self._np32 = np64.astype(np.float32)
         self._npmax = np64.reshape(M, T).max(axis=1)
         self._na64 = _row_sqnorms(self._F2)
+        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        self._workers = min(cpus, 8)
 
     # -- admissibility -------------------------------------------------------------------------
 
@@ -769,7 +819,7 @@ class SearchIndex:
 
     # -- one scan of the database for several queries ------------------------------------------
 
-    def _scan(self, Q, biases):
+    def _scan(self, Q, biases, scratch=None, pool=None):
         """Per query and clip: the float32 argmin, min, and the rows needing an exact look.
 
         Parameters
@@ -778,6 +828,10 @@ class SearchIndex:
             Query pose features.
         biases : list of B arrays, shape (M T,), float32
             ``|p|^2`` where the window is admissible for that query, else +inf.
+        scratch : dict, optional
+            Keeps a single query's product buffer between steps (fresh pages cost page faults).
+        pool : ThreadPoolExecutor, optional
+            Threads to share out each chunk's product and reductions by clips.
 
         Returns
         -------
@@ -806,28 +860,54 @@ class SearchIndex:
         W = np.float32(-2.0) * Qp  # exact scaling: the product gives -2 q.p directly
         nq = np.einsum("ij,ij->i", Qp.astype(np.float64), Qp.astype(np.float64))
         per_chunk = max(1, min(M, _CHUNK_BYTES // (4 * T * B)))
-        buf = np.empty(per_chunk * T * B, np.float32)
+        size = per_chunk * T * B
+        buf = None if scratch is None else scratch.get("product")
+        if buf is None or buf.size < size:
+            buf = np.empty(size, np.float32)
+            if scratch is not None and B == 1:  # a batch's larger buffer is freed before its decisions
+                scratch["product"] = buf
         product = _matrix_product(B)
         s0 = np.empty((M, B), np.int64)
         amin = np.empty((M, B), np.float32)
-        cx_m, cx_b, cx_rows = [], [], []
-        for c0 in range(0, M, per_chunk):
-            c1 = min(M, c0 + per_chunk)
+
+        def work(c0, c1, G):
+            """Product and reductions for clips c0 .. c1 - 1 into ``G`` ((c1 - c0) T, B);
+            returns the clips whose minimum is not decisive, as (clips, queries, rows)."""
             nc = c1 - c0
             r0, r1 = c0 * T, c1 * T
-            G = buf[: nc * T * B].reshape(nc * T, B)  # rows x queries
             product(self._P2[r0:r1], W, G)
             G3 = G.reshape(nc, T, B)
+            found = []
             for bias, j0, j1 in ranges:
-                G[:, j0:j1] += bias[r0:r1, None]
-                s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], nq[j0:j1], self._npmax[c0:c1], self._pose_c)
+                bias2 = bias[r0:r1].reshape(nc, T)
+                s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
                 s0[c0:c1, j0:j1] = s0c
                 amin[c0:c1, j0:j1] = amc
                 ci, bj = np.nonzero(und)
                 if ci.size:
-                    cx_m.append(ci + c0)
-                    cx_b.append(perm[bj + j0])
-                    cx_rows.append(G3[ci, :, bj + j0])
+                    rows = G3[ci, :, bj + j0]
+                    found.append((ci + c0, perm[bj + j0], rows if j1 - j0 == 1 else rows + bias2[ci]))
+            return found
+
+        # each chunk is shared out to the threads by clips: the memory-bound product of
+        # one part overlaps the compute-bound reductions of another
+        parts = 1 if pool is None else self._workers
+        cx_m, cx_b, cx_rows = [], [], []
+        for c0 in range(0, M, per_chunk):
+            c1 = min(M, c0 + per_chunk)
+            cuts = np.linspace(c0, c1, min(parts, c1 - c0) + 1).astype(int)
+            pieces = []
+            for a, b in zip(cuts[:-1], cuts[1:]):
+                G = buf[(a - c0) * T * B : (b - c0) * T * B].reshape((b - a) * T, B)  # rows x queries
+                pieces.append((int(a), int(b), G))
+            jobs = [pool.submit(work, *p) for p in pieces[1:]] if len(pieces) > 1 else []
+            found = work(*pieces[0])
+            for job in jobs:
+                found += job.result()
+            for m_, b_, rows in found:
+                cx_m.append(m_)
+                cx_b.append(b_)
+                cx_rows.append(rows)
         complex_ = []
         if cx_b:
             mi, bi, rows = np.concatenate(cx_m), np.concatenate(cx_b), np.concatenate(cx_rows)
@@ -909,10 +989,10 @@ class SearchIndex:
             return None
         return SimpleNamespace(clips=clips, start=start[clips], v=v[clips], e=e[clips])
 
-    def _rank(self, sv, dots, q, f, width):
+    def _rank(self, sv, av, ae, q, f, width):
         """Steps 2-4 of Algorithm 1 for one query: audio distances, ranks, the candidate table.
 
-        ``dots`` are the float32 products ``F[clip, start] . f`` of the survivors.
+        ``av``, ``ae``: the survivors' estimated cosine distances and their error bounds.
         Returns a dict of the table columns (top ``width`` in combined order) and ``n``.
         """
         T = self.shape[1]
@@ -925,15 +1005,6 @@ class SearchIndex:
 
         def audio_exact(idx):
             return exact_cosine_distance(self._F2[flat[idx]], f)
-
-        na = self._na64[flat]
-        f64 = f.astype(np.float64)
-        nb = float(np.einsum("i,i->", f64, f64))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            av = 1.0 - dots.astype(np.float64) / np.sqrt(na * nb)
-        zero = (na == 0.0) | (nb == 0.0)
-        av[zero] = 1.0  # exact: the definition's value for a zero vector
-        ae = np.where(zero, 0.0, self._audio_e)
 
         # Ranks are known up to groups of near-equal estimates. Only clips that could
         # make the top `w` of the combined ranking need their groups settled exactly:
@@ -1008,8 +1079,10 @@ class SearchIndex:
         Notes
         -----
         Each step multiplies the pose matrix by all active queries at once (torch's
-        matrix product when available); the per-query decisions that follow run on a
-        small thread pool when there are four queries or more.
+        matrix product when available). The search runs its own few threads (one per
+        core, at most 8): they share out the scan by clips and, with four queries or
+        more, the per-query decisions; numpy's BLAS and torch are limited to one
+        thread each while it runs (their settings are restored afterwards).
         """
         if isinstance(queries, np.ndarray) and queries.ndim == 2:
             raise ConfigError("search_batch takes a sequence of query arrays; use search for a single query")
@@ -1058,10 +1131,14 @@ class SearchIndex:
                 )
             )
 
-        # the per-query decisions of a step are independent: spread them over the cores
-        workers = min(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1, 8)
-        pool = ThreadPoolExecutor(workers) if B >= 4 and workers > 1 else None
-        try:
+        # a few threads share the scan and, in batches, the per-query decisions of each step
+        pool = ThreadPoolExecutor(self._workers) if self._workers > 1 else None
+        if B > 1:
+            _matrix_product(B)  # loads torch, if installed, before its threads are limited
+        with contextlib.ExitStack() as stack:
+            stack.enter_context(_single_threaded_blas())
+            if pool is not None:
+                stack.callback(pool.shutdown)
             for i in range(max(c.n_steps for c in calls)):
                 active = [b for b in range(B) if i < calls[b].n_steps]
                 keys = {}
@@ -1080,13 +1157,10 @@ class SearchIndex:
                     decided.update(self._step(retry, keys, poses, calls, i, cache, pool))
                 # drop cached masks this step did not use (a long control track has many)
                 used = set(keys.values()) | {(k[0], "-", -1) for k in keys.values()}
-                for key in [key for key in cache if key not in used]:
+                for key in [key for key in cache if isinstance(key, tuple) and key not in used]:
                     del cache[key]
                 for b in active:
                     self._record(results[b], calls[b], i, decided[b], poses, b)
-        finally:
-            if pool is not None:
-                pool.shutdown()
 
         for r in results:
             if r.relaxed.any():
@@ -1105,9 +1179,9 @@ class SearchIndex:
         ``pool`` (a thread pool) spreads the per-query decisions over the cores; they are
         independent, so the results do not depend on it.
         """
-        run = map if pool is None else pool.map
+        run = map if pool is None or len(active) < 4 else pool.map
         biases = [self._bias(cache, keys[b]) for b in active]
-        s0, amin, nq, complex_ = self._scan(poses[active], biases)
+        s0, amin, nq, complex_ = self._scan(poses[active], biases, cache.setdefault("scratch", {}), pool)
         svs = list(
             run(lambda j: self._survivors(s0[j], amin[j], nq[j], complex_[j], poses[active[j]]), range(len(active)))
         )
@@ -1117,14 +1191,19 @@ class SearchIndex:
         for j, sv in enumerate(svs):
             if sv is not None:
                 rows[j, : sv.clips.size] = sv.clips * T + sv.start
-        dots = np.empty(rows.shape, np.float32)
-        _kernels().audio_dots(self._F2, rows, fq, dots)  # all queries together: each clip's rows are read once
+        fq64 = fq.astype(np.float64)
+        nb = np.einsum("ij,ij->i", fq64, fq64)
+        av = np.empty(rows.shape)
+        ae = np.empty(rows.shape)
+        # all queries together: the queries' rows of one clip are read together
+        _kernels().audio_cos(self._F2, self._na64, rows, fq, nb, self._audio_e, av, ae)
 
         def rank(j):
             sv, b = svs[j], active[j]
             if sv is None:
                 return None
-            return self._rank(sv, dots[j, : sv.clips.size], poses[b], fq[j], calls[b].config.table_width)
+            n = sv.clips.size
+            return self._rank(sv, av[j, :n], ae[j, :n], poses[b], fq[j], calls[b].config.table_width)
 
         return dict(zip(active, run(rank, range(len(active)))))
 

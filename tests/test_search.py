@@ -445,3 +445,16 @@ def test_read_only_database_and_reused_index():
         batch = idx.search_batch(queries, configs=SearchConfig(step=4, k=1))
     singles = [search_reference(P, F, valid, q, config=SearchConfig(step=4, k=1)) for q in queries]
     assert all(a.equals(b) for a, b in zip(batch, singles))
+
+
+def test_thread_settings_are_restored_after_a_search():
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    torch = pytest.importorskip("torch")
+    P, F, valid, rng = small_db(10, M=20)
+    queries = [rng.standard_normal((12, 5)).astype(np.float32) for _ in range(5)]
+    before = [(d["filepath"], d["num_threads"]) for d in threadpoolctl.threadpool_info()]
+    torch_threads = torch.get_num_threads()
+    search_batch(P, F, valid, queries)
+    search(P, F, valid, queries[0])
+    after = [(d["filepath"], d["num_threads"]) for d in threadpoolctl.threadpool_info()]
+    assert after == before and torch.get_num_threads() == torch_threads
