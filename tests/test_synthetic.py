@@ -219,8 +219,9 @@ def test_events_are_consistent(takes):
         speaking = (ev.phrases[:, 1] - ev.phrases[:, 0]).sum()
         assert 3.0 <= len(ev.syllable_onsets) / speaking <= 6.0
         assert 0.2 < ev.stressed.mean() < 0.5
-        lead = ev.stroke_stress_onsets - ev.stroke_times
-        assert lead.min() >= 0.04 - 1e-9 and lead.max() <= 0.14 + 1e-9
+        # every stroke ends on (within 20 ms of) the vowel onset of its stressed syllable
+        assert np.abs(ev.stroke_times - ev.stroke_stress_onsets).max() <= 0.02 + 1e-9
+        assert np.isin(ev.stroke_stress_onsets, ev.stress_onsets).all()
         assert set(ev.stroke_hands) <= {"left", "right", "both"}
     modes = {m for _, ev in takes for m in ev.gesture_modes}
     assert modes == {"symmetric", "asymmetric", "left", "right"}
@@ -283,37 +284,46 @@ def test_audio_energy_and_hand_speed_correlate(takes):
     r = np.array([[_best_lag_correlation(energy[i], speed[j], max_lag=MAX_LAG) for j in range(n)] for i in range(n)])
     matched = np.diag(r)
     mismatched = r[~np.eye(n, dtype=bool)]
-    # a take's own motion follows its speech (observed: 0.31-0.61, mean 0.42) ...
-    assert matched.mean() > 0.3 and matched.min() > 0.2
-    # ... clearly more than another take's motion does (observed: mean 0.08)
+    # a take's own motion follows its speech (observed: 0.21-0.52, mean 0.41; the hands move
+    # in some pauses, where they retract) ...
+    assert matched.mean() > 0.3 and matched.min() > 0.15
+    # ... clearly more than another take's motion does (observed: mean 0.04)
     assert matched.mean() - mismatched.mean() > 0.2
     for i in range(n):
         assert matched[i] > np.delete(r[i], i).mean() + 0.1
 
 
-def test_speed_peaks_fall_just_before_stressed_syllables(takes):
+def _speed_minima(speeds: np.ndarray) -> np.ndarray:
+    """Times (s) of the local minima of the summed wrist speed, smoothed over about a frame."""
+    return signal.argrelmin(gaussian_filter1d(speeds.sum(axis=1), 1.0))[0] / FPS
+
+
+def test_strokes_end_on_stressed_syllables(takes):
     rng = np.random.default_rng(0)
     hits, chance = [], []
     for take, ev in takes:
         speeds = _wrist_speeds(take.motion.positions)
-        peaks = np.concatenate([signal.find_peaks(speeds[:, h], prominence=0.3)[0] for h in (0, 1)]) / FPS
+        minima = _speed_minima(speeds)
 
-        def share_near(stress):
-            # a stroke's peak velocity leads its stressed vowel by 0.04-0.14 s; allow a frame or two
-            d = peaks[:, None] - stress[None, :]
-            return np.any((d >= -0.25) & (d <= 0.05), axis=1).mean()
+        def share_on(times):
+            # share of the times with a velocity minimum (a motion beat) within about a frame
+            return np.mean(np.abs(minima[:, None] - times[None, :]).min(axis=0) <= 0.07)
 
-        hits.append(share_near(ev.stress_onsets))
+        hits.append(share_on(ev.stress_onsets))
         shifted = [np.sort((ev.stress_onsets + rng.uniform(1, ev.duration - 1)) % ev.duration) for _ in range(50)]
-        chance.append(np.mean([share_near(s) for s in shifted]))
-        # the stroking hand is fast at the planned stroke times
+        chance.append(np.mean([share_on(s) for s in shifted]))
+        # the hand stops where a stroke ends (observed 0.89-0.97 of the strokes) ...
+        assert share_on(ev.stroke_times) > 0.75
+        # ... having moved fast just before: the stroke precedes the stress
         hand = np.array([{"left": 0, "right": 1, "both": 0}[h] for h in ev.stroke_hands])
-        frames = np.round(ev.stroke_times * FPS).astype(int)
-        at_stroke = speeds[frames, hand]
-        assert np.mean(at_stroke > np.percentile(speeds[:, 0], 75)) > 0.8
+        end = np.round(ev.stroke_times * FPS).astype(int)
+        before = np.max([speeds[end - k, hand] for k in (1, 2, 3)], axis=0)
+        assert np.mean(before > np.percentile(speeds[:, 0], 75)) > 0.7  # observed 0.78-0.93
+        assert np.mean(speeds[end, hand] < 0.5 * before) > 0.9  # observed 0.95-0.98
     hits, chance = np.mean(hits), np.mean(chance)
-    # observed: 0.60 of the peaks near a stress, against 0.37 for stresses shifted at random
-    assert hits > 1.4 * chance and hits > chance + 0.15
+    # observed: 0.75 of the stressed vowel onsets fall on a motion beat, against 0.29 for
+    # stresses shifted at random
+    assert hits > 2.0 * chance and hits > chance + 0.3
 
 
 def test_control_attributes_have_wide_ranges(takes):
@@ -342,5 +352,5 @@ def test_control_attributes_have_wide_ranges(takes):
     both_up = windows((lw[:, 1] > 0.1) & (rw[:, 1] > 0.1)).all(axis=1)
     one_up = windows((lw[:, 1] > 0.1) | (rw[:, 1] > 0.1)).all(axis=1)
     a = windows(asym).mean(axis=1)
-    assert (both_up & (a < 0.06)).sum() >= 10  # observed 30 of 240
-    assert (one_up & (a > 0.25)).sum() >= 10  # observed 63
+    assert (both_up & (a < 0.06)).sum() >= 10  # observed 57 of 240
+    assert (one_up & (a > 0.25)).sum() >= 10  # observed 81

@@ -19,11 +19,19 @@ How a take is made
    per vowel; band-passed noise for fricatives and plosive bursts; silence
    with faint room noise in pauses and plosive closures.
 3. **Gesture plan.** Most phrases (all aroused ones) carry a gesture phrase:
-   a preparation, strokes whose peak wrist velocity falls 40-140 ms before
-   the vowel onset of a stressed syllable (louder syllable, larger stroke),
-   holds and recoveries between strokes, and an unhurried retraction to the
-   rest pose (hands low beside the hips) in a pause of 0.6 s or more; through
-   shorter pauses the hands stay up. A gesture phrase uses both hands
+   a preparation, then strokes (louder syllable, larger stroke) that *end*
+   on the vowel onset of a stressed syllable, where the hand stops and turns
+   (a minimum of its velocity: the motion beat that AI Choreographer and
+   BEAT measure), so that the stroke's fast part precedes the stress. The
+   gesture phases keep to the syllables: a stroke starts on the vowel onset
+   of a syllable before the stress, and the hand rebounds about as briskly
+   to where the next stroke starts, arriving on a later vowel onset, and
+   holds there until that stroke (a stroke too soon for a rebound goes
+   straight back instead); the beats of a gesture phrase go much the same
+   way. After the last stroke the hand rebounds and holds until the phrase
+   ends; in a pause of 0.6 s or more comes an unhurried retraction to the
+   rest pose (hands low beside the hips); through shorter pauses the hands
+   stay up. A gesture phrase uses both hands
    symmetrically, both hands differently, or one hand, at a low, middle or
    high height, narrow or wide, slow or fast, with a hand shape (open,
    relaxed, pointing, fist, pinch). Wrist moves peak at 2.3 m/s at most.
@@ -86,15 +94,16 @@ class DemoEvents:
     pauses : np.ndarray, shape (pauses, 2), float64
         Silent stretches: before the first phrase, between phrases, after the last.
     stroke_times : np.ndarray, shape (strokes,), float64
-        Time of peak wrist velocity of each gesture stroke.
+        End of each gesture stroke: the hand stops and turns (its velocity is
+        at a minimum), after the stroke's fast part.
     stroke_stress_onsets : np.ndarray, shape (strokes,), float64
         Vowel onset of the stressed syllable each stroke goes with; the stroke
-        leads it by ``stroke_stress_onsets - stroke_times`` (0.04-0.14 s).
+        ends on it, ``|stroke_times - stroke_stress_onsets| <= 0.02`` s.
     stroke_hands : tuple of str
         ``"left"``, ``"right"`` or ``"both"`` per stroke.
     gesture_phrases : np.ndarray, shape (gesture phrases, 2), float64
-        Start of the preparation and end of the last stroke (before hold and
-        retraction) of each gesture phrase.
+        Start of the preparation and end of the last stroke (before rebound,
+        hold and retraction) of each gesture phrase.
     gesture_modes : tuple of str
         ``"symmetric"``, ``"asymmetric"``, ``"left"`` or ``"right"`` per gesture phrase.
     """
@@ -846,16 +855,34 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
             if i not in used:
                 settle(i, np.inf)
         fast = rng.random() < 0.1 + 0.8 * a
-        # strokes: peak velocity leads the stressed vowel onset; keep strokes apart
-        leads = rng.uniform(0.04, 0.14, len(stresses))
-        durs = rng.uniform(0.16, 0.26, len(stresses)) if fast else rng.uniform(0.26, 0.38, len(stresses))
-        peaks = stresses - leads
+        # Gesture phases keep to the syllables. A stroke ends on the stressed vowel onset: the hand
+        # stops and turns there (a velocity minimum), so the stroke's fast part precedes the
+        # stress. It starts on the vowel onset of a syllable before, and the hand rebounds, about
+        # as briskly, to where the next stroke starts (or this one started), arriving on a later
+        # vowel onset; where the syllables give no fitting length, a phase takes its own.
+        g = np.flatnonzero(in_phrase)
+        nuc, syl_p = speech.syl_nucleus, speech.syl_phrase
+        shortest, longest = (0.18, 0.34) if fast else (0.24, 0.48)
+        ends = stresses + rng.uniform(-0.02, 0.02, len(g))
+        durs = rng.uniform(shortest, longest, len(g))
+        jitter = rng.uniform(-0.02, 0.02, (2, len(g)))
+        starts, rebounds = ends - durs, ends + durs
+        for k, j in enumerate(g):
+            for back in (1, 2):
+                if j - back >= 0 and syl_p[j - back] == p and shortest <= ends[k] - nuc[j - back] <= longest:
+                    starts[k] = nuc[j - back] + jitter[0, k]
+                    break
+            for ahead in (1, 2):
+                if j + ahead < len(nuc) and syl_p[j + ahead] == p and shortest <= nuc[j + ahead] - ends[k] <= longest:
+                    rebounds[k] = nuc[j + ahead] + jitter[1, k]
+                    break
         chosen, last_end = [], -np.inf
-        for k in range(len(stresses)):
-            s0, s1 = peaks[k] - durs[k] / 2, peaks[k] + durs[k] / 2
-            if s0 >= last_end + 0.1 and s1 < duration - 0.1:
+        for k in range(len(g)):
+            # a stroke too soon after the last one to leave room for a rebound starts straight from
+            # its end, back the way the hand came (a beat back)
+            if ends[k] - last_end >= shortest and ends[k] < duration - 0.1:
                 chosen.append(k)
-                last_end = s1
+                last_end = ends[k]
         height, width = _draw(rng, _HEIGHT_P), _draw(rng, _WIDTH_P)
         home = {used[0]: _home_pose(rng, height, width, _draw(rng, _HANDSHAPE_P), rests[used[0]])}
         if mode == "symmetric":
@@ -868,13 +895,13 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
         # hands start moving at the earliest a little before the speech does, and after what
         # they did before; drop strokes until a preparation fits
         earliest = max([arms[i].last_time + 0.05 for i in used] + [speech.phrases[p, 0] - 0.3, 0.0])
-        while chosen and peaks[chosen[0]] - durs[chosen[0]] / 2 - earliest < 0.3:
+        while chosen and starts[chosen[0]] - earliest < 0.3:
             chosen.pop(0)
         if not chosen:
             for i in used:
                 settle(i, np.inf)
             continue
-        first_start = peaks[chosen[0]] - durs[chosen[0]] / 2
+        first_start = starts[chosen[0]]
         # through a short pause the hands stay up; in a longer one they go down to rest if that
         # leaves time for an unhurried preparation
         silence = speech.phrases[p, 0] - (speech.phrases[p - 1, 1] if p > 0 else 0.0)
@@ -889,24 +916,32 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
         prep_start = max(earliest, first_start - prep_dur)
         dominant = int(rng.integers(2)) if mode == "asymmetric" else used[0]
         scale = (0.12 + 0.26 * a) if fast else (0.08 + 0.12 * a)
+        # repeated beats of a gesture phrase go much the same way (the hands of a symmetric phrase
+        # mirror each other; the secondary hand of an asymmetric one goes its own way)
+        phrase_dir = {i: _stroke_direction(rng) for i in used}
         prev_dir: dict[int, np.ndarray | None] = {i: None for i in used}
+        prev_start: dict[int, np.ndarray | None] = {i: None for i in used}
+        rebound_at = {i: 0.0 for i in used}  # when the hand's rebound from its last stroke is due to end
+        at_stroke_end = {i: False for i in used}  # the hand has just ended a stroke and not yet rebounded
         for n, k in enumerate(chosen):
-            s0, s1 = peaks[k] - durs[k] / 2, peaks[k] + durs[k] / 2
-            direction = _stroke_direction(rng)
+            s1 = ends[k]
+            direction = _unit(phrase_dir[dominant] + rng.normal(0.0, 0.25, 3))
             amp = scale * emphasis[k] ** 2 * rng.uniform(0.85, 1.15)  # louder syllable, bigger stroke
             hands = []
             for i in used:
                 arm = arms[i]
+                s0 = starts[k]
                 if i != dominant and mode == "asymmetric":
                     if rng.random() > 0.4:
                         if n == 0:  # the secondary hand still takes its position
                             arm.move(prep_start, s1, home[i])
                         continue
-                    d_i, amp_i = _stroke_direction(rng), 0.5 * amp
+                    d_i, amp_i = _unit(phrase_dir[i] + rng.normal(0.0, 0.25, 3)), 0.5 * amp
                 else:
                     d_i, amp_i = direction, amp
-                if prev_dir[i] is not None and s0 - arm.last_time < 0.3:
-                    d_i = _unit(-prev_dir[i] + rng.normal(0.0, 0.3, 3))  # no time to recover: beat back
+                beat_back = at_stroke_end[i] and s0 - arm.last_time < shortest
+                if beat_back:
+                    d_i = _unit(-prev_dir[i] + rng.normal(0.0, 0.2, 3))
                 start_pose = home[i].copy()
                 start_pose[_WRIST] -= 0.5 * amp_i * d_i
                 start_pose[_FLEX] -= 0.15
@@ -916,23 +951,32 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
                 end_pose[_CURL] = np.clip(end_pose[_CURL] - 0.08, 0.0, 1.0)
                 if arm.last_time <= prep_start:  # preparation from wherever the hand rests
                     arm.move(prep_start, s0, start_pose)
-                elif prev_dir[i] is not None and s0 - arm.last_time >= 0.3:
-                    # recover to the next stroke's start after a short hold
-                    hold = min(rng.uniform(0.08, 0.2), s0 - arm.last_time - 0.22)
-                    arm.move(arm.last_time + hold, s0, start_pose)
-                if s0 < arm.last_time:  # this hand is still busy; it sits this stroke out
+                elif beat_back:  # no room for a rebound: straight back from the last stroke's end
+                    s0 = arm.last_time
+                elif at_stroke_end[i]:
+                    # rebound to this stroke's start, then hold there until the stroke
+                    arm.move(arm.last_time, min(rebound_at[i], s0), start_pose)
+                    at_stroke_end[i] = False
+                if s1 - s0 < 0.1 or s0 < arm.last_time:  # this hand is still busy; it sits this stroke out
                     continue
                 arm.move(s0, s1, end_pose)
-                prev_dir[i] = d_i
+                prev_dir[i], prev_start[i], rebound_at[i] = d_i, start_pose, rebounds[k]
+                at_stroke_end[i] = True
                 hands.append(i)
             if hands:
-                stroke_times.append(peaks[k])
+                stroke_times.append(ends[k])
                 stroke_stress.append(stresses[k])
                 stroke_hands.append("both" if len(hands) == 2 else ("left", "right")[hands[0]])
-        for i in used:
-            arms[i].pending_retraction = arms[i].last_time + rng.uniform(0.1, 0.3)
         g_phrases.append((prep_start, max(arms[i].last_time for i in used)))
         g_modes.append(mode)
+        phrase_end = speech.phrases[p, 1]
+        for i in used:
+            arm = arms[i]
+            if at_stroke_end[i]:
+                # after the last stroke the hand rebounds to where the stroke began and holds until
+                # the speech pauses; the retraction comes in the pause
+                arm.move(arm.last_time, rebound_at[i], prev_start[i])
+            arm.pending_retraction = max(arm.last_time + rng.uniform(0.1, 0.3), phrase_end + rng.uniform(0.05, 0.2))
     settle(0, np.inf)
     settle(1, np.inf)
     return _GesturePlan(
