@@ -146,7 +146,7 @@ def _cmd_synthesize(args) -> int:
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
     audios = [load_audio(f) for f in files]
-    results = synthesize_batch(audios, db=db, config=config)
+    results = synthesize_batch(audios, db=db, config=config, refiner=args.refiner)
     for f, stem, res in zip(files, stems, results):
         res.source = f.name
         res.save_npz(targets[(stem, "npz")], overwrite=args.force)
@@ -161,6 +161,72 @@ def _cmd_synthesize(args) -> int:
         note = f"; control relaxed at {len(relaxed)} step(s)" if relaxed else ""
         print(f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
               f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}")
+    print(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _cmd_train_refiner(args) -> int:
+    from dataclasses import replace
+
+    from .database import MatchingDatabase
+    from .demo import open_default_database
+    from .refine.data import PairsConfig
+    from .refine.train import preset, train_refiner
+
+    t0 = time.perf_counter()
+    if args.demo == bool(args.db):
+        raise ConfigError("give the database to train on with --db, or --demo for the demo database")
+    if args.resume and args.force:
+        raise ConfigError("--resume goes on from the folder and --force replaces it; give one of them")
+    db = open_default_database() if args.demo else MatchingDatabase.load(args.db)
+    if args.demo:
+        from .demo import DEMO_MINUTES, DEMO_SEED
+
+        standard = f"demo (seed {DEMO_SEED}, {DEMO_MINUTES:g} min)"
+        if db.meta["build"].get("source") != standard:
+            warnings.warn(f"the default database at {db.path} is not the standard demo ({standard}); the shipped "
+                          "refiner was trained on the standard one (rebuild it with `gesturekit build-db --demo "
+                          "--force`)", GestureKitWarning, stacklevel=2)
+    data = None
+    if not args.resume or args.exclude_take or args.exclude_range:
+        data = PairsConfig(seed=args.seed, exclude_takes=tuple(args.exclude_take or ()),
+                           exclude_ranges=tuple(_parse_range(x) for x in (args.exclude_range or ())))
+    train = replace(preset(args.preset).train, seed=args.seed)
+    bars: dict = {}
+
+    def on_pairs(done, total):
+        bar = bars.get("pairs")
+        if bar is None:
+            bar = bars["pairs"] = _progress_bar(total, "window", "k-NN training pairs")
+        bar.n = done
+        bar.refresh()
+
+    def on_step(it, total, losses):
+        if "pairs" in bars:
+            bars.pop("pairs").close()
+        bar = bars.get("train")
+        if bar is None:
+            bar = bars["train"] = _progress_bar(total, "it", "training the refiner")
+            bar.n = it - 1
+        bar.update(1)
+        if "generator_l1" in losses:
+            bar.set_postfix_str(f"W {losses['wasserstein']:.2f} gp {losses['gradient_penalty']:.2f} "
+                                f"L1 {losses['generator_l1']:.3f}", refresh=False)
+
+    try:
+        out = train_refiner(db, args.out, preset_name=args.preset, iterations=args.iterations, train=train,
+                            data=data, resume=args.resume, overwrite=args.force, device=args.device,
+                            keep_train_state=not args.no_train_state, on_pairs=on_pairs, on_step=on_step)
+    finally:
+        for bar in bars.values():
+            bar.close()
+    from .refine.infer import read_refiner_config
+
+    cfg = read_refiner_config(out)
+    print(f"refiner    {out}")
+    print(f"preset     {cfg['preset']}  ({cfg['iteration']} iterations on {cfg['device']})")
+    print(f"windows    {cfg['pairs']['windows']} training windows (k-NN search {cfg['time']['search_s']:.1f} s)")
+    print(f"training   {cfg['time']['train_s']:.1f} s; losses in {out / 'loss_log.csv'}")
     print(f"done in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -344,9 +410,38 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--exclude-take", action="append", metavar="TAKE", help="keep a database take out of the search")
     y.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
                    help="keep a stretch of a take (seconds) out of the search")
+    y.add_argument("--refiner", metavar="PATH", help="refine the k-NN motion with a trained refiner folder "
+                   "(from train-refiner), or 'demo' for the one shipped with the demo database; "
+                   "the npz keeps both motions")
     y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
     y.add_argument("--force", action="store_true", help="replace existing output files")
     y.set_defaults(func=_cmd_synthesize)
+
+    r = sub.add_parser(
+        "train-refiner",
+        help="train the resynchronisation cGAN (refiner) on a database",
+        description="Train the paper's resynchronisation cGAN on a matching database built with "
+        "--overlap-stride: k-NN motion for every window of the overlapping cut, then WGAN-GP training with "
+        "a progress bar, checkpoints in the output folder (--resume goes on from the last one) and a loss "
+        "log (loss_log.csv). Uses the GPU when torch sees one.",
+    )
+    r.add_argument("--db", help="matching database folder (built with --overlap-stride)")
+    r.add_argument("--demo", action="store_true", help="train on the default demo database (built if missing)")
+    r.add_argument("--out", required=True, help="refiner folder to write")
+    r.add_argument("--preset", choices=["quick", "paper"], default="quick",
+                   help="quick: small networks, ~10 min on a 2-core CPU; paper: the paper's sizes (GPU)")
+    r.add_argument("--iterations", type=int, help="critic iterations (default: the preset's; with --resume: "
+                   "train on up to this many)")
+    r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
+    r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
+    r.add_argument("--seed", type=int, default=0, help="seed of the weights, batches and k draws (default 0)")
+    r.add_argument("--exclude-take", action="append", metavar="TAKE", help="keep a take out of training")
+    r.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
+                   help="keep a stretch of a take (seconds) out of training")
+    r.add_argument("--no-train-state", action="store_true",
+                   help="leave out the optimiser state at the end (a smaller folder that cannot be resumed)")
+    r.add_argument("--force", action="store_true", help="replace an existing refiner folder")
+    r.set_defaults(func=_cmd_train_refiner)
     from .evaluate.baselines import SYSTEMS
 
     e = sub.add_parser(

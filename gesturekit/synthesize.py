@@ -328,6 +328,7 @@ def synthesize(
     db: MatchingDatabase,
     config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
+    refiner=None,
 ) -> SynthesisResult:
     """Synthesise gesture motion for speech.
 
@@ -339,13 +340,18 @@ def synthesize(
     config : SynthesisConfig, optional
     control : ControlTrack or str, optional
         Overrides ``config.control``.
+    refiner : Refiner or path, optional
+        A trained refiner (:class:`gesturekit.refine.infer.Refiner`, a refiner folder, or
+        ``"demo"`` for the one shipped with the demo database). It refines the k-NN
+        motion with the speech's cGAN audio features; the result is ``refined_motion``
+        and also ``motion``.
 
     Returns
     -------
     SynthesisResult
         The output has exactly ``floor(samples * 15 / 16000)`` frames.
     """
-    return synthesize_batch([audio], db=db, config=config, controls=[control])[0]
+    return synthesize_batch([audio], db=db, config=config, controls=[control], refiner=refiner)[0]
 
 
 def synthesize_batch(
@@ -354,6 +360,7 @@ def synthesize_batch(
     db: MatchingDatabase,
     config: SynthesisConfig | list[SynthesisConfig] | None = None,
     controls=None,
+    refiner=None,
 ) -> list[SynthesisResult]:
     """Synthesise several speeches together: one scan of the database per step serves all.
 
@@ -363,6 +370,8 @@ def synthesize_batch(
     config : SynthesisConfig or one per speech
         Exclusions must be the same for all speeches in one batch.
     controls : sequence of ControlTrack, str or None, optional
+    refiner : Refiner or path, optional
+        As in :func:`synthesize`, applied to every speech.
 
     Returns
     -------
@@ -378,6 +387,8 @@ def synthesize_batch(
     excl = {(c.exclude_takes, c.exclude_ranges) for c in configs}
     if len(excl) > 1:
         raise ConfigError("all speeches of one batch must exclude the same database takes and ranges")
+    if refiner is not None:
+        refiner = _open_refiner(refiner, db)
     prepared = [_prepare(db, a, c, ctl) for a, c, ctl in zip(audios, configs, controls)]
     # masks differ per speech; the search shares one mask stack, so stack them with offsets
     stack, step_idx = [], []
@@ -395,4 +406,24 @@ def synthesize_batch(
         step_masks=step_idx,
         exclude=_exclusion(db, configs[0]),
     )
-    return [_finish(db, r, p[0], p[1], c, p[3]) for r, p, c in zip(results, prepared, configs)]
+    out = [_finish(db, r, p[0], p[1], c, p[3]) for r, p, c in zip(results, prepared, configs)]
+    if refiner is not None:
+        for res in out:
+            _refine(db, res, refiner)
+    return out
+
+
+def _open_refiner(refiner, db):
+    from .refine import load_refiner
+
+    if isinstance(refiner, (str, os.PathLike)):
+        refiner = load_refiner(refiner)
+    refiner.check_database(db)
+    return refiner
+
+
+def _refine(db: MatchingDatabase, res: SynthesisResult, refiner) -> None:
+    """Refine the k-NN motion with the speech's cGAN audio features; it becomes the output."""
+    _, a = db.query_features(res.audio, n_frames=res.n_frames)
+    res.refined_motion = refiner.refine_motion(res.knn_motion, a)
+    res.motion = res.refined_motion

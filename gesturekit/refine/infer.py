@@ -1,0 +1,329 @@
+"""A trained refiner: load a checkpoint folder and refine k-NN motion of any length.
+
+A refiner folder (written by :func:`gesturekit.refine.train.train_refiner`)::
+
+    config.json       format, model sizes, training options, feature layout, iteration, file hashes
+    generator.pt      generator state dict (torch.save; read with weights_only=True)
+    critic.pt         critic state dict
+    train_state.pt    optimiser and random-generator states, for --resume (optional)
+    stats.npz         z-scoring statistics: audio_mean/std (28), motion_mean/std (165)
+    loss_log.csv      losses during training, one row per logging interval
+
+Any length is refined without a seam every 64 frames, in one of two ways:
+``mode="full"`` (the default) runs the fully convolutional generator over the
+whole sequence at once (padded to a multiple of 8 frames), so there are no
+windows at all; ``mode="windowed"`` refines 64-frame windows every ``hop``
+frames, exactly the input size of training, and cross-fades their outputs with
+Hann weights (every frame is a weighted mean of ``64 / hop`` windows, the
+weights fading to almost 0 at each window's ends). Away from the ends both
+agree closely; the full pass costs about ``64 / hop`` times less.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..errors import ConfigError, DatabaseError, InputFileError
+from ..features import LAYOUT
+from ..motion import Motion
+from ..skeleton import FPS, JOINT_NAMES
+from .model import GENERATOR_STRIDE, Generator, ModelConfig
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "Refiner", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
+
+FORMAT = "gesturekit-refiner"
+FORMAT_VERSION = 1
+STATE_FILES = ("generator.pt", "critic.pt", "train_state.pt")
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def read_refiner_config(path: str | os.PathLike) -> dict:
+    """The ``config.json`` of a refiner folder, checked for format and version.
+
+    Raises
+    ------
+    InputFileError
+        No folder, no or unreadable ``config.json``, another format or version.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        raise InputFileError("no refiner folder here (train one with `gesturekit train-refiner`)", path=path)
+    cfg_file = path / "config.json"
+    if not cfg_file.is_file():
+        raise InputFileError("not a refiner folder: config.json is missing", path=path)
+    try:
+        cfg = json.loads(cfg_file.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"config.json is not valid JSON ({exc})", path=path) from None
+    if not isinstance(cfg, dict) or cfg.get("format") != FORMAT:
+        raise InputFileError("config.json does not describe a gesturekit refiner", path=path)
+    if cfg.get("format_version") != FORMAT_VERSION:
+        raise InputFileError(
+            f"refiner format version {cfg.get('format_version')} is not supported (this gesturekit reads "
+            f"version {FORMAT_VERSION}); train it again",
+            path=path,
+        )
+    return cfg
+
+
+def load_state(path: str | os.PathLike, name: str, cfg: dict) -> dict:
+    """One ``.pt`` file of a refiner folder, checked against the hash in ``config.json``.
+
+    Loaded with ``torch.load(..., weights_only=True)``: tensors and plain containers only.
+
+    Raises
+    ------
+    InputFileError
+        Missing, changed since ``config.json`` was written (an interrupted save), or unreadable.
+    """
+    path = Path(path)
+    f = path / name
+    if not f.is_file():
+        raise InputFileError(f"{name} is missing; the refiner folder is incomplete", path=path)
+    want = cfg.get("files", {}).get(name)
+    if want is None or file_sha256(f) != want:
+        raise InputFileError(
+            f"{name} does not match config.json (a save was interrupted, or the file was changed); "
+            "train again or restore the folder",
+            path=path,
+        )
+    try:
+        return torch.load(f, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises several types for corrupt or unsafe files
+        raise InputFileError(f"{name} cannot be read as a weights-only checkpoint ({exc})", path=path) from None
+
+
+def read_stats(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """The z-scoring statistics of a refiner folder (``stats.npz``, no pickles)."""
+    path = Path(path)
+    f = path / "stats.npz"
+    try:
+        with np.load(f, allow_pickle=False) as z:
+            stats = {k: np.asarray(z[k], dtype=np.float32) for k in z.files}
+    except FileNotFoundError:
+        raise InputFileError("stats.npz is missing; the refiner folder is incomplete", path=path) from None
+    except (ValueError, OSError) as exc:
+        raise InputFileError(f"stats.npz cannot be read ({exc})", path=path) from None
+    for key in ("audio_mean", "audio_std", "motion_mean", "motion_std"):
+        if key not in stats:
+            raise InputFileError(f"stats.npz lacks {key}", path=path)
+    return stats
+
+
+def read_loss_log(path: str | os.PathLike):
+    """The loss log of a refiner folder as a pandas DataFrame (one row per logging interval).
+
+    Columns: iteration, elapsed_s, critic_loss, wasserstein, gradient_penalty,
+    generator_loss, generator_adversarial, generator_l1.
+    """
+    import pandas as pd
+
+    f = Path(path) / "loss_log.csv"
+    if not f.is_file():
+        raise InputFileError("loss_log.csv is missing", path=path)
+    return pd.read_csv(f)
+
+
+def hann_weights(n: int) -> np.ndarray:
+    """Cross-fade weights of one window, ``sin^2(pi (i + 0.5) / n)``, shape (n,), all > 0."""
+    return (np.sin(np.pi * (np.arange(n) + 0.5) / n) ** 2).astype(np.float64)
+
+
+class Refiner:
+    """The generator of a trained resynchronisation cGAN, ready to refine motion.
+
+    Parameters
+    ----------
+    generator : Generator
+    stats : dict
+        ``audio_mean``, ``audio_std`` (28,), ``motion_mean``, ``motion_std`` (165,).
+    config : dict
+        The refiner's ``config.json`` content (``layout`` and ``joint_names`` are checked).
+    path : path, optional
+    device : str or torch.device
+    """
+
+    def __init__(self, generator: Generator, *, stats: dict, config: dict, path=None, device="cpu"):
+        self.device = torch.device(device)
+        self.generator = generator.to(self.device).eval()
+        self.stats = {k: np.asarray(v, dtype=np.float32) for k, v in stats.items()}
+        self.config = config
+        self.path = None if path is None else Path(path)
+        self.window = int(generator.config.window)
+
+    # ---- loading ----------------------------------------------------------------------------
+    @classmethod
+    def load(cls, path: str | os.PathLike, *, device: str = "cpu") -> "Refiner":
+        """Open a refiner folder (weights read with ``torch.load(..., weights_only=True)``).
+
+        Raises
+        ------
+        InputFileError
+            Missing or damaged files.
+        DatabaseError
+            The refiner was trained on features of another layout than this gesturekit computes.
+        """
+        path = Path(path)
+        cfg = read_refiner_config(path)
+        if cfg.get("layout") != LAYOUT.signature() or cfg.get("joint_names") != list(JOINT_NAMES):
+            raise DatabaseError(
+                "this refiner was trained on another feature layout or skeleton than this gesturekit uses; "
+                "train it again on a database built with this version",
+                path=path,
+            )
+        try:
+            mcfg = ModelConfig.from_dict(cfg["model"])
+        except (KeyError, TypeError, ConfigError) as exc:
+            raise InputFileError(f"config.json has no valid model section ({exc})", path=path) from None
+        gen = Generator(mcfg)
+        state = load_state(path, "generator.pt", cfg)
+        try:
+            gen.load_state_dict(state)
+        except (RuntimeError, TypeError) as exc:
+            raise InputFileError(f"generator.pt does not fit the model in config.json ({exc})", path=path) from None
+        stats = read_stats(path)
+        if stats["audio_mean"].shape != (mcfg.audio_dim,) or stats["motion_mean"].shape != (mcfg.motion_dim,):
+            raise InputFileError("stats.npz does not fit the model's channel counts", path=path)
+        return cls(gen, stats=stats, config=cfg, path=path, device=device)
+
+    # ---- compatibility ----------------------------------------------------------------------
+    def check_database(self, db) -> None:
+        """Refuse a database whose features have another layout than the refiner's training data.
+
+        Raises
+        ------
+        DatabaseError
+            Naming the database and the refiner.
+        """
+        meta = db.meta
+        mine = self.config.get("layout")
+        theirs = meta.get("layout")
+        where = self.path if self.path is not None else "refiner"
+        if theirs != mine or list(meta.get("joint_names", [])) != list(self.config.get("joint_names", [])):
+            diff = sorted(k for k in set(mine or {}) | set(theirs or {}) if (mine or {}).get(k) != (theirs or {}).get(k))
+            detail = f" (differs in: {', '.join(diff)})" if diff else " (another skeleton)"
+            raise DatabaseError(
+                f"the database has another feature layout than refiner {where} was trained on{detail}; "
+                "use a refiner trained on this database (`gesturekit train-refiner --db ...`)",
+                path=db.path,
+            )
+
+    # ---- refining ---------------------------------------------------------------------------
+    def refine(self, motion, audio, *, mode: str = "full", hop: int = 16, batch: int = 256) -> np.ndarray:
+        """Refine k-NN motion with the audio of the same frames.
+
+        Parameters
+        ----------
+        motion : np.ndarray, shape (T, 165) or (T, 55, 3), metres
+            The k-NN motion (any T >= 1).
+        audio : np.ndarray, shape (T, 28)
+            Raw cGAN audio features of the same frames
+            (:meth:`MatchingDatabase.query_features` returns them second).
+        mode : {"full", "windowed"}
+            ``full``: one fully convolutional pass over the whole sequence;
+            ``windowed``: 64-frame windows every ``hop`` frames, cross-faded.
+        hop : int
+            Frames between windows of ``windowed`` (1..64; 16 = each frame seen by 4 windows).
+        batch : int
+            Windows per generator call (memory).
+
+        Returns
+        -------
+        np.ndarray, shape (T, 165), float32, metres
+        """
+        g = np.asarray(motion, dtype=np.float32)
+        if g.ndim == 3:
+            g = g.reshape(g.shape[0], -1)
+        a = np.asarray(audio, dtype=np.float32)
+        D, A = self.generator.config.motion_dim, self.generator.config.audio_dim
+        if g.ndim != 2 or g.shape[1] != D or g.shape[0] < 1:
+            raise ConfigError(f"motion must have shape (frames >= 1, {D}), got {np.asarray(motion).shape}")
+        if a.shape != (g.shape[0], A):
+            raise ConfigError(f"audio features must have shape ({g.shape[0]}, {A}) like the motion, got {a.shape}")
+        if not (np.isfinite(g).all() and np.isfinite(a).all()):
+            raise ConfigError("motion or audio features contain NaN or infinite values")
+        gz = (g - self.stats["motion_mean"]) / self.stats["motion_std"]
+        az = (a - self.stats["audio_mean"]) / self.stats["audio_std"]
+        if mode == "windowed":
+            if not 1 <= hop <= self.window:
+                raise ConfigError(f"hop must be in 1..{self.window}, got {hop}")
+            out = self._windowed(gz, az, hop=int(hop), batch=max(1, int(batch)))
+        elif mode == "full":
+            out = self._full(gz, az)
+        else:
+            raise ConfigError(f"mode must be 'windowed' or 'full', got {mode!r}")
+        return (out * self.stats["motion_std"] + self.stats["motion_mean"]).astype(np.float32)
+
+    def refine_motion(self, motion: Motion, audio: np.ndarray, **options) -> Motion:
+        """:meth:`refine` for a :class:`~gesturekit.motion.Motion` at 15 fps; returns a Motion."""
+        if motion.fps != FPS:
+            raise ConfigError(f"the refiner works at {FPS} fps; the motion has {motion.fps} fps")
+        return Motion.from_flat(self.refine(motion.flat(), audio, **options), motion.fps)
+
+    def _run(self, az: np.ndarray, gz: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            y = self.generator(
+                torch.from_numpy(np.ascontiguousarray(az)).to(self.device),
+                torch.from_numpy(np.ascontiguousarray(gz)).to(self.device),
+            )
+        return y.float().cpu().numpy()
+
+    def _windowed(self, gz, az, *, hop, batch):
+        W = self.window
+        T = gz.shape[0]
+        # every frame of the input lies under the same number of windows (W / hop when hop divides W)
+        front = W - hop
+        back = W - hop + (-(T + front - hop)) % hop  # windows end exactly at the padded end
+        n_win = (T + front + back - W) // hop + 1
+        # edge padding: the ends are refined like the middle, with the motion held still outside
+        gp = np.pad(gz, ((front, back), (0, 0)), mode="edge")
+        ap = np.pad(az, ((front, back), (0, 0)), mode="edge")
+        w = hann_weights(W)
+        acc = np.zeros(gp.shape, np.float64)
+        wsum = np.zeros(gp.shape[0], np.float64)
+        starts = np.arange(n_win) * hop
+        offs = np.arange(W)
+        for b0 in range(0, n_win, batch):
+            s = starts[b0 : b0 + batch]
+            idx = s[:, None] + offs[None, :]
+            y = self._run(ap[idx], gp[idx])
+            for j, s0 in enumerate(s):
+                acc[s0 : s0 + W] += w[:, None] * y[j]
+                wsum[s0 : s0 + W] += w
+        return (acc[front : front + T] / wsum[front : front + T, None]).astype(np.float32)
+
+    def _full(self, gz, az):
+        T = gz.shape[0]
+        pad = -T % GENERATOR_STRIDE
+        if T + pad < self.window:
+            pad = self.window - T
+        gp = np.pad(gz, ((0, pad), (0, 0)), mode="edge")
+        ap = np.pad(az, ((0, pad), (0, 0)), mode="edge")
+        return self._run(ap[None], gp[None])[0, :T]
+
+    # ---- description ------------------------------------------------------------------------
+    def describe(self) -> dict:
+        """Summary: path, preset, iterations, model sizes, training database."""
+        c = self.config
+        return {
+            "path": None if self.path is None else str(self.path),
+            "preset": c.get("preset"),
+            "iteration": c.get("iteration"),
+            "complete": c.get("complete"),
+            "model": c.get("model"),
+            "database": c.get("database", {}).get("label") or c.get("database", {}).get("path"),
+            "windows": c.get("pairs", {}).get("windows"),
+        }

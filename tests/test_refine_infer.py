@@ -1,0 +1,191 @@
+"""Refiner inference: any length, no seam every 64 frames, checkpoint loading, layout checks."""
+import copy
+import json
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gesturekit.database import BuildConfig, MatchingDatabase
+from gesturekit.errors import ConfigError, DatabaseError, InputFileError
+from gesturekit.features import LAYOUT
+from gesturekit.refine import default_refiner_path, load_refiner
+from gesturekit.refine.infer import Refiner
+from gesturekit.refine.model import ModelConfig, build_models
+from gesturekit.refine.train import TrainConfig, train_refiner
+from gesturekit.skeleton import JOINT_NAMES
+
+from .conftest import make_take
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_torch_thread():
+    # tiny networks: one thread is faster, and immune to a busy machine's thread contention
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+TINY = ModelConfig(generator_channels=(4, 8, 8, 8), critic_channels=(8, 4, 4))
+
+
+def random_refiner(seed=0, channels=(8, 8, 8, 8)):
+    gen, _ = build_models(ModelConfig(generator_channels=channels, critic_channels=(4, 4, 4)), seed=seed)
+    # running statistics as after training, so the eval-mode network is not the identity of BN
+    for m in gen.modules():
+        if isinstance(m, torch.nn.BatchNorm1d):
+            m.running_mean.uniform_(-0.2, 0.2, generator=torch.Generator().manual_seed(seed))
+    stats = {"audio_mean": np.zeros(28, np.float32), "audio_std": np.ones(28, np.float32),
+             "motion_mean": np.zeros(165, np.float32), "motion_std": np.full(165, 0.1, np.float32)}
+    return Refiner(gen, stats=stats, config={"layout": LAYOUT.signature(), "joint_names": list(JOINT_NAMES)})
+
+
+def smooth_inputs(T, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(T)[:, None] / 15.0
+    motion = 0.1 * np.sin(2 * np.pi * rng.uniform(0.1, 0.8, (1, 165)) * t + rng.uniform(0, 6, (1, 165)))
+    audio = np.sin(2 * np.pi * rng.uniform(0.2, 2.0, (1, 28)) * t + rng.uniform(0, 6, (1, 28)))
+    return motion.astype(np.float32), audio.astype(np.float32)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(1, 300), st.sampled_from([8, 16, 32, 64]), st.sampled_from(["windowed", "full"]))
+def test_any_length_keeps_its_frames(T, hop, mode):
+    ref = random_refiner()
+    g, a = smooth_inputs(T)
+    out = ref.refine(g, a, mode=mode, hop=hop)
+    assert out.shape == (T, 165) and out.dtype == np.float32 and np.isfinite(out).all()
+    # (T, 55, 3) motion is accepted as well
+    np.testing.assert_array_equal(ref.refine(g.reshape(T, 55, 3), a, mode=mode, hop=hop), out)
+
+
+def _seam_ratio(y):
+    """Mean step |y[t+1] - y[t]| across frames 64 i - 1 -> 64 i over that across 8 j - 1 -> 8 j elsewhere.
+
+    The generator's nearest up-sampling makes every 8th step special, so seams at multiples of
+    64 are compared with the other multiples of 8.
+    """
+    d = np.abs(np.diff(y, axis=0)).mean(axis=1)
+    t = np.arange(d.size)
+    seam = (t % 64) == 63
+    other = ((t % 8) == 7) & ~seam
+    return d[seam].mean() / d[other].mean()
+
+
+def test_ten_minutes_have_no_seam_every_64_frames():
+    ref = random_refiner(seed=1)
+    g, a = smooth_inputs(15 * 600, seed=1)
+    windowed = ref.refine(g, a, mode="windowed")
+    full = ref.refine(g, a, mode="full")
+    assert windowed.shape == full.shape == (9000, 165)
+    assert _seam_ratio(windowed) < 1.2
+    assert _seam_ratio(full) < 1.2
+    # the statistic does see seams: cutting into plain 64-frame windows leaves one at every cut
+    n = 9000 // 64 * 64
+    z = ((g[:n] - ref.stats["motion_mean"]) / ref.stats["motion_std"]).reshape(-1, 64, 165)
+    az = a[:n].reshape(-1, 64, 28)
+    with torch.no_grad():
+        naive = ref.generator(torch.from_numpy(az), torch.from_numpy(z)).numpy().reshape(-1, 165)
+    assert _seam_ratio(naive * ref.stats["motion_std"]) > 1.5
+
+
+def test_windowed_and_full_agree_away_from_the_ends():
+    # different padding at window ends is all that separates them; the Hann cross-fade hides it
+    ref = random_refiner(seed=2)
+    g, a = smooth_inputs(1000, seed=2)
+    w, f = ref.refine(g, a, mode="windowed", hop=8), ref.refine(g, a, mode="full")
+    spread = np.abs(f[64:-64] - f[64:-64].mean(axis=0)).mean()
+    assert np.abs(w[64:-64] - f[64:-64]).mean() < 0.05 * spread
+
+
+def test_bad_inputs_are_refused():
+    ref = random_refiner()
+    g, a = smooth_inputs(40)
+    with pytest.raises(ConfigError, match="audio features must have shape"):
+        ref.refine(g, a[:30])
+    with pytest.raises(ConfigError, match="mode"):
+        ref.refine(g, a, mode="fast")
+    with pytest.raises(ConfigError, match="hop"):
+        ref.refine(g, a, mode="windowed", hop=0)
+    bad = g.copy()
+    bad[3, 3] = np.nan
+    with pytest.raises(ConfigError, match="NaN"):
+        ref.refine(bad, a)
+
+
+# ---- checkpoint folders ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    base = tmp_path_factory.mktemp("refiner")
+    takes = [make_take(12.0, seed=1, name="a"), make_take(10.0, seed=2, name="b")]
+    db = MatchingDatabase.build(takes, config=BuildConfig(overlap_stride=16, store_audio=False))
+    db.save(base / "db")
+    db = MatchingDatabase.load(base / "db")
+    out = train_refiner(db, base / "r", model=TINY, train=TrainConfig(iterations=5, batch_size=4), device="cpu")
+    return db, out
+
+
+def test_load_uses_weights_only_and_refines(tiny):
+    db, out = tiny
+    ref = Refiner.load(out)
+    ref.check_database(db)
+    state = torch.load(out / "generator.pt", weights_only=True)
+    assert all(torch.equal(state[k], v) for k, v in ref.generator.state_dict().items())
+    assert not ref.generator.training
+    y = ref.refine(np.asarray(db.G[0]), np.asarray(db.A[0]))
+    assert y.shape == (64, 165)
+    # deterministic
+    np.testing.assert_array_equal(y, Refiner.load(out).refine(np.asarray(db.G[0]), np.asarray(db.A[0])))
+
+
+def test_a_database_with_another_layout_is_refused(tiny):
+    db, out = tiny
+    ref = Refiner.load(out)
+    other = copy.copy(db)
+    other.meta = json.loads(json.dumps(db.meta))
+    other.meta["layout"]["n_mfcc"] = 20
+    with pytest.raises(DatabaseError, match="another feature layout.*n_mfcc"):
+        ref.check_database(other)
+
+
+def test_a_refiner_of_another_layout_is_refused(tiny, tmp_path):
+    _, out = tiny
+    import shutil
+
+    copy_dir = tmp_path / "r"
+    shutil.copytree(out, copy_dir)
+    cfg = json.loads((copy_dir / "config.json").read_text())
+    cfg["layout"]["audio_offsets"] = [0, 1]
+    (copy_dir / "config.json").write_text(json.dumps(cfg))
+    with pytest.raises(DatabaseError, match="another feature layout"):
+        Refiner.load(copy_dir)
+
+
+def test_broken_folders_are_named_in_the_error(tmp_path):
+    with pytest.raises(InputFileError, match="no refiner folder"):
+        Refiner.load(tmp_path / "nothing")
+    (tmp_path / "x").mkdir()
+    with pytest.raises(InputFileError, match="config.json is missing"):
+        Refiner.load(tmp_path / "x")
+    (tmp_path / "x" / "config.json").write_text("{not json")
+    with pytest.raises(InputFileError, match=r"x: config.json is not valid JSON"):
+        Refiner.load(tmp_path / "x")
+    (tmp_path / "x" / "config.json").write_text(json.dumps({"format": "gesturekit-refiner", "format_version": 99}))
+    with pytest.raises(InputFileError, match="version 99"):
+        Refiner.load(tmp_path / "x")
+
+
+def test_the_shipped_demo_refiner_loads():
+    path = default_refiner_path()
+    if not (path / "config.json").is_file():
+        pytest.skip(f"no demo refiner at {path}")
+    ref = load_refiner("demo")
+    size = sum(p.stat().st_size for p in path.iterdir())
+    assert size < 2 * 1024 * 1024
+    assert ref.config["preset"] == "quick" and ref.config["complete"]
+    g, a = smooth_inputs(100)
+    assert np.isfinite(ref.refine(g, a)).all()
