@@ -1,7 +1,14 @@
 """Shared fixtures: the read-only test data beside the repository, tiny generated takes."""
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
+
+# numba (librosa's onset peak picking, our search loops) caches compiled code on disk; two test
+# workers compiling the same function at once can read each other's half-written cache and crash.
+# Each test process gets its own cache folder (set before anything imports numba).
+os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(tempfile.gettempdir(), f"gesturekit-tests-numba-{os.getpid()}"))
 
 import numpy as np
 import pytest
