@@ -53,7 +53,9 @@ from .features import (
 from .motion import AUDIO_SR, Take, resample_positions
 from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES
 
-__all__ = ["FORMAT_VERSION", "BuildConfig", "TakeFeatures", "take_features", "MatchingDatabase"]
+__all__ = [
+    "FORMAT_VERSION", "BuildConfig", "TakeFeatures", "take_features", "MatchingDatabase", "normalise_exclusions",
+]
 
 FORMAT = "gesturekit-matching-database"
 FORMAT_VERSION = 1
@@ -167,6 +169,24 @@ def take_features(take: Take, *, layout: FeatureLayout = LAYOUT) -> TakeFeatures
         audio=audio,
         sources=dict(take.sources),
     )
+
+
+def normalise_exclusions(takes, ranges) -> tuple[tuple[str, ...], tuple[tuple[str, float, float], ...]]:
+    """Held-out takes and (take, start_s, end_s) ranges as plain tuples, for configs.
+
+    Raises
+    ------
+    ConfigError
+        A range entry is not a (take, start, end) triple of a name and two numbers.
+    """
+    out = []
+    for r in ranges:
+        try:
+            take, a, b = r
+            out.append((str(take), float(a), float(b)))
+        except (TypeError, ValueError):
+            raise ConfigError(f"exclude_ranges entries must be (take, start_s, end_s), got {r!r}") from None
+    return tuple(str(t) for t in takes), tuple(out)
 
 
 def _windows(n_frames: int, length: int, stride: int) -> np.ndarray:

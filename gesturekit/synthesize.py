@@ -17,7 +17,7 @@ import numpy as np
 from . import __version__
 from .blend import BLEND_MODES, blend_segments
 from .control import ControlTrack, parse_control, step_masks
-from .database import MatchingDatabase
+from .database import MatchingDatabase, normalise_exclusions
 from .errors import ConfigError
 from .features import n_audio_frames
 from .motion import AUDIO_SR, Motion
@@ -80,15 +80,9 @@ class SynthesisConfig:
         if not isinstance(self.blend_frames, int) or self.blend_frames < 1:
             raise ConfigError(f"blend_frames must be a positive integer, got {self.blend_frames!r}")
         object.__setattr__(self, "control", parse_control(self.control).to_text())  # validates, normalises
-        object.__setattr__(self, "exclude_takes", tuple(str(t) for t in self.exclude_takes))
-        ranges = []
-        for r in self.exclude_ranges:
-            try:
-                take, a, b = r
-                ranges.append((str(take), float(a), float(b)))
-            except (TypeError, ValueError):
-                raise ConfigError(f"exclude_ranges entries must be (take, start_s, end_s), got {r!r}") from None
-        object.__setattr__(self, "exclude_ranges", tuple(ranges))
+        takes, ranges = normalise_exclusions(self.exclude_takes, self.exclude_ranges)
+        object.__setattr__(self, "exclude_takes", takes)
+        object.__setattr__(self, "exclude_ranges", ranges)
         # validate k, step, topk, seed, mask_rule and pins once, the way the search reads them
         SearchConfig(k=self.k, step=self.step, topk=self.topk, seed=self.seed, mask_rule=self.mask_rule, pins=self.pins)
         object.__setattr__(self, "pins", {int(i): (int(m), int(s)) for i, (m, s) in sorted(self.pins.items())})

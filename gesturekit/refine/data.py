@@ -26,7 +26,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..database import MatchingDatabase
+from ..database import MatchingDatabase, normalise_exclusions
 from ..errors import ConfigError, DatabaseError, GestureKitWarning
 from ..search import SearchConfig, SearchIndex
 
@@ -70,15 +70,9 @@ class PairsConfig:
             raise ConfigError(f"k_max must be at least 2, got {self.k_max}")
         if self.step < 1:
             raise ConfigError(f"step must be at least 1, got {self.step}")
-        object.__setattr__(self, "exclude_takes", tuple(str(t) for t in self.exclude_takes))
-        ranges = []
-        for r in self.exclude_ranges:
-            try:
-                take, a, b = r
-                ranges.append((str(take), float(a), float(b)))
-            except (TypeError, ValueError):
-                raise ConfigError(f"exclude_ranges entries must be (take, start_s, end_s), got {r!r}") from None
-        object.__setattr__(self, "exclude_ranges", tuple(ranges))
+        takes, ranges = normalise_exclusions(self.exclude_takes, self.exclude_ranges)
+        object.__setattr__(self, "exclude_takes", takes)
+        object.__setattr__(self, "exclude_ranges", ranges)
 
     def to_dict(self) -> dict:
         return {

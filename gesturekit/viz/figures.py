@@ -77,6 +77,24 @@ def _xyz(points: np.ndarray) -> dict:
     return {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
 
 
+
+def _motions_and_labels(motions, labels, *, who: str) -> tuple[list[Motion], list[str]]:
+    """One motion or a list of them, with one label each (checked; ``who`` names the caller in errors)."""
+    motions = [motions] if isinstance(motions, Motion) else list(motions)
+    if not motions:
+        raise ConfigError(f"{who} needs at least one motion")
+    for m in motions:
+        if not isinstance(m, Motion):
+            raise ConfigError(f"{who} takes Motion objects, got {type(m).__name__}")
+        if m.n_frames < 1:
+            raise ConfigError(f"{who} got a motion with no frame")
+    if labels is None:
+        labels = [f"motion {i + 1}" for i in range(len(motions))] if len(motions) > 1 else [""]
+    labels = [str(s) for s in labels]
+    if len(labels) != len(motions):
+        raise ConfigError(f"{who} got {len(labels)} labels for {len(motions)} motions")
+    return motions, labels
+
 def skeleton_figure(
     motions: Motion | Sequence[Motion],
     *,
@@ -137,19 +155,7 @@ def skeleton_figure(
         No motion, a motion with no frame, labels of the wrong length, or a
         non-positive ``fps``/``max_frames``.
     """
-    motions = [motions] if isinstance(motions, Motion) else list(motions)
-    if not motions:
-        raise ConfigError("skeleton_figure needs at least one motion")
-    for m in motions:
-        if not isinstance(m, Motion):
-            raise ConfigError(f"skeleton_figure takes Motion objects, got {type(m).__name__}")
-        if m.n_frames < 1:
-            raise ConfigError("skeleton_figure got a motion with no frame")
-    if labels is None:
-        labels = [f"motion {i + 1}" for i in range(len(motions))] if len(motions) > 1 else [""]
-    labels = [str(s) for s in labels]
-    if len(labels) != len(motions):
-        raise ConfigError(f"skeleton_figure got {len(labels)} labels for {len(motions)} motions")
+    motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure")
     if max_frames < 1:
         raise ConfigError(f"max_frames must be at least 1, got {max_frames}")
     grid_fps = float(fps) if fps is not None else max(float(m.fps) for m in motions)
@@ -525,19 +531,7 @@ def wrist_figure(
         whose end is not after its start, or thresholds lacking an attribute
         of a row.
     """
-    motions = [motions] if isinstance(motions, Motion) else list(motions)
-    if not motions:
-        raise ConfigError("wrist_figure needs at least one motion")
-    for m in motions:
-        if not isinstance(m, Motion):
-            raise ConfigError(f"wrist_figure takes Motion objects, got {type(m).__name__}")
-        if m.n_frames < 1:
-            raise ConfigError("wrist_figure got a motion with no frame")
-    if labels is None:
-        labels = [f"motion {i + 1}" for i in range(len(motions))] if len(motions) > 1 else [""]
-    labels = [str(s) for s in labels]
-    if len(labels) != len(motions):
-        raise ConfigError(f"wrist_figure got {len(labels)} labels for {len(motions)} motions")
+    motions, labels = _motions_and_labels(motions, labels, who="wrist_figure")
     bands = _as_bands(bands)
     if thresholds is not None:
         missing = [a for a, _ in WRIST_ROWS if a not in thresholds]
