@@ -60,6 +60,64 @@ def test_audio_onsets_find_clicks():
     np.testing.assert_allclose(onsets, BEATS, atol=0.03)
 
 
+def _pick_peaks_literal(x, pre_max, post_max, pre_avg, post_avg, delta, wait):
+    """The peak-picking rule as written: a frame-by-frame walk, windows clipped to the signal."""
+    n, peaks, i = len(x), [], 0
+    while i < n:
+        lo_m, hi_m = max(0, i - pre_max), min(n, i + post_max)
+        lo_a, hi_a = max(0, i - pre_avg), min(n, i + post_avg)
+        if x[i] == max(x[lo_m:hi_m]) and x[i] >= sum(float(v) for v in x[lo_a:hi_a]) / (hi_a - lo_a) + delta:
+            peaks.append(i)
+            i += wait + 1
+        else:
+            i += 1
+    return peaks
+
+
+@settings(max_examples=200, deadline=None)
+@given(x=st.lists(st.integers(0, 6), min_size=0, max_size=60),
+       pre_max=st.integers(0, 4), post_max=st.integers(1, 4), pre_avg=st.integers(0, 6),
+       post_avg=st.integers(1, 6), delta=st.sampled_from([0.0, 0.25, 0.5, 1.0]), wait=st.integers(0, 5))
+def test_pick_peaks_equals_the_literal_rule(x, pre_max, post_max, pre_avg, post_avg, delta, wait):
+    # small integers in float: many ties and plateaus, and exact means
+    xs = np.asarray(x, dtype=np.float64) / 2
+    got = M.pick_peaks(xs, pre_max=pre_max, post_max=post_max, pre_avg=pre_avg, post_avg=post_avg,
+                       delta=delta, wait=wait)
+    assert got.tolist() == _pick_peaks_literal(xs, pre_max, post_max, pre_avg, post_avg, delta, wait)
+
+
+def test_pick_peaks_rejects_bad_windows():
+    with pytest.raises(ConfigError):
+        M.pick_peaks(np.ones(5), pre_max=1, post_max=0, pre_avg=1, post_avg=1, delta=0.0, wait=0)
+
+
+def test_audio_onsets_equal_librosa_onset_detect_on_real_speech(shared_data, tmp_path):
+    # librosa's own picker is a cached numba gufunc: run it in a child process with a private cache
+    import os
+    import subprocess
+    import sys
+
+    from gesturekit.datasets.audio import load_audio
+
+    files = sorted(shared_data.rglob("*.wav"))
+    assert files, f"no speech in {shared_data}"
+    ours = {f.name: M.audio_onsets(load_audio(f)) for f in files}
+    code = (
+        "import sys, pathlib, numpy as np, librosa\n"
+        "from gesturekit.datasets.audio import load_audio\n"
+        "out = pathlib.Path(sys.argv[1])\n"
+        "for f in map(pathlib.Path, sys.argv[2:]):\n"
+        "    t = librosa.onset.onset_detect(y=load_audio(f), sr=16000, hop_length=160, units='time')\n"
+        "    np.save(out / (f.name + '.npy'), t)\n"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    subprocess.run([sys.executable, "-c", code, str(tmp_path), *map(str, files)], check=True, env=env, timeout=300)
+    for f in files:
+        ref = np.load(tmp_path / (f.name + ".npy"), allow_pickle=False)
+        assert len(ours[f.name]) > 20, f.name
+        np.testing.assert_array_equal(ours[f.name], ref, err_msg=f.name)
+
+
 def test_motion_beats_are_the_speed_minima_of_the_strokes():
     beats = M.motion_beats(_strokes(BEATS, 10.0), fps=FPS)
     inner = beats[(beats > 0.5) & (beats < 9.0)]

@@ -73,13 +73,15 @@ def demo_home(tmp_path_factory):
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_notebook_runs_top_to_bottom(name, demo_home, monkeypatch, capsys):
+def test_notebook_runs_top_to_bottom(name, demo_home, monkeypatch, capsys, tmp_path):
     pytest.importorskip("ipykernel", reason="ipykernel is in requirements-test.txt")
     nbclient = pytest.importorskip("nbclient", reason="nbclient is in requirements-test.txt")
     _, nb = _read(name)
     # the kernel inherits the environment: the notebooks open the demo database of this home
     monkeypatch.setenv("GESTUREKIT_HOME", str(demo_home))
     monkeypatch.setenv("GESTUREKIT_DEMO_MINUTES", str(DEMO_MINUTES))
+    # and a numba cache of its own: compiled code cached by one process can crash another
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
     client = nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
                                      resources={"metadata": {"path": str(NOTEBOOKS)}})
     t0 = time.perf_counter()

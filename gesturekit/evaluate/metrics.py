@@ -10,7 +10,7 @@ Measures
 - **Beat consistency** (:func:`beat_consistency`): motion beats are the local
   minima of the kinetic velocity (mean joint speed, lightly smoothed), as in
   AI Choreographer (Li et al. 2021) and BEAT (Liu et al. 2022); audio beats are
-  the onsets librosa detects. For every audio onset, the distance ``d`` to the
+  the onsets of librosa's onset envelope. For every audio onset, the distance ``d`` to the
   nearest motion beat scores ``exp(-d^2 / (2 sigma^2))``; the measure is the
   mean over the onsets (the averaging of both papers' published code). Higher
   is better, in [0, 1].
@@ -53,6 +53,7 @@ __all__ = [
     "joint_speeds",
     "kinetic_velocity",
     "motion_beats",
+    "pick_peaks",
     "audio_onsets",
     "beat_consistency",
     "beat_consistency_score",
@@ -195,8 +196,65 @@ def motion_beats(
     return idx / _fps(fps)
 
 
+def pick_peaks(x, *, pre_max: int, post_max: int, pre_avg: int, post_avg: int, delta: float,
+               wait: int) -> np.ndarray:
+    """Greedy peak picking of an onset envelope (Boeck et al. 2012, the rule librosa uses).
+
+    Frame ``n`` is a peak when ``x[n] == max(x[n - pre_max : n + post_max])``,
+    ``x[n] >= mean(x[n - pre_avg : n + post_avg]) + delta`` (windows clipped
+    to the signal) and no peak was taken in the ``wait`` frames before it. The
+    first frame only looks ahead.
+
+    Parameters
+    ----------
+    x : array, shape (frames,)
+        Envelope.
+    pre_max, post_max, pre_avg, post_avg, wait : int
+        Window extents and the refractory gap, frames (``post_*`` >= 1).
+    delta : float
+        Margin above the local mean, in units of ``x``.
+
+    Returns
+    -------
+    np.ndarray, shape (peaks,), int64
+        Frame indices, increasing.
+    """
+    x = np.asarray(x).ravel()
+    if not np.issubdtype(x.dtype, np.floating):
+        x = x.astype(np.float64)
+    n = x.size
+    if min(pre_max, pre_avg, wait) < 0 or min(post_max, post_avg) < 1 or delta < 0:
+        raise ConfigError("peak picking needs pre_* >= 0, post_* >= 1, wait >= 0 and delta >= 0")
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    idx = np.arange(n)
+    # windows clipped to [0, n): running max by a sliding view over a -inf-padded signal,
+    # running mean by cumulative sums (vectorised; only the greedy wait rule needs a loop)
+    padded = np.concatenate([np.full(pre_max, -np.inf), x, np.full(post_max, -np.inf)])
+    local_max = np.lib.stride_tricks.sliding_window_view(padded, pre_max + post_max)[:n].max(axis=1)
+    csum = np.concatenate([[0.0], np.cumsum(x, dtype=np.float64)])
+    lo = np.maximum(idx - pre_avg, 0)
+    hi = np.minimum(idx + post_avg, n)
+    local_mean = (csum[hi] - csum[lo]) / (hi - lo)
+    ok = (x == local_max) & (x >= local_mean + delta)
+    # the first frame compares with what lies ahead only (its max window starts at 0 anyway)
+    peaks: list[int] = []
+    next_allowed = 0
+    for i in np.flatnonzero(ok):
+        if i >= next_allowed:
+            peaks.append(int(i))
+            next_allowed = i + wait + 1
+    return np.asarray(peaks, dtype=np.int64)
+
+
 def audio_onsets(audio, *, sr: int = AUDIO_SR, hop_length: int = 160) -> np.ndarray:
-    """Onset times of speech, detected by librosa (spectral flux peaks).
+    """Onset times of speech: peaks of librosa's spectral-flux onset envelope.
+
+    The envelope is ``librosa.onset.onset_strength``, scaled to [0, 1]; the
+    peaks follow librosa's ``onset_detect`` rule and defaults (30 ms before
+    for the maximum, 100 ms around for the mean, margin 0.07, 30 ms wait),
+    picked by :func:`pick_peaks` rather than librosa's cached numba gufunc,
+    whose on-disk cache can crash processes that share it.
 
     Parameters
     ----------
@@ -218,8 +276,17 @@ def audio_onsets(audio, *, sr: int = AUDIO_SR, hop_length: int = 160) -> np.ndar
         raise ConfigError(f"audio must be mono, shape (samples,), got {a.shape}")
     if a.size < 2 * hop_length or not np.any(a):
         return np.zeros(0)
-    return np.asarray(librosa.onset.onset_detect(y=a, sr=int(sr), hop_length=int(hop_length), units="time"),
-                      dtype=np.float64)
+    sr, hop = int(sr), int(hop_length)
+    env = librosa.onset.onset_strength(y=a, sr=sr, hop_length=hop)
+    env = env - env.min()
+    env /= env.max() + np.finfo(env.dtype).tiny
+    if not env.any() or not np.all(np.isfinite(env)):
+        return np.zeros(0)
+    # window lengths exactly as onset_detect derives them (floor, then ceil to int)
+    frames = pick_peaks(env, pre_max=math.ceil(0.03 * sr // hop), post_max=math.ceil(0.00 * sr // hop + 1),
+                        pre_avg=math.ceil(0.10 * sr // hop), post_avg=math.ceil(0.10 * sr // hop + 1),
+                        wait=math.ceil(0.03 * sr // hop), delta=0.07)
+    return librosa.frames_to_time(frames, sr=sr, hop_length=hop).astype(np.float64)
 
 
 def beat_consistency(motion_beat_times, onset_times, *, sigma: float = 0.1) -> float:
