@@ -721,6 +721,53 @@ def _kernels() -> SimpleNamespace:
                 amin[c, j] = best[j]
                 undecided[c, j] = np.isfinite(best[j]) and (count[j] > 1 or np.float64(best[j]) + nq[j] <= err)
 
+    # float32 products in any order (reassociation, FMA, SIMD lanes): the pose error bound allows it
+    @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+    def dot32(p, q):
+        acc = np.float32(0.0)
+        for j in range(p.shape[0]):
+            acc += p[j] * q[j]
+        return acc
+
+    @numba.njit(cache=True, nogil=True)
+    def scan_one(P3, q, bias, nq, npmax, c_err, tiny, G, s0, amin, undecided, F3, na, fq, nb, e, av, ae):
+        nc, T, _ = P3.shape
+        inf = np.float32(np.inf)
+        for c in range(nc):
+            best = inf
+            for s in range(T):
+                b = bias[c, s]
+                if b == inf:  # not admissible: its row is never read
+                    G[c, s] = inf
+                    continue
+                a = b + np.float32(-2.0) * dot32(P3[c, s], q)  # exact scaling by -2, then one float32 add
+                G[c, s] = a
+                best = min(best, a)
+            err = c_err * (npmax[c] + nq) + tiny
+            t64 = np.float64(best) + 2.0 * err
+            t32 = np.float32(t64)
+            if t32 < t64:  # round the float32 threshold up
+                t32 = np.nextafter(t32, inf)
+            count = 0
+            arg = 0
+            for s in range(T - 1, -1, -1):  # backwards: arg ends at the first minimum
+                a = G[c, s]
+                count += a <= t32
+                if a == best:
+                    arg = s
+            s0[c] = arg
+            amin[c] = best
+            undecided[c] = np.isfinite(best) and (count > 1 or np.float64(best) + nq <= err)
+            # the audio estimate of that start, as audio_cos computes it (while the clip is at hand)
+            if best < inf:
+                d = na[c, arg] * nb
+                if d == 0.0:
+                    av[c] = 1.0
+                    ae[c] = 0.0
+                else:
+                    av[c] = 1.0 - np.float64(dot32(F3[c, arg], fq)) / np.sqrt(d)
+                    ae[c] = e
+
     # float32 products in any order (reassociation, FMA): the audio error bound allows it
     @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
     def audio_cos(F2, na, rows, fq, nb, e, av, ae):
@@ -741,7 +788,7 @@ def _kernels() -> SimpleNamespace:
                         av[b, i] = 1.0 - np.float64(acc) / np.sqrt(d)
                         ae[b, i] = e
 
-    return SimpleNamespace(reduce_many=reduce_many, audio_cos=audio_cos)
+    return SimpleNamespace(reduce_many=reduce_many, scan_one=scan_one, audio_cos=audio_cos)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -771,6 +818,8 @@ class SearchIndex:
         self.P, self.F, self.valid = _validate_db(P, F, valid)
         M, T, D = self.P.shape
         self.shape = (M, T, D, self.F.shape[2])
+        self._P3 = np.asarray(self.P)  # plain views (np.memmap is a subclass the kernels do not take)
+        self._F3 = np.asarray(self.F)
         self._P2 = self.P.reshape(M * T, D)
         self._F2 = self.F.reshape(M * T, -1)
         self._pose_c = _pose_err_factor(D)
@@ -779,6 +828,7 @@ class SearchIndex:
         self._np32 = np64.astype(np.float32)
         self._npmax = np64.reshape(M, T).max(axis=1)
         self._na64 = _row_sqnorms(self._F2)
+        self._na2 = self._na64.reshape(M, T)
         cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
         self._workers = min(cpus, 8)
 
@@ -819,7 +869,7 @@ class SearchIndex:
 
     # -- one scan of the database for several queries ------------------------------------------
 
-    def _scan(self, Q, biases, scratch=None, pool=None):
+    def _scan(self, Q, biases, fq, scratch=None, pool=None):
         """Per query and clip: the float32 argmin, min, and the rows needing an exact look.
 
         Parameters
@@ -828,6 +878,9 @@ class SearchIndex:
             Query pose features.
         biases : list of B arrays, shape (M T,), float32
             ``|p|^2`` where the window is admissible for that query, else +inf.
+        fq : np.ndarray, shape (B, A), float32
+            The queries' audio features. With a single query the scan also estimates the
+            cosine distance of each clip's start ``s0`` (see ``audio`` below).
         scratch : dict, optional
             Keeps a single query's product buffer between steps (fresh pages cost page faults).
         pool : ThreadPoolExecutor, optional
@@ -844,6 +897,9 @@ class SearchIndex:
         complex : list of B (clips, rows) pairs
             Clips whose minimum is not decisive; ``rows[i]`` holds the estimates of all T
             starts of clip ``clips[i]``.
+        audio : (av, ae) of (M,) float64, or None
+            With a single query: the estimated cosine distance of each clip's ``s0`` and its error
+            bound (as :func:`_kernels`' ``audio_cos``; NaN where no start is admissible).
         """
         M, T, D, _ = self.shape
         B = Q.shape[0]
@@ -869,15 +925,36 @@ class SearchIndex:
         product = _matrix_product(B)
         s0 = np.empty((M, B), np.int64)
         amin = np.empty((M, B), np.float32)
+        audio = None
+        if B == 1:
+            f1 = np.ascontiguousarray(fq[0], dtype=np.float32)
+            f64 = f1.astype(np.float64)
+            nb = float(f64 @ f64)
+            audio = (np.full(M, np.nan), np.zeros(M))
 
         def work(c0, c1, G):
             """Product and reductions for clips c0 .. c1 - 1 into ``G`` ((c1 - c0) T, B);
             returns the clips whose minimum is not decisive, as (clips, queries, rows)."""
             nc = c1 - c0
             r0, r1 = c0 * T, c1 * T
+            found = []
+            if B == 1:  # one fused pass: products of admissible rows only, and the reductions
+                G2 = G.reshape(nc, T)
+                s0c = np.empty(nc, np.int64)
+                amc = np.empty(nc, np.float32)
+                und = np.empty(nc, bool)
+                bias2 = biases[0][r0:r1].reshape(nc, T)
+                _kernels().scan_one(self._P3[c0:c1], Qp[0], bias2, float(nq[0]), self._npmax[c0:c1],
+                                    self._pose_c, _TINY, G2, s0c, amc, und, self._F3[c0:c1], self._na2[c0:c1],
+                                    f1, nb, self._audio_e, audio[0][c0:c1], audio[1][c0:c1])
+                s0[c0:c1, 0] = s0c
+                amin[c0:c1, 0] = amc
+                ci = np.flatnonzero(und)
+                if ci.size:
+                    found.append((ci + c0, np.zeros(ci.size, np.int64), G2[ci]))
+                return found
             product(self._P2[r0:r1], W, G)
             G3 = G.reshape(nc, T, B)
-            found = []
             for bias, j0, j1 in ranges:
                 bias2 = bias[r0:r1].reshape(nc, T)
                 s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
@@ -919,7 +996,7 @@ class SearchIndex:
         inv = np.empty(B, np.int64)
         inv[perm] = np.arange(B)
         s0, amin, nq = s0[:, inv], amin[:, inv], nq[inv]
-        return s0.T, amin.T, nq, complex_
+        return s0.T, amin.T, nq, complex_, audio
 
     # -- exact decisions for one query ----------------------------------------------------------
 
@@ -1181,22 +1258,38 @@ class SearchIndex:
         """
         run = map if pool is None or len(active) < 4 else pool.map
         biases = [self._bias(cache, keys[b]) for b in active]
-        s0, amin, nq, complex_ = self._scan(poses[active], biases, cache.setdefault("scratch", {}), pool)
+        fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
+        s0, amin, nq, complex_, audio = self._scan(poses[active], biases, fq, cache.setdefault("scratch", {}), pool)
         svs = list(
             run(lambda j: self._survivors(s0[j], amin[j], nq[j], complex_[j], poses[active[j]]), range(len(active)))
         )
-        fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
         T = self.shape[1]
-        rows = np.full((len(active), self.shape[0]), -1, np.int64)
-        for j, sv in enumerate(svs):
-            if sv is not None:
-                rows[j, : sv.clips.size] = sv.clips * T + sv.start
         fq64 = fq.astype(np.float64)
         nb = np.einsum("ij,ij->i", fq64, fq64)
-        av = np.empty(rows.shape)
-        ae = np.empty(rows.shape)
-        # all queries together: the queries' rows of one clip are read together
-        _kernels().audio_cos(self._F2, self._na64, rows, fq, nb, self._audio_e, av, ae)
+        if audio is not None:  # one query: the scan estimated the audio of each clip's s0
+            sv = svs[0]
+            n = 0 if sv is None else sv.clips.size
+            av = np.empty((1, max(n, 1)))
+            ae = np.empty((1, max(n, 1)))
+            if n:
+                av[0, :n] = audio[0][sv.clips]
+                ae[0, :n] = audio[1][sv.clips]
+                moved = np.flatnonzero(sv.start != s0[0, sv.clips])  # settled on another start
+                if moved.size:
+                    rows = (sv.clips[moved] * T + sv.start[moved])[None, :]
+                    mv, me = np.empty(rows.shape), np.empty(rows.shape)
+                    _kernels().audio_cos(self._F2, self._na64, rows, fq, nb, self._audio_e, mv, me)
+                    av[0, moved] = mv[0]
+                    ae[0, moved] = me[0]
+        else:
+            rows = np.full((len(active), self.shape[0]), -1, np.int64)
+            for j, sv in enumerate(svs):
+                if sv is not None:
+                    rows[j, : sv.clips.size] = sv.clips * T + sv.start
+            av = np.empty(rows.shape)
+            ae = np.empty(rows.shape)
+            # all queries together: the queries' rows of one clip are read together
+            _kernels().audio_cos(self._F2, self._na64, rows, fq, nb, self._audio_e, av, ae)
 
         def rank(j):
             sv, b = svs[j], active[j]
