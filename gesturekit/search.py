@@ -526,18 +526,9 @@ def _rank_groups(v: np.ndarray, err: np.ndarray):
     # Equal estimates always share a group (their intervals overlap), and groups that
     # matter are re-sorted exactly, so the initial sort need not be stable.
     order = np.argsort(v)
-    vs, es = v[order], err[order]
-    hi_v = np.maximum.accumulate(vs + es)
-    lo_v = np.minimum.accumulate((vs - es)[::-1])[::-1]
-    split = np.ones(n, bool)
-    split[1:] = hi_v[:-1] < lo_v[1:]  # proven order between sorted neighbours
-    group = np.cumsum(split) - 1
-    first = np.flatnonzero(split)
-    last = np.append(first[1:] - 1, n - 1)
     lo = np.empty(n, np.int64)
     hi = np.empty(n, np.int64)
-    lo[order] = first[group]
-    hi[order] = last[group]
+    _kernels().group_bounds(v, err, order, lo, hi)
     return order, lo, hi
 
 
@@ -675,11 +666,18 @@ def _reduce_chunk(G3, bias, nq, npmax, c_err):
 
 @functools.cache
 def _kernels() -> SimpleNamespace:
-    """The two compiled loops of the search (numba, a dependency of librosa), built on first use.
+    """The compiled loops of the search (numba, a dependency of librosa), built on first use.
 
+    ``scan_one(P3, q, bias, nq, npmax, c_err, tiny, G, s0, amin, undecided, F3, na2, fq, nb, e, av, ae)``:
+    the scan of one query in one pass per clip: float32 estimates ``G`` of the admissible
+    starts only (+inf elsewhere, their rows unread), the reductions of :func:`_reduce_chunk`,
+    and the audio estimate ``av``, ``ae`` of the chosen start ``s0``.
     ``reduce_many(G3, bias, nq, npmax, c_err, tiny, s0, amin, undecided)``:
     :func:`_reduce_chunk` for several queries in one pass over each clip's (T, queries)
     block (numpy's reductions along the strided axis are slow).
+    ``audio_at(F3, na2, s0, amin, fq, nb, e, av, ae)``: the audio estimates of each clip's
+    ``s0`` for several queries (one clip's rows serve all of them).
+    ``group_bounds(v, err, order, lo, hi)``: the groups of :func:`_rank_groups`.
     ``audio_cos(F2, na, rows, fq, nb, e, av, ae)``: estimated cosine distances
     ``av[b, i]`` of the survivors ``F2[rows[b, i]]`` of every query to ``fq[b]``
     (float32 products, float64 norms ``na``, ``nb``), with error bounds ``ae`` (``e``;
@@ -768,6 +766,44 @@ def _kernels() -> SimpleNamespace:
                     av[c] = 1.0 - np.float64(dot32(F3[c, arg], fq)) / np.sqrt(d)
                     ae[c] = e
 
+    @numba.njit(cache=True, nogil=True)
+    def group_bounds(v, err, order, lo, hi):
+        # sorted neighbours i-1, i are in proven order when the largest upper end up to i-1
+        # lies below the smallest lower end from i on; a group is a run without such a split
+        n = order.size
+        low_from = np.empty(n)
+        m = np.inf
+        for i in range(n - 1, -1, -1):
+            k = order[i]
+            m = min(m, v[k] - err[k])
+            low_from[i] = m
+        start = 0
+        top = v[order[0]] + err[order[0]]
+        for i in range(1, n + 1):
+            if i == n or top < low_from[i]:
+                for r in range(start, i):
+                    lo[order[r]] = start
+                    hi[order[r]] = i - 1
+                start = i
+            if i < n:
+                k = order[i]
+                top = max(top, v[k] + err[k])
+
+    @numba.njit(cache=True, nogil=True)
+    def audio_at(F3, na2, s0, amin, fq, nb, e, av, ae):
+        nc, nq = s0.shape
+        for c in range(nc):  # one clip's rows serve all its queries while they are in cache
+            for j in range(nq):
+                if amin[c, j] < np.inf:
+                    s = s0[c, j]
+                    d = na2[c, s] * nb[j]
+                    if d == 0.0:  # a zero vector: the definition's value, exactly
+                        av[c, j] = 1.0
+                        ae[c, j] = 0.0
+                    else:
+                        av[c, j] = 1.0 - np.float64(dot32(F3[c, s], fq[j])) / np.sqrt(d)
+                        ae[c, j] = e
+
     # float32 products in any order (reassociation, FMA): the audio error bound allows it
     @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
     def audio_cos(F2, na, rows, fq, nb, e, av, ae):
@@ -788,7 +824,8 @@ def _kernels() -> SimpleNamespace:
                         av[b, i] = 1.0 - np.float64(acc) / np.sqrt(d)
                         ae[b, i] = e
 
-    return SimpleNamespace(reduce_many=reduce_many, scan_one=scan_one, audio_cos=audio_cos)
+    return SimpleNamespace(reduce_many=reduce_many, scan_one=scan_one, audio_at=audio_at, audio_cos=audio_cos,
+                           group_bounds=group_bounds)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -879,8 +916,7 @@ class SearchIndex:
         biases : list of B arrays, shape (M T,), float32
             ``|p|^2`` where the window is admissible for that query, else +inf.
         fq : np.ndarray, shape (B, A), float32
-            The queries' audio features. With a single query the scan also estimates the
-            cosine distance of each clip's start ``s0`` (see ``audio`` below).
+            The queries' audio features (see ``audio`` below).
         scratch : dict, optional
             Keeps a single query's product buffer between steps (fresh pages cost page faults).
         pool : ThreadPoolExecutor, optional
@@ -925,12 +961,12 @@ class SearchIndex:
         product = _matrix_product(B)
         s0 = np.empty((M, B), np.int64)
         amin = np.empty((M, B), np.float32)
-        audio = None
-        if B == 1:
-            f1 = np.ascontiguousarray(fq[0], dtype=np.float32)
-            f64 = f1.astype(np.float64)
-            nb = float(f64 @ f64)
-            audio = (np.full(M, np.nan), np.zeros(M))
+        # the audio estimate of each clip's s0 per query, made while the clip is at hand
+        fqp = np.ascontiguousarray(np.asarray(fq, np.float32)[perm])
+        f64 = fqp.astype(np.float64)
+        nbp = np.einsum("ij,ij->i", f64, f64)
+        av = np.full((M, B), np.nan)
+        ae = np.zeros((M, B))
 
         def work(c0, c1, G):
             """Product and reductions for clips c0 .. c1 - 1 into ``G`` ((c1 - c0) T, B);
@@ -946,7 +982,7 @@ class SearchIndex:
                 bias2 = biases[0][r0:r1].reshape(nc, T)
                 _kernels().scan_one(self._P3[c0:c1], Qp[0], bias2, float(nq[0]), self._npmax[c0:c1],
                                     self._pose_c, _TINY, G2, s0c, amc, und, self._F3[c0:c1], self._na2[c0:c1],
-                                    f1, nb, self._audio_e, audio[0][c0:c1], audio[1][c0:c1])
+                                    fqp[0], float(nbp[0]), self._audio_e, av[c0:c1, 0], ae[c0:c1, 0])
                 s0[c0:c1, 0] = s0c
                 amin[c0:c1, 0] = amc
                 ci = np.flatnonzero(und)
@@ -960,6 +996,8 @@ class SearchIndex:
                 s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
                 s0[c0:c1, j0:j1] = s0c
                 amin[c0:c1, j0:j1] = amc
+                _kernels().audio_at(self._F3[c0:c1], self._na2[c0:c1], s0c, amc, fqp[j0:j1], nbp[j0:j1],
+                                    self._audio_e, av[c0:c1, j0:j1], ae[c0:c1, j0:j1])
                 ci, bj = np.nonzero(und)
                 if ci.size:
                     rows = G3[ci, :, bj + j0]
@@ -996,7 +1034,7 @@ class SearchIndex:
         inv = np.empty(B, np.int64)
         inv[perm] = np.arange(B)
         s0, amin, nq = s0[:, inv], amin[:, inv], nq[inv]
-        return s0.T, amin.T, nq, complex_, audio
+        return s0.T, amin.T, nq, complex_, (av[:, inv].T, ae[:, inv].T)
 
     # -- exact decisions for one query ----------------------------------------------------------
 
@@ -1266,30 +1304,25 @@ class SearchIndex:
         T = self.shape[1]
         fq64 = fq.astype(np.float64)
         nb = np.einsum("ij,ij->i", fq64, fq64)
-        if audio is not None:  # one query: the scan estimated the audio of each clip's s0
-            sv = svs[0]
-            n = 0 if sv is None else sv.clips.size
-            av = np.empty((1, max(n, 1)))
-            ae = np.empty((1, max(n, 1)))
-            if n:
-                av[0, :n] = audio[0][sv.clips]
-                ae[0, :n] = audio[1][sv.clips]
-                moved = np.flatnonzero(sv.start != s0[0, sv.clips])  # settled on another start
-                if moved.size:
-                    rows = (sv.clips[moved] * T + sv.start[moved])[None, :]
-                    mv, me = np.empty(rows.shape), np.empty(rows.shape)
-                    _kernels().audio_cos(self._F2, self._na64, rows, fq, nb, self._audio_e, mv, me)
-                    av[0, moved] = mv[0]
-                    ae[0, moved] = me[0]
-        else:
-            rows = np.full((len(active), self.shape[0]), -1, np.int64)
-            for j, sv in enumerate(svs):
-                if sv is not None:
-                    rows[j, : sv.clips.size] = sv.clips * T + sv.start
-            av = np.empty(rows.shape)
-            ae = np.empty(rows.shape)
-            # all queries together: the queries' rows of one clip are read together
-            _kernels().audio_cos(self._F2, self._na64, rows, fq, nb, self._audio_e, av, ae)
+        # the scan estimated the audio of each clip's s0; survivors settled on another start
+        # (exact resolution of near-ties) get theirs here
+        n_max = max([1] + [sv.clips.size for sv in svs if sv is not None])
+        av = np.empty((len(active), n_max))
+        ae = np.empty((len(active), n_max))
+        rows = np.full((len(active), n_max), -1, np.int64)
+        for j, sv in enumerate(svs):
+            if sv is not None:
+                n = sv.clips.size
+                av[j, :n] = audio[0][j, sv.clips]
+                ae[j, :n] = audio[1][j, sv.clips]
+                moved = np.flatnonzero(sv.start != s0[j, sv.clips])
+                rows[j, moved] = sv.clips[moved] * T + sv.start[moved]
+        if (rows >= 0).any():
+            mv, me = np.empty(rows.shape), np.empty(rows.shape)
+            _kernels().audio_cos(self._F2, self._na64, rows, fq, nb, self._audio_e, mv, me)
+            hit = rows >= 0
+            av[hit] = mv[hit]
+            ae[hit] = me[hit]
 
         def rank(j):
             sv, b = svs[j], active[j]
