@@ -10,7 +10,8 @@ configuration) with one scan of the database per step.
 
 Exactness. The result equals :func:`gesturekit.search_reference.search_reference`
 decision for decision. Each step scans the database once in float32
-(``||p||^2 - 2 p.q`` by a matrix product), keeps per clip the starts whose
+(``||p||^2 - 2 p.q``: for one query a compiled pass that reads only the rows of
+admissible starts, for several a matrix product), keeps per clip the starts whose
 float32 value lies within a proven error bound of the clip's minimum, and
 decides among those with the exact float64 definitions of
 :mod:`gesturekit.search_reference`. The same bound-and-re-check is applied to
