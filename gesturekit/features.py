@@ -132,6 +132,67 @@ def frame_centres(n_frames: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> np.nd
     return (2 * t * sr + fps) // (2 * fps)
 
 
+# Slaney's mel scale: linear below 1 kHz, logarithmic above (constants as librosa writes them,
+# so that the filters come out bit-identical)
+_MEL_F_SP = 200.0 / 3
+_MEL_MIN_LOG_HZ = 1000.0
+_MEL_MIN_LOG_MEL = (_MEL_MIN_LOG_HZ - 0.0) / _MEL_F_SP
+_MEL_LOGSTEP = np.log(6.4) / 27.0
+
+
+def _hz_to_mel(hz) -> np.ndarray:
+    """Slaney mel of frequencies ``hz`` (array, Hz)."""
+    hz = np.atleast_1d(np.asarray(hz, dtype=np.float64))
+    mel = (hz - 0.0) / _MEL_F_SP
+    log = hz >= _MEL_MIN_LOG_HZ
+    mel[log] = _MEL_MIN_LOG_MEL + np.log(hz[log] / _MEL_MIN_LOG_HZ) / _MEL_LOGSTEP
+    return mel
+
+
+def _mel_to_hz(mel) -> np.ndarray:
+    """Inverse of :func:`_hz_to_mel`."""
+    mel = np.atleast_1d(np.asarray(mel, dtype=np.float64))
+    hz = 0.0 + _MEL_F_SP * mel
+    log = mel >= _MEL_MIN_LOG_MEL
+    hz[log] = _MEL_MIN_LOG_HZ * np.exp(_MEL_LOGSTEP * (mel[log] - _MEL_MIN_LOG_MEL))
+    return hz
+
+
+def mel_filterbank(*, sr: int, n_fft: int, n_mels: int, fmin: float = 0.0, fmax: float | None = None) -> np.ndarray:
+    """Triangular mel filters on Slaney's scale with Slaney's area normalisation.
+
+    The same weights as ``librosa.filters.mel`` with its defaults (bit for bit,
+    tested), computed here because importing librosa costs seconds.
+
+    Parameters
+    ----------
+    sr : int
+        Sample rate, Hz.
+    n_fft : int
+        FFT length, samples.
+    n_mels : int
+        Number of filters.
+    fmin, fmax : float
+        Lowest and highest filter edge, Hz (``fmax`` default ``sr / 2``).
+
+    Returns
+    -------
+    np.ndarray, shape (n_mels, 1 + n_fft // 2), float32
+    """
+    fmax = sr / 2 if fmax is None else fmax
+    fft_hz = np.fft.rfftfreq(n=n_fft, d=1.0 / sr)
+    edges = _mel_to_hz(np.linspace(_hz_to_mel(fmin)[0], _hz_to_mel(fmax)[0], n_mels + 2))
+    widths = np.diff(edges)
+    ramps = np.subtract.outer(edges, fft_hz)
+    weights = np.zeros((n_mels, 1 + n_fft // 2), dtype=np.float32)
+    for i in range(n_mels):
+        # rising and falling edge of filter i, clipped at zero (rounded to float32, then scaled,
+        # in that order: the order of librosa's computation, so the weights are identical)
+        weights[i] = np.maximum(0, np.minimum(-ramps[i] / widths[i], ramps[i + 2] / widths[i + 1]))
+    weights *= (2.0 / (edges[2 : n_mels + 2] - edges[:n_mels]))[:, None]
+    return weights
+
+
 def audio_frame_features(
     audio: np.ndarray,
     *,
@@ -159,8 +220,7 @@ def audio_frame_features(
         spectrum in dB), column 13 is ``log(mean(w * x**2) / mean(w) + 1e-10)``
         over the Hann window ``w`` of the frame.
     """
-    import librosa  # heavy imports kept local: the layout is usable without them
-    import scipy.fft
+    import scipy.fft  # kept local: the layout is usable without it
 
     audio = np.asarray(audio, dtype=np.float32)
     if audio.ndim != 1:
@@ -171,9 +231,7 @@ def audio_frame_features(
     half = n_fft // 2
     centres = frame_centres(n_frames, sr=layout.sr, fps=layout.fps)
     window = np.hanning(n_fft + 1)[:-1].astype(np.float32)  # periodic Hann
-    mel = librosa.filters.mel(
-        sr=layout.sr, n_fft=n_fft, n_mels=layout.n_mels, fmin=0.0, fmax=layout.sr / 2
-    ).astype(np.float32)
+    mel = mel_filterbank(sr=layout.sr, n_fft=n_fft, n_mels=layout.n_mels, fmin=0.0, fmax=layout.sr / 2)
     out = np.empty((n_frames, layout.frame_dim), dtype=np.float32)
     offsets = np.arange(-half, n_fft - half, dtype=np.int64)
     n = len(audio)
@@ -185,8 +243,10 @@ def audio_frame_features(
         frames = np.where(inside, audio[np.clip(idx, 0, max(n - 1, 0))] if n else 0.0, 0.0).astype(np.float32)
         spec = scipy.fft.rfft(frames * window, axis=1)  # complex64 for float32 input
         power = spec.real**2 + spec.imag**2
-        mel_db = librosa.power_to_db(power @ mel.T, ref=1.0, amin=1e-10, top_db=None)
-        out[a:b, : layout.n_mfcc] = librosa.feature.mfcc(S=mel_db.T, n_mfcc=layout.n_mfcc).T
+        # power in dB (floor 1e-10, reference 1) and its orthonormal DCT-II: librosa's
+        # power_to_db and mfcc with their defaults, operation for operation
+        mel_db = 10.0 * np.log10(np.maximum(1e-10, power @ mel.T))
+        out[a:b, : layout.n_mfcc] = scipy.fft.dct(mel_db, type=2, norm="ortho", axis=1)[:, : layout.n_mfcc]
         energy = (frames**2 * window).sum(axis=1, dtype=np.float64) / window.sum(dtype=np.float64)
         out[a:b, layout.n_mfcc] = np.log(energy + 1e-10)
     return out

@@ -318,7 +318,7 @@ def test_loading_is_channel_average_then_soxr_resampling(tmp_path, rate, channel
     audio, info = load_audio_with_info(path)
     expected = librosa.resample(x.mean(axis=1), orig_sr=rate, target_sr=SR, res_type="soxr_hq")
     assert len(audio) == math.ceil((rate + 17) * SR / rate) == len(expected)
-    np.testing.assert_allclose(audio, expected, atol=1e-6)
+    np.testing.assert_array_equal(audio, expected)  # our soxr call is librosa's, without importing librosa
     assert (info.sample_rate, info.channels, info.n_samples) == (rate, channels, rate + 17)
 
 

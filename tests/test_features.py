@@ -22,6 +22,7 @@ from gesturekit.features import (
     audio_frame_features,
     cgan_audio_features,
     frame_centres,
+    mel_filterbank,
     n_audio_frames,
     pose_features,
     stack_audio_features,
@@ -136,6 +137,31 @@ def literal_frame_features(audio: np.ndarray, t: int) -> np.ndarray:
     mfcc = scipy.fft.dct(mel_db, type=2, norm="ortho")[: LAYOUT.n_mfcc]
     energy = np.log(np.sum(window * segment**2) / np.sum(window) + 1e-10)
     return np.concatenate([mfcc, [energy]])
+
+
+@pytest.mark.parametrize("sr, n_fft, n_mels", [(SR, LAYOUT.n_fft, LAYOUT.n_mels), (22050, 2048, 128), (16000, 512, 64),
+                                                (8000, 256, 20), (44100, 1024, 80)])
+def test_mel_filterbank_is_librosas_bit_for_bit(sr, n_fft, n_mels):
+    ours = mel_filterbank(sr=sr, n_fft=n_fft, n_mels=n_mels)
+    theirs = librosa.filters.mel(sr=sr, n_fft=n_fft, n_mels=n_mels, fmin=0.0, fmax=sr / 2)
+    assert ours.dtype == theirs.dtype == np.float32
+    np.testing.assert_array_equal(ours, theirs)
+
+
+def test_mfccs_are_librosas_power_to_db_and_mfcc_bit_for_bit():
+    """Our dB and DCT steps are librosa's, operation for operation (librosa is not imported at run time)."""
+    rng = np.random.default_rng(9)
+    audio = (0.2 * rng.standard_normal(3 * SR) * np.abs(np.sin(np.linspace(0, 9, 3 * SR)))).astype(np.float32)
+    audio[SR : SR + 4000] = 0.0  # silence: the 1e-10 floor
+    m = audio_frame_features(audio)
+    n_fft, half = LAYOUT.n_fft, LAYOUT.n_fft // 2
+    centres = frame_centres(m.shape[0], sr=SR, fps=FPS)
+    idx = centres[:, None] + np.arange(-half, n_fft - half)[None, :]
+    frames = np.where((idx >= 0) & (idx < audio.size), audio[np.clip(idx, 0, audio.size - 1)], 0.0).astype(np.float32)
+    spec = scipy.fft.rfft(frames * np.hanning(n_fft + 1)[:-1].astype(np.float32), axis=1)
+    mel = librosa.filters.mel(sr=SR, n_fft=n_fft, n_mels=LAYOUT.n_mels, fmin=0.0, fmax=SR / 2)
+    mel_db = librosa.power_to_db((spec.real**2 + spec.imag**2) @ mel.T, ref=1.0, amin=1e-10, top_db=None)
+    np.testing.assert_array_equal(m[:, : LAYOUT.n_mfcc], librosa.feature.mfcc(S=mel_db.T, n_mfcc=LAYOUT.n_mfcc).T)
 
 
 def test_audio_frame_features_match_a_literal_computation():

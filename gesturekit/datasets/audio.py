@@ -6,7 +6,8 @@
 Only when soundfile cannot read the format at all does it fall back to
 audioread, then to the ffmpeg binary shipped with ``imageio-ffmpeg`` (for
 MP4/M4A, WebM, WMA, ...). Channels are averaged to mono and the result is
-resampled with ``librosa.resample(res_type="soxr_hq")``.
+resampled with soxr's high-quality filter (:func:`resample`, equal to
+``librosa.resample(res_type="soxr_hq")``).
 
 Every problem a user can cause is an :class:`~gesturekit.errors.AudioFileError`
 whose message names the file: missing, empty, not audio, truncated, damaged,
@@ -28,7 +29,7 @@ import numpy as np
 from ..errors import AudioFileError, ConfigError, GestureKitWarning
 from ..motion import AUDIO_SR
 
-__all__ = ["AudioInfo", "load_audio", "load_audio_with_info", "SILENCE_PEAK"]
+__all__ = ["AudioInfo", "load_audio", "load_audio_with_info", "resample", "SILENCE_PEAK"]
 
 #: Peak amplitude (full scale = 1) at or below which audio counts as silent: -80 dBFS.
 SILENCE_PEAK = 1e-4
@@ -191,12 +192,35 @@ def load_audio_with_info(
             GestureKitWarning(f"{path}: the audio is silent (peak level at or below -80 dBFS)"), stacklevel=2
         )
     if info.sample_rate != sr:
-        import librosa  # heavy import, needed only when resampling
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            mono = librosa.resample(mono, orig_sr=info.sample_rate, target_sr=int(sr), res_type="soxr_hq")
+        mono = resample(mono, info.sample_rate, int(sr))
     return np.ascontiguousarray(mono, dtype=np.float32), info
+
+
+def resample(x: np.ndarray, orig_sr: int, target_sr: int) -> np.ndarray:
+    """Resample mono audio with soxr's high-quality filter.
+
+    The result equals ``librosa.resample(x, orig_sr=..., target_sr=..., res_type="soxr_hq")``
+    (tested): soxr's output cut or zero-padded to ``ceil(len(x) * target_sr / orig_sr)``
+    samples, without importing librosa (seconds).
+
+    Parameters
+    ----------
+    x : np.ndarray, shape (samples,), float32
+    orig_sr, target_sr : int
+        Sample rates, Hz.
+
+    Returns
+    -------
+    np.ndarray, shape (ceil(samples * target_sr / orig_sr),), float32
+    """
+    import soxr  # a dependency of librosa
+
+    x = np.asarray(x, dtype=np.float32)
+    n = int(np.ceil(x.shape[0] * (float(target_sr) / orig_sr)))
+    y = soxr.resample(x, orig_sr, target_sr, quality="soxr_hq")
+    out = np.zeros(n, dtype=np.float32)
+    out[: min(n, y.shape[0])] = y[:n]
+    return out
 
 
 def _check_file(path: Path) -> str | None:
