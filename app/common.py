@@ -593,9 +593,13 @@ def _warm_up(path: str, stamp: int) -> threading.Thread:
 
     db = _open(path, stamp)
     noise = np.random.default_rng(0).normal(0.0, 0.1, 2 * AUDIO_SR).astype(np.float32)
+
+    def warm() -> None:
+        synthesize(noise, db=db, config=SynthesisConfig(topk=1))
+        import gesturekit.viz.figures  # noqa: F401  (plotly's figure classes: a second to import)
+
     # a failure here is left to the server log: the user's own run reports it on the page
-    thread = threading.Thread(target=synthesize, args=(noise,), kwargs={"db": db, "config": SynthesisConfig(topk=1)},
-                              name="gesturekit-warm-up", daemon=True)
+    thread = threading.Thread(target=warm, name="gesturekit-warm-up", daemon=True)
     thread.start()
     return thread
 
