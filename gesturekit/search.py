@@ -405,15 +405,7 @@ def _validate_db(P, F, valid):
         raise ConfigError(f"audio features must have shape ({M}, {T}, dims) like the pose features, got {F.shape}")
     if valid.shape != (M, T) or valid.dtype != bool:
         raise ConfigError(f"valid must be a bool array of shape ({M}, {T}), got {valid.dtype} {valid.shape}")
-    for name, x in (("pose", P), ("audio", F)):
-        flat = x.reshape(M * T, -1)
-        step = max(1, (1 << 22) // flat.shape[1])
-        for a in range(0, flat.shape[0], step):
-            chunk = flat[a : a + step]
-            if not np.isfinite(chunk).all():
-                raise ConfigError(f"{name} features contain NaN or infinite values")
-            if chunk.size and np.abs(chunk).max() > _MAX_ABS:
-                raise ConfigError(f"{name} features exceed {_MAX_ABS:g} in magnitude (are they z-scored?)")
+    # finite values and magnitudes are checked by SearchIndex while it computes the norms
     return P, F, valid
 
 
@@ -475,6 +467,9 @@ def _validate_call(shape, query, config, masks, step_mask, exclude):
 def _validate(P, F, valid, query, config, masks, step_mask, exclude):
     """Shared input checks of the fast and the reference search; returns the normalised inputs."""
     P, F, valid = _validate_db(P, F, valid)
+    M, T = valid.shape
+    _checked_sqnorms(P.reshape(M * T, -1), "pose")  # the values, as SearchIndex checks them
+    _checked_sqnorms(F.reshape(M * T, -1), "audio")
     call = _validate_call((*P.shape, F.shape[2]), query, config, masks, step_mask, exclude)
     call.P, call.F, call.valid = P, F, valid
     return call
@@ -484,13 +479,27 @@ def _validate(P, F, valid, query, config, masks, step_mask, exclude):
 # helpers of the fast search
 
 
-def _row_sqnorms(x2: np.ndarray) -> np.ndarray:
-    """Squared norms of the rows of a float32 (rows, dims) matrix, float64, in chunks."""
+def _checked_sqnorms(x2: np.ndarray, name: str, workers: int = 1) -> np.ndarray:
+    """Squared norms (float64) of the rows of a float32 (rows, dims) matrix, read once.
+
+    Raises
+    ------
+    ConfigError
+        NaN or infinite values, or magnitudes above ``_MAX_ABS``.
+    """
     out = np.empty(x2.shape[0])
-    step = max(1, (1 << 20) // x2.shape[1])
-    for a in range(0, x2.shape[0], step):
-        c = x2[a : a + step].astype(np.float64)
-        out[a : a + step] = np.einsum("ij,ij->i", c, c)
+    kernel = _kernels().row_stats
+    cuts = np.linspace(0, x2.shape[0], max(1, min(workers, x2.shape[0])) + 1).astype(int)
+    parts = list(zip(cuts[:-1], cuts[1:]))
+    if len(parts) > 1:
+        with ThreadPoolExecutor(len(parts)) as pool:
+            stats = list(pool.map(lambda ab: kernel(x2[ab[0] : ab[1]], out[ab[0] : ab[1]]), parts))
+    else:
+        stats = [kernel(x2, out)]
+    if not all(ok for ok, _ in stats):
+        raise ConfigError(f"{name} features contain NaN or infinite values")
+    if max(top for _, top in stats) > _MAX_ABS:
+        raise ConfigError(f"{name} features exceed {_MAX_ABS:g} in magnitude (are they z-scored?)")
     return out
 
 
@@ -669,16 +678,19 @@ def _reduce_chunk(G3, bias, nq, npmax, c_err):
 def _kernels() -> SimpleNamespace:
     """The compiled loops of the search (numba, a dependency of librosa), built on first use.
 
-    ``scan_one(P3, q, bias, nq, npmax, c_err, tiny, G, s0, amin, undecided, F3, na2, fq, nb, e, av, ae)``:
+    ``scan_one(P3, q, bias, nq, npmax, c_err, tiny, G, s0, amin, undecided, F3, na2, fq, nb, av, inexact)``:
     the scan of one query in one pass per clip: float32 estimates ``G`` of the admissible
     starts only (+inf elsewhere, their rows unread), the reductions of :func:`_reduce_chunk`,
-    and the audio estimate ``av``, ``ae`` of the chosen start ``s0``.
+    and the audio estimate ``av`` of the chosen start ``s0`` (``inexact``: False where it is
+    exact, at a zero norm).
     ``reduce_many(G3, bias, nq, npmax, c_err, tiny, s0, amin, undecided)``:
     :func:`_reduce_chunk` for several queries in one pass over each clip's (T, queries)
     block (numpy's reductions along the strided axis are slow).
-    ``audio_at(F3, na2, s0, amin, fq, nb, e, av, ae)``: the audio estimates of each clip's
+    ``audio_at(F3, na2, s0, amin, fq, nb, av, inexact)``: the audio estimates of each clip's
     ``s0`` for several queries (one clip's rows serve all of them).
     ``group_bounds(v, err, order, lo, hi)``: the groups of :func:`_rank_groups`.
+    ``row_stats(x2, norms)``: float64 squared norms of the rows of ``x2``, whether all
+    values are finite, and the largest magnitude (one pass for validation and norms).
     ``audio_cos(F2, na, rows, fq, nb, e, av, ae)``: estimated cosine distances
     ``av[b, i]`` of the survivors ``F2[rows[b, i]]`` of every query to ``fq[b]``
     (float32 products, float64 norms ``na``, ``nb``), with error bounds ``ae`` (``e``;
@@ -729,7 +741,7 @@ def _kernels() -> SimpleNamespace:
         return acc
 
     @numba.njit(cache=True, nogil=True)
-    def scan_one(P3, q, bias, nq, npmax, c_err, tiny, G, s0, amin, undecided, F3, na, fq, nb, e, av, ae):
+    def scan_one(P3, q, bias, nq, npmax, c_err, tiny, G, s0, amin, undecided, F3, na, fq, nb, av, inexact):
         nc, T, _ = P3.shape
         inf = np.float32(np.inf)
         for c in range(nc):
@@ -762,10 +774,25 @@ def _kernels() -> SimpleNamespace:
                 d = na[c, arg] * nb
                 if d == 0.0:
                     av[c] = 1.0
-                    ae[c] = 0.0
+                    inexact[c] = False
                 else:
                     av[c] = 1.0 - np.float64(dot32(F3[c, arg], fq)) / np.sqrt(d)
-                    ae[c] = e
+                    inexact[c] = True
+
+    @numba.njit(cache=True, nogil=True)
+    def row_stats(x2, norms):
+        finite = True
+        top = 0.0
+        for r in range(x2.shape[0]):
+            acc = 0.0
+            for j in range(x2.shape[1]):
+                v = np.float64(x2[r, j])
+                if not np.isfinite(v):
+                    finite = False
+                top = max(top, abs(v))
+                acc += v * v
+            norms[r] = acc
+        return finite, top
 
     @numba.njit(cache=True, nogil=True)
     def group_bounds(v, err, order, lo, hi):
@@ -791,7 +818,7 @@ def _kernels() -> SimpleNamespace:
                 top = max(top, v[k] + err[k])
 
     @numba.njit(cache=True, nogil=True)
-    def audio_at(F3, na2, s0, amin, fq, nb, e, av, ae):
+    def audio_at(F3, na2, s0, amin, fq, nb, av, inexact):
         nc, nq = s0.shape
         for c in range(nc):  # one clip's rows serve all its queries while they are in cache
             for j in range(nq):
@@ -800,10 +827,10 @@ def _kernels() -> SimpleNamespace:
                     d = na2[c, s] * nb[j]
                     if d == 0.0:  # a zero vector: the definition's value, exactly
                         av[c, j] = 1.0
-                        ae[c, j] = 0.0
+                        inexact[c, j] = False
                     else:
                         av[c, j] = 1.0 - np.float64(dot32(F3[c, s], fq[j])) / np.sqrt(d)
-                        ae[c, j] = e
+                        inexact[c, j] = True
 
     # float32 products in any order (reassociation, FMA): the audio error bound allows it
     @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
@@ -826,7 +853,7 @@ def _kernels() -> SimpleNamespace:
                         ae[b, i] = e
 
     return SimpleNamespace(reduce_many=reduce_many, scan_one=scan_one, audio_at=audio_at, audio_cos=audio_cos,
-                           group_bounds=group_bounds)
+                           group_bounds=group_bounds, row_stats=row_stats)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -862,13 +889,13 @@ class SearchIndex:
         self._F2 = self.F.reshape(M * T, -1)
         self._pose_c = _pose_err_factor(D)
         self._audio_e = _audio_err(self.shape[3])
-        np64 = _row_sqnorms(self._P2)
-        self._np32 = np64.astype(np.float32)
-        self._npmax = np64.reshape(M, T).max(axis=1)
-        self._na64 = _row_sqnorms(self._F2)
-        self._na2 = self._na64.reshape(M, T)
         cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
         self._workers = min(cpus, 8)
+        np64 = _checked_sqnorms(np.asarray(self._P2), "pose", self._workers)
+        self._np32 = np64.astype(np.float32)
+        self._npmax = np64.reshape(M, T).max(axis=1)
+        self._na64 = _checked_sqnorms(np.asarray(self._F2), "audio", self._workers)
+        self._na2 = self._na64.reshape(M, T)
 
     # -- admissibility -------------------------------------------------------------------------
 
@@ -934,9 +961,11 @@ class SearchIndex:
         complex : list of B (clips, rows) pairs
             Clips whose minimum is not decisive; ``rows[i]`` holds the estimates of all T
             starts of clip ``clips[i]``.
-        audio : (av, ae) of (M,) float64, or None
-            With a single query: the estimated cosine distance of each clip's ``s0`` and its error
-            bound (as :func:`_kernels`' ``audio_cos``; NaN where no start is admissible).
+        audio : (av, inexact, col)
+            ``av[m, col[b]]`` (float64) is the estimated cosine distance of clip ``m``'s start
+            ``s0`` to query ``b``'s audio feature (as ``audio_cos`` of :func:`_kernels`; NaN
+            where no start is admissible); ``inexact`` (bool, same shape) is False where the
+            value is exact (a zero norm), else the audio error bound applies.
         """
         M, T, D, _ = self.shape
         B = Q.shape[0]
@@ -967,7 +996,7 @@ class SearchIndex:
         f64 = fqp.astype(np.float64)
         nbp = np.einsum("ij,ij->i", f64, f64)
         av = np.full((M, B), np.nan)
-        ae = np.zeros((M, B))
+        inexact = np.zeros((M, B), bool)
 
         def work(c0, c1, G):
             """Product and reductions for clips c0 .. c1 - 1 into ``G`` ((c1 - c0) T, B);
@@ -983,7 +1012,7 @@ class SearchIndex:
                 bias2 = biases[0][r0:r1].reshape(nc, T)
                 _kernels().scan_one(self._P3[c0:c1], Qp[0], bias2, float(nq[0]), self._npmax[c0:c1],
                                     self._pose_c, _TINY, G2, s0c, amc, und, self._F3[c0:c1], self._na2[c0:c1],
-                                    fqp[0], float(nbp[0]), self._audio_e, av[c0:c1, 0], ae[c0:c1, 0])
+                                    fqp[0], float(nbp[0]), av[c0:c1, 0], inexact[c0:c1, 0])
                 s0[c0:c1, 0] = s0c
                 amin[c0:c1, 0] = amc
                 ci = np.flatnonzero(und)
@@ -998,7 +1027,7 @@ class SearchIndex:
                 s0[c0:c1, j0:j1] = s0c
                 amin[c0:c1, j0:j1] = amc
                 _kernels().audio_at(self._F3[c0:c1], self._na2[c0:c1], s0c, amc, fqp[j0:j1], nbp[j0:j1],
-                                    self._audio_e, av[c0:c1, j0:j1], ae[c0:c1, j0:j1])
+                                    av[c0:c1, j0:j1], inexact[c0:c1, j0:j1])
                 ci, bj = np.nonzero(und)
                 if ci.size:
                     rows = G3[ci, :, bj + j0]
@@ -1035,7 +1064,7 @@ class SearchIndex:
         inv = np.empty(B, np.int64)
         inv[perm] = np.arange(B)
         s0, amin, nq = s0[:, inv], amin[:, inv], nq[inv]
-        return s0.T, amin.T, nq, complex_, (av[:, inv].T, ae[:, inv].T)
+        return s0.T, amin.T, nq, complex_, (av, inexact, inv)
 
     # -- exact decisions for one query ----------------------------------------------------------
 
@@ -1314,8 +1343,9 @@ class SearchIndex:
         for j, sv in enumerate(svs):
             if sv is not None:
                 n = sv.clips.size
-                av[j, :n] = audio[0][j, sv.clips]
-                ae[j, :n] = audio[1][j, sv.clips]
+                col = audio[2][j]
+                av[j, :n] = audio[0][sv.clips, col]
+                ae[j, :n] = np.where(audio[1][sv.clips, col], self._audio_e, 0.0)
                 moved = np.flatnonzero(sv.start != s0[j, sv.clips])
                 rows[j, moved] = sv.clips[moved] * T + sv.start[moved]
         if (rows >= 0).any():
