@@ -68,6 +68,7 @@ __all__ = [
     "is_generated",
     "load_database",
     "load_refiner",
+    "check_refiner",
     "page_setup",
     "persistent_key",
     "run_page",
@@ -628,6 +629,53 @@ def _open_refiner(path: str, stamp: int):
     from gesturekit.refine import load_refiner as load
 
     return load(path)
+
+
+def check_refiner(path: str | os.PathLike, db: MatchingDatabase) -> Path:
+    """Check a refiner folder against ``db`` without loading it (no torch): its resolved path.
+
+    Starts loading it in the background (see :func:`warm_up_refiner`), so that the
+    run that uses it finds it ready.
+
+    Raises
+    ------
+    GestureKitError
+        No refiner there, an unreadable ``config.json``, or another feature layout than ``db``'s.
+    """
+    from gesturekit.refine import check_refiner as check
+
+    if not str(path).strip():
+        raise ConfigError("type the folder of a trained refiner, or turn the refiner off")
+    folder = check(path, db)
+    warm_up_refiner(folder)
+    return folder
+
+
+@st.cache_resource(show_spinner=False, max_entries=8)
+def _warm_refiner(path: str, stamp: int) -> threading.Thread:
+    def warm() -> None:
+        # torch's import, the files read and the first forward pass (torch picks its kernels):
+        # the run's own load then takes a fraction of a second
+        import numpy as np
+
+        from gesturekit.refine import load_refiner as load
+
+        load(path).refine(np.zeros((64, 165), np.float32), np.zeros((64, 28), np.float32))
+
+    # a failure here is left to the server log: the run's own load reports it on the page
+
+    thread = threading.Thread(target=warm, name="gesturekit-warm-refiner", daemon=True)
+    thread.start()
+    return thread
+
+
+def warm_up_refiner(path: Path) -> None:
+    """Load a refiner (torch, weights) in the background, once per server and version."""
+    try:
+        stamp = (Path(path) / "config.json").stat().st_mtime_ns
+    except OSError:
+        return
+    _warm_refiner(str(path), stamp)
 
 
 def load_refiner(path: str | os.PathLike, db: MatchingDatabase):

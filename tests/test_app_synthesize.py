@@ -266,12 +266,17 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
         def check_database(self, db):
             pass
 
+        def refine(self, motion, audio):  # the page's background warm-up runs one pass
+            return motion
+
     folder = tmp_path / "my-refiner"
     folder.mkdir()
     (folder / "config.json").write_text("{}", encoding="utf-8")
     monkeypatch.setattr("gesturekit.synthesize.synthesize", synthesize)
     monkeypatch.setattr("gesturekit.viz.session.synthesize", synthesize)
     monkeypatch.setattr("gesturekit.refine.load_refiner", lambda path: StandIn())
+    checked = []
+    monkeypatch.setattr("gesturekit.refine.check_refiner", lambda path, db: checked.append(path) or Path(path))
 
     at = upload(open_page(), speech_file(3.0))
     at.toggle(key="_w.synth.refine").set_value(True).run()
@@ -279,6 +284,7 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
     at.button(key="synth.go").click().run()
     assert not at.exception and not errors(at)
     assert len(seen) == 1 and isinstance(seen[0], StandIn)
+    assert checked and Path(checked[-1]) == folder  # checked when chosen, loaded when run
     skel = chart(at, "synth.skeleton")
     assert [a["text"] for a in skel["layout"]["scene"]["annotations"]] == ["k-NN", "k-NN + refiner"]
     wrists = chart(at, "synth.wrists")

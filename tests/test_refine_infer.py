@@ -1,6 +1,7 @@
 """Refiner inference: any length, no seam every 64 frames, checkpoint loading, layout checks."""
 import copy
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -150,6 +151,28 @@ def test_a_database_with_another_layout_is_refused(tiny):
     other.meta["layout"]["n_mfcc"] = 20
     with pytest.raises(DatabaseError, match="another feature layout.*n_mfcc"):
         ref.check_database(other)
+
+
+def test_check_refiner_reads_the_folder_without_torch_and_refuses_another_layout(tiny, tmp_path):
+    import subprocess
+    import sys
+
+    from gesturekit.refine import check_refiner
+
+    db, out = tiny
+    assert check_refiner(out, db) == Path(out).resolve()
+    other = copy.copy(db)
+    other.meta = json.loads(json.dumps(db.meta))
+    other.meta["layout"]["n_mels"] = 64
+    with pytest.raises(DatabaseError, match="another feature layout.*n_mels"):
+        check_refiner(out, other)
+    with pytest.raises(InputFileError, match="no refiner folder"):
+        check_refiner(tmp_path / "nothing", db)
+    # the app checks a chosen folder on every page view: that must not import torch
+    code = ("import sys; from gesturekit.database import MatchingDatabase; from gesturekit.refine import check_refiner; "
+            f"check_refiner({str(out)!r}, MatchingDatabase.load({str(Path(db.path))!r})); "
+            "assert 'torch' not in sys.modules, 'torch was imported'")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
 
 
 def test_a_refiner_of_another_layout_is_refused(tiny, tmp_path):

@@ -162,7 +162,7 @@ def _default_refiner(db) -> str:
 
 
 def settings(db) -> dict:
-    """The search settings: SynthesisConfig arguments, the refiner (or None), and whether they can run."""
+    """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can run."""
     ss = st.session_state
     pk = common.persistent_key
     c = st.columns(4)
@@ -194,9 +194,10 @@ def settings(db) -> dict:
             "Refiner folder", key=pk("synth.refiner_path", default), disabled=not on,
             placeholder="folder written by gesturekit train-refiner")
         if on:
-            ok = False  # until the refiner is open: a run must not silently go without it
+            ok = False  # until the refiner is checked: a run must not silently go without it
             with common.user_errors():
-                refiner = common.load_refiner(folder, db)
+                # config and layout only here (no torch); the weights load when Run is pressed
+                refiner = common.check_refiner(folder, db)
                 ok = True
     else:
         c[3].toggle("Refiner (cGAN)", value=False, disabled=True, key="synth.refine_unavailable",
@@ -324,7 +325,8 @@ def main() -> None:
     if st.button("Run", type="primary", key="synth.go", disabled=track is None or not chosen["ok"]):
         with common.user_errors():  # an impossible setting is reported; the last result stays below
             config = SynthesisConfig(**chosen["options"], control=track.to_text(), pins=pins)
-            common.run_synthesis(db, speech["audio"], config=config, source=speech["name"], refiner=chosen["refiner"])
+            refiner = None if chosen["refiner"] is None else common.load_refiner(chosen["refiner"], db)
+            common.run_synthesis(db, speech["audio"], config=config, source=speech["name"], refiner=refiner)
 
     record = common.current_synthesis(db)
     if record is not None:

@@ -32,12 +32,11 @@ from ..errors import ConfigError, DatabaseError, InputFileError
 from ..features import LAYOUT
 from ..motion import Motion
 from ..skeleton import FPS, JOINT_NAMES
+from .folder import FORMAT, FORMAT_VERSION, read_refiner_config
 from .model import GENERATOR_STRIDE, Generator, ModelConfig
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "Refiner", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
 
-FORMAT = "gesturekit-refiner"
-FORMAT_VERSION = 1
 STATE_FILES = ("generator.pt", "critic.pt", "train_state.pt")
 
 
@@ -48,35 +47,6 @@ def file_sha256(path: str | os.PathLike) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def read_refiner_config(path: str | os.PathLike) -> dict:
-    """The ``config.json`` of a refiner folder, checked for format and version.
-
-    Raises
-    ------
-    InputFileError
-        No folder, no or unreadable ``config.json``, another format or version.
-    """
-    path = Path(path)
-    if not path.is_dir():
-        raise InputFileError("no refiner folder here (train one with `gesturekit train-refiner`)", path=path)
-    cfg_file = path / "config.json"
-    if not cfg_file.is_file():
-        raise InputFileError("not a refiner folder: config.json is missing", path=path)
-    try:
-        cfg = json.loads(cfg_file.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"config.json is not valid JSON ({exc})", path=path) from None
-    if not isinstance(cfg, dict) or cfg.get("format") != FORMAT:
-        raise InputFileError("config.json does not describe a gesturekit refiner", path=path)
-    if cfg.get("format_version") != FORMAT_VERSION:
-        raise InputFileError(
-            f"refiner format version {cfg.get('format_version')} is not supported (this gesturekit reads "
-            f"version {FORMAT_VERSION}); train it again",
-            path=path,
-        )
-    return cfg
 
 
 def load_state(path: str | os.PathLike, name: str, cfg: dict) -> dict:
@@ -208,18 +178,9 @@ class Refiner:
         DatabaseError
             Naming the database and the refiner.
         """
-        meta = db.meta
-        mine = self.config.get("layout")
-        theirs = meta.get("layout")
-        where = self.path if self.path is not None else "refiner"
-        if theirs != mine or list(meta.get("joint_names", [])) != list(self.config.get("joint_names", [])):
-            diff = sorted(k for k in set(mine or {}) | set(theirs or {}) if (mine or {}).get(k) != (theirs or {}).get(k))
-            detail = f" (differs in: {', '.join(diff)})" if diff else " (another skeleton)"
-            raise DatabaseError(
-                f"the database has another feature layout than refiner {where} was trained on{detail}; "
-                "use a refiner trained on this database (`gesturekit train-refiner --db ...`)",
-                path=db.path,
-            )
+        from . import check_layout
+
+        check_layout(self.config, db, where=self.path if self.path is not None else "refiner")
 
     # ---- refining ---------------------------------------------------------------------------
     def refine(self, motion, audio, *, mode: str = "full", hop: int = 16, batch: int = 256) -> np.ndarray:
