@@ -21,6 +21,26 @@ ZEGGS_BVH = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
 ZEGGS_WAV = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.wav"
 
 
+@pytest.fixture(scope="module")
+def demo_home(tmp_path_factory) -> Path:
+    """A gesturekit home holding a 2-minute demo database at the default path (one per test module)."""
+    from gesturekit.demo import build_demo_database
+
+    home = tmp_path_factory.mktemp("gkhome")
+    build_demo_database(home / "db" / "demo", minutes=2)
+    return home
+
+
+@pytest.fixture
+def app_env(demo_home, tmp_path, monkeypatch) -> Path:
+    """The app's environment: ``demo_home`` as GESTUREKIT_HOME, and a fresh working directory
+    (``./db`` of the working directory is one of the places the sidebar lists)."""
+    monkeypatch.setenv("GESTUREKIT_HOME", str(demo_home))
+    monkeypatch.delenv("GESTUREKIT_DEMO_MINUTES", raising=False)
+    monkeypatch.chdir(tmp_path)
+    return demo_home
+
+
 @pytest.fixture
 def shared_data() -> Path:
     """The shared test data folder; the test is skipped when it is absent."""

@@ -28,14 +28,6 @@ def demo_home(tmp_path_factory) -> Path:
     return home
 
 
-@pytest.fixture
-def app_env(demo_home, tmp_path, monkeypatch) -> Path:
-    monkeypatch.setenv("GESTUREKIT_HOME", str(demo_home))
-    monkeypatch.delenv("GESTUREKIT_DEMO_MINUTES", raising=False)
-    monkeypatch.chdir(tmp_path)  # ./db of the working directory is one of the places the sidebar lists
-    return demo_home
-
-
 def _run_database_page() -> AppTest:
     at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
     assert not at.exception

@@ -14,27 +14,11 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
-from gesturekit.demo import build_demo_database
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 SYNTH, INSPECT = "pages/1_Synthesize.py", "pages/2_Retrieval_inspector.py"
 TIMEOUT = 90
 TOPK = 5
-
-
-@pytest.fixture(scope="module")
-def demo_home(tmp_path_factory) -> Path:
-    home = tmp_path_factory.mktemp("gkhome")
-    build_demo_database(home / "db" / "demo", minutes=2)
-    return home
-
-
-@pytest.fixture
-def app_env(demo_home, tmp_path, monkeypatch) -> Path:
-    monkeypatch.setenv("GESTUREKIT_HOME", str(demo_home))
-    monkeypatch.delenv("GESTUREKIT_DEMO_MINUTES", raising=False)
-    monkeypatch.chdir(tmp_path)
-    return demo_home
 
 
 @pytest.fixture(scope="module")

@@ -7,26 +7,10 @@ import soundfile as sf
 from streamlit.testing.v1 import AppTest
 
 from gesturekit.datasets.synthetic import generate_demo_take
-from gesturekit.demo import build_demo_database
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 PAGE = "pages/4_Study_stimuli.py"
 TIMEOUT = 120
-
-
-@pytest.fixture(scope="module")
-def demo_home(tmp_path_factory) -> Path:
-    home = tmp_path_factory.mktemp("gkhome")
-    build_demo_database(home / "db" / "demo", minutes=2)
-    return home
-
-
-@pytest.fixture
-def app_env(demo_home, tmp_path, monkeypatch) -> Path:
-    monkeypatch.setenv("GESTUREKIT_HOME", str(demo_home))
-    monkeypatch.delenv("GESTUREKIT_DEMO_MINUTES", raising=False)
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 def _page() -> AppTest:
@@ -37,8 +21,8 @@ def _page() -> AppTest:
     return at
 
 
-def test_conditions_table_render_and_preview(app_env):
-    speech = app_env / "speech"
+def test_conditions_table_render_and_preview(app_env, tmp_path):
+    speech = tmp_path / "speech"
     speech.mkdir()
     take, _ = generate_demo_take(seconds=2.0, seed=3, name="s")
     sf.write(speech / "hello.wav", take.audio[:19200], 16000)  # 1.2 s
@@ -47,21 +31,21 @@ def test_conditions_table_render_and_preview(app_env):
     at.text_input(key="_w.study.folder").set_value(str(speech)).run()
     at.selectbox(key="_w.study.resolution").set_value("320x240")
     at.number_input(key="_w.study.workers").set_value(1)
-    at.text_input(key="_w.study.out").set_value(str(app_env / "study")).run()
+    at.text_input(key="_w.study.out").set_value(str(tmp_path / "study")).run()
     assert not at.exception, at.exception
     table = next(d.value for d in at.dataframe if "system" in d.value.columns)
     assert sorted(table["system"]) == ["knn", "random"] and set(table["audio"]) == {"hello.wav"}
     at.button(key="study.go").click().run()
     assert not at.exception, at.exception
     assert not [e.value for e in at.error]
-    manifest = pd.read_csv(app_env / "study" / "manifest.csv")
+    manifest = pd.read_csv(tmp_path / "study" / "manifest.csv")
     assert sorted(manifest["id"]) == sorted(table["id"])
     assert len(at.get("video")) == 2  # the preview of participant 1's first stimuli
     assert any("stimuli written" in p.proto.text for p in at.get("progress"))
 
 
-def test_a_missing_folder_is_an_error_message(app_env):
+def test_a_missing_folder_is_an_error_message(app_env, tmp_path):
     at = _page()
-    at.text_input(key="_w.study.folder").set_value(str(app_env / "nowhere")).run()
+    at.text_input(key="_w.study.folder").set_value(str(tmp_path / "nowhere")).run()
     assert not at.exception
     assert any("no such folder" in e.value for e in at.error)

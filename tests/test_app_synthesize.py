@@ -15,7 +15,6 @@ from streamlit.testing.v1 import AppTest
 from gesturekit.control import frame_attributes
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
-from gesturekit.demo import build_demo_database
 from gesturekit.export.video import probe_media
 from gesturekit.viz.figures import WRIST_ROWS
 
@@ -23,22 +22,6 @@ HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 PAGE = "pages/1_Synthesize.py"
 TIMEOUT = 90
 EDITOR = "synth.segments_editor"
-
-
-@pytest.fixture(scope="module")
-def demo_home(tmp_path_factory) -> Path:
-    """A gesturekit home holding a 2-minute demo database at the default path."""
-    home = tmp_path_factory.mktemp("gkhome")
-    build_demo_database(home / "db" / "demo", minutes=2)
-    return home
-
-
-@pytest.fixture
-def app_env(demo_home, tmp_path, monkeypatch) -> Path:
-    monkeypatch.setenv("GESTUREKIT_HOME", str(demo_home))
-    monkeypatch.delenv("GESTUREKIT_DEMO_MINUTES", raising=False)
-    monkeypatch.chdir(tmp_path)
-    return demo_home
 
 
 @pytest.fixture(scope="module")
