@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -19,6 +20,16 @@ from gesturekit.skeleton import N_JOINTS
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 ZEGGS_BVH = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
 ZEGGS_WAV = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.wav"
+
+
+@pytest.fixture(autouse=True)
+def _restore_main_module():
+    """Streamlit's AppTest runs pages as ``__main__`` and leaves them there; processes spawned
+    later in the same test process would import that page. Each test gets the original back."""
+    main = sys.modules.get("__main__")
+    yield
+    if main is not None:
+        sys.modules["__main__"] = main
 
 
 @pytest.fixture(scope="module")
