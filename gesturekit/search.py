@@ -542,27 +542,6 @@ def _rank_groups(v: np.ndarray, err: np.ndarray):
     return order, lo, hi
 
 
-def _settle_groups(v, err, order, lo, hi, wanted, exact) -> None:
-    """Make the order exact inside every group holding a ``wanted`` element.
-
-    The group's estimates are replaced by exact values (``exact(indices)``) and
-    the group re-sorted (equal values by index); ``v``, ``err`` and ``order`` are
-    updated in place. Groups of one element need nothing.
-    """
-    starts = np.unique(lo[wanted & (hi > lo)])
-    if starts.size == 0:
-        return
-    ends = hi[order[starts]]
-    members = np.concatenate([order[a : b + 1] for a, b in zip(starts, ends)])
-    need = members[err[members] > 0]
-    if need.size:
-        v[need] = exact(need)
-        err[need] = 0.0
-    for a, b in zip(starts, ends):
-        m = order[a : b + 1]
-        order[a : b + 1] = m[np.lexsort((m, v[m]))]
-
-
 def _matrix_product(n_queries: int):
     """``out[:] = rows @ W.T`` for float32 arrays; the fastest routine for the shape on a CPU.
 
@@ -691,10 +670,9 @@ def _kernels() -> SimpleNamespace:
     ``group_bounds(v, err, order, lo, hi)``: the groups of :func:`_rank_groups`.
     ``row_stats(x2, norms)``: float64 squared norms of the rows of ``x2``, whether all
     values are finite, and the largest magnitude (one pass for validation and norms).
-    ``audio_cos(F2, na, rows, fq, nb, e, av, ae)``: estimated cosine distances
-    ``av[b, i]`` of the survivors ``F2[rows[b, i]]`` of every query to ``fq[b]``
-    (float32 products, float64 norms ``na``, ``nb``), with error bounds ``ae`` (``e``;
-    0 where a norm is 0 and the value is exact); ``rows < 0`` are skipped.
+    ``survivors(...)`` and ``rank_top(...)``: the exact decisions of one query after the
+    scan (see :meth:`SearchIndex._decide`), with the exact distances of
+    :mod:`gesturekit.search_reference` (float64, left to right).
     """
     import numba  # heavy: imported when a search first runs, not with the package
 
@@ -769,7 +747,7 @@ def _kernels() -> SimpleNamespace:
             s0[c] = arg
             amin[c] = best
             undecided[c] = np.isfinite(best) and (count > 1 or np.float64(best) + nq <= err)
-            # the audio estimate of that start, as audio_cos computes it (while the clip is at hand)
+            # the audio estimate of that start (while the clip is at hand): float32 product, float64 norms
             if best < inf:
                 d = na[c, arg] * nb
                 if d == 0.0:
@@ -832,28 +810,208 @@ def _kernels() -> SimpleNamespace:
                         av[c, j] = 1.0 - np.float64(dot32(F3[c, s], fq[j])) / np.sqrt(d)
                         inexact[c, j] = True
 
-    # float32 products in any order (reassociation, FMA): the audio error bound allows it
-    @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
-    def audio_cos(F2, na, rows, fq, nb, e, av, ae):
-        B, n = rows.shape
-        A = fq.shape[1]
-        for i in range(n):  # the i-th survivor of every query: neighbouring clips, read together
-            for b in range(B):
-                r = rows[b, i]
-                if r >= 0:
-                    acc = np.float32(0.0)
-                    for j in range(A):
-                        acc += F2[r, j] * fq[b, j]
-                    d = na[r] * nb[b]
-                    if d == 0.0:  # a zero vector: the definition's value, exactly
-                        av[b, i] = 1.0
-                        ae[b, i] = 0.0
-                    else:
-                        av[b, i] = 1.0 - np.float64(acc) / np.sqrt(d)
-                        ae[b, i] = e
+    # -- the exact decisions of one query (steps 1-4 of Algorithm 1 after the scan) --------------
+    # No fastmath below: these are the exact values, the same operations in the same order as
+    # gesturekit.search_reference (float64, left to right).
 
-    return SimpleNamespace(reduce_many=reduce_many, scan_one=scan_one, audio_at=audio_at, audio_cos=audio_cos,
-                           group_bounds=group_bounds, row_stats=row_stats)
+    @numba.njit(cache=True, nogil=True)
+    def pose_d2(P3, c, s, q):
+        acc = 0.0
+        for j in range(q.shape[0]):
+            d = np.float64(P3[c, s, j]) - np.float64(q[j])
+            acc += d * d
+        return acc
+
+    @numba.njit(cache=True, nogil=True)
+    def sq64(f):
+        acc = 0.0
+        for j in range(f.shape[0]):
+            y = np.float64(f[j])
+            acc += y * y
+        return acc
+
+    @numba.njit(cache=True, nogil=True)
+    def cos_d(F3, c, s, f, nb):
+        dot = 0.0
+        na = 0.0
+        for j in range(f.shape[0]):
+            x = np.float64(F3[c, s, j])
+            dot += x * np.float64(f[j])
+            na += x * x
+        if na == 0.0 or nb == 0.0:
+            return 1.0
+        return 1.0 - dot / np.sqrt(na * nb)
+
+    @numba.njit(cache=True, nogil=True)
+    def resolve_clip(row, c, nq, e, P3, q):
+        # exact values tier by tier: the starts within 2 e of the smallest unknown estimate,
+        # until the best non-zero exact value is proven (no unknown start could reach it)
+        T = row.shape[0]
+        a = np.empty(T)
+        known = np.full(T, np.nan)
+        for s in range(T):
+            a[s] = np.float64(row[s]) + nq
+        while True:
+            best = np.inf
+            nearest = np.inf
+            for s in range(T):
+                if not np.isnan(known[s]):
+                    if known[s] > 0.0:
+                        best = min(best, known[s])
+                elif np.isfinite(a[s]):
+                    nearest = min(nearest, a[s])
+            pend = False
+            for s in range(T):
+                if np.isnan(known[s]) and np.isfinite(a[s]):
+                    if (a[s] - e <= best) if np.isfinite(best) else (a[s] <= nearest + 2.0 * e):
+                        known[s] = pose_d2(P3, c, s, q)
+                        pend = True
+            if not pend:
+                break
+        if not np.isfinite(best):
+            return -1, np.nan
+        for s in range(T):  # ties: the smallest start
+            if known[s] == best:
+                return s, best
+        return -1, np.nan
+
+    @numba.njit(cache=True, nogil=True)
+    def survivors(s0, amin, nq, npmax, c_err, tiny, cclips, crows, P3, q, F3, f, av_col, inexact_col, audio_e,
+                  clips, start, v, e, av, ae):
+        M = s0.shape[0]
+        crow = np.full(M, -1, np.int64)
+        for i in range(cclips.shape[0]):
+            crow[cclips[i]] = i
+        nb = sq64(f)
+        n = 0
+        for m in range(M):
+            err = c_err * (npmax[m] + nq) + tiny
+            if crow[m] >= 0:
+                st, val = resolve_clip(crows[crow[m]], m, nq, err, P3, q)
+                if st < 0:
+                    continue
+                vm, em = val, 0.0
+            elif np.isfinite(amin[m]):
+                st, vm, em = s0[m], np.float64(amin[m]) + nq, err
+            else:
+                continue
+            clips[n] = m
+            start[n] = st
+            v[n] = vm
+            e[n] = em
+            if st == s0[m]:  # the scan's estimate of this start
+                av[n] = av_col[m]
+                ae[n] = audio_e if inexact_col[m] else 0.0
+            else:  # an exact near-tie moved the start: its exact audio distance
+                av[n] = cos_d(F3, m, st, f, nb)
+                ae[n] = 0.0
+            n += 1
+        return n
+
+    @numba.njit(cache=True, nogil=True)
+    def bounds(v, err, order, lo, hi):
+        has_err = False
+        for i in range(err.shape[0]):
+            if err[i] > 0.0:
+                has_err = True
+                break
+        if has_err:
+            group_bounds(v, err, order, lo, hi)
+        else:
+            for i in range(order.shape[0]):
+                lo[order[i]] = i
+                hi[order[i]] = i
+        for i in range(order.shape[0]):
+            if hi[i] > lo[i]:
+                return True
+        return False
+
+    @numba.njit(cache=True, nogil=True)
+    def settle(v, err, order, lo, hi, wanted, pose, clips, start, P3, F3, q, f, nb):
+        # make the order exact inside every group holding a wanted element: exact values,
+        # then sorted by (value, index)
+        n = order.shape[0]
+        a = 0
+        while a < n:
+            b = hi[order[a]]
+            if b > a:
+                need = False
+                for r in range(a, b + 1):
+                    if wanted[order[r]]:
+                        need = True
+                        break
+                if need:
+                    members = np.sort(order[a : b + 1])
+                    for k in members:
+                        if err[k] > 0.0:
+                            if pose:
+                                v[k] = pose_d2(P3, clips[k], start[k], q)
+                            else:
+                                v[k] = cos_d(F3, clips[k], start[k], f, nb)
+                            err[k] = 0.0
+                    vals = np.empty(members.shape[0])
+                    for r in range(members.shape[0]):
+                        vals[r] = v[members[r]]
+                    idx = np.argsort(vals, kind="mergesort")  # stable: equal values by index
+                    for r in range(members.shape[0]):
+                        order[a + r] = members[idx[r]]
+            a = b + 1
+
+    @numba.njit(cache=True, nogil=True)
+    def rank_top(v, e, av, ae, porder, aorder, clips, start, P3, F3, q, f, width, out_i, out_f):
+        n = v.shape[0]
+        w = min(width, n)
+        nb = sq64(f)
+        plo = np.empty(n, np.int64)
+        phi = np.empty(n, np.int64)
+        alo = np.empty(n, np.int64)
+        ahi = np.empty(n, np.int64)
+        pg = bounds(v, e, porder, plo, phi)
+        ag = bounds(av, ae, aorder, alo, ahi)
+        if pg or ag:
+            # only clips that could make the top w of the combined ranking need their groups
+            # settled: one whose smallest possible rank sum exceeds the w-th smallest largest
+            # possible rank sum cannot be among the first w
+            bound = np.partition(phi + ahi, w - 1)[w - 1]
+            wanted = plo + alo <= bound
+            settle(v, e, porder, plo, phi, wanted, True, clips, start, P3, F3, q, f, nb)
+            settle(av, ae, aorder, alo, ahi, wanted, False, clips, start, P3, F3, q, f, nb)
+        prank = np.empty(n, np.int64)
+        arank = np.empty(n, np.int64)
+        for i in range(n):
+            prank[porder[i]] = i
+            arank[aorder[i]] = i
+        key = np.empty(n, np.int64)
+        for i in range(n):
+            key[i] = (prank[i] + arank[i]) * n + i  # unique: ties go to the lower clip index
+        kth = np.partition(key, w - 1)[w - 1]
+        top = np.empty(w, np.int64)
+        kt = np.empty(w, np.int64)
+        j = 0
+        for i in range(n):
+            if key[i] <= kth:
+                top[j] = i
+                kt[j] = key[i]
+                j += 1
+        top = top[np.argsort(kt)]
+        for r in range(w):
+            i = top[r]
+            if e[i] > 0.0:
+                v[i] = pose_d2(P3, clips[i], start[i], q)
+            if ae[i] > 0.0:
+                av[i] = cos_d(F3, clips[i], start[i], f, nb)
+            out_i[0, r] = clips[i]
+            out_i[1, r] = start[i]
+            out_i[2, r] = prank[i]
+            out_i[3, r] = arank[i]
+            out_i[4, r] = prank[i] + arank[i]
+            out_f[0, r] = np.sqrt(v[i])
+            out_f[1, r] = av[i]
+        return w
+
+    return SimpleNamespace(reduce_many=reduce_many, scan_one=scan_one, audio_at=audio_at,
+                           group_bounds=group_bounds, row_stats=row_stats, survivors=survivors,
+                           rank_top=rank_top)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -963,7 +1121,7 @@ class SearchIndex:
             starts of clip ``clips[i]``.
         audio : (av, inexact, col)
             ``av[m, col[b]]`` (float64) is the estimated cosine distance of clip ``m``'s start
-            ``s0`` to query ``b``'s audio feature (as ``audio_cos`` of :func:`_kernels`; NaN
+            ``s0`` to query ``b``'s audio feature (float32 product, float64 norms; NaN
             where no start is admissible); ``inexact`` (bool, same shape) is False where the
             value is exact (a zero norm), else the audio error bound applies.
         """
@@ -1068,128 +1226,48 @@ class SearchIndex:
 
     # -- exact decisions for one query ----------------------------------------------------------
 
-    def _resolve_complex(self, clips, rows, q, nq, err):
-        """Exact per-clip choice where the float32 minimum is not decisive.
+    def _decide(self, s0, amin, nq, complex_, q, f, av_col, inexact_col, width):
+        """Steps 1-4 of Algorithm 1 for one query, after the scan; None when no clip survives.
 
-        Parameters
-        ----------
-        clips : (n,) int64
-        rows : (n, T) float32
-            The float32 values ``A`` of every start of those clips (+inf: inadmissible).
-        q : (D,) float32
-        nq : float
-        err : (n,) float64
-            Error bound of ``A + nq`` per clip.
+        Step 1 (per clip the nearest admissible non-zero start) takes the scan's float32
+        minimum where it is decisive and resolves the other clips exactly, tier by tier.
+        Steps 2-4 rank the survivors by pose and by audio distance: ranks are known up to
+        groups of near-equal estimates, and only groups holding a clip that could make the
+        top ``width`` of the combined ranking are settled with exact values. The compiled
+        loops are in :func:`_kernels` (``survivors``, ``rank_top``).
 
         Returns
         -------
-        starts : (n,) int64, -1 where the clip drops out; values : (n,) float64, exact d2.
-
-        Notes
-        -----
-        Exact values are computed tier by tier: the starts within ``2 err`` of the
-        smallest unknown estimate, until the best non-zero exact value is proven,
-        i.e. no start still unknown could reach it (``A + nq - err > best``).
+        dict
+            ``n`` (survivors) and the table columns (top ``width`` in combined order).
         """
-        a = rows.astype(np.float64) + nq
-        e = err[:, None]
-        known = np.full(a.shape, np.nan)
-        usable = np.isfinite(a)
-        while True:
-            have = ~np.isnan(known)
-            best = np.where(have & (known > 0), known, np.inf).min(axis=1)
-            rest = usable & ~have
-            nearest = np.where(rest, a, np.inf).min(axis=1)
-            proven = np.isfinite(best)[:, None]
-            pend = rest & np.where(proven, a - e <= best[:, None], a <= nearest[:, None] + 2.0 * e)
-            if not pend.any():
-                break
-            ci, si = np.nonzero(pend)
-            known[ci, si] = exact_pose_sqdist(self.P[clips[ci], si], q)
-        hit = (known == best[:, None]) & np.isfinite(best)[:, None]
-        starts = np.where(hit.any(axis=1), hit.argmax(axis=1), -1)  # ties: the smallest start
-        return starts, np.where(starts >= 0, best, np.nan)
-
-    def _survivors(self, s0, amin, nq, complex_, q):
-        """Step 1 of Algorithm 1 for one query: per clip the nearest admissible non-zero start.
-
-        Returns None when no clip survives, else a namespace with ``clips``, ``start``
-        (the chosen starts), ``v`` (squared pose distances: exact, or float32
-        estimates) and ``e`` (their error bounds, 0 for exact values).
-        """
-        err = self._pose_c * (self._npmax + nq) + _TINY
-        start = s0.copy()
-        v = amin.astype(np.float64) + nq
-        e = err.copy()
-        alive = np.isfinite(amin)
+        M = self.shape[0]
+        k = _kernels()
+        clips = np.empty(M, np.int64)
+        start = np.empty(M, np.int64)
+        v, e, av, ae = np.empty(M), np.empty(M), np.empty(M), np.empty(M)
         cclips, crows = complex_
-        if cclips.size:
-            cs, cv = self._resolve_complex(cclips, crows, q, nq, err[cclips])
-            start[cclips] = cs
-            v[cclips] = cv
-            e[cclips] = 0.0
-            alive[cclips] = cs >= 0
-        clips = np.flatnonzero(alive)
-        if clips.size == 0:
+        n = k.survivors(s0, amin, float(nq), self._npmax, self._pose_c, _TINY, cclips, crows, self._P3, q,
+                        self._F3, f, av_col, inexact_col, self._audio_e, clips, start, v, e, av, ae)
+        if n == 0:
             return None
-        return SimpleNamespace(clips=clips, start=start[clips], v=v[clips], e=e[clips])
-
-    def _rank(self, sv, av, ae, q, f, width):
-        """Steps 2-4 of Algorithm 1 for one query: audio distances, ranks, the candidate table.
-
-        ``av``, ``ae``: the survivors' estimated cosine distances and their error bounds.
-        Returns a dict of the table columns (top ``width`` in combined order) and ``n``.
-        """
-        T = self.shape[1]
-        clips, s, v, e = sv.clips, sv.start, sv.v, sv.e
-        n = clips.size
-        flat = clips * T + s
-
-        def pose_exact(idx):
-            return exact_pose_sqdist(self.P[clips[idx], s[idx]], q)
-
-        def audio_exact(idx):
-            return exact_cosine_distance(self._F2[flat[idx]], f)
-
-        # Ranks are known up to groups of near-equal estimates. Only clips that could
-        # make the top `w` of the combined ranking need their groups settled exactly:
-        # a clip whose smallest possible rank sum exceeds the w-th smallest largest
-        # possible rank sum cannot be among the first w.
-        w = min(width, n)
-        pose_order, plo, phi = _rank_groups(v, e)
-        audio_order, alo, ahi = _rank_groups(av, ae)
-        if (phi > plo).any() or (ahi > alo).any():
-            bound = np.partition(phi + ahi, w - 1)[w - 1]
-            contender = plo + alo <= bound
-            _settle_groups(v, e, pose_order, plo, phi, contender, pose_exact)
-            _settle_groups(av, ae, audio_order, alo, ahi, contender, audio_exact)
-
-        pose_rank = np.empty(n, np.int64)
-        pose_rank[pose_order] = np.arange(n)
-        audio_rank = np.empty(n, np.int64)
-        audio_rank[audio_order] = np.arange(n)
-        combined = pose_rank + audio_rank
-        key = combined * n + np.arange(n)  # unique: ties go to the lower clip index
-        if w < n:
-            top = np.argpartition(key, w - 1)[:w]
-            top = top[np.argsort(key[top])]
-        else:
-            top = np.argsort(key)
-        need = top[e[top] > 0]
-        if need.size:
-            v[need] = pose_exact(need)
-        need = top[ae[top] > 0]
-        if need.size:
-            av[need] = audio_exact(need)
+        clips, start, v, e, av, ae = clips[:n], start[:n], v[:n], e[:n], av[:n], ae[:n]
+        # numpy's sorts are faster than compiled ones; with error bounds the groups make the
+        # order exact, so the initial sort need not be stable (equal estimates share a group)
+        porder = np.argsort(v, kind=None if e.any() else "stable")
+        aorder = np.argsort(av, kind=None if ae.any() else "stable")
+        out_i = np.empty((5, min(width, n)), np.int64)
+        out_f = np.empty((2, min(width, n)))
+        k.rank_top(v, e, av, ae, porder, aorder, clips, start, self._P3, self._F3, q, f, width, out_i, out_f)
         return {
             "n": n,
-            "cand_clip": clips[top],
-            "cand_start": s[top],
-            "cand_pose_dist": np.sqrt(v[top]),
-            "cand_audio_dist": av[top],
-            "cand_pose_rank": pose_rank[top],
-            "cand_audio_rank": audio_rank[top],
-            "cand_combined": combined[top],
+            "cand_clip": out_i[0],
+            "cand_start": out_i[1],
+            "cand_pose_dist": out_f[0],
+            "cand_audio_dist": out_f[1],
+            "cand_pose_rank": out_i[2],
+            "cand_audio_rank": out_i[3],
+            "cand_combined": out_i[4],
         }
 
     # -- public ---------------------------------------------------------------------------------
@@ -1327,42 +1405,16 @@ class SearchIndex:
         run = map if pool is None or len(active) < 4 else pool.map
         biases = [self._bias(cache, keys[b]) for b in active]
         fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
-        s0, amin, nq, complex_, audio = self._scan(poses[active], biases, fq, cache.setdefault("scratch", {}), pool)
-        svs = list(
-            run(lambda j: self._survivors(s0[j], amin[j], nq[j], complex_[j], poses[active[j]]), range(len(active)))
+        s0, amin, nq, complex_, (av, inexact, col) = self._scan(
+            poses[active], biases, fq, cache.setdefault("scratch", {}), pool
         )
-        T = self.shape[1]
-        fq64 = fq.astype(np.float64)
-        nb = np.einsum("ij,ij->i", fq64, fq64)
-        # the scan estimated the audio of each clip's s0; survivors settled on another start
-        # (exact resolution of near-ties) get theirs here
-        n_max = max([1] + [sv.clips.size for sv in svs if sv is not None])
-        av = np.empty((len(active), n_max))
-        ae = np.empty((len(active), n_max))
-        rows = np.full((len(active), n_max), -1, np.int64)
-        for j, sv in enumerate(svs):
-            if sv is not None:
-                n = sv.clips.size
-                col = audio[2][j]
-                av[j, :n] = audio[0][sv.clips, col]
-                ae[j, :n] = np.where(audio[1][sv.clips, col], self._audio_e, 0.0)
-                moved = np.flatnonzero(sv.start != s0[j, sv.clips])
-                rows[j, moved] = sv.clips[moved] * T + sv.start[moved]
-        if (rows >= 0).any():
-            mv, me = np.empty(rows.shape), np.empty(rows.shape)
-            _kernels().audio_cos(self._F2, self._na64, rows, fq, nb, self._audio_e, mv, me)
-            hit = rows >= 0
-            av[hit] = mv[hit]
-            ae[hit] = me[hit]
 
-        def rank(j):
-            sv, b = svs[j], active[j]
-            if sv is None:
-                return None
-            n = sv.clips.size
-            return self._rank(sv, av[j, :n], ae[j, :n], poses[b], fq[j], calls[b].config.table_width)
+        def decide(j):
+            b = active[j]
+            return self._decide(s0[j], amin[j], nq[j], complex_[j], poses[b], fq[j], av[:, col[j]],
+                                inexact[:, col[j]], calls[b].config.table_width)
 
-        return dict(zip(active, run(rank, range(len(active)))))
+        return dict(zip(active, run(decide, range(len(active)))))
 
     def _record(self, res, call, i, d, poses, b):
         """Write step ``i``'s table and choice (the k-th, or the pin) into ``res``; advance ``p_{t-1}``."""
