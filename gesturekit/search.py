@@ -37,6 +37,7 @@ import functools
 import numbers
 import os
 import sys
+import threading
 import warnings
 from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -545,6 +546,9 @@ def _rank_groups(v: np.ndarray, err: np.ndarray):
 def _matrix_product(n_queries: int):
     """``out[:] = rows @ W.T`` for float32 arrays; the fastest routine for the shape on a CPU.
 
+    ``rows`` (c, L, D) may be a strided view (the first ``L`` starts of ``c`` clips);
+    ``W`` is (B, D), ``out`` a C-contiguous (c, L, B).
+
     One query (or no torch): numpy's BLAS, single-threaded while a search runs (see
     :func:`_single_threaded_blas`; the search shares the rows out to its own threads).
     Several queries: torch's matrix product (MKL, one thread), which handles this
@@ -562,10 +566,7 @@ def _matrix_product(n_queries: int):
     if torch is None or torch.get_float32_matmul_precision() != "highest":
 
         def product(rows, W, out):
-            if W.shape[0] == 1:
-                np.dot(rows, W[0], out=out.reshape(-1))
-            else:
-                np.dot(rows, W.T, out=out)
+            np.matmul(rows, W.T, out=out)
 
         return product
 
@@ -573,7 +574,7 @@ def _matrix_product(n_queries: int):
         with warnings.catch_warnings():  # a read-only (memory-mapped) database is only read here
             warnings.filterwarnings("ignore", message=".*not writable.*", category=UserWarning)
             a = torch.from_numpy(rows)
-        torch.mm(a, torch.from_numpy(np.ascontiguousarray(W.T)), out=torch.from_numpy(out))
+        torch.matmul(a, torch.from_numpy(np.ascontiguousarray(W.T)), out=torch.from_numpy(out))
 
     return product
 
@@ -668,6 +669,7 @@ def _kernels() -> SimpleNamespace:
     ``audio_at(F3, na2, s0, amin, fq, nb, av, inexact)``: the audio estimates of each clip's
     ``s0`` for several queries (one clip's rows serve all of them).
     ``group_bounds(v, err, order, lo, hi)``: the groups of :func:`_rank_groups`.
+    ``admissible_ends(bias2)``: per clip, one past its last admissible start (0: none).
     ``row_stats(x2, norms)``: float64 squared norms of the rows of ``x2``, whether all
     values are finite, and the largest magnitude (one pass for validation and norms).
     ``survivors(...)`` and ``rank_top(...)``: the exact decisions of one query after the
@@ -681,8 +683,8 @@ def _kernels() -> SimpleNamespace:
         nc, T, nb = G3.shape
         best = np.empty(nb, dtype=np.float32)
         thr = np.empty(nb, dtype=np.float32)
-        arg = np.empty(nb, dtype=np.int64)
-        count = np.empty(nb, dtype=np.int64)
+        arg = np.empty(nb, dtype=np.int32)  # 32-bit lanes like the values: wider vectors
+        count = np.empty(nb, dtype=np.int32)
         for c in range(nc):
             for j in range(nb):
                 best[j] = np.inf
@@ -690,8 +692,10 @@ def _kernels() -> SimpleNamespace:
                 arg[j] = 0
             for s in range(T):  # the inner loop runs along contiguous queries: vectorised
                 p2 = bias[c, s]
+                row = G3[c, s]
                 for j in range(nb):
-                    best[j] = min(best[j], G3[c, s, j] + p2)  # float32, as the error bound assumes
+                    a = row[j] + p2  # float32, as the error bound assumes
+                    best[j] = a if a < best[j] else best[j]
             for j in range(nb):
                 t64 = np.float64(best[j]) + 2.0 * (c_err * (npmax[c] + nq[j]) + tiny)
                 t32 = np.float32(t64)
@@ -700,10 +704,12 @@ def _kernels() -> SimpleNamespace:
                 thr[j] = t32
             for s in range(T - 1, -1, -1):  # backwards: arg ends at the first minimum
                 p2 = bias[c, s]
+                row = G3[c, s]
+                si = np.int32(s)
                 for j in range(nb):
-                    a = G3[c, s, j] + p2
-                    count[j] += a <= thr[j]
-                    arg[j] = s if a == best[j] else arg[j]
+                    a = row[j] + p2
+                    count[j] += np.int32(1) if a <= thr[j] else np.int32(0)
+                    arg[j] = si if a == best[j] else arg[j]
             for j in range(nb):
                 err = c_err * (npmax[c] + nq[j]) + tiny
                 s0[c, j] = arg[j]
@@ -756,6 +762,17 @@ def _kernels() -> SimpleNamespace:
                 else:
                     av[c] = 1.0 - np.float64(dot32(F3[c, arg], fq)) / np.sqrt(d)
                     inexact[c] = True
+
+    @numba.njit(cache=True, nogil=True)
+    def admissible_ends(bias2):
+        M, T = bias2.shape
+        ends = np.zeros(M, np.int64)
+        for c in range(M):
+            for s in range(T - 1, -1, -1):  # from the end: only the last few starts are read
+                if bias2[c, s] < np.inf:
+                    ends[c] = s + 1
+                    break
+        return ends
 
     @numba.njit(cache=True, nogil=True)
     def row_stats(x2, norms):
@@ -958,33 +975,57 @@ def _kernels() -> SimpleNamespace:
             a = b + 1
 
     @numba.njit(cache=True, nogil=True)
-    def rank_top(v, e, av, ae, porder, aorder, clips, start, P3, F3, q, f, width, out_i, out_f):
+    def kth_smallest(x, k):
+        # the k-th smallest value (k >= 1) by a sorted buffer of the k smallest so far:
+        # one pass, and for the small k of a candidate table far cheaper than a partition
+        if k > 64:
+            return np.partition(x, k - 1)[k - 1]
+        buf = np.empty(k, x.dtype)
+        m = 0
+        for i in range(x.shape[0]):
+            xi = x[i]
+            if m == k:
+                if xi >= buf[k - 1]:
+                    continue
+                r = k - 1
+            else:
+                r = m
+                m += 1
+            while r > 0 and buf[r - 1] > xi:
+                buf[r] = buf[r - 1]
+                r -= 1
+            buf[r] = xi
+        return buf[k - 1]
+
+    @numba.njit(cache=True, nogil=True)
+    def rank_top(v, e, av, ae, porder, aorder, clips, start, P3, F3, q, f, width, out_i, out_f, work):
+        # work: (7, >= n) int64 scratch, reused between calls (fresh memory costs page faults)
         n = v.shape[0]
         w = min(width, n)
         nb = sq64(f)
-        plo = np.empty(n, np.int64)
-        phi = np.empty(n, np.int64)
-        alo = np.empty(n, np.int64)
-        ahi = np.empty(n, np.int64)
+        plo = work[0, :n]
+        phi = work[1, :n]
+        alo = work[2, :n]
+        ahi = work[3, :n]
         pg = bounds(v, e, porder, plo, phi)
         ag = bounds(av, ae, aorder, alo, ahi)
         if pg or ag:
             # only clips that could make the top w of the combined ranking need their groups
             # settled: one whose smallest possible rank sum exceeds the w-th smallest largest
             # possible rank sum cannot be among the first w
-            bound = np.partition(phi + ahi, w - 1)[w - 1]
+            bound = kth_smallest(phi + ahi, w)
             wanted = plo + alo <= bound
             settle(v, e, porder, plo, phi, wanted, True, clips, start, P3, F3, q, f, nb)
             settle(av, ae, aorder, alo, ahi, wanted, False, clips, start, P3, F3, q, f, nb)
-        prank = np.empty(n, np.int64)
-        arank = np.empty(n, np.int64)
+        prank = work[4, :n]
+        arank = work[5, :n]
         for i in range(n):
             prank[porder[i]] = i
             arank[aorder[i]] = i
-        key = np.empty(n, np.int64)
+        key = work[6, :n]
         for i in range(n):
             key[i] = (prank[i] + arank[i]) * n + i  # unique: ties go to the lower clip index
-        kth = np.partition(key, w - 1)[w - 1]
+        kth = kth_smallest(key, w)
         top = np.empty(w, np.int64)
         kt = np.empty(w, np.int64)
         j = 0
@@ -1010,8 +1051,9 @@ def _kernels() -> SimpleNamespace:
         return w
 
     return SimpleNamespace(reduce_many=reduce_many, scan_one=scan_one, audio_at=audio_at,
-                           group_bounds=group_bounds, row_stats=row_stats, survivors=survivors,
-                           rank_top=rank_top)
+                           group_bounds=group_bounds, row_stats=row_stats, admissible_ends=admissible_ends,
+                           survivors=survivors,
+                           rank_top=rank_top, kth_smallest=kth_smallest)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1054,6 +1096,7 @@ class SearchIndex:
         self._npmax = np64.reshape(M, T).max(axis=1)
         self._na64 = _checked_sqnorms(np.asarray(self._F2), "audio", self._workers)
         self._na2 = self._na64.reshape(M, T)
+        self._scratch = threading.local()
 
     # -- admissibility -------------------------------------------------------------------------
 
@@ -1147,6 +1190,8 @@ class SearchIndex:
             if scratch is not None and B == 1:  # a batch's larger buffer is freed before its decisions
                 scratch["product"] = buf
         product = _matrix_product(B)
+        # per query group and clip: one past the last admissible start (0: none)
+        range_ends = [] if B == 1 else [_kernels().admissible_ends(bias.reshape(M, T)) for bias, _, _ in ranges]
         s0 = np.empty((M, B), np.int64)
         amin = np.empty((M, B), np.float32)
         # the audio estimate of each clip's s0 per query, made while the clip is at hand
@@ -1177,10 +1222,16 @@ class SearchIndex:
                 if ci.size:
                     found.append((ci + c0, np.zeros(ci.size, np.int64), G2[ci]))
                 return found
-            product(self._P2[r0:r1], W, G)
-            G3 = G.reshape(nc, T, B)
-            for bias, j0, j1 in ranges:
-                bias2 = bias[r0:r1].reshape(nc, T)
+            # starts from L on are admissible for no query in these clips: their products are skipped
+            L = int(max(ends[c0:c1].max() for ends in range_ends))
+            if L == 0:
+                s0[c0:c1] = 0
+                amin[c0:c1] = np.inf
+                return found
+            G3 = G[: nc * L].reshape(nc, L, B)
+            product(self._P3[c0:c1, :L], W, G3)
+            for (bias, j0, j1) in ranges:
+                bias2 = bias[r0:r1].reshape(nc, T)[:, :L]
                 s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
                 s0[c0:c1, j0:j1] = s0c
                 amin[c0:c1, j0:j1] = amc
@@ -1188,8 +1239,9 @@ class SearchIndex:
                                     av[c0:c1, j0:j1], inexact[c0:c1, j0:j1])
                 ci, bj = np.nonzero(und)
                 if ci.size:
-                    rows = G3[ci, :, bj + j0]
-                    found.append((ci + c0, perm[bj + j0], rows if j1 - j0 == 1 else rows + bias2[ci]))
+                    rows = np.full((ci.size, T), np.float32(np.inf))
+                    rows[:, :L] = G3[ci, :, bj + j0] if j1 - j0 == 1 else G3[ci, :, bj + j0] + bias2[ci]
+                    found.append((ci + c0, perm[bj + j0], rows))
             return found
 
         # each chunk is shared out to the threads by clips: the memory-bound product of
@@ -1243,9 +1295,13 @@ class SearchIndex:
         """
         M = self.shape[0]
         k = _kernels()
-        clips = np.empty(M, np.int64)
-        start = np.empty(M, np.int64)
-        v, e, av, ae = np.empty(M), np.empty(M), np.empty(M), np.empty(M)
+        # per-thread scratch, reused between steps: fresh pages for every query cost page faults
+        scratch = getattr(self._scratch, "decide", None)
+        if scratch is None or scratch[0].shape[1] != M:
+            scratch = self._scratch.decide = (np.empty((9, M), np.int64), np.empty((4, M)))
+        ints, floats = scratch
+        clips, start = ints[7], ints[8]
+        v, e, av, ae = floats
         cclips, crows = complex_
         n = k.survivors(s0, amin, float(nq), self._npmax, self._pose_c, _TINY, cclips, crows, self._P3, q,
                         self._F3, f, av_col, inexact_col, self._audio_e, clips, start, v, e, av, ae)
@@ -1258,7 +1314,7 @@ class SearchIndex:
         aorder = np.argsort(av, kind=None if ae.any() else "stable")
         out_i = np.empty((5, min(width, n)), np.int64)
         out_f = np.empty((2, min(width, n)))
-        k.rank_top(v, e, av, ae, porder, aorder, clips, start, self._P3, self._F3, q, f, width, out_i, out_f)
+        k.rank_top(v, e, av, ae, porder, aorder, clips, start, self._P3, self._F3, q, f, width, out_i, out_f, ints)
         return {
             "n": n,
             "cand_clip": out_i[0],

@@ -230,6 +230,30 @@ def test_batch_equals_single_runs(problem, n_queries, seed):
     assert all(a.equals(b) for a, b in zip(batch, singles))
 
 
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_batch_skips_inadmissible_starts_and_clips_without_any(threads):
+    # a control that admits only early starts of the first clips: the batch multiplies only the
+    # starts some query may use, and parts of the database with none at all are skipped whole
+    rng = np.random.default_rng(11)
+    M, T, D, A = 40, 24, 6, 5
+    P = rng.standard_normal((M, T, D)).astype(np.float32)
+    F = rng.standard_normal((M, T, A)).astype(np.float32)
+    valid = np.ones((M, T), bool)
+    masks = np.zeros((1, M, T), bool)
+    masks[0, : M // 3, :10] = True
+    queries = [rng.standard_normal((30, A)).astype(np.float32) for _ in range(3)]
+    configs = [SearchConfig(k=k, step=4, topk=5, mask_rule="all") for k in range(3)]
+    step_masks = [np.zeros(8, np.int64), np.where(np.arange(8) % 2, 0, -1), np.zeros(8, np.int64)]
+    index = SearchIndex(P, F, valid)
+    index._workers = threads
+    batch = index.search_batch(queries, configs=configs, masks=masks, step_masks=step_masks)
+    for q, c, sm, b in zip(queries, configs, step_masks, batch):
+        single = search(P, F, valid, q, config=c, masks=masks, step_mask=sm)
+        assert b.equals(single)
+        controlled = np.flatnonzero(sm >= 0)
+        assert (b.clip[controlled] < M // 3).all() and (b.start[controlled] <= 6).all()
+
+
 # -- rules of the search -------------------------------------------------------------------------
 
 
