@@ -8,6 +8,7 @@ searches several speeches together, scanning the database once per step.
 """
 from __future__ import annotations
 
+import numbers
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -57,6 +58,11 @@ class SynthesisConfig:
         (take, start_s, end_s) stretches the search must not use.
     pins : dict of int -> (int, int)
         Step -> (clip, start): force that step's choice ("use this candidate instead").
+    refiner_keep_hz : float
+        With a refiner: keep the k-NN motion's content slower than this (Hz) and take
+        the faster content from the refiner (see :func:`gesturekit.refine.infer.keep_slow`),
+        so controls of hand height, width and symmetry survive refinement; 0: the
+        refiner's output as it is (the paper).
     """
 
     k: int = 0
@@ -71,8 +77,13 @@ class SynthesisConfig:
     exclude_takes: tuple = ()
     exclude_ranges: tuple = ()
     pins: dict = field(default_factory=dict, hash=False)
+    refiner_keep_hz: float = 2.0
 
     def __post_init__(self):
+        hz = self.refiner_keep_hz
+        if isinstance(hz, bool) or not isinstance(hz, numbers.Real) or not (np.isfinite(hz) and hz >= 0):
+            raise ConfigError(f"refiner_keep_hz must be a frequency >= 0 (0: off), got {hz!r}")
+        object.__setattr__(self, "refiner_keep_hz", float(hz))
         if self.init not in ("random", "rest"):
             raise ConfigError(f"init must be 'random' or 'rest', got {self.init!r}")
         if self.blend not in BLEND_MODES:
@@ -102,6 +113,7 @@ class SynthesisConfig:
             "exclude_takes": list(self.exclude_takes),
             "exclude_ranges": [list(r) for r in self.exclude_ranges],
             "pins": {str(i): list(v) for i, v in self.pins.items()},
+            "refiner_keep_hz": self.refiner_keep_hz,
         }
 
     @classmethod
@@ -419,5 +431,6 @@ def _open_refiner(refiner, db):
 def _refine(db: MatchingDatabase, res: SynthesisResult, refiner) -> None:
     """Refine the k-NN motion with the speech's cGAN audio features; it becomes the output."""
     _, a = db.query_features(res.audio, n_frames=res.n_frames)
-    res.refined_motion = refiner.refine_motion(res.knn_motion, a)
+    hz = res.config.refiner_keep_hz
+    res.refined_motion = refiner.refine_motion(res.knn_motion, a, keep_below_hz=hz if hz > 0 else None)
     res.motion = res.refined_motion

@@ -49,6 +49,14 @@ def test_synthesize_with_a_refiner_keeps_both_motions(setup):
     want = Refiner.load(path).refine(plain.knn_motion.flat(), a)
     np.testing.assert_allclose(res.refined_motion.flat(), want, atol=1e-6)
     assert res.metadata()["refined"]
+    # refiner_keep_hz = 0: the refiner's output as it is (the paper)
+    raw = synthesize(speech, db=db, config=SynthesisConfig(refiner_keep_hz=0), refiner=path)
+    want = Refiner.load(path).refine(plain.knn_motion.flat(), a, keep_below_hz=None)
+    np.testing.assert_allclose(raw.refined_motion.flat(), want, atol=1e-6)
+    assert not np.allclose(raw.refined_motion.flat(), res.refined_motion.flat(), atol=1e-4)
+    assert SynthesisConfig.from_dict(raw.config.to_dict()).refiner_keep_hz == 0.0
+    with pytest.raises(Exception, match="refiner_keep_hz"):
+        SynthesisConfig(refiner_keep_hz=-1)
 
 
 def test_synthesize_refuses_a_refiner_of_another_layout(setup):

@@ -13,7 +13,7 @@ from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError, DatabaseError, InputFileError
 from gesturekit.features import LAYOUT
 from gesturekit.refine import default_refiner_path, load_refiner
-from gesturekit.refine.infer import Refiner
+from gesturekit.refine.infer import KEEP_BELOW_HZ, Refiner, keep_slow
 from gesturekit.refine.model import ModelConfig, build_models
 from gesturekit.refine.train import TrainConfig, train_refiner
 from gesturekit.skeleton import JOINT_NAMES
@@ -114,6 +114,55 @@ def test_bad_inputs_are_refused():
     bad[3, 3] = np.nan
     with pytest.raises(ConfigError, match="NaN"):
         ref.refine(bad, a)
+
+
+# ---- keeping the k-NN motion's slow content ----------------------------------------------------
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(2, 400), st.floats(0.3, 1.5), st.integers(0, 2**31 - 1))
+def test_keep_slow_takes_slow_content_from_knn_and_fast_content_from_the_refiner(T, hz, seed):
+    rng = np.random.default_rng(seed)
+    knn = rng.standard_normal((T, 6)).astype(np.float32)
+    offset = rng.uniform(-1, 1, (1, 6))  # e.g. a hand pulled up by the refiner: slow content
+    fast = 0.05 * (-1.0) ** np.arange(T)[:, None] * rng.uniform(0.5, 1, (1, 6))  # 7.5 Hz at 15 fps
+    out = keep_slow(knn + offset + fast, knn, hz)
+    assert out.shape == (T, 6) and out.dtype == np.float32
+    # the offset is gone entirely; the fast alternation stays (a Gaussian passes exp(-ln2/2 (7.5/hz)^2)
+    # of it, at most 0.02% here), apart from the ends, where the held edge values hold a part of it
+    resid = out - knn - fast
+    margin = int(4 * np.sqrt(np.log(2)) / (2 * np.pi * hz) * 15) + 1  # the filter's reach, frames
+    if T > 2 * margin:
+        assert np.abs(resid[margin:-margin]).max() < 2e-3 * 0.05 + 1e-5
+    assert np.abs(resid).max() < 0.05 + 1e-5
+
+
+def test_keep_slow_cuts_near_the_stated_frequency():
+    T = 900
+    t = np.arange(T)[:, None] / 15.0
+    for f, kept_by_knn in ((0.25, True), (6.0, False)):
+        wave = np.sin(2 * np.pi * f * t)
+        out = keep_slow(wave, np.zeros((T, 1)), 2.0)
+        # slow: the k-NN's (zero) wins; fast: the refiner's wave passes
+        ratio = np.abs(out[100:-100]).max() / np.abs(wave[100:-100]).max()
+        assert (ratio < 0.05) if kept_by_knn else (ratio > 0.9)
+    # half power at the cut-off frequency
+    wave = np.sin(2 * np.pi * 2.0 * t)
+    low = wave - keep_slow(wave, np.zeros((T, 1)), 2.0)  # what the low-pass passed
+    assert abs(np.sqrt((low[100:-100] ** 2).mean() / (wave[100:-100] ** 2).mean()) - np.sqrt(0.5)) < 0.02
+
+
+def test_refine_keeps_slow_content_by_default_and_none_is_the_generator_alone():
+    ref = random_refiner(seed=3)
+    g, a = smooth_inputs(200, seed=3)
+    raw = ref.refine(g, a, keep_below_hz=None)
+    np.testing.assert_allclose(ref.refine(g, a), keep_slow(raw, g, KEEP_BELOW_HZ), atol=1e-6)
+    np.testing.assert_allclose(ref.refine(g, a, keep_below_hz=1.0), keep_slow(raw, g, 1.0), atol=1e-6)
+    # the random generator moves the motion far; the default pulls its slow part back to the input
+    assert np.abs(ref.refine(g, a) - g).mean() < 0.5 * np.abs(raw - g).mean()
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ConfigError, match="keep_below_hz"):
+            ref.refine(g, a, keep_below_hz=bad)
 
 
 # ---- checkpoint folders ---------------------------------------------------------------------------

@@ -193,6 +193,11 @@ def settings(db) -> dict:
         folder = ss["synth.refiner_path"] = c[3].text_input(
             "Refiner folder", key=pk("synth.refiner_path", default), disabled=not on,
             placeholder="folder written by gesturekit train-refiner")
+        out["refiner_keep_hz"] = ss["synth.refiner_keep_hz"] = c[3].number_input(
+            "Keep k-NN motion below (Hz)", min_value=0.0, max_value=7.5, step=0.5, disabled=not on,
+            key=pk("synth.refiner_keep_hz", 2.0),
+            help="the k-NN motion's slow content (hand height, width, symmetry: what controls set) is kept, "
+            "the refiner supplies the faster content (joins, timing); 0: the refiner's output as it is (the paper)")
         if on:
             ok = False  # until the refiner is checked: a run must not silently go without it
             with common.user_errors():

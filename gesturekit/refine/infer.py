@@ -17,6 +17,15 @@ frames, exactly the input size of training, and cross-fades their outputs with
 Hann weights (every frame is a weighted mean of ``64 / hop`` windows, the
 weights fading to almost 0 at each window's ends). Away from the ends both
 agree closely; the full pass costs about ``64 / hop`` times less.
+
+``keep_below_hz`` (ours; default :data:`KEEP_BELOW_HZ`) keeps the k-NN motion's
+content slower than that frequency and takes only the faster content from the
+generator: ``out = g + lowpass(knn - g)``. A refiner trained briefly (the quick
+preset) smooths the joins but also pulls slow features, such as hand height,
+towards the training data's average, which undoes the controls; the joins and
+the timing the refiner is for are faster than the segment rate (15 / 8 Hz), the
+controlled features slower. ``None`` returns the generator's output as it is
+(the paper).
 """
 from __future__ import annotations
 
@@ -35,9 +44,42 @@ from ..skeleton import FPS, JOINT_NAMES
 from .folder import FORMAT, FORMAT_VERSION, read_refiner_config
 from .model import GENERATOR_STRIDE, Generator, ModelConfig
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "Refiner", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "KEEP_BELOW_HZ", "Refiner", "keep_slow", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
 
 STATE_FILES = ("generator.pt", "critic.pt", "train_state.pt")
+
+#: Default of ``keep_below_hz``: about the segment rate (15 fps / 8 frames = 1.875 Hz).
+KEEP_BELOW_HZ = 2.0
+
+
+def keep_slow(refined: np.ndarray, knn: np.ndarray, hz: float, fps: float = FPS) -> np.ndarray:
+    """``refined`` with its content slower than ``hz`` replaced by ``knn``'s.
+
+    ``refined + G * (knn - refined)``, ``G`` a Gaussian low-pass along time whose
+    power falls to half at ``hz`` (sigma = sqrt(ln 2) / (2 pi hz) seconds), with
+    the ends held (edge values repeated), so a constant offset between the two is
+    removed entirely and changes much faster than ``hz`` are kept.
+
+    Parameters
+    ----------
+    refined, knn : np.ndarray, shape (T, C)
+        Motion, metres.
+    hz : float
+        Cut-off frequency, > 0.
+    fps : float
+
+    Returns
+    -------
+    np.ndarray, shape (T, C), float32
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    if not (np.isfinite(hz) and hz > 0):
+        raise ConfigError(f"keep_below_hz must be a positive frequency in Hz, got {hz}")
+    sigma = np.sqrt(np.log(2.0)) / (2.0 * np.pi * float(hz)) * float(fps)  # frames
+    diff = np.asarray(knn, np.float64) - np.asarray(refined, np.float64)
+    slow = gaussian_filter1d(diff, sigma, axis=0, mode="nearest", truncate=4.0)
+    return (np.asarray(refined, np.float64) + slow).astype(np.float32)
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -183,7 +225,10 @@ class Refiner:
         check_layout(self.config, db, where=self.path if self.path is not None else "refiner")
 
     # ---- refining ---------------------------------------------------------------------------
-    def refine(self, motion, audio, *, mode: str = "full", hop: int = 16, batch: int = 256) -> np.ndarray:
+    def refine(
+        self, motion, audio, *, mode: str = "full", hop: int = 16, batch: int = 256,
+        keep_below_hz: float | None = KEEP_BELOW_HZ,
+    ) -> np.ndarray:
         """Refine k-NN motion with the audio of the same frames.
 
         Parameters
@@ -200,11 +245,16 @@ class Refiner:
             Frames between windows of ``windowed`` (1..64; 16 = each frame seen by 4 windows).
         batch : int
             Windows per generator call (memory).
+        keep_below_hz : float or None
+            Keep the k-NN motion's content slower than this (Hz), see :func:`keep_slow`;
+            None: the generator's output as it is (the paper).
 
         Returns
         -------
         np.ndarray, shape (T, 165), float32, metres
         """
+        if keep_below_hz is not None and not (np.isfinite(keep_below_hz) and keep_below_hz > 0):
+            raise ConfigError(f"keep_below_hz must be a positive frequency in Hz or None, got {keep_below_hz}")
         g = np.asarray(motion, dtype=np.float32)
         if g.ndim == 3:
             g = g.reshape(g.shape[0], -1)
@@ -226,7 +276,8 @@ class Refiner:
             out = self._full(gz, az)
         else:
             raise ConfigError(f"mode must be 'windowed' or 'full', got {mode!r}")
-        return (out * self.stats["motion_std"] + self.stats["motion_mean"]).astype(np.float32)
+        out = (out * self.stats["motion_std"] + self.stats["motion_mean"]).astype(np.float32)
+        return out if keep_below_hz is None else keep_slow(out, g, keep_below_hz)
 
     def refine_motion(self, motion: Motion, audio: np.ndarray, **options) -> Motion:
         """:meth:`refine` for a :class:`~gesturekit.motion.Motion` at 15 fps; returns a Motion."""
