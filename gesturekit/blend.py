@@ -1,13 +1,17 @@
-"""Optional transitions between search segments (not in the paper, which leaves smoothing to the cGAN)."""
+"""Optional transitions between search segments (not in the paper, which leaves smoothing to the
+cGAN), and the step that keeps the k-NN motion's slow content in refined motion."""
 from __future__ import annotations
 
 import numpy as np
 
 from .errors import ConfigError
 
-__all__ = ["BLEND_MODES", "blend_segments"]
+__all__ = ["BLEND_MODES", "KEEP_BELOW_HZ", "blend_segments", "keep_slow"]
 
 BLEND_MODES = ("none", "offset")
+
+#: Default cut-off of :func:`keep_slow` in synthesis, Hz: about the segment rate (15 fps / 8 frames).
+KEEP_BELOW_HZ = 2.0
 
 
 def blend_segments(g: np.ndarray, boundaries: np.ndarray, *, mode: str = "none", frames: int = 4) -> np.ndarray:
@@ -50,3 +54,43 @@ def blend_segments(g: np.ndarray, boundaries: np.ndarray, *, mode: str = "none",
         n = min(frames, len(out) - b)
         out[b : b + n] += (weight[:n, None] * offset[None, :]).astype(out.dtype)
     return out
+
+
+def keep_slow(refined: np.ndarray, knn: np.ndarray, hz: float, fps: float = 15.0) -> np.ndarray:
+    """``refined`` with its content slower than ``hz`` replaced by ``knn``'s.
+
+    ``refined + G * (knn - refined)``, ``G`` a Gaussian low-pass along time whose
+    power falls to half at ``hz`` (sigma = sqrt(ln 2) / (2 pi hz) seconds), with
+    the ends held (edge values repeated), so a constant offset between the two is
+    removed entirely and changes much faster than ``hz`` are kept.
+
+    Why: a refiner trained briefly (the quick preset) smooths the joins but also
+    pulls slow features, such as hand height, towards its training data's average,
+    which undoes the controls. The joins and the timing a refiner is for are
+    faster than the segment rate (15 / 8 Hz); hand height, width and symmetry,
+    which the controls set, are slower.
+
+    Parameters
+    ----------
+    refined, knn : np.ndarray, shape (T, C)
+        Refined and k-NN motion (e.g. flattened joint positions), metres.
+    hz : float
+        Cut-off frequency, > 0.
+    fps : float
+        Frame rate of both, frames per second.
+
+    Returns
+    -------
+    np.ndarray, shape (T, C), float32
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    if not (np.isfinite(hz) and hz > 0):
+        raise ConfigError(f"keep_below_hz must be a positive frequency in Hz, got {hz}")
+    refined = np.asarray(refined, np.float64)
+    knn = np.asarray(knn, np.float64)
+    if refined.shape != knn.shape:
+        raise ConfigError(f"refined {refined.shape} and k-NN {knn.shape} motion differ in shape")
+    sigma = np.sqrt(np.log(2.0)) / (2.0 * np.pi * float(hz)) * float(fps)  # frames
+    slow = gaussian_filter1d(knn - refined, sigma, axis=0, mode="nearest", truncate=4.0)
+    return (refined + slow).astype(np.float32)

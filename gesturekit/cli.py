@@ -134,7 +134,7 @@ def _cmd_synthesize(args) -> int:
         mask_rule=args.mask_rule, blend=args.blend, control=control,
         exclude_takes=tuple(args.exclude_take or ()),
         exclude_ranges=tuple(_parse_range(r) for r in (args.exclude_range or ())),
-        refiner_keep_hz=args.refiner_keep_hz,
+        **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
     )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -414,7 +414,7 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--refiner", metavar="PATH", help="refine the k-NN motion with a trained refiner folder "
                    "(from train-refiner), or 'demo' for the one shipped with the demo database; "
                    "the npz keeps both motions")
-    y.add_argument("--refiner-keep-hz", type=float, default=2.0, metavar="HZ",
+    y.add_argument("--refiner-keep-hz", type=float, default=None, metavar="HZ",
                    help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
                    "controls) and take the faster content from the refiner (default 2); 0: the refiner's "
                    "output as it is (the paper)")

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .blend import BLEND_MODES, blend_segments
+from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control, step_masks
 from .database import MatchingDatabase, normalise_exclusions
 from .errors import ConfigError
@@ -60,7 +60,7 @@ class SynthesisConfig:
         Step -> (clip, start): force that step's choice ("use this candidate instead").
     refiner_keep_hz : float
         With a refiner: keep the k-NN motion's content slower than this (Hz) and take
-        the faster content from the refiner (see :func:`gesturekit.refine.infer.keep_slow`),
+        the faster content from the refiner (see :func:`gesturekit.blend.keep_slow`),
         so controls of hand height, width and symmetry survive refinement; 0: the
         refiner's output as it is (the paper).
     """
@@ -77,7 +77,7 @@ class SynthesisConfig:
     exclude_takes: tuple = ()
     exclude_ranges: tuple = ()
     pins: dict = field(default_factory=dict, hash=False)
-    refiner_keep_hz: float = 2.0
+    refiner_keep_hz: float = KEEP_BELOW_HZ
 
     def __post_init__(self):
         hz = self.refiner_keep_hz
@@ -429,8 +429,13 @@ def _open_refiner(refiner, db):
 
 
 def _refine(db: MatchingDatabase, res: SynthesisResult, refiner) -> None:
-    """Refine the k-NN motion with the speech's cGAN audio features; it becomes the output."""
+    """Refine the k-NN motion with the speech's cGAN audio features (keeping its content below
+    ``refiner_keep_hz``); it becomes the output."""
     _, a = db.query_features(res.audio, n_frames=res.n_frames)
+    refined = refiner.refine_motion(res.knn_motion, a)
     hz = res.config.refiner_keep_hz
-    res.refined_motion = refiner.refine_motion(res.knn_motion, a, keep_below_hz=hz if hz > 0 else None)
+    if hz > 0:
+        kept = keep_slow(refined.flat(), res.knn_motion.flat(), hz, fps=res.knn_motion.fps)
+        refined = Motion.from_flat(kept, refined.fps)
+    res.refined_motion = refined
     res.motion = res.refined_motion

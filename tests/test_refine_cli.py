@@ -6,6 +6,7 @@ import pytest
 import torch
 import soundfile as sf
 
+from gesturekit.blend import keep_slow
 from gesturekit.cli import main
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.refine.infer import Refiner
@@ -46,13 +47,14 @@ def test_synthesize_with_a_refiner_keeps_both_motions(setup):
     np.testing.assert_array_equal(res.knn_motion.positions, plain.knn_motion.positions)
     assert res.refined_motion is not None and res.motion is res.refined_motion
     _, a = db.query_features(speech, n_frames=res.n_frames)
-    want = Refiner.load(path).refine(plain.knn_motion.flat(), a)
+    # by default the k-NN motion's content below 2 Hz is kept (SynthesisConfig.refiner_keep_hz)
+    generator = Refiner.load(path).refine(plain.knn_motion.flat(), a)
+    want = keep_slow(generator, plain.knn_motion.flat(), 2.0)
     np.testing.assert_allclose(res.refined_motion.flat(), want, atol=1e-6)
     assert res.metadata()["refined"]
     # refiner_keep_hz = 0: the refiner's output as it is (the paper)
     raw = synthesize(speech, db=db, config=SynthesisConfig(refiner_keep_hz=0), refiner=path)
-    want = Refiner.load(path).refine(plain.knn_motion.flat(), a, keep_below_hz=None)
-    np.testing.assert_allclose(raw.refined_motion.flat(), want, atol=1e-6)
+    np.testing.assert_allclose(raw.refined_motion.flat(), generator, atol=1e-6)
     assert not np.allclose(raw.refined_motion.flat(), res.refined_motion.flat(), atol=1e-4)
     assert SynthesisConfig.from_dict(raw.config.to_dict()).refiner_keep_hz == 0.0
     with pytest.raises(Exception, match="refiner_keep_hz"):
@@ -89,6 +91,15 @@ def test_cli_train_refiner_and_synthesize(setup, tmp_path, capsys):
         assert z["refined_positions"].shape == z["knn_positions"].shape == z["positions"].shape
         np.testing.assert_array_equal(z["positions"], z["refined_positions"])
         assert not np.array_equal(z["positions"], z["knn_positions"])
+        kept = z["refined_positions"]
+        assert json.loads(str(z["config"]))["synthesis"]["refiner_keep_hz"] == 2.0
+    # --refiner-keep-hz 0: the refiner's output as it is
+    assert main(["synthesize", str(base / "speech.wav"), "--db", str(base / "db"), "--refiner", str(out),
+                 "--refiner-keep-hz", "0", "--out", str(tmp_path / "raw")]) == 0
+    with np.load(tmp_path / "raw" / "speech.npz", allow_pickle=False) as z:
+        assert json.loads(str(z["config"]))["synthesis"]["refiner_keep_hz"] == 0.0
+        np.testing.assert_array_equal(z["knn_positions"], np.load(syn / "speech.npz")["knn_positions"])
+        assert np.abs(z["refined_positions"] - z["knn_positions"]).mean() > np.abs(kept - z["knn_positions"]).mean()
 
 
 def test_cli_errors(setup, tmp_path, capsys):

@@ -13,7 +13,8 @@ from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError, DatabaseError, InputFileError
 from gesturekit.features import LAYOUT
 from gesturekit.refine import default_refiner_path, load_refiner
-from gesturekit.refine.infer import KEEP_BELOW_HZ, Refiner, keep_slow
+from gesturekit.blend import keep_slow
+from gesturekit.refine.infer import Refiner
 from gesturekit.refine.model import ModelConfig, build_models
 from gesturekit.refine.train import TrainConfig, train_refiner
 from gesturekit.skeleton import JOINT_NAMES
@@ -152,17 +153,19 @@ def test_keep_slow_cuts_near_the_stated_frequency():
     assert abs(np.sqrt((low[100:-100] ** 2).mean() / (wave[100:-100] ** 2).mean()) - np.sqrt(0.5)) < 0.02
 
 
-def test_refine_keeps_slow_content_by_default_and_none_is_the_generator_alone():
+def test_refine_is_the_generator_alone_unless_asked_to_keep_slow_content():
     ref = random_refiner(seed=3)
     g, a = smooth_inputs(200, seed=3)
-    raw = ref.refine(g, a, keep_below_hz=None)
-    np.testing.assert_allclose(ref.refine(g, a), keep_slow(raw, g, KEEP_BELOW_HZ), atol=1e-6)
+    raw = ref.refine(g, a)
+    np.testing.assert_array_equal(ref.refine(g, a, keep_below_hz=None), raw)
     np.testing.assert_allclose(ref.refine(g, a, keep_below_hz=1.0), keep_slow(raw, g, 1.0), atol=1e-6)
-    # the random generator moves the motion far; the default pulls its slow part back to the input
-    assert np.abs(ref.refine(g, a) - g).mean() < 0.5 * np.abs(raw - g).mean()
+    # the random generator moves the motion far; keeping slow content pulls it back to the input
+    assert np.abs(ref.refine(g, a, keep_below_hz=2.0) - g).mean() < 0.5 * np.abs(raw - g).mean()
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(ConfigError, match="keep_below_hz"):
             ref.refine(g, a, keep_below_hz=bad)
+    with pytest.raises(ConfigError, match="differ in shape"):
+        keep_slow(raw, g[:10], 2.0)
 
 
 # ---- checkpoint folders ---------------------------------------------------------------------------

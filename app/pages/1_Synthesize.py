@@ -7,7 +7,7 @@ import pandas as pd
 import streamlit as st
 
 import common
-from gesturekit.blend import BLEND_MODES
+from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.errors import ConfigError, GestureKitError, GestureKitWarning
 from gesturekit.motion import AUDIO_SR
@@ -195,7 +195,7 @@ def settings(db) -> dict:
             placeholder="folder written by gesturekit train-refiner")
         out["refiner_keep_hz"] = ss["synth.refiner_keep_hz"] = c[3].number_input(
             "Keep k-NN motion below (Hz)", min_value=0.0, max_value=7.5, step=0.5, disabled=not on,
-            key=pk("synth.refiner_keep_hz", 2.0),
+            key=pk("synth.refiner_keep_hz", KEEP_BELOW_HZ),
             help="the k-NN motion's slow content (hand height, width, symmetry: what controls set) is kept, "
             "the refiner supplies the faster content (joins, timing); 0: the refiner's output as it is (the paper)")
         if on:

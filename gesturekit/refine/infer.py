@@ -18,14 +18,9 @@ Hann weights (every frame is a weighted mean of ``64 / hop`` windows, the
 weights fading to almost 0 at each window's ends). Away from the ends both
 agree closely; the full pass costs about ``64 / hop`` times less.
 
-``keep_below_hz`` (ours; default :data:`KEEP_BELOW_HZ`) keeps the k-NN motion's
-content slower than that frequency and takes only the faster content from the
-generator: ``out = g + lowpass(knn - g)``. A refiner trained briefly (the quick
-preset) smooths the joins but also pulls slow features, such as hand height,
-towards the training data's average, which undoes the controls; the joins and
-the timing the refiner is for are faster than the segment rate (15 / 8 Hz), the
-controlled features slower. ``None`` returns the generator's output as it is
-(the paper).
+``keep_below_hz`` (ours; off by default here, 2 Hz by default in synthesis, see
+:func:`gesturekit.blend.keep_slow`) keeps the k-NN motion's content slower than
+that frequency and takes only the faster content from the generator.
 """
 from __future__ import annotations
 
@@ -37,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..blend import keep_slow
 from ..errors import ConfigError, DatabaseError, InputFileError
 from ..features import LAYOUT
 from ..motion import Motion
@@ -44,42 +40,10 @@ from ..skeleton import FPS, JOINT_NAMES
 from .folder import FORMAT, FORMAT_VERSION, read_refiner_config
 from .model import GENERATOR_STRIDE, Generator, ModelConfig
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "KEEP_BELOW_HZ", "Refiner", "keep_slow", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "Refiner", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
 
 STATE_FILES = ("generator.pt", "critic.pt", "train_state.pt")
 
-#: Default of ``keep_below_hz``: about the segment rate (15 fps / 8 frames = 1.875 Hz).
-KEEP_BELOW_HZ = 2.0
-
-
-def keep_slow(refined: np.ndarray, knn: np.ndarray, hz: float, fps: float = FPS) -> np.ndarray:
-    """``refined`` with its content slower than ``hz`` replaced by ``knn``'s.
-
-    ``refined + G * (knn - refined)``, ``G`` a Gaussian low-pass along time whose
-    power falls to half at ``hz`` (sigma = sqrt(ln 2) / (2 pi hz) seconds), with
-    the ends held (edge values repeated), so a constant offset between the two is
-    removed entirely and changes much faster than ``hz`` are kept.
-
-    Parameters
-    ----------
-    refined, knn : np.ndarray, shape (T, C)
-        Motion, metres.
-    hz : float
-        Cut-off frequency, > 0.
-    fps : float
-
-    Returns
-    -------
-    np.ndarray, shape (T, C), float32
-    """
-    from scipy.ndimage import gaussian_filter1d
-
-    if not (np.isfinite(hz) and hz > 0):
-        raise ConfigError(f"keep_below_hz must be a positive frequency in Hz, got {hz}")
-    sigma = np.sqrt(np.log(2.0)) / (2.0 * np.pi * float(hz)) * float(fps)  # frames
-    diff = np.asarray(knn, np.float64) - np.asarray(refined, np.float64)
-    slow = gaussian_filter1d(diff, sigma, axis=0, mode="nearest", truncate=4.0)
-    return (np.asarray(refined, np.float64) + slow).astype(np.float32)
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -227,7 +191,7 @@ class Refiner:
     # ---- refining ---------------------------------------------------------------------------
     def refine(
         self, motion, audio, *, mode: str = "full", hop: int = 16, batch: int = 256,
-        keep_below_hz: float | None = KEEP_BELOW_HZ,
+        keep_below_hz: float | None = None,
     ) -> np.ndarray:
         """Refine k-NN motion with the audio of the same frames.
 
@@ -246,8 +210,9 @@ class Refiner:
         batch : int
             Windows per generator call (memory).
         keep_below_hz : float or None
-            Keep the k-NN motion's content slower than this (Hz), see :func:`keep_slow`;
-            None: the generator's output as it is (the paper).
+            Keep the k-NN motion's content slower than this (Hz), see
+            :func:`gesturekit.blend.keep_slow`; None (default): the generator's output
+            as it is (the paper).
 
         Returns
         -------
