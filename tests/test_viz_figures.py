@@ -12,6 +12,7 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS, bones
+from gesturekit.viz.figures import _chains
 from gesturekit.viz.figures import (
     DEFAULT_MAX_FRAMES,
     attribute_histograms,
@@ -32,12 +33,13 @@ def _traces(fig, motion: int) -> dict:
 
 
 def _segments(trace) -> np.ndarray:
-    """(bones, 2, 3) from a trace of (child, parent, NaN) triples."""
+    """(bones, 2, 3) (child, parent) from a trace of joint paths separated by NaN points,
+    each path parent first: every pair of consecutive finite points is one bone."""
     pts = np.stack([np.asarray(trace.x, float), np.asarray(trace.y, float), np.asarray(trace.z, float)], axis=1)
-    assert len(pts) % 3 == 0
-    triples = pts.reshape(-1, 3, 3)
-    assert np.isnan(triples[:, 2]).all() and np.isfinite(triples[:, :2]).all()
-    return triples[:, :2]
+    gap = np.isnan(pts).any(axis=1)
+    assert gap[-1] and (np.isnan(pts[gap]).all())
+    pairs = [(pts[i + 1], pts[i]) for i in range(len(pts) - 1) if not gap[i] and not gap[i + 1]]
+    return np.array(pairs)
 
 
 def _bone_set(segments: np.ndarray) -> set:
@@ -59,6 +61,21 @@ def test_skeleton_draws_all_54_bones_at_the_joint_positions():
     body, hands = _segments(parts["body"]), _segments(parts["hands"])
     assert (len(body), len(hands)) == (14, 40)
     assert _bone_set(np.concatenate([body, hands])) == _expected_bones(m.positions[0])
+    # joint paths, not one polyline per bone: fewer points to send and draw
+    assert len(parts["body"].x) + len(parts["hands"].x) < 0.55 * 3 * 54
+
+
+@settings(max_examples=50, deadline=None)
+@given(hst.lists(hst.integers(0, 10**6), min_size=1, max_size=60), hst.booleans())
+def test_joint_paths_draw_every_bone_once(draws, forest):
+    # a random tree (or forest) of joints: joint j's parent is one of the joints before it
+    n = len(draws) + 1
+    parents = [d % j for j, d in zip(range(1, n), draws)]
+    pairs = np.array([(j, p) for j, p in zip(range(1, n), parents) if not (forest and j % 7 == 0)]).reshape(-1, 2)
+    chains = _chains(pairs)
+    drawn = [(c[i + 1], c[i]) for c in chains for i in range(len(c) - 1)]
+    assert sorted(drawn) == sorted(map(tuple, pairs.tolist()))
+    assert all(len(c) >= 2 for c in chains)
 
 
 def test_skeleton_frames_follow_the_motion():

@@ -54,23 +54,61 @@ def _bone_groups() -> tuple[np.ndarray, np.ndarray]:
     return pairs[body], pairs[~body]
 
 
-def _segments(positions: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """Line segments of bones as one polyline broken by NaN rows.
+def _chains(pairs: np.ndarray) -> list[list[int]]:
+    """The bones of ``pairs`` as joint paths, each bone in exactly one path.
+
+    A path follows a joint's first child on down and starts again from a joint
+    for each further child, so a finger is one path of 5 joints (4 bones) rather
+    than 4 separate bones: about half the points to draw and to send.
+
+    Parameters
+    ----------
+    pairs : np.ndarray, shape (bones, 2)
+        (child, parent) joint indices; each child appears once.
+
+    Returns
+    -------
+    list of list of int
+        Joint indices along each path, parent first.
+    """
+    children: dict[int, list[int]] = {}
+    for c, par in pairs.tolist():
+        children.setdefault(par, []).append(c)
+    child_set = {c for c, _ in pairs.tolist()}
+    chains = []
+    # a path starts at every joint that is not drawn as a child here, and once more at a
+    # joint for each of its children after the first
+    starts = [j for j in children if j not in child_set]
+    stack = [(j, k) for j in sorted(starts) for k in range(len(children[j]))]
+    while stack:
+        top, k = stack.pop(0)
+        path = [top, children[top][k]]
+        while path[-1] in children:
+            j = path[-1]
+            stack.extend((j, i) for i in range(1, len(children[j])))
+            path.append(children[j][0])
+        chains.append(path)
+    return chains
+
+
+def _polylines(positions: np.ndarray, chains: list[list[int]]) -> np.ndarray:
+    """Joint paths as one polyline broken by NaN rows.
 
     Parameters
     ----------
     positions : np.ndarray, shape (frames, 55, 3), metres
-    pairs : np.ndarray, shape (bones, 2), (child, parent) joint indices
+    chains : list of list of int
+        From :func:`_chains`.
 
     Returns
     -------
-    np.ndarray, shape (frames, 3 * bones, 3), float32
-        For each bone: child, parent, NaN (plotly leaves a gap at a NaN point).
+    np.ndarray, shape (frames, points, 3), float32
+        The joints of each path in order, then a NaN point (plotly leaves a gap there).
     """
-    out = np.full((positions.shape[0], len(pairs), 3, 3), np.nan, dtype=np.float32)
-    out[:, :, 0] = positions[:, pairs[:, 0]]
-    out[:, :, 1] = positions[:, pairs[:, 1]]
-    return out.reshape(positions.shape[0], 3 * len(pairs), 3)
+    idx = np.concatenate([np.append(np.asarray(c), -1) for c in chains])
+    out = np.asarray(positions, np.float32)[:, idx]
+    out[:, idx < 0] = np.nan
+    return out
 
 
 def _xyz(points: np.ndarray) -> dict:
@@ -142,8 +180,9 @@ def skeleton_figure(
     -------
     plotly.graph_objects.Figure
         Two line-and-marker traces per motion: ``meta["part"] == "body"``
-        (14 bones) and ``"hands"`` (40 bones), each bone a (child, parent, NaN)
-        triple of points, so the joints are the markers at the bone ends.
+        (14 bones) and ``"hands"`` (40 bones), drawn as joint paths (a finger from
+        the wrist to its tip) separated by NaN points; every pair of consecutive
+        finite points is a bone, and the joints are the markers.
         One ``go.Frame`` per shown time (named by its index,
         ``layout.meta`` holds ``{"fps", "frame_step", "times"}`` with the
         times in seconds), and a scene camera with ``up = (0, 1, 0)`` and the
@@ -178,10 +217,10 @@ def skeleton_figure(
     offsets = (np.arange(len(motions)) - (len(motions) - 1) / 2) * float(spacing)
     shown = [p + np.array([dx, 0, 0], dtype=np.float32) for p, dx in zip(shown, offsets)]
 
-    body_pairs, hand_pairs = _bone_groups()
-    # per motion: (body segments, finger segments), each (frames, points, 3); markers at the
-    # segment ends draw every joint, since every joint ends a bone
-    parts = [(_segments(p, body_pairs), _segments(p, hand_pairs)) for p in shown]
+    body_chains, hand_chains = (_chains(pairs) for pairs in _bone_groups())
+    # per motion: (body polylines, finger polylines), each (frames, points, 3); markers at the
+    # points draw every joint, since every joint is on a bone
+    parts = [(_polylines(p, body_chains), _polylines(p, hand_chains)) for p in shown]
 
     traces = []
     for i, (label, (body, hands)) in enumerate(zip(labels, parts)):
