@@ -40,7 +40,6 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
@@ -49,7 +48,7 @@ import streamlit as st
 
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
-from gesturekit.errors import ConfigError, DatabaseError, GestureKitError, GestureKitWarning
+from gesturekit.errors import ConfigError, DatabaseError, GestureKitError, collect_warnings
 from gesturekit.paths import default_database_path, home
 
 __all__ = [
@@ -151,16 +150,12 @@ def _warnings_shown() -> Iterator[list[str]]:
 
     Yields the list their messages are collected in (complete when the block ends).
     """
-    messages: list[str] = []
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", GestureKitWarning)
+    with collect_warnings() as messages:  # this session's thread only: sessions run side by side
         try:
             yield messages
         finally:
-            for w in caught:
-                if issubclass(w.category, GestureKitWarning):
-                    messages.append(str(w.message))
-                    st.warning(messages[-1])
+            for message in messages:
+                st.warning(message)
 
 
 # ---- state --------------------------------------------------------------------------------------

@@ -7,7 +7,11 @@ a plain message instead of a traceback.
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import threading
+import warnings
+from typing import Iterator
 
 __all__ = [
     "GestureKitError",
@@ -17,6 +21,8 @@ __all__ = [
     "DatabaseError",
     "ConfigError",
     "GestureKitWarning",
+    "warn",
+    "collect_warnings",
 ]
 
 
@@ -59,3 +65,47 @@ class ConfigError(GestureKitError):
 
 class GestureKitWarning(UserWarning):
     """Something was adjusted (trimmed, relaxed, resampled) and the user should know."""
+
+
+_collecting = threading.local()
+
+
+def warn(message: str, *, stacklevel: int = 1) -> None:
+    """Issue a :class:`GestureKitWarning`, or collect it inside :func:`collect_warnings`.
+
+    Parameters
+    ----------
+    message : str
+    stacklevel : int
+        As :func:`warnings.warn`, counted from the caller of this function.
+    """
+    stack = getattr(_collecting, "stack", None)
+    if stack:
+        stack[-1].append(message)
+    else:
+        warnings.warn(GestureKitWarning(message), stacklevel=stacklevel + 1)
+
+
+@contextlib.contextmanager
+def collect_warnings() -> Iterator[list[str]]:
+    """Collect the messages of the :class:`GestureKitWarning` s this thread issues in the block.
+
+    Unlike :func:`warnings.catch_warnings`, which swaps process-wide state, this
+    sees only the calling thread's warnings and leaves other threads alone: in the
+    app, several sessions and background threads run at once. Blocks nest; the
+    innermost collects.
+
+    Yields
+    ------
+    list of str
+        The messages, in order (complete when the block ends).
+    """
+    stack = getattr(_collecting, "stack", None)
+    if stack is None:
+        stack = _collecting.stack = []
+    messages: list[str] = []
+    stack.append(messages)
+    try:
+        yield messages
+    finally:
+        stack.pop()

@@ -46,7 +46,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import ConfigError, GestureKitWarning
+from .errors import ConfigError, warn
 
 __all__ = [
     "SearchConfig",
@@ -543,6 +543,9 @@ def _rank_groups(v: np.ndarray, err: np.ndarray):
     return order, lo, hi
 
 
+_WARNINGS_LOCK = threading.Lock()
+
+
 def _matrix_product(n_queries: int):
     """``out[:] = rows @ W.T`` for float32 arrays; the fastest routine for the shape on a CPU.
 
@@ -571,9 +574,13 @@ def _matrix_product(n_queries: int):
         return product
 
     def product(rows, W, out):
-        with warnings.catch_warnings():  # a read-only (memory-mapped) database is only read here
-            warnings.filterwarnings("ignore", message=".*not writable.*", category=UserWarning)
+        if rows.flags.writeable:
             a = torch.from_numpy(rows)
+        else:  # a read-only (memory-mapped) database is only read here
+            # catch_warnings swaps process-wide state: the search's own threads take turns
+            with _WARNINGS_LOCK, warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message=".*not writable.*", category=UserWarning)
+                a = torch.from_numpy(rows)
         torch.matmul(a, torch.from_numpy(np.ascontiguousarray(W.T)), out=torch.from_numpy(out))
 
     return product
@@ -1049,11 +1056,8 @@ class SearchIndex:
 
         for r in results:
             if r.relaxed.any():
-                warnings.warn(
-                    GestureKitWarning(
-                        f"control relaxed at steps {np.flatnonzero(r.relaxed).tolist()}: "
-                        "no database window satisfies it"
-                    ),
+                warn(
+                    f"control relaxed at steps {np.flatnonzero(r.relaxed).tolist()}: no database window satisfies it",
                     stacklevel=3,
                 )
         return results

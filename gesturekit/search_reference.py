@@ -42,11 +42,10 @@ shortlist with the same definitions):
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 
-from .errors import ConfigError, GestureKitWarning
+from .errors import ConfigError, warn
 from .search import SearchConfig, SearchResult, _validate
 
 __all__ = ["pose_sqdist", "cosine_distance", "window_admissible", "search_reference"]
@@ -275,8 +274,5 @@ def search_reference(
         p_prev = P[m, s + N - 1].tolist()
 
     if relaxed_steps:
-        warnings.warn(
-            GestureKitWarning(f"control relaxed at steps {relaxed_steps}: no database window satisfies it"),
-            stacklevel=2,
-        )
+        warn(f"control relaxed at steps {relaxed_steps}: no database window satisfies it", stacklevel=2)
     return res

@@ -1,6 +1,5 @@
 """Speech in, gestures out: choose speech, draw controls, set the search, run, watch, download."""
 import functools
-import warnings
 
 import numpy as np
 import pandas as pd
@@ -9,7 +8,7 @@ import streamlit as st
 import common
 from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
-from gesturekit.errors import ConfigError, GestureKitError, GestureKitWarning
+from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
 from gesturekit.synthesize import SynthesisConfig
 from gesturekit.viz import session as gs
@@ -60,8 +59,7 @@ def speech_input() -> dict | None:
                 return None
             if ss.get(SPEECH, {}).get("token") != token:
                 try:
-                    with st.spinner("Reading the speech…"), warnings.catch_warnings(record=True) as caught:
-                        warnings.simplefilter("always", GestureKitWarning)
+                    with st.spinner("Reading the speech…"), collect_warnings() as notes:
                         audio, info = gs.read_speech_upload(up.name, up.getvalue())
                 except (GestureKitError, OSError) as exc:
                     # remembered, so the same upload is not decoded again on every rerun
@@ -69,7 +67,6 @@ def speech_input() -> dict | None:
                     ss[_FAILED] = (token, str(exc))
                     st.error(str(exc), icon="⚠️")
                     return None
-                notes = [str(w.message) for w in caught if issubclass(w.category, GestureKitWarning)]
                 _set_speech(token, up.name, audio, info.summary(), notes)
     else:
         labels = list(gs.SPEECH_EXAMPLES)

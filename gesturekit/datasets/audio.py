@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import AudioFileError, ConfigError, GestureKitWarning
+from ..errors import AudioFileError, ConfigError, warn
 from ..motion import AUDIO_SR
 
 __all__ = ["AudioInfo", "load_audio", "load_audio_with_info", "resample", "SILENCE_PEAK"]
@@ -188,9 +188,7 @@ def load_audio_with_info(
     mono = data[:, 0] if data.shape[1] == 1 else data.mean(axis=1, dtype=np.float32)
     del data
     if float(np.max(np.abs(mono))) <= SILENCE_PEAK:
-        warnings.warn(
-            GestureKitWarning(f"{path}: the audio is silent (peak level at or below -80 dBFS)"), stacklevel=2
-        )
+        warn(f"{path}: the audio is silent (peak level at or below -80 dBFS)", stacklevel=2)
     if info.sample_rate != sr:
         mono = resample(mono, info.sample_rate, int(sr))
     return np.ascontiguousarray(mono, dtype=np.float32), info

@@ -19,7 +19,6 @@ import io
 import json
 import math
 import tempfile
-import warnings
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -28,7 +27,7 @@ import pandas as pd
 
 from ..control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_attributes
 from ..database import MatchingDatabase
-from ..errors import ConfigError, GestureKitError, GestureKitWarning
+from ..errors import ConfigError, GestureKitError, collect_warnings, warn
 from ..export.files import safe_filename
 from ..motion import AUDIO_SR, Motion
 from ..synthesize import SynthesisConfig, SynthesisResult, synthesize, synthesize_batch
@@ -318,15 +317,13 @@ def read_speech_upload(name: str, data: bytes):
     with tempfile.TemporaryDirectory(prefix="gesturekit-upload-") as tmp:
         path = Path(tmp) / safe_filename(Path(str(name)).name, default="upload")
         path.write_bytes(bytes(data))
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", GestureKitWarning)
+        with collect_warnings() as caught:
             try:
                 audio, info = load_audio_with_info(path)
             except GestureKitError as exc:
                 raise type(exc)(exc.problem, path=str(name)) from None
-    for w in caught:  # passed on, naming the upload rather than its temporary copy
-        message = str(w.message).replace(str(path), str(name))
-        warnings.warn(w.category(message) if issubclass(w.category, GestureKitWarning) else w.message, stacklevel=2)
+    for message in caught:  # passed on, naming the upload rather than its temporary copy
+        warn(message.replace(str(path), str(name)), stacklevel=2)
     return audio, dataclasses.replace(info, path=str(name))
 
 
