@@ -54,8 +54,11 @@ def _first_pose_bones(spec: dict) -> np.ndarray:
     """The segments of frame 0 of a skeleton chart, sorted, shape (54, 6)."""
     segs = []
     for trace in spec["data"]:
-        pts = np.stack([_array(trace[c]) for c in "xyz"], axis=1).reshape(-1, 3, 3)[:, :2]
-        segs.append(pts.reshape(-1, 6))
+        # joint paths separated by NaN points, parent first: consecutive finite points are bones
+        pts = np.stack([_array(trace[c]) for c in "xyz"], axis=1)
+        ok = np.isfinite(pts).all(axis=1)
+        pair = ok[:-1] & ok[1:]
+        segs.append(np.concatenate([pts[1:][pair], pts[:-1][pair]], axis=1))  # (child, parent)
     segs = np.concatenate(segs)
     return segs[np.lexsort(segs.T[::-1])]
 
