@@ -11,7 +11,7 @@ import time
 import warnings
 from pathlib import Path
 
-from .errors import ConfigError, GestureKitError, GestureKitWarning
+from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
 
 __all__ = ["main", "build_parser"]
 
@@ -185,9 +185,8 @@ def _cmd_train_refiner(args) -> int:
 
         standard = f"demo (seed {DEMO_SEED}, {DEMO_MINUTES:g} min)"
         if db.meta["build"].get("source") != standard:
-            warnings.warn(f"the default database at {db.path} is not the standard demo ({standard}); the shipped "
-                          "refiner was trained on the standard one (rebuild it with `gesturekit build-db --demo "
-                          "--force`)", GestureKitWarning, stacklevel=2)
+            warn(f"the default database at {db.path} is not the standard demo ({standard}); the shipped "
+                 "refiner was trained on the standard one (rebuild it with `gesturekit build-db --demo --force`)")
     data = None
     if not args.resume or args.exclude_take or args.exclude_range:
         data = PairsConfig(seed=args.seed, exclude_takes=tuple(args.exclude_take or ()),

@@ -29,7 +29,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
@@ -38,7 +37,7 @@ import numpy as np
 
 from . import __version__
 from .control import ATTRIBUTE_NAMES, frame_attributes
-from .errors import ConfigError, DatabaseError, GestureKitWarning
+from .errors import ConfigError, DatabaseError, warn
 from .features import (
     LAYOUT,
     FeatureLayout,
@@ -145,10 +144,9 @@ def take_features(take: Take, *, layout: FeatureLayout = LAYOUT) -> TakeFeatures
     n = min(n_motion, n_audio)
     if n_motion != n_audio:
         longer = "motion" if n_motion > n_audio else "audio"
-        warnings.warn(
+        warn(
             f"{take.name}: motion has {n_motion / layout.fps:.2f} s and audio {n_audio / layout.fps:.2f} s; "
             f"trimmed the {longer} by {abs(n_motion - n_audio) / layout.fps:.2f} s to {n / layout.fps:.2f} s",
-            GestureKitWarning,
             stacklevel=2,
         )
     if n < 1:

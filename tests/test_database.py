@@ -1,12 +1,13 @@
 import json
 import os
+import warnings
 
 import numpy as np
 import pytest
 
 from gesturekit.control import ATTRIBUTE_NAMES
 from gesturekit.database import BuildConfig, MatchingDatabase, take_features
-from gesturekit.errors import ConfigError, DatabaseError, GestureKitWarning
+from gesturekit.errors import ConfigError, DatabaseError, GestureKitWarning, collect_warnings
 from gesturekit.features import LAYOUT, pose_features
 
 from .conftest import make_take
@@ -163,6 +164,12 @@ def test_length_mismatch_is_trimmed_with_warning():
     with pytest.warns(GestureKitWarning, match=r"trimmed the motion by 2.00 s to 8.00 s"):
         tf = take_features(short_audio)
     assert tf.n_frames == 120
+    # inside collect_warnings (the app's build page), the same message is collected instead
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GestureKitWarning)
+        with collect_warnings() as notes:
+            take_features(short_audio)
+    assert len(notes) == 1 and "trimmed the motion by 2.00 s to 8.00 s" in notes[0]
 
 
 def test_exclusion_mask(db):

@@ -21,13 +21,12 @@ Each sequence becomes one :class:`~gesturekit.motion.Take`.
 from __future__ import annotations
 
 import os
-import warnings
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, GestureKitWarning, MotionFileError
+from ..errors import ConfigError, MotionFileError, warn
 from ..motion import AUDIO_SR, Motion, Take
 from ..skeleton import FPS, N_JOINTS
 
@@ -120,11 +119,11 @@ def load_habibie2021(
             f"the audio ({n_samples} samples) is shorter than one motion frame", path=path)
     if gap is not None:
         longer = "motion" if gap > 0 else "audio"
-        warnings.warn(
+        warn(
             f"{path}: motion ({n_frames} frames, {n_frames / FPS:.3f} s) and audio "
             f"({n_samples} samples, {n_samples / AUDIO_SR:.3f} s) differ by {abs(gap):.3f} s in all "
             f"{n_seq} sequences; the {longer} was trimmed to the shorter",
-            GestureKitWarning, stacklevel=2)
+            stacklevel=2)
     stem = path.stem
     return [
         Take(

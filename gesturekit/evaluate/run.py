@@ -35,7 +35,6 @@ import math
 import os
 import re
 import time
-import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -43,7 +42,7 @@ from typing import Callable
 import numpy as np
 
 from ..control import ControlTrack, Segment, parse_control
-from ..errors import ConfigError, GestureKitWarning
+from ..errors import ConfigError, warn
 from ..features import LAYOUT
 from ..motion import AUDIO_SR, Motion
 from . import metrics
@@ -445,7 +444,7 @@ def run_evaluation(
                                   refiner=refiner)
             tick(f"{system} with the control")
         except SystemUnavailable as exc:
-            warnings.warn(str(exc), GestureKitWarning, stacklevel=2)
+            warn(str(exc), stacklevel=2)
             notes.append(str(exc))
             done = before + 2
             continue

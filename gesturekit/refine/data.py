@@ -20,14 +20,13 @@ used, and the search never uses held-out frames either.
 """
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from ..database import MatchingDatabase, normalise_exclusions
-from ..errors import ConfigError, DatabaseError, GestureKitWarning
+from ..errors import ConfigError, DatabaseError, collect_warnings
 from ..search import SearchConfig, SearchIndex
 
 __all__ = ["PairsConfig", "TrainingPairs", "make_training_pairs", "training_windows"]
@@ -243,9 +242,8 @@ def make_training_pairs(
         configs = [
             SearchConfig(k=int(k_all[w]), step=config.step, topk=1, init=P0[w], mask_rule="all") for w in idx
         ]
-        with warnings.catch_warnings():
+        with collect_warnings():
             # a relaxed step could use the window's own frames: such windows are dropped below
-            warnings.simplefilter("ignore", GestureKitWarning)
             results = index.search_batch(
                 [np.asarray(ov["F"][w]) for w in idx],
                 configs=configs,
