@@ -1,7 +1,6 @@
 """Training pairs of the refiner: the k-NN search over the overlapping cut, as the authors made them."""
 import numpy as np
 import pytest
-import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -11,15 +10,7 @@ from gesturekit.refine.data import PairsConfig, draw_k, make_training_pairs, tra
 from gesturekit.search import SearchConfig, search
 
 from .conftest import make_take
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    # tiny networks: one thread is faster, and immune to a busy machine's thread contention
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+from .refine_helpers import _one_torch_thread  # noqa: F401 (an autouse fixture)
 
 
 @pytest.fixture(scope="module")

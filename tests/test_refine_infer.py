@@ -20,17 +20,7 @@ from gesturekit.refine.train import TrainConfig, train_refiner
 from gesturekit.skeleton import JOINT_NAMES
 
 from .conftest import make_take
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    # tiny networks: one thread is faster, and immune to a busy machine's thread contention
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-TINY = ModelConfig(generator_channels=(4, 8, 8, 8), critic_channels=(8, 4, 4))
+from .refine_helpers import TINY, _one_torch_thread  # noqa: F401 (an autouse fixture)
 
 
 def random_refiner(seed=0, channels=(8, 8, 8, 8)):

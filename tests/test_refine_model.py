@@ -8,16 +8,7 @@ from torch import nn
 from gesturekit.errors import ConfigError
 from gesturekit.refine.model import Critic, Generator, ModelConfig, build_models, count_parameters
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    # tiny networks: one thread is faster, and immune to a busy machine's thread contention
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-TINY = ModelConfig(generator_channels=(4, 8, 8, 8), critic_channels=(8, 4, 4))
+from .refine_helpers import TINY, _one_torch_thread  # noqa: F401 (an autouse fixture)
 
 
 def test_paper_sizes_are_the_default():

@@ -14,17 +14,7 @@ from gesturekit.refine.model import ModelConfig
 from gesturekit.refine.train import LOG_COLUMNS, PRESETS, TrainConfig, Trainer, gradient_penalty, train_refiner
 
 from .conftest import make_take
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    # tiny networks: one thread is faster, and immune to a busy machine's thread contention
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-TINY = ModelConfig(generator_channels=(4, 8, 8, 8), critic_channels=(8, 4, 4))
+from .refine_helpers import TINY, _one_torch_thread  # noqa: F401 (an autouse fixture)
 
 
 def tiny_data(n=6, seed=0):
