@@ -52,6 +52,25 @@ def app_env(demo_home, tmp_path, monkeypatch) -> Path:
     return demo_home
 
 
+def chart_spec(at, key: str) -> dict:
+    """The plotly JSON spec of the chart with widget key ``key`` on an AppTest page."""
+    import json
+
+    for el in at.get("plotly_chart"):
+        if el.proto.id.endswith(key):
+            return json.loads(el.proto.spec)
+    raise AssertionError(f"no plotly chart with key {key!r}")
+
+
+def plotly_array(value) -> np.ndarray:
+    """A data array of a plotly JSON spec (typed-array dict or list, None as NaN), float64."""
+    import base64
+
+    if isinstance(value, dict):
+        return np.frombuffer(base64.b64decode(value["bdata"]), dtype=np.dtype(value["dtype"])).astype(np.float64)
+    return np.array([np.nan if v is None else v for v in value], dtype=np.float64)
+
+
 @pytest.fixture
 def shared_data() -> Path:
     """The shared test data folder; the test is skipped when it is absent."""

@@ -1,8 +1,6 @@
 """The app shell (Home, sidebar) and the Database page, run headless with Streamlit's AppTest."""
 from __future__ import annotations
 
-import base64
-import json
 import shutil
 from pathlib import Path
 
@@ -14,6 +12,8 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import DEMO_LABEL
 from gesturekit.demo import build_demo_database
 from gesturekit.skeleton import bones
+
+from .conftest import chart_spec as _chart, plotly_array as _array
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 DATABASE_PAGE = "pages/3_Database.py"
@@ -34,20 +34,6 @@ def _run_database_page() -> AppTest:
     at.switch_page(DATABASE_PAGE).run()
     assert not at.exception, at.exception
     return at
-
-
-def _chart(at: AppTest, key: str) -> dict:
-    for el in at.get("plotly_chart"):
-        if el.proto.id.endswith(key):
-            return json.loads(el.proto.spec)
-    raise AssertionError(f"no plotly chart with key {key!r}")
-
-
-def _array(value) -> np.ndarray:
-    """A coordinate array of a plotly JSON spec (typed-array dict or list)."""
-    if isinstance(value, dict):
-        return np.frombuffer(base64.b64decode(value["bdata"]), dtype=np.dtype(value["dtype"])).astype(np.float64)
-    return np.array([np.nan if v is None else v for v in value], dtype=np.float64)
 
 
 def _first_pose_bones(spec: dict) -> np.ndarray:

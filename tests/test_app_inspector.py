@@ -1,9 +1,7 @@
 """The Retrieval inspector page, run headless with Streamlit's AppTest: candidates per step, pins, k comparison."""
 from __future__ import annotations
 
-import base64
 import io
-import json
 import shutil
 from pathlib import Path
 
@@ -14,6 +12,8 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
+
+from .conftest import chart_spec as chart, plotly_array as array
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 SYNTH, INSPECT = "pages/1_Synthesize.py", "pages/2_Retrieval_inspector.py"
@@ -52,22 +52,9 @@ def result(at: AppTest):
     return at.session_state["gk.synthesis"]["result"]
 
 
-def chart(at: AppTest, key: str) -> dict:
-    for el in at.get("plotly_chart"):
-        if el.proto.id.endswith(key):
-            return json.loads(el.proto.spec)
-    raise AssertionError(f"no plotly chart with key {key!r}")
-
-
 def table(at: AppTest, column: str):
     """The dataframe on the page that has ``column``."""
     return next(d.value for d in at.dataframe if column in d.value.columns)
-
-
-def array(value) -> np.ndarray:
-    if isinstance(value, dict):
-        return np.frombuffer(base64.b64decode(value["bdata"]), dtype=np.dtype(value["dtype"])).astype(np.float64)
-    return np.array([np.nan if v is None else v for v in value], dtype=np.float64)
 
 
 def motions_in(spec: dict) -> list[int]:

@@ -1,9 +1,7 @@
 """The Synthesize page, run headless with Streamlit's AppTest: upload, controls, settings, run, result, exports."""
 from __future__ import annotations
 
-import base64
 import io
-import json
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +15,8 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.export.video import probe_media
 from gesturekit.viz.figures import WRIST_ROWS
+
+from .conftest import chart_spec as chart, plotly_array as array
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 PAGE = "pages/1_Synthesize.py"
@@ -63,19 +63,6 @@ def box(at: AppTest, x0: float, x1: float) -> AppTest:
     at.session_state["synth.waveform"] = {"selection": {"points": [], "point_indices": [], "lasso": [],
                                                         "box": [{"xref": "x", "yref": "y", "x": [x0, x1], "y": [-1, 1]}]}}
     return at.run()
-
-
-def chart(at: AppTest, key: str) -> dict:
-    for el in at.get("plotly_chart"):
-        if el.proto.id.endswith(key):
-            return json.loads(el.proto.spec)
-    raise AssertionError(f"no plotly chart with key {key!r}")
-
-
-def array(value) -> np.ndarray:
-    if isinstance(value, dict):
-        return np.frombuffer(base64.b64decode(value["bdata"]), dtype=np.dtype(value["dtype"])).astype(np.float64)
-    return np.array([np.nan if v is None else v for v in value], dtype=np.float64)
 
 
 def bands(spec: dict) -> list[tuple[float, float, str]]:
