@@ -12,10 +12,11 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS, bones
-from gesturekit.viz.figures import _chains
+from gesturekit.viz.figures import _chains, _typed
 from gesturekit.viz.figures import (
     DEFAULT_MAX_FRAMES,
     attribute_histograms,
+    data_array,
     skeleton_figure,
     waveform_figure,
 )
@@ -35,7 +36,7 @@ def _traces(fig, motion: int) -> dict:
 def _segments(trace) -> np.ndarray:
     """(bones, 2, 3) (child, parent) from a trace of joint paths separated by NaN points,
     each path parent first: every pair of consecutive finite points is one bone."""
-    pts = np.stack([np.asarray(trace.x, float), np.asarray(trace.y, float), np.asarray(trace.z, float)], axis=1)
+    pts = np.stack([data_array(trace.x), data_array(trace.y), data_array(trace.z)], axis=1)
     gap = np.isnan(pts).any(axis=1)
     assert gap[-1] and (np.isnan(pts[gap]).all())
     pairs = [(pts[i + 1], pts[i]) for i in range(len(pts) - 1) if not gap[i] and not gap[i + 1]]
@@ -62,7 +63,7 @@ def test_skeleton_draws_all_54_bones_at_the_joint_positions():
     assert (len(body), len(hands)) == (14, 40)
     assert _bone_set(np.concatenate([body, hands])) == _expected_bones(m.positions[0])
     # joint paths, not one polyline per bone: fewer points to send and draw
-    assert len(parts["body"].x) + len(parts["hands"].x) < 0.55 * 3 * 54
+    assert data_array(parts["body"].x).size + data_array(parts["hands"].x).size < 0.55 * 3 * 54
 
 
 @settings(max_examples=50, deadline=None)
@@ -76,6 +77,36 @@ def test_joint_paths_draw_every_bone_once(draws, forest):
     drawn = [(c[i + 1], c[i]) for c in chains for i in range(len(c) - 1)]
     assert sorted(drawn) == sorted(map(tuple, pairs.tolist()))
     assert all(len(c) >= 2 for c in chains)
+
+
+@settings(max_examples=50, deadline=None)
+@given(hst.lists(hst.one_of(hst.floats(width=32, allow_nan=False), hst.just(float("nan"))), max_size=200))
+def test_typed_arrays_are_what_plotly_writes_and_read_back(values):
+    import json
+
+    import plotly.io as pio
+
+    a = np.asarray(values, np.float32)
+    # the figure's own encoding equals the one plotly makes of the same float32 array
+    ours = json.loads(pio.to_json(go.Figure(go.Scatter3d(x=_typed(a), y=[], z=[])), validate=False))["data"][0]["x"]
+    theirs = json.loads(pio.to_json(go.Figure(go.Scatter3d(x=a, y=[], z=[])), validate=False))["data"][0]["x"]
+    if a.size:
+        assert ours == theirs
+    for read in (data_array(ours), data_array(a), data_array([None if np.isnan(v) else float(v) for v in a])):
+        np.testing.assert_array_equal(read, a.astype(np.float64))
+
+
+def test_skeleton_figure_sends_typed_arrays():
+    # every coordinate array of every frame travels as base64 float32, not as a list of numbers
+    import json
+
+    import plotly.io as pio
+
+    fig = skeleton_figure([_motion(40, seed=1), _motion(40, seed=2)])
+    spec = json.loads(pio.to_json(fig, validate=False))
+    arrays = [t[c] for f in [spec] + spec["frames"] for t in f["data"] for c in "xyz"]
+    assert len(arrays) == 3 * 4 * 41
+    assert all(isinstance(a, dict) and a["dtype"] == "f4" for a in arrays)
 
 
 def test_skeleton_frames_follow_the_motion():
@@ -123,8 +154,8 @@ def test_side_by_side_motions_are_offset_and_the_shorter_holds_its_last_pose():
     fig = skeleton_figure([a, b], labels=["kNN", "refined"])
     assert len(fig.data) == 4 and fig.layout.showlegend
     assert [t.text for t in fig.layout.scene.annotations] == ["kNN", "refined"]
-    xa = np.nanmean(np.asarray(_traces(fig, 0)["body"].x, float))
-    xb = np.nanmean(np.asarray(_traces(fig, 1)["body"].x, float))
+    xa = np.nanmean(data_array(_traces(fig, 0)["body"].x))
+    xb = np.nanmean(data_array(_traces(fig, 1)["body"].x))
     assert xb - xa > 0.5  # the second motion stands to the viewer's right (+X)
     last = _segments(fig.frames[-1].data[2])  # motion 1's body at the last time
     held = _segments(fig.frames[9].data[2])

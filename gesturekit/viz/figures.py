@@ -5,7 +5,10 @@ nothing from streamlit, so the same figure can be shown with
 ``st.plotly_chart`` or ``fig.show()`` in a notebook. Coordinates follow
 :mod:`gesturekit.skeleton`: metres, Y up, the character faces +Z and its
 left is +X. Numeric arrays are handed to plotly as float32 numpy arrays, which
-plotly serialises as compact typed arrays.
+plotly serialises as compact typed arrays; the skeleton figure's many small
+per-frame arrays are handed over already encoded that way (see
+:func:`data_array` to read them back), since plotly's own per-array checks and
+conversions took most of a second for a 30 s motion.
 
 Traces carry a ``meta`` dict that says what they show (``{"motion": i,
 "part": "body" | "hands" | "joints"}`` for skeletons, ``{"part": ...}``
@@ -13,6 +16,7 @@ elsewhere), so pages and tests can find them without relying on their order.
 """
 from __future__ import annotations
 
+import base64
 import math
 from typing import Sequence
 
@@ -34,6 +38,7 @@ __all__ = [
     "WRIST_ROWS",
     "wrist_figure",
     "candidates_figure",
+    "data_array",
 ]
 
 #: Most animation frames a skeleton figure holds (20 s at 15 fps). Longer motions are
@@ -111,8 +116,38 @@ def _polylines(positions: np.ndarray, chains: list[list[int]]) -> np.ndarray:
     return out
 
 
+def _typed(values: np.ndarray) -> dict:
+    """A float32 array as plotly's typed-array spec (little-endian, base64), as plotly itself writes it."""
+    return {"dtype": "f4", "bdata": base64.b64encode(np.ascontiguousarray(values, "<f4").tobytes()).decode("ascii")}
+
+
 def _xyz(points: np.ndarray) -> dict:
-    return {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
+    """x, y, z of ``points`` (n, 3) as typed-array specs."""
+    return {"x": _typed(points[:, 0]), "y": _typed(points[:, 1]), "z": _typed(points[:, 2])}
+
+
+def data_array(value) -> np.ndarray:
+    """A plotly data array as numbers, whichever form it takes.
+
+    Parameters
+    ----------
+    value : typed-array spec, sequence or np.ndarray
+        A trace's ``x``/``y``/``z`` as a figure holds it (or as its JSON has it):
+        plotly's typed-array dict ``{"dtype", "bdata"[, "shape"]}``, a list
+        (``None`` for a gap) or an array.
+
+    Returns
+    -------
+    np.ndarray, float64
+        The values; gaps are NaN.
+    """
+    if isinstance(value, dict) and "bdata" in value:
+        out = np.frombuffer(base64.b64decode(value["bdata"]), dtype=np.dtype(value["dtype"]).newbyteorder("<"))
+        if value.get("shape"):
+            out = out.reshape([int(d) for d in str(value["shape"]).split(",")])
+        return out.astype(np.float64)
+    return np.array([np.nan if v is None else v for v in np.asarray(value, dtype=object).ravel()],
+                    dtype=np.float64).reshape(np.shape(value))
 
 
 
