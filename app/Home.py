@@ -3,6 +3,11 @@
 On a machine without a database, this page (like every page) builds the
 generated demo speaker's database at the default path first, with a progress
 bar; nothing is downloaded.
+
+``streamlit run`` finds the ``st.App`` below and serves this page through it:
+its lifespan prepares the default database's search and refiner as the server
+starts (:func:`common.server_lifespan`), so the first run does not wait for
+them. Each page view runs this file as ``__main__``, where only the page is drawn.
 """
 import streamlit as st
 
@@ -22,6 +27,7 @@ def main() -> None:
         "frames may be used. An optional conditional GAN refines the result into smooth motion."
     )
     db = common.sidebar_database()
+    common.warm_up(db)  # a database chosen here is prepared while the user moves on
 
     st.subheader("Open database")
     common.show_database_label(db)
@@ -40,4 +46,7 @@ def main() -> None:
             st.caption(page.purpose)
 
 
-common.run_page(main)
+if __name__ == "__main__":
+    common.run_page(main)
+else:  # imported by the server at start
+    app = st.App(__file__, lifespan=common.server_lifespan)

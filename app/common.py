@@ -38,6 +38,7 @@ trials).
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import threading
 from dataclasses import dataclass
@@ -61,6 +62,7 @@ __all__ = [
     "SYNTHESIS_KEY",
     "build_from_folder",
     "database_folders",
+    "default_refiner",
     "current_synthesis",
     "demo_minutes",
     "ensure_demo_database",
@@ -72,10 +74,12 @@ __all__ = [
     "persistent_key",
     "run_page",
     "run_synthesis",
+    "server_lifespan",
     "show_database_label",
     "show_skeletons",
     "sidebar_database",
     "user_errors",
+    "warm_up",
     "warm_up_search",
 ]
 
@@ -580,6 +584,32 @@ def show_skeletons(fig, *, key: str, motions: int = 1) -> None:
     st.plotly_chart(fig, key=key, config={"displaylogo": False})
 
 
+def _first_use(noise) -> None:
+    """Everything a first result needs once per process, run on small inputs: the speech
+    reader, the figures (plotly builds its validators on first use) and the WAV writer.
+
+    ``noise``: a few seconds of mono float32 audio at 16 kHz.
+    """
+    import io
+
+    import numpy as np
+    import plotly.io as pio
+    import soundfile as sf
+
+    from gesturekit.motion import AUDIO_SR, N_JOINTS, Motion
+    from gesturekit.viz import session as gs
+    from gesturekit.viz.figures import skeleton_figure, waveform_figure, wrist_figure
+
+    buf = io.BytesIO()
+    sf.write(buf, noise, AUDIO_SR, format="WAV", subtype="PCM_16")
+    audio, _ = gs.read_speech_upload("warm-up.wav", buf.getvalue())
+    gs.wav_bytes(audio)
+    motion = Motion(np.zeros((4, N_JOINTS, 3), np.float32), 15.0)
+    for fig in (waveform_figure(audio, AUDIO_SR), skeleton_figure([motion, motion], labels=["a", "b"]),
+                wrist_figure([motion, motion], labels=["a", "b"])):
+        pio.to_json(fig.to_dict(), validate=False)
+
+
 @st.cache_resource(show_spinner=False, max_entries=8)
 def _warm_up(path: str, stamp: int) -> threading.Thread:
     import numpy as np
@@ -591,10 +621,15 @@ def _warm_up(path: str, stamp: int) -> threading.Thread:
     noise = np.random.default_rng(0).normal(0.0, 0.1, 2 * AUDIO_SR).astype(np.float32)
 
     def warm() -> None:
-        synthesize(noise, db=db, config=SynthesisConfig(topk=1))
-        import gesturekit.viz.figures  # noqa: F401  (plotly's figure classes: a second to import)
+        # what an upload needs first, then what Run needs; a failure is left to the server
+        # log (the user's own run reports it on the page)
+        for step in (lambda: _first_use(noise), lambda: synthesize(noise, db=db, config=SynthesisConfig(topk=1))):
+            try:
+                with collect_warnings():
+                    step()
+            except Exception as exc:  # noqa: BLE001
+                print(f"gesturekit: a warm-up step failed: {exc}", flush=True)
 
-    # a failure here is left to the server log: the user's own run reports it on the page
     thread = threading.Thread(target=warm, name="gesturekit-warm-up", daemon=True)
     thread.start()
     return thread
@@ -616,6 +651,52 @@ def warm_up_search(db: MatchingDatabase) -> None:
     except OSError:
         return
     _warm_up(str(path), stamp)
+
+
+def default_refiner(db: MatchingDatabase) -> str:
+    """The refiner folder offered first for ``db``: one beside the database (``<db>/refiner``),
+    else the shipped demo refiner for a generated database, else "" (none)."""
+    if db.path is not None and (Path(db.path) / "refiner" / "config.json").is_file():
+        return str(Path(db.path) / "refiner")
+    try:
+        from gesturekit.refine import default_refiner_path
+    except ImportError:  # a gesturekit without the refiner
+        return ""
+    shipped = default_refiner_path()
+    return str(shipped) if is_generated(db) and (shipped / "config.json").is_file() else ""
+
+
+def warm_up(db: MatchingDatabase) -> None:
+    """Prepare, in the background and once per server, what a first run with ``db`` needs:
+    its search (:func:`warm_up_search`) and its default refiner (:func:`warm_up_refiner`)."""
+    warm_up_search(db)
+    refiner = default_refiner(db)
+    if refiner:
+        warm_up_refiner(Path(refiner))
+
+
+@contextlib.asynccontextmanager
+async def server_lifespan(app):
+    """The server's start and stop (``st.App``'s lifespan, see ``Home.py``): at start,
+    the default database's search and refiner are prepared in the background.
+
+    Nothing is built here: a missing demo database is built by the first page
+    view, with a progress bar. A failure is left to the server log.
+    """
+    # the caches are filled outside any page run here, which streamlit's context lookup
+    # would log as a warning for each cached call
+    quiet = logging.getLogger("streamlit.runtime.scriptrunner_utils.script_run_context")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
+    try:
+        path = default_database_path()
+        if (path / "database.json").is_file():
+            warm_up(load_database(path))
+    except Exception as exc:  # noqa: BLE001  (the server must start regardless)
+        print(f"gesturekit: warm-up at start skipped: {exc}", flush=True)
+    finally:
+        quiet.setLevel(level)
+    yield
 
 
 @st.cache_resource(max_entries=4, show_spinner="Loading the refiner…")

@@ -146,18 +146,6 @@ def controls(speech: dict) -> ControlTrack | None:
     return track
 
 
-def _default_refiner(db) -> str:
-    """The refiner folder offered first: one beside the database, or the shipped one for the demo database."""
-    if db.path is not None and (db.path / "refiner" / "config.json").is_file():
-        return str(db.path / "refiner")
-    try:
-        from gesturekit.refine import default_refiner_path
-    except ImportError:
-        return ""
-    shipped = default_refiner_path()
-    return str(shipped) if common.is_generated(db) and (shipped / "config.json").is_file() else ""
-
-
 def settings(db) -> dict:
     """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can run."""
     ss = st.session_state
@@ -184,7 +172,7 @@ def settings(db) -> dict:
         ss[f"synth.{name}"] = value
     refiner, ok = None, True
     if gs.refiner_hook() is not None:
-        default = _default_refiner(db)
+        default = common.default_refiner(db)
         on = ss["synth.refine"] = c[3].toggle("Refiner (cGAN)", key=pk("synth.refine", bool(default)),
                                               help="smooth and re-time the k-NN motion with a trained refiner")
         folder = ss["synth.refiner_path"] = c[3].text_input(
@@ -295,7 +283,7 @@ def main() -> None:
     common.page_setup("Synthesize")
     st.title("Synthesize")
     db = common.sidebar_database()
-    common.warm_up_search(db)
+    common.warm_up(db)
     ss = st.session_state
 
     st.subheader("1 · Speech")

@@ -1,0 +1,73 @@
+"""The app's server start: ``streamlit run app/Home.py`` serves Home's ``st.App``, whose lifespan
+prepares the default database's search and refiner in the background."""
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import pytest
+
+from gesturekit.paths import default_database_path
+
+APP_DIR = Path(__file__).resolve().parents[1] / "app"
+
+
+@pytest.fixture
+def common(app_env, monkeypatch):
+    monkeypatch.syspath_prepend(str(APP_DIR))
+    import common as module
+
+    return module
+
+
+def _start_and_stop(common) -> None:
+    async def run():
+        async with common.server_lifespan(None):
+            pass
+
+    asyncio.run(run())
+
+
+def test_streamlit_run_finds_the_app_with_its_lifespan():
+    from streamlit.web.server.app_discovery import discover_asgi_app
+
+    found = discover_asgi_app(APP_DIR / "Home.py")
+    assert found.is_asgi_app and found.app_name == "app"
+
+
+def test_server_start_prepares_search_and_refiner_of_the_default_database(common):
+    _start_and_stop(common)
+    path = default_database_path().resolve()
+    db = common.load_database(path)
+    stamp = (path / "database.json").stat().st_mtime_ns
+    search = common._warm_up(str(path), stamp)  # cached: the thread the start began
+    assert search.name == "gesturekit-warm-up"
+    refiner = Path(common.default_refiner(db))
+    assert common.is_generated(db) and (refiner / "config.json").is_file()
+    warm_refiner = common._warm_refiner(str(refiner), (refiner / "config.json").stat().st_mtime_ns)
+    assert warm_refiner.name == "gesturekit-warm-refiner"
+    for thread in (search, warm_refiner):
+        thread.join(timeout=300)
+        assert not thread.is_alive()
+    import gesturekit.search as search_module
+
+    assert search_module._kernels.cache_info().currsize == 1  # the compiled search is loaded
+
+
+def test_server_start_without_a_database_builds_nothing(common, tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("GESTUREKIT_HOME", str(tmp_path / "empty"))
+    _start_and_stop(common)
+    assert not default_database_path().exists()  # the first page view builds it, with a progress bar
+    assert capsys.readouterr().out == ""
+
+
+def test_server_start_with_a_broken_database_still_starts(common, tmp_path, monkeypatch, capsys):
+    home = tmp_path / "broken"
+    monkeypatch.setenv("GESTUREKIT_HOME", str(home))
+    folder = default_database_path()
+    folder.mkdir(parents=True)
+    (folder / "database.json").write_text(json.dumps({"format": "nonsense"}))
+    _start_and_stop(common)
+    out = capsys.readouterr().out
+    assert "warm-up at start skipped" in out and str(folder) in out
