@@ -14,7 +14,8 @@ exact, at a zero norm).
 block (numpy's reductions along the strided axis are slow).
 ``audio_at(F3, na2, s0, amin, fq, nb, av, inexact)``: the audio estimates of each clip's
 ``s0`` for several queries (one clip's rows serve all of them).
-``group_bounds(v, err, order, lo, hi)``: the groups of :func:`gesturekit.search._rank_groups`.
+``group_bounds(v, err, order, lo, hi)``: the groups of :func:`gesturekit.search._rank_groups`;
+``prefix_groups(...)``: the same over a sorted prefix of the order (see ``rank_top``).
 ``admissible_ends(bias2)``: per clip, one past its last admissible start (0: none).
 ``row_stats(x2, norms)``: float64 squared norms of the rows of ``x2``, whether all
 values are finite, and the largest magnitude (one pass for validation and norms).
@@ -169,6 +170,44 @@ def group_bounds(v, err, order, lo, hi):
 
 
 @numba.njit(cache=True, nogil=True)
+def prefix_groups(v, err, order, L, lo, hi, glo, ghi):
+    # group_bounds over the first L positions of ``order`` (those sorted; the rest in any
+    # order, each above them by estimate). A split before position i is proven when the
+    # largest upper end before i lies below the smallest lower end from i on, the rest
+    # included. Returns s: positions before s are in complete groups (exact lo, hi);
+    # every other element gets lo = s, hi = n - 1 (its rank lies somewhere there).
+    n = order.shape[0]
+    m = np.inf
+    for i in range(L, n):
+        k = order[i]
+        m = min(m, v[k] - err[k])
+    low = np.empty(L + 1)
+    low[L] = m
+    for i in range(L - 1, -1, -1):
+        k = order[i]
+        m = min(m, v[k] - err[k])
+        low[i] = m
+    start = 0
+    top = -np.inf
+    for i in range(1, L + 1):
+        k = order[i - 1]
+        top = max(top, v[k] + err[k])
+        if top < low[i]:
+            for r in range(start, i):  # by position; glo, ghi: int64 scratch of >= L values
+                glo[r] = start
+                ghi[r] = i - 1
+            start = i
+    for i in range(n):
+        lo[i] = start
+        hi[i] = n - 1
+    for r in range(start):
+        k = order[r]
+        lo[k] = glo[r]
+        hi[k] = ghi[r]
+    return start
+
+
+@numba.njit(cache=True, nogil=True)
 def audio_at(F3, na2, s0, amin, fq, nb, av, inexact):
     nc, nq = s0.shape
     for c in range(nc):  # one clip's rows serve all its queries while they are in cache
@@ -289,54 +328,44 @@ def survivors(s0, amin, nq, npmax, c_err, tiny, cclips, crows, P3, q, F3, f, av_
 
 
 @numba.njit(cache=True, nogil=True)
-def bounds(v, err, order, lo, hi):
-    has_err = False
-    for i in range(err.shape[0]):
-        if err[i] > 0.0:
-            has_err = True
-            break
-    if has_err:
-        group_bounds(v, err, order, lo, hi)
-    else:
-        for i in range(order.shape[0]):
-            lo[order[i]] = i
-            hi[order[i]] = i
-    for i in range(order.shape[0]):
-        if hi[i] > lo[i]:
-            return True
-    return False
+def settle(v, err, order, lo, hi, cand, pose, clips, start, P3, F3, q, f, nb):
+    # make the order exact inside the group of every element of ``cand``: exact values,
+    # then sorted by (value, index); each group once
+    for ci in range(cand.shape[0]):
+        a = lo[cand[ci]]
+        b = hi[cand[ci]]
+        if b == a:
+            continue
+        done = False
+        for cj in range(ci):
+            if lo[cand[cj]] == a:
+                done = True
+                break
+        if done:
+            continue
+        members = np.sort(order[a : b + 1])
+        for k in members:
+            if err[k] > 0.0:
+                if pose:
+                    v[k] = pose_d2(P3, clips[k], start[k], q)
+                else:
+                    v[k] = cos_d(F3, clips[k], start[k], f, nb)
+                err[k] = 0.0
+        vals = np.empty(members.shape[0])
+        for r in range(members.shape[0]):
+            vals[r] = v[members[r]]
+        idx = np.argsort(vals, kind="mergesort")  # stable: equal values by index
+        for r in range(members.shape[0]):
+            order[a + r] = members[idx[r]]
 
 
 @numba.njit(cache=True, nogil=True)
-def settle(v, err, order, lo, hi, wanted, pose, clips, start, P3, F3, q, f, nb):
-    # make the order exact inside every group holding a wanted element: exact values,
-    # then sorted by (value, index)
-    n = order.shape[0]
-    a = 0
-    while a < n:
-        b = hi[order[a]]
-        if b > a:
-            need = False
-            for r in range(a, b + 1):
-                if wanted[order[r]]:
-                    need = True
-                    break
-            if need:
-                members = np.sort(order[a : b + 1])
-                for k in members:
-                    if err[k] > 0.0:
-                        if pose:
-                            v[k] = pose_d2(P3, clips[k], start[k], q)
-                        else:
-                            v[k] = cos_d(F3, clips[k], start[k], f, nb)
-                        err[k] = 0.0
-                vals = np.empty(members.shape[0])
-                for r in range(members.shape[0]):
-                    vals[r] = v[members[r]]
-                idx = np.argsort(vals, kind="mergesort")  # stable: equal values by index
-                for r in range(members.shape[0]):
-                    order[a + r] = members[idx[r]]
-        a = b + 1
+def position(order, lo, hi, i):
+    # the position of element i in ``order``: inside its group [lo, hi]
+    for r in range(lo[i], hi[i] + 1):
+        if order[r] == i:
+            return r
+    return -1
 
 
 @numba.njit(cache=True, nogil=True)
@@ -364,7 +393,10 @@ def kth_smallest(x, k):
 
 
 @numba.njit(cache=True, nogil=True)
-def rank_top(v, e, av, ae, porder, aorder, clips, start, P3, F3, q, f, width, out_i, out_f, work):
+def rank_top(v, e, av, ae, porder, Lp, aorder, La, clips, start, P3, F3, q, f, width, out_i, out_f, work):
+    # porder, aorder: the survivors, the first Lp (La) sorted by pose (audio) estimate.
+    # Returns -1, changing nothing, when those prefixes cannot decide the table (the
+    # caller then passes whole orders, which always can); else the table's length.
     # work: (7, >= n) int64 scratch, reused between calls (fresh memory costs page faults)
     n = v.shape[0]
     w = min(width, n)
@@ -373,45 +405,50 @@ def rank_top(v, e, av, ae, porder, aorder, clips, start, P3, F3, q, f, width, ou
     phi = work[1, :n]
     alo = work[2, :n]
     ahi = work[3, :n]
-    pg = bounds(v, e, porder, plo, phi)
-    ag = bounds(av, ae, aorder, alo, ahi)
-    if pg or ag:
-        # only clips that could make the top w of the combined ranking need their groups
-        # settled: one whose smallest possible rank sum exceeds the w-th smallest largest
-        # possible rank sum cannot be among the first w
-        bound = kth_smallest(phi + ahi, w)
-        wanted = plo + alo <= bound
-        settle(v, e, porder, plo, phi, wanted, True, clips, start, P3, F3, q, f, nb)
-        settle(av, ae, aorder, alo, ahi, wanted, False, clips, start, P3, F3, q, f, nb)
-    prank = work[4, :n]
-    arank = work[5, :n]
+    sp = prefix_groups(v, e, porder, Lp, plo, phi, work[4], work[5])
+    sa = prefix_groups(av, ae, aorder, La, alo, ahi, work[4], work[5])
+    # at least w clips have an exact rank sum at most the w-th smallest largest possible
+    # sum; a clip whose smallest possible sum exceeds that cannot be among the first w,
+    # so only the few others (the candidates) need exact ranks
+    sums = work[6, :n]
     for i in range(n):
-        prank[porder[i]] = i
-        arank[aorder[i]] = i
-    key = work[6, :n]
+        sums[i] = phi[i] + ahi[i]
+    bound = kth_smallest(sums, w)
+    if (sp < n and bound >= sp) or (sa < n and bound >= sa):
+        return -1  # a candidate could lie beyond a prefix's complete groups
+    nc = 0
     for i in range(n):
-        key[i] = (prank[i] + arank[i]) * n + i  # unique: ties go to the lower clip index
-    kth = kth_smallest(key, w)
-    top = np.empty(w, np.int64)
-    kt = np.empty(w, np.int64)
-    j = 0
+        if plo[i] + alo[i] <= bound:
+            nc += 1
+    cand = np.empty(nc, np.int64)
+    nc = 0
     for i in range(n):
-        if key[i] <= kth:
-            top[j] = i
-            kt[j] = key[i]
-            j += 1
-    top = top[np.argsort(kt)]
+        if plo[i] + alo[i] <= bound:
+            cand[nc] = i
+            nc += 1
+    settle(v, e, porder, plo, phi, cand, True, clips, start, P3, F3, q, f, nb)
+    settle(av, ae, aorder, alo, ahi, cand, False, clips, start, P3, F3, q, f, nb)
+    prank = np.empty(nc, np.int64)
+    arank = np.empty(nc, np.int64)
+    key = np.empty(nc, np.int64)
+    for r in range(nc):
+        i = cand[r]
+        prank[r] = position(porder, plo, phi, i)
+        arank[r] = position(aorder, alo, ahi, i)
+        key[r] = (prank[r] + arank[r]) * n + i  # unique: ties go to the lower clip index
+    best = np.argsort(key)[:w]
     for r in range(w):
-        i = top[r]
+        c = best[r]
+        i = cand[c]
         if e[i] > 0.0:
             v[i] = pose_d2(P3, clips[i], start[i], q)
         if ae[i] > 0.0:
             av[i] = cos_d(F3, clips[i], start[i], f, nb)
         out_i[0, r] = clips[i]
         out_i[1, r] = start[i]
-        out_i[2, r] = prank[i]
-        out_i[3, r] = arank[i]
-        out_i[4, r] = prank[i] + arank[i]
+        out_i[2, r] = prank[c]
+        out_i[3, r] = arank[c]
+        out_i[4, r] = prank[c] + arank[c]
         out_f[0, r] = np.sqrt(v[i])
         out_f[1, r] = av[i]
     return w

@@ -543,6 +543,34 @@ def _rank_groups(v: np.ndarray, err: np.ndarray):
     return order, lo, hi
 
 
+#: Survivors sorted first by each ranking in a query's decisions; the rest is only
+#: partitioned off. Enough whenever the top of the combined ranking lies within the
+#: first few hundred of both rankings, as it does unless pose and audio disagree
+#: throughout; otherwise the whole orders are sorted (same result).
+_PREFIX = 1024
+
+
+def _initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
+    """The order the rank groups of :meth:`SearchIndex._decide` start from.
+
+    Returns ``(order, L)``: the survivors with the ``L = min(prefix, n)`` smallest
+    estimates first, sorted, the others after them in any order. Any order near the
+    sorted one will do: the groups of near-equal estimates (equal exact values
+    included) are proven whatever the order inside them (see :func:`_rank_groups`),
+    and those that matter are re-sorted with exact values. Sorting float32 copies of
+    the estimates is then enough (they misplace only values closer than float32
+    rounding), and numpy sorts and partitions float32 keys faster than float64 ones.
+    """
+    n = v.size
+    key = v.astype(np.float32)
+    if prefix >= n:
+        return np.argsort(key), n
+    order = np.argpartition(key, prefix - 1)
+    head = order[:prefix]
+    order[:prefix] = head[np.argsort(key[head])]
+    return order, prefix
+
+
 _WARNINGS_LOCK = threading.Lock()
 
 
@@ -775,11 +803,14 @@ class SearchIndex:
         complex : list of B (clips, rows) pairs
             Clips whose minimum is not decisive; ``rows[i]`` holds the estimates of all T
             starts of clip ``clips[i]``.
-        audio : (av, inexact, col)
-            ``av[m, col[b]]`` (float64) is the estimated cosine distance of clip ``m``'s start
+        audio : (av, inexact)
+            ``av[b, m]`` (B, M) float64 is the estimated cosine distance of clip ``m``'s start
             ``s0`` to query ``b``'s audio feature (float32 product, float64 norms; NaN
             where no start is admissible); ``inexact`` (bool, same shape) is False where the
             value is exact (a zero norm), else the audio error bound applies.
+
+        Every (B, M) array is C-contiguous: a query's decisions read its own rows (a
+        column of a (M, B) array would cost a cache line per clip).
         """
         M, T, D, _ = self.shape
         B = Q.shape[0]
@@ -886,8 +917,8 @@ class SearchIndex:
             complex_ = [(np.zeros(0, np.int64), np.zeros((0, T), np.float32))] * B
         inv = np.empty(B, np.int64)
         inv[perm] = np.arange(B)
-        s0, amin, nq = s0[:, inv], amin[:, inv], nq[inv]
-        return s0.T, amin.T, nq, complex_, (av, inexact, inv)
+        # back to the callers' query order, one C-contiguous row per query
+        return s0.T[inv], amin.T[inv], nq[inv], complex_, (av.T[inv], inexact.T[inv])
 
     # -- exact decisions for one query ----------------------------------------------------------
 
@@ -921,13 +952,18 @@ class SearchIndex:
         if n == 0:
             return None
         clips, start, v, e, av, ae = clips[:n], start[:n], v[:n], e[:n], av[:n], ae[:n]
-        # numpy's sorts are faster than compiled ones; with error bounds the groups make the
-        # order exact, so the initial sort need not be stable (equal estimates share a group)
-        porder = np.argsort(v, kind=None if e.any() else "stable")
-        aorder = np.argsort(av, kind=None if ae.any() else "stable")
         out_i = np.empty((5, min(width, n)), np.int64)
         out_f = np.empty((2, min(width, n)))
-        k.rank_top(v, e, av, ae, porder, aorder, clips, start, self._P3, self._F3, q, f, width, out_i, out_f, ints)
+        prefix = _PREFIX
+        while True:  # sorted prefixes first; whole orders when they cannot decide
+            porder, lp = _initial_order(v, prefix)
+            aorder, la = _initial_order(av, prefix)
+            if k.rank_top(v, e, av, ae, porder, lp, aorder, la, clips, start, self._P3, self._F3, q, f, width,
+                          out_i, out_f, ints) >= 0:
+                break
+            if prefix >= n:  # pragma: no cover - whole orders always decide
+                raise RuntimeError("rank_top could not decide with whole orders")
+            prefix = n
         return {
             "n": n,
             "cand_clip": out_i[0],
@@ -1071,14 +1107,14 @@ class SearchIndex:
         run = map if pool is None or len(active) < 4 else pool.map
         biases = [self._bias(cache, keys[b]) for b in active]
         fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
-        s0, amin, nq, complex_, (av, inexact, col) = self._scan(
+        s0, amin, nq, complex_, (av, inexact) = self._scan(
             poses[active], biases, fq, cache.setdefault("scratch", {}), pool
         )
 
         def decide(j):
             b = active[j]
-            return self._decide(s0[j], amin[j], nq[j], complex_[j], poses[b], fq[j], av[:, col[j]],
-                                inexact[:, col[j]], calls[b].config.table_width)
+            return self._decide(s0[j], amin[j], nq[j], complex_[j], poses[b], fq[j], av[j], inexact[j],
+                                calls[b].config.table_width)
 
         return dict(zip(active, run(decide, range(len(active)))))
 

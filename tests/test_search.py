@@ -159,6 +159,103 @@ def test_rank_groups_bound_the_exact_ranks():
     assert (hi > lo).any() and (hi == lo).any()
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 300), st.sampled_from([0.0, 0.004, 0.05]), st.integers(1, 320))
+def test_prefix_groups_bound_the_exact_ranks(seed, n, err_size, L):
+    # a sorted prefix of L positions (the rest only partitioned off): positions before the
+    # returned s are in complete groups, every other element's rank lies in [s, n - 1]
+    from gesturekit._search_kernels import prefix_groups
+
+    rng = np.random.default_rng(seed)
+    exact = np.round(rng.standard_normal(n), 2)  # exact ties
+    err = np.full(n, err_size)
+    est = exact + rng.uniform(-1, 1, n) * err
+    L = min(L, n)
+    key = est.astype(np.float32)
+    order = np.argpartition(key, L - 1) if L < n else np.argsort(key)
+    order[:L] = order[:L][np.argsort(key[order[:L]])]
+    lo, hi = np.empty(n, np.int64), np.empty(n, np.int64)
+    s = prefix_groups(est, err, order, L, lo, hi, np.empty(n + 1, np.int64), np.empty(n + 1, np.int64))
+    exact_rank = np.empty(n, int)
+    exact_rank[np.lexsort((np.arange(n), exact))] = np.arange(n)
+    assert np.all(lo <= exact_rank) and np.all(exact_rank <= hi)
+    head = order[:s]
+    assert set(exact_rank[head]) == set(range(s))  # the complete groups hold exactly the first s ranks
+    assert np.all(lo[order[s:]] == s) and np.all(hi[order[s:]] == n - 1)
+    if L == n:
+        assert s == n
+    else:
+        from gesturekit._search_kernels import group_bounds
+
+        rest = order[L:]
+        whole = np.concatenate([order[:L], rest[np.argsort(key[rest])]])
+        full_lo, full_hi = np.empty(n, np.int64), np.empty(n, np.int64)
+        group_bounds(est, err, whole, full_lo, full_hi)
+        # a group complete within the prefix is the group of the whole order
+        assert np.all(lo[head] == full_lo[head]) and np.all(hi[head] == full_hi[head])
+
+
+def _prefix_problem(seed: int, offset: float):
+    rng = np.random.default_rng(seed)
+    M, T, D, A = 90, 20, 96, 112
+    # offset 40: far from 0, large error bounds and wide groups; duplicated clips: exact ties
+    P = (np.round(rng.standard_normal((M, T, D)) / 0.25) * 0.25 + offset).astype(np.float32)
+    P[rng.integers(0, M, 20)] = P[rng.integers(0, M, 20)]
+    F = rng.standard_normal((M, T, A)).astype(np.float32)
+    return P, F, np.ones((M, T), bool), rng.standard_normal((16, A)).astype(np.float32)
+
+
+def _with_prefix(prefix, fn):
+    import gesturekit.search as search_module
+
+    saved = search_module._PREFIX
+    search_module._PREFIX = prefix
+    try:
+        return fn()
+    finally:
+        search_module._PREFIX = saved
+
+
+@settings(max_examples=16, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.sampled_from([0.0, 40.0]), st.sampled_from([1, 3, 24, 60]), st.integers(0, 3))
+def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k):
+    # the decisions sort only a prefix of each ranking and fall back to whole orders when
+    # it cannot decide: short prefixes exercise both ways
+    P, F, valid, query = _prefix_problem(seed, offset)
+    cfg = SearchConfig(k=k, step=4, topk=3, seed=seed % 5)
+    assert_same(*_with_prefix(prefix, lambda: run_both(P, F, valid, query, config=cfg)))
+
+
+def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
+    import gesturekit.search as search_module
+
+    kernels = search_module._kernels()
+    seen = []
+
+    class Recording:
+        def __getattr__(self, name):
+            if name != "rank_top":
+                return getattr(kernels, name)
+
+            def rank_top(v, e, av, ae, porder, lp, aorder, la, *rest):
+                out = kernels.rank_top(v, e, av, ae, porder, lp, aorder, la, *rest)
+                seen.append("whole" if min(lp, la) >= v.shape[0] else "prefix" if out >= 0 else "retry")
+                return out
+
+            return rank_top
+
+    monkeypatch.setattr(search_module, "_kernels", lambda: Recording())
+    P, F, valid, query = _prefix_problem(0, 0.0)
+    cfg = SearchConfig(step=4, topk=3)
+    results = {}
+    for prefix, expected in ((60, {"prefix"}), (3, {"retry", "whole"}), (10**6, {"whole"})):
+        seen.clear()
+        results[prefix] = _with_prefix(prefix, lambda: search(P, F, valid, query, config=cfg))
+        assert set(seen) == expected, (prefix, seen)
+        assert seen.count("retry") in (0, seen.count("whole"))  # each retry decided with whole orders
+    assert results[60].equals(results[10**6]) and results[3].equals(results[10**6])
+
+
 # -- fast == reference --------------------------------------------------------------------------
 
 
