@@ -604,6 +604,9 @@ def _first_use(noise) -> None:
     sf.write(buf, noise, AUDIO_SR, format="WAV", subtype="PCM_16")
     audio, _ = gs.read_speech_upload("warm-up.wav", buf.getvalue())
     gs.wav_bytes(audio)
+    import pyarrow as pa  # what streamlit's tables are sent as: its first import takes most of a second
+
+    pa.Table.from_pandas(gs.segments_frame(gs.track_from_segments(gs.empty_segments())))
     motion = Motion(np.zeros((4, N_JOINTS, 3), np.float32), 15.0)
     for fig in (waveform_figure(audio, AUDIO_SR), skeleton_figure([motion, motion], labels=["a", "b"]),
                 wrist_figure([motion, motion], labels=["a", "b"])):
@@ -730,13 +733,15 @@ def check_refiner(path: str | os.PathLike, db: MatchingDatabase) -> Path:
 @st.cache_resource(show_spinner=False, max_entries=8)
 def _warm_refiner(path: str, stamp: int) -> threading.Thread:
     def warm() -> None:
-        # torch's import, the files read and the first forward pass (torch picks its kernels):
-        # the run's own load then takes a fraction of a second
+        # torch's import, the files read and a first forward pass (torch picks its kernels for
+        # the shapes), into the cached object the runs use
         import numpy as np
 
-        from gesturekit.refine import load_refiner as load
+        from gesturekit.blend import KEEP_BELOW_HZ
 
-        load(path).refine(np.zeros((64, 165), np.float32), np.zeros((64, 28), np.float32))
+        n = 450  # frames of 30 s of speech
+        _open_refiner(path, stamp).refine(np.zeros((n, 165), np.float32), np.zeros((n, 28), np.float32),
+                                          keep_below_hz=KEEP_BELOW_HZ)
 
     # a failure here is left to the server log: the run's own load reports it on the page
 
