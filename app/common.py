@@ -737,13 +737,15 @@ def _warm_refiner(path: str, stamp: int) -> threading.Thread:
         # the shapes), into the cached object the runs use
         import numpy as np
 
-        from gesturekit.blend import KEEP_BELOW_HZ
+        from gesturekit.blend import KEEP_BELOW_HZ, keep_slow
 
         n = 450  # frames of 30 s of speech
-        _open_refiner(path, stamp).refine(np.zeros((n, 165), np.float32), np.zeros((n, 28), np.float32),
-                                          keep_below_hz=KEEP_BELOW_HZ)
-
-    # a failure here is left to the server log: the run's own load reports it on the page
+        try:
+            knn = np.zeros((n, 165), np.float32)
+            # as synthesis calls it: the generator, then the k-NN motion's slow content kept
+            keep_slow(_open_refiner(path, stamp).refine(knn, np.zeros((n, 28), np.float32)), knn, KEEP_BELOW_HZ)
+        except Exception as exc:  # noqa: BLE001  (the run's own load reports it on the page)
+            print(f"gesturekit: the refiner's warm-up failed: {exc}", flush=True)
 
     thread = threading.Thread(target=warm, name="gesturekit-warm-refiner", daemon=True)
     thread.start()
