@@ -7,7 +7,8 @@ clicks Run and waits until the 3D view and the wrist plot are drawn. The
 first attempt starts as soon as the page has opened in a fresh browser after
 the server's start, while the server is still preparing the database in the
 background (compiled search, refiner, figures); later attempts, each in a new
-browser session, show the steady state. Target: under 5 s.
+browser session, show the steady state; a last one in a new browser shows a
+user's first visit once the server is prepared. Target: under 5 s.
 
 Needs the ``playwright`` package and Chromium (``apt-get install chromium``).
 
@@ -64,27 +65,39 @@ def main(argv=None) -> int:
         wav = drv.write_speech(home / "speech_30s.wav", seconds=args.seconds)
         print(f"speech: {wav.name}, {args.seconds:g} s, 16 kHz mono WAV, {wav.stat().st_size / 1e6:.1f} MB")
         times = []
+
+        def attempt(page, url: str, kind: str) -> float | None:
+            drv.open_app(page, url, "Synthesize", heading="Synthesize")  # a new session each time
+            t0 = time.perf_counter()
+            drv.upload(page, wav)
+            t1 = time.perf_counter()
+            drv.run_and_wait(page)
+            t2 = time.perf_counter()
+            problems = drv.problems(page)
+            if problems:
+                print(f"the page shows an error: {problems[0][:400]}")
+                return None
+            print(f"{kind:>30}: upload -> speech read {t1 - t0:5.2f} s, Run -> result on screen {t2 - t1:5.2f} s, "
+                  f"total {t2 - t0:5.2f} s")
+            return t2 - t0
+
         t_launch = time.perf_counter()
-        with drv.app_server(home) as url, drv.browser() as page:
-            print(f"server answering and browser started {time.perf_counter() - t_launch:.1f} s after the server's launch")
-            for attempt in range(1 + args.repeats):
-                drv.open_app(page, url, "Synthesize", heading="Synthesize")  # a new session each time
-                t0 = time.perf_counter()
-                drv.upload(page, wav)
-                t1 = time.perf_counter()
-                drv.run_and_wait(page)
-                t2 = time.perf_counter()
-                problems = drv.problems(page)
-                if problems:
-                    print(f"the page shows an error: {problems[0][:400]}")
+        with drv.app_server(home) as url:
+            with drv.browser() as page:
+                print(f"server answering and browser started {time.perf_counter() - t_launch:.1f} s after the "
+                      "server's launch")
+                for i in range(1 + args.repeats):
+                    times.append(attempt(page, url, "first (server just started)" if i == 0 else f"repeat {i}"))
+                    if times[-1] is None:
+                        return 1
+            with drv.browser() as page:  # a user's first visit once the server has prepared the database
+                fresh = attempt(page, url, "new browser, prepared server")
+                if fresh is None:
                     return 1
-                times.append(t2 - t0)
-                kind = "first (cold server)" if attempt == 0 else f"repeat {attempt}"
-                print(f"{kind:>20}: upload -> speech read {t1 - t0:5.2f} s, Run -> result on screen {t2 - t1:5.2f} s, "
-                      f"total {t2 - t0:5.2f} s")
         warm = times[1:] or times
         print(f"upload of {args.seconds:g} s speech -> first result on screen: median {statistics.median(warm):.2f} s "
-              f"(best {min(warm):.2f} s) warm, {times[0]:.2f} s on the server's first synthesis; target < 5 s")
+              f"(best {min(warm):.2f} s) warm, {fresh:.2f} s in a new browser, {times[0]:.2f} s right after the "
+              "server's start; target < 5 s")
     return 0
 
 
