@@ -568,20 +568,13 @@ def current_synthesis(db: MatchingDatabase) -> dict | None:
     return record if record["database"] == here else None
 
 
-def show_skeletons(fig, *, key: str, motions: int = 1) -> None:
-    """Show a :func:`gesturekit.viz.figures.skeleton_figure` with ``st.plotly_chart``.
+def show_skeletons(page: str, *, height: int) -> None:
+    """Show a :func:`gesturekit.viz.viewer.skeleton_viewer` page (drawing ``height`` pixels high).
 
-    The camera moves closer the more motions stand side by side, since the
-    scene is normalised to its (wide) X extent and would leave them small.
+    The viewer draws on a 2D canvas: a browser without a GPU shows it at once, where
+    a WebGL scene would take it seconds to set up.
     """
-    camera = dict(fig.layout.scene.camera.eye.to_plotly_json()) if fig.layout.scene.camera.eye else {}
-    if camera:
-        # distance of the eye from the scene centre, in units of the scene's widest side
-        z = 1.35 if motions <= 2 else min(1.35, max(0.7, 3.5 / motions))
-        camera.update(x=0.0, y=0.08 * z, z=z)
-    if camera:
-        fig.update_layout(scene_camera_eye=camera)
-    st.plotly_chart(fig, key=key, config={"displaylogo": False})
+    st.iframe(page, height=int(height) + 48)
 
 
 def _first_use(noise) -> None:
@@ -598,7 +591,8 @@ def _first_use(noise) -> None:
 
     from gesturekit.motion import AUDIO_SR, N_JOINTS, Motion
     from gesturekit.viz import session as gs
-    from gesturekit.viz.figures import skeleton_figure, waveform_figure, wrist_figure
+    from gesturekit.viz.figures import waveform_figure, wrist_figure
+    from gesturekit.viz.viewer import skeleton_viewer
 
     buf = io.BytesIO()
     sf.write(buf, noise, AUDIO_SR, format="WAV", subtype="PCM_16")
@@ -608,8 +602,8 @@ def _first_use(noise) -> None:
 
     pa.Table.from_pandas(gs.segments_frame(gs.track_from_segments(gs.empty_segments())))
     motion = Motion(np.zeros((4, N_JOINTS, 3), np.float32), 15.0)
-    for fig in (waveform_figure(audio, AUDIO_SR), skeleton_figure([motion, motion], labels=["a", "b"]),
-                wrist_figure([motion, motion], labels=["a", "b"])):
+    skeleton_viewer([motion, motion], labels=["a", "b"])
+    for fig in (waveform_figure(audio, AUDIO_SR), wrist_figure([motion, motion], labels=["a", "b"])):
         pio.to_json(fig.to_dict(), validate=False)
 
 

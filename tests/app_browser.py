@@ -195,13 +195,22 @@ def box_select(page, start_frac: float, end_frac: float) -> None:
 
 
 def run_and_wait(page) -> None:
-    """Click Run and wait for the first result: the 3D view (a WebGL canvas) and the wrist plot."""
+    """Click Run and wait for the first result: the 3D view drawn and the wrist plot."""
     page.get_by_role("button", name="Run", exact=True).click()
     wait_result(page)
 
 
+def skeleton_canvas(page, key: str):
+    """The canvas of the skeleton viewer with key ``key`` (gesturekit.viz.viewer), once it has drawn."""
+    frame = page.frame_locator(f'iframe[srcdoc*=\'data-key="{key}"\']')
+    frame.locator('body[data-drawn="1"]').wait_for(state="attached")
+    canvas = frame.locator("canvas#c")
+    canvas.wait_for(state="visible")
+    return canvas
+
+
 def wait_result(page) -> None:
-    page.locator('[data-testid="stPlotlyChart"] .gl-container canvas').first.wait_for(state="visible")
+    skeleton_canvas(page, "synth.skeleton")
     page.locator('[data-testid="stPlotlyChart"] text', has_text="left wrist height").first.wait_for(state="visible")
 
 

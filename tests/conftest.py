@@ -62,6 +62,18 @@ def chart_spec(at, key: str) -> dict:
     raise AssertionError(f"no plotly chart with key {key!r}")
 
 
+def viewer(at, key: str) -> dict:
+    """The data of the skeleton viewer with key ``key`` on an AppTest page (coordinates decoded,
+    see :func:`gesturekit.viz.viewer.read_viewer_data`)."""
+    from gesturekit.viz.viewer import read_viewer_data
+
+    for el in at.get("iframe"):
+        page = el.proto.srcdoc
+        if f'data-key="{key}"' in page:
+            return read_viewer_data(page)
+    raise AssertionError(f"no skeleton viewer with key {key!r}")
+
+
 def plotly_array(value) -> np.ndarray:
     """A data array of a plotly JSON spec (typed-array dict or list, None as NaN), float64."""
     import base64

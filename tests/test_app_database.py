@@ -13,7 +13,7 @@ from gesturekit.datasets.synthetic import DEMO_LABEL
 from gesturekit.demo import build_demo_database
 from gesturekit.skeleton import bones
 
-from .conftest import chart_spec as _chart, plotly_array as _array
+from .conftest import chart_spec as _chart, plotly_array as _array, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 DATABASE_PAGE = "pages/3_Database.py"
@@ -36,15 +36,16 @@ def _run_database_page() -> AppTest:
     return at
 
 
-def _first_pose_bones(spec: dict) -> np.ndarray:
-    """The segments of frame 0 of a skeleton chart, sorted, shape (54, 6)."""
+def _first_pose_bones(data: dict) -> np.ndarray:
+    """The segments of frame 0 of a skeleton viewer's data, sorted, shape (54, 6)."""
     segs = []
-    for trace in spec["data"]:
-        # joint paths separated by NaN points, parent first: consecutive finite points are bones
-        pts = np.stack([_array(trace[c]) for c in "xyz"], axis=1)
-        ok = np.isfinite(pts).all(axis=1)
-        pair = ok[:-1] & ok[1:]
-        segs.append(np.concatenate([pts[1:][pair], pts[:-1][pair]], axis=1))  # (child, parent)
+    for m in data["motions"]:
+        for part in ("body", "hands"):
+            # joint paths separated by NaN points, parent first: consecutive finite points are bones
+            pts = m[part][0]
+            ok = np.isfinite(pts).all(axis=1)
+            pair = ok[:-1] & ok[1:]
+            segs.append(np.concatenate([pts[1:][pair], pts[:-1][pair]], axis=1))  # (child, parent)
     segs = np.concatenate(segs)
     return segs[np.lexsort(segs.T[::-1])]
 
@@ -87,9 +88,9 @@ def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):
     lines = sorted(s["x0"] for s in hist["layout"]["shapes"] if s["name"].startswith("hand_speed"))
     assert lines == pytest.approx([lo, hi])
 
-    skel = _chart(at, "db.skeleton")
-    assert len(skel["frames"]) == db.clip_frames
-    assert skel["layout"]["scene"]["camera"]["up"] == {"x": 0, "y": 1, "z": 0}
+    skel = viewer(at, "db.skeleton")
+    assert len(skel["times"]) == db.clip_frames
+    assert skel["up"] == [0, 1, 0]
     np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 0), atol=1e-6)
     assert len(at.get("audio")) == 1
 
@@ -100,20 +101,20 @@ def test_choosing_another_clip_changes_the_viewer(app_env):
     clip_input = next(n for n in at.number_input if n.label == "Clip to view")
     clip_input.set_value(3).run()
     assert not at.exception
-    skel = _chart(at, "db.skeleton")
-    assert skel["layout"]["title"]["text"].startswith("clip 3:")
+    skel = viewer(at, "db.skeleton")
+    assert skel["title"].startswith("clip 3:")
     np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 3), atol=1e-6)
 
     # selecting a row of the clips table picks that clip too
     at.session_state["db.clips_table"] = {"selection": {"rows": [7], "columns": []}}
     at.run()
     assert not at.exception
-    assert _chart(at, "db.skeleton")["layout"]["title"]["text"].startswith("clip 7:")
+    assert viewer(at, "db.skeleton")["title"].startswith("clip 7:")
     assert next(n for n in at.number_input if n.label == "Clip to view").value == 7
 
     # the choice is per user: a second session still shows clip 0
     other = _run_database_page()
-    assert _chart(other, "db.skeleton")["layout"]["title"]["text"].startswith("clip 0:")
+    assert viewer(other, "db.skeleton")["title"].startswith("clip 0:")
 
 
 @pytest.mark.parametrize("kind", ["missing", "not_a_database"])
@@ -127,7 +128,7 @@ def test_a_bad_database_path_shows_an_error_not_a_traceback(app_env, tmp_path, k
     errors = _error_texts(at)
     assert len(errors) == 1 and str(target) in errors[0]
     assert ("no database folder" if kind == "missing" else "database.json is missing") in errors[0]
-    assert not at.get("plotly_chart")
+    assert not at.get("plotly_chart") and not at.get("iframe")
 
 
 def test_databases_in_the_working_directory_are_offered(app_env, tmp_path):

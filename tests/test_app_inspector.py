@@ -13,7 +13,7 @@ from streamlit.testing.v1 import AppTest
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 
-from .conftest import chart_spec as chart, plotly_array as array
+from .conftest import chart_spec as chart, plotly_array as array, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 SYNTH, INSPECT = "pages/1_Synthesize.py", "pages/2_Retrieval_inspector.py"
@@ -89,9 +89,10 @@ def test_every_step_lists_its_k_candidates_with_their_sources(app_env, db):
         np.testing.assert_allclose(cands["pose_dist"], s.cand_pose_dist[step])
         assert cands["chosen"].tolist().index(True) == s.position[step]
         # the chosen window and four alternatives, animated together; one point per candidate
-        views = chart(at, "inspect.views")
+        views = viewer(at, "inspect.views")
         step_frames = min((step + 1) * res.config.step, res.n_frames) - step * res.config.step
-        assert motions_in(views) == [0, 1, 2, 3, 4] and len(views["frames"]) == step_frames
+        assert len(views["motions"]) == 5 and len(views["times"]) == step_frames
+        assert views["motions"][0]["label"].startswith("chosen")
         (points,) = [t for t in chart(at, "inspect.candidates_plot")["data"] if t["meta"]["part"] == "candidates"]
         np.testing.assert_allclose(array(points["x"]), s.cand_pose_dist[step])
     assert any(m.value.startswith(f"**Step {s.n_steps - 1}**") for m in at.markdown)
@@ -129,9 +130,8 @@ def test_comparing_k_shows_the_results_side_by_side(app_env):
     at = synthesized()
     at.button(key="inspect.compare_go").click().run()
     assert not at.exception and not [e.value for e in at.error]
-    views = chart(at, "inspect.compare_views")
-    assert motions_in(views) == [0, 1, 2]
-    assert [a["text"] for a in views["layout"]["scene"]["annotations"]] == ["k = 0", "k = 1", "k = 2"]
+    views = viewer(at, "inspect.compare_views")
+    assert [m["label"] for m in views["motions"]] == ["k = 0", "k = 1", "k = 2"]
     compared = table(at, "control_met")
     assert list(compared["k"]) == [0, 1, 2]
     runs = at.session_state["inspect.compare"]["results"]

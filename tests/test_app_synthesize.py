@@ -16,7 +16,7 @@ from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.export.video import probe_media
 from gesturekit.viz.figures import WRIST_ROWS
 
-from .conftest import chart_spec as chart, plotly_array as array
+from .conftest import chart_spec as chart, plotly_array as array, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 PAGE = "pages/1_Synthesize.py"
@@ -96,13 +96,13 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     assert res.n_frames == 60
 
     # the 3D view: every joint of the first frame at the result's positions, one animation frame per frame
-    skel = chart(at, "synth.skeleton")
-    assert {t["meta"]["part"] for t in skel["data"]} == {"body", "hands"}
-    assert len(skel["frames"]) == res.n_frames
-    points = np.concatenate([np.stack([array(t[c]) for c in "xyz"], axis=1) for t in skel["data"]])
+    skel = viewer(at, "synth.skeleton")
+    assert len(skel["motions"]) == 1 and len(skel["times"]) == res.n_frames
+    m = skel["motions"][0]
+    points = np.concatenate([m["body"][0], m["hands"][0]])
     points = np.unique(np.round(points[np.isfinite(points).all(axis=1)], 5), axis=0)
     np.testing.assert_allclose(points, np.unique(np.round(res.motion.positions[0], 5), axis=0), atol=2e-5)
-    assert skel["layout"]["scene"]["dragmode"] == "orbit"
+    assert skel["up"] == [0, 1, 0] and skel["eye"][2] > 0  # in front of the character, Y up
 
     # the wrist plot: the result's own wrist heights and speeds, the control band, the thresholds
     wrists = chart(at, "synth.wrists")
@@ -191,7 +191,7 @@ def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
     assert not at.exception
     assert at.number_input(key="_w.synth.k").value == 2 and at.selectbox(key="_w.synth.blend").value == "offset"
     assert at.data_editor[0].value.to_dict("records") == [{"start_s": 0.0, "end_s": 2.0, "constraint": "both_hands=low"}]
-    assert chart(at, "synth.skeleton")  # the result is still there
+    assert viewer(at, "synth.skeleton")  # the result is still there
 
     other = open_page()  # another user sees none of it
     assert "gk.synthesis" not in other.session_state and not other.get("plotly_chart")
@@ -255,8 +255,8 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
     assert not at.exception and not errors(at)
     assert len(seen) == 1 and isinstance(seen[0], StandIn)
     assert checked and Path(checked[-1]) == folder  # checked when chosen, loaded when run
-    skel = chart(at, "synth.skeleton")
-    assert [a["text"] for a in skel["layout"]["scene"]["annotations"]] == ["k-NN", "k-NN + refiner"]
+    skel = viewer(at, "synth.skeleton")
+    assert [m["label"] for m in skel["motions"]] == ["k-NN", "k-NN + refiner"]
     wrists = chart(at, "synth.wrists")
     res = result(at)
     speeds = {t["meta"]["motion"]: array(t["y"]) for t in wrists["data"] if t["meta"]["attribute"] == "left_hand_speed"}

@@ -50,9 +50,14 @@ def test_upload_box_select_run_then_inspect(served, tmp_path):
 
         app_browser.run_and_wait(page)
         app_browser.wait_idle(page)
-        # the 3D view is a WebGL canvas with real size; the wrist plot has its four rows
-        canvas = page.locator('[data-testid="stPlotlyChart"] .gl-container canvas').first.bounding_box()
-        assert canvas["width"] > 200 and canvas["height"] > 200
+        # the 3D view has drawn on a canvas of real size, and plays; the wrist plot has its four rows
+        canvas = app_browser.skeleton_canvas(page, "synth.skeleton")
+        box = canvas.bounding_box()
+        assert box["width"] > 200 and box["height"] > 200
+        assert canvas.get_attribute("data-frame") == "0"
+        page.frame_locator('iframe[srcdoc*=\'data-key="synth.skeleton"\']').locator("#play").click()
+        page.wait_for_timeout(1200)
+        assert int(canvas.get_attribute("data-frame")) > 0
         for row in ("left wrist height", "right wrist height", "left wrist speed", "right wrist speed"):
             assert page.locator('[data-testid="stPlotlyChart"] text', has_text=row).count() >= 1
         assert page.get_by_text("controls:").count() >= 1
@@ -64,7 +69,7 @@ def test_upload_box_select_run_then_inspect(served, tmp_path):
         # the inspector sees this session's result (state kept across pages)
         app_browser.go_to(page, "Retrieval inspector")
         page.get_by_text("Step 0").first.wait_for()
-        page.locator('[data-testid="stPlotlyChart"] .gl-container canvas').first.wait_for(state="visible")
+        app_browser.skeleton_canvas(page, "inspect.views")
         assert app_browser.problems(page) == []
         app_browser.screenshot(page, out / "browser_inspector.png")
     assert (out / "browser_synthesize.png").stat().st_size > 10_000

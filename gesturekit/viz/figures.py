@@ -168,6 +168,35 @@ def _motions_and_labels(motions, labels, *, who: str) -> tuple[list[Motion], lis
         raise ConfigError(f"{who} got {len(labels)} labels for {len(motions)} motions")
     return motions, labels
 
+def _time_grid(motions: list[Motion], *, fps, max_frames: int, spacing):
+    """The shown times of a skeleton view and each motion's poses at them, side by side.
+
+    Returns ``(grid_fps, step, times, shown, offsets)``: the time grid's frame rate, the
+    decimation step (every ``step``-th grid time is shown), the shown times in seconds,
+    per motion its poses at those times (sample and hold, offset along X), shape
+    (len(times), 55, 3) float32, and the X offsets in metres.
+    """
+    if max_frames < 1:
+        raise ConfigError(f"max_frames must be at least 1, got {max_frames}")
+    grid_fps = float(fps) if fps is not None else max(float(m.fps) for m in motions)
+    if not grid_fps > 0:
+        raise ConfigError(f"fps must be positive, got {fps}")
+    duration = max(m.duration for m in motions)
+    n_grid = max(1, int(math.ceil(duration * grid_fps - 1e-9)))
+    step = int(math.ceil(n_grid / max_frames))
+    times = np.arange(0, n_grid, step) / grid_fps
+    shown = []
+    for m in motions:
+        idx = np.minimum(np.floor(times * m.fps + 1e-6).astype(np.int64), m.n_frames - 1)
+        shown.append(np.asarray(m.positions[idx], dtype=np.float32))
+    if spacing is None:
+        widest = max(float(np.ptp(p[..., 0])) for p in shown)
+        spacing = max(0.8, widest + 0.4)
+    offsets = (np.arange(len(motions)) - (len(motions) - 1) / 2) * float(spacing)
+    shown = [p + np.array([dx, 0, 0], dtype=np.float32) for p, dx in zip(shown, offsets)]
+    return grid_fps, step, times, shown, offsets
+
+
 def skeleton_figure(
     motions: Motion | Sequence[Motion],
     *,
@@ -230,28 +259,7 @@ def skeleton_figure(
         non-positive ``fps``/``max_frames``.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure")
-    if max_frames < 1:
-        raise ConfigError(f"max_frames must be at least 1, got {max_frames}")
-    grid_fps = float(fps) if fps is not None else max(float(m.fps) for m in motions)
-    if not grid_fps > 0:
-        raise ConfigError(f"fps must be positive, got {fps}")
-
-    duration = max(m.duration for m in motions)
-    n_grid = max(1, int(math.ceil(duration * grid_fps - 1e-9)))
-    step = int(math.ceil(n_grid / max_frames))
-    times = np.arange(0, n_grid, step) / grid_fps
-
-    # the poses shown at each time, per motion (sample and hold)
-    shown = []
-    for m in motions:
-        idx = np.minimum(np.floor(times * m.fps + 1e-6).astype(np.int64), m.n_frames - 1)
-        shown.append(np.asarray(m.positions[idx], dtype=np.float32))
-    if spacing is None:
-        widest = max(float(np.ptp(p[..., 0])) for p in shown)
-        spacing = max(0.8, widest + 0.4)
-    offsets = (np.arange(len(motions)) - (len(motions) - 1) / 2) * float(spacing)
-    shown = [p + np.array([dx, 0, 0], dtype=np.float32) for p, dx in zip(shown, offsets)]
-
+    grid_fps, step, times, shown, offsets = _time_grid(motions, fps=fps, max_frames=max_frames, spacing=spacing)
     body_chains, hand_chains = (_chains(pairs) for pairs in _bone_groups())
     # per motion: (body polylines, finger polylines), each (frames, points, 3); markers at the
     # points draw every joint, since every joint is on a bone
