@@ -168,13 +168,15 @@ def _motions_and_labels(motions, labels, *, who: str) -> tuple[list[Motion], lis
         raise ConfigError(f"{who} got {len(labels)} labels for {len(motions)} motions")
     return motions, labels
 
-def _time_grid(motions: list[Motion], *, fps, max_frames: int, spacing):
-    """The shown times of a skeleton view and each motion's poses at them, side by side.
+def _skeleton_paths(motions: list[Motion], *, fps, max_frames: int, spacing):
+    """What a skeleton view shows: the time grid and each motion's joint paths at its times.
 
-    Returns ``(grid_fps, step, times, shown, offsets)``: the time grid's frame rate, the
-    decimation step (every ``step``-th grid time is shown), the shown times in seconds,
-    per motion its poses at those times (sample and hold, offset along X), shape
-    (len(times), 55, 3) float32, and the X offsets in metres.
+    Returns ``(grid_fps, step, times, offsets, parts, lo, hi)``: the time grid's frame
+    rate, the decimation step (every ``step``-th grid time is shown), the shown times
+    in seconds, the motions' X offsets in metres (side by side), per motion its
+    (body, finger) polylines of :func:`_polylines` at those times (sample and hold,
+    offset along X), each (len(times), points, 3) float32, and the bounds of every
+    shown pose, 0.1 m added on each side.
     """
     if max_frames < 1:
         raise ConfigError(f"max_frames must be at least 1, got {max_frames}")
@@ -194,7 +196,10 @@ def _time_grid(motions: list[Motion], *, fps, max_frames: int, spacing):
         spacing = max(0.8, widest + 0.4)
     offsets = (np.arange(len(motions)) - (len(motions) - 1) / 2) * float(spacing)
     shown = [p + np.array([dx, 0, 0], dtype=np.float32) for p, dx in zip(shown, offsets)]
-    return grid_fps, step, times, shown, offsets
+    allp = np.concatenate([p.reshape(-1, 3) for p in shown])
+    body_chains, hand_chains = (_chains(pairs) for pairs in _bone_groups())
+    parts = [(_polylines(p, body_chains), _polylines(p, hand_chains)) for p in shown]
+    return grid_fps, step, times, offsets, parts, allp.min(axis=0) - 0.1, allp.max(axis=0) + 0.1
 
 
 def skeleton_figure(
@@ -259,11 +264,10 @@ def skeleton_figure(
         non-positive ``fps``/``max_frames``.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure")
-    grid_fps, step, times, shown, offsets = _time_grid(motions, fps=fps, max_frames=max_frames, spacing=spacing)
-    body_chains, hand_chains = (_chains(pairs) for pairs in _bone_groups())
     # per motion: (body polylines, finger polylines), each (frames, points, 3); markers at the
     # points draw every joint, since every joint is on a bone
-    parts = [(_polylines(p, body_chains), _polylines(p, hand_chains)) for p in shown]
+    grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(motions, fps=fps, max_frames=max_frames,
+                                                                    spacing=spacing)
 
     traces = []
     for i, (label, (body, hands)) in enumerate(zip(labels, parts)):
@@ -293,8 +297,6 @@ def skeleton_figure(
             frames.append(dict(data=data, traces=trace_ids, name=str(k)))
 
     # fixed ranges over every shown frame: the view must not jump while playing
-    allp = np.concatenate([p.reshape(-1, 3) for p in shown])
-    lo, hi = allp.min(axis=0) - 0.1, allp.max(axis=0) + 0.1
     centre, extent = (lo + hi) / 2, np.maximum(hi - lo, 0.3)
     lo, hi = centre - extent / 2, centre + extent / 2
     aspect = extent / extent.max()

@@ -20,17 +20,12 @@ import html
 import json
 from typing import Sequence
 
-import numpy as np
-
 from ..motion import Motion
 from .figures import (
     DEFAULT_MAX_FRAMES,
     MOTION_COLORS,
-    _bone_groups,
-    _chains,
     _motions_and_labels,
-    _polylines,
-    _time_grid,
+    _skeleton_paths,
     _typed,
     data_array,
 )
@@ -73,13 +68,10 @@ def viewer_data(
         As :func:`gesturekit.viz.figures.skeleton_figure`.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer")
-    grid_fps, step, times, shown, offsets = _time_grid(motions, fps=fps, max_frames=max_frames, spacing=spacing)
-    body_chains, hand_chains = (_chains(pairs) for pairs in _bone_groups())
-    allp = np.concatenate([p.reshape(-1, 3) for p in shown])
-    lo, hi = allp.min(axis=0) - 0.1, allp.max(axis=0) + 0.1
+    grid_fps, step, times, offsets, paths, lo, hi = _skeleton_paths(motions, fps=fps, max_frames=max_frames,
+                                                                    spacing=spacing)
     out = []
-    for i, (label, p, dx) in enumerate(zip(labels, shown, offsets)):
-        body, hands = _polylines(p, body_chains), _polylines(p, hand_chains)
+    for i, (label, (body, hands), dx) in enumerate(zip(labels, paths, offsets)):
         parts = {}
         for name, a in (("body", body), ("hands", hands)):
             spec = _typed(a.reshape(-1))
