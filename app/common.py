@@ -568,13 +568,17 @@ def current_synthesis(db: MatchingDatabase) -> dict | None:
     return record if record["database"] == here else None
 
 
-def show_skeletons(page: str, *, height: int) -> None:
-    """Show a :func:`gesturekit.viz.viewer.skeleton_viewer` page (drawing ``height`` pixels high).
+def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, height: int = 520) -> None:
+    """Show motions side by side in gesturekit's 3D viewer (:func:`gesturekit.viz.viewer.skeleton_viewer`).
 
     The viewer draws on a 2D canvas: a browser without a GPU shows it at once, where
-    a WebGL scene would take it seconds to set up.
+    a WebGL scene would take it seconds to set up. ``height``: of the drawing, in
+    pixels (its controls come below); ``key`` names the viewer (pages and tests find it by it).
     """
-    st.iframe(page, height=int(height) + 48)
+    from gesturekit.viz.viewer import CONTROLS_HEIGHT, skeleton_viewer
+
+    page = skeleton_viewer(motions, labels=labels, title=title, height=height, key=key)
+    st.iframe(page, height=int(height) + CONTROLS_HEIGHT)
 
 
 def _first_use(noise) -> None:

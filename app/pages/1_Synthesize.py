@@ -13,7 +13,6 @@ from gesturekit.motion import AUDIO_SR
 from gesturekit.synthesize import SynthesisConfig
 from gesturekit.viz import session as gs
 from gesturekit.viz.figures import waveform_figure, wrist_figure
-from gesturekit.viz.viewer import skeleton_viewer
 
 SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}
 SEGMENTS = "synth.segments"  # the control table as the user last left it (DataFrame)
@@ -250,9 +249,7 @@ def show_result(db, record) -> None:
     with left:
         title = f"{result.source}: {result.n_frames} frames, {result.n_frames / result.motion.fps:.1f} s"
         # sent before the wrist plot is made, so the browser draws the 3D view meanwhile
-        skeleton = _figure(record, "skeleton", lambda: skeleton_viewer(motions, labels=labels, title=title,
-                                                                        key="synth.skeleton"))
-        common.show_skeletons(skeleton, height=520)
+        common.show_skeletons(motions, labels=labels, title=title, key="synth.skeleton")
     with right:
         st.markdown("**Speech**")
         st.audio(gs.wav_bytes(result.audio), format="audio/wav")

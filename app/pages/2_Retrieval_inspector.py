@@ -4,7 +4,6 @@ import streamlit as st
 import common
 from gesturekit.viz import session as gs
 from gesturekit.viz.figures import candidates_figure, wrist_figure
-from gesturekit.viz.viewer import skeleton_viewer
 
 STEP = "inspect.step"  # the step shown (per user)
 CANDIDATE = "inspect.candidate"  # the position of the candidate inspected at that step
@@ -83,7 +82,7 @@ def step_view(db, record, step: int) -> None:
         for r in others.head(shown).itertuples():
             motions.append(gs.candidate_motion(db, r.clip, r.start, b - a))
             labels.append(f"#{r.position}")
-        common.show_skeletons(skeleton_viewer(motions, labels=labels, height=360, key="inspect.views"), height=360)
+        common.show_skeletons(motions, labels=labels, height=360, key="inspect.views")
 
     st.markdown("**Listen and choose**")
     positions = [int(p) for p in table["position"]]
@@ -149,8 +148,7 @@ def compare_view(db, record) -> None:
         return
     motions = [r.refined_motion if r.refined_motion is not None else r.motion for r in done["results"]]
     labels = [f"k = {k}" for k in done["ks"]]
-    common.show_skeletons(skeleton_viewer(motions, labels=labels, height=420, key="inspect.compare_views"),
-                          height=420)
+    common.show_skeletons(motions, labels=labels, height=420, key="inspect.compare_views")
     st.dataframe(gs.comparison_table(done["results"], db.thresholds), hide_index=True, key="inspect.compare_table",
                  column_config={"pose_dist": st.column_config.NumberColumn("mean pose distance", format="%.3f"),
                                 "audio_dist": st.column_config.NumberColumn("mean audio distance", format="%.4f"),

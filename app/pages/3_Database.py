@@ -6,7 +6,6 @@ import streamlit as st
 import common
 from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.viz.figures import attribute_histograms, waveform_figure
-from gesturekit.viz.viewer import skeleton_viewer
 
 CLIP = "db.clip"  # the clip shown in the viewer (per user)
 _LAST_ROW = "_db.last_selected_clip"  # the table selection already applied
@@ -84,8 +83,7 @@ def viewer(db, clip: int) -> None:
     motion = Motion.from_flat(np.asarray(db.G[clip]), db.fps)
     left, right = st.columns([3, 2])
     with left:
-        common.show_skeletons(skeleton_viewer(motion, title=f"clip {clip}: {row['take']} at {row['start_s']:.2f} s",
-                                              key="db.skeleton"), height=520)
+        common.show_skeletons(motion, title=f"clip {clip}: {row['take']} at {row['start_s']:.2f} s", key="db.skeleton")
     with right:
         if db.audio is not None:
             audio = db.segment_audio(clip, 0, db.clip_frames)

@@ -30,7 +30,10 @@ from .figures import (
     data_array,
 )
 
-__all__ = ["skeleton_viewer", "viewer_data", "read_viewer_data"]
+__all__ = ["CONTROLS_HEIGHT", "skeleton_viewer", "viewer_data", "read_viewer_data"]
+
+#: Pixels the controls (play button, slider, time) take below the drawing.
+CONTROLS_HEIGHT = 48
 
 _DATA_ID = "gk-data"
 
@@ -133,7 +136,7 @@ def skeleton_viewer(
     motions, labels, fps, title, max_frames, spacing
         As for :func:`gesturekit.viz.figures.skeleton_figure`.
     height : int
-        Height of the drawing in pixels (the controls come below it, 44 px).
+        Height of the drawing in pixels (the controls come below it: :data:`CONTROLS_HEIGHT`).
     key : str
         A name for the page (``data-key`` of its body), by which pages and tests find it.
 
