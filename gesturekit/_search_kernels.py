@@ -14,8 +14,8 @@ exact, at a zero norm).
 block (numpy's reductions along the strided axis are slow).
 ``audio_at(F3, na2, s0, amin, fq, nb, av, inexact)``: the audio estimates of each clip's
 ``s0`` for several queries (one clip's rows serve all of them).
-``group_bounds(v, err, order, lo, hi)``: the groups of :func:`gesturekit.search._rank_groups`;
-``prefix_groups(...)``: the same over a sorted prefix of the order (see ``rank_top``).
+``prefix_groups(v, err, order, L, lo, hi, glo, ghi)``: the ranges of sorted positions whose exact
+order is unknown (groups of near-equal estimates), over a sorted prefix of the order (see ``rank_top``).
 ``admissible_ends(bias2)``: per clip, one past its last admissible start (0: none).
 ``row_stats(x2, norms)``: float64 squared norms of the rows of ``x2``, whether all
 values are finite, and the largest magnitude (one pass for validation and norms).
@@ -146,33 +146,10 @@ def row_stats(x2, norms):
 
 
 @numba.njit(cache=True, nogil=True)
-def group_bounds(v, err, order, lo, hi):
-    # sorted neighbours i-1, i are in proven order when the largest upper end up to i-1
-    # lies below the smallest lower end from i on; a group is a run without such a split
-    n = order.size
-    low_from = np.empty(n)
-    m = np.inf
-    for i in range(n - 1, -1, -1):
-        k = order[i]
-        m = min(m, v[k] - err[k])
-        low_from[i] = m
-    start = 0
-    top = v[order[0]] + err[order[0]]
-    for i in range(1, n + 1):
-        if i == n or top < low_from[i]:
-            for r in range(start, i):
-                lo[order[r]] = start
-                hi[order[r]] = i - 1
-            start = i
-        if i < n:
-            k = order[i]
-            top = max(top, v[k] + err[k])
-
-
-@numba.njit(cache=True, nogil=True)
 def prefix_groups(v, err, order, L, lo, hi, glo, ghi):
-    # group_bounds over the first L positions of ``order`` (those sorted; the rest in any
-    # order, each above them by estimate). A split before position i is proven when the
+    # Each v[k] lies within err[k] of its exact value. Groups over the first L positions of
+    # ``order`` (those sorted; the rest in any order, each above them by estimate; L = n: the
+    # whole order, every group complete). A split before position i is proven when the
     # largest upper end before i lies below the smallest lower end from i on, the rest
     # included. Returns s: positions before s are in complete groups (exact lo, hi);
     # every other element gets lo = s, hi = n - 1 (its rank lies somewhere there).

@@ -514,35 +514,6 @@ def _window_all(flags: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def _rank_groups(v: np.ndarray, err: np.ndarray):
-    """Order of estimates ``v`` and the ranges of sorted positions whose exact order is unknown.
-
-    Each ``v[i]`` lies within ``err[i]`` of its exact value. Sorted neighbours
-    whose intervals ``[v - err, v + err]`` cannot overlap (also through a chain
-    of others) are in proven order; the chains form groups of sorted positions.
-
-    Returns
-    -------
-    order : (n,) int64
-        ``v`` sorted; the order inside a group is arbitrary until settled.
-    lo, hi : (n,) int64
-        First and last sorted position of each element's group: its exact rank lies in ``[lo, hi]``.
-    """
-    n = v.size
-    if n < 2 or not err.any():  # all exact: equal values in index order
-        order = np.argsort(v, kind="stable")
-        pos = np.empty(n, np.int64)
-        pos[order] = np.arange(n)
-        return order, pos, pos.copy()
-    # Equal estimates always share a group (their intervals overlap), and groups that
-    # matter are re-sorted exactly, so the initial sort need not be stable.
-    order = np.argsort(v)
-    lo = np.empty(n, np.int64)
-    hi = np.empty(n, np.int64)
-    _kernels().group_bounds(v, err, order, lo, hi)
-    return order, lo, hi
-
-
 #: Survivors sorted first by each ranking in a query's decisions; the rest is only
 #: partitioned off. Enough whenever the top of the combined ranking lies within the
 #: first few hundred of both rankings, as it does unless pose and audio disagree
@@ -556,7 +527,7 @@ def _initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
     Returns ``(order, L)``: the survivors with the ``L = min(prefix, n)`` smallest
     estimates first, sorted, the others after them in any order. Any order near the
     sorted one will do: the groups of near-equal estimates (equal exact values
-    included) are proven whatever the order inside them (see :func:`_rank_groups`),
+    included) are proven whatever the order inside them (``prefix_groups`` of :func:`_kernels`),
     and those that matter are re-sorted with exact values. Sorting float32 copies of
     the estimates is then enough (they misplace only values closer than float32
     rounding), and numpy sorts and partitions float32 keys faster than float64 ones.

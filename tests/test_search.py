@@ -15,7 +15,6 @@ from gesturekit.errors import ConfigError, GestureKitWarning
 from gesturekit.search import (
     SearchConfig,
     SearchIndex,
-    _rank_groups,
     exact_cosine_distance,
     exact_pose_sqdist,
     search,
@@ -147,12 +146,22 @@ def test_vectorised_exact_distances_equal_the_definitions(seed, n, dim, coarse):
     assert cos[0] == 1.0 if not rows[0].any() else True
 
 
+def _whole_order_groups(est, err, order):
+    """lo, hi of the groups of a whole order (every group complete)."""
+    from gesturekit._search_kernels import prefix_groups
+
+    n = est.size
+    lo, hi = np.empty(n, np.int64), np.empty(n, np.int64)
+    assert prefix_groups(est, err, order, n, lo, hi, np.empty(n + 1, np.int64), np.empty(n + 1, np.int64)) == n
+    return lo, hi
+
+
 def test_rank_groups_bound_the_exact_ranks():
     rng = np.random.default_rng(3)
     exact = np.round(rng.standard_normal(500), 2)  # many exact ties
     err = np.full(500, 0.004)
     est = exact + rng.uniform(-1, 1, 500) * err
-    order, lo, hi = _rank_groups(est.copy(), err.copy())
+    lo, hi = _whole_order_groups(est, err, np.argsort(est))
     exact_rank = np.empty(500, int)
     exact_rank[np.lexsort((np.arange(500), exact))] = np.arange(500)
     assert np.all(lo <= exact_rank) and np.all(exact_rank <= hi)
@@ -185,12 +194,8 @@ def test_prefix_groups_bound_the_exact_ranks(seed, n, err_size, L):
     if L == n:
         assert s == n
     else:
-        from gesturekit._search_kernels import group_bounds
-
         rest = order[L:]
-        whole = np.concatenate([order[:L], rest[np.argsort(key[rest])]])
-        full_lo, full_hi = np.empty(n, np.int64), np.empty(n, np.int64)
-        group_bounds(est, err, whole, full_lo, full_hi)
+        full_lo, full_hi = _whole_order_groups(est, err, np.concatenate([order[:L], rest[np.argsort(key[rest])]]))
         # a group complete within the prefix is the group of the whole order
         assert np.all(lo[head] == full_lo[head]) and np.all(hi[head] == full_hi[head])
 
