@@ -175,9 +175,20 @@ def go_to(page, title: str) -> None:
 
 
 def upload(page, wav: Path) -> None:
-    """Upload a speech file on the Synthesize page and wait until it has been read."""
+    """Upload a speech file on the Synthesize page and wait until it has been read.
+
+    The page names the speech it works on in a caption below the uploader
+    (the uploader's own list shows the name as soon as the file is chosen).
+    """
     page.locator('[data-testid="stFileUploader"] input[type="file"]').set_input_files(str(wav))
-    page.get_by_text(wav.name, exact=False).last.wait_for()
+    page.locator('[data-testid="stCaptionContainer"] strong', has_text=wav.name).first.wait_for()
+    page.get_by_role("button", name="Run", exact=True).wait_for()
+
+
+def synthesize_ready(page) -> None:
+    """Wait until the Synthesize page is drawn whole: its waveform chart, the segment table and Run."""
+    page.locator('[data-testid="stPlotlyChart"] .main-svg').first.wait_for(state="visible")
+    page.locator('[data-testid="stDataFrame"] canvas').first.wait_for(state="attached")
     page.get_by_role("button", name="Run", exact=True).wait_for()
 
 

@@ -14,6 +14,7 @@ from gesturekit.control import frame_attributes
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.export.video import probe_media
+from gesturekit.viz import session as gs
 from gesturekit.viz.figures import WRIST_ROWS
 
 from .conftest import chart_spec as chart, plotly_array as array, viewer
@@ -121,6 +122,29 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     assert any(c.value == "MP4: render it above" for c in at.caption)
 
 
+def test_a_first_visit_opens_on_example_speech_until_a_file_is_uploaded(app_env):
+    at = open_page()
+    hint = "Until you upload a file, the page works on example speech."
+    example = next(iter(gs.SPEECH_EXAMPLES))
+    assert at.radio(key="_w.synth.mode").value == "Upload a file"
+    assert [c.value for c in at.caption if c.value == hint] == [hint]
+    assert any(c.value.startswith(f"**{example}**") for c in at.caption)
+    wave = chart(at, "synth.waveform")
+    assert array(wave["data"][0]["x"])[-1] == pytest.approx(gs.SPEECH_EXAMPLES[example][0], abs=0.05)
+    assert not at.button(key="synth.go").disabled
+
+    at = upload(at, speech_file(3.0), name="mine.wav")
+    assert not [c for c in at.caption if c.value == hint]
+    assert any(c.value.startswith("**mine.wav**") for c in at.caption)
+    assert array(chart(at, "synth.waveform")["data"][0]["x"])[-1] == pytest.approx(3.0, abs=0.05)
+    at.button(key="synth.go").click().run()
+    assert not at.exception and result(at).source == "mine.wav" and result(at).n_frames == 45
+
+    # removing the file keeps the uploaded speech (the uploader also forgets it on a page switch)
+    at.file_uploader(key="synth.upload").set_value(None).run()
+    assert any(c.value.startswith("**mine.wav**") for c in at.caption)
+
+
 def test_box_selecting_on_the_waveform_adds_and_cuts_segments(app_env):
     at = upload(open_page(), speech_file(4.0))
     at.selectbox(key="_w.synth.new_constraint").set_value("speed=fast").run()
@@ -193,8 +217,10 @@ def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
     assert at.data_editor[0].value.to_dict("records") == [{"start_s": 0.0, "end_s": 2.0, "constraint": "both_hands=low"}]
     assert viewer(at, "synth.skeleton")  # the result is still there
 
-    other = open_page()  # another user sees none of it
-    assert "gk.synthesis" not in other.session_state and not other.get("plotly_chart")
+    other = open_page()  # another user sees none of it: a first visit, on the example speech
+    assert "gk.synthesis" not in other.session_state and not other.get("iframe")
+    assert other.number_input(key="_w.synth.k").value == 0 and other.data_editor[0].value.empty
+    assert other.session_state["synth.speech"]["token"] == ("example", "demo speaker, 8 s (generated)")
 
 
 def test_rendering_the_video_gives_an_mp4_with_the_speech(app_env, tmp_path):

@@ -68,6 +68,14 @@ def speech_input() -> dict | None:
                     st.error(str(exc), icon="⚠️")
                     return None
                 _set_speech(token, up.name, audio, info.summary(), notes)
+        elif SPEECH not in ss:
+            # a first visit opens on an example, so the whole page can be seen and run at once
+            # (and the browser has its charts and table ready when the user's file arrives)
+            label = next(iter(gs.SPEECH_EXAMPLES))
+            audio = _example_audio(label)
+            _set_speech(("example", label), label, audio, f"generated, {len(audio) / AUDIO_SR:.2f} s")
+        if up is None and ss[SPEECH]["token"][0] == "example":
+            st.caption("Until you upload a file, the page works on example speech.")
     else:
         labels = list(gs.SPEECH_EXAMPLES)
         key = common.persistent_key("synth.example", labels[0])
