@@ -581,9 +581,21 @@ def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, 
     st.iframe(page, height=int(height) + CONTROLS_HEIGHT)
 
 
+@st.cache_resource(show_spinner="Generating the example speech…", max_entries=4)
+def example_audio(label: str):
+    """Example speech (a key of :data:`gesturekit.viz.session.SPEECH_EXAMPLES`): mono float32 at
+    16 kHz, read-only, made once per server and shared by every session."""
+    from gesturekit.viz.session import example_speech
+
+    audio = example_speech(label)
+    audio.setflags(write=False)
+    return audio
+
+
 def _first_use(noise) -> None:
-    """Everything a first result needs once per process, run on small inputs: the speech
-    reader, the figures (plotly builds its validators on first use) and the WAV writer.
+    """Everything a first result needs once per process, run on small inputs: the example
+    speech a first visit shows, the speech reader, the figures (plotly builds its validators
+    on first use) and the WAV writer.
 
     ``noise``: a few seconds of mono float32 audio at 16 kHz.
     """
@@ -598,6 +610,7 @@ def _first_use(noise) -> None:
     from gesturekit.viz.figures import waveform_figure, wrist_figure
     from gesturekit.viz.viewer import skeleton_viewer
 
+    example_audio(next(iter(gs.SPEECH_EXAMPLES)))  # what a first visit to Synthesize shows
     buf = io.BytesIO()
     sf.write(buf, noise, AUDIO_SR, format="WAV", subtype="PCM_16")
     audio, _ = gs.read_speech_upload("warm-up.wav", buf.getvalue())

@@ -36,7 +36,13 @@ def test_streamlit_run_finds_the_app_with_its_lifespan():
     assert found.is_asgi_app and found.app_name == "app"
 
 
-def test_server_start_prepares_search_and_refiner_of_the_default_database(common):
+def test_server_start_prepares_search_and_refiner_of_the_default_database(common, monkeypatch):
+    import gesturekit.viz.session as gs
+
+    made = []
+    real = gs.example_speech
+    monkeypatch.setattr(gs, "example_speech", lambda label: made.append(label) or real(label))
+    common.example_audio.clear()
     _start_and_stop(common)
     path = default_database_path().resolve()
     db = common.load_database(path)
@@ -53,6 +59,10 @@ def test_server_start_prepares_search_and_refiner_of_the_default_database(common
     import gesturekit.search as search_module
 
     assert search_module._kernels.cache_info().currsize == 1  # the compiled search is loaded
+    # the example speech a first visit to Synthesize shows is made once, at the start
+    first = next(iter(gs.SPEECH_EXAMPLES))
+    assert made == [first]
+    assert common.example_audio(first).shape == (int(gs.SPEECH_EXAMPLES[first][0] * 16000),) and made == [first]
 
 
 def test_server_start_without_a_database_builds_nothing(common, tmp_path, monkeypatch, capsys):

@@ -29,13 +29,6 @@ _BLEND_LABELS = {"none": "none (paper)", "offset": "offset fade at joins"}
 _MASK_LABELS = {"ends": "first and last frame of a window (paper)", "all": "every frame of a window"}
 
 
-@st.cache_resource(show_spinner="Generating the example speech…", max_entries=4)
-def _example_audio(label: str) -> np.ndarray:
-    audio = gs.example_speech(label)
-    audio.setflags(write=False)  # shared by every session
-    return audio
-
-
 def _set_speech(token, name: str, audio: np.ndarray, summary: str, notes=()) -> None:
     ss = st.session_state
     ss[SPEECH] = {"token": token, "name": name, "audio": audio, "summary": summary, "notes": list(notes)}
@@ -72,7 +65,7 @@ def speech_input() -> dict | None:
             # a first visit opens on an example, so the whole page can be seen and run at once
             # (and the browser has its charts and table ready when the user's file arrives)
             label = next(iter(gs.SPEECH_EXAMPLES))
-            audio = _example_audio(label)
+            audio = common.example_audio(label)
             _set_speech(("example", label), label, audio, f"generated, {len(audio) / AUDIO_SR:.2f} s")
         if up is None and ss[SPEECH]["token"][0] == "example":
             st.caption("Until you upload a file, the page works on example speech.")
@@ -83,7 +76,7 @@ def speech_input() -> dict | None:
                                                    help="new speech of the generated demo speaker, not in the database")
         token = ("example", label)
         if ss.get(SPEECH, {}).get("token") != token:
-            audio = _example_audio(label)
+            audio = common.example_audio(label)
             _set_speech(token, label, audio, f"generated, {len(audio) / AUDIO_SR:.2f} s")
     return ss.get(SPEECH)
 
