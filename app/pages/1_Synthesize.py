@@ -36,6 +36,11 @@ def _set_speech(token, name: str, audio: np.ndarray, summary: str, notes=()) -> 
     ss.pop(_LAST_BOX, None)
 
 
+def _use_example(label: str) -> None:
+    audio = common.example_audio(label)
+    _set_speech(("example", label), label, audio, f"generated, {len(audio) / AUDIO_SR:.2f} s")
+
+
 def speech_input() -> dict | None:
     """Upload or example; returns the user's speech, or None when there is none yet."""
     ss = st.session_state
@@ -64,9 +69,7 @@ def speech_input() -> dict | None:
         elif SPEECH not in ss:
             # a first visit opens on an example, so the whole page can be seen and run at once
             # (and the browser has its charts and table ready when the user's file arrives)
-            label = next(iter(gs.SPEECH_EXAMPLES))
-            audio = common.example_audio(label)
-            _set_speech(("example", label), label, audio, f"generated, {len(audio) / AUDIO_SR:.2f} s")
+            _use_example(next(iter(gs.SPEECH_EXAMPLES)))
         if up is None and ss[SPEECH]["token"][0] == "example":
             st.caption("Until you upload a file, the page works on example speech.")
     else:
@@ -74,10 +77,8 @@ def speech_input() -> dict | None:
         key = common.persistent_key("synth.example", labels[0])
         label = ss["synth.example"] = st.selectbox("Example", labels, key=key,
                                                    help="new speech of the generated demo speaker, not in the database")
-        token = ("example", label)
-        if ss.get(SPEECH, {}).get("token") != token:
-            audio = common.example_audio(label)
-            _set_speech(token, label, audio, f"generated, {len(audio) / AUDIO_SR:.2f} s")
+        if ss.get(SPEECH, {}).get("token") != ("example", label):
+            _use_example(label)
     return ss.get(SPEECH)
 
 

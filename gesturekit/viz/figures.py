@@ -168,6 +168,7 @@ def _motions_and_labels(motions, labels, *, who: str) -> tuple[list[Motion], lis
         raise ConfigError(f"{who} got {len(labels)} labels for {len(motions)} motions")
     return motions, labels
 
+
 def _skeleton_paths(motions: list[Motion], *, fps, max_frames: int, spacing):
     """What a skeleton view shows: the time grid and each motion's joint paths at its times.
 
