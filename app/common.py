@@ -58,7 +58,7 @@ import streamlit as st
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, DatabaseError, GestureKitError, collect_warnings
-from gesturekit.paths import check_allowed, default_database_path, home, is_allowed
+from gesturekit.paths import PathNotAllowedError, check_allowed, default_database_path, home, is_allowed
 
 __all__ = [
     "APP_DIR",
@@ -73,6 +73,7 @@ __all__ = [
     "build_from_folder",
     "database_folders",
     "default_refiner",
+    "error_text",
     "current_synthesis",
     "demo_minutes",
     "ensure_demo_database",
@@ -142,19 +143,28 @@ def user_errors() -> Iterator[None]:
 
     Catches :class:`GestureKitError` (bad paths, bad folders, existing
     outputs, invalid settings) and ``OSError`` (a file that cannot be read or
-    written; a file outside the allowed folders is named by its name only, so
-    that the server's layout stays private). Anything else is a bug and
-    propagates. Code after the failing statement inside the block does not
-    run; code after the block does.
+    written). A file the message is about that lies outside the allowed
+    folders (a temporary copy of an upload, a file a library opened) is named
+    by its name only, so that the server's layout stays private; a refused
+    path is shown as the user typed it. Anything else is a bug and propagates.
+    Code after the failing statement inside the block does not run; code
+    after the block does.
     """
     try:
         yield
-    except GestureKitError as exc:
-        st.error(str(exc), icon="⚠️")
-    except OSError as exc:
-        where = f"{_shown_path(exc.filename)}: " if exc.filename else ""
-        # strerror alone: str(exc) repeats the file names, in full
-        st.error(f"{where}{exc.strerror or type(exc).__name__}", icon="⚠️")
+    except (GestureKitError, OSError) as exc:
+        st.error(error_text(exc), icon="⚠️")
+
+
+def error_text(exc: GestureKitError | OSError) -> str:
+    """The message of a user error as the page shows it (see :func:`user_errors`)."""
+    if isinstance(exc, PathNotAllowedError) or (isinstance(exc, GestureKitError) and exc.path is None):
+        return str(exc)
+    if isinstance(exc, GestureKitError):
+        return f"{_shown_path(exc.path)}: {exc.problem}"
+    where = f"{_shown_path(exc.filename)}: " if exc.filename else ""
+    # strerror alone: str(exc) repeats the file names, in full
+    return f"{where}{exc.strerror or type(exc).__name__}"
 
 
 def _shown_path(filename) -> str:
@@ -192,7 +202,9 @@ def allowed(path: str | os.PathLike, *, what: str, write: bool = False) -> Path:
     Raises
     ------
     ConfigError
-        Empty, or outside :func:`gesturekit.paths.allowed_roots` (the message lists them).
+        Empty.
+    PathNotAllowedError
+        Outside :func:`gesturekit.paths.allowed_roots` (the message lists them).
     """
     return check_allowed(path, what=what, write=write)
 

@@ -9,6 +9,7 @@ from .errors import ConfigError
 
 __all__ = [
     "APP_ROOTS_ENV",
+    "PathNotAllowedError",
     "allowed_roots",
     "assets",
     "check_allowed",
@@ -19,6 +20,10 @@ __all__ = [
 
 #: Environment variable listing more folders the app may read and write (``os.pathsep``-separated).
 APP_ROOTS_ENV = "GESTUREKIT_APP_ROOTS"
+
+
+class PathNotAllowedError(ConfigError):
+    """A path lies outside the folders the app may use (see :func:`check_allowed`)."""
 
 
 def home() -> Path:
@@ -100,8 +105,10 @@ def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) ->
     Raises
     ------
     ConfigError
-        ``path`` is empty or lies outside :func:`allowed_roots`; the message
-        names the path as typed and the allowed folders.
+        ``path`` is empty.
+    PathNotAllowedError
+        ``path`` lies outside :func:`allowed_roots`; the message names the
+        path as typed and the allowed folders.
     """
     if not str(path).strip():
         raise ConfigError(f"type the {what}")
@@ -110,7 +117,7 @@ def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) ->
     if _inside(resolved, roots):
         return resolved
     listed = ", ".join(str(root) for root in roots)
-    raise ConfigError(
+    raise PathNotAllowedError(
         f"the {what} must be inside one of the folders this app may {'write' if write else 'read'}: {listed} "
         f"(whoever runs the server can add folders with {APP_ROOTS_ENV})",
         path=path,

@@ -19,7 +19,7 @@ import soundfile as sf
 from streamlit.testing.v1 import AppTest
 
 from gesturekit.datasets.synthetic import generate_demo_take
-from gesturekit.errors import ConfigError
+from gesturekit.errors import ConfigError, InputFileError
 from gesturekit.paths import APP_ROOTS_ENV, allowed_roots, check_allowed
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -299,12 +299,16 @@ def test_an_unexpected_error_shows_a_reference_not_a_traceback(app_env, monkeypa
     assert GENERIC.match(again.error[0].value).group(1) != reference
 
 
-@pytest.mark.parametrize("inside", [True, False])
-def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(app_env, tmp_path, monkeypatch, inside):
+@pytest.mark.parametrize("inside", [True, False], ids=["inside", "outside"])
+@pytest.mark.parametrize("error", ["OSError", "GestureKitError"])
+def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(app_env, tmp_path, monkeypatch, inside,
+                                                                          error):
     missing = (tmp_path if inside else Path("/srv/private")) / "stats.npz"
 
     def broken(self):
-        raise FileNotFoundError(2, "No such file or directory", str(missing))
+        if error == "OSError":
+            raise FileNotFoundError(2, "No such file or directory", str(missing))
+        raise InputFileError("No such file or directory", path=missing)
 
     monkeypatch.setattr("gesturekit.database.MatchingDatabase.describe", broken)
     at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
