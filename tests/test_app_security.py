@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 import soundfile as sf
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from streamlit.testing.v1 import AppTest
 
 from gesturekit.datasets.synthetic import generate_demo_take
@@ -316,3 +318,20 @@ def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(app_en
     (message,) = [e.value for e in at.error]
     assert message == f"{missing if inside else 'stats.npz'}: No such file or directory"
     assert inside or "/srv/private" not in _texts(at)
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(parts=st.lists(st.text(st.characters(blacklist_characters="/\0", blacklist_categories=["Cs"]), min_size=1,
+                              max_size=8).filter(lambda p: p not in (".", "..")), min_size=1, max_size=4),
+       kind=st.sampled_from(["OSError", "GestureKitError"]))
+def test_an_error_text_keeps_folders_outside_private(app_env, outside, monkeypatch, parts, kind):
+    """Whatever the file, only its last part is shown when it lies outside the allowed folders."""
+    monkeypatch.syspath_prepend(str(ROOT / "app"))
+    import common
+
+    path = outside.joinpath(*parts)
+    exc = (PermissionError(13, "Permission denied", str(path)) if kind == "OSError"
+           else InputFileError("cannot be read", path=path))
+    text = common.error_text(exc)
+    assert text == f"{parts[-1]}: " + ("Permission denied" if kind == "OSError" else "cannot be read")
+    assert str(outside) not in text
