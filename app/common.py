@@ -18,7 +18,14 @@ A page is a short script::
 
 ``run_page`` shows every :class:`~gesturekit.errors.GestureKitError` (and
 ``OSError`` from a file the user named) as ``st.error`` with its message,
-never as a traceback.
+never as a traceback; anything else as a generic message with a reference
+into the server log, where its traceback goes (logger ``gesturekit.app``).
+
+Folders. Every path a user types is checked with :func:`allowed` before it
+is read or written: only folders inside :func:`gesturekit.paths.allowed_roots`
+(gesturekit's home, ``./db``, ``$GESTUREKIT_APP_ROOTS``) may be used, so a
+browser user of a served app cannot open, list or write the server's other
+folders.
 
 State. Databases are opened once per process with ``st.cache_resource``,
 keyed by their folder and the modification time of their ``database.json``
@@ -40,6 +47,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import secrets
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,19 +58,22 @@ import streamlit as st
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, DatabaseError, GestureKitError, collect_warnings
-from gesturekit.paths import default_database_path, home
+from gesturekit.paths import PathNotAllowedError, check_allowed, default_database_path, home, is_allowed
 
 __all__ = [
     "APP_DIR",
     "DATABASE_KEY",
     "DEMO_MINUTES_ENV",
+    "LOG",
     "PAGES",
     "PINS_KEY",
     "Page",
     "SYNTHESIS_KEY",
+    "allowed",
     "build_from_folder",
     "database_folders",
     "default_refiner",
+    "error_text",
     "current_synthesis",
     "demo_minutes",
     "ensure_demo_database",
@@ -84,6 +95,8 @@ __all__ = [
 ]
 
 APP_DIR = Path(__file__).resolve().parent
+#: The server log of the app: unexpected errors (with their tracebacks) and failed background work.
+LOG = logging.getLogger("gesturekit.app")
 DEMO_MINUTES_ENV = "GESTUREKIT_DEMO_MINUTES"
 
 #: Session-state key of the user's chosen database folder (a string), shared by all pages.
@@ -130,22 +143,70 @@ def user_errors() -> Iterator[None]:
 
     Catches :class:`GestureKitError` (bad paths, bad folders, existing
     outputs, invalid settings) and ``OSError`` (a file that cannot be read or
-    written). Anything else is a bug and propagates. Code after the failing
-    statement inside the block does not run; code after the block does.
+    written). A file the message is about that lies outside the allowed
+    folders (a temporary copy of an upload, a file a library opened) is named
+    by its name only, so that the server's layout stays private; a refused
+    path is shown as the user typed it. Anything else is a bug and propagates.
+    Code after the failing statement inside the block does not run; code
+    after the block does.
     """
     try:
         yield
-    except GestureKitError as exc:
-        st.error(str(exc), icon="⚠️")
-    except OSError as exc:
-        where = f"{exc.filename}: " if exc.filename else ""
-        st.error(f"{where}{exc.strerror or exc}", icon="⚠️")
+    except (GestureKitError, OSError) as exc:
+        st.error(error_text(exc), icon="⚠️")
+
+
+def error_text(exc: GestureKitError | OSError) -> str:
+    """The message of a user error as the page shows it (see :func:`user_errors`)."""
+    if isinstance(exc, PathNotAllowedError) or (isinstance(exc, GestureKitError) and exc.path is None):
+        return str(exc)
+    if isinstance(exc, GestureKitError):
+        return f"{_shown_path(exc.path)}: {exc.problem}"
+    where = f"{_shown_path(exc.filename)}: " if exc.filename else ""
+    # strerror alone: str(exc) repeats the file names, in full
+    return f"{where}{exc.strerror or type(exc).__name__}"
+
+
+def _shown_path(filename) -> str:
+    """A file name for the page: in full inside the allowed folders, else its last part only."""
+    try:
+        name = os.fsdecode(filename)
+        return name if is_allowed(name) else Path(name).name
+    except (TypeError, ValueError, OSError):  # a descriptor number, an undecodable name
+        return "a file"
 
 
 def run_page(body: Callable[[], None]) -> None:
-    """Run a page's body, showing user errors as ``st.error`` (see :func:`user_errors`)."""
-    with user_errors():
-        body()
+    """Run a page's body, showing user errors as ``st.error`` (see :func:`user_errors`).
+
+    Any other exception is a bug: the page says so with a reference, and the
+    traceback goes to the server log (:data:`LOG`) under that reference, so that
+    no traceback and no server path reach the browser. Streamlit's own
+    ``st.stop`` and ``st.rerun`` pass through (they are not ``Exception`` s).
+    """
+    try:
+        with user_errors():
+            body()
+    except Exception:  # noqa: BLE001  (the browser gets a reference; the log gets the rest)
+        reference = secrets.token_hex(4)
+        LOG.exception("unexpected error in a page (reference %s)", reference)
+        st.error(f"Something went wrong; the details are in the server log (reference {reference}).", icon="⚠️")
+
+
+def allowed(path: str | os.PathLike, *, what: str, write: bool = False) -> Path:
+    """Refuse a typed path outside the folders the app may use (:func:`gesturekit.paths.check_allowed`).
+
+    Returns the path resolved. The message is the same whether or not the path
+    exists, so it tells a user nothing about the server's folders.
+
+    Raises
+    ------
+    ConfigError
+        Empty.
+    PathNotAllowedError
+        Outside :func:`gesturekit.paths.allowed_roots` (the message lists them).
+    """
+    return check_allowed(path, what=what, write=write)
 
 
 @contextlib.contextmanager
@@ -337,7 +398,8 @@ def _select_database() -> Path:
     choice = st.sidebar.selectbox(
         "Database", keys, key=_CHOICE_WIDGET,
         format_func=lambda k: "another folder…" if k == _OTHER else options[k],
-        help="The demo database, databases in ./db or in gesturekit's home db folder, or any folder you type.",
+        help="The demo database, databases in ./db or in gesturekit's home db folder, or a folder you type "
+             "(inside the folders this app may use).",
     )
     if choice == _OTHER:
         typed = st.sidebar.text_input("Database folder", key=_TYPED_WIDGET, placeholder="/path/to/database")
@@ -371,13 +433,15 @@ def sidebar_database() -> MatchingDatabase:
     Raises
     ------
     GestureKitError
-        The chosen folder is not a readable database (shown by :func:`run_page`).
+        The chosen folder lies outside the allowed folders (:func:`allowed`) or is not a
+        readable database (shown by :func:`run_page`).
     """
     ss = st.session_state
     path = _select_database()
     _build_expander()
     for kind, text in ss.pop(_FLASH_KEY, []):
         getattr(st.sidebar, kind)(text)
+    allowed(path, what="database folder")  # before anything looks at the folder
     if path.expanduser().resolve() == default_database_path().expanduser().resolve():
         path = ensure_demo_database()
         try:
@@ -484,6 +548,11 @@ def _build_expander() -> None:
             if naming == "JSON joint map" and not map_path.strip():
                 raise ConfigError("type the path of the JSON joint map")
             target = out.strip() or (str(home() / "db" / Path(folder.strip()).name) if folder.strip() else "")
+            # every typed path is checked before any is looked at (build_from_folder reports empty ones)
+            for typed, what, write in ((folder, "folder of takes", False), (map_path, "joint map", False),
+                                       (target, "database folder to write", True)):
+                if typed.strip():
+                    allowed(typed.strip(), what=what, write=write)
             bar = st.progress(0.0, text="finding takes…")
 
             def progress(i: int, total: int, name: str) -> None:
@@ -641,8 +710,8 @@ def _warm_up(path: str, stamp: int) -> threading.Thread:
             try:
                 with collect_warnings():
                     step()
-            except Exception as exc:  # noqa: BLE001
-                print(f"gesturekit: a warm-up step failed: {exc}", flush=True)
+            except Exception:  # noqa: BLE001
+                LOG.warning("a warm-up step failed", exc_info=True)
 
     thread = threading.Thread(target=warm, name="gesturekit-warm-up", daemon=True)
     thread.start()
@@ -706,8 +775,8 @@ async def server_lifespan(app):
         path = default_database_path()
         if (path / "database.json").is_file():
             warm_up(load_database(path))
-    except Exception as exc:  # noqa: BLE001  (the server must start regardless)
-        print(f"gesturekit: warm-up at start skipped: {exc}", flush=True)
+    except Exception:  # noqa: BLE001  (the server must start regardless)
+        LOG.warning("warm-up at start skipped", exc_info=True)
     finally:
         quiet.setLevel(level)
     yield
@@ -730,12 +799,14 @@ def check_refiner(path: str | os.PathLike, db: MatchingDatabase) -> Path:
     Raises
     ------
     GestureKitError
-        No refiner there, an unreadable ``config.json``, or another feature layout than ``db``'s.
+        A folder outside the allowed ones (:func:`allowed`), no refiner there, an unreadable
+        ``config.json``, or another feature layout than ``db``'s.
     """
     from gesturekit.refine import check_refiner as check
 
     if not str(path).strip():
         raise ConfigError("type the folder of a trained refiner, or turn the refiner off")
+    allowed(path, what="refiner folder")
     folder = check(path, db)
     warm_up_refiner(folder)
     return folder
@@ -755,8 +826,8 @@ def _warm_refiner(path: str, stamp: int) -> threading.Thread:
             knn = np.zeros((n, 165), np.float32)
             # as synthesis calls it: the generator, then the k-NN motion's slow content kept
             keep_slow(_open_refiner(path, stamp).refine(knn, np.zeros((n, 28), np.float32)), knn, KEEP_BELOW_HZ)
-        except Exception as exc:  # noqa: BLE001  (the run's own load reports it on the page)
-            print(f"gesturekit: the refiner's warm-up failed: {exc}", flush=True)
+        except Exception:  # noqa: BLE001  (the run's own load reports it on the page)
+            LOG.warning("the refiner's warm-up failed", exc_info=True)
 
     thread = threading.Thread(target=warm, name="gesturekit-warm-refiner", daemon=True)
     thread.start()
@@ -780,12 +851,12 @@ def load_refiner(path: str | os.PathLike, db: MatchingDatabase):
     Raises
     ------
     GestureKitError
-        No refiner there, an unreadable one, or one trained on another feature
-        layout than ``db``'s (the message names the folder).
+        A folder outside the allowed ones (:func:`allowed`), no refiner there, an unreadable
+        one, or one trained on another feature layout than ``db``'s (the message names the folder).
     """
     if not str(path).strip():
         raise ConfigError("type the folder of a trained refiner, or turn the refiner off")
-    path = Path(path).expanduser().resolve()
+    path = allowed(path, what="refiner folder")
     try:
         stamp = (path / "config.json").stat().st_mtime_ns
     except OSError:

@@ -1,10 +1,29 @@
-"""Where gesturekit keeps what it generates itself (the demo database, its refiner)."""
+"""Where gesturekit keeps what it generates itself (the demo database, its refiner), and which
+folders a served app may read and write (:func:`allowed_roots`, :func:`check_allowed`)."""
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-__all__ = ["home", "default_database_path"]
+from .errors import ConfigError
+
+__all__ = [
+    "APP_ROOTS_ENV",
+    "PathNotAllowedError",
+    "allowed_roots",
+    "assets",
+    "check_allowed",
+    "default_database_path",
+    "home",
+    "is_allowed",
+]
+
+#: Environment variable listing more folders the app may read and write (``os.pathsep``-separated).
+APP_ROOTS_ENV = "GESTUREKIT_APP_ROOTS"
+
+
+class PathNotAllowedError(ConfigError):
+    """A path lies outside the folders the app may use (see :func:`check_allowed`)."""
 
 
 def home() -> Path:
@@ -16,3 +35,90 @@ def home() -> Path:
 def default_database_path() -> Path:
     """Where the embedded demo database is built and found by default."""
     return home() / "db" / "demo"
+
+
+def assets() -> Path:
+    """The files shipped inside the package (the demo refiner); read-only for the app."""
+    return Path(__file__).resolve().parent / "assets"
+
+
+def allowed_roots(*, write: bool = False) -> tuple[Path, ...]:
+    """The folders the app may use, resolved, in this order, without repeats.
+
+    gesturekit's :func:`home`, ``./db`` of the working directory, and every
+    folder listed in ``$GESTUREKIT_APP_ROOTS`` (separated by ``os.pathsep``;
+    empty entries are skipped, relative ones are taken from the working
+    directory). For reading, the package's :func:`assets` (the demo refiner)
+    come last. The folders need not exist.
+
+    Parameters
+    ----------
+    write : bool
+        The roots for writing: the same without the package's assets.
+
+    Returns
+    -------
+    tuple of Path
+        Absolute paths with symbolic links and ``..`` resolved.
+    """
+    roots = [home(), Path.cwd() / "db"]
+    roots += [Path(entry.strip()) for entry in os.environ.get(APP_ROOTS_ENV, "").split(os.pathsep) if entry.strip()]
+    if not write:
+        roots.append(assets())
+    out: list[Path] = []
+    for root in roots:
+        resolved = root.expanduser().resolve()
+        if resolved not in out:
+            out.append(resolved)
+    return tuple(out)
+
+
+def is_allowed(path: str | os.PathLike, *, write: bool = False) -> bool:
+    """Whether ``path``, with symbolic links and ``..`` resolved, lies in one of :func:`allowed_roots`."""
+    return _inside(Path(path).expanduser().resolve(), allowed_roots(write=write))
+
+
+def _inside(resolved: Path, roots: tuple[Path, ...]) -> bool:
+    return any(resolved == root or resolved.is_relative_to(root) for root in roots)
+
+
+def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) -> Path:
+    """Refuse a path outside the folders the app may use; return it resolved.
+
+    Whether the path exists plays no part: a refused path gets the same
+    message either way, so that a user cannot learn which folders a server has.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        As the user typed it (``~`` is expanded).
+    what : str
+        What the path is for, as the message should say it (``"database folder"``).
+    write : bool
+        The path will be written: the package's assets are not allowed.
+
+    Returns
+    -------
+    Path
+        The absolute path, symbolic links and ``..`` resolved.
+
+    Raises
+    ------
+    ConfigError
+        ``path`` is empty.
+    PathNotAllowedError
+        ``path`` lies outside :func:`allowed_roots`; the message names the
+        path as typed and the allowed folders.
+    """
+    if not str(path).strip():
+        raise ConfigError(f"type the {what}")
+    resolved = Path(path).expanduser().resolve()
+    roots = allowed_roots(write=write)
+    if _inside(resolved, roots):
+        return resolved
+    listed = ", ".join(str(root) for root in roots)
+    raise PathNotAllowedError(
+        f"the {what} must be inside one of the folders this app may {'write' if write else 'read'}: {listed} "
+        f"(whoever runs the server can add folders with {APP_ROOTS_ENV})",
+        path=path,
+    )

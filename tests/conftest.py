@@ -45,8 +45,10 @@ def demo_home(tmp_path_factory) -> Path:
 @pytest.fixture
 def app_env(demo_home, tmp_path, monkeypatch) -> Path:
     """The app's environment: ``demo_home`` as GESTUREKIT_HOME, and a fresh working directory
-    (``./db`` of the working directory is one of the places the sidebar lists)."""
+    (``./db`` of the working directory is one of the places the sidebar lists), which is also
+    one of the folders the app may use (``GESTUREKIT_APP_ROOTS``), so a test's files can be typed in."""
     monkeypatch.setenv("GESTUREKIT_HOME", str(demo_home))
+    monkeypatch.setenv("GESTUREKIT_APP_ROOTS", str(tmp_path))
     monkeypatch.delenv("GESTUREKIT_DEMO_MINUTES", raising=False)
     monkeypatch.chdir(tmp_path)
     return demo_home

@@ -65,19 +65,21 @@ def test_server_start_prepares_search_and_refiner_of_the_default_database(common
     assert common.example_audio(first).shape == (int(gs.SPEECH_EXAMPLES[first][0] * 16000),) and made == [first]
 
 
-def test_server_start_without_a_database_builds_nothing(common, tmp_path, monkeypatch, capsys):
+def test_server_start_without_a_database_builds_nothing(common, tmp_path, monkeypatch, caplog):
     monkeypatch.setenv("GESTUREKIT_HOME", str(tmp_path / "empty"))
-    _start_and_stop(common)
+    with caplog.at_level("DEBUG", logger="gesturekit.app"):
+        _start_and_stop(common)
     assert not default_database_path().exists()  # the first page view builds it, with a progress bar
-    assert capsys.readouterr().out == ""
+    assert not [r for r in caplog.records if r.name == "gesturekit.app"]
 
 
-def test_server_start_with_a_broken_database_still_starts(common, tmp_path, monkeypatch, capsys):
+def test_server_start_with_a_broken_database_still_starts(common, tmp_path, monkeypatch, caplog):
     home = tmp_path / "broken"
     monkeypatch.setenv("GESTUREKIT_HOME", str(home))
     folder = default_database_path()
     folder.mkdir(parents=True)
     (folder / "database.json").write_text(json.dumps({"format": "nonsense"}))
-    _start_and_stop(common)
-    out = capsys.readouterr().out
-    assert "warm-up at start skipped" in out and str(folder) in out
+    with caplog.at_level("WARNING", logger="gesturekit.app"):
+        _start_and_stop(common)
+    (record,) = [r for r in caplog.records if r.name == "gesturekit.app"]  # the server log, not the page
+    assert "warm-up at start skipped" in record.getMessage() and str(folder) in str(record.exc_info[1])

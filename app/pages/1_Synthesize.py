@@ -62,8 +62,8 @@ def speech_input() -> dict | None:
                 except (GestureKitError, OSError) as exc:
                     # remembered, so the same upload is not decoded again on every rerun
                     ss.pop(SPEECH, None)
-                    ss[_FAILED] = (token, str(exc))
-                    st.error(str(exc), icon="⚠️")
+                    ss[_FAILED] = (token, common.error_text(exc))
+                    st.error(ss[_FAILED][1], icon="⚠️")
                     return None
                 _set_speech(token, up.name, audio, info.summary(), notes)
         elif SPEECH not in ss:

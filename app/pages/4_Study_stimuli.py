@@ -18,9 +18,10 @@ PREVIEWS = 3
 
 
 def _speech_files(folder: str) -> list[Path]:
-    p = Path(folder.strip()).expanduser()
     if not folder.strip():
         return []
+    p = Path(folder.strip()).expanduser()
+    common.allowed(p, what="folder of speech files")  # before looking: no listing of other folders
     if not p.is_dir():
         raise ConfigError("no such folder", path=p)
     return sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
@@ -92,6 +93,9 @@ def conditions(opts) -> bool:
 def run(db, opts) -> None:
     if not opts["out"]:
         raise ConfigError("type the study folder to write")
+    common.allowed(opts["out"], what="study folder to write", write=True)
+    if opts["refiner"] not in (None, "demo"):  # "demo": the shipped refiner, by name
+        common.allowed(opts["refiner"], what="refiner folder")
     bar = st.progress(0.0, text="synthesising…")
 
     def progress(stage, done, total):
