@@ -21,18 +21,23 @@ one input once decoded in memory       4 GB         ``GESTUREKIT_MAX_INPUT_GB``
 =====================================  ===========  ================================
 
 The values are read from the environment at each check, so a test or a
-long-running server sees a change at once.
+long-running server sees a change at once; :func:`override` sets one for a
+block of code (the command line's options), in this thread or task only.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 import os
 from dataclasses import dataclass
+from typing import Iterator
 
-from .errors import ConfigError, InputFileError
+from .errors import ConfigError, InputFileError, MotionFileError
 
 __all__ = [
     "Limit",
+    "override",
     "SPEECH_MINUTES",
     "TAKE_HOURS",
     "MIN_SAMPLE_RATE",
@@ -49,6 +54,9 @@ __all__ = [
     "check_bytes",
     "describe_seconds",
     "describe_bytes",
+    "npy_header",
+    "npz_headers",
+    "array_bytes",
 ]
 
 
@@ -78,6 +86,9 @@ class Limit:
         ConfigError
             The variable is set to something other than a positive finite number.
         """
+        given = _overrides.get().get(self.env)
+        if given is not None:
+            return given[0]
         text = os.environ.get(self.env, "").strip()
         if not text:
             return self.default
@@ -90,7 +101,47 @@ class Limit:
         return v
 
     def how_to_raise(self) -> str:
+        """How a user changes this limit, for messages."""
+        given = _overrides.get().get(self.env)
+        if given is not None and given[1]:
+            return f"{given[1]} sets it"
         return f"set the environment variable {self.env} to change it"
+
+
+_overrides: contextvars.ContextVar[dict] = contextvars.ContextVar("gesturekit_limits", default={})
+
+
+@contextlib.contextmanager
+def override(limit: Limit, value: float | None, *, option: str | None = None) -> Iterator[None]:
+    """Set ``limit`` to ``value`` inside the block (nothing changes when ``value`` is None).
+
+    Parameters
+    ----------
+    limit : Limit
+    value : float or None
+        In the limit's unit.
+    option : str, optional
+        The command-line option that gave it, named in messages and errors.
+
+    Raises
+    ------
+    ConfigError
+        ``value`` is not a positive finite number.
+    """
+    if value is None:
+        yield
+        return
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise ConfigError(f"{option or limit.env} must be a positive number of {limit.unit}, got {value!r}")
+    token = _overrides.set({**_overrides.get(), limit.env: (v, option)})
+    try:
+        yield
+    finally:
+        _overrides.reset(token)
 
 
 SPEECH_MINUTES = Limit("GESTUREKIT_MAX_SPEECH_MINUTES", 60.0, "minutes")
@@ -156,7 +207,7 @@ def check_duration(seconds: float, *, what: str, path=None, speech: bool = False
         A limit given explicitly (e.g. by a command-line option), seconds; default the
         environment's.
     option : str, optional
-        The command-line option that raises the limit, mentioned in the message.
+        The option that set ``max_seconds``, mentioned in the message.
 
     Raises
     ------
@@ -168,7 +219,12 @@ def check_duration(seconds: float, *, what: str, path=None, speech: bool = False
     if math.isfinite(seconds) and seconds <= cap:
         return
     kind = "speech" if speech else "one take"
-    how = f"use {option} or {limit.env}" if option else limit.how_to_raise()
+    if option:
+        how = f"{option} sets it"
+    elif max_seconds is not None:
+        how = "the maximum duration given"
+    else:
+        how = limit.how_to_raise()
     raise InputFileError(
         f"{what}: {describe_seconds(seconds)}, beyond the limit of {describe_seconds(cap)} for {kind} ({how})",
         path=path,
@@ -256,3 +312,86 @@ def check_bytes(n: float, *, what: str, path=None) -> None:
         f"({INPUT_GB.how_to_raise()})",
         path=path,
     )
+
+
+def npy_header(f, *, path=None, name: str = "npy") -> tuple[tuple[int, ...], "np.dtype", int]:
+    """Shape, dtype and header length of an ``.npy`` stream, read without loading the array.
+
+    Parameters
+    ----------
+    f : binary file object
+        Positioned at the start of the ``.npy`` data.
+    path : path, optional
+        The file, for messages.
+    name : str
+        What is read (``"npy"``, ``"'body' in the npz"``), for messages.
+
+    Returns
+    -------
+    shape : tuple of int
+    dtype : np.dtype
+    offset : int
+        Bytes of magic and header before the data.
+
+    Raises
+    ------
+    MotionFileError
+        Not an npy header, or an unsupported version.
+    """
+    import numpy as np
+
+    fmt = np.lib.format
+    try:
+        version = fmt.read_magic(f)
+        if version == (1, 0):
+            shape, _, dtype = fmt.read_array_header_1_0(f)
+        elif version in ((2, 0), (3, 0)):
+            shape, _, dtype = fmt.read_array_header_2_0(f)
+        else:
+            raise ValueError(f"unsupported npy version {version}")
+    except (ValueError, OSError, EOFError, SyntaxError) as exc:
+        raise MotionFileError(f"cannot read the {name} header: {exc}", path=path) from None
+    offset = f.tell() if hasattr(f, "tell") else 0
+    return tuple(int(n) for n in shape), dtype, offset
+
+
+def npz_headers(path) -> dict[str, tuple[tuple[int, ...], "np.dtype"]]:
+    """Shape and dtype of every array in an ``.npz`` archive, read without loading the arrays.
+
+    Parameters
+    ----------
+    path : path
+
+    Returns
+    -------
+    dict
+        Array name (without ``.npy``) -> (shape, dtype).
+
+    Raises
+    ------
+    MotionFileError
+        Not a zip archive, or a member without an npy header.
+    """
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            out = {}
+            for info in z.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                key = info.filename[:-4]
+                with z.open(info) as member:
+                    shape, dtype, _ = npy_header(member, path=path, name=f"{key!r} in the npz")
+                out[key] = (shape, dtype)
+            return out
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
+        raise MotionFileError(f"cannot read the npz archive: {exc}", path=path) from None
+
+
+def array_bytes(shape: tuple[int, ...], itemsize: int) -> float:
+    """Bytes of an array of ``shape`` with ``itemsize``-byte elements (float, never overflows)."""
+    n = float(itemsize)
+    for d in shape:
+        n *= d
+    return n

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import limits
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion, output_frame_count
 from ..skeleton import FPS
@@ -60,6 +61,17 @@ _FK_BLOCK = 8192
 _AUTO_CM_THRESHOLD = 40.0
 
 _UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+#: After forward kinematics, a joint farther than this from the origin (metres)
+#: is absurd: far beyond any capture volume, and so large that the offsets of
+#: bones (centimetres) would be lost to rounding when made pelvis-relative.
+_MAX_FROM_ORIGIN_M = 1e6
+
+#: A joint farther than this from the skeleton's pelvis (metres) is absurd.
+_MAX_FROM_PELVIS_M = 1000.0
+
+#: A rotation channel beyond this many degrees is absurd (thousands of turns).
+_MAX_ANGLE_DEG = 1e6
 
 
 @dataclass(frozen=True, eq=False)
@@ -383,7 +395,16 @@ def _parse_motion(lines, start, n_channels, path):
                               path=path)
     if n_frames <= 0:
         raise MotionFileError(f"the file has no frames (Frames: {n_frames})", path=path)
+    # what the header asks for is checked before any frame is converted: the frame
+    # time sets how many frames resampling makes, and the count how many are read
+    limits.check_fps(1.0 / frame_time, what=f"line {time_line}: 'Frame Time: {m.group(1)}' gives a frame rate that",
+                     path=path)
     data = body[2:]
+    if n_channels and n_frames > len(data):
+        raise MotionFileError(
+            f"the header says {n_frames} frames but the file has {len(data)} frame lines (truncated?)", path=path)
+    limits.check_duration(n_frames * frame_time, path=path,
+                          what=f"line {frames_line}: the header says {n_frames} frames of {frame_time:g} s")
     if n_channels == 0:
         return frame_time, np.zeros((n_frames, 0))
     if len(data) != n_frames:
@@ -665,6 +686,7 @@ def load_bvh_motion(
     """
     _check_units(units)
     _check_fps(fps)
+    limits.check_fps(fps, what="the output frame rate", option="fps")
     jmap = load_joint_map(joint_map)
     data = parse_bvh(path)
     wanted = [jmap.pelvis] + jmap.source_names()
@@ -675,12 +697,65 @@ def load_bvh_motion(
             f"{len(missing)} joints of the joint map {jmap.name!r} are missing from the file: "
             f"{', '.join(missing)}", path=path)
     scale = unit_scale(data, units=units)
+    _check_angles(data, path)
     positions = resample_world_positions(data, fps=fps)
     if positions.shape[0] == 0:
         raise MotionFileError(
             f"too short: {data.n_frames} frames at {data.fps:g} fps give no frame at {fps:g} fps", path=path)
     idx = np.array([data.index(n) for n in jmap.source_names()], dtype=np.int64)
     pelvis = data.index(jmap.pelvis)
+    _check_positions(data, positions, scale, pelvis, fps, path)
     rel = (positions[:, idx] - positions[:, pelvis:pelvis + 1]) * scale
     return Motion(rel.astype(np.float32), float(fps))
 
+
+
+def _check_angles(data: BvhData, path) -> None:
+    """Refuse rotation channels beyond :data:`_MAX_ANGLE_DEG`, naming the first frame and joint."""
+    rot = np.array([ch.endswith("rotation") for chans in data.channels for ch in chans], dtype=bool)
+    if not rot.any():
+        return
+    bad = np.abs(data.values[:, rot]) > _MAX_ANGLE_DEG
+    if not bad.any():
+        return
+    frame, k = np.argwhere(bad)[0]
+    column = int(np.flatnonzero(rot)[k])
+    joint = int(np.searchsorted(data.channel_starts, column, side="right") - 1)
+    while not data.channels[joint]:  # joints without channels share the next joint's start
+        joint -= 1
+    value = data.values[frame, column]
+    raise MotionFileError(
+        f"absurd rotation: joint {data.names[joint]!r} at frame {frame} has "
+        f"{data.channels[joint][column - int(data.channel_starts[joint])]} {value:g} degrees "
+        f"(more than {_MAX_ANGLE_DEG:g}); {int(bad.any(axis=1).sum())} frames affected", path=path)
+
+
+def _check_positions(data: BvhData, positions: np.ndarray, scale: float, pelvis: int, fps: float, path) -> None:
+    """Refuse world positions (frames, J, 3) in file units that are not finite or absurdly far.
+
+    Far is more than :data:`_MAX_FROM_ORIGIN_M` from the origin or
+    :data:`_MAX_FROM_PELVIS_M` from the pelvis along any axis; the message
+    names the first output frame and joint.
+    """
+    metres = positions * scale
+    with np.errstate(over="ignore", invalid="ignore"):
+        # the largest coordinate, not the norm: squares of 1e200 would overflow
+        from_origin = np.abs(metres).max(axis=2)
+        from_pelvis = np.abs(metres - metres[:, pelvis:pelvis + 1]).max(axis=2)
+    bad = ~np.isfinite(from_origin) | ~np.isfinite(from_pelvis) | (from_origin > _MAX_FROM_ORIGIN_M) \
+        | (from_pelvis > _MAX_FROM_PELVIS_M)
+    if not bad.any():
+        return
+    frame, joint = (int(v) for v in np.argwhere(bad)[0])
+    where = f"joint {data.names[joint]!r} at frame {frame} ({frame / fps:.2f} s)"
+    if not (np.isfinite(from_origin[frame, joint]) and np.isfinite(from_pelvis[frame, joint])):
+        what = "is not finite (NaN or infinity)"
+    elif from_origin[frame, joint] > _MAX_FROM_ORIGIN_M:
+        what = (f"lies {from_origin[frame, joint]:.3g} m from the origin along one axis "
+                f"(more than {_MAX_FROM_ORIGIN_M / 1000:g} km)")
+    else:
+        what = (f"lies {from_pelvis[frame, joint]:.3g} m from the pelvis {data.names[pelvis]!r} along one axis "
+                f"(more than {_MAX_FROM_PELVIS_M / 1000:g} km)")
+    raise MotionFileError(
+        f"absurd positions after forward kinematics: {where} {what}; "
+        f"{int(bad.any(axis=1).sum())} frames affected", path=path)
