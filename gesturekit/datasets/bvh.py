@@ -70,7 +70,8 @@ _MAX_FROM_ORIGIN_M = 1e6
 #: A joint farther than this from the skeleton's pelvis (metres) is absurd.
 _MAX_FROM_PELVIS_M = 1000.0
 
-#: A rotation channel beyond this many degrees is absurd (thousands of turns).
+#: A rotation channel beyond this many degrees is absurd (thousands of turns, and
+#: at 1e300 no digit of the angle within a turn is left).
 _MAX_ANGLE_DEG = 1e6
 
 
@@ -697,7 +698,7 @@ def load_bvh_motion(
             f"{len(missing)} joints of the joint map {jmap.name!r} are missing from the file: "
             f"{', '.join(missing)}", path=path)
     scale = unit_scale(data, units=units)
-    _check_angles(data, path)
+    _check_channels(data, scale, path)
     positions = resample_world_positions(data, fps=fps)
     if positions.shape[0] == 0:
         raise MotionFileError(
@@ -710,24 +711,34 @@ def load_bvh_motion(
 
 
 
-def _check_angles(data: BvhData, path) -> None:
-    """Refuse rotation channels beyond :data:`_MAX_ANGLE_DEG`, naming the first frame and joint."""
+def _check_channels(data: BvhData, scale: float, path) -> None:
+    """Refuse channel values of any source frame that no pose can have, naming the first frame and joint.
+
+    Rotations beyond :data:`_MAX_ANGLE_DEG` degrees, positions beyond
+    :data:`_MAX_FROM_ORIGIN_M` metres. Checked on every frame of the file, also
+    those that resampling skips.
+    """
     rot = np.array([ch.endswith("rotation") for chans in data.channels for ch in chans], dtype=bool)
-    if not rot.any():
+    if rot.size == 0:
         return
-    bad = np.abs(data.values[:, rot]) > _MAX_ANGLE_DEG
+    bound = np.where(rot, _MAX_ANGLE_DEG, _MAX_FROM_ORIGIN_M / scale)
+    bad = np.abs(data.values) > bound
     if not bad.any():
         return
-    frame, k = np.argwhere(bad)[0]
-    column = int(np.flatnonzero(rot)[k])
+    frame, column = (int(v) for v in np.argwhere(bad)[0])
     joint = int(np.searchsorted(data.channel_starts, column, side="right") - 1)
     while not data.channels[joint]:  # joints without channels share the next joint's start
         joint -= 1
+    channel = data.channels[joint][column - int(data.channel_starts[joint])]
     value = data.values[frame, column]
+    if rot[column]:
+        what = f"absurd rotation: {channel} {value:g} degrees (more than {_MAX_ANGLE_DEG:g})"
+    else:
+        what = (f"absurd position: {channel} {value:g} file units ({abs(value) * scale:.3g} m, "
+                f"more than {_MAX_FROM_ORIGIN_M / 1000:g} km)")
     raise MotionFileError(
-        f"absurd rotation: joint {data.names[joint]!r} at frame {frame} has "
-        f"{data.channels[joint][column - int(data.channel_starts[joint])]} {value:g} degrees "
-        f"(more than {_MAX_ANGLE_DEG:g}); {int(bad.any(axis=1).sum())} frames affected", path=path)
+        f"{what} for joint {data.names[joint]!r} at frame {frame} ({frame * data.frame_time:.2f} s); "
+        f"{int(bad.any(axis=1).sum())} frames affected", path=path)
 
 
 def _check_positions(data: BvhData, positions: np.ndarray, scale: float, pelvis: int, fps: float, path) -> None:

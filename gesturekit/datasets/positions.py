@@ -270,11 +270,6 @@ def _check_header(path: Path, suffix: str, size: int, fps: float | None) -> None
         with open(path, "rb") as f:
             shape, dtype, offset = limits.npy_header(f, path=path)
         what = "the npy header says"
-        stored = limits.array_bytes(shape, dtype.itemsize)
-        if offset + stored > size:
-            raise MotionFileError(
-                f"the file is truncated: the npy header says shape {shape} of {dtype} "
-                f"({limits.describe_bytes(stored)}) but only {size - offset} bytes follow", path=path)
     else:
         headers = limits.npz_headers(path)
         key = "positions" if "positions" in headers else (next(iter(headers)) if len(headers) == 1 else None)
@@ -296,6 +291,12 @@ def _check_header(path: Path, suffix: str, size: int, fps: float | None) -> None
                        what=f"{what} shape {shape} of {dtype}", path=path)
     if fps is not None and shape:
         limits.check_duration(shape[0] / fps, what=f"{what} {shape[0]} frames at {fps:g} fps", path=path)
+    if suffix == ".npy":
+        stored = limits.array_bytes(shape, dtype.itemsize)
+        if offset + stored > size:
+            raise MotionFileError(
+                f"the file is truncated: the npy header says shape {shape} of {dtype} "
+                f"({limits.describe_bytes(stored)}) but only {size - offset} bytes follow", path=path)
 
 
 def _from_npz(path: Path) -> np.ndarray:
