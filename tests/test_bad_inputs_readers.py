@@ -97,7 +97,8 @@ def test_speech_beyond_the_option_limit_is_refused(tmp_path, tiny_db, speech):
 
 @pytest.mark.parametrize("value", ["nan", "0", "-5"])
 def test_bad_max_speech_minutes(value, tmp_path, tiny_db, speech):
-    run = run_cli("synthesize", speech["wav"], "--db", tiny_db, "--out", tmp_path / "out", "--max-speech-minutes", value)
+    run = run_cli("synthesize", speech["wav"], "--db", tiny_db, "--out", tmp_path / "out",
+                  "--max-speech-minutes", value)
     assert_refused(run, names="--max-speech-minutes", problem="positive number")
 
 

@@ -318,6 +318,29 @@ def test_many_channels_beyond_the_memory_limit(tmp_path, monkeypatch):
         load_audio(path)
 
 
+def test_formats_of_unknown_duration_are_decoded_only_up_to_the_limit(tmp_path, monkeypatch):
+    # M4A: soundfile cannot read it, so ffmpeg decodes it, and only the header-less stream tells the length
+    src = tmp_path / "s.wav"
+    sf.write(src, h.speech_like(12.0), h.SR)
+    path = tmp_path / "speech.m4a"
+    h.ffmpeg("-i", src, "-c:a", "aac", path)
+    monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.1")
+    with pytest.raises(InputFileError, match=r"speech\.m4a: decoding stopped past the limit, at: 7\.0 s, "
+                                             r"beyond the limit of 6\.0 s for speech"):
+        load_audio(path)
+    monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.5")
+    assert load_audio_with_info(path)[1].duration == pytest.approx(12.0, abs=0.1)
+
+
+def test_the_app_upload_meets_the_same_limits(tmp_path):
+    from gesturekit.errors import GestureKitError
+    from gesturekit.viz.session import read_speech_upload
+
+    raw = h.wav_with_header(tmp_path / "one_hz.wav", rate=1).read_bytes()
+    with pytest.raises(GestureKitError, match=r"^my speech\.wav: the WAV header says a sample rate of 1 Hz"):
+        read_speech_upload("my speech.wav", raw)
+
+
 # ----------------------------------------------------------------------------- absurd BVH values
 
 

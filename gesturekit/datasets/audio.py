@@ -703,7 +703,7 @@ def _read_audioread(path: Path, budget: _Budget) -> tuple[np.ndarray, int]:
     except Exception as e:  # noqa: BLE001 - any decoder failure means "cannot read"
         raise _Unreadable(_reason(e) if str(e) else "no decoder for this format") from None
     if n > cap:
-        budget.check_duration(n / (2 * max(channels, 1) * rate), "the decoded audio runs at least")
+        budget.check_duration(n / (2 * max(channels, 1) * rate), "decoding stopped past the limit, at")
     if channels < 1 or rate <= 0:
         raise _Unreadable("reported no channels or no sample rate")
     samples = np.frombuffer(pcm, dtype="<i2")
@@ -741,5 +741,5 @@ def _read_ffmpeg(path: Path, budget: _Budget) -> tuple[np.ndarray, int]:
     except (sf.SoundFileError, RuntimeError) as e:
         raise _Unreadable(_reason(e)) from None
     limits.check_sample_rate(rate, what="the decoder", path=path)
-    budget.check_duration(data.shape[0] / rate, "the decoded audio runs at least")
+    budget.check_duration(data.shape[0] / rate, "decoding stopped past the limit, at")
     return data, rate
