@@ -168,6 +168,10 @@ def parse_bvh(path: str | os.PathLike) -> BvhData:
         The file is missing, empty, not a BVH file, malformed (numbers, braces,
         channel counts, frame lines), has no frames, or holds NaN/infinite
         values. The message names the file and, where it can, the line.
+    InputFileError
+        The header's frame time is outside the accepted frame rates, or its
+        frames last longer than one take may (:mod:`gesturekit.limits`);
+        checked before the frames are read.
     """
     path = Path(path)
     if not path.exists():
@@ -680,10 +684,14 @@ def load_bvh_motion(
     ------
     MotionFileError
         The file is unreadable or malformed (see :func:`parse_bvh`), lacks
-        joints the map names (all of them are listed), or is too short to
-        give one output frame.
+        joints the map names (all of them are listed), is too short to give
+        one output frame, or holds values no pose can have: rotations beyond
+        1e6 degrees, positions beyond 1000 km from the origin, or joints
+        beyond 1 km from the pelvis after forward kinematics (the message
+        names the first frame and joint).
     ConfigError, InputFileError
-        The joint map or an option is invalid.
+        The joint map or an option is invalid, or the file is beyond the
+        limits (:mod:`gesturekit.limits`).
     """
     _check_units(units)
     _check_fps(fps)

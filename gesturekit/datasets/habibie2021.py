@@ -73,6 +73,10 @@ def load_habibie2021(
         invalid ``joint_order``.
     ConfigError
         Invalid ``units`` or ``joint_order`` argument.
+    InputFileError
+        The arrays' headers state sequences longer than one take may be, or
+        more memory than one input may take (:mod:`gesturekit.limits`),
+        checked before the arrays are loaded.
     """
     if units not in _UNIT_SCALE:
         raise ConfigError(f"units must be 'm', 'cm' or 'mm', got {units!r}")

@@ -195,7 +195,8 @@ def read_position_array(path: str | os.PathLike, *, fps: float | None = None) ->
     For ``.npy`` and ``.npz`` the array's shape and type are read from its
     header first, and an array of the wrong shape, or beyond the limits of one
     take or one input (:mod:`gesturekit.limits`), is refused before it is loaded.
-    Text files are refused when the file alone is larger than the input limit.
+    Text files are refused when the numbers they may hold (one per 2 bytes)
+    could exceed the input limit.
 
     Parameters
     ----------
@@ -229,7 +230,9 @@ def read_position_array(path: str | os.PathLike, *, fps: float | None = None) ->
     if suffix in (".npy", ".npz"):
         _check_header(path, suffix, size, fps)
     else:
-        limits.check_bytes(size, what=f"the text file holds {size} bytes", path=path)
+        # a number and its separator take at least 2 bytes of text and 8 once read
+        limits.check_bytes(4.0 * size, what=f"the text file of {size} bytes may hold {size // 2} numbers",
+                           path=path)
     try:
         if suffix == ".npy":
             array = np.load(path, allow_pickle=False)
