@@ -25,6 +25,7 @@ cannot be told from a shorter recording.
 """
 from __future__ import annotations
 
+import functools
 import io
 import os
 import struct
@@ -528,22 +529,22 @@ def _mp3_walk(data, start: int, size: int, first) -> tuple[int | None, int | Non
     return samples, None
 
 
-_OGG_CRC = None
+@functools.lru_cache(maxsize=1)
+def _ogg_crc_table() -> tuple[int, ...]:
+    """CRC-32 lookup table of the Ogg page checksum (polynomial 0x04C11DB7, not reflected)."""
+    table = []
+    for i in range(256):
+        r = i << 24
+        for _ in range(8):
+            r = ((r << 1) ^ 0x04C11DB7) & 0xFFFFFFFF if r & 0x80000000 else (r << 1) & 0xFFFFFFFF
+        table.append(r)
+    return tuple(table)
 
 
 def _ogg_crc(page: bytes) -> int:
-    """The Ogg page checksum (CRC-32, polynomial 0x04C11DB7, not reflected) of a page with its field zeroed."""
-    global _OGG_CRC
-    if _OGG_CRC is None:
-        table = []
-        for i in range(256):
-            r = i << 24
-            for _ in range(8):
-                r = ((r << 1) ^ 0x04C11DB7) & 0xFFFFFFFF if r & 0x80000000 else (r << 1) & 0xFFFFFFFF
-            table.append(r)
-        _OGG_CRC = table
+    """The Ogg page checksum of ``page`` (with its checksum field zeroed)."""
+    table = _ogg_crc_table()
     crc = 0
-    table = _OGG_CRC
     for b in page:
         crc = ((crc << 8) & 0xFFFFFFFF) ^ table[(crc >> 24) ^ b]
     return crc
