@@ -378,3 +378,20 @@ def test_rotation_values_no_pose_can_have(value, problem, tmp_path):
     path = h.bvh_take(tmp_path, marks={(17, 8): value}, audio=False)
     with pytest.raises(MotionFileError, match=problem + r".*at frame 17 \(0\.57 s\); 1 frames affected"):
         load_bvh_motion(path)
+
+
+@pytest.mark.parametrize("kwargs, problem", [(dict(frame_time="100000"), "outside the accepted range"),
+                                             (dict(frames="1000000000"), "beyond the limit of 4.0 h")])
+def test_bvh_header_beyond_the_limits_is_refused_before_the_file_is_read_whole(kwargs, problem, tmp_path,
+                                                                               monkeypatch):
+    from gesturekit.datasets.bvh import parse_bvh
+
+    path = h.bvh_take(tmp_path, audio=False, **kwargs)
+
+    def read_whole(self):
+        raise AssertionError("the whole file was read")
+
+    monkeypatch.setattr(Path, "read_bytes", read_whole)
+    with pytest.raises(InputFileError, match=problem) as info:
+        parse_bvh(path)
+    assert str(info.value).startswith(f"{path}: line ")

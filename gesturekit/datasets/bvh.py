@@ -179,6 +179,9 @@ def parse_bvh(path: str | os.PathLike) -> BvhData:
     if path.is_dir():
         raise MotionFileError("is a directory, not a BVH file", path=path)
     try:
+        with open(path, "rb") as f:
+            # the header's frame count and frame time are checked before the whole file is read
+            _check_motion_header_early(f.read(_HEAD_BYTES), path)
         raw = path.read_bytes()
     except OSError as exc:
         raise MotionFileError(f"cannot read file: {exc.strerror or exc}", path=path) from None
@@ -375,6 +378,49 @@ def _parse_hierarchy(lines, start, stop, path):
     return names, parents, offsets, channels
 
 
+#: Bytes of a BVH file read first to check its MOTION header before the whole file is read.
+_HEAD_BYTES = 1 << 20
+
+
+def _check_motion_limits(n_frames, frame_time, frames_line, time_line, time_text, path, *, lines_present=None):
+    """Refuse what the MOTION header asks for before any frame is converted.
+
+    The frame time sets how many frames resampling makes (a frame rate within
+    :func:`gesturekit.limits.check_fps`), and frames x frame time the take's
+    duration (within :func:`gesturekit.limits.max_take_seconds`).
+    """
+    limits.check_fps(1.0 / frame_time, what=f"line {time_line}: 'Frame Time: {time_text}' gives a frame rate that",
+                     path=path)
+    if lines_present is not None and n_frames > lines_present:
+        raise MotionFileError(
+            f"the header says {n_frames} frames but the file has {lines_present} frame lines (truncated?)",
+            path=path)
+    limits.check_duration(n_frames * frame_time, path=path,
+                          what=f"line {frames_line}: the header says {n_frames} frames of {frame_time:g} s")
+
+
+def _check_motion_header_early(head: bytes, path) -> None:
+    """Check the MOTION header found in the first bytes of a file; anything unclear is left to the parser."""
+    lines = head.decode("latin-1").splitlines()
+    if len(head) == _HEAD_BYTES:
+        lines = lines[:-1]  # the last line may be cut
+    motion_at = next((i for i, line in enumerate(lines) if line.strip().upper() == "MOTION"), None)
+    if motion_at is None:
+        return
+    body = [(i + 1, lines[i].strip()) for i in range(motion_at + 1, len(lines)) if lines[i].strip()][:2]
+    if len(body) < 2:
+        return
+    m_frames, m_time = _FRAMES_RE.match(body[0][1]), _FRAME_TIME_RE.match(body[1][1])
+    if m_frames is None or m_time is None:
+        return
+    try:
+        n_frames, frame_time = int(m_frames.group(1)), float(m_time.group(1))
+    except ValueError:
+        return
+    if n_frames > 0 and math.isfinite(frame_time) and frame_time > 0:
+        _check_motion_limits(n_frames, frame_time, body[0][0], body[1][0], m_time.group(1), path)
+
+
 def _parse_motion(lines, start, n_channels, path):
     body = [(i + 1, lines[i].strip()) for i in range(start, len(lines)) if lines[i].strip()]
     if len(body) < 2:
@@ -400,16 +446,9 @@ def _parse_motion(lines, start, n_channels, path):
                               path=path)
     if n_frames <= 0:
         raise MotionFileError(f"the file has no frames (Frames: {n_frames})", path=path)
-    # what the header asks for is checked before any frame is converted: the frame
-    # time sets how many frames resampling makes, and the count how many are read
-    limits.check_fps(1.0 / frame_time, what=f"line {time_line}: 'Frame Time: {m.group(1)}' gives a frame rate that",
-                     path=path)
     data = body[2:]
-    if n_channels and n_frames > len(data):
-        raise MotionFileError(
-            f"the header says {n_frames} frames but the file has {len(data)} frame lines (truncated?)", path=path)
-    limits.check_duration(n_frames * frame_time, path=path,
-                          what=f"line {frames_line}: the header says {n_frames} frames of {frame_time:g} s")
+    _check_motion_limits(n_frames, frame_time, frames_line, time_line, m.group(1), path,
+                         lines_present=len(data) if n_channels else None)
     if n_channels == 0:
         return frame_time, np.zeros((n_frames, 0))
     if len(data) != n_frames:
