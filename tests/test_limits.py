@@ -318,18 +318,32 @@ def test_many_channels_beyond_the_memory_limit(tmp_path, monkeypatch):
         load_audio(path)
 
 
-def test_formats_of_unknown_duration_are_decoded_only_up_to_the_limit(tmp_path, monkeypatch):
-    # M4A: soundfile cannot read it, so ffmpeg decodes it, and only the header-less stream tells the length
-    src = tmp_path / "s.wav"
-    sf.write(src, h.speech_like(12.0), h.SR)
-    path = tmp_path / "speech.m4a"
-    h.ffmpeg("-i", src, "-c:a", "aac", path)
+@pytest.fixture(scope="module")
+def m4a(tmp_path_factory) -> Path:
+    """12 s of speech in an M4A (AAC) container, which soundfile cannot read: ffmpeg decodes it."""
+    folder = tmp_path_factory.mktemp("m4a")
+    sf.write(folder / "s.wav", h.speech_like(12.0), h.SR)
+    h.ffmpeg("-i", folder / "s.wav", "-c:a", "aac", folder / "speech.m4a")
+    return folder / "speech.m4a"
+
+
+def test_a_container_read_by_ffmpeg_is_checked_from_its_header(m4a, monkeypatch):
+    monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.1")
+    with pytest.raises(InputFileError, match=r"speech\.m4a: the AAC container header says 192000 samples at "
+                                             r"16000 Hz: 12\.0 s, beyond the limit of 6\.0 s for speech"):
+        load_audio(m4a)
+    monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.5")
+    assert load_audio_with_info(m4a)[1].duration == pytest.approx(12.0, abs=0.1)
+
+
+def test_a_stream_of_unstated_length_is_decoded_only_up_to_the_limit(m4a, monkeypatch):
+    from gesturekit.datasets import audio as audio_module
+
+    monkeypatch.setattr(audio_module, "_probe_ffmpeg", lambda exe, path, budget: None)  # a header that says nothing
     monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.1")
     with pytest.raises(InputFileError, match=r"speech\.m4a: decoding stopped past the limit, at: 7\.0 s, "
                                              r"beyond the limit of 6\.0 s for speech"):
-        load_audio(path)
-    monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.5")
-    assert load_audio_with_info(path)[1].duration == pytest.approx(12.0, abs=0.1)
+        load_audio(m4a)
 
 
 def test_the_app_upload_meets_the_same_limits(tmp_path):

@@ -28,6 +28,7 @@ from __future__ import annotations
 import functools
 import io
 import os
+import re
 import struct
 import subprocess
 import warnings
@@ -688,7 +689,11 @@ def _read_audioread(path: Path, budget: _Budget) -> tuple[np.ndarray, int]:
 
             with audioread.audio_open(os.fspath(path)) as f:
                 rate, channels = int(f.samplerate), int(f.channels)
-                limits.check_sample_rate(rate, what="the decoder", path=path)
+                stated = getattr(f, "duration", None)  # from the container, when it says
+                if isinstance(stated, (int, float)) and stated > 0 and rate > 0:
+                    budget.check_header("container", rate, channels, round(stated * rate))
+                else:
+                    limits.check_sample_rate(rate, what="the decoder", path=path)
                 # audioread always yields 16-bit signed little-endian PCM; the duration is
                 # known only once decoded, so decoding stops just past the limit
                 cap = 2 * max(channels, 1) * int(rate * budget.seconds() + rate)
@@ -722,6 +727,7 @@ def _read_ffmpeg(path: Path, budget: _Budget) -> tuple[np.ndarray, int]:
         raise _Unreadable("not installed") from None
     import soundfile as sf
 
+    _probe_ffmpeg(exe, path, budget)
     cmd = [
         exe, "-nostdin", "-hide_banner", "-v", "error",
         "-protocol_whitelist", "file",  # never let a file make ffmpeg open URLs
@@ -744,3 +750,29 @@ def _read_ffmpeg(path: Path, budget: _Budget) -> tuple[np.ndarray, int]:
     limits.check_sample_rate(rate, what="the decoder", path=path)
     budget.check_duration(data.shape[0] / rate, "decoding stopped past the limit, at")
     return data, rate
+
+
+_FFMPEG_DURATION = re.compile(r"Duration: (\d+):(\d\d):(\d\d(?:\.\d+)?)")
+_FFMPEG_AUDIO = re.compile(r"Stream #0:\d+\S*: Audio: ([^,]+).*?, (\d+) Hz, (mono|stereo|(\d+) channels)?")
+
+
+def _probe_ffmpeg(exe: str, path: Path, budget: _Budget) -> None:
+    """Check the duration, sample rate and channels the container states (ffmpeg's summary) before decoding.
+
+    Nothing is decoded: ffmpeg is run without an output and prints what it read
+    from the container's header. What it cannot state is left to the capped decode.
+    """
+    cmd = [exe, "-nostdin", "-hide_banner", "-protocol_whitelist", "file", "-i", "file:" + os.path.abspath(path)]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, check=False, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return
+    text = proc.stderr.decode("utf-8", "replace")
+    duration, audio = _FFMPEG_DURATION.search(text), _FFMPEG_AUDIO.search(text)
+    if duration is None or audio is None:
+        return
+    seconds = int(duration.group(1)) * 3600 + int(duration.group(2)) * 60 + float(duration.group(3))
+    rate = int(audio.group(2))
+    layout = audio.group(3)
+    channels = 1 if layout in (None, "mono") else 2 if layout == "stereo" else int(audio.group(4))
+    budget.check_header(f"{audio.group(1).split()[0].upper()} container", rate, channels, round(seconds * rate))
