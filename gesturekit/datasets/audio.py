@@ -17,11 +17,12 @@ too short, or holding NaN/infinite samples. Silent audio is accepted with a
 What a file costs is estimated from its header before anything is decoded
 (:mod:`gesturekit.limits`): a sample rate outside 4-384 kHz, speech longer than
 60 minutes (a take longer than 4 hours) or more decoded samples than one input
-may take are refused. Truncation is detected from what the container states:
-the WAV/FLAC sample count, the MP3 Xing/VBRI byte count, ID3 length, and an MP3
-frame cut off at the end, and an Ogg stream that ends without its
-end-of-stream page. An MP3 without such headers cut exactly between two frames
-cannot be told from a shorter recording.
+may take are refused; a stream whose container states no length (only the
+fallback decoders meet one) is decoded only up to the limit. Truncation is
+detected from what the container states: the WAV/FLAC sample count, the MP3
+Xing/VBRI byte count or ID3 length, an MP3 frame cut off at the end, and an
+Ogg stream that ends without its end-of-stream page. An MP3 without such
+headers cut exactly between two frames cannot be told from a shorter recording.
 """
 from __future__ import annotations
 
