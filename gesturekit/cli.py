@@ -50,6 +50,10 @@ def _cmd_build_db(args) -> int:
         if out.exists() and not args.force:
             raise GestureKitError(f"{out}: a database already exists here; add --force to replace it")
         joint_map = args.joint_map or args.preset
+        if args.fps is not None:
+            from .limits import check_fps
+
+            check_fps(args.fps, what="the frame rate of the joint-position files", option="--fps")
         sources = discover_takes(args.folder, kind=args.kind)
         n = count_takes(sources)
         config = BuildConfig(
@@ -349,6 +353,12 @@ def _cmd_stimuli(args) -> int:
     return 0
 
 
+def _add_max_speech(parser) -> None:
+    parser.add_argument("--max-speech-minutes", type=float, metavar="MIN",
+                        help="refuse speech files longer than this (default 60, or the environment "
+                             "variable GESTUREKIT_MAX_SPEECH_MINUTES)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="gesturekit",
@@ -419,6 +429,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "output as it is (the paper)")
     y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
     y.add_argument("--force", action="store_true", help="replace existing output files")
+    _add_max_speech(y)
     y.set_defaults(func=_cmd_synthesize)
 
     r = sub.add_parser(
@@ -515,12 +526,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, help="rendering processes (default: all cores)")
     s.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask distributed cluster (tcp://host:8786)")
     s.add_argument("--force", action="store_true", help="replace an existing study")
+    _add_max_speech(s)
     s.set_defaults(func=_cmd_stimuli)
     return p
 
 
 def _format_warning(message, category, filename, lineno, line=None):
     return f"warning: {message}\n"
+
+
+def _limits_of(args):
+    """The input limits the command's options set (``--max-speech-minutes``), for the command's run."""
+    from .limits import SPEECH_MINUTES, override
+
+    return override(SPEECH_MINUTES, getattr(args, "max_speech_minutes", None), option="--max-speech-minutes")
 
 
 def main(argv=None) -> int:
@@ -531,7 +550,8 @@ def main(argv=None) -> int:
         old = warnings.formatwarning
         warnings.formatwarning = _format_warning
         try:
-            return args.func(args)
+            with _limits_of(args):
+                return args.func(args)
         except GestureKitError as exc:
             print(f"gesturekit: error: {exc}", file=sys.stderr)
             return 2

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import limits
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion, output_frame_count
 from ..skeleton import FPS
@@ -60,6 +61,18 @@ _FK_BLOCK = 8192
 _AUTO_CM_THRESHOLD = 40.0
 
 _UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+#: After forward kinematics, a joint farther than this from the origin (metres)
+#: is absurd: far beyond any capture volume, and so large that the offsets of
+#: bones (centimetres) would be lost to rounding when made pelvis-relative.
+_MAX_FROM_ORIGIN_M = 1e6
+
+#: A joint farther than this from the skeleton's pelvis (metres) is absurd.
+_MAX_FROM_PELVIS_M = 1000.0
+
+#: A rotation channel beyond this many degrees is absurd (thousands of turns, and
+#: at 1e300 no digit of the angle within a turn is left).
+_MAX_ANGLE_DEG = 1e6
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,6 +168,10 @@ def parse_bvh(path: str | os.PathLike) -> BvhData:
         The file is missing, empty, not a BVH file, malformed (numbers, braces,
         channel counts, frame lines), has no frames, or holds NaN/infinite
         values. The message names the file and, where it can, the line.
+    InputFileError
+        The header's frame time is outside the accepted frame rates, or its
+        frames last longer than one take may (:mod:`gesturekit.limits`);
+        checked before the frames are read.
     """
     path = Path(path)
     if not path.exists():
@@ -162,6 +179,9 @@ def parse_bvh(path: str | os.PathLike) -> BvhData:
     if path.is_dir():
         raise MotionFileError("is a directory, not a BVH file", path=path)
     try:
+        with open(path, "rb") as f:
+            # the header's frame count and frame time are checked before the whole file is read
+            _check_motion_header_early(f.read(_HEAD_BYTES), path)
         raw = path.read_bytes()
     except OSError as exc:
         raise MotionFileError(f"cannot read file: {exc.strerror or exc}", path=path) from None
@@ -358,6 +378,49 @@ def _parse_hierarchy(lines, start, stop, path):
     return names, parents, offsets, channels
 
 
+#: Bytes of a BVH file read first to check its MOTION header before the whole file is read.
+_HEAD_BYTES = 1 << 20
+
+
+def _check_motion_limits(n_frames, frame_time, frames_line, time_line, time_text, path, *, lines_present=None):
+    """Refuse what the MOTION header asks for before any frame is converted.
+
+    The frame time sets how many frames resampling makes (a frame rate within
+    :func:`gesturekit.limits.check_fps`), and frames x frame time the take's
+    duration (within :func:`gesturekit.limits.max_take_seconds`).
+    """
+    limits.check_fps(1.0 / frame_time, what=f"line {time_line}: 'Frame Time: {time_text}' gives a frame rate that",
+                     path=path)
+    if lines_present is not None and n_frames > lines_present:
+        raise MotionFileError(
+            f"the header says {n_frames} frames but the file has {lines_present} frame lines (truncated?)",
+            path=path)
+    limits.check_duration(n_frames * frame_time, path=path,
+                          what=f"line {frames_line}: the header says {n_frames} frames of {frame_time:g} s")
+
+
+def _check_motion_header_early(head: bytes, path) -> None:
+    """Check the MOTION header found in the first bytes of a file; anything unclear is left to the parser."""
+    lines = head.decode("latin-1").splitlines()
+    if len(head) == _HEAD_BYTES:
+        lines = lines[:-1]  # the last line may be cut
+    motion_at = next((i for i, line in enumerate(lines) if line.strip().upper() == "MOTION"), None)
+    if motion_at is None:
+        return
+    body = [(i + 1, lines[i].strip()) for i in range(motion_at + 1, len(lines)) if lines[i].strip()][:2]
+    if len(body) < 2:
+        return
+    m_frames, m_time = _FRAMES_RE.match(body[0][1]), _FRAME_TIME_RE.match(body[1][1])
+    if m_frames is None or m_time is None:
+        return
+    try:
+        n_frames, frame_time = int(m_frames.group(1)), float(m_time.group(1))
+    except ValueError:
+        return
+    if n_frames > 0 and math.isfinite(frame_time) and frame_time > 0:
+        _check_motion_limits(n_frames, frame_time, body[0][0], body[1][0], m_time.group(1), path)
+
+
 def _parse_motion(lines, start, n_channels, path):
     body = [(i + 1, lines[i].strip()) for i in range(start, len(lines)) if lines[i].strip()]
     if len(body) < 2:
@@ -384,6 +447,8 @@ def _parse_motion(lines, start, n_channels, path):
     if n_frames <= 0:
         raise MotionFileError(f"the file has no frames (Frames: {n_frames})", path=path)
     data = body[2:]
+    _check_motion_limits(n_frames, frame_time, frames_line, time_line, m.group(1), path,
+                         lines_present=len(data) if n_channels else None)
     if n_channels == 0:
         return frame_time, np.zeros((n_frames, 0))
     if len(data) != n_frames:
@@ -658,13 +723,18 @@ def load_bvh_motion(
     ------
     MotionFileError
         The file is unreadable or malformed (see :func:`parse_bvh`), lacks
-        joints the map names (all of them are listed), or is too short to
-        give one output frame.
+        joints the map names (all of them are listed), is too short to give
+        one output frame, or holds values no pose can have: rotations beyond
+        1e6 degrees, positions beyond 1000 km from the origin, or joints
+        beyond 1 km from the pelvis after forward kinematics (the message
+        names the first frame and joint).
     ConfigError, InputFileError
-        The joint map or an option is invalid.
+        The joint map or an option is invalid, or the file is beyond the
+        limits (:mod:`gesturekit.limits`).
     """
     _check_units(units)
     _check_fps(fps)
+    limits.check_fps(fps, what="the output frame rate", option="fps")
     jmap = load_joint_map(joint_map)
     data = parse_bvh(path)
     wanted = [jmap.pelvis] + jmap.source_names()
@@ -675,12 +745,75 @@ def load_bvh_motion(
             f"{len(missing)} joints of the joint map {jmap.name!r} are missing from the file: "
             f"{', '.join(missing)}", path=path)
     scale = unit_scale(data, units=units)
+    _check_channels(data, scale, path)
     positions = resample_world_positions(data, fps=fps)
     if positions.shape[0] == 0:
         raise MotionFileError(
             f"too short: {data.n_frames} frames at {data.fps:g} fps give no frame at {fps:g} fps", path=path)
     idx = np.array([data.index(n) for n in jmap.source_names()], dtype=np.int64)
     pelvis = data.index(jmap.pelvis)
+    _check_positions(data, positions, scale, pelvis, fps, path)
     rel = (positions[:, idx] - positions[:, pelvis:pelvis + 1]) * scale
     return Motion(rel.astype(np.float32), float(fps))
 
+
+
+def _check_channels(data: BvhData, scale: float, path) -> None:
+    """Refuse channel values of any source frame that no pose can have, naming the first frame and joint.
+
+    Rotations beyond :data:`_MAX_ANGLE_DEG` degrees, positions beyond
+    :data:`_MAX_FROM_ORIGIN_M` metres. Checked on every frame of the file, also
+    those that resampling skips.
+    """
+    rot = np.array([ch.endswith("rotation") for chans in data.channels for ch in chans], dtype=bool)
+    if rot.size == 0:
+        return
+    bound = np.where(rot, _MAX_ANGLE_DEG, _MAX_FROM_ORIGIN_M / scale)
+    bad = np.abs(data.values) > bound
+    if not bad.any():
+        return
+    frame, column = (int(v) for v in np.argwhere(bad)[0])
+    joint = int(np.searchsorted(data.channel_starts, column, side="right") - 1)
+    while not data.channels[joint]:  # joints without channels share the next joint's start
+        joint -= 1
+    channel = data.channels[joint][column - int(data.channel_starts[joint])]
+    value = data.values[frame, column]
+    if rot[column]:
+        what = f"absurd rotation: {channel} {value:g} degrees (more than {_MAX_ANGLE_DEG:g})"
+    else:
+        what = (f"absurd position: {channel} {value:g} file units ({abs(value) * scale:.3g} m, "
+                f"more than {_MAX_FROM_ORIGIN_M / 1000:g} km)")
+    raise MotionFileError(
+        f"{what} for joint {data.names[joint]!r} at frame {frame} ({frame * data.frame_time:.2f} s); "
+        f"{int(bad.any(axis=1).sum())} frames affected", path=path)
+
+
+def _check_positions(data: BvhData, positions: np.ndarray, scale: float, pelvis: int, fps: float, path) -> None:
+    """Refuse world positions (frames, J, 3) in file units that are not finite or absurdly far.
+
+    Far is more than :data:`_MAX_FROM_ORIGIN_M` from the origin or
+    :data:`_MAX_FROM_PELVIS_M` from the pelvis along any axis; the message
+    names the first output frame and joint.
+    """
+    metres = positions * scale
+    with np.errstate(over="ignore", invalid="ignore"):
+        # the largest coordinate, not the norm: squares of 1e200 would overflow
+        from_origin = np.abs(metres).max(axis=2)
+        from_pelvis = np.abs(metres - metres[:, pelvis:pelvis + 1]).max(axis=2)
+    bad = ~np.isfinite(from_origin) | ~np.isfinite(from_pelvis) | (from_origin > _MAX_FROM_ORIGIN_M) \
+        | (from_pelvis > _MAX_FROM_PELVIS_M)
+    if not bad.any():
+        return
+    frame, joint = (int(v) for v in np.argwhere(bad)[0])
+    where = f"joint {data.names[joint]!r} at frame {frame} ({frame / fps:.2f} s)"
+    if not (np.isfinite(from_origin[frame, joint]) and np.isfinite(from_pelvis[frame, joint])):
+        what = "is not finite (NaN or infinity)"
+    elif from_origin[frame, joint] > _MAX_FROM_ORIGIN_M:
+        what = (f"lies {from_origin[frame, joint]:.3g} m from the origin along one axis "
+                f"(more than {_MAX_FROM_ORIGIN_M / 1000:g} km)")
+    else:
+        what = (f"lies {from_pelvis[frame, joint]:.3g} m from the pelvis {data.names[pelvis]!r} along one axis "
+                f"(more than {_MAX_FROM_PELVIS_M / 1000:g} km)")
+    raise MotionFileError(
+        f"absurd positions after forward kinematics: {where} {what}; "
+        f"{int(bad.any(axis=1).sum())} frames affected", path=path)

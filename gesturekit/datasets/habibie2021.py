@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import limits
 from ..errors import ConfigError, MotionFileError, warn
 from ..motion import AUDIO_SR, Motion, Take
 from ..skeleton import FPS, N_JOINTS
@@ -72,12 +73,17 @@ def load_habibie2021(
         invalid ``joint_order``.
     ConfigError
         Invalid ``units`` or ``joint_order`` argument.
+    InputFileError
+        The arrays' headers state sequences longer than one take may be, or
+        more memory than one input may take (:mod:`gesturekit.limits`),
+        checked before the arrays are loaded.
     """
     if units not in _UNIT_SCALE:
         raise ConfigError(f"units must be 'm', 'cm' or 'mm', got {units!r}")
     path = Path(path)
     if not path.is_file():
         raise MotionFileError("file not found", path=path)
+    _check_limits(path)
     arrays = _read_npz(path)
     wav, body = arrays["wav"], arrays["body"]
 
@@ -155,6 +161,30 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
             return {k: npz[k] for k in ("wav", "body", "mfcc", "joint_order") if k in keys}
         except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
             raise MotionFileError(f"cannot read the archive's arrays: {exc}", path=path) from None
+
+
+def _check_limits(path: Path) -> None:
+    """Refuse, from the arrays' npy headers, sequences or an archive beyond the limits, before loading.
+
+    A sequence is a take: ``body`` frames at 15 fps and ``wav`` samples at
+    16 kHz must fit :func:`gesturekit.limits.max_take_seconds`; all arrays,
+    converted to float64 (body) and float32 (wav), must fit one input's memory.
+    Headers that cannot be read are left to the loader to report.
+    """
+    try:
+        headers = limits.npz_headers(path)
+    except MotionFileError:
+        return
+    rates = {"body": (FPS, "frames", 8), "wav": (AUDIO_SR, "samples", 4)}
+    total = 0.0
+    for key, (shape, dtype) in headers.items():
+        per, unit, converted = rates.get(key, (None, None, 0))
+        total += limits.array_bytes(shape, dtype.itemsize + converted)
+        if per is not None and len(shape) >= 2:
+            limits.check_duration(shape[1] / per, path=path,
+                                  what=f"the npz header of {key!r} says {shape[1]} {unit} per sequence at {per} Hz")
+    limits.check_bytes(total, what=f"the npz headers say {', '.join(f'{k} {v[0]}' for k, v in headers.items())}",
+                       path=path)
 
 
 def _numeric(array: np.ndarray, key: str, path) -> np.ndarray:

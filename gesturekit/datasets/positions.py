@@ -31,6 +31,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from .. import limits
 from ..errors import ConfigError, InputFileError, MotionFileError
 from ..motion import Motion, resample_positions
 from ..skeleton import FPS, JOINT_NAMES
@@ -188,8 +189,14 @@ def _validate(content, *, name: str, path) -> PositionJointMap:
                             names=None if names is None else tuple(names))
 
 
-def read_position_array(path: str | os.PathLike) -> np.ndarray:
+def read_position_array(path: str | os.PathLike, *, fps: float | None = None) -> np.ndarray:
     """Read joint positions from a file, shape (frames, joints, 3), float64.
+
+    For ``.npy`` and ``.npz`` the array's shape and type are read from its
+    header first, and an array of the wrong shape, or beyond the limits of one
+    take or one input (:mod:`gesturekit.limits`), is refused before it is loaded.
+    Text files are refused when the numbers they may hold (one per 2 bytes)
+    could exceed the input limit.
 
     Parameters
     ----------
@@ -198,12 +205,17 @@ def read_position_array(path: str | os.PathLike) -> np.ndarray:
         ``"positions"``), ``.txt`` (whitespace-separated) or ``.csv``
         (comma-separated) with one frame per row. Arrays of shape
         (frames, joints * 3) are reshaped.
+    fps : float, optional
+        Frame rate of the file, frames per second; with it the duration the
+        header states is checked against the limit of one take.
 
     Raises
     ------
     MotionFileError
         Missing or unreadable file, unknown suffix, wrong shape, no frames,
         non-numeric or NaN/infinite values.
+    InputFileError
+        The header states more frames or bytes than the limits allow.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -212,8 +224,15 @@ def read_position_array(path: str | os.PathLike) -> np.ndarray:
                               path=path)
     if not path.is_file():
         raise MotionFileError("file not found", path=path)
-    if path.stat().st_size == 0:
+    size = path.stat().st_size
+    if size == 0:
         raise MotionFileError("empty file", path=path)
+    if suffix in (".npy", ".npz"):
+        _check_header(path, suffix, size, fps)
+    else:
+        # a number and its separator take at least 2 bytes of text and 8 once read
+        limits.check_bytes(4.0 * size, what=f"the text file of {size} bytes may hold {size // 2} numbers",
+                           path=path)
     try:
         if suffix == ".npy":
             array = np.load(path, allow_pickle=False)
@@ -246,6 +265,41 @@ def read_position_array(path: str | os.PathLike) -> np.ndarray:
         raise MotionFileError(
             f"positions contain NaN or infinity in {bad.size} frames (first: frame {bad[0]})", path=path)
     return array
+
+
+def _check_header(path: Path, suffix: str, size: int, fps: float | None) -> None:
+    """Refuse, from the npy header, an array of the wrong shape or beyond the limits."""
+    if suffix == ".npy":
+        with open(path, "rb") as f:
+            shape, dtype, offset = limits.npy_header(f, path=path)
+        what = "the npy header says"
+    else:
+        headers = limits.npz_headers(path)
+        key = "positions" if "positions" in headers else (next(iter(headers)) if len(headers) == 1 else None)
+        if key is None:
+            return  # reported when read
+        shape, dtype = headers[key]
+        what = f"the npz header of {key!r} says"
+    if dtype.hasobject:
+        raise MotionFileError(f"cannot read positions stored as Python objects ({what} dtype {dtype}); "
+                              "they must be numbers", path=path)
+    if dtype.kind not in "biuf":
+        raise MotionFileError(f"positions must be numbers, {what} dtype {dtype}", path=path)
+    flat_ok = len(shape) == 2 and shape[1] % 3 == 0 and shape[1] > 0
+    if not (flat_ok or (len(shape) == 3 and shape[2] == 3 and shape[1] > 0)) and not (shape and shape[0] == 0):
+        raise MotionFileError(
+            f"positions must have shape (frames, joints, 3) or (frames, joints*3), {what} {shape}", path=path)
+    # float64 after conversion, and the array as stored
+    limits.check_bytes(limits.array_bytes(shape, 8 + dtype.itemsize),
+                       what=f"{what} shape {shape} of {dtype}", path=path)
+    if fps is not None and shape:
+        limits.check_duration(shape[0] / fps, what=f"{what} {shape[0]} frames at {fps:g} fps", path=path)
+    if suffix == ".npy":
+        stored = limits.array_bytes(shape, dtype.itemsize)
+        if offset + stored > size:
+            raise MotionFileError(
+                f"the file is truncated: the npy header says shape {shape} of {dtype} "
+                f"({limits.describe_bytes(stored)}) but only {size - offset} bytes follow", path=path)
 
 
 def _from_npz(path: Path) -> np.ndarray:
@@ -294,14 +348,16 @@ def load_positions_motion(
         The file is unreadable, malformed, too short for one output frame, or
         does not have the joints the map names.
     ConfigError, InputFileError
-        Bad options or joint map.
+        Bad options or joint map; ``fps`` outside the accepted range, or a
+        header beyond the limits (:mod:`gesturekit.limits`).
     """
     if units not in _UNIT_SCALE:
         raise ConfigError(f"units must be 'm', 'cm' or 'mm', got {units!r}")
     if not (isinstance(fps, (int, float, np.integer, np.floating)) and math.isfinite(fps) and fps > 0):
         raise ConfigError(f"fps must be a positive number, got {fps!r}")
+    limits.check_fps(fps, what="the frame rate of the position file", option="fps")
     jmap = load_position_joint_map(joint_map)
-    array = read_position_array(path)
+    array = read_position_array(path, fps=float(fps))
     idx, pelvis = jmap.resolve(array.shape[1], path=path)
     positions = array[:, idx]
     if pelvis is not None:
