@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,10 @@ from ..errors import ConfigError, MotionFileError, warn
 from ..motion import AUDIO_SR, Motion, Take
 from ..skeleton import FPS, N_JOINTS
 
-__all__ = ["load_habibie2021"]
+__all__ = ["load_habibie2021", "is_habibie2021_npz", "count_sequences"]
+
+# what a damaged archive raises while it is opened or read
+_READ_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error)
 
 _UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
@@ -136,11 +140,66 @@ def load_habibie2021(
     ]
 
 
-def _read_npz(path: Path) -> dict[str, np.ndarray]:
+def _open_npz(path: Path):
     try:
         loaded = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise MotionFileError(f"not a readable npz archive: {exc}", path=path) from None
+    except _READ_ERRORS as exc:
+        raise MotionFileError(f"not a readable npz archive ({exc}); is the file truncated?", path=path) from None
+    return loaded
+
+
+def is_habibie2021_npz(path: str | os.PathLike) -> bool:
+    """Whether an ``.npz`` file holds the arrays ``wav`` and ``body`` (reads the archive's index only).
+
+    Raises
+    ------
+    MotionFileError
+        The file is not a readable npz archive (e.g. truncated).
+    """
+    path = Path(path)
+    loaded = _open_npz(path)
+    if not isinstance(loaded, np.lib.npyio.NpzFile):
+        return False
+    with loaded as npz:
+        return "wav" in npz.files and "body" in npz.files
+
+
+def count_sequences(path: str | os.PathLike) -> int:
+    """Sequences (takes) of an archive, from the ``body`` array's header alone (no data is read).
+
+    Raises
+    ------
+    MotionFileError
+        Not a readable npz archive, no ``body``, or a ``body`` that is not a plain numeric
+        array (an object array would need unpickling, which gesturekit never does).
+    """
+    path = Path(path)
+    loaded = _open_npz(path)
+    if not isinstance(loaded, np.lib.npyio.NpzFile):
+        raise MotionFileError("expected an npz archive with keys 'wav' and 'body', found a single array", path=path)
+    with loaded as npz:
+        if "body" not in npz.files:
+            raise MotionFileError("missing key body", path=path)
+        fmt = np.lib.format
+        try:
+            with npz.zip.open("body.npy") as f:
+                version = fmt.read_magic(f)
+                if version == (1, 0):
+                    shape, _, dtype = fmt.read_array_header_1_0(f)
+                elif version == (2, 0):
+                    shape, _, dtype = fmt.read_array_header_2_0(f)
+                else:
+                    raise ValueError(f"npy format version {version[0]}.{version[1]} is not supported")
+        except (*_READ_ERRORS, KeyError) as exc:
+            raise MotionFileError(f"cannot read the header of 'body' ({exc})", path=path) from None
+    if dtype.hasobject:
+        raise MotionFileError("'body' holds Python objects (dtype object); gesturekit reads numbers only and "
+                              "never unpickles", path=path)
+    return int(shape[0]) if len(shape) >= 3 else 1
+
+
+def _read_npz(path: Path) -> dict[str, np.ndarray]:
+    loaded = _open_npz(path)
     if not isinstance(loaded, np.lib.npyio.NpzFile):
         raise MotionFileError("expected an npz archive with keys 'wav' and 'body', found a single array",
                               path=path)
@@ -153,8 +212,9 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
                 path=path)
         try:
             return {k: npz[k] for k in ("wav", "body", "mfcc", "joint_order") if k in keys}
-        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-            raise MotionFileError(f"cannot read the archive's arrays: {exc}", path=path) from None
+        except _READ_ERRORS as exc:
+            # object arrays land here too: allow_pickle=False refuses them
+            raise MotionFileError(f"cannot read the archive's arrays ({exc})", path=path) from None
 
 
 def _numeric(array: np.ndarray, key: str, path) -> np.ndarray:
