@@ -157,7 +157,6 @@ def _cmd_synthesize(args) -> int:
         **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
     )
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     stems = [safe_filename(f.stem) for f in files]
     if len(set(stems)) != len(stems):
         raise ConfigError("two speech files have the same name; synthesise them in separate runs")
@@ -168,6 +167,7 @@ def _cmd_synthesize(args) -> int:
         raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
     audios = [load_audio(f) for f in files]
     results = synthesize_batch(audios, db=db, config=config, refiner=args.refiner)
+    out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     for f, stem, res in zip(files, stems, results):
         res.source = f.name
         res.save_npz(targets[(stem, "npz")], overwrite=args.force)
