@@ -684,6 +684,12 @@ def _check_meta(meta: dict, path: Path) -> None:
     build = meta["build"]
     if not (_is_int(build.get("clip_frames")) and build["clip_frames"] > 0):
         raise bad(f"build.clip_frames must be a positive integer, found {build.get('clip_frames')!r}")
+    for key in ("label", "source"):
+        if not isinstance(build.get(key, ""), str):
+            raise bad(f"build.{key} must be a string, found {type(build[key]).__name__}")
+    stride = build.get("overlap_stride")
+    if stride is not None and not (_is_int(stride) and stride > 0):
+        raise bad(f"build.overlap_stride must be a positive integer or null, found {stride!r}")
     names = meta["attribute_names"]
     if names != list(ATTRIBUTE_NAMES):
         raise bad(f"attribute_names must be {', '.join(ATTRIBUTE_NAMES)}")
@@ -704,6 +710,8 @@ def _check_meta(meta: dict, path: Path) -> None:
         if t["name"] in seen:
             raise bad(f"take name {t['name']!r} appears twice")
         seen.add(t["name"])
+        if not isinstance(t.get("sources"), dict):
+            raise bad(f"takes[{i}].sources must be an object, found {type(t.get('sources')).__name__}")
         for key in ("n_frames", "first_clip", "n_clips", "audio_offset", "audio_samples"):
             if not (_is_int(t.get(key)) and t[key] >= 0):
                 raise bad(f"takes[{i}].{key} must be an integer >= 0, found {t.get(key)!r}")
