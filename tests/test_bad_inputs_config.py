@@ -63,11 +63,18 @@ def test_control_string_refused(work, text, problem):
 
 
 def test_long_valid_control_string_is_not_taken_for_a_path(work):
+    """A 300-character control string is parsed as a track (no "File name too long"): the run
+    goes on to the next check, the database, and stops there."""
+    from gesturekit.cli import _control_from_arg
+    from gesturekit.control import parse_control
+
     text = ",".join(f"{i}-{i + 1}:left_hand=high+speed=slow" for i in range(12))
     assert len(text) > 255
-    run = _synth(work, "--control", text)
-    assert run.code == 0, run.stderr
-    assert (work / "out" / "speech.npz").is_file()
+    assert _control_from_arg(text) == parse_control(text).to_text()
+    before = snapshot(work)
+    run = run_cli("synthesize", work / "speech.wav", "--db", work / "no-db", "--out", work / "out",
+                  "--control", text)
+    assert_refused(run, names=work / "no-db", problem="no database folder", before=before)
 
 
 # ---- control files ---------------------------------------------------------------------------
@@ -346,3 +353,23 @@ def test_positions_fps_refused(tmp_path, fps):
     run = run_cli("build-db", folder, "--kind", "positions", "--joint-map", "zeggs", "--fps", fps,
                   "--out", tmp_path / "db")
     assert_refused(run, names="--fps", problem="positive", before=before)
+
+
+# ---- text over 255 characters where a file may be named ----------------------------------------
+def test_speech_name_too_long_is_one_message(work):
+    f = work / ("a" * 300 + ".wav")
+    before = snapshot(work)
+    run = run_cli("synthesize", f, "--db", work / "db", "--out", work / "out")
+    assert_refused(run, names=f, problem=("too long", "not found", "no such"), before=before)
+
+
+def test_joint_map_text_too_long_is_not_a_file(tmp_path):
+    folder = tmp_path / "takes"
+    folder.mkdir()
+    np.save(folder / "t.npy", np.zeros((60, 55, 3), np.float32))
+    sf.write(folder / "t.wav", np.zeros(64000, np.float32), 16000)
+    spec = "j" * 300
+    before = snapshot(tmp_path)
+    run = run_cli("build-db", folder, "--kind", "positions", "--joint-map", spec, "--fps", "30",
+                  "--out", tmp_path / "db")
+    assert_refused(run, names=spec, problem="joint map file not found", before=before)
