@@ -248,7 +248,7 @@ def parse_time_range(text: str, *, what: str = "time range", form: str = "START-
     if not (np.isfinite(start) and np.isfinite(end)):
         raise ConfigError(f"{what}: a time is too large to be seconds")
     if not end > start:
-        raise ConfigError(f"{what}: end must be after start")
+        raise ConfigError(f"{what}: end must be after start (need 0 <= start < end)")
     return start, end
 
 
