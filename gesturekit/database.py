@@ -51,6 +51,7 @@ from .features import (
     valid_starts,
 )
 from .motion import AUDIO_SR, Take, resample_positions
+from .paths import is_dir
 from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES
 
 __all__ = [
@@ -605,7 +606,7 @@ class MatchingDatabase:
         """
         path = Path(path)
         meta_file = path / "database.json"
-        if not path.is_dir():
+        if not is_dir(path):
             raise DatabaseError("no database folder here (build one with `gesturekit build-db`)", path=path)
         if not meta_file.is_file():
             raise DatabaseError("not a gesturekit database: database.json is missing", path=path)

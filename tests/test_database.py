@@ -298,3 +298,8 @@ def test_damaged_files_are_refused(db, tmp_path, breakage, message):
     breakage(path)
     with pytest.raises(DatabaseError, match=message):
         MatchingDatabase.load(path)
+
+
+def test_a_name_too_long_is_no_database_folder(tmp_path):
+    with pytest.raises(DatabaseError, match="no database folder"):
+        MatchingDatabase.load(tmp_path / ("d" * 300))

@@ -340,3 +340,8 @@ def test_damaged_stats_are_refused(demo_copy, tmp_path, stats, message):
         np.savez(folder / "stats.npz", **stats)
     with pytest.raises(InputFileError, match=message):
         Refiner.load(folder)
+
+
+def test_a_name_too_long_is_no_refiner_folder(tmp_path):
+    with pytest.raises(InputFileError, match="no refiner folder"):
+        read_refiner_config(tmp_path / ("r" * 300))

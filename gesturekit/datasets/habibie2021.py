@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import ConfigError, MotionFileError, warn
 from ..motion import AUDIO_SR, Motion, Take
+from ..paths import is_file
 from ..skeleton import FPS, N_JOINTS
 
 __all__ = ["load_habibie2021", "is_habibie2021_npz", "count_sequences"]
@@ -80,7 +81,7 @@ def load_habibie2021(
     if units not in _UNIT_SCALE:
         raise ConfigError(f"units must be 'm', 'cm' or 'mm', got {units!r}")
     path = Path(path)
-    if not path.is_file():
+    if not is_file(path):
         raise MotionFileError("file not found", path=path)
     arrays = _read_npz(path)
     wav, body = arrays["wav"], arrays["body"]

@@ -290,12 +290,13 @@ def speech_sources(db, *, audio=(), holdouts=()) -> list[StimulusSpeech]:
     from ..datasets.takes import AUDIO_EXTENSIONS
     from ..errors import InputFileError
     from ..evaluate.run import held_out
+    from ..paths import is_dir
 
     out: list[StimulusSpeech] = []
     for item in audio:
         p = Path(item)
         files = [p]
-        if p.is_dir():
+        if is_dir(p):
             files = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
             if not files:
                 raise InputFileError(f"no speech files ({'/'.join(AUDIO_EXTENSIONS)}) in this folder", path=p)

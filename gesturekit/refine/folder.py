@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 from ..errors import InputFileError
+from ..paths import is_dir
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "read_refiner_config"]
 
@@ -29,7 +30,7 @@ def read_refiner_config(path: str | os.PathLike) -> dict:
         or a key of the wrong type.
     """
     path = Path(path)
-    if not path.is_dir():
+    if not is_dir(path):
         raise InputFileError("no refiner folder here (train one with `gesturekit train-refiner`)", path=path)
     cfg_file = path / "config.json"
     if not cfg_file.is_file():
