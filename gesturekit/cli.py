@@ -279,6 +279,7 @@ def _cmd_evaluate(args) -> int:
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already; add --force to replace the evaluation in {out}")
     _parse_holdouts([args.holdout])
+    _check_positive("--beat-sigma", args.beat_sigma, "time in seconds")
     control = _control_from_arg(args.control)
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
     config = SynthesisConfig(k=args.k, step=args.step, seed=args.seed, init=args.init_pose,
@@ -348,6 +349,8 @@ def _cmd_stimuli(args) -> int:
     if not args.audio and not args.holdout:
         raise ConfigError("give speech with --audio (files or folders) and/or --holdout TAKE:START-END")
     _parse_holdouts(args.holdout)
+    if not math.isfinite(args.loudness):
+        raise ConfigError(f"--loudness must be a finite number of LUFS (e.g. -23), got {args.loudness:g}")
     control = _control_from_arg(args.control) or ""
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
     bars: dict = {}

@@ -373,3 +373,22 @@ def test_joint_map_text_too_long_is_not_a_file(tmp_path):
     run = run_cli("build-db", folder, "--kind", "positions", "--joint-map", spec, "--fps", "30",
                   "--out", tmp_path / "db")
     assert_refused(run, names=spec, problem="joint map file not found", before=before)
+
+
+@pytest.mark.parametrize("option, value, problem", [
+    ("--beat-sigma", "nan", "positive"),
+    ("--beat-sigma", "inf", "positive"),
+    ("--beat-sigma", "0", "positive"),
+])
+def test_evaluate_numbers_refused(work, option, value, problem):
+    before = snapshot(work)
+    run = run_cli("evaluate", "--db", work / "db", "--holdout", "demo0_000:1-9", option, value, "--out", work / "ev")
+    assert_refused(run, names=option, problem=problem, before=before)
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_stimuli_loudness_refused(work, value):
+    before = snapshot(work)
+    run = run_cli("stimuli", "--db", work / "db", "--holdout", "demo0_000:1-9", "--systems", "gt",
+                  f"--loudness={value}", "--out", work / "st")
+    assert_refused(run, names="--loudness", problem="finite", before=before)

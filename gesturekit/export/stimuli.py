@@ -490,6 +490,9 @@ def make_stimuli(
     t0 = time.perf_counter()
     systems = parse_systems(systems)
     width, height = _check_resolution(resolution)
+    if not math.isfinite(loudness_lufs):
+        # a NaN target would scale every soundtrack to NaN samples
+        raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {loudness_lufs!r}")
     track = parse_control(control)
     refiner_name = None if refiner is None else str(getattr(refiner, "path", None) or refiner)
     if "knn+cgan" in systems:
