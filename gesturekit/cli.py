@@ -260,6 +260,10 @@ def _control_from_arg(text: str | None) -> str | None:
         return None
     if is_file(text):
         return load_control_file(text).to_text()
+    if text.strip().lower().endswith((".csv", ".json")):
+        from .errors import InputFileError
+
+        raise InputFileError("control file not found", path=text)
     try:
         return parse_control(text).to_text()
     except ConfigError as exc:

@@ -78,6 +78,12 @@ def test_long_valid_control_string_is_not_taken_for_a_path(work):
 
 
 # ---- control files ---------------------------------------------------------------------------
+def test_missing_control_file_is_named_as_a_file(work):
+    before = snapshot(work)
+    run = _synth(work, "--control", work / "controls.csv")
+    assert_refused(run, names=work / "controls.csv", problem="control file not found", before=before)
+
+
 @pytest.mark.parametrize("name, content, problem", [
     ("c.csv", "start_s,end_s,constraint\n0,1,left_hand=h\xe9\n".encode("latin-1"), "UTF-8"),
     ("c.json", b"42", "list"),
