@@ -177,15 +177,19 @@ def normalise_exclusions(takes, ranges) -> tuple[tuple[str, ...], tuple[tuple[st
     Raises
     ------
     ConfigError
-        A range entry is not a (take, start, end) triple of a name and two numbers.
+        A range entry is not a (take, start, end) triple of a name and two finite numbers
+        with ``0 <= start < end``.
     """
     out = []
     for r in ranges:
         try:
             take, a, b = r
-            out.append((str(take), float(a), float(b)))
+            take, a, b = str(take), float(a), float(b)
         except (TypeError, ValueError):
             raise ConfigError(f"exclude_ranges entries must be (take, start_s, end_s), got {r!r}") from None
+        if not (np.isfinite(a) and np.isfinite(b) and 0 <= a < b):
+            raise ConfigError(f"exclude range {take}:{a:g}-{b:g} s: need finite times with 0 <= start < end")
+        out.append((take, a, b))
     return tuple(str(t) for t in takes), tuple(out)
 
 

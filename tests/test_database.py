@@ -303,3 +303,12 @@ def test_damaged_files_are_refused(db, tmp_path, breakage, message):
 def test_a_name_too_long_is_no_database_folder(tmp_path):
     with pytest.raises(DatabaseError, match="no database folder"):
         MatchingDatabase.load(tmp_path / ("d" * 300))
+
+
+@pytest.mark.parametrize("rng", [("a", float("nan"), 2.0), ("a", 0.0, float("inf")), ("a", 3.0, 1.0), ("a", -1.0, 1.0)])
+def test_exclusion_ranges_must_be_finite_and_ordered(rng):
+    from gesturekit.database import normalise_exclusions
+
+    with pytest.raises(ConfigError, match="0 <= start < end"):
+        normalise_exclusions((), [rng])
+    assert normalise_exclusions(("b",), [("a", 0, 1.5)]) == (("b",), (("a", 0.0, 1.5),))
