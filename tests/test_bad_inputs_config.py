@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -251,11 +250,11 @@ def test_broken_database_refused_by_synthesize(work):
 
 
 # ---- Habibie et al. 2021 npz files ------------------------------------------------------------
-def _habibie_npz(f: Path, seconds: float = 6.0, *, body_dtype=np.float32):
+def _habibie_npz(f: Path, seconds: float = 6.0):
     n, s = int(seconds * 15), int(seconds * 16000)
     rng = np.random.default_rng(0)
     np.savez(f, wav=(0.1 * rng.standard_normal((1, s))).astype(np.float32),
-             body=(0.1 * rng.standard_normal((1, n, 165))).astype(body_dtype))
+             body=(0.1 * rng.standard_normal((1, n, 165))).astype(np.float32))
 
 
 def _truncated_npz(folder: Path) -> Path:
