@@ -6,12 +6,14 @@ Every command turns errors of the gesturekit family into one line on stderr
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 import warnings
 from pathlib import Path
 
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
+from .paths import is_dir, is_file
 
 __all__ = ["main", "build_parser"]
 
@@ -28,7 +30,9 @@ def _cmd_build_db(args) -> int:
     from .paths import default_database_path
 
     t0 = time.perf_counter()
+    _check_positive("--fps", args.fps, "frame rate")
     if args.demo:
+        _check_positive("--minutes", args.minutes, "number of minutes")
         if args.folder is not None:
             raise ConfigError("give either a folder of takes or --demo, not both")
         out = Path(args.out) if args.out else default_database_path()
@@ -89,14 +93,35 @@ def _cmd_info(args) -> int:
     return 0
 
 
-def _parse_range(text: str) -> tuple[str, float, float]:
-    """``TAKE:START-END`` (seconds) -> (take, start, end)."""
-    import re
+def _check_positive(option: str, value: float | None, what: str) -> None:
+    """Refuse a numeric option that is given but not a finite number > 0 (nan, inf, 0, negative)."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{option} must be a positive {what}, got {value:g}")
 
-    m = re.match(r"^(.+):\s*([0-9.]+)\s*-\s*([0-9.]+)\s*$", text)
-    if not m:
-        raise ConfigError(f"--exclude-range {text!r} must look like TAKE:START-END (seconds)")
-    return m.group(1), float(m.group(2)), float(m.group(3))
+
+def _parse_range(text: str) -> tuple[str, float, float]:
+    """``TAKE:START-END`` (seconds; the range after the last ``:``) -> (take, start, end)."""
+    from .control import parse_time_range
+
+    take, colon, times = text.rpartition(":")
+    what = f"--exclude-range {text!r}"
+    if not colon or not take.strip():
+        raise ConfigError(f"{what} must look like TAKE:START-END in seconds")
+    start, end = parse_time_range(times, what=what, form="TAKE:START-END")
+    return take.strip(), start, end
+
+
+def _parse_holdouts(texts) -> list:
+    """Check ``--holdout`` values before any work starts; each as :class:`~gesturekit.evaluate.run.Holdout`."""
+    from .evaluate.run import parse_holdout
+
+    out = []
+    for text in texts or ():
+        try:
+            out.append(parse_holdout(text))
+        except ConfigError as exc:
+            raise ConfigError(f"--holdout: {exc}") from None
+    return out
 
 
 def _speech_files(inputs: list[str]) -> list[Path]:
@@ -106,7 +131,7 @@ def _speech_files(inputs: list[str]) -> list[Path]:
     files: list[Path] = []
     for item in inputs:
         p = Path(item)
-        if p.is_dir():
+        if is_dir(p):
             found = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
             if not found:
                 raise InputFileError(f"no speech files ({'/'.join(AUDIO_EXTENSIONS)}) in this folder", path=p)
@@ -117,7 +142,6 @@ def _speech_files(inputs: list[str]) -> list[Path]:
 
 
 def _cmd_synthesize(args) -> int:
-    from .control import load_control_file, parse_control
     from .database import MatchingDatabase
     from .datasets.audio import load_audio
     from .demo import open_default_database
@@ -126,22 +150,17 @@ def _cmd_synthesize(args) -> int:
 
     t0 = time.perf_counter()
     files = _speech_files(args.speech)
+    control = _control_from_arg(args.control) or ""
+    exclude_ranges = tuple(_parse_range(r) for r in (args.exclude_range or ()))
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
-    control = ""
-    if args.control:
-        if Path(args.control).is_file():
-            control = load_control_file(args.control).to_text()
-        else:
-            control = parse_control(args.control).to_text()
     config = SynthesisConfig(
         k=args.k, step=args.step, topk=args.topk, seed=args.seed, init=args.init_pose,
         mask_rule=args.mask_rule, blend=args.blend, control=control,
         exclude_takes=tuple(args.exclude_take or ()),
-        exclude_ranges=tuple(_parse_range(r) for r in (args.exclude_range or ())),
+        exclude_ranges=exclude_ranges,
         **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
     )
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     stems = [safe_filename(f.stem) for f in files]
     if len(set(stems)) != len(stems):
         raise ConfigError("two speech files have the same name; synthesise them in separate runs")
@@ -152,6 +171,7 @@ def _cmd_synthesize(args) -> int:
         raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
     audios = [load_audio(f) for f in files]
     results = synthesize_batch(audios, db=db, config=config, refiner=args.refiner)
+    out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     for f, stem, res in zip(files, stems, results):
         res.source = f.name
         res.save_npz(targets[(stem, "npz")], overwrite=args.force)
@@ -183,6 +203,7 @@ def _cmd_train_refiner(args) -> int:
         raise ConfigError("give the database to train on with --db, or --demo for the demo database")
     if args.resume and args.force:
         raise ConfigError("--resume goes on from the folder and --force replaces it; give one of them")
+    exclude_ranges = tuple(_parse_range(x) for x in (args.exclude_range or ()))
     db = open_default_database() if args.demo else MatchingDatabase.load(args.db)
     if args.demo:
         from .demo import DEMO_MINUTES, DEMO_SEED
@@ -194,7 +215,7 @@ def _cmd_train_refiner(args) -> int:
     data = None
     if not args.resume or args.exclude_take or args.exclude_range:
         data = PairsConfig(seed=args.seed, exclude_takes=tuple(args.exclude_take or ()),
-                           exclude_ranges=tuple(_parse_range(x) for x in (args.exclude_range or ())))
+                           exclude_ranges=exclude_ranges)
     train = replace(preset(args.preset).train, seed=args.seed)
     bars: dict = {}
 
@@ -241,9 +262,16 @@ def _control_from_arg(text: str | None) -> str | None:
 
     if not text:
         return None
-    if Path(text).is_file():
+    if is_file(text):
         return load_control_file(text).to_text()
-    return parse_control(text).to_text()
+    if text.strip().lower().endswith((".csv", ".json")):
+        from .errors import InputFileError
+
+        raise InputFileError("control file not found", path=text)
+    try:
+        return parse_control(text).to_text()
+    except ConfigError as exc:
+        raise ConfigError(f"--control: {exc}") from None
 
 
 def _cmd_evaluate(args) -> int:
@@ -258,6 +286,9 @@ def _cmd_evaluate(args) -> int:
     existing = [str(p) for p in targets if p.exists()]
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already; add --force to replace the evaluation in {out}")
+    _parse_holdouts([args.holdout])
+    _check_positive("--beat-sigma", args.beat_sigma, "time in seconds")
+    control = _control_from_arg(args.control)
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
     config = SynthesisConfig(k=args.k, step=args.step, seed=args.seed, init=args.init_pose,
                              mask_rule=args.mask_rule, blend=args.blend)
@@ -269,7 +300,7 @@ def _cmd_evaluate(args) -> int:
             bar.refresh()
 
         ev = run_evaluation(db, holdout=args.holdout, systems=args.systems, config=config,
-                            control=_control_from_arg(args.control), fgd_model=args.fgd_model,
+                            control=control, fgd_model=args.fgd_model,
                             refiner=args.refiner, sigma=args.beat_sigma, progress=progress)
     print(ev.to_markdown())
     written = ev.save(out, overwrite=args.force)
@@ -288,6 +319,7 @@ def _cmd_train_fgd(args) -> int:
     out = Path(args.out)
     if (out / "fgd.json").exists() and not args.force:
         raise GestureKitError(f"{out}: an FGD model exists here already; add --force to replace it")
+    _parse_holdouts(args.holdout)
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
     takes, ranges = [], []
     for h in args.holdout or ():
@@ -324,6 +356,10 @@ def _cmd_stimuli(args) -> int:
         raise ConfigError(f"--resolution must look like 640x480, got {args.resolution!r}")
     if not args.audio and not args.holdout:
         raise ConfigError("give speech with --audio (files or folders) and/or --holdout TAKE:START-END")
+    _parse_holdouts(args.holdout)
+    if not math.isfinite(args.loudness):
+        raise ConfigError(f"--loudness must be a finite number of LUFS (e.g. -23), got {args.loudness:g}")
+    control = _control_from_arg(args.control) or ""
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
     bars: dict = {}
 
@@ -338,7 +374,7 @@ def _cmd_stimuli(args) -> int:
     try:
         res = make_stimuli(
             db, out=args.out, audio=args.audio or (), holdouts=args.holdout or (), systems=args.systems,
-            seed=args.seed, participants=args.participants, control=_control_from_arg(args.control) or "",
+            seed=args.seed, participants=args.participants, control=control,
             refiner=args.refiner, resolution=(int(m.group(1)), int(m.group(2))), loudness_lufs=args.loudness,
             workers=args.workers, scheduler=args.scheduler, overwrite=args.force, progress=progress,
         )
@@ -542,6 +578,15 @@ def _limits_of(args):
     return override(SPEECH_MINUTES, getattr(args, "max_speech_minutes", None), option="--max-speech-minutes")
 
 
+def _os_error_text(exc: OSError) -> str:
+    """``PATH: strerror`` (both paths for a rename or copy), or the error's own text when it names no file."""
+    problem = exc.strerror or str(exc)
+    if exc.filename is None:
+        return problem
+    names = str(exc.filename) if exc.filename2 is None else f"{exc.filename} -> {exc.filename2}"
+    return f"{names}: {problem}"
+
+
 def main(argv=None) -> int:
     """Run the command line; returns the exit status."""
     args = build_parser().parse_args(argv)
@@ -554,6 +599,12 @@ def main(argv=None) -> int:
                 return args.func(args)
         except GestureKitError as exc:
             print(f"gesturekit: error: {exc}", file=sys.stderr)
+            return 2
+        except OSError as exc:
+            # the last net for a user's file that could not be read (a folder where a file was
+            # expected, a name too long, an I/O error): one line naming it; other exceptions are
+            # bugs and keep their traceback
+            print(f"gesturekit: error: {_os_error_text(exc)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             print("gesturekit: interrupted", file=sys.stderr)

@@ -29,6 +29,7 @@ __all__ = [
     "frame_attributes",
     "Segment",
     "ControlTrack",
+    "parse_time_range",
     "parse_control",
     "load_control_file",
     "constraint_mask",
@@ -201,11 +202,54 @@ class ControlTrack:
                 start, end, text = float(r["start_s"]), float(r["end_s"]), str(r["constraint"])
             except (KeyError, TypeError, ValueError) as exc:
                 raise ConfigError(f"{source}: row {i + 1} needs start_s, end_s and constraint ({exc})") from None
-            segs.append(Segment(start, end, _parse_constraints(text)))
+            try:
+                segs.append(Segment(start, end, _parse_constraints(text)))
+            except ConfigError as exc:
+                raise ConfigError(f"{source}: row {i + 1}: {exc.problem}") from None
         return cls(tuple(segs))
 
 
-_SEGMENT_RE = re.compile(r"^\s*([0-9.]+)\s*-\s*([0-9.]+)\s*:\s*(.+?)\s*$")
+# a time in seconds: plain decimal digits (no sign, exponent, nan or inf), e.g. 3, 2.5, .5
+_SECONDS = r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)"
+_TIME_RANGE_RE = re.compile(rf"^\s*({_SECONDS})\s*-\s*({_SECONDS})\s*$")
+
+
+def parse_time_range(text: str, *, what: str = "time range", form: str = "START-END") -> tuple[float, float]:
+    """``"START-END"`` in seconds -> ``(start, end)``, with ``0 <= start < end`` and both finite.
+
+    The one grammar of every time range a user types (control segments,
+    ``--exclude-range``, ``--holdout``): two plain decimal numbers joined by
+    ``-``. Signs, exponents, ``nan`` and ``inf`` are refused here rather than
+    being half-accepted by a pattern and failing later in ``float()``.
+
+    Parameters
+    ----------
+    text : str
+        The range alone, e.g. ``"0-2.5"``.
+    what : str
+        How the message names what was given (e.g. ``"--exclude-range 'T:1-2'"``).
+    form : str
+        The form the message asks for (e.g. ``"TAKE:START-END"``).
+
+    Returns
+    -------
+    (float, float)
+        Start and end, seconds.
+
+    Raises
+    ------
+    ConfigError
+        Not of that form, not finite, or the end not after the start.
+    """
+    m = _TIME_RANGE_RE.match(text)
+    if not m:
+        raise ConfigError(f"{what} must look like {form} in seconds (plain numbers >= 0, e.g. 0-2.5)")
+    start, end = float(m.group(1)), float(m.group(2))
+    if not (np.isfinite(start) and np.isfinite(end)):
+        raise ConfigError(f"{what}: a time is too large to be seconds")
+    if not end > start:
+        raise ConfigError(f"{what}: end must be after start (need 0 <= start < end)")
+    return start, end
 
 
 def _parse_constraints(text: str) -> tuple[tuple[str, str], ...]:
@@ -225,7 +269,14 @@ def _parse_constraints(text: str) -> tuple[tuple[str, str], ...]:
 def parse_control(text: str) -> ControlTrack:
     """Parse ``"0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric"`` (seconds).
 
-    An empty string gives an empty (unconstrained) track.
+    An empty string gives an empty (unconstrained) track. Times follow
+    :func:`parse_time_range`.
+
+    Raises
+    ------
+    ConfigError
+        A segment that is not ``START-END:name=value[+name=value...]``, an unknown
+        control or value, or overlapping segments.
     """
     if text is None or not text.strip():
         return ControlTrack(())
@@ -233,19 +284,34 @@ def parse_control(text: str) -> ControlTrack:
     for chunk in text.split(","):
         if not chunk.strip():
             continue
-        m = _SEGMENT_RE.match(chunk)
-        if not m:
+        times, colon, constraints = chunk.partition(":")
+        if not colon or not constraints.strip():
             raise ConfigError(f"control segment {chunk.strip()!r} must look like START-END:name=value (seconds)")
-        segs.append(Segment(float(m.group(1)), float(m.group(2)), _parse_constraints(m.group(3))))
+        start, end = parse_time_range(times, what=f"control segment {chunk.strip()!r}", form="START-END:name=value")
+        segs.append(Segment(start, end, _parse_constraints(constraints)))
     return ControlTrack(tuple(segs))
 
 
+_CONTROL_COLUMNS = ("start_s", "end_s", "constraint")
+
+
 def load_control_file(path: str | os.PathLike) -> ControlTrack:
-    """Read a control track from CSV (columns start_s, end_s, constraint) or JSON (a list of such objects)."""
+    """Read a control track from CSV (columns start_s, end_s, constraint) or JSON (a list of such objects).
+
+    JSON may also be an object whose ``segments`` is that list.
+
+    Raises
+    ------
+    InputFileError
+        Unreadable, not UTF-8, not valid JSON, JSON of another structure, CSV
+        without the three columns, or a row that is not a valid segment.
+    """
     p = os.fspath(path)
     try:
         with open(p, encoding="utf-8") as fh:
             text = fh.read()
+    except UnicodeDecodeError as exc:
+        raise InputFileError(f"not UTF-8 text (byte {exc.start}); save the control file as UTF-8", path=p) from None
     except OSError as exc:
         raise InputFileError(f"cannot read control file ({exc.strerror})", path=p) from None
     try:
@@ -253,13 +319,30 @@ def load_control_file(path: str | os.PathLike) -> ControlTrack:
             data = json.loads(text)
             if isinstance(data, dict):
                 data = data.get("segments", [])
+            if not isinstance(data, list):
+                raise InputFileError(
+                    f"a JSON control file must hold a list of segments (objects with {', '.join(_CONTROL_COLUMNS)}), "
+                    f"found {type(data).__name__}", path=p)
+            for i, r in enumerate(data):
+                if not isinstance(r, dict):
+                    raise InputFileError(f"row {i + 1} must be an object with {', '.join(_CONTROL_COLUMNS)}, "
+                                         f"found {type(r).__name__}", path=p)
             return ControlTrack.from_records(data, source=p)
-        rows = list(csv.DictReader(io.StringIO(text)))
-        return ControlTrack.from_records(rows, source=p)
+        reader = csv.DictReader(io.StringIO(text))
+        columns = reader.fieldnames or []
+        missing = [c for c in _CONTROL_COLUMNS if c not in columns]
+        if missing:
+            raise InputFileError(
+                f"a CSV control file needs the columns {', '.join(_CONTROL_COLUMNS)}; missing {', '.join(missing)} "
+                f"(found {', '.join(columns) or 'no header'})", path=p)
+        return ControlTrack.from_records(list(reader), source=p)
     except json.JSONDecodeError as exc:
         raise InputFileError(f"not valid JSON ({exc.msg} at line {exc.lineno})", path=p) from None
     except ConfigError as exc:
-        raise InputFileError(exc.problem, path=p) from None
+        problem = exc.problem
+        if problem.startswith(p + ": "):
+            problem = problem[len(p) + 2:]
+        raise InputFileError(problem, path=p) from None
 
 
 def constraint_mask(

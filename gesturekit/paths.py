@@ -16,6 +16,8 @@ __all__ = [
     "default_database_path",
     "home",
     "is_allowed",
+    "is_dir",
+    "is_file",
 ]
 
 #: Environment variable listing more folders the app may read and write (``os.pathsep``-separated).
@@ -122,3 +124,24 @@ def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) ->
         f"(whoever runs the server can add folders with {APP_ROOTS_ENV})",
         path=path,
     )
+
+
+def is_file(path) -> bool:
+    """Whether ``path`` names an existing regular file; never raises.
+
+    For text a user typed that may be a file name or something else (a control
+    track, a preset name): a name the system cannot look up (longer than 255
+    characters, a NUL byte, a loop of links) is not a file rather than an error.
+    """
+    try:
+        return Path(path).is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def is_dir(path) -> bool:
+    """Whether ``path`` names an existing folder; never raises (see :func:`is_file`)."""
+    try:
+        return Path(path).is_dir()
+    except (OSError, ValueError):
+        return False

@@ -68,3 +68,42 @@ def test_position_files_need_joint_map_and_fps(tmp_path, capsys):
 def test_python_dash_m_runs_the_cli():
     r = subprocess.run([sys.executable, "-m", "gesturekit", "--help"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "build-db" in r.stdout
+
+
+def test_an_os_error_while_reading_is_one_message_naming_the_file(monkeypatch, capsys):
+    import gesturekit.cli as cli
+
+    def read_fails(args):
+        raise IsADirectoryError(21, "Is a directory", "/data/takes/t.wav")
+
+    monkeypatch.setattr(cli, "_cmd_info", read_fails)
+    assert cli.main(["info", "somewhere"]) == 2
+    assert capsys.readouterr().err == "gesturekit: error: /data/takes/t.wav: Is a directory\n"
+
+    def copy_fails(args):
+        raise OSError(5, "Input/output error", "/a/in.npy", None, "/b/out.npy")
+
+    monkeypatch.setattr(cli, "_cmd_info", copy_fails)
+    assert cli.main(["info", "somewhere"]) == 2
+    assert capsys.readouterr().err == "gesturekit: error: /a/in.npy -> /b/out.npy: Input/output error\n"
+
+
+def test_a_bug_is_not_hidden_behind_a_message(monkeypatch):
+    import gesturekit.cli as cli
+
+    def bug(args):
+        return {}["missing"]
+
+    monkeypatch.setattr(cli, "_cmd_info", bug)
+    with pytest.raises(KeyError):
+        cli.main(["info", "somewhere"])
+
+
+def test_long_user_text_is_never_a_failed_file_lookup(tmp_path):
+    from gesturekit.paths import is_dir, is_file
+
+    long = "0-1:left_hand=high," * 20
+    assert len(long) > 255
+    assert not is_file(long) and not is_dir(long) and not is_file("a\0b") and not is_dir(tmp_path / ("x" * 300))
+    (tmp_path / "f.csv").write_text("start_s,end_s,constraint\n")
+    assert is_file(tmp_path / "f.csv") and not is_dir(tmp_path / "f.csv") and is_dir(tmp_path)

@@ -14,6 +14,7 @@ from gesturekit.control import (
     frame_attributes,
     load_control_file,
     parse_control,
+    parse_time_range,
     step_masks,
 )
 from gesturekit.errors import ConfigError, InputFileError
@@ -133,3 +134,70 @@ def test_step_masks_use_each_steps_middle_frame():
     assert masks.shape == (2, 2, 64) and masks[0].all() and not masks[1].any()
     masks, idx = step_masks(ControlTrack(()), attrs, thr, n_frames=45, step=8)
     assert masks is None and (idx == -1).all()
+
+
+_decimal = st.decimals(min_value=0, max_value=10**6, allow_nan=False, allow_infinity=False, places=3)
+
+
+@settings(max_examples=80, deadline=None)
+@given(_decimal, _decimal)
+def test_time_range_accepts_plain_decimals_with_start_before_end(a, b):
+    text = f"{a}-{b}"
+    if a < b:
+        assert parse_time_range(text) == (float(a), float(b))
+    else:
+        with pytest.raises(ConfigError, match="end must be after start"):
+            parse_time_range(text)
+
+
+@pytest.mark.parametrize("text", ["1..2-3", "nan-3", "0-inf", "1e3-2e3", "-1-2", "+1-2", "1-", "-", "1 2-3", "",
+                                  "0x1-2", "1_0-20"])
+def test_time_range_refuses_what_is_not_two_plain_numbers(text):
+    with pytest.raises(ConfigError, match="START-END in seconds"):
+        parse_time_range(text)
+
+
+def test_time_range_too_large_to_be_seconds():
+    with pytest.raises(ConfigError, match="too large"):
+        parse_time_range("0-" + "9" * 400)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(alphabet=st.sampled_from("0123456789.-:,+=e nafilt_hghwsowd"), max_size=40) | st.text(max_size=40))
+def test_parse_control_raises_only_config_errors(text):
+    try:
+        track = parse_control(text)
+    except ConfigError:
+        return
+    assert all(0 <= s.start_s < s.end_s and np.isfinite(s.end_s) for s in track.segments)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.binary(max_size=120), st.sampled_from(["c.csv", "c.json"]))
+def test_control_file_of_any_bytes_is_read_or_refused_by_name(tmp_path_factory, data, name):
+    f = tmp_path_factory.mktemp("ctl") / name
+    f.write_bytes(data)
+    try:
+        track = load_control_file(f)
+    except InputFileError as exc:
+        assert exc.path == str(f)
+        return
+    assert isinstance(track, ControlTrack)
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("c.csv", "start_s,end_s,constraint\n0,1,left_hand=h\xe9\n".encode("latin-1"), "not UTF-8"),
+    ("c.json", b"42", "must hold a list of segments"),
+    ("c.json", b'{"segments": "0-1:left_hand=high"}', "must hold a list of segments"),
+    ("c.json", b'[["0", "1", "left_hand=high"]]', "row 1 must be an object"),
+    ("c.json", b'[{"start_s": 0, "end_s": 1, "constraint": "left_hand=high"}, {"start_s": 2}]', "row 2 needs"),
+    ("c.json", b'[{"start_s": 1, "end_s": 0.5, "constraint": "left_hand=high"}]', "row 1: .*end must be after"),
+    ("c.csv", b"start,end,constraint\n0,1,left_hand=high\n", "missing start_s, end_s"),
+    ("c.csv", b"", "no header"),
+])
+def test_control_file_structure_errors(tmp_path, name, content, message):
+    f = tmp_path / name
+    f.write_bytes(content)
+    with pytest.raises(InputFileError, match=message) as info:
+        load_control_file(f)
+    assert info.value.path == str(f) and str(info.value).count(str(f)) == 1

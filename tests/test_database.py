@@ -192,3 +192,123 @@ def test_query_features_use_database_statistics(db, takes):
     fq, aq = db.query_features(takes[0].audio)
     assert fq.shape == (300, 112) and aq.shape == (300, 28)
     np.testing.assert_allclose(fq[:64], db.F[0], atol=1e-4)
+
+
+# ---- load validates what it reads -------------------------------------------------------------
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_json = st.recursive(
+    st.none() | st.booleans() | st.integers(-3, 10**7) | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(max_size=4),
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner, max_size=3),
+    max_leaves=5,
+)
+
+
+@pytest.fixture(scope="module")
+def saved(db, tmp_path_factory):
+    return db.save(tmp_path_factory.mktemp("validated") / "db")
+
+
+def _places(meta):
+    """Every editable place of database.json: (container, key) pairs, format/layout left alone."""
+    out = [(meta, k) for k in meta if k not in ("format", "format_version", "layout")]
+    for name in ("build", "thresholds", "counts"):
+        out += [(meta[name], k) for k in meta[name]]
+    for t in meta["takes"]:
+        out += [(t, k) for k in t]
+    out.append((meta["takes"], 0))
+    return out
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_damaged_database_json_is_refused_or_consistent(saved, data):
+    original = (saved / "database.json").read_text()
+    meta = json.loads(original)
+    places = _places(meta)
+    container, key = places[data.draw(st.integers(0, len(places) - 1), label="place")]
+    if data.draw(st.booleans(), label="delete") and isinstance(container, dict):
+        del container[key]
+    else:
+        container[key] = data.draw(_json, label="value")
+    (saved / "database.json").write_text(json.dumps(meta))
+    try:
+        loaded = MatchingDatabase.load(saved)
+    except DatabaseError as exc:
+        assert exc.path == str(saved)
+        return
+    finally:
+        (saved / "database.json").write_text(original)
+    # whatever loads is consistent: every clip inside its take, the tables and thresholds usable
+    table = loaded.clips_table()
+    frames = {t["name"]: t["n_frames"] for t in loaded.meta["takes"]}
+    assert all(row.start_frame + loaded.clip_frames <= frames[row.take] for row in table.itertuples())
+    assert set(loaded.thresholds) == set(ATTRIBUTE_NAMES)
+    loaded.takes_table()
+    assert loaded.summary_text().startswith("database")
+
+
+def _resave(path, name, array):
+    np.save(path / f"{name}.npy", array)
+
+
+@pytest.mark.parametrize("name, change, message", [
+    ("clip_take", lambda a: a[::-1].copy(), "does not match the takes"),
+    ("clip_take", lambda a: a.astype(np.float64), "must be integers"),
+    ("clip_start", lambda a: a[:-1], "clip_start.npy has"),
+    ("clip_start", lambda a: a + 10_000, "outside take"),
+    ("valid", lambda a: a[:, :10], r"valid.npy has shape"),
+    ("pose_track", lambda a: a[:, :64], "pose_track.npy has shape"),
+    ("clip_take", lambda a: a[:0], "no clips"),
+])
+def test_inconsistent_arrays_are_refused(db, tmp_path, name, change, message):
+    path = db.save(tmp_path / "db")
+    _resave(path, name, change(np.load(path / f"{name}.npy")))
+    with pytest.raises(DatabaseError, match=message):
+        MatchingDatabase.load(path)
+
+
+def test_overlap_cut_is_checked_too(db, tmp_path):
+    path = db.save(tmp_path / "db")
+    start = np.load(path / "overlap" / "clip_start.npy")
+    start[-1] = 10**6
+    np.save(path / "overlap" / "clip_start.npy", start)
+    with pytest.raises(DatabaseError, match="overlap/clip_start.npy"):
+        MatchingDatabase.load(path)
+
+
+@pytest.mark.parametrize("breakage, message", [
+    (lambda p: (p / "stats.npz").write_bytes((p / "stats.npz").read_bytes()[:300]), "stats.npz cannot be read"),
+    (lambda p: np.savez(p / "stats.npz", F_mean=np.array([None], dtype=object)), "stats.npz cannot be read"),
+    (lambda p: np.savez(p / "stats.npz", F_mean=np.zeros(LAYOUT.audio_dim)), "stats.npz lacks F_std"),
+    (lambda p: np.savez(p / "stats.npz", **{f"{k}_{s}": np.full(n, np.nan) for k, n in
+                                            (("F", LAYOUT.audio_dim), ("P", LAYOUT.pose_dim),
+                                             ("A", LAYOUT.cgan_audio_dim)) for s in ("mean", "std")}),
+     "F_mean must be 112 finite numbers"),
+    (lambda p: (p / "audio.npy").write_bytes(b"not an array"), "audio.npy cannot be read"),
+    (lambda p: np.save(p / "audio.npy", np.zeros(10, np.int16)), "audio.npy must be int16 samples"),
+    (lambda p: ((p / "F.npy").unlink(), (p / "F.npy").mkdir()), "F.npy cannot be read"),
+    (lambda p: (p / "database.json").write_text('{"format": "gesturekit-matching-database", "format_version": 1}'),
+     "feature layout"),
+])
+def test_damaged_files_are_refused(db, tmp_path, breakage, message):
+    path = db.save(tmp_path / "db")
+    breakage(path)
+    with pytest.raises(DatabaseError, match=message):
+        MatchingDatabase.load(path)
+
+
+def test_a_name_too_long_is_no_database_folder(tmp_path):
+    with pytest.raises(DatabaseError, match="no database folder"):
+        MatchingDatabase.load(tmp_path / ("d" * 300))
+
+
+@pytest.mark.parametrize("rng", [("a", float("nan"), 2.0), ("a", 0.0, float("inf")), ("a", 3.0, 1.0), ("a", -1.0, 1.0)])
+def test_exclusion_ranges_must_be_finite_and_ordered(rng):
+    from gesturekit.database import normalise_exclusions
+
+    with pytest.raises(ConfigError, match="0 <= start < end"):
+        normalise_exclusions((), [rng])
+    assert normalise_exclusions(("b",), [("a", 0, 1.5)]) == (("b",), (("a", 0.0, 1.5),))

@@ -148,3 +148,46 @@ def test_not_an_archive(tmp_path):
     np.savez(pickled, wav=np.array([{"a": 1}], dtype=object), body=np.zeros((1, FRAMES, 165)))
     with pytest.raises(MotionFileError, match="pickled.npz"):
         load_habibie2021(pickled)
+
+
+# ---- discovery reads headers only, and never unpickles ---------------------------------------
+from gesturekit.datasets.habibie2021 import count_sequences, is_habibie2021_npz  # noqa: E402
+from gesturekit.datasets.takes import count_takes, discover_takes  # noqa: E402
+
+
+@pytest.mark.parametrize("body_shape, n", [((3, FRAMES, 165), 3), ((2, FRAMES, 55, 3), 2), ((FRAMES, 165), 1)])
+def test_sequences_are_counted_from_the_header(tmp_path, body_shape, n):
+    path = tmp_path / "s.npz"
+    np.savez(path, wav=np.zeros((n, SAMPLES), np.float32), body=np.zeros(body_shape, np.float32))
+    assert is_habibie2021_npz(path) and count_sequences(path) == n
+    assert count_takes(discover_takes(tmp_path)) == n
+
+
+def test_object_body_is_refused_without_unpickling(tmp_path, monkeypatch):
+    import pickle
+
+    path = tmp_path / "s.npz"
+    np.savez(path, wav=np.zeros((1, SAMPLES), np.float32), body=np.array([{"a": 1}], dtype=object))
+
+    def no_unpickling(*args, **kwargs):
+        raise AssertionError("unpickled")
+
+    monkeypatch.setattr(pickle, "load", no_unpickling)
+    monkeypatch.setattr(pickle, "loads", no_unpickling)
+    with pytest.raises(MotionFileError, match="dtype object.*never unpickles") as info:
+        count_sequences(path)
+    assert info.value.path == str(path)
+    with pytest.raises(MotionFileError, match="Object arrays cannot be loaded"):
+        load_habibie2021(path)
+
+
+@pytest.mark.parametrize("keep", [0.2, 0.6, 0.95])
+def test_truncated_archive_is_refused_in_discovery(tmp_path, keep):
+    wav, body, mfcc = make()
+    path = tmp_path / "s.npz"
+    np.savez(path, wav=wav, body=body, mfcc=mfcc)
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * keep)])
+    with pytest.raises(MotionFileError, match="not a readable npz archive.*truncated") as info:
+        discover_takes(tmp_path, kind="habibie2021")
+    assert info.value.path == str(path)

@@ -254,3 +254,94 @@ def test_the_shipped_demo_refiner_loads():
     assert ref.config["preset"] == "quick" and ref.config["complete"]
     g, a = smooth_inputs(100)
     assert np.isfinite(ref.refine(g, a)).all()
+
+
+# ---- config.json is checked against the structure training writes ---------------------------
+from hypothesis import HealthCheck  # noqa: E402
+
+from gesturekit.errors import GestureKitError  # noqa: E402
+from gesturekit.refine.folder import read_refiner_config  # noqa: E402
+
+_DEMO = Path(__file__).resolve().parents[1] / "gesturekit" / "assets" / "demo-refiner"
+_json = st.recursive(
+    st.none() | st.booleans() | st.integers(-3, 300) | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(max_size=4),
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner, max_size=3),
+    max_leaves=5,
+)
+
+
+@pytest.fixture(scope="module")
+def demo_copy(tmp_path_factory):
+    import shutil
+
+    return Path(shutil.copytree(_DEMO, tmp_path_factory.mktemp("refiner") / "demo"))
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_damaged_config_is_refused_or_loads(demo_copy, data):
+    original = (demo_copy / "config.json").read_text()
+    cfg = json.loads(original)
+    places = [(cfg, k) for k in cfg if k not in ("format", "format_version")]
+    places += [(cfg["model"], k) for k in cfg["model"]] + [(cfg["files"], k) for k in cfg["files"]]
+    container, key = places[data.draw(st.integers(0, len(places) - 1), label="place")]
+    if data.draw(st.booleans(), label="delete"):
+        del container[key]
+    else:
+        container[key] = data.draw(_json, label="value")
+    (demo_copy / "config.json").write_text(json.dumps(cfg))
+    try:
+        refiner = Refiner.load(demo_copy)
+    except GestureKitError as exc:
+        assert exc.path == str(demo_copy)
+        return
+    finally:
+        (demo_copy / "config.json").write_text(original)
+    assert refiner.window % 8 == 0
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda c: {**c, "files": list(c["files"])}, "'files' must be an object, found list"),
+    (lambda c: {**c, "files": {"generator.pt": "abc"}}, "files.generator.pt must be the file's SHA-256"),
+    (lambda c: {**c, "model": {**c["model"], "generator_channels": [32, "64"]}}, "model.generator_channels"),
+    (lambda c: {**c, "model": {**c["model"], "window": True}}, "model.window must be a positive integer"),
+    (lambda c: {**c, "iteration": 1.5}, "'iteration' must be an integer"),
+    (lambda c: {**c, "resumable": "yes"}, "'resumable' must be true or false"),
+    (lambda c: {**c, "training": []}, "'training' must be an object"),
+    (lambda c: {k: v for k, v in c.items() if k != "joint_names"}, "'joint_names' must be a list"),
+])
+def test_config_of_the_wrong_structure_is_named(demo_copy, tmp_path, edit, message):
+    import shutil
+
+    folder = Path(shutil.copytree(demo_copy, tmp_path / "r"))
+    cfg = json.loads((folder / "config.json").read_text())
+    (folder / "config.json").write_text(json.dumps(edit(cfg)))
+    with pytest.raises(InputFileError, match=message) as info:
+        read_refiner_config(folder)
+    assert info.value.path == str(folder)
+
+
+@pytest.mark.parametrize("stats, message", [
+    (b"PK\x03\x04 truncated", "stats.npz cannot be read"),
+    ({"audio_mean": np.array([None], dtype=object)}, "stats.npz cannot be read"),
+    ({"audio_mean": np.zeros(28), "audio_std": np.ones(28), "motion_mean": np.zeros(165),
+      "motion_std": np.full(165, np.inf)}, "motion_std must be a vector of finite numbers"),
+    ({"audio_mean": np.zeros(28), "audio_std": np.ones(27), "motion_mean": np.zeros(165),
+      "motion_std": np.ones(165)}, "does not fit the model"),
+])
+def test_damaged_stats_are_refused(demo_copy, tmp_path, stats, message):
+    import shutil
+
+    folder = Path(shutil.copytree(demo_copy, tmp_path / "r"))
+    if isinstance(stats, bytes):
+        (folder / "stats.npz").write_bytes(stats)
+    else:
+        np.savez(folder / "stats.npz", **stats)
+    with pytest.raises(InputFileError, match=message):
+        Refiner.load(folder)
+
+
+def test_a_name_too_long_is_no_refiner_folder(tmp_path):
+    with pytest.raises(InputFileError, match="no refiner folder"):
+        read_refiner_config(tmp_path / ("r" * 300))

@@ -145,6 +145,14 @@ def test_gt_needs_held_out_parts_and_knn_cgan_a_refiner(demo_path, speech_folder
         make_stimuli(db, out=tmp_path / "b", audio=[speech_folder], systems="knn,knn+cgan")
 
 
+@pytest.mark.parametrize("lufs", [float("nan"), float("inf")])
+def test_a_loudness_that_is_not_a_number_is_refused_before_any_work(demo_path, speech_folder, tmp_path, lufs):
+    db = MatchingDatabase.load(demo_path)
+    with pytest.raises(ConfigError, match="finite number of LUFS"):
+        make_stimuli(db, out=tmp_path / "a", audio=[speech_folder], systems="knn", loudness_lufs=lufs)
+    assert not (tmp_path / "a").exists()
+
+
 def test_dask_cluster_gives_the_same_study_as_local_processes(demo_path, speech_folder, tmp_path):
     from distributed import LocalCluster
 

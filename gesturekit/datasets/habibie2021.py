@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +30,13 @@ import numpy as np
 from .. import limits
 from ..errors import ConfigError, MotionFileError, warn
 from ..motion import AUDIO_SR, Motion, Take
+from ..paths import is_file
 from ..skeleton import FPS, N_JOINTS
 
-__all__ = ["load_habibie2021"]
+__all__ = ["load_habibie2021", "is_habibie2021_npz", "count_sequences"]
+
+# what a damaged archive raises while it is opened or read
+_READ_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error)
 
 _UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
@@ -81,7 +86,7 @@ def load_habibie2021(
     if units not in _UNIT_SCALE:
         raise ConfigError(f"units must be 'm', 'cm' or 'mm', got {units!r}")
     path = Path(path)
-    if not path.is_file():
+    if not is_file(path):
         raise MotionFileError("file not found", path=path)
     _check_limits(path)
     arrays = _read_npz(path)
@@ -142,11 +147,54 @@ def load_habibie2021(
     ]
 
 
-def _read_npz(path: Path) -> dict[str, np.ndarray]:
+def _open_npz(path: Path):
     try:
         loaded = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise MotionFileError(f"not a readable npz archive: {exc}", path=path) from None
+    except _READ_ERRORS as exc:
+        raise MotionFileError(f"not a readable npz archive ({exc}); is the file truncated?", path=path) from None
+    return loaded
+
+
+def is_habibie2021_npz(path: str | os.PathLike) -> bool:
+    """Whether an ``.npz`` file holds the arrays ``wav`` and ``body`` (reads the archive's index only).
+
+    Raises
+    ------
+    MotionFileError
+        The file is not a readable npz archive (e.g. truncated).
+    """
+    path = Path(path)
+    loaded = _open_npz(path)
+    if not isinstance(loaded, np.lib.npyio.NpzFile):
+        return False
+    with loaded as npz:
+        return "wav" in npz.files and "body" in npz.files
+
+
+def count_sequences(path: str | os.PathLike) -> int:
+    """Sequences (takes) of an archive, from the ``body`` array's header alone (no data is read).
+
+    Raises
+    ------
+    MotionFileError
+        Not a readable npz archive, no ``body``, or a ``body`` that is not a plain numeric
+        array (an object array would need unpickling, which gesturekit never does).
+    """
+    from ..limits import npz_headers
+
+    path = Path(path)
+    headers = npz_headers(path)
+    if "body" not in headers:
+        raise MotionFileError("missing key body", path=path)
+    shape, dtype = headers["body"]
+    if dtype.hasobject:
+        raise MotionFileError("'body' holds Python objects (dtype object); gesturekit reads numbers only and "
+                              "never unpickles", path=path)
+    return int(shape[0]) if len(shape) >= 3 else 1
+
+
+def _read_npz(path: Path) -> dict[str, np.ndarray]:
+    loaded = _open_npz(path)
     if not isinstance(loaded, np.lib.npyio.NpzFile):
         raise MotionFileError("expected an npz archive with keys 'wav' and 'body', found a single array",
                               path=path)
@@ -159,8 +207,9 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
                 path=path)
         try:
             return {k: npz[k] for k in ("wav", "body", "mfcc", "joint_order") if k in keys}
-        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-            raise MotionFileError(f"cannot read the archive's arrays: {exc}", path=path) from None
+        except _READ_ERRORS as exc:
+            # object arrays land here too: allow_pickle=False refuses them
+            raise MotionFileError(f"cannot read the archive's arrays ({exc})", path=path) from None
 
 
 def _check_limits(path: Path) -> None:

@@ -34,6 +34,7 @@ import numpy as np
 from .. import limits
 from ..errors import ConfigError, InputFileError, MotionFileError
 from ..motion import Motion, resample_positions
+from ..paths import is_file
 from ..skeleton import FPS, JOINT_NAMES
 from .presets import missing_and_unknown
 
@@ -134,7 +135,7 @@ def load_position_joint_map(spec: str | os.PathLike | Mapping | PositionJointMap
     if not isinstance(spec, (str, os.PathLike)):
         raise ConfigError(f"a position joint map must be a JSON file or a dict, got {type(spec).__name__}")
     path = Path(spec)
-    if not path.is_file():
+    if not is_file(path):
         raise InputFileError("joint map file not found", path=path)
     try:
         content = json.loads(path.read_text(encoding="utf-8-sig"))

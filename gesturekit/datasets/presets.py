@@ -46,6 +46,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from ..errors import ConfigError, InputFileError
+from ..paths import is_file
 from ..skeleton import FINGERS, JOINT_NAMES
 
 __all__ = ["JointMap", "PRESETS", "load_joint_map", "missing_and_unknown"]
@@ -161,7 +162,7 @@ def load_joint_map(spec: str | os.PathLike | Mapping | JointMap) -> JointMap:
     if not isinstance(spec, (str, os.PathLike)):
         raise ConfigError(f"a joint map must be a preset name, a JSON file or a dict, got {type(spec).__name__}")
     path = Path(spec)
-    if not path.is_file():
+    if not is_file(path):
         if path.suffix.lower() == ".json" or os.sep in str(spec):
             raise InputFileError("joint map file not found", path=path)
         raise ConfigError(f"unknown joint map {str(spec)!r}: not a preset ({', '.join(PRESETS)}) nor a JSON file")

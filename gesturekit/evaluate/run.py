@@ -33,7 +33,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -41,7 +40,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..control import ControlTrack, Segment, parse_control
+from ..control import ControlTrack, Segment, parse_control, parse_time_range
 from ..errors import ConfigError, warn
 from ..features import LAYOUT
 from ..motion import AUDIO_SR, Motion
@@ -124,20 +123,31 @@ class Holdout:
         return f"{self.take}:{self.start_s:g}-{self.end_s:g}"
 
 
-_RANGE_RE = re.compile(r"^(.+):\s*([0-9]+(?:\.[0-9]*)?)\s*-\s*([0-9]+(?:\.[0-9]*)?)\s*$")
-
-
 def parse_holdout(text) -> Holdout:
-    """``"TAKE"`` or ``"TAKE:START-END"`` (seconds) -> :class:`Holdout`."""
+    """``"TAKE"`` or ``"TAKE:START-END"`` (seconds) -> :class:`Holdout`.
+
+    Text after the last ``:`` is the time range (see
+    :func:`gesturekit.control.parse_time_range`), so a take name holding ``:``
+    cannot be held out whole.
+
+    Raises
+    ------
+    ConfigError
+        No take name, or a range that is not ``START-END`` with ``0 <= START < END``.
+    """
     if isinstance(text, Holdout):
         return text
     text = str(text).strip()
-    m = _RANGE_RE.match(text)
-    if m:
-        return Holdout(m.group(1), float(m.group(2)), float(m.group(3)))
     if not text:
         raise ConfigError("a held-out part must be TAKE or TAKE:START-END (seconds)")
-    return Holdout(text)
+    take, colon, times = text.rpartition(":")
+    if not colon:
+        return Holdout(text)
+    what = f"held-out part {text!r}"
+    if not take.strip():
+        raise ConfigError(f"{what} must look like TAKE or TAKE:START-END in seconds")
+    start, end = parse_time_range(times, what=what, form="TAKE or TAKE:START-END")
+    return Holdout(take.strip(), start, end)
 
 
 @dataclass

@@ -290,12 +290,13 @@ def speech_sources(db, *, audio=(), holdouts=()) -> list[StimulusSpeech]:
     from ..datasets.takes import AUDIO_EXTENSIONS
     from ..errors import InputFileError
     from ..evaluate.run import held_out
+    from ..paths import is_dir
 
     out: list[StimulusSpeech] = []
     for item in audio:
         p = Path(item)
         files = [p]
-        if p.is_dir():
+        if is_dir(p):
             files = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
             if not files:
                 raise InputFileError(f"no speech files ({'/'.join(AUDIO_EXTENSIONS)}) in this folder", path=p)
@@ -489,6 +490,9 @@ def make_stimuli(
     t0 = time.perf_counter()
     systems = parse_systems(systems)
     width, height = _check_resolution(resolution)
+    if not math.isfinite(loudness_lufs):
+        # a NaN target would scale every soundtrack to NaN samples
+        raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {loudness_lufs!r}")
     track = parse_control(control)
     refiner_name = None if refiner is None else str(getattr(refiner, "path", None) or refiner)
     if "knn+cgan" in systems:

@@ -3,9 +3,11 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 from ..errors import InputFileError
+from ..paths import is_dir
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "read_refiner_config"]
 
@@ -14,15 +16,21 @@ FORMAT_VERSION = 1
 
 
 def read_refiner_config(path: str | os.PathLike) -> dict:
-    """The ``config.json`` of a refiner folder, checked for format and version.
+    """The ``config.json`` of a refiner folder, checked for format, version and structure.
+
+    The structure is what training writes: ``model`` (sizes, positive integers),
+    ``layout`` (an object), ``joint_names`` (strings), ``iteration`` (an integer
+    >= 0), ``files`` (file name -> SHA-256 in hex), and, where present, the
+    other sections as objects, flags as booleans and names as strings.
 
     Raises
     ------
     InputFileError
-        No folder, no or unreadable ``config.json``, another format or version.
+        No folder, no or unreadable ``config.json``, another format or version,
+        or a key of the wrong type.
     """
     path = Path(path)
-    if not path.is_dir():
+    if not is_dir(path):
         raise InputFileError("no refiner folder here (train one with `gesturekit train-refiner`)", path=path)
     cfg_file = path / "config.json"
     if not cfg_file.is_file():
@@ -31,6 +39,8 @@ def read_refiner_config(path: str | os.PathLike) -> dict:
         cfg = json.loads(cfg_file.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputFileError(f"config.json is not valid JSON ({exc})", path=path) from None
+    except OSError as exc:
+        raise InputFileError(f"config.json cannot be read ({exc.strerror})", path=path) from None
     if not isinstance(cfg, dict) or cfg.get("format") != FORMAT:
         raise InputFileError("config.json does not describe a gesturekit refiner", path=path)
     if cfg.get("format_version") != FORMAT_VERSION:
@@ -39,4 +49,51 @@ def read_refiner_config(path: str | os.PathLike) -> dict:
             f"version {FORMAT_VERSION}); train it again",
             path=path,
         )
+    _check_structure(cfg, path)
     return cfg
+
+
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+_MODEL_SIZES = ("audio_dim", "motion_dim", "window")
+_MODEL_CHANNELS = ("generator_channels", "critic_channels")
+
+
+def _positive_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and x > 0
+
+
+def _check_structure(cfg: dict, path: Path) -> None:
+    def bad(what: str):
+        return InputFileError(f"config.json: {what}; the refiner folder is damaged (train again)", path=path)
+
+    def kind(x) -> str:
+        return type(x).__name__
+
+    for key in ("model", "layout", "files"):
+        if not isinstance(cfg.get(key), dict):
+            raise bad(f"'{key}' must be an object, found {kind(cfg.get(key))}")
+    for key in ("training", "data", "database", "pairs", "time"):
+        if key in cfg and not isinstance(cfg[key], dict):
+            raise bad(f"'{key}' must be an object, found {kind(cfg[key])}")
+    for key in ("resumable", "complete"):
+        if key in cfg and not isinstance(cfg[key], bool):
+            raise bad(f"'{key}' must be true or false, found {cfg[key]!r}")
+    for key in ("preset", "device", "gesturekit_version", "torch_version"):
+        if key in cfg and not isinstance(cfg[key], str):
+            raise bad(f"'{key}' must be a string, found {kind(cfg[key])}")
+    it = cfg.get("iteration")
+    if not (isinstance(it, int) and not isinstance(it, bool) and it >= 0):
+        raise bad(f"'iteration' must be an integer >= 0, found {it!r}")
+    names = cfg.get("joint_names")
+    if not (isinstance(names, list) and all(isinstance(n, str) for n in names)):
+        raise bad("'joint_names' must be a list of joint names")
+    for name, digest in cfg["files"].items():
+        if not (isinstance(digest, str) and _SHA256.fullmatch(digest)):
+            raise bad(f"files.{name} must be the file's SHA-256 in hex, found {digest!r}")
+    model = cfg["model"]
+    for key in _MODEL_SIZES:
+        if key in model and not _positive_int(model[key]):
+            raise bad(f"model.{key} must be a positive integer, found {model[key]!r}")
+    for key in _MODEL_CHANNELS:
+        if key in model and not (isinstance(model[key], list) and all(_positive_int(c) for c in model[key])):
+            raise bad(f"model.{key} must be a list of positive integers, found {model[key]!r}")

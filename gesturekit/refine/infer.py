@@ -27,6 +27,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -91,11 +93,15 @@ def read_stats(path: str | os.PathLike) -> dict[str, np.ndarray]:
             stats = {k: np.asarray(z[k], dtype=np.float32) for k in z.files}
     except FileNotFoundError:
         raise InputFileError("stats.npz is missing; the refiner folder is incomplete", path=path) from None
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        # a truncated archive, or object arrays (allow_pickle=False refuses them)
         raise InputFileError(f"stats.npz cannot be read ({exc})", path=path) from None
     for key in ("audio_mean", "audio_std", "motion_mean", "motion_std"):
         if key not in stats:
             raise InputFileError(f"stats.npz lacks {key}", path=path)
+        if stats[key].ndim != 1 or not np.isfinite(stats[key]).all():
+            raise InputFileError(f"stats.npz: {key} must be a vector of finite numbers, found shape "
+                                 f"{stats[key].shape}", path=path)
     return stats
 
 
@@ -171,7 +177,8 @@ class Refiner:
         except (RuntimeError, TypeError) as exc:
             raise InputFileError(f"generator.pt does not fit the model in config.json ({exc})", path=path) from None
         stats = read_stats(path)
-        if stats["audio_mean"].shape != (mcfg.audio_dim,) or stats["motion_mean"].shape != (mcfg.motion_dim,):
+        if any(stats[f"{k}_{part}"].shape != (dim,) for k, dim in (("audio", mcfg.audio_dim), ("motion", mcfg.motion_dim))
+               for part in ("mean", "std")):
             raise InputFileError("stats.npz does not fit the model's channel counts", path=path)
         return cls(gen, stats=stats, config=cfg, path=path, device=device)
 
