@@ -34,10 +34,12 @@ def test_body_keeps_the_joints_and_derives_pelvis_hips_and_head_centre(n, seed):
     shapes = APPEARANCE.body(p)
     assert shapes.points.shape == (n, N_JOINTS + len(DERIVED_POINTS), 3) and shapes.points.dtype == np.float32
     np.testing.assert_array_equal(shapes.points[:, :N_JOINTS], p)
-    pelvis, lhip, rhip, head_c = (shapes.points[:, N_JOINTS + i].astype(np.float64) for i in range(4))
+    pelvis, lhip, rhip, head_c, lchest, rchest = (shapes.points[:, N_JOINTS + i].astype(np.float64) for i in range(6))
     # the hips straddle the pelvis, hip_half_width either side
     np.testing.assert_allclose((lhip + rhip) / 2, pelvis, atol=1e-5)
     assert np.allclose(np.linalg.norm(lhip - pelvis, axis=1), APPEARANCE.hip_half_width, atol=1e-5)
+    mid = (p[:, joint_index("chest")].astype(np.float64) + p[:, joint_index("upper_chest")]) / 2
+    np.testing.assert_allclose((lchest + rchest) / 2, mid, atol=1e-5)
     head, top = p[:, joint_index("head")], p[:, joint_index("head_top")]
     np.testing.assert_allclose(head_c, head + (top - head) * APPEARANCE.head_centre, atol=1e-5)
     lo, hi = APPEARANCE.bounds(shapes.points)
