@@ -220,6 +220,22 @@ def skeleton_canvas(page, key: str):
     return canvas
 
 
+def viewer_frame(page, key: str):
+    """The frame (Playwright ``Frame``) of the skeleton viewer with key ``key``, once it has drawn.
+
+    Its script's global ``gk`` holds the shown ``frame``, ``frames`` (how many it holds), the
+    clock ``time``, the speech's ``audioTime``, ``playing``, ``drawn`` and ``drawMs``.
+    """
+    skeleton_canvas(page, key)
+    for frame in page.frames:
+        try:
+            if frame.evaluate("() => document.body && document.body.dataset.key") == key:
+                return frame
+        except Exception:  # noqa: BLE001 (a frame navigating away; look at the next)
+            continue
+    raise RuntimeError(f"no skeleton viewer frame with key {key!r}")
+
+
 def wait_result(page) -> None:
     skeleton_canvas(page, "synth.skeleton")
     page.locator('[data-testid="stPlotlyChart"] text', has_text="left wrist height").first.wait_for(state="visible")

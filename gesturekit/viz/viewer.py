@@ -265,7 +265,7 @@ def skeleton_viewer(
     str
         The HTML. Once it has drawn its first frame, the page's body has
         ``data-drawn="1"`` and the canvas ``data-frame`` holds the shown frame's index;
-        the script's global ``gk`` holds ``frame``, ``time`` (the clock, seconds),
+        the script's global ``gk`` holds ``frame``, ``frames`` (how many the page holds), ``time`` (the clock, seconds),
         ``audioTime`` (the speech's ``currentTime``, or null), ``playing``, ``drawn``
         (frames drawn so far) and ``drawMs`` (the last draw's milliseconds).
 
@@ -329,7 +329,7 @@ __AUDIO__
   const extent = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 0.3);
   const home = {yaw: Math.atan2(D.eye[0], D.eye[2]), pitch: Math.atan2(D.eye[1], Math.hypot(D.eye[0], D.eye[2])), zoom: 1};
   let view = Object.assign({}, home), frame = 0, playing = false, t0 = 0, clock0 = 0;
-  const gk = window.gk = {frame: 0, time: 0, audioTime: audio ? 0 : null, playing: false, drawn: 0, drawMs: 0};
+  const gk = window.gk = {frame: 0, frames: N, time: 0, audioTime: audio ? 0 : null, playing: false, drawn: 0, drawMs: 0};
   const rgb = (hex) => [1, 3, 5].map(i => parseInt(hex.slice(i, i + 2), 16));
   const base = M.map(m => { const o = {}; for (const k in m.colors) o[k] = rgb(m.colors[k]); return o; });
   // the appearance's rule: colour * min(1, ambient + diffuse * max(0, normal . light)), light in the camera frame
