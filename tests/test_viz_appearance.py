@@ -38,7 +38,8 @@ def test_body_keeps_the_joints_and_derives_pelvis_hips_and_head_centre(n, seed):
     # the hips straddle the pelvis, hip_half_width either side
     np.testing.assert_allclose((lhip + rhip) / 2, pelvis, atol=1e-5)
     assert np.allclose(np.linalg.norm(lhip - pelvis, axis=1), APPEARANCE.hip_half_width, atol=1e-5)
-    mid = (p[:, joint_index("chest")].astype(np.float64) + p[:, joint_index("upper_chest")]) / 2
+    chest, upper = p[:, joint_index("chest")].astype(np.float64), p[:, joint_index("upper_chest")]
+    mid = chest + (upper - chest) * APPEARANCE.chest_height
     np.testing.assert_allclose((lchest + rchest) / 2, mid, atol=1e-5)
     head, top = p[:, joint_index("head")], p[:, joint_index("head_top")]
     np.testing.assert_allclose(head_c, head + (top - head) * APPEARANCE.head_centre, atol=1e-5)
