@@ -323,7 +323,7 @@ __AUDIO__
   const canvas = document.getElementById("c"), ctx = canvas.getContext("2d");
   const slider = document.getElementById("s"), tlabel = document.getElementById("t"), play = document.getElementById("play");
   const audio = document.getElementById("gk-audio");
-  document.getElementById("note").textContent = D.note;
+  document.getElementById("note").title = D.note;
   slider.max = String(N - 1);
   const lo = D.lo, hi = D.hi, centre = [0, 1, 2].map(i => (lo[i] + hi[i]) / 2);
   const extent = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 0.3);
@@ -452,6 +452,7 @@ __AUDIO__
       ctx.fillText(m.label, q[0], Math.max(14, q[1]));
     }
     if (D.title) { ctx.font = "15px sans-serif"; ctx.textAlign = "left"; ctx.fillText(D.title, 8, 20); }
+    if (D.note) { ctx.fillStyle = "#9a6700"; ctx.font = "12px sans-serif"; ctx.textAlign = "left"; ctx.fillText(D.note, 8, h - 8); }
     slider.value = String(frame);
     const total = D.n_grid / D.fps;
     tlabel.textContent = D.times[frame].toFixed(2) + " / " + total.toFixed(2) + " s";
