@@ -139,7 +139,10 @@ class Appearance:
         The capsule across the chest (between the chest points).
     shoulder_radius : float
         The collar bones (upper chest to collar to shoulder).
+    neck_base_radius : float
+        The bone from upper chest to neck: the base of the neck, shaded as part of the torso.
     neck_radius : float
+        The neck above it (neck to neck_upper to head).
     head_radius : float
         The head sphere, centred :attr:`head_centre` of the way from ``head`` to ``head_top``.
     head_centre : float
@@ -182,6 +185,7 @@ class Appearance:
     hip_radius: float = 0.09
     chest_radius: float = 0.09
     shoulder_radius: float = 0.06
+    neck_base_radius: float = 0.06
     neck_radius: float = 0.048
     head_radius: float = 0.1
     head_centre: float = 0.45
@@ -256,8 +260,8 @@ class Appearance:
             Capsule(lchest, rchest, self.chest_radius, "torso"),
         ]
         radius = {
-            "spine_mid": None, "chest": self.torso_radius, "upper_chest": self.torso_radius,
-            "neck": self.torso_radius * 0.5, "neck_upper": self.neck_radius, "head": self.neck_radius,
+            "chest": self.torso_radius, "upper_chest": self.torso_radius,
+            "neck": self.neck_base_radius, "neck_upper": self.neck_radius, "head": self.neck_radius,
             "left_collar": self.shoulder_radius, "left_shoulder": self.shoulder_radius,
             "right_collar": self.shoulder_radius, "right_shoulder": self.shoulder_radius,
             "left_elbow": self.upper_arm_radius, "right_elbow": self.upper_arm_radius,
