@@ -637,16 +637,20 @@ def current_synthesis(db: MatchingDatabase) -> dict | None:
     return record if record["database"] == here else None
 
 
-def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, height: int = 520) -> None:
+def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, height: int = 520,
+                   audio=None) -> None:
     """Show motions side by side in gesturekit's 3D viewer (:func:`gesturekit.viz.viewer.skeleton_viewer`).
 
     The viewer draws on a 2D canvas: a browser without a GPU shows it at once, where
     a WebGL scene would take it seconds to set up. ``height``: of the drawing, in
     pixels (its controls come below); ``key`` names the viewer (pages and tests find it by it).
+    ``audio``: the speech of the motions (mono float32 at 16 kHz, from their first frame);
+    the viewer's play button then plays it and the shown frame follows it, so no separate
+    player is needed.
     """
     from gesturekit.viz.viewer import CONTROLS_HEIGHT, skeleton_viewer
 
-    page = skeleton_viewer(motions, labels=labels, title=title, height=height, key=key)
+    page = skeleton_viewer(motions, labels=labels, title=title, height=height, key=key, audio=audio)
     st.iframe(page, height=int(height) + CONTROLS_HEIGHT)
 
 

@@ -10,9 +10,16 @@ background (compiled search, refiner, figures); later attempts, each in a new
 browser session, show the steady state; a last one in a new browser shows a
 user's first visit once the server is prepared. Target: under 5 s.
 
+Then the 3D view's playback, in that new browser: the time from Run to the view's
+first drawn frame; for a side-by-side 82 s result (k-NN and refined; the shared BEAT
+speech when present, else generated speech) the draw time of one frame (the canvas
+forced to paint) and the frames drawn per second while it plays on its speech's clock
+(target >= 15); and, without the app, the page size and first-frame time of a
+ten-minute side-by-side view with its speech.
+
 Needs the ``playwright`` package and Chromium (``apt-get install chromium``).
 
-Usage: python bench/bench_app.py [--minutes 20] [--seconds 30] [--repeats 3]
+Usage: python bench/bench_app.py [--minutes 20] [--seconds 30] [--repeats 3] [--play-seconds 82]
 """
 from __future__ import annotations
 
@@ -46,6 +53,7 @@ def main(argv=None) -> int:
     parser.add_argument("--minutes", type=float, default=None, help="demo database size (default: the app's default)")
     parser.add_argument("--seconds", type=float, default=30.0, help="length of the uploaded speech")
     parser.add_argument("--repeats", type=int, default=3, help="attempts after the first")
+    parser.add_argument("--play-seconds", type=float, default=82.0, help="length of the speech played back")
     args = parser.parse_args(argv)
 
     from gesturekit.demo import DEMO_MINUTES, build_demo_database
@@ -73,14 +81,18 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             drv.upload(page, wav)
             t1 = time.perf_counter()
-            drv.run_and_wait(page)
+            page.get_by_role("button", name="Run", exact=True).click()
+            drv.skeleton_canvas(page, "synth.skeleton")
+            t_view = time.perf_counter()
+            drv.wait_result(page)
             t2 = time.perf_counter()
             problems = drv.problems(page)
             if problems:
                 print(f"the page shows an error: {problems[0][:400]}")
                 return None
             print(f"{kind:>30}: page opened {t0 - t_open:5.2f} s; upload -> speech read {t1 - t0:5.2f} s, "
-                  f"Run -> result on screen {t2 - t1:5.2f} s, total {t2 - t0:5.2f} s")
+                  f"Run -> result on screen {t2 - t1:5.2f} s (3D view's first frame {t_view - t1:5.2f} s), "
+                  f"total {t2 - t0:5.2f} s")
             return t2 - t0
 
         t_launch = time.perf_counter()
@@ -96,11 +108,92 @@ def main(argv=None) -> int:
                 fresh = attempt(page, url, "new browser, prepared server")
                 if fresh is None:
                     return 1
+                if not playback(drv, page, url, home, args.play_seconds):
+                    return 1
         warm = times[1:] or times
         print(f"upload of {args.seconds:g} s speech -> first result on screen: median {statistics.median(warm):.2f} s "
               f"(best {min(warm):.2f} s) warm, {fresh:.2f} s in a new browser, {times[0]:.2f} s right after the "
               "server's start; target < 5 s")
+        long_view(drv)
     return 0
+
+
+#: In a viewer's frame: the median milliseconds of drawing one frame, the canvas forced to paint
+#: (reading a pixel back makes the browser finish the drawing, which it may otherwise defer).
+_DRAW_MS = """(n) => { const s = document.getElementById("s"), c = document.getElementById("c").getContext("2d");
+  const out = [];
+  for (let i = 0; i < n; i++) {
+    const t = performance.now();
+    s.value = String((i * 37) % Number(s.max)); s.dispatchEvent(new Event("input"));
+    c.getImageData(0, 0, 1, 1);
+    out.push(performance.now() - t);
+  }
+  out.sort((a, b) => a - b); return out[Math.floor(n / 2)]; }"""
+
+
+def playback(drv, page, url: str, home: Path, seconds: float) -> bool:
+    """A side-by-side result of ``seconds`` of speech in the new browser: Run -> first drawn frame,
+    the draw time of one frame, and frames drawn per second while it plays."""
+    beat = REPO.parent / "shared" / "data" / "speech" / "beat_lawrence_0_19_19.wav"
+    if abs(seconds - 82.0) < 1e-9 and beat.is_file():
+        wav, what = beat, "the shared BEAT speech"
+    else:
+        wav, what = drv.write_speech(home / f"speech_{seconds:g}s.wav", seconds=seconds), "generated speech"
+    drv.open_app(page, url, "Synthesize", heading="Synthesize")
+    drv.synthesize_ready(page)
+    drv.upload(page, wav)
+    t0 = time.perf_counter()
+    page.get_by_role("button", name="Run", exact=True).click()
+    view = drv.viewer_frame(page, "synth.skeleton")
+    t_view = time.perf_counter() - t0
+    drv.wait_result(page)
+    drv.wait_idle(page)
+    if drv.problems(page):
+        print(f"the page shows an error: {drv.problems(page)[0][:400]}")
+        return False
+    n_motions = view.evaluate("() => JSON.parse(document.getElementById('gk-data').textContent).motions.length")
+    frames = view.evaluate("() => gk.frames")
+    draw_ms = view.evaluate(_DRAW_MS, 60)
+    view.evaluate("() => { const s = document.getElementById('s'); s.value = '0'; s.dispatchEvent(new Event('input')); }")
+    view.locator("#play").click()
+    page.wait_for_timeout(500)
+    a = view.evaluate("() => [gk.drawn, performance.now(), gk.frame]")
+    page.wait_for_timeout(5000)
+    b = view.evaluate("() => [gk.drawn, performance.now(), gk.frame, document.getElementById('gk-audio').currentTime]")
+    view.locator("#play").click()
+    fps = (b[0] - a[0]) / ((b[1] - a[1]) / 1000)
+    print(f"playback, {what} ({seconds:g} s), {n_motions} motions side by side, {frames} frames held: "
+          f"Run -> 3D view's first drawn frame {t_view:.2f} s in a new browser; one frame drawn in "
+          f"{draw_ms:.1f} ms (canvas forced to paint, median of 60; 66 ms would be 15 fps); "
+          f"{fps:.1f} frames drawn per second while playing (target >= 15), "
+          f"shown frame {b[2]} at speech time {b[3]:.2f} s")
+    return True
+
+
+def long_view(drv) -> None:
+    """A ten-minute side-by-side view with its speech, outside the app: page size and time to the first frame."""
+    import numpy as np
+
+    from gesturekit.motion import AUDIO_SR, Motion
+    from gesturekit.skeleton import N_JOINTS
+    from gesturekit.viz.viewer import VIEWER_MAX_FRAMES, skeleton_viewer
+
+    rng = np.random.default_rng(0)
+    pos = (rng.normal(0, 0.3, (1, N_JOINTS, 3))
+           + np.cumsum(rng.normal(0, 0.004, (VIEWER_MAX_FRAMES, N_JOINTS, 3)), 0)).astype(np.float32)
+    t = time.perf_counter()
+    page_html = skeleton_viewer([Motion(pos, 15.0), Motion(pos[::-1].copy(), 15.0)], labels=["k-NN", "refined"],
+                                audio=rng.uniform(-0.1, 0.1, VIEWER_MAX_FRAMES * AUDIO_SR // 15).astype(np.float32))
+    t_make = time.perf_counter() - t
+    with tempfile.TemporaryDirectory(prefix="gesturekit-bench-view-") as tmp, drv.browser() as page:
+        path = Path(tmp) / "view.html"
+        path.write_text(page_html, encoding="utf-8")
+        t = time.perf_counter()
+        page.goto(path.as_uri())  # as a file: Playwright's set_content would time its own transfer
+        page.wait_for_selector('body[data-drawn="1"]', state="attached")
+        t_draw = time.perf_counter() - t
+    print(f"ten minutes side by side with speech ({VIEWER_MAX_FRAMES} frames): page {len(page_html) / 1e6:.1f} MB, "
+          f"made in {t_make:.2f} s, first frame drawn {t_draw:.2f} s after a new browser opened it")
 
 
 if __name__ == "__main__":

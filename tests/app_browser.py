@@ -220,6 +220,22 @@ def skeleton_canvas(page, key: str):
     return canvas
 
 
+def viewer_frame(page, key: str):
+    """The frame (Playwright ``Frame``) of the skeleton viewer with key ``key``, once it has drawn.
+
+    Its script's global ``gk`` holds the shown ``frame``, ``frames`` (how many it holds), the
+    clock ``time``, the speech's ``audioTime``, ``playing``, ``drawn`` and ``drawMs``.
+    """
+    skeleton_canvas(page, key)
+    for frame in page.frames:
+        try:
+            if frame.evaluate("() => document.body && document.body.dataset.key") == key:
+                return frame
+        except Exception:  # noqa: BLE001 (a frame navigating away; look at the next)
+            continue
+    raise RuntimeError(f"no skeleton viewer frame with key {key!r}")
+
+
 def wait_result(page) -> None:
     skeleton_canvas(page, "synth.skeleton")
     page.locator('[data-testid="stPlotlyChart"] text', has_text="left wrist height").first.wait_for(state="visible")
@@ -259,6 +275,20 @@ def screenshot(page, path: Path) -> Path:
     return path
 
 
+def viewer_screenshot(page, key: str, path: Path, *, at: float = 0.4) -> Path:
+    """Save a PNG of the 3D view with key ``key`` alone, showing the frame ``at`` of the way through."""
+    view = viewer_frame(page, key)
+    view.evaluate("""(at) => { const s = document.getElementById("s");
+        s.value = String(Math.round(at * Number(s.max))); s.dispatchEvent(new Event("input")); }""", at)
+    element = page.locator(f'iframe[srcdoc*=\'data-key="{key}"\']').first
+    element.scroll_into_view_if_needed()
+    page.wait_for_timeout(300)
+    part = path.with_name(f".{path.name}.part")
+    element.screenshot(path=str(part), type="png")
+    os.replace(part, path)
+    return path
+
+
 def make_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 3.0) -> list[Path]:
     """Screenshots of the Synthesize, Retrieval inspector and Database pages, written to ``out``.
 
@@ -289,6 +319,26 @@ def make_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 
     return shots
 
 
+def make_viewer_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 3.0) -> list[Path]:
+    """Screenshots of the 3D view alone, written to ``out``: ``viewer_synthesize.png`` (a result's
+    k-NN and refined motions side by side) and ``viewer_database.png`` (one clip of the demo database)."""
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="gesturekit-shots-") as tmp:
+        home = Path(tmp)
+        wav = write_speech(home / "speech.wav", seconds=seconds)
+        with app_server(home, demo_minutes=demo_minutes) as url, browser() as page:
+            open_app(page, url, "Synthesize", heading="Synthesize")
+            upload(page, wav)
+            run_and_wait(page)
+            wait_idle(page)
+            shots = [viewer_screenshot(page, "synth.skeleton", out / "viewer_synthesize.png")]
+            go_to(page, "Database")
+            shots.append(viewer_screenshot(page, "db.skeleton", out / "viewer_database.png", at=0.5))
+            if problems(page):
+                raise RuntimeError(f"the page shows an error: {problems(page)[0][:500]}")
+    return shots
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description="Screenshots of the app's pages for the README.")
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "screenshots")
@@ -297,7 +347,7 @@ def main(argv=None) -> int:
     if reason:
         print(f"cannot make screenshots: {reason}", file=sys.stderr)
         return 1
-    for p in make_screenshots(args.out):
+    for p in make_screenshots(args.out) + make_viewer_screenshots(args.out):
         print(p)
     return 0
 

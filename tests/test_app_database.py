@@ -40,12 +40,8 @@ def _first_pose_bones(data: dict) -> np.ndarray:
     """The segments of frame 0 of a skeleton viewer's data, sorted, shape (54, 6)."""
     segs = []
     for m in data["motions"]:
-        for part in ("body", "hands"):
-            # joint paths separated by NaN points, parent first: consecutive finite points are bones
-            pts = m[part][0]
-            ok = np.isfinite(pts).all(axis=1)
-            pair = ok[:-1] & ok[1:]
-            segs.append(np.concatenate([pts[1:][pair], pts[:-1][pair]], axis=1))  # (child, parent)
+        pts = m["points"][0]  # the joints, then the appearance's derived points
+        segs.append(np.concatenate([pts[bones()[:, 0]], pts[bones()[:, 1]]], axis=1))  # (child, parent)
     segs = np.concatenate(segs)
     return segs[np.lexsort(segs.T[::-1])]
 
@@ -92,7 +88,10 @@ def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):
     assert len(skel["times"]) == db.clip_frames
     assert skel["up"] == [0, 1, 0]
     np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 0), atol=1e-6)
-    assert len(at.get("audio")) == 1
+    # the clip's speech plays in the viewer, on its clock: no separate player
+    np.testing.assert_allclose(skel["audio"][:db.clip_frames * 16000 // 15],
+                               db.segment_audio(0, 0, db.clip_frames)[:db.clip_frames * 16000 // 15], atol=1e-4)
+    assert len(at.get("audio")) == 0
 
 
 def test_choosing_another_clip_changes_the_viewer(app_env):

@@ -12,6 +12,7 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
+from gesturekit.viz import session as gs
 
 from .conftest import chart_spec as chart, plotly_array as array, viewer
 
@@ -96,7 +97,9 @@ def test_every_step_lists_its_k_candidates_with_their_sources(app_env, db):
         (points,) = [t for t in chart(at, "inspect.candidates_plot")["data"] if t["meta"]["part"] == "candidates"]
         np.testing.assert_allclose(array(points["x"]), s.cand_pose_dist[step])
     assert any(m.value.startswith(f"**Step {s.n_steps - 1}**") for m in at.markdown)
-    assert len(at.get("audio")) == 2  # this step's speech, the candidate's own speech
+    assert len(at.get("audio")) == 1  # the candidate's own speech; this step's plays in the 3D view
+    step_speech = gs.step_speech(res, s.n_steps - 1)
+    np.testing.assert_allclose(views["audio"][:len(step_speech)], step_speech, atol=1e-4)
 
 
 def test_pinning_a_candidate_changes_that_step_and_can_be_undone(app_env):

@@ -14,6 +14,7 @@ from gesturekit.control import frame_attributes
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.export.video import probe_media
+from gesturekit.skeleton import N_JOINTS
 from gesturekit.viz import session as gs
 from gesturekit.viz.figures import WRIST_ROWS
 
@@ -100,8 +101,7 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     skel = viewer(at, "synth.skeleton")
     assert len(skel["motions"]) == 1 and len(skel["times"]) == res.n_frames
     m = skel["motions"][0]
-    points = np.concatenate([m["body"][0], m["hands"][0]])
-    points = np.unique(np.round(points[np.isfinite(points).all(axis=1)], 5), axis=0)
+    points = np.unique(np.round(m["points"][0][:N_JOINTS], 5), axis=0)
     np.testing.assert_allclose(points, np.unique(np.round(res.motion.positions[0], 5), axis=0), atol=2e-5)
     assert skel["up"] == [0, 1, 0] and skel["eye"][2] > 0  # in front of the character, Y up
 
@@ -116,7 +116,9 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     lines = {s["name"]: s["y0"] for s in wrists["layout"]["shapes"] if s["type"] == "line"}
     assert lines["left_hand_height high"] == pytest.approx(db.thresholds["left_hand_height"][1])
 
-    assert len(at.get("audio")) == 2  # the speech, and the player beside the 3D view
+    # the uploaded speech's player; the result's speech plays in the 3D view, on its clock
+    assert len(at.get("audio")) == 1
+    np.testing.assert_allclose(skel["audio"][:len(res.audio)], res.audio, atol=1e-4)
     labels = [d.proto.label for d in at.get("download_button")]
     assert labels == ["Motion + search (npz)", "Motion (BVH)", "Control track (CSV)", "Config (JSON)"]
     assert any(c.value == "MP4: render it above" for c in at.caption)

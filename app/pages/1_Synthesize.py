@@ -251,11 +251,11 @@ def show_result(db, record) -> None:
     with left:
         title = f"{result.source}: {result.n_frames} frames, {result.n_frames / result.motion.fps:.1f} s"
         # sent before the wrist plot is made, so the browser draws the 3D view meanwhile
-        common.show_skeletons(motions, labels=labels, title=title, key="synth.skeleton")
+        common.show_skeletons(motions, labels=labels, title=title, key="synth.skeleton", audio=result.audio)
     with right:
         st.markdown("**Speech**")
-        st.audio(gs.wav_bytes(result.audio), format="audio/wav")
-        st.caption("Start the speech and the 3D view (▶ Play) together, or render the video:")
+        st.caption("▶ Play under the 3D view plays the speech, and the view follows it frame by frame; "
+                   "or render the video:")
         video(record)
     st.subheader("Wrist height and speed")
     st.caption("Shaded: the control segments. Dashed: the database's low and high thresholds of each quantity.")

@@ -82,7 +82,9 @@ def step_view(db, record, step: int) -> None:
         for r in others.head(shown).itertuples():
             motions.append(gs.candidate_motion(db, r.clip, r.start, b - a))
             labels.append(f"#{r.position}")
-        common.show_skeletons(motions, labels=labels, height=360, key="inspect.views")
+        # the step's input speech is the clock: it is what every candidate was matched against
+        common.show_skeletons(motions, labels=labels, height=360, key="inspect.views",
+                              audio=gs.step_speech(result, step))
 
     st.markdown("**Listen and choose**")
     positions = [int(p) for p in table["position"]]
@@ -97,8 +99,7 @@ def step_view(db, record, step: int) -> None:
     r = row_of[pick]
     c = st.columns(3)
     with c[0]:
-        st.caption("the input speech of this step")
-        st.audio(gs.wav_bytes(gs.step_speech(result, step)), format="audio/wav")
+        st.caption("the input speech of this step: ▶ Play in the 3D view above plays it with the candidates")
     with c[1]:
         st.caption(f"candidate #{pick}'s own speech in the database")
         if db.audio is not None:
@@ -148,7 +149,7 @@ def compare_view(db, record) -> None:
         return
     motions = [r.refined_motion if r.refined_motion is not None else r.motion for r in done["results"]]
     labels = [f"k = {k}" for k in done["ks"]]
-    common.show_skeletons(motions, labels=labels, height=420, key="inspect.compare_views")
+    common.show_skeletons(motions, labels=labels, height=420, key="inspect.compare_views", audio=result.audio)
     st.dataframe(gs.comparison_table(done["results"], db.thresholds), hide_index=True, key="inspect.compare_table",
                  column_config={"pose_dist": st.column_config.NumberColumn("mean pose distance", format="%.3f"),
                                 "audio_dist": st.column_config.NumberColumn("mean audio distance", format="%.4f"),

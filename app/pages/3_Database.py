@@ -81,13 +81,14 @@ def viewer(db, clip: int) -> None:
     st.caption(f"take **{row['take']}**, frames {row['start_frame']}–{row['start_frame'] + db.clip_frames - 1} "
                f"({row['start_s']:.2f}–{row['end_s']:.2f} s)")
     motion = Motion.from_flat(np.asarray(db.G[clip]), db.fps)
+    audio = db.segment_audio(clip, 0, db.clip_frames) if db.audio is not None else None
     left, right = st.columns([3, 2])
     with left:
-        common.show_skeletons(motion, title=f"clip {clip}: {row['take']} at {row['start_s']:.2f} s", key="db.skeleton")
+        common.show_skeletons(motion, title=f"clip {clip}: {row['take']} at {row['start_s']:.2f} s", key="db.skeleton",
+                              audio=audio)
     with right:
-        if db.audio is not None:
-            audio = db.segment_audio(clip, 0, db.clip_frames)
-            st.audio(audio, sample_rate=AUDIO_SR)
+        if audio is not None:
+            st.caption("▶ Play under the 3D view plays the clip's speech with it.")
             st.plotly_chart(waveform_figure(audio, AUDIO_SR, height=200), key="db.waveform")
         else:
             st.caption("This database was built without audio.")
