@@ -1,0 +1,364 @@
+"""How a motion looks: one appearance shared by the page viewer, the notebooks' figure and the MP4.
+
+A motion is drawn as a person, not as sticks: every bone of the 55-joint
+skeleton becomes a capsule (a segment with a radius and round ends), the torso
+gets volume from a few capsules between derived hip points and the shoulders,
+and the head is a sphere. :meth:`Appearance.body` turns joint positions into
+these shapes; :meth:`Appearance.shade` is the one lighting rule (Lambert with
+ambient light, the light fixed to the camera); :meth:`Appearance.bounds` is the
+one framing rule (the body's bounds over the whole motion, with a margin, fill
+the view). The colours follow the app's: the first motion (k-NN) blue, the
+second (refined) orange.
+
+Everything here is plain numpy: each drawing backend (the page's 2D canvas, a
+plotly figure, a pyvista render) reads the same numbers and draws them its own way.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS, joint_index
+
+__all__ = [
+    "APPEARANCE",
+    "Appearance",
+    "BodyShapes",
+    "Capsule",
+    "DERIVED_POINTS",
+    "Sphere",
+    "hex_to_rgb",
+    "rgb_to_hex",
+]
+
+#: Points :meth:`Appearance.body` adds after the 55 joints, in this order (indices 55, 56, ...).
+DERIVED_POINTS: tuple[str, ...] = ("pelvis", "left_hip", "right_hip", "head_centre")
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """A segment between two points, drawn with a radius and round ends.
+
+    Attributes
+    ----------
+    a, b : int
+        Indices into :attr:`BodyShapes.points` (a joint below 55, a derived point above).
+    radius : float
+        Metres.
+    part : str
+        The body part: ``"torso"``, ``"neck"``, ``"upper_arm"``, ``"forearm"``, ``"palm"``, ``"finger"``.
+    """
+
+    a: int
+    b: int
+    radius: float
+    part: str
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """A ball around one point.
+
+    Attributes
+    ----------
+    centre : int
+        Index into :attr:`BodyShapes.points`.
+    radius : float
+        Metres.
+    part : str
+        The body part (``"head"``).
+    covers : tuple of (int, int)
+        The bones (child, parent joint indices) the sphere stands for; they get no capsule.
+    """
+
+    centre: int
+    radius: float
+    part: str
+    covers: tuple[tuple[int, int], ...] = ()
+
+
+@dataclass(frozen=True)
+class BodyShapes:
+    """What to draw for one motion.
+
+    Attributes
+    ----------
+    points : numpy.ndarray
+        Shape (frames, 55 + len(DERIVED_POINTS), 3), float32, metres: the joints, then the
+        :data:`DERIVED_POINTS`.
+    capsules : tuple of Capsule
+    spheres : tuple of Sphere
+    """
+
+    points: np.ndarray
+    capsules: tuple[Capsule, ...]
+    spheres: tuple[Sphere, ...]
+
+
+def hex_to_rgb(color: str) -> np.ndarray:
+    """``"#rrggbb"`` as floats in [0, 1], shape (3,)."""
+    c = color.lstrip("#")
+    return np.array([int(c[i:i + 2], 16) for i in (0, 2, 4)], dtype=np.float64) / 255.0
+
+
+def rgb_to_hex(rgb) -> str:
+    """Floats in [0, 1] (clipped), shape (3,), as ``"#rrggbb"``."""
+    v = np.clip(np.round(np.asarray(rgb, dtype=np.float64) * 255.0), 0, 255).astype(int)
+    return "#{:02x}{:02x}{:02x}".format(*v)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 1e-9, n, 1.0)
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """The look of a motion as a person: colours, body part sizes, light, ground and framing.
+
+    Lengths are in metres. Colours are ``"#rrggbb"``. The light direction is in the
+    camera's frame (x to the right of the view, y up, z towards the viewer), so the
+    figure stays lit from the front whichever way the view is turned.
+
+    Attributes
+    ----------
+    motion_colors : tuple of str
+        One colour per motion, in order (first k-NN blue, then refined orange, ...).
+    part_tint : tuple of (str, float)
+        Per body part, how far its colour is mixed towards white (0: the motion's colour).
+    torso_radius : float
+        The spine capsules (pelvis to upper chest).
+    torso_side_radius : float
+        The capsules from each hip to the shoulder on its side, and between the hips.
+    shoulder_radius : float
+        The collar bones (upper chest to collar to shoulder).
+    neck_radius : float
+    head_radius : float
+        The head sphere, centred :attr:`head_centre` of the way from ``head`` to ``head_top``.
+    head_centre : float
+        Fraction, 0 at ``head``, 1 at ``head_top``.
+    upper_arm_radius, forearm_radius : float
+    palm_radius : float
+        Wrist to each finger's root.
+    finger_radius, fingertip_radius : float
+        Finger bones; the last bone of each finger.
+    pelvis_below : float
+        The pelvis point lies this many spine_mid-to-chest lengths below spine_mid, along the spine.
+    hip_half_width : float
+        The hips lie this far either side of the pelvis, along the shoulders' left-right line.
+    light_direction : tuple of float
+        Towards the light, camera frame (normalised where used).
+    ambient, diffuse : float
+        Shading: ``colour * min(1, ambient + diffuse * max(0, normal . light))``.
+    background : str
+    ground_color : str
+        The floor a figure stands on (drawn as a band below it).
+    shadow_color : str
+        The contact shadow under each figure; :attr:`shadow_alpha` its opacity.
+    shadow_alpha : float
+    ground_gap : float
+        The floor lies this far below the lowest surface over the whole motion.
+    frame_margin : float
+        Framing: the bounds over the whole motion grow by this fraction of their size on
+        every side, and that box fills the view.
+    """
+
+    motion_colors: tuple[str, ...] = ("#2c5d8f", "#c0502d", "#3a8a4e", "#7b4fa0", "#a07a1f", "#2a8a8a")
+    part_tint: tuple[tuple[str, float], ...] = (("head", 0.22), ("palm", 0.12), ("finger", 0.12))
+    torso_radius: float = 0.1
+    torso_side_radius: float = 0.07
+    shoulder_radius: float = 0.06
+    neck_radius: float = 0.048
+    head_radius: float = 0.1
+    head_centre: float = 0.45
+    upper_arm_radius: float = 0.046
+    forearm_radius: float = 0.037
+    palm_radius: float = 0.014
+    finger_radius: float = 0.0095
+    fingertip_radius: float = 0.008
+    pelvis_below: float = 1.4
+    hip_half_width: float = 0.095
+    light_direction: tuple[float, float, float] = (-0.45, 0.6, 0.66)
+    ambient: float = 0.42
+    diffuse: float = 0.7
+    background: str = "#f4f5f7"
+    ground_color: str = "#e3e6ea"
+    shadow_color: str = "#000000"
+    shadow_alpha: float = 0.18
+    ground_gap: float = 0.02
+    frame_margin: float = 0.05
+
+    def color(self, motion: int) -> str:
+        """The colour of the ``motion``-th motion (colours repeat after the last)."""
+        return self.motion_colors[motion % len(self.motion_colors)]
+
+    def part_color(self, motion: int, part: str) -> str:
+        """The colour of one body part of the ``motion``-th motion, before shading."""
+        tint = dict(self.part_tint).get(part, 0.0)
+        rgb = hex_to_rgb(self.color(motion))
+        return rgb_to_hex(rgb + (1.0 - rgb) * tint)
+
+    def light(self) -> np.ndarray:
+        """The unit direction towards the light, camera frame, shape (3,)."""
+        return _unit(np.asarray(self.light_direction, dtype=np.float64))
+
+    def shade(self, color: str, normals) -> np.ndarray:
+        """The lit colour of surface points.
+
+        Parameters
+        ----------
+        color : str
+            ``"#rrggbb"``, the unlit colour.
+        normals : array_like
+            Shape (..., 3), unit surface normals in the camera frame.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (..., 3), RGB in [0, 1]: ``colour * min(1, ambient + diffuse * max(0, n . l))``.
+        """
+        n = np.asarray(normals, dtype=np.float64)
+        lambert = np.maximum(0.0, n @ self.light())
+        k = np.minimum(1.0, self.ambient + self.diffuse * lambert)
+        return hex_to_rgb(color) * k[..., None]
+
+    def shapes(self) -> tuple[tuple[Capsule, ...], tuple[Sphere, ...]]:
+        """The capsules and spheres of the body, independent of the pose.
+
+        Every one of the 54 bones is a capsule, except ``head`` to ``head_top``, which the
+        head sphere stands for (its ``covers``). The torso adds capsules between the
+        derived points (pelvis, hips) and the shoulders.
+        """
+        j = joint_index
+        n = N_JOINTS
+        pelvis, lhip, rhip, head_c = (n + i for i in range(len(DERIVED_POINTS)))
+        head_bone = (j("head_top"), j("head"))
+        caps = [
+            # torso volume first: the spine, each side, and the hips
+            Capsule(pelvis, j("spine_mid"), self.torso_radius, "torso"),
+            Capsule(lhip, rhip, self.torso_side_radius, "torso"),
+            Capsule(lhip, j("left_shoulder"), self.torso_side_radius, "torso"),
+            Capsule(rhip, j("right_shoulder"), self.torso_side_radius, "torso"),
+        ]
+        radius = {
+            "spine_mid": None, "chest": self.torso_radius, "upper_chest": self.torso_radius,
+            "neck": self.neck_radius, "neck_upper": self.neck_radius, "head": self.neck_radius,
+            "left_collar": self.shoulder_radius, "left_shoulder": self.shoulder_radius,
+            "right_collar": self.shoulder_radius, "right_shoulder": self.shoulder_radius,
+            "left_elbow": self.upper_arm_radius, "right_elbow": self.upper_arm_radius,
+        }
+        part = {"chest": "torso", "upper_chest": "torso", "neck": "neck", "neck_upper": "neck", "head": "neck",
+                "left_collar": "torso", "left_shoulder": "torso", "right_collar": "torso",
+                "right_shoulder": "torso", "left_elbow": "upper_arm", "right_elbow": "upper_arm"}
+        for child in range(1, N_JOINTS):
+            parent = int(PARENTS[child])
+            if parent < 0 or (child, parent) == head_bone:
+                continue
+            name = JOINT_NAMES[child]
+            if name in radius:
+                caps.append(Capsule(parent, child, radius[name], part[name]))
+            elif name.endswith("wrist"):
+                caps.append(Capsule(parent, child, self.forearm_radius, "forearm"))
+            elif name.endswith("1"):
+                caps.append(Capsule(parent, child, self.palm_radius, "palm"))
+            else:
+                r = self.fingertip_radius if name.endswith("4") else self.finger_radius
+                caps.append(Capsule(parent, child, r, "finger"))
+        spheres = (Sphere(head_c, self.head_radius, "head", covers=(head_bone,)),)
+        return tuple(caps), spheres
+
+    def body(self, positions) -> BodyShapes:
+        """The shapes to draw for a motion: its points (joints and derived points) and capsules.
+
+        Parameters
+        ----------
+        positions : array_like
+            Shape (frames, 55, 3), metres, Y up, the character facing +Z.
+
+        Returns
+        -------
+        BodyShapes
+            ``points`` of shape (frames, 59, 3) float32: the joints, then pelvis, left hip,
+            right hip and head centre (:data:`DERIVED_POINTS`).
+
+        Raises
+        ------
+        ConfigError
+            If ``positions`` is not (frames, 55, 3) with at least one frame.
+        """
+        p = np.asarray(positions, dtype=np.float64)
+        if p.ndim != 3 or p.shape[1:] != (N_JOINTS, 3) or p.shape[0] < 1:
+            raise ConfigError(f"positions must have shape (frames, {N_JOINTS}, 3), got {p.shape}")
+        j = joint_index
+        spine, chest = p[:, j("spine_mid")], p[:, j("chest")]
+        pelvis = spine + (spine - chest) * self.pelvis_below
+        across = _unit(p[:, j("left_shoulder")] - p[:, j("right_shoulder")])
+        head, top = p[:, j("head")], p[:, j("head_top")]
+        derived = np.stack([
+            pelvis,
+            pelvis + across * self.hip_half_width,
+            pelvis - across * self.hip_half_width,
+            head + (top - head) * self.head_centre,
+        ], axis=1)
+        caps, spheres = self.shapes()
+        points = np.concatenate([p, derived], axis=1).astype(np.float32)
+        return BodyShapes(points=points, capsules=caps, spheres=spheres)
+
+    def bounds(self, points, *, margin: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """The box every drawn surface stays in over the whole motion: the framing rule.
+
+        Parameters
+        ----------
+        points : array_like
+            Shape (..., 3), metres: :attr:`BodyShapes.points` of one or several motions
+            (finite values only are used).
+        margin : bool
+            Grow the box by :attr:`frame_margin` of its largest side on every side.
+
+        Returns
+        -------
+        (lo, hi) : numpy.ndarray
+            Each shape (3,), metres. The view is framed so that this box fills it.
+        """
+        q = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        q = q[np.isfinite(q).all(axis=1)]
+        if len(q) == 0:
+            raise ConfigError("no finite point to frame")
+        pad = max(self.head_radius, self.torso_radius)  # the thickest surface around any point
+        lo, hi = q.min(axis=0) - pad, q.max(axis=0) + pad
+        if margin:
+            m = self.frame_margin * float(np.max(hi - lo))
+            lo, hi = lo - m, hi + m
+        return lo, hi
+
+    def ground_height(self, points) -> float:
+        """The floor's height (Y, metres): :attr:`ground_gap` below the lowest surface of the motion.
+
+        Parameters
+        ----------
+        points : array_like
+            Shape (..., 3), metres (as :meth:`bounds`).
+        """
+        q = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        q = q[np.isfinite(q).all(axis=1)]
+        return float(q[:, 1].min() - max(self.torso_radius, self.torso_side_radius) - self.ground_gap)
+
+    def to_json(self) -> dict:
+        """The appearance as a JSON-ready dict (what a page's script reads): colours, light,
+        ambient, diffuse, background, ground, shadow and margin."""
+        return {
+            "light": [round(float(x), 6) for x in self.light()],
+            "ambient": self.ambient,
+            "diffuse": self.diffuse,
+            "background": self.background,
+            "ground": self.ground_color,
+            "shadow": self.shadow_color,
+            "shadow_alpha": self.shadow_alpha,
+            "margin": self.frame_margin,
+        }
+
+
+#: The appearance every view uses.
+APPEARANCE = Appearance()
