@@ -21,7 +21,7 @@ from gesturekit.errors import ConfigError, GestureKitError, InputFileError
 from gesturekit.export.video import AUDIO_OUT_SR, probe_media, render_video
 from gesturekit.motion import Motion
 from gesturekit.skeleton import FINGERS, N_JOINTS, hand_indices, joint_index
-from gesturekit.viz.render import RenderStyle, SkeletonScene, render_image, view_bounds
+from gesturekit.viz.render import CHUNK_FRAMES, RenderStyle, SkeletonScene, render_frames, render_image, view_bounds
 
 FPS = 15.0
 SR = 16000
@@ -180,6 +180,45 @@ def test_same_inputs_give_the_same_bytes(tmp_path):
     a = render_video(tmp_path / "a.mp4", swinging_motion(8), audio=tone(0.5), sr=SR, resolution=(96, 64))
     b = render_video(tmp_path / "b.mp4", swinging_motion(8), audio=tone(0.5), sr=SR, resolution=(96, 64))
     assert hashlib.sha256(a.read_bytes()).digest() == hashlib.sha256(b.read_bytes()).digest()
+
+
+def test_parallel_render_gives_the_same_bytes_as_serial(tmp_path):
+    # 70 frames are three chunks: each of two processes renders some, the parent puts them in order
+    motion, other = swinging_motion(70), still_motion(64)
+    calls = []
+    serial = render_video(tmp_path / "serial.mp4", motion, side_by_side=other, labels=["a", "b"], audio=tone(5.0),
+                          sr=SR, resolution=(96, 64), workers=1)
+    parallel = render_video(tmp_path / "parallel.mp4", motion, side_by_side=other, labels=["a", "b"],
+                            audio=tone(5.0), sr=SR, resolution=(96, 64), workers=2,
+                            progress=lambda done, total: calls.append((done, total)))
+    assert serial.read_bytes() == parallel.read_bytes()
+    assert calls == [(i, 75) for i in range(1, 76)]  # in order, up to the audio's 75 frames
+
+
+def test_parallel_frames_are_the_scene_frames_in_order():
+    motion = swinging_motion(CHUNK_FRAMES + 5)
+    frames = list(render_frames([motion], resolution=(48, 32), workers=2))
+    assert len(frames) == motion.n_frames
+    with SkeletonScene([motion], resolution=(48, 32)) as scene:
+        for i in (0, CHUNK_FRAMES - 1, CHUNK_FRAMES, motion.n_frames - 1):  # both sides of the chunk border
+            np.testing.assert_array_equal(frames[i], scene.render_frame(i))
+
+
+def test_a_failed_rendering_process_is_reported_and_leaves_no_file(tmp_path, monkeypatch):
+    from gesturekit.viz import render
+
+    monkeypatch.setattr(render.sys, "executable", "/bin/false")  # each process exits at once, with code 1
+    path = tmp_path / "out.mp4"
+    with pytest.raises(GestureKitError, match="rendering process stopped at frame 0 .*exit code 1"):
+        render_video(path, swinging_motion(40), resolution=(48, 32), workers=2)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("workers", [0, -1, 1.5, True, "2"])
+def test_bad_worker_counts_are_refused(tmp_path, workers):
+    with pytest.raises(ConfigError, match="workers must be a positive whole number"):
+        render_video(tmp_path / "w.mp4", still_motion(3), resolution=(64, 48), workers=workers)
+    assert not (tmp_path / "w.mp4").exists()
 
 
 def test_existing_file_is_kept_unless_overwrite(tmp_path):
