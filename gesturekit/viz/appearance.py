@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 #: Points :meth:`Appearance.body` adds after the 55 joints, in this order (indices 55, 56, ...).
-DERIVED_POINTS: tuple[str, ...] = ("pelvis", "left_hip", "right_hip", "head_centre")
+DERIVED_POINTS: tuple[str, ...] = ("pelvis", "left_hip", "right_hip", "head_centre", "left_chest", "right_chest")
 
 
 @dataclass(frozen=True)
@@ -128,10 +128,15 @@ class Appearance:
         One colour per motion, in order (first k-NN blue, then refined orange, ...).
     part_tint : tuple of (str, float)
         Per body part, how far its colour is mixed towards white (0: the motion's colour).
+    merged_parts : tuple of str
+        Parts whose capsules are shaded as one surface: one cylinder along the spine
+        (pelvis to upper chest), so the torso reads as one body rather than as tubes.
     torso_radius : float
-        The spine capsules (pelvis to upper chest).
-    torso_side_radius : float
-        The capsules from each hip to the shoulder on its side, and between the hips.
+        The spine capsules (pelvis to upper chest): the torso's depth.
+    hip_radius : float
+        The capsule between the hips.
+    chest_radius : float
+        The capsule across the chest (between the chest points).
     shoulder_radius : float
         The collar bones (upper chest to collar to shoulder).
     neck_radius : float
@@ -148,6 +153,9 @@ class Appearance:
         The pelvis point lies this many spine_mid-to-chest lengths below spine_mid, along the spine.
     hip_half_width : float
         The hips lie this far either side of the pelvis, along the shoulders' left-right line.
+    chest_half_width : float
+        The chest points lie this far either side of the midpoint of ``chest`` and ``upper_chest``,
+        along the same line.
     light_direction : tuple of float
         Towards the light, camera frame (normalised where used).
     ambient, diffuse : float
@@ -167,8 +175,10 @@ class Appearance:
 
     motion_colors: tuple[str, ...] = ("#2c5d8f", "#c0502d", "#3a8a4e", "#7b4fa0", "#a07a1f", "#2a8a8a")
     part_tint: tuple[tuple[str, float], ...] = (("head", 0.22), ("palm", 0.12), ("finger", 0.12))
-    torso_radius: float = 0.1
-    torso_side_radius: float = 0.07
+    merged_parts: tuple[str, ...] = ("torso",)
+    torso_radius: float = 0.12
+    hip_radius: float = 0.09
+    chest_radius: float = 0.11
     shoulder_radius: float = 0.06
     neck_radius: float = 0.048
     head_radius: float = 0.1
@@ -179,10 +189,11 @@ class Appearance:
     finger_radius: float = 0.0095
     fingertip_radius: float = 0.008
     pelvis_below: float = 1.4
-    hip_half_width: float = 0.095
+    hip_half_width: float = 0.045
+    chest_half_width: float = 0.055
     light_direction: tuple[float, float, float] = (-0.45, 0.6, 0.66)
-    ambient: float = 0.42
-    diffuse: float = 0.7
+    ambient: float = 0.5
+    diffuse: float = 0.62
     background: str = "#f4f5f7"
     ground_color: str = "#e3e6ea"
     shadow_color: str = "#000000"
@@ -229,27 +240,26 @@ class Appearance:
 
         Every one of the 54 bones is a capsule, except ``head`` to ``head_top``, which the
         head sphere stands for (its ``covers``). The torso adds capsules between the
-        derived points (pelvis, hips) and the shoulders.
+        derived points: the hips and across the chest.
         """
         j = joint_index
         n = N_JOINTS
-        pelvis, lhip, rhip, head_c = (n + i for i in range(len(DERIVED_POINTS)))
+        pelvis, lhip, rhip, head_c, lchest, rchest = (n + i for i in range(len(DERIVED_POINTS)))
         head_bone = (j("head_top"), j("head"))
         caps = [
-            # torso volume first: the spine, each side, and the hips
+            # the torso's volume: the spine down to the pelvis, across the hips and the chest
             Capsule(pelvis, j("spine_mid"), self.torso_radius, "torso"),
-            Capsule(lhip, rhip, self.torso_side_radius, "torso"),
-            Capsule(lhip, j("left_shoulder"), self.torso_side_radius, "torso"),
-            Capsule(rhip, j("right_shoulder"), self.torso_side_radius, "torso"),
+            Capsule(lhip, rhip, self.hip_radius, "torso"),
+            Capsule(lchest, rchest, self.chest_radius, "torso"),
         ]
         radius = {
             "spine_mid": None, "chest": self.torso_radius, "upper_chest": self.torso_radius,
-            "neck": self.neck_radius, "neck_upper": self.neck_radius, "head": self.neck_radius,
+            "neck": self.torso_radius * 0.5, "neck_upper": self.neck_radius, "head": self.neck_radius,
             "left_collar": self.shoulder_radius, "left_shoulder": self.shoulder_radius,
             "right_collar": self.shoulder_radius, "right_shoulder": self.shoulder_radius,
             "left_elbow": self.upper_arm_radius, "right_elbow": self.upper_arm_radius,
         }
-        part = {"chest": "torso", "upper_chest": "torso", "neck": "neck", "neck_upper": "neck", "head": "neck",
+        part = {"chest": "torso", "upper_chest": "torso", "neck": "torso", "neck_upper": "neck", "head": "neck",
                 "left_collar": "torso", "left_shoulder": "torso", "right_collar": "torso",
                 "right_shoulder": "torso", "left_elbow": "upper_arm", "right_elbow": "upper_arm"}
         for child in range(1, N_JOINTS):
@@ -280,8 +290,8 @@ class Appearance:
         Returns
         -------
         BodyShapes
-            ``points`` of shape (frames, 59, 3) float32: the joints, then pelvis, left hip,
-            right hip and head centre (:data:`DERIVED_POINTS`).
+            ``points`` of shape (frames, 61, 3) float32: the joints, then the
+            :data:`DERIVED_POINTS` (pelvis, hips, head centre, chest points).
 
         Raises
         ------
@@ -296,11 +306,14 @@ class Appearance:
         pelvis = spine + (spine - chest) * self.pelvis_below
         across = _unit(p[:, j("left_shoulder")] - p[:, j("right_shoulder")])
         head, top = p[:, j("head")], p[:, j("head_top")]
+        breast = (chest + p[:, j("upper_chest")]) / 2  # the chest is broadest between the two joints
         derived = np.stack([
             pelvis,
             pelvis + across * self.hip_half_width,
             pelvis - across * self.hip_half_width,
             head + (top - head) * self.head_centre,
+            breast + across * self.chest_half_width,
+            breast - across * self.chest_half_width,
         ], axis=1)
         caps, spheres = self.shapes()
         points = np.concatenate([p, derived], axis=1).astype(np.float32)
@@ -343,7 +356,7 @@ class Appearance:
         """
         q = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         q = q[np.isfinite(q).all(axis=1)]
-        return float(q[:, 1].min() - max(self.torso_radius, self.torso_side_radius) - self.ground_gap)
+        return float(q[:, 1].min() - max(self.torso_radius, self.hip_radius) - self.ground_gap)
 
     def to_json(self) -> dict:
         """The appearance as a JSON-ready dict (what a page's script reads): colours, light,
@@ -357,6 +370,7 @@ class Appearance:
             "shadow": self.shadow_color,
             "shadow_alpha": self.shadow_alpha,
             "margin": self.frame_margin,
+            "merged": list(self.merged_parts),
         }
 
 
