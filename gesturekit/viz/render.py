@@ -43,7 +43,7 @@ from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
 from ..skeleton import N_JOINTS
-from .appearance import APPEARANCE, DERIVED_POINTS, Appearance
+from .appearance import APPEARANCE, DERIVED_POINTS, Appearance, hex_to_rgb
 
 __all__ = ["RenderStyle", "SkeletonScene", "default_workers", "render_frames", "render_image", "view_bounds"]
 
@@ -240,20 +240,28 @@ class _BodyMeshes:
             normals = mesh.point_data["Normals"]
             for (_, _, template, _), start in zip(balls, ball_index):
                 normals[start:start + len(template)] = template  # a ball's normals never change
+            # balls of one template are moved together: (centres, radii, template, first point)
+            groups = []
+            for template in (self._ball, self._head):
+                mine = [(p, r, start) for (p, r, t, _), start in zip(balls, ball_index) if t is template]
+                if mine:
+                    groups.append((np.array([m[0] for m in mine]), np.array([m[1] for m in mine]), template,
+                                   mine[0][2]))
             self._layout.append((
                 mesh,
                 np.array([c.a for c in caps], dtype=np.int64), np.array([c.b for c in caps], dtype=np.int64),
                 np.array([c.radius for c in caps]),
-                [(p, r, template, start) for (p, r, template, _), start in zip(balls, ball_index)],
+                groups,
             ))
             self.parts[part] = mesh
 
     def update(self, points: np.ndarray) -> None:
         """Move the meshes to one frame's body points, shape (61, 3) (:meth:`Appearance.body`), metres."""
         points = np.asarray(points, dtype=np.float64)
-        for mesh, ia, ib, radii, balls in self._layout:
-            xyz = mesh.points
-            normals = mesh.point_data["Normals"]
+        for mesh, ia, ib, radii, groups in self._layout:
+            # plain views of VTK's arrays: numpy writes straight into them
+            xyz = np.asarray(mesh.points).view(np.ndarray)
+            normals = np.asarray(mesh.point_data["Normals"]).view(np.ndarray)
             nt = len(ia) * 2 * len(self._cos)
             if len(ia):
                 start, end = points[ia], points[ib]
@@ -270,8 +278,9 @@ class _BodyMeshes:
                 rings = np.concatenate([start[:, None] + offset, end[:, None] + offset], axis=1)
                 xyz[:nt] = rings.reshape(-1, 3)
                 normals[:nt] = np.concatenate([radial, radial], axis=1).reshape(-1, 3)
-            for p, r, template, at in balls:
-                xyz[at:at + len(template)] = points[p] + r * template
+            for centres, r, template, at in groups:
+                balls = points[centres][:, None, :] + r[:, None, None] * template[None]
+                xyz[at:at + balls.shape[0] * balls.shape[1]] = balls.reshape(-1, 3)
             mesh.GetPoints().Modified()
             mesh.GetPointData().GetNormals().Modified()
             mesh.Modified()
@@ -463,12 +472,15 @@ class SkeletonScene:
         pl.add_mesh(floor, color=a.ground_color, lighting=False)
         pelvis = points[:, -len(DERIVED_POINTS) + DERIVED_POINTS.index("pelvis")].mean(axis=0)
         half = 2.2 * a.hip_half_width + a.hip_radius  # the shadow's half width, metres, across X
-        # three stacked discs, each fainter and wider: a shadow that fades at its rim
+        # three stacked discs, each darker and smaller: a shadow that fades at its rim; opaque, the
+        # colour of the floor seen through the shadow, since translucency costs a render pass
+        ground_rgb, shadow_rgb = hex_to_rgb(a.ground_color), hex_to_rgb(a.shadow_color)
         for k, scale in enumerate((1.0, 0.75, 0.5)):
+            alpha = a.shadow_alpha * (k + 1) / 3
             disc = pv.Disc(center=(0.0, 0.0, 0.0), inner=0.0, outer=half * scale, normal=(0, 1, 0), c_res=48)
             disc.points[:, 2] *= 0.5  # flat ellipse: shallower than wide
             disc.points[:] += (pelvis[0], ground + 1e-3 * (k + 1), pelvis[2])
-            pl.add_mesh(disc, color=a.shadow_color, opacity=a.shadow_alpha / 3, lighting=False)
+            pl.add_mesh(disc, color=tuple(ground_rgb * (1 - alpha) + shadow_rgb * alpha), lighting=False)
 
     @property
     def backend(self) -> str:
