@@ -307,7 +307,7 @@ def test_skeleton_figure_has_the_appearance_colours_a_head_and_thick_limbs():
         widths = {p: parts[p].line.width for p in ("torso", "body", "hands")}
         assert widths["torso"] > widths["body"] > widths["hands"] >= 1
         ratio = APPEARANCE.head_radius / APPEARANCE.torso_radius
-        assert parts["head"].marker.size == pytest.approx(widths["torso"] * ratio)
+        assert parts["head"].marker.size == pytest.approx(parts["torso"].marker.size * ratio)
     assert APPEARANCE.color(0) != APPEARANCE.color(1)
     # the head ball at the appearance's head centre (X aside: the figures stand apart)
     from gesturekit.viz.appearance import DERIVED_POINTS

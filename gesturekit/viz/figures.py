@@ -305,12 +305,16 @@ def skeleton_figure(
     hi = np.maximum(hi, every.max(axis=0) + a.head_radius)
     # fixed ranges over every shown frame: the view must not jump while playing
     centre, extent = (lo + hi) / 2, np.maximum(hi - lo, 0.3)
-    # plotly draws 3D lines and markers in screen pixels: the appearance's radii (metres) become
+    # plotly sizes 3D lines and markers in screen pixels: the appearance's radii (metres) become
     # pixels at the figure's scale (the scene's largest side spans about 0.6 of its height)
     px = 0.6 * height / float(extent.max())
 
     def width(radius: float) -> float:
         return max(1.0, 2 * radius * px)
+
+    def size(radius: float) -> float:
+        # a 3D marker comes out about three times its nominal size (measured in Chromium)
+        return max(1.0, 2 * radius * px / 3)
 
     traces = []
     for i, (label, _) in enumerate(zip(labels, parts)):
@@ -328,14 +332,15 @@ def skeleton_figure(
                 go.Scatter3d(
                     **_xyz(points[0]), mode="lines+markers", line=dict(color=color, width=w),
                     # markers at the joints, as wide as the line: round ends, as the capsules have
-                    marker=dict(color=color, size=w, line=dict(width=0)), name=name, showlegend=legend, **common,
+                    marker=dict(color=color, size=w / 3, line=dict(width=0)), name=name, showlegend=legend,
+                    **common,
                 )
             )
         common["meta"] = {"motion": i, "part": "head"}
         color = a.part_color(i, "head")
         traces.append(
             go.Scatter3d(
-                **_xyz(head[0]), mode="markers", marker=dict(color=color, size=width(a.head_radius), opacity=1.0,
+                **_xyz(head[0]), mode="markers", marker=dict(color=color, size=size(a.head_radius), opacity=1.0,
                                                              line=dict(width=0)),
                 name=f"{label} head".strip(), showlegend=False, **common,
             )
