@@ -1,14 +1,17 @@
-"""Offscreen 3D renders of the 55-joint skeleton with PyVista.
+"""Offscreen 3D renders of motions as bodies, with PyVista: the frames of the MP4 videos.
 
 A :class:`SkeletonScene` draws one motion, or two side by side (for example the
-k-NN result next to the refined one), as bones (tubes) and joints (spheres),
-every finger joint included, on a plain background, seen from the front: the
-camera stands on the character's +Z side, looks along -Z and frames a fixed
-box around the upper body, enlarged only where a motion leaves it, so that the
-hands are always in the picture and the clips of every system look alike in a
-user study. The meshes are built once; each frame only rewrites their points
-(a few thousand, in numpy), so a long clip costs little more than the
-rasterisation itself.
+k-NN result next to the refined one), in the one appearance of every view
+(:mod:`gesturekit.viz.appearance`): capsules with round ends for the limbs,
+fingers and torso, a head ball, each motion in its colour (first blue, second
+orange), lit by the appearance's light fixed to the camera, standing over a
+floor with a contact shadow. The camera stands on the character's +Z side,
+looks down a little and is framed on every drawn surface of the whole clip,
+so the figure fills the view and no hand is ever cut; a fixed box instead
+(``RenderStyle(fit_motion=False)``) frames the clips of every system of a user
+study alike. The meshes are built once; each frame only rewrites their points
+(in numpy), so a long clip costs little more than the rasterisation itself.
+:func:`render_frames` renders a clip's frames on every core, in order.
 
 Rendering needs no display server. On Linux without ``DISPLAY`` or
 ``WAYLAND_DISPLAY`` the scene asks VTK for its EGL render window (Mesa's
@@ -193,6 +196,10 @@ def _write(mesh: pv.PolyData, points: np.ndarray, normals: np.ndarray | None = N
     mesh.Modified()
 
 
+# balls smaller than this (metres; the fingers' and palms') get half the sphere resolution
+_SMALL_BALL = 0.02
+
+
 class _BodyMeshes:
     """The surfaces of one motion's body, one mesh per body part, whose points are rewritten every frame.
 
@@ -218,6 +225,7 @@ class _BodyMeshes:
         ring = np.stack([k, (k + 1) % sides, (k + 1) % sides + sides, k + sides], axis=1)
         self._ball, ball_tris = _unit_sphere(style.sphere_resolution)
         self._head, head_tris = _unit_sphere(style.head_resolution)
+        self._small, small_tris = _unit_sphere(max(4, style.sphere_resolution // 2))
 
         self.parts: dict[str, pv.PolyData] = {}
         self._layout = []  # per part: (mesh, tube ends a, b, tube radii, ball centres, radii, template)
@@ -225,7 +233,10 @@ class _BodyMeshes:
         for part in names:
             caps = [c for c in capsules if c.part == part]
             ends = sorted({(c.a, c.radius) for c in caps} | {(c.b, c.radius) for c in caps})
-            balls = [(p, r, self._ball, ball_tris) for p, r in ends]
+            # a finger's balls cover a few pixels: a coarse sphere is enough, and much cheaper
+            balls = [(p, r, self._ball, ball_tris) if r >= _SMALL_BALL else (p, r, self._small, small_tris)
+                     for p, r in ends]
+            balls.sort(key=lambda ball: ball[2] is self._small)  # each template's balls in one run of points
             balls += [(s.centre, s.radius, self._head, head_tris) for s in spheres if s.part == part]
             polygons, n = [], 0
             for _ in caps:
@@ -242,7 +253,7 @@ class _BodyMeshes:
                 normals[start:start + len(template)] = template  # a ball's normals never change
             # balls of one template are moved together: (centres, radii, template, first point)
             groups = []
-            for template in (self._ball, self._head):
+            for template in (self._ball, self._small, self._head):
                 mine = [(p, r, start) for (p, r, t, _), start in zip(balls, ball_index) if t is template]
                 if mine:
                     groups.append((np.array([m[0] for m in mine]), np.array([m[1] for m in mine]), template,
