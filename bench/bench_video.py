@@ -62,8 +62,8 @@ def main(argv=None) -> int:
         else:
             take, _ = generate_demo_take(seconds=args.seconds, seed=7, name="speech")
             audio, name = take.audio, f"{args.seconds:g} s of the generated speaker"
-        result = synthesize(audio, db=db)
-        left, right = result.knn_motion, result.motion  # what the page shows side by side
+        result = synthesize(audio, db=db, refiner="demo")
+        left, right = result.knn_motion, result.refined_motion  # what the page shows side by side
         print(f"speech: {name}, {len(result.audio) / 16000:.1f} s; {result.n_frames} frames side by side, "
               f"{width}x{height}")
         runs = {}

