@@ -383,3 +383,15 @@ def test_encoder_failure_is_reported_and_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(GestureKitError, match="out.mp4.*ffmpeg could not encode"):
         render_video(tmp_path / "out.mp4", still_motion(3), resolution=(64, 48))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_style_travels_to_the_rendering_processes_unchanged():
+    import json
+
+    from gesturekit.viz.appearance import Appearance
+
+    style = RenderStyle(appearance=Appearance(motion_colors=("#112233", "#445566")), fit_motion=False,
+                        view_box=((-1, 1), (-0.5, 1), (-0.3, 0.5)), elevation=5.0)
+    assert RenderStyle.from_json(json.loads(json.dumps(style.to_json()))) == style
+    with pytest.raises(ConfigError, match="appearance must be an Appearance"):
+        RenderStyle(appearance="blue")
