@@ -139,7 +139,10 @@ class Appearance:
         The capsule across the chest (between the chest points).
     shoulder_radius : float
         The collar bones (upper chest to collar to shoulder).
+    neck_base_radius : float
+        The bone from upper chest to neck: the base of the neck, shaded as part of the torso.
     neck_radius : float
+        The neck above it (neck to neck_upper to head).
     head_radius : float
         The head sphere, centred :attr:`head_centre` of the way from ``head`` to ``head_top``.
     head_centre : float
@@ -154,8 +157,10 @@ class Appearance:
     hip_half_width : float
         The hips lie this far either side of the pelvis, along the shoulders' left-right line.
     chest_half_width : float
-        The chest points lie this far either side of the midpoint of ``chest`` and ``upper_chest``,
-        along the same line.
+        The chest points lie this far either side of a point :attr:`chest_height` of the way from
+        ``chest`` to ``upper_chest``, along the same line.
+    chest_height : float
+        Fraction, 0 at ``chest``, 1 at ``upper_chest``.
     light_direction : tuple of float
         Towards the light, camera frame (normalised where used).
     ambient, diffuse : float
@@ -178,8 +183,9 @@ class Appearance:
     merged_parts: tuple[str, ...] = ("torso",)
     torso_radius: float = 0.12
     hip_radius: float = 0.09
-    chest_radius: float = 0.11
+    chest_radius: float = 0.09
     shoulder_radius: float = 0.06
+    neck_base_radius: float = 0.06
     neck_radius: float = 0.048
     head_radius: float = 0.1
     head_centre: float = 0.45
@@ -190,7 +196,8 @@ class Appearance:
     fingertip_radius: float = 0.008
     pelvis_below: float = 1.4
     hip_half_width: float = 0.045
-    chest_half_width: float = 0.055
+    chest_half_width: float = 0.08
+    chest_height: float = 0.7
     light_direction: tuple[float, float, float] = (-0.45, 0.6, 0.66)
     ambient: float = 0.5
     diffuse: float = 0.62
@@ -253,8 +260,8 @@ class Appearance:
             Capsule(lchest, rchest, self.chest_radius, "torso"),
         ]
         radius = {
-            "spine_mid": None, "chest": self.torso_radius, "upper_chest": self.torso_radius,
-            "neck": self.torso_radius * 0.5, "neck_upper": self.neck_radius, "head": self.neck_radius,
+            "chest": self.torso_radius, "upper_chest": self.torso_radius,
+            "neck": self.neck_base_radius, "neck_upper": self.neck_radius, "head": self.neck_radius,
             "left_collar": self.shoulder_radius, "left_shoulder": self.shoulder_radius,
             "right_collar": self.shoulder_radius, "right_shoulder": self.shoulder_radius,
             "left_elbow": self.upper_arm_radius, "right_elbow": self.upper_arm_radius,
@@ -306,7 +313,7 @@ class Appearance:
         pelvis = spine + (spine - chest) * self.pelvis_below
         across = _unit(p[:, j("left_shoulder")] - p[:, j("right_shoulder")])
         head, top = p[:, j("head")], p[:, j("head_top")]
-        breast = (chest + p[:, j("upper_chest")]) / 2  # the chest is broadest between the two joints
+        breast = chest + (p[:, j("upper_chest")] - chest) * self.chest_height  # broadest high on the chest
         derived = np.stack([
             pelvis,
             pelvis + across * self.hip_half_width,
