@@ -364,12 +364,12 @@ def _camera(points: np.ndarray, aspect: float, style: RenderStyle, *, pad=0.0, m
 
 
 class SkeletonScene:
-    """An offscreen window showing one or two skeletons, updated frame by frame.
+    """An offscreen window showing one or two motions as bodies, updated frame by frame.
 
     Build it once per clip, call :meth:`render_frame` for every frame, then
     :meth:`close` it (or use it as a context manager). Two motions are shown
-    in two panels side by side, each with its label above, framed by the same
-    camera.
+    in two panels side by side, each in its colour with its label above in the
+    same colour, framed by the same camera.
 
     Parameters
     ----------
