@@ -21,7 +21,8 @@ from gesturekit.errors import ConfigError, GestureKitError, InputFileError
 from gesturekit.export.video import AUDIO_OUT_SR, probe_media, render_video
 from gesturekit.motion import Motion
 from gesturekit.skeleton import FINGERS, N_JOINTS, hand_indices, joint_index
-from gesturekit.viz.render import RenderStyle, SkeletonScene, render_image, view_bounds
+from gesturekit.viz.appearance import APPEARANCE, DERIVED_POINTS
+from gesturekit.viz.render import CHUNK_FRAMES, RenderStyle, SkeletonScene, render_frames, render_image, view_bounds
 
 FPS = 15.0
 SR = 16000
@@ -88,9 +89,21 @@ def decode(path) -> list[np.ndarray]:
 
 
 def figure_mask(image: np.ndarray) -> np.ndarray:
-    """Pixels that differ clearly from the background colour of the house style."""
-    background = np.array([0xEE, 0xEE, 0xEA])
-    return np.abs(image.astype(int) - background).sum(axis=-1) > 60
+    """Pixels of a figure: coloured, where background, floor and shadow are grey."""
+    image = image.astype(int)
+    return image.max(axis=-1) - image.min(axis=-1) > 40
+
+
+def blue(image: np.ndarray) -> np.ndarray:
+    """Pixels of the first motion's colour (blue): clearly more blue than red."""
+    image = image.astype(int)
+    return image[..., 2] - image[..., 0] > 40
+
+
+def orange(image: np.ndarray) -> np.ndarray:
+    """Pixels of the second motion's colour (orange): clearly more red than blue."""
+    image = image.astype(int)
+    return image[..., 0] - image[..., 2] > 40
 
 
 def changed_pixels(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -164,9 +177,39 @@ def test_side_by_side_has_both_figures_and_labels(tmp_path):
     frame = decode(out)[0]
     mask = figure_mask(frame)
     assert mask[:, :160].sum() > 100 and mask[:, 160:].sum() > 100
-    # dark label text in the top rows of both panels
-    dark = frame.sum(axis=-1) < 200
-    assert dark[:25, :160].sum() > 10 and dark[:25, 160:].sum() > 10
+    # the labels, each in its motion's colour, in the top rows of its panel
+    assert blue(frame[:25, :160]).sum() > 10 and orange(frame[:25, 160:]).sum() > 10
+
+
+def test_two_motions_have_their_own_colours_in_their_own_halves():
+    image = render_image(still_motion(1), side_by_side=swinging_motion(3), frame=2, resolution=(200, 120))
+    left, right = image[:, :100], image[:, 100:]
+    assert blue(left).sum() > 400 and orange(right).sum() > 400
+    assert orange(left).sum() == 0 and blue(right).sum() == 0
+
+
+def test_the_body_has_a_head_above_its_neck_and_fills_the_view():
+    motion = still_motion(1)
+    with SkeletonScene([motion], resolution=(160, 120)) as scene:
+        image = scene.render_frame(0)
+        body = APPEARANCE.body(motion.positions).points[0]
+        head = scene.project(body[[N_JOINTS + DERIVED_POINTS.index("head_centre")]])[0]
+        neck = scene.project(motion.positions[0, [joint_index("neck")]])[0]
+    mask = figure_mask(image)
+    assert head[1] < neck[1] - 5  # rows count down: the head is drawn above the neck
+    col, row = np.round(head).astype(int)
+    assert mask[row, col]
+    # the head is the motion's colour, lighter (its tint)
+    r, g, b = image[row - 1:row + 2, col - 1:col + 2].reshape(-1, 3).mean(axis=0)
+    assert b > r + 20
+    # framed to fill the view: the figure spans most of the picture's height
+    rows, cols = np.nonzero(mask)
+    assert rows.max() - rows.min() > 0.6 * 120
+    assert cols.max() - cols.min() > 0.2 * 160
+    # a floor and a contact shadow under the figure: the bottom rows are darker than the sky
+    floor = image[-5:].astype(int).sum(axis=-1).mean()
+    sky = image[:5].astype(int).sum(axis=-1).mean()
+    assert floor < sky - 10
 
 
 def test_progress_counts_every_frame(tmp_path):
@@ -180,6 +223,45 @@ def test_same_inputs_give_the_same_bytes(tmp_path):
     a = render_video(tmp_path / "a.mp4", swinging_motion(8), audio=tone(0.5), sr=SR, resolution=(96, 64))
     b = render_video(tmp_path / "b.mp4", swinging_motion(8), audio=tone(0.5), sr=SR, resolution=(96, 64))
     assert hashlib.sha256(a.read_bytes()).digest() == hashlib.sha256(b.read_bytes()).digest()
+
+
+def test_parallel_render_gives_the_same_bytes_as_serial(tmp_path):
+    # 70 frames are three chunks: each of two processes renders some, the parent puts them in order
+    motion, other = swinging_motion(70), still_motion(64)
+    calls = []
+    serial = render_video(tmp_path / "serial.mp4", motion, side_by_side=other, labels=["a", "b"], audio=tone(5.0),
+                          sr=SR, resolution=(96, 64), workers=1)
+    parallel = render_video(tmp_path / "parallel.mp4", motion, side_by_side=other, labels=["a", "b"],
+                            audio=tone(5.0), sr=SR, resolution=(96, 64), workers=2,
+                            progress=lambda done, total: calls.append((done, total)))
+    assert serial.read_bytes() == parallel.read_bytes()
+    assert calls == [(i, 75) for i in range(1, 76)]  # in order, up to the audio's 75 frames
+
+
+def test_parallel_frames_are_the_scene_frames_in_order():
+    motion = swinging_motion(CHUNK_FRAMES + 5)
+    frames = list(render_frames([motion], resolution=(48, 32), workers=2))
+    assert len(frames) == motion.n_frames
+    with SkeletonScene([motion], resolution=(48, 32)) as scene:
+        for i in (0, CHUNK_FRAMES - 1, CHUNK_FRAMES, motion.n_frames - 1):  # both sides of the chunk border
+            np.testing.assert_array_equal(frames[i], scene.render_frame(i))
+
+
+def test_a_failed_rendering_process_is_reported_and_leaves_no_file(tmp_path, monkeypatch):
+    from gesturekit.viz import render
+
+    monkeypatch.setattr(render.sys, "executable", "/bin/false")  # each process exits at once, with code 1
+    path = tmp_path / "out.mp4"
+    with pytest.raises(GestureKitError, match="rendering process stopped at frame 0 .*exit code 1"):
+        render_video(path, swinging_motion(40), resolution=(48, 32), workers=2)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("workers", [0, -1, 1.5, True, "2"])
+def test_bad_worker_counts_are_refused(tmp_path, workers):
+    with pytest.raises(ConfigError, match="workers must be a positive whole number"):
+        render_video(tmp_path / "w.mp4", still_motion(3), resolution=(64, 48), workers=workers)
+    assert not (tmp_path / "w.mp4").exists()
 
 
 def test_existing_file_is_kept_unless_overwrite(tmp_path):
@@ -246,15 +328,16 @@ def test_front_view_shows_the_character_facing_the_camera():
         assert mask[row - 1:row + 2, col - 1:col + 2].any()
 
 
-def test_motions_inside_the_view_box_are_framed_identically():
-    style = RenderStyle()
+def test_stimuli_are_framed_identically_and_previews_fit_the_motion():
+    fixed = RenderStyle(fit_motion=False)
     a, b = still_motion(2), swinging_motion(5)
-    np.testing.assert_array_equal(view_bounds([a], style=style), np.asarray(style.view_box))
-    np.testing.assert_array_equal(view_bounds([a], style=style), view_bounds([b], style=style))
-    far = Motion(a.positions + np.float32([1.5, 0, 0]), FPS)
-    grown = view_bounds([far], style=style)
-    assert grown[0, 1] >= far.positions[..., 0].max() + style.body_joint_radius
-    np.testing.assert_array_equal(grown[1:], np.asarray(style.view_box)[1:])
+    np.testing.assert_array_equal(view_bounds([a], style=fixed), np.asarray(fixed.view_box))
+    np.testing.assert_array_equal(view_bounds([a], style=fixed), view_bounds([b], style=fixed))
+    # fitted: every drawn surface of every frame inside, the swinging arm's reach included
+    fitted_a, fitted_b = view_bounds([a]), view_bounds([b])
+    points = APPEARANCE.body(b.positions).points.reshape(-1, 3)
+    assert np.all(points >= fitted_b[:, 0]) and np.all(points <= fitted_b[:, 1])
+    assert np.ptp(fitted_b[0]) > np.ptp(fitted_a[0]) + 0.1  # the arm, raised sideways, widens the view
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -300,3 +383,15 @@ def test_encoder_failure_is_reported_and_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(GestureKitError, match="out.mp4.*ffmpeg could not encode"):
         render_video(tmp_path / "out.mp4", still_motion(3), resolution=(64, 48))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_style_travels_to_the_rendering_processes_unchanged():
+    import json
+
+    from gesturekit.viz.appearance import Appearance
+
+    style = RenderStyle(appearance=Appearance(motion_colors=("#112233", "#445566")), fit_motion=False,
+                        view_box=((-1, 1), (-0.5, 1), (-0.3, 0.5)), elevation=5.0)
+    assert RenderStyle.from_json(json.loads(json.dumps(style.to_json()))) == style
+    with pytest.raises(ConfigError, match="appearance must be an Appearance"):
+        RenderStyle(appearance="blue")

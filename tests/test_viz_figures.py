@@ -58,7 +58,7 @@ def test_skeleton_draws_all_54_bones_at_the_joint_positions():
     m = _motion(20)
     fig = skeleton_figure(m)
     parts = _traces(fig, 0)
-    assert set(parts) == {"body", "hands"}
+    assert set(parts) == {"body", "hands", "torso", "head"}
     body, hands = _segments(parts["body"]), _segments(parts["hands"])
     assert (len(body), len(hands)) == (14, 40)
     assert _bone_set(np.concatenate([body, hands])) == _expected_bones(m.positions[0])
@@ -105,7 +105,7 @@ def test_skeleton_figure_sends_typed_arrays():
     fig = skeleton_figure([_motion(40, seed=1), _motion(40, seed=2)])
     spec = json.loads(pio.to_json(fig, validate=False))
     arrays = [t[c] for f in [spec] + spec["frames"] for t in f["data"] for c in "xyz"]
-    assert len(arrays) == 3 * 4 * 41
+    assert len(arrays) == 3 * 8 * 41
     assert all(isinstance(a, dict) and a["dtype"] == "f4" for a in arrays)
 
 
@@ -116,8 +116,8 @@ def test_skeleton_frames_follow_the_motion():
     assert len(fig.layout.sliders[0].steps) == 64
     k = 37
     frame = fig.frames[k]
-    assert list(frame.traces) == [0, 1]
-    shown = np.concatenate([_segments(t) for t in frame.data])
+    assert list(frame.traces) == [0, 1, 2, 3]
+    shown = np.concatenate([_segments(t) for t in frame.data[:2]])
     assert _bone_set(shown) == _expected_bones(m.positions[k])
     play = fig.layout.updatemenus[0].buttons[0]
     assert play.method == "animate" and play.args[1]["frame"]["duration"] == pytest.approx(1000 / 15)
@@ -152,13 +152,13 @@ def test_frames_never_exceed_max_and_cover_the_motion(n, max_frames, fps):
 def test_side_by_side_motions_are_offset_and_the_shorter_holds_its_last_pose():
     a, b = _motion(30, seed=1), _motion(10, seed=2)
     fig = skeleton_figure([a, b], labels=["kNN", "refined"])
-    assert len(fig.data) == 4 and fig.layout.showlegend
+    assert len(fig.data) == 8 and fig.layout.showlegend
     assert [t.text for t in fig.layout.scene.annotations] == ["kNN", "refined"]
     xa = np.nanmean(data_array(_traces(fig, 0)["body"].x))
     xb = np.nanmean(data_array(_traces(fig, 1)["body"].x))
     assert xb - xa > 0.5  # the second motion stands to the viewer's right (+X)
-    last = _segments(fig.frames[-1].data[2])  # motion 1's body at the last time
-    held = _segments(fig.frames[9].data[2])
+    last = _segments(fig.frames[-1].data[4])  # motion 1's body at the last time
+    held = _segments(fig.frames[9].data[4])
     np.testing.assert_allclose(last, held)
 
 
@@ -292,3 +292,26 @@ def test_waveform_rejects_bad_input():
         waveform_figure(np.zeros(100), 16000, bands=[(0.5, 0.5, "empty")])
     with pytest.raises(ConfigError):
         waveform_figure(np.zeros(100), 0)
+
+
+def test_skeleton_figure_has_the_appearance_colours_a_head_and_thick_limbs():
+    from gesturekit.viz.appearance import APPEARANCE
+
+    a, b = _motion(5, seed=1), _motion(5, seed=2)
+    fig = skeleton_figure([a, b], labels=["kNN", "refined"])
+    for i in (0, 1):
+        parts = _traces(fig, i)
+        assert parts["body"].line.color == APPEARANCE.part_color(i, "upper_arm")
+        assert parts["head"].marker.color == APPEARANCE.part_color(i, "head")
+        # widths in proportion to the radii: torso > limbs > fingers, and the head the widest
+        widths = {p: parts[p].line.width for p in ("torso", "body", "hands")}
+        assert widths["torso"] > widths["body"] > widths["hands"] >= 1
+        ratio = APPEARANCE.head_radius / APPEARANCE.torso_radius
+        assert parts["head"].marker.size == pytest.approx(parts["torso"].marker.size * ratio)
+    assert APPEARANCE.color(0) != APPEARANCE.color(1)
+    # the head ball at the appearance's head centre (X aside: the figures stand apart)
+    from gesturekit.viz.appearance import DERIVED_POINTS
+
+    head = np.array([data_array(getattr(_traces(fig, 0)["head"], c))[0] for c in "xyz"])
+    centre = APPEARANCE.body(a.positions[:1]).points[0, N_JOINTS + DERIVED_POINTS.index("head_centre")]
+    np.testing.assert_allclose(head[1:], centre[1:], atol=1e-5)

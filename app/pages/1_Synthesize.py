@@ -1,5 +1,6 @@
 """Speech in, gestures out: choose speech, draw controls, set the search, run, watch, download."""
 import functools
+import time
 
 import numpy as np
 import pandas as pd
@@ -21,7 +22,7 @@ _BASE = "_synth.segments_base"  # the table the editor shows before the user's e
 _LAST_BOX = "_synth.last_box"  # the box selection already turned into a segment
 _FAILED = "_synth.failed_upload"  # (token, message) of an upload that could not be read
 _DERIVED = "_synth.figures"  # figures of the current result: {"run": n, name: figure}
-_VIDEO = "_synth.video"  # {"run": n, "bytes": mp4}
+_VIDEO = "_synth.video"  # {"run": n, "bytes": mp4, "note": how long it took}
 
 UPLOAD, EXAMPLE = "Upload a file", "Example speech"
 _INIT_LABELS = {"random": "random database frame (paper)", "rest": "rest pose"}
@@ -209,24 +210,44 @@ def _figure(record, name: str, build):
 
 
 def video(record) -> None:
-    """The MP4 with sound, rendered on demand."""
+    """The MP4 with sound, rendered on demand on every core, then played in the page."""
     ss = st.session_state
     result = record["result"]
     done = ss.get(_VIDEO)
     if done is not None and done["run"] == record["run"]:
         st.video(done["bytes"], format="video/mp4")
+        st.caption(done["note"])
         return
     st.caption("For exact audio-video sync, render the motion offscreen to an MP4 with the speech as soundtrack.")
     if st.button("Render MP4 with sound", key="synth.render"):
-        bar = st.progress(0.0, text="rendering…")
+        from gesturekit.viz.render import default_workers  # the rendering libraries load only when rendering
+
+        workers = default_workers()
+        bar = st.progress(0.0, text=f"rendering on {workers} core{'s' if workers > 1 else ''}…")
+        shown = {"at": 0.0, "frames": 0}
 
         def progress(i: int, n: int) -> None:
-            bar.progress(min(1.0, i / max(n, 1)), text=f"rendering frame {i}/{n}")
+            # a few updates a second: one message per frame would keep the browser busy redrawing the bar
+            now, shown["frames"] = time.perf_counter(), n
+            if i == n or now - shown["at"] >= 0.2:
+                shown["at"] = now
+                bar.progress(min(1.0, i / max(n, 1)), text=f"rendering frame {i} / {n}")
 
-        data = gs.render_mp4(result, progress=progress)
-        bar.progress(1.0, text="encoded")
-        ss[_VIDEO] = {"run": record["run"], "bytes": data}
+        t0 = time.perf_counter()
+        try:
+            data = gs.render_mp4(result, progress=progress)
+        except GestureKitError as exc:
+            bar.empty()
+            st.error(f"Could not render the video: {exc}")
+            return
+        seconds = time.perf_counter() - t0
+        bar.empty()
+        frames = shown["frames"]
+        note = (f"Rendered {frames} frames in {seconds:.1f} s ({frames / max(seconds, 1e-9):.0f} frames/s); "
+                "download it below.")
+        ss[_VIDEO] = {"run": record["run"], "bytes": data, "note": note}
         st.video(data, format="video/mp4")
+        st.caption(note)
 
 
 def show_result(db, record) -> None:

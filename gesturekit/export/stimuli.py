@@ -329,7 +329,8 @@ def _render_stimulus(job: dict) -> str:
     from .video import render_video
 
     motion = Motion(job["positions"], job["fps"])
-    render_video(job["path"], motion, audio=job["audio"], resolution=tuple(job["resolution"]),
+    # one process per stimulus already keeps every core busy
+    render_video(job["path"], motion, audio=job["audio"], resolution=tuple(job["resolution"]), workers=1,
                  overwrite=True, style=stimulus_style())
     return job["id"]
 

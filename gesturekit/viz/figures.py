@@ -27,7 +27,8 @@ from plotly.subplots import make_subplots
 from ..control import ATTRIBUTE_NAMES, ControlTrack, frame_attributes
 from ..errors import ConfigError
 from ..motion import Motion
-from ..skeleton import BODY_JOINTS, bones, joint_index
+from ..skeleton import BODY_JOINTS, N_JOINTS, bones, joint_index
+from .appearance import APPEARANCE
 
 __all__ = [
     "DEFAULT_MAX_FRAMES",
@@ -203,6 +204,24 @@ def _skeleton_paths(motions: list[Motion], *, fps, max_frames: int, spacing):
     return grid_fps, step, times, offsets, parts, allp.min(axis=0) - 0.1, allp.max(axis=0) + 0.1
 
 
+def _torso_and_head(motions: list[Motion], times: np.ndarray, offsets: np.ndarray):
+    """Per motion, at the shown times (sample and hold, offset along X): the torso's capsules of
+    the appearance as NaN-separated segments, shape (times, points, 3), and the head's centre,
+    shape (times, 1, 3), float32, metres."""
+    a = APPEARANCE
+    capsules, spheres = a.shapes()
+    torso = [(c.a, c.b) for c in capsules if c.a >= N_JOINTS or c.b >= N_JOINTS]
+    idx = np.array([j for pair in torso for j in (*pair, -1)])
+    out = []
+    for m, dx in zip(motions, offsets):
+        frames = np.minimum(np.floor(times * m.fps + 1e-6).astype(np.int64), m.n_frames - 1)
+        points = a.body(m.positions[frames]).points + np.array([dx, 0, 0], dtype=np.float32)
+        segments = points[:, idx]
+        segments[:, idx < 0] = np.nan
+        out.append((segments, points[:, [s.centre for s in spheres]]))
+    return out
+
+
 def skeleton_figure(
     motions: Motion | Sequence[Motion],
     *,
@@ -215,8 +234,12 @@ def skeleton_figure(
 ) -> go.Figure:
     """An animated 3D view of one or several skeletons, side by side, seen from the front.
 
-    Each motion is drawn as its 54 bones (14 body bones up to the wrists as
-    thick lines, the 40 finger bones as thin lines) with its joints as dots. Several
+    Each motion is drawn in the one appearance (:mod:`gesturekit.viz.appearance`),
+    as far as plotly's 3D lines allow: its 54 bones (14 body bones up to the
+    wrists as thick lines, the 40 finger bones as thin lines, widths from the
+    appearance's radii at the figure's scale) with round joints, the torso's
+    capsules (pelvis, hips, chest) as wide lines, and the head as a ball; in the
+    motion's colour (first blue, second orange), parts tinted as in the MP4. Several
     motions are offset copies in one scene, placed along X (the first on the
     viewer's left), so they share one camera. The camera stands on the
     characters' +Z side, looking along -Z, with Y up. The figure has play/pause
@@ -249,10 +272,12 @@ def skeleton_figure(
     Returns
     -------
     plotly.graph_objects.Figure
-        Two line-and-marker traces per motion: ``meta["part"] == "body"``
-        (14 bones) and ``"hands"`` (40 bones), drawn as joint paths (a finger from
-        the wrist to its tip) separated by NaN points; every pair of consecutive
-        finite points is a bone, and the joints are the markers.
+        Four traces per motion: ``meta["part"] == "body"`` (14 bones) and
+        ``"hands"`` (40 bones), drawn as joint paths (a finger from the wrist to
+        its tip) separated by NaN points, every pair of consecutive finite
+        points a bone and the joints its markers; ``"torso"`` (the
+        appearance's torso capsules, NaN-separated segments); ``"head"`` (one
+        marker at the head's centre).
         One ``go.Frame`` per shown time (named by its index,
         ``layout.meta`` holds ``{"fps", "frame_step", "times"}`` with the
         times in seconds), and a scene camera with ``up = (0, 1, 0)`` and the
@@ -270,23 +295,54 @@ def skeleton_figure(
     grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(motions, fps=fps, max_frames=max_frames,
                                                                     spacing=spacing)
 
+    # the torso's volume and the head, as the render and the page draw them
+    extras = _torso_and_head(motions, times, offsets)
+    parts = [(body, hands, torso, head) for (body, hands), (torso, head) in zip(parts, extras)]
+    every = np.concatenate([np.concatenate([t.reshape(-1, 3), h.reshape(-1, 3)]) for t, h in extras])
+    every = every[np.isfinite(every).all(axis=1)]
+    a = APPEARANCE
+    lo = np.minimum(lo, every.min(axis=0) - a.head_radius)
+    hi = np.maximum(hi, every.max(axis=0) + a.head_radius)
+    # fixed ranges over every shown frame: the view must not jump while playing
+    centre, extent = (lo + hi) / 2, np.maximum(hi - lo, 0.3)
+    # plotly sizes 3D lines and markers in screen pixels: the appearance's radii (metres) become
+    # pixels at the figure's scale (the scene's largest side spans about 0.6 of its height)
+    px = 0.6 * height / float(extent.max())
+
+    def width(radius: float) -> float:
+        return max(1.0, 2 * radius * px)
+
+    def size(radius: float) -> float:
+        # a 3D marker comes out about three times its nominal size (measured in Chromium)
+        return max(1.0, 2 * radius * px / 3)
+
     traces = []
-    for i, (label, (body, hands)) in enumerate(zip(labels, parts)):
-        color = MOTION_COLORS[i % len(MOTION_COLORS)]
+    for i, (label, _) in enumerate(zip(labels, parts)):
         group = f"motion{i}"
-        common = dict(legendgroup=group, hoverinfo="skip")
-        traces.append(
-            go.Scatter3d(
-                **_xyz(body[0]), mode="lines+markers", line=dict(color=color, width=7),
-                marker=dict(color=color, size=3), name=label or "body",
-                showlegend=len(motions) > 1, meta={"motion": i, "part": "body"}, **common,
-            )
+        common = dict(legendgroup=group, hoverinfo="skip", meta=None)
+        body, hands, torso, head = parts[i]
+        looks = (
+            ("body", body, a.part_color(i, "upper_arm"), width(a.forearm_radius), label or "body", len(motions) > 1),
+            ("hands", hands, a.part_color(i, "finger"), width(a.finger_radius), f"{label} hands".strip(), False),
+            ("torso", torso, a.part_color(i, "torso"), width(a.torso_radius), f"{label} torso".strip(), False),
         )
+        for part, points, color, w, name, legend in looks:
+            common["meta"] = {"motion": i, "part": part}
+            traces.append(
+                go.Scatter3d(
+                    **_xyz(points[0]), mode="lines+markers", line=dict(color=color, width=w),
+                    # markers at the joints, as wide as the line: round ends, as the capsules have
+                    marker=dict(color=color, size=w / 3, line=dict(width=0)), name=name, showlegend=legend,
+                    **common,
+                )
+            )
+        common["meta"] = {"motion": i, "part": "head"}
+        color = a.part_color(i, "head")
         traces.append(
             go.Scatter3d(
-                **_xyz(hands[0]), mode="lines+markers", line=dict(color=color, width=3),
-                marker=dict(color=color, size=1.5), name=f"{label} hands".strip(),
-                showlegend=False, meta={"motion": i, "part": "hands"}, **common,
+                **_xyz(head[0]), mode="markers", marker=dict(color=color, size=size(a.head_radius), opacity=1.0,
+                                                             line=dict(width=0)),
+                name=f"{label} head".strip(), showlegend=False, **common,
             )
         )
 
@@ -294,11 +350,9 @@ def skeleton_figure(
     if len(times) > 1:
         trace_ids = list(range(len(traces)))
         for k in range(len(times)):
-            data = [dict(type="scatter3d", **_xyz(a[k])) for part in parts for a in part]
+            data = [dict(type="scatter3d", **_xyz(p[k])) for part in parts for p in part]
             frames.append(dict(data=data, traces=trace_ids, name=str(k)))
 
-    # fixed ranges over every shown frame: the view must not jump while playing
-    centre, extent = (lo + hi) / 2, np.maximum(hi - lo, 0.3)
     lo, hi = centre - extent / 2, centre + extent / 2
     aspect = extent / extent.max()
     axis = dict(visible=False, showbackground=False, showspikes=False)

@@ -1,14 +1,17 @@
-"""Offscreen 3D renders of the 55-joint skeleton with PyVista.
+"""Offscreen 3D renders of motions as bodies, with PyVista: the frames of the MP4 videos.
 
 A :class:`SkeletonScene` draws one motion, or two side by side (for example the
-k-NN result next to the refined one), as bones (tubes) and joints (spheres),
-every finger joint included, on a plain background, seen from the front: the
-camera stands on the character's +Z side, looks along -Z and frames a fixed
-box around the upper body, enlarged only where a motion leaves it, so that the
-hands are always in the picture and the clips of every system look alike in a
-user study. The meshes are built once; each frame only rewrites their points
-(a few thousand, in numpy), so a long clip costs little more than the
-rasterisation itself.
+k-NN result next to the refined one), in the one appearance of every view
+(:mod:`gesturekit.viz.appearance`): capsules with round ends for the limbs,
+fingers and torso, a head ball, each motion in its colour (first blue, second
+orange), lit by the appearance's light fixed to the camera, standing over a
+floor with a contact shadow. The camera stands on the character's +Z side,
+looks down a little and is framed on every drawn surface of the whole clip,
+so the figure fills the view and no hand is ever cut; a fixed box instead
+(``RenderStyle(fit_motion=False)``) frames the clips of every system of a user
+study alike. The meshes are built once; each frame only rewrites their points
+(in numpy), so a long clip costs little more than the rasterisation itself.
+:func:`render_frames` renders a clip's frames on every core, in order.
 
 Rendering needs no display server. On Linux without ``DISPLAY`` or
 ``WAYLAND_DISPLAY`` the scene asks VTK for its EGL render window (Mesa's
@@ -22,10 +25,17 @@ from __future__ import annotations
 
 import contextlib
 import ctypes.util
+import dataclasses
+import json
 import math
 import os
+import queue
+import subprocess
 import sys
+import tempfile
+import threading
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 import numpy as np
@@ -35,50 +45,44 @@ from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
-from ..skeleton import N_JOINTS, bones, hand_indices, joint_index
+from ..skeleton import N_JOINTS
+from .appearance import APPEARANCE, DERIVED_POINTS, Appearance, hex_to_rgb
 
-__all__ = ["RenderStyle", "SkeletonScene", "render_image", "view_bounds"]
+__all__ = ["RenderStyle", "SkeletonScene", "default_workers", "render_frames", "render_image", "view_bounds"]
 
 _WINDOW_ENV = "VTK_DEFAULT_OPENGL_WINDOW"
 
 
 @dataclass(frozen=True)
 class RenderStyle:
-    """How a skeleton looks; the defaults are the project's one house style.
+    """How a rendered scene looks and is framed; the body itself is an :class:`Appearance`.
 
-    Lengths are in metres; colours are anything PyVista accepts (names,
-    ``"#rrggbb"``, RGB triples in 0..1).
+    The figure is the one of the page's viewer and the notebooks' figure: the
+    appearance's capsules, head sphere, colours (first motion blue, second
+    orange), light (fixed to the camera), floor and contact shadow. This style
+    adds what only a render has: the camera, tessellation, labels.
 
     Parameters
     ----------
-    background : colour
-        Plain background of every panel.
-    bone_color, joint_color, head_color : colour
-        Colours of the tubes, the joint spheres and the head ball.
+    appearance : Appearance
+        The look of the body (:data:`gesturekit.viz.appearance.APPEARANCE` by default).
     text_color : colour
-        Colour of the panel labels.
-    body_bone_radius, finger_bone_radius : float
-        Tube radius of the body bones (pelvis to wrist) and of the finger bones.
-    body_joint_radius, wrist_joint_radius, finger_joint_radius : float
-        Sphere radius of the body joints, the wrists and the finger joints.
-    head_radius : float
-        Radius of a ball centred between ``head`` and ``head_top`` that shows
-        where the face is; 0 leaves it out.
-    show_pelvis : bool
-        Draw the pelvis (the origin of the pelvis-relative positions) and the
-        bone from it to ``spine_mid``.
+        Colour of the panel labels (anything PyVista accepts).
     view_box : ((xmin, xmax), (ymin, ymax), (zmin, zmax))
-        Pelvis-relative region the camera always shows, metres: a standing
-        speaker's head and reach. A motion that leaves it enlarges the view
-        when ``fit_motion`` is set.
+        Pelvis-relative region, metres, framed when ``fit_motion`` is off: a
+        standing speaker's upper body and reach. Its bottom is the floor.
     fit_motion : bool
-        Enlarge the view to every joint of every frame, so no hand is ever cut.
+        Frame the appearance's bounds of every motion over the whole clip, so
+        that the figure fills the view (the page's framing rule). Off, every
+        clip is framed by ``view_box``, so that clips of different systems
+        look alike (user-study stimuli).
     view_angle : float
         Vertical field of view of the perspective camera, degrees, in (0, 120).
-    margin : float
-        Empty border around the framed region, as a fraction of its size.
-    tube_sides, sphere_resolution, head_resolution : int
-        Tessellation of the tubes, the joint spheres and the head ball.
+    elevation : float
+        How far the camera looks down at the figure, degrees in [0, 60): a
+        little, so that the floor shows as a band.
+    capsule_sides, sphere_resolution, head_resolution : int
+        Tessellation of the capsules' tubes, their round ends and the head.
     multi_samples : int
         Multisample anti-aliasing samples per pixel, 0 for none. Smoother
         edges, but in software rendering (no GPU) 4 samples make each frame
@@ -87,29 +91,21 @@ class RenderStyle:
         Size of the panel labels, points.
     """
 
-    background: object = "#eeeeea"
-    bone_color: object = "#5b7fa6"
-    joint_color: object = "#2c4663"
-    head_color: object = "#c9ced6"
+    appearance: Appearance = APPEARANCE
     text_color: object = "#202020"
-    body_bone_radius: float = 0.014
-    finger_bone_radius: float = 0.0045
-    body_joint_radius: float = 0.02
-    wrist_joint_radius: float = 0.012
-    finger_joint_radius: float = 0.006
-    head_radius: float = 0.07
-    show_pelvis: bool = True
-    view_box: tuple = ((-0.6, 0.6), (-0.25, 0.8), (-0.2, 0.45))
+    view_box: tuple = ((-0.6, 0.6), (-0.35, 0.85), (-0.3, 0.45))
     fit_motion: bool = True
     view_angle: float = 20.0
-    margin: float = 0.04
-    tube_sides: int = 10
-    sphere_resolution: int = 10
-    head_resolution: int = 24
+    elevation: float = 10.0
+    capsule_sides: int = 10
+    sphere_resolution: int = 8
+    head_resolution: int = 20
     multi_samples: int = 0
     font_size: int = 14
 
     def __post_init__(self):
+        if not isinstance(self.appearance, Appearance):
+            raise ConfigError(f"appearance must be an Appearance, got {type(self.appearance).__name__}")
         box = np.asarray(self.view_box, dtype=np.float64)
         if box.shape != (3, 2) or not np.all(np.isfinite(box)) or np.any(box[:, 1] <= box[:, 0]):
             raise ConfigError(
@@ -118,12 +114,25 @@ class RenderStyle:
             )
         if not 0 < self.view_angle < 120:
             raise ConfigError(f"view_angle must be in (0, 120) degrees, got {self.view_angle}")
-        if self.tube_sides < 3 or min(self.sphere_resolution, self.head_resolution) < 4:
+        if not 0 <= self.elevation < 60:
+            raise ConfigError(f"elevation must be in [0, 60) degrees, got {self.elevation}")
+        if self.capsule_sides < 3 or min(self.sphere_resolution, self.head_resolution) < 4:
             raise ConfigError(
-                "tube_sides must be at least 3, sphere_resolution and head_resolution at least 4"
+                "capsule_sides must be at least 3, sphere_resolution and head_resolution at least 4"
             )
-        if self.multi_samples < 0 or self.margin < 0:
-            raise ConfigError("multi_samples and margin must not be negative")
+        if self.multi_samples < 0:
+            raise ConfigError("multi_samples must not be negative")
+
+    def to_json(self) -> dict:
+        """The style as a JSON-ready dict (:meth:`from_json` reads it back)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict) -> "RenderStyle":
+        """The style :meth:`to_json` wrote."""
+        fields = {k: _to_tuples(v) for k, v in data.items() if k != "appearance"}
+        appearance = Appearance(**{k: _to_tuples(v) for k, v in data["appearance"].items()})
+        return cls(appearance=appearance, **fields)
 
 
 @contextlib.contextmanager
@@ -167,8 +176,11 @@ def _unit_sphere(resolution: int) -> tuple[np.ndarray, np.ndarray]:
     return points, np.asarray(sphere.faces).reshape(-1, 4)[:, 1:]
 
 
-def _mesh_with_normals(n_points: int, polygons: np.ndarray) -> pv.PolyData:
-    mesh = pv.PolyData(np.zeros((n_points, 3)), faces=_faces(polygons))
+def _mesh_with_normals(n_points: int, polygons: list[np.ndarray]) -> pv.PolyData:
+    """A mesh of ``n_points`` points (all at the origin) with a normal per point, from groups
+    of polygons, each group of equal size, shape (k, n)."""
+    faces = np.concatenate([_faces(p) for p in polygons])
+    mesh = pv.PolyData(np.zeros((n_points, 3)), faces=faces)
     mesh.point_data["Normals"] = np.zeros((n_points, 3))
     mesh.point_data.active_normals_name = "Normals"
     return mesh
@@ -184,129 +196,180 @@ def _write(mesh: pv.PolyData, points: np.ndarray, normals: np.ndarray | None = N
     mesh.Modified()
 
 
-class _SkeletonMeshes:
-    """Tube-and-sphere meshes of one skeleton whose points are rewritten every frame.
+# balls smaller than this (metres; the fingers' and palms') get half the sphere resolution
+_SMALL_BALL = 0.02
 
-    Three meshes: ``bones`` (one open tube per bone), ``joints`` (one sphere
-    per joint, plus the pelvis) and ``head`` (a ball, or None).
+
+class _BodyMeshes:
+    """The surfaces of one motion's body, one mesh per body part, whose points are rewritten every frame.
+
+    Every capsule of the appearance is an open tube between its two points
+    plus a ball of its radius at each end (balls shared by capsules of one
+    part that meet with the same radius); the appearance's spheres (the head)
+    are balls. Normals are exact (radial), so shading is smooth at any
+    tessellation.
+
+    Attributes
+    ----------
+    parts : dict of str to pyvista.PolyData
+        One mesh per body part (``"torso"``, ``"head"``, ``"finger"``, ...).
     """
 
     def __init__(self, style: RenderStyle):
-        pelvis = N_JOINTS  # extra joint at the origin of the pelvis-relative positions
-        pairs = [tuple(b) for b in bones()]  # (child, parent)
-        if style.show_pelvis:
-            pairs.append((joint_index("spine_mid"), pelvis))
-        self._pairs = np.array(pairs, dtype=np.int64)
-        self._joints = np.arange(N_JOINTS + 1 if style.show_pelvis else N_JOINTS)
-
-        fingers = np.concatenate([hand_indices(side)[1:] for side in ("left", "right")])
-        wrists = [joint_index("left_wrist"), joint_index("right_wrist")]
-        radius = np.full(N_JOINTS + 1, style.body_joint_radius)
-        radius[fingers] = style.finger_joint_radius
-        radius[wrists] = style.wrist_joint_radius
-        self._joint_r = radius[self._joints]
-        self._bone_r = np.where(
-            np.isin(self._pairs[:, 0], fingers), style.finger_bone_radius, style.body_bone_radius
-        )
-        self._head_r = float(style.head_radius)
-        self._head_ends = (joint_index("head"), joint_index("head_top"))
-
-        # spheres: one unit template, moved and scaled per joint; its normals never change
-        self._sphere, tris = _unit_sphere(style.sphere_resolution)
-        m, nj = len(self._sphere), len(self._joints)
-        self.joints = _mesh_with_normals(nj * m, np.concatenate([tris + j * m for j in range(nj)]))
-        self.joints.point_data["Normals"][:] = np.tile(self._sphere, (nj, 1))
-        self.head = None
-        if self._head_r > 0:
-            self._head_sphere, head_tris = _unit_sphere(style.head_resolution)
-            self.head = _mesh_with_normals(len(self._head_sphere), head_tris)
-            self.head.point_data["Normals"][:] = self._head_sphere
-
-        # tubes: two rings of ``sides`` points per bone joined by quads; no caps,
-        # the joint spheres close the ends
-        sides = style.tube_sides
+        a = style.appearance
+        capsules, spheres = a.shapes()
+        sides = style.capsule_sides
         angles = 2 * np.pi * np.arange(sides) / sides
         self._cos, self._sin = np.cos(angles), np.sin(angles)
         k = np.arange(sides)
         ring = np.stack([k, (k + 1) % sides, (k + 1) % sides + sides, k + sides], axis=1)
-        nb = len(self._pairs)
-        self.bones = _mesh_with_normals(
-            nb * 2 * sides, np.concatenate([ring + b * 2 * sides for b in range(nb)])
-        )
+        self._ball, ball_tris = _unit_sphere(style.sphere_resolution)
+        self._head, head_tris = _unit_sphere(style.head_resolution)
+        self._small, small_tris = _unit_sphere(max(4, style.sphere_resolution // 2))
 
-    def update(self, positions: np.ndarray) -> None:
-        """Move the meshes to one frame's joint positions, shape (55, 3), metres."""
-        pos = np.zeros((N_JOINTS + 1, 3))  # the last row is the pelvis, at the origin
-        pos[:N_JOINTS] = positions
+        self.parts: dict[str, pv.PolyData] = {}
+        self._layout = []  # per part: (mesh, tube ends a, b, tube radii, ball centres, radii, template)
+        names = sorted({c.part for c in capsules} | {s.part for s in spheres})
+        for part in names:
+            caps = [c for c in capsules if c.part == part]
+            ends = sorted({(c.a, c.radius) for c in caps} | {(c.b, c.radius) for c in caps})
+            # a finger's balls cover a few pixels: a coarse sphere is enough, and much cheaper
+            balls = [(p, r, self._ball, ball_tris) if r >= _SMALL_BALL else (p, r, self._small, small_tris)
+                     for p, r in ends]
+            balls.sort(key=lambda ball: ball[2] is self._small)  # each template's balls in one run of points
+            balls += [(s.centre, s.radius, self._head, head_tris) for s in spheres if s.part == part]
+            polygons, n = [], 0
+            for _ in caps:
+                polygons.append(ring + n)
+                n += 2 * sides
+            ball_index = []
+            for _, _, template, tris in balls:
+                polygons.append(tris + n)
+                ball_index.append(n)
+                n += len(template)
+            mesh = _mesh_with_normals(n, polygons)
+            normals = mesh.point_data["Normals"]
+            for (_, _, template, _), start in zip(balls, ball_index):
+                normals[start:start + len(template)] = template  # a ball's normals never change
+            # balls of one template are moved together: (centres, radii, template, first point)
+            groups = []
+            for template in (self._ball, self._small, self._head):
+                mine = [(p, r, start) for (p, r, t, _), start in zip(balls, ball_index) if t is template]
+                if mine:
+                    groups.append((np.array([m[0] for m in mine]), np.array([m[1] for m in mine]), template,
+                                   mine[0][2]))
+            self._layout.append((
+                mesh,
+                np.array([c.a for c in caps], dtype=np.int64), np.array([c.b for c in caps], dtype=np.int64),
+                np.array([c.radius for c in caps]),
+                groups,
+            ))
+            self.parts[part] = mesh
 
-        centres = pos[self._joints]
-        spheres = centres[:, None, :] + self._joint_r[:, None, None] * self._sphere[None]
-        _write(self.joints, spheres.reshape(-1, 3))
-        if self.head is not None:
-            centre = 0.5 * (pos[self._head_ends[0]] + pos[self._head_ends[1]])
-            _write(self.head, centre + self._head_r * self._head_sphere)
+    def update(self, points: np.ndarray) -> None:
+        """Move the meshes to one frame's body points, shape (61, 3) (:meth:`Appearance.body`), metres."""
+        points = np.asarray(points, dtype=np.float64)
+        for mesh, ia, ib, radii, groups in self._layout:
+            # plain views of VTK's arrays: numpy writes straight into them
+            xyz = np.asarray(mesh.points).view(np.ndarray)
+            normals = np.asarray(mesh.point_data["Normals"]).view(np.ndarray)
+            nt = len(ia) * 2 * len(self._cos)
+            if len(ia):
+                start, end = points[ia], points[ib]
+                d = end - start
+                length = np.linalg.norm(d, axis=1, keepdims=True)
+                axis = np.where(length > 1e-9, d / np.maximum(length, 1e-12), [0.0, 1.0, 0.0])
+                # a vector far from parallel to the axis spans the ring's plane with it
+                helper = np.where(np.abs(axis[:, 2:3]) < 0.9, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+                u = np.cross(axis, helper)
+                u /= np.linalg.norm(u, axis=1, keepdims=True)
+                v = np.cross(axis, u)
+                radial = self._cos[None, :, None] * u[:, None, :] + self._sin[None, :, None] * v[:, None, :]
+                offset = radii[:, None, None] * radial
+                rings = np.concatenate([start[:, None] + offset, end[:, None] + offset], axis=1)
+                xyz[:nt] = rings.reshape(-1, 3)
+                normals[:nt] = np.concatenate([radial, radial], axis=1).reshape(-1, 3)
+            for centres, r, template, at in groups:
+                balls = points[centres][:, None, :] + r[:, None, None] * template[None]
+                xyz[at:at + balls.shape[0] * balls.shape[1]] = balls.reshape(-1, 3)
+            mesh.GetPoints().Modified()
+            mesh.GetPointData().GetNormals().Modified()
+            mesh.Modified()
 
-        start = pos[self._pairs[:, 1]]
-        end = pos[self._pairs[:, 0]]
-        d = end - start
-        length = np.linalg.norm(d, axis=1, keepdims=True)
-        axis = np.where(length > 1e-9, d / np.maximum(length, 1e-12), [0.0, 1.0, 0.0])
-        # a vector far from parallel to the axis spans the ring's plane with it
-        helper = np.where(np.abs(axis[:, 2:3]) < 0.9, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
-        u = np.cross(axis, helper)
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-        v = np.cross(axis, u)
-        radial = self._cos[None, :, None] * u[:, None, :] + self._sin[None, :, None] * v[:, None, :]
-        offset = self._bone_r[:, None, None] * radial
-        rings = np.concatenate([start[:, None] + offset, end[:, None] + offset], axis=1)
-        _write(self.bones, rings.reshape(-1, 3), np.concatenate([radial, radial], axis=1).reshape(-1, 3))
+
+def _reach(a: Appearance) -> np.ndarray:
+    """How far the surface reaches around each body point, metres, shape (points,): the largest
+    radius of the capsules and spheres on it."""
+    capsules, spheres = a.shapes()
+    reach = np.zeros(N_JOINTS + len(DERIVED_POINTS))
+    for c in capsules:
+        reach[[c.a, c.b]] = np.maximum(reach[[c.a, c.b]], c.radius)
+    for sp in spheres:
+        reach[sp.centre] = max(reach[sp.centre], sp.radius)
+    return reach
 
 
 def view_bounds(motions: Sequence[Motion], *, style: RenderStyle | None = None) -> np.ndarray:
-    """The pelvis-relative region a scene frames, shape (3, 2): (min, max) of x, y, z in metres.
+    """The region a scene frames, shape (3, 2): (min, max) of x, y, z in metres.
 
-    The style's ``view_box``, grown to contain every joint of every frame of
-    ``motions`` (plus the joint radius) when ``style.fit_motion`` is set.
-    Depends only on the arguments, so all motions rendered with the same style
-    that stay inside the box are framed identically.
+    With ``style.fit_motion`` (the default), the appearance's framing rule:
+    the bounds of every drawn surface of every motion over the whole clip,
+    the floor included, grown by its ``frame_margin`` on each side (per axis).
+    Without it, the style's fixed ``view_box``. The floor lies at the bottom
+    of the region.
     """
     style = style or RenderStyle()
-    box = np.asarray(style.view_box, dtype=np.float64).copy()
-    if style.fit_motion:
-        pad = max(style.body_joint_radius, style.head_radius)
-        for motion in motions:
-            pos = motion.positions.reshape(-1, 3)
-            if pos.size == 0:
-                continue
-            box[:, 0] = np.minimum(box[:, 0], pos.min(axis=0) - pad)
-            box[:, 1] = np.maximum(box[:, 1], pos.max(axis=0) + pad)
-    return box
+    if not style.fit_motion:
+        return np.asarray(style.view_box, dtype=np.float64).copy()
+    a = style.appearance
+    every = np.concatenate([a.body(m.positions).points.reshape(-1, 3) for m in motions])
+    lo, hi = a.bounds(every, margin=False)
+    lo[1] = min(lo[1], a.ground_height(every))
+    pad = a.frame_margin * (hi - lo)
+    return np.stack([lo - pad, hi + pad], axis=1)
 
 
-def _front_camera(box: np.ndarray, aspect: float, style: RenderStyle):
-    """Camera on the +Z side looking along -Z at the box's centre, far enough to see all of it.
+def _camera(points: np.ndarray, aspect: float, style: RenderStyle, *, pad=0.0, margin: float = 0.0):
+    """Camera in front of the points (+Z), looking down by ``style.elevation``, as close as it
+    can be with every point (grown by ``pad`` metres) in view and a ``margin`` (a fraction of
+    the view) left free on every side.
 
-    Returns ``(position, focal_point, view_up, (near, far))``.
+    Parameters
+    ----------
+    points : np.ndarray, shape (n, 3)
+        What must be seen, metres.
+    aspect : float
+        Width over height of the view.
+    pad : float or np.ndarray of shape (n,)
+        Radius around each point that must be seen too, metres.
+
+    Returns
+    -------
+    ``(position, focal_point, view_up, (near, far))``.
     """
-    centre = box.mean(axis=1)
-    half = 0.5 * (box[:, 1] - box[:, 0]) * (1 + style.margin)
-    t = math.tan(math.radians(style.view_angle) / 2)
-    # the box's near face (z = centre + half z) is the widest in perspective:
-    # its half height must fit within t times its distance to the camera
-    distance = half[2] + max(half[1] / t, half[0] / (t * aspect))
-    position = centre + np.array([0.0, 0.0, distance])
-    near = max(1e-3, distance - half[2] - 1.0)
-    far = distance + half[2] + 1.0
-    return tuple(position), tuple(centre), (0.0, 1.0, 0.0), (near, far)
+    e = math.radians(style.elevation)
+    back = np.array([0.0, math.sin(e), math.cos(e)])  # from the scene towards the camera
+    up = np.array([0.0, math.cos(e), -math.sin(e)])
+    right = np.cross(up, back)
+    x, y, z = points @ right, points @ up, points @ back
+    # centred on the points' extent across the view, then moved back until the widest point fits
+    t = math.tan(math.radians(style.view_angle) / 2) / (1 + 2 * margin)
+    cx, cy = 0.5 * ((x - pad).min() + (x + pad).max()), 0.5 * ((y - pad).min() + (y + pad).max())
+    distance = float(np.max(np.maximum((np.abs(x - cx) + pad) / (t * aspect), (np.abs(y - cy) + pad) / t) + z + pad))
+    focal = cx * right + cy * up
+    position = focal + distance * back
+    near = max(1e-3, 0.02 * distance)
+    far = distance - float(z.min()) + 20.0  # the floor reaches far behind
+    return tuple(position), tuple(focal), tuple(up), (near, far)
 
 
 class SkeletonScene:
-    """An offscreen window showing one or two skeletons, updated frame by frame.
+    """An offscreen window showing one or two motions as bodies, updated frame by frame.
 
     Build it once per clip, call :meth:`render_frame` for every frame, then
     :meth:`close` it (or use it as a context manager). Two motions are shown
-    in two panels side by side, each with its label above, framed by the same
-    camera.
+    in two panels side by side, each in its colour with its label above in the
+    same colour, framed by the same camera.
 
     Parameters
     ----------
@@ -345,7 +408,7 @@ class SkeletonScene:
         self.resolution = (int(resolution[0]), int(resolution[1]))
         s = self.style
         theme = pv.themes.Theme()  # a fresh theme: the user's global theme must not change the look
-        theme.background = s.background
+        theme.background = s.appearance.background
         theme.multi_samples = int(s.multi_samples)
         theme.anti_aliasing = "msaa" if s.multi_samples > 0 else None
         with _opengl_window_choice():
@@ -355,7 +418,7 @@ class SkeletonScene:
                 border=False,
                 window_size=list(self.resolution),
                 theme=theme,
-                lighting="three lights",
+                lighting="none",  # the appearance's one light, added with the meshes
             )
         try:
             self._build(labels)
@@ -366,23 +429,41 @@ class SkeletonScene:
         self._pixels = vtkUnsignedCharArray()
 
     def _build(self, labels) -> None:
-        """Add every skeleton's meshes, the labels and the camera to the window."""
+        """Add every body's meshes, the floor, the shadows, the labels, the light and the camera."""
         pl, s, motions = self._plotter, self.style, self.motions
-        self._skeletons = []
+        a = s.appearance
+        self._bodies = []
+        self._points = [a.body(m.positions).points for m in motions]  # (frames, 61, 3) each
+        box = view_bounds(motions, style=s)
+        every = np.concatenate([p.reshape(-1, 3) for p in self._points])
         aspect = (self.resolution[0] / len(motions)) / self.resolution[1]
-        position, focal, up, clip = _front_camera(view_bounds(motions, style=s), aspect, s)
+        if s.fit_motion:
+            # the framing rule on what is drawn: every surface over the clip, and the floor under it
+            ground = a.ground_height(every)
+            pelvis = every[N_JOINTS + DERIVED_POINTS.index("pelvis")::len(self._points[0][0])]
+            under = pelvis.mean(axis=0) * [1, 0, 1] + [0, ground, 0]  # where the shadow lies
+            reach = np.tile(_reach(a), len(every) // len(self._points[0][0]))
+            position, focal, up, clip = _camera(np.vstack([every, under]), aspect, s,
+                                                pad=np.append(reach, 0.0), margin=a.frame_margin)
+        else:
+            ground = float(box[1, 0])
+            corners = np.array([[x, y, z] for x in box[0] for y in box[1] for z in box[2]])
+            position, focal, up, clip = _camera(corners, aspect, s)
+        # the appearance's rule, colour * (ambient + diffuse * max(0, n . l)), light fixed to the camera
+        surface = dict(ambient=a.ambient, diffuse=a.diffuse, specular=0.0)
+        light = a.light()
         for i, motion in enumerate(motions):
             pl.subplot(0, i)
-            meshes = _SkeletonMeshes(s)
-            meshes.update(motion.positions[0])
-            surface = dict(smooth_shading=False, specular=0.25, specular_power=20, ambient=0.15)
-            for mesh, color in ((meshes.bones, s.bone_color), (meshes.joints, s.joint_color),
-                                (meshes.head, s.head_color)):
-                if mesh is not None:
-                    actor = pl.add_mesh(mesh, color=color, **surface)
-                    actor.prop.interpolation = "gouraud"  # our own normals, smoothly interpolated
+            self._floor_and_shadow(box, ground, self._points[i])
+            body = _BodyMeshes(s)
+            body.update(self._points[i][0])
+            for part, mesh in body.parts.items():
+                actor = pl.add_mesh(mesh, color=a.part_color(i, part), **surface)
+                actor.prop.interpolation = "gouraud"  # our own normals, smoothly interpolated
             if labels is not None:
-                pl.add_text(str(labels[i]), position="upper_edge", font_size=s.font_size, color=s.text_color)
+                pl.add_text(str(labels[i]), position="upper_edge", font_size=s.font_size, color=a.color(i))
+            pl.renderer.add_light(pv.Light(position=tuple(light), focal_point=(0.0, 0.0, 0.0),
+                                           light_type="camera light", intensity=1.0))
             camera = pl.renderer.GetActiveCamera()
             camera.SetPosition(*position)
             camera.SetFocalPoint(*focal)
@@ -390,7 +471,27 @@ class SkeletonScene:
             camera.SetViewAngle(s.view_angle)
             camera.SetClippingRange(*clip)
             pl.renderer.camera_set = True
-            self._skeletons.append(meshes)
+            self._bodies.append(body)
+
+    def _floor_and_shadow(self, box: np.ndarray, ground: float, points: np.ndarray) -> None:
+        """The floor, unlit, from behind the framed region to under the camera, and a soft
+        contact shadow on it under the body (where its pelvis stands on average)."""
+        pl, a = self._plotter, self.style.appearance
+        width = box[0, 1] - box[0, 0]
+        floor = pv.Plane(center=(box[0].mean(), ground, box[2, 1]), direction=(0, 1, 0),
+                         i_size=width * 6, j_size=2 * (box[2, 1] - box[2, 0]) + 20.0)
+        pl.add_mesh(floor, color=a.ground_color, lighting=False)
+        pelvis = points[:, -len(DERIVED_POINTS) + DERIVED_POINTS.index("pelvis")].mean(axis=0)
+        half = 2.2 * a.hip_half_width + a.hip_radius  # the shadow's half width, metres, across X
+        # three stacked discs, each darker and smaller: a shadow that fades at its rim; opaque, the
+        # colour of the floor seen through the shadow, since translucency costs a render pass
+        ground_rgb, shadow_rgb = hex_to_rgb(a.ground_color), hex_to_rgb(a.shadow_color)
+        for k, scale in enumerate((1.0, 0.75, 0.5)):
+            alpha = a.shadow_alpha * (k + 1) / 3
+            disc = pv.Disc(center=(0.0, 0.0, 0.0), inner=0.0, outer=half * scale, normal=(0, 1, 0), c_res=48)
+            disc.points[:, 2] *= 0.5  # flat ellipse: shallower than wide
+            disc.points[:] += (pelvis[0], ground + 1e-3 * (k + 1), pelvis[2])
+            pl.add_mesh(disc, color=tuple(ground_rgb * (1 - alpha) + shadow_rgb * alpha), lighting=False)
 
     @property
     def backend(self) -> str:
@@ -405,8 +506,8 @@ class SkeletonScene:
         frame = int(frame)
         if frame == self._frame:
             return
-        for meshes, motion in zip(self._skeletons, self.motions):
-            meshes.update(motion.positions[min(frame, motion.n_frames - 1)])
+        for body, points in zip(self._bodies, self._points):
+            body.update(points[min(frame, len(points) - 1)])
         self._frame = frame
 
     def render_frame(self, frame: int) -> np.ndarray:
@@ -534,3 +635,193 @@ def render_image(
     motions = [motion] if side_by_side is None else [motion, side_by_side]
     with SkeletonScene(motions, labels=labels, resolution=resolution, style=style) as scene:
         return scene.render_frame(frame)
+
+
+# -- many frames on every core ----------------------------------------------------------------------
+
+#: Frames one rendering process renders in a row before the next process's turn (2 s at 15 fps).
+CHUNK_FRAMES = 30
+#: With ``workers=None``, clips shorter than this render in the calling process: starting
+#: the rendering processes (about a second) would cost more than it saves.
+PARALLEL_MIN_FRAMES = 150
+# the most frame bytes waiting in the parent for their turn, all processes together
+_BUFFER_BYTES = 256 << 20
+
+
+def default_workers() -> int:
+    """The cores this process may run on: the number of rendering processes used by default."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def render_frames(
+    motions: Sequence[Motion],
+    *,
+    labels: Sequence[str] | None = None,
+    resolution: tuple[int, int] = (640, 480),
+    style: RenderStyle | None = None,
+    workers: int | None = None,
+) -> Iterator[np.ndarray]:
+    """Every frame of a scene's clip, in order, rendered on several cores.
+
+    The frames are exactly those of :meth:`SkeletonScene.render_frame` for
+    frames ``0 .. n_frames - 1``, whichever number of processes renders them.
+    With more than one worker, each is a separate Python process
+    (:mod:`gesturekit.viz.render_worker`) with its own offscreen window that
+    renders every ``workers``-th chunk of :data:`CHUNK_FRAMES` frames; the
+    frames come back through pipes and are handed out in order, at most about
+    256 MB of them waiting at any time.
+
+    Parameters
+    ----------
+    motions : sequence of Motion
+        One or two motions of equal fps, as for :class:`SkeletonScene`.
+    labels : sequence of str, optional
+        One label per motion.
+    resolution : (int, int)
+        Width and height of the pictures, pixels.
+    style : RenderStyle, optional
+        Look of the scene.
+    workers : int, optional
+        Rendering processes; 1 renders in this process. By default one per
+        core (:func:`default_workers`), or this process alone for clips
+        shorter than :data:`PARALLEL_MIN_FRAMES` frames.
+
+    Returns
+    -------
+    iterator of np.ndarray
+        One picture per frame of the longest motion, each shape
+        (height, width, 3), uint8 RGB, top row first. Close the iterator (or
+        exhaust it) to stop the rendering processes early.
+
+    Raises
+    ------
+    ConfigError
+        Bad motions, labels, resolution or ``workers`` (raised by this call,
+        before anything is rendered).
+    GestureKitError
+        A rendering process failed (raised while iterating; its message is included).
+    """
+    motions = list(motions)
+    style = style or RenderStyle()
+    _check_scene(motions, labels, resolution)
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer))
+                                or workers < 1):
+        raise ConfigError(f"workers must be a positive whole number, got {workers!r}")
+    n_frames = max(m.n_frames for m in motions)
+    chunks = -(-n_frames // CHUNK_FRAMES)
+    if workers is None:
+        workers = default_workers() if n_frames >= PARALLEL_MIN_FRAMES else 1
+    workers = min(int(workers), chunks)
+    resolution = (int(resolution[0]), int(resolution[1]))
+    if workers == 1:
+        return _serial_frames(motions, labels, resolution, style)
+    return _parallel_frames(motions, labels, resolution, style, workers)
+
+
+def _serial_frames(motions, labels, resolution, style) -> Iterator[np.ndarray]:
+    with SkeletonScene(motions, labels=labels, resolution=resolution, style=style) as scene:
+        for frame in range(scene.n_frames):
+            yield scene.render_frame(frame)
+
+
+def _to_tuples(value):
+    """JSON lists back to tuples, recursively (the style's fields are tuples)."""
+    if isinstance(value, list):
+        return tuple(_to_tuples(v) for v in value)
+    return value
+
+
+def _write_job(path: Path, motions, labels, resolution, style: RenderStyle) -> None:
+    spec = {
+        "fps": float(motions[0].fps),
+        "labels": None if labels is None else [str(x) for x in labels],
+        "resolution": list(resolution),
+        "style": style.to_json(),
+    }
+    arrays = {f"motion{i}": np.asarray(m.positions) for i, m in enumerate(motions)}
+    np.savez(path, spec=np.array(json.dumps(spec)), **arrays)
+
+
+def _scene_from_job(path: str) -> SkeletonScene:
+    """The scene a job file written by :func:`_write_job` describes (in a rendering process)."""
+    with np.load(path, allow_pickle=False) as data:
+        spec = json.loads(str(data["spec"]))
+        positions = [data[f"motion{i}"] for i in range(2) if f"motion{i}" in data.files]
+    style = RenderStyle.from_json(spec["style"])
+    motions = [Motion(p, spec["fps"]) for p in positions]
+    return SkeletonScene(motions, labels=spec["labels"], resolution=tuple(spec["resolution"]), style=style)
+
+
+def _parallel_frames(motions, labels, resolution, style, workers: int) -> Iterator[np.ndarray]:
+    width, height = resolution
+    size = width * height * 3
+    n_frames = max(m.n_frames for m in motions)
+    waiting = max(2, min(CHUNK_FRAMES, _BUFFER_BYTES // (size * workers)))
+    stop = threading.Event()
+
+    def read(proc: subprocess.Popen, out: queue.Queue) -> None:
+        """Move one process's frames into its queue, then None (end or failure)."""
+        def put(item) -> bool:
+            while not stop.is_set():
+                try:
+                    out.put(item, timeout=0.1)
+                    return True
+                except queue.Full:
+                    continue
+            return False
+
+        try:
+            while True:
+                data = proc.stdout.read(size)
+                if len(data) < size or not put(data):
+                    break
+        finally:
+            put(None)
+
+    # the package this module belongs to, first on the path: the processes render with this same code
+    root = str(Path(__file__).resolve().parents[2])
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+    # one rasteriser thread per process (Mesa's llvmpipe): the processes are the parallelism
+    env.setdefault("LP_NUM_THREADS", "1")
+    with tempfile.TemporaryDirectory(prefix="gesturekit-render-") as tmp:
+        job = Path(tmp) / "job.npz"
+        _write_job(job, motions, labels, resolution, style)
+        procs, queues, threads, logs = [], [], [], []
+        try:
+            for k in range(workers):
+                log = open(Path(tmp) / f"worker{k}.log", "w+b")
+                logs.append(log)
+                cmd = [sys.executable, "-m", "gesturekit.viz.render_worker", str(job), str(k), str(workers),
+                       str(CHUNK_FRAMES)]
+                procs.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                              stderr=log, env=env))
+                queues.append(queue.Queue(maxsize=waiting))
+                threads.append(threading.Thread(target=read, args=(procs[k], queues[k]), daemon=True))
+                threads[k].start()
+            for frame in range(n_frames):
+                k = (frame // CHUNK_FRAMES) % workers
+                data = queues[k].get()
+                if data is None:
+                    code = procs[k].wait()
+                    logs[k].seek(0)
+                    message = logs[k].read().decode("utf-8", "replace").strip()[-2000:] or "no message"
+                    raise GestureKitError(
+                        f"a rendering process stopped at frame {frame} of {n_frames} (exit code {code}): {message}"
+                    )
+                yield np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)
+        finally:
+            stop.set()
+            for proc in procs:
+                if proc.poll() is None:
+                    proc.kill()
+                proc.wait()
+            for thread in threads:
+                thread.join()
+            for proc in procs:
+                proc.stdout.close()
+            for log in logs:
+                log.close()

@@ -1,0 +1,87 @@
+"""MP4 render speed: 82 s of speech, k-NN and refined side by side, as the app renders it.
+
+Synthesizes the speech on a small generated demo database (not timed), then renders the
+MP4 the Synthesize page renders (640x480, both motions side by side, the speech as
+soundtrack) twice in one run: in one process, and on every core
+(:func:`gesturekit.viz.render.render_frames`). Prints the wall time and frames per
+second of each, their ratio, the CPU seconds the rendering processes and the encoder
+spent together, the load average (other work on the machine slows both), and whether the
+two files are the same bytes.
+
+The speech is the shared BEAT recording ``../shared/data/speech/beat_lawrence_0_19_19.wav``
+(82 s) when present, else 82 s of the generated speaker.
+
+Usage: python bench/bench_video.py [--seconds 82] [--resolution 640x480]
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import platform
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+BEAT = REPO.parent / "shared" / "data" / "speech" / "beat_lawrence_0_19_19.wav"
+
+
+def _machine() -> str:
+    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+    return f"{os.cpu_count()} cores, {mem:.0f} GiB, {platform.machine()}"
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and its finished children (rendering processes, ffmpeg)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=82.0, help="speech length when BEAT is absent")
+    parser.add_argument("--resolution", default="640x480", help="video size, WIDTHxHEIGHT")
+    args = parser.parse_args(argv)
+    width, height = (int(v) for v in args.resolution.lower().split("x"))
+
+    from gesturekit.datasets.audio import load_audio
+    from gesturekit.datasets.synthetic import generate_demo_take
+    from gesturekit.demo import build_demo_database
+    from gesturekit.export.video import render_video
+    from gesturekit.synthesize import synthesize
+    from gesturekit.viz.render import default_workers
+
+    print(f"machine: {_machine()}")
+    with tempfile.TemporaryDirectory(prefix="gesturekit-bench-video-") as tmp:
+        tmp = Path(tmp)
+        db = build_demo_database(tmp / "db", minutes=4)
+        if BEAT.is_file():
+            audio, name = load_audio(BEAT), BEAT.name
+        else:
+            take, _ = generate_demo_take(seconds=args.seconds, seed=7, name="speech")
+            audio, name = take.audio, f"{args.seconds:g} s of the generated speaker"
+        result = synthesize(audio, db=db, refiner="demo")
+        left, right = result.knn_motion, result.refined_motion  # what the page shows side by side
+        print(f"speech: {name}, {len(result.audio) / 16000:.1f} s; {result.n_frames} frames side by side, "
+              f"{width}x{height}")
+        runs = {}
+        for workers in (1, default_workers()):
+            out = tmp / f"w{workers}.mp4"
+            load = os.getloadavg()[0]
+            cpu, t0 = _cpu_seconds(), time.perf_counter()
+            render_video(out, left, side_by_side=right, audio=result.audio, labels=("k-NN", "k-NN + refiner"),
+                         resolution=(width, height), workers=workers)
+            wall, cpu = time.perf_counter() - t0, _cpu_seconds() - cpu
+            runs[workers] = (wall, hashlib.sha256(out.read_bytes()).hexdigest())
+            frames = round(len(result.audio) / 16000 * left.fps)
+            print(f"workers={workers}: {wall:.1f} s, {frames / wall:.1f} frames/s, {cpu:.1f} CPU s "
+                  f"(load average before: {load:.1f})")
+        (w1, h1), (wn, hn) = runs[1], runs[max(runs)]
+        print(f"every core vs one process: {w1 / wn:.2f}x; same bytes: {h1 == hn}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
