@@ -165,14 +165,21 @@ def _warnings_shown() -> Iterator[list[str]]:
 # ---- state --------------------------------------------------------------------------------------
 
 def persistent_key(name: str, default) -> str:
-    """The widget key for a value that survives page switches.
+    """The widget key for a value that survives page switches and pages stopped early.
 
-    Streamlit drops the state of widgets not shown in a run, so a value kept
-    only in a widget is lost when the user visits another page. Use the
-    returned key as the widget's ``key`` and store the value it returns under
-    ``name``::
+    Use the returned key as the widget's ``key`` and store the value it
+    returns under ``name``::
 
         st.session_state["synth.seed"] = st.number_input("Seed", key=common.persistent_key("synth.seed", 0))
+
+    Why the value is written to the widget on every run: a widget that is not
+    drawn in a run (another page is shown, or the page stopped before it, as
+    the sidebar does while a database folder is being typed) is removed from
+    the browser, and when it is drawn again the browser shows the widget's
+    default (a number input's minimum) unless the run sends the value; the
+    next interaction would then send that default back as the user's choice.
+    A value present under the key is the user's latest edit and is kept
+    under ``name`` first.
 
     Parameters
     ----------
@@ -183,8 +190,9 @@ def persistent_key(name: str, default) -> str:
     """
     ss = st.session_state
     key = f"_w.{name}"
-    if key not in ss:
-        ss[key] = ss.get(name, default)
+    if key in ss:
+        ss[name] = ss[key]
+    ss[key] = ss.get(name, default)
     return key
 
 

@@ -24,7 +24,19 @@ from .features import n_audio_frames
 from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 
-__all__ = ["SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
+__all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
+
+#: The settings of Habibie et al. 2022: option -> (the paper's value, how a value is written,
+#: the paper's value as written after it). ``refiner_keep_hz`` counts only when a refiner is
+#: applied (the paper uses the refiner's output as it is).
+PAPER_SETTINGS = {
+    "k": (0, "k = {}", "0"),
+    "step": (8, "N = {}", "8"),
+    "init": ("random", "initial pose: {}", "random"),
+    "blend": ("none", "blending: {}", "none"),
+    "mask_rule": ("ends", "control held at: {}", "ends"),
+    "refiner_keep_hz": (0.0, "k-NN motion kept below {:g} Hz", "0: the refiner's output as it is"),
+}
 
 
 @dataclass(frozen=True)
@@ -127,6 +139,26 @@ class SynthesisConfig:
         d["exclude_ranges"] = tuple(tuple(r) for r in d.get("exclude_ranges", ()))
         d["pins"] = {int(i): tuple(v) for i, v in d.get("pins", {}).items()}
         return cls(**d)
+
+    def paper_differences(self, *, refined: bool) -> list[str]:
+        """The settings that differ from the paper's (:data:`PAPER_SETTINGS`), as text.
+
+        Parameters
+        ----------
+        refined : bool
+            Whether a refiner is applied (``refiner_keep_hz`` counts only then).
+
+        Returns
+        -------
+        list of str
+            E.g. ``["N = 6 (paper 8)"]``; empty when the search is the paper's.
+        """
+        out = []
+        for name, (paper, form, paper_text) in PAPER_SETTINGS.items():
+            value = getattr(self, name)
+            if value != paper and (refined or name != "refiner_keep_hz"):
+                out.append(f"{form.format(value)} (paper {paper_text})")
+        return out
 
     def with_pin(self, step: int, clip: int, start: int) -> "SynthesisConfig":
         """A copy with one more pinned choice (replacing any pin at that step)."""

@@ -152,12 +152,17 @@ def settings(db) -> dict:
     """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can run."""
     ss = st.session_state
     pk = common.persistent_key
+    step_key = pk("synth.step", 8)
+    if ss[step_key] > db.clip_frames:  # a database of shorter clips: say so, never change it unseen
+        st.warning(f"N was {ss[step_key]}, more than this database's clips hold ({db.clip_frames} frames): "
+                   f"it is now {db.clip_frames}.", icon="⚠️")
+        ss[step_key] = ss["synth.step"] = db.clip_frames
     c = st.columns(4)
     out = {
         "k": c[0].number_input("k (0 = best match)", min_value=0, max_value=100, step=1, key=pk("synth.k", 0),
                                help="take the k-th best window of the combined ranking at every step"),
         "step": c[1].number_input("N (frames per step)", min_value=1, max_value=db.clip_frames, step=1,
-                                  key=pk("synth.step", 8), help="8 in the paper: a new search every 0.53 s"),
+                                  key=step_key, help="8 in the paper: a new search every 0.53 s"),
         "seed": c[2].number_input("Seed", min_value=0, max_value=2**31 - 1, step=1, key=pk("synth.seed", 0),
                                   help="of the random initial pose"),
         "topk": c[3].number_input("Candidates recorded per step", min_value=1, max_value=50, step=1,
@@ -192,9 +197,20 @@ def settings(db) -> dict:
                 refiner = common.check_refiner(folder, db)
                 ok = True
     else:
+        on = False
         c[3].toggle("Refiner (cGAN)", value=False, disabled=True, key="synth.refine_unavailable",
                     help="this gesturekit cannot apply a refiner")
+    differs = _paper_differences(out, refined=on)
+    if differs:
+        st.caption("Differs from the paper: " + "; ".join(differs))
     return {"options": out, "refiner": refiner, "ok": ok}
+
+
+def _paper_differences(options: dict, *, refined: bool) -> list[str]:
+    try:
+        return SynthesisConfig(**options).paper_differences(refined=refined)
+    except ConfigError:  # an impossible setting is reported when Run is pressed
+        return []
 
 
 def _figure(record, name: str, build):
@@ -241,6 +257,9 @@ def show_result(db, record) -> None:
         parts.append(f"{len(c.pins)} pinned step{'s' if len(c.pins) > 1 else ''}")
     if result.refined_motion is not None:
         parts.append("refined")
+    differs = c.paper_differences(refined=result.refined_motion is not None)
+    if differs:
+        parts.append("differs from the paper: " + "; ".join(differs))
     st.caption(" · ".join(parts))
     if result.relaxed_steps:
         st.warning(f"No database window satisfied the control at step(s) {', '.join(map(str, result.relaxed_steps))}; "
