@@ -118,10 +118,19 @@ def _cmd_synthesize(args) -> int:
     from .datasets.audio import load_audio
     from .demo import open_default_database
     from .export.files import safe_filename
+    from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
 
     t0 = time.perf_counter()
     files = _speech_files(args.speech)
+    out = Path(args.out)
+    stems = [safe_filename(f.stem) for f in files]
+    first: dict[str, Path] = {}
+    for f, stem in zip(files, stems):  # checked before anything is written
+        if stem in first:
+            raise ConfigError(f"{first[stem]} and {f} would both be written as {out / stem}.npz; rename one, "
+                              "or synthesise them in separate runs")
+        first[stem] = f
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
     control = ""
     if args.control:
@@ -136,11 +145,7 @@ def _cmd_synthesize(args) -> int:
         exclude_ranges=tuple(_parse_range(r) for r in (args.exclude_range or ())),
         **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
     )
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    stems = [safe_filename(f.stem) for f in files]
-    if len(set(stems)) != len(stems):
-        raise ConfigError("two speech files have the same name; synthesise them in separate runs")
     kinds = ["npz", "bvh"] + (["mp4"] if args.video else [])
     targets = {(stem, kind): out / f"{stem}.{kind}" for stem in stems for kind in kinds}
     existing = [str(p) for p in targets.values() if p.exists()]
@@ -159,7 +164,8 @@ def _cmd_synthesize(args) -> int:
                                progress=lambda done, total: (setattr(bar, "n", done), bar.refresh()))
             written.append(targets[(stem, "mp4")])
         relaxed = res.relaxed_steps
-        note = f"; control relaxed at {len(relaxed)} step(s)" if relaxed else ""
+        note = (f"; control relaxed at {describe_steps(relaxed, step=res.config.step, fps=res.motion.fps)}"
+                if relaxed else "")
         print(f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
               f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}")
     print(f"done in {time.perf_counter() - t0:.1f} s")

@@ -443,6 +443,7 @@ def synthesize_batch(
         masks=masks,
         step_masks=step_idx,
         exclude=_exclusion(db, configs[0]),
+        fps=db.fps,
     )
     out = [_finish(db, r, p[0], p[1], c, p[3]) for r, p, c in zip(results, prepared, configs)]
     if refiner is not None:

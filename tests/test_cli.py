@@ -68,3 +68,22 @@ def test_position_files_need_joint_map_and_fps(tmp_path, capsys):
 def test_python_dash_m_runs_the_cli():
     r = subprocess.run([sys.executable, "-m", "gesturekit", "--help"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "build-db" in r.stdout
+
+
+@pytest.mark.parametrize("names", [("a.wav", "a.mp3"), ("talk one.wav", "talk_one.flac"), ("b.ogg", "b.wav", "c.wav")],
+                         ids=["same-stem", "same-safe-name", "folder"])
+def test_synthesize_refuses_speech_files_written_to_the_same_outputs(tmp_path, names):
+    from .badinput import assert_refused, run_cli, snapshot
+
+    folder = tmp_path / "speech"
+    folder.mkdir()
+    for name in names:
+        (folder / name).write_bytes(b"not read: the names clash first")
+    out = tmp_path / "out"
+    before = snapshot(folder, out)
+    args = [folder] if len(names) == 3 else [folder / n for n in names]
+    run = run_cli("synthesize", *args, "--db", tmp_path / "no-db", "--out", out)
+    clash = sorted(names)[:2] if len(names) == 3 else names
+    assert_refused(run, names=folder / clash[0], problem="would both be written", before=before)
+    assert str(folder / clash[1]) in run.stderr
+    assert not out.exists()

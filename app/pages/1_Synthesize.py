@@ -10,6 +10,7 @@ from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
+from gesturekit.search import describe_steps
 from gesturekit.synthesize import SynthesisConfig
 from gesturekit.viz import session as gs
 from gesturekit.viz.figures import waveform_figure, wrist_figure
@@ -262,8 +263,8 @@ def show_result(db, record) -> None:
         parts.append("differs from the paper: " + "; ".join(differs))
     st.caption(" · ".join(parts))
     if result.relaxed_steps:
-        st.warning(f"No database window satisfied the control at step(s) {', '.join(map(str, result.relaxed_steps))}; "
-                   "the control was dropped there.", icon="⚠️")
+        where = describe_steps(result.relaxed_steps, step=c.step, fps=result.motion.fps)
+        st.warning(f"No database window satisfied the control at {where}; the control was dropped there.", icon="⚠️")
     motions, labels = gs.display_motions(result)
     labels = labels if len(motions) > 1 else None
     left, right = st.columns([3, 2])
