@@ -676,16 +676,15 @@ def warm_up_search(db: MatchingDatabase) -> None:
 
 
 def default_refiner(db: MatchingDatabase) -> str:
-    """The refiner folder offered first for ``db``: one beside the database (``<db>/refiner``),
-    else the shipped demo refiner for a generated database, else "" (none)."""
-    if db.path is not None and (Path(db.path) / "refiner" / "config.json").is_file():
-        return str(Path(db.path) / "refiner")
+    """The refiner folder offered first for ``db``, with the refiner switched on: one trained on
+    it (``<db>/refiner``, or the shipped demo refiner for the demo speaker; see
+    :func:`gesturekit.refine.refiner_for`, which the command line uses too), else "" (off)."""
     try:
-        from gesturekit.refine import default_refiner_path
+        from gesturekit.refine import refiner_for
     except ImportError:  # a gesturekit without the refiner
         return ""
-    shipped = default_refiner_path()
-    return str(shipped) if is_generated(db) and (shipped / "config.json").is_file() else ""
+    found = refiner_for(db)
+    return "" if found is None else str(found)
 
 
 def warm_up(db: MatchingDatabase) -> None:

@@ -112,6 +112,23 @@ def _speech_files(inputs: list[str]) -> list[Path]:
     return files
 
 
+def _refiner_choice(given: str | None, db):
+    """The refiner of ``synthesize``: the one named, none for ``none``, else one trained on ``db``
+    (:func:`gesturekit.refine.refiner_for`; the app's default too)."""
+    import importlib.util
+
+    if given is not None:
+        return None if given == "none" else given
+    if importlib.util.find_spec("torch") is None:  # a gesturekit installed without the refiner's torch
+        return None
+    from .refine import refiner_for
+
+    found = refiner_for(db)
+    if found is not None:
+        print(f"refining with {found}, trained on this database (--refiner none: the k-NN motion alone)")
+    return found
+
+
 def _cmd_synthesize(args) -> int:
     from .control import load_control_file, parse_control
     from .database import MatchingDatabase
@@ -152,7 +169,7 @@ def _cmd_synthesize(args) -> int:
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
     audios = [load_audio(f) for f in files]
-    results = synthesize_batch(audios, db=db, config=config, refiner=args.refiner)
+    results = synthesize_batch(audios, db=db, config=config, refiner=_refiner_choice(args.refiner, db))
     for f, stem, res in zip(files, stems, results):
         res.source = f.name
         res.save_npz(targets[(stem, "npz")], overwrite=args.force)
@@ -417,8 +434,9 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
                    help="keep a stretch of a take (seconds) out of the search")
     y.add_argument("--refiner", metavar="PATH", help="refine the k-NN motion with a trained refiner folder "
-                   "(from train-refiner), or 'demo' for the one shipped with the demo database; "
-                   "the npz keeps both motions")
+                   "(from train-refiner), 'demo' for the one shipped with the demo database, or 'none'; "
+                   "default: a refiner trained on the database if there is one (DB/refiner, or the shipped "
+                   "one for the demo database), else none. The npz keeps both motions")
     y.add_argument("--refiner-keep-hz", type=float, default=None, metavar="HZ",
                    help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
                    "controls) and take the faster content from the refiner (default 2); 0: the refiner's "

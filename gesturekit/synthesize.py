@@ -19,7 +19,7 @@ from . import __version__
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control, step_masks
 from .database import MatchingDatabase, normalise_exclusions
-from .errors import ConfigError
+from .errors import ConfigError, warn
 from .features import n_audio_frames
 from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
@@ -193,6 +193,10 @@ class SynthesisResult:
         Name of the speech (file name, or "audio").
     refined_motion : Motion or None
         The refiner's output, when a refiner was applied.
+    refiner : dict or None
+        Which refiner was applied (:func:`gesturekit.refine.provenance`: its folder, its
+        training database, the sha256 of its weights); None without one, or for a refiner
+        not loaded from a folder.
     """
 
     motion: Motion
@@ -204,6 +208,7 @@ class SynthesisResult:
     database: str
     source: str
     refined_motion: Motion | None = None
+    refiner: dict | None = None
 
     @property
     def n_frames(self) -> int:
@@ -249,6 +254,7 @@ class SynthesisResult:
             "relaxed_steps": self.relaxed_steps,
             "init_frame": list(self.search.init_frame),
             "refined": self.refined_motion is not None,
+            "refiner": self.refiner,
         }
 
     def save_npz(self, path, *, overwrite: bool = False) -> Path:
@@ -425,8 +431,10 @@ def synthesize_batch(
     excl = {(c.exclude_takes, c.exclude_ranges) for c in configs}
     if len(excl) > 1:
         raise ConfigError("all speeches of one batch must exclude the same database takes and ranges")
+    made_by = None
     if refiner is not None:
         refiner = _open_refiner(refiner, db)
+        made_by = _provenance(refiner, db)
     prepared = [_prepare(db, a, c, ctl) for a, c, ctl in zip(audios, configs, controls)]
     # masks differ per speech; the search shares one mask stack, so stack them with offsets
     stack, step_idx = [], []
@@ -449,7 +457,23 @@ def synthesize_batch(
     if refiner is not None:
         for res in out:
             _refine(db, res, refiner)
+            res.refiner = made_by
     return out
+
+
+def _provenance(refiner, db) -> dict | None:
+    """Which refiner this is (None for one not loaded from a folder); warns when it was trained
+    on another database than ``db``."""
+    from .refine import describe_training, provenance, trained_on
+
+    config, path = getattr(refiner, "config", None), getattr(refiner, "path", None)
+    if not isinstance(config, dict) or path is None:
+        return None
+    if not trained_on(config, db):
+        name = db.label or (db.path.name if db.path is not None else "this database")
+        warn(f"refiner {path} was trained on {describe_training(config)}, not on {name}: "
+             "its output may not suit this database (train one on it with `gesturekit train-refiner --db ...`)")
+    return provenance(path, config)
 
 
 def _open_refiner(refiner, db):

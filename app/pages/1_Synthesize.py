@@ -257,7 +257,8 @@ def show_result(db, record) -> None:
     if c.pins:
         parts.append(f"{len(c.pins)} pinned step{'s' if len(c.pins) > 1 else ''}")
     if result.refined_motion is not None:
-        parts.append("refined")
+        made_by = getattr(result, "refiner", None)
+        parts.append(f"refined by `{made_by['path']}`" if made_by else "refined")
     differs = c.paper_differences(refined=result.refined_motion is not None)
     if differs:
         parts.append("differs from the paper: " + "; ".join(differs))
