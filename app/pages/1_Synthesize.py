@@ -55,17 +55,16 @@ def speech_input() -> dict | None:
             failed = ss.get(_FAILED)
             if failed is not None and failed[0] == token:
                 st.error(failed[1], icon="⚠️")
-                return None
+                return _kept_speech()
             if ss.get(SPEECH, {}).get("token") != token:
                 try:
                     with st.spinner("Reading the speech…"), collect_warnings() as notes:
                         audio, info = gs.read_speech_upload(up.name, up.getvalue())
                 except (GestureKitError, OSError) as exc:
                     # remembered, so the same upload is not decoded again on every rerun
-                    ss.pop(SPEECH, None)
                     ss[_FAILED] = (token, str(exc))
                     st.error(str(exc), icon="⚠️")
-                    return None
+                    return _kept_speech()
                 _set_speech(token, up.name, audio, info.summary(), notes)
         elif SPEECH not in ss:
             # a first visit opens on an example, so the whole page can be seen and run at once
@@ -81,6 +80,16 @@ def speech_input() -> dict | None:
         if ss.get(SPEECH, {}).get("token") != ("example", label):
             _use_example(label)
     return ss.get(SPEECH)
+
+
+def _kept_speech() -> dict | None:
+    """After an upload that could not be read: the user's previous upload stays the speech (the
+    error is shown above it); the example speech does not stand in for a file the user chose."""
+    speech = st.session_state.get(SPEECH)
+    if speech is not None and speech["token"][0] == "upload":
+        st.caption(f"Still working on **{speech['name']}**, the last file that could be read.")
+        return speech
+    return None
 
 
 def _editor_base() -> pd.DataFrame:
@@ -312,6 +321,9 @@ def main() -> None:
     speech = speech_input()
     if speech is None:
         st.info("Upload a speech file, or choose an example.")
+        record = common.current_synthesis(db)
+        if record is not None:  # the last result stays in view
+            show_result(db, record)
         return
     st.caption(f"**{speech['name']}** · {speech['summary']}")
     for note in speech["notes"]:
