@@ -142,3 +142,18 @@ def test_a_pin_outside_the_table_has_no_ring():
 def test_candidates_figure_rejects_bad_arguments(step, names, message):
     with pytest.raises(ConfigError, match=message):
         candidates_figure(_record(0), step, names=names)
+
+
+@pytest.mark.parametrize("which", ["waveform", "wrists"])
+def test_legends_sit_under_the_plot_clear_of_the_chart_toolbar(which):
+    """A page's chart toolbar covers the top right: the legend goes to the bottom left, in room of its own."""
+    if which == "waveform":
+        fig = waveform_figure(np.sin(np.arange(16000, dtype=np.float32) / 30), 16000, bands=[(0.1, 0.5, "speed=slow")])
+    else:
+        m = _lifting(45, 15.0, speed=0.5)
+        fig = wrist_figure([m, m], labels=["k-NN", "k-NN + refiner"])
+    legend = fig.layout.legend
+    assert (legend.xref, legend.yref) == ("container", "container")
+    assert (legend.x, legend.xanchor, legend.y, legend.yanchor) == (0, "left", 0, "bottom")
+    assert fig.layout.margin.b >= 30  # the legend's row, under the axis title
+    assert any(t.showlegend is not False for t in fig.data)

@@ -361,6 +361,14 @@ def skeleton_figure(
     return fig
 
 
+#: Where the line charts put their legend: under the plot, at the figure's bottom left, clear of
+#: the chart toolbar a page shows at the top right (and of the control labels above the plot).
+BOTTOM_LEGEND = dict(orientation="h", x=0, xanchor="left", xref="container", y=0, yanchor="bottom",
+                     yref="container")
+#: Pixels kept at the bottom of a figure for :data:`BOTTOM_LEGEND`.
+LEGEND_ROOM = 30
+
+
 def _attribute_unit(name: str) -> str:
     return "m/s" if "speed" in name else "m"
 
@@ -535,9 +543,9 @@ def waveform_figure(
                                showarrow=False, font=dict(size=10, color=color))
     fig.update_layout(
         title=dict(text=title) if title else None, height=height,
-        margin=dict(l=10, r=10, t=40 if title or bands else 10, b=10),
+        margin=dict(l=10, r=10, t=40 if title or bands else 10, b=10 + LEGEND_ROOM),
         xaxis=dict(title="time [s]", range=[0, n / sr]), yaxis=dict(title="amplitude"),
-        legend=dict(orientation="h", y=1.02, x=1, xanchor="right", yanchor="bottom"),
+        legend=BOTTOM_LEGEND,
         uirevision="waveform",
     )
     return fig
@@ -670,8 +678,8 @@ def wrist_figure(
     fig.update_xaxes(title_text="time [s]", row=n_rows, col=1)
     fig.update_layout(
         title=dict(text=title) if title else None, height=height,
-        margin=dict(l=10, r=10, t=70 if title else 45, b=10),
-        legend=dict(orientation="h", y=1.06 if title else 1.04, x=1, xanchor="right", yanchor="bottom"),
+        margin=dict(l=10, r=10, t=70 if title else 45, b=10 + (LEGEND_ROOM if len(motions) > 1 else 0)),
+        legend=BOTTOM_LEGEND,
         showlegend=len(motions) > 1, uirevision="wrists",
     )
     return fig
