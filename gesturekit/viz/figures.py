@@ -753,7 +753,21 @@ def candidates_figure(search, step: int, *, names: Sequence[str] | None = None, 
     fig.update_layout(
         title=dict(text=title) if title else None, height=height,
         margin=dict(l=10, r=10, t=40 if title else 10, b=10),
-        xaxis=dict(title="pose distance (z-scored)"), yaxis=dict(title="audio distance (cosine)"),
+        xaxis=dict(title="pose distance (z-scored)", range=_padded(x, low=0.08, high=0.08)),
+        # more room above: each point's label is written over it
+        yaxis=dict(title="audio distance (cosine)", range=_padded(y, low=0.08, high=0.2)),
         showlegend=False,
     )
     return fig
+
+
+def _padded(values: np.ndarray, *, low: float, high: float) -> list[float] | None:
+    """An axis range around ``values`` with fractions of their span (or of their size, when they
+    are all equal) added below and above, so no marker or label is cut at the plot's edge."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return None
+    lo, hi = float(v.min()), float(v.max())
+    span = hi - lo if hi > lo else max(abs(hi), 1.0) * 0.1
+    return [lo - low * span, hi + high * span]
