@@ -93,6 +93,10 @@ def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):
     assert skel["up"] == [0, 1, 0]
     np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 0), atol=1e-6)
     assert len(at.get("audio")) == 1
+    # the clip's attributes, each with its unit
+    (attrs,) = [d for d in at.dataframe if "clip mean" in d.value.columns]
+    units = dict(zip(attrs.value["attribute"], attrs.value["unit"]))
+    assert units == {n: ("m/s" if "speed" in n else "m") for n in db.attribute_names}
 
 
 def test_choosing_another_clip_changes_the_viewer(app_env):

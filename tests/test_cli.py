@@ -39,6 +39,9 @@ def test_build_and_info_from_position_files(tmp_path, capsys):
     assert main(["info", str(out), "--takes"]) == 0
     printed = capsys.readouterr().out
     assert "t1" in printed and "left_hand_height" in printed
+    # every attribute's line ends in its unit
+    lines = {ln.split()[0]: ln.split()[-1] for ln in printed.splitlines() if ln.startswith("  ")}
+    assert lines["left_hand_height"] == "m" and lines["hand_speed"] == "m/s" and lines["asymmetry"] == "m"
 
 
 def test_errors_are_one_line_with_exit_status_2(tmp_path, capsys):

@@ -24,7 +24,7 @@ import numpy as np
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
-from ..control import ATTRIBUTE_NAMES, ControlTrack, frame_attributes
+from ..control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, ControlTrack, frame_attributes
 from ..errors import ConfigError
 from ..motion import Motion
 from ..skeleton import BODY_JOINTS, bones, joint_index
@@ -365,12 +365,14 @@ def skeleton_figure(
 #: the chart toolbar a page shows at the top right (and of the control labels above the plot).
 BOTTOM_LEGEND = dict(orientation="h", x=0, xanchor="left", xref="container", y=0, yanchor="bottom",
                      yref="container")
+#: Pixels above the plots of :func:`attribute_histograms`: its two-line title, then the subplot titles.
+HISTOGRAM_TOP = 100
 #: Pixels kept at the bottom of a figure for :data:`BOTTOM_LEGEND`.
 LEGEND_ROOM = 30
 
 
 def _attribute_unit(name: str) -> str:
-    return "m/s" if "speed" in name else "m"
+    return ATTRIBUTE_UNITS.get(name, "m/s" if "speed" in name else "m")
 
 
 def attribute_histograms(db, *, bins: int = 40, names: Sequence[str] | None = None, cols: int = 3) -> go.Figure:
@@ -443,8 +445,10 @@ def attribute_histograms(db, *, bins: int = 40, names: Sequence[str] | None = No
         if pct else "dashed lines: the low and high thresholds"
     )
     fig.update_layout(
-        title=dict(text=f"Control attributes of the database frames<br><sup>{subtitle}</sup>"),
-        height=230 * rows + 80, margin=dict(l=10, r=10, t=80, b=10), bargap=0,
+        # the title sits at the figure's top, the subplot titles in room of their own below it
+        title=dict(text=f"Control attributes of the database frames<br><sup>{subtitle}</sup>",
+                   y=1 - 16 / (230 * rows + HISTOGRAM_TOP), yref="container", yanchor="top"),
+        height=230 * rows + HISTOGRAM_TOP, margin=dict(l=10, r=10, t=HISTOGRAM_TOP, b=10), bargap=0,
     )
     return fig
 
