@@ -144,3 +144,35 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
         assert settings["refiner_keep_hz"] == pytest.approx(1.5)
         assert settings["control"] == f"{float(cells[0]):g}-4.25:both_hands=high"
         assert app_browser.problems(page) == []
+
+
+def _switch_database_and_back(page) -> None:
+    _choose_database(page, "another folder…")
+    page.get_by_text("Type the folder of a database").first.wait_for()
+    _choose_database(page, "demo database (generated speaker)")
+
+
+def test_the_other_pages_keep_their_settings_too(served):
+    url, _ = served
+    with app_browser.browser() as page:
+        # Study stimuli: plain persisted number inputs
+        app_browser.open_app(page, url, "Study_stimuli", heading="Study stimuli")
+        _set_number(page, "Seed", "7")
+        _set_number(page, "Participants", "3")
+        _switch_database_and_back(page)
+        page.get_by_role("heading", name="Study stimuli", exact=True).first.wait_for()
+        assert (_number(page, "Seed").input_value(), _number(page, "Participants").input_value()) == ("7", "3")
+        _set_number(page, "Parallel renders", "2")  # a later change sends the kept values along, unchanged
+        assert (_number(page, "Seed").input_value(), _number(page, "Participants").input_value()) == ("7", "3")
+
+        # Database: the clip viewed
+        app_browser.go_to(page, "Database")
+        _set_number(page, "Clip to view", "3")
+        page.get_by_role("heading", name="Clip 3").first.wait_for()
+        _switch_database_and_back(page)
+        page.get_by_role("heading", name="Clip 3").first.wait_for()
+        assert _number(page, "Clip to view").input_value() == "3"
+
+        app_browser.go_to(page, "Study stimuli")
+        assert (_number(page, "Seed").input_value(), _number(page, "Participants").input_value()) == ("7", "3")
+        assert app_browser.problems(page) == []
