@@ -72,6 +72,7 @@ __all__ = [
     "check_refiner",
     "page_setup",
     "persistent_key",
+    "remount_key",
     "run_page",
     "run_synthesis",
     "server_lifespan",
@@ -194,6 +195,36 @@ def persistent_key(name: str, default) -> str:
         ss[name] = ss[key]
     ss[key] = ss.get(name, default)
     return key
+
+
+_RUN_KEY = "_gk.page_run"  # runs of any page in this session (see page_setup)
+
+
+def remount_key(key: str) -> str:
+    """The key for a widget whose value a run cannot send to the browser (a data editor's edits).
+
+    Such a widget, once not drawn in a run (another page, or a page stopped
+    early), comes back in the browser without the user's edits while the
+    session still holds them: the page would compute with edits the user no
+    longer sees, and the next interaction would drop them. The key returned
+    here changes whenever the widget was not drawn in the previous run of a
+    page, so the widget starts anew, in the browser and here alike, from the
+    page's own copy of its value (which the page must keep under another key).
+
+    Parameters
+    ----------
+    key : str
+        The widget's base key; the key returned is ``key`` until the first
+        remount, then ``f"{key}.{n}"``.
+    """
+    ss = st.session_state
+    run = ss.get(_RUN_KEY, 0)
+    seen, n = ss.get(f"_gk.remount.{key}", (None, 0))
+    if seen is not None and seen < run - 1:
+        ss.pop(key if n == 0 else f"{key}.{n}", None)
+        n += 1
+    ss[f"_gk.remount.{key}"] = (run, n)
+    return key if n == 0 else f"{key}.{n}"
 
 
 # ---- the demo database --------------------------------------------------------------------------
@@ -514,8 +545,10 @@ def _build_expander() -> None:
 # ---- page frame ---------------------------------------------------------------------------------
 
 def page_setup(title: str, *, icon: str = "🖐️") -> None:
-    """Page title and wide layout; call first on every page."""
+    """Page title and wide layout; call first on every page (it also counts the session's runs,
+    see :func:`remount_key`)."""
     st.set_page_config(page_title=f"{title} · gesturekit", page_icon=icon, layout="wide")
+    st.session_state[_RUN_KEY] = st.session_state.get(_RUN_KEY, 0) + 1
 
 
 # ---- the user's synthesis, shared by the Synthesize and Retrieval inspector pages ---------------

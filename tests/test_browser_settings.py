@@ -71,15 +71,28 @@ def _table(page, *, expect: int = 0) -> list[str]:
 def _edit_cell(page, row: int, column: int, text: str) -> None:
     """Type into a cell of the control table (columns: start, end, constraint) as a user does."""
     grid = page.locator('[data-testid="stDataFrame"]').first
-    grid.scroll_into_view_if_needed()
-    box = grid.bounding_box()
     header = row_height = 35  # the editor's default sizes, in pixels
-    page.mouse.dblclick(box["x"] + box["width"] * (column + 0.5) / 3, box["y"] + header + row_height * (row + 0.5))
-    page.wait_for_timeout(800)  # the cell's editor opens
-    page.keyboard.press("Control+a")
-    page.keyboard.type(text)
-    page.keyboard.press("Enter")
-    app_browser.wait_idle(page)
+    for _ in range(3):  # a busy machine may open the cell's editor late: try again
+        grid.scroll_into_view_if_needed()
+        box = grid.bounding_box()
+        page.mouse.dblclick(box["x"] + box["width"] * (column + 0.5) / 3,
+                            box["y"] + header + row_height * (row + 0.5))
+        editor = page.locator("#portal textarea, #portal input").first
+        try:
+            editor.wait_for(state="visible", timeout=5000)
+        except Exception:  # noqa: BLE001  (not opened: click again)
+            page.keyboard.press("Escape")
+            continue
+        page.keyboard.press("Control+a")
+        page.keyboard.type(text)
+        page.keyboard.press("Enter")
+        app_browser.wait_idle(page)
+        for _ in range(25):  # the grid shows the committed value a moment later
+            cells = _table(page)
+            if len(cells) > row * 3 + column and cells[row * 3 + column] == text:
+                return
+            page.wait_for_timeout(200)
+    raise AssertionError(f"could not type {text!r} into the table's row {row}, column {column}")
 
 
 def _bands(page) -> int:

@@ -17,7 +17,7 @@ from gesturekit.viz.figures import waveform_figure, wrist_figure
 
 SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}
 SEGMENTS = "synth.segments"  # the control table as the user last left it (DataFrame)
-EDITOR = "synth.segments_editor"  # the data editor's widget key
+EDITOR = "synth.segments_editor"  # the data editor's widget key (see common.remount_key)
 _BASE = "_synth.segments_base"  # the table the editor shows before the user's edits
 _LAST_BOX = "_synth.last_box"  # the box selection already turned into a segment
 _FAILED = "_synth.failed_upload"  # (token, message) of an upload that could not be read
@@ -92,11 +92,11 @@ def _kept_speech() -> dict | None:
     return None
 
 
-def _editor_base() -> pd.DataFrame:
+def _editor_base(key: str) -> pd.DataFrame:
     ss = st.session_state
-    if EDITOR not in ss or _BASE not in ss:
-        # the editor's own state is gone (first visit, or the user was on another page):
-        # it starts again from the table as the user left it
+    if key not in ss or _BASE not in ss:
+        # a new editor (first visit, or not drawn in the last run: another page, or the page
+        # stopped in the sidebar): it starts again from the table as the user left it
         ss[_BASE] = ss.get(SEGMENTS, gs.empty_segments())
     return ss[_BASE]
 
@@ -118,8 +118,9 @@ def controls(speech: dict) -> ControlTrack | None:
         help="Drag across the waveform to select a time range: a segment with this constraint is added "
              "(replacing what it overlaps). Edit, add or delete rows in the table below.")
     chart_slot = st.container()  # drawn after the table, so the bands show the latest edits
+    key = common.remount_key(EDITOR)
     table = st.data_editor(
-        _editor_base(), key=EDITOR, num_rows="dynamic", hide_index=True, width="stretch",
+        _editor_base(key), key=key, num_rows="dynamic", hide_index=True, width="stretch",
         column_config={
             "start_s": st.column_config.NumberColumn("start [s]", min_value=0.0, step=0.01, format="%.2f",
                                                      required=True),
