@@ -26,8 +26,10 @@ keyed by their folder and the modification time of their ``database.json``
 sessions and must be treated as read-only. Everything a user chooses lives in
 ``st.session_state``, which Streamlit keeps per browser session, so two
 users never see each other's choices. Streamlit forgets a widget's value when
-its page is left; :func:`persistent_key` gives widgets a value that survives
-page switches.
+it is not drawn in a run (its page is left, or the page stops early);
+:func:`persistent_key` gives widgets a value that survives that, and
+:func:`remount_key` does the same for a widget whose value a run cannot send
+(the data editor).
 
 Environment. ``GESTUREKIT_HOME`` moves gesturekit's own folder (see
 :mod:`gesturekit.paths`); ``GESTUREKIT_DEMO_MINUTES`` sets the minutes of the

@@ -357,7 +357,8 @@ class MatchingDatabase:
                      "in m, speeds in m/s)")
         for name, r in d["attributes"].items():
             unit = ATTRIBUTE_UNITS.get(name, "")
-            lines.append(f"  {name:<18} {r['min']:8.3f} {r['low']:8.3f} {r['high']:8.3f} {r['max']:8.3f} {unit}".rstrip())
+            values = f"{r['min']:8.3f} {r['low']:8.3f} {r['high']:8.3f} {r['max']:8.3f}"
+            lines.append(f"  {name:<18} {values} {unit}".rstrip())
         return "\n".join(lines)
 
     # ---- audio of the database -------------------------------------------------------------
