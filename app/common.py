@@ -33,8 +33,10 @@ keyed by their folder and the modification time of their ``database.json``
 sessions and must be treated as read-only. Everything a user chooses lives in
 ``st.session_state``, which Streamlit keeps per browser session, so two
 users never see each other's choices. Streamlit forgets a widget's value when
-its page is left; :func:`persistent_key` gives widgets a value that survives
-page switches.
+it is not drawn in a run (its page is left, or the page stops early);
+:func:`persistent_key` gives widgets a value that survives that, and
+:func:`remount_key` does the same for a widget whose value a run cannot send
+(the data editor).
 
 Environment. ``GESTUREKIT_HOME`` moves gesturekit's own folder (see
 :mod:`gesturekit.paths`); ``GESTUREKIT_DEMO_MINUTES`` sets the minutes of the
@@ -83,6 +85,7 @@ __all__ = [
     "check_refiner",
     "page_setup",
     "persistent_key",
+    "remount_key",
     "run_page",
     "run_synthesis",
     "server_lifespan",
@@ -226,14 +229,21 @@ def _warnings_shown() -> Iterator[list[str]]:
 # ---- state --------------------------------------------------------------------------------------
 
 def persistent_key(name: str, default) -> str:
-    """The widget key for a value that survives page switches.
+    """The widget key for a value that survives page switches and pages stopped early.
 
-    Streamlit drops the state of widgets not shown in a run, so a value kept
-    only in a widget is lost when the user visits another page. Use the
-    returned key as the widget's ``key`` and store the value it returns under
-    ``name``::
+    Use the returned key as the widget's ``key`` and store the value it
+    returns under ``name``::
 
         st.session_state["synth.seed"] = st.number_input("Seed", key=common.persistent_key("synth.seed", 0))
+
+    Why the value is written to the widget on every run: a widget that is not
+    drawn in a run (another page is shown, or the page stopped before it, as
+    the sidebar does while a database folder is being typed) is removed from
+    the browser, and when it is drawn again the browser shows the widget's
+    default (a number input's minimum) unless the run sends the value; the
+    next interaction would then send that default back as the user's choice.
+    A value present under the key is the user's latest edit and is kept
+    under ``name`` first.
 
     Parameters
     ----------
@@ -244,9 +254,40 @@ def persistent_key(name: str, default) -> str:
     """
     ss = st.session_state
     key = f"_w.{name}"
-    if key not in ss:
-        ss[key] = ss.get(name, default)
+    if key in ss:
+        ss[name] = ss[key]
+    ss[key] = ss.get(name, default)
     return key
+
+
+_RUN_KEY = "_gk.page_run"  # runs of any page in this session (see page_setup)
+
+
+def remount_key(key: str) -> str:
+    """The key for a widget whose value a run cannot send to the browser (a data editor's edits).
+
+    Such a widget, once not drawn in a run (another page, or a page stopped
+    early), comes back in the browser without the user's edits while the
+    session still holds them: the page would compute with edits the user no
+    longer sees, and the next interaction would drop them. The key returned
+    here changes whenever the widget was not drawn in the previous run of a
+    page, so the widget starts anew, in the browser and here alike, from the
+    page's own copy of its value (which the page must keep under another key).
+
+    Parameters
+    ----------
+    key : str
+        The widget's base key; the key returned is ``key`` until the first
+        remount, then ``f"{key}.{n}"``.
+    """
+    ss = st.session_state
+    run = ss.get(_RUN_KEY, 0)
+    seen, n = ss.get(f"_gk.remount.{key}", (None, 0))
+    if seen is not None and seen < run - 1:
+        ss.pop(key if n == 0 else f"{key}.{n}", None)
+        n += 1
+    ss[f"_gk.remount.{key}"] = (run, n)
+    return key if n == 0 else f"{key}.{n}"
 
 
 # ---- the demo database --------------------------------------------------------------------------
@@ -575,8 +616,10 @@ def _build_expander() -> None:
 # ---- page frame ---------------------------------------------------------------------------------
 
 def page_setup(title: str, *, icon: str = "🖐️") -> None:
-    """Page title and wide layout; call first on every page."""
+    """Page title and wide layout; call first on every page (it also counts the session's runs,
+    see :func:`remount_key`)."""
     st.set_page_config(page_title=f"{title} · gesturekit", page_icon=icon, layout="wide")
+    st.session_state[_RUN_KEY] = st.session_state.get(_RUN_KEY, 0) + 1
 
 
 # ---- the user's synthesis, shared by the Synthesize and Retrieval inspector pages ---------------
@@ -741,16 +784,15 @@ def warm_up_search(db: MatchingDatabase) -> None:
 
 
 def default_refiner(db: MatchingDatabase) -> str:
-    """The refiner folder offered first for ``db``: one beside the database (``<db>/refiner``),
-    else the shipped demo refiner for a generated database, else "" (none)."""
-    if db.path is not None and (Path(db.path) / "refiner" / "config.json").is_file():
-        return str(Path(db.path) / "refiner")
+    """The refiner folder offered first for ``db``, with the refiner switched on: one trained on
+    it (``<db>/refiner``, or the shipped demo refiner for the demo speaker; see
+    :func:`gesturekit.refine.refiner_for`, which the command line uses too), else "" (off)."""
     try:
-        from gesturekit.refine import default_refiner_path
+        from gesturekit.refine import refiner_for
     except ImportError:  # a gesturekit without the refiner
         return ""
-    shipped = default_refiner_path()
-    return str(shipped) if is_generated(db) and (shipped / "config.json").is_file() else ""
+    found = refiner_for(db)
+    return "" if found is None else str(found)
 
 
 def warm_up(db: MatchingDatabase) -> None:

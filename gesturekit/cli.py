@@ -141,17 +141,43 @@ def _speech_files(inputs: list[str]) -> list[Path]:
     return files
 
 
+def _refiner_choice(given: str | None, db):
+    """The refiner of ``synthesize``: the one named, none for ``none``, else one trained on ``db``
+    (:func:`gesturekit.refine.refiner_for`; the app's default too)."""
+    import importlib.util
+
+    if given is not None:
+        return None if given == "none" else given
+    if importlib.util.find_spec("torch") is None:  # a gesturekit installed without the refiner's torch
+        return None
+    from .refine import refiner_for
+
+    found = refiner_for(db)
+    if found is not None:
+        print(f"refining with {found}, trained on this database (--refiner none: the k-NN motion alone)")
+    return found
+
+
 def _cmd_synthesize(args) -> int:
     from .database import MatchingDatabase
     from .datasets.audio import load_audio
     from .demo import open_default_database
     from .export.files import safe_filename
+    from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
 
     t0 = time.perf_counter()
     files = _speech_files(args.speech)
     control = _control_from_arg(args.control) or ""
     exclude_ranges = tuple(_parse_range(r) for r in (args.exclude_range or ()))
+    out = Path(args.out)
+    stems = [safe_filename(f.stem) for f in files]
+    first: dict[str, Path] = {}
+    for f, stem in zip(files, stems):  # checked before anything is written
+        if stem in first:
+            raise ConfigError(f"{first[stem]} and {f} would both be written as {out / stem}.npz; rename one, "
+                              "or synthesise them in separate runs")
+        first[stem] = f
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
     config = SynthesisConfig(
         k=args.k, step=args.step, topk=args.topk, seed=args.seed, init=args.init_pose,
@@ -160,17 +186,13 @@ def _cmd_synthesize(args) -> int:
         exclude_ranges=exclude_ranges,
         **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
     )
-    out = Path(args.out)
-    stems = [safe_filename(f.stem) for f in files]
-    if len(set(stems)) != len(stems):
-        raise ConfigError("two speech files have the same name; synthesise them in separate runs")
     kinds = ["npz", "bvh"] + (["mp4"] if args.video else [])
     targets = {(stem, kind): out / f"{stem}.{kind}" for stem in stems for kind in kinds}
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
     audios = [load_audio(f) for f in files]
-    results = synthesize_batch(audios, db=db, config=config, refiner=args.refiner)
+    results = synthesize_batch(audios, db=db, config=config, refiner=_refiner_choice(args.refiner, db))
     out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     for f, stem, res in zip(files, stems, results):
         res.source = f.name
@@ -183,7 +205,8 @@ def _cmd_synthesize(args) -> int:
                                progress=lambda done, total: (setattr(bar, "n", done), bar.refresh()))
             written.append(targets[(stem, "mp4")])
         relaxed = res.relaxed_steps
-        note = f"; control relaxed at {len(relaxed)} step(s)" if relaxed else ""
+        note = (f"; control relaxed at {describe_steps(relaxed, step=res.config.step, fps=res.motion.fps)}"
+                if relaxed else "")
         print(f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
               f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}")
     print(f"done in {time.perf_counter() - t0:.1f} s")
@@ -457,8 +480,9 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
                    help="keep a stretch of a take (seconds) out of the search")
     y.add_argument("--refiner", metavar="PATH", help="refine the k-NN motion with a trained refiner folder "
-                   "(from train-refiner), or 'demo' for the one shipped with the demo database; "
-                   "the npz keeps both motions")
+                   "(from train-refiner), 'demo' for the one shipped with the demo database, or 'none'; "
+                   "default: a refiner trained on the database if there is one (DB/refiner, or the shipped "
+                   "one for the demo database), else none. The npz keeps both motions")
     y.add_argument("--refiner-keep-hz", type=float, default=None, metavar="HZ",
                    help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
                    "controls) and take the faster content from the refiner (default 2); 0: the refiner's "

@@ -25,6 +25,7 @@ from .skeleton import FPS, joint_index
 
 __all__ = [
     "ATTRIBUTE_NAMES",
+    "ATTRIBUTE_UNITS",
     "CONSTRAINTS",
     "frame_attributes",
     "Segment",
@@ -48,6 +49,9 @@ ATTRIBUTE_NAMES: tuple[str, ...] = (
     "hand_width",         # mean of both widths [m]
     "asymmetry",          # distance between the left wrist and the mirrored right wrist [m]
 )
+
+#: The unit of each attribute: metres for heights, widths and asymmetry, metres per second for speeds.
+ATTRIBUTE_UNITS: dict[str, str] = {name: "m/s" if "speed" in name else "m" for name in ATTRIBUTE_NAMES}
 
 #: Constraint name -> (attribute(s) it tests, {value: "low"|"high"}). "low" means below the low
 #: percentile of the attribute, "high" above the high percentile; several attributes must all hold.

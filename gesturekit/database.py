@@ -37,7 +37,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from . import __version__
-from .control import ATTRIBUTE_NAMES, frame_attributes
+from .control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, frame_attributes
 from .errors import ConfigError, DatabaseError, warn
 from .features import (
     LAYOUT,
@@ -359,9 +359,12 @@ class MatchingDatabase:
         ]
         if d["overlap_windows"]:
             lines.append(f"overlap    {d['overlap_windows']} windows for refiner training")
-        lines.append("attributes (min / low threshold / high threshold / max)")
+        lines.append("attributes (min / low threshold / high threshold / max; heights, widths and asymmetry "
+                     "in m, speeds in m/s)")
         for name, r in d["attributes"].items():
-            lines.append(f"  {name:<18} {r['min']:8.3f} {r['low']:8.3f} {r['high']:8.3f} {r['max']:8.3f}")
+            unit = ATTRIBUTE_UNITS.get(name, "")
+            values = f"{r['min']:8.3f} {r['low']:8.3f} {r['high']:8.3f} {r['max']:8.3f}"
+            lines.append(f"  {name:<18} {values} {unit}".rstrip())
         return "\n".join(lines)
 
     # ---- audio of the database -------------------------------------------------------------

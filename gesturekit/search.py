@@ -56,6 +56,7 @@ __all__ = [
     "search_batch",
     "exact_pose_sqdist",
     "exact_cosine_distance",
+    "describe_steps",
 ]
 
 _U32 = 2.0**-24
@@ -954,7 +955,8 @@ class SearchIndex:
         """Run Algorithm 1 for one query; see :func:`search` for the parameters."""
         return self.search_batch([query], configs=[config], masks=masks, step_masks=[step_mask], exclude=exclude)[0]
 
-    def search_batch(self, queries, *, configs=None, masks=None, step_masks=None, exclude=None) -> list[SearchResult]:
+    def search_batch(self, queries, *, configs=None, masks=None, step_masks=None, exclude=None,
+                     fps: float | None = None) -> list[SearchResult]:
         """Run Algorithm 1 for several queries with one scan of the database per step.
 
         Parameters
@@ -969,6 +971,8 @@ class SearchIndex:
             Per query, the mask index of each step (-1: no control).
         exclude : np.ndarray, shape (M, T), bool, optional
             Frames no query may use.
+        fps : float, optional
+            Frame rate of the output: a relaxed control is then reported in seconds.
 
         Returns
         -------
@@ -1063,10 +1067,8 @@ class SearchIndex:
 
         for r in results:
             if r.relaxed.any():
-                warn(
-                    f"control relaxed at steps {np.flatnonzero(r.relaxed).tolist()}: no database window satisfies it",
-                    stacklevel=3,
-                )
+                where = describe_steps(np.flatnonzero(r.relaxed), step=r.config.step, fps=fps)
+                warn(f"control relaxed at {where}: no database window satisfies it", stacklevel=3)
         return results
 
     def _step(self, active, keys, poses, calls, i, cache, pool=None):
@@ -1181,3 +1183,43 @@ def search_batch(
     return SearchIndex(P, F, valid).search_batch(
         queries, configs=configs, masks=masks, step_masks=step_masks, exclude=exclude
     )
+
+
+def describe_steps(steps, *, step: int, fps: float | None = None, most: int = 3) -> str:
+    """Search steps said briefly: runs of consecutive steps joined, long lists cut short.
+
+    Parameters
+    ----------
+    steps : sequence of int
+        Step indices (step ``i`` covers output frames ``i * step`` to ``(i + 1) * step``).
+    step : int
+        Frames per step (N).
+    fps : float, optional
+        Frame rate of the output; given, the runs are said in seconds.
+    most : int
+        Runs written out; further ones are counted.
+
+    Returns
+    -------
+    str
+        E.g. ``"0.53-4.80 s (8 steps)"`` with ``fps``, ``"steps 1-8"`` without.
+    """
+    steps = sorted({int(i) for i in steps})
+    runs: list[list[int]] = []
+    for i in steps:
+        if runs and i == runs[-1][1] + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    if fps is None:
+        parts = [f"{a}" if a == b else f"{a}-{b}" for a, b in runs[:most]]
+        head = "step " if len(steps) == 1 else "steps "
+    else:
+        parts = [f"{a * step / fps:.2f}-{(b + 1) * step / fps:.2f} s" for a, b in runs[:most]]
+        head = ""
+    if len(runs) > most:
+        parts.append(f"and {len(runs) - most} more stretch{'es' if len(runs) - most > 1 else ''}")
+    text = head + ", ".join(parts)
+    if fps is not None:
+        text += f" ({len(steps)} step{'s' if len(steps) != 1 else ''})"
+    return text

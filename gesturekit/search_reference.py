@@ -46,7 +46,7 @@ import math
 import numpy as np
 
 from .errors import ConfigError, warn
-from .search import SearchConfig, SearchResult, _validate
+from .search import SearchConfig, SearchResult, _validate, describe_steps
 
 __all__ = ["pose_sqdist", "cosine_distance", "window_admissible", "search_reference"]
 
@@ -274,5 +274,6 @@ def search_reference(
         p_prev = P[m, s + N - 1].tolist()
 
     if relaxed_steps:
-        warn(f"control relaxed at steps {relaxed_steps}: no database window satisfies it", stacklevel=2)
+        warn(f"control relaxed at {describe_steps(relaxed_steps, step=N)}: no database window satisfies it",
+             stacklevel=2)
     return res

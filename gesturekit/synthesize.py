@@ -19,12 +19,24 @@ from . import __version__
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control, step_masks
 from .database import MatchingDatabase, normalise_exclusions
-from .errors import ConfigError
+from .errors import ConfigError, warn
 from .features import n_audio_frames
 from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 
-__all__ = ["SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
+__all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
+
+#: The settings of Habibie et al. 2022: option -> (the paper's value, how a value is written,
+#: the paper's value as written after it). ``refiner_keep_hz`` counts only when a refiner is
+#: applied (the paper uses the refiner's output as it is).
+PAPER_SETTINGS = {
+    "k": (0, "k = {}", "0"),
+    "step": (8, "N = {}", "8"),
+    "init": ("random", "initial pose: {}", "random"),
+    "blend": ("none", "blending: {}", "none"),
+    "mask_rule": ("ends", "control held at: {}", "ends"),
+    "refiner_keep_hz": (0.0, "k-NN motion kept below {:g} Hz", "0: the refiner's output as it is"),
+}
 
 
 @dataclass(frozen=True)
@@ -128,6 +140,26 @@ class SynthesisConfig:
         d["pins"] = {int(i): tuple(v) for i, v in d.get("pins", {}).items()}
         return cls(**d)
 
+    def paper_differences(self, *, refined: bool) -> list[str]:
+        """The settings that differ from the paper's (:data:`PAPER_SETTINGS`), as text.
+
+        Parameters
+        ----------
+        refined : bool
+            Whether a refiner is applied (``refiner_keep_hz`` counts only then).
+
+        Returns
+        -------
+        list of str
+            E.g. ``["N = 6 (paper 8)"]``; empty when the search is the paper's.
+        """
+        out = []
+        for name, (paper, form, paper_text) in PAPER_SETTINGS.items():
+            value = getattr(self, name)
+            if value != paper and (refined or name != "refiner_keep_hz"):
+                out.append(f"{form.format(value)} (paper {paper_text})")
+        return out
+
     def with_pin(self, step: int, clip: int, start: int) -> "SynthesisConfig":
         """A copy with one more pinned choice (replacing any pin at that step)."""
         pins = dict(self.pins)
@@ -161,6 +193,10 @@ class SynthesisResult:
         Name of the speech (file name, or "audio").
     refined_motion : Motion or None
         The refiner's output, when a refiner was applied.
+    refiner : dict or None
+        Which refiner was applied (:func:`gesturekit.refine.provenance`: its folder, its
+        training database, the sha256 of its weights); None without one, or for a refiner
+        not loaded from a folder.
     """
 
     motion: Motion
@@ -172,6 +208,7 @@ class SynthesisResult:
     database: str
     source: str
     refined_motion: Motion | None = None
+    refiner: dict | None = None
 
     @property
     def n_frames(self) -> int:
@@ -217,6 +254,7 @@ class SynthesisResult:
             "relaxed_steps": self.relaxed_steps,
             "init_frame": list(self.search.init_frame),
             "refined": self.refined_motion is not None,
+            "refiner": self.refiner,
         }
 
     def save_npz(self, path, *, overwrite: bool = False) -> Path:
@@ -393,8 +431,10 @@ def synthesize_batch(
     excl = {(c.exclude_takes, c.exclude_ranges) for c in configs}
     if len(excl) > 1:
         raise ConfigError("all speeches of one batch must exclude the same database takes and ranges")
+    made_by = None
     if refiner is not None:
         refiner = _open_refiner(refiner, db)
+        made_by = _provenance(refiner, db)
     prepared = [_prepare(db, a, c, ctl) for a, c, ctl in zip(audios, configs, controls)]
     # masks differ per speech; the search shares one mask stack, so stack them with offsets
     stack, step_idx = [], []
@@ -411,12 +451,29 @@ def synthesize_batch(
         masks=masks,
         step_masks=step_idx,
         exclude=_exclusion(db, configs[0]),
+        fps=db.fps,
     )
     out = [_finish(db, r, p[0], p[1], c, p[3]) for r, p, c in zip(results, prepared, configs)]
     if refiner is not None:
         for res in out:
             _refine(db, res, refiner)
+            res.refiner = made_by
     return out
+
+
+def _provenance(refiner, db) -> dict | None:
+    """Which refiner this is (None for one not loaded from a folder); warns when it was trained
+    on another database than ``db``."""
+    from .refine import describe_training, provenance, trained_on
+
+    config, path = getattr(refiner, "config", None), getattr(refiner, "path", None)
+    if not isinstance(config, dict) or path is None:
+        return None
+    if not trained_on(config, db):
+        name = db.label or (db.path.name if db.path is not None else "this database")
+        warn(f"refiner {path} was trained on {describe_training(config)}, not on {name}: "
+             "its output may not suit this database (train one on it with `gesturekit train-refiner --db ...`)")
+    return provenance(path, config)
 
 
 def _open_refiner(refiner, db):

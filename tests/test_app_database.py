@@ -92,6 +92,10 @@ def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):
     np.testing.assert_allclose(skel["audio"][:db.clip_frames * 16000 // 15],
                                db.segment_audio(0, 0, db.clip_frames)[:db.clip_frames * 16000 // 15], atol=1e-4)
     assert len(at.get("audio")) == 0
+    # the clip's attributes, each with its unit
+    (attrs,) = [d for d in at.dataframe if "clip mean" in d.value.columns]
+    units = dict(zip(attrs.value["attribute"], attrs.value["unit"]))
+    assert units == {n: ("m/s" if "speed" in n else "m") for n in db.attribute_names}
 
 
 def test_choosing_another_clip_changes_the_viewer(app_env):

@@ -97,9 +97,51 @@ def test_every_step_lists_its_k_candidates_with_their_sources(app_env, db):
         (points,) = [t for t in chart(at, "inspect.candidates_plot")["data"] if t["meta"]["part"] == "candidates"]
         np.testing.assert_allclose(array(points["x"]), s.cand_pose_dist[step])
     assert any(m.value.startswith(f"**Step {s.n_steps - 1}**") for m in at.markdown)
-    assert len(at.get("audio")) == 1  # the candidate's own speech; this step's plays in the 3D view
+    # the candidate's own speech, and that with a second of its take around it; this step's plays in the 3D view
+    assert len(at.get("audio")) == 2
     step_speech = gs.step_speech(res, s.n_steps - 1)
     np.testing.assert_allclose(views["audio"][:len(step_speech)], step_speech, atol=1e-4)
+
+
+def test_a_candidates_speech_comes_with_its_context_marked(app_env, db):
+    at = set_step(synthesized(), 3)
+    res = result(at)
+    row = table(at, "audio_dist").iloc[0]
+    n = res.config.step
+    (caption,) = [c.value for c in at.caption if "the window is" in c.value]
+    spec = chart(at, "inspect.context")
+    (band,) = [sh for sh in spec["layout"]["shapes"] if sh["type"] == "rect"]
+    take = db.take_audio(int(db.clip_take[row["clip"]]))
+    f0 = int(db.clip_start[row["clip"]]) + int(row["start"])
+    s0 = round(f0 * 16000 / db.fps)
+    before = min(1.0, s0 / 16000)  # a second, or less at the take's start
+    assert band["x0"] == pytest.approx(before, abs=1e-6)
+    assert band["x1"] - band["x0"] == pytest.approx(n / db.fps, abs=1e-3)
+    assert f"the window is {before:.2f}–{before + n / db.fps:.2f} s" in caption
+    assert f"{row['take']} at {s0 / 16000:.2f}" in caption
+    excerpt, a, b, t0 = __import__("gesturekit.viz.session", fromlist=["x"]).segment_in_context(
+        db, int(row["clip"]), int(row["start"]), n)
+    np.testing.assert_array_equal(excerpt, take[round(t0 * 16000): round(t0 * 16000) + len(excerpt)])
+    assert (a, b) == (pytest.approx(before), pytest.approx(band["x1"]))
+
+
+def test_every_table_names_its_columns_in_words_and_control_met_in_whole_percent(app_env):
+    import json
+
+    at = synthesized()
+    at.button(key="inspect.compare_go").click().run()
+    assert not at.exception
+    assert len(at.dataframe) == 3
+    for frame in at.dataframe:
+        config = json.loads(frame.proto.columns)
+        for column in frame.value.columns:
+            label = config.get(column, {}).get("label")
+            assert label and "_" not in label, (column, label)
+    compared = table(at, "control_met")
+    met = compared["control_met"].dropna()
+    assert len(met) == 3 and ((met == met.round()) & (met >= 0) & (met <= 100)).all()
+    frame = next(f for f in at.dataframe if "control_met" in f.value.columns)
+    assert json.loads(frame.proto.columns)["control_met"]["type_config"]["format"] == "%d%%"
 
 
 def test_pinning_a_candidate_changes_that_step_and_can_be_undone(app_env):

@@ -178,6 +178,41 @@ def test_a_bad_upload_is_an_error_message_not_a_traceback(app_env):
     assert not errors(at) and at.button(key="synth.go")
 
 
+def test_a_failed_upload_keeps_the_last_result_and_speech_in_view(app_env):
+    at = upload(open_page(), speech_file(3.0), name="good.wav")
+    if at.toggle(key="_w.synth.refine").value:
+        at.toggle(key="_w.synth.refine").set_value(False).run()
+    at.button(key="synth.go").click().run()
+    assert not errors(at) and viewer(at, "synth.skeleton")
+    at = upload(at, b"these are my notes, not sound" * 20, name="notes.wav")
+    (err,) = errors(at)
+    assert err.startswith("notes.wav: ")
+    assert not at.exception
+    assert at.session_state["synth.speech"]["name"] == "good.wav"  # the last readable file is still the speech
+    assert any("Still working on **good.wav**" in c.value for c in at.caption)
+    assert viewer(at, "synth.skeleton") and result(at).source == "good.wav"  # the result stays
+    assert not at.button(key="synth.go").disabled
+    at.run()  # the failed file is not read again, and still reported above the result
+    assert errors(at) == [err] and viewer(at, "synth.skeleton")
+
+
+def test_settings_that_differ_from_the_paper_are_named(app_env):
+    at = open_page()
+    at.radio(key="_w.synth.mode").set_value("Example speech").run()
+    if at.toggle(key="_w.synth.refine").value:
+        at.toggle(key="_w.synth.refine").set_value(False).run()
+    assert not [c.value for c in at.caption if "Differs from the paper" in c.value]  # the defaults are the paper's
+    at.number_input(key="_w.synth.step").set_value(6)
+    at.selectbox(key="_w.synth.init").set_value("rest").run()
+    (note,) = [c.value for c in at.caption if c.value.startswith("Differs from the paper")]
+    assert note == "Differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)"
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    assert result(at).config.step == 6
+    assert any("differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)" in c.value
+               for c in at.caption if "seed" in c.value)
+
+
 def test_a_silent_upload_is_accepted_with_a_warning(app_env):
     buf = io.BytesIO()
     sf.write(buf, np.zeros(32000, np.float32), 16000, format="WAV")

@@ -39,6 +39,9 @@ def test_build_and_info_from_position_files(tmp_path, capsys):
     assert main(["info", str(out), "--takes"]) == 0
     printed = capsys.readouterr().out
     assert "t1" in printed and "left_hand_height" in printed
+    # every attribute's line ends in its unit
+    lines = {ln.split()[0]: ln.split()[-1] for ln in printed.splitlines() if ln.startswith("  ")}
+    assert lines["left_hand_height"] == "m" and lines["hand_speed"] == "m/s" and lines["asymmetry"] == "m"
 
 
 def test_errors_are_one_line_with_exit_status_2(tmp_path, capsys):
@@ -107,3 +110,22 @@ def test_long_user_text_is_never_a_failed_file_lookup(tmp_path):
     assert not is_file(long) and not is_dir(long) and not is_file("a\0b") and not is_dir(tmp_path / ("x" * 300))
     (tmp_path / "f.csv").write_text("start_s,end_s,constraint\n")
     assert is_file(tmp_path / "f.csv") and not is_dir(tmp_path / "f.csv") and is_dir(tmp_path)
+
+
+@pytest.mark.parametrize("names", [("a.wav", "a.mp3"), ("talk one.wav", "talk_one.flac"), ("b.ogg", "b.wav", "c.wav")],
+                         ids=["same-stem", "same-safe-name", "folder"])
+def test_synthesize_refuses_speech_files_written_to_the_same_outputs(tmp_path, names):
+    from .badinput import assert_refused, run_cli, snapshot
+
+    folder = tmp_path / "speech"
+    folder.mkdir()
+    for name in names:
+        (folder / name).write_bytes(b"not read: the names clash first")
+    out = tmp_path / "out"
+    before = snapshot(folder, out)
+    args = [folder] if len(names) == 3 else [folder / n for n in names]
+    run = run_cli("synthesize", *args, "--db", tmp_path / "no-db", "--out", out)
+    clash = sorted(names)[:2] if len(names) == 3 else names
+    assert_refused(run, names=folder / clash[0], problem="would both be written", before=before)
+    assert str(folder / clash[1]) in run.stderr
+    assert not out.exists()

@@ -345,3 +345,77 @@ def test_damaged_stats_are_refused(demo_copy, tmp_path, stats, message):
 def test_a_name_too_long_is_no_refiner_folder(tmp_path):
     with pytest.raises(InputFileError, match="no refiner folder"):
         read_refiner_config(tmp_path / ("r" * 300))
+
+
+# ---- which refiner made a result --------------------------------------------------------------------
+
+
+def _db_like(source: str, *, path=None, takes: int = 10, clips: int = 280):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(path=path, meta={"build": {"source": source}}, take_names=[f"t{i}" for i in range(takes)],
+                           n_clips=clips, label="")
+
+
+@pytest.mark.parametrize("source, takes, clips, expected", [
+    ("demo (seed 0, 20 min)", 10, 280, True),
+    ("demo (seed 0, 2 min)", 1, 28, True),  # the same generated speaker, shorter
+    ("demo (seed 1, 20 min)", 10, 280, False),
+    ("/data/zeggs", 10, 280, False),
+])
+def test_trained_on_the_demo_speaker(source, takes, clips, expected):
+    from gesturekit.refine import refiner_for, trained_on
+    from gesturekit.refine.folder import read_refiner_config
+
+    config = read_refiner_config(default_refiner_path())
+    db = _db_like(source, takes=takes, clips=clips)
+    assert trained_on(config, db) is expected
+    assert refiner_for(db) == (default_refiner_path().resolve() if expected else None)
+
+
+def test_recorded_databases_match_by_folder_or_by_source_takes_and_clips(tmp_path):
+    from gesturekit.refine import trained_on
+
+    config = {"database": {"path": str(tmp_path / "db"), "source": "/data/zeggs", "takes": 3, "clips": 40}}
+    assert trained_on(config, _db_like("", path=tmp_path / "db"))
+    assert trained_on(config, _db_like("/data/zeggs", path=tmp_path / "copy", takes=3, clips=40))
+    assert not trained_on(config, _db_like("/data/zeggs", path=tmp_path / "copy", takes=3, clips=41))
+    assert not trained_on(config, _db_like("", path=tmp_path / "other"))
+
+
+def test_a_result_records_its_refiner_and_another_database_is_warned(tiny, tmp_path):
+    import hashlib
+    import warnings
+
+    from gesturekit.errors import GestureKitWarning
+    from gesturekit.synthesize import synthesize
+
+    db, out = tiny
+    audio = make_take(4.0, seed=5, name="q").audio
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GestureKitWarning)  # its own database: no warning
+        res = synthesize(audio, db=db, refiner=out)
+    meta = json.loads(json.dumps(res.metadata()))
+    assert meta["refined"] is True
+    assert meta["refiner"]["path"] == str(Path(out).resolve())
+    assert meta["refiner"]["generator_sha256"] == hashlib.sha256((out / "generator.pt").read_bytes()).hexdigest()
+    assert meta["refiner"]["trained_on"]["path"] == str(db.path)
+    assert synthesize(audio, db=db).metadata()["refiner"] is None
+
+    other = MatchingDatabase.build([make_take(8.0, seed=9, name="c")], config=BuildConfig(store_audio=False))
+    other.save(tmp_path / "other")
+    other = MatchingDatabase.load(tmp_path / "other")
+    with pytest.warns(GestureKitWarning, match=r"refiner .* was trained on .*, not on"):
+        res = synthesize(audio, db=other, refiner=out)
+    assert res.metadata()["refiner"]["trained_on"]["path"] == str(db.path)
+
+
+def test_the_command_line_applies_a_refiner_trained_on_the_database_unless_told_otherwise(capsys):
+    from gesturekit.cli import _refiner_choice
+
+    demo, other = _db_like("demo (seed 0, 20 min)"), _db_like("/data/zeggs")
+    assert _refiner_choice(None, demo) == default_refiner_path().resolve()
+    assert "trained on this database" in capsys.readouterr().out
+    assert _refiner_choice("none", demo) is None
+    assert _refiner_choice(None, other) is None
+    assert _refiner_choice("demo", other) == "demo"  # named: applied (with the warning at synthesis)

@@ -15,6 +15,7 @@ from gesturekit.errors import ConfigError, GestureKitWarning
 from gesturekit.search import (
     SearchConfig,
     SearchIndex,
+    describe_steps,
     exact_cosine_distance,
     exact_pose_sqdist,
     search,
@@ -406,7 +407,7 @@ def test_unsatisfiable_control_is_relaxed_reported_and_warned():
     query = rng.standard_normal((40, F.shape[2])).astype(np.float32)  # 5 steps of 8
     masks = np.stack([np.zeros_like(valid), rng.random(valid.shape) < 0.7])
     step_mask = np.array([1, 0, 0, 1, -1])
-    with pytest.warns(GestureKitWarning, match=r"relaxed at steps \[1, 2\]"):
+    with pytest.warns(GestureKitWarning, match=r"relaxed at steps 1-2:"):
         res = search(P, F, valid, query, masks=masks, step_mask=step_mask)
     assert res.relaxed.tolist() == [False, True, True, False, False]
     for i in (0, 3):  # the satisfiable control is obeyed
@@ -584,3 +585,24 @@ def test_thread_settings_are_restored_after_a_search():
     search(P, F, valid, queries[0])
     after = [(d["filepath"], d["num_threads"]) for d in threadpoolctl.threadpool_info()]
     assert after == before and torch.get_num_threads() == torch_threads
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.sets(st.integers(0, 40), min_size=1, max_size=30), st.integers(1, 12))
+def test_describe_steps_covers_exactly_the_steps_in_seconds(steps, N):
+    fps = 15.0
+    text = describe_steps(steps, step=N, fps=fps, most=100)
+    assert text.endswith(f"({len(steps)} step{'s' if len(steps) > 1 else ''})")
+    covered = set()
+    for part in text.rsplit(" (", 1)[0].split(", "):
+        a, b = (float(v) for v in part.removesuffix(" s").split("-"))
+        covered |= {i for i in range(41) if a - 0.005 <= i * N / fps < b - 0.005}  # times are rounded to 0.01 s
+    assert covered == set(steps)
+
+
+def test_describe_steps_joins_runs_and_shortens_long_lists():
+    assert describe_steps(range(1, 9), step=8, fps=15.0) == "0.53-4.80 s (8 steps)"
+    assert describe_steps([1, 2], step=8) == "steps 1-2"
+    assert describe_steps([3], step=8) == "step 3"
+    many = describe_steps([0, 2, 4, 6, 8], step=8, fps=15.0)
+    assert many == "0.00-0.53 s, 1.07-1.60 s, 2.13-2.67 s, and 2 more stretches (5 steps)"

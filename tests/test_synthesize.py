@@ -264,3 +264,25 @@ def test_cli_synthesize_with_video_and_controls(zeggs_db, shared_data, tmp_path,
     _, _, config = load_npz(out / "espeak_en_us.npz")
     assert config["synthesis"]["control"] == "0-4:left_hand=low,4-8:speed=fast+width=wide"
     assert config["synthesis"]["k"] == 1 and config["source"] == "espeak_en_us.wav"
+
+
+@settings(max_examples=60, deadline=None)
+@given(k=st.integers(0, 3), step=st.integers(1, 12), init=st.sampled_from(["random", "rest"]),
+       blend=st.sampled_from(["none", "offset"]), mask_rule=st.sampled_from(["ends", "all"]),
+       keep=st.sampled_from([0.0, 1.5, 2.0]), refined=st.booleans())
+def test_paper_differences_name_exactly_the_settings_that_differ(k, step, init, blend, mask_rule, keep, refined):
+    config = SynthesisConfig(k=k, step=step, init=init, blend=blend, mask_rule=mask_rule, refiner_keep_hz=keep)
+    notes = config.paper_differences(refined=refined)
+    expected = {"k = ": k != 0, "N = ": step != 8, "initial pose": init != "random", "blending": blend != "none",
+                "control held at": mask_rule != "ends", "kept below": refined and keep != 0}
+    for text, differs in expected.items():
+        assert sum(text in n for n in notes) == int(differs), (text, notes)
+    assert len(notes) == sum(expected.values())
+    if step != 8:
+        assert f"N = {step} (paper 8)" in notes
+
+
+def test_the_paper_search_has_no_differences():
+    assert SynthesisConfig(refiner_keep_hz=0.0).paper_differences(refined=True) == []
+    assert SynthesisConfig().paper_differences(refined=False) == []
+    assert SynthesisConfig(seed=9, topk=3).paper_differences(refined=False) == []  # no effect on the method

@@ -231,6 +231,35 @@ def test_histograms_have_one_subplot_per_attribute_and_threshold_lines():
         assert set(colors[x < lo]).isdisjoint(colors[(x > lo) & (x < hi)])
 
 
+@pytest.mark.parametrize("n", [1, 2, 4, 9])
+def test_the_histograms_title_stays_above_the_subplot_titles(n):
+    from gesturekit.control import ATTRIBUTE_NAMES
+
+    class Many(_FakeDB):
+        attribute_names = ATTRIBUTE_NAMES[:n]
+
+        def attribute(self, name):
+            return np.linspace(0, 1, 128).reshape(2, 64)
+
+        @property
+        def thresholds(self):
+            return {a: (0.2, 0.7) for a in self.attribute_names}
+
+        @thresholds.setter
+        def thresholds(self, value):
+            pass
+
+    fig = attribute_histograms(Many())
+    height, top = fig.layout.height, fig.layout.margin.t
+    title = fig.layout.title
+    assert (title.yref, title.yanchor) == ("container", "top")
+    title_top = (1 - title.y) * height  # pixels from the figure's top
+    # two lines of title (about 45 px) end well before the subplot titles (25 px above the plots)
+    assert title_top + 45 <= top - 25
+    subplot_titles = [a for a in fig.layout.annotations if "[" in a.text]
+    assert len(subplot_titles) == n and all(a.text.endswith(("[m]", "[m/s]")) for a in subplot_titles)
+
+
 def test_histograms_of_a_matching_database():
     # a MatchingDatabase made from arrays: its attribute API without the audio pipeline
     rng = np.random.default_rng(3)

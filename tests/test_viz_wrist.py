@@ -142,3 +142,38 @@ def test_a_pin_outside_the_table_has_no_ring():
 def test_candidates_figure_rejects_bad_arguments(step, names, message):
     with pytest.raises(ConfigError, match=message):
         candidates_figure(_record(0), step, names=names)
+
+
+@pytest.mark.parametrize("which", ["waveform", "wrists"])
+def test_legends_sit_under_the_plot_clear_of_the_chart_toolbar(which):
+    """A page's chart toolbar covers the top right: the legend goes to the bottom left, in room of its own."""
+    if which == "waveform":
+        fig = waveform_figure(np.sin(np.arange(16000, dtype=np.float32) / 30), 16000, bands=[(0.1, 0.5, "speed=slow")])
+    else:
+        m = _lifting(45, 15.0, speed=0.5)
+        fig = wrist_figure([m, m], labels=["k-NN", "k-NN + refiner"])
+    legend = fig.layout.legend
+    assert (legend.xref, legend.yref) == ("container", "container")
+    assert (legend.x, legend.xanchor, legend.y, legend.yanchor) == (0, "left", 0, "bottom")
+    assert fig.layout.margin.b >= 30  # the legend's row, under the axis title
+    assert any(t.showlegend is not False for t in fig.data)
+
+
+@settings(max_examples=40, deadline=None)
+@given(hst.lists(hst.tuples(hst.floats(0, 50), hst.floats(0, 2)), min_size=1, max_size=10))
+def test_the_candidates_plot_holds_every_point_and_room_for_its_label(points):
+    from types import SimpleNamespace
+
+    n = len(points)
+    col = lambda v, dt=np.int64: np.asarray([v], dtype=dt)  # noqa: E731  (one step)
+    rec = SimpleNamespace(
+        cand_clip=col(list(range(n))), cand_start=col([0] * n), cand_pose_rank=col(list(range(n))),
+        cand_audio_rank=col(list(range(n))), cand_combined=col(list(range(n))), position=np.asarray([0]),
+        cand_pose_dist=col([p for p, _ in points], np.float64), cand_audio_dist=col([a for _, a in points], np.float64))
+    fig = candidates_figure(rec, 0)
+    (x0, x1), (y0, y1) = fig.layout.xaxis.range, fig.layout.yaxis.range
+    xs, ys = [p for p, _ in points], [a for _, a in points]
+    assert x0 < min(xs) and max(xs) < x1 and y0 < min(ys) and max(ys) < y1
+    # above the highest point, room for a label: a fifth of the points' spread (or of their size)
+    spread = (max(ys) - min(ys)) or max(abs(max(ys)), 1.0) * 0.1
+    assert y1 - max(ys) >= 0.2 * spread - 1e-12

@@ -11,13 +11,14 @@ from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
+from gesturekit.search import describe_steps
 from gesturekit.synthesize import SynthesisConfig
 from gesturekit.viz import session as gs
 from gesturekit.viz.figures import waveform_figure, wrist_figure
 
 SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}
 SEGMENTS = "synth.segments"  # the control table as the user last left it (DataFrame)
-EDITOR = "synth.segments_editor"  # the data editor's widget key
+EDITOR = "synth.segments_editor"  # the data editor's widget key (see common.remount_key)
 _BASE = "_synth.segments_base"  # the table the editor shows before the user's edits
 _LAST_BOX = "_synth.last_box"  # the box selection already turned into a segment
 _FAILED = "_synth.failed_upload"  # (token, message) of an upload that could not be read
@@ -55,17 +56,16 @@ def speech_input() -> dict | None:
             failed = ss.get(_FAILED)
             if failed is not None and failed[0] == token:
                 st.error(failed[1], icon="⚠️")
-                return None
+                return _kept_speech()
             if ss.get(SPEECH, {}).get("token") != token:
                 try:
                     with st.spinner("Reading the speech…"), collect_warnings() as notes:
                         audio, info = gs.read_speech_upload(up.name, up.getvalue())
                 except (GestureKitError, OSError) as exc:
                     # remembered, so the same upload is not decoded again on every rerun
-                    ss.pop(SPEECH, None)
                     ss[_FAILED] = (token, common.error_text(exc))
                     st.error(ss[_FAILED][1], icon="⚠️")
-                    return None
+                    return _kept_speech()
                 _set_speech(token, up.name, audio, info.summary(), notes)
         elif SPEECH not in ss:
             # a first visit opens on an example, so the whole page can be seen and run at once
@@ -83,11 +83,21 @@ def speech_input() -> dict | None:
     return ss.get(SPEECH)
 
 
-def _editor_base() -> pd.DataFrame:
+def _kept_speech() -> dict | None:
+    """After an upload that could not be read: the user's previous upload stays the speech (the
+    error is shown above it); the example speech does not stand in for a file the user chose."""
+    speech = st.session_state.get(SPEECH)
+    if speech is not None and speech["token"][0] == "upload":
+        st.caption(f"Still working on **{speech['name']}**, the last file that could be read.")
+        return speech
+    return None
+
+
+def _editor_base(key: str) -> pd.DataFrame:
     ss = st.session_state
-    if EDITOR not in ss or _BASE not in ss:
-        # the editor's own state is gone (first visit, or the user was on another page):
-        # it starts again from the table as the user left it
+    if key not in ss or _BASE not in ss:
+        # a new editor (first visit, or not drawn in the last run: another page, or the page
+        # stopped in the sidebar): it starts again from the table as the user left it
         ss[_BASE] = ss.get(SEGMENTS, gs.empty_segments())
     return ss[_BASE]
 
@@ -109,8 +119,9 @@ def controls(speech: dict) -> ControlTrack | None:
         help="Drag across the waveform to select a time range: a segment with this constraint is added "
              "(replacing what it overlaps). Edit, add or delete rows in the table below.")
     chart_slot = st.container()  # drawn after the table, so the bands show the latest edits
+    key = common.remount_key(EDITOR)
     table = st.data_editor(
-        _editor_base(), key=EDITOR, num_rows="dynamic", hide_index=True, width="stretch",
+        _editor_base(key), key=key, num_rows="dynamic", hide_index=True, width="stretch",
         column_config={
             "start_s": st.column_config.NumberColumn("start [s]", min_value=0.0, step=0.01, format="%.2f",
                                                      required=True),
@@ -153,12 +164,17 @@ def settings(db) -> dict:
     """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can run."""
     ss = st.session_state
     pk = common.persistent_key
+    step_key = pk("synth.step", 8)
+    if ss[step_key] > db.clip_frames:  # a database of shorter clips: say so, never change it unseen
+        st.warning(f"N was {ss[step_key]}, more than this database's clips hold ({db.clip_frames} frames): "
+                   f"it is now {db.clip_frames}.", icon="⚠️")
+        ss[step_key] = ss["synth.step"] = db.clip_frames
     c = st.columns(4)
     out = {
         "k": c[0].number_input("k (0 = best match)", min_value=0, max_value=100, step=1, key=pk("synth.k", 0),
                                help="take the k-th best window of the combined ranking at every step"),
         "step": c[1].number_input("N (frames per step)", min_value=1, max_value=db.clip_frames, step=1,
-                                  key=pk("synth.step", 8), help="8 in the paper: a new search every 0.53 s"),
+                                  key=step_key, help="8 in the paper: a new search every 0.53 s"),
         "seed": c[2].number_input("Seed", min_value=0, max_value=2**31 - 1, step=1, key=pk("synth.seed", 0),
                                   help="of the random initial pose"),
         "topk": c[3].number_input("Candidates recorded per step", min_value=1, max_value=50, step=1,
@@ -193,9 +209,20 @@ def settings(db) -> dict:
                 refiner = common.check_refiner(folder, db)
                 ok = True
     else:
+        on = False
         c[3].toggle("Refiner (cGAN)", value=False, disabled=True, key="synth.refine_unavailable",
                     help="this gesturekit cannot apply a refiner")
+    differs = _paper_differences(out, refined=on)
+    if differs:
+        st.caption("Differs from the paper: " + "; ".join(differs))
     return {"options": out, "refiner": refiner, "ok": ok}
+
+
+def _paper_differences(options: dict, *, refined: bool) -> list[str]:
+    try:
+        return SynthesisConfig(**options).paper_differences(refined=refined)
+    except ConfigError:  # an impossible setting is reported when Run is pressed
+        return []
 
 
 def _figure(record, name: str, build):
@@ -261,11 +288,15 @@ def show_result(db, record) -> None:
     if c.pins:
         parts.append(f"{len(c.pins)} pinned step{'s' if len(c.pins) > 1 else ''}")
     if result.refined_motion is not None:
-        parts.append("refined")
+        made_by = getattr(result, "refiner", None)
+        parts.append(f"refined by `{made_by['path']}`" if made_by else "refined")
+    differs = c.paper_differences(refined=result.refined_motion is not None)
+    if differs:
+        parts.append("differs from the paper: " + "; ".join(differs))
     st.caption(" · ".join(parts))
     if result.relaxed_steps:
-        st.warning(f"No database window satisfied the control at step(s) {', '.join(map(str, result.relaxed_steps))}; "
-                   "the control was dropped there.", icon="⚠️")
+        where = describe_steps(result.relaxed_steps, step=c.step, fps=result.motion.fps)
+        st.warning(f"No database window satisfied the control at {where}; the control was dropped there.", icon="⚠️")
     motions, labels = gs.display_motions(result)
     labels = labels if len(motions) > 1 else None
     left, right = st.columns([3, 2])
@@ -312,6 +343,9 @@ def main() -> None:
     speech = speech_input()
     if speech is None:
         st.info("Upload a speech file, or choose an example.")
+        record = common.current_synthesis(db)
+        if record is not None:  # the last result stays in view
+            show_result(db, record)
         return
     st.caption(f"**{speech['name']}** · {speech['summary']}")
     for note in speech["notes"]:

@@ -2,13 +2,37 @@
 import streamlit as st
 
 import common
+from gesturekit.motion import AUDIO_SR
 from gesturekit.viz import session as gs
-from gesturekit.viz.figures import candidates_figure, wrist_figure
+from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
 
 STEP = "inspect.step"  # the step shown (per user)
 CANDIDATE = "inspect.candidate"  # the position of the candidate inspected at that step
 COMPARE = "inspect.compare"  # {"run": n, "ks": [...], "results": [...]}
 _LAST_ROW = "_inspect.last_selected_step"  # the steps-table selection already applied
+CONTEXT_S = 1.0  # seconds of a candidate's take heard around it
+
+_n, _t = st.column_config.NumberColumn, st.column_config.TextColumn
+#: Every column of the page's tables, named in words (ranks count from 0, the best).
+CANDIDATE_COLUMNS = {
+    "position": _n("combined position"), "clip": _n("clip"), "start": _n("start frame"), "take": _t("take"),
+    "source_s": _n("source time [s]", format="%.2f"), "pose_dist": _n("pose distance", format="%.3f"),
+    "audio_dist": _n("audio distance", format="%.4f"), "pose_rank": _n("pose rank"),
+    "audio_rank": _n("audio rank"), "combined": _n("combined rank"),
+    "chosen": st.column_config.CheckboxColumn("chosen"),
+}
+STEPS_COLUMNS = {
+    "step": _n("step"), "first_frame": _n("first frame"), "start_s": _n("time [s]", format="%.2f"),
+    "clip": _n("clip"), "start": _n("start frame"), "take": _t("take"),
+    "source_s": _n("source time [s]", format="%.2f"), "position": _n("combined position"),
+    "candidates": _n("clips that survived"), "relaxed": st.column_config.CheckboxColumn("control relaxed"),
+    "pinned": st.column_config.CheckboxColumn("pinned"),
+}
+COMPARE_COLUMNS = {
+    "k": _n("k"), "pose_dist": _n("mean pose distance", format="%.3f"),
+    "audio_dist": _n("mean audio distance", format="%.4f"), "relaxed_steps": _n("steps relaxed"),
+    "pinned_steps": _n("steps pinned"), "control_met": _n("control met", format="%d%%"),
+}
 
 
 def _rerun_with(db, record, config) -> None:
@@ -25,10 +49,7 @@ def pick_step(db, result) -> int:
     with st.expander(f"All {len(table)} steps", expanded=False):
         event = st.dataframe(
             table, hide_index=True, key="inspect.steps_table", on_select="rerun", selection_mode="single-row",
-            height=240, column_config={
-                "start_s": st.column_config.NumberColumn("time [s]", format="%.2f"),
-                "source_s": st.column_config.NumberColumn("source time [s]", format="%.2f"),
-            })
+            height=240, column_config=STEPS_COLUMNS)
     rows = list(event.selection.rows) if event is not None else []
     selected = int(rows[0]) if rows and rows[0] < len(table) else None
     key = common.persistent_key(STEP, 0)
@@ -56,12 +77,7 @@ def step_view(db, record, step: int) -> None:
         f"{int(s.n_candidates[step])} clips survived"
     )
     table = gs.candidates_table(result, db, step)
-    st.dataframe(table, hide_index=True, key="inspect.candidates", column_config={
-        "source_s": st.column_config.NumberColumn("source time [s]", format="%.2f"),
-        "pose_dist": st.column_config.NumberColumn("pose distance", format="%.3f"),
-        "audio_dist": st.column_config.NumberColumn("audio distance", format="%.4f"),
-        "combined": st.column_config.NumberColumn("combined rank"),
-    })
+    st.dataframe(table, hide_index=True, key="inspect.candidates", column_config=CANDIDATE_COLUMNS)
 
     views, plot = st.columns([3, 2])
     with plot:
@@ -104,12 +120,24 @@ def step_view(db, record, step: int) -> None:
         st.caption(f"candidate #{pick}'s own speech in the database")
         if db.audio is not None:
             st.audio(gs.wav_bytes(db.segment_audio(r.clip, r.start, b - a)), format="audio/wav")
+            context(db, r, b - a)
         else:
             st.caption("(this database was built without audio)")
     with c[2]:
         if st.button("Use this candidate instead", key="inspect.use", disabled=bool(r.chosen), type="primary",
                      help="pin it at this step and run the synthesis again; later steps continue from it"):
             _rerun_with(db, record, result.config.with_pin(step, r.clip, r.start))
+
+
+def context(db, r, n_frames: int) -> None:
+    """The candidate's speech with a second of its take on either side, the window shaded."""
+    audio, a, b, t0 = gs.segment_in_context(db, r.clip, r.start, n_frames, context_s=CONTEXT_S)
+    st.caption(f"…with up to {CONTEXT_S:g} s around it: the window is {a:.2f}–{b:.2f} s of this "
+               f"{len(audio) / AUDIO_SR:.2f} s excerpt ({r.take} at {t0 + a:.2f}–{t0 + b:.2f} s)")
+    st.audio(gs.wav_bytes(audio), format="audio/wav")
+    fig = waveform_figure(audio, AUDIO_SR, bands=[(a, b, "window")], height=150)
+    fig.update_layout(showlegend=False, margin=dict(l=10, r=10, t=25, b=10), yaxis_title=None)
+    st.plotly_chart(fig, key="inspect.context", config={"displaylogo": False})
 
 
 def pins_view(db, record) -> None:
@@ -150,10 +178,9 @@ def compare_view(db, record) -> None:
     motions = [r.refined_motion if r.refined_motion is not None else r.motion for r in done["results"]]
     labels = [f"k = {k}" for k in done["ks"]]
     common.show_skeletons(motions, labels=labels, height=420, key="inspect.compare_views", audio=result.audio)
-    st.dataframe(gs.comparison_table(done["results"], db.thresholds), hide_index=True, key="inspect.compare_table",
-                 column_config={"pose_dist": st.column_config.NumberColumn("mean pose distance", format="%.3f"),
-                                "audio_dist": st.column_config.NumberColumn("mean audio distance", format="%.4f"),
-                                "control_met": st.column_config.NumberColumn("control met", format="percent")})
+    table = gs.comparison_table(done["results"], db.thresholds)
+    table["control_met"] = (100 * table["control_met"]).round()  # whole percent, one format for every row
+    st.dataframe(table, hide_index=True, key="inspect.compare_table", column_config=COMPARE_COLUMNS)
     st.plotly_chart(wrist_figure(motions, labels=labels, bands=result.control, thresholds=db.thresholds),
                     key="inspect.compare_wrists", config={"displaylogo": False})
 

@@ -4,6 +4,7 @@ import pandas as pd
 import streamlit as st
 
 import common
+from gesturekit.control import ATTRIBUTE_UNITS
 from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.viz.figures import attribute_histograms, waveform_figure
 
@@ -69,7 +70,8 @@ def clip_attributes(db, clip: int) -> pd.DataFrame:
     for name in db.attribute_names:
         v = np.asarray(db.attribute(name)[clip], dtype=np.float64)
         lo, hi = db.thresholds[name]
-        rows.append({"attribute": name, "clip mean": v.mean(), "low threshold": lo, "high threshold": hi,
+        rows.append({"attribute": name, "unit": ATTRIBUTE_UNITS.get(name, ""), "clip mean": v.mean(),
+                     "low threshold": lo, "high threshold": hi,
                      "frames low [%]": 100 * np.mean(v < lo), "frames high [%]": 100 * np.mean(v > hi)})
     return pd.DataFrame(rows)
 
@@ -92,10 +94,12 @@ def viewer(db, clip: int) -> None:
             st.plotly_chart(waveform_figure(audio, AUDIO_SR, height=200), key="db.waveform")
         else:
             st.caption("This database was built without audio.")
-        st.dataframe(clip_attributes(db, clip), hide_index=True, key="db.clip_attributes",
-                     column_config={c: st.column_config.NumberColumn(format="%.3f")
-                                    for c in ("clip mean", "low threshold", "high threshold")}
-                     | {c: st.column_config.NumberColumn(format="%.0f") for c in ("frames low [%]", "frames high [%]")})
+    # the whole page's width: every column readable; mean and thresholds in the row's unit
+    st.markdown(f"**Control attributes of clip {clip}**")
+    st.dataframe(clip_attributes(db, clip), hide_index=True, key="db.clip_attributes", width="stretch",
+                 column_config={c: st.column_config.NumberColumn(format="%.3f")
+                                for c in ("clip mean", "low threshold", "high threshold")}
+                 | {c: st.column_config.NumberColumn(format="%.0f") for c in ("frames low [%]", "frames high [%]")})
 
 
 def main() -> None:

@@ -9,9 +9,14 @@ torch is imported by the submodules only, so ``import gesturekit.refine`` stays 
 """
 from __future__ import annotations
 
+import hashlib
+import re
 from pathlib import Path
 
-__all__ = ["default_refiner_path", "load_refiner", "check_layout", "check_refiner"]
+from ..errors import GestureKitError
+
+__all__ = ["default_refiner_path", "load_refiner", "check_layout", "check_refiner", "trained_on",
+           "refiner_for", "provenance", "describe_training"]
 
 
 def default_refiner_path() -> Path:
@@ -87,3 +92,71 @@ def check_refiner(path, db) -> Path:
     path = Path(path).expanduser().resolve()
     check_layout(read_refiner_config(path), db, where=path)
     return path
+
+
+def _speaker(source: str) -> str:
+    # the generated demo speaker is the same at any length: "demo (seed 0, 20 min)" -> "demo (seed 0)"
+    return re.sub(r",\s*[0-9.]+\s*min\)", ")", source) if source.startswith("demo") else source
+
+
+def trained_on(config: dict, db) -> bool:
+    """Whether a refiner (its ``config.json``) was trained on ``db``: the same folder, or the same
+    recorded source with the same takes and clips; for the generated demo speaker, the same
+    generator seed at any length."""
+    trained = config.get("database") or {}
+    if db.path is not None and trained.get("path"):
+        if Path(trained["path"]).expanduser().resolve() == Path(db.path).expanduser().resolve():
+            return True
+    source = str(db.meta.get("build", {}).get("source", ""))
+    theirs = str(trained.get("source", ""))
+    if not source or not theirs:
+        return False
+    if source.startswith("demo") and theirs.startswith("demo"):
+        return _speaker(source) == _speaker(theirs)
+    return (source == theirs and trained.get("takes") == len(db.take_names)
+            and trained.get("clips") == db.n_clips)
+
+
+def describe_training(config: dict) -> str:
+    """The training database of a refiner, as its ``config.json`` records it, in a few words."""
+    t = config.get("database") or {}
+    name = t.get("label") or t.get("source") or t.get("path") or "an unrecorded database"
+    counts = f" ({t['takes']} takes, {t['clips']} clips)" if "takes" in t and "clips" in t else ""
+    return f"{name}{counts}"
+
+
+def refiner_for(db) -> Path | None:
+    """The refiner applied to ``db`` when none is named: one in ``<db>/refiner`` or the shipped
+    demo refiner (:func:`default_refiner_path`), whichever was trained on ``db`` (:func:`trained_on`);
+    None when neither was."""
+    from .folder import read_refiner_config
+
+    candidates = ([Path(db.path) / "refiner"] if db.path is not None else []) + [default_refiner_path()]
+    for folder in candidates:
+        if not (folder / "config.json").is_file():
+            continue
+        try:
+            config = read_refiner_config(folder)
+        except GestureKitError:
+            continue
+        if trained_on(config, db):
+            return folder.resolve()
+    return None
+
+
+def provenance(path, config: dict) -> dict:
+    """What reproduces a refined result: the refiner's folder, the database it was trained on
+    (from its ``config.json``) and the sha256 of its weights (``generator.pt``), hex."""
+    folder = Path(path).expanduser().resolve()
+    digest = hashlib.sha256()
+    with open(folder / "generator.pt", "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    trained = config.get("database") or {}
+    return {
+        "path": str(folder),
+        "trained_on": {k: trained.get(k) for k in ("path", "label", "source", "takes", "clips")},
+        "generator_sha256": digest.hexdigest(),
+        "preset": config.get("preset"),
+        "iteration": config.get("iteration"),
+    }

@@ -24,7 +24,7 @@ import numpy as np
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
-from ..control import ATTRIBUTE_NAMES, ControlTrack, frame_attributes
+from ..control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, ControlTrack, frame_attributes
 from ..errors import ConfigError
 from ..motion import Motion
 from ..skeleton import BODY_JOINTS, N_JOINTS, bones, joint_index
@@ -415,8 +415,18 @@ def skeleton_figure(
     return fig
 
 
+#: Where the line charts put their legend: under the plot, at the figure's bottom left, clear of
+#: the chart toolbar a page shows at the top right (and of the control labels above the plot).
+BOTTOM_LEGEND = dict(orientation="h", x=0, xanchor="left", xref="container", y=0, yanchor="bottom",
+                     yref="container")
+#: Pixels above the plots of :func:`attribute_histograms`: its two-line title, then the subplot titles.
+HISTOGRAM_TOP = 100
+#: Pixels kept at the bottom of a figure for :data:`BOTTOM_LEGEND`.
+LEGEND_ROOM = 30
+
+
 def _attribute_unit(name: str) -> str:
-    return "m/s" if "speed" in name else "m"
+    return ATTRIBUTE_UNITS.get(name, "m/s" if "speed" in name else "m")
 
 
 def attribute_histograms(db, *, bins: int = 40, names: Sequence[str] | None = None, cols: int = 3) -> go.Figure:
@@ -489,8 +499,10 @@ def attribute_histograms(db, *, bins: int = 40, names: Sequence[str] | None = No
         if pct else "dashed lines: the low and high thresholds"
     )
     fig.update_layout(
-        title=dict(text=f"Control attributes of the database frames<br><sup>{subtitle}</sup>"),
-        height=230 * rows + 80, margin=dict(l=10, r=10, t=80, b=10), bargap=0,
+        # the title sits at the figure's top, the subplot titles in room of their own below it
+        title=dict(text=f"Control attributes of the database frames<br><sup>{subtitle}</sup>",
+                   y=1 - 16 / (230 * rows + HISTOGRAM_TOP), yref="container", yanchor="top"),
+        height=230 * rows + HISTOGRAM_TOP, margin=dict(l=10, r=10, t=HISTOGRAM_TOP, b=10), bargap=0,
     )
     return fig
 
@@ -589,9 +601,9 @@ def waveform_figure(
                                showarrow=False, font=dict(size=10, color=color))
     fig.update_layout(
         title=dict(text=title) if title else None, height=height,
-        margin=dict(l=10, r=10, t=40 if title or bands else 10, b=10),
+        margin=dict(l=10, r=10, t=40 if title or bands else 10, b=10 + LEGEND_ROOM),
         xaxis=dict(title="time [s]", range=[0, n / sr]), yaxis=dict(title="amplitude"),
-        legend=dict(orientation="h", y=1.02, x=1, xanchor="right", yanchor="bottom"),
+        legend=BOTTOM_LEGEND,
         uirevision="waveform",
     )
     return fig
@@ -724,8 +736,8 @@ def wrist_figure(
     fig.update_xaxes(title_text="time [s]", row=n_rows, col=1)
     fig.update_layout(
         title=dict(text=title) if title else None, height=height,
-        margin=dict(l=10, r=10, t=70 if title else 45, b=10),
-        legend=dict(orientation="h", y=1.06 if title else 1.04, x=1, xanchor="right", yanchor="bottom"),
+        margin=dict(l=10, r=10, t=70 if title else 45, b=10 + (LEGEND_ROOM if len(motions) > 1 else 0)),
+        legend=BOTTOM_LEGEND,
         showlegend=len(motions) > 1, uirevision="wrists",
     )
     return fig
@@ -799,7 +811,21 @@ def candidates_figure(search, step: int, *, names: Sequence[str] | None = None, 
     fig.update_layout(
         title=dict(text=title) if title else None, height=height,
         margin=dict(l=10, r=10, t=40 if title else 10, b=10),
-        xaxis=dict(title="pose distance (z-scored)"), yaxis=dict(title="audio distance (cosine)"),
+        xaxis=dict(title="pose distance (z-scored)", range=_padded(x, low=0.08, high=0.08)),
+        # more room above: each point's label is written over it
+        yaxis=dict(title="audio distance (cosine)", range=_padded(y, low=0.08, high=0.2)),
         showlegend=False,
     )
     return fig
+
+
+def _padded(values: np.ndarray, *, low: float, high: float) -> list[float] | None:
+    """An axis range around ``values`` with fractions of their span (or of their size, when they
+    are all equal) added below and above, so no marker or label is cut at the plot's edge."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return None
+    lo, hi = float(v.min()), float(v.max())
+    span = hi - lo if hi > lo else max(abs(hi), 1.0) * 0.1
+    return [lo - low * span, hi + high * span]

@@ -54,6 +54,7 @@ __all__ = [
     "steps_overview",
     "candidates_table",
     "candidate_motion",
+    "segment_in_context",
     "step_speech",
     "compare_k",
     "control_adherence",
@@ -495,6 +496,47 @@ def candidate_motion(db: MatchingDatabase, clip: int, start: int, n_frames: int)
     if g.shape[0] == 0:
         raise ConfigError(f"clip {clip} has no frame {start}")
     return Motion.from_flat(g, db.fps)
+
+
+def segment_in_context(db: MatchingDatabase, clip: int, start: int, n_frames: int, *,
+                       context_s: float = 1.0) -> tuple[np.ndarray, float, float, float]:
+    """A database window's speech with up to ``context_s`` seconds of its take on either side.
+
+    A step's window is short (8 frames: 0.53 s); the words around it tell
+    whether its gesture suits the speech.
+
+    Parameters
+    ----------
+    db : MatchingDatabase
+        Built with audio.
+    clip, start, n_frames : int
+        The window: frames ``start .. start + n_frames`` of ``clip``.
+    context_s : float
+        Seconds before and after, fewer at the take's ends.
+
+    Returns
+    -------
+    (audio, segment_start_s, segment_end_s, take_start_s)
+        ``audio``: float32 at 16 kHz, shape (samples,); the window lies from
+        ``segment_start_s`` to ``segment_end_s`` seconds into it; the excerpt
+        begins ``take_start_s`` seconds into the take.
+
+    Raises
+    ------
+    ConfigError
+        A database without audio, or a negative ``context_s``.
+    """
+    if db.audio is None:
+        raise ConfigError("this database was built without audio")
+    if not context_s >= 0:
+        raise ConfigError(f"context_s must be >= 0 seconds, got {context_s!r}")
+    take = db.take_audio(int(db.arrays["clip_take"][clip]))
+    f0 = int(db.arrays["clip_start"][clip]) + int(start)
+    s0 = int(round(f0 * AUDIO_SR / db.fps))
+    s1 = min(int(round((f0 + int(n_frames)) * AUDIO_SR / db.fps)), take.shape[0])
+    pad = int(round(context_s * AUDIO_SR))
+    a, b = max(0, s0 - pad), min(take.shape[0], s1 + pad)
+    return np.asarray(take[a:b], dtype=np.float32), (s0 - a) / AUDIO_SR, (s1 - a) / AUDIO_SR, a / AUDIO_SR
 
 
 def step_speech(result: SynthesisResult, step: int) -> np.ndarray:
