@@ -170,6 +170,34 @@ def _motions_and_labels(motions, labels, *, who: str) -> tuple[list[Motion], lis
     return motions, labels
 
 
+def _time_grid(motions: list[Motion], *, fps, max_frames: int) -> tuple[float, int, int, np.ndarray]:
+    """The time grid a skeleton view plays on: ``(grid_fps, n_grid, step, times)``.
+
+    ``grid_fps`` is ``fps`` or the fastest motion's frame rate; ``n_grid`` frames of it
+    cover the longest motion; every ``step``-th grid time is shown so that at most
+    ``max_frames`` remain; ``times`` are the shown times in seconds, shape (shown,).
+
+    Raises
+    ------
+    ConfigError
+        ``max_frames`` below 1, or a frame rate that is not a positive finite number.
+    """
+    if max_frames < 1:
+        raise ConfigError(f"max_frames must be at least 1, got {max_frames}")
+    grid_fps = float(fps) if fps is not None else max(float(m.fps) for m in motions)
+    if not (math.isfinite(grid_fps) and grid_fps > 0):
+        raise ConfigError(f"fps must be positive, got {fps}")
+    duration = max(m.duration for m in motions)
+    n_grid = max(1, int(math.ceil(duration * grid_fps - 1e-9)))
+    step = int(math.ceil(n_grid / max_frames))
+    return grid_fps, n_grid, step, np.arange(0, n_grid, step) / grid_fps
+
+
+def _frames_at(motion: Motion, times: np.ndarray) -> np.ndarray:
+    """Indices of ``motion``'s frames shown at ``times`` (seconds): sample and hold, the last frame past its end."""
+    return np.minimum(np.floor(times * motion.fps + 1e-6).astype(np.int64), motion.n_frames - 1)
+
+
 def _skeleton_paths(motions: list[Motion], *, fps, max_frames: int, spacing):
     """What a skeleton view shows: the time grid and each motion's joint paths at its times.
 
@@ -180,19 +208,8 @@ def _skeleton_paths(motions: list[Motion], *, fps, max_frames: int, spacing):
     offset along X), each (len(times), points, 3) float32, and the bounds of every
     shown pose, 0.1 m added on each side.
     """
-    if max_frames < 1:
-        raise ConfigError(f"max_frames must be at least 1, got {max_frames}")
-    grid_fps = float(fps) if fps is not None else max(float(m.fps) for m in motions)
-    if not grid_fps > 0:
-        raise ConfigError(f"fps must be positive, got {fps}")
-    duration = max(m.duration for m in motions)
-    n_grid = max(1, int(math.ceil(duration * grid_fps - 1e-9)))
-    step = int(math.ceil(n_grid / max_frames))
-    times = np.arange(0, n_grid, step) / grid_fps
-    shown = []
-    for m in motions:
-        idx = np.minimum(np.floor(times * m.fps + 1e-6).astype(np.int64), m.n_frames - 1)
-        shown.append(np.asarray(m.positions[idx], dtype=np.float32))
+    grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
+    shown = [np.asarray(m.positions[_frames_at(m, times)], dtype=np.float32) for m in motions]
     if spacing is None:
         widest = max(float(np.ptp(p[..., 0])) for p in shown)
         spacing = max(0.8, widest + 0.4)

@@ -38,7 +38,7 @@ from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import N_JOINTS, joint_index
 from .appearance import APPEARANCE, DERIVED_POINTS, Appearance
-from .figures import _motions_and_labels, _typed, data_array
+from .figures import _frames_at, _motions_and_labels, _time_grid, _typed, data_array
 
 __all__ = ["CONTROLS_HEIGHT", "VIEWER_MAX_FRAMES", "skeleton_viewer", "viewer_data", "read_viewer_data",
            "wav_data_uri"]
@@ -143,19 +143,8 @@ def viewer_data(
         or ``max_frames`` below 1.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer")
-    if max_frames < 1:
-        raise ConfigError(f"max_frames must be at least 1, got {max_frames}")
-    grid_fps = float(fps) if fps is not None else max(float(m.fps) for m in motions)
-    if not (math.isfinite(grid_fps) and grid_fps > 0):
-        raise ConfigError(f"fps must be positive, got {fps}")
-    duration = max(m.duration for m in motions)
-    n_grid = max(1, int(math.ceil(duration * grid_fps - 1e-9)))
-    step = int(math.ceil(n_grid / max_frames))
-    times = np.arange(0, n_grid, step) / grid_fps
-    bodies = []
-    for m in motions:
-        idx = np.minimum(np.floor(times * m.fps + 1e-6).astype(np.int64), m.n_frames - 1)
-        bodies.append(appearance.body(m.positions[idx]))
+    grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
+    bodies = [appearance.body(m.positions[_frames_at(m, times)]) for m in motions]
     if spacing is None:
         widest = max(float(np.ptp(b.points[..., 0])) for b in bodies)
         spacing = max(0.8, widest + 0.25)
