@@ -23,7 +23,6 @@ def _progress_bar(total, unit, desc):
 
 
 def _cmd_build_db(args) -> int:
-    from .database import BuildConfig, MatchingDatabase
     from .demo import build_demo_database
     from .paths import default_database_path
 
@@ -40,37 +39,47 @@ def _cmd_build_db(args) -> int:
 
             db = build_demo_database(out, minutes=args.minutes, seed=args.seed, overwrite=args.force, progress=progress)
     else:
-        from .datasets.takes import count_takes, discover_takes, iter_takes
-
         if args.folder is None:
             raise ConfigError("give a folder of takes to build from, or --demo for the generated demo speaker")
         if not args.out:
             raise ConfigError("give the database folder to write with --out")
-        out = Path(args.out)
-        if out.exists() and not args.force:
-            raise GestureKitError(f"{out}: a database already exists here; add --force to replace it")
-        joint_map = args.joint_map or args.preset
-        sources = discover_takes(args.folder, kind=args.kind)
-        n = count_takes(sources)
-        config = BuildConfig(
-            overlap_stride=args.overlap_stride,
-            percentiles=tuple(args.percentiles),
-            store_audio=not args.no_audio,
-            label=args.label or "",
-            source=str(Path(args.folder).resolve()),
-            joint_map=None if joint_map is None else str(joint_map),
-        )
-        with _progress_bar(n, "take", "reading takes") as bar:
-            def progress(i, name):
-                bar.set_postfix_str(name[-30:])
-                bar.update(1)
+        from .outputs import check_output, output_lock
 
-            takes = iter_takes(sources, joint_map=joint_map, fps_in=args.fps, units=args.units)
-            db = MatchingDatabase.build(takes, config=config, progress=progress)
-        db.save(out, overwrite=args.force)
+        out = Path(args.out)
+        # before reading any take: the output must be free, ours to replace, and apart from the takes
+        check_output(out, "database", overwrite=args.force, inputs=[args.folder])
+        with output_lock(out):
+            db = _build_from_folder(args, out)
     print(db.summary_text())
     print(f"built in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _build_from_folder(args, out: Path):
+    """Read the takes of ``args.folder`` and save their database at ``out`` (whose lock the caller holds)."""
+    from .database import BuildConfig, MatchingDatabase
+    from .datasets.takes import count_takes, discover_takes, iter_takes
+
+    joint_map = args.joint_map or args.preset
+    sources = discover_takes(args.folder, kind=args.kind)
+    n = count_takes(sources)
+    config = BuildConfig(
+        overlap_stride=args.overlap_stride,
+        percentiles=tuple(args.percentiles),
+        store_audio=not args.no_audio,
+        label=args.label or "",
+        source=str(Path(args.folder).resolve()),
+        joint_map=None if joint_map is None else str(joint_map),
+    )
+    with _progress_bar(n, "take", "reading takes") as bar:
+        def progress(i, name):
+            bar.set_postfix_str(name[-30:])
+            bar.update(1)
+
+        takes = iter_takes(sources, joint_map=joint_map, fps_in=args.fps, units=args.units)
+        db = MatchingDatabase.build(takes, config=config, progress=progress)
+    db.save(out, overwrite=args.force, inputs=[args.folder], locked=True)
+    return db
 
 
 def _cmd_info(args) -> int:

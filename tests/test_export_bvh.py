@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from gesturekit.errors import ConfigError
+from gesturekit.errors import ConfigError, OutputError
 from gesturekit.export import bvh as bvh_module
 from gesturekit.export.bvh import ROTATION_ORDERS, euler_from_matrices, write_bvh
 from gesturekit.export.files import atomic_write, safe_filename
@@ -463,7 +463,7 @@ def test_failure_leaves_no_partial_file(tmp_path, monkeypatch):
         f.write(b"HIERARCHY\nROOT")
         raise OSError("no space left")
 
-    with pytest.raises(OSError):
+    with pytest.raises(OutputError, match="no space left"):
         atomic_write(target, half, overwrite=True)
     assert target.read_text() == "old" and os.listdir(tmp_path) == ["old.bvh"]
 
