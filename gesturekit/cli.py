@@ -145,8 +145,13 @@ def _cmd_synthesize(args) -> int:
         exclude_ranges=tuple(_parse_range(r) for r in (args.exclude_range or ())),
         **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
     )
+    from .outputs import check_output, write_errors
+
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise GestureKitError(f"{out}: is a file, not a folder; give --out a folder for the results")
+    with write_errors(out):
+        out.mkdir(parents=True, exist_ok=True)
     stems = [safe_filename(f.stem) for f in files]
     if len(set(stems)) != len(stems):
         raise ConfigError("two speech files have the same name; synthesise them in separate runs")
@@ -155,6 +160,9 @@ def _cmd_synthesize(args) -> int:
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
+    for p in targets.values():
+        # with --force too: only files gesturekit wrote are replaced, and never a folder
+        check_output(p, "file", overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
     results = synthesize_batch(audios, db=db, config=config, refiner=args.refiner)
     for f, stem, res in zip(files, stems, results):

@@ -440,6 +440,12 @@ def test_overwrite_protection(tmp_path):
     with pytest.raises(ConfigError, match=r"take\.bvh.*already exists.*overwrite"):
         write_bvh(path, motion)
     assert path.read_text() == "precious"
+    # overwrite replaces only a BVH of gesturekit's skeleton
+    with pytest.raises(OutputError, match=r"take\.bvh: is a file that gesturekit did not write"):
+        write_bvh(path, motion, overwrite=True)
+    assert path.read_text() == "precious"
+    path.unlink()
+    write_bvh(path, Motion(smooth_motion(3, seed=13), 15))
     write_bvh(path, motion, overwrite=True)
     assert path.read_text().startswith("HIERARCHY")
     assert sorted(os.listdir(tmp_path)) == ["take.bvh"]
