@@ -79,14 +79,40 @@ _HEAD_BYTES = 1 << 16
 # ---- what is there --------------------------------------------------------------------------------
 
 
+def _layout(kind: str) -> frozenset[str]:
+    """Every name a folder of this kind can hold (its marker included)."""
+    if kind == "database":
+        from .database import _CLIP_ARRAYS
+
+        arrays = (*_CLIP_ARRAYS, "clip_take", "clip_start", "audio")
+        return frozenset([f"{a}.npy" for a in arrays] + ["stats.npz", "overlap", "database.json"])
+    if kind == "refiner":
+        return frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"])
+    return frozenset()
+
+
 def _folder_kind(path: Path) -> str | None:
-    """The gesturekit kind of a folder, from its marker file; None when it has none."""
+    """The gesturekit kind of a folder, from its marker file; None when it has none.
+
+    A marker that cannot be read (damaged, not JSON) still counts when every name in the
+    folder is one that kind of folder holds: a database whose ``database.json`` was cut
+    short can be rebuilt in place.
+    """
+    names = None
     for kind, (marker, fmt, _) in FOLDER_KINDS.items():
         try:
             meta = json.loads((path / marker).read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+        except FileNotFoundError:
             continue
-        if isinstance(meta, dict) and meta.get("format") == fmt:
+        except (OSError, ValueError):
+            meta = None
+        if isinstance(meta, dict):
+            if meta.get("format") == fmt:
+                return kind
+            continue
+        if names is None:
+            names = {p.name for p in path.iterdir()}
+        if names and names <= _layout(kind):
             return kind
     return None
 

@@ -90,6 +90,12 @@ def test_each_kind_replaces_only_its_own(small_db, tmp_path):
     (tmp_path / "other" / "database.json").write_text(json.dumps({"format": "someone-else"}))
     with pytest.raises(OutputError, match="did not write"):
         check_output(tmp_path / "other", "database", overwrite=True)
+    # a damaged marker counts when the folder holds only what that kind of folder holds
+    (tmp_path / "db" / "database.json").write_text("{ cut sh")
+    assert check_output(tmp_path / "db", "database", overwrite=True) is True
+    (tmp_path / "db" / "thesis.tex").write_text("mine")
+    with pytest.raises(OutputError, match="did not write"):
+        check_output(tmp_path / "db", "database", overwrite=True)
 
 
 def test_files_are_recognised_by_their_markers(tmp_path):
@@ -428,3 +434,13 @@ def test_kill_during_a_checkpoint_keeps_the_last_complete_one(small_db, tmp_path
     b = torch.load(resumed / "generator.pt", weights_only=True)
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
     assert sorted(os.listdir(tmp_path)) == ["cut", "db", "straight"]  # the temporary folder is cleaned up
+
+
+def test_without_an_atomic_exchange_the_swap_uses_two_renames(tmp_path, monkeypatch):
+    monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)
+    for n in (1, 2):
+        write_folder(tmp_path / "s", "study",
+                     lambda tmp: (tmp / "study.json").write_text(json.dumps({"format": "gesturekit-study", "n": n})),
+                     overwrite=True)
+        assert json.loads((tmp_path / "s" / "study.json").read_text())["n"] == n
+    assert os.listdir(tmp_path) == ["s"]
