@@ -272,6 +272,9 @@ def _cmd_evaluate(args) -> int:
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already; add --force to replace the evaluation in {out}")
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    from .outputs import check_output
+
+    check_output(out, "evaluation", overwrite=args.force, inputs=[db.path])  # before the long part
     config = SynthesisConfig(k=args.k, step=args.step, seed=args.seed, init=args.init_pose,
                              mask_rule=args.mask_rule, blend=args.blend)
     with _progress_bar(None, "step", "evaluating") as bar:
@@ -302,6 +305,9 @@ def _cmd_train_fgd(args) -> int:
     if (out / "fgd.json").exists() and not args.force:
         raise GestureKitError(f"{out}: an FGD model exists here already; add --force to replace it")
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    from .outputs import check_output
+
+    check_output(out, "fgd", overwrite=args.force, inputs=[db.path])  # before training
     takes, ranges = [], []
     for h in args.holdout or ():
         ref = held_out(db, h)

@@ -8,7 +8,9 @@ same rules hold everywhere:
   same kind (:data:`FOLDER_KINDS`, :data:`FILE_KINDS`): a database folder
   (``database.json`` of format ``gesturekit-matching-database``), a refiner
   folder (``config.json`` of format ``gesturekit-refiner``), a study folder
-  (``study.json`` of format ``gesturekit-study``), an ``.npz`` archive with
+  (``study.json`` of format ``gesturekit-study``), an FGD model folder
+  (``fgd.json``), an evaluation folder (``evaluation.json`` of format
+  ``gesturekit-evaluation``), an ``.npz`` archive with
   gesturekit's ``config`` and ``format_version`` entries, a BVH file whose
   joints are gesturekit's 55 in its order, an MP4 carrying gesturekit's
   metadata tag. Anything else (a folder of other files, a file where a folder
@@ -64,6 +66,8 @@ FOLDER_KINDS = {
     "database": ("database.json", "gesturekit-matching-database", "a matching database"),
     "refiner": ("config.json", "gesturekit-refiner", "a refiner folder"),
     "study": ("study.json", "gesturekit-study", "a study folder"),
+    "fgd": ("fgd.json", "gesturekit-fgd-autoencoder", "an FGD model folder"),
+    "evaluation": ("evaluation.json", "gesturekit-evaluation", "an evaluation folder"),
 }
 
 #: File kinds gesturekit can recognise as its own, by suffix.
@@ -88,15 +92,21 @@ def _layout(kind: str) -> frozenset[str]:
         return frozenset([f"{a}.npy" for a in arrays] + ["stats.npz", "overlap", "database.json"])
     if kind == "refiner":
         return frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"])
+    if kind == "study":
+        return frozenset(["study.json", "manifest.csv", "order.csv", "videos"])
+    if kind == "fgd":
+        return frozenset(["fgd.json", "weights.pt"])
+    if kind == "evaluation":
+        return frozenset(["evaluation.json", "results.csv", "results.md", "controls.csv", "controls.md"])
     return frozenset()
 
 
 def _folder_kind(path: Path) -> str | None:
     """The gesturekit kind of a folder, from its marker file; None when it has none.
 
-    A marker that cannot be read (damaged, not JSON) still counts when every name in the
-    folder is one that kind of folder holds: a database whose ``database.json`` was cut
-    short can be rebuilt in place.
+    A marker that cannot be read (damaged, not JSON) or has no ``format`` (written by an
+    earlier gesturekit) still counts when every name in the folder is one that kind of
+    folder holds: a database whose ``database.json`` was cut short can be rebuilt in place.
     """
     names = None
     for kind, (marker, fmt, _) in FOLDER_KINDS.items():
@@ -109,7 +119,8 @@ def _folder_kind(path: Path) -> str | None:
         if isinstance(meta, dict):
             if meta.get("format") == fmt:
                 return kind
-            continue
+            if "format" in meta:
+                continue
         if names is None:
             names = {p.name for p in path.iterdir()}
         if names and names <= _layout(kind):

@@ -91,6 +91,14 @@ def _cases(w: Path) -> dict:
             synth + ["--out", res], res / "hello.npz", "add --force", [res]),
         "synthesize --force on an npz gesturekit did not write": (
             synth + ["--out", res, "--force"], res / "hello.npz", "is a file that gesturekit did not write", [res]),
+        "train-fgd --out the database --force": (
+            ["train-fgd", "--db", db, "--out", db, "--force"], db, "is an input of this command", [db]),
+        "train-fgd --force on a foreign folder": (
+            ["train-fgd", "--db", db, "--out", thesis, "--force"], thesis, "did not write", [thesis]),
+        "evaluate --force on a foreign folder": (
+            ["evaluate", "--db", db, "--holdout", "a", "--out", thesis, "--force"], thesis, "did not write", [thesis]),
+        "evaluate --out inside the database": (
+            ["evaluate", "--db", db, "--holdout", "a", "--out", db / "eval"], db / "eval", "lies inside the input", [db]),
         "stimuli --force on a foreign folder": (
             stim + ["--out", thesis, "--force"], thesis, "did not write", [thesis]),
         "stimuli --out the speech folder": (

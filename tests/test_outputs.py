@@ -411,7 +411,8 @@ _TRAIN = """
 """
 
 
-def test_kill_during_a_checkpoint_keeps_the_last_complete_one(small_db, tmp_path):
+def test_kill_during_a_checkpoint_keeps_the_last_complete_one(small_db, tmp_path, monkeypatch):
+    import gesturekit.refine.train as train_module
     from gesturekit.refine.infer import Refiner
     from gesturekit.refine.train import TrainConfig, train_refiner
 
@@ -427,6 +428,16 @@ def test_kill_during_a_checkpoint_keeps_the_last_complete_one(small_db, tmp_path
     assert cfg["iteration"] == 4 and not cfg["complete"]
     Refiner.load(cut)  # synthesis can use it as it is
     torch.set_num_threads(1)
+
+    def full(path, obj):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    # a full disk at the next checkpoint is a message, and the last complete checkpoint stays
+    with monkeypatch.context() as m:
+        m.setattr(train_module, "_save_torch", full)
+        with pytest.raises(OutputError, match=r"/cut: cannot write: the disk is full \(.*generator\.pt\)"):
+            train_refiner(db, cut, resume=True, device="cpu")
+    assert json.loads((cut / "config.json").read_text())["iteration"] == 4
     resumed = train_refiner(db, cut, resume=True, device="cpu")
     straight = train_refiner(db, tmp_path / "straight", model=TINY, device="cpu",
                              train=TrainConfig(iterations=10, batch_size=4, checkpoint_every=4, log_every=2))
@@ -444,3 +455,4 @@ def test_without_an_atomic_exchange_the_swap_uses_two_renames(tmp_path, monkeypa
                      overwrite=True)
         assert json.loads((tmp_path / "s" / "study.json").read_text())["n"] == n
     assert os.listdir(tmp_path) == ["s"]
+
