@@ -456,3 +456,9 @@ def test_without_an_atomic_exchange_the_swap_uses_two_renames(tmp_path, monkeypa
         assert json.loads((tmp_path / "s" / "study.json").read_text())["n"] == n
     assert os.listdir(tmp_path) == ["s"]
 
+
+
+def test_a_dataset_bvh_is_not_taken_for_gesturekit_output(zeggs_files, tmp_path):
+    bvh, _ = zeggs_files
+    with pytest.raises(OutputError, match="is a file that gesturekit did not write"):
+        check_output(bvh, "file", overwrite=True)
