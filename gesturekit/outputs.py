@@ -128,13 +128,19 @@ def _folder_kind(path: Path) -> str | None:
     return None
 
 
-def _count_entries(path: Path, limit: int = 10_000) -> tuple[int, bool]:
-    n = 0
-    for _root, dirs, files in os.walk(path):
-        n += len(files) + len(dirs)
-        if n >= limit:
-            return n, True
-    return n, False
+def _describe_contents(path: Path, limit: int = 10_000) -> str:
+    """``"12 files"``, ``"3 files and 1 folder"``: what a folder holds, counted to ``limit`` entries."""
+    files = folders = 0
+    for _root, dirs, names in os.walk(path):
+        files += len(names)
+        folders += len(dirs)
+        if files + folders >= limit:
+            break
+    more = "+" if files + folders >= limit else ""
+    parts = [f"{files}{more} file{'' if files == 1 else 's'}"] if files or not folders else []
+    if folders:
+        parts.append(f"{folders} folder{'' if folders == 1 else 's'}")
+    return " and ".join(parts)
 
 
 def _file_is_owned(path: Path) -> bool:
@@ -263,9 +269,8 @@ def check_output(
         return True
     if found is not None:
         raise OutputError(f"holds {FOLDER_KINDS[found][2]}, not {name}; refusing to replace it", path=path)
-    n, more = _count_entries(path)
     raise OutputError(
-        f"holds {n}{'+' if more else ''} files that gesturekit did not write; refusing to replace it", path=path)
+        f"holds {_describe_contents(path)} that gesturekit did not write; refusing to replace it", path=path)
 
 
 # ---- locks ------------------------------------------------------------------------------------------

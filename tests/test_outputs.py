@@ -69,7 +69,7 @@ def test_a_foreign_folder_is_refused_saying_what_is_there(tmp_path):
     (thesis / "chapters").mkdir(parents=True)
     for i in range(11):
         (thesis / "chapters" / f"{i}.tex").write_text("text")
-    with pytest.raises(OutputError, match=r"thesis: holds 12 files that gesturekit did not write; refusing"):
+    with pytest.raises(OutputError, match=r"thesis: holds 11 files and 1 folder that gesturekit did not write; refusing"):
         check_output(thesis, "database", overwrite=True)
 
 
