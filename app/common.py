@@ -523,7 +523,7 @@ def build_from_folder(
     out : path
         Database folder to write.
     overwrite : bool
-        Replace an existing database at ``out``.
+        Replace an earlier database at ``out`` (only a database gesturekit built; other folders are refused).
     fps : float, optional
         Frame rate of joint-position files (they do not carry one).
     label : str
@@ -539,13 +539,15 @@ def build_from_folder(
     """
     from gesturekit.datasets.presets import load_joint_map
     from gesturekit.datasets.takes import count_takes, discover_takes, iter_takes
+    from gesturekit.outputs import check_output
 
     if not str(folder).strip():
         raise ConfigError("type the folder of takes to build from")
     if not str(out).strip():
         raise ConfigError("type the database folder to write")
     folder, out = Path(folder).expanduser(), Path(out).expanduser()
-    if out.exists() and not overwrite:
+    # 'overwrite' replaces only a database gesturekit wrote, never the takes or a folder of other files
+    if check_output(out, "database", overwrite=True, inputs=[folder]) and not overwrite:
         raise DatabaseError("a database already exists here; tick 'overwrite' to replace it", path=out)
     jmap = load_joint_map(joint_map)  # fail before reading any take
     sources = discover_takes(folder)
@@ -558,7 +560,7 @@ def build_from_folder(
             progress(i, total, name)
 
     db = MatchingDatabase.build(takes, config=config, progress=on_take)
-    db.save(out, overwrite=overwrite)
+    db.save(out, overwrite=overwrite, inputs=[folder])
     return db
 
 
@@ -582,7 +584,8 @@ def _build_expander() -> None:
         out = st.text_input("Database folder to write", key="_gk.build_out",
                             placeholder=str(home() / "db" / "<folder name>"))
         label = st.text_input("Label (optional)", key="_gk.build_label")
-        overwrite = st.checkbox("overwrite an existing database", key="_gk.build_overwrite")
+        overwrite = st.checkbox("overwrite an existing database", key="_gk.build_overwrite",
+                                help="replaces only a database gesturekit built; any other folder is kept")
         if not st.button("Build", key="_gk.build_go"):
             return
         with user_errors():

@@ -25,7 +25,6 @@ def _progress_bar(total, unit, desc):
 
 
 def _cmd_build_db(args) -> int:
-    from .database import BuildConfig, MatchingDatabase
     from .demo import build_demo_database
     from .paths import default_database_path
 
@@ -44,41 +43,51 @@ def _cmd_build_db(args) -> int:
 
             db = build_demo_database(out, minutes=args.minutes, seed=args.seed, overwrite=args.force, progress=progress)
     else:
-        from .datasets.takes import count_takes, discover_takes, iter_takes
-
         if args.folder is None:
             raise ConfigError("give a folder of takes to build from, or --demo for the generated demo speaker")
         if not args.out:
             raise ConfigError("give the database folder to write with --out")
-        out = Path(args.out)
-        if out.exists() and not args.force:
-            raise GestureKitError(f"{out}: a database already exists here; add --force to replace it")
-        joint_map = args.joint_map or args.preset
         if args.fps is not None:
             from .limits import check_fps
 
             check_fps(args.fps, what="the frame rate of the joint-position files", option="--fps")
-        sources = discover_takes(args.folder, kind=args.kind)
-        n = count_takes(sources)
-        config = BuildConfig(
-            overlap_stride=args.overlap_stride,
-            percentiles=tuple(args.percentiles),
-            store_audio=not args.no_audio,
-            label=args.label or "",
-            source=str(Path(args.folder).resolve()),
-            joint_map=None if joint_map is None else str(joint_map),
-        )
-        with _progress_bar(n, "take", "reading takes") as bar:
-            def progress(i, name):
-                bar.set_postfix_str(name[-30:])
-                bar.update(1)
+        from .outputs import check_output, output_lock
 
-            takes = iter_takes(sources, joint_map=joint_map, fps_in=args.fps, units=args.units)
-            db = MatchingDatabase.build(takes, config=config, progress=progress)
-        db.save(out, overwrite=args.force)
+        out = Path(args.out)
+        # before reading any take: the output must be free, ours to replace, and apart from the takes
+        check_output(out, "database", overwrite=args.force, inputs=[args.folder])
+        with output_lock(out):
+            db = _build_from_folder(args, out)
     print(db.summary_text())
     print(f"built in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _build_from_folder(args, out: Path):
+    """Read the takes of ``args.folder`` and save their database at ``out`` (whose lock the caller holds)."""
+    from .database import BuildConfig, MatchingDatabase
+    from .datasets.takes import count_takes, discover_takes, iter_takes
+
+    joint_map = args.joint_map or args.preset
+    sources = discover_takes(args.folder, kind=args.kind)
+    n = count_takes(sources)
+    config = BuildConfig(
+        overlap_stride=args.overlap_stride,
+        percentiles=tuple(args.percentiles),
+        store_audio=not args.no_audio,
+        label=args.label or "",
+        source=str(Path(args.folder).resolve()),
+        joint_map=None if joint_map is None else str(joint_map),
+    )
+    with _progress_bar(n, "take", "reading takes") as bar:
+        def progress(i, name):
+            bar.set_postfix_str(name[-30:])
+            bar.update(1)
+
+        takes = iter_takes(sources, joint_map=joint_map, fps_in=args.fps, units=args.units)
+        db = MatchingDatabase.build(takes, config=config, progress=progress)
+    db.save(out, overwrite=args.force, inputs=[args.folder], locked=True)
+    return db
 
 
 def _cmd_info(args) -> int:
@@ -163,6 +172,7 @@ def _cmd_synthesize(args) -> int:
     from .datasets.audio import load_audio
     from .demo import open_default_database
     from .export.files import safe_filename
+    from .outputs import check_output, write_errors
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
 
@@ -186,14 +196,20 @@ def _cmd_synthesize(args) -> int:
         exclude_ranges=exclude_ranges,
         **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
     )
+    if out.exists() and not out.is_dir():
+        raise GestureKitError(f"{out}: is a file, not a folder; give --out a folder for the results")
     kinds = ["npz", "bvh"] + (["mp4"] if args.video else [])
     targets = {(stem, kind): out / f"{stem}.{kind}" for stem in stems for kind in kinds}
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
+    for p in targets.values():
+        # with --force too: only files gesturekit wrote are replaced, and never a folder
+        check_output(p, "file", overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
     results = synthesize_batch(audios, db=db, config=config, refiner=_refiner_choice(args.refiner, db))
-    out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
+    with write_errors(out):
+        out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     for f, stem, res in zip(files, stems, results):
         res.source = f.name
         res.save_npz(targets[(stem, "npz")], overwrite=args.force)
@@ -313,6 +329,9 @@ def _cmd_evaluate(args) -> int:
     _check_positive("--beat-sigma", args.beat_sigma, "time in seconds")
     control = _control_from_arg(args.control)
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    from .outputs import check_output
+
+    check_output(out, "evaluation", overwrite=args.force, inputs=[db.path])  # before the long part
     config = SynthesisConfig(k=args.k, step=args.step, seed=args.seed, init=args.init_pose,
                              mask_rule=args.mask_rule, blend=args.blend)
     with _progress_bar(None, "step", "evaluating") as bar:
@@ -344,6 +363,9 @@ def _cmd_train_fgd(args) -> int:
         raise GestureKitError(f"{out}: an FGD model exists here already; add --force to replace it")
     _parse_holdouts(args.holdout)
     db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    from .outputs import check_output
+
+    check_output(out, "fgd", overwrite=args.force, inputs=[db.path])  # before training
     takes, ranges = [], []
     for h in args.holdout or ():
         ref = held_out(db, h)

@@ -22,13 +22,14 @@ On disk a database is a folder::
     overlap/             the overlapping cut, same arrays per window (optional)
 
 Every array is a plain ``.npy`` (memory-mapped on load, never pickled); the
-folder is written under a temporary name and renamed into place.
+folder is written under a temporary name and swapped into place, by the rules
+of :mod:`gesturekit.outputs` (``database.json`` is the marker that lets
+``--force`` recognise a database).
 """
 from __future__ import annotations
 
 import json
 import os
-import shutil
 import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -553,23 +554,44 @@ class MatchingDatabase:
         return cls(meta=meta, arrays=arrays, stats=stats, audio=audio, overlap=overlap)
 
     # ---- save / load --------------------------------------------------------------------------
-    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-        """Write the database folder atomically (a temporary folder renamed into place).
+    def save(
+        self,
+        path: str | os.PathLike,
+        *,
+        overwrite: bool = False,
+        inputs: Iterable[str | os.PathLike | None] = (),
+        locked: bool = False,
+    ) -> Path:
+        """Write the database folder atomically (a temporary folder swapped into place).
+
+        Parameters
+        ----------
+        path : path
+            The database folder. An empty folder is used; an earlier database is
+            replaced only with ``overwrite``; anything else there is refused.
+        overwrite : bool
+            Replace an earlier gesturekit database at ``path``.
+        inputs : iterable of path, optional
+            Input folders (the takes) that ``path`` must not be, lie in or contain.
+        locked : bool
+            The caller holds :func:`gesturekit.outputs.output_lock` of ``path``
+            (the command line holds it for the whole build).
 
         Raises
         ------
+        OutputError
+            Something other than an earlier database is at ``path``, a database
+            is there and ``overwrite`` is False, another process is writing it,
+            ``path`` overlaps an input, or writing failed (disk full, permission).
         DatabaseError
-            If ``path`` exists and ``overwrite`` is False.
+            An array holds NaN or infinite values; nothing is written.
         """
+        from .outputs import write_folder
+
         path = Path(path)
-        if path.exists() and not overwrite:
-            raise DatabaseError("a database already exists here; pass overwrite=True (--force) to replace it", path=path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.parent / f".{path.name}.tmp-{os.getpid()}"
-        if tmp.exists():
-            shutil.rmtree(tmp)
-        try:
-            tmp.mkdir()
+        self._check_finite(path)
+
+        def fill(tmp: Path) -> None:
             for k, v in self.arrays.items():
                 np.save(tmp / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
             np.savez(tmp / "stats.npz", **{k: np.asarray(v) for k, v in self.stats.items()})
@@ -581,19 +603,34 @@ class MatchingDatabase:
                     np.save(tmp / "overlap" / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
             meta = dict(self.meta)
             meta["counts"] = {"clips": self.n_clips, "takes": len(self.meta["takes"])}
+            # the marker that lets a later --force recognise this folder, written last
             (tmp / "database.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
-            old = None
-            if path.exists():
-                old = path.parent / f".{path.name}.old-{os.getpid()}"
-                os.replace(path, old)
-            os.replace(tmp, path)
-            if old is not None:
-                shutil.rmtree(old, ignore_errors=True)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
+
+        write_folder(path, "database", fill, overwrite=overwrite, inputs=inputs, locked=locked)
         self.path = path
         return path
+
+    def _check_finite(self, path: Path) -> None:
+        """Refuse to save arrays with NaN or infinite values (they would poison every search)."""
+        parts = [("", self.arrays), ("overlap ", self.overlap or {}), ("z-scoring ", self.stats)]
+        for where, arrays in parts:
+            for k, v in arrays.items():
+                v = np.asarray(v) if where == "z-scoring " else v
+                if not np.issubdtype(v.dtype, np.floating):
+                    continue
+                # clip by clip, so that a memory-mapped array is never copied whole
+                flat = v.reshape(v.shape[0], -1) if v.ndim > 1 else v.reshape(1, -1)
+                for i in range(0, flat.shape[0], 256):
+                    ok = np.isfinite(flat[i:i + 256]).all(axis=1)
+                    if not ok.all():
+                        row = i + int(np.argmin(ok))
+                        at = f" (clip {row})" if v.ndim > 1 and not where else ""
+                        raise DatabaseError(
+                            f"the database's {where}array {k} holds NaN or infinite values{at}: a take's motion or "
+                            "audio features are not finite; nothing was written", path=path)
+        if self.audio is not None and np.issubdtype(np.asarray(self.audio).dtype, np.floating):
+            if not np.isfinite(self.audio).all():
+                raise DatabaseError("the database's audio holds NaN or infinite values; nothing was written", path=path)
 
     @classmethod
     def load(cls, path: str | os.PathLike, *, mmap: bool = True) -> "MatchingDatabase":

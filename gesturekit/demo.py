@@ -35,11 +35,17 @@ def build_demo_database(
     progress : callable(done, total), optional
         Progress in seconds of generated material, then of processed takes.
     """
-    from .datasets.synthetic import DEMO_LABEL, generate_demo_takes
+    from .outputs import check_output, output_lock
 
     out = Path(out) if out is not None else default_database_path()
-    if out.exists() and not overwrite:
-        raise DatabaseError("a database already exists here; pass overwrite=True (--force) to replace it", path=out)
+    check_output(out, "database", overwrite=overwrite)  # before minutes of generating
+    with output_lock(out):
+        return _build_demo(out, minutes=minutes, seed=seed, overwrite=overwrite, progress=progress)
+
+
+def _build_demo(out: Path, *, minutes: float, seed: int, overwrite: bool, progress) -> MatchingDatabase:
+    from .datasets.synthetic import DEMO_LABEL, generate_demo_takes
+
     total = minutes * 60.0
 
     def gen_progress(done, tot):
@@ -57,7 +63,7 @@ def build_demo_database(
         config=BuildConfig(overlap_stride=8, label=DEMO_LABEL, source=f"demo (seed {seed}, {minutes:g} min)"),
         progress=build_progress,
     )
-    db.save(out, overwrite=overwrite)
+    db.save(out, overwrite=overwrite, locked=True)
     return db
 
 

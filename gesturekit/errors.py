@@ -20,6 +20,7 @@ __all__ = [
     "MotionFileError",
     "DatabaseError",
     "ConfigError",
+    "OutputError",
     "GestureKitWarning",
     "warn",
     "collect_warnings",
@@ -61,6 +62,10 @@ class DatabaseError(GestureKitError):
 
 class ConfigError(GestureKitError):
     """A parameter or combination of parameters is invalid."""
+
+
+class OutputError(ConfigError):
+    """An output cannot be written where asked: something else is there, another writer, or the write failed."""
 
 
 class GestureKitWarning(UserWarning):

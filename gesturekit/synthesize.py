@@ -19,7 +19,7 @@ from . import __version__
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control, step_masks
 from .database import MatchingDatabase, normalise_exclusions
-from .errors import ConfigError, warn
+from .errors import ConfigError, GestureKitError, warn
 from .features import n_audio_frames
 from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
@@ -257,9 +257,30 @@ class SynthesisResult:
             "refiner": self.refiner,
         }
 
+    def check_finite(self, path=None) -> None:
+        """Refuse to write a result with NaN or infinite positions, naming where they came from.
+
+        Raises
+        ------
+        GestureKitError
+            The k-NN motion (read from the database) or the refiner's output is not finite.
+        """
+        parts = [("the k-NN motion (poses read from the database; the database may be damaged)", self.knn_motion)]
+        if self.refined_motion is not None:
+            parts.append(("the refiner", self.refined_motion))
+        for who, motion in parts:
+            bad = ~np.isfinite(motion.positions).all(axis=(1, 2))
+            if bad.any():
+                verb = "produced" if who == "the refiner" else "holds"
+                raise GestureKitError(
+                    f"not written: {who} {verb} NaN or infinite positions (from frame {int(np.argmax(bad))} on)",
+                    path=path)
+
     def save_npz(self, path, *, overwrite: bool = False) -> Path:
         """npz with positions (the final motion), fps, knn_positions, the search record and the config."""
         from .export.npz import save_npz
+
+        self.check_finite(path)
 
         arrays = {"knn_positions": self.knn_motion.positions}
         if self.refined_motion is not None:
@@ -271,12 +292,14 @@ class SynthesisResult:
         """BVH of the final motion (55-joint hierarchy, rotations that reproduce the positions)."""
         from .export.bvh import write_bvh
 
+        self.check_finite(path)
         return write_bvh(path, self.motion, overwrite=overwrite, units=units)
 
     def save_video(self, path, *, overwrite: bool = False, progress=None, side_by_side: bool = False, resolution=(640, 480)) -> Path:
         """MP4 of the skeleton with the speech (h264 + aac); k-NN and refined side by side if asked."""
         from .export.video import render_video
 
+        self.check_finite(path)
         if side_by_side and self.refined_motion is not None:
             return render_video(path, self.knn_motion, audio=self.audio, side_by_side=self.refined_motion,
                                 labels=("k-NN", "k-NN + refiner"), overwrite=overwrite, progress=progress,

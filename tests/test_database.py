@@ -7,7 +7,7 @@ import pytest
 
 from gesturekit.control import ATTRIBUTE_NAMES
 from gesturekit.database import BuildConfig, MatchingDatabase, take_features
-from gesturekit.errors import ConfigError, DatabaseError, GestureKitWarning, collect_warnings
+from gesturekit.errors import ConfigError, DatabaseError, GestureKitWarning, OutputError, collect_warnings
 from gesturekit.features import LAYOUT, pose_features
 
 from .conftest import make_take
@@ -104,7 +104,7 @@ def test_audio_is_kept_and_segments_align(db, takes):
 
 def test_refuses_to_overwrite(db, tmp_path):
     db.save(tmp_path / "db")
-    with pytest.raises(DatabaseError, match="already exists"):
+    with pytest.raises(OutputError, match="already exists"):
         db.save(tmp_path / "db")
     db.save(tmp_path / "db", overwrite=True)
     assert MatchingDatabase.load(tmp_path / "db").n_clips == 7
@@ -123,7 +123,7 @@ def test_failed_save_leaves_old_database_intact(db, tmp_path, monkeypatch):
         return real(*a, **k)
 
     monkeypatch.setattr(np, "save", failing)
-    with pytest.raises(OSError):
+    with pytest.raises(OutputError, match="disk full"):
         db.save(tmp_path / "db", overwrite=True)
     monkeypatch.undo()
     assert sorted(os.listdir(tmp_path)) == ["db"]

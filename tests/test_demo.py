@@ -5,7 +5,7 @@ from gesturekit.cli import main
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import DEMO_LABEL
 from gesturekit.demo import build_demo_database, open_default_database
-from gesturekit.errors import DatabaseError
+from gesturekit.errors import DatabaseError, OutputError
 
 
 def test_demo_database_is_labelled_and_deterministic(tmp_path):
@@ -18,7 +18,7 @@ def test_demo_database_is_labelled_and_deterministic(tmp_path):
     assert a.overlap is not None  # the refiner's training cut comes with the demo
     assert seen and seen[-1][0] == pytest.approx(seen[-1][1])  # progress reaches the end
     assert all(x[0] <= y[0] for x, y in zip(seen, seen[1:]))  # and never goes back
-    with pytest.raises(DatabaseError, match="already exists"):
+    with pytest.raises(OutputError, match="already exists"):
         build_demo_database(tmp_path / "a", minutes=2.0)
 
 

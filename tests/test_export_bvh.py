@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from gesturekit.errors import ConfigError
+from gesturekit.errors import ConfigError, OutputError
 from gesturekit.export import bvh as bvh_module
 from gesturekit.export.bvh import ROTATION_ORDERS, euler_from_matrices, write_bvh
 from gesturekit.export.files import atomic_write, safe_filename
@@ -440,6 +440,12 @@ def test_overwrite_protection(tmp_path):
     with pytest.raises(ConfigError, match=r"take\.bvh.*already exists.*overwrite"):
         write_bvh(path, motion)
     assert path.read_text() == "precious"
+    # overwrite replaces only a BVH of gesturekit's skeleton
+    with pytest.raises(OutputError, match=r"take\.bvh: is a file that gesturekit did not write"):
+        write_bvh(path, motion, overwrite=True)
+    assert path.read_text() == "precious"
+    path.unlink()
+    write_bvh(path, Motion(smooth_motion(3, seed=13), 15))
     write_bvh(path, motion, overwrite=True)
     assert path.read_text().startswith("HIERARCHY")
     assert sorted(os.listdir(tmp_path)) == ["take.bvh"]
@@ -463,7 +469,7 @@ def test_failure_leaves_no_partial_file(tmp_path, monkeypatch):
         f.write(b"HIERARCHY\nROOT")
         raise OSError("no space left")
 
-    with pytest.raises(OSError):
+    with pytest.raises(OutputError, match="no space left"):
         atomic_write(target, half, overwrite=True)
     assert target.read_text() == "old" and os.listdir(tmp_path) == ["old.bvh"]
 

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from gesturekit.errors import ConfigError, MotionFileError
+from gesturekit.errors import ConfigError, MotionFileError, OutputError
 from gesturekit.export import npz as npz_module
 from gesturekit.export.npz import FORMAT_VERSION, RESERVED_KEYS, load_npz, save_npz
 from gesturekit.motion import Motion
@@ -178,10 +178,10 @@ def test_failure_while_writing_leaves_nothing(tmp_path, monkeypatch):
 
     real = np.lib.format.write_array
     monkeypatch.setattr(npz_module.np.lib.format, "write_array", failing_write_array)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match="disk full"):
         save_npz(path, motion=make_motion(seed=2), overwrite=True)
     calls.clear()
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match="disk full"):
         save_npz(tmp_path / "new.npz", motion=make_motion(seed=2))
     assert path.read_bytes() == before and os.listdir(tmp_path) == ["out.npz"]
 

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from gesturekit.errors import ConfigError, GestureKitError, InputFileError
+from gesturekit.errors import ConfigError, GestureKitError, InputFileError, OutputError
 from gesturekit.export.video import AUDIO_OUT_SR, probe_media, render_video
 from gesturekit.motion import Motion
 from gesturekit.skeleton import FINGERS, N_JOINTS, hand_indices, joint_index
@@ -270,6 +270,12 @@ def test_existing_file_is_kept_unless_overwrite(tmp_path):
     with pytest.raises(ConfigError, match="taken.mp4.*already exists"):
         render_video(path, still_motion(3), resolution=(64, 48))
     assert path.read_bytes() == b"not a video"
+    # overwrite replaces only a video gesturekit wrote (recognised by its metadata tag)
+    with pytest.raises(OutputError, match="taken.mp4: is a file that gesturekit did not write"):
+        render_video(path, still_motion(3), resolution=(64, 48), overwrite=True)
+    assert path.read_bytes() == b"not a video"
+    path.unlink()
+    render_video(path, still_motion(2), resolution=(64, 48))
     render_video(path, still_motion(3), resolution=(64, 48), overwrite=True)
     assert probe_media(path)["video"]["frames"] == 3
     assert [p.name for p in tmp_path.iterdir()] == ["taken.mp4"]  # no temporary file left

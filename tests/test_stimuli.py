@@ -134,7 +134,7 @@ def test_stimuli_command_three_speeches_by_three_systems(demo_path, speech_folde
     assert sorted(order["id"].unique()) == sorted(manifest["id"])
     assert order["participant"].nunique() == 6
     assert main(args) == 2  # an existing study needs --force
-    assert "exists here already" in capsys.readouterr().err
+    assert "already exists here" in capsys.readouterr().err
 
 
 def test_gt_needs_held_out_parts_and_knn_cgan_a_refiner(demo_path, speech_folder, tmp_path):

@@ -64,7 +64,8 @@ def settings(db) -> dict:
         out = ss["study.out"] = c[0].text_input("Study folder to write", key=pk("study.out", str(home() / "study")))
         workers = ss["study.workers"] = int(c[1].number_input("Parallel renders", min_value=1, step=1,
                                                                key=pk("study.workers", os.cpu_count() or 1)))
-        overwrite = st.checkbox("replace an existing study there", key="study.overwrite")
+        overwrite = st.checkbox("replace an existing study there", key="study.overwrite",
+                                help="replaces only a study gesturekit made; any other folder is kept")
     names = [f.name for f in _speech_files(folder)] + [u.name for u in uploads or []]
     holdout_list = [h.strip() for h in holdouts.split(",") if h.strip()]
     return {

@@ -215,31 +215,32 @@ class FGDModel:
             return float(((self.net(x) - x) ** 2).mean())
 
     def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-        """Write the model folder (``fgd.json`` + ``weights.pt``); each file is written atomically."""
+        """Write the model folder (``fgd.json`` + ``weights.pt``) whole, swapped into place.
+
+        ``overwrite`` replaces only an FGD model folder (see :mod:`gesturekit.outputs`).
+        """
         import io
 
         import torch
 
         from ..export.files import atomic_write
+        from ..outputs import write_folder
 
         path = Path(path)
-        if path.exists() and not path.is_dir():
-            raise ConfigError("exists and is not a folder", path=path)
-        if (path / "fgd.json").exists() and not overwrite:
-            raise ConfigError("an FGD model exists here already; pass overwrite=True (--force) to replace it",
-                              path=path)
-        path.mkdir(parents=True, exist_ok=True)
         state = {f"net.{k}": v.detach().clone() for k, v in self.net.state_dict().items()}
         state["mean"] = torch.from_numpy(self.mean.copy())
         state["std"] = torch.from_numpy(self.std.copy())
         buf = io.BytesIO()
         torch.save(state, buf)
-        atomic_write(path / "weights.pt", lambda f: f.write(buf.getvalue()), overwrite=True)
         meta = {"format": _FORMAT, "format_version": _FORMAT_VERSION, "config": asdict(self.config),
                 "motion_dim": int(self.mean.shape[0]), "fps": LAYOUT.fps, "info": self.info}
         text = json.dumps(meta, indent=1).encode("utf-8")
-        atomic_write(path / "fgd.json", lambda f: f.write(text), overwrite=True)
-        return path
+
+        def fill(tmp: Path) -> None:
+            atomic_write(tmp / "weights.pt", lambda f: f.write(buf.getvalue()))
+            atomic_write(tmp / "fgd.json", lambda f: f.write(text))
+
+        return write_folder(path, "fgd", fill, overwrite=overwrite)
 
 
 def load_fgd_model(path: str | os.PathLike) -> FGDModel:

@@ -317,18 +317,27 @@ class Evaluation:
         return "\n".join(lines) + "\n"
 
     def save(self, folder: str | os.PathLike, *, overwrite: bool = False) -> list[Path]:
-        """Write ``results.csv``, ``results.md``, ``controls.csv``, ``controls.md`` and ``evaluation.json``."""
+        """Write ``results.csv``, ``results.md``, ``controls.csv``, ``controls.md`` and ``evaluation.json``.
+
+        The folder is written whole (see :mod:`gesturekit.outputs`): an empty or new folder, or,
+        with ``overwrite``, an earlier evaluation folder; any other folder is refused.
+        """
+        from ..outputs import write_folder
+
         folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        out = [
-            write_csv(self.table, folder / "results.csv", overwrite=overwrite),
-            write_text(markdown_table(self.table) + "\n", folder / "results.md", overwrite=overwrite),
-            write_csv(self.controls, folder / "controls.csv", overwrite=overwrite),
-            write_text(markdown_table(self.controls) + "\n", folder / "controls.md", overwrite=overwrite),
-        ]
-        meta = {"held_out": self.held_out.describe(), "settings": self.settings, "notes": self.notes}
-        out.append(write_text(json.dumps(meta, indent=1) + "\n", folder / "evaluation.json", overwrite=overwrite))
-        return out
+        meta = {"format": "gesturekit-evaluation", "held_out": self.held_out.describe(), "settings": self.settings,
+                "notes": self.notes}
+
+        def fill(tmp: Path) -> None:
+            write_csv(self.table, tmp / "results.csv")
+            write_text(markdown_table(self.table) + "\n", tmp / "results.md")
+            write_csv(self.controls, tmp / "controls.csv")
+            write_text(markdown_table(self.controls) + "\n", tmp / "controls.md")
+            write_text(json.dumps(meta, indent=1) + "\n", tmp / "evaluation.json")
+
+        # the folder is written whole and swapped in; overwrite replaces only an evaluation folder
+        write_folder(folder, "evaluation", fill, overwrite=overwrite)
+        return [folder / n for n in ("results.csv", "results.md", "controls.csv", "controls.md", "evaluation.json")]
 
 
 def _fgd_model(db, fgd_model, exclude, notes):

@@ -159,6 +159,10 @@ def write_bvh(
     bad = ~np.isfinite(positions).all(axis=(1, 2))
     if bad.any():
         raise ConfigError(f"positions are not finite (NaN or infinite) from frame {int(np.argmax(bad))} on", path=path)
+    if overwrite:
+        from ..outputs import check_output
+
+        check_output(path, "file", overwrite=True)  # only a BVH of gesturekit's skeleton is replaced
 
     offsets, end_sites = rest_offsets(positions, rest=rest, path=path)
     local, root_position = solve_rotations(positions, offsets)

@@ -3,7 +3,11 @@
 An export either appears complete under its final name or not at all: the
 bytes go to a temporary file in the target folder, are flushed to disk and the
 temporary file is then renamed onto the target. An existing file is never
-replaced unless the caller asks for it.
+replaced unless the caller asks for it. The temporary file's name carries the
+writer's process id, so that the next writer of the same file removes what a
+killed one left (:func:`gesturekit.outputs.clean_stale`); an ``OSError`` while
+writing (disk full, permission denied) is raised as an
+:class:`~gesturekit.errors.OutputError` naming the file.
 """
 from __future__ import annotations
 
@@ -60,7 +64,11 @@ def atomic_write(
     ConfigError
         ``path`` exists and ``overwrite`` is False, is a folder, or its folder
         does not exist.
+    OutputError
+        Writing failed (an ``OSError``: disk full, permission denied, ...).
     """
+    from ..outputs import clean_stale, write_errors
+
     path = Path(path)
     folder = path.parent
     if path.is_dir():
@@ -70,20 +78,23 @@ def atomic_write(
     if not overwrite and path.exists():
         raise _exists_error(path)
 
-    tmp, fd = _create_temp(folder, path.name)
+    with write_errors(path):
+        clean_stale(path)
+        tmp, fd = _create_temp(folder, path.name)
     try:
-        with os.fdopen(fd, "wb") as f:
-            write_fn(f)
-            f.flush()
-            os.fsync(f.fileno())
-        if overwrite:
-            os.replace(tmp, path)
-        else:
-            _move_no_clobber(tmp, path)
+        with write_errors(path):
+            with os.fdopen(fd, "wb") as f:
+                write_fn(f)
+                f.flush()
+                os.fsync(f.fileno())
+            if overwrite:
+                os.replace(tmp, path)
+            else:
+                _move_no_clobber(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)
-        except FileNotFoundError:
+        except OSError:
             pass
         raise
     _sync_folder(folder)
@@ -101,7 +112,8 @@ def _create_temp(folder: Path, name: str) -> tuple[Path, int]:
     # os.open with mode 0o666 lets the umask decide the permissions, as for any new file
     # (tempfile would make it private to the owner, and the rename would keep that)
     while True:
-        tmp = folder / f".{name[:64]}.{uuid.uuid4().hex[:12]}.tmp"
+        # the process id lets a later writer tell a killed writer's leftover from a running one's file
+        tmp = folder / f".{name[:64]}.{os.getpid()}-{uuid.uuid4().hex[:12]}.tmp"
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
         except FileExistsError:

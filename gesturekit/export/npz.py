@@ -105,6 +105,16 @@ def save_npz(
     ]
     for name in sorted(arrays or {}):
         entries.append((name, _checked_extra(name, arrays[name], path)))
+    for name, arr in entries:
+        if (name == "positions" or name.endswith("_positions")) and np.issubdtype(arr.dtype, np.floating):
+            bad = np.atleast_1d(~np.isfinite(arr).all(axis=tuple(range(1, arr.ndim))))
+            if bad.any():
+                raise ConfigError(f"not written: {name} holds NaN or infinite values (from frame "
+                                  f"{int(np.argmax(bad))} on)", path=path)
+    if overwrite:
+        from ..outputs import check_output
+
+        check_output(path, "file", overwrite=True)  # only an npz gesturekit wrote is replaced
     method = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
 
     def write(f) -> None:

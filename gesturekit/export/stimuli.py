@@ -13,7 +13,8 @@ A study folder::
     videos/<id>.mp4   the stimuli; an id reveals neither the speech nor the system
     manifest.csv      id, file, audio, system, controls, seed, duration_s (the key: keep it from raters)
     order.csv         participant, trial, position, slot, id: the presentation order
-    study.json        every setting that made the folder
+    study.json        every setting that made the folder; its ``format`` (``gesturekit-study``)
+                      lets a later ``--force`` recognise the folder as a study to replace
 
 Ids are the first hex digits of an HMAC-SHA256, keyed by the seed, of the
 speech and system names: the same seed gives the same ids (and the same
@@ -483,9 +484,7 @@ def make_stimuli(
         load_refiner_for,
         parse_systems,
         refiner_unavailable_reason,
-        run_system,
     )
-    from ..synthesize import SynthesisConfig
     from .video import _check_resolution
 
     t0 = time.perf_counter()
@@ -501,12 +500,27 @@ def make_stimuli(
         if reason:
             raise SystemUnavailable(reason)
         refiner = load_refiner_for(refiner)
+    from ..outputs import check_output, output_lock
+
     out = Path(out)
+    # the study folder is never the database's or the speech's, nor inside or around them
+    check_output(out, "study", overwrite=overwrite, inputs=[getattr(db, "path", None), *audio])
+    with output_lock(out):
+        check_output(out, "study", overwrite=overwrite, inputs=[getattr(db, "path", None), *audio])
+        return _make_stimuli_locked(
+            db, out=out, audio=audio, holdouts=holdouts, systems=systems, seed=seed, participants=participants,
+            track=track, config=config, refiner=refiner, refiner_name=refiner_name, width=width, height=height,
+            loudness_lufs=loudness_lufs, workers=workers, scheduler=scheduler, progress=progress, t0=t0)
+
+
+def _make_stimuli_locked(db, *, out, audio, holdouts, systems, seed, participants, track, config, refiner,
+                         refiner_name, width, height, loudness_lufs, workers, scheduler, progress, t0):
+    """:func:`make_stimuli` once the study folder is checked and locked."""
+    from ..evaluate.baselines import SystemUnavailable, run_system
+    from ..outputs import write_errors
+    from ..synthesize import SynthesisConfig
+
     manifest_path, order_path, study_path = out / "manifest.csv", out / "order.csv", out / "study.json"
-    if out.exists() and not out.is_dir():
-        raise ConfigError("exists and is not a folder", path=out)
-    if manifest_path.exists() and not overwrite:
-        raise ConfigError("a study exists here already; pass overwrite=True (--force) to replace it", path=out)
     speeches = speech_sources(db, audio=audio, holdouts=holdouts)
     if "gt" in systems:
         missing = [s.name for s in speeches if s.gt is None]
@@ -516,7 +530,11 @@ def make_stimuli(
     base = config or SynthesisConfig(seed=int(seed))
     plan = plan_stimuli([s.name for s in speeches], systems, seed=seed, participants=participants,
                         controls=track.to_text(), synthesis_seed=base.seed)
-    (out / "videos").mkdir(parents=True, exist_ok=True)
+    with write_errors(out):
+        (out / "videos").mkdir(parents=True, exist_ok=True)
+        if not study_path.exists():
+            # the marker first: a run killed while rendering leaves a folder that --force may replace
+            _write_text(study_path, json.dumps({"format": "gesturekit-study", "complete": False}) + "\n")
 
     # synthesis here (cheap, needs the database); rendering goes to the workers
     jobs, durations = [], {}
@@ -555,6 +573,7 @@ def make_stimuli(
     _write_text(manifest_path, manifest.to_csv(index=False, lineterminator="\n"))
     _write_text(order_path, plan.order.to_csv(index=False, lineterminator="\n"))
     settings = {
+        "format": "gesturekit-study",
         "database": str(db.path) if db.path is not None else (db.label or "in-memory database"),
         "systems": list(systems),
         "speeches": [s.name for s in speeches],

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..motion import AUDIO_SR, Motion
+from ..outputs import MP4_TAG
 from .files import atomic_write
 
 __all__ = ["render_video", "probe_media", "AUDIO_OUT_SR"]
@@ -121,10 +122,14 @@ def render_video(
     if not path.parent.is_dir():
         raise ConfigError(f"cannot write: folder {str(path.parent)!r} does not exist", path=path)
     # checked before rendering, so a long render does not end in this error
-    if not overwrite and path.exists():
-        raise ConfigError(
-            "already exists; pass overwrite=True (--force on the command line) to replace it", path=path
-        )
+    from ..outputs import check_output
+
+    check_output(path, "file", overwrite=overwrite)  # only an MP4 gesturekit wrote is replaced
+    for m in [motion] + ([] if side_by_side is None else [side_by_side]):
+        bad = ~np.isfinite(np.asarray(m.positions)).all(axis=(1, 2))
+        if bad.any():
+            raise ConfigError(f"not written: the motion holds NaN or infinite positions (from frame "
+                              f"{int(np.argmax(bad))} on)", path=path)
     width, height = _check_resolution(resolution)
     if audio is not None:
         audio = _check_audio(audio, sr)
@@ -214,6 +219,8 @@ def _encode_command(out: Path, width: int, height: int, fps: float, wav: Path | 
         "-movflags", "+faststart",
         # no encoder versions or dates in the file: the same inputs give the same bytes
         "-map_metadata", "-1", "-fflags", "+bitexact", "-flags:v", "+bitexact", "-flags:a", "+bitexact",
+        # the tag by which a later --force recognises the file as gesturekit's own
+        "-metadata", f"comment={MP4_TAG}",
         "-f", "mp4", f"file:{out}",
     ]
     return cmd

@@ -13,7 +13,7 @@ minutes on a CPU.
 
 :func:`train_refiner` does the whole job for a database: training pairs
 (:mod:`gesturekit.refine.data`), training, a checkpoint folder written every
-``checkpoint_every`` iterations (and when interrupted), ``resume=True`` to go on
+``checkpoint_every`` iterations (and when interrupted; each one whole or not at all), ``resume=True`` to go on
 from the last checkpoint. Random draws come from one seeded ``torch.Generator``
 whose state is checkpointed, so a resumed run ends with the same weights as an
 uninterrupted one.
@@ -25,6 +25,7 @@ import csv
 import io
 import json
 import os
+import shutil
 import signal
 import threading
 import time
@@ -391,31 +392,44 @@ def _read_log(path: Path, upto: int) -> list[dict]:
 
 
 def _save_checkpoint(out: Path, trainer: Trainer, meta: dict, stats: dict, rows: list[dict], *, train_state: bool) -> None:
-    """Write every file of the folder; config.json last, with the hashes of the state files."""
-    out.mkdir(parents=True, exist_ok=True)
-    files = {
-        "generator.pt": _save_torch(out / "generator.pt", trainer.generator.state_dict()),
-        "critic.pt": _save_torch(out / "critic.pt", trainer.critic.state_dict()),
-    }
-    if train_state:
-        files["train_state.pt"] = _save_torch(out / "train_state.pt", trainer.state_dict())
-    else:
-        try:
-            os.unlink(out / "train_state.pt")
-        except FileNotFoundError:
-            pass
+    """Write a whole checkpoint folder beside ``out`` and swap it in: all of it or nothing.
 
-    def write_stats(f):
-        np.savez(f, **stats)
+    The files go into ``.NAME.tmp-PID`` (``config.json`` last, with the hashes of
+    the state files), which then takes the place of ``out`` in one step
+    (:func:`gesturekit.outputs.swap_folder`): a process killed at any moment
+    leaves the previous checkpoint complete, and the next run removes the
+    temporary folder. The caller holds the output lock of ``out``.
+    """
+    from ..outputs import swap_folder, write_errors
 
-    atomic_write(out / "stats.npz", write_stats, overwrite=True)
-    _write_log(out / "loss_log.csv", rows)
-    cfg = dict(meta)
-    cfg["iteration"] = trainer.iteration
-    cfg["files"] = files
-    cfg["resumable"] = train_state
-    data = json.dumps(cfg, indent=1).encode("utf-8")
-    atomic_write(out / "config.json", lambda f: f.write(data), overwrite=True)
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    try:
+        with write_errors(out):
+            if tmp.exists():
+                shutil.rmtree(tmp)
+            tmp.mkdir(parents=True)
+            files = {
+                "generator.pt": _save_torch(tmp / "generator.pt", trainer.generator.state_dict()),
+                "critic.pt": _save_torch(tmp / "critic.pt", trainer.critic.state_dict()),
+            }
+            if train_state:
+                files["train_state.pt"] = _save_torch(tmp / "train_state.pt", trainer.state_dict())
+
+            def write_stats(f):
+                np.savez(f, **stats)
+
+            atomic_write(tmp / "stats.npz", write_stats)
+            _write_log(tmp / "loss_log.csv", rows)
+            cfg = dict(meta)
+            cfg["iteration"] = trainer.iteration
+            cfg["files"] = files
+            cfg["resumable"] = train_state
+            data = json.dumps(cfg, indent=1).encode("utf-8")
+            atomic_write(tmp / "config.json", lambda f: f.write(data))
+            swap_folder(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def _database_summary(db: MatchingDatabase) -> dict:
@@ -482,10 +496,30 @@ def train_refiner(
     ------
     ConfigError
         ``out`` exists (without ``resume`` or ``overwrite``), or ``resume`` with other options.
+    OutputError
+        ``out`` holds something other than a refiner folder (also with ``overwrite``), is, lies in
+        or contains the database's folder, another process is writing it, or writing failed.
     DatabaseError
         The database has no overlapping cut, or another layout than the checkpoint.
     """
+    from ..outputs import check_not_input, check_output, clean_stale, output_lock
+
     out = Path(out)
+    # the refiner folder is never the database, inside it or around it (its stats.npz would be replaced)
+    check_not_input(out, [db.path])
+    if not resume and check_output(out, "refiner", overwrite=True) and not overwrite:
+        raise ConfigError("exists already; add --resume to go on training or --force to start again", path=out)
+    with output_lock(out):
+        # a checkpoint swap cut short by a kill is undone, its temporary folder removed
+        clean_stale(out, own=True)
+        return _train_locked(db, out, preset_name=preset_name, iterations=iterations, model=model, train=train,
+                             data=data, resume=resume, device=device, keep_train_state=keep_train_state,
+                             on_pairs=on_pairs, on_step=on_step)
+
+
+def _train_locked(db, out: Path, *, preset_name, iterations, model, train, data, resume, device,
+                  keep_train_state, on_pairs, on_step) -> Path:
+    """:func:`train_refiner` once the output is checked and locked."""
     p = preset(preset_name)
     model = model or p.model
     train = train or p.train
@@ -516,8 +550,6 @@ def train_refiner(
             )
     else:
         data = PairsConfig() if data is None else data
-        if out.exists() and any(out.iterdir()) and not overwrite:
-            raise ConfigError("exists already; add --resume to go on training or --force to start again", path=out)
 
     t0 = time.perf_counter()
     pairs = make_training_pairs(db, config=data, progress=on_pairs)

@@ -1,0 +1,519 @@
+"""Outputs gesturekit owns: what ``--force`` may replace, who may write, and what a crash leaves.
+
+Every writer of a folder or file output goes through this module, so that the
+same rules hold everywhere:
+
+* **Replace only what gesturekit wrote.** ``overwrite=True`` (``--force``)
+  replaces an output only when it is recognisably one gesturekit wrote, of the
+  same kind (:data:`FOLDER_KINDS`, :data:`FILE_KINDS`): a database folder
+  (``database.json`` of format ``gesturekit-matching-database``), a refiner
+  folder (``config.json`` of format ``gesturekit-refiner``), a study folder
+  (``study.json`` of format ``gesturekit-study``), an FGD model folder
+  (``fgd.json``), an evaluation folder (``evaluation.json`` of format
+  ``gesturekit-evaluation``), an ``.npz`` archive with
+  gesturekit's ``config`` and ``format_version`` entries, a BVH file whose
+  joints are gesturekit's 55 in its order, an MP4 carrying gesturekit's
+  metadata tag. Anything else (a folder of other files, a file where a folder
+  goes, a folder where a file goes) is refused, saying what is there. An empty
+  folder is used as it is.
+* **Outputs never overlap inputs.** An output folder that is, lies inside or
+  contains an input folder (the takes, the database trained on, the speech of
+  a study) is refused.
+* **One writer per output.** :func:`output_lock` takes an exclusive
+  ``flock`` on ``.NAME.lock`` beside the output; a second writer fails at once
+  naming the first one's process id.
+* **Crashes leave nothing behind for long.** Folders are written as
+  ``.NAME.tmp-PID`` and swapped into place (:func:`write_folder`); the next
+  writer removes the temporaries (``.NAME.tmp-PID``, ``.NAME.old-PID``, the
+  ``.NAME.PID-*.tmp`` files of :func:`gesturekit.export.files.atomic_write`)
+  of processes that are no longer running (:func:`clean_stale`).
+* **Write failures are messages.** An ``OSError`` while writing (disk full,
+  permission denied) becomes an :class:`~gesturekit.errors.OutputError` naming
+  the path (:func:`write_errors`).
+"""
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import errno
+import json
+import os
+import re
+import shutil
+import threading
+import zipfile
+from pathlib import Path
+from typing import Callable, Iterable, Iterator
+
+from .errors import OutputError
+
+__all__ = [
+    "FOLDER_KINDS",
+    "FILE_KINDS",
+    "MP4_TAG",
+    "check_output",
+    "check_not_input",
+    "output_lock",
+    "clean_stale",
+    "write_folder",
+    "swap_folder",
+    "write_errors",
+    "pid_alive",
+]
+
+#: Folder kinds: kind -> (marker file, its ``format`` value, what it is called in messages).
+FOLDER_KINDS = {
+    "database": ("database.json", "gesturekit-matching-database", "a matching database"),
+    "refiner": ("config.json", "gesturekit-refiner", "a refiner folder"),
+    "study": ("study.json", "gesturekit-study", "a study folder"),
+    "fgd": ("fgd.json", "gesturekit-fgd-autoencoder", "an FGD model folder"),
+    "evaluation": ("evaluation.json", "gesturekit-evaluation", "an evaluation folder"),
+}
+
+#: File kinds gesturekit can recognise as its own, by suffix.
+FILE_KINDS = {".npz": "an npz archive", ".bvh": "a BVH file", ".mp4": "an MP4 video"}
+
+#: The MP4 metadata comment gesturekit's videos carry (``-metadata comment=...``).
+MP4_TAG = "written by gesturekit"
+
+# how far into a file the markers are looked for: BVH hierarchies and MP4 headers (faststart) are short
+_HEAD_BYTES = 1 << 16
+
+
+# ---- what is there --------------------------------------------------------------------------------
+
+
+def _layout(kind: str) -> frozenset[str]:
+    """Every name a folder of this kind can hold (its marker included)."""
+    if kind == "database":
+        from .database import _CLIP_ARRAYS
+
+        arrays = (*_CLIP_ARRAYS, "clip_take", "clip_start", "audio")
+        return frozenset([f"{a}.npy" for a in arrays] + ["stats.npz", "overlap", "database.json"])
+    if kind == "refiner":
+        return frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"])
+    if kind == "study":
+        return frozenset(["study.json", "manifest.csv", "order.csv", "videos"])
+    if kind == "fgd":
+        return frozenset(["fgd.json", "weights.pt"])
+    if kind == "evaluation":
+        return frozenset(["evaluation.json", "results.csv", "results.md", "controls.csv", "controls.md"])
+    return frozenset()
+
+
+def _folder_kind(path: Path) -> str | None:
+    """The gesturekit kind of a folder, from its marker file; None when it has none.
+
+    A marker that cannot be read (damaged, not JSON) or has no ``format`` (written by an
+    earlier gesturekit) still counts when every name in the folder is one that kind of
+    folder holds: a database whose ``database.json`` was cut short can be rebuilt in place.
+    """
+    names = None
+    for kind, (marker, fmt, _) in FOLDER_KINDS.items():
+        try:
+            meta = json.loads((path / marker).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            continue
+        except (OSError, ValueError):
+            meta = None
+        if isinstance(meta, dict):
+            if meta.get("format") == fmt:
+                return kind
+            if "format" in meta:
+                continue
+        if names is None:
+            names = {p.name for p in path.iterdir()}
+        if names and names <= _layout(kind):
+            return kind
+    return None
+
+
+def _describe_contents(path: Path, limit: int = 10_000) -> str:
+    """``"12 files"``, ``"3 files and 1 folder"``: what a folder holds, counted to ``limit`` entries."""
+    files = folders = 0
+    for _root, dirs, names in os.walk(path):
+        files += len(names)
+        folders += len(dirs)
+        if files + folders >= limit:
+            break
+    more = "+" if files + folders >= limit else ""
+    parts = [f"{files}{more} file{'' if files == 1 else 's'}"] if files or not folders else []
+    if folders:
+        parts.append(f"{folders} folder{'' if folders == 1 else 's'}")
+    return " and ".join(parts)
+
+
+def _file_is_owned(path: Path) -> bool:
+    """True when ``path`` is a file gesturekit wrote, recognised by its suffix's marker."""
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".npz":
+            with zipfile.ZipFile(path) as zf:
+                names = set(zf.namelist())
+            return {"config.npy", "format_version.npy", "positions.npy"} <= names
+        with open(path, "rb") as f:
+            head = f.read(_HEAD_BYTES)
+        if suffix == ".bvh":
+            from .skeleton import JOINT_NAMES
+
+            text = head.decode("ascii", "replace")
+            if not text.startswith("HIERARCHY"):
+                return False
+            names = re.findall(r"^\s*(?:ROOT|JOINT)\s+(\S+)", text.split("MOTION")[0], re.M)
+            return sorted(names) == sorted(JOINT_NAMES)
+        if suffix == ".mp4":
+            if MP4_TAG.encode() in head:
+                return True
+            size = os.path.getsize(path)
+            with open(path, "rb") as f:
+                f.seek(max(0, size - _HEAD_BYTES))
+                return MP4_TAG.encode() in f.read()
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return False
+    return False
+
+
+def check_not_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike | None]) -> None:
+    """Refuse an output that is, lies inside, or contains one of the ``inputs``.
+
+    Parameters
+    ----------
+    out : path
+        The output folder or file.
+    inputs : iterable of path or None
+        Input files or folders (None entries are skipped).
+
+    Raises
+    ------
+    OutputError
+        Naming the output and the input it would overwrite.
+    """
+    o = Path(os.path.realpath(out))
+    for inp in inputs:
+        if inp is None:
+            continue
+        i = Path(os.path.realpath(inp))
+        if o == i:
+            raise OutputError(f"is an input of this command ({inp}); choose another output", path=out)
+        if i in o.parents:
+            raise OutputError(f"lies inside the input {inp}; choose an output outside it", path=out)
+        if o in i.parents:
+            raise OutputError(f"contains the input {inp}; choose an output that does not", path=out)
+
+
+def check_output(
+    path: str | os.PathLike,
+    kind: str,
+    *,
+    overwrite: bool,
+    inputs: Iterable[str | os.PathLike | None] = (),
+) -> bool:
+    """Check that ``path`` may be written as an output of ``kind``.
+
+    Parameters
+    ----------
+    path : path
+        The output folder or file.
+    kind : str
+        A key of :data:`FOLDER_KINDS`, or ``"file"`` (recognised by the suffix, :data:`FILE_KINDS`).
+    overwrite : bool
+        Whether an earlier output of the same kind may be replaced.
+    inputs : iterable of path, optional
+        Inputs of the command (see :func:`check_not_input`).
+
+    Returns
+    -------
+    bool
+        True when an earlier output of this kind is there (and will be replaced).
+
+    Raises
+    ------
+    OutputError
+        The output overlaps an input; something other than an empty folder or
+        an output of this kind is there; or an output is there and ``overwrite``
+        is False.
+    """
+    path = Path(path)
+    check_not_input(path, inputs)
+    if path.is_symlink():
+        raise OutputError("is a symbolic link; refusing to write through it", path=path)
+    if not path.exists():
+        return False
+    if kind == "file":
+        if path.is_dir():
+            raise OutputError("is a folder, not a file; refusing to replace it", path=path)
+        if not overwrite:
+            raise OutputError(
+                "already exists; pass overwrite=True (--force on the command line) to replace it", path=path)
+        if not path.is_file() or not _file_is_owned(path):
+            what = FILE_KINDS.get(path.suffix.lower())
+            raise OutputError(
+                f"is a file that gesturekit did not write{'' if what is None else f' (not {what} of gesturekit)'}; "
+                "refusing to replace it", path=path)
+        return True
+    _marker, _fmt, name = FOLDER_KINDS[kind]
+    if not path.is_dir():
+        raise OutputError(f"is a file, not a folder; refusing to replace it with {name}", path=path)
+    try:
+        empty = next(path.iterdir(), None) is None
+    except OSError as exc:
+        raise OutputError(f"cannot be read ({exc.strerror or exc})", path=path) from None
+    if empty:
+        return False
+    found = _folder_kind(path)
+    if found == kind:
+        if not overwrite:
+            raise OutputError(
+                f"{name} already exists here; pass overwrite=True (--force on the command line) to replace it",
+                path=path)
+        return True
+    if found is not None:
+        raise OutputError(f"holds {FOLDER_KINDS[found][2]}, not {name}; refusing to replace it", path=path)
+    raise OutputError(
+        f"holds {_describe_contents(path)} that gesturekit did not write; refusing to replace it", path=path)
+
+
+# ---- locks ------------------------------------------------------------------------------------------
+
+_held = threading.local()
+
+
+@contextlib.contextmanager
+def output_lock(path: str | os.PathLike) -> Iterator[None]:
+    """Hold the exclusive lock of one output path for the block.
+
+    The lock is an ``flock`` on ``.NAME.lock`` beside ``path`` (its folder is
+    created). It is released, and the lock file removed, when the block ends or
+    the process dies; a lock file left by a dead process is no obstacle.
+
+    Raises
+    ------
+    OutputError
+        Another process, or another thread of this one, holds the lock.
+    """
+    import fcntl
+
+    path = Path(path)
+    with write_errors(path.parent):
+        path.parent.mkdir(parents=True, exist_ok=True)
+    lock = path.parent / f".{path.name}.lock"
+    while True:
+        with write_errors(lock):
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno not in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
+                os.close(fd)
+                raise OutputError(f"cannot be locked for writing ({exc.strerror or exc})", path=path) from None
+            try:
+                holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+            except OSError:
+                holder = ""
+            os.close(fd)
+            who = f"pid {holder}" if holder.isdigit() else "pid unknown"
+            raise OutputError(
+                f"another gesturekit process ({who}) is writing this output; try again when it has finished",
+                path=path) from None
+        # the file may have been removed by a holder that finished between our open and flock
+        try:
+            same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode("ascii"), 0)
+        yield
+    finally:
+        try:
+            os.unlink(lock)
+        except OSError:
+            pass
+        os.close(fd)
+
+
+# ---- stale temporaries ------------------------------------------------------------------------------
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id runs (on this machine)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except OSError:
+        return True
+    return True
+
+
+def clean_stale(path: str | os.PathLike, *, own: bool = False) -> list[Path]:
+    """Remove what interrupted writers of ``path`` left beside it.
+
+    ``.NAME.tmp-PID`` and ``.NAME.old-PID`` folders and ``.NAME.PID-*.tmp``
+    files whose process no longer runs are removed; with ``own`` (the caller
+    holds :func:`output_lock`) also those of this process. If ``path`` itself
+    is missing and a ``.NAME.old-PID`` folder is there (a writer died between
+    the two renames of a swap), that folder is put back first.
+
+    Returns
+    -------
+    list of Path
+        What was removed.
+    """
+    path = Path(path)
+    folder = path.parent
+    if not folder.is_dir():
+        return []
+    name = re.escape(path.name)
+    pattern = re.compile(
+        rf"^(?:\.{name}\.(?:tmp|old)-(\d+)|\.{re.escape(path.name[:64])}\.(\d+)-[0-9a-f]+\.tmp)$")
+    stale = []
+    for entry in folder.iterdir():
+        m = pattern.match(entry.name)
+        if not m:
+            continue
+        pid = int(next(g for g in m.groups() if g is not None))
+        if pid_alive(pid) and not (own and pid == os.getpid()):
+            continue
+        stale.append(entry)
+    removed = []
+    for entry in sorted(stale, key=lambda e: ".old-" not in e.name):
+        if ".old-" in entry.name and not path.exists() and not path.is_symlink():
+            os.replace(entry, path)
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            with contextlib.suppress(FileNotFoundError):
+                entry.unlink()
+        removed.append(entry)
+    return removed
+
+
+# ---- writing a folder -------------------------------------------------------------------------------
+
+_RENAME_EXCHANGE = 2
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths in one step (Linux ``renameat2``); False where the system cannot."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    at_fdcwd = -100
+    if fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP, errno.EOPNOTSUPP):
+        return False
+    raise OSError(err, os.strerror(err), os.fspath(b))
+
+
+def swap_folder(tmp: Path, path: Path) -> None:
+    """Put the finished folder ``tmp`` in the place of ``path`` (which may exist) and delete the old one.
+
+    Where the system can, the two folders are exchanged in one step, so that
+    ``path`` is at every moment either the old folder or the new one. Elsewhere
+    the old folder is first renamed to ``.NAME.old-PID``, which
+    :func:`clean_stale` puts back if the process dies before the second rename.
+    """
+    if path.exists() and _exchange(tmp, path):
+        shutil.rmtree(tmp, ignore_errors=True)
+        return
+    old = None
+    if path.exists():
+        old = path.parent / f".{path.name}.old-{os.getpid()}"
+        if old.exists():
+            shutil.rmtree(old)
+        os.replace(path, old)
+    os.replace(tmp, path)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def write_folder(
+    path: str | os.PathLike,
+    kind: str,
+    fill: Callable[[Path], None],
+    *,
+    overwrite: bool = False,
+    inputs: Iterable[str | os.PathLike | None] = (),
+    locked: bool = False,
+) -> Path:
+    """Write an output folder all at once: checked, locked, filled under a temporary name, swapped in.
+
+    Parameters
+    ----------
+    path : path
+        The folder to write.
+    kind : str
+        A key of :data:`FOLDER_KINDS`; ``fill`` must write its marker file.
+    fill : callable(Path)
+        Writes every file into the (empty, existing) temporary folder it gets.
+    overwrite : bool
+        Replace an earlier output of the same kind.
+    inputs : iterable of path
+        Inputs that the output must not overlap.
+    locked : bool
+        The caller holds :func:`output_lock` of ``path`` already.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    OutputError
+        See :func:`check_output` and :func:`output_lock`; an ``OSError`` while writing.
+    """
+    path = Path(path)
+    check_output(path, kind, overwrite=overwrite, inputs=inputs)
+    lock = contextlib.nullcontext() if locked else output_lock(path)
+    with lock:
+        clean_stale(path, own=True)
+        # checked again under the lock: another writer may have finished meanwhile
+        check_output(path, kind, overwrite=overwrite, inputs=inputs)
+        tmp = path.parent / f".{path.name}.tmp-{os.getpid()}"
+        try:
+            with write_errors(path):
+                tmp.mkdir()
+                fill(tmp)
+                if path.is_dir() and next(path.iterdir(), None) is None:
+                    path.rmdir()  # an empty folder given as the output
+                swap_folder(tmp, path)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+    return path
+
+
+@contextlib.contextmanager
+def write_errors(path: str | os.PathLike) -> Iterator[None]:
+    """Turn an ``OSError`` raised in the block into an :class:`OutputError` naming ``path``."""
+    try:
+        yield
+    except OutputError:
+        raise
+    except OSError as exc:
+        reason = {
+            errno.ENOSPC: "the disk is full",
+            errno.EDQUOT: "the disk quota is exceeded",
+            errno.EACCES: "permission denied",
+            errno.EPERM: "permission denied",
+            errno.EROFS: "the file system is read-only",
+            errno.ENOTDIR: "a part of the path is a file, not a folder",
+            errno.EEXIST: "something is in the way",
+        }.get(exc.errno, exc.strerror or str(exc))
+        where = f" ({exc.filename})" if exc.filename and os.fspath(exc.filename) != os.fspath(path) else ""
+        raise OutputError(f"cannot write: {reason}{where}", path=path) from None
