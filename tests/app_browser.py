@@ -7,9 +7,10 @@ of the README's screenshots::
 
 Chromium is Debian's (``apt-get install chromium``), driven through the
 ``playwright`` Python package; Playwright's own browser downloads are not
-used. The server runs on 127.0.0.1 on a free port with ``GESTUREKIT_HOME``
-in a folder of the caller's choosing, so it never touches the user's
-databases.
+used. The server runs from the repository root (so it reads the app's
+``.streamlit/config.toml``, as a user's does) on 127.0.0.1 on a free port,
+with ``GESTUREKIT_HOME`` in a folder of the caller's choosing, so it never
+touches the user's databases.
 """
 from __future__ import annotations
 
@@ -90,10 +91,11 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
     log = log or Path(home) / "streamlit.log"
     cmd = [sys.executable, "-m", "streamlit", "run", str(HOME_SCRIPT), "--server.address", "127.0.0.1",
            "--server.port", str(port), "--server.headless", "true", "--browser.gatherUsageStats", "false",
-           "--server.fileWatcherType", "none", "--global.developmentMode", "false",
-           "--client.toolbarMode", "minimal"]
+           "--server.fileWatcherType", "none", "--global.developmentMode", "false"]
     with open(log, "wb") as out:
-        proc = subprocess.Popen(cmd, env=env, cwd=str(home), stdout=out, stderr=subprocess.STDOUT,
+        # from the repository root, as a user starts it: Streamlit reads ./.streamlit/config.toml
+        # (the viewer toolbar, error details kept to the log), so the tests see what a user sees
+        proc = subprocess.Popen(cmd, env=env, cwd=str(REPO), stdout=out, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL)
     url = f"http://127.0.0.1:{port}"
     try:

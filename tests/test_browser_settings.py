@@ -68,19 +68,55 @@ def _table(page, *, expect: int = 0) -> list[str]:
     return [c.inner_text() for c in cells.all()]
 
 
+def _selected_cell(grid) -> tuple[int, int] | None:
+    """(row, column) of the grid's selected cell, 0-based over the data, read from its accessible table."""
+    cell = grid.locator('td[role="gridcell"][aria-selected="true"]')
+    if cell.count() != 1:
+        return None
+    cell_id = cell.first.get_attribute("id") or ""  # "glide-cell-<column + 1>-<row>"; column 0 marks rows
+    parts = cell_id.split("-")
+    if len(parts) != 4 or not (parts[2].isdigit() and parts[3].isdigit()):
+        return None
+    return int(parts[3]), int(parts[2]) - 1
+
+
 def _edit_cell(page, row: int, column: int, text: str) -> None:
-    """Type into a cell of the control table (columns: start, end, constraint) as a user does."""
+    """Type into a cell of the control table (columns: start, end, constraint) as a user does.
+
+    The editor draws its cells on a canvas, with a row-marker column and column widths of its
+    own, and a toolbar above it: a click at an assumed pixel position can land on another cell.
+    So one click selects some cell of the data, the grid's accessible table says which one, and
+    the arrow keys move the selection to the wanted cell before Enter opens its editor.
+    """
     grid = page.locator('[data-testid="stDataFrame"]').first
-    header = row_height = 35  # the editor's default sizes, in pixels
+    canvas = grid.locator('canvas[data-testid="data-grid-canvas"]')
     for _ in range(3):  # a busy machine may open the cell's editor late: try again
-        grid.scroll_into_view_if_needed()
-        box = grid.bounding_box()
-        page.mouse.dblclick(box["x"] + box["width"] * (column + 0.5) / 3,
-                            box["y"] + header + row_height * (row + 0.5))
+        canvas.scroll_into_view_if_needed()
+        box = canvas.bounding_box()
+        header = grid.locator(".dvn-underlay > canvas").nth(1).bounding_box()["height"]
+        rows = canvas.locator('tbody tr[role="row"]').count()
+        row_height = (box["height"] - header) / (rows + 1)  # the data rows and the editor's empty row
+        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + header + row_height / 2)
+        at = None
+        for _ in range(25):  # the selection shows in the table a moment after the click
+            at = _selected_cell(grid)
+            if at is not None:
+                break
+            page.wait_for_timeout(200)
+        if at is None:
+            continue
+        for key, steps in (("ArrowDown", row - at[0]), ("ArrowUp", at[0] - row),
+                           ("ArrowRight", column - at[1]), ("ArrowLeft", at[1] - column)):
+            for _ in range(max(steps, 0)):
+                page.keyboard.press(key)
+        if _selected_cell(grid) != (row, column):
+            page.keyboard.press("Escape")
+            continue
+        page.keyboard.press("Enter")
         editor = page.locator("#portal textarea, #portal input").first
         try:
             editor.wait_for(state="visible", timeout=5000)
-        except Exception:  # noqa: BLE001  (not opened: click again)
+        except Exception:  # noqa: BLE001  (not opened: select again)
             page.keyboard.press("Escape")
             continue
         page.keyboard.press("Control+a")
