@@ -78,8 +78,7 @@ def test_upload_box_select_run_then_inspect(served, tmp_path):
 
         # a control segment by dragging across the waveform: its band appears, labelled
         app_browser.box_select(page, 0.25, 0.6)
-        page.locator('[data-testid="stPlotlyChart"] text', has_text="both_hands=high").first.wait_for()
-        app_browser.wait_idle(page)
+        assert page.locator('[data-testid="stPlotlyChart"]').first.locator("text", has_text="both_hands=high").count() == 1
 
         app_browser.run_and_wait(page)
         app_browser.wait_idle(page)
