@@ -116,5 +116,6 @@ def test_a_file_that_is_not_audio_is_an_error_message(served, tmp_path):
         page.locator('[data-testid="stFileUploader"] input[type="file"]').set_input_files(str(bad))
         alert = page.locator('[data-testid="stAlert"]', has_text="notes.wav")
         alert.first.wait_for()
+        app_browser.wait_idle(page)  # the run that drew the message may still show the last run's Run button
         assert app_browser.problems(page) == []
         assert page.get_by_role("button", name="Run", exact=True).count() == 0
