@@ -78,7 +78,8 @@ def test_upload_box_select_run_then_inspect(served, tmp_path):
 
         # a control segment by dragging across the waveform: its band appears, labelled
         app_browser.box_select(page, 0.25, 0.6)
-        assert page.locator('[data-testid="stPlotlyChart"]').first.locator("text", has_text="both_hands=high").count() == 1
+        waveform = page.locator('[data-testid="stPlotlyChart"]').first
+        assert waveform.locator("text", has_text="both_hands=high").count() == 1
 
         app_browser.run_and_wait(page)
         app_browser.wait_idle(page)

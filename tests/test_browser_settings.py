@@ -83,10 +83,11 @@ def _selected_cell(grid) -> tuple[int, int] | None:
 def _edit_cell(page, row: int, column: int, text: str) -> None:
     """Type into a cell of the control table (columns: start, end, constraint) as a user does.
 
-    The editor draws its cells on a canvas, with a row-marker column and column widths of its
-    own, and a toolbar above it: a click at an assumed pixel position can land on another cell.
-    So one click selects some cell of the data, the grid's accessible table says which one, and
-    the arrow keys move the selection to the wanted cell before Enter opens its editor.
+    The editor draws its cells on a canvas, with a row-marker column, column widths of its own
+    and a 36 px header: a click at an assumed pixel position can land on another cell. So one
+    click selects some cell of the data rows (from the canvas's own size), the grid's accessible
+    table says which one, and the arrow keys move the selection to the wanted cell before Enter
+    opens its editor. Tries three times; raises AssertionError when the cell never shows ``text``.
     """
     grid = page.locator('[data-testid="stDataFrame"]').first
     canvas = grid.locator('canvas[data-testid="data-grid-canvas"]')
@@ -120,7 +121,10 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
             page.keyboard.press("Escape")
             continue
         page.keyboard.press("Control+a")
-        page.keyboard.type(text)
+        # keys at a person's pace, and a pause before Enter: on a busy machine the cell's editor
+        # took the keys into its box but committed the value it held before them (nothing was sent)
+        page.keyboard.type(text, delay=50)
+        page.wait_for_timeout(300)
         page.keyboard.press("Enter")
         app_browser.wait_idle(page)
         for _ in range(25):  # the grid shows the committed value a moment later
