@@ -7,9 +7,10 @@ of the README's screenshots::
 
 Chromium is Debian's (``apt-get install chromium``), driven through the
 ``playwright`` Python package; Playwright's own browser downloads are not
-used. The server runs on 127.0.0.1 on a free port with ``GESTUREKIT_HOME``
-in a folder of the caller's choosing, so it never touches the user's
-databases.
+used. The server runs from the repository root (so it reads the app's
+``.streamlit/config.toml``, as a user's does) on 127.0.0.1 on a free port,
+with ``GESTUREKIT_HOME`` in a folder of the caller's choosing, so it never
+touches the user's databases.
 """
 from __future__ import annotations
 
@@ -90,10 +91,11 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
     log = log or Path(home) / "streamlit.log"
     cmd = [sys.executable, "-m", "streamlit", "run", str(HOME_SCRIPT), "--server.address", "127.0.0.1",
            "--server.port", str(port), "--server.headless", "true", "--browser.gatherUsageStats", "false",
-           "--server.fileWatcherType", "none", "--global.developmentMode", "false",
-           "--client.toolbarMode", "minimal"]
+           "--server.fileWatcherType", "none", "--global.developmentMode", "false"]
     with open(log, "wb") as out:
-        proc = subprocess.Popen(cmd, env=env, cwd=str(home), stdout=out, stderr=subprocess.STDOUT,
+        # from the repository root, as a user starts it: Streamlit reads ./.streamlit/config.toml
+        # (the viewer toolbar, error details kept to the log), so the tests see what a user sees
+        proc = subprocess.Popen(cmd, env=env, cwd=str(REPO), stdout=out, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL)
     url = f"http://127.0.0.1:{port}"
     try:
@@ -179,6 +181,8 @@ def upload(page, wav: Path) -> None:
 
     The page names the speech it works on in a caption below the uploader
     (the uploader's own list shows the name as soon as the file is chosen).
+    The run may still be drawing the rest of the page (the new waveform):
+    :func:`box_select` waits for its end.
     """
     page.locator('[data-testid="stFileUploader"] input[type="file"]').set_input_files(str(wav))
     page.locator('[data-testid="stCaptionContainer"] strong', has_text=wav.name).first.wait_for()
@@ -192,17 +196,36 @@ def synthesize_ready(page) -> None:
     page.get_by_role("button", name="Run", exact=True).wait_for()
 
 
-def box_select(page, start_frac: float, end_frac: float) -> None:
-    """Drag across the waveform chart (the first chart of the Synthesize page) between two fractions of its width."""
-    drag = page.locator('[data-testid="stPlotlyChart"]').first.locator("rect.nsewdrag").first
-    drag.wait_for()
-    box = drag.bounding_box()
-    y = box["y"] + box["height"] / 2
-    page.mouse.move(box["x"] + box["width"] * start_frac, y)
-    page.mouse.down()
-    page.mouse.move(box["x"] + box["width"] * (start_frac + end_frac) / 2, y, steps=5)
-    page.mouse.move(box["x"] + box["width"] * end_frac, y, steps=5)
-    page.mouse.up()
+def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_hands=high",
+               tries: int = 3) -> None:
+    """Drag across the waveform chart (the first chart of the Synthesize page) between two fractions
+    of its plot area's width, and wait until the band ``label`` of the new segment is drawn on it.
+
+    A drag on a chart that a run is about to replace (the page still drawing, say, the waveform of
+    speech just uploaded) is lost with that chart: the drag starts only once the page is idle, and
+    is made again when no band appears. The band must not be on the chart before.
+    """
+    chart = page.locator('[data-testid="stPlotlyChart"]').first
+    band = chart.locator("text", has_text=label).first
+    for _ in range(tries):
+        wait_idle(page)
+        drag = chart.locator("rect.nsewdrag").first  # the plot area (not the legend, nor the toolbar)
+        drag.wait_for(state="visible")
+        drag.scroll_into_view_if_needed()
+        box = drag.bounding_box()
+        y = box["y"] + box["height"] / 2
+        page.mouse.move(box["x"] + box["width"] * start_frac, y)
+        page.mouse.down()
+        page.mouse.move(box["x"] + box["width"] * (start_frac + end_frac) / 2, y, steps=5)
+        page.mouse.move(box["x"] + box["width"] * end_frac, y, steps=5)
+        page.mouse.up()
+        try:
+            band.wait_for(state="visible", timeout=30_000)
+        except Exception:  # noqa: BLE001  (a playwright timeout: the selection was lost, drag again)
+            continue
+        wait_idle(page)
+        return
+    raise RuntimeError(f"no band {label!r} on the waveform after {tries} drags across it")
 
 
 def run_and_wait(page) -> None:
@@ -305,8 +328,6 @@ def make_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 
             open_app(page, url, "Synthesize", heading="Synthesize")
             upload(page, wav)
             box_select(page, 0.3, 0.55)
-            page.locator('[data-testid="stPlotlyChart"] text', has_text="both_hands=high").first.wait_for()
-            wait_idle(page)
             run_and_wait(page)
             wait_idle(page)
             for name, title in (("synthesize", None), ("retrieval_inspector", "Retrieval inspector"),

@@ -8,7 +8,9 @@ tests.app_browser`` makes them too); otherwise to the test's temporary folder.
 from __future__ import annotations
 
 import os
+import socket
 from pathlib import Path
+from urllib.parse import urlparse
 
 import pytest
 
@@ -32,6 +34,36 @@ def _shots(tmp_path: Path) -> Path:
     return tmp_path
 
 
+def _other_addresses() -> list[str]:
+    """This machine's IPv4 addresses other than loopback (empty where it has none)."""
+    try:
+        infos = socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET)
+    except OSError:
+        return []
+    return sorted({i[4][0] for i in infos if not i[4][0].startswith("127.")})
+
+
+def _assert_what_a_user_sees(page, url: str) -> None:
+    """The app's own settings hold (.streamlit/config.toml): local only, a viewer's toolbar."""
+    port = urlparse(url).port
+    assert page.evaluate("() => location.hostname") == "127.0.0.1"
+    for address in _other_addresses():  # bound to 127.0.0.1 alone: not reachable from elsewhere
+        with socket.socket() as s:
+            s.settimeout(2)
+            assert s.connect_ex((address, port)) != 0, f"the app answers on {address}:{port}"
+    # no Deploy button; the main menu, if any, has no developer items (rerun, clear cache)
+    assert page.locator('[data-testid="stAppDeployButton"]').count() == 0
+    menu = page.locator('[data-testid="stMainMenu"]')
+    if menu.count():
+        menu.first.click()
+        popover = page.locator('[data-testid="stMainMenuPopover"]')
+        popover.first.wait_for()
+        items = popover.first.inner_text()
+        for developer in ("Rerun", "Clear cache", "Deploy"):
+            assert developer not in items, items
+        page.keyboard.press("Escape")
+
+
 def test_upload_box_select_run_then_inspect(served, tmp_path):
     url, home = served
     wav = app_browser.write_speech(tmp_path / "my speech.wav", seconds=6.0)
@@ -40,13 +72,14 @@ def test_upload_box_select_run_then_inspect(served, tmp_path):
     with app_browser.browser() as page:
         app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
         assert (home / "db" / "demo" / "database.json").is_file()  # built by the app on the first view
+        _assert_what_a_user_sees(page, url)
         app_browser.upload(page, wav)
         assert page.get_by_text("WAV (PCM_16), 16000 Hz, 1 channel, 6.00 s").count() == 1
 
         # a control segment by dragging across the waveform: its band appears, labelled
         app_browser.box_select(page, 0.25, 0.6)
-        page.locator('[data-testid="stPlotlyChart"] text', has_text="both_hands=high").first.wait_for()
-        app_browser.wait_idle(page)
+        waveform = page.locator('[data-testid="stPlotlyChart"]').first
+        assert waveform.locator("text", has_text="both_hands=high").count() == 1
 
         app_browser.run_and_wait(page)
         app_browser.wait_idle(page)
@@ -84,5 +117,6 @@ def test_a_file_that_is_not_audio_is_an_error_message(served, tmp_path):
         page.locator('[data-testid="stFileUploader"] input[type="file"]').set_input_files(str(bad))
         alert = page.locator('[data-testid="stAlert"]', has_text="notes.wav")
         alert.first.wait_for()
+        app_browser.wait_idle(page)  # the run that drew the message may still show the last run's Run button
         assert app_browser.problems(page) == []
         assert page.get_by_role("button", name="Run", exact=True).count() == 0

@@ -68,23 +68,63 @@ def _table(page, *, expect: int = 0) -> list[str]:
     return [c.inner_text() for c in cells.all()]
 
 
+def _selected_cell(grid) -> tuple[int, int] | None:
+    """(row, column) of the grid's selected cell, 0-based over the data, read from its accessible table."""
+    cell = grid.locator('td[role="gridcell"][aria-selected="true"]')
+    if cell.count() != 1:
+        return None
+    cell_id = cell.first.get_attribute("id") or ""  # "glide-cell-<column + 1>-<row>"; column 0 marks rows
+    parts = cell_id.split("-")
+    if len(parts) != 4 or not (parts[2].isdigit() and parts[3].isdigit()):
+        return None
+    return int(parts[3]), int(parts[2]) - 1
+
+
 def _edit_cell(page, row: int, column: int, text: str) -> None:
-    """Type into a cell of the control table (columns: start, end, constraint) as a user does."""
+    """Type into a cell of the control table (columns: start, end, constraint) as a user does.
+
+    The editor draws its cells on a canvas, with a row-marker column, column widths of its own
+    and a 36 px header: a click at an assumed pixel position can land on another cell. So one
+    click selects some cell of the data rows (from the canvas's own size), the grid's accessible
+    table says which one, and the arrow keys move the selection to the wanted cell before Enter
+    opens its editor. Tries three times; raises AssertionError when the cell never shows ``text``.
+    """
     grid = page.locator('[data-testid="stDataFrame"]').first
-    header = row_height = 35  # the editor's default sizes, in pixels
+    canvas = grid.locator('canvas[data-testid="data-grid-canvas"]')
     for _ in range(3):  # a busy machine may open the cell's editor late: try again
-        grid.scroll_into_view_if_needed()
-        box = grid.bounding_box()
-        page.mouse.dblclick(box["x"] + box["width"] * (column + 0.5) / 3,
-                            box["y"] + header + row_height * (row + 0.5))
+        canvas.scroll_into_view_if_needed()
+        box = canvas.bounding_box()
+        header = grid.locator(".dvn-underlay > canvas").nth(1).bounding_box()["height"]
+        rows = canvas.locator('tbody tr[role="row"]').count()
+        row_height = (box["height"] - header) / (rows + 1)  # the data rows and the editor's empty row
+        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + header + row_height / 2)
+        at = None
+        for _ in range(25):  # the selection shows in the table a moment after the click
+            at = _selected_cell(grid)
+            if at is not None:
+                break
+            page.wait_for_timeout(200)
+        if at is None:
+            continue
+        for key, steps in (("ArrowDown", row - at[0]), ("ArrowUp", at[0] - row),
+                           ("ArrowRight", column - at[1]), ("ArrowLeft", at[1] - column)):
+            for _ in range(max(steps, 0)):
+                page.keyboard.press(key)
+        if _selected_cell(grid) != (row, column):
+            page.keyboard.press("Escape")
+            continue
+        page.keyboard.press("Enter")
         editor = page.locator("#portal textarea, #portal input").first
         try:
             editor.wait_for(state="visible", timeout=5000)
-        except Exception:  # noqa: BLE001  (not opened: click again)
+        except Exception:  # noqa: BLE001  (not opened: select again)
             page.keyboard.press("Escape")
             continue
         page.keyboard.press("Control+a")
-        page.keyboard.type(text)
+        # keys at a person's pace, and a pause before Enter: on a busy machine the cell's editor
+        # took the keys into its box but committed the value it held before them (nothing was sent)
+        page.keyboard.type(text, delay=50)
+        page.wait_for_timeout(300)
         page.keyboard.press("Enter")
         app_browser.wait_idle(page)
         for _ in range(25):  # the grid shows the committed value a moment later
@@ -114,8 +154,7 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
         for label, value in SETTINGS.items():
             _set_number(page, label, value)
         app_browser.box_select(page, 0.2, 0.45)
-        page.locator('[data-testid="stPlotlyChart"] text', has_text="both_hands=high").first.wait_for()
-        app_browser.wait_idle(page)
+        assert _bands(page) == 1
         # an edit in the table itself (the editor's own state, not a box selection)
         _edit_cell(page, 0, 1, "4.25")
         cells = _table(page)
