@@ -6,6 +6,7 @@ Every command turns errors of the gesturekit family into one line on stderr
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import sys
 import time
@@ -172,7 +173,7 @@ def _cmd_synthesize(args) -> int:
     from .datasets.audio import load_audio
     from .demo import open_default_database
     from .export.files import safe_filename
-    from .outputs import check_output, write_errors
+    from .outputs import check_output, output_lock, write_errors
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
 
@@ -210,21 +211,27 @@ def _cmd_synthesize(args) -> int:
     results = synthesize_batch(audios, db=db, config=config, refiner=_refiner_choice(args.refiner, db))
     with write_errors(out):
         out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
-    for f, stem, res in zip(files, stems, results):
-        res.source = f.name
-        res.save_npz(targets[(stem, "npz")], overwrite=args.force)
-        res.save_bvh(targets[(stem, "bvh")], overwrite=args.force)
-        written = [targets[(stem, "npz")], targets[(stem, "bvh")]]
-        if args.video:
-            with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
-                res.save_video(targets[(stem, "mp4")], overwrite=args.force,
-                               progress=lambda done, total: (setattr(bar, "n", done), bar.refresh()))
-            written.append(targets[(stem, "mp4")])
-        relaxed = res.relaxed_steps
-        note = (f"; control relaxed at {describe_steps(relaxed, step=res.config.step, fps=res.motion.fps)}"
-                if relaxed else "")
-        print(f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
-              f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}")
+    with contextlib.ExitStack() as held:
+        for p in targets.values():
+            # a second synthesize writing the same files fails here and says so; checked again
+            # under the lock, since another run may have written them while this one searched
+            held.enter_context(output_lock(p))
+            check_output(p, "file", overwrite=args.force, inputs=files)
+        for f, stem, res in zip(files, stems, results):
+            res.source = f.name
+            res.save_npz(targets[(stem, "npz")], overwrite=args.force)
+            res.save_bvh(targets[(stem, "bvh")], overwrite=args.force)
+            written = [targets[(stem, "npz")], targets[(stem, "bvh")]]
+            if args.video:
+                with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
+                    res.save_video(targets[(stem, "mp4")], overwrite=args.force,
+                                   progress=lambda done, total: (setattr(bar, "n", done), bar.refresh()))
+                written.append(targets[(stem, "mp4")])
+            relaxed = res.relaxed_steps
+            note = (f"; control relaxed at {describe_steps(relaxed, step=res.config.step, fps=res.motion.fps)}"
+                    if relaxed else "")
+            print(f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
+                  f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}")
     print(f"done in {time.perf_counter() - t0:.1f} s")
     return 0
 

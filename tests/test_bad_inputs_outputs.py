@@ -131,3 +131,16 @@ def test_a_locked_output_is_refused_naming_the_writer(world):
         before = snapshot(out)
         run = run_cli("build-db", world / "corpus" / "takes", "--preset", "zeggs", "--out", out)
         assert_refused(run, names=out, problem="another gesturekit process (pid", before=before)
+
+
+def test_synthesize_refuses_files_another_run_is_writing(world, tmp_path):
+    out = tmp_path / "out"
+    args = ["synthesize", world / "speech" / "hello.wav", "--db", world / "db", "--out", out, "--refiner", "none"]
+    with output_lock(out / "hello.npz"):  # another run is writing it
+        before = snapshot(out)
+        assert_refused(run_cli(*args), names=out / "hello.npz", problem="another gesturekit process (pid",
+                       before=before)
+    # once the other run is done, the same command writes both files, and no lock file stays behind
+    run = run_cli(*args)
+    assert run.code == 0, run.stderr
+    assert {p.name for p in out.iterdir()} == {"hello.npz", "hello.bvh"}
