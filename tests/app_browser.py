@@ -115,12 +115,17 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
             time.sleep(0.2)
         yield url
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop(proc)
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """End a server started by a test: politely, then by force after 20 s."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 @contextlib.contextmanager
@@ -319,30 +324,35 @@ def make_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 
     home; the Synthesize page gets ``seconds`` of generated speech with one
     box-selected control segment.
     """
-    out.mkdir(parents=True, exist_ok=True)
     shots = []
-    with tempfile.TemporaryDirectory(prefix="gesturekit-shots-") as tmp:
-        home = Path(tmp)
-        wav = write_speech(home / "speech.wav", seconds=seconds)
-        with app_server(home, demo_minutes=demo_minutes) as url, browser() as page:
-            open_app(page, url, "Synthesize", heading="Synthesize")
-            upload(page, wav)
-            box_select(page, 0.3, 0.55)
-            run_and_wait(page)
-            wait_idle(page)
-            for name, title in (("synthesize", None), ("retrieval_inspector", "Retrieval inspector"),
-                                ("database", "Database")):
-                if title is not None:
-                    go_to(page, title)
-                if problems(page):
-                    raise RuntimeError(f"the {name} page shows an error: {problems(page)[0][:500]}")
-                shots.append(screenshot(page, out / f"{name}.png"))
+    with _result_page(out, seconds=seconds, demo_minutes=demo_minutes, box=(0.3, 0.55)) as page:
+        for name, title in (("synthesize", None), ("retrieval_inspector", "Retrieval inspector"),
+                            ("database", "Database")):
+            if title is not None:
+                go_to(page, title)
+            if problems(page):
+                raise RuntimeError(f"the {name} page shows an error: {problems(page)[0][:500]}")
+            shots.append(screenshot(page, out / f"{name}.png"))
     return shots
 
 
 def make_viewer_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 3.0) -> list[Path]:
     """Screenshots of the 3D view alone, written to ``out``: ``viewer_synthesize.png`` (a result's
     k-NN and refined motions side by side) and ``viewer_database.png`` (one clip of the demo database)."""
+    with _result_page(out, seconds=seconds, demo_minutes=demo_minutes) as page:
+        shots = [viewer_screenshot(page, "synth.skeleton", out / "viewer_synthesize.png")]
+        go_to(page, "Database")
+        shots.append(viewer_screenshot(page, "db.skeleton", out / "viewer_database.png", at=0.5))
+        if problems(page):
+            raise RuntimeError(f"the page shows an error: {problems(page)[0][:500]}")
+    return shots
+
+
+@contextlib.contextmanager
+def _result_page(out: Path, *, seconds: float, demo_minutes: float, box: tuple[float, float] | None = None):
+    """A browser page on Synthesize with a result of ``seconds`` of generated speech (one
+    box-selected control segment over the fractions ``box`` of the waveform, if given), served
+    from a fresh demo database of ``demo_minutes`` in a temporary home; ``out`` is created."""
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="gesturekit-shots-") as tmp:
         home = Path(tmp)
@@ -350,14 +360,11 @@ def make_viewer_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: f
         with app_server(home, demo_minutes=demo_minutes) as url, browser() as page:
             open_app(page, url, "Synthesize", heading="Synthesize")
             upload(page, wav)
+            if box is not None:
+                box_select(page, *box)
             run_and_wait(page)
             wait_idle(page)
-            shots = [viewer_screenshot(page, "synth.skeleton", out / "viewer_synthesize.png")]
-            go_to(page, "Database")
-            shots.append(viewer_screenshot(page, "db.skeleton", out / "viewer_database.png", at=0.5))
-            if problems(page):
-                raise RuntimeError(f"the page shows an error: {problems(page)[0][:500]}")
-    return shots
+            yield page
 
 
 def main(argv=None) -> int:

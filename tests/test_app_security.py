@@ -24,6 +24,8 @@ from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.errors import ConfigError, InputFileError
 from gesturekit.paths import APP_ROOTS_ENV, allowed_roots, check_allowed
 
+from . import app_browser
+
 ROOT = Path(__file__).resolve().parents[1]
 HOME = ROOT / "app" / "Home.py"
 STUDY_PAGE = "pages/4_Study_stimuli.py"
@@ -115,12 +117,7 @@ def test_the_readme_command_serves_on_127_0_0_1_only(demo_home, tmp_path):
         assert answer == "ok"
         assert _listening(port) == {"127.0.0.1"}  # not 0.0.0.0, not ::
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        app_browser.stop(proc)
 
 
 # ---- allowed folders ----------------------------------------------------------------------------
