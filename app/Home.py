@@ -1,21 +1,24 @@
 """gesturekit's app: start it with ``streamlit run app/Home.py``.
 
-On a machine without a database, this page (like every page) builds the
-generated demo speaker's database at the default path first, with a progress
-bar; nothing is downloaded.
+This file is the entrypoint: each page view runs it as ``__main__``, and it
+draws the page the user is on (the pages are declared in :mod:`nav`); the
+home page is :func:`home` below. On a machine without a database, every page
+builds the generated demo speaker's database at the default path first, with
+a progress bar; nothing is downloaded.
 
-``streamlit run`` finds the ``st.App`` below and serves this page through it:
+``streamlit run`` finds the ``st.App`` below and serves the pages through it:
 its lifespan prepares the default database's search and refiner as the server
-starts (:func:`common.server_lifespan`), so the first run does not wait for
-them. Each page view runs this file as ``__main__``, where only the page is drawn.
+starts (:func:`resources.server_lifespan`), so the first run does not wait for
+them.
 """
 import streamlit as st
 
-import common
+import nav
+import resources
+import sidebar
 
 
-def main() -> None:
-    common.page_setup("gesturekit")
+def home() -> None:
     st.title("gesturekit")
     st.markdown(
         "Speech in, co-speech gestures out, by **motion matching**: the method of Habibie et al., "
@@ -26,11 +29,11 @@ def main() -> None:
         "(hands high or low, fast or slow, wide, symmetric...) restrict, for stretches of time, which database "
         "frames may be used. An optional conditional GAN refines the result into smooth motion."
     )
-    db = common.sidebar_database()
-    common.warm_up(db)  # a database chosen here is prepared while the user moves on
+    db = sidebar.sidebar_database()
+    resources.warm_up(db)  # a database chosen here is prepared while the user moves on
 
     st.subheader("Open database")
-    common.show_database_label(db)
+    sidebar.show_database_label(db)
     d = db.describe()
     st.markdown(
         f"`{d['path']}`: {d['takes']} takes, {d['clips']} clips of {d['clip_frames']} frames "
@@ -40,13 +43,12 @@ def main() -> None:
     st.caption("Choose another database, or build one from a folder of takes, in the sidebar.")
 
     st.subheader("Pages")
-    for page in common.PAGES:
-        if page.exists:
-            st.page_link(page.script, label=page.title, icon=page.icon)
-            st.caption(page.purpose)
+    for page in nav.PAGES:
+        nav.link(page.title)
+        st.caption(page.purpose)
 
 
 if __name__ == "__main__":
-    common.run_page(main)
+    nav.run(home)
 else:  # imported by the server at start
-    app = st.App(__file__, lifespan=common.server_lifespan)
+    app = st.App(__file__, lifespan=resources.server_lifespan)

@@ -14,7 +14,7 @@ import warnings
 from pathlib import Path
 
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
-from .paths import is_dir, is_file
+from .paths import is_file
 
 __all__ = ["main", "build_parser"]
 
@@ -25,11 +25,40 @@ def _progress_bar(total, unit, desc):
     return tqdm(total=total, unit=unit, desc=desc, file=sys.stderr, dynamic_ncols=True, leave=False)
 
 
+def _advance(bar, done, total=None, note: str | None = None) -> None:
+    """Show ``done`` (of ``total``, when it is only known now) on a progress bar, with a note after it."""
+    if total is not None:
+        bar.total = total
+    bar.n = done
+    if note is not None:
+        bar.set_postfix_str(note, refresh=False)
+    bar.refresh()
+
+
+@contextlib.contextmanager
+def _stage_bars():
+    """Progress bars of a command's stages in turn: ``bar(desc, total, unit)`` is the stage's bar,
+    made (and the one before closed) when the stage starts; all are closed when the block ends."""
+    bars: dict = {}
+
+    def bar(desc, total, unit):
+        if desc not in bars:
+            for earlier in bars.values():
+                earlier.close()
+            bars[desc] = _progress_bar(total, unit, desc)
+        return bars[desc]
+
+    try:
+        yield bar
+    finally:
+        for each in bars.values():
+            each.close()
+
+
 def _cmd_build_db(args) -> int:
     from .demo import build_demo_database
     from .paths import default_database_path
 
-    t0 = time.perf_counter()
     _check_positive("--fps", args.fps, "frame rate")
     if args.demo:
         _check_positive("--minutes", args.minutes, "number of minutes")
@@ -38,11 +67,8 @@ def _cmd_build_db(args) -> int:
         out = Path(args.out) if args.out else default_database_path()
         total = args.minutes * 60
         with _progress_bar(round(total), "s", "demo speaker") as bar:
-            def progress(done, tot):
-                bar.n = round(done)
-                bar.refresh()
-
-            db = build_demo_database(out, minutes=args.minutes, seed=args.seed, overwrite=args.force, progress=progress)
+            db = build_demo_database(out, minutes=args.minutes, seed=args.seed, overwrite=args.force,
+                                     progress=lambda done, tot: _advance(bar, round(done)))
     else:
         if args.folder is None:
             raise ConfigError("give a folder of takes to build from, or --demo for the generated demo speaker")
@@ -57,38 +83,18 @@ def _cmd_build_db(args) -> int:
         out = Path(args.out)
         # before reading any take: the output must be free, ours to replace, and apart from the takes
         check_output(out, "database", overwrite=args.force, inputs=[args.folder])
-        with output_lock(out):
-            db = _build_from_folder(args, out)
+        from .database import BuildConfig
+        from .workspace import build_database
+
+        config = BuildConfig(overlap_stride=args.overlap_stride, percentiles=tuple(args.percentiles),
+                             store_audio=not args.no_audio, label=args.label or "")
+        with output_lock(out), _stage_bars() as bar:  # the bar shows once the first take is read
+            db = build_database(args.folder, out, config=config, joint_map=args.joint_map or args.preset,
+                                kind=args.kind, fps=args.fps, units=args.units, overwrite=args.force, locked=True,
+                                progress=lambda done, total, name: _advance(bar("reading takes", total, "take"),
+                                                                            done, note=name[-30:]))
     print(db.summary_text())
-    print(f"built in {time.perf_counter() - t0:.1f} s")
-    return 0
-
-
-def _build_from_folder(args, out: Path):
-    """Read the takes of ``args.folder`` and save their database at ``out`` (whose lock the caller holds)."""
-    from .database import BuildConfig, MatchingDatabase
-    from .datasets.takes import count_takes, discover_takes, iter_takes
-
-    joint_map = args.joint_map or args.preset
-    sources = discover_takes(args.folder, kind=args.kind)
-    n = count_takes(sources)
-    config = BuildConfig(
-        overlap_stride=args.overlap_stride,
-        percentiles=tuple(args.percentiles),
-        store_audio=not args.no_audio,
-        label=args.label or "",
-        source=str(Path(args.folder).resolve()),
-        joint_map=None if joint_map is None else str(joint_map),
-    )
-    with _progress_bar(n, "take", "reading takes") as bar:
-        def progress(i, name):
-            bar.set_postfix_str(name[-30:])
-            bar.update(1)
-
-        takes = iter_takes(sources, joint_map=joint_map, fps_in=args.fps, units=args.units)
-        db = MatchingDatabase.build(takes, config=config, progress=progress)
-    db.save(out, overwrite=args.force, inputs=[args.folder], locked=True)
-    return db
+    return _done(args, "built")
 
 
 def _cmd_info(args) -> int:
@@ -134,23 +140,6 @@ def _parse_holdouts(texts) -> list:
     return out
 
 
-def _speech_files(inputs: list[str]) -> list[Path]:
-    from .datasets.takes import AUDIO_EXTENSIONS
-    from .errors import InputFileError
-
-    files: list[Path] = []
-    for item in inputs:
-        p = Path(item)
-        if is_dir(p):
-            found = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
-            if not found:
-                raise InputFileError(f"no speech files ({'/'.join(AUDIO_EXTENSIONS)}) in this folder", path=p)
-            files += found
-        else:
-            files.append(p)
-    return files
-
-
 def _refiner_choice(given: str | None, db):
     """The refiner of ``synthesize``: the one named, none for ``none``, else one trained on ``db``
     (:func:`gesturekit.refine.refiner_for`; the app's default too)."""
@@ -169,16 +158,14 @@ def _refiner_choice(given: str | None, db):
 
 
 def _cmd_synthesize(args) -> int:
-    from .database import MatchingDatabase
     from .datasets.audio import load_audio
-    from .demo import open_default_database
     from .export.files import safe_filename
     from .outputs import check_output, output_lock, write_errors
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
+    from .workspace import expand_speech, open_database
 
-    t0 = time.perf_counter()
-    files = _speech_files(args.speech)
+    files = expand_speech(args.speech)
     control = _control_from_arg(args.control) or ""
     exclude_ranges = tuple(_parse_range(r) for r in (args.exclude_range or ()))
     out = Path(args.out)
@@ -189,7 +176,7 @@ def _cmd_synthesize(args) -> int:
             raise ConfigError(f"{first[stem]} and {f} would both be written as {out / stem}.npz; rename one, "
                               "or synthesise them in separate runs")
         first[stem] = f
-    db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    db = open_database(args.db)
     config = SynthesisConfig(
         k=args.k, step=args.step, topk=args.topk, seed=args.seed, init=args.init_pose,
         mask_rule=args.mask_rule, blend=args.blend, control=control,
@@ -225,32 +212,29 @@ def _cmd_synthesize(args) -> int:
             if args.video:
                 with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
                     res.save_video(targets[(stem, "mp4")], overwrite=args.force,
-                                   progress=lambda done, total: (setattr(bar, "n", done), bar.refresh()))
+                                   progress=lambda done, total: _advance(bar, done))
                 written.append(targets[(stem, "mp4")])
             relaxed = res.relaxed_steps
             note = (f"; control relaxed at {describe_steps(relaxed, step=res.config.step, fps=res.motion.fps)}"
                     if relaxed else "")
             print(f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
                   f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}")
-    print(f"done in {time.perf_counter() - t0:.1f} s")
-    return 0
+    return _done(args)
 
 
 def _cmd_train_refiner(args) -> int:
     from dataclasses import replace
 
-    from .database import MatchingDatabase
-    from .demo import open_default_database
     from .refine.data import PairsConfig
     from .refine.train import preset, train_refiner
+    from .workspace import open_database
 
-    t0 = time.perf_counter()
     if args.demo == bool(args.db):
         raise ConfigError("give the database to train on with --db, or --demo for the demo database")
     if args.resume and args.force:
         raise ConfigError("--resume goes on from the folder and --force replaces it; give one of them")
     exclude_ranges = tuple(_parse_range(x) for x in (args.exclude_range or ()))
-    db = open_default_database() if args.demo else MatchingDatabase.load(args.db)
+    db = open_database(None if args.demo else args.db)
     if args.demo:
         from .demo import DEMO_MINUTES, DEMO_SEED
 
@@ -263,34 +247,16 @@ def _cmd_train_refiner(args) -> int:
         data = PairsConfig(seed=args.seed, exclude_takes=tuple(args.exclude_take or ()),
                            exclude_ranges=exclude_ranges)
     train = replace(preset(args.preset).train, seed=args.seed)
-    bars: dict = {}
+    with _stage_bars() as bar:
+        def on_step(it, total, losses):
+            note = (f"W {losses['wasserstein']:.2f} gp {losses['gradient_penalty']:.2f} "
+                    f"L1 {losses['generator_l1']:.3f}" if "generator_l1" in losses else None)
+            _advance(bar("training the refiner", total, "it"), it, note=note)
 
-    def on_pairs(done, total):
-        bar = bars.get("pairs")
-        if bar is None:
-            bar = bars["pairs"] = _progress_bar(total, "window", "k-NN training pairs")
-        bar.n = done
-        bar.refresh()
-
-    def on_step(it, total, losses):
-        if "pairs" in bars:
-            bars.pop("pairs").close()
-        bar = bars.get("train")
-        if bar is None:
-            bar = bars["train"] = _progress_bar(total, "it", "training the refiner")
-            bar.n = it - 1
-        bar.update(1)
-        if "generator_l1" in losses:
-            bar.set_postfix_str(f"W {losses['wasserstein']:.2f} gp {losses['gradient_penalty']:.2f} "
-                                f"L1 {losses['generator_l1']:.3f}", refresh=False)
-
-    try:
         out = train_refiner(db, args.out, preset_name=args.preset, iterations=args.iterations, train=train,
                             data=data, resume=args.resume, overwrite=args.force, device=args.device,
-                            keep_train_state=not args.no_train_state, on_pairs=on_pairs, on_step=on_step)
-    finally:
-        for bar in bars.values():
-            bar.close()
+                            keep_train_state=not args.no_train_state, on_step=on_step,
+                            on_pairs=lambda done, total: _advance(bar("k-NN training pairs", total, "window"), done))
     from .refine.infer import read_refiner_config
 
     cfg = read_refiner_config(out)
@@ -298,8 +264,7 @@ def _cmd_train_refiner(args) -> int:
     print(f"preset     {cfg['preset']}  ({cfg['iteration']} iterations on {cfg['device']})")
     print(f"windows    {cfg['pairs']['windows']} training windows (k-NN search {cfg['time']['search_s']:.1f} s)")
     print(f"training   {cfg['time']['train_s']:.1f} s; losses in {out / 'loss_log.csv'}")
-    print(f"done in {time.perf_counter() - t0:.1f} s")
-    return 0
+    return _done(args)
 
 
 def _control_from_arg(text: str | None) -> str | None:
@@ -321,12 +286,10 @@ def _control_from_arg(text: str | None) -> str | None:
 
 
 def _cmd_evaluate(args) -> int:
-    from .database import MatchingDatabase
-    from .demo import open_default_database
     from .evaluate.run import run_evaluation
     from .synthesize import SynthesisConfig
+    from .workspace import open_database
 
-    t0 = time.perf_counter()
     out = Path(args.out)
     targets = [out / n for n in ("results.csv", "results.md", "controls.csv", "controls.md", "evaluation.json")]
     existing = [str(p) for p in targets if p.exists()]
@@ -335,41 +298,32 @@ def _cmd_evaluate(args) -> int:
     _parse_holdouts([args.holdout])
     _check_positive("--beat-sigma", args.beat_sigma, "time in seconds")
     control = _control_from_arg(args.control)
-    db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    db = open_database(args.db)
     from .outputs import check_output
 
     check_output(out, "evaluation", overwrite=args.force, inputs=[db.path])  # before the long part
     config = SynthesisConfig(k=args.k, step=args.step, seed=args.seed, init=args.init_pose,
                              mask_rule=args.mask_rule, blend=args.blend)
     with _progress_bar(None, "step", "evaluating") as bar:
-        def progress(done, total, what):
-            bar.total = total
-            bar.n = done
-            bar.set_postfix_str(what[-30:], refresh=False)
-            bar.refresh()
-
         ev = run_evaluation(db, holdout=args.holdout, systems=args.systems, config=config,
-                            control=control, fgd_model=args.fgd_model,
-                            refiner=args.refiner, sigma=args.beat_sigma, progress=progress)
+                            control=control, fgd_model=args.fgd_model, refiner=args.refiner, sigma=args.beat_sigma,
+                            progress=lambda done, total, what: _advance(bar, done, total, what[-30:]))
     print(ev.to_markdown())
     written = ev.save(out, overwrite=args.force)
     print(f"wrote {', '.join(str(p) for p in written)}")
-    print(f"done in {time.perf_counter() - t0:.1f} s")
-    return 0
+    return _done(args)
 
 
 def _cmd_train_fgd(args) -> int:
-    from .database import MatchingDatabase
-    from .demo import open_default_database
     from .evaluate.fgd import FGDConfig, train_fgd_model
     from .evaluate.run import held_out
+    from .workspace import open_database
 
-    t0 = time.perf_counter()
     out = Path(args.out)
     if (out / "fgd.json").exists() and not args.force:
         raise GestureKitError(f"{out}: an FGD model exists here already; add --force to replace it")
     _parse_holdouts(args.holdout)
-    db = MatchingDatabase.load(args.db) if args.db else open_default_database()
+    db = open_database(args.db)
     from .outputs import check_output
 
     check_output(out, "fgd", overwrite=args.force, inputs=[db.path])  # before training
@@ -381,26 +335,19 @@ def _cmd_train_fgd(args) -> int:
     exclude = db.exclusion_mask(takes=takes, ranges=ranges) if (takes or ranges) else None
     config = FGDConfig(steps=args.steps, seed=args.seed, window=args.window, latent=args.latent)
     with _progress_bar(config.steps, "step", "training the FGD autoencoder") as bar:
-        def progress(step, steps, loss):
-            bar.n = step
-            bar.set_postfix_str(f"loss {loss:.4f}", refresh=False)
-            bar.refresh()
-
-        model = train_fgd_model(db, config=config, exclude=exclude, progress=progress)
+        model = train_fgd_model(db, config=config, exclude=exclude,
+                                progress=lambda step, steps, loss: _advance(bar, step, note=f"loss {loss:.4f}"))
     model.info["held_out"] = list(args.holdout or ())
     model.save(out, overwrite=args.force)
     print(f"FGD autoencoder: {model.info['clips_used']} clips used, {model.info['clips_held_out']} held out, "
           f"final reconstruction loss {model.info['final_loss']:.4f}")
-    print(f"saved to {out} in {time.perf_counter() - t0:.1f} s")
-    return 0
+    return _done(args, f"saved to {out}")
 
 
 def _cmd_stimuli(args) -> int:
-    from .database import MatchingDatabase
-    from .demo import open_default_database
     from .export.stimuli import make_stimuli
+    from .workspace import open_database
 
-    t0 = time.perf_counter()
     import re
 
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", args.resolution)
@@ -412,39 +359,95 @@ def _cmd_stimuli(args) -> int:
     if not math.isfinite(args.loudness):
         raise ConfigError(f"--loudness must be a finite number of LUFS (e.g. -23), got {args.loudness:g}")
     control = _control_from_arg(args.control) or ""
-    db = MatchingDatabase.load(args.db) if args.db else open_default_database()
-    bars: dict = {}
-
-    def progress(stage, done, total):
-        if stage not in bars:
-            for b in bars.values():
-                b.close()
-            bars[stage] = _progress_bar(total, "stimulus", stage)
-        bars[stage].n = done
-        bars[stage].refresh()
-
-    try:
+    db = open_database(args.db)
+    with _stage_bars() as bar:
         res = make_stimuli(
             db, out=args.out, audio=args.audio or (), holdouts=args.holdout or (), systems=args.systems,
             seed=args.seed, participants=args.participants, control=control,
             refiner=args.refiner, resolution=(int(m.group(1)), int(m.group(2))), loudness_lufs=args.loudness,
-            workers=args.workers, scheduler=args.scheduler, overwrite=args.force, progress=progress,
+            workers=args.workers, scheduler=args.scheduler, overwrite=args.force,
+            progress=lambda stage, done, total: _advance(bar(stage, total, "stimulus"), done),
         )
-    finally:
-        for b in bars.values():
-            b.close()
     print(f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "
           f"systems) in {res.folder / 'videos'}")
     print(f"manifest (the key; keep it from raters): {res.folder / 'manifest.csv'}")
     print(f"presentation order for {res.settings['participants']} participants: {res.folder / 'order.csv'}")
-    print(f"done in {time.perf_counter() - t0:.1f} s")
-    return 0
+    return _done(args)
 
 
 def _add_max_speech(parser) -> None:
     parser.add_argument("--max-speech-minutes", type=float, metavar="MIN",
                         help="refuse speech files longer than this (default 60, or the environment "
                              "variable GESTUREKIT_MAX_SPEECH_MINUTES)")
+
+
+#: Each command"s line in ``gesturekit --help`` and the paragraph of its own ``--help``.
+_ABOUT = {
+    "build-db": (
+        "build a matching database from a folder of takes (or the generated demo speaker)",
+        "Build a matching database from a folder of takes: BVH + speech (ZEGGS, BEAT, any BVH with a joint "
+        "map), joint-position files + speech, or npz files of the Habibie et al. 2021 layout.",
+    ),
+    "info": ("describe a matching database", None),
+    "synthesize": (
+        "gesture motion for speech: npz + BVH (+ MP4 with --video)",
+        "Synthesise gesture motion for one or more speech files (or folders of them) by motion matching. "
+        "Several files are searched together, scanning the database once per step.",
+    ),
+    "train-refiner": (
+        "train the resynchronisation cGAN (refiner) on a database",
+        "Train the paper's resynchronisation cGAN on a matching database built with --overlap-stride: k-NN "
+        "motion for every window of the overlapping cut, then WGAN-GP training with a progress bar, "
+        "checkpoints in the output folder (--resume goes on from the last one) and a loss log "
+        "(loss_log.csv). Uses the GPU when torch sees one.",
+    ),
+    "evaluate": (
+        "objective measures of every system on a held-out part of a database",
+        "Keep a take or a time range of one out of the database, synthesise its speech with each system, and "
+        "print and save (CSV + markdown) beat consistency, diversity, FGD, Hellinger distances of velocity "
+        "and acceleration histograms, jerk, acceleration, boundary jumps and control adherence.",
+    ),
+    "train-fgd": (
+        "train the motion autoencoder of the FGD measure on a database",
+        "Train the small convolutional autoencoder whose latent space the Frechet Gesture Distance is "
+        "measured in, on the poses of a matching database, leaving held-out parts out.",
+    ),
+    "stimuli": (
+        "user-study videos: every speech x system, opaque ids, manifest and presentation order",
+        "Render every speech with every system as an MP4 in one identical style (fixed camera, resolution, "
+        "frame rate, loudness-normalised speech), named by opaque ids, with a manifest CSV kept apart from "
+        "the videos and a balanced presentation order per participant (Latin squares).",
+    ),
+}
+
+
+def _command(sub, name: str, func) -> argparse.ArgumentParser:
+    """Add the subcommand ``name``, run by ``func(args)``, described by :data:`_ABOUT`."""
+    summary, description = _ABOUT[name]
+    parser = sub.add_parser(name, help=summary, description=description)
+    parser.set_defaults(func=func)
+    return parser
+
+
+def _add_search(parser, *, seed: str) -> None:
+    """The options of the search that ``synthesize`` and ``evaluate`` share; ``seed``: what the seed seeds."""
+    parser.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
+    parser.add_argument("--step", type=int, default=8, help="frames per search step, N (default 8)")
+    parser.add_argument("--seed", type=int, default=0, help=f"seed of {seed} (default 0)")
+    parser.add_argument("--init-pose", choices=["random", "rest"], default="random",
+                        help="initial pose: a random admissible database frame (the paper) or the rest pose")
+    parser.add_argument("--mask-rule", choices=["ends", "all"], default="ends",
+                        help="a control must hold at a window's first and last frame (ends: the paper) or every "
+                             "frame")
+    parser.add_argument("--blend", choices=["none", "offset"], default="none",
+                        help="none: the paper's hard joins; offset: a short fade at each join (ours)")
+
+
+def _add_exclusions(parser, *, out_of: str) -> None:
+    """``--exclude-take`` and ``--exclude-range``, keeping parts of the database out of ``out_of``."""
+    parser.add_argument("--exclude-take", action="append", metavar="TAKE", help=f"keep a database take out of {out_of}")
+    parser.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
+                        help=f"keep a stretch of a take (seconds) out of {out_of}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -455,12 +458,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    b = sub.add_parser(
-        "build-db",
-        help="build a matching database from a folder of takes (or the generated demo speaker)",
-        description="Build a matching database from a folder of takes: BVH + speech (ZEGGS, BEAT, any BVH with a "
-        "joint map), joint-position files + speech, or npz files of the Habibie et al. 2021 layout.",
-    )
+    b = _command(sub, "build-db", _cmd_build_db)
     b.add_argument("folder", nargs="?", help="folder of takes")
     b.add_argument("--out", help="database folder to write (default for --demo: the app's default path)")
     b.add_argument("--preset", choices=["zeggs", "beat"], help="joint naming preset of the BVH files")
@@ -477,37 +475,20 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--demo", action="store_true", help="build the generated demo speaker's database")
     b.add_argument("--minutes", type=float, default=20.0, help="minutes of demo speaker (with --demo)")
     b.add_argument("--seed", type=int, default=0, help="seed of the demo speaker (with --demo)")
-    b.set_defaults(func=_cmd_build_db)
 
-    i = sub.add_parser("info", help="describe a matching database")
+    i = _command(sub, "info", _cmd_info)
     i.add_argument("database", nargs="?", help="database folder (default: the demo database)")
     i.add_argument("--takes", action="store_true", help="also list the takes")
-    i.set_defaults(func=_cmd_info)
 
-    y = sub.add_parser(
-        "synthesize",
-        help="gesture motion for speech: npz + BVH (+ MP4 with --video)",
-        description="Synthesise gesture motion for one or more speech files (or folders of them) by motion "
-        "matching. Several files are searched together, scanning the database once per step.",
-    )
+    y = _command(sub, "synthesize", _cmd_synthesize)
     y.add_argument("speech", nargs="+", help="speech files (wav, flac, ogg, mp3; any rate) or folders of them")
     y.add_argument("--db", help="matching database folder (default: the demo database)")
     y.add_argument("--out", default="out", help="output folder (default: out)")
-    y.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
-    y.add_argument("--step", type=int, default=8, help="frames per search step, N (default 8)")
+    _add_search(y, seed="the random initial pose")
     y.add_argument("--topk", type=int, default=10, help="candidates per step to record (default 10)")
-    y.add_argument("--seed", type=int, default=0, help="seed of the random initial pose (default 0)")
-    y.add_argument("--init-pose", choices=["random", "rest"], default="random",
-                   help="initial pose: a random admissible database frame (the paper) or the rest pose")
     y.add_argument("--control", help='control track: "0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric" '
                    "(seconds) or a CSV/JSON file with start_s, end_s, constraint")
-    y.add_argument("--mask-rule", choices=["ends", "all"], default="ends",
-                   help="a control must hold at a window's first and last frame (ends: the paper) or every frame")
-    y.add_argument("--blend", choices=["none", "offset"], default="none",
-                   help="none: the paper's hard joins; offset: a short fade at each join (ours)")
-    y.add_argument("--exclude-take", action="append", metavar="TAKE", help="keep a database take out of the search")
-    y.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
-                   help="keep a stretch of a take (seconds) out of the search")
+    _add_exclusions(y, out_of="the search")
     y.add_argument("--refiner", metavar="PATH", help="refine the k-NN motion with a trained refiner folder "
                    "(from train-refiner), 'demo' for the one shipped with the demo database, or 'none'; "
                    "default: a refiner trained on the database if there is one (DB/refiner, or the shipped "
@@ -519,16 +500,8 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
     y.add_argument("--force", action="store_true", help="replace existing output files")
     _add_max_speech(y)
-    y.set_defaults(func=_cmd_synthesize)
 
-    r = sub.add_parser(
-        "train-refiner",
-        help="train the resynchronisation cGAN (refiner) on a database",
-        description="Train the paper's resynchronisation cGAN on a matching database built with "
-        "--overlap-stride: k-NN motion for every window of the overlapping cut, then WGAN-GP training with "
-        "a progress bar, checkpoints in the output folder (--resume goes on from the last one) and a loss "
-        "log (loss_log.csv). Uses the GPU when torch sees one.",
-    )
+    r = _command(sub, "train-refiner", _cmd_train_refiner)
     r.add_argument("--db", help="matching database folder (built with --overlap-stride)")
     r.add_argument("--demo", action="store_true", help="train on the default demo database (built if missing)")
     r.add_argument("--out", required=True, help="refiner folder to write")
@@ -539,22 +512,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
     r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
     r.add_argument("--seed", type=int, default=0, help="seed of the weights, batches and k draws (default 0)")
-    r.add_argument("--exclude-take", action="append", metavar="TAKE", help="keep a take out of training")
-    r.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
-                   help="keep a stretch of a take (seconds) out of training")
+    _add_exclusions(r, out_of="training")
     r.add_argument("--no-train-state", action="store_true",
                    help="leave out the optimiser state at the end (a smaller folder that cannot be resumed)")
     r.add_argument("--force", action="store_true", help="replace an existing refiner folder")
-    r.set_defaults(func=_cmd_train_refiner)
     from .evaluate.baselines import SYSTEMS
 
-    e = sub.add_parser(
-        "evaluate",
-        help="objective measures of every system on a held-out part of a database",
-        description="Keep a take or a time range of one out of the database, synthesise its speech with each "
-        "system, and print and save (CSV + markdown) beat consistency, diversity, FGD, Hellinger distances of "
-        "velocity and acceleration histograms, jerk, acceleration, boundary jumps and control adherence.",
-    )
+    e = _command(sub, "evaluate", _cmd_evaluate)
     e.add_argument("--db", help="matching database folder (default: the demo database)")
     e.add_argument("--holdout", required=True, metavar="TAKE[:START-END]",
                    help="held-out take, or time range of one in seconds (e.g. 067_Speech_2_x_1_0:50-68.8)")
@@ -565,22 +529,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--control", help="control track of the controlled runs (seconds of the held-out speech); "
                    "default: six equal stretches asking for left hand low/high, slow/fast, symmetric/asymmetric")
     e.add_argument("--beat-sigma", type=float, default=0.1, help="beat-consistency tolerance, seconds (default 0.1)")
-    e.add_argument("--k", type=int, default=0, help="k of the k-NN (default 0)")
-    e.add_argument("--step", type=int, default=8, help="frames per search step, N (default 8)")
-    e.add_argument("--seed", type=int, default=0, help="seed of the initial pose and the random baseline")
-    e.add_argument("--init-pose", choices=["random", "rest"], default="random")
-    e.add_argument("--mask-rule", choices=["ends", "all"], default="ends")
-    e.add_argument("--blend", choices=["none", "offset"], default="none")
+    _add_search(e, seed="the initial pose and the random baseline")
     e.add_argument("--out", default="evaluation", help="folder for the tables (default: evaluation)")
     e.add_argument("--force", action="store_true", help="replace existing tables")
-    e.set_defaults(func=_cmd_evaluate)
 
-    f = sub.add_parser(
-        "train-fgd",
-        help="train the motion autoencoder of the FGD measure on a database",
-        description="Train the small convolutional autoencoder whose latent space the Frechet Gesture Distance "
-        "is measured in, on the poses of a matching database, leaving held-out parts out.",
-    )
+    f = _command(sub, "train-fgd", _cmd_train_fgd)
     f.add_argument("--db", help="matching database folder (default: the demo database)")
     f.add_argument("--out", required=True, help="model folder to write")
     f.add_argument("--holdout", action="append", metavar="TAKE[:START-END]",
@@ -590,15 +543,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--latent", type=int, default=32, help="size of the latent feature (default 32)")
     f.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     f.add_argument("--force", action="store_true", help="replace an existing model")
-    f.set_defaults(func=_cmd_train_fgd)
 
-    s = sub.add_parser(
-        "stimuli",
-        help="user-study videos: every speech x system, opaque ids, manifest and presentation order",
-        description="Render every speech with every system as an MP4 in one identical style (fixed camera, "
-        "resolution, frame rate, loudness-normalised speech), named by opaque ids, with a manifest CSV kept "
-        "apart from the videos and a balanced presentation order per participant (Latin squares).",
-    )
+    s = _command(sub, "stimuli", _cmd_stimuli)
     s.add_argument("--db", help="matching database folder (default: the demo database)")
     s.add_argument("--audio", nargs="+", help="speech files or folders of them")
     s.add_argument("--holdout", action="append", metavar="TAKE[:START-END]",
@@ -616,8 +562,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask distributed cluster (tcp://host:8786)")
     s.add_argument("--force", action="store_true", help="replace an existing study")
     _add_max_speech(s)
-    s.set_defaults(func=_cmd_stimuli)
     return p
+
+
+def _done(args, what: str = "done") -> int:
+    """Say that the command is done and how long it took (since :func:`main` began it); exit status 0."""
+    print(f"{what} in {time.perf_counter() - args.started:.1f} s")
+    return 0
 
 
 def _format_warning(message, category, filename, lineno, line=None):
@@ -643,6 +594,7 @@ def _os_error_text(exc: OSError) -> str:
 def main(argv=None) -> int:
     """Run the command line; returns the exit status."""
     args = build_parser().parse_args(argv)
+    args.started = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("always", GestureKitWarning)
         old = warnings.formatwarning

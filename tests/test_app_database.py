@@ -16,7 +16,7 @@ from gesturekit.skeleton import bones
 from .conftest import chart_spec as _chart, plotly_array as _array, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
-DATABASE_PAGE = "pages/3_Database.py"
+DATABASE_PAGE = "views/3_Database.py"
 TIMEOUT = 60
 
 

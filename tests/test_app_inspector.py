@@ -17,7 +17,7 @@ from gesturekit.viz import session as gs
 from .conftest import chart_spec as chart, plotly_array as array, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
-SYNTH, INSPECT = "pages/1_Synthesize.py", "pages/2_Retrieval_inspector.py"
+SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
 TIMEOUT = 90
 TOPK = 5
 

@@ -28,8 +28,8 @@ from . import app_browser
 
 ROOT = Path(__file__).resolve().parents[1]
 HOME = ROOT / "app" / "Home.py"
-STUDY_PAGE = "pages/4_Study_stimuli.py"
-SYNTH_PAGE = "pages/1_Synthesize.py"
+STUDY_PAGE = "views/4_Study_stimuli.py"
+SYNTH_PAGE = "views/1_Synthesize.py"
 TIMEOUT = 90
 GENERIC = re.compile(r"^Something went wrong; the details are in the server log \(reference ([0-9a-f]{8})\)\.$")
 
@@ -324,11 +324,11 @@ def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(app_en
 def test_an_error_text_keeps_folders_outside_private(app_env, outside, monkeypatch, parts, kind):
     """Whatever the file, only its last part is shown when it lies outside the allowed folders."""
     monkeypatch.syspath_prepend(str(ROOT / "app"))
-    import common
+    import display
 
     path = outside.joinpath(*parts)
     exc = (PermissionError(13, "Permission denied", str(path)) if kind == "OSError"
            else InputFileError("cannot be read", path=path))
-    text = common.error_text(exc)
+    text = display.error_text(exc)
     assert text == f"{parts[-1]}: " + ("Permission denied" if kind == "OSError" else "cannot be read")
     assert str(outside) not in text

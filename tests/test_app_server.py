@@ -9,14 +9,16 @@ from pathlib import Path
 import pytest
 
 from gesturekit.paths import default_database_path
+from gesturekit.workspace import is_generated
 
 APP_DIR = Path(__file__).resolve().parents[1] / "app"
 
 
 @pytest.fixture
 def common(app_env, monkeypatch):
+    """The app's resources module (what the server's start prepares)."""
     monkeypatch.syspath_prepend(str(APP_DIR))
-    import common as module
+    import resources as module
 
     return module
 
@@ -50,7 +52,7 @@ def test_server_start_prepares_search_and_refiner_of_the_default_database(common
     search = common._warm_up(str(path), stamp)  # cached: the thread the start began
     assert search.name == "gesturekit-warm-up"
     refiner = Path(common.default_refiner(db))
-    assert common.is_generated(db) and (refiner / "config.json").is_file()
+    assert is_generated(db) and (refiner / "config.json").is_file()
     warm_refiner = common._warm_refiner(str(refiner), (refiner / "config.json").stat().st_mtime_ns)
     assert warm_refiner.name == "gesturekit-warm-refiner"
     for thread in (search, warm_refiner):

@@ -9,7 +9,7 @@ from streamlit.testing.v1 import AppTest
 from gesturekit.datasets.synthetic import generate_demo_take
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
-PAGE = "pages/4_Study_stimuli.py"
+PAGE = "views/4_Study_stimuli.py"
 TIMEOUT = 120
 
 

@@ -21,7 +21,7 @@ from gesturekit.viz.figures import WRIST_ROWS
 from .conftest import chart_spec as chart, plotly_array as array, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
-PAGE = "pages/1_Synthesize.py"
+PAGE = "views/1_Synthesize.py"
 TIMEOUT = 90
 EDITOR = "synth.segments_editor"
 
@@ -247,7 +247,7 @@ def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
     assert c.control == "0-2:both_hands=low"
     assert result(at).n_frames == 8 * 15  # the 8 s example
 
-    at.switch_page("pages/3_Database.py").run()
+    at.switch_page("views/3_Database.py").run()
     at.switch_page(PAGE).run()
     assert not at.exception
     assert at.number_input(key="_w.synth.k").value == 2 and at.selectbox(key="_w.synth.blend").value == "offset"

@@ -1,7 +1,10 @@
 """Step through the search: each step's candidates, their distances and clips; pin a choice; compare k."""
 import streamlit as st
 
-import common
+import display
+import nav
+import sidebar
+import state
 from gesturekit.motion import AUDIO_SR
 from gesturekit.viz import session as gs
 from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
@@ -38,7 +41,7 @@ COMPARE_COLUMNS = {
 def _rerun_with(db, record, config) -> None:
     """Synthesise again with new pins (everything else as before) and redraw."""
     result = record["result"]
-    common.run_synthesis(db, result.audio, config=config, source=result.source, refiner=record["refiner"])
+    state.run_synthesis(db, result.audio, config=config, source=result.source, refiner=record["refiner"])
     st.rerun()
 
 
@@ -52,7 +55,7 @@ def pick_step(db, result) -> int:
             height=240, column_config=STEPS_COLUMNS)
     rows = list(event.selection.rows) if event is not None else []
     selected = int(rows[0]) if rows and rows[0] < len(table) else None
-    key = common.persistent_key(STEP, 0)
+    key = state.persistent_key(STEP, 0)
     if selected is not None and selected != ss.get(_LAST_ROW):
         ss[key] = selected
     ss[_LAST_ROW] = selected
@@ -89,7 +92,7 @@ def step_view(db, record, step: int) -> None:
         others = table[~table["chosen"]]
         shown = 0
         if len(others):
-            key = common.persistent_key("inspect.n_views", 4)
+            key = state.persistent_key("inspect.n_views", 4)
             ss[key] = min(int(ss[key]), len(others))
             shown = ss["inspect.n_views"] = st.slider("Alternatives shown in 3D", min_value=0,
                                                       max_value=len(others), key=key)
@@ -99,12 +102,12 @@ def step_view(db, record, step: int) -> None:
             motions.append(gs.candidate_motion(db, r.clip, r.start, b - a))
             labels.append(f"#{r.position}")
         # the step's input speech is the clock: it is what every candidate was matched against
-        common.show_skeletons(motions, labels=labels, height=360, key="inspect.views",
+        display.show_skeletons(motions, labels=labels, height=360, key="inspect.views",
                               audio=gs.step_speech(result, step))
 
     st.markdown("**Listen and choose**")
     positions = [int(p) for p in table["position"]]
-    key = common.persistent_key(CANDIDATE, positions[0])
+    key = state.persistent_key(CANDIDATE, positions[0])
     if ss[key] not in positions:
         ss[key] = positions[0]
     row_of = {int(r.position): r for r in table.itertuples()}
@@ -166,7 +169,7 @@ def compare_view(db, record) -> None:
     result = record["result"]
     st.subheader("Compare k")
     st.caption("The same speech, controls, pins and seed, taking the k-th best candidate at every step.")
-    ks = ss["inspect.ks"] = st.multiselect("k", list(range(10)), key=common.persistent_key("inspect.ks", [0, 1, 2]))
+    ks = ss["inspect.ks"] = st.multiselect("k", list(range(10)), key=state.persistent_key("inspect.ks", [0, 1, 2]))
     if st.button("Compare", key="inspect.compare_go", disabled=not ks):
         with st.spinner("Searching…"):
             results = gs.compare_k(result.audio, db=db, config=result.config, ks=sorted(ks), refiner=record["refiner"],
@@ -177,7 +180,7 @@ def compare_view(db, record) -> None:
         return
     motions = [r.refined_motion if r.refined_motion is not None else r.motion for r in done["results"]]
     labels = [f"k = {k}" for k in done["ks"]]
-    common.show_skeletons(motions, labels=labels, height=420, key="inspect.compare_views", audio=result.audio)
+    display.show_skeletons(motions, labels=labels, height=420, key="inspect.compare_views", audio=result.audio)
     table = gs.comparison_table(done["results"], db.thresholds)
     table["control_met"] = (100 * table["control_met"]).round()  # whole percent, one format for every row
     st.dataframe(table, hide_index=True, key="inspect.compare_table", column_config=COMPARE_COLUMNS)
@@ -186,13 +189,12 @@ def compare_view(db, record) -> None:
 
 
 def main() -> None:
-    common.page_setup("Retrieval inspector")
     st.title("Retrieval inspector")
-    db = common.sidebar_database()
-    record = common.current_synthesis(db)
+    db = sidebar.sidebar_database()
+    record = state.current_synthesis(db)
     if record is None:
         st.info("Run a synthesis on the Synthesize page first: this page shows how its search chose every step.")
-        st.page_link("pages/1_Synthesize.py", label="Synthesize", icon="🎙️")
+        nav.link("Synthesize")
         return
     result = record["result"]
     st.caption(f"**{result.source}** · {result.search.n_steps} steps of {result.config.step} frames · "
@@ -203,4 +205,4 @@ def main() -> None:
     compare_view(db, record)
 
 
-common.run_page(main)
+main()

@@ -3,7 +3,9 @@ import numpy as np
 import pandas as pd
 import streamlit as st
 
-import common
+import display
+import sidebar
+import state
 from gesturekit.control import ATTRIBUTE_UNITS
 from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.viz.figures import attribute_histograms, waveform_figure
@@ -39,7 +41,7 @@ def pick_clip(db) -> int:
 
     st.subheader("Clips")
     takes = ["all takes"] + db.take_names
-    fkey = common.persistent_key("db.take_filter", "all takes")
+    fkey = state.persistent_key("db.take_filter", "all takes")
     if ss[fkey] not in takes:  # a take of another database
         ss[fkey] = "all takes"
     which = ss["db.take_filter"] = st.selectbox("Clips of", takes, key=fkey)
@@ -53,7 +55,7 @@ def pick_clip(db) -> int:
     )
     rows = list(event.selection.rows) if event is not None else []
     selected = int(table.iloc[rows[0]]["clip"]) if rows and rows[0] < len(table) else None
-    key = common.persistent_key(CLIP, 0)
+    key = state.persistent_key(CLIP, 0)
     if selected is not None and selected != ss.get(_LAST_ROW):
         ss[key] = selected  # a new row selection wins over the number input
     ss[_LAST_ROW] = selected
@@ -86,7 +88,7 @@ def viewer(db, clip: int) -> None:
     audio = db.segment_audio(clip, 0, db.clip_frames) if db.audio is not None else None
     left, right = st.columns([3, 2])
     with left:
-        common.show_skeletons(motion, title=f"clip {clip}: {row['take']} at {row['start_s']:.2f} s", key="db.skeleton",
+        display.show_skeletons(motion, title=f"clip {clip}: {row['take']} at {row['start_s']:.2f} s", key="db.skeleton",
                               audio=audio)
     with right:
         if audio is not None:
@@ -103,9 +105,8 @@ def viewer(db, clip: int) -> None:
 
 
 def main() -> None:
-    common.page_setup("Database")
     st.title("Database")
-    db = common.sidebar_database()
+    db = sidebar.sidebar_database()
     summary(db)
     clip = pick_clip(db)
     viewer(db, clip)
@@ -116,4 +117,4 @@ def main() -> None:
     st.plotly_chart(attribute_histograms(db), key="db.histograms")
 
 
-common.run_page(main)
+main()

@@ -6,7 +6,10 @@ import numpy as np
 import pandas as pd
 import streamlit as st
 
-import common
+import display
+import resources
+import sidebar
+import state
 from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
@@ -18,7 +21,7 @@ from gesturekit.viz.figures import waveform_figure, wrist_figure
 
 SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}
 SEGMENTS = "synth.segments"  # the control table as the user last left it (DataFrame)
-EDITOR = "synth.segments_editor"  # the data editor's widget key (see common.remount_key)
+EDITOR = "synth.segments_editor"  # the data editor's widget key (see state.remount_key)
 _BASE = "_synth.segments_base"  # the table the editor shows before the user's edits
 _LAST_BOX = "_synth.last_box"  # the box selection already turned into a segment
 _FAILED = "_synth.failed_upload"  # (token, message) of an upload that could not be read
@@ -34,12 +37,12 @@ _MASK_LABELS = {"ends": "first and last frame of a window (paper)", "all": "ever
 def _set_speech(token, name: str, audio: np.ndarray, summary: str, notes=()) -> None:
     ss = st.session_state
     ss[SPEECH] = {"token": token, "name": name, "audio": audio, "summary": summary, "notes": list(notes)}
-    ss[common.PINS_KEY] = {}  # pins were chosen for other speech
+    ss[state.PINS_KEY] = {}  # pins were chosen for other speech
     ss.pop(_LAST_BOX, None)
 
 
 def _use_example(label: str) -> None:
-    audio = common.example_audio(label)
+    audio = resources.example_audio(label)
     _set_speech(("example", label), label, audio, f"generated, {len(audio) / AUDIO_SR:.2f} s")
 
 
@@ -47,7 +50,7 @@ def speech_input() -> dict | None:
     """Upload or example; returns the user's speech, or None when there is none yet."""
     ss = st.session_state
     mode = ss["synth.mode"] = st.radio("Speech", [UPLOAD, EXAMPLE], horizontal=True, label_visibility="collapsed",
-                                       key=common.persistent_key("synth.mode", UPLOAD))
+                                       key=state.persistent_key("synth.mode", UPLOAD))
     if mode == UPLOAD:
         up = st.file_uploader("Speech file: wav, flac, ogg or mp3, any sample rate and channels",
                               type=["wav", "flac", "ogg", "mp3"], key="synth.upload")
@@ -63,7 +66,7 @@ def speech_input() -> dict | None:
                         audio, info = gs.read_speech_upload(up.name, up.getvalue())
                 except (GestureKitError, OSError) as exc:
                     # remembered, so the same upload is not decoded again on every rerun
-                    ss[_FAILED] = (token, common.error_text(exc))
+                    ss[_FAILED] = (token, display.error_text(exc))
                     st.error(ss[_FAILED][1], icon="⚠️")
                     return _kept_speech()
                 _set_speech(token, up.name, audio, info.summary(), notes)
@@ -75,7 +78,7 @@ def speech_input() -> dict | None:
             st.caption("Until you upload a file, the page works on example speech.")
     else:
         labels = list(gs.SPEECH_EXAMPLES)
-        key = common.persistent_key("synth.example", labels[0])
+        key = state.persistent_key("synth.example", labels[0])
         label = ss["synth.example"] = st.selectbox("Example", labels, key=key,
                                                    help="new speech of the generated demo speaker, not in the database")
         if ss.get(SPEECH, {}).get("token") != ("example", label):
@@ -113,13 +116,13 @@ def controls(speech: dict) -> ControlTrack | None:
     """Waveform with bands, box-select to add, the segment table; returns the track (None if invalid)."""
     ss = st.session_state
     duration = len(speech["audio"]) / AUDIO_SR
-    new_key = common.persistent_key("synth.new_constraint", "both_hands=high")
+    new_key = state.persistent_key("synth.new_constraint", "both_hands=high")
     new_constraint = ss["synth.new_constraint"] = st.selectbox(
         "Constraint for a box-selected range", gs.CONSTRAINT_CHOICES, key=new_key,
         help="Drag across the waveform to select a time range: a segment with this constraint is added "
              "(replacing what it overlaps). Edit, add or delete rows in the table below.")
     chart_slot = st.container()  # drawn after the table, so the bands show the latest edits
-    key = common.remount_key(EDITOR)
+    key = state.remount_key(EDITOR)
     table = st.data_editor(
         _editor_base(key), key=key, num_rows="dynamic", hide_index=True, width="stretch",
         column_config={
@@ -163,7 +166,7 @@ def controls(speech: dict) -> ControlTrack | None:
 def settings(db) -> dict:
     """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can run."""
     ss = st.session_state
-    pk = common.persistent_key
+    pk = state.persistent_key
     step_key = pk("synth.step", 8)
     if ss[step_key] > db.clip_frames:  # a database of shorter clips: say so, never change it unseen
         st.warning(f"N was {ss[step_key]}, more than this database's clips hold ({db.clip_frames} frames): "
@@ -191,7 +194,7 @@ def settings(db) -> dict:
         ss[f"synth.{name}"] = value
     refiner, ok = None, True
     if gs.refiner_hook() is not None:
-        default = common.default_refiner(db)
+        default = resources.default_refiner(db)
         on = ss["synth.refine"] = c[3].toggle("Refiner (cGAN)", key=pk("synth.refine", bool(default)),
                                               help="smooth and re-time the k-NN motion with a trained refiner")
         folder = ss["synth.refiner_path"] = c[3].text_input(
@@ -204,9 +207,9 @@ def settings(db) -> dict:
             "the refiner supplies the faster content (joins, timing); 0: the refiner's output as it is (the paper)")
         if on:
             ok = False  # until the refiner is checked: a run must not silently go without it
-            with common.user_errors():
+            with display.user_errors():
                 # config and layout only here (no torch); the weights load when Run is pressed
-                refiner = common.check_refiner(folder, db)
+                refiner = resources.check_refiner(folder, db)
                 ok = True
     else:
         on = False
@@ -303,7 +306,7 @@ def show_result(db, record) -> None:
     with left:
         title = f"{result.source}: {result.n_frames} frames, {result.n_frames / result.motion.fps:.1f} s"
         # sent before the wrist plot is made, so the browser draws the 3D view meanwhile
-        common.show_skeletons(motions, labels=labels, title=title, key="synth.skeleton", audio=result.audio)
+        display.show_skeletons(motions, labels=labels, title=title, key="synth.skeleton", audio=result.audio)
     with right:
         st.markdown("**Speech**")
         st.caption("▶ Play under the 3D view plays the speech, and the view follows it frame by frame; "
@@ -333,17 +336,16 @@ def show_result(db, record) -> None:
 
 
 def main() -> None:
-    common.page_setup("Synthesize")
     st.title("Synthesize")
-    db = common.sidebar_database()
-    common.warm_up(db)
+    db = sidebar.sidebar_database()
+    resources.warm_up(db)
     ss = st.session_state
 
     st.subheader("1 · Speech")
     speech = speech_input()
     if speech is None:
         st.info("Upload a speech file, or choose an example.")
-        record = common.current_synthesis(db)
+        record = state.current_synthesis(db)
         if record is not None:  # the last result stays in view
             show_result(db, record)
         return
@@ -357,28 +359,28 @@ def main() -> None:
 
     st.subheader("3 · Search")
     chosen = settings(db)
-    record = common.current_synthesis(db)
+    record = state.current_synthesis(db)
     if record is None:
-        ss[common.PINS_KEY] = {}  # pins name clips of the database of the last result
-    pins = dict(ss.get(common.PINS_KEY, {}))
+        ss[state.PINS_KEY] = {}  # pins name clips of the database of the last result
+    pins = dict(ss.get(state.PINS_KEY, {}))
     if pins:
         c = st.columns([4, 1])
         c[0].caption("Pinned choices from the Retrieval inspector (step: clip, start): "
                      + ", ".join(f"{i}: {m}, {s}" for i, (m, s) in sorted(pins.items())))
         if c[1].button("Clear pins", key="synth.clear_pins"):
-            ss[common.PINS_KEY] = {}
+            ss[state.PINS_KEY] = {}
             st.rerun()
     if st.button("Run", type="primary", key="synth.go", disabled=track is None or not chosen["ok"]):
-        with common.user_errors():  # an impossible setting is reported; the last result stays below
+        with display.user_errors():  # an impossible setting is reported; the last result stays below
             config = SynthesisConfig(**chosen["options"], control=track.to_text(), pins=pins)
-            refiner = None if chosen["refiner"] is None else common.load_refiner(chosen["refiner"], db)
-            common.run_synthesis(db, speech["audio"], config=config, source=speech["name"], refiner=refiner)
+            refiner = None if chosen["refiner"] is None else resources.load_refiner(chosen["refiner"], db)
+            state.run_synthesis(db, speech["audio"], config=config, source=speech["name"], refiner=refiner)
 
-    record = common.current_synthesis(db)
+    record = state.current_synthesis(db)
     if record is not None:
         show_result(db, record)
-    elif ss.get(common.SYNTHESIS_KEY) is not None:
+    elif ss.get(state.SYNTHESIS_KEY) is not None:
         st.info("The last result was made with another database; run again.")
 
 
-common.run_page(main)
+main()

@@ -5,12 +5,15 @@ from pathlib import Path
 
 import streamlit as st
 
-import common
+import display
+import sidebar
+import state
 from gesturekit.datasets.takes import AUDIO_EXTENSIONS
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SYSTEM_DESCRIPTIONS, SYSTEMS
 from gesturekit.export.stimuli import make_stimuli, plan_stimuli
 from gesturekit.paths import home
+from gesturekit.workspace import speech_files
 
 RESULT = "study.result"  # the user's last study: folder, manifest, order (per session)
 RESOLUTIONS = ("320x240", "640x480", "1280x720")
@@ -21,15 +24,13 @@ def _speech_files(folder: str) -> list[Path]:
     if not folder.strip():
         return []
     p = Path(folder.strip()).expanduser()
-    common.allowed(p, what="folder of speech files")  # before looking: no listing of other folders
-    if not p.is_dir():
-        raise ConfigError("no such folder", path=p)
-    return sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
+    display.allowed(p, what="folder of speech files")  # before looking: no listing of other folders
+    return speech_files(p)
 
 
 def settings(db) -> dict:
     """The study's widgets; returns the options of make_stimuli and the speech names."""
-    ss, pk = st.session_state, common.persistent_key
+    ss, pk = st.session_state, state.persistent_key
     left, right = st.columns(2)
     with left:
         st.markdown("**Speech**")
@@ -94,9 +95,9 @@ def conditions(opts) -> bool:
 def run(db, opts) -> None:
     if not opts["out"]:
         raise ConfigError("type the study folder to write")
-    common.allowed(opts["out"], what="study folder to write", write=True)
+    display.allowed(opts["out"], what="study folder to write", write=True)
     if opts["refiner"] not in (None, "demo"):  # "demo": the shipped refiner, by name
-        common.allowed(opts["refiner"], what="refiner folder")
+        display.allowed(opts["refiner"], what="refiner folder")
     bar = st.progress(0.0, text="synthesising…")
 
     def progress(stage, done, total):
@@ -141,17 +142,16 @@ def show_result() -> None:
 
 
 def main() -> None:
-    common.page_setup("Study stimuli")
     st.title("Study stimuli")
     st.caption("Every speech rendered with every system in one look (fixed camera, same size and frame rate, "
                "speech at one loudness), named by opaque ids, with a balanced presentation order per participant.")
-    db = common.sidebar_database()
+    db = sidebar.sidebar_database()
     opts = settings(db)
     ready = conditions(opts)
     if ready and st.button("Make the stimuli", type="primary", key="study.go"):
-        with common.user_errors():
+        with display.user_errors():
             run(db, opts)
     show_result()
 
 
-common.run_page(main)
+main()

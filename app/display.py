@@ -1,0 +1,136 @@
+"""Showing things on a page: user errors as messages (never tracebacks), warnings, motions in 3D.
+
+:func:`run_page` (which ``Home.py`` wraps around every page) shows every
+:class:`~gesturekit.errors.GestureKitError` (and ``OSError`` from a file the
+user named) as ``st.error`` with its message, never as a traceback; anything
+else as a generic message with a reference into the server log, where its
+traceback goes (logger ``gesturekit.app``).
+
+Folders. Every path a user types is checked with :func:`allowed` before it
+is read or written: only folders inside :func:`gesturekit.paths.allowed_roots`
+(gesturekit's home, ``./db``, ``$GESTUREKIT_APP_ROOTS``) may be used, so a
+browser user of a served app cannot open, list or write the server's other
+folders. A file named in a message that lies outside them is shown by its
+name only.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import secrets
+from pathlib import Path
+from typing import Callable, Iterator
+
+import streamlit as st
+
+from gesturekit.errors import GestureKitError, collect_warnings
+from gesturekit.paths import PathNotAllowedError, check_allowed, is_allowed
+
+__all__ = ["LOG", "allowed", "error_text", "run_page", "show_skeletons", "user_errors", "warnings_shown"]
+
+#: The server log of the app: unexpected errors (with their tracebacks) and failed background work.
+LOG = logging.getLogger("gesturekit.app")
+
+
+@contextlib.contextmanager
+def user_errors() -> Iterator[None]:
+    """Show errors a user can cause as ``st.error`` in the current container, not as a traceback.
+
+    Catches :class:`GestureKitError` (bad paths, bad folders, existing
+    outputs, invalid settings) and ``OSError`` (a file that cannot be read or
+    written). A file the message is about that lies outside the allowed
+    folders (a temporary copy of an upload, a file a library opened) is named
+    by its name only, so that the server's layout stays private; a refused
+    path is shown as the user typed it. Anything else is a bug and propagates.
+    Code after the failing statement inside the block does not run; code
+    after the block does.
+    """
+    try:
+        yield
+    except (GestureKitError, OSError) as exc:
+        st.error(error_text(exc), icon="⚠️")
+
+
+def error_text(exc: GestureKitError | OSError) -> str:
+    """The message of a user error as the page shows it (see :func:`user_errors`)."""
+    if isinstance(exc, PathNotAllowedError) or (isinstance(exc, GestureKitError) and exc.path is None):
+        return str(exc)
+    if isinstance(exc, GestureKitError):
+        return f"{_shown_path(exc.path)}: {exc.problem}"
+    where = f"{_shown_path(exc.filename)}: " if exc.filename else ""
+    # strerror alone: str(exc) repeats the file names, in full
+    return f"{where}{exc.strerror or type(exc).__name__}"
+
+
+def _shown_path(filename) -> str:
+    """A file name for the page: in full inside the allowed folders, else its last part only."""
+    try:
+        name = os.fsdecode(filename)
+        return name if is_allowed(name) else Path(name).name
+    except (TypeError, ValueError, OSError):  # a descriptor number, an undecodable name
+        return "a file"
+
+
+def run_page(body: Callable[[], None]) -> None:
+    """Run a page's body, showing user errors as ``st.error`` (see :func:`user_errors`).
+
+    Any other exception is a bug: the page says so with a reference, and the
+    traceback goes to the server log (:data:`LOG`) under that reference, so that
+    no traceback and no server path reach the browser. Streamlit's own
+    ``st.stop`` and ``st.rerun`` pass through (they are not ``Exception`` s).
+    """
+    try:
+        with user_errors():
+            body()
+    except Exception:  # noqa: BLE001  (the browser gets a reference; the log gets the rest)
+        reference = secrets.token_hex(4)
+        LOG.exception("unexpected error in a page (reference %s)", reference)
+        st.error(f"Something went wrong; the details are in the server log (reference {reference}).", icon="⚠️")
+
+
+def allowed(path: str | os.PathLike, *, what: str, write: bool = False) -> Path:
+    """Refuse a typed path outside the folders the app may use (:func:`gesturekit.paths.check_allowed`).
+
+    Returns the path resolved. The message is the same whether or not the path
+    exists, so it tells a user nothing about the server's folders.
+
+    Raises
+    ------
+    ConfigError
+        Empty.
+    PathNotAllowedError
+        Outside :func:`gesturekit.paths.allowed_roots` (the message lists them).
+    """
+    return check_allowed(path, what=what, write=write)
+
+
+@contextlib.contextmanager
+def warnings_shown() -> Iterator[list[str]]:
+    """Show the :class:`GestureKitWarning` s raised inside the block as ``st.warning``.
+
+    Yields the list their messages are collected in (complete when the block ends).
+    """
+    with collect_warnings() as messages:  # this session's thread only: sessions run side by side
+        try:
+            yield messages
+        finally:
+            for message in messages:
+                st.warning(message)
+
+
+def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, height: int = 520,
+                   audio=None) -> None:
+    """Show motions side by side in gesturekit's 3D viewer (:func:`gesturekit.viz.viewer.skeleton_viewer`).
+
+    The viewer draws on a 2D canvas: a browser without a GPU shows it at once, where
+    a WebGL scene would take it seconds to set up. ``height``: of the drawing, in
+    pixels (its controls come below); ``key`` names the viewer (pages and tests find it by it).
+    ``audio``: the speech of the motions (mono float32 at 16 kHz, from their first frame);
+    the viewer's play button then plays it and the shown frame follows it, so no separate
+    player is needed.
+    """
+    from gesturekit.viz.viewer import CONTROLS_HEIGHT, skeleton_viewer
+
+    page = skeleton_viewer(motions, labels=labels, title=title, height=height, key=key, audio=audio)
+    st.iframe(page, height=int(height) + CONTROLS_HEIGHT)

@@ -1,0 +1,217 @@
+"""A user's files as the command line and the app see them: databases and speech.
+
+One place for what both front ends do with the folders a user names:
+
+- :func:`open_database`: the database folder given, or the demo database at the
+  default path (built first if it is missing);
+- :func:`database_folders`: the databases a user can pick, the default first;
+- :func:`is_generated`: whether a database holds the generated demo speaker;
+- :func:`build_database`: read a folder of takes and save its database;
+- :func:`speech_files` and :func:`expand_speech`: the speech files of a folder,
+  and a list of files and folders as the speech files it names.
+
+Nothing here draws or prints; progress is reported through callbacks.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable, Iterable
+
+from .database import BuildConfig, MatchingDatabase
+from .datasets.takes import AUDIO_EXTENSIONS, count_takes, discover_takes, iter_takes
+from .errors import InputFileError
+from .paths import default_database_path, home, is_dir
+
+__all__ = [
+    "DEMO_DATABASE_LABEL",
+    "build_database",
+    "database_folders",
+    "expand_speech",
+    "is_generated",
+    "open_database",
+    "speech_files",
+]
+
+#: How :func:`database_folders` names the default (demo) database.
+DEMO_DATABASE_LABEL = "demo database (generated speaker)"
+_GENERATOR_MODULE = "gesturekit.datasets.synthetic"  # what a generated take names as its source
+
+
+def open_database(path: str | os.PathLike | None = None) -> MatchingDatabase:
+    """The database at ``path``, or the demo database at the default path when ``path`` is None or empty.
+
+    The demo database is built first when it is missing (see
+    :func:`gesturekit.demo.open_default_database`).
+
+    Raises
+    ------
+    DatabaseError
+        No database at ``path``, or one that cannot be read (the message names the folder).
+    """
+    if path is not None and str(path):
+        return MatchingDatabase.load(path)
+    from .demo import open_default_database
+
+    return open_default_database()
+
+
+def is_generated(db: MatchingDatabase) -> bool:
+    """Whether ``db`` holds the generated demo speaker (or takes of it) rather than recorded motion."""
+    if str(db.meta.get("build", {}).get("source", "")).startswith("demo"):
+        return True
+    return any(
+        str(t.get("sources", {}).get("generator", "")).startswith(_GENERATOR_MODULE)
+        for t in db.meta.get("takes", [])
+    )
+
+
+def database_folders(*, cwd: str | os.PathLike | None = None) -> dict[str, str]:
+    """Databases a user can pick: resolved folder (a string) -> label, the default demo database first.
+
+    The others are the folders holding a ``database.json`` directly inside
+    ``<cwd>/db`` and gesturekit's home ``db`` folder (see
+    :func:`gesturekit.paths.home`), sorted by name within each, each labelled
+    ``"<name>  (<where>)"``. The default is listed whether or not it is built yet.
+
+    Parameters
+    ----------
+    cwd : path, optional
+        The working directory whose ``db`` folder is searched (default: the current one).
+    """
+    out = {str(default_database_path().expanduser().resolve()): DEMO_DATABASE_LABEL}
+    for base in (Path.cwd() if cwd is None else Path(cwd)) / "db", home() / "db":
+        try:
+            found = sorted(p for p in base.iterdir() if (p / "database.json").is_file())
+        except OSError:  # no such folder, or one that cannot be listed: nothing to offer there
+            continue
+        for p in found:
+            out.setdefault(str(p.resolve()), f"{p.name}  ({base})")
+    return out
+
+
+def build_database(
+    folder: str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    config: BuildConfig | None = None,
+    joint_map=None,
+    kind: str = "auto",
+    fps: float | None = None,
+    units: str = "auto",
+    overwrite: bool = False,
+    locked: bool = False,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> MatchingDatabase:
+    """Read the takes of ``folder`` and save their matching database at ``out``.
+
+    What ``gesturekit build-db FOLDER`` and the app's "build from a folder" do.
+    The joint map is read before any take, so a bad one fails before the long part.
+
+    Parameters
+    ----------
+    folder : path
+        Folder of takes (see :func:`gesturekit.datasets.takes.discover_takes`).
+    out : path
+        Database folder to write.
+    config : BuildConfig, optional
+        How to build; its ``source`` (the folder, resolved) and ``joint_map`` are filled in here.
+    joint_map : str, path or None
+        ``"zeggs"``, ``"beat"``, the path of a JSON joint map, or None (BVH files: ``zeggs``).
+    kind : {"auto", "bvh", "positions", "habibie2021"}
+        The kind of takes (see :func:`~gesturekit.datasets.takes.discover_takes`).
+    fps : float, optional
+        Frame rate of joint-position files (they do not carry one), frames per second.
+    units : {"auto", "cm", "m"}
+        Units of the motion files.
+    overwrite : bool
+        Replace an earlier database at ``out`` (only a database gesturekit built).
+    locked : bool
+        The caller holds ``out``'s output lock (:func:`gesturekit.outputs.output_lock`).
+    progress : callable(done, total, take_name), optional
+        Called after each take is read; ``total`` is the number of takes.
+
+    Returns
+    -------
+    MatchingDatabase
+        The database, saved.
+
+    Raises
+    ------
+    GestureKitError
+        A missing or empty folder, an unreadable joint map or take, an output
+        that may not be written; the message names the path.
+    """
+    folder = Path(folder).expanduser()
+    sources = discover_takes(folder, kind=kind)
+    jmap = _read_joint_map(joint_map, {s.kind for s in sources})
+    total = count_takes(sources)
+    config = replace(config or BuildConfig(), source=str(folder.resolve()),
+                     joint_map=None if joint_map is None else str(joint_map))
+
+    def on_take(done: int, name: str) -> None:
+        if progress is not None:
+            progress(done, total, name)
+
+    takes = iter_takes(sources, joint_map=jmap, fps_in=fps, units=units)
+    db = MatchingDatabase.build(takes, config=config, progress=on_take)
+    db.save(Path(out).expanduser(), overwrite=overwrite, inputs=[folder], locked=locked)
+    return db
+
+
+def _read_joint_map(joint_map, kinds: set[str]):
+    """``joint_map`` read (and checked) for the kinds of takes found, so a bad one fails before any take
+    is read; as given when no take needs it."""
+    if joint_map is None:
+        return None
+    if "bvh" in kinds:
+        from .datasets.presets import load_joint_map
+
+        return load_joint_map(joint_map)
+    if "positions" in kinds:
+        from .datasets.positions import load_position_joint_map
+
+        return load_position_joint_map(joint_map)
+    return joint_map
+
+
+def speech_files(folder: str | os.PathLike) -> list[Path]:
+    """The speech files directly inside ``folder`` (not recursive), sorted by name.
+
+    A speech file is a regular file whose suffix, in any case, is one of
+    :data:`gesturekit.datasets.takes.AUDIO_EXTENSIONS`. The list may be empty.
+
+    Raises
+    ------
+    InputFileError
+        ``folder`` is not a folder.
+    """
+    folder = Path(folder)
+    if not is_dir(folder):
+        raise InputFileError("no such folder", path=folder)
+    return sorted(p for p in folder.iterdir() if p.suffix.lower() in AUDIO_EXTENSIONS and p.is_file())
+
+
+def expand_speech(items: Iterable[str | os.PathLike]) -> list[Path]:
+    """The speech files a list of files and folders names, in its order.
+
+    A folder stands for its speech files (:func:`speech_files`); anything else
+    is taken as a file (read, and checked, later).
+
+    Raises
+    ------
+    InputFileError
+        A folder without speech files (the message names it and the suffixes looked for).
+    """
+    files: list[Path] = []
+    for item in items:
+        path = Path(item)
+        if not is_dir(path):
+            files.append(path)
+            continue
+        found = speech_files(path)
+        if not found:
+            raise InputFileError(f"no speech files ({'/'.join(AUDIO_EXTENSIONS)}) in this folder", path=path)
+        files += found
+    return files
