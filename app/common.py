@@ -649,7 +649,7 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
     source : str
         Name of the speech, stored in the result (download names, metadata).
     refiner : optional
-        A refiner, passed on by :func:`gesturekit.viz.session.with_refiner`.
+        A refiner, passed on by :func:`gesturekit.interactive.with_refiner`.
 
     Raises
     ------
@@ -659,7 +659,7 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
     from dataclasses import replace
 
     from gesturekit.synthesize import synthesize
-    from gesturekit.viz.session import with_refiner
+    from gesturekit.interactive import with_refiner
 
     ss = st.session_state
     config, extra = with_refiner(config, refiner)
@@ -702,9 +702,9 @@ def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, 
 
 @st.cache_resource(show_spinner="Generating the example speech…", max_entries=4)
 def example_audio(label: str):
-    """Example speech (a key of :data:`gesturekit.viz.session.SPEECH_EXAMPLES`): mono float32 at
+    """Example speech (a key of :data:`gesturekit.interactive.SPEECH_EXAMPLES`): mono float32 at
     16 kHz, read-only, made once per server and shared by every session."""
-    from gesturekit.viz.session import example_speech
+    from gesturekit.interactive import example_speech
 
     audio = example_speech(label)
     audio.setflags(write=False)
@@ -725,7 +725,7 @@ def _first_use(noise) -> None:
     import soundfile as sf
 
     from gesturekit.motion import AUDIO_SR, N_JOINTS, Motion
-    from gesturekit.viz import session as gs
+    from gesturekit import interactive as gs
     from gesturekit.viz.figures import waveform_figure, wrist_figure
     from gesturekit.viz.viewer import skeleton_viewer
 

@@ -172,7 +172,7 @@ def _cmd_synthesize(args) -> int:
     from .database import MatchingDatabase
     from .datasets.audio import load_audio
     from .demo import open_default_database
-    from .export.files import safe_filename
+    from ._io import safe_filename
     from .outputs import check_output, output_lock, write_errors
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
@@ -398,7 +398,7 @@ def _cmd_train_fgd(args) -> int:
 def _cmd_stimuli(args) -> int:
     from .database import MatchingDatabase
     from .demo import open_default_database
-    from .export.stimuli import make_stimuli
+    from .study import make_stimuli
 
     t0 = time.perf_counter()
     import re

@@ -25,7 +25,7 @@ same rules hold everywhere:
 * **Crashes leave nothing behind for long.** Folders are written as
   ``.NAME.tmp-PID`` and swapped into place (:func:`write_folder`); the next
   writer removes the temporaries (``.NAME.tmp-PID``, ``.NAME.old-PID``, the
-  ``.NAME.PID-*.tmp`` files of :func:`gesturekit.export.files.atomic_write`)
+  ``.NAME.PID-*.tmp`` files of :func:`gesturekit._io.atomic_write`)
   of processes that are no longer running (:func:`clean_stale`).
 * **Write failures are messages.** An ``OSError`` while writing (disk full,
   permission denied) becomes an :class:`~gesturekit.errors.OutputError` naming

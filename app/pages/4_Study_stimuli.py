@@ -9,7 +9,7 @@ import common
 from gesturekit.datasets.takes import AUDIO_EXTENSIONS
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SYSTEM_DESCRIPTIONS, SYSTEMS
-from gesturekit.export.stimuli import make_stimuli, plan_stimuli
+from gesturekit.study import make_stimuli, plan_stimuli
 from gesturekit.paths import home
 
 RESULT = "study.result"  # the user's last study: folder, manifest, order (per session)

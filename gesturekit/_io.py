@@ -1,6 +1,6 @@
-"""Helpers shared by every exporter: atomic writes and safe file names.
+"""General file helpers: atomic writes and safe file names, for every writer in gesturekit.
 
-An export either appears complete under its final name or not at all: the
+A file either appears complete under its final name or not at all: the
 bytes go to a temporary file in the target folder, are flushed to disk and the
 temporary file is then renamed onto the target. An existing file is never
 replaced unless the caller asks for it. The temporary file's name carries the
@@ -19,7 +19,7 @@ import uuid
 from pathlib import Path
 from typing import BinaryIO, Callable
 
-from ..errors import ConfigError
+from .errors import ConfigError
 
 __all__ = ["atomic_write", "safe_filename"]
 
@@ -67,7 +67,7 @@ def atomic_write(
     OutputError
         Writing failed (an ``OSError``: disk full, permission denied, ...).
     """
-    from ..outputs import clean_stale, write_errors
+    from .outputs import clean_stale, write_errors
 
     path = Path(path)
     folder = path.parent
