@@ -86,9 +86,9 @@ _HEAD_BYTES = 1 << 16
 def _layout(kind: str) -> frozenset[str]:
     """Every name a folder of this kind can hold (its marker included)."""
     if kind == "database":
-        from .database import _CLIP_ARRAYS
+        from ._database_folder import CLIP_ARRAYS
 
-        arrays = (*_CLIP_ARRAYS, "clip_take", "clip_start", "audio")
+        arrays = (*CLIP_ARRAYS, "clip_take", "clip_start", "audio")
         return frozenset([f"{a}.npy" for a in arrays] + ["stats.npz", "overlap", "database.json"])
     if kind == "refiner":
         return frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"])

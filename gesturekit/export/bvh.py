@@ -137,7 +137,7 @@ def write_bvh(
     Returns
     -------
     pathlib.Path
-        ``path``.
+        ``path``, the BVH file written.
 
     Raises
     ------

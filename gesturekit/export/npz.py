@@ -84,7 +84,7 @@ def save_npz(
     Returns
     -------
     pathlib.Path
-        ``path``.
+        ``path``, the archive written.
 
     Raises
     ------

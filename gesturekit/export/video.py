@@ -106,7 +106,7 @@ def render_video(
     Returns
     -------
     pathlib.Path
-        ``path``.
+        ``path``, the MP4 file written.
 
     Raises
     ------
