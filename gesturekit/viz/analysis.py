@@ -21,7 +21,7 @@ from plotly.subplots import make_subplots
 from ..errors import ConfigError
 from ..evaluate.metrics import KINEMATIC_JOINTS, audio_onsets, kinetic_velocity, motion_beats
 from ..motion import AUDIO_SR, Motion
-from .figures import MOTION_COLORS
+from ._plotly import MOTION_COLORS
 
 __all__ = [
     "LOSS_GROUPS",
