@@ -236,6 +236,16 @@ def _parse_hierarchy(lines, start, stop, path):
         if tok != "{":
             fail(f"expected '{{', found {tok!r}", lineno)
 
+    def open_joint(name, parent, *, is_end_site):
+        # a joint's OFFSET and CHANNELS follow inside its braces
+        parents.append(parent)
+        names.append(name)
+        offsets.append(None)
+        channels.append([])
+        end_site.append(is_end_site)
+        stack.append(len(names) - 1)
+        expect_brace()
+
     def number(what):
         tok, lineno = take(what)
         try:
@@ -262,13 +272,7 @@ def _parse_hierarchy(lines, start, stop, path):
                 fail(f"duplicate joint name {name!r}", lineno)
             if stack and end_site[stack[-1]]:
                 fail("a joint inside an End Site", lineno)
-            parents.append(stack[-1] if stack else -1)
-            names.append(name)
-            offsets.append(None)
-            channels.append([])
-            end_site.append(False)
-            stack.append(len(names) - 1)
-            expect_brace()
+            open_joint(name, stack[-1] if stack else -1, is_end_site=False)
         elif key == "END":
             site, site_line = take("'Site'")
             if site.upper() != "SITE":
@@ -279,13 +283,7 @@ def _parse_hierarchy(lines, start, stop, path):
             name, k = f"{names[parent]}_End", 2
             while name in names:  # a second End Site of the same joint
                 name, k = f"{names[parent]}_End{k}", k + 1
-            parents.append(parent)
-            names.append(name)
-            offsets.append(None)
-            channels.append([])
-            end_site.append(True)
-            stack.append(len(names) - 1)
-            expect_brace()
+            open_joint(name, parent, is_end_site=True)
         elif key == "OFFSET":
             if not stack:
                 fail("OFFSET outside of a joint", lineno)

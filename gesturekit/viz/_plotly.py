@@ -56,18 +56,25 @@ def data_array(value) -> np.ndarray:
                     dtype=np.float64).reshape(np.shape(value))
 
 
-def _motions_and_labels(motions, labels, *, who: str) -> tuple[list[Motion], list[str]]:
-    """One motion or a list of them, with one label each (checked; ``who`` names the caller in errors)."""
+def _motions_and_labels(
+    motions, labels, *, who: str, empty_ok: bool = False, label_one: bool = False,
+) -> tuple[list[Motion], list[str]]:
+    """One motion or a list of them, with one label each (checked; ``who`` names the caller in errors).
+
+    A motion with no frame is refused unless ``empty_ok``; without ``labels``
+    the motions are called "motion 1", "motion 2", ..., a lone motion only if
+    ``label_one`` (else its label is empty).
+    """
     motions = [motions] if isinstance(motions, Motion) else list(motions)
     if not motions:
         raise ConfigError(f"{who} needs at least one motion")
     for m in motions:
         if not isinstance(m, Motion):
             raise ConfigError(f"{who} takes Motion objects, got {type(m).__name__}")
-        if m.n_frames < 1:
+        if m.n_frames < 1 and not empty_ok:
             raise ConfigError(f"{who} got a motion with no frame")
     if labels is None:
-        labels = [f"motion {i + 1}" for i in range(len(motions))] if len(motions) > 1 else [""]
+        labels = [f"motion {i + 1}" for i in range(len(motions))] if len(motions) > 1 or label_one else [""]
     labels = [str(s) for s in labels]
     if len(labels) != len(motions):
         raise ConfigError(f"{who} got {len(labels)} labels for {len(motions)} motions")

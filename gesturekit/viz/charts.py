@@ -151,6 +151,7 @@ def waveform_figure(
     envelope_ms : float
         Window of the RMS energy curve, milliseconds.
     title : str, optional
+        Shown above the waveform.
     height : int
         Figure height in pixels.
 
@@ -267,8 +268,9 @@ def wrist_figure(
         Attribute name -> (low, high), e.g. ``db.thresholds``; each row gets
         the lines of its attribute (heights in m, speeds in m/s).
     title : str, optional
+        Shown above the four rows.
     height : int
-        Figure height in pixels.
+        Figure height in pixels, all rows together.
 
     Returns
     -------

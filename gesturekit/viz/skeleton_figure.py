@@ -120,8 +120,7 @@ def _torso_and_head(motions: list[Motion], times: np.ndarray, offsets: np.ndarra
     idx = np.array([j for pair in torso for j in (*pair, -1)])
     out = []
     for m, dx in zip(motions, offsets):
-        frames = np.minimum(np.floor(times * m.fps + 1e-6).astype(np.int64), m.n_frames - 1)
-        points = a.body(m.positions[frames]).points + np.array([dx, 0, 0], dtype=np.float32)
+        points = a.body(m.positions[_frames_at(m, times)]).points + np.array([dx, 0, 0], dtype=np.float32)
         segments = points[:, idx]
         segments[:, idx < 0] = np.nan
         out.append((segments, points[:, [s.centre for s in spheres]]))
