@@ -120,7 +120,7 @@ def read_database(path: Path, *, mmap: bool) -> dict:
         Missing folder or files, another format or format version, another
         feature layout, or files that are damaged or disagree with each other.
     """
-    meta = read_json_marker(path, "database.json", format=FORMAT, version=FORMAT_VERSION, error=DatabaseError,
+    meta = read_json_marker(path, "database.json", marker_format=FORMAT, version=FORMAT_VERSION, error=DatabaseError,
                             messages=_MESSAGES)
     if meta.get("layout") != LAYOUT.signature():
         raise DatabaseError(

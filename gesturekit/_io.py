@@ -210,7 +210,7 @@ def read_json_marker(
     folder: str | os.PathLike,
     name: str,
     *,
-    format: str,
+    marker_format: str,
     version: int,
     error: type[GestureKitError],
     messages: dict[str, str],
@@ -226,7 +226,7 @@ def read_json_marker(
         The folder that should hold the marker.
     name : str
         The marker's file name, such as ``"database.json"``.
-    format : str
+    marker_format : str
         The marker's expected ``format`` entry.
     version : int
         The ``format_version`` this gesturekit reads.
@@ -261,7 +261,7 @@ def read_json_marker(
         raise error(f"{name} is not valid JSON ({exc})", path=folder) from None
     except OSError as exc:
         raise error(f"{name} cannot be read ({exc.strerror})", path=folder) from None
-    if not isinstance(content, dict) or content.get("format") != format:
+    if not isinstance(content, dict) or content.get("format") != marker_format:
         raise error(messages["other_format"], path=folder)
     if content.get("format_version") != version:
         raise error(messages["other_version"].format(found=content.get("format_version"), supported=version),

@@ -36,7 +36,7 @@ def read_refiner_config(path: str | os.PathLike) -> dict:
         or a key of the wrong type.
     """
     path = Path(path)
-    cfg = read_json_marker(path, "config.json", format=FORMAT, version=FORMAT_VERSION, error=InputFileError,
+    cfg = read_json_marker(path, "config.json", marker_format=FORMAT, version=FORMAT_VERSION, error=InputFileError,
                            messages=_MESSAGES)
     _check_structure(cfg, path)
     return cfg
