@@ -24,7 +24,8 @@ On disk a database is a folder::
 Every array is a plain ``.npy`` (memory-mapped on load, never pickled); the
 folder is written under a temporary name and swapped into place, by the rules
 of :mod:`gesturekit.outputs` (``database.json`` is the marker that lets
-``--force`` recognise a database).
+``--force`` recognise a database). Writing, reading and checking the folder
+is :mod:`gesturekit._database_folder`'s part; building is this module's.
 """
 from __future__ import annotations
 

@@ -14,10 +14,12 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..motion import Motion
+from .appearance import APPEARANCE
 
 
-#: Colours of the motions of a skeleton figure, in order (repeated past the end).
-MOTION_COLORS = ("#2c5d8f", "#c0502d", "#3a8a4e", "#7b4fa0", "#a07a1f", "#2a8a8a")
+#: Colours of the motions of a figure, in order (repeated past the end): the appearance's, so a
+#: motion has one colour in every view.
+MOTION_COLORS = APPEARANCE.motion_colors
 
 _BAND_COLORS = ("#4c78a8", "#f58518", "#54a24b", "#e45756", "#b279a2", "#72b7b2", "#eeca3b", "#9d755d")
 
