@@ -177,9 +177,9 @@ def _in_background(name: str, *steps) -> threading.Thread:
 
 @st.cache_resource(show_spinner="Generating the example speech…", max_entries=4)
 def example_audio(label: str):
-    """Example speech (a key of :data:`gesturekit.viz.session.SPEECH_EXAMPLES`): mono float32 at
+    """Example speech (a key of :data:`gesturekit.interactive.SPEECH_EXAMPLES`): mono float32 at
     16 kHz, read-only, made once per server and shared by every session."""
-    from gesturekit.viz.session import example_speech
+    from gesturekit.interactive import example_speech
 
     audio = example_speech(label)
     audio.setflags(write=False)
@@ -200,7 +200,7 @@ def _first_use(noise) -> None:
     import soundfile as sf
 
     from gesturekit.motion import AUDIO_SR, N_JOINTS, Motion
-    from gesturekit.viz import session as gs
+    from gesturekit import interactive as gs
     from gesturekit.viz.figures import waveform_figure, wrist_figure
     from gesturekit.viz.viewer import skeleton_viewer
 

@@ -118,7 +118,7 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
     source : str
         Name of the speech, stored in the result (download names, metadata).
     refiner : optional
-        A refiner, passed on by :func:`gesturekit.viz.session.with_refiner`.
+        A refiner, passed on by :func:`gesturekit.interactive.with_refiner`.
 
     Raises
     ------
@@ -126,7 +126,7 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
         Impossible settings (shown by :func:`display.run_page` / :func:`display.user_errors`).
     """
     from gesturekit.synthesize import synthesize
-    from gesturekit.viz.session import with_refiner
+    from gesturekit.interactive import with_refiner
 
     ss = st.session_state
     config, extra = with_refiner(config, refiner)

@@ -3,7 +3,7 @@
 An implementation of Habibie et al., "A Motion Matching-based Framework for
 Controllable Gesture Synthesis from Speech" (SIGGRAPH 2022).
 """
-__version__ = "0.1.0"
+from ._version import __version__
 
 from .errors import (
     AudioFileError,

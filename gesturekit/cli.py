@@ -159,7 +159,7 @@ def _refiner_choice(given: str | None, db):
 
 def _cmd_synthesize(args) -> int:
     from .datasets.audio import load_audio
-    from .export.files import safe_filename
+    from ._io import safe_filename
     from .outputs import check_output, output_lock, write_errors
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
@@ -345,7 +345,7 @@ def _cmd_train_fgd(args) -> int:
 
 
 def _cmd_stimuli(args) -> int:
-    from .export.stimuli import make_stimuli
+    from .study import make_stimuli
     from .workspace import open_database
 
     import re

@@ -24,20 +24,20 @@ On disk a database is a folder::
 Every array is a plain ``.npy`` (memory-mapped on load, never pickled); the
 folder is written under a temporary name and swapped into place, by the rules
 of :mod:`gesturekit.outputs` (``database.json`` is the marker that lets
-``--force`` recognise a database).
+``--force`` recognise a database). Writing, reading and checking the folder
+is :mod:`gesturekit._database_folder`'s part; building is this module's.
 """
 from __future__ import annotations
 
-import json
 import os
-import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
 
 import numpy as np
 
-from . import __version__
+from ._database_folder import CLIP_ARRAYS, FORMAT, FORMAT_VERSION, read_database, write_database
+from ._version import __version__
 from .control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, frame_attributes
 from .errors import ConfigError, DatabaseError, warn
 from .features import (
@@ -52,16 +52,12 @@ from .features import (
     valid_starts,
 )
 from .motion import AUDIO_SR, Take, resample_positions
-from .paths import is_dir
 from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES
 
 __all__ = [
     "FORMAT_VERSION", "BuildConfig", "TakeFeatures", "take_features", "MatchingDatabase", "normalise_exclusions",
 ]
 
-FORMAT = "gesturekit-matching-database"
-FORMAT_VERSION = 1
-_CLIP_ARRAYS = ("F", "P", "G", "A", "valid", "attributes", "pose_track")
 
 
 @dataclass
@@ -219,10 +215,12 @@ class MatchingDatabase:
     """The matching database of the search: clips with their features, poses and attributes.
 
     Build one with :meth:`build` (from :class:`~gesturekit.motion.Take` objects)
-    and :meth:`save`; open one with :meth:`load`. Array attributes (shapes for
-    M clips of 64 frames): ``F`` (M,64,112), ``P`` (M,64,96), ``G`` (M,64,165),
-    ``A`` (M,64,28), ``valid`` (M,64), ``attributes`` (M,64,9),
-    ``pose_track`` (M,70,24), ``clip_take`` (M,), ``clip_start`` (M,).
+    and :meth:`save`; open one with :meth:`load`. Array properties (shapes for
+    M clips of 64 frames): :attr:`audio_features` (M,64,112), :attr:`pose_features`
+    (M,64,96), :attr:`poses` (M,64,165), :attr:`cgan_audio_features` (M,64,28),
+    :attr:`valid` (M,64), :attr:`attributes` (M,64,9), :attr:`pose_track` (M,70,24),
+    :attr:`clip_take` (M,), :attr:`clip_start` (M,); the paper's letters ``F``, ``P``,
+    ``G`` and ``A`` name the first four too.
     """
 
     def __init__(self, *, meta: dict, arrays: dict, stats: dict, audio=None, overlap=None, path=None):
@@ -234,11 +232,72 @@ class MatchingDatabase:
         self.path = None if path is None else Path(path)
 
     # ---- array access -------------------------------------------------------------------
-    def __getattr__(self, name):
-        arrays = self.__dict__.get("arrays", {})
-        if name in arrays:
-            return arrays[name]
-        raise AttributeError(name)
+    # readable names first; the paper's letters (Habibie et al. 2022, Sec. 3) are aliases below
+    @property
+    def audio_features(self) -> np.ndarray:
+        """The z-scored audio features f_t of every clip frame, shape (M, 64, 112), float32."""
+        return self.arrays["F"]
+
+    @property
+    def pose_features(self) -> np.ndarray:
+        """The z-scored pose features p_t of every clip frame, shape (M, 64, 96), float32."""
+        return self.arrays["P"]
+
+    @property
+    def poses(self) -> np.ndarray:
+        """The output poses g_t: 55 joint positions per frame, flattened, shape (M, 64, 165), metres."""
+        return self.arrays["G"]
+
+    @property
+    def cgan_audio_features(self) -> np.ndarray:
+        """The refiner's audio input (MFCCs m_t and their deltas), not z-scored, shape (M, 64, 28), float32."""
+        return self.arrays["A"]
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Whether each clip frame may start a segment (its look-ahead lies in the take), shape (M, 64), bool."""
+        return self.arrays["valid"]
+
+    @property
+    def attributes(self) -> np.ndarray:
+        """The control attributes of every clip frame, shape (M, 64, 9), float32, in the order of
+        :attr:`attribute_names` (units: :data:`gesturekit.control.ATTRIBUTE_UNITS`)."""
+        return self.arrays["attributes"]
+
+    @property
+    def pose_track(self) -> np.ndarray:
+        """Raw feature-joint positions of frames s..s+69 of each clip, shape (M, 70, 24), metres."""
+        return self.arrays["pose_track"]
+
+    @property
+    def clip_take(self) -> np.ndarray:
+        """The take index of each clip, shape (M,), int32."""
+        return self.arrays["clip_take"]
+
+    @property
+    def clip_start(self) -> np.ndarray:
+        """The first frame of each clip in its take, shape (M,), int32."""
+        return self.arrays["clip_start"]
+
+    @property
+    def F(self) -> np.ndarray:
+        """The paper's name for :attr:`audio_features`."""
+        return self.audio_features
+
+    @property
+    def P(self) -> np.ndarray:
+        """The paper's name for :attr:`pose_features`."""
+        return self.pose_features
+
+    @property
+    def G(self) -> np.ndarray:
+        """The paper's name for :attr:`poses`."""
+        return self.poses
+
+    @property
+    def A(self) -> np.ndarray:
+        """The paper's name for :attr:`cgan_audio_features`."""
+        return self.cgan_audio_features
 
     @property
     def n_clips(self) -> int:
@@ -478,16 +537,16 @@ class MatchingDatabase:
             z = ZScore.fit(np.concatenate([getattr(t, attr) for t in per_take])[allv])
             stats[f"{key}_mean"], stats[f"{key}_std"] = z.mean, z.std
 
-        clip_parts: dict[str, list] = {k: [] for k in _CLIP_ARRAYS}
+        clip_parts: dict[str, list] = {k: [] for k in CLIP_ARRAYS}
         overlap_parts: dict[str, list] | None = (
-            {k: [] for k in _CLIP_ARRAYS + ("clip_take", "clip_start")} if config.overlap_stride else None
+            {k: [] for k in CLIP_ARRAYS + ("clip_take", "clip_start")} if config.overlap_stride else None
         )
         clip_take, clip_start, take_meta, audio_parts = [], [], [], []
         audio_offset = 0
         for ti, tf in enumerate(per_take):
             starts = _windows(tf.n_frames, L, L)
             cut = _cut(tf, starts, L, track_len)
-            for k in _CLIP_ARRAYS:
+            for k in CLIP_ARRAYS:
                 clip_parts[k].append(cut[k])
             first_clip = len(clip_take)
             clip_take += [ti] * len(starts)
@@ -495,7 +554,7 @@ class MatchingDatabase:
             if overlap_parts is not None:
                 ostarts = _windows(tf.n_frames, L, config.overlap_stride)
                 ocut = _cut(tf, ostarts, L, track_len)
-                for k in _CLIP_ARRAYS:
+                for k in CLIP_ARRAYS:
                     overlap_parts[k].append(ocut[k])
                 overlap_parts["clip_take"].append(np.full(len(ostarts), ti, np.int32))
                 overlap_parts["clip_start"].append(ostarts.astype(np.int32))
@@ -518,7 +577,7 @@ class MatchingDatabase:
             raise ConfigError(f"every take is shorter than one clip ({L} frames = {L / FPS:.1f} s)")
 
         def finish(parts):
-            out = {k: np.concatenate(parts[k]) for k in _CLIP_ARRAYS}
+            out = {k: np.concatenate(parts[k]) for k in CLIP_ARRAYS}
             out["F"] = ZScore(stats["F_mean"], stats["F_std"]).apply(out["F"])
             out["P"] = ZScore(stats["P_mean"], stats["P_std"]).apply(out["P"])
             return out
@@ -564,18 +623,12 @@ class MatchingDatabase:
     ) -> Path:
         """Write the database folder atomically (a temporary folder swapped into place).
 
-        Parameters
-        ----------
-        path : path
-            The database folder. An empty folder is used; an earlier database is
-            replaced only with ``overwrite``; anything else there is refused.
-        overwrite : bool
-            Replace an earlier gesturekit database at ``path``.
-        inputs : iterable of path, optional
-            Input folders (the takes) that ``path`` must not be, lie in or contain.
-        locked : bool
-            The caller holds :func:`gesturekit.outputs.output_lock` of ``path``
-            (the command line holds it for the whole build).
+        ``path`` is the database folder: an empty folder is used, an earlier
+        database is replaced only with ``overwrite``, anything else there is
+        refused. ``inputs`` are the folders of the takes, which ``path`` must
+        not be, lie in or contain; ``locked`` says that the caller holds
+        :func:`gesturekit.outputs.output_lock` of ``path`` (the command line
+        holds it for the whole build).
 
         Raises
         ------
@@ -586,51 +639,10 @@ class MatchingDatabase:
         DatabaseError
             An array holds NaN or infinite values; nothing is written.
         """
-        from .outputs import write_folder
-
         path = Path(path)
-        self._check_finite(path)
-
-        def fill(tmp: Path) -> None:
-            for k, v in self.arrays.items():
-                np.save(tmp / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
-            np.savez(tmp / "stats.npz", **{k: np.asarray(v) for k, v in self.stats.items()})
-            if self.audio is not None:
-                np.save(tmp / "audio.npy", np.asarray(self.audio), allow_pickle=False)
-            if self.overlap is not None:
-                (tmp / "overlap").mkdir()
-                for k, v in self.overlap.items():
-                    np.save(tmp / "overlap" / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
-            meta = dict(self.meta)
-            meta["counts"] = {"clips": self.n_clips, "takes": len(self.meta["takes"])}
-            # the marker that lets a later --force recognise this folder, written last
-            (tmp / "database.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
-
-        write_folder(path, "database", fill, overwrite=overwrite, inputs=inputs, locked=locked)
+        write_database(self, path, overwrite=overwrite, inputs=inputs, locked=locked)
         self.path = path
         return path
-
-    def _check_finite(self, path: Path) -> None:
-        """Refuse to save arrays with NaN or infinite values (they would poison every search)."""
-        parts = [("", self.arrays), ("overlap ", self.overlap or {}), ("z-scoring ", self.stats)]
-        for where, arrays in parts:
-            for k, v in arrays.items():
-                v = np.asarray(v) if where == "z-scoring " else v
-                if not np.issubdtype(v.dtype, np.floating):
-                    continue
-                # clip by clip, so that a memory-mapped array is never copied whole
-                flat = v.reshape(v.shape[0], -1) if v.ndim > 1 else v.reshape(1, -1)
-                for i in range(0, flat.shape[0], 256):
-                    ok = np.isfinite(flat[i:i + 256]).all(axis=1)
-                    if not ok.all():
-                        row = i + int(np.argmin(ok))
-                        at = f" (clip {row})" if v.ndim > 1 and not where else ""
-                        raise DatabaseError(
-                            f"the database's {where}array {k} holds NaN or infinite values{at}: a take's motion or "
-                            "audio features are not finite; nothing was written", path=path)
-        if self.audio is not None and np.issubdtype(np.asarray(self.audio).dtype, np.floating):
-            if not np.isfinite(self.audio).all():
-                raise DatabaseError("the database's audio holds NaN or infinite values; nothing was written", path=path)
 
     @classmethod
     def load(cls, path: str | os.PathLike, *, mmap: bool = True) -> "MatchingDatabase":
@@ -649,203 +661,4 @@ class MatchingDatabase:
             feature layout, or files that are damaged or disagree with each other.
         """
         path = Path(path)
-        meta_file = path / "database.json"
-        if not is_dir(path):
-            raise DatabaseError("no database folder here (build one with `gesturekit build-db`)", path=path)
-        if not meta_file.is_file():
-            raise DatabaseError("not a gesturekit database: database.json is missing", path=path)
-        try:
-            meta = json.loads(meta_file.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise DatabaseError(f"database.json is not valid JSON ({exc})", path=path) from None
-        except OSError as exc:
-            raise DatabaseError(f"database.json cannot be read ({exc.strerror})", path=path) from None
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-            raise DatabaseError("not a gesturekit matching database (unknown format)", path=path)
-        if meta.get("format_version") != FORMAT_VERSION:
-            raise DatabaseError(
-                f"database format version {meta.get('format_version')} is not supported by this gesturekit "
-                f"(format version {FORMAT_VERSION}); rebuild it with `gesturekit build-db --force`",
-                path=path,
-            )
-        if meta.get("layout") != LAYOUT.signature():
-            raise DatabaseError(
-                "database was built with another feature layout; rebuild it with `gesturekit build-db --force`",
-                path=path,
-            )
-        _check_meta(meta, path)
-        mode = "r" if mmap else None
-
-        def read(p: Path):
-            try:
-                return np.load(p, mmap_mode=mode, allow_pickle=False)
-            except FileNotFoundError:
-                raise DatabaseError(f"{p.name} is missing; the database is incomplete", path=path) from None
-            except (ValueError, EOFError) as exc:
-                raise DatabaseError(f"{p.name} cannot be read ({exc})", path=path) from None
-            except OSError as exc:
-                raise DatabaseError(f"{p.name} cannot be read ({exc.strerror or exc})", path=path) from None
-
-        arrays = {k: read(path / f"{k}.npy") for k in _CLIP_ARRAYS + ("clip_take", "clip_start")}
-        stats = _read_stats(path)
-        audio = read(path / "audio.npy") if (path / "audio.npy").exists() else None
-        overlap = None
-        if (path / "overlap").is_dir():
-            overlap = {k: read(path / "overlap" / f"{k}.npy") for k in _CLIP_ARRAYS + ("clip_take", "clip_start")}
-        _check_arrays(meta, arrays, stats, path, where="")
-        _check_clip_order(meta, arrays["clip_take"], path)
-        if overlap is not None:
-            _check_arrays(meta, overlap, stats, path, where="overlap/")
-        if audio is not None:
-            need = max((t["audio_offset"] + t["audio_samples"] for t in meta["takes"]), default=0)
-            if audio.ndim != 1 or audio.dtype != np.int16 or audio.shape[0] < need:
-                raise DatabaseError(f"audio.npy must be int16 samples, at least {need} of them; found "
-                                    f"{audio.dtype} of shape {audio.shape}", path=path)
-        return cls(meta=meta, arrays=arrays, stats=stats, audio=audio, overlap=overlap, path=path)
-
-
-_STATS_KEYS = {"F": LAYOUT.audio_dim, "P": LAYOUT.pose_dim, "A": LAYOUT.cgan_audio_dim}
-
-
-def _is_int(x) -> bool:
-    return isinstance(x, int) and not isinstance(x, bool)
-
-
-def _is_number(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
-
-
-def _check_meta(meta: dict, path: Path) -> None:
-    """``database.json`` against the structure :meth:`MatchingDatabase.save` writes."""
-
-    def bad(what: str):
-        return DatabaseError(f"database.json: {what}; the file is damaged (rebuild the database)", path=path)
-
-    for key, kind in (("build", dict), ("takes", list), ("thresholds", dict), ("attribute_names", list)):
-        if key not in meta:
-            raise bad(f"'{key}' is missing")
-        if not isinstance(meta[key], kind):
-            raise bad(f"'{key}' must be {'an object' if kind is dict else 'a list'}, found {type(meta[key]).__name__}")
-    build = meta["build"]
-    if not (_is_int(build.get("clip_frames")) and build["clip_frames"] > 0):
-        raise bad(f"build.clip_frames must be a positive integer, found {build.get('clip_frames')!r}")
-    for key in ("label", "source"):
-        if not isinstance(build.get(key, ""), str):
-            raise bad(f"build.{key} must be a string, found {type(build[key]).__name__}")
-    stride = build.get("overlap_stride")
-    if stride is not None and not (_is_int(stride) and stride > 0):
-        raise bad(f"build.overlap_stride must be a positive integer or null, found {stride!r}")
-    names = meta["attribute_names"]
-    if names != list(ATTRIBUTE_NAMES):
-        raise bad(f"attribute_names must be {', '.join(ATTRIBUTE_NAMES)}")
-    thresholds = meta["thresholds"]
-    for name in names:
-        t = thresholds.get(name)
-        if not (isinstance(t, list) and len(t) == 2 and all(_is_number(v) for v in t) and t[0] <= t[1]):
-            raise bad(f"thresholds of {name} must be [low, high], two finite numbers, found {t!r}")
-    takes = meta["takes"]
-    if not takes:
-        raise bad("'takes' is empty: the database has no takes")
-    seen = set()
-    for i, t in enumerate(takes):
-        if not isinstance(t, dict):
-            raise bad(f"takes[{i}] must be an object, found {type(t).__name__}")
-        if not isinstance(t.get("name"), str) or not t["name"]:
-            raise bad(f"takes[{i}].name must be a non-empty string")
-        if t["name"] in seen:
-            raise bad(f"take name {t['name']!r} appears twice")
-        seen.add(t["name"])
-        if not isinstance(t.get("sources"), dict):
-            raise bad(f"takes[{i}].sources must be an object, found {type(t.get('sources')).__name__}")
-        for key in ("n_frames", "first_clip", "n_clips", "audio_offset", "audio_samples"):
-            if not (_is_int(t.get(key)) and t[key] >= 0):
-                raise bad(f"takes[{i}].{key} must be an integer >= 0, found {t.get(key)!r}")
-    counts = meta.get("counts")
-    if counts is not None:
-        if not (isinstance(counts, dict) and _is_int(counts.get("clips")) and _is_int(counts.get("takes"))):
-            raise bad(f"'counts' must hold the integers clips and takes, found {counts!r}")
-        if counts["takes"] != len(takes):
-            raise bad(f"counts.takes is {counts['takes']} but {len(takes)} takes are listed")
-
-
-def _read_stats(path: Path) -> dict[str, np.ndarray]:
-    """``stats.npz``: the six z-scoring vectors, finite, of the layout's sizes (never unpickled)."""
-    f = path / "stats.npz"
-    try:
-        with np.load(f, allow_pickle=False) as z:
-            stats = {k: np.asarray(z[k]) for k in z.files}
-    except FileNotFoundError:
-        raise DatabaseError("stats.npz is missing; the database is incomplete", path=path) from None
-    except (ValueError, EOFError, zipfile.BadZipFile) as exc:
-        # object arrays (pickles) land here too: allow_pickle=False refuses them
-        raise DatabaseError(f"stats.npz cannot be read ({exc})", path=path) from None
-    except OSError as exc:
-        raise DatabaseError(f"stats.npz cannot be read ({exc.strerror or exc})", path=path) from None
-    for key, dim in _STATS_KEYS.items():
-        for part in ("mean", "std"):
-            a = stats.get(f"{key}_{part}")
-            if a is None:
-                raise DatabaseError(f"stats.npz lacks {key}_{part}", path=path)
-            if a.shape != (dim,) or not np.issubdtype(a.dtype, np.floating) or not np.isfinite(a).all():
-                raise DatabaseError(f"stats.npz: {key}_{part} must be {dim} finite numbers, found "
-                                    f"{a.dtype} of shape {a.shape}", path=path)
-    return stats
-
-
-def _check_arrays(meta: dict, arrays: dict, stats: dict, path: Path, *, where: str) -> None:
-    """Shapes and dtypes of one cut's arrays, and every clip inside its take (index arrays only)."""
-    L = meta["build"]["clip_frames"]
-    ct, cs = arrays["clip_take"], arrays["clip_start"]
-    for name, a in (("clip_take", ct), ("clip_start", cs)):
-        if a.ndim != 1 or not np.issubdtype(a.dtype, np.integer):
-            raise DatabaseError(f"{where}{name}.npy must be integers of shape (clips,), found {a.dtype} of shape "
-                                f"{a.shape}", path=path)
-    m = ct.shape[0]
-    if m == 0:
-        raise DatabaseError(f"{where}clip_take.npy: the database has no clips", path=path)
-    if cs.shape[0] != m:
-        raise DatabaseError(f"{where}clip_start.npy has {cs.shape[0]} clips, clip_take.npy {m}", path=path)
-    if not where and meta.get("counts") is not None and meta["counts"]["clips"] != m:
-        raise DatabaseError(f"database.json counts {meta['counts']['clips']} clips but the arrays hold {m}",
-                            path=path)
-    expected = {
-        "F": (m, L, stats["F_mean"].shape[0]),
-        "P": (m, L, stats["P_mean"].shape[0]),
-        "G": (m, L, len(JOINT_NAMES) * 3),
-        "A": (m, L, stats["A_mean"].shape[0]),
-        "valid": (m, L),
-        "attributes": (m, L, len(ATTRIBUTE_NAMES)),
-        "pose_track": (m, L + LAYOUT.pose_lookahead, 3 * len(POSE_FEATURE_INDICES)),
-    }
-    for k, shape in expected.items():
-        if arrays[k].shape != shape:
-            raise DatabaseError(f"{where}{k}.npy has shape {arrays[k].shape}, expected {shape} ({m} clips of "
-                                f"{L} frames)", path=path)
-    takes = meta["takes"]
-    ti = np.asarray(ct, dtype=np.int64)
-    if ti.min() < 0 or ti.max() >= len(takes):
-        raise DatabaseError(f"{where}clip_take.npy holds take index {int(ti.min() if ti.min() < 0 else ti.max())}; "
-                            f"the database has takes 0..{len(takes) - 1}", path=path)
-    start = np.asarray(cs, dtype=np.int64)
-    n_frames = np.array([t["n_frames"] for t in takes], dtype=np.int64)
-    outside = (start < 0) | (start + L > n_frames[ti])
-    if outside.any():
-        c = int(np.flatnonzero(outside)[0])
-        raise DatabaseError(f"{where}clip_start.npy: clip {c} starts at frame {int(start[c])}, outside take "
-                            f"{takes[ti[c]]['name']!r} of {int(n_frames[ti[c]])} frames (clips of {L} frames)",
-                            path=path)
-
-
-def _check_clip_order(meta: dict, clip_take: np.ndarray, path: Path) -> None:
-    """Each take's clips are the ``n_clips`` consecutive clips from ``first_clip`` (what the tables and the
-    search's take boundaries assume)."""
-    takes = meta["takes"]
-    first = np.array([t["first_clip"] for t in takes], dtype=np.int64)
-    n = np.array([t["n_clips"] for t in takes], dtype=np.int64)
-    m = clip_take.shape[0]
-    if n.sum() != m or not np.array_equal(first, np.concatenate([[0], np.cumsum(n)[:-1]])):
-        raise DatabaseError(f"database.json: the takes' first_clip/n_clips do not cover the {m} clips of "
-                            "clip_take.npy", path=path)
-    if not np.array_equal(np.asarray(clip_take), np.repeat(np.arange(len(takes)), n)):
-        raise DatabaseError("clip_take.npy does not match the takes' first_clip/n_clips in database.json",
-                            path=path)
+        return cls(**read_database(path, mmap=mmap), path=path)

@@ -25,7 +25,7 @@ same rules hold everywhere:
 * **Crashes leave nothing behind for long.** Folders are written as
   ``.NAME.tmp-PID`` and swapped into place (:func:`write_folder`); the next
   writer removes the temporaries (``.NAME.tmp-PID``, ``.NAME.old-PID``, the
-  ``.NAME.PID-*.tmp`` files of :func:`gesturekit.export.files.atomic_write`)
+  ``.NAME.PID-*.tmp`` files of :func:`gesturekit._io.atomic_write`)
   of processes that are no longer running (:func:`clean_stale`).
 * **Write failures are messages.** An ``OSError`` while writing (disk full,
   permission denied) becomes an :class:`~gesturekit.errors.OutputError` naming
@@ -86,9 +86,9 @@ _HEAD_BYTES = 1 << 16
 def _layout(kind: str) -> frozenset[str]:
     """Every name a folder of this kind can hold (its marker included)."""
     if kind == "database":
-        from .database import _CLIP_ARRAYS
+        from ._database_folder import CLIP_ARRAYS
 
-        arrays = (*_CLIP_ARRAYS, "clip_take", "clip_start", "audio")
+        arrays = (*CLIP_ARRAYS, "clip_take", "clip_start", "audio")
         return frozenset([f"{a}.npy" for a in arrays] + ["stats.npz", "overlap", "database.json"])
     if kind == "refiner":
         return frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"])

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control, step_masks
 from .database import MatchingDatabase, normalise_exclusions

@@ -12,7 +12,7 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
-from gesturekit.viz import session as gs
+from gesturekit import interactive as gs
 
 from .conftest import chart_spec as chart, plotly_array as array, viewer
 
@@ -119,7 +119,7 @@ def test_a_candidates_speech_comes_with_its_context_marked(app_env, db):
     assert band["x1"] - band["x0"] == pytest.approx(n / db.fps, abs=1e-3)
     assert f"the window is {before:.2f}–{before + n / db.fps:.2f} s" in caption
     assert f"{row['take']} at {s0 / 16000:.2f}" in caption
-    excerpt, a, b, t0 = __import__("gesturekit.viz.session", fromlist=["x"]).segment_in_context(
+    excerpt, a, b, t0 = __import__("gesturekit.interactive", fromlist=["x"]).segment_in_context(
         db, int(row["clip"]), int(row["start"]), n)
     np.testing.assert_array_equal(excerpt, take[round(t0 * 16000): round(t0 * 16000) + len(excerpt)])
     assert (a, b) == (pytest.approx(before), pytest.approx(band["x1"]))

@@ -39,7 +39,7 @@ def test_streamlit_run_finds_the_app_with_its_lifespan():
 
 
 def test_server_start_prepares_search_and_refiner_of_the_default_database(common, monkeypatch):
-    import gesturekit.viz.session as gs
+    import gesturekit.interactive as gs
 
     made = []
     real = gs.example_speech

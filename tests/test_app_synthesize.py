@@ -15,7 +15,7 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.export.video import probe_media
 from gesturekit.skeleton import N_JOINTS
-from gesturekit.viz import session as gs
+from gesturekit import interactive as gs
 from gesturekit.viz.figures import WRIST_ROWS
 
 from .conftest import chart_spec as chart, plotly_array as array, viewer
@@ -306,7 +306,7 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
     folder.mkdir()
     (folder / "config.json").write_text("{}", encoding="utf-8")
     monkeypatch.setattr("gesturekit.synthesize.synthesize", synthesize)
-    monkeypatch.setattr("gesturekit.viz.session.synthesize", synthesize)
+    monkeypatch.setattr("gesturekit.interactive.synthesize", synthesize)
     monkeypatch.setattr("gesturekit.refine.load_refiner", lambda path: StandIn())
     checked = []
     monkeypatch.setattr("gesturekit.refine.check_refiner", lambda path, db: checked.append(path) or Path(path))

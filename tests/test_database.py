@@ -69,6 +69,32 @@ def test_zscore_statistics_are_of_valid_frames(db, takes):
     np.testing.assert_allclose(db.stats["P_std"], p.std(0), rtol=1e-4)
 
 
+# every array under a readable name, with the paper's letter as an alias where it has one
+ARRAY_PROPERTIES = {
+    "audio_features": "F", "pose_features": "P", "poses": "G", "cgan_audio_features": "A", "valid": None,
+    "attributes": None, "pose_track": None, "clip_take": None, "clip_start": None,
+}
+
+
+@pytest.mark.parametrize("name,letter", ARRAY_PROPERTIES.items())
+def test_arrays_are_documented_properties_and_letters_are_aliases(db, name, letter):
+    # properties (not a __getattr__) are what IDEs, type checkers and help() can see
+    prop = vars(MatchingDatabase)[name]
+    assert isinstance(prop, property) and prop.__doc__ and "shape (M," in prop.__doc__
+    key = letter or name
+    assert getattr(db, name) is db.arrays[key]
+    if letter is not None:
+        assert isinstance(vars(MatchingDatabase)[letter], property)
+        assert getattr(db, letter) is getattr(db, name)
+
+
+def test_unknown_attribute_is_an_attribute_error(db):
+    assert "__getattr__" not in vars(MatchingDatabase)
+    with pytest.raises(AttributeError):
+        db.overlap_stride  # noqa: B018  (a build option, not an attribute of the database)
+    assert not hasattr(db, "stats_F")
+
+
 def test_thresholds_are_percentiles_of_clip_frames(db):
     h = db.attribute("left_hand_height").ravel()
     lo, hi = db.thresholds["left_hand_height"]

@@ -8,7 +8,7 @@ import pytest
 import soundfile as sf
 
 from gesturekit.errors import GestureKitWarning, collect_warnings, warn
-from gesturekit.viz.session import read_speech_upload
+from gesturekit.interactive import read_speech_upload
 
 
 def test_warn_issues_a_gesturekit_warning_outside_a_collection():

@@ -1,4 +1,4 @@
-"""Tests of gesturekit.export.bvh (and the shared helpers of gesturekit.export.files).
+"""Tests of gesturekit.export.bvh (and the shared helpers of gesturekit._io).
 
 Exported files are read back by readers that share no code with the writer:
 the ``bvhio`` package, and a small parser with scipy forward kinematics
@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from gesturekit.errors import ConfigError, OutputError
 from gesturekit.export import bvh as bvh_module
 from gesturekit.export.bvh import ROTATION_ORDERS, euler_from_matrices, write_bvh
-from gesturekit.export.files import atomic_write, safe_filename
+from gesturekit._io import atomic_write, safe_filename
 from gesturekit.motion import Motion
 from gesturekit.skeleton import FINGERS, JOINT_NAMES, N_JOINTS, PARENTS, joint_index
 

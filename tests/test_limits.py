@@ -348,7 +348,7 @@ def test_a_stream_of_unstated_length_is_decoded_only_up_to_the_limit(m4a, monkey
 
 def test_the_app_upload_meets_the_same_limits(tmp_path):
     from gesturekit.errors import GestureKitError
-    from gesturekit.viz.session import read_speech_upload
+    from gesturekit.interactive import read_speech_upload
 
     raw = h.wav_with_header(tmp_path / "one_hz.wav", rate=1).read_bytes()
     with pytest.raises(GestureKitError, match=r"^my speech\.wav: the WAV header says a sample rate of 1 Hz"):

@@ -18,7 +18,7 @@ from gesturekit import outputs
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import DatabaseError, GestureKitError, OutputError
 from gesturekit.export.bvh import write_bvh
-from gesturekit.export.files import atomic_write
+from gesturekit._io import atomic_write
 from gesturekit.export.npz import save_npz
 from gesturekit.motion import Motion
 from gesturekit.outputs import check_not_input, check_output, clean_stale, output_lock, write_folder

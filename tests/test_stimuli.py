@@ -17,7 +17,7 @@ from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SystemUnavailable
-from gesturekit.export.stimuli import (
+from gesturekit.study import (
     balanced_latin_square,
     make_stimuli,
     measure_loudness,

@@ -354,3 +354,28 @@ def test_control_attributes_have_wide_ranges(takes):
     a = windows(asym).mean(axis=1)
     assert (both_up & (a < 0.06)).sum() >= 10  # observed 57 of 240
     assert (one_up & (a > 0.25)).sum() >= 10  # observed 81
+
+
+def test_the_demo_body_is_posed_by_the_bvh_readers_forward_kinematics():
+    # one forward kinematics in the package: a fix to it reaches both the reader and the generator
+    from gesturekit.datasets import _demo_body, _kinematics, bvh
+
+    assert _demo_body.world_positions is _kinematics.world_positions is bvh.world_positions
+    rng = np.random.default_rng(0)
+    n = 5
+    local = [np.linalg.qr(rng.normal(size=(n, 3, 3)))[0] for _ in range(N_JOINTS)]
+    root = rng.normal(size=(n, 3))
+    pos = _demo_body._forward_kinematics(root, local)
+    # the same chain written out joint by joint: world rotation of the parent times the rest offset
+    off = _demo_body._rest_offsets()
+    from gesturekit.skeleton import PARENTS
+
+    glob = [None] * N_JOINTS
+    expect = np.empty_like(pos)
+    for j, p in enumerate(PARENTS):
+        if p < 0:
+            glob[j], expect[:, j] = local[j], root
+        else:
+            glob[j] = glob[p] @ local[j]
+            expect[:, j] = expect[:, p] + glob[p] @ off[j]
+    np.testing.assert_allclose(pos, expect, atol=1e-12)

@@ -12,7 +12,8 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS, bones
-from gesturekit.viz.figures import _chains, _typed
+from gesturekit.viz._plotly import _typed
+from gesturekit.viz.skeleton_figure import _chains
 from gesturekit.viz.figures import (
     DEFAULT_MAX_FRAMES,
     attribute_histograms,

@@ -16,7 +16,7 @@ from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
 from gesturekit.search import describe_steps
 from gesturekit.synthesize import SynthesisConfig
-from gesturekit.viz import session as gs
+from gesturekit import interactive as gs
 from gesturekit.viz.figures import waveform_figure, wrist_figure
 
 SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}

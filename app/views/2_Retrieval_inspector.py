@@ -6,7 +6,7 @@ import nav
 import sidebar
 import state
 from gesturekit.motion import AUDIO_SR
-from gesturekit.viz import session as gs
+from gesturekit import interactive as gs
 from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
 
 STEP = "inspect.step"  # the step shown (per user)

@@ -11,7 +11,7 @@ import state
 from gesturekit.datasets.takes import AUDIO_EXTENSIONS
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SYSTEM_DESCRIPTIONS, SYSTEMS
-from gesturekit.export.stimuli import make_stimuli, plan_stimuli
+from gesturekit.study import make_stimuli, plan_stimuli
 from gesturekit.paths import home
 from gesturekit.workspace import speech_files
 

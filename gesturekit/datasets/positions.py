@@ -36,7 +36,7 @@ from ..errors import ConfigError, InputFileError, MotionFileError
 from ..motion import Motion, resample_positions
 from ..paths import is_file
 from ..skeleton import FPS, JOINT_NAMES
-from .presets import missing_and_unknown
+from .presets import mapping_problems
 
 __all__ = ["PositionJointMap", "load_position_joint_map", "read_position_array", "load_positions_motion"]
 
@@ -174,16 +174,8 @@ def _validate(content, *, name: str, path) -> PositionJointMap:
         fail("'names' must be a list of source joint names")
     if names is not None and len(set(names)) != len(names):
         fail("'names' has duplicates")
-    missing, unknown = missing_and_unknown(joints)
-    problems = []
-    if missing:
-        problems.append(f"{len(missing)} of our joints not mapped: {', '.join(missing)}")
-    if unknown:
-        problems.append(f"not joints of our skeleton: {', '.join(unknown)}")
-    bad = sorted(k for k, v in joints.items()
-                 if k in JOINT_NAMES and not (_is_index(v) or (isinstance(v, str) and v)))
-    if bad:
-        problems.append(f"values must be joint indices or names: {', '.join(bad)}")
+    problems = mapping_problems(joints, value_ok=lambda v: _is_index(v) or (isinstance(v, str) and bool(v)),
+                                values_must_be="values must be joint indices or names")
     if problems:
         fail("; ".join(problems))
     return PositionJointMap(name=name, pelvis=pelvis, joints=dict(joints),

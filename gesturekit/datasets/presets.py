@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -49,7 +49,7 @@ from ..errors import ConfigError, InputFileError
 from ..paths import is_file
 from ..skeleton import FINGERS, JOINT_NAMES
 
-__all__ = ["JointMap", "PRESETS", "load_joint_map", "missing_and_unknown"]
+__all__ = ["JointMap", "PRESETS", "load_joint_map", "missing_and_unknown", "mapping_problems"]
 
 
 @dataclass(frozen=True)
@@ -99,6 +99,36 @@ def missing_and_unknown(names: Iterable[str]) -> tuple[list[str], list[str]]:
     missing = [n for n in JOINT_NAMES if n not in names]
     unknown = sorted(str(n) for n in names - set(JOINT_NAMES))
     return missing, unknown
+
+
+def mapping_problems(joints: Mapping, *, value_ok: Callable[[object], bool], values_must_be: str) -> list[str]:
+    """What is wrong with a map from our joint names to source joints, one phrase per problem.
+
+    Parameters
+    ----------
+    joints : mapping
+        Our joint name -> the source joint it comes from.
+    value_ok : callable(value) -> bool
+        Whether a value names a source joint the way this kind of map must.
+    values_must_be : str
+        The start of the phrase for values that are not, e.g. ``"values must be joint indices or names"``.
+
+    Returns
+    -------
+    list of str
+        Our joints not mapped, keys that are not our joints, our joints with
+        a bad value; empty when the map is sound.
+    """
+    missing, unknown = missing_and_unknown(joints)
+    problems = []
+    if missing:
+        problems.append(f"{len(missing)} of our joints not mapped: {', '.join(missing)}")
+    if unknown:
+        problems.append(f"not joints of our skeleton: {', '.join(unknown)}")
+    bad = sorted(k for k, v in joints.items() if k in JOINT_NAMES and not value_ok(v))
+    if bad:
+        problems.append(f"{values_must_be}: {', '.join(bad)}")
+    return problems
 
 
 def _mixamo_like(name: str) -> JointMap:
@@ -194,15 +224,8 @@ def _validate(content, *, name: str, path) -> JointMap:
     joints = content.get("joints")
     if not isinstance(joints, Mapping):
         fail("'joints' must map each of our joint names to a source joint name")
-    missing, unknown = missing_and_unknown(joints)
-    problems = []
-    if missing:
-        problems.append(f"{len(missing)} of our joints not mapped: {', '.join(missing)}")
-    if unknown:
-        problems.append(f"not joints of our skeleton: {', '.join(unknown)}")
-    bad = sorted(k for k, v in joints.items() if k in JOINT_NAMES and (not isinstance(v, str) or not v))
-    if bad:
-        problems.append(f"source joint names must be non-empty strings: {', '.join(bad)}")
+    problems = mapping_problems(joints, value_ok=lambda v: isinstance(v, str) and bool(v),
+                                values_must_be="source joint names must be non-empty strings")
     if problems:
         fail("; ".join(problems))
     return JointMap(name=name, pelvis=pelvis, joints=dict(joints))

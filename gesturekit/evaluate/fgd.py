@@ -223,7 +223,7 @@ class FGDModel:
 
         import torch
 
-        from ..export.files import atomic_write
+        from .._io import atomic_write
         from ..outputs import write_folder
 
         path = Path(path)

@@ -532,7 +532,7 @@ def markdown_table(df, *, floatfmt: str = ".4g") -> str:
 
 def write_text(text: str, path, *, overwrite: bool = False) -> Path:
     """Write a UTF-8 text file atomically."""
-    from ..export.files import atomic_write
+    from .._io import atomic_write
 
     data = text.encode("utf-8")
     return atomic_write(path, lambda f: f.write(data), overwrite=overwrite)

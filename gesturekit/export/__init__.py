@@ -1,1 +1,1 @@
-"""Writers of finished motion: npz archives and BVH files, with the shared atomic file helpers."""
+"""Writers of finished motion: npz archives, BVH files and MP4 videos with the speech."""

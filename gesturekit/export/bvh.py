@@ -61,7 +61,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..motion import Motion
 from ..skeleton import FINGERS, JOINT_NAMES, N_JOINTS, PARENTS, joint_index
-from .files import atomic_write
+from .._io import atomic_write
 
 __all__ = ["ROTATION_ORDERS", "TWIST_REFERENCES", "UNITS", "write_bvh", "rest_offsets", "solve_rotations", "euler_from_matrices"]
 
@@ -137,7 +137,7 @@ def write_bvh(
     Returns
     -------
     pathlib.Path
-        ``path``.
+        ``path``, the BVH file written.
 
     Raises
     ------

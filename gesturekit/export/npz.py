@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
-from .files import atomic_write
+from .._io import atomic_write
 
 __all__ = ["FORMAT_VERSION", "RESERVED_KEYS", "save_npz", "load_npz"]
 
@@ -84,7 +84,7 @@ def save_npz(
     Returns
     -------
     pathlib.Path
-        ``path``.
+        ``path``, the archive written.
 
     Raises
     ------

@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG
-from .files import atomic_write
+from .._io import atomic_write
 
 __all__ = ["render_video", "probe_media", "AUDIO_OUT_SR"]
 
@@ -106,7 +106,7 @@ def render_video(
     Returns
     -------
     pathlib.Path
-        ``path``.
+        ``path``, the MP4 file written.
 
     Raises
     ------

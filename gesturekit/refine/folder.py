@@ -1,18 +1,24 @@
 """A refiner folder's ``config.json``, read without torch (the app checks folders before loading them)."""
 from __future__ import annotations
 
-import json
 import os
 import re
 from pathlib import Path
 
+from .._io import read_json_marker
 from ..errors import InputFileError
-from ..paths import is_dir
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "read_refiner_config"]
 
 FORMAT = "gesturekit-refiner"
 FORMAT_VERSION = 1
+_MESSAGES = {
+    "no_folder": "no refiner folder here (train one with `gesturekit train-refiner`)",
+    "no_file": "not a refiner folder: config.json is missing",
+    "other_format": "config.json does not describe a gesturekit refiner",
+    "other_version": "refiner format version {found} is not supported (this gesturekit reads version {supported}); "
+                     "train it again",
+}
 
 
 def read_refiner_config(path: str | os.PathLike) -> dict:
@@ -30,25 +36,8 @@ def read_refiner_config(path: str | os.PathLike) -> dict:
         or a key of the wrong type.
     """
     path = Path(path)
-    if not is_dir(path):
-        raise InputFileError("no refiner folder here (train one with `gesturekit train-refiner`)", path=path)
-    cfg_file = path / "config.json"
-    if not cfg_file.is_file():
-        raise InputFileError("not a refiner folder: config.json is missing", path=path)
-    try:
-        cfg = json.loads(cfg_file.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"config.json is not valid JSON ({exc})", path=path) from None
-    except OSError as exc:
-        raise InputFileError(f"config.json cannot be read ({exc.strerror})", path=path) from None
-    if not isinstance(cfg, dict) or cfg.get("format") != FORMAT:
-        raise InputFileError("config.json does not describe a gesturekit refiner", path=path)
-    if cfg.get("format_version") != FORMAT_VERSION:
-        raise InputFileError(
-            f"refiner format version {cfg.get('format_version')} is not supported (this gesturekit reads "
-            f"version {FORMAT_VERSION}); train it again",
-            path=path,
-        )
+    cfg = read_json_marker(path, "config.json", marker_format=FORMAT, version=FORMAT_VERSION, error=InputFileError,
+                           messages=_MESSAGES)
     _check_structure(cfg, path)
     return cfg
 

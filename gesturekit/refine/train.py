@@ -36,10 +36,10 @@ from typing import Callable
 import numpy as np
 import torch
 
-from .. import __version__
+from .._version import __version__
 from ..database import MatchingDatabase
 from ..errors import ConfigError, DatabaseError, InputFileError
-from ..export.files import atomic_write
+from .._io import atomic_write
 from ..features import LAYOUT
 from ..skeleton import JOINT_NAMES
 from .data import PairsConfig, TrainingPairs, make_training_pairs

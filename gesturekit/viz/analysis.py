@@ -20,8 +20,8 @@ from plotly.subplots import make_subplots
 
 from ..errors import ConfigError
 from ..evaluate.metrics import KINEMATIC_JOINTS, audio_onsets, kinetic_velocity, motion_beats
-from ..motion import AUDIO_SR, Motion
-from .figures import MOTION_COLORS
+from ..motion import AUDIO_SR
+from ._plotly import MOTION_COLORS, _motions_and_labels
 
 __all__ = [
     "LOSS_GROUPS",
@@ -42,21 +42,6 @@ LOSS_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
 )
 
 
-def _motions(motions, labels, what: str) -> tuple[list[Motion], list[str]]:
-    motions = [motions] if isinstance(motions, Motion) else list(motions)
-    if not motions:
-        raise ConfigError(f"{what} needs at least one motion")
-    for m in motions:
-        if not isinstance(m, Motion):
-            raise ConfigError(f"{what} takes Motion objects, got {type(m).__name__}")
-    if labels is None:
-        labels = [f"motion {i + 1}" for i in range(len(motions))]
-    labels = [str(s) for s in labels]
-    if len(labels) != len(motions):
-        raise ConfigError(f"{what} got {len(labels)} labels for {len(motions)} motions")
-    return motions, labels
-
-
 def loss_curves_figure(log, *, smooth: int = 1, title: str | None = None, height: int = 380) -> go.Figure:
     """Training curves of a refiner: the critic's losses, the generator's loss and its terms.
 
@@ -69,6 +54,7 @@ def loss_curves_figure(log, *, smooth: int = 1, title: str | None = None, height
     smooth : int
         Rows of a centred moving mean (1: none).
     title : str, optional
+        Shown above the subplots.
     height : int
         Pixels.
 
@@ -177,7 +163,7 @@ def join_profile_figure(motions, boundaries, *, labels: Sequence[str] | None = N
         One line per motion (``meta = {"part": "join", "motion": i}``), x the offset in frames
         from the join, y the mean joint speed (m/s); a vertical line shape named ``"join"`` at 0.
     """
-    motions, labels = _motions(motions, labels, "join_profile_figure")
+    motions, labels = _motions_and_labels(motions, labels, who="join_profile_figure", empty_ok=True, label_one=True)
     fig = go.Figure()
     for i, (m, label) in enumerate(zip(motions, labels)):
         off, v = join_profile(m.positions, boundaries, fps=m.fps, radius=radius)
@@ -217,7 +203,7 @@ def beats_figure(motions, audio, *, labels: Sequence[str] | None = None, sr: int
         trace of its beats (``{"part": "beats", "motion": i}``); one marker trace of the onsets
         (``{"part": "onsets"}``) at the bottom, with vertical line shapes named ``"onset"``.
     """
-    motions, labels = _motions(motions, labels, "beats_figure")
+    motions, labels = _motions_and_labels(motions, labels, who="beats_figure", empty_ok=True, label_one=True)
     end = max(m.duration for m in motions) if end_s is None else float(end_s)
     if not end > start_s >= 0:
         raise ConfigError(f"need 0 <= start_s < end_s, got {start_s}-{end}")

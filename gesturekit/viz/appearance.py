@@ -178,9 +178,11 @@ class Appearance:
         every side, and that box fills the view.
     """
 
+    # colours
     motion_colors: tuple[str, ...] = ("#2c5d8f", "#c0502d", "#3a8a4e", "#7b4fa0", "#a07a1f", "#2a8a8a")
     part_tint: tuple[tuple[str, float], ...] = (("head", 0.22), ("palm", 0.12), ("finger", 0.12))
     merged_parts: tuple[str, ...] = ("torso",)
+    # the body's shapes
     torso_radius: float = 0.12
     hip_radius: float = 0.09
     chest_radius: float = 0.09
@@ -194,18 +196,22 @@ class Appearance:
     palm_radius: float = 0.014
     finger_radius: float = 0.0095
     fingertip_radius: float = 0.008
+    # points the skeleton lacks, placed from its joints
     pelvis_below: float = 1.4
     hip_half_width: float = 0.045
     chest_half_width: float = 0.08
     chest_height: float = 0.7
+    # shading
     light_direction: tuple[float, float, float] = (-0.45, 0.6, 0.66)
     ambient: float = 0.5
     diffuse: float = 0.62
+    # the scene: a background, the floor the figure stands on and its contact shadow
     background: str = "#f4f5f7"
     ground_color: str = "#e3e6ea"
     shadow_color: str = "#000000"
     shadow_alpha: float = 0.18
     ground_gap: float = 0.02
+    # framing
     frame_margin: float = 0.05
 
     def color(self, motion: int) -> str:

@@ -38,7 +38,7 @@ from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import N_JOINTS, joint_index
 from .appearance import APPEARANCE, DERIVED_POINTS, Appearance
-from .figures import _frames_at, _motions_and_labels, _time_grid, _typed, data_array
+from ._plotly import _frames_at, _motions_and_labels, _time_grid, _typed, data_array
 
 __all__ = ["CONTROLS_HEIGHT", "VIEWER_MAX_FRAMES", "skeleton_viewer", "viewer_data", "read_viewer_data",
            "wav_data_uri"]

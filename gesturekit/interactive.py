@@ -25,12 +25,12 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from ..control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_attributes
-from ..database import MatchingDatabase
-from ..errors import ConfigError, GestureKitError, collect_warnings, warn
-from ..export.files import safe_filename
-from ..motion import AUDIO_SR, Motion
-from ..synthesize import SynthesisConfig, SynthesisResult, synthesize, synthesize_batch
+from ._io import safe_filename
+from .control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_attributes
+from .database import MatchingDatabase
+from .errors import ConfigError, GestureKitError, collect_warnings, warn
+from .motion import AUDIO_SR, Motion
+from .synthesize import SynthesisConfig, SynthesisResult, synthesize, synthesize_batch
 
 __all__ = [
     "SEGMENT_COLUMNS",
@@ -275,7 +275,7 @@ def example_speech(label: str) -> np.ndarray:
     np.ndarray, shape (samples,), float32
         Mono speech at 16 kHz.
     """
-    from ..datasets.synthetic import generate_demo_take
+    from .datasets.synthetic import generate_demo_take
 
     if label not in SPEECH_EXAMPLES:
         raise ConfigError(f"no example speech {label!r}; examples: {', '.join(SPEECH_EXAMPLES)}")
@@ -313,7 +313,7 @@ def read_speech_upload(name: str, data: bytes):
     GestureKitWarning
         Silent audio (as :func:`gesturekit.datasets.audio.load_audio`), naming the upload.
     """
-    from ..datasets.audio import load_audio_with_info
+    from .datasets.audio import load_audio_with_info
 
     with tempfile.TemporaryDirectory(prefix="gesturekit-upload-") as tmp:
         path = Path(tmp) / safe_filename(Path(str(name)).name, default="upload")

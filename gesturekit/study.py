@@ -44,9 +44,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..errors import ConfigError, GestureKitError
-from ..motion import AUDIO_SR, Motion
-from .files import atomic_write
+from ._io import atomic_write
+from .errors import ConfigError, GestureKitError
+from .motion import AUDIO_SR, Motion
 
 __all__ = [
     "StimulusSpeech",
@@ -202,7 +202,7 @@ def measure_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR) -> float:
     float
         LUFS, 0.1 LU resolution; about -70 (the gate) for silence or audio under 0.4 s.
     """
-    from .video import _ffmpeg
+    from .export.video import _ffmpeg
 
     a = np.ascontiguousarray(audio, dtype="<f4")
     if a.ndim != 1 or a.size == 0:
@@ -287,11 +287,11 @@ def speech_sources(db, *, audio=(), holdouts=()) -> list[StimulusSpeech]:
         ``TAKE`` or ``TAKE:START-END``: the database's own speech and recorded motion (``gt``),
         kept out of every system's search.
     """
-    from ..datasets.audio import load_audio
-    from ..datasets.takes import AUDIO_EXTENSIONS
-    from ..errors import InputFileError
-    from ..evaluate.run import held_out
-    from ..paths import is_dir
+    from .datasets.audio import load_audio
+    from .datasets.takes import AUDIO_EXTENSIONS
+    from .errors import InputFileError
+    from .evaluate.run import held_out
+    from .paths import is_dir
 
     out: list[StimulusSpeech] = []
     for item in audio:
@@ -320,14 +320,14 @@ def speech_sources(db, *, audio=(), holdouts=()) -> list[StimulusSpeech]:
 
 def stimulus_style():
     """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion)."""
-    from ..viz.render import RenderStyle
+    from .viz.render import RenderStyle
 
     return RenderStyle(fit_motion=False)
 
 
 def _render_stimulus(job: dict) -> str:
     """Render one stimulus (runs in a worker process or on a Dask worker)."""
-    from .video import render_video
+    from .export.video import render_video
 
     motion = Motion(job["positions"], job["fps"])
     # one process per stimulus already keeps every core busy
@@ -478,14 +478,14 @@ def make_stimuli(
     StudyResult
         The same inputs and seed give the same ids, order and videos.
     """
-    from ..control import parse_control
-    from ..evaluate.baselines import (
+    from .control import parse_control
+    from .evaluate.baselines import (
         SystemUnavailable,
         load_refiner_for,
         parse_systems,
         refiner_unavailable_reason,
     )
-    from .video import _check_resolution
+    from .export.video import _check_resolution
 
     t0 = time.perf_counter()
     systems = parse_systems(systems)
@@ -500,7 +500,7 @@ def make_stimuli(
         if reason:
             raise SystemUnavailable(reason)
         refiner = load_refiner_for(refiner)
-    from ..outputs import check_output, output_lock
+    from .outputs import check_output, output_lock
 
     out = Path(out)
     # the study folder is never the database's or the speech's, nor inside or around them
@@ -516,9 +516,9 @@ def make_stimuli(
 def _make_stimuli_locked(db, *, out, audio, holdouts, systems, seed, participants, track, config, refiner,
                          refiner_name, width, height, loudness_lufs, workers, scheduler, progress, t0):
     """:func:`make_stimuli` once the study folder is checked and locked."""
-    from ..evaluate.baselines import SystemUnavailable, run_system
-    from ..outputs import write_errors
-    from ..synthesize import SynthesisConfig
+    from .evaluate.baselines import SystemUnavailable, run_system
+    from .outputs import write_errors
+    from .synthesize import SynthesisConfig
 
     manifest_path, order_path, study_path = out / "manifest.csv", out / "order.csv", out / "study.json"
     speeches = speech_sources(db, audio=audio, holdouts=holdouts)

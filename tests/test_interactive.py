@@ -17,7 +17,7 @@ from gesturekit.errors import AudioFileError, ConfigError, GestureKitWarning
 from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.skeleton import N_JOINTS, joint_index
 from gesturekit.synthesize import SynthesisConfig, synthesize
-from gesturekit.viz import session as gs
+from gesturekit import interactive as gs
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
-"""Helpers shared by every exporter: atomic writes and safe file names.
+"""General file helpers: atomic writes and safe file names, for every writer in gesturekit.
 
-An export either appears complete under its final name or not at all: the
+A file either appears complete under its final name or not at all: the
 bytes go to a temporary file in the target folder, are flushed to disk and the
 temporary file is then renamed onto the target. An existing file is never
 replaced unless the caller asks for it. The temporary file's name carries the
@@ -12,6 +12,7 @@ writing (disk full, permission denied) is raised as an
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import re
 import unicodedata
@@ -19,9 +20,10 @@ import uuid
 from pathlib import Path
 from typing import BinaryIO, Callable
 
-from ..errors import ConfigError
+from .errors import ConfigError, GestureKitError
+from .paths import is_dir
 
-__all__ = ["atomic_write", "safe_filename"]
+__all__ = ["atomic_write", "safe_filename", "read_json_marker"]
 
 # names Windows refuses whatever the extension, compared case-insensitively
 _RESERVED_NAMES = frozenset(
@@ -57,7 +59,7 @@ def atomic_write(
     Returns
     -------
     pathlib.Path
-        ``path``.
+        ``path``, complete.
 
     Raises
     ------
@@ -67,7 +69,7 @@ def atomic_write(
     OutputError
         Writing failed (an ``OSError``: disk full, permission denied, ...).
     """
-    from ..outputs import clean_stale, write_errors
+    from .outputs import clean_stale, write_errors
 
     path = Path(path)
     folder = path.parent
@@ -202,3 +204,66 @@ def safe_filename(name: str, *, max_length: int = 100, default: str = "unnamed")
 def _clean_default(default: str) -> str:
     clean = re.sub(r"[^A-Za-z0-9_-]", "_", default).strip("_")
     return clean or "unnamed"
+
+
+def read_json_marker(
+    folder: str | os.PathLike,
+    name: str,
+    *,
+    marker_format: str,
+    version: int,
+    error: type[GestureKitError],
+    messages: dict[str, str],
+) -> dict:
+    """The JSON marker file ``name`` of an output folder (a database, a refiner), of the right format.
+
+    Only the marker's ``format`` and ``format_version`` are checked; the caller
+    checks the rest of its structure.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The folder that should hold the marker.
+    name : str
+        The marker's file name, such as ``"database.json"``.
+    marker_format : str
+        The marker's expected ``format`` entry.
+    version : int
+        The ``format_version`` this gesturekit reads.
+    error : type
+        The :class:`~gesturekit.errors.GestureKitError` subclass to raise, naming ``folder``.
+    messages : dict of str
+        What to say when ``folder`` is no folder (``"no_folder"``), lacks the
+        marker (``"no_file"``), holds another format (``"other_format"``) or
+        another version (``"other_version"``, formatted with ``found`` and
+        ``supported``); each says how to make the right folder.
+
+    Returns
+    -------
+    dict
+        The marker's content.
+
+    Raises
+    ------
+    GestureKitError
+        Of type ``error``: no folder, no marker file, a marker that is not
+        readable UTF-8 JSON, or one of another format or version.
+    """
+    folder = Path(folder)
+    marker = folder / name
+    if not is_dir(folder):
+        raise error(messages["no_folder"], path=folder)
+    if not marker.is_file():
+        raise error(messages["no_file"], path=folder)
+    try:
+        content = json.loads(marker.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise error(f"{name} is not valid JSON ({exc})", path=folder) from None
+    except OSError as exc:
+        raise error(f"{name} cannot be read ({exc.strerror})", path=folder) from None
+    if not isinstance(content, dict) or content.get("format") != marker_format:
+        raise error(messages["other_format"], path=folder)
+    if content.get("format_version") != version:
+        raise error(messages["other_version"].format(found=content.get("format_version"), supported=version),
+                    path=folder)
+    return content

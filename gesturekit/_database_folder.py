@@ -1,0 +1,305 @@
+"""A matching database's folder on disk: writing it, and reading it back with every check.
+
+The layout of the folder is described in :mod:`gesturekit.database`;
+:meth:`~gesturekit.database.MatchingDatabase.save` and
+:meth:`~gesturekit.database.MatchingDatabase.load` call :func:`write_database`
+and :func:`read_database`. Reading trusts nothing: ``database.json`` is checked
+against the structure writing produces and the arrays against it (shapes,
+dtypes, every clip inside its take), arrays are never unpickled, and a
+damaged folder is a :class:`~gesturekit.errors.DatabaseError` naming the file.
+"""
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Iterable
+
+import numpy as np
+
+from ._io import read_json_marker
+from .control import ATTRIBUTE_NAMES
+from .errors import DatabaseError
+from .features import LAYOUT
+from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES
+
+if TYPE_CHECKING:
+    from .database import MatchingDatabase
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "CLIP_ARRAYS", "write_database", "read_database"]
+
+FORMAT = "gesturekit-matching-database"
+FORMAT_VERSION = 1
+# the per-clip arrays of a cut, each with M clips first; clip_take and clip_start index them
+CLIP_ARRAYS = ("F", "P", "G", "A", "valid", "attributes", "pose_track")
+_INDEX_ARRAYS = ("clip_take", "clip_start")
+_MESSAGES = {
+    "no_folder": "no database folder here (build one with `gesturekit build-db`)",
+    "no_file": "not a gesturekit database: database.json is missing",
+    "other_format": "not a gesturekit matching database (unknown format)",
+    "other_version": "database format version {found} is not supported by this gesturekit (format version "
+                     "{supported}); rebuild it with `gesturekit build-db --force`",
+}
+
+
+def write_database(
+    db: "MatchingDatabase",
+    path: Path,
+    *,
+    overwrite: bool,
+    inputs: Iterable[str | os.PathLike | None],
+    locked: bool,
+) -> None:
+    """Write ``db`` as the folder ``path`` by the rules of :func:`gesturekit.outputs.write_folder`.
+
+    Raises
+    ------
+    OutputError
+        See :func:`gesturekit.outputs.write_folder`.
+    DatabaseError
+        An array holds NaN or infinite values; nothing is written.
+    """
+    from .outputs import write_folder
+
+    _check_finite(db, path)
+
+    def fill(tmp: Path) -> None:
+        for k, v in db.arrays.items():
+            np.save(tmp / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
+        np.savez(tmp / "stats.npz", **{k: np.asarray(v) for k, v in db.stats.items()})
+        if db.audio is not None:
+            np.save(tmp / "audio.npy", np.asarray(db.audio), allow_pickle=False)
+        if db.overlap is not None:
+            (tmp / "overlap").mkdir()
+            for k, v in db.overlap.items():
+                np.save(tmp / "overlap" / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
+        meta = dict(db.meta)
+        meta["counts"] = {"clips": db.n_clips, "takes": len(db.meta["takes"])}
+        # the marker that lets a later --force recognise this folder, written last
+        (tmp / "database.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
+
+    write_folder(path, "database", fill, overwrite=overwrite, inputs=inputs, locked=locked)
+
+
+def _check_finite(db: "MatchingDatabase", path: Path) -> None:
+    """Refuse to save arrays with NaN or infinite values (they would poison every search)."""
+    parts = [("", db.arrays), ("overlap ", db.overlap or {}), ("z-scoring ", db.stats)]
+    for where, arrays in parts:
+        for k, v in arrays.items():
+            v = np.asarray(v) if where == "z-scoring " else v
+            if not np.issubdtype(v.dtype, np.floating):
+                continue
+            # clip by clip, so that a memory-mapped array is never copied whole
+            flat = v.reshape(v.shape[0], -1) if v.ndim > 1 else v.reshape(1, -1)
+            for i in range(0, flat.shape[0], 256):
+                ok = np.isfinite(flat[i:i + 256]).all(axis=1)
+                if not ok.all():
+                    row = i + int(np.argmin(ok))
+                    at = f" (clip {row})" if v.ndim > 1 and not where else ""
+                    raise DatabaseError(
+                        f"the database's {where}array {k} holds NaN or infinite values{at}: a take's motion or "
+                        "audio features are not finite; nothing was written", path=path)
+    if db.audio is not None and np.issubdtype(np.asarray(db.audio).dtype, np.floating):
+        if not np.isfinite(db.audio).all():
+            raise DatabaseError("the database's audio holds NaN or infinite values; nothing was written", path=path)
+
+
+def read_database(path: Path, *, mmap: bool) -> dict:
+    """Read and check a database folder.
+
+    Returns
+    -------
+    dict
+        ``meta``, ``arrays``, ``stats``, ``audio`` (or None), ``overlap`` (or
+        None): the keyword arguments of :class:`~gesturekit.database.MatchingDatabase`.
+
+    Raises
+    ------
+    DatabaseError
+        Missing folder or files, another format or format version, another
+        feature layout, or files that are damaged or disagree with each other.
+    """
+    meta = read_json_marker(path, "database.json", marker_format=FORMAT, version=FORMAT_VERSION, error=DatabaseError,
+                            messages=_MESSAGES)
+    if meta.get("layout") != LAYOUT.signature():
+        raise DatabaseError(
+            "database was built with another feature layout; rebuild it with `gesturekit build-db --force`",
+            path=path,
+        )
+    _check_meta(meta, path)
+    mode = "r" if mmap else None
+
+    def read(p: Path):
+        try:
+            return np.load(p, mmap_mode=mode, allow_pickle=False)
+        except FileNotFoundError:
+            raise DatabaseError(f"{p.name} is missing; the database is incomplete", path=path) from None
+        except (ValueError, EOFError) as exc:
+            raise DatabaseError(f"{p.name} cannot be read ({exc})", path=path) from None
+        except OSError as exc:
+            raise DatabaseError(f"{p.name} cannot be read ({exc.strerror or exc})", path=path) from None
+
+    arrays = {k: read(path / f"{k}.npy") for k in CLIP_ARRAYS + _INDEX_ARRAYS}
+    stats = _read_stats(path)
+    audio = read(path / "audio.npy") if (path / "audio.npy").exists() else None
+    overlap = None
+    if (path / "overlap").is_dir():
+        overlap = {k: read(path / "overlap" / f"{k}.npy") for k in CLIP_ARRAYS + _INDEX_ARRAYS}
+    _check_arrays(meta, arrays, stats, path, where="")
+    _check_clip_order(meta, arrays["clip_take"], path)
+    if overlap is not None:
+        _check_arrays(meta, overlap, stats, path, where="overlap/")
+    if audio is not None:
+        need = max((t["audio_offset"] + t["audio_samples"] for t in meta["takes"]), default=0)
+        if audio.ndim != 1 or audio.dtype != np.int16 or audio.shape[0] < need:
+            raise DatabaseError(f"audio.npy must be int16 samples, at least {need} of them; found "
+                                f"{audio.dtype} of shape {audio.shape}", path=path)
+    return {"meta": meta, "arrays": arrays, "stats": stats, "audio": audio, "overlap": overlap}
+
+
+_STATS_KEYS = {"F": LAYOUT.audio_dim, "P": LAYOUT.pose_dim, "A": LAYOUT.cgan_audio_dim}
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
+
+
+def _check_meta(meta: dict, path: Path) -> None:
+    """``database.json`` against the structure :func:`write_database` writes."""
+
+    def bad(what: str):
+        return DatabaseError(f"database.json: {what}; the file is damaged (rebuild the database)", path=path)
+
+    for key, kind in (("build", dict), ("takes", list), ("thresholds", dict), ("attribute_names", list)):
+        if key not in meta:
+            raise bad(f"'{key}' is missing")
+        if not isinstance(meta[key], kind):
+            raise bad(f"'{key}' must be {'an object' if kind is dict else 'a list'}, found {type(meta[key]).__name__}")
+    build = meta["build"]
+    if not (_is_int(build.get("clip_frames")) and build["clip_frames"] > 0):
+        raise bad(f"build.clip_frames must be a positive integer, found {build.get('clip_frames')!r}")
+    for key in ("label", "source"):
+        if not isinstance(build.get(key, ""), str):
+            raise bad(f"build.{key} must be a string, found {type(build[key]).__name__}")
+    stride = build.get("overlap_stride")
+    if stride is not None and not (_is_int(stride) and stride > 0):
+        raise bad(f"build.overlap_stride must be a positive integer or null, found {stride!r}")
+    names = meta["attribute_names"]
+    if names != list(ATTRIBUTE_NAMES):
+        raise bad(f"attribute_names must be {', '.join(ATTRIBUTE_NAMES)}")
+    thresholds = meta["thresholds"]
+    for name in names:
+        t = thresholds.get(name)
+        if not (isinstance(t, list) and len(t) == 2 and all(_is_number(v) for v in t) and t[0] <= t[1]):
+            raise bad(f"thresholds of {name} must be [low, high], two finite numbers, found {t!r}")
+    takes = meta["takes"]
+    if not takes:
+        raise bad("'takes' is empty: the database has no takes")
+    seen = set()
+    for i, t in enumerate(takes):
+        if not isinstance(t, dict):
+            raise bad(f"takes[{i}] must be an object, found {type(t).__name__}")
+        if not isinstance(t.get("name"), str) or not t["name"]:
+            raise bad(f"takes[{i}].name must be a non-empty string")
+        if t["name"] in seen:
+            raise bad(f"take name {t['name']!r} appears twice")
+        seen.add(t["name"])
+        if not isinstance(t.get("sources"), dict):
+            raise bad(f"takes[{i}].sources must be an object, found {type(t.get('sources')).__name__}")
+        for key in ("n_frames", "first_clip", "n_clips", "audio_offset", "audio_samples"):
+            if not (_is_int(t.get(key)) and t[key] >= 0):
+                raise bad(f"takes[{i}].{key} must be an integer >= 0, found {t.get(key)!r}")
+    counts = meta.get("counts")
+    if counts is not None:
+        if not (isinstance(counts, dict) and _is_int(counts.get("clips")) and _is_int(counts.get("takes"))):
+            raise bad(f"'counts' must hold the integers clips and takes, found {counts!r}")
+        if counts["takes"] != len(takes):
+            raise bad(f"counts.takes is {counts['takes']} but {len(takes)} takes are listed")
+
+
+def _read_stats(path: Path) -> dict[str, np.ndarray]:
+    """``stats.npz``: the six z-scoring vectors, finite, of the layout's sizes (never unpickled)."""
+    f = path / "stats.npz"
+    try:
+        with np.load(f, allow_pickle=False) as z:
+            stats = {k: np.asarray(z[k]) for k in z.files}
+    except FileNotFoundError:
+        raise DatabaseError("stats.npz is missing; the database is incomplete", path=path) from None
+    except (ValueError, EOFError, zipfile.BadZipFile) as exc:
+        # object arrays (pickles) land here too: allow_pickle=False refuses them
+        raise DatabaseError(f"stats.npz cannot be read ({exc})", path=path) from None
+    except OSError as exc:
+        raise DatabaseError(f"stats.npz cannot be read ({exc.strerror or exc})", path=path) from None
+    for key, dim in _STATS_KEYS.items():
+        for part in ("mean", "std"):
+            a = stats.get(f"{key}_{part}")
+            if a is None:
+                raise DatabaseError(f"stats.npz lacks {key}_{part}", path=path)
+            if a.shape != (dim,) or not np.issubdtype(a.dtype, np.floating) or not np.isfinite(a).all():
+                raise DatabaseError(f"stats.npz: {key}_{part} must be {dim} finite numbers, found "
+                                    f"{a.dtype} of shape {a.shape}", path=path)
+    return stats
+
+
+def _check_arrays(meta: dict, arrays: dict, stats: dict, path: Path, *, where: str) -> None:
+    """Shapes and dtypes of one cut's arrays, and every clip inside its take (index arrays only)."""
+    L = meta["build"]["clip_frames"]
+    ct, cs = arrays["clip_take"], arrays["clip_start"]
+    for name, a in (("clip_take", ct), ("clip_start", cs)):
+        if a.ndim != 1 or not np.issubdtype(a.dtype, np.integer):
+            raise DatabaseError(f"{where}{name}.npy must be integers of shape (clips,), found {a.dtype} of shape "
+                                f"{a.shape}", path=path)
+    m = ct.shape[0]
+    if m == 0:
+        raise DatabaseError(f"{where}clip_take.npy: the database has no clips", path=path)
+    if cs.shape[0] != m:
+        raise DatabaseError(f"{where}clip_start.npy has {cs.shape[0]} clips, clip_take.npy {m}", path=path)
+    if not where and meta.get("counts") is not None and meta["counts"]["clips"] != m:
+        raise DatabaseError(f"database.json counts {meta['counts']['clips']} clips but the arrays hold {m}",
+                            path=path)
+    expected = {
+        "F": (m, L, stats["F_mean"].shape[0]),
+        "P": (m, L, stats["P_mean"].shape[0]),
+        "G": (m, L, len(JOINT_NAMES) * 3),
+        "A": (m, L, stats["A_mean"].shape[0]),
+        "valid": (m, L),
+        "attributes": (m, L, len(ATTRIBUTE_NAMES)),
+        "pose_track": (m, L + LAYOUT.pose_lookahead, 3 * len(POSE_FEATURE_INDICES)),
+    }
+    for k, shape in expected.items():
+        if arrays[k].shape != shape:
+            raise DatabaseError(f"{where}{k}.npy has shape {arrays[k].shape}, expected {shape} ({m} clips of "
+                                f"{L} frames)", path=path)
+    takes = meta["takes"]
+    ti = np.asarray(ct, dtype=np.int64)
+    if ti.min() < 0 or ti.max() >= len(takes):
+        raise DatabaseError(f"{where}clip_take.npy holds take index {int(ti.min() if ti.min() < 0 else ti.max())}; "
+                            f"the database has takes 0..{len(takes) - 1}", path=path)
+    start = np.asarray(cs, dtype=np.int64)
+    n_frames = np.array([t["n_frames"] for t in takes], dtype=np.int64)
+    outside = (start < 0) | (start + L > n_frames[ti])
+    if outside.any():
+        c = int(np.flatnonzero(outside)[0])
+        raise DatabaseError(f"{where}clip_start.npy: clip {c} starts at frame {int(start[c])}, outside take "
+                            f"{takes[ti[c]]['name']!r} of {int(n_frames[ti[c]])} frames (clips of {L} frames)",
+                            path=path)
+
+
+def _check_clip_order(meta: dict, clip_take: np.ndarray, path: Path) -> None:
+    """Each take's clips are the ``n_clips`` consecutive clips from ``first_clip`` (what the tables and the
+    search's take boundaries assume)."""
+    takes = meta["takes"]
+    first = np.array([t["first_clip"] for t in takes], dtype=np.int64)
+    n = np.array([t["n_clips"] for t in takes], dtype=np.int64)
+    m = clip_take.shape[0]
+    if n.sum() != m or not np.array_equal(first, np.concatenate([[0], np.cumsum(n)[:-1]])):
+        raise DatabaseError(f"database.json: the takes' first_clip/n_clips do not cover the {m} clips of "
+                            "clip_take.npy", path=path)
+    if not np.array_equal(np.asarray(clip_take), np.repeat(np.arange(len(takes)), n)):
+        raise DatabaseError("clip_take.npy does not match the takes' first_clip/n_clips in database.json",
+                            path=path)

@@ -1,0 +1,320 @@
+"""The 3D skeleton figure: motions side by side, animated on one time grid, in plotly.
+
+The bones are drawn as a few polylines per motion (body and fingers), the
+torso and head as the house appearance draws them; frames hold the same traces
+at each shown time. Part of :mod:`gesturekit.viz.figures`.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import plotly.graph_objects as go
+
+from ..motion import Motion
+from ..skeleton import BODY_JOINTS, N_JOINTS, bones, joint_index
+from ._plotly import _frames_at, _motions_and_labels, _time_grid, _xyz
+from .appearance import APPEARANCE
+
+
+#: Most animation frames a skeleton figure holds (20 s at 15 fps). Longer motions are
+#: shown at a lower frame rate; each frame then lasts longer, so playback keeps real time.
+DEFAULT_MAX_FRAMES = 300
+
+
+def _bone_groups() -> tuple[np.ndarray, np.ndarray]:
+    """(child, parent) pairs of the body bones (up to the wrists) and of the 40 finger bones."""
+    pairs = bones()
+    wrists = {joint_index("left_wrist"), joint_index("right_wrist")}
+    body = np.array([c < len(BODY_JOINTS) or c in wrists for c in pairs[:, 0]])
+    return pairs[body], pairs[~body]
+
+
+def _chains(pairs: np.ndarray) -> list[list[int]]:
+    """The bones of ``pairs`` as joint paths, each bone in exactly one path.
+
+    A path follows a joint's first child on down and starts again from a joint
+    for each further child, so a finger is one path of 5 joints (4 bones) rather
+    than 4 separate bones: about half the points to draw and to send.
+
+    Parameters
+    ----------
+    pairs : np.ndarray, shape (bones, 2)
+        (child, parent) joint indices; each child appears once.
+
+    Returns
+    -------
+    list of list of int
+        Joint indices along each path, parent first.
+    """
+    children: dict[int, list[int]] = {}
+    for c, par in pairs.tolist():
+        children.setdefault(par, []).append(c)
+    child_set = {c for c, _ in pairs.tolist()}
+    chains = []
+    # a path starts at every joint that is not drawn as a child here, and once more at a
+    # joint for each of its children after the first
+    starts = [j for j in children if j not in child_set]
+    stack = [(j, k) for j in sorted(starts) for k in range(len(children[j]))]
+    while stack:
+        top, k = stack.pop(0)
+        path = [top, children[top][k]]
+        while path[-1] in children:
+            j = path[-1]
+            stack.extend((j, i) for i in range(1, len(children[j])))
+            path.append(children[j][0])
+        chains.append(path)
+    return chains
+
+
+def _polylines(positions: np.ndarray, chains: list[list[int]]) -> np.ndarray:
+    """Joint paths as one polyline broken by NaN rows.
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (frames, 55, 3), metres
+    chains : list of list of int
+        From :func:`_chains`.
+
+    Returns
+    -------
+    np.ndarray, shape (frames, points, 3), float32
+        The joints of each path in order, then a NaN point (plotly leaves a gap there).
+    """
+    idx = np.concatenate([np.append(np.asarray(c), -1) for c in chains])
+    out = np.asarray(positions, np.float32)[:, idx]
+    out[:, idx < 0] = np.nan
+    return out
+
+
+def _skeleton_paths(motions: list[Motion], *, fps, max_frames: int, spacing):
+    """What a skeleton view shows: the time grid and each motion's joint paths at its times.
+
+    Returns ``(grid_fps, step, times, offsets, parts, lo, hi)``: the time grid's frame
+    rate, the decimation step (every ``step``-th grid time is shown), the shown times
+    in seconds, the motions' X offsets in metres (side by side), per motion its
+    (body, finger) polylines of :func:`_polylines` at those times (sample and hold,
+    offset along X), each (len(times), points, 3) float32, and the bounds of every
+    shown pose, 0.1 m added on each side.
+    """
+    grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
+    shown = [np.asarray(m.positions[_frames_at(m, times)], dtype=np.float32) for m in motions]
+    if spacing is None:
+        widest = max(float(np.ptp(p[..., 0])) for p in shown)
+        spacing = max(0.8, widest + 0.4)
+    offsets = (np.arange(len(motions)) - (len(motions) - 1) / 2) * float(spacing)
+    shown = [p + np.array([dx, 0, 0], dtype=np.float32) for p, dx in zip(shown, offsets)]
+    allp = np.concatenate([p.reshape(-1, 3) for p in shown])
+    body_chains, hand_chains = (_chains(pairs) for pairs in _bone_groups())
+    parts = [(_polylines(p, body_chains), _polylines(p, hand_chains)) for p in shown]
+    return grid_fps, step, times, offsets, parts, allp.min(axis=0) - 0.1, allp.max(axis=0) + 0.1
+
+
+def _torso_and_head(motions: list[Motion], times: np.ndarray, offsets: np.ndarray):
+    """Per motion, at the shown times (sample and hold, offset along X): the torso's capsules of
+    the appearance as NaN-separated segments, shape (times, points, 3), and the head's centre,
+    shape (times, 1, 3), float32, metres."""
+    a = APPEARANCE
+    capsules, spheres = a.shapes()
+    torso = [(c.a, c.b) for c in capsules if c.a >= N_JOINTS or c.b >= N_JOINTS]
+    idx = np.array([j for pair in torso for j in (*pair, -1)])
+    out = []
+    for m, dx in zip(motions, offsets):
+        points = a.body(m.positions[_frames_at(m, times)]).points + np.array([dx, 0, 0], dtype=np.float32)
+        segments = points[:, idx]
+        segments[:, idx < 0] = np.nan
+        out.append((segments, points[:, [s.centre for s in spheres]]))
+    return out
+
+
+def skeleton_figure(
+    motions: Motion | Sequence[Motion],
+    *,
+    labels: Sequence[str] | None = None,
+    fps: float | None = None,
+    title: str | None = None,
+    max_frames: int = DEFAULT_MAX_FRAMES,
+    spacing: float | None = None,
+    height: int = 520,
+) -> go.Figure:
+    """An animated 3D view of one or several skeletons, side by side, seen from the front.
+
+    Each motion is drawn in the one appearance (:mod:`gesturekit.viz.appearance`),
+    as far as plotly's 3D lines allow: its 54 bones (14 body bones up to the
+    wrists as thick lines, the 40 finger bones as thin lines, widths from the
+    appearance's radii at the figure's scale) with round joints, the torso's
+    capsules (pelvis, hips, chest) as wide lines, and the head as a ball; in the
+    motion's colour (first blue, second orange), parts tinted as in the MP4. Several
+    motions are offset copies in one scene, placed along X (the first on the
+    viewer's left), so they share one camera. The camera stands on the
+    characters' +Z side, looking along -Z, with Y up. The figure has play/pause
+    buttons and a time slider; its axis ranges stay fixed over all frames.
+
+    Parameters
+    ----------
+    motions : Motion or sequence of Motion
+        Joint positions, shape (frames, 55, 3), metres, each at its own fps.
+        Motions of different lengths are shown together; a shorter one holds
+        its last pose.
+    labels : sequence of str, optional
+        One name per motion, shown above it and in the legend.
+    fps : float, optional
+        Frame rate of the animation's time grid, frames per second; default
+        the highest fps of the motions. Each motion shows, at time ``t``, its
+        last frame at or before ``t``.
+    title : str, optional
+        Figure title.
+    max_frames : int
+        Most animation frames (default :data:`DEFAULT_MAX_FRAMES`). A longer
+        time grid keeps every ``ceil(n / max_frames)``-th time; frame durations
+        grow by the same factor so playback stays in real time.
+    spacing : float, optional
+        Distance in metres between neighbouring motions along X; default the
+        widest motion's X extent plus 0.4 m (at least 0.8 m).
+    height : int
+        Figure height in pixels.
+
+    Returns
+    -------
+    plotly.graph_objects.Figure
+        Four traces per motion: ``meta["part"] == "body"`` (14 bones) and
+        ``"hands"`` (40 bones), drawn as joint paths (a finger from the wrist to
+        its tip) separated by NaN points, every pair of consecutive finite
+        points a bone and the joints its markers; ``"torso"`` (the
+        appearance's torso capsules, NaN-separated segments); ``"head"`` (one
+        marker at the head's centre).
+        One ``go.Frame`` per shown time (named by its index,
+        ``layout.meta`` holds ``{"fps", "frame_step", "times"}`` with the
+        times in seconds), and a scene camera with ``up = (0, 1, 0)`` and the
+        eye on the +Z side.
+
+    Raises
+    ------
+    ConfigError
+        No motion, a motion with no frame, labels of the wrong length, or a
+        non-positive ``fps``/``max_frames``.
+    """
+    motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure")
+    # per motion: (body polylines, finger polylines), each (frames, points, 3); markers at the
+    # points draw every joint, since every joint is on a bone
+    grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(motions, fps=fps, max_frames=max_frames,
+                                                                    spacing=spacing)
+
+    # the torso's volume and the head, as the render and the page draw them
+    extras = _torso_and_head(motions, times, offsets)
+    parts = [(body, hands, torso, head) for (body, hands), (torso, head) in zip(parts, extras)]
+    every = np.concatenate([np.concatenate([t.reshape(-1, 3), h.reshape(-1, 3)]) for t, h in extras])
+    every = every[np.isfinite(every).all(axis=1)]
+    a = APPEARANCE
+    lo = np.minimum(lo, every.min(axis=0) - a.head_radius)
+    hi = np.maximum(hi, every.max(axis=0) + a.head_radius)
+    # fixed ranges over every shown frame: the view must not jump while playing
+    centre, extent = (lo + hi) / 2, np.maximum(hi - lo, 0.3)
+    # plotly sizes 3D lines and markers in screen pixels: the appearance's radii (metres) become
+    # pixels at the figure's scale (the scene's largest side spans about 0.6 of its height)
+    px = 0.6 * height / float(extent.max())
+
+    def width(radius: float) -> float:
+        return max(1.0, 2 * radius * px)
+
+    def size(radius: float) -> float:
+        # a 3D marker comes out about three times its nominal size (measured in Chromium)
+        return max(1.0, 2 * radius * px / 3)
+
+    traces = []
+    for i, (label, _) in enumerate(zip(labels, parts)):
+        group = f"motion{i}"
+        common = dict(legendgroup=group, hoverinfo="skip", meta=None)
+        body, hands, torso, head = parts[i]
+        looks = (
+            ("body", body, a.part_color(i, "upper_arm"), width(a.forearm_radius), label or "body", len(motions) > 1),
+            ("hands", hands, a.part_color(i, "finger"), width(a.finger_radius), f"{label} hands".strip(), False),
+            ("torso", torso, a.part_color(i, "torso"), width(a.torso_radius), f"{label} torso".strip(), False),
+        )
+        for part, points, color, w, name, legend in looks:
+            common["meta"] = {"motion": i, "part": part}
+            traces.append(
+                go.Scatter3d(
+                    **_xyz(points[0]), mode="lines+markers", line=dict(color=color, width=w),
+                    # markers at the joints, as wide as the line: round ends, as the capsules have
+                    marker=dict(color=color, size=w / 3, line=dict(width=0)), name=name, showlegend=legend,
+                    **common,
+                )
+            )
+        common["meta"] = {"motion": i, "part": "head"}
+        color = a.part_color(i, "head")
+        traces.append(
+            go.Scatter3d(
+                **_xyz(head[0]), mode="markers", marker=dict(color=color, size=size(a.head_radius), opacity=1.0,
+                                                             line=dict(width=0)),
+                name=f"{label} head".strip(), showlegend=False, **common,
+            )
+        )
+
+    frames = []
+    if len(times) > 1:
+        trace_ids = list(range(len(traces)))
+        for k in range(len(times)):
+            data = [dict(type="scatter3d", **_xyz(p[k])) for part in parts for p in part]
+            frames.append(dict(data=data, traces=trace_ids, name=str(k)))
+
+    lo, hi = centre - extent / 2, centre + extent / 2
+    aspect = extent / extent.max()
+    axis = dict(visible=False, showbackground=False, showspikes=False)
+    annotations = []
+    if any(labels) and len(motions) > 1:
+        top = float(hi[1]) - 0.02
+        annotations = [
+            dict(x=float(dx), y=top, z=0.0, text=label, showarrow=False, font=dict(size=13))
+            for dx, label in zip(offsets, labels)
+        ]
+    scene = dict(
+        xaxis=dict(range=[float(lo[0]), float(hi[0])], **axis),
+        yaxis=dict(range=[float(lo[1]), float(hi[1])], **axis),
+        zaxis=dict(range=[float(lo[2]), float(hi[2])], **axis),
+        aspectmode="manual",
+        aspectratio=dict(x=float(aspect[0]), y=float(aspect[1]), z=float(aspect[2])),
+        # in front of the character (+Z), slightly above, looking at the scene centre
+        camera=dict(up=dict(x=0, y=1, z=0), eye=dict(x=0.0, y=0.15, z=1.9), center=dict(x=0, y=0, z=0),
+                    projection=dict(type="perspective")),
+        annotations=annotations,
+        dragmode="orbit"  # "turntable" assumes Z up and would draw this Y-up scene upside down
+    )
+    frame_ms = 1000.0 * step / grid_fps
+    layout = dict(
+        title=dict(text=title) if title else None,
+        height=height,
+        margin=dict(l=0, r=0, t=40 if title else 10, b=0),
+        scene=scene,
+        showlegend=len(motions) > 1,
+        legend=dict(orientation="h", y=1.0, x=0.5, xanchor="center"),
+        uirevision="skeleton",  # keep the user's camera when the figure is redrawn
+        meta={"fps": grid_fps, "frame_step": step, "times": [round(float(t), 4) for t in times]},
+    )
+    if frames:
+        play = dict(frame=dict(duration=frame_ms, redraw=True), fromcurrent=True, mode="immediate",
+                    transition=dict(duration=0))
+        pause = dict(frame=dict(duration=0, redraw=False), mode="immediate", transition=dict(duration=0))
+        layout["updatemenus"] = [
+            dict(
+                type="buttons", direction="left", x=0.0, y=0.0, xanchor="left", yanchor="top",
+                pad=dict(t=45, r=10), showactive=False,
+                buttons=[dict(label="▶ Play", method="animate", args=[None, play]),
+                         dict(label="❚❚ Pause", method="animate", args=[[None], pause])],
+            )
+        ]
+        layout["sliders"] = [
+            dict(
+                active=0, x=0.18, y=0.0, len=0.82, xanchor="left", yanchor="top", pad=dict(t=30),
+                currentvalue=dict(prefix="t = ", suffix=" s", visible=True),
+                steps=[
+                    dict(label=f"{t:.2f}", method="animate",
+                         args=[[str(k)], dict(frame=dict(duration=0, redraw=True), mode="immediate",
+                                              transition=dict(duration=0))])
+                    for k, t in enumerate(times)
+                ],
+            )
+        ]
+        layout["margin"]["b"] = 70
+    fig = go.Figure(data=traces, frames=frames, layout=layout)
+    return fig
