@@ -1,5 +1,5 @@
 """Tests of gesturekit.search: the fast search equals the loop-for-loop reference
-(gesturekit.search_reference) decision for decision, and the rules of Algorithm 1
+(gesturekit.search.reference) decision for decision, and the rules of Algorithm 1
 (exclusions, controls, relaxation, k beyond the survivors, pins, seeds, batches) hold."""
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from gesturekit.search import (
     search,
     search_batch,
 )
-from gesturekit.search_reference import cosine_distance, pose_sqdist, search_reference
+from gesturekit.search.reference import cosine_distance, pose_sqdist, search_reference
 
 SLOW = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -149,7 +149,7 @@ def test_vectorised_exact_distances_equal_the_definitions(seed, n, dim, coarse):
 
 def _whole_order_groups(est, err, order):
     """lo, hi of the groups of a whole order (every group complete)."""
-    from gesturekit._search_kernels import prefix_groups
+    from gesturekit.search.kernels import prefix_groups
 
     n = est.size
     lo, hi = np.empty(n, np.int64), np.empty(n, np.int64)
@@ -174,7 +174,7 @@ def test_rank_groups_bound_the_exact_ranks():
 def test_prefix_groups_bound_the_exact_ranks(seed, n, err_size, L):
     # a sorted prefix of L positions (the rest only partitioned off): positions before the
     # returned s are in complete groups, every other element's rank lies in [s, n - 1]
-    from gesturekit._search_kernels import prefix_groups
+    from gesturekit.search.kernels import prefix_groups
 
     rng = np.random.default_rng(seed)
     exact = np.round(rng.standard_normal(n), 2)  # exact ties
@@ -212,7 +212,7 @@ def _prefix_problem(seed: int, offset: float):
 
 
 def _with_prefix(prefix, fn):
-    import gesturekit.search as search_module
+    import gesturekit.search.index as search_module
 
     saved = search_module._PREFIX
     search_module._PREFIX = prefix
@@ -233,9 +233,9 @@ def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k
 
 
 def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
-    import gesturekit.search as search_module
+    import gesturekit.search.index as search_module
 
-    kernels = search_module._kernels()
+    kernels = search_module.compiled()
     seen = []
 
     class Recording:
@@ -250,7 +250,7 @@ def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
 
             return rank_top
 
-    monkeypatch.setattr(search_module, "_kernels", lambda: Recording())
+    monkeypatch.setattr(search_module, "compiled", lambda: Recording())
     P, F, valid, query = _prefix_problem(0, 0.0)
     cfg = SearchConfig(step=4, topk=3)
     results = {}

@@ -12,7 +12,7 @@ from gesturekit.control import parse_control
 from gesturekit.database import MatchingDatabase
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import ConfigError, GestureKitWarning
-from gesturekit.search_reference import search_reference
+from gesturekit.search.reference import search_reference
 from gesturekit.skeleton import joint_index
 from gesturekit.synthesize import SynthesisConfig, rest_pose_frame, synthesize, synthesize_batch
 

@@ -17,7 +17,7 @@ from gesturekit.evaluate import metrics
 from gesturekit.features import LAYOUT
 from gesturekit.motion import Motion
 from gesturekit.search import SearchConfig, search
-from gesturekit.search_reference import cosine_distance, pose_sqdist, window_admissible
+from gesturekit.search.reference import cosine_distance, pose_sqdist, window_admissible
 from gesturekit.synthesize import SynthesisConfig, synthesize
 from gesturekit.viz.walkthrough import (
     constraints_table,

@@ -1,7 +1,7 @@
 """The method step by step: one search step taken apart, and the tables the walkthroughs show.
 
 :func:`explain_step` recomputes a single step of Algorithm 1 (see
-:mod:`gesturekit.search_reference` for the rules) for *every* clip of the
+:mod:`gesturekit.search.reference` for the rules) for *every* clip of the
 database, not only the few candidates :class:`~gesturekit.search.SearchResult`
 records, and returns the whole table: each clip's nearest admissible window to
 the last pose, its pose and audio distances, its two ranks, their sum and its

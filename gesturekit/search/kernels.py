@@ -1,16 +1,16 @@
-"""The compiled loops of :mod:`gesturekit.search` (numba, a dependency of librosa).
+"""The compiled loops of :mod:`gesturekit.search.index` (numba, a dependency of librosa).
 
-Imported by :func:`gesturekit.search._kernels` when a search first runs, not with the
+Imported by :func:`gesturekit.search.exact.compiled` when a search first runs, not with the
 package (numba is heavy). The loops are module-level functions so that numba's on-disk
 cache serves them in every later process, including those that call each other.
 
 ``scan_one(P3, q, bias, nq, npmax, c_err, tiny, G, s0, amin, undecided, F3, na2, fq, nb, av, inexact)``:
 the scan of one query in one pass per clip: float32 estimates ``G`` of the admissible
-starts only (+inf elsewhere, their rows unread), the reductions of :func:`gesturekit.search._reduce_chunk`,
+starts only (+inf elsewhere, their rows unread), the reductions of :func:`gesturekit.search.index._reduce_chunk`,
 and the audio estimate ``av`` of the chosen start ``s0`` (``inexact``: False where it is
 exact, at a zero norm).
 ``reduce_many(G3, bias, nq, npmax, c_err, tiny, s0, amin, undecided)``:
-:func:`gesturekit.search._reduce_chunk` for several queries in one pass over each clip's (T, queries)
+:func:`gesturekit.search.index._reduce_chunk` for several queries in one pass over each clip's (T, queries)
 block (numpy's reductions along the strided axis are slow).
 ``audio_at(F3, na2, s0, amin, fq, nb, av, inexact)``: the audio estimates of each clip's
 ``s0`` for several queries (one clip's rows serve all of them).
@@ -20,8 +20,8 @@ order is unknown (groups of near-equal estimates), over a sorted prefix of the o
 ``row_stats(x2, norms)``: float64 squared norms of the rows of ``x2``, whether all
 values are finite, and the largest magnitude (one pass for validation and norms).
 ``survivors(...)`` and ``rank_top(...)``: the exact decisions of one query after the
-scan (see :meth:`gesturekit.search.SearchIndex._decide`), with the exact distances of
-:mod:`gesturekit.search_reference` (float64, left to right).
+scan (see :meth:`gesturekit.search.index.SearchIndex._decide`), with the exact distances of
+:mod:`gesturekit.search.reference` (float64, left to right).
 """
 from __future__ import annotations
 
@@ -202,7 +202,7 @@ def audio_at(F3, na2, s0, amin, fq, nb, av, inexact):
 
 # -- the exact decisions of one query (steps 1-4 of Algorithm 1 after the scan) --------------
 # No fastmath below: these are the exact values, the same operations in the same order as
-# gesturekit.search_reference (float64, left to right).
+# gesturekit.search.reference (float64, left to right).
 
 
 @numba.njit(cache=True, nogil=True)

@@ -45,8 +45,9 @@ import math
 
 import numpy as np
 
-from .errors import ConfigError, warn
-from .search import SearchConfig, SearchResult, _validate, describe_steps
+from ..errors import ConfigError, warn
+from .checks import validate
+from .types import SearchConfig, SearchResult, describe_steps
 
 __all__ = ["pose_sqdist", "cosine_distance", "window_admissible", "search_reference"]
 
@@ -177,7 +178,7 @@ def search_reference(
     -------
     SearchResult
     """
-    v = _validate(P, F, valid, query, config, masks, step_mask, exclude)
+    v = validate(P, F, valid, query, config, masks, step_mask, exclude)
     P, F, valid, query, cfg = v.P, v.F, v.valid, v.query, v.config
     exclude, masks, step_mask = v.exclude, v.masks, v.step_mask
     M, T = valid.shape
