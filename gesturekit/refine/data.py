@@ -240,7 +240,7 @@ def make_training_pairs(
             np.logical_and(allowed, ~own, out=masks[j])
         n_steps = -(-L // config.step)
         configs = [
-            SearchConfig(k=int(k_all[w]), step=config.step, topk=1, init=P0[w], mask_rule="all") for w in idx
+            SearchConfig(k=int(k_all[w]), step=config.step, topk=1, init_pose=P0[w], mask_rule="all") for w in idx
         ]
         with collect_warnings():
             # a relaxed step could use the window's own frames: such windows are dropped below

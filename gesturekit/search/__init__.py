@@ -11,6 +11,8 @@ Modules
 -------
 types
     :class:`SearchConfig`, :class:`SearchResult`, :func:`describe_steps`.
+plan
+    :func:`plan_search`: a synthesis's search inputs, built once (:class:`SearchPlan`).
 reference
     Algorithm 1 loop for loop: the definition the fast search reproduces.
 explain
@@ -33,12 +35,15 @@ from __future__ import annotations
 from .admissible import admissible_starts
 from .exact import exact_cosine_distance, exact_pose_sqdist
 from .index import SearchIndex, search, search_batch
+from .plan import SearchPlan, plan_search
 from .types import SearchConfig, SearchResult, describe_steps
 
 __all__ = [
     "SearchConfig",
     "SearchResult",
     "SearchIndex",
+    "SearchPlan",
+    "plan_search",
     "search",
     "search_batch",
     "exact_pose_sqdist",

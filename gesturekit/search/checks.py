@@ -14,7 +14,13 @@ from ..errors import ConfigError
 from .exact import MAX_ABS, compiled
 from .types import SearchConfig
 
-__all__ = ["validate", "validate_db", "validate_call", "checked_sqnorms"]
+__all__ = ["validate", "validate_db", "validate_call", "check_segment", "checked_sqnorms"]
+
+
+def check_segment(n: int, clip_frames: int) -> None:
+    """Refuse a segment length N (frames per step, already a positive integer) longer than a clip."""
+    if n > clip_frames:
+        raise ConfigError(f"step {n} is longer than a database clip ({clip_frames} frames)")
 
 
 def validate_db(P, F, valid):
@@ -45,12 +51,11 @@ def validate_call(shape, query, config, masks, step_mask, exclude):
     if np.abs(query).max() > MAX_ABS:
         raise ConfigError(f"query audio features exceed {MAX_ABS:g} in magnitude (are they z-scored?)")
     N = config.step
-    if N > T:
-        raise ConfigError(f"step {N} is longer than a database clip ({T} frames)")
-    if not isinstance(config.init, str):
-        if len(config.init) != D:
-            raise ConfigError(f"initial pose must have {D} values, got {len(config.init)}")
-        if max(abs(x) for x in config.init) > MAX_ABS:
+    check_segment(N, T)
+    if not isinstance(config.init_pose, str):
+        if len(config.init_pose) != D:
+            raise ConfigError(f"initial pose must have {D} values, got {len(config.init_pose)}")
+        if max(abs(x) for x in config.init_pose) > MAX_ABS:
             raise ConfigError(f"initial pose exceeds {MAX_ABS:g} in magnitude (is it z-scored?)")
     n_steps = -(-query.shape[0] // N)
     if masks is not None:

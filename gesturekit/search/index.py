@@ -454,7 +454,7 @@ class SearchIndex:
         results, poses = [], np.empty((B, D), np.float32)
         for b, c in enumerate(calls):
             cfg = c.config
-            if cfg.init == "random":
+            if cfg.init_pose == "random":
                 adm, _ = step_key(b, 0)
                 if not adm.any():
                     adm, _ = step_key(b, 0, relaxed=True)
@@ -466,7 +466,7 @@ class SearchIndex:
                 init_pose = self.P[init_frame]
             else:
                 init_frame = (-1, -1)
-                init_pose = np.asarray(cfg.init, dtype=np.float32)
+                init_pose = np.asarray(cfg.init_pose, dtype=np.float32)
             poses[b] = init_pose
             results.append(
                 SearchResult.empty(

@@ -192,7 +192,7 @@ def search_reference(
         return None if j < 0 else masks[j]
 
     # p_{-1}
-    if cfg.init == "random":
+    if cfg.init_pose == "random":
         frames = []
         for mask in (control(0), None):
             frames = [
@@ -210,7 +210,7 @@ def search_reference(
         init_pose = P[m0, s0].copy()
         init_frame = (m0, s0)
     else:
-        init_pose = np.asarray(cfg.init, dtype=np.float32)
+        init_pose = np.asarray(cfg.init_pose, dtype=np.float32)
         init_frame = (-1, -1)
     p_prev = init_pose.tolist()
 

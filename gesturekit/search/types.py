@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._config import config_from_dict, config_to_dict
 from ..errors import ConfigError
 
 __all__ = ["SearchConfig", "SearchResult", "CANDIDATE_FIELDS", "describe_steps"]
@@ -31,10 +32,12 @@ class SearchConfig:
         Candidates per step kept in the record (at least ``k + 1`` are kept).
     seed : int
         Seed of the random initial pose.
-    init : "random" or sequence of float
-        ``"random"``: the pose feature of a random admissible database frame
-        satisfying step 0's control (seeded). Otherwise an explicit z-scored
+    init_pose : "random" or sequence of float
+        ``p_{-1}``. ``"random"``: the pose feature of a random admissible database
+        frame satisfying step 0's control (seeded). Otherwise an explicit z-scored
         pose feature (D values, e.g. a rest pose), stored rounded to float32.
+        (Saved configurations of earlier versions call it ``init``; :meth:`from_dict`
+        reads both.)
     mask_rule : {"ends", "all"}
         Where a control mask must hold in a window: at its first and last
         frame (the authors' code) or on every frame (ours).
@@ -47,7 +50,7 @@ class SearchConfig:
     step: int = 8
     topk: int = 10
     seed: int = 0
-    init: str | tuple[float, ...] = "random"
+    init_pose: str | tuple[float, ...] = "random"
     mask_rule: str = "ends"
     pins: dict = field(default_factory=dict, hash=False)
 
@@ -59,18 +62,19 @@ class SearchConfig:
             object.__setattr__(self, name, int(value))
         if self.mask_rule not in ("ends", "all"):
             raise ConfigError(f"SearchConfig.mask_rule must be 'ends' or 'all', got {self.mask_rule!r}")
-        init = self.init
+        init = self.init_pose
         if isinstance(init, str):
             if init != "random":
-                raise ConfigError(f"SearchConfig.init must be 'random' or a pose feature vector, got {init!r}")
+                raise ConfigError(f"SearchConfig.init_pose must be 'random' or a pose feature vector, got {init!r}")
         else:
             try:
                 arr = np.asarray(init, dtype=np.float64)
             except (TypeError, ValueError) as exc:
-                raise ConfigError(f"SearchConfig.init must be 'random' or a pose feature vector: {exc}") from None
+                raise ConfigError(f"SearchConfig.init_pose must be 'random' or a pose feature vector: {exc}") from None
             if arr.ndim != 1 or arr.size == 0 or not np.all(np.isfinite(arr)):
-                raise ConfigError(f"SearchConfig.init must be a finite 1-D pose feature vector, got shape {arr.shape}")
-            object.__setattr__(self, "init", tuple(float(x) for x in arr.astype(np.float32)))
+                raise ConfigError(
+                    f"SearchConfig.init_pose must be a finite 1-D pose feature vector, got shape {arr.shape}")
+            object.__setattr__(self, "init_pose", tuple(float(x) for x in arr.astype(np.float32)))
         if not isinstance(self.pins, Mapping):
             raise ConfigError(f"SearchConfig.pins must map step -> (clip, start), got {type(self.pins).__name__}")
         pins = {}
@@ -89,24 +93,15 @@ class SearchConfig:
 
     def to_dict(self) -> dict:
         """A JSON-able dict (pin steps become strings) that :meth:`from_dict` reads back."""
-        return {
-            "k": self.k,
-            "step": self.step,
-            "topk": self.topk,
-            "seed": self.seed,
-            "init": self.init if isinstance(self.init, str) else list(self.init),
-            "mask_rule": self.mask_rule,
-            "pins": {str(i): [m, s] for i, (m, s) in self.pins.items()},
-        }
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "SearchConfig":
-        """Inverse of :meth:`to_dict`; unknown keys raise :class:`ConfigError`."""
-        known = {"k", "step", "topk", "seed", "init", "mask_rule", "pins"}
-        unknown = set(d) - known
-        if unknown:
-            raise ConfigError(f"unknown SearchConfig keys: {sorted(unknown)}")
-        return cls(**dict(d))
+        """Inverse of :meth:`to_dict` (also of earlier versions' ``init``); unknown keys raise :class:`ConfigError`."""
+        d = dict(d)
+        if "init" in d and "init_pose" not in d:
+            d["init_pose"] = d.pop("init")
+        return config_from_dict(cls, d, what="SearchConfig keys")
 
     @property
     def table_width(self) -> int:
