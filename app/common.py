@@ -649,7 +649,7 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
     source : str
         Name of the speech, stored in the result (download names, metadata).
     refiner : optional
-        A refiner, passed on by :func:`gesturekit.viz.session.with_refiner`.
+        A refiner (folder or loaded), applied by :func:`gesturekit.synthesize.synthesize`.
 
     Raises
     ------
@@ -659,12 +659,10 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
     from dataclasses import replace
 
     from gesturekit.synthesize import synthesize
-    from gesturekit.viz.session import with_refiner
 
     ss = st.session_state
-    config, extra = with_refiner(config, refiner)
     with st.spinner("Searching the database…"), _warnings_shown():
-        result = synthesize(audio, db=db, config=config, **extra)
+        result = synthesize(audio, db=db, config=config, refiner=refiner)
     ss[_RUN_COUNTER] = ss.get(_RUN_COUNTER, 0) + 1
     record = {"result": replace(result, source=source), "run": ss[_RUN_COUNTER],
               "database": str(Path(db.path).resolve()) if db.path is not None else result.database,
