@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from .._config import config_from_dict, config_to_dict
 from ..database import MatchingDatabase, normalise_exclusions
 from ..errors import ConfigError, DatabaseError, collect_warnings
 from ..search import SearchConfig, SearchIndex
@@ -74,24 +75,13 @@ class PairsConfig:
         object.__setattr__(self, "exclude_ranges", ranges)
 
     def to_dict(self) -> dict:
-        return {
-            "seed": self.seed,
-            "step": self.step,
-            "k_one_fraction": self.k_one_fraction,
-            "k_max": self.k_max,
-            "exclude_takes": list(self.exclude_takes),
-            "exclude_ranges": [list(r) for r in self.exclude_ranges],
-        }
+        """A JSON-able dict; :meth:`from_dict` reads it back."""
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> "PairsConfig":
-        unknown = set(d) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ConfigError(f"unknown training-data options: {', '.join(sorted(unknown))}")
-        d = dict(d)
-        d["exclude_takes"] = tuple(d.get("exclude_takes", ()))
-        d["exclude_ranges"] = tuple(tuple(r) for r in d.get("exclude_ranges", ()))
-        return cls(**d)
+        """Inverse of :meth:`to_dict`; unknown options raise :class:`ConfigError`."""
+        return config_from_dict(cls, d, what="training-data options")
 
 
 @dataclass

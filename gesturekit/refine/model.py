@@ -20,12 +20,13 @@ pool by 2, then a linear layer to one score (no sigmoid: WGAN).
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 from torch import nn
 import torch.nn.functional as F
 
+from .._config import config_from_dict, config_to_dict
 from ..errors import ConfigError
 
 __all__ = ["ModelConfig", "Generator", "Critic", "build_models", "xavier_init", "count_parameters"]
@@ -73,17 +74,13 @@ class ModelConfig:
             raise ConfigError("audio_dim and motion_dim must be positive")
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d["generator_channels"] = list(self.generator_channels)
-        d["critic_channels"] = list(self.critic_channels)
-        return d
+        """A JSON-able dict; :meth:`from_dict` reads it back."""
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> "ModelConfig":
-        unknown = set(d) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ConfigError(f"unknown model options: {', '.join(sorted(unknown))}")
-        return cls(**d)
+        """Inverse of :meth:`to_dict`; unknown options raise :class:`ConfigError`."""
+        return config_from_dict(cls, d, what="model options")
 
 
 def _double_conv(cin: int, cout: int, norm) -> nn.Sequential:

@@ -29,7 +29,7 @@ import shutil
 import signal
 import threading
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from .. import __version__
+from .._config import config_from_dict, config_to_dict
 from ..database import MatchingDatabase
 from ..errors import ConfigError, DatabaseError, InputFileError
 from ..export.files import atomic_write
@@ -135,16 +136,13 @@ class TrainConfig:
             raise ConfigError("gp_weight and l1_weight must not be negative")
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d["betas"] = list(self.betas)
-        return d
+        """A JSON-able dict; :meth:`from_dict` reads it back."""
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrainConfig":
-        unknown = set(d) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ConfigError(f"unknown training options: {', '.join(sorted(unknown))}")
-        return cls(**d)
+        """Inverse of :meth:`to_dict`; unknown options raise :class:`ConfigError`."""
+        return config_from_dict(cls, d, what="training options")
 
 
 @dataclass(frozen=True)

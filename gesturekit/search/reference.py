@@ -38,6 +38,28 @@ shortlist with the same definitions):
   ``d2``; the reported distance is ``sqrt(d2)``.
 * audio: ``dot``, ``|a|^2`` and ``|b|^2`` summed the same way, and
   ``1 - dot / sqrt(|a|^2 * |b|^2)``; 1 when either norm is 0 (:func:`cosine_distance`).
+
+Fidelity to the authors' code (GestureKNN). Compared step by step with stable
+sorts, their loop makes the choices these rules make, except where it departs
+from the algorithm as written; these rules follow the algorithm:
+
+* Their per-clip scan, ``while pose_cand_ctr < len(sorted_idx_list) - 1``,
+  never examines a clip's last-ranked frame: a clip whose only admissible start
+  ranks last drops out of the step there and survives here (rule 2).
+* Their random initial frame is any database frame satisfying the active control
+  at that frame only; it may be one that cannot start a window (``s > T - N``).
+  Here ``p_{-1}`` is drawn from the admissible starts of step 0 (rule 1, with the
+  control held by the mask rule); ``docs/METHOD.md`` credits the control rule to
+  their code without this caveat.
+* Their features are zero-padded inside each 64-frame clip and z-scored over all
+  frames, padding included, and every start ``s <= T - N`` is eligible, so a start
+  whose look-ahead is padding can be chosen. Here the statistics come from the
+  frames that can start a segment and such starts are never admissible (``valid``);
+  ``docs/METHOD.md``'s "z-scored with statistics of the database [code]" does not
+  say that theirs include the padding.
+* Their search stops with an error unless the output's frame count is 0 or 1
+  modulo N, and when fewer than ``k + 1`` clips survive; here the last step is cut
+  to the query's length (rule 5) and the last survivor is taken (rule 4, ``short``).
 """
 from __future__ import annotations
 
