@@ -243,9 +243,9 @@ def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
             if name != "rank_top":
                 return getattr(kernels, name)
 
-            def rank_top(v, e, av, ae, porder, lp, aorder, la, *rest):
-                out = kernels.rank_top(v, e, av, ae, porder, lp, aorder, la, *rest)
-                seen.append("whole" if min(lp, la) >= v.shape[0] else "prefix" if out >= 0 else "retry")
+            def rank_top(estimates, porder, lp, aorder, la, *rest):
+                out = kernels.rank_top(estimates, porder, lp, aorder, la, *rest)
+                seen.append("whole" if min(lp, la) >= estimates.shape[1] else "prefix" if out >= 0 else "retry")
                 return out
 
             return rank_top

@@ -212,7 +212,7 @@ class SearchIndex:
             That estimate ``A = |p|^2 - 2 p.q`` (+inf: no admissible start).
         nq : (B,) float64
             ``|q|^2``.
-        complex : list of B (clips, rows) pairs
+        undecided : list of B (clips, rows) pairs
             Clips whose minimum is not decisive; ``rows[i]`` holds the estimates of all T
             starts of clip ``clips[i]``.
         audio : (av, inexact)
@@ -319,22 +319,23 @@ class SearchIndex:
                 cx_m.append(m_)
                 cx_b.append(b_)
                 cx_rows.append(rows)
-        complex_ = []
+        undecided = []
         if cx_b:
             mi, bi, rows = np.concatenate(cx_m), np.concatenate(cx_b), np.concatenate(cx_rows)
             for b in range(B):
                 sel = bi == b
-                complex_.append((mi[sel], rows[sel]))
+                undecided.append((mi[sel], rows[sel]))
         else:
-            complex_ = [(np.zeros(0, np.int64), np.zeros((0, T), np.float32))] * B
+            undecided = [(np.zeros(0, np.int64), np.zeros((0, T), np.float32))] * B
         inv = np.empty(B, np.int64)
         inv[perm] = np.arange(B)
         # back to the callers' query order, one C-contiguous row per query
-        return s0.T[inv], amin.T[inv], nq[inv], complex_, (av.T[inv], inexact.T[inv])
+        return s0.T[inv], amin.T[inv], nq[inv], undecided, (av.T[inv], inexact.T[inv])
 
     # -- exact decisions for one query ----------------------------------------------------------
 
-    def _decide(self, s0, amin, nq, complex_, q, f, av_col, inexact_col, width):
+    def _decide(self, best_start, best_est, q_sqnorm, undecided, query_pose, query_audio, scan_audio_est,
+                scan_audio_inexact, width):
         """Steps 1-4 of Algorithm 1 for one query, after the scan; None when no clip survives.
 
         Step 1 (per clip the nearest admissible non-zero start) takes the scan's float32
@@ -355,23 +356,23 @@ class SearchIndex:
         scratch = getattr(self._scratch, "decide", None)
         if scratch is None or scratch[0].shape[1] != M:
             scratch = self._scratch.decide = (np.empty((9, M), np.int64), np.empty((4, M)))
-        ints, floats = scratch
-        clips, start = ints[7], ints[8]
-        v, e, av, ae = floats
-        cclips, crows = complex_
-        n = k.survivors(s0, amin, float(nq), self._npmax, self._pose_c, TINY, cclips, crows, self._P3, q,
-                        self._F3, f, av_col, inexact_col, self._audio_e, clips, start, v, e, av, ae)
+        work, estimates = scratch
+        windows = work[7:9]  # rows 0-6 are rank_top's scratch
+        undecided_clips, undecided_rows = undecided
+        n = k.survivors(best_start, best_est, float(q_sqnorm), self._npmax, self._pose_c, TINY, undecided_clips,
+                        undecided_rows, self._P3, query_pose, self._F3, query_audio, scan_audio_est, scan_audio_inexact,
+                        self._audio_e, windows, estimates)
         if n == 0:
             return None
-        clips, start, v, e, av, ae = clips[:n], start[:n], v[:n], e[:n], av[:n], ae[:n]
+        windows, estimates = windows[:, :n], estimates[:, :n]
         out_i = np.empty((5, min(width, n)), np.int64)
         out_f = np.empty((2, min(width, n)))
         prefix = _PREFIX
         while True:  # sorted prefixes first; whole orders when they cannot decide
-            porder, lp = _initial_order(v, prefix)
-            aorder, la = _initial_order(av, prefix)
-            if k.rank_top(v, e, av, ae, porder, lp, aorder, la, clips, start, self._P3, self._F3, q, f, width,
-                          out_i, out_f, ints) >= 0:
+            pose_order, n_pose_sorted = _initial_order(estimates[0], prefix)
+            audio_order, n_audio_sorted = _initial_order(estimates[2], prefix)
+            if k.rank_top(estimates, pose_order, n_pose_sorted, audio_order, n_audio_sorted, windows, self._P3,
+                          self._F3, query_pose, query_audio, width, out_i, out_f, work) >= 0:
                 break
             if prefix >= n:  # pragma: no cover - whole orders always decide
                 raise RuntimeError("rank_top could not decide with whole orders")
@@ -520,13 +521,13 @@ class SearchIndex:
         run = map if pool is None or len(active) < 4 else pool.map
         biases = [self._bias(cache, keys[b]) for b in active]
         fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
-        s0, amin, nq, complex_, (av, inexact) = self._scan(
+        s0, amin, nq, undecided, (av, inexact) = self._scan(
             poses[active], biases, fq, cache.setdefault("scratch", {}), pool
         )
 
         def decide(j):
             b = active[j]
-            return self._decide(s0[j], amin[j], nq[j], complex_[j], poses[b], fq[j], av[j], inexact[j],
+            return self._decide(s0[j], amin[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j],
                                 calls[b].config.table_width)
 
         return dict(zip(active, run(decide, range(len(active)))))
