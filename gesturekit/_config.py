@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Iterable, Mapping
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 from .errors import ConfigError
 
-__all__ = ["config_to_dict", "config_from_dict"]
+__all__ = ["JsonConfig", "config_to_dict", "config_from_dict"]
 
 C = TypeVar("C")
 
@@ -94,3 +94,21 @@ def config_from_dict(cls: type[C], data: Mapping, *, what: str) -> C:
             value = _tuples(value)
         kwargs[name] = value
     return cls(**kwargs)
+
+
+class JsonConfig:
+    """``to_dict`` and ``from_dict`` for a configuration dataclass whose JSON form is its fields.
+
+    A subclass names its options for error messages in ``OPTIONS_NAME`` (e.g. ``"model options"``).
+    """
+
+    OPTIONS_NAME: ClassVar[str] = "options"
+
+    def to_dict(self) -> dict:
+        """A JSON-able dict of the fields; :meth:`from_dict` reads it back."""
+        return config_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping):
+        """Inverse of :meth:`to_dict`; unknown options raise :class:`~gesturekit.errors.ConfigError`."""
+        return config_from_dict(cls, d, what=cls.OPTIONS_NAME)

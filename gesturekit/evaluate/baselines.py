@@ -229,8 +229,8 @@ def audio_nearest_segments(
 
     Returns
     -------
-    frames : np.ndarray, shape (n_frames, 2), int64
-    relaxed : np.ndarray, shape (n_steps,), bool
+    (frames, relaxed)
+        As :func:`random_segments` returns them.
     """
     F = np.asarray(F)
     M, T, A = F.shape

@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from .._config import config_from_dict, config_to_dict
+from .._config import JsonConfig
 from ..database import MatchingDatabase, normalise_exclusions
 from ..errors import ConfigError, DatabaseError, collect_warnings
 from ..search import SearchConfig, SearchIndex
@@ -37,7 +37,7 @@ _CHUNK_BYTES = 96 << 20
 
 
 @dataclass(frozen=True)
-class PairsConfig:
+class PairsConfig(JsonConfig):
     """How training pairs are made; saved in a refiner's ``config.json``.
 
     Parameters
@@ -55,6 +55,8 @@ class PairsConfig:
     exclude_ranges : tuple of (str, float, float)
         (take, start_s, end_s) stretches kept out likewise.
     """
+
+    OPTIONS_NAME = "training-data options"
 
     seed: int = 0
     step: int = 8
@@ -74,14 +76,6 @@ class PairsConfig:
         object.__setattr__(self, "exclude_takes", takes)
         object.__setattr__(self, "exclude_ranges", ranges)
 
-    def to_dict(self) -> dict:
-        """A JSON-able dict; :meth:`from_dict` reads it back."""
-        return config_to_dict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "PairsConfig":
-        """Inverse of :meth:`to_dict`; unknown options raise :class:`ConfigError`."""
-        return config_from_dict(cls, d, what="training-data options")
 
 
 @dataclass

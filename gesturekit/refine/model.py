@@ -26,7 +26,7 @@ import torch
 from torch import nn
 import torch.nn.functional as F
 
-from .._config import config_from_dict, config_to_dict
+from .._config import JsonConfig
 from ..errors import ConfigError
 
 __all__ = ["ModelConfig", "Generator", "Critic", "build_models", "xavier_init", "count_parameters"]
@@ -38,7 +38,7 @@ GENERATOR_STRIDE = 8
 
 
 @dataclass(frozen=True)
-class ModelConfig:
+class ModelConfig(JsonConfig):
     """Sizes of the generator and the critic; saved in a refiner's ``config.json``.
 
     Parameters
@@ -54,6 +54,8 @@ class ModelConfig:
     critic_channels : (int, int, int)
         Channels of the critic's blocks (paper: 512, 256, 128).
     """
+
+    OPTIONS_NAME = "model options"
 
     audio_dim: int = 28
     motion_dim: int = 165
@@ -73,14 +75,6 @@ class ModelConfig:
         if self.audio_dim < 1 or self.motion_dim < 1:
             raise ConfigError("audio_dim and motion_dim must be positive")
 
-    def to_dict(self) -> dict:
-        """A JSON-able dict; :meth:`from_dict` reads it back."""
-        return config_to_dict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "ModelConfig":
-        """Inverse of :meth:`to_dict`; unknown options raise :class:`ConfigError`."""
-        return config_from_dict(cls, d, what="model options")
 
 
 def _double_conv(cin: int, cout: int, norm) -> nn.Sequential:

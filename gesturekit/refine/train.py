@@ -37,7 +37,7 @@ import numpy as np
 import torch
 
 from .. import __version__
-from .._config import config_from_dict, config_to_dict
+from .._config import JsonConfig
 from ..database import MatchingDatabase
 from ..errors import ConfigError, DatabaseError, InputFileError
 from ..export.files import atomic_write
@@ -74,7 +74,7 @@ LOG_COLUMNS = (
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainConfig(JsonConfig):
     """Training schedule and losses; saved in a refiner's ``config.json``.
 
     Parameters
@@ -108,6 +108,8 @@ class TrainConfig:
         Seed of the initial weights and of every random draw of training.
     """
 
+    OPTIONS_NAME = "training options"
+
     iterations: int = 2000
     batch_size: int = 100
     lr: float = 1e-4
@@ -135,14 +137,6 @@ class TrainConfig:
         if self.gp_weight < 0 or self.l1_weight < 0:
             raise ConfigError("gp_weight and l1_weight must not be negative")
 
-    def to_dict(self) -> dict:
-        """A JSON-able dict; :meth:`from_dict` reads it back."""
-        return config_to_dict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "TrainConfig":
-        """Inverse of :meth:`to_dict`; unknown options raise :class:`ConfigError`."""
-        return config_from_dict(cls, d, what="training options")
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ plan
 reference
     Algorithm 1 loop for loop: the definition the fast search reproduces.
 explain
-    One step taken apart for every clip of the database (:func:`explain_step`).
+    One step taken apart for every clip of the database (:func:`~gesturekit.search.explain.explain_step`).
 admissible
     Which windows a step may use, vectorised (:func:`admissible_starts`), used by all of them.
 exact

@@ -59,17 +59,10 @@ def exact_pose_sqdist(rows: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def exact_cosine_distance(rows: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Exact cosine distances of several rows to one query.
+    """Exact cosine distances of several audio features ``rows`` (n, A) to one ``f`` (A,), all float32.
 
-    Parameters
-    ----------
-    rows : np.ndarray, shape (n, A), float32
-    f : np.ndarray, shape (A,), float32
-
-    Returns
-    -------
-    np.ndarray, shape (n,), float64
-        Bit-identical to :func:`gesturekit.search.reference.cosine_distance` per row.
+    Returns the (n,) float64 distances, each bit-identical to
+    :func:`gesturekit.search.reference.cosine_distance` (1 where a norm is 0).
     """
     x = np.asarray(rows).T  # (A, n)
     y = np.asarray(f, dtype=np.float64)

@@ -95,18 +95,8 @@ def pose_sqdist(a, b) -> float:
 
 
 def cosine_distance(a, b) -> float:
-    """Cosine distance ``1 - a.b / (|a| |b|)``, exactly as defined for the search.
-
-    Parameters
-    ----------
-    a, b : sequence of float, length A
-        Two audio features (float32 values).
-
-    Returns
-    -------
-    float
-        In [0, 2]; 1 when either vector is all zeros.
-    """
+    """Cosine distance ``1 - a.b / (|a| |b|)`` of two audio features (A float32 values each),
+    exactly as defined for the search: in [0, 2], and 1 when either vector is all zeros."""
     dot = na = nb = 0.0
     for x, y in zip(a, b):
         x, y = float(x), float(y)

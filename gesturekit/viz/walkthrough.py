@@ -286,7 +286,7 @@ def rankings_figure(explanation: StepExplanation, *, names: Mapping[int, str] | 
         A description per clip shown on hover (e.g. its take and time).
     title : str, optional
     height : int
-        Pixels.
+        Figure height in pixels.
 
     Returns
     -------
