@@ -17,7 +17,7 @@ from gesturekit.search import SearchConfig
 from gesturekit.synthesize import SynthesisConfig
 
 names = st.text("abcdefghij_", min_size=1, max_size=8)
-ranges = st.tuples(names, st.floats(0, 50), st.floats(50, 100))
+ranges = st.tuples(names, st.floats(0, 49), st.floats(50, 100))  # start < end
 
 CONFIGS = st.one_of(
     st.builds(ModelConfig, generator_channels=st.tuples(*[st.integers(1, 512)] * 4),
