@@ -118,7 +118,7 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
     source : str
         Name of the speech, stored in the result (download names, metadata).
     refiner : optional
-        A refiner, passed on by :func:`gesturekit.interactive.with_refiner`.
+        A refiner (folder or loaded), applied by :func:`gesturekit.synthesize.synthesize`.
 
     Raises
     ------
@@ -126,12 +126,10 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
         Impossible settings (shown by :func:`display.run_page` / :func:`display.user_errors`).
     """
     from gesturekit.synthesize import synthesize
-    from gesturekit.interactive import with_refiner
 
     ss = st.session_state
-    config, extra = with_refiner(config, refiner)
     with st.spinner("Searching the database…"), warnings_shown():
-        result = synthesize(audio, db=db, config=config, **extra)
+        result = synthesize(audio, db=db, config=config, refiner=refiner)
     ss[_RUN_COUNTER] = ss.get(_RUN_COUNTER, 0) + 1
     record = {"result": replace(result, source=source), "run": ss[_RUN_COUNTER],
               "database": _folder(db) if db.path is not None else result.database,

@@ -4,7 +4,7 @@ Prints, measured in this one run on this machine:
 
 * per search step vs one float32 matrix-vector product over the whole pose matrix
   (M T x 96), the memory-bound floor of a scan (target <= 1.5x);
-* the fast search vs the literal reference (gesturekit.search_reference), per
+* the fast search vs the literal reference (gesturekit.search.reference), per
   clip-step (target >= 250x);
 * end-to-end time for 60 s of speech (900 frames, 113 steps; target < 2 s);
 * a batch of 32 query sequences vs 32 single runs (target >= 5x);
@@ -25,7 +25,7 @@ import tracemalloc
 import numpy as np
 
 from gesturekit.search import SearchConfig, SearchIndex, search
-from gesturekit.search_reference import search_reference
+from gesturekit.search.reference import search_reference
 
 M_OLIVER, T, D, A = 9624, 64, 96, 112
 

@@ -14,7 +14,6 @@ Times are in seconds, motions are :class:`~gesturekit.motion.Motion` objects
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import io
 import json
 import math
@@ -30,7 +29,7 @@ from .control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_
 from .database import MatchingDatabase
 from .errors import ConfigError, GestureKitError, collect_warnings, warn
 from .motion import AUDIO_SR, Motion
-from .synthesize import SynthesisConfig, SynthesisResult, synthesize, synthesize_batch
+from .synthesize import SynthesisConfig, SynthesisResult, synthesize_batch
 
 __all__ = [
     "SEGMENT_COLUMNS",
@@ -45,8 +44,6 @@ __all__ = [
     "example_speech",
     "read_speech_upload",
     "wav_bytes",
-    "refiner_hook",
-    "with_refiner",
     "display_motions",
     "export_filename",
     "export_bytes",
@@ -346,32 +343,7 @@ def wav_bytes(audio: np.ndarray, *, sr: int = AUDIO_SR) -> bytes:
     return buf.getvalue()
 
 
-# ---- the refiner --------------------------------------------------------------------------------
-
-def refiner_hook() -> str | None:
-    """How this gesturekit takes a refiner: ``"argument"`` of :func:`synthesize`, a ``"config"`` field, or None."""
-    if "refiner" in inspect.signature(synthesize).parameters:
-        return "argument"
-    if "refiner" in {f.name for f in dataclasses.fields(SynthesisConfig)}:
-        return "config"
-    return None
-
-
-def with_refiner(config: SynthesisConfig, refiner) -> tuple[SynthesisConfig, dict]:
-    """The config and keyword arguments of :func:`synthesize` that apply ``refiner`` (None: none).
-
-    Returns
-    -------
-    (SynthesisConfig, dict)
-        Unchanged config and ``{}`` without a refiner or without refiner support.
-    """
-    hook = refiner_hook()
-    if refiner is None or hook is None:
-        return config, {}
-    if hook == "argument":
-        return config, {"refiner": refiner}
-    return dataclasses.replace(config, refiner=refiner), {}
-
+# ---- what to show ------------------------------------------------------------------------------
 
 def display_motions(result: SynthesisResult) -> tuple[list[Motion], list[str]]:
     """The motions to show for a result: k-NN and refined side by side when refined, else the output."""
@@ -552,8 +524,7 @@ def compare_k(audio, *, db: MatchingDatabase, config: SynthesisConfig, ks: Seque
               source: str | None = None) -> list[SynthesisResult]:
     """Results for several ``k`` with everything else (speech, controls, pins, seed) the same.
 
-    One batched search serves all (:func:`synthesize_batch`), unless a refiner
-    must be passed to :func:`synthesize` one speech at a time.
+    One batched search serves all (:func:`synthesize_batch`), refined by ``refiner`` if given.
 
     Parameters
     ----------
@@ -564,7 +535,7 @@ def compare_k(audio, *, db: MatchingDatabase, config: SynthesisConfig, ks: Seque
     ks : sequence of int
         The values of ``k`` (>= 0), in the order of the results.
     refiner : optional
-        Passed on as :func:`with_refiner` does.
+        Applied to every result (see :func:`synthesize_batch`).
     source : str, optional
         Name of the speech stored in the results.
 
@@ -575,14 +546,8 @@ def compare_k(audio, *, db: MatchingDatabase, config: SynthesisConfig, ks: Seque
     ks = [int(k) for k in ks]
     if not ks:
         raise ConfigError("choose at least one k to compare")
-    configs, extra = [], {}
-    for k in ks:
-        c, extra = with_refiner(dataclasses.replace(config, k=k), refiner)
-        configs.append(c)
-    if extra and "refiner" not in inspect.signature(synthesize_batch).parameters:
-        results = [synthesize(audio, db=db, config=c, **extra) for c in configs]
-    else:
-        results = synthesize_batch([audio] * len(ks), db=db, config=configs, **extra)
+    configs = [dataclasses.replace(config, k=k) for k in ks]
+    results = synthesize_batch([audio] * len(ks), db=db, config=configs, refiner=refiner)
     if source is not None:
         results = [dataclasses.replace(r, source=source) for r in results]
     return results

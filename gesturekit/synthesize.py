@@ -10,19 +10,21 @@ from __future__ import annotations
 
 import numbers
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from ._version import __version__
+from ._config import config_from_dict, config_to_dict
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
-from .control import ControlTrack, parse_control, step_masks
+from .control import ControlTrack, parse_control
 from .database import MatchingDatabase, normalise_exclusions
 from .errors import ConfigError, GestureKitError, warn
-from .features import n_audio_frames
 from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
+from .search.plan import SearchPlan, plan_search, rest_pose_frame
 
 __all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
 
@@ -39,106 +41,127 @@ PAPER_SETTINGS = {
 }
 
 
-@dataclass(frozen=True)
+#: The options of :class:`SynthesisConfig` that belong to its search (:class:`SearchConfig`);
+#: the saved form lists them beside the others, as it always has.
+SEARCH_OPTIONS = ("k", "step", "topk", "seed", "mask_rule", "pins")
+
+
+@dataclass(frozen=True, init=False)
 class SynthesisConfig:
     """Every option of a synthesis; saved with every output.
 
+    The search's options live in ``search`` (a :class:`SearchConfig`) and are read
+    through it; ``k``, ``step``, ``topk``, ``seed``, ``mask_rule`` and ``pins`` are
+    accepted as keywords (and by :func:`dataclasses.replace`) and read as attributes,
+    both passing through to ``search``.
+
     Parameters
     ----------
-    k : int
-        Take the k-th best of the combined ranking (0 = best).
-    step : int
-        Frames per search step, N (8 in the paper).
-    topk : int
-        Candidates per step recorded for inspection.
-    seed : int
-        Seed of the random initial pose.
+    search : SearchConfig, optional
+        k, N (``step``), recorded candidates (``topk``), seed, mask rule and pins.
+        Its ``init_pose`` must be ``"random"``: the initial pose is chosen by ``init``.
     init : {"random", "rest"}
         ``random``: a random database frame that satisfies the first step's control
         (the authors' choice); ``rest``: the database's rest pose (see :func:`rest_pose_frame`).
-    mask_rule : {"ends", "all"}
-        Where a control must hold in a window: its first and last frame (the paper)
-        or every frame (stricter).
     blend : {"none", "offset"}
         ``none`` is the paper (the refiner smooths); ``offset`` fades each join over ``blend_frames``.
     blend_frames : int
-    control : str
-        The control track as text, e.g. ``"0-3:left_hand=low,3-6:speed=slow"`` (seconds).
+    control : str or ControlTrack
+        The control track, e.g. ``"0-3:left_hand=low,3-6:speed=slow"`` (seconds); kept as its
+        text, and parsed once (:attr:`control_track`).
     exclude_takes : tuple of str
         Database takes the search must not use (e.g. the query's own take).
     exclude_ranges : tuple of (str, float, float)
         (take, start_s, end_s) stretches the search must not use.
-    pins : dict of int -> (int, int)
-        Step -> (clip, start): force that step's choice ("use this candidate instead").
     refiner_keep_hz : float
         With a refiner: keep the k-NN motion's content slower than this (Hz) and take
         the faster content from the refiner (see :func:`gesturekit.blend.keep_slow`),
         so controls of hand height, width and symmetry survive refinement; 0: the
         refiner's output as it is (the paper).
+    k, step, topk, seed, mask_rule, pins
+        The options of ``search`` (see :class:`SearchConfig`); given, they replace its values.
     """
 
-    k: int = 0
-    step: int = 8
-    topk: int = 10
-    seed: int = 0
+    search: SearchConfig = field(default_factory=SearchConfig)
     init: str = "random"
-    mask_rule: str = "ends"
     blend: str = "none"
     blend_frames: int = 4
     control: str = ""
     exclude_takes: tuple = ()
     exclude_ranges: tuple = ()
-    pins: dict = field(default_factory=dict, hash=False)
     refiner_keep_hz: float = KEEP_BELOW_HZ
 
-    def __post_init__(self):
-        hz = self.refiner_keep_hz
-        if isinstance(hz, bool) or not isinstance(hz, numbers.Real) or not (np.isfinite(hz) and hz >= 0):
-            raise ConfigError(f"refiner_keep_hz must be a frequency >= 0 (0: off), got {hz!r}")
-        object.__setattr__(self, "refiner_keep_hz", float(hz))
-        if self.init not in ("random", "rest"):
-            raise ConfigError(f"init must be 'random' or 'rest', got {self.init!r}")
-        if self.blend not in BLEND_MODES:
-            raise ConfigError(f"blend must be one of {', '.join(BLEND_MODES)}, got {self.blend!r}")
-        if not isinstance(self.blend_frames, int) or self.blend_frames < 1:
-            raise ConfigError(f"blend_frames must be a positive integer, got {self.blend_frames!r}")
-        object.__setattr__(self, "control", parse_control(self.control).to_text())  # validates, normalises
-        takes, ranges = normalise_exclusions(self.exclude_takes, self.exclude_ranges)
-        object.__setattr__(self, "exclude_takes", takes)
-        object.__setattr__(self, "exclude_ranges", ranges)
-        # validate k, step, topk, seed, mask_rule and pins once, the way the search reads them
-        SearchConfig(k=self.k, step=self.step, topk=self.topk, seed=self.seed, mask_rule=self.mask_rule, pins=self.pins)
-        object.__setattr__(self, "pins", {int(i): (int(m), int(s)) for i, (m, s) in sorted(self.pins.items())})
-
-    def to_dict(self) -> dict:
-        """A JSON-able dict; :meth:`from_dict` reads it back."""
-        return {
-            "k": self.k,
-            "step": self.step,
-            "topk": self.topk,
-            "seed": self.seed,
-            "init": self.init,
-            "mask_rule": self.mask_rule,
-            "blend": self.blend,
-            "blend_frames": self.blend_frames,
-            "control": self.control,
-            "exclude_takes": list(self.exclude_takes),
-            "exclude_ranges": [list(r) for r in self.exclude_ranges],
-            "pins": {str(i): list(v) for i, v in self.pins.items()},
-            "refiner_keep_hz": self.refiner_keep_hz,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "SynthesisConfig":
-        known = set(cls.__dataclass_fields__)
-        unknown = set(d) - known
+    def __init__(self, search: SearchConfig | None = None, *, init: str = "random", blend: str = "none",
+                 blend_frames: int = 4, control: str | ControlTrack = "", exclude_takes=(), exclude_ranges=(),
+                 refiner_keep_hz: float = KEEP_BELOW_HZ, **search_options):
+        unknown = set(search_options) - set(SEARCH_OPTIONS)
         if unknown:
             raise ConfigError(f"unknown synthesis options: {', '.join(sorted(unknown))}")
+        search = SearchConfig() if search is None else search
+        if not isinstance(search, SearchConfig):
+            raise ConfigError(f"search must be a SearchConfig, got {type(search).__name__}")
+        if search_options:
+            search = replace(search, **search_options)
+        if search.init_pose != "random":
+            raise ConfigError("the initial pose of a synthesis is chosen by init ('random' or 'rest'), "
+                              "not by search.init_pose")
+        hz = refiner_keep_hz
+        if isinstance(hz, bool) or not isinstance(hz, numbers.Real) or not (np.isfinite(hz) and hz >= 0):
+            raise ConfigError(f"refiner_keep_hz must be a frequency >= 0 (0: off), got {hz!r}")
+        if init not in ("random", "rest"):
+            raise ConfigError(f"init must be 'random' or 'rest', got {init!r}")
+        if blend not in BLEND_MODES:
+            raise ConfigError(f"blend must be one of {', '.join(BLEND_MODES)}, got {blend!r}")
+        if not isinstance(blend_frames, int) or blend_frames < 1:
+            raise ConfigError(f"blend_frames must be a positive integer, got {blend_frames!r}")
+        track = control if isinstance(control, ControlTrack) else parse_control(control)  # validates
+        takes, ranges = normalise_exclusions(exclude_takes, exclude_ranges)
+        for name, value in (("search", search), ("init", init), ("blend", blend), ("blend_frames", blend_frames),
+                            ("control", track.to_text()), ("exclude_takes", takes), ("exclude_ranges", ranges),
+                            ("refiner_keep_hz", float(hz)), ("_track", track)):
+            object.__setattr__(self, name, value)
+
+    # the search's options, read through ``search`` (one source of truth)
+    k = property(lambda self: self.search.k, doc="Take the k-th best of the combined ranking (0 = best).")
+    step = property(lambda self: self.search.step, doc="Frames per search step, N (8 in the paper).")
+    topk = property(lambda self: self.search.topk, doc="Candidates per step recorded for inspection.")
+    seed = property(lambda self: self.search.seed, doc="Seed of the random initial pose.")
+    mask_rule = property(lambda self: self.search.mask_rule, doc="Where a control must hold in a window.")
+    pins = property(lambda self: self.search.pins, doc="Step -> (clip, start): forced choices.")
+
+    @property
+    def control_track(self) -> ControlTrack:
+        """The control track, parsed once when the configuration was made."""
+        return self._track
+
+    def to_dict(self) -> dict:
+        """A JSON-able dict, the search's options beside the others (the saved form of every
+        version); :meth:`from_dict` reads it back."""
+        search = self.search.to_dict()
+        out = {name: search[name] for name in ("k", "step", "topk", "seed")}
+        out["init"] = self.init
+        out["mask_rule"] = search["mask_rule"]
+        out.update(config_to_dict(self, exclude=("search", "init", "refiner_keep_hz")))
+        out["pins"] = search["pins"]
+        out["refiner_keep_hz"] = self.refiner_keep_hz
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "SynthesisConfig":
+        """Inverse of :meth:`to_dict`; also reads a nested ``"search"`` object.
+
+        Raises
+        ------
+        ConfigError
+            Unknown options.
+        """
+        if not isinstance(d, Mapping):
+            raise ConfigError(f"synthesis options must be a JSON object, got {type(d).__name__}")
         d = dict(d)
-        d["exclude_takes"] = tuple(d.get("exclude_takes", ()))
-        d["exclude_ranges"] = tuple(tuple(r) for r in d.get("exclude_ranges", ()))
-        d["pins"] = {int(i): tuple(v) for i, v in d.get("pins", {}).items()}
-        return cls(**d)
+        search = dict(d.pop("search", None) or {})
+        search.update({name: d.pop(name) for name in SEARCH_OPTIONS if name in d})
+        d["search"] = SearchConfig.from_dict(search)
+        return config_from_dict(cls, d, what="synthesis options")
 
     def paper_differences(self, *, refined: bool) -> list[str]:
         """The settings that differ from the paper's (:data:`PAPER_SETTINGS`), as text.
@@ -186,7 +209,7 @@ class SynthesisResult:
     audio : np.ndarray, shape (samples,), float32
         The speech at 16 kHz.
     config : SynthesisConfig
-    control : ControlTrack
+        The options it was made with, its control track included (:attr:`control`).
     database : str
         Path of the database (or its label when it was not saved).
     source : str
@@ -197,6 +220,9 @@ class SynthesisResult:
         Which refiner was applied (:func:`gesturekit.refine.provenance`: its folder, its
         training database, the sha256 of its weights); None without one, or for a refiner
         not loaded from a folder.
+    plan : SearchPlan or None
+        What the search was given (query features, control masks, exclusions, search
+        options); the retrieval inspector reads it instead of recomputing it.
     """
 
     motion: Motion
@@ -204,11 +230,16 @@ class SynthesisResult:
     search: SearchResult
     audio: np.ndarray
     config: SynthesisConfig
-    control: ControlTrack
     database: str
     source: str
     refined_motion: Motion | None = None
     refiner: dict | None = None
+    plan: SearchPlan | None = None
+
+    @property
+    def control(self) -> ControlTrack:
+        """The control track the search used (``config.control``, parsed)."""
+        return self.config.control_track
 
     @property
     def n_frames(self) -> int:
@@ -308,25 +339,6 @@ class SynthesisResult:
                             resolution=resolution)
 
 
-def rest_pose_frame(db: MatchingDatabase) -> tuple[int, int]:
-    """The database frame used as the rest pose: hands lowest among the slowest frames.
-
-    Among valid frames whose mean hand speed is below its low threshold, the one
-    with the lowest sum of wrist heights (ties: first in clip order).
-
-    Returns
-    -------
-    (clip, frame)
-    """
-    speed = np.asarray(db.attribute("hand_speed"))
-    height = np.asarray(db.attribute("left_hand_height")) + np.asarray(db.attribute("right_hand_height"))
-    ok = np.asarray(db.valid) & (speed <= db.thresholds["hand_speed"][0])
-    if not ok.any():
-        ok = np.asarray(db.valid)
-    score = np.where(ok, height, np.inf)
-    return tuple(int(x) for x in np.unravel_index(int(np.argmin(score)), score.shape))
-
-
 def _index(db: MatchingDatabase) -> SearchIndex:
     idx = db.__dict__.get("_search_index")
     if idx is None:
@@ -348,30 +360,7 @@ def _load_speech(audio) -> tuple[np.ndarray, str]:
     return a, "audio"
 
 
-def _prepare(db, audio, config, control):
-    samples, name = _load_speech(audio)
-    n = n_audio_frames(len(samples))
-    fq, _ = db.query_features(samples, n_frames=n)
-    track = control if control is not None else parse_control(config.control)
-    if isinstance(track, str):
-        track = parse_control(track)
-    masks, smask = step_masks(track, np.asarray(db.attributes), db.thresholds, n_frames=n, step=config.step)
-    init = "random"
-    if config.init == "rest":
-        c, f = rest_pose_frame(db)
-        init = tuple(float(x) for x in db.P[c, f])
-    scfg = SearchConfig(k=config.k, step=config.step, topk=config.topk, seed=config.seed, init=init,
-                        mask_rule=config.mask_rule, pins=config.pins)
-    return samples, name, fq, track, masks, smask, scfg
-
-
-def _exclusion(db, config):
-    if not config.exclude_takes and not config.exclude_ranges:
-        return None
-    return db.exclusion_mask(takes=config.exclude_takes, ranges=config.exclude_ranges)
-
-
-def _finish(db, res: SearchResult, samples, name, config, track) -> SynthesisResult:
+def _finish(db, res: SearchResult, plan: SearchPlan, samples, name, config) -> SynthesisResult:
     G = db.G
     g = np.asarray(G[res.frames[:, 0], res.frames[:, 1]], dtype=np.float32)  # (T, 165)
     knn = Motion.from_flat(g, db.fps)
@@ -383,9 +372,9 @@ def _finish(db, res: SearchResult, samples, name, config, track) -> SynthesisRes
         search=res,
         audio=samples,
         config=config,
-        control=track,
         database=str(db.path) if db.path is not None else (db.label or "in-memory database"),
         source=name,
+        plan=plan,
     )
 
 
@@ -406,7 +395,7 @@ def synthesize(
     db : MatchingDatabase
     config : SynthesisConfig, optional
     control : ControlTrack or str, optional
-        Overrides ``config.control``.
+        Replaces ``config.control``; the result's config records it.
     refiner : Refiner or path, optional
         A trained refiner (:class:`gesturekit.refine.infer.Refiner`, a refiner folder, or
         ``"demo"`` for the one shipped with the demo database). It refines the k-NN
@@ -437,6 +426,7 @@ def synthesize_batch(
     config : SynthesisConfig or one per speech
         Exclusions must be the same for all speeches in one batch.
     controls : sequence of ControlTrack, str or None, optional
+        Per speech, replaces its config's ``control``; the result's config records it.
     refiner : Refiner or path, optional
         As in :func:`synthesize`, applied to every speech.
 
@@ -458,25 +448,28 @@ def synthesize_batch(
     if refiner is not None:
         refiner = _open_refiner(refiner, db)
         made_by = _provenance(refiner, db)
-    prepared = [_prepare(db, a, c, ctl) for a, c, ctl in zip(audios, configs, controls)]
+    # a given control replaces the config's: the config a result records is the one searched
+    configs = [c if ctl is None else replace(c, control=ctl) for c, ctl in zip(configs, controls)]
+    speeches = [_load_speech(a) for a in audios]
+    plans = [plan_search(db, samples, c) for (samples, _), c in zip(speeches, configs)]
     # masks differ per speech; the search shares one mask stack, so stack them with offsets
     stack, step_idx = [], []
-    for p in prepared:
-        masks, smask = p[4], p[5].copy()
-        if masks is not None:
-            smask[smask >= 0] += len(stack)
-            stack.extend(list(masks))
-        step_idx.append(smask)
-    masks = np.stack(stack) if stack else None
+    for plan in plans:
+        index = plan.step_mask_index.copy()
+        if plan.masks is not None:
+            index[index >= 0] += len(stack)
+            stack.extend(list(plan.masks))
+        step_idx.append(index)
     results = _index(db).search_batch(
-        [p[2] for p in prepared],
-        configs=[p[6] for p in prepared],
-        masks=masks,
+        [plan.query for plan in plans],
+        configs=[plan.config for plan in plans],
+        masks=np.stack(stack) if stack else None,
         step_masks=step_idx,
-        exclude=_exclusion(db, configs[0]),
+        exclude=plans[0].exclude,
         fps=db.fps,
     )
-    out = [_finish(db, r, p[0], p[1], c, p[3]) for r, p, c in zip(results, prepared, configs)]
+    out = [_finish(db, r, plan, samples, name, c)
+           for r, plan, (samples, name), c in zip(results, plans, speeches, configs)]
     if refiner is not None:
         for res in out:
             _refine(db, res, refiner)

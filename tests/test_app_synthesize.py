@@ -306,7 +306,6 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
     folder.mkdir()
     (folder / "config.json").write_text("{}", encoding="utf-8")
     monkeypatch.setattr("gesturekit.synthesize.synthesize", synthesize)
-    monkeypatch.setattr("gesturekit.interactive.synthesize", synthesize)
     monkeypatch.setattr("gesturekit.refine.load_refiner", lambda path: StandIn())
     checked = []
     monkeypatch.setattr("gesturekit.refine.check_refiner", lambda path, db: checked.append(path) or Path(path))

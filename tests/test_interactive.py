@@ -217,7 +217,6 @@ def test_control_adherence_counts_constrained_frames_meeting_their_constraint():
 
 
 def test_without_a_refiner_nothing_changes(result):
-    assert gs.with_refiner(result.config, None) == (result.config, {})
     motions, labels = gs.display_motions(result)
     assert motions == [result.motion] and labels == ["k-NN"]
 

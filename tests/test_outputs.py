@@ -289,14 +289,13 @@ def test_a_nan_motion_is_not_exported(tmp_path):
 
 
 def test_a_refiner_that_yields_nan_is_named(tmp_path):
-    from gesturekit.control import parse_control
     from gesturekit.synthesize import SynthesisConfig, SynthesisResult
 
     knn = still(6)
     refined = Motion(np.full_like(knn.positions, np.nan), knn.fps)
     # the check comes before anything else of the result is used, so no search record is needed
     res = SynthesisResult(motion=refined, knn_motion=knn, search=None, audio=np.zeros(3200, np.float32),
-                          config=SynthesisConfig(), control=parse_control(""), database="test", source="x.wav",
+                          config=SynthesisConfig(), database="test", source="x.wav",
                           refined_motion=refined)
     for save, name in ((res.save_npz, "r.npz"), (res.save_bvh, "r.bvh"), (res.save_video, "r.mp4")):
         with pytest.raises(GestureKitError, match=f"{name}: not written: the refiner produced NaN or infinite "

@@ -57,7 +57,7 @@ def test_each_pair_is_the_search_of_its_window(db, pairs):
         take, frame = db.clip_take[:, None], db.clip_start[:, None] + np.arange(64)[None, :]
         own = (take == ov["clip_take"][w]) & (frame >= ov["clip_start"][w]) & (frame < ov["clip_start"][w] + 64)
         res = search(db.P, db.F, db.valid, ov["F"][w], exclude=own,
-                     config=SearchConfig(k=int(pairs.k[i]), topk=1, init=ov["P"][w, 0], mask_rule="all"))
+                     config=SearchConfig(k=int(pairs.k[i]), topk=1, init_pose=ov["P"][w, 0], mask_rule="all"))
         np.testing.assert_array_equal(res.frames, pairs.frames[i])
 
 

@@ -1,5 +1,5 @@
 """Tests of gesturekit.search: the fast search equals the loop-for-loop reference
-(gesturekit.search_reference) decision for decision, and the rules of Algorithm 1
+(gesturekit.search.reference) decision for decision, and the rules of Algorithm 1
 (exclusions, controls, relaxation, k beyond the survivors, pins, seeds, batches) hold."""
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from gesturekit.search import (
     search,
     search_batch,
 )
-from gesturekit.search_reference import cosine_distance, pose_sqdist, search_reference
+from gesturekit.search.reference import cosine_distance, pose_sqdist, search_reference
 
 SLOW = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -119,7 +119,7 @@ def problems(draw, *, max_clips=7):
         step=N,
         topk=draw(st.integers(1, 4)),
         seed=draw(st.integers(0, 5)),
-        init=init,
+        init_pose=init,
         mask_rule=draw(st.sampled_from(["ends", "all"])),
         pins=pins,
     )
@@ -149,7 +149,7 @@ def test_vectorised_exact_distances_equal_the_definitions(seed, n, dim, coarse):
 
 def _whole_order_groups(est, err, order):
     """lo, hi of the groups of a whole order (every group complete)."""
-    from gesturekit._search_kernels import prefix_groups
+    from gesturekit.search.kernels import prefix_groups
 
     n = est.size
     lo, hi = np.empty(n, np.int64), np.empty(n, np.int64)
@@ -174,7 +174,7 @@ def test_rank_groups_bound_the_exact_ranks():
 def test_prefix_groups_bound_the_exact_ranks(seed, n, err_size, L):
     # a sorted prefix of L positions (the rest only partitioned off): positions before the
     # returned s are in complete groups, every other element's rank lies in [s, n - 1]
-    from gesturekit._search_kernels import prefix_groups
+    from gesturekit.search.kernels import prefix_groups
 
     rng = np.random.default_rng(seed)
     exact = np.round(rng.standard_normal(n), 2)  # exact ties
@@ -212,7 +212,7 @@ def _prefix_problem(seed: int, offset: float):
 
 
 def _with_prefix(prefix, fn):
-    import gesturekit.search as search_module
+    import gesturekit.search.index as search_module
 
     saved = search_module._PREFIX
     search_module._PREFIX = prefix
@@ -233,9 +233,9 @@ def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k
 
 
 def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
-    import gesturekit.search as search_module
+    import gesturekit.search.index as search_module
 
-    kernels = search_module._kernels()
+    kernels = search_module.compiled()
     seen = []
 
     class Recording:
@@ -243,14 +243,14 @@ def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
             if name != "rank_top":
                 return getattr(kernels, name)
 
-            def rank_top(v, e, av, ae, porder, lp, aorder, la, *rest):
-                out = kernels.rank_top(v, e, av, ae, porder, lp, aorder, la, *rest)
-                seen.append("whole" if min(lp, la) >= v.shape[0] else "prefix" if out >= 0 else "retry")
+            def rank_top(estimates, porder, lp, aorder, la, *rest):
+                out = kernels.rank_top(estimates, porder, lp, aorder, la, *rest)
+                seen.append("whole" if min(lp, la) >= estimates.shape[1] else "prefix" if out >= 0 else "retry")
                 return out
 
             return rank_top
 
-    monkeypatch.setattr(search_module, "_kernels", lambda: Recording())
+    monkeypatch.setattr(search_module, "compiled", lambda: Recording())
     P, F, valid, query = _prefix_problem(0, 0.0)
     cfg = SearchConfig(step=4, topk=3)
     results = {}
@@ -420,12 +420,12 @@ def test_the_query_frame_itself_is_skipped_and_nothing_left_is_an_error():
     valid[:] = False
     valid[1, 2] = valid[2, 1] = True  # the only admissible windows of the database
     query = rng.standard_normal((8, F.shape[2])).astype(np.float32)
-    res = search(P, F, valid, query, config=SearchConfig(init=tuple(P[1, 2].tolist())))
+    res = search(P, F, valid, query, config=SearchConfig(init_pose=tuple(P[1, 2].tolist())))
     assert (res.clip[0], res.start[0]) == (2, 1)  # (1, 2) is at distance 0: the query's own frame
     assert res.n_candidates[0] == 1
     valid[2, 1] = False
     with pytest.raises(ConfigError, match="no database window is admissible"):
-        search(P, F, valid, query, config=SearchConfig(init=tuple(P[1, 2].tolist())))
+        search(P, F, valid, query, config=SearchConfig(init_pose=tuple(P[1, 2].tolist())))
     with pytest.raises(ConfigError, match="no database window is admissible"):
         search(P, F, valid, query)  # the random initial pose can only be that frame too
     valid[:] = False
@@ -486,7 +486,7 @@ def test_pins_force_the_choice_and_the_search_continues_from_them():
     assert np.array_equal(pinned.clip[:1], free.clip[:1])
     # step 2 searches from the pinned segment's last pose
     P2 = P.copy()
-    expected = search(P2, F, valid, query[12:], config=SearchConfig(step=6, init=tuple(P[alt[0], alt[1] + 5].tolist())))
+    expected = search(P2, F, valid, query[12:], config=SearchConfig(step=6, init_pose=tuple(P[alt[0], alt[1] + 5].tolist())))
     assert (pinned.clip[2], pinned.start[2]) == (expected.clip[0], expected.start[0])
     exclude = np.zeros_like(valid)
     exclude[alt[0], alt[1] + 2] = True
@@ -515,7 +515,7 @@ def test_frames_follow_the_chosen_windows_and_the_last_step_is_cut():
 def test_candidate_frame_and_config_round_trip():
     P, F, valid, rng = small_db(7)
     query = rng.standard_normal((16, F.shape[2])).astype(np.float32)
-    cfg = SearchConfig(k=1, topk=3, seed=2, init=tuple(np.zeros(6)), mask_rule="all", pins={1: (2, 3)})
+    cfg = SearchConfig(k=1, topk=3, seed=2, init_pose=tuple(np.zeros(6)), mask_rule="all", pins={1: (2, 3)})
     res = search(P, F, valid, query, config=cfg)
     df = res.candidates_frame()
     assert list(df.columns) == [
@@ -528,6 +528,10 @@ def test_candidate_frame_and_config_round_trip():
     assert (df.groupby("step").combined.diff().dropna() >= 0).all()
     back = SearchConfig.from_dict(json.loads(json.dumps(cfg.to_dict())))
     assert back == cfg
+    # configurations saved before the initial pose was called init_pose are read as they were
+    old = {**cfg.to_dict(), "init": cfg.to_dict()["init_pose"]}
+    del old["init_pose"]
+    assert SearchConfig.from_dict(old) == cfg
     with pytest.raises(ConfigError, match="unknown"):
         SearchConfig.from_dict({"k": 1, "nope": 2})
 
@@ -540,7 +544,7 @@ def test_candidate_frame_and_config_round_trip():
         (dict(query=np.zeros((5, 4), np.float32)), "query audio features must have shape"),
         (dict(query=np.full((5, 5), np.nan, np.float32)), "NaN"),
         (dict(config=SearchConfig(step=21)), "longer than a database clip"),
-        (dict(config=SearchConfig(init=(1.0, 2.0))), "initial pose must have 6 values"),
+        (dict(config=SearchConfig(init_pose=(1.0, 2.0))), "initial pose must have 6 values"),
         (dict(step_mask=np.array([0, 0])), "step_mask entries must be -1 or an index below 0"),
         (dict(exclude=np.zeros((12, 19), bool)), "exclude must be a bool array"),
     ],
@@ -554,7 +558,7 @@ def test_bad_inputs_raise_config_errors(change, message):
 
 
 @pytest.mark.parametrize(
-    "bad", [dict(k=-1), dict(step=0), dict(mask_rule="middle"), dict(init="rest"), dict(pins={0: 3}), dict(seed=True)]
+    "bad", [dict(k=-1), dict(step=0), dict(mask_rule="middle"), dict(init_pose="rest"), dict(pins={0: 3}), dict(seed=True)]
 )
 def test_bad_config_values_raise(bad):
     with pytest.raises(ConfigError):

@@ -12,7 +12,7 @@ from gesturekit.control import parse_control
 from gesturekit.database import MatchingDatabase
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import ConfigError, GestureKitWarning
-from gesturekit.search_reference import search_reference
+from gesturekit.search.reference import search_reference
 from gesturekit.skeleton import joint_index
 from gesturekit.synthesize import SynthesisConfig, rest_pose_frame, synthesize, synthesize_batch
 
@@ -286,3 +286,77 @@ def test_the_paper_search_has_no_differences():
     assert SynthesisConfig(refiner_keep_hz=0.0).paper_differences(refined=True) == []
     assert SynthesisConfig().paper_differences(refined=False) == []
     assert SynthesisConfig(seed=9, topk=3).paper_differences(refined=False) == []  # no effect on the method
+
+
+# -- one plan, one source of truth for the search's options and the control track ---------------------
+
+
+def test_a_given_control_is_the_one_searched_and_recorded(demo_db, speech):
+    # the config says one control, the argument another: the argument wins, and the result says so
+    a, b = "0-20:left_hand=high", "0-20:left_hand=low"
+    res = synthesize(speech, db=demo_db, config=SynthesisConfig(control=a), control=b)
+    alone = synthesize(speech, db=demo_db, config=SynthesisConfig(control=b))
+    assert res.config.control == b and res.control.to_text() == b and res.plan.control.to_text() == b
+    assert res.search.equals(alone.search) and res.config == alone.config
+    assert not synthesize(speech, db=demo_db, config=SynthesisConfig(control=a)).search.equals(res.search)
+
+
+def test_the_result_keeps_the_plan_it_searched_with(demo_db, speech):
+    from gesturekit.search import plan_search
+
+    cfg = SynthesisConfig(k=1, step=6, init="rest", control="1-5:speed=slow", exclude_takes=(demo_db.take_names[0],))
+    res = synthesize(speech, db=demo_db, config=cfg)
+    plan = res.plan
+    again = plan_search(demo_db, speech, cfg)
+    np.testing.assert_array_equal(plan.query, again.query)
+    np.testing.assert_array_equal(plan.masks, again.masks)
+    np.testing.assert_array_equal(plan.step_mask_index, again.step_mask_index)
+    np.testing.assert_array_equal(plan.exclude, again.exclude)
+    assert plan.config == again.config == res.search.config and plan.segment == 6
+    assert plan.n_steps == res.search.n_steps and plan.n_frames == res.n_frames
+    np.testing.assert_array_equal(res.search.init_pose, np.asarray(plan.config.init_pose, np.float32))
+    assert plan.mask_at(0) is None and plan.mask_at(3) is not None  # step 3 covers 1.2-1.6 s
+    with pytest.raises(ConfigError, match="step must be in"):
+        plan.mask_at(plan.n_steps)
+
+
+@settings(max_examples=40, deadline=None)
+@given(k=st.integers(0, 5), step=st.integers(1, 16), topk=st.integers(1, 12), seed=st.integers(0, 9),
+       rule=st.sampled_from(["ends", "all"]), init=st.sampled_from(["random", "rest"]),
+       pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3))
+def test_the_search_options_live_in_one_nested_config(k, step, topk, seed, rule, init, pins):
+    import dataclasses
+    import json
+
+    from gesturekit.search import SearchConfig
+
+    flat = SynthesisConfig(k=k, step=step, topk=topk, seed=seed, mask_rule=rule, init=init, pins=pins)
+    nested = SynthesisConfig(SearchConfig(k=k, step=step, topk=topk, seed=seed, mask_rule=rule, pins=pins), init=init)
+    assert flat == nested and flat.search == SearchConfig(k=k, step=step, topk=topk, seed=seed, mask_rule=rule,
+                                                          pins=pins)
+    assert (flat.k, flat.step, flat.topk, flat.seed, flat.mask_rule, flat.pins) == (
+        k, step, topk, seed, rule, flat.search.pins)
+    assert dataclasses.replace(flat, k=k + 1).search == dataclasses.replace(flat.search, k=k + 1)
+    saved = json.loads(json.dumps(flat.to_dict()))
+    # the saved form is the flat one earlier versions wrote (and read), and reads back
+    assert set(saved) == {"k", "step", "topk", "seed", "init", "mask_rule", "blend", "blend_frames", "control",
+                          "exclude_takes", "exclude_ranges", "pins", "refiner_keep_hz"}
+    assert SynthesisConfig.from_dict(saved) == flat
+    search = {name: saved.pop(name) for name in ("k", "step", "topk", "seed", "mask_rule", "pins")}
+    assert SynthesisConfig.from_dict({**saved, "search": search}) == flat
+
+
+def test_a_config_saved_by_an_earlier_version_reads_back():
+    saved = {"k": 2, "step": 6, "topk": 7, "seed": 5, "init": "rest", "mask_rule": "all", "blend": "offset",
+             "blend_frames": 3, "control": "0-4.25:both_hands=high", "exclude_takes": ["a"],
+             "exclude_ranges": [["b", 1.0, 2.5]], "pins": {"3": [4, 5]}, "refiner_keep_hz": 1.5}
+    cfg = SynthesisConfig.from_dict(saved)
+    assert (cfg.k, cfg.step, cfg.topk, cfg.seed, cfg.init, cfg.mask_rule) == (2, 6, 7, 5, "rest", "all")
+    assert cfg.pins == {3: (4, 5)} and cfg.exclude_ranges == (("b", 1.0, 2.5),) and cfg.exclude_takes == ("a",)
+    assert cfg.control_track.to_text() == "0-4.25:both_hands=high" and cfg.to_dict() == saved
+    with pytest.raises(ConfigError, match="unknown synthesis options: nope"):
+        SynthesisConfig.from_dict({**saved, "nope": 1})
+    with pytest.raises(ConfigError, match="unknown synthesis options: nope"):
+        SynthesisConfig(nope=1)
+    with pytest.raises(ConfigError, match="init_pose"):
+        SynthesisConfig(search=__import__("gesturekit.search", fromlist=["SearchConfig"]).SearchConfig(init_pose=(1.0,)))

@@ -17,7 +17,7 @@ from gesturekit.evaluate import metrics
 from gesturekit.features import LAYOUT
 from gesturekit.motion import Motion
 from gesturekit.search import SearchConfig, search
-from gesturekit.search_reference import cosine_distance, pose_sqdist, window_admissible
+from gesturekit.search.reference import cosine_distance, pose_sqdist, window_admissible
 from gesturekit.synthesize import SynthesisConfig, synthesize
 from gesturekit.viz.walkthrough import (
     constraints_table,
@@ -50,7 +50,7 @@ def _db(seed: int, *, M: int = 7, T: int = 16, D: int = 6, A: int = 5, levels: i
 
 def _check_step(db, res, query, i, *, N, k, mask, exclude, rule):
     pose = res.init_pose if i == 0 else db.P[res.clip[i - 1], res.start[i - 1] + N - 1]
-    e = explain_step(db, query, pose, t=i * N, step=N, k=k, mask=mask, exclude=exclude, mask_rule=rule)
+    e = explain_step(db, query, pose, t=i * N, segment=N, k=k, mask=mask, exclude=exclude, mask_rule=rule)
     assert (e.clip, e.start, e.position) == (res.clip[i], res.start[i], res.position[i])
     assert e.relaxed == bool(res.relaxed[i])
     assert e.n_survivors == res.n_candidates[i]
@@ -102,7 +102,7 @@ def test_table_holds_every_clip_with_the_definitions_of_the_reference():
     db = _db(3, M=9)
     q = np.random.default_rng(4).normal(size=(10, 5)).astype(np.float32)
     pose = db.P[2, 5]
-    e = explain_step(db, q, pose, t=2, step=4, k=1)
+    e = explain_step(db, q, pose, t=2, segment=4, k=1)
     assert list(e.table["clip"]) == list(range(9))
     for row in e.table.itertuples():
         adm = [s for s in range(16) if window_admissible(row.clip, s, 4, valid=db.valid)]
@@ -128,11 +128,11 @@ def test_table_holds_every_clip_with_the_definitions_of_the_reference():
 def test_k_beyond_the_survivors_takes_the_last_and_relaxing_drops_the_control():
     db = _db(5, M=4)
     q = np.ones((4, 5), np.float32)
-    e = explain_step(db, q, db.P[0, 0], k=50, step=2)
+    e = explain_step(db, q, db.P[0, 0], k=50, segment=2)
     assert e.position == e.n_survivors - 1
     none = np.zeros(db.valid.shape, bool)
-    r = explain_step(db, q, db.P[0, 0], step=2, mask=none)
-    free = explain_step(db, q, db.P[0, 0], step=2)
+    r = explain_step(db, q, db.P[0, 0], segment=2, mask=none)
+    free = explain_step(db, q, db.P[0, 0], segment=2)
     assert r.relaxed and not free.relaxed and (r.clip, r.start) == (free.clip, free.start)
 
 
@@ -184,7 +184,7 @@ def test_synthesis_steps_are_explained_with_their_controls_and_exclusions(small_
 def test_rankings_figure_places_every_survivor_by_its_two_ranks():
     db = _db(8, M=12)
     q = np.random.default_rng(2).normal(size=(3, 5)).astype(np.float32)
-    e = explain_step(db, q, db.P[1, 1], step=3, k=2)
+    e = explain_step(db, q, db.P[1, 1], segment=3, k=2)
     fig = rankings_figure(e, names={int(e.clip): "take a, 1.0 s"})
     parts = {t.meta["part"]: t for t in fig.data}
     r = e.ranking()
@@ -221,7 +221,7 @@ def test_feature_blocks_tile_the_layout_and_the_heatmap_marks_them():
 
 def test_constraints_table_counts_what_each_constraint_admits(small_db):
     db = small_db
-    table = constraints_table(db, step=8).set_index("constraint")
+    table = constraints_table(db, segment=8).set_index("constraint")
     assert len(table) == sum(len(v) for _, v in CONSTRAINTS.values())
     attrs = np.asarray(db.attributes)
     lo, hi = db.thresholds["left_hand_height"]

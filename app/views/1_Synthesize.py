@@ -193,28 +193,23 @@ def settings(db) -> dict:
     for name, value in out.items():
         ss[f"synth.{name}"] = value
     refiner, ok = None, True
-    if gs.refiner_hook() is not None:
-        default = resources.default_refiner(db)
-        on = ss["synth.refine"] = c[3].toggle("Refiner (cGAN)", key=pk("synth.refine", bool(default)),
-                                              help="smooth and re-time the k-NN motion with a trained refiner")
-        folder = ss["synth.refiner_path"] = c[3].text_input(
-            "Refiner folder", key=pk("synth.refiner_path", default), disabled=not on,
-            placeholder="folder written by gesturekit train-refiner")
-        out["refiner_keep_hz"] = ss["synth.refiner_keep_hz"] = c[3].number_input(
-            "Keep k-NN motion below (Hz)", min_value=0.0, max_value=7.5, step=0.5, disabled=not on,
-            key=pk("synth.refiner_keep_hz", KEEP_BELOW_HZ),
-            help="the k-NN motion's slow content (hand height, width, symmetry: what controls set) is kept, "
-            "the refiner supplies the faster content (joins, timing); 0: the refiner's output as it is (the paper)")
-        if on:
-            ok = False  # until the refiner is checked: a run must not silently go without it
-            with display.user_errors():
-                # config and layout only here (no torch); the weights load when Run is pressed
-                refiner = resources.check_refiner(folder, db)
-                ok = True
-    else:
-        on = False
-        c[3].toggle("Refiner (cGAN)", value=False, disabled=True, key="synth.refine_unavailable",
-                    help="this gesturekit cannot apply a refiner")
+    default = resources.default_refiner(db)
+    on = ss["synth.refine"] = c[3].toggle("Refiner (cGAN)", key=pk("synth.refine", bool(default)),
+                                          help="smooth and re-time the k-NN motion with a trained refiner")
+    folder = ss["synth.refiner_path"] = c[3].text_input(
+        "Refiner folder", key=pk("synth.refiner_path", default), disabled=not on,
+        placeholder="folder written by gesturekit train-refiner")
+    out["refiner_keep_hz"] = ss["synth.refiner_keep_hz"] = c[3].number_input(
+        "Keep k-NN motion below (Hz)", min_value=0.0, max_value=7.5, step=0.5, disabled=not on,
+        key=pk("synth.refiner_keep_hz", KEEP_BELOW_HZ),
+        help="the k-NN motion's slow content (hand height, width, symmetry: what controls set) is kept, "
+        "the refiner supplies the faster content (joins, timing); 0: the refiner's output as it is (the paper)")
+    if on:
+        ok = False  # until the refiner is checked: a run must not silently go without it
+        with display.user_errors():
+            # config and layout only here (no torch); the weights load when Run is pressed
+            refiner = resources.check_refiner(folder, db)
+            ok = True
     differs = _paper_differences(out, refined=on)
     if differs:
         st.caption("Differs from the paper: " + "; ".join(differs))
@@ -372,7 +367,7 @@ def main() -> None:
             st.rerun()
     if st.button("Run", type="primary", key="synth.go", disabled=track is None or not chosen["ok"]):
         with display.user_errors():  # an impossible setting is reported; the last result stays below
-            config = SynthesisConfig(**chosen["options"], control=track.to_text(), pins=pins)
+            config = SynthesisConfig(**chosen["options"], control=track, pins=pins)
             refiner = None if chosen["refiner"] is None else resources.load_refiner(chosen["refiner"], db)
             state.run_synthesis(db, speech["audio"], config=config, source=speech["name"], refiner=refiner)
 

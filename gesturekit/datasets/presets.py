@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
+from .._config import config_to_dict
 from ..errors import ConfigError, InputFileError
 from ..paths import is_file
 from ..skeleton import FINGERS, JOINT_NAMES
@@ -82,7 +83,7 @@ class JointMap:
 
     def to_dict(self) -> dict:
         """The JSON form: ``{"pelvis": ..., "joints": {...}}``."""
-        return {"pelvis": self.pelvis, "joints": dict(self.joints)}
+        return config_to_dict(self, exclude=("name",))
 
 
 def missing_and_unknown(names: Iterable[str]) -> tuple[list[str], list[str]]:

@@ -22,14 +22,17 @@ to the lowest (clip, start), so the results are reproducible.
 """
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..control import ControlTrack, parse_control, step_masks
+from ..control import ControlTrack
 from ..errors import ConfigError
 from ..motion import Motion
+from ..search.admissible import admissible_starts
+from ..search.checks import check_segment
+from ..search.plan import plan_search
+from ..search.types import SearchConfig
 
 __all__ = [
     "SYSTEMS",
@@ -103,25 +106,16 @@ def parse_systems(systems) -> tuple[str, ...]:
 # ---- admissible windows -------------------------------------------------------------------------
 
 
-def _window_all(flags: np.ndarray, n: int) -> np.ndarray:
-    """``out[m, s]``: all of ``flags[m, s:s+n]`` (False where the window leaves the clip)."""
-    M, T = flags.shape
-    out = np.zeros((M, T), bool)
-    if n <= T:
-        bad = np.concatenate([np.zeros((M, 1), np.int64), np.cumsum(~flags, axis=1)], axis=1)
-        out[:, : T - n + 1] = bad[:, n:] == bad[:, : T - n + 1]
-    return out
-
-
 def admissible_windows(valid, *, step: int, exclude=None, mask=None, mask_rule: str = "ends") -> np.ndarray:
-    """Start frames of windows of ``step`` frames the search may use.
+    """Start frames of windows of ``step`` frames the search may use
+    (:func:`gesturekit.search.admissible.admissible_starts`, the search's own rule).
 
     Parameters
     ----------
     valid : array, shape (M, T), bool
         Frames that may start a segment.
     step : int
-        Window length N, frames.
+        Window length N, frames (1..T).
     exclude : array, shape (M, T), bool, optional
         Held-out frames: no window may contain one.
     mask : array, shape (M, T), bool, optional
@@ -134,24 +128,9 @@ def admissible_windows(valid, *, step: int, exclude=None, mask=None, mask_rule: 
     np.ndarray, shape (M, T), bool
     """
     valid = np.asarray(valid, dtype=bool)
-    M, T = valid.shape
-    if not isinstance(step, (int, np.integer)) or not 1 <= step <= T:
-        raise ConfigError(f"step must be 1..{T} frames, got {step!r}")
-    adm = valid.copy()
-    adm[:, T - step + 1 :] = False
-    if exclude is not None:
-        adm &= _window_all(~np.asarray(exclude, dtype=bool), step)
-    if mask is not None:
-        mask = np.asarray(mask, dtype=bool)
-        if mask_rule == "ends":
-            ends = np.zeros_like(mask)
-            ends[:, : T - step + 1] = mask[:, : T - step + 1] & mask[:, step - 1 :]
-            adm &= ends
-        elif mask_rule == "all":
-            adm &= _window_all(mask, step)
-        else:
-            raise ConfigError(f"mask_rule must be 'ends' or 'all', got {mask_rule!r}")
-    return adm
+    options = SearchConfig(step=step, mask_rule=mask_rule)  # checked as the search checks them
+    check_segment(options.step, valid.shape[1])
+    return admissible_starts(valid, options.step, exclude=exclude, mask=mask, rule=options.mask_rule)
 
 
 class _Steps:
@@ -168,8 +147,8 @@ class _Steps:
 
     def _adm(self, j: int) -> np.ndarray:
         if j not in self._cache:
-            self._cache[j] = admissible_windows(self.valid, step=self.step, exclude=self.exclude,
-                                                mask=None if j < 0 else self.masks[j], mask_rule=self.rule)
+            self._cache[j] = admissible_starts(self.valid, self.step, exclude=self.exclude,
+                                               mask=None if j < 0 else self.masks[j], rule=self.rule)
         return self._cache[j]
 
     def __call__(self, i: int) -> tuple[np.ndarray, bool]:
@@ -250,8 +229,8 @@ def audio_nearest_segments(
 
     Returns
     -------
-    frames : np.ndarray, shape (n_frames, 2), int64
-    relaxed : np.ndarray, shape (n_steps,), bool
+    (frames, relaxed)
+        As :func:`random_segments` returns them.
     """
     F = np.asarray(F)
     M, T, A = F.shape
@@ -344,62 +323,22 @@ def pose_nearest_segments(
 
 
 def refiner_unavailable_reason(refiner) -> str | None:
-    """Why ``knn+cgan`` cannot run with this refiner, or None when it can.
-
-    A refiner is usable when the synthesis takes a ``refiner`` option, or when it is a trained
-    refiner object (``refine_motion``) or a folder the refiner package can open.
-    """
-    from .. import synthesize as synth
-
+    """Why ``knn+cgan`` cannot run with this refiner (None: it can), said before any work starts."""
     if refiner is None:
         return ("knn+cgan is unavailable: it needs a trained refiner (give --refiner MODEL; train one with "
                 "`gesturekit train-refiner`)")
-    if ("refiner" in inspect.signature(synth.synthesize_batch).parameters
-            or "refiner" in getattr(synth.SynthesisConfig, "__dataclass_fields__", {})
-            or hasattr(refiner, "refine_motion")):
-        return None
-    try:
-        from ..refine import load_refiner  # noqa: F401
-    except ImportError:
-        return "knn+cgan is unavailable: this gesturekit has no refiner (gesturekit.refine)"
     return None
 
 
 def load_refiner_for(refiner):
-    """A refiner given as a path, opened with the refiner package's loader; objects pass through."""
+    """A refiner given as a path, opened (:func:`gesturekit.refine.load_refiner`); objects pass through."""
     import os
 
     if not isinstance(refiner, (str, os.PathLike)):
         return refiner
-    try:
-        from ..refine import load_refiner
-    except ImportError:
-        raise SystemUnavailable("knn+cgan is unavailable: this gesturekit has no refiner (gesturekit.refine)") from None
+    from ..refine import load_refiner
+
     return load_refiner(refiner)
-
-
-def _refined(db, res, refiner):
-    """The refined motion of a synthesis: the synthesis's own, else the refiner applied to its k-NN motion."""
-    if res.refined_motion is not None:
-        return res.refined_motion
-    if not hasattr(refiner, "refine_motion"):
-        raise SystemUnavailable("knn+cgan is unavailable: the synthesis returned no refined motion")
-    if hasattr(refiner, "check_database"):
-        refiner.check_database(db)
-    _, audio_features = db.query_features(res.audio, n_frames=res.knn_motion.n_frames)
-    return refiner.refine_motion(res.knn_motion, audio_features)
-
-
-def _baseline_inputs(db, audio, config, track):
-    from ..features import n_audio_frames
-
-    n = n_audio_frames(len(audio))
-    fq, _ = db.query_features(audio, n_frames=n)
-    masks, smask = step_masks(track, np.asarray(db.attributes), db.thresholds, n_frames=n, step=config.step)
-    exclude = None
-    if config.exclude_takes or config.exclude_ranges:
-        exclude = db.exclusion_mask(takes=config.exclude_takes, ranges=config.exclude_ranges)
-    return n, fq, masks, smask, exclude
 
 
 def run_system(
@@ -425,7 +364,7 @@ def run_system(
         k, step, seed, initial pose, mask rule, blending, exclusions (all systems but ``gt``
         use its step, seed, mask rule and exclusions; ``knn`` uses all of it).
     control : ControlTrack or str, optional
-        Overrides ``config.control`` (``gt`` ignores controls).
+        Replaces ``config.control`` (``gt`` ignores controls).
     gt : Motion, optional
         The recorded motion (needed for ``gt``).
     refiner : optional
@@ -446,9 +385,8 @@ def run_system(
     if system not in SYSTEMS:
         raise ConfigError(f"unknown system {system!r}; known systems: {', '.join(SYSTEMS)}")
     config = config or SynthesisConfig()
-    track = control if control is not None else config.control
-    if isinstance(track, str):
-        track = parse_control(track)
+    if control is not None:  # the config records the control every system uses
+        config = replace(config, control=control)
     audio = np.asarray(audio, dtype=np.float32)
     N = config.step
     if system == "gt":
@@ -456,37 +394,25 @@ def run_system(
             raise SystemUnavailable("gt needs the recorded motion of the speech (a held-out part of the database)")
         return SystemOutput("gt", gt, np.arange(N, gt.n_frames, N, dtype=np.int64))
     if system in ("knn", "knn+cgan"):
-        kwargs = {}
         if system == "knn+cgan":
             reason = refiner_unavailable_reason(refiner)
             if reason:
                 raise SystemUnavailable(reason)
-            refiner = load_refiner_for(refiner)
-        cfg = replace(config, control=track.to_text())
-        if system == "knn+cgan":
-            # the synthesis applies the refiner when it has the option (an argument or a config field);
-            # otherwise it is applied here to the k-NN motion (see _refined)
-            if "refiner" in inspect.signature(synthesize).parameters:
-                kwargs["refiner"] = refiner
-            elif "refiner" in getattr(SynthesisConfig, "__dataclass_fields__", {}):
-                cfg = replace(cfg, refiner=refiner)
-        res = synthesize(audio, db=db, config=cfg, **kwargs)
-        motion = _refined(db, res, refiner) if system == "knn+cgan" else res.motion
+        res = synthesize(audio, db=db, config=config, refiner=refiner if system == "knn+cgan" else None)
+        motion = res.motion
         return SystemOutput(system, motion, np.arange(N, motion.n_frames, N, dtype=np.int64), len(res.relaxed_steps))
-    n, fq, masks, smask, exclude = _baseline_inputs(db, audio, config, track)
+    plan = plan_search(db, audio, config)
+    n, options = plan.n_frames, plan.config
     valid = np.asarray(db.valid)
-    common = dict(step=N, exclude=exclude, masks=masks, step_mask=smask, mask_rule=config.mask_rule)
+    common = dict(step=N, exclude=plan.exclude, masks=plan.masks, step_mask=plan.step_mask_index,
+                  mask_rule=options.mask_rule)
     if system == "random":
-        frames, relaxed = random_segments(valid, n_frames=n, seed=config.seed, **common)
+        frames, relaxed = random_segments(valid, n_frames=n, seed=options.seed, **common)
     elif system == "audio-only":
-        frames, relaxed = audio_nearest_segments(db.F, valid, fq, **common)
-    else:  # pose-only
-        init = None
-        if config.init == "rest":
-            from ..synthesize import rest_pose_frame
-
-            init = np.asarray(db.P[rest_pose_frame(db)], dtype=np.float32)
-        frames, relaxed = pose_nearest_segments(db.P, valid, n_frames=n, seed=config.seed, init_pose=init, **common)
+        frames, relaxed = audio_nearest_segments(db.F, valid, plan.query, **common)
+    else:  # pose-only, from the rest pose when the plan resolved one
+        init = None if options.init_pose == "random" else np.asarray(options.init_pose, dtype=np.float32)
+        frames, relaxed = pose_nearest_segments(db.P, valid, n_frames=n, seed=options.seed, init_pose=init, **common)
     g = np.asarray(db.G[frames[:, 0], frames[:, 1]], dtype=np.float32)
     motion = Motion.from_flat(g, db.fps)
     return SystemOutput(system, motion, np.arange(N, n, N, dtype=np.int64), int(relaxed.sum()))

@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from .._config import JsonConfig
 from ..database import MatchingDatabase, normalise_exclusions
 from ..errors import ConfigError, DatabaseError, collect_warnings
 from ..search import SearchConfig, SearchIndex
@@ -36,7 +37,7 @@ _CHUNK_BYTES = 96 << 20
 
 
 @dataclass(frozen=True)
-class PairsConfig:
+class PairsConfig(JsonConfig):
     """How training pairs are made; saved in a refiner's ``config.json``.
 
     Parameters
@@ -54,6 +55,8 @@ class PairsConfig:
     exclude_ranges : tuple of (str, float, float)
         (take, start_s, end_s) stretches kept out likewise.
     """
+
+    OPTIONS_NAME = "training-data options"
 
     seed: int = 0
     step: int = 8
@@ -73,25 +76,6 @@ class PairsConfig:
         object.__setattr__(self, "exclude_takes", takes)
         object.__setattr__(self, "exclude_ranges", ranges)
 
-    def to_dict(self) -> dict:
-        return {
-            "seed": self.seed,
-            "step": self.step,
-            "k_one_fraction": self.k_one_fraction,
-            "k_max": self.k_max,
-            "exclude_takes": list(self.exclude_takes),
-            "exclude_ranges": [list(r) for r in self.exclude_ranges],
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "PairsConfig":
-        unknown = set(d) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ConfigError(f"unknown training-data options: {', '.join(sorted(unknown))}")
-        d = dict(d)
-        d["exclude_takes"] = tuple(d.get("exclude_takes", ()))
-        d["exclude_ranges"] = tuple(tuple(r) for r in d.get("exclude_ranges", ()))
-        return cls(**d)
 
 
 @dataclass
@@ -240,7 +224,7 @@ def make_training_pairs(
             np.logical_and(allowed, ~own, out=masks[j])
         n_steps = -(-L // config.step)
         configs = [
-            SearchConfig(k=int(k_all[w]), step=config.step, topk=1, init=P0[w], mask_rule="all") for w in idx
+            SearchConfig(k=int(k_all[w]), step=config.step, topk=1, init_pose=P0[w], mask_rule="all") for w in idx
         ]
         with collect_warnings():
             # a relaxed step could use the window's own frames: such windows are dropped below

@@ -20,12 +20,13 @@ pool by 2, then a linear layer to one score (no sigmoid: WGAN).
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 from torch import nn
 import torch.nn.functional as F
 
+from .._config import JsonConfig
 from ..errors import ConfigError
 
 __all__ = ["ModelConfig", "Generator", "Critic", "build_models", "xavier_init", "count_parameters"]
@@ -37,7 +38,7 @@ GENERATOR_STRIDE = 8
 
 
 @dataclass(frozen=True)
-class ModelConfig:
+class ModelConfig(JsonConfig):
     """Sizes of the generator and the critic; saved in a refiner's ``config.json``.
 
     Parameters
@@ -53,6 +54,8 @@ class ModelConfig:
     critic_channels : (int, int, int)
         Channels of the critic's blocks (paper: 512, 256, 128).
     """
+
+    OPTIONS_NAME = "model options"
 
     audio_dim: int = 28
     motion_dim: int = 165
@@ -72,18 +75,6 @@ class ModelConfig:
         if self.audio_dim < 1 or self.motion_dim < 1:
             raise ConfigError("audio_dim and motion_dim must be positive")
 
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["generator_channels"] = list(self.generator_channels)
-        d["critic_channels"] = list(self.critic_channels)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "ModelConfig":
-        unknown = set(d) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ConfigError(f"unknown model options: {', '.join(sorted(unknown))}")
-        return cls(**d)
 
 
 def _double_conv(cin: int, cout: int, norm) -> nn.Sequential:

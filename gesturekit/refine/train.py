@@ -29,7 +29,7 @@ import shutil
 import signal
 import threading
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from .._version import __version__
+from .._config import JsonConfig
 from ..database import MatchingDatabase
 from ..errors import ConfigError, DatabaseError, InputFileError
 from .._io import atomic_write
@@ -73,7 +74,7 @@ LOG_COLUMNS = (
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainConfig(JsonConfig):
     """Training schedule and losses; saved in a refiner's ``config.json``.
 
     Parameters
@@ -107,6 +108,8 @@ class TrainConfig:
         Seed of the initial weights and of every random draw of training.
     """
 
+    OPTIONS_NAME = "training options"
+
     iterations: int = 2000
     batch_size: int = 100
     lr: float = 1e-4
@@ -134,17 +137,6 @@ class TrainConfig:
         if self.gp_weight < 0 or self.l1_weight < 0:
             raise ConfigError("gp_weight and l1_weight must not be negative")
 
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["betas"] = list(self.betas)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "TrainConfig":
-        unknown = set(d) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ConfigError(f"unknown training options: {', '.join(sorted(unknown))}")
-        return cls(**d)
 
 
 @dataclass(frozen=True)

@@ -1,15 +1,10 @@
-"""The method step by step: one search step taken apart, and the tables the walkthroughs show.
+"""The method step by step: the tables and figures the walkthroughs show.
 
-:func:`explain_step` recomputes a single step of Algorithm 1 (see
-:mod:`gesturekit.search_reference` for the rules) for *every* clip of the
-database, not only the few candidates :class:`~gesturekit.search.SearchResult`
-records, and returns the whole table: each clip's nearest admissible window to
-the last pose, its pose and audio distances, its two ranks, their sum and its
-place in the combined ranking. Distances use the exact definitions of the
-search (:func:`gesturekit.search.exact_pose_sqdist`,
-:func:`gesturekit.search.exact_cosine_distance`) and ties are broken by the same
-rules, so the explained choice is the search's choice, bit for bit.
-:func:`explain_synthesis_step` does it for a step of a finished synthesis.
+A search step taken apart for every clip of the database is computed beside the
+search (:mod:`gesturekit.search.explain`: :func:`explain_step`,
+:class:`StepExplanation`, re-exported here); :func:`explain_synthesis_step` takes
+a step of a finished synthesis apart from the plan the synthesis kept, and
+:func:`rankings_figure` draws it.
 
 Tables gather what the walkthrough notebooks show as pandas DataFrames: what
 each control constraint admits of a database (:func:`constraints_table`),
@@ -21,21 +16,22 @@ the paper's control statistics (:func:`control_statistics`). The figures
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
 import plotly.graph_objects as go
 
-from ..control import ATTRIBUTE_NAMES, CONSTRAINTS, constraint_mask, step_masks
+from ..control import ATTRIBUTE_NAMES, CONSTRAINTS, constraint_mask
 from ..errors import ConfigError
-from ..search import exact_cosine_distance, exact_pose_sqdist
+from ..search.admissible import admissible_starts
+from ..search.explain import StepExplanation, explain_plan_step, explain_step, plan_step_inputs
 
 __all__ = [
     "StepExplanation",
     "explain_step",
     "step_inputs",
     "explain_synthesis_step",
+    "explain_plan_step",
     "constraints_table",
     "synthesis_table",
     "motion_measures",
@@ -45,228 +41,14 @@ __all__ = [
     "feature_figure",
 ]
 
-#: Rows of pose features whose exact distances are computed at once (bounds the float64 scratch).
-_CHUNK_ROWS = 1 << 15
 
+def _plan(result, db):
+    """The plan a synthesis searched with (made again only for a result that does not keep one)."""
+    if result.plan is not None:
+        return result.plan
+    from ..search.plan import plan_search
 
-@dataclass
-class StepExplanation:
-    """One search step, every clip of the database accounted for.
-
-    Attributes
-    ----------
-    table : pandas.DataFrame
-        One row per clip, in clip order: ``clip``; ``start`` (its nearest admissible
-        window's first frame, -1 when the clip drops out); ``admissible`` (windows of the
-        clip the step may use); ``pose_dist`` (Euclidean distance of the window's pose
-        feature to ``p_{t-1}``, z-scored units); ``audio_dist`` (cosine distance of its
-        audio feature to ``f_t``, 0..2); ``pose_rank``, ``audio_rank`` (ordinal ranks among
-        the surviving clips, 0 = best, ties by clip index); ``combined`` (their sum);
-        ``position`` (place in the combined ranking, ties by clip index); ``chosen``.
-        Clips that drop out have NaN distances and -1 ranks.
-    clip, start : int
-        The chosen window.
-    position : int
-        Its place in the combined ranking: ``min(k, survivors - 1)``.
-    next_pose : np.ndarray, shape (D,), float32
-        The pose feature at the chosen window's last frame: ``p_{t-1}`` of the next step.
-    pose : np.ndarray, shape (D,), float32
-        The pose feature the step matched against.
-    audio : np.ndarray, shape (A,), float32
-        ``f_t``, the speech's audio feature at the step's first frame.
-    t, step, k : int
-        The step's first output frame, its length N and the k taken.
-    relaxed : bool
-        The control admitted no window and was dropped, as the search does.
-    """
-
-    table: "pd.DataFrame"  # noqa: F821
-    clip: int
-    start: int
-    position: int
-    next_pose: np.ndarray
-    pose: np.ndarray
-    audio: np.ndarray
-    t: int
-    step: int
-    k: int
-    relaxed: bool = False
-
-    @property
-    def n_survivors(self) -> int:
-        """Clips with an admissible window (the rest drop out of this step)."""
-        return int(np.count_nonzero(self.table["start"].to_numpy() >= 0))
-
-    def ranking(self):
-        """The surviving clips in combined-rank order (best first), as a DataFrame."""
-        t = self.table[self.table["start"] >= 0]
-        return t.sort_values("position").reset_index(drop=True)
-
-
-def _admissible(valid, n, *, exclude, mask, rule) -> np.ndarray:
-    """``ok[m, s]``: the window of ``n`` frames at ``s`` of clip ``m`` may be used (rule 1 of the search)."""
-    M, T = valid.shape
-    ok = np.zeros((M, T), bool)
-    if n > T:
-        return ok
-    last = T - n + 1  # starts with s + n <= T
-    ok[:, :last] = valid[:, :last]
-    if exclude is not None:
-        ex = np.concatenate([np.zeros((M, 1), np.int64), np.cumsum(exclude, axis=1, dtype=np.int64)], axis=1)
-        ok[:, :last] &= (ex[:, n:] - ex[:, :last]) == 0  # no excluded frame in [s, s + n)
-    if mask is not None:
-        if rule == "ends":
-            ok[:, :last] &= mask[:, :last] & mask[:, n - 1:]
-        else:
-            bad = np.concatenate([np.zeros((M, 1), np.int64), np.cumsum(~mask, axis=1, dtype=np.int64)], axis=1)
-            ok[:, :last] &= (bad[:, n:] - bad[:, :last]) == 0
-    return ok
-
-
-def _nearest(P, pose, ok) -> tuple[np.ndarray, np.ndarray]:
-    """Per clip the admissible start nearest ``pose`` (distance 0 skipped, ties to the smallest start).
-
-    Returns
-    -------
-    start : (M,) int64, -1 where the clip drops out
-    d2 : (M,) float64 squared distances, inf where it drops out
-    """
-    M, T, D = P.shape
-    d2 = np.full(M * T, np.inf)
-    flat_ok = ok.ravel()
-    rows = np.flatnonzero(flat_ok)
-    P2 = P.reshape(M * T, D)
-    for a in range(0, rows.size, _CHUNK_ROWS):
-        r = rows[a:a + _CHUNK_ROWS]
-        d2[r] = exact_pose_sqdist(np.asarray(P2[r], dtype=np.float32), pose)
-    d2[d2 == 0.0] = np.inf  # the query's own frame
-    d2 = d2.reshape(M, T)
-    start = np.argmin(d2, axis=1)  # first minimum: the smallest start on ties
-    best = d2[np.arange(M), start]
-    start = np.where(np.isfinite(best), start, -1)
-    return start.astype(np.int64), best
-
-
-def explain_step(
-    db,
-    query_features: np.ndarray,
-    pose: np.ndarray,
-    *,
-    t: int = 0,
-    step: int = 8,
-    k: int = 0,
-    mask: np.ndarray | None = None,
-    exclude: np.ndarray | None = None,
-    mask_rule: str = "ends",
-) -> StepExplanation:
-    """One step of Algorithm 1 for every clip: nearest windows, two rankings, the combined rank.
-
-    Parameters
-    ----------
-    db : MatchingDatabase
-        Anything with ``P`` (M, T, 96), ``F`` (M, T, 112) z-scored float32 features and
-        ``valid`` (M, T) bool.
-    query_features : np.ndarray, shape (T_out, 112)
-        z-scored audio features of the speech (:meth:`MatchingDatabase.query_features`).
-    pose : np.ndarray, shape (96,)
-        ``p_{t-1}``, the z-scored pose feature of the last output frame.
-    t : int
-        The step's first output frame, ``0 <= t < T_out``; ``f_t = query_features[t]``.
-    step : int
-        Frames per step, N.
-    k : int
-        Which place of the combined ranking to take (0 = best).
-    mask : np.ndarray, shape (M, T), bool, optional
-        The step's control: the database frames it admits.
-    exclude : np.ndarray, shape (M, T), bool, optional
-        Frames never to use.
-    mask_rule : {"ends", "all"}
-        Where ``mask`` must hold in a window: its first and last frame, or every frame.
-
-    Returns
-    -------
-    StepExplanation
-        Its ``clip``, ``start`` and candidate order equal those of
-        :func:`gesturekit.search.search` for the same step and inputs.
-
-    Raises
-    ------
-    ConfigError
-        Bad shapes or options, or no admissible window even without the control.
-    """
-    import pandas as pd
-
-    P, F, valid = db.P, db.F, np.asarray(db.valid, dtype=bool)
-    M, T = valid.shape
-    q = np.asarray(query_features, dtype=np.float32)
-    pose = np.asarray(pose, dtype=np.float32).ravel()
-    if q.ndim != 2 or q.shape[1] != F.shape[-1]:
-        raise ConfigError(f"query_features must have shape (frames, {F.shape[-1]}), got {q.shape}")
-    if pose.shape != (P.shape[-1],):
-        raise ConfigError(f"pose must have {P.shape[-1]} values, got shape {pose.shape}")
-    if not 0 <= int(t) < q.shape[0]:
-        raise ConfigError(f"t must be in 0..{q.shape[0] - 1}, got {t}")
-    if int(step) < 1 or int(k) < 0:
-        raise ConfigError(f"step must be >= 1 and k >= 0, got step={step}, k={k}")
-    if mask_rule not in ("ends", "all"):
-        raise ConfigError(f"mask_rule must be 'ends' or 'all', got {mask_rule!r}")
-    for name, arr in (("mask", mask), ("exclude", exclude)):
-        if arr is not None and np.shape(arr) != (M, T):
-            raise ConfigError(f"{name} must have shape ({M}, {T}), got {np.shape(arr)}")
-    t, step, k = int(t), int(step), int(k)
-    exclude = None if exclude is None else np.asarray(exclude, dtype=bool)
-    f_t = q[t]
-
-    relaxed = False
-    ok = _admissible(valid, step, exclude=exclude, mask=None if mask is None else np.asarray(mask, bool),
-                     rule=mask_rule)
-    start, d2 = _nearest(P, pose, ok)
-    if not (start >= 0).any() and mask is not None:
-        relaxed = True  # as the search: drop the control for this step, keep the exclusions
-        ok = _admissible(valid, step, exclude=exclude, mask=None, rule=mask_rule)
-        start, d2 = _nearest(P, pose, ok)
-    alive = np.flatnonzero(start >= 0)
-    if alive.size == 0:
-        raise ConfigError(f"no database window is admissible at t={t} (valid start, {step} frames inside "
-                          "the clip, no excluded frame) other than the query's own frame")
-
-    audio = exact_cosine_distance(np.asarray(F[alive, start[alive]], dtype=np.float32), f_t)
-    n = alive.size
-    # ordinal ranks; alive is in clip order, so a stable sort breaks ties by clip index
-    pose_rank = np.empty(n, np.int64)
-    pose_rank[np.argsort(d2[alive], kind="stable")] = np.arange(n)
-    audio_rank = np.empty(n, np.int64)
-    audio_rank[np.argsort(audio, kind="stable")] = np.arange(n)
-    combined = pose_rank + audio_rank
-    order = np.argsort(combined, kind="stable")
-    position = np.empty(n, np.int64)
-    position[order] = np.arange(n)
-    pos = min(k, n - 1)
-    chosen = int(alive[order[pos]])
-    c_start = int(start[chosen])
-
-    def full(values, fill, dtype):
-        out = np.full(M, fill, dtype=dtype)
-        out[alive] = values
-        return out
-
-    table = pd.DataFrame({
-        "clip": np.arange(M),
-        "start": start,
-        "admissible": ok.sum(axis=1),
-        "pose_dist": full(np.sqrt(d2[alive]), np.nan, np.float64),
-        "audio_dist": full(audio, np.nan, np.float64),
-        "pose_rank": full(pose_rank, -1, np.int64),
-        "audio_rank": full(audio_rank, -1, np.int64),
-        "combined": full(combined, -1, np.int64),
-        "position": full(position, -1, np.int64),
-        "chosen": np.arange(M) == chosen,
-    })
-    return StepExplanation(
-        table=table, clip=chosen, start=c_start, position=pos,
-        next_pose=np.asarray(P[chosen, c_start + step - 1], dtype=np.float32).copy(),
-        pose=pose, audio=f_t.copy(), t=t, step=step, k=k, relaxed=relaxed,
-    )
+    return plan_search(db, result.audio, result.config)
 
 
 def step_inputs(result, db, step: int) -> dict:
@@ -275,7 +57,7 @@ def step_inputs(result, db, step: int) -> dict:
     Parameters
     ----------
     result : SynthesisResult
-        A finished synthesis (:func:`gesturekit.synthesize.synthesize`).
+        A finished synthesis (:func:`gesturekit.synthesize.synthesize`); its plan is read.
     db : MatchingDatabase
         The database it searched.
     step : int
@@ -284,30 +66,9 @@ def step_inputs(result, db, step: int) -> dict:
     Returns
     -------
     dict
-        ``query_features`` (T_out, 112), ``pose`` (``p_{t-1}``: the initial pose for step 0,
-        else the pose feature at the last frame of the previous step's window), ``t``,
-        ``step`` (N), ``k``, ``mask`` (the step's control mask or None), ``exclude`` and
-        ``mask_rule``.
+        See :func:`gesturekit.search.explain.plan_step_inputs`.
     """
-    s = result.search
-    if not 0 <= int(step) < s.n_steps:
-        raise ConfigError(f"step must be in 0..{s.n_steps - 1}, got {step}")
-    i = int(step)
-    cfg = result.config
-    N = cfg.step
-    n = result.n_frames
-    query, _ = db.query_features(result.audio, n_frames=n)
-    if i == 0:
-        pose = np.asarray(s.init_pose, dtype=np.float32)
-    else:
-        pose = np.asarray(db.P[int(s.clip[i - 1]), int(s.start[i - 1]) + N - 1], dtype=np.float32)
-    masks, smask = step_masks(result.control, np.asarray(db.attributes), db.thresholds, n_frames=n, step=N)
-    mask = None if masks is None or smask[i] < 0 else masks[smask[i]]
-    exclude = None
-    if cfg.exclude_takes or cfg.exclude_ranges:
-        exclude = db.exclusion_mask(takes=cfg.exclude_takes, ranges=cfg.exclude_ranges)
-    return {"query_features": query, "pose": pose, "t": i * N, "step": N, "k": cfg.k, "mask": mask,
-            "exclude": exclude, "mask_rule": cfg.mask_rule}
+    return plan_step_inputs(_plan(result, db), result.search, db.P, step)
 
 
 def explain_synthesis_step(result, db, step: int) -> StepExplanation:
@@ -316,19 +77,19 @@ def explain_synthesis_step(result, db, step: int) -> StepExplanation:
     A pinned step is explained by the search's rule; its actual window is the pin
     (``result.search.pinned``).
     """
-    return explain_step(db, **step_inputs(result, db, step))
+    return explain_plan_step(db, _plan(result, db), result.search, step)
 
 
 # ---- tables ---------------------------------------------------------------------------------------
 
 
-def constraints_table(db, *, step: int = 8):
+def constraints_table(db, *, segment: int = 8):
     """Every constraint a control can set, with its threshold and how much of the database it admits.
 
     Parameters
     ----------
     db : MatchingDatabase
-    step : int
+    segment : int
         Window length N for the window counts.
 
     Returns
@@ -350,8 +111,8 @@ def constraints_table(db, *, step: int = 8):
     for name, (names, values) in CONSTRAINTS.items():
         for value, side in values.items():
             mask = constraint_mask(attrs, ((name, value),), th)
-            ends = _admissible(valid, int(step), exclude=None, mask=mask, rule="ends")
-            every = _admissible(valid, int(step), exclude=None, mask=mask, rule="all")
+            ends = admissible_starts(valid, int(segment), mask=mask, rule="ends")
+            every = admissible_starts(valid, int(segment), mask=mask, rule="all")
             rows.append({
                 "constraint": f"{name}={value}",
                 "attributes": "+".join(names),
@@ -525,7 +286,7 @@ def rankings_figure(explanation: StepExplanation, *, names: Mapping[int, str] | 
         A description per clip shown on hover (e.g. its take and time).
     title : str, optional
     height : int
-        Pixels.
+        Figure height in pixels.
 
     Returns
     -------

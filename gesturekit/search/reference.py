@@ -38,6 +38,28 @@ shortlist with the same definitions):
   ``d2``; the reported distance is ``sqrt(d2)``.
 * audio: ``dot``, ``|a|^2`` and ``|b|^2`` summed the same way, and
   ``1 - dot / sqrt(|a|^2 * |b|^2)``; 1 when either norm is 0 (:func:`cosine_distance`).
+
+Fidelity to the authors' code (GestureKNN). Compared step by step with stable
+sorts, their loop makes the choices these rules make, except where it departs
+from the algorithm as written; these rules follow the algorithm:
+
+* Their per-clip scan, ``while pose_cand_ctr < len(sorted_idx_list) - 1``,
+  never examines a clip's last-ranked frame: a clip whose only admissible start
+  ranks last drops out of the step there and survives here (rule 2).
+* Their random initial frame is any database frame satisfying the active control
+  at that frame only; it may be one that cannot start a window (``s > T - N``).
+  Here ``p_{-1}`` is drawn from the admissible starts of step 0 (rule 1, with the
+  control held by the mask rule); ``docs/METHOD.md`` credits the control rule to
+  their code without this caveat.
+* Their features are zero-padded inside each 64-frame clip and z-scored over all
+  frames, padding included, and every start ``s <= T - N`` is eligible, so a start
+  whose look-ahead is padding can be chosen. Here the statistics come from the
+  frames that can start a segment and such starts are never admissible (``valid``);
+  ``docs/METHOD.md``'s "z-scored with statistics of the database [code]" does not
+  say that theirs include the padding.
+* Their search stops with an error unless the output's frame count is 0 or 1
+  modulo N, and when fewer than ``k + 1`` clips survive; here the last step is cut
+  to the query's length (rule 5) and the last survivor is taken (rule 4, ``short``).
 """
 from __future__ import annotations
 
@@ -45,8 +67,9 @@ import math
 
 import numpy as np
 
-from .errors import ConfigError, warn
-from .search import SearchConfig, SearchResult, _validate, describe_steps
+from ..errors import ConfigError, warn
+from .checks import validate
+from .types import SearchConfig, SearchResult, describe_steps
 
 __all__ = ["pose_sqdist", "cosine_distance", "window_admissible", "search_reference"]
 
@@ -72,18 +95,8 @@ def pose_sqdist(a, b) -> float:
 
 
 def cosine_distance(a, b) -> float:
-    """Cosine distance ``1 - a.b / (|a| |b|)``, exactly as defined for the search.
-
-    Parameters
-    ----------
-    a, b : sequence of float, length A
-        Two audio features (float32 values).
-
-    Returns
-    -------
-    float
-        In [0, 2]; 1 when either vector is all zeros.
-    """
+    """Cosine distance ``1 - a.b / (|a| |b|)`` of two audio features (A float32 values each),
+    exactly as defined for the search: in [0, 2], and 1 when either vector is all zeros."""
     dot = na = nb = 0.0
     for x, y in zip(a, b):
         x, y = float(x), float(y)
@@ -177,7 +190,7 @@ def search_reference(
     -------
     SearchResult
     """
-    v = _validate(P, F, valid, query, config, masks, step_mask, exclude)
+    v = validate(P, F, valid, query, config, masks, step_mask, exclude)
     P, F, valid, query, cfg = v.P, v.F, v.valid, v.query, v.config
     exclude, masks, step_mask = v.exclude, v.masks, v.step_mask
     M, T = valid.shape
@@ -191,7 +204,7 @@ def search_reference(
         return None if j < 0 else masks[j]
 
     # p_{-1}
-    if cfg.init == "random":
+    if cfg.init_pose == "random":
         frames = []
         for mask in (control(0), None):
             frames = [
@@ -209,7 +222,7 @@ def search_reference(
         init_pose = P[m0, s0].copy()
         init_frame = (m0, s0)
     else:
-        init_pose = np.asarray(cfg.init, dtype=np.float32)
+        init_pose = np.asarray(cfg.init_pose, dtype=np.float32)
         init_frame = (-1, -1)
     p_prev = init_pose.tolist()
 

@@ -1,0 +1,128 @@
+"""Input checks shared by the fast search and the reference: shapes, values, options.
+
+Every check raises :class:`~gesturekit.errors.ConfigError` naming the input and
+the problem; the normalised inputs come back as C-contiguous arrays.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..errors import ConfigError
+from .exact import MAX_ABS, compiled
+from .types import SearchConfig
+
+__all__ = ["validate", "validate_db", "validate_call", "check_segment", "checked_sqnorms"]
+
+
+def check_segment(n: int, clip_frames: int) -> None:
+    """Refuse a segment length N (frames per step, already a positive integer) longer than a clip."""
+    if n > clip_frames:
+        raise ConfigError(f"step {n} is longer than a database clip ({clip_frames} frames)")
+
+
+def validate_db(P, F, valid):
+    P = np.ascontiguousarray(P, dtype=np.float32)
+    F = np.ascontiguousarray(F, dtype=np.float32)
+    valid = np.ascontiguousarray(valid)
+    if P.ndim != 3 or P.shape[0] < 1 or P.shape[1] < 1 or P.shape[2] < 1:
+        raise ConfigError(f"pose features must have shape (clips, frames, dims), got {P.shape}")
+    M, T, _ = P.shape
+    if F.ndim != 3 or F.shape[:2] != (M, T) or F.shape[2] < 1:
+        raise ConfigError(f"audio features must have shape ({M}, {T}, dims) like the pose features, got {F.shape}")
+    if valid.shape != (M, T) or valid.dtype != bool:
+        raise ConfigError(f"valid must be a bool array of shape ({M}, {T}), got {valid.dtype} {valid.shape}")
+    # finite values and magnitudes are checked by SearchIndex while it computes the norms
+    return P, F, valid
+
+
+def validate_call(shape, query, config, masks, step_mask, exclude):
+    M, T, D, A = shape
+    config = SearchConfig() if config is None else config
+    if not isinstance(config, SearchConfig):
+        raise ConfigError(f"config must be a SearchConfig, got {type(config).__name__}")
+    query = np.ascontiguousarray(query, dtype=np.float32)
+    if query.ndim != 2 or query.shape[1] != A or query.shape[0] < 1:
+        raise ConfigError(f"query audio features must have shape (frames >= 1, {A}), got {query.shape}")
+    if not np.isfinite(query).all():
+        raise ConfigError("query audio features contain NaN or infinite values")
+    if np.abs(query).max() > MAX_ABS:
+        raise ConfigError(f"query audio features exceed {MAX_ABS:g} in magnitude (are they z-scored?)")
+    N = config.step
+    check_segment(N, T)
+    if not isinstance(config.init_pose, str):
+        if len(config.init_pose) != D:
+            raise ConfigError(f"initial pose must have {D} values, got {len(config.init_pose)}")
+        if max(abs(x) for x in config.init_pose) > MAX_ABS:
+            raise ConfigError(f"initial pose exceeds {MAX_ABS:g} in magnitude (is it z-scored?)")
+    n_steps = -(-query.shape[0] // N)
+    if masks is not None:
+        masks = np.ascontiguousarray(masks)
+        if masks.ndim != 3 or masks.shape[1:] != (M, T) or masks.dtype != bool:
+            raise ConfigError(
+                f"masks must be a bool array of shape (n_masks, {M}, {T}), got {masks.dtype} {masks.shape}"
+            )
+    if step_mask is not None:
+        step_mask = np.asarray(step_mask)
+        if step_mask.shape != (n_steps,) or step_mask.dtype.kind not in "iu":
+            raise ConfigError(
+                f"step_mask must be {n_steps} integers (one per step of {N} frames), got {step_mask.shape}"
+            )
+        n_masks = 0 if masks is None else masks.shape[0]
+        if step_mask.size and (step_mask.min() < -1 or step_mask.max() >= n_masks):
+            raise ConfigError(f"step_mask entries must be -1 or an index below {n_masks} (the number of masks)")
+        step_mask = step_mask.astype(np.int64)
+    elif masks is not None:
+        raise ConfigError("masks were given without step_mask (which mask each step uses)")
+    if exclude is not None:
+        exclude = np.ascontiguousarray(exclude)
+        if exclude.shape != (M, T) or exclude.dtype != bool:
+            raise ConfigError(f"exclude must be a bool array of shape ({M}, {T}), got {exclude.dtype} {exclude.shape}")
+    for i, (m, s) in config.pins.items():
+        if i >= n_steps:
+            raise ConfigError(f"pin at step {i}, but the query has only {n_steps} steps")
+        if m >= M or s + N > T:
+            raise ConfigError(f"pin at step {i}: window (clip {m}, start {s}) of {N} frames is outside the database")
+        if exclude is not None and exclude[m, s : s + N].any():
+            raise ConfigError(f"pin at step {i}: window (clip {m}, start {s}) contains excluded frames")
+    return SimpleNamespace(
+        query=query, config=config, masks=masks, step_mask=step_mask, exclude=exclude, n_steps=n_steps
+    )
+
+
+def validate(P, F, valid, query, config, masks, step_mask, exclude):
+    """Shared input checks of the fast and the reference search; returns the normalised inputs."""
+    P, F, valid = validate_db(P, F, valid)
+    M, T = valid.shape
+    checked_sqnorms(P.reshape(M * T, -1), "pose")  # the values, as SearchIndex checks them
+    checked_sqnorms(F.reshape(M * T, -1), "audio")
+    call = validate_call((*P.shape, F.shape[2]), query, config, masks, step_mask, exclude)
+    call.P, call.F, call.valid = P, F, valid
+    return call
+
+
+def checked_sqnorms(x2: np.ndarray, name: str, workers: int = 1) -> np.ndarray:
+    """Squared norms (float64) of the rows of a float32 (rows, dims) matrix, read once.
+
+    Raises
+    ------
+    ConfigError
+        NaN or infinite values, or magnitudes above ``MAX_ABS``.
+    """
+    out = np.empty(x2.shape[0])
+    kernel = compiled().row_stats
+    cuts = np.linspace(0, x2.shape[0], max(1, min(workers, x2.shape[0])) + 1).astype(int)
+    parts = list(zip(cuts[:-1], cuts[1:]))
+    if len(parts) > 1:
+        with ThreadPoolExecutor(len(parts)) as pool:
+            stats = list(pool.map(lambda ab: kernel(x2[ab[0] : ab[1]], out[ab[0] : ab[1]]), parts))
+    else:
+        stats = [kernel(x2, out)]
+    if not all(ok for ok, _ in stats):
+        raise ConfigError(f"{name} features contain NaN or infinite values")
+    if max(top for _, top in stats) > MAX_ABS:
+        raise ConfigError(f"{name} features exceed {MAX_ABS:g} in magnitude (are they z-scored?)")
+    return out
+

@@ -1,0 +1,90 @@
+"""The exact distances of the search, vectorised, and the error bounds of its float32 estimates.
+
+:func:`exact_pose_sqdist` and :func:`exact_cosine_distance` are the definitions of
+:mod:`gesturekit.search.reference` (float64, summed left to right) for many rows
+at once, bit for bit. The fast search estimates distances in float32 and
+re-checks every near-tie with these; the bounds below say how far an estimate
+may be from the exact value (see :mod:`gesturekit.search.index`).
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["exact_pose_sqdist", "exact_cosine_distance", "pose_err_factor", "audio_err", "compiled", "MAX_ABS"]
+
+U32 = 2.0**-24
+#: Absolute slack for float32 underflow in products.
+TINY = 1e-30
+#: Largest feature magnitude accepted: float32 products and sums of squares cannot overflow.
+MAX_ABS = 1e15
+
+
+def pose_err_factor(dims: int) -> float:
+    """Multiple of ``max|p|^2 + |q|^2`` bounding the float32 pose estimate's error.
+
+    The bound is ``(gamma_D + 3u)``; ``(D + 32) u`` adds room for the float64 rounding
+    of the exact value and of ``|p|^2``, ``|q|^2`` (see :mod:`gesturekit.search.index`).
+    """
+    return (dims + 32) * U32
+
+
+def audio_err(dims: int) -> float:
+    """Bound on the error of the cosine distance estimated from a float32 dot product of
+    A values (``gamma_A |a| |b|``, relative to ``|a| |b|``) and float64 norms."""
+    return (dims + 16) * U32 + 1e-12
+
+
+def exact_pose_sqdist(rows: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Exact squared pose distances of several rows to one query.
+
+    Parameters
+    ----------
+    rows : np.ndarray, shape (n, D), float32
+    q : np.ndarray, shape (D,), float32
+
+    Returns
+    -------
+    np.ndarray, shape (n,), float64
+        Bit-identical to :func:`gesturekit.search.reference.pose_sqdist` per row.
+    """
+    # (D, n), one column per row: float64(a_j) - float64(b_j), rows laid out for the loop below
+    x = np.subtract(np.asarray(rows).T, np.asarray(q, dtype=np.float64)[:, None], dtype=np.float64, order="C")
+    np.multiply(x, x, out=x)
+    acc = np.zeros(x.shape[1])
+    for j in range(x.shape[0]):  # left to right, as the definition says
+        acc += x[j]
+    return acc
+
+
+def exact_cosine_distance(rows: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Exact cosine distances of several audio features ``rows`` (n, A) to one ``f`` (A,), all float32.
+
+    Returns the (n,) float64 distances, each bit-identical to
+    :func:`gesturekit.search.reference.cosine_distance` (1 where a norm is 0).
+    """
+    x = np.asarray(rows).T  # (A, n)
+    y = np.asarray(f, dtype=np.float64)
+    n = x.shape[1]
+    terms = np.empty((x.shape[0], 2 * n))  # per dimension: the n products, then the n squares
+    np.multiply(x, y[:, None], out=terms[:, :n], dtype=np.float64)
+    np.multiply(x, x, out=terms[:, n:], dtype=np.float64)
+    acc = np.zeros(2 * n)
+    nb = 0.0
+    for j, yj in enumerate(y.tolist()):  # left to right, as the definition says
+        acc += terms[j]
+        nb += yj * yj
+    dot, na = acc[:n], acc[n:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = 1.0 - dot / np.sqrt(na * nb)
+    out[(na == 0.0) | (nb == 0.0)] = 1.0
+    return out
+
+
+@functools.cache
+def compiled():
+    """The compiled loops of the search (:mod:`gesturekit.search.kernels`), imported on first use."""
+    from . import kernels  # numba is heavy: imported when a search first runs
+
+    return kernels

@@ -1,0 +1,626 @@
+"""The fast exact search: :class:`SearchIndex`, :func:`search`, :func:`search_batch`.
+
+:func:`search` runs the search of the paper (Algorithm 1 of the supplementary
+material, with the authors' choices and ours, see ``docs/METHOD.md`` and
+:mod:`gesturekit.search.reference`) on plain arrays and returns a
+:class:`SearchResult`: the chosen (clip, start) per step, the output frames as
+(clip, frame) indices, and a record of every step's best candidates.
+:func:`search_batch` serves several query sequences (each with its own
+configuration) with one scan of the database per step.
+
+Exactness. The result equals :func:`gesturekit.search.reference.search_reference`
+decision for decision. Each step scans the database once in float32
+(``||p||^2 - 2 p.q``: for one query a compiled pass that reads only the rows of
+admissible starts, for several a matrix product), keeps per clip the starts whose
+float32 value lies within a proven error bound of the clip's minimum, and
+decides among those with the exact float64 definitions of
+:mod:`gesturekit.search.reference`. The same bound-and-re-check is applied to
+the ordering of clips by pose and by audio distance, so ties and near-ties are
+always settled by the exact values.
+
+Error bound (pose). For a row ``p`` and the query ``q`` (both float32, D = 96
+values), the float32 estimate ``A = fl(np32 + fl(-2 q.p))`` with ``np32`` the
+float32 rounding of ``|p|^2`` satisfies, for any summation order of the
+product (blocked, SIMD, FMA), ``|A + |q|^2 - d2| <= (gamma_D + 3u)(|p|^2 + |q|^2)``
+with ``u = 2**-24`` and ``gamma_D = D u / (1 - D u)``; we use
+``(D + 32) u (max_clip |p|^2 + |q|^2)``, which also covers the float64 rounding
+of the exact value. Features are limited to magnitudes below 1e15 so that no
+float32 product or sum overflows.
+
+Error bound (audio). The cosine distance is estimated from a float32 dot product
+(any summation order) and float64 norms; its error is below ``(A + 16) u``.
+"""
+from __future__ import annotations
+
+import contextlib
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from ..errors import ConfigError, warn
+from .admissible import base_starts, control_starts
+from .checks import checked_sqnorms, validate_call, validate_db
+from .exact import TINY, audio_err, compiled, pose_err_factor
+from .threads import matrix_product, single_threaded_blas, worker_count
+from .types import CANDIDATE_FIELDS, SearchConfig, SearchResult, describe_steps
+
+__all__ = ["SearchIndex", "search", "search_batch"]
+
+#: Clips scanned per chunk are chosen so that one chunk's float32 result holds this many bytes.
+_CHUNK_BYTES = 16 << 20
+
+#: Survivors sorted first by each ranking in a query's decisions; the rest is only
+#: partitioned off. Enough whenever the top of the combined ranking lies within the
+#: first few hundred of both rankings, as it does unless pose and audio disagree
+#: throughout; otherwise the whole orders are sorted (same result).
+_PREFIX = 1024
+
+
+def _initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
+    """The order the rank groups of :meth:`SearchIndex._decide` start from.
+
+    Returns ``(order, L)``: the survivors with the ``L = min(prefix, n)`` smallest
+    estimates first, sorted, the others after them in any order. Any order near the
+    sorted one will do: the groups of near-equal estimates (equal exact values
+    included) are proven whatever the order inside them (``prefix_groups`` of :mod:`~gesturekit.search.kernels`),
+    and those that matter are re-sorted with exact values. Sorting float32 copies of
+    the estimates is then enough (they misplace only values closer than float32
+    rounding), and numpy sorts and partitions float32 keys faster than float64 ones.
+    """
+    n = v.size
+    key = v.astype(np.float32)
+    if prefix >= n:
+        return np.argsort(key), n
+    order = np.argpartition(key, prefix - 1)
+    head = order[:prefix]
+    order[:prefix] = head[np.argsort(key[head])]
+    return order, prefix
+
+
+def _reduce_chunk(G3, bias, nq, npmax, c_err):
+    """Per clip and query of a chunk: the float32 argmin and minimum of the estimates
+    ``A = G3 + bias`` over the clip's starts, and whether that minimum is not decisive:
+    another start within twice the error bound of it, or a minimum that may be an exact zero.
+
+    Parameters
+    ----------
+    G3 : (nc, T, b) float32
+        ``-2 q.p`` per clip, start and query (a view; may be strided). With one query
+        it is overwritten with ``A``.
+    bias : (nc, T) float32
+        ``|p|^2``, or +inf where the start is not admissible.
+    nq : (b,) float64
+        ``|q|^2`` per query.
+    npmax : (nc,) float64
+        Largest ``|p|^2`` per clip.
+    c_err : float
+        :func:`pose_err_factor` of the pose dimension.
+
+    Returns
+    -------
+    s0 : (nc, b) int64, amin : (nc, b) float32, undecided : (nc, b) bool
+    """
+    nc, T, b = G3.shape
+    if b > 1:  # several queries: numpy's reductions along the strided axis are slow
+        s0 = np.empty((nc, b), np.int64)
+        amin = np.empty((nc, b), np.float32)
+        undecided = np.empty((nc, b), bool)
+        compiled().reduce_many(G3, bias, nq, npmax, c_err, TINY, s0, amin, undecided)
+        return s0, amin, undecided
+    A = G3[:, :, 0]
+    A += bias
+    A = G3[:, :, 0]
+    s0 = A.argmin(axis=1)
+    amin = np.take_along_axis(A, s0[:, None], axis=1)[:, 0]
+    err = c_err * (npmax + nq[0]) + TINY
+    am64 = amin.astype(np.float64)
+    finite = np.isfinite(amin)
+    with np.errstate(invalid="ignore"):
+        thr = np.where(finite, am64 + 2.0 * err, -np.inf).astype(np.float32)
+    thr = np.nextafter(thr, np.float32(np.inf))  # round the float32 threshold up
+    count = np.count_nonzero(A <= thr[:, None], axis=1)
+    undecided = finite & ((count > 1) | (am64 + nq[0] <= err))
+    return s0[:, None], amin[:, None], undecided[:, None]
+
+
+class SearchIndex:
+    """A database prepared for fast exact search (norms and per-clip bounds computed once).
+
+    Parameters
+    ----------
+    P : np.ndarray, shape (M, T, D), float32
+        z-scored pose features of the clips (D = 96). Kept by reference (not copied)
+        when it is a C-contiguous float32 array.
+    F : np.ndarray, shape (M, T, A), float32
+        z-scored audio features (A = 112), kept by reference likewise.
+    valid : np.ndarray, shape (M, T), bool
+        Frames whose features needed no padding; only these may start a segment.
+
+    Notes
+    -----
+    Extra memory: ``12 M T`` bytes of per-frame norms; per search, a few arrays
+    of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
+    """
+
+    def __init__(self, P, F, valid):
+        self.P, self.F, self.valid = validate_db(P, F, valid)
+        M, T, D = self.P.shape
+        self.shape = (M, T, D, self.F.shape[2])
+        self._P3 = np.asarray(self.P)  # plain views (np.memmap is a subclass the kernels do not take)
+        self._F3 = np.asarray(self.F)
+        self._P2 = self.P.reshape(M * T, D)
+        self._F2 = self.F.reshape(M * T, -1)
+        self._pose_c = pose_err_factor(D)
+        self._audio_e = audio_err(self.shape[3])
+        self._workers = worker_count()
+        np64 = checked_sqnorms(np.asarray(self._P2), "pose", self._workers)
+        self._np32 = np64.astype(np.float32)
+        self._npmax = np64.reshape(M, T).max(axis=1)
+        self._na64 = checked_sqnorms(np.asarray(self._F2), "audio", self._workers)
+        self._na2 = self._na64.reshape(M, T)
+        self._scratch = threading.local()
+
+    # -- admissibility -------------------------------------------------------------------------
+
+    def _admissible(self, cache, n, rule, j, masks, exclude):
+        """Admissible window starts ``(M, T)`` for windows of ``n`` frames under mask ``j``
+        (-1: no control) and mask rule ``rule``, and the cache key they are stored under."""
+        key = (n, rule if j >= 0 else "-", j)
+        if key not in cache:
+            base_key = (n, "-", -1)
+            if base_key not in cache:
+                cache[base_key] = (base_starts(self.valid, n, exclude), None)
+            adm = cache[base_key][0]
+            if j >= 0:
+                adm = adm & control_starts(masks[j], n, rule)
+            cache[key] = (adm, None)
+        adm, bias = cache[key]
+        return adm, key
+
+    def _bias(self, cache, key):
+        """``|p|^2`` (float32) where a start is admissible under ``key``, +inf elsewhere; (M T,)."""
+        adm, bias = cache[key]
+        if bias is None:
+            bias = np.where(adm.ravel(), self._np32, np.float32(np.inf))
+            cache[key] = (adm, bias)
+        return bias
+
+    # -- one scan of the database for several queries ------------------------------------------
+
+    def _scan(self, Q, biases, fq, scratch=None, pool=None):
+        """Per query and clip: the float32 argmin, min, and the rows needing an exact look.
+
+        Parameters
+        ----------
+        Q : np.ndarray, shape (B, D), float32
+            Query pose features.
+        biases : list of B arrays, shape (M T,), float32
+            ``|p|^2`` where the window is admissible for that query, else +inf.
+        fq : np.ndarray, shape (B, A), float32
+            The queries' audio features (see ``audio`` below).
+        scratch : dict, optional
+            Keeps a single query's product buffer between steps (fresh pages cost page faults).
+        pool : ThreadPoolExecutor, optional
+            Threads to share out each chunk's product and reductions by clips.
+
+        Returns
+        -------
+        s0 : (B, M) int64
+            A start of least float32 estimate per clip.
+        amin : (B, M) float32
+            That estimate ``A = |p|^2 - 2 p.q`` (+inf: no admissible start).
+        nq : (B,) float64
+            ``|q|^2``.
+        undecided : list of B (clips, rows) pairs
+            Clips whose minimum is not decisive; ``rows[i]`` holds the estimates of all T
+            starts of clip ``clips[i]``.
+        audio : (av, inexact)
+            ``av[b, m]`` (B, M) float64 is the estimated cosine distance of clip ``m``'s start
+            ``s0`` to query ``b``'s audio feature (float32 product, float64 norms; NaN
+            where no start is admissible); ``inexact`` (bool, same shape) is False where the
+            value is exact (a zero norm), else the audio error bound applies.
+
+        Every (B, M) array is C-contiguous: a query's decisions read its own rows (a
+        column of a (M, B) array would cost a cache line per clip).
+        """
+        M, T, D, _ = self.shape
+        B = Q.shape[0]
+        # queries sharing a bias become one contiguous range of columns
+        groups: dict[int, list[int]] = {}
+        for b, bias in enumerate(biases):
+            groups.setdefault(id(bias), []).append(b)
+        perm = np.concatenate([np.asarray(m, dtype=np.int64) for m in groups.values()])
+        ranges, j = [], 0
+        for members in groups.values():
+            ranges.append((biases[members[0]], j, j + len(members)))
+            j += len(members)
+        Qp = Q[perm]
+        W = np.float32(-2.0) * Qp  # exact scaling: the product gives -2 q.p directly
+        nq = np.einsum("ij,ij->i", Qp.astype(np.float64), Qp.astype(np.float64))
+        per_chunk = max(1, min(M, _CHUNK_BYTES // (4 * T * B)))
+        size = per_chunk * T * B
+        buf = None if scratch is None else scratch.get("product")
+        if buf is None or buf.size < size:
+            buf = np.empty(size, np.float32)
+            if scratch is not None and B == 1:  # a batch's larger buffer is freed before its decisions
+                scratch["product"] = buf
+        product = matrix_product(B)
+        # per query group and clip: one past the last admissible start (0: none)
+        range_ends = [] if B == 1 else [compiled().admissible_ends(bias.reshape(M, T)) for bias, _, _ in ranges]
+        s0 = np.empty((M, B), np.int64)
+        amin = np.empty((M, B), np.float32)
+        # the audio estimate of each clip's s0 per query, made while the clip is at hand
+        fqp = np.ascontiguousarray(np.asarray(fq, np.float32)[perm])
+        f64 = fqp.astype(np.float64)
+        nbp = np.einsum("ij,ij->i", f64, f64)
+        av = np.full((M, B), np.nan)
+        inexact = np.zeros((M, B), bool)
+
+        def work(c0, c1, G):
+            """Product and reductions for clips c0 .. c1 - 1 into ``G`` ((c1 - c0) T, B);
+            returns the clips whose minimum is not decisive, as (clips, queries, rows)."""
+            nc = c1 - c0
+            r0, r1 = c0 * T, c1 * T
+            found = []
+            if B == 1:  # one fused pass: products of admissible rows only, and the reductions
+                G2 = G.reshape(nc, T)
+                s0c = np.empty(nc, np.int64)
+                amc = np.empty(nc, np.float32)
+                und = np.empty(nc, bool)
+                bias2 = biases[0][r0:r1].reshape(nc, T)
+                compiled().scan_one(self._P3[c0:c1], Qp[0], bias2, float(nq[0]), self._npmax[c0:c1],
+                                    self._pose_c, TINY, G2, s0c, amc, und, self._F3[c0:c1], self._na2[c0:c1],
+                                    fqp[0], float(nbp[0]), av[c0:c1, 0], inexact[c0:c1, 0])
+                s0[c0:c1, 0] = s0c
+                amin[c0:c1, 0] = amc
+                ci = np.flatnonzero(und)
+                if ci.size:
+                    found.append((ci + c0, np.zeros(ci.size, np.int64), G2[ci]))
+                return found
+            # starts from L on are admissible for no query in these clips: their products are skipped
+            L = int(max(ends[c0:c1].max() for ends in range_ends))
+            if L == 0:
+                s0[c0:c1] = 0
+                amin[c0:c1] = np.inf
+                return found
+            G3 = G[: nc * L].reshape(nc, L, B)
+            product(self._P3[c0:c1, :L], W, G3)
+            for (bias, j0, j1) in ranges:
+                bias2 = bias[r0:r1].reshape(nc, T)[:, :L]
+                s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
+                s0[c0:c1, j0:j1] = s0c
+                amin[c0:c1, j0:j1] = amc
+                compiled().audio_at(self._F3[c0:c1], self._na2[c0:c1], s0c, amc, fqp[j0:j1], nbp[j0:j1],
+                                    av[c0:c1, j0:j1], inexact[c0:c1, j0:j1])
+                ci, bj = np.nonzero(und)
+                if ci.size:
+                    rows = np.full((ci.size, T), np.float32(np.inf))
+                    rows[:, :L] = G3[ci, :, bj + j0] if j1 - j0 == 1 else G3[ci, :, bj + j0] + bias2[ci]
+                    found.append((ci + c0, perm[bj + j0], rows))
+            return found
+
+        # each chunk is shared out to the threads by clips: the memory-bound product of
+        # one part overlaps the compute-bound reductions of another
+        parts = 1 if pool is None else self._workers
+        cx_m, cx_b, cx_rows = [], [], []
+        for c0 in range(0, M, per_chunk):
+            c1 = min(M, c0 + per_chunk)
+            cuts = np.linspace(c0, c1, min(parts, c1 - c0) + 1).astype(int)
+            pieces = []
+            for a, b in zip(cuts[:-1], cuts[1:]):
+                G = buf[(a - c0) * T * B : (b - c0) * T * B].reshape((b - a) * T, B)  # rows x queries
+                pieces.append((int(a), int(b), G))
+            jobs = [pool.submit(work, *p) for p in pieces[1:]] if len(pieces) > 1 else []
+            found = work(*pieces[0])
+            for job in jobs:
+                found += job.result()
+            for m_, b_, rows in found:
+                cx_m.append(m_)
+                cx_b.append(b_)
+                cx_rows.append(rows)
+        undecided = []
+        if cx_b:
+            mi, bi, rows = np.concatenate(cx_m), np.concatenate(cx_b), np.concatenate(cx_rows)
+            for b in range(B):
+                sel = bi == b
+                undecided.append((mi[sel], rows[sel]))
+        else:
+            undecided = [(np.zeros(0, np.int64), np.zeros((0, T), np.float32))] * B
+        inv = np.empty(B, np.int64)
+        inv[perm] = np.arange(B)
+        # back to the callers' query order, one C-contiguous row per query
+        return s0.T[inv], amin.T[inv], nq[inv], undecided, (av.T[inv], inexact.T[inv])
+
+    # -- exact decisions for one query ----------------------------------------------------------
+
+    def _decide(self, best_start, best_est, q_sqnorm, undecided, query_pose, query_audio, scan_audio_est,
+                scan_audio_inexact, width):
+        """Steps 1-4 of Algorithm 1 for one query, after the scan; None when no clip survives.
+
+        Step 1 (per clip the nearest admissible non-zero start) takes the scan's float32
+        minimum where it is decisive and resolves the other clips exactly, tier by tier.
+        Steps 2-4 rank the survivors by pose and by audio distance: ranks are known up to
+        groups of near-equal estimates, and only groups holding a clip that could make the
+        top ``width`` of the combined ranking are settled with exact values. The compiled
+        loops are in :mod:`gesturekit.search.kernels` (``survivors``, ``rank_top``).
+
+        Returns
+        -------
+        dict
+            ``n`` (survivors) and the table columns (top ``width`` in combined order).
+        """
+        M = self.shape[0]
+        k = compiled()
+        # per-thread scratch, reused between steps: fresh pages for every query cost page faults
+        scratch = getattr(self._scratch, "decide", None)
+        if scratch is None or scratch[0].shape[1] != M:
+            scratch = self._scratch.decide = (np.empty((9, M), np.int64), np.empty((4, M)))
+        work, estimates = scratch
+        windows = work[7:9]  # rows 0-6 are rank_top's scratch
+        undecided_clips, undecided_rows = undecided
+        n = k.survivors(best_start, best_est, float(q_sqnorm), self._npmax, self._pose_c, TINY, undecided_clips,
+                        undecided_rows, self._P3, query_pose, self._F3, query_audio, scan_audio_est, scan_audio_inexact,
+                        self._audio_e, windows, estimates)
+        if n == 0:
+            return None
+        windows, estimates = windows[:, :n], estimates[:, :n]
+        out_i = np.empty((5, min(width, n)), np.int64)
+        out_f = np.empty((2, min(width, n)))
+        prefix = _PREFIX
+        while True:  # sorted prefixes first; whole orders when they cannot decide
+            pose_order, n_pose_sorted = _initial_order(estimates[0], prefix)
+            audio_order, n_audio_sorted = _initial_order(estimates[2], prefix)
+            if k.rank_top(estimates, pose_order, n_pose_sorted, audio_order, n_audio_sorted, windows, self._P3,
+                          self._F3, query_pose, query_audio, width, out_i, out_f, work) >= 0:
+                break
+            if prefix >= n:  # pragma: no cover - whole orders always decide
+                raise RuntimeError("rank_top could not decide with whole orders")
+            prefix = n
+        return {
+            "n": n,
+            "cand_clip": out_i[0],
+            "cand_start": out_i[1],
+            "cand_pose_dist": out_f[0],
+            "cand_audio_dist": out_f[1],
+            "cand_pose_rank": out_i[2],
+            "cand_audio_rank": out_i[3],
+            "cand_combined": out_i[4],
+        }
+
+    # -- public ---------------------------------------------------------------------------------
+
+    def search(
+        self, query, *, config: SearchConfig | None = None, masks=None, step_mask=None, exclude=None
+    ) -> SearchResult:
+        """Run Algorithm 1 for one query; see :func:`search` for the parameters."""
+        return self.search_batch([query], configs=[config], masks=masks, step_masks=[step_mask], exclude=exclude)[0]
+
+    def search_batch(self, queries, *, configs=None, masks=None, step_masks=None, exclude=None,
+                     fps: float | None = None) -> list[SearchResult]:
+        """Run Algorithm 1 for several queries with one scan of the database per step.
+
+        Parameters
+        ----------
+        queries : sequence of np.ndarray, each shape (T_out_b, A)
+            z-scored audio features of each speech to synthesise.
+        configs : SearchConfig or sequence of SearchConfig, optional
+            One for all, or one per query (step length, k, pins ... may differ).
+        masks : np.ndarray, shape (n_masks, M, T), bool, optional
+            Control masks shared by the queries.
+        step_masks : sequence of (np.ndarray of shape (n_steps_b,), int, or None), optional
+            Per query, the mask index of each step (-1: no control).
+        exclude : np.ndarray, shape (M, T), bool, optional
+            Frames no query may use.
+        fps : float, optional
+            Frame rate of the output: a relaxed control is then reported in seconds.
+
+        Returns
+        -------
+        list of SearchResult
+            Identical to running :func:`search` on each query.
+
+        Notes
+        -----
+        Each step multiplies the pose matrix by all active queries at once (torch's
+        matrix product when available). The search runs its own few threads (one per
+        core, at most 8): they share out the scan by clips and, with four queries or
+        more, the per-query decisions; numpy's BLAS and torch are limited to one
+        thread each while it runs (their settings are restored afterwards).
+        """
+        if isinstance(queries, np.ndarray) and queries.ndim == 2:
+            raise ConfigError("search_batch takes a sequence of query arrays; use search for a single query")
+        queries = list(queries)
+        B = len(queries)
+        if B == 0:
+            return []
+        if configs is None or isinstance(configs, SearchConfig):
+            configs = [configs] * B
+        if step_masks is None:
+            step_masks = [None] * B
+        configs, step_masks = list(configs), list(step_masks)
+        if len(configs) != B or len(step_masks) != B:
+            raise ConfigError(f"{B} queries need {B} configs and step masks, got {len(configs)} and {len(step_masks)}")
+        calls = [validate_call(self.shape, q, c, masks, sm, exclude) for q, c, sm in zip(queries, configs, step_masks)]
+        masks = calls[0].masks
+        exclude = calls[0].exclude
+        M, T, D, _ = self.shape
+        cache: dict = {}
+
+        def step_key(b, i, relaxed=False):
+            c = calls[b]
+            j = -1 if (relaxed or c.step_mask is None) else int(c.step_mask[i])
+            return self._admissible(cache, c.config.step, c.config.mask_rule, j, masks, exclude)
+
+        results, poses = [], np.empty((B, D), np.float32)
+        for b, c in enumerate(calls):
+            cfg = c.config
+            if cfg.init_pose == "random":
+                adm, _ = step_key(b, 0)
+                if not adm.any():
+                    adm, _ = step_key(b, 0, relaxed=True)
+                flat = np.flatnonzero(adm)
+                if flat.size == 0:
+                    raise ConfigError("no admissible database frame to draw the initial pose from")
+                pick = int(flat[int(np.random.default_rng(cfg.seed).integers(flat.size))])
+                init_frame = divmod(pick, T)
+                init_pose = self.P[init_frame]
+            else:
+                init_frame = (-1, -1)
+                init_pose = np.asarray(cfg.init_pose, dtype=np.float32)
+            poses[b] = init_pose
+            results.append(
+                SearchResult.empty(
+                    c.n_steps, c.query.shape[0], cfg.table_width, config=cfg, init_pose=init_pose, init_frame=init_frame
+                )
+            )
+
+        # a few threads share the scan and, in batches, the per-query decisions of each step
+        pool = ThreadPoolExecutor(self._workers) if self._workers > 1 else None
+        if B > 1:
+            matrix_product(B)  # loads torch, if installed, before its threads are limited
+        with contextlib.ExitStack() as stack:
+            stack.enter_context(single_threaded_blas())
+            if pool is not None:
+                stack.callback(pool.shutdown)
+            for i in range(max(c.n_steps for c in calls)):
+                active = [b for b in range(B) if i < calls[b].n_steps]
+                keys = {}
+                for b in active:
+                    adm, key = step_key(b, i)
+                    if key[2] >= 0 and not adm.any():  # the control admits no window at all
+                        results[b].relaxed[i] = True
+                        adm, key = step_key(b, i, relaxed=True)
+                    keys[b] = key
+                decided = self._step(active, keys, poses, calls, i, cache, pool)
+                retry = [b for b in active if decided[b] is None and keys[b][2] >= 0]
+                if retry:  # only the query's own frame was admissible under the control
+                    for b in retry:
+                        results[b].relaxed[i] = True
+                        keys[b] = step_key(b, i, relaxed=True)[1]
+                    decided.update(self._step(retry, keys, poses, calls, i, cache, pool))
+                # drop cached masks this step did not use (a long control track has many)
+                used = set(keys.values()) | {(k[0], "-", -1) for k in keys.values()}
+                for key in [key for key in cache if isinstance(key, tuple) and key not in used]:
+                    del cache[key]
+                for b in active:
+                    self._record(results[b], calls[b], i, decided[b], poses, b)
+
+        for r in results:
+            if r.relaxed.any():
+                where = describe_steps(np.flatnonzero(r.relaxed), step=r.config.step, fps=fps)
+                warn(f"control relaxed at {where}: no database window satisfies it", stacklevel=3)
+        return results
+
+    def _step(self, active, keys, poses, calls, i, cache, pool=None):
+        """One search step for several queries: one scan, then the exact decisions per query.
+
+        ``pool`` (a thread pool) spreads the per-query decisions over the cores; they are
+        independent, so the results do not depend on it.
+        """
+        run = map if pool is None or len(active) < 4 else pool.map
+        biases = [self._bias(cache, keys[b]) for b in active]
+        fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
+        s0, amin, nq, undecided, (av, inexact) = self._scan(
+            poses[active], biases, fq, cache.setdefault("scratch", {}), pool
+        )
+
+        def decide(j):
+            b = active[j]
+            return self._decide(s0[j], amin[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j],
+                                calls[b].config.table_width)
+
+        return dict(zip(active, run(decide, range(len(active)))))
+
+    def _record(self, res, call, i, d, poses, b):
+        """Write step ``i``'s table and choice (the k-th, or the pin) into ``res``; advance ``p_{t-1}``."""
+        cfg = call.config
+        N = cfg.step
+        if d is None and i not in cfg.pins:
+            raise ConfigError(
+                f"step {i}: no database window is admissible (valid start, {N} frames inside the clip, "
+                "no excluded frame) other than the query's own frame"
+            )
+        n = 0 if d is None else d["n"]
+        if d is not None:
+            w = d["cand_clip"].size
+            for name in CANDIDATE_FIELDS:
+                getattr(res, name)[i, :w] = d[name]
+        res.n_candidates[i] = n
+        res.short[i] = cfg.k >= n
+        if i in cfg.pins:
+            m, s = cfg.pins[i]
+            res.pinned[i] = True
+            hit = np.flatnonzero((res.cand_clip[i] == m) & (res.cand_start[i] == s))
+            res.position[i] = int(hit[0]) if hit.size else -1
+        else:
+            pos = min(cfg.k, n - 1)
+            m, s = int(d["cand_clip"][pos]), int(d["cand_start"][pos])
+            res.position[i] = pos
+        res.clip[i], res.start[i] = m, s
+        t = i * N
+        L = min(N, call.query.shape[0] - t)
+        res.frames[t : t + L, 0] = m
+        res.frames[t : t + L, 1] = s + np.arange(L)
+        poses[b] = self.P[m, s + N - 1]
+
+
+def search(
+    P, F, valid, query, *, config: SearchConfig | None = None, masks=None, step_mask=None, exclude=None
+) -> SearchResult:
+    """Algorithm 1: the k-NN motion search for one speech query.
+
+    Parameters
+    ----------
+    P : np.ndarray, shape (M, T, 96), float32
+        z-scored pose features of the database clips (T = 64 frames at 15 fps).
+    F : np.ndarray, shape (M, T, 112), float32
+        z-scored audio features of the database clips.
+    valid : np.ndarray, shape (M, T), bool
+        Frames whose features needed no padding (only these may start a segment).
+    query : np.ndarray, shape (T_out, 112)
+        z-scored audio features of the speech to synthesise (cast to float32).
+    config : SearchConfig, optional
+        Defaults: k = 0, N = 8, 10 candidates recorded, random initial pose with seed 0.
+    masks : np.ndarray, shape (n_masks, M, T), bool, optional
+        Control masks: which database frames may be used.
+    step_mask : np.ndarray, shape (n_steps,), int, optional
+        Per step (``n_steps = ceil(T_out / N)``), the index into ``masks``, -1 for no control.
+    exclude : np.ndarray, shape (M, T), bool, optional
+        Frames never to use (held-out takes); a window containing one is inadmissible.
+
+    Returns
+    -------
+    SearchResult
+        Equal to :func:`gesturekit.search.reference.search_reference` on the same inputs.
+
+    Raises
+    ------
+    ConfigError
+        Bad shapes or options, or a step where no window is admissible even without control.
+
+    Warns
+    -----
+    GestureKitWarning
+        When a step's control admits no window and is dropped for that step.
+
+    Notes
+    -----
+    Builds a :class:`SearchIndex` on every call; keep one to search the same database repeatedly.
+    """
+    return SearchIndex(P, F, valid).search(query, config=config, masks=masks, step_mask=step_mask, exclude=exclude)
+
+
+def search_batch(
+    P, F, valid, queries, *, configs=None, masks=None, step_masks=None, exclude=None
+) -> list[SearchResult]:
+    """Algorithm 1 for several queries with one scan of the database per step.
+
+    Parameters are those of :func:`search`, with ``queries`` a sequence of query
+    arrays, ``configs`` one :class:`SearchConfig` or one per query, and
+    ``step_masks`` one step mask (or None) per query. Returns one
+    :class:`SearchResult` per query, identical to separate :func:`search` calls.
+    """
+    return SearchIndex(P, F, valid).search_batch(
+        queries, configs=configs, masks=masks, step_masks=step_masks, exclude=exclude
+    )

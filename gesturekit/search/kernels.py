@@ -1,0 +1,563 @@
+"""The compiled loops of :mod:`gesturekit.search.index` (numba, a dependency of librosa).
+
+Imported by :func:`gesturekit.search.exact.compiled` when a search first runs, not with the
+package (numba is heavy). The loops are module-level functions so that numba's on-disk
+cache serves them in every later process, including those that call each other.
+
+The scan: :func:`scan_one` (one query, one pass per clip), :func:`reduce_many` and
+:func:`audio_at` (several queries after a matrix product), :func:`admissible_ends`,
+:func:`row_stats` (validation and norms). The exact decisions of one query after the
+scan (see :meth:`gesturekit.search.index.SearchIndex._decide`): :func:`survivors` and
+:func:`rank_top`, with the exact distances of :mod:`gesturekit.search.reference`
+(float64, left to right: :func:`pose_d2`, :func:`cos_d`). Names: ``best_start`` /
+``best_est`` the scan's per-clip minimum, ``*_est`` an estimate, ``*_err`` its error
+bound, ``q_sqnorm`` ``|p_{t-1}|^2``.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def reduce_many(products, bias, q_sqnorm, clip_max_sqnorm, err_factor, tiny, best_start, best_est, undecided):
+    """:func:`gesturekit.search.index._reduce_chunk` for several queries, one pass per clip.
+
+    Parameters
+    ----------
+    products : (nc, T, B) float32
+        ``-2 q.p`` per clip, start and query.
+    bias : (nc, T) float32
+        ``|p|^2`` where the start is admissible, +inf elsewhere.
+    q_sqnorm : (B,) float64
+        ``|q|^2`` per query.
+    clip_max_sqnorm : (nc,) float64
+        Largest ``|p|^2`` per clip.
+    err_factor, tiny : float
+        The pose error bound is ``err_factor (clip_max_sqnorm + q_sqnorm) + tiny``.
+    best_start, best_est, undecided : (nc, B) int64, float32, bool
+        Out: per clip and query the first start of least estimate, that estimate, and
+        whether it is not decisive (another start within twice the bound, or a possible zero).
+    """
+    nc, T, n_queries = products.shape
+    best = np.empty(n_queries, dtype=np.float32)
+    thr = np.empty(n_queries, dtype=np.float32)
+    arg = np.empty(n_queries, dtype=np.int32)  # 32-bit lanes like the values: wider vectors
+    count = np.empty(n_queries, dtype=np.int32)
+    for c in range(nc):
+        for j in range(n_queries):
+            best[j] = np.inf
+            count[j] = 0
+            arg[j] = 0
+        for s in range(T):  # the inner loop runs along contiguous queries: vectorised
+            p2 = bias[c, s]
+            row = products[c, s]
+            for j in range(n_queries):
+                a = row[j] + p2  # float32, as the error bound assumes
+                best[j] = a if a < best[j] else best[j]
+        for j in range(n_queries):
+            t64 = np.float64(best[j]) + 2.0 * (err_factor * (clip_max_sqnorm[c] + q_sqnorm[j]) + tiny)
+            t32 = np.float32(t64)
+            if t32 < t64:  # round the float32 threshold up
+                t32 = np.nextafter(t32, np.float32(np.inf))
+            thr[j] = t32
+        for s in range(T - 1, -1, -1):  # backwards: arg ends at the first minimum
+            p2 = bias[c, s]
+            row = products[c, s]
+            si = np.int32(s)
+            for j in range(n_queries):
+                a = row[j] + p2
+                count[j] += np.int32(1) if a <= thr[j] else np.int32(0)
+                arg[j] = si if a == best[j] else arg[j]
+        for j in range(n_queries):
+            err = err_factor * (clip_max_sqnorm[c] + q_sqnorm[j]) + tiny
+            best_start[c, j] = arg[j]
+            best_est[c, j] = best[j]
+            undecided[c, j] = np.isfinite(best[j]) and (count[j] > 1 or np.float64(best[j]) + q_sqnorm[j] <= err)
+
+
+# float32 products in any order (reassociation, FMA, SIMD lanes): the pose error bound allows it
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def dot32(row, query):
+    """``row . query`` in float32, summed in any order (the pose error bound allows it)."""
+    acc = np.float32(0.0)
+    for j in range(row.shape[0]):
+        acc += row[j] * query[j]
+    return acc
+
+
+@numba.njit(cache=True, nogil=True)
+def scan_one(poses, query_pose, bias, q_sqnorm, clip_max_sqnorm, err_factor, tiny, est, best_start, best_est, undecided,
+             audio, audio_sqnorms, query_audio, query_audio_sqnorm, audio_est, audio_inexact):
+    """The scan of one query, one pass per clip: estimates, reductions and the audio estimate.
+
+    Parameters
+    ----------
+    poses : (nc, T, D) float32
+        Pose features of the clips scanned.
+    query_pose : (D,) float32
+        ``p_{t-1}``.
+    bias : (nc, T) float32
+        ``|p|^2`` where the start is admissible, +inf elsewhere (those rows are never read).
+    q_sqnorm : float
+        ``|p_{t-1}|^2``.
+    clip_max_sqnorm : (nc,) float64
+    err_factor, tiny : float
+        As for :func:`reduce_many`.
+    est : (nc, T) float32
+        Out: ``|p|^2 - 2 p.q`` per start (+inf where not admissible).
+    best_start, best_est, undecided : (nc,) int64, float32, bool
+        Out: as for :func:`reduce_many`.
+    audio : (nc, T, A) float32
+        Audio features of the clips.
+    audio_sqnorms : (nc, T) float64
+        Their squared norms.
+    query_audio : (A,) float32
+        ``f_t``.
+    query_audio_sqnorm : float
+    audio_est, audio_inexact : (nc,) float64, bool
+        Out: the cosine distance estimate at each clip's ``best_start`` (float32 product,
+        float64 norms), and False where that value is exact (a zero norm).
+    """
+    nc, T, _ = poses.shape
+    inf = np.float32(np.inf)
+    for c in range(nc):
+        best = inf
+        for s in range(T):
+            b = bias[c, s]
+            if b == inf:  # not admissible: its row is never read
+                est[c, s] = inf
+                continue
+            a = b + np.float32(-2.0) * dot32(poses[c, s], query_pose)  # exact scaling by -2, then one float32 add
+            est[c, s] = a
+            best = min(best, a)
+        err = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
+        t64 = np.float64(best) + 2.0 * err
+        t32 = np.float32(t64)
+        if t32 < t64:  # round the float32 threshold up
+            t32 = np.nextafter(t32, inf)
+        count = 0
+        arg = 0
+        for s in range(T - 1, -1, -1):  # backwards: arg ends at the first minimum
+            a = est[c, s]
+            count += a <= t32
+            if a == best:
+                arg = s
+        best_start[c] = arg
+        best_est[c] = best
+        undecided[c] = np.isfinite(best) and (count > 1 or np.float64(best) + q_sqnorm <= err)
+        # the audio estimate of that start (while the clip is at hand): float32 product, float64 norms
+        if best < inf:
+            d = audio_sqnorms[c, arg] * query_audio_sqnorm
+            if d == 0.0:
+                audio_est[c] = 1.0
+                audio_inexact[c] = False
+            else:
+                audio_est[c] = 1.0 - np.float64(dot32(audio[c, arg], query_audio)) / np.sqrt(d)
+                audio_inexact[c] = True
+
+
+@numba.njit(cache=True, nogil=True)
+def admissible_ends(bias):
+    """Per clip, one past its last admissible start (0: none); ``bias`` (M, T) is +inf where not admissible."""
+    M, T = bias.shape
+    ends = np.zeros(M, np.int64)
+    for c in range(M):
+        for s in range(T - 1, -1, -1):  # from the end: only the last few starts are read
+            if bias[c, s] < np.inf:
+                ends[c] = s + 1
+                break
+    return ends
+
+
+@numba.njit(cache=True, nogil=True)
+def row_stats(rows, sqnorms):
+    """Float64 squared norms of ``rows`` (n, d) into ``sqnorms`` (n,).
+
+    Returns (whether all values are finite, the largest magnitude): one pass for validation and norms.
+    """
+    finite = True
+    top = 0.0
+    for r in range(rows.shape[0]):
+        acc = 0.0
+        for j in range(rows.shape[1]):
+            v = np.float64(rows[r, j])
+            if not np.isfinite(v):
+                finite = False
+            top = max(top, abs(v))
+            acc += v * v
+        sqnorms[r] = acc
+    return finite, top
+
+
+@numba.njit(cache=True, nogil=True)
+def prefix_groups(est, err, order, n_sorted, lo, hi, scratch_lo, scratch_hi):
+    """Groups of near-equal estimates over the sorted prefix of an order.
+
+    Each ``est[k]`` lies within ``err[k]`` of its exact value. ``order`` lists the elements,
+    its first ``n_sorted`` positions sorted by estimate and the rest in any order, each above
+    them by estimate (``n_sorted = n``: the whole order). A split before position ``i`` is
+    proven when the largest upper end before ``i`` lies below the smallest lower end from ``i``
+    on, the rest included.
+
+    Returns ``s``: the elements at positions before ``s`` are in complete groups, and
+    ``lo[k]``, ``hi[k]`` bound their exact rank (the group's positions); every other element
+    gets ``lo = s``, ``hi = n - 1``. ``scratch_lo``, ``scratch_hi``: int64 scratch of at least
+    ``n_sorted`` values.
+    """
+    n = order.shape[0]
+    m = np.inf
+    for i in range(n_sorted, n):
+        k = order[i]
+        m = min(m, est[k] - err[k])
+    low = np.empty(n_sorted + 1)
+    low[n_sorted] = m
+    for i in range(n_sorted - 1, -1, -1):
+        k = order[i]
+        m = min(m, est[k] - err[k])
+        low[i] = m
+    start = 0
+    top = -np.inf
+    for i in range(1, n_sorted + 1):
+        k = order[i - 1]
+        top = max(top, est[k] + err[k])
+        if top < low[i]:
+            for r in range(start, i):  # by position; scratch_lo, scratch_hi: int64 scratch of >= n_sorted values
+                scratch_lo[r] = start
+                scratch_hi[r] = i - 1
+            start = i
+    for i in range(n):
+        lo[i] = start
+        hi[i] = n - 1
+    for r in range(start):
+        k = order[r]
+        lo[k] = scratch_lo[r]
+        hi[k] = scratch_hi[r]
+    return start
+
+
+@numba.njit(cache=True, nogil=True)
+def audio_at(audio, audio_sqnorms, best_start, best_est, query_audio, query_audio_sqnorm, audio_est, audio_inexact):
+    """The audio estimates at each clip's best start, for several queries.
+
+    ``audio`` (nc, T, A) and ``audio_sqnorms`` (nc, T) of the clips; ``best_start``,
+    ``best_est`` (nc, B) from the scan; ``query_audio`` (B, A) and ``query_audio_sqnorm`` (B,).
+    Out: ``audio_est`` (nc, B) cosine distance estimates and ``audio_inexact`` (False: exact).
+    """
+    nc, n_queries = best_start.shape
+    for c in range(nc):  # one clip's rows serve all its queries while they are in cache
+        for j in range(n_queries):
+            if best_est[c, j] < np.inf:
+                s = best_start[c, j]
+                d = audio_sqnorms[c, s] * query_audio_sqnorm[j]
+                if d == 0.0:  # a zero vector: the definition's value, exactly
+                    audio_est[c, j] = 1.0
+                    audio_inexact[c, j] = False
+                else:
+                    audio_est[c, j] = 1.0 - np.float64(dot32(audio[c, s], query_audio[j])) / np.sqrt(d)
+                    audio_inexact[c, j] = True
+
+
+# -- the exact decisions of one query (steps 1-4 of Algorithm 1 after the scan) --------------
+# No fastmath below: these are the exact values, the same operations in the same order as
+# gesturekit.search.reference (float64, left to right).
+
+
+@numba.njit(cache=True, nogil=True)
+def pose_d2(poses, clip, start, query_pose):
+    """Exact squared distance of ``poses[clip, start]`` to ``query_pose`` (float64, left to right)."""
+    acc = 0.0
+    for j in range(query_pose.shape[0]):
+        d = np.float64(poses[clip, start, j]) - np.float64(query_pose[j])
+        acc += d * d
+    return acc
+
+
+@numba.njit(cache=True, nogil=True)
+def sq64(x):
+    """Exact squared norm of ``x`` (float64, left to right)."""
+    acc = 0.0
+    for j in range(x.shape[0]):
+        y = np.float64(x[j])
+        acc += y * y
+    return acc
+
+
+@numba.njit(cache=True, nogil=True)
+def cos_d(audio, clip, start, query_audio, query_sqnorm):
+    """Exact cosine distance of ``audio[clip, start]`` to ``query_audio`` (squared norm ``query_sqnorm``)."""
+    dot = 0.0
+    sqnorm = 0.0
+    for j in range(query_audio.shape[0]):
+        x = np.float64(audio[clip, start, j])
+        dot += x * np.float64(query_audio[j])
+        sqnorm += x * x
+    if sqnorm == 0.0 or query_sqnorm == 0.0:
+        return 1.0
+    return 1.0 - dot / np.sqrt(sqnorm * query_sqnorm)
+
+
+@numba.njit(cache=True, nogil=True)
+def resolve_clip(row_est, clip, q_sqnorm, err, poses, query_pose):
+    """A clip's nearest admissible non-zero start, exactly, from its row of estimates.
+
+    Exact values are computed tier by tier (the starts within ``2 err`` of the smallest
+    unknown estimate) until the best non-zero exact value is proven: no unknown start
+    could reach it. ``row_est`` (T,) float32 holds ``|p|^2 - 2 p.q`` (+inf: not admissible).
+    Returns ``(start, d2)``, ``(-1, nan)`` when the clip drops out; ties: the smallest start.
+    """
+    T = row_est.shape[0]
+    a = np.empty(T)
+    known = np.full(T, np.nan)
+    for s in range(T):
+        a[s] = np.float64(row_est[s]) + q_sqnorm
+    while True:
+        best = np.inf
+        nearest = np.inf
+        for s in range(T):
+            if not np.isnan(known[s]):
+                if known[s] > 0.0:
+                    best = min(best, known[s])
+            elif np.isfinite(a[s]):
+                nearest = min(nearest, a[s])
+        pend = False
+        for s in range(T):
+            if np.isnan(known[s]) and np.isfinite(a[s]):
+                if (a[s] - err <= best) if np.isfinite(best) else (a[s] <= nearest + 2.0 * err):
+                    known[s] = pose_d2(poses, clip, s, query_pose)
+                    pend = True
+        if not pend:
+            break
+    if not np.isfinite(best):
+        return -1, np.nan
+    for s in range(T):  # ties: the smallest start
+        if known[s] == best:
+            return s, best
+    return -1, np.nan
+
+
+@numba.njit(cache=True, nogil=True)
+def survivors(best_start, best_est, q_sqnorm, clip_max_sqnorm, err_factor, tiny, undecided_clips, undecided_rows,
+              poses, query_pose, audio, query_audio, scan_audio_est, scan_audio_inexact, audio_bound, windows,
+              estimates):
+    """Step 1 of Algorithm 1 for one query after the scan: each clip's nearest admissible start.
+
+    Parameters
+    ----------
+    best_start, best_est : (M,) int64, float32
+        The scan's first start of least estimate per clip and that estimate (+inf: none).
+    q_sqnorm, clip_max_sqnorm, err_factor, tiny
+        As for :func:`reduce_many` (one query).
+    undecided_clips, undecided_rows : (c,) int64, (c, T) float32
+        Clips whose minimum was not decisive and their rows of estimates (resolved exactly).
+    poses, query_pose, audio, query_audio
+        The database's pose (M, T, D) and audio (M, T, A) features, ``p_{t-1}`` and ``f_t``.
+    scan_audio_est, scan_audio_inexact : (M,) float64, bool
+        The scan's audio estimates at ``best_start`` (see :func:`scan_one`).
+    audio_bound : float
+        The error bound of an inexact audio estimate.
+    windows : (2, >= M) int64
+        Out: row 0 the surviving clips (in clip order), row 1 their starts.
+    estimates : (4, >= M) float64
+        Out, per survivor: the pose estimate ``d2`` and its error bound, the audio
+        estimate and its error bound (0: exact).
+
+    Returns
+    -------
+    int
+        The number of survivors (the first columns of ``windows`` and ``estimates``).
+    """
+    M = best_start.shape[0]
+    clips, start = windows[0], windows[1]
+    pose_est, pose_err, audio_est, audio_err = estimates[0], estimates[1], estimates[2], estimates[3]
+    undecided_row = np.full(M, -1, np.int64)
+    for i in range(undecided_clips.shape[0]):
+        undecided_row[undecided_clips[i]] = i
+    query_audio_sqnorm = sq64(query_audio)
+    n = 0
+    for m in range(M):
+        err = err_factor * (clip_max_sqnorm[m] + q_sqnorm) + tiny
+        if undecided_row[m] >= 0:
+            st, val = resolve_clip(undecided_rows[undecided_row[m]], m, q_sqnorm, err, poses, query_pose)
+            if st < 0:
+                continue
+            vm, em = val, 0.0
+        elif np.isfinite(best_est[m]):
+            st, vm, em = best_start[m], np.float64(best_est[m]) + q_sqnorm, err
+        else:
+            continue
+        clips[n] = m
+        start[n] = st
+        pose_est[n] = vm
+        pose_err[n] = em
+        if st == best_start[m]:  # the scan's estimate of this start
+            audio_est[n] = scan_audio_est[m]
+            audio_err[n] = audio_bound if scan_audio_inexact[m] else 0.0
+        else:  # an exact near-tie moved the start: its exact audio distance
+            audio_est[n] = cos_d(audio, m, st, query_audio, query_audio_sqnorm)
+            audio_err[n] = 0.0
+        n += 1
+    return n
+
+
+@numba.njit(cache=True, nogil=True)
+def settle(est, err, order, lo, hi, candidates, is_pose, clips, start, poses, audio, query_pose, query_audio,
+           query_audio_sqnorm):
+    """Make ``order`` exact inside the group of every element of ``candidates``.
+
+    The group's members get exact values (pose ``d2`` when ``is_pose``, else cosine distances;
+    ``err`` becomes 0) and are sorted by (value, index); each group once.
+    """
+    for ci in range(candidates.shape[0]):
+        a = lo[candidates[ci]]
+        b = hi[candidates[ci]]
+        if b == a:
+            continue
+        done = False
+        for cj in range(ci):
+            if lo[candidates[cj]] == a:
+                done = True
+                break
+        if done:
+            continue
+        members = np.sort(order[a : b + 1])
+        for k in members:
+            if err[k] > 0.0:
+                if is_pose:
+                    est[k] = pose_d2(poses, clips[k], start[k], query_pose)
+                else:
+                    est[k] = cos_d(audio, clips[k], start[k], query_audio, query_audio_sqnorm)
+                err[k] = 0.0
+        vals = np.empty(members.shape[0])
+        for r in range(members.shape[0]):
+            vals[r] = est[members[r]]
+        idx = np.argsort(vals, kind="mergesort")  # stable: equal values by index
+        for r in range(members.shape[0]):
+            order[a + r] = members[idx[r]]
+
+
+@numba.njit(cache=True, nogil=True)
+def position(order, lo, hi, i):
+    """The position of element ``i`` in ``order``: inside its group ``[lo[i], hi[i]]``."""
+    for r in range(lo[i], hi[i] + 1):
+        if order[r] == i:
+            return r
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
+def kth_smallest(x, k):
+    """The ``k``-th smallest value of ``x`` (``k >= 1``).
+
+    A sorted buffer of the ``k`` smallest so far: one pass, and for the small ``k`` of a
+    candidate table far cheaper than a partition.
+    """
+    if k > 64:
+        return np.partition(x, k - 1)[k - 1]
+    buf = np.empty(k, x.dtype)
+    m = 0
+    for i in range(x.shape[0]):
+        xi = x[i]
+        if m == k:
+            if xi >= buf[k - 1]:
+                continue
+            r = k - 1
+        else:
+            r = m
+            m += 1
+        while r > 0 and buf[r - 1] > xi:
+            buf[r] = buf[r - 1]
+            r -= 1
+        buf[r] = xi
+    return buf[k - 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def rank_top(estimates, pose_order, n_pose_sorted, audio_order, n_audio_sorted, windows, poses, audio,
+             query_pose, query_audio, width, out_i, out_f, work):
+    """Steps 2-4 of Algorithm 1 for one query: the top ``width`` of the combined ranking.
+
+    Parameters
+    ----------
+    estimates : (4, n) float64
+        Per survivor (see :func:`survivors`): pose estimate, its error, audio estimate, its
+        error; refined in place where exact values are needed.
+    pose_order, audio_order : (n,) int64
+        The survivors, the first ``n_pose_sorted`` (``n_audio_sorted``) sorted by estimate.
+    windows : (2, n) int64
+        The survivors' clips and starts.
+    poses, audio, query_pose, query_audio
+        As for :func:`survivors`.
+    width : int
+        Rows of the candidate table.
+    out_i : (5, min(width, n)) int64
+        Out: clip, start, pose rank, audio rank, combined rank, in combined order.
+    out_f : (2, min(width, n)) float64
+        Out: exact pose distance (``sqrt(d2)``) and audio distance.
+    work : (7, >= n) int64
+        Scratch, reused between calls (fresh memory costs page faults).
+
+    Returns
+    -------
+    int
+        The table's length, or -1, changing nothing, when the sorted prefixes cannot decide
+        it (the caller then passes whole orders, which always can).
+    """
+    clips, start = windows[0], windows[1]
+    v, e, av, ae = estimates[0], estimates[1], estimates[2], estimates[3]  # pose, audio: estimate, error
+    n = v.shape[0]
+    w = min(width, n)
+    query_audio_sqnorm = sq64(query_audio)
+    plo = work[0, :n]
+    phi = work[1, :n]
+    alo = work[2, :n]
+    ahi = work[3, :n]
+    sp = prefix_groups(v, e, pose_order, n_pose_sorted, plo, phi, work[4], work[5])
+    sa = prefix_groups(av, ae, audio_order, n_audio_sorted, alo, ahi, work[4], work[5])
+    # at least w clips have an exact rank sum at most the w-th smallest largest possible
+    # sum; a clip whose smallest possible sum exceeds that cannot be among the first w,
+    # so only the few others (the candidates) need exact ranks
+    sums = work[6, :n]
+    for i in range(n):
+        sums[i] = phi[i] + ahi[i]
+    bound = kth_smallest(sums, w)
+    if (sp < n and bound >= sp) or (sa < n and bound >= sa):
+        return -1  # a candidate could lie beyond a prefix's complete groups
+    nc = 0
+    for i in range(n):
+        if plo[i] + alo[i] <= bound:
+            nc += 1
+    candidates = np.empty(nc, np.int64)
+    nc = 0
+    for i in range(n):
+        if plo[i] + alo[i] <= bound:
+            candidates[nc] = i
+            nc += 1
+    settle(v, e, pose_order, plo, phi, candidates, True, clips, start, poses, audio, query_pose, query_audio,
+           query_audio_sqnorm)
+    settle(av, ae, audio_order, alo, ahi, candidates, False, clips, start, poses, audio, query_pose, query_audio,
+           query_audio_sqnorm)
+    prank = np.empty(nc, np.int64)
+    arank = np.empty(nc, np.int64)
+    key = np.empty(nc, np.int64)
+    for r in range(nc):
+        i = candidates[r]
+        prank[r] = position(pose_order, plo, phi, i)
+        arank[r] = position(audio_order, alo, ahi, i)
+        key[r] = (prank[r] + arank[r]) * n + i  # unique: ties go to the lower clip index
+    best = np.argsort(key)[:w]
+    for r in range(w):
+        c = best[r]
+        i = candidates[c]
+        if e[i] > 0.0:
+            v[i] = pose_d2(poses, clips[i], start[i], query_pose)
+        if ae[i] > 0.0:
+            av[i] = cos_d(audio, clips[i], start[i], query_audio, query_audio_sqnorm)
+        out_i[0, r] = clips[i]
+        out_i[1, r] = start[i]
+        out_i[2, r] = prank[c]
+        out_i[3, r] = arank[c]
+        out_i[4, r] = prank[c] + arank[c]
+        out_f[0, r] = np.sqrt(v[i])
+        out_f[1, r] = av[i]
+    return w

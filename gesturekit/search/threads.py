@@ -1,0 +1,98 @@
+"""Thread and BLAS control of the fast search.
+
+The search runs its own few threads; numpy's BLAS and torch are held to one
+thread each while it runs (:func:`single_threaded_blas`), and a batch's matrix
+product goes to the routine that handles its tall, thin shape best
+(:func:`matrix_product`).
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import sys
+import threading
+import warnings
+
+import numpy as np
+
+__all__ = ["matrix_product", "single_threaded_blas", "worker_count"]
+
+
+def worker_count() -> int:
+    """Threads a search runs: one per core this process may use, at most 8."""
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return min(cpus, 8)
+
+
+_WARNINGS_LOCK = threading.Lock()
+
+
+def matrix_product(n_queries: int):
+    """``out[:] = rows @ W.T`` for float32 arrays; the fastest routine for the shape on a CPU.
+
+    ``rows`` (c, L, D) may be a strided view (the first ``L`` starts of ``c`` clips);
+    ``W`` is (B, D), ``out`` a C-contiguous (c, L, B).
+
+    One query (or no torch): numpy's BLAS, single-threaded while a search runs (see
+    :func:`single_threaded_blas`; the search shares the rows out to its own threads).
+    Several queries: torch's matrix product (MKL, one thread), which handles this
+    tall, thin shape far better than numpy's BLAS, when torch is installed. The
+    product is memory-bound: more threads per product would not read faster, and
+    BLAS's idle threads keep spinning and slow down the work that follows.
+    """
+    torch = None
+    if n_queries > 1:
+        try:
+            import torch  # optional and heavy: only for batches
+        except ImportError:  # pragma: no cover - torch is a dependency of the refiner
+            torch = None
+    # the error bound assumes true float32 products: torch may be set to use bfloat16/TF32
+    if torch is None or torch.get_float32_matmul_precision() != "highest":
+
+        def product(rows, W, out):
+            np.matmul(rows, W.T, out=out)
+
+        return product
+
+    def product(rows, W, out):
+        if rows.flags.writeable:
+            a = torch.from_numpy(rows)
+        else:  # a read-only (memory-mapped) database is only read here
+            # catch_warnings swaps process-wide state: the search's own threads take turns
+            with _WARNINGS_LOCK, warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message=".*not writable.*", category=UserWarning)
+                a = torch.from_numpy(rows)
+        torch.matmul(a, torch.from_numpy(np.ascontiguousarray(W.T)), out=torch.from_numpy(out))
+
+    return product
+
+
+@functools.cache
+def _blas_controller():
+    """threadpoolctl's controller of the loaded BLAS libraries (None without threadpoolctl)."""
+    try:
+        from threadpoolctl import ThreadpoolController  # comes with scikit-learn (a librosa dependency)
+    except ImportError:  # pragma: no cover
+        return None
+    return ThreadpoolController()
+
+
+@contextlib.contextmanager
+def single_threaded_blas():
+    """numpy's BLAS, and torch when it is loaded, limited to one thread while a search
+    runs (the search runs its own threads); restored afterwards."""
+    ctl = _blas_controller()
+    limiter = None if ctl is None else ctl.limit(limits=1, user_api="blas")
+    torch = sys.modules.get("torch")
+    threads = None if torch is None else torch.get_num_threads()
+    if threads is not None:
+        torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        if limiter is not None:
+            limiter.restore_original_limits()
+        if threads is not None:
+            torch.set_num_threads(threads)
+

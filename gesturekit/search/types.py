@@ -1,0 +1,301 @@
+"""What a search takes and gives: :class:`SearchConfig`, :class:`SearchResult`, step descriptions.
+
+Both are plain data: the configuration is validated when it is made and saved
+with every result (:meth:`SearchConfig.to_dict`); the result holds the chosen
+window of every step and the table of its best candidates.
+"""
+from __future__ import annotations
+
+import numbers
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._config import config_from_dict, config_to_dict
+from ..errors import ConfigError
+
+__all__ = ["SearchConfig", "SearchResult", "CANDIDATE_FIELDS", "describe_steps"]
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """Options of one search; JSON-able through :meth:`to_dict`, saved with every result.
+
+    Parameters
+    ----------
+    k : int
+        Which candidate of the combined ranking to take (0 = best).
+    step : int
+        Frames per search step, ``N`` (8 in the authors' code).
+    topk : int
+        Candidates per step kept in the record (at least ``k + 1`` are kept).
+    seed : int
+        Seed of the random initial pose.
+    init_pose : "random" or sequence of float
+        ``p_{-1}``. ``"random"``: the pose feature of a random admissible database
+        frame satisfying step 0's control (seeded). Otherwise an explicit z-scored
+        pose feature (D values, e.g. a rest pose), stored rounded to float32.
+        (Saved configurations of earlier versions call it ``init``; :meth:`from_dict`
+        reads both.)
+    mask_rule : {"ends", "all"}
+        Where a control mask must hold in a window: at its first and last
+        frame (the authors' code) or on every frame (ours).
+    pins : dict of int -> (int, int)
+        Step -> (clip, start): forces the choice at that step; later steps
+        continue from the pinned segment.
+    """
+
+    k: int = 0
+    step: int = 8
+    topk: int = 10
+    seed: int = 0
+    init_pose: str | tuple[float, ...] = "random"
+    mask_rule: str = "ends"
+    pins: dict = field(default_factory=dict, hash=False)
+
+    def __post_init__(self):
+        for name, low in (("k", 0), ("step", 1), ("topk", 1), ("seed", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+                raise ConfigError(f"SearchConfig.{name} must be an integer >= {low}, got {value!r}")
+            object.__setattr__(self, name, int(value))
+        if self.mask_rule not in ("ends", "all"):
+            raise ConfigError(f"SearchConfig.mask_rule must be 'ends' or 'all', got {self.mask_rule!r}")
+        init = self.init_pose
+        if isinstance(init, str):
+            if init != "random":
+                raise ConfigError(f"SearchConfig.init_pose must be 'random' or a pose feature vector, got {init!r}")
+        else:
+            try:
+                arr = np.asarray(init, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"SearchConfig.init_pose must be 'random' or a pose feature vector: {exc}") from None
+            if arr.ndim != 1 or arr.size == 0 or not np.all(np.isfinite(arr)):
+                raise ConfigError(
+                    f"SearchConfig.init_pose must be a finite 1-D pose feature vector, got shape {arr.shape}")
+            object.__setattr__(self, "init_pose", tuple(float(x) for x in arr.astype(np.float32)))
+        if not isinstance(self.pins, Mapping):
+            raise ConfigError(f"SearchConfig.pins must map step -> (clip, start), got {type(self.pins).__name__}")
+        pins = {}
+        for key, value in self.pins.items():
+            try:
+                step_i = int(key)
+                clip, start = (int(x) for x in value)
+            except (TypeError, ValueError):
+                raise ConfigError(
+                    f"SearchConfig.pins: expected step -> (clip, start), got {key!r}: {value!r}"
+                ) from None
+            if step_i < 0 or clip < 0 or start < 0:
+                raise ConfigError(f"SearchConfig.pins: negative index in {key!r}: {value!r}")
+            pins[step_i] = (clip, start)
+        object.__setattr__(self, "pins", dict(sorted(pins.items())))
+
+    def to_dict(self) -> dict:
+        """A JSON-able dict (pin steps become strings) that :meth:`from_dict` reads back."""
+        return config_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "SearchConfig":
+        """Inverse of :meth:`to_dict` (also of earlier versions' ``init``); unknown keys raise :class:`ConfigError`."""
+        d = dict(d)
+        if "init" in d and "init_pose" not in d:
+            d["init_pose"] = d.pop("init")
+        return config_from_dict(cls, d, what="SearchConfig keys")
+
+    @property
+    def table_width(self) -> int:
+        """Candidates recorded per step: ``max(topk, k + 1)``, so the chosen one is always among them."""
+        return max(self.topk, self.k + 1)
+
+
+CANDIDATE_FIELDS = (
+    "cand_clip",
+    "cand_start",
+    "cand_pose_dist",
+    "cand_audio_dist",
+    "cand_pose_rank",
+    "cand_audio_rank",
+    "cand_combined",
+)
+
+
+@dataclass(eq=False)
+class SearchResult:
+    """The outcome of one search, with a record of every step's best candidates.
+
+    Steps are indexed ``i = 0 .. n_steps - 1``; step ``i`` covers output frames
+    ``[i N, min((i + 1) N, T_out))``. The candidate table of a step lists the
+    surviving clips in combined-rank order (position 0 = best), ``K =
+    config.table_width`` columns, padded with -1 (integers) and NaN (distances)
+    when fewer clips survived.
+
+    Attributes
+    ----------
+    clip, start : np.ndarray, shape (n_steps,), int64
+        The chosen window of each step (database clip and start frame).
+    frames : np.ndarray, shape (T_out, 2), int64
+        ``(clip, frame)`` of the database frame used for each output frame.
+    relaxed : np.ndarray, shape (n_steps,), bool
+        The step's control admitted no window and was dropped for that step.
+    short : np.ndarray, shape (n_steps,), bool
+        Fewer than ``k + 1`` clips survived; the last one was taken.
+    pinned : np.ndarray, shape (n_steps,), bool
+        The choice was forced by ``config.pins``.
+    position : np.ndarray, shape (n_steps,), int64
+        Column of the chosen window in the candidate table (-1: a pin not in the table).
+    n_candidates : np.ndarray, shape (n_steps,), int64
+        Clips that survived the step.
+    cand_clip, cand_start : np.ndarray, shape (n_steps, K), int64
+    cand_pose_dist : np.ndarray, shape (n_steps, K), float64
+        Euclidean distance between the candidate's pose feature and ``p_{t-1}`` (z-scored units).
+    cand_audio_dist : np.ndarray, shape (n_steps, K), float64
+        Cosine distance between the candidate's audio feature and ``f_t``, in [0, 2].
+    cand_pose_rank, cand_audio_rank, cand_combined : np.ndarray, shape (n_steps, K), int64
+        Ordinal ranks (0 = best) among the surviving clips, and their sum.
+    init_pose : np.ndarray, shape (D,), float32
+        ``p_{-1}``.
+    init_frame : tuple of int
+        ``(clip, frame)`` the random initial pose was taken from, ``(-1, -1)`` if given.
+    config : SearchConfig
+    """
+
+    clip: np.ndarray
+    start: np.ndarray
+    frames: np.ndarray
+    relaxed: np.ndarray
+    short: np.ndarray
+    pinned: np.ndarray
+    position: np.ndarray
+    n_candidates: np.ndarray
+    cand_clip: np.ndarray
+    cand_start: np.ndarray
+    cand_pose_dist: np.ndarray
+    cand_audio_dist: np.ndarray
+    cand_pose_rank: np.ndarray
+    cand_audio_rank: np.ndarray
+    cand_combined: np.ndarray
+    init_pose: np.ndarray
+    init_frame: tuple
+    config: SearchConfig
+
+    @classmethod
+    def empty(cls, n_steps: int, n_frames: int, width: int, *, config, init_pose, init_frame) -> "SearchResult":
+        """A result to fill in: every table entry padded, every flag False."""
+
+        def ints(*shape):
+            return np.full(shape, -1, dtype=np.int64)
+
+        def floats(*shape):
+            return np.full(shape, np.nan, dtype=np.float64)
+
+        return cls(
+            clip=ints(n_steps),
+            start=ints(n_steps),
+            frames=ints(n_frames, 2),
+            relaxed=np.zeros(n_steps, bool),
+            short=np.zeros(n_steps, bool),
+            pinned=np.zeros(n_steps, bool),
+            position=ints(n_steps),
+            n_candidates=np.zeros(n_steps, np.int64),
+            cand_clip=ints(n_steps, width),
+            cand_start=ints(n_steps, width),
+            cand_pose_dist=floats(n_steps, width),
+            cand_audio_dist=floats(n_steps, width),
+            cand_pose_rank=ints(n_steps, width),
+            cand_audio_rank=ints(n_steps, width),
+            cand_combined=ints(n_steps, width),
+            init_pose=np.asarray(init_pose, dtype=np.float32).copy(),
+            init_frame=(int(init_frame[0]), int(init_frame[1])),
+            config=config,
+        )
+
+    @property
+    def n_steps(self) -> int:
+        """Search steps taken."""
+        return int(self.clip.shape[0])
+
+    def array_fields(self) -> dict[str, np.ndarray]:
+        """Every array of the result by name (for saving with ``np.savez``; the config goes as JSON)."""
+        names = ("clip", "start", "frames", "relaxed", "short", "pinned", "position", "n_candidates")
+        out = {n: getattr(self, n) for n in names + CANDIDATE_FIELDS}
+        out["init_pose"] = self.init_pose
+        out["init_frame"] = np.asarray(self.init_frame, dtype=np.int64)
+        return out
+
+    def equals(self, other: "SearchResult") -> bool:
+        """Whether two results are identical (arrays bit for bit, NaN equal to NaN, same config)."""
+        if self.config != other.config:
+            return False
+        a, b = self.array_fields(), other.array_fields()
+        return all(a[n].shape == b[n].shape and np.array_equal(a[n], b[n], equal_nan=a[n].dtype.kind == "f") for n in a)
+
+    def candidates_frame(self):
+        """The candidate record as a pandas DataFrame, one row per (step, position).
+
+        Columns: ``step, position, clip, start, pose_dist, audio_dist, pose_rank,
+        audio_rank, combined, chosen``; padding entries are left out.
+        """
+        import pandas as pd  # kept local: the search itself does not need pandas
+
+        n_steps, width = self.cand_clip.shape
+        steps = np.repeat(np.arange(n_steps), width)
+        pos = np.tile(np.arange(width), n_steps)
+        keep = self.cand_clip.ravel() >= 0
+        chosen = pos == np.repeat(self.position, width)
+        df = pd.DataFrame(
+            {
+                "step": steps,
+                "position": pos,
+                "clip": self.cand_clip.ravel(),
+                "start": self.cand_start.ravel(),
+                "pose_dist": self.cand_pose_dist.ravel(),
+                "audio_dist": self.cand_audio_dist.ravel(),
+                "pose_rank": self.cand_pose_rank.ravel(),
+                "audio_rank": self.cand_audio_rank.ravel(),
+                "combined": self.cand_combined.ravel(),
+                "chosen": chosen,
+            }
+        )
+        return df[keep].reset_index(drop=True)
+
+
+def describe_steps(steps, *, step: int, fps: float | None = None, most: int = 3) -> str:
+    """Search steps said briefly: runs of consecutive steps joined, long lists cut short.
+
+    Parameters
+    ----------
+    steps : sequence of int
+        Step indices (step ``i`` covers output frames ``i * step`` to ``(i + 1) * step``).
+    step : int
+        Frames per step (N).
+    fps : float, optional
+        Frame rate of the output; given, the runs are said in seconds.
+    most : int
+        Runs written out; further ones are counted.
+
+    Returns
+    -------
+    str
+        E.g. ``"0.53-4.80 s (8 steps)"`` with ``fps``, ``"steps 1-8"`` without.
+    """
+    steps = sorted({int(i) for i in steps})
+    runs: list[list[int]] = []
+    for i in steps:
+        if runs and i == runs[-1][1] + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    if fps is None:
+        parts = [f"{a}" if a == b else f"{a}-{b}" for a, b in runs[:most]]
+        head = "step " if len(steps) == 1 else "steps "
+    else:
+        parts = [f"{a * step / fps:.2f}-{(b + 1) * step / fps:.2f} s" for a, b in runs[:most]]
+        head = ""
+    if len(runs) > most:
+        parts.append(f"and {len(runs) - most} more stretch{'es' if len(runs) - most > 1 else ''}")
+    text = head + ", ".join(parts)
+    if fps is not None:
+        text += f" ({len(steps)} step{'s' if len(steps) != 1 else ''})"
+    return text
+
