@@ -13,6 +13,7 @@ The pip runs use ``--retries 1``: PyPI's CPU index of PyTorch is searched for ev
 where its host cannot be reached pip's default five retries with back-off cost about 8 s a package
 (12 minutes for requirements.txt); one retry without back-off costs milliseconds.
 """
+
 from __future__ import annotations
 
 import ast
@@ -154,7 +155,8 @@ def test_requirements_match_pyproject():
     theirs = declared(("all",))
     assert set(mine) == set(theirs), (
         f"only in requirements.txt: {sorted(set(mine) - set(theirs))}; "
-        f"only in pyproject.toml: {sorted(set(theirs) - set(mine))}")
+        f"only in pyproject.toml: {sorted(set(theirs) - set(mine))}"
+    )
     for name, req in mine.items():
         other = theirs[name]
         assert req.extras == other.extras, name
@@ -186,7 +188,7 @@ def index_urls() -> list[str]:
 
 def reachable(url: str) -> bool:
     if url.startswith("file://"):
-        return Path(url[len("file://"):]).is_dir()
+        return Path(url[len("file://") :]).is_dir()
     try:
         urllib.request.urlopen(url.rstrip("/") + "/pip/", timeout=10).close()
     except urllib.error.HTTPError:
@@ -199,13 +201,21 @@ def reachable(url: str) -> bool:
 def pip(*args: str, python: str = sys.executable, cwd: Path, timeout: float) -> subprocess.CompletedProcess:
     """Run pip; when it fails and no package index answers, skip instead (nothing to resolve against)."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    run = subprocess.run([python, "-m", "pip", *args, "--retries", "1", "--disable-pip-version-check"],
-                         cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+    run = subprocess.run(
+        [python, "-m", "pip", *args, "--retries", "1", "--disable-pip-version-check"],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
     if run.returncode != 0:
         urls = index_urls()
         if not any(reachable(u) for u in urls):
-            pytest.skip(f"no package index can be reached (tried {', '.join(urls)}); pip said: "
-                        f"{run.stderr.strip().splitlines()[-1] if run.stderr.strip() else run.returncode}")
+            pytest.skip(
+                f"no package index can be reached (tried {', '.join(urls)}); pip said: "
+                f"{run.stderr.strip().splitlines()[-1] if run.stderr.strip() else run.returncode}"
+            )
         pytest.fail(f"pip {' '.join(args)} failed (exit {run.returncode}):\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}")
     return run
 
@@ -216,8 +226,9 @@ def source(tmp_path_factory) -> Path:
     dest = tmp_path_factory.mktemp("src")
     for name in ("pyproject.toml", "README.md", "requirements.txt"):
         shutil.copy2(ROOT / name, dest / name)
-    shutil.copytree(ROOT / "gesturekit", dest / "gesturekit",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.pyc"))
+    shutil.copytree(
+        ROOT / "gesturekit", dest / "gesturekit", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.pyc")
+    )
     return dest
 
 
@@ -225,11 +236,23 @@ def test_requirements_resolve_to_cpu_torch(source, tmp_path):
     """The README's install command on a CPU machine: torch's CPU build, no CUDA packages."""
     report = tmp_path / "report.json"
     start = time.monotonic()
-    pip("install", "--dry-run", "--ignore-installed", "--quiet", "--report", str(report),
-        "-r", "requirements.txt", cwd=source, timeout=300)
+    pip(
+        "install",
+        "--dry-run",
+        "--ignore-installed",
+        "--quiet",
+        "--report",
+        str(report),
+        "-r",
+        "requirements.txt",
+        cwd=source,
+        timeout=300,
+    )
     took = time.monotonic() - start
-    installs = {canonicalize_name(i["metadata"]["name"]): i["metadata"]["version"]
-                for i in json.loads(report.read_text())["install"]}
+    installs = {
+        canonicalize_name(i["metadata"]["name"]): i["metadata"]["version"]
+        for i in json.loads(report.read_text())["install"]
+    }
     assert Version(installs["torch"]).local == "cpu", f"torch resolves to {installs['torch']}, not a +cpu build"
     assert Version(installs["torch"]).public == "2.13.0"
     assert not [n for n in installs if n.startswith("nvidia")], sorted(installs)
@@ -244,10 +267,12 @@ def test_clean_venv_install_imports_the_search(source, tmp_path):
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
     python = str(venv / "bin" / "python")
     pip("install", "--quiet", str(source), python=python, cwd=tmp_path, timeout=540)
-    probe = ("import importlib.util, gesturekit, gesturekit.search, gesturekit.synthesize; "
-             "print(gesturekit.__file__); "
-             "print(sorted(m for m in ('torch', 'streamlit', 'plotly', 'pyvista', 'dask') "
-             "if importlib.util.find_spec(m)))")
+    probe = (
+        "import importlib.util, gesturekit, gesturekit.search, gesturekit.synthesize; "
+        "print(gesturekit.__file__); "
+        "print(sorted(m for m in ('torch', 'streamlit', 'plotly', 'pyvista', 'dask') "
+        "if importlib.util.find_spec(m)))"
+    )
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     run = subprocess.run([python, "-c", probe], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
