@@ -279,3 +279,44 @@ def test_clean_venv_install_imports_the_search(source, tmp_path):
     where, extras = run.stdout.strip().splitlines()[-2:]
     assert Path(where).resolve().is_relative_to(venv.resolve()), where
     assert extras == "[]", f"a core install brought optional packages: {extras}"
+
+
+# ---------------------------------------------------------------- tools/typing_coverage.py
+
+
+def test_typing_coverage_counts_the_public_api(tmp_path, monkeypatch):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("typing_coverage", ROOT / "tools" / "typing_coverage.py")
+    tool = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "typing_coverage", tool)  # dataclasses look their module up there
+    spec.loader.exec_module(tool)
+    pkg = tmp_path / "gesturekit"
+    (pkg / "_private").mkdir(parents=True)
+    (pkg / "_private" / "hidden.py").write_text("def f(a, b): pass\n")
+    (pkg / "mod.py").write_text(
+        "def f(a: int, b, *args, c: str = '', **kw) -> int:\n"
+        "    def nested(x): pass\n"
+        "    return 0\n"
+        "def _g(a): pass\n"
+        "class K:\n"
+        "    def __init__(self, n: int): pass\n"
+        "    def m(self, x): pass\n"
+        "    @staticmethod\n"
+        "    def s(y: float) -> None: pass\n"
+        "    @classmethod\n"
+        "    def c(cls) -> 'K': pass\n"
+        "class _Hidden:\n"
+        "    def m(self, x): pass\n"
+    )
+    monkeypatch.setattr(tool, "ROOT", tmp_path)
+    [(name, (count, gaps))] = tool.measure(pkg).items()
+    assert name == "gesturekit.mod"
+    # f: a, b, args, c, kw (a, c typed); K.__init__: n (typed); K.m: x; K.s: y (typed); K.c: none
+    assert (count.params, count.params_typed) == (8, 4)
+    # returns of f, m, s, c (not __init__): m's is missing
+    assert (count.returns, count.returns_typed) == (4, 3)
+    assert gaps == ["f", "K.m"]
+    assert tool.main([]) == 0
+    assert tool.main(["--min", "50"]) == 0  # 4 / 8 parameters, 3 / 4 returns
+    assert tool.main(["--min", "60"]) == 1
