@@ -220,6 +220,13 @@ def pip(*args: str, python: str = sys.executable, cwd: Path, timeout: float) -> 
     return run
 
 
+def test_an_index_counts_as_reachable_only_when_it_answers(tmp_path):
+    """What decides between skipping and failing when pip fails."""
+    assert reachable(tmp_path.as_uri())
+    assert not reachable((tmp_path / "absent").as_uri())
+    assert not reachable("https://index.invalid/simple")  # .invalid never resolves
+
+
 @pytest.fixture(scope="module")
 def source(tmp_path_factory) -> Path:
     """A copy of what pip installs from (pip writes build metadata beside the sources)."""
