@@ -11,11 +11,11 @@ its lifespan prepares the default database's search and refiner as the server
 starts (:func:`resources.server_lifespan`), so the first run does not wait for
 them.
 """
-import streamlit as st
 
 import nav
 import resources
 import sidebar
+import streamlit as st
 
 
 def home() -> None:

@@ -13,14 +13,15 @@ browser user of a served app cannot open, list or write the server's other
 folders. A file named in a message that lies outside them is shown by its
 name only.
 """
+
 from __future__ import annotations
 
 import contextlib
 import logging
 import os
 import secrets
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Callable, Iterator
 
 import streamlit as st
 
@@ -119,8 +120,7 @@ def warnings_shown() -> Iterator[list[str]]:
                 st.warning(message)
 
 
-def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, height: int = 520,
-                   audio=None) -> None:
+def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, height: int = 520, audio=None) -> None:
     """Show motions side by side in gesturekit's 3D viewer (:func:`gesturekit.viz.viewer.skeleton_viewer`).
 
     The viewer draws on a 2D canvas: a browser without a GPU shows it at once, where

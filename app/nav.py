@@ -7,16 +7,16 @@ runs the one the user is on inside :func:`display.run_page`, after
 would take such a folder for the older, implicit way of declaring pages and
 run its scripts without ``Home.py`` around them.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
-
-import streamlit as st
 
 import display
 import state
+import streamlit as st
 
 __all__ = ["APP_DIR", "HOME_TITLE", "PAGES", "Page", "link", "run"]
 
@@ -43,14 +43,30 @@ class Page:
 
 #: The pages after Home, in menu order.
 PAGES: tuple[Page, ...] = (
-    Page("views/1_Synthesize.py", "Synthesize", "🎙️",
-         "speech in, gestures out: choose controls, run the search, refine, export"),
-    Page("views/2_Retrieval_inspector.py", "Retrieval inspector", "🔎",
-         "step through the search: the candidates of every step, their distances and clips"),
-    Page("views/3_Database.py", "Database", "🗂️",
-         "what the matching database holds: takes, clips, control attributes, any clip in 3D with its sound"),
-    Page("views/4_Study_stimuli.py", "Study stimuli", "🎬",
-         "user-study videos: speeches x systems in one style, opaque ids, balanced order"),
+    Page(
+        "views/1_Synthesize.py",
+        "Synthesize",
+        "🎙️",
+        "speech in, gestures out: choose controls, run the search, refine, export",
+    ),
+    Page(
+        "views/2_Retrieval_inspector.py",
+        "Retrieval inspector",
+        "🔎",
+        "step through the search: the candidates of every step, their distances and clips",
+    ),
+    Page(
+        "views/3_Database.py",
+        "Database",
+        "🗂️",
+        "what the matching database holds: takes, clips, control attributes, any clip in 3D with its sound",
+    ),
+    Page(
+        "views/4_Study_stimuli.py",
+        "Study stimuli",
+        "🎬",
+        "user-study videos: speeches x systems in one style, opaque ids, balanced order",
+    ),
 )
 
 
@@ -65,7 +81,8 @@ def run(home: Callable[[], None]) -> None:
 
     Call once per run, from the entrypoint (``Home.py``).
     """
-    page = st.navigation([st.Page(home, title=HOME_TITLE, icon="🖐️", default=True)]
-                         + [p.streamlit_page() for p in PAGES])
+    page = st.navigation(
+        [st.Page(home, title=HOME_TITLE, icon="🖐️", default=True)] + [p.streamlit_page() for p in PAGES]
+    )
     state.page_setup(page.title)
     display.run_page(page.run)

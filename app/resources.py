@@ -15,6 +15,7 @@ demo database the app builds on a machine that has none (default
 :data:`gesturekit.demo.DEMO_MINUTES`; smaller is faster, for tests and
 trials).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -24,8 +25,8 @@ import threading
 from pathlib import Path
 
 import streamlit as st
-
 from display import allowed, warnings_shown
+
 from gesturekit.database import MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, collect_warnings
@@ -121,8 +122,12 @@ def rebuild_demo(path: Path) -> None:
     with build_lock():
         bar = st.progress(0.0, text="rebuilding the demo database…")
         with warnings_shown():
-            build_demo_database(path, minutes=demo_minutes(), overwrite=True,
-                                progress=lambda done, total: bar.progress(min(1.0, done / total)))
+            build_demo_database(
+                path,
+                minutes=demo_minutes(),
+                overwrite=True,
+                progress=lambda done, total: bar.progress(min(1.0, done / total)),
+            )
 
 
 @st.cache_resource(max_entries=8, show_spinner="Opening the database…")
@@ -162,6 +167,7 @@ def _in_background(name: str, *steps) -> threading.Thread:
     A step that fails is logged to the server log (the user's own run reports it on the
     page) and the next one runs; warnings are kept off the pages.
     """
+
     def work() -> None:
         for step in steps:
             try:
@@ -199,8 +205,8 @@ def _first_use(noise) -> None:
     import plotly.io as pio
     import soundfile as sf
 
-    from gesturekit.motion import AUDIO_SR, N_JOINTS, Motion
     from gesturekit import interactive as gs
+    from gesturekit.motion import AUDIO_SR, N_JOINTS, Motion
     from gesturekit.viz.figures import waveform_figure, wrist_figure
     from gesturekit.viz.viewer import skeleton_viewer
 
@@ -228,8 +234,11 @@ def _warm_up(path: str, stamp: int) -> threading.Thread:
     db = _open(path, stamp)
     noise = np.random.default_rng(0).normal(0.0, 0.1, 2 * AUDIO_SR).astype(np.float32)
     # what an upload needs first, then what Run needs
-    return _in_background("gesturekit-warm-up", lambda: _first_use(noise),
-                          lambda: synthesize(noise, db=db, config=SynthesisConfig(topk=1)))
+    return _in_background(
+        "gesturekit-warm-up",
+        lambda: _first_use(noise),
+        lambda: synthesize(noise, db=db, config=SynthesisConfig(topk=1)),
+    )
 
 
 def warm_up_search(db: MatchingDatabase) -> None:

@@ -6,14 +6,15 @@ shared by all pages. The choices are the databases
 types (inside the folders the app may use, :func:`display.allowed`). The
 default (demo) database is built on first use.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
-import streamlit as st
-
 import resources
+import streamlit as st
 from display import allowed, user_errors, warnings_shown
+
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError, DatabaseError
 from gesturekit.paths import default_database_path, home
@@ -49,10 +50,12 @@ def _select_database() -> Path:
     if _TYPED_WIDGET not in ss:
         ss[_TYPED_WIDGET] = ""
     choice = st.sidebar.selectbox(
-        "Database", keys, key=_CHOICE_WIDGET,
+        "Database",
+        keys,
+        key=_CHOICE_WIDGET,
         format_func=lambda k: "another folder…" if k == _OTHER else options[k],
         help="The demo database, databases in ./db or in gesturekit's home db folder, or a folder you type "
-             "(inside the folders this app may use).",
+        "(inside the folders this app may use).",
     )
     if choice == _OTHER:
         typed = st.sidebar.text_input("Database folder", key=_TYPED_WIDGET, placeholder="/path/to/database")
@@ -112,8 +115,16 @@ def sidebar_database() -> MatchingDatabase:
     return db
 
 
-def _build_from_folder(folder: str, *, joint_map: str, out: str, overwrite: bool = False, fps: float | None = None,
-                       label: str = "", progress=None) -> MatchingDatabase:
+def _build_from_folder(
+    folder: str,
+    *,
+    joint_map: str,
+    out: str,
+    overwrite: bool = False,
+    fps: float | None = None,
+    label: str = "",
+    progress=None,
+) -> MatchingDatabase:
     """Build and save a database from a folder of takes, as typed in the sidebar's form
     (:func:`gesturekit.workspace.build_database`, what ``gesturekit build-db FOLDER`` does).
 
@@ -149,8 +160,15 @@ def _build_from_folder(folder: str, *, joint_map: str, out: str, overwrite: bool
     # 'overwrite' replaces only a database gesturekit wrote, never the takes or a folder of other files
     if check_output(out, "database", overwrite=True, inputs=[folder]) and not overwrite:
         raise DatabaseError("a database already exists here; tick 'overwrite' to replace it", path=out)
-    return build_database(folder, out, config=BuildConfig(label=label), joint_map=joint_map, fps=fps,
-                          overwrite=overwrite, progress=progress)
+    return build_database(
+        folder,
+        out,
+        config=BuildConfig(label=label),
+        joint_map=joint_map,
+        fps=fps,
+        overwrite=overwrite,
+        progress=progress,
+    )
 
 
 def _count(n: int, noun: str) -> str:
@@ -160,21 +178,38 @@ def _count(n: int, noun: str) -> str:
 def _build_expander() -> None:
     """The sidebar's "build from a folder" form; a built database becomes the selection."""
     with st.sidebar.expander("Build a database from a folder"):
-        folder = st.text_input("Folder of takes", key="_gk.build_folder",
-                               help="BVH + speech files of the same name, joint-position files + speech, "
-                                    "or npz files of the Habibie et al. 2021 layout")
-        naming = st.radio("Skeleton", ["zeggs", "beat", "JSON joint map"], key="_gk.build_naming",
-                          horizontal=True, help="joint naming preset of the BVH files, or a JSON joint map")
+        folder = st.text_input(
+            "Folder of takes",
+            key="_gk.build_folder",
+            help="BVH + speech files of the same name, joint-position files + speech, "
+            "or npz files of the Habibie et al. 2021 layout",
+        )
+        naming = st.radio(
+            "Skeleton",
+            ["zeggs", "beat", "JSON joint map"],
+            key="_gk.build_naming",
+            horizontal=True,
+            help="joint naming preset of the BVH files, or a JSON joint map",
+        )
         map_path = ""
         if naming == "JSON joint map":
             map_path = st.text_input("Joint map (JSON file)", key="_gk.build_map")
-        fps = st.number_input("Frame rate of joint-position files (0: not needed)", min_value=0.0,
-                              value=0.0, step=1.0, key="_gk.build_fps")
-        out = st.text_input("Database folder to write", key="_gk.build_out",
-                            placeholder=str(home() / "db" / "<folder name>"))
+        fps = st.number_input(
+            "Frame rate of joint-position files (0: not needed)",
+            min_value=0.0,
+            value=0.0,
+            step=1.0,
+            key="_gk.build_fps",
+        )
+        out = st.text_input(
+            "Database folder to write", key="_gk.build_out", placeholder=str(home() / "db" / "<folder name>")
+        )
         label = st.text_input("Label (optional)", key="_gk.build_label")
-        overwrite = st.checkbox("overwrite an existing database", key="_gk.build_overwrite",
-                                help="replaces only a database gesturekit built; any other folder is kept")
+        overwrite = st.checkbox(
+            "overwrite an existing database",
+            key="_gk.build_overwrite",
+            help="replaces only a database gesturekit built; any other folder is kept",
+        )
         if not st.button("Build", key="_gk.build_go"):
             return
         with user_errors():
@@ -182,8 +217,11 @@ def _build_expander() -> None:
                 raise ConfigError("type the path of the JSON joint map")
             target = out.strip() or (str(home() / "db" / Path(folder.strip()).name) if folder.strip() else "")
             # every typed path is checked before any is looked at (_build_from_folder reports empty ones)
-            for typed, what, write in ((folder, "folder of takes", False), (map_path, "joint map", False),
-                                       (target, "database folder to write", True)):
+            for typed, what, write in (
+                (folder, "folder of takes", False),
+                (map_path, "joint map", False),
+                (target, "database folder to write", True),
+            ):
                 if typed.strip():
                     allowed(typed.strip(), what=what, write=write)
             bar = st.progress(0.0, text="finding takes…")
@@ -193,13 +231,22 @@ def _build_expander() -> None:
 
             with warnings_shown() as warned, resources.build_lock():
                 db = _build_from_folder(
-                    folder, joint_map=map_path.strip() if naming == "JSON joint map" else naming, out=target,
-                    overwrite=overwrite, fps=fps or None, label=label.strip(), progress=progress,
+                    folder,
+                    joint_map=map_path.strip() if naming == "JSON joint map" else naming,
+                    out=target,
+                    overwrite=overwrite,
+                    fps=fps or None,
+                    label=label.strip(),
+                    progress=progress,
                 )
             bar.progress(1.0, text="saved")
             st.session_state[_PENDING_KEY] = str(Path(db.path).resolve())
             # the page reruns to open the new database; the messages are shown on that run
-            st.session_state[_FLASH_KEY] = [("success", f"Built {_count(db.n_clips, 'clip')} from "
-                                                        f"{_count(len(db.take_names), 'take')} into {db.path}")]
+            st.session_state[_FLASH_KEY] = [
+                (
+                    "success",
+                    f"Built {_count(db.n_clips, 'clip')} from {_count(len(db.take_names), 'take')} into {db.path}",
+                )
+            ]
             st.session_state[_FLASH_KEY] += [("warning", w) for w in warned]
             st.rerun()

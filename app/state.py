@@ -9,14 +9,15 @@ whose value a run cannot send (the data editor). The Synthesize and Retrieval
 inspector pages share the user's synthesis (:data:`SYNTHESIS_KEY`) and pinned
 choices (:data:`PINS_KEY`).
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
 
 import streamlit as st
-
 from display import warnings_shown
+
 from gesturekit.database import MatchingDatabase
 
 __all__ = [
@@ -131,9 +132,13 @@ def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=N
     with st.spinner("Searching the database…"), warnings_shown():
         result = synthesize(audio, db=db, config=config, refiner=refiner)
     ss[_RUN_COUNTER] = ss.get(_RUN_COUNTER, 0) + 1
-    record = {"result": replace(result, source=source), "run": ss[_RUN_COUNTER],
-              "database": _folder(db) if db.path is not None else result.database,
-              "speech": source, "refiner": refiner}
+    record = {
+        "result": replace(result, source=source),
+        "run": ss[_RUN_COUNTER],
+        "database": _folder(db) if db.path is not None else result.database,
+        "speech": source,
+        "refiner": refiner,
+    }
     ss[SYNTHESIS_KEY] = record
     ss[PINS_KEY] = dict(config.pins)
     return record

@@ -21,6 +21,7 @@ Needs the ``playwright`` package and Chromium (``apt-get install chromium``).
 
 Usage: python bench/bench_app.py [--minutes 20] [--seconds 30] [--repeats 3] [--play-seconds 82]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -69,7 +70,10 @@ def main(argv=None) -> int:
         home = Path(tmp)
         t = time.perf_counter()
         db = build_demo_database(home / "db" / "demo", minutes=minutes)
-        print(f"demo database: {minutes:g} min, {db.n_clips} clips (built in {time.perf_counter() - t:.1f} s, not timed below)")
+        print(
+            f"demo database: {minutes:g} min, {db.n_clips} clips "
+            f"(built in {time.perf_counter() - t:.1f} s, not timed below)"
+        )
         wav = drv.write_speech(home / "speech_30s.wav", seconds=args.seconds)
         print(f"speech: {wav.name}, {args.seconds:g} s, 16 kHz mono WAV, {wav.stat().st_size / 1e6:.1f} MB")
         times = []
@@ -90,16 +94,20 @@ def main(argv=None) -> int:
             if problems:
                 print(f"the page shows an error: {problems[0][:400]}")
                 return None
-            print(f"{kind:>30}: page opened {t0 - t_open:5.2f} s; upload -> speech read {t1 - t0:5.2f} s, "
-                  f"Run -> result on screen {t2 - t1:5.2f} s (3D view's first frame {t_view - t1:5.2f} s), "
-                  f"total {t2 - t0:5.2f} s")
+            print(
+                f"{kind:>30}: page opened {t0 - t_open:5.2f} s; upload -> speech read {t1 - t0:5.2f} s, "
+                f"Run -> result on screen {t2 - t1:5.2f} s (3D view's first frame {t_view - t1:5.2f} s), "
+                f"total {t2 - t0:5.2f} s"
+            )
             return t2 - t0
 
         t_launch = time.perf_counter()
         with drv.app_server(home) as url:
             with drv.browser() as page:
-                print(f"server answering and browser started {time.perf_counter() - t_launch:.1f} s after the "
-                      "server's launch")
+                print(
+                    f"server answering and browser started {time.perf_counter() - t_launch:.1f} s after the "
+                    "server's launch"
+                )
                 for i in range(1 + args.repeats):
                     times.append(attempt(page, url, "first (server just started)" if i == 0 else f"repeat {i}"))
                     if times[-1] is None:
@@ -111,9 +119,11 @@ def main(argv=None) -> int:
                 if not playback(drv, page, url, home, args.play_seconds):
                     return 1
         warm = times[1:] or times
-        print(f"upload of {args.seconds:g} s speech -> first result on screen: median {statistics.median(warm):.2f} s "
-              f"(best {min(warm):.2f} s) warm, {fresh:.2f} s in a new browser, {times[0]:.2f} s right after the "
-              "server's start; target < 5 s")
+        print(
+            f"upload of {args.seconds:g} s speech -> first result on screen: median {statistics.median(warm):.2f} s "
+            f"(best {min(warm):.2f} s) warm, {fresh:.2f} s in a new browser, {times[0]:.2f} s right after the "
+            "server's start; target < 5 s"
+        )
         long_view(drv)
     return 0
 
@@ -154,7 +164,9 @@ def playback(drv, page, url: str, home: Path, seconds: float) -> bool:
     n_motions = view.evaluate("() => JSON.parse(document.getElementById('gk-data').textContent).motions.length")
     frames = view.evaluate("() => gk.frames")
     draw_ms = view.evaluate(_DRAW_MS, 60)
-    view.evaluate("() => { const s = document.getElementById('s'); s.value = '0'; s.dispatchEvent(new Event('input')); }")
+    view.evaluate(
+        "() => { const s = document.getElementById('s'); s.value = '0'; s.dispatchEvent(new Event('input')); }"
+    )
     view.locator("#play").click()
     page.wait_for_timeout(500)
     a = view.evaluate("() => [gk.drawn, performance.now(), gk.frame]")
@@ -162,11 +174,13 @@ def playback(drv, page, url: str, home: Path, seconds: float) -> bool:
     b = view.evaluate("() => [gk.drawn, performance.now(), gk.frame, document.getElementById('gk-audio').currentTime]")
     view.locator("#play").click()
     fps = (b[0] - a[0]) / ((b[1] - a[1]) / 1000)
-    print(f"playback, {what} ({seconds:g} s), {n_motions} motions side by side, {frames} frames held: "
-          f"Run -> 3D view's first drawn frame {t_view:.2f} s in a new browser; one frame drawn in "
-          f"{draw_ms:.1f} ms (canvas forced to paint, median of 60; 66 ms would be 15 fps); "
-          f"{fps:.1f} frames drawn per second while playing (target >= 15), "
-          f"shown frame {b[2]} at speech time {b[3]:.2f} s")
+    print(
+        f"playback, {what} ({seconds:g} s), {n_motions} motions side by side, {frames} frames held: "
+        f"Run -> 3D view's first drawn frame {t_view:.2f} s in a new browser; one frame drawn in "
+        f"{draw_ms:.1f} ms (canvas forced to paint, median of 60; 66 ms would be 15 fps); "
+        f"{fps:.1f} frames drawn per second while playing (target >= 15), "
+        f"shown frame {b[2]} at speech time {b[3]:.2f} s"
+    )
     return True
 
 
@@ -179,11 +193,15 @@ def long_view(drv) -> None:
     from gesturekit.viz.viewer import VIEWER_MAX_FRAMES, skeleton_viewer
 
     rng = np.random.default_rng(0)
-    pos = (rng.normal(0, 0.3, (1, N_JOINTS, 3))
-           + np.cumsum(rng.normal(0, 0.004, (VIEWER_MAX_FRAMES, N_JOINTS, 3)), 0)).astype(np.float32)
+    pos = (
+        rng.normal(0, 0.3, (1, N_JOINTS, 3)) + np.cumsum(rng.normal(0, 0.004, (VIEWER_MAX_FRAMES, N_JOINTS, 3)), 0)
+    ).astype(np.float32)
     t = time.perf_counter()
-    page_html = skeleton_viewer([Motion(pos, 15.0), Motion(pos[::-1].copy(), 15.0)], labels=["k-NN", "refined"],
-                                audio=rng.uniform(-0.1, 0.1, VIEWER_MAX_FRAMES * AUDIO_SR // 15).astype(np.float32))
+    page_html = skeleton_viewer(
+        [Motion(pos, 15.0), Motion(pos[::-1].copy(), 15.0)],
+        labels=["k-NN", "refined"],
+        audio=rng.uniform(-0.1, 0.1, VIEWER_MAX_FRAMES * AUDIO_SR // 15).astype(np.float32),
+    )
     t_make = time.perf_counter() - t
     with tempfile.TemporaryDirectory(prefix="gesturekit-bench-view-") as tmp, drv.browser() as page:
         path = Path(tmp) / "view.html"
@@ -192,8 +210,10 @@ def long_view(drv) -> None:
         page.goto(path.as_uri())  # as a file: Playwright's set_content would time its own transfer
         page.wait_for_selector('body[data-drawn="1"]', state="attached")
         t_draw = time.perf_counter() - t
-    print(f"ten minutes side by side with speech ({VIEWER_MAX_FRAMES} frames): page {len(page_html) / 1e6:.1f} MB, "
-          f"made in {t_make:.2f} s, first frame drawn {t_draw:.2f} s after a new browser opened it")
+    print(
+        f"ten minutes side by side with speech ({VIEWER_MAX_FRAMES} frames): page {len(page_html) / 1e6:.1f} MB, "
+        f"made in {t_make:.2f} s, first frame drawn {t_draw:.2f} s after a new browser opened it"
+    )
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ Prints, measured in one run:
 
 Usage: python bench/bench_build.py [--minutes 20]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -66,8 +67,10 @@ def main() -> None:
     for t in takes:
         take_features(t)
     dt = time.perf_counter() - t0
-    print(f"all per-take features (audio, pose, attributes), {seconds / 60:.0f} min: {dt:.2f} s = "
-          f"{seconds / dt:.0f}x real time")
+    print(
+        f"all per-take features (audio, pose, attributes), {seconds / 60:.0f} min: {dt:.2f} s = "
+        f"{seconds / dt:.0f}x real time"
+    )
 
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
@@ -78,8 +81,10 @@ def main() -> None:
 
         MatchingDatabase.load(Path(tmp) / "demo")
         dl = time.perf_counter() - t1
-    print(f"demo database, {args.minutes:g} min of generated speaker -> {db.n_clips} clips: built and saved in "
-          f"{dt:.1f} s ({args.minutes * 60 / dt:.0f}x real time); opened in {dl * 1000:.1f} ms")
+    print(
+        f"demo database, {args.minutes:g} min of generated speaker -> {db.n_clips} clips: built and saved in "
+        f"{dt:.1f} s ({args.minutes * 60 / dt:.0f}x real time); opened in {dl * 1000:.1f} ms"
+    )
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ weights: speed does not depend on them):
 
 Usage: python bench/bench_refiner.py [--seconds 60]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,8 +42,12 @@ def _paper_sized():
     from gesturekit.skeleton import JOINT_NAMES
 
     gen, _ = build_models(ModelConfig(), seed=0)
-    stats = {"audio_mean": np.zeros(28, np.float32), "audio_std": np.ones(28, np.float32),
-             "motion_mean": np.zeros(165, np.float32), "motion_std": np.full(165, 0.1, np.float32)}
+    stats = {
+        "audio_mean": np.zeros(28, np.float32),
+        "audio_std": np.ones(28, np.float32),
+        "motion_mean": np.zeros(165, np.float32),
+        "motion_std": np.full(165, 0.1, np.float32),
+    }
     return Refiner(gen, stats=stats, config={"layout": LAYOUT.signature(), "joint_names": list(JOINT_NAMES)})
 
 
@@ -73,9 +78,11 @@ def main() -> None:
         for n_threads in sorted({threads, 1}, reverse=True):
             torch.set_num_threads(n_threads)
             for mode in ("windowed", "full"):
-                dt = _best_of(5, lambda: ref.refine(motion, audio, mode=mode))
-                print(f"{name}, {mode:8s}, {n_threads} thread(s): {args.seconds:.0f} s of motion in "
-                      f"{dt * 1000:.1f} ms = {args.seconds / dt:.0f}x real time")
+                dt = _best_of(5, lambda ref=ref, mode=mode: ref.refine(motion, audio, mode=mode))
+                print(
+                    f"{name}, {mode:8s}, {n_threads} thread(s): {args.seconds:.0f} s of motion in "
+                    f"{dt * 1000:.1f} ms = {args.seconds / dt:.0f}x real time"
+                )
     torch.set_num_threads(threads)
 
 

@@ -14,6 +14,7 @@ The database is random: 9,624 clips x 64 frames (the "Oliver" database of the
 paper), features drawn from a standard normal distribution, as the z-scored
 features are. Run: ``python bench/bench_search.py`` (a few minutes on 2 cores).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -58,9 +59,11 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     rng = np.random.default_rng(0)
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}, "
-          f"numpy {np.__version__}; load average {' '.join(f'{x:.1f}' for x in os.getloadavg())} "
-          "(other processes share the cores: timings are medians or bests of repeated runs)")
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}, "
+        f"numpy {np.__version__}; load average {' '.join(f'{x:.1f}' for x in os.getloadavg())} "
+        "(other processes share the cores: timings are medians or bests of repeated runs)"
+    )
     M = args.clips
     P, F, valid = make_db(M, rng)
     db_bytes = P.nbytes + F.nbytes + valid.nbytes
@@ -92,10 +95,12 @@ def main(argv=None):
     peak_batch = tracemalloc.get_traced_memory()[1] - base
     tracemalloc.stop()
     del idx2
-    print(f"\n[memory] index (norms, bounds) {index_bytes / 2**20:.1f} MiB = {index_bytes / db_bytes:.1%} of the "
-          f"database; peak extra during a search (tracemalloc) {peak_single / 2**20:.1f} MiB -> with the index "
-          f"{(index_bytes + peak_single) / db_bytes:.1%}; during a batch of {args.batch}: "
-          f"{peak_batch / 2**20:.1f} MiB -> {(index_bytes + peak_batch) / db_bytes:.1%} (target < 10%)")
+    print(
+        f"\n[memory] index (norms, bounds) {index_bytes / 2**20:.1f} MiB = {index_bytes / db_bytes:.1%} of the "
+        f"database; peak extra during a search (tracemalloc) {peak_single / 2**20:.1f} MiB -> with the index "
+        f"{(index_bytes + peak_single) / db_bytes:.1%}; during a batch of {args.batch}: "
+        f"{peak_batch / 2**20:.1f} MiB -> {(index_bytes + peak_batch) / db_bytes:.1%} (target < 10%)"
+    )
 
     # 2. per step vs one matrix-vector product: pairs taken back to back (a 2 s search
     # bracketed by products), so both members of a pair see the same machine state
@@ -114,15 +119,19 @@ def main(argv=None):
         steps.append(step)
         gemvs.append(0.5 * (g0 + g1))
     t_step, t_gemv = float(np.median(steps)), float(np.median(gemvs))
-    print(f"\n[per step] {cfg.step} frames per step: {t_step * 1e3:.1f} ms per step (median of {len(steps)} runs of "
-          f"30 steps); one float32 matrix-vector product over ({P2.shape[0]}, {D}): {t_gemv * 1e3:.1f} ms; "
-          f"ratio per pair: median {np.median(ratios):.2f}x, best {min(ratios):.2f}x (target <= 1.5x)")
+    print(
+        f"\n[per step] {cfg.step} frames per step: {t_step * 1e3:.1f} ms per step (median of {len(steps)} runs of "
+        f"30 steps); one float32 matrix-vector product over ({P2.shape[0]}, {D}): {t_gemv * 1e3:.1f} ms; "
+        f"ratio per pair: median {np.median(ratios):.2f}x, best {min(ratios):.2f}x (target <= 1.5x)"
+    )
 
     # 3. end to end for 60 s of speech
     t_search = best_of(lambda: index.search(query, config=cfg), 2)
     t_e2e = best_of(lambda: search(P, F, valid, query, config=cfg), 2)
-    print(f"[60 s of speech] 113 steps on a prepared index {t_search:.2f} s (index preparation {t_index:.2f} s); "
-          f"search() from plain arrays, both included: {t_e2e:.2f} s (target < 2 s)")
+    print(
+        f"[60 s of speech] 113 steps on a prepared index {t_search:.2f} s (index preparation {t_index:.2f} s); "
+        f"search() from plain arrays, both included: {t_e2e:.2f} s (target < 2 s)"
+    )
 
     # 4. fast vs the literal reference, per clip-step
     Ms = 60
@@ -134,10 +143,12 @@ def main(argv=None):
     assert small.search(qs, config=cfg).equals(ref), "fast and reference searches disagree"
     t_small = best_of(lambda: small.search(qs, config=cfg), 5) / (Ms * ref.n_steps)
     t_big = t_step / M
-    print(f"[vs reference] reference {t_ref * 1e6:.0f} us per clip-step ({Ms} clips, {ref.n_steps} steps, identical "
-          f"result); fast {t_big * 1e6:.2f} us per clip-step at {M} clips -> {t_ref / t_big:.0f}x (target >= 250x); "
-          f"fast on the same {Ms} clips, where fixed per-step costs dominate: {t_small * 1e6:.1f} us -> "
-          f"{t_ref / t_small:.0f}x")
+    print(
+        f"[vs reference] reference {t_ref * 1e6:.0f} us per clip-step ({Ms} clips, {ref.n_steps} steps, identical "
+        f"result); fast {t_big * 1e6:.2f} us per clip-step at {M} clips -> {t_ref / t_big:.0f}x (target >= 250x); "
+        f"fast on the same {Ms} clips, where fixed per-step costs dominate: {t_small * 1e6:.1f} us -> "
+        f"{t_ref / t_small:.0f}x"
+    )
 
     # 5. a batch of 32 sequences vs 32 single runs, alternating, so that other load on the
     # machine falls on both alike; the ratio of each pair, and the median of them
@@ -151,9 +162,12 @@ def main(argv=None):
         t_singles.append(time.perf_counter() - t0)
         ratios.append(t_singles[-1] / t_batch[-1])
     assert all(a.equals(b) for a, b in zip(batch, singles)), "batch and single runs disagree"
-    print(f"[batch] {args.batch} sequences of {args.batch_seconds:g} s ({batch[0].n_steps} steps, k = 0..2): one batch "
-          f"median {np.median(t_batch):.2f} s, {args.batch} single runs median {np.median(t_singles):.2f} s; "
-          f"ratio per pair: median {np.median(ratios):.1f}x, best {max(ratios):.1f}x (target >= 5x)")
+    print(
+        f"[batch] {args.batch} sequences of {args.batch_seconds:g} s ({batch[0].n_steps} steps, k = 0..2): one batch "
+        f"median {np.median(t_batch):.2f} s, {args.batch} single runs median {np.median(t_singles):.2f} s; "
+        f"ratio per pair: median {np.median(ratios):.1f}x, best {max(ratios):.1f}x (target >= 5x)"
+    )
+
 
 if __name__ == "__main__":
     main()

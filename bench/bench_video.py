@@ -13,6 +13,7 @@ The speech is the shared BEAT recording ``../shared/data/speech/beat_lawrence_0_
 
 Usage: python bench/bench_video.py [--seconds 82] [--resolution 640x480]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -64,20 +65,31 @@ def main(argv=None) -> int:
             audio, name = take.audio, f"{args.seconds:g} s of the generated speaker"
         result = synthesize(audio, db=db, refiner="demo")
         left, right = result.knn_motion, result.refined_motion  # what the page shows side by side
-        print(f"speech: {name}, {len(result.audio) / 16000:.1f} s; {result.n_frames} frames side by side, "
-              f"{width}x{height}")
+        print(
+            f"speech: {name}, {len(result.audio) / 16000:.1f} s; {result.n_frames} frames side by side, "
+            f"{width}x{height}"
+        )
         runs = {}
         for workers in (1, default_workers()):
             out = tmp / f"w{workers}.mp4"
             load = os.getloadavg()[0]
             cpu, t0 = _cpu_seconds(), time.perf_counter()
-            render_video(out, left, side_by_side=right, audio=result.audio, labels=("k-NN", "k-NN + refiner"),
-                         resolution=(width, height), workers=workers)
+            render_video(
+                out,
+                left,
+                side_by_side=right,
+                audio=result.audio,
+                labels=("k-NN", "k-NN + refiner"),
+                resolution=(width, height),
+                workers=workers,
+            )
             wall, cpu = time.perf_counter() - t0, _cpu_seconds() - cpu
             runs[workers] = (wall, hashlib.sha256(out.read_bytes()).hexdigest())
             frames = round(len(result.audio) / 16000 * left.fps)
-            print(f"workers={workers}: {wall:.1f} s, {frames / wall:.1f} frames/s, {cpu:.1f} CPU s "
-                  f"(load average before: {load:.1f})")
+            print(
+                f"workers={workers}: {wall:.1f} s, {frames / wall:.1f} frames/s, {cpu:.1f} CPU s "
+                f"(load average before: {load:.1f})"
+            )
         (w1, h1), (wn, hn) = runs[1], runs[max(runs)]
         print(f"every core vs one process: {w1 / wn:.2f}x; same bytes: {h1 == hn}")
     return 0

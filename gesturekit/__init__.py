@@ -3,8 +3,10 @@
 An implementation of Habibie et al., "A Motion Matching-based Framework for
 Controllable Gesture Synthesis from Speech" (SIGGRAPH 2022).
 """
-from ._version import __version__
 
+from ._version import __version__
+from .control import ControlTrack, parse_control
+from .database import BuildConfig, MatchingDatabase
 from .errors import (
     AudioFileError,
     ConfigError,
@@ -14,8 +16,6 @@ from .errors import (
     InputFileError,
     MotionFileError,
 )
-from .control import ControlTrack, parse_control
-from .database import BuildConfig, MatchingDatabase
 from .motion import AUDIO_SR, Motion, Take
 
 __all__ = [

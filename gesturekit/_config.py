@@ -6,6 +6,7 @@ its fields; :func:`config_from_dict` reads it back, refusing unknown keys and
 turning JSON lists back into the tuples (and nested configurations) the fields
 hold. The classes' own ``__post_init__`` does the rest of the checking.
 """
+
 from __future__ import annotations
 
 import dataclasses

@@ -8,13 +8,15 @@ against the structure writing produces and the arrays against it (shapes,
 dtypes, every clip inside its take), arrays are never unpickled, and a
 damaged folder is a :class:`~gesturekit.errors.DatabaseError` naming the file.
 """
+
 from __future__ import annotations
 
 import json
 import os
 import zipfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,12 +41,12 @@ _MESSAGES = {
     "no_file": "not a gesturekit database: database.json is missing",
     "other_format": "not a gesturekit matching database (unknown format)",
     "other_version": "database format version {found} is not supported by this gesturekit (format version "
-                     "{supported}); rebuild it with `gesturekit build-db --force`",
+    "{supported}); rebuild it with `gesturekit build-db --force`",
 }
 
 
 def write_database(
-    db: "MatchingDatabase",
+    db: MatchingDatabase,
     path: Path,
     *,
     overwrite: bool,
@@ -82,7 +84,7 @@ def write_database(
     write_folder(path, "database", fill, overwrite=overwrite, inputs=inputs, locked=locked)
 
 
-def _check_finite(db: "MatchingDatabase", path: Path) -> None:
+def _check_finite(db: MatchingDatabase, path: Path) -> None:
     """Refuse to save arrays with NaN or infinite values (they would poison every search)."""
     parts = [("", db.arrays), ("overlap ", db.overlap or {}), ("z-scoring ", db.stats)]
     for where, arrays in parts:
@@ -93,13 +95,15 @@ def _check_finite(db: "MatchingDatabase", path: Path) -> None:
             # clip by clip, so that a memory-mapped array is never copied whole
             flat = v.reshape(v.shape[0], -1) if v.ndim > 1 else v.reshape(1, -1)
             for i in range(0, flat.shape[0], 256):
-                ok = np.isfinite(flat[i:i + 256]).all(axis=1)
+                ok = np.isfinite(flat[i : i + 256]).all(axis=1)
                 if not ok.all():
                     row = i + int(np.argmin(ok))
                     at = f" (clip {row})" if v.ndim > 1 and not where else ""
                     raise DatabaseError(
                         f"the database's {where}array {k} holds NaN or infinite values{at}: a take's motion or "
-                        "audio features are not finite; nothing was written", path=path)
+                        "audio features are not finite; nothing was written",
+                        path=path,
+                    )
     if db.audio is not None and np.issubdtype(np.asarray(db.audio).dtype, np.floating):
         if not np.isfinite(db.audio).all():
             raise DatabaseError("the database's audio holds NaN or infinite values; nothing was written", path=path)
@@ -120,8 +124,9 @@ def read_database(path: Path, *, mmap: bool) -> dict:
         Missing folder or files, another format or format version, another
         feature layout, or files that are damaged or disagree with each other.
     """
-    meta = read_json_marker(path, "database.json", marker_format=FORMAT, version=FORMAT_VERSION, error=DatabaseError,
-                            messages=_MESSAGES)
+    meta = read_json_marker(
+        path, "database.json", marker_format=FORMAT, version=FORMAT_VERSION, error=DatabaseError, messages=_MESSAGES
+    )
     if meta.get("layout") != LAYOUT.signature():
         raise DatabaseError(
             "database was built with another feature layout; rebuild it with `gesturekit build-db --force`",
@@ -153,8 +158,10 @@ def read_database(path: Path, *, mmap: bool) -> dict:
     if audio is not None:
         need = max((t["audio_offset"] + t["audio_samples"] for t in meta["takes"]), default=0)
         if audio.ndim != 1 or audio.dtype != np.int16 or audio.shape[0] < need:
-            raise DatabaseError(f"audio.npy must be int16 samples, at least {need} of them; found "
-                                f"{audio.dtype} of shape {audio.shape}", path=path)
+            raise DatabaseError(
+                f"audio.npy must be int16 samples, at least {need} of them; found {audio.dtype} of shape {audio.shape}",
+                path=path,
+            )
     return {"meta": meta, "arrays": arrays, "stats": stats, "audio": audio, "overlap": overlap}
 
 
@@ -241,8 +248,10 @@ def _read_stats(path: Path) -> dict[str, np.ndarray]:
             if a is None:
                 raise DatabaseError(f"stats.npz lacks {key}_{part}", path=path)
             if a.shape != (dim,) or not np.issubdtype(a.dtype, np.floating) or not np.isfinite(a).all():
-                raise DatabaseError(f"stats.npz: {key}_{part} must be {dim} finite numbers, found "
-                                    f"{a.dtype} of shape {a.shape}", path=path)
+                raise DatabaseError(
+                    f"stats.npz: {key}_{part} must be {dim} finite numbers, found {a.dtype} of shape {a.shape}",
+                    path=path,
+                )
     return stats
 
 
@@ -252,16 +261,16 @@ def _check_arrays(meta: dict, arrays: dict, stats: dict, path: Path, *, where: s
     ct, cs = arrays["clip_take"], arrays["clip_start"]
     for name, a in (("clip_take", ct), ("clip_start", cs)):
         if a.ndim != 1 or not np.issubdtype(a.dtype, np.integer):
-            raise DatabaseError(f"{where}{name}.npy must be integers of shape (clips,), found {a.dtype} of shape "
-                                f"{a.shape}", path=path)
+            raise DatabaseError(
+                f"{where}{name}.npy must be integers of shape (clips,), found {a.dtype} of shape {a.shape}", path=path
+            )
     m = ct.shape[0]
     if m == 0:
         raise DatabaseError(f"{where}clip_take.npy: the database has no clips", path=path)
     if cs.shape[0] != m:
         raise DatabaseError(f"{where}clip_start.npy has {cs.shape[0]} clips, clip_take.npy {m}", path=path)
     if not where and meta.get("counts") is not None and meta["counts"]["clips"] != m:
-        raise DatabaseError(f"database.json counts {meta['counts']['clips']} clips but the arrays hold {m}",
-                            path=path)
+        raise DatabaseError(f"database.json counts {meta['counts']['clips']} clips but the arrays hold {m}", path=path)
     expected = {
         "F": (m, L, stats["F_mean"].shape[0]),
         "P": (m, L, stats["P_mean"].shape[0]),
@@ -273,21 +282,27 @@ def _check_arrays(meta: dict, arrays: dict, stats: dict, path: Path, *, where: s
     }
     for k, shape in expected.items():
         if arrays[k].shape != shape:
-            raise DatabaseError(f"{where}{k}.npy has shape {arrays[k].shape}, expected {shape} ({m} clips of "
-                                f"{L} frames)", path=path)
+            raise DatabaseError(
+                f"{where}{k}.npy has shape {arrays[k].shape}, expected {shape} ({m} clips of {L} frames)", path=path
+            )
     takes = meta["takes"]
     ti = np.asarray(ct, dtype=np.int64)
     if ti.min() < 0 or ti.max() >= len(takes):
-        raise DatabaseError(f"{where}clip_take.npy holds take index {int(ti.min() if ti.min() < 0 else ti.max())}; "
-                            f"the database has takes 0..{len(takes) - 1}", path=path)
+        raise DatabaseError(
+            f"{where}clip_take.npy holds take index {int(ti.min() if ti.min() < 0 else ti.max())}; "
+            f"the database has takes 0..{len(takes) - 1}",
+            path=path,
+        )
     start = np.asarray(cs, dtype=np.int64)
     n_frames = np.array([t["n_frames"] for t in takes], dtype=np.int64)
     outside = (start < 0) | (start + L > n_frames[ti])
     if outside.any():
         c = int(np.flatnonzero(outside)[0])
-        raise DatabaseError(f"{where}clip_start.npy: clip {c} starts at frame {int(start[c])}, outside take "
-                            f"{takes[ti[c]]['name']!r} of {int(n_frames[ti[c]])} frames (clips of {L} frames)",
-                            path=path)
+        raise DatabaseError(
+            f"{where}clip_start.npy: clip {c} starts at frame {int(start[c])}, outside take "
+            f"{takes[ti[c]]['name']!r} of {int(n_frames[ti[c]])} frames (clips of {L} frames)",
+            path=path,
+        )
 
 
 def _check_clip_order(meta: dict, clip_take: np.ndarray, path: Path) -> None:
@@ -298,8 +313,8 @@ def _check_clip_order(meta: dict, clip_take: np.ndarray, path: Path) -> None:
     n = np.array([t["n_clips"] for t in takes], dtype=np.int64)
     m = clip_take.shape[0]
     if n.sum() != m or not np.array_equal(first, np.concatenate([[0], np.cumsum(n)[:-1]])):
-        raise DatabaseError(f"database.json: the takes' first_clip/n_clips do not cover the {m} clips of "
-                            "clip_take.npy", path=path)
+        raise DatabaseError(
+            f"database.json: the takes' first_clip/n_clips do not cover the {m} clips of clip_take.npy", path=path
+        )
     if not np.array_equal(np.asarray(clip_take), np.repeat(np.arange(len(takes)), n)):
-        raise DatabaseError("clip_take.npy does not match the takes' first_clip/n_clips in database.json",
-                            path=path)
+        raise DatabaseError("clip_take.npy does not match the takes' first_clip/n_clips in database.json", path=path)

@@ -9,6 +9,7 @@ killed one left (:func:`gesturekit.outputs.clean_stale`); an ``OSError`` while
 writing (disk full, permission denied) is raised as an
 :class:`~gesturekit.errors.OutputError` naming the file.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -17,8 +18,9 @@ import os
 import re
 import unicodedata
 import uuid
+from collections.abc import Callable
 from pathlib import Path
-from typing import BinaryIO, Callable
+from typing import BinaryIO
 
 from .errors import ConfigError, GestureKitError
 from .paths import is_dir
@@ -27,9 +29,7 @@ __all__ = ["atomic_write", "safe_filename", "read_json_marker"]
 
 # names Windows refuses whatever the extension, compared case-insensitively
 _RESERVED_NAMES = frozenset(
-    ["CON", "PRN", "AUX", "NUL"]
-    + [f"COM{i}" for i in range(1, 10)]
-    + [f"LPT{i}" for i in range(1, 10)]
+    ["CON", "PRN", "AUX", "NUL"] + [f"COM{i}" for i in range(1, 10)] + [f"LPT{i}" for i in range(1, 10)]
 )
 
 
@@ -264,6 +264,7 @@ def read_json_marker(
     if not isinstance(content, dict) or content.get("format") != marker_format:
         raise error(messages["other_format"], path=folder)
     if content.get("format_version") != version:
-        raise error(messages["other_version"].format(found=content.get("format_version"), supported=version),
-                    path=folder)
+        raise error(
+            messages["other_version"].format(found=content.get("format_version"), supported=version), path=folder
+        )
     return content

@@ -1,5 +1,6 @@
 """Optional transitions between search segments (not in the paper, which leaves smoothing to the
 cGAN), and the step that keeps the k-NN motion's slow content in refined motion."""
+
 from __future__ import annotations
 
 import numpy as np

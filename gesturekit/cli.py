@@ -3,6 +3,7 @@
 Every command turns errors of the gesturekit family into one line on stderr
 (exit status 2) and prints warnings as ``warning: ...`` lines.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -67,8 +68,13 @@ def _cmd_build_db(args) -> int:
         out = Path(args.out) if args.out else default_database_path()
         total = args.minutes * 60
         with _progress_bar(round(total), "s", "demo speaker") as bar:
-            db = build_demo_database(out, minutes=args.minutes, seed=args.seed, overwrite=args.force,
-                                     progress=lambda done, tot: _advance(bar, round(done)))
+            db = build_demo_database(
+                out,
+                minutes=args.minutes,
+                seed=args.seed,
+                overwrite=args.force,
+                progress=lambda done, tot: _advance(bar, round(done)),
+            )
     else:
         if args.folder is None:
             raise ConfigError("give a folder of takes to build from, or --demo for the generated demo speaker")
@@ -86,13 +92,25 @@ def _cmd_build_db(args) -> int:
         from .database import BuildConfig
         from .workspace import build_database
 
-        config = BuildConfig(overlap_stride=args.overlap_stride, percentiles=tuple(args.percentiles),
-                             store_audio=not args.no_audio, label=args.label or "")
+        config = BuildConfig(
+            overlap_stride=args.overlap_stride,
+            percentiles=tuple(args.percentiles),
+            store_audio=not args.no_audio,
+            label=args.label or "",
+        )
         with output_lock(out), _stage_bars() as bar:  # the bar shows once the first take is read
-            db = build_database(args.folder, out, config=config, joint_map=args.joint_map or args.preset,
-                                kind=args.kind, fps=args.fps, units=args.units, overwrite=args.force, locked=True,
-                                progress=lambda done, total, name: _advance(bar("reading takes", total, "take"),
-                                                                            done, note=name[-30:]))
+            db = build_database(
+                args.folder,
+                out,
+                config=config,
+                joint_map=args.joint_map or args.preset,
+                kind=args.kind,
+                fps=args.fps,
+                units=args.units,
+                overwrite=args.force,
+                locked=True,
+                progress=lambda done, total, name: _advance(bar("reading takes", total, "take"), done, note=name[-30:]),
+            )
     print(db.summary_text())
     return _done(args, "built")
 
@@ -158,8 +176,8 @@ def _refiner_choice(given: str | None, db):
 
 
 def _cmd_synthesize(args) -> int:
-    from .datasets.audio import load_audio
     from ._io import safe_filename
+    from .datasets.audio import load_audio
     from .outputs import check_output, output_lock, write_errors
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
@@ -173,13 +191,21 @@ def _cmd_synthesize(args) -> int:
     first: dict[str, Path] = {}
     for f, stem in zip(files, stems):  # checked before anything is written
         if stem in first:
-            raise ConfigError(f"{first[stem]} and {f} would both be written as {out / stem}.npz; rename one, "
-                              "or synthesise them in separate runs")
+            raise ConfigError(
+                f"{first[stem]} and {f} would both be written as {out / stem}.npz; rename one, "
+                "or synthesise them in separate runs"
+            )
         first[stem] = f
     db = open_database(args.db)
     config = SynthesisConfig(
-        k=args.k, step=args.step, topk=args.topk, seed=args.seed, init=args.init_pose,
-        mask_rule=args.mask_rule, blend=args.blend, control=control,
+        k=args.k,
+        step=args.step,
+        topk=args.topk,
+        seed=args.seed,
+        init=args.init_pose,
+        mask_rule=args.mask_rule,
+        blend=args.blend,
+        control=control,
         exclude_takes=tuple(args.exclude_take or ()),
         exclude_ranges=exclude_ranges,
         **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
@@ -190,7 +216,9 @@ def _cmd_synthesize(args) -> int:
     targets = {(stem, kind): out / f"{stem}.{kind}" for stem in stems for kind in kinds}
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not args.force:
-        raise GestureKitError(f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force")
+        raise GestureKitError(
+            f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force"
+        )
     for p in targets.values():
         # with --force too: only files gesturekit wrote are replaced, and never a folder
         check_output(p, "file", overwrite=args.force, inputs=files)
@@ -211,14 +239,20 @@ def _cmd_synthesize(args) -> int:
             written = [targets[(stem, "npz")], targets[(stem, "bvh")]]
             if args.video:
                 with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
-                    res.save_video(targets[(stem, "mp4")], overwrite=args.force,
-                                   progress=lambda done, total: _advance(bar, done))
+                    res.save_video(
+                        targets[(stem, "mp4")], overwrite=args.force, progress=lambda done, total: _advance(bar, done)
+                    )
                 written.append(targets[(stem, "mp4")])
             relaxed = res.relaxed_steps
-            note = (f"; control relaxed at {describe_steps(relaxed, step=res.config.step, fps=res.motion.fps)}"
-                    if relaxed else "")
-            print(f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
-                  f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}")
+            note = (
+                f"; control relaxed at {describe_steps(relaxed, step=res.config.step, fps=res.motion.fps)}"
+                if relaxed
+                else ""
+            )
+            print(
+                f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
+                f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}"
+            )
     return _done(args)
 
 
@@ -240,23 +274,38 @@ def _cmd_train_refiner(args) -> int:
 
         standard = f"demo (seed {DEMO_SEED}, {DEMO_MINUTES:g} min)"
         if db.meta["build"].get("source") != standard:
-            warn(f"the default database at {db.path} is not the standard demo ({standard}); the shipped "
-                 "refiner was trained on the standard one (rebuild it with `gesturekit build-db --demo --force`)")
+            warn(
+                f"the default database at {db.path} is not the standard demo ({standard}); the shipped "
+                "refiner was trained on the standard one (rebuild it with `gesturekit build-db --demo --force`)"
+            )
     data = None
     if not args.resume or args.exclude_take or args.exclude_range:
-        data = PairsConfig(seed=args.seed, exclude_takes=tuple(args.exclude_take or ()),
-                           exclude_ranges=exclude_ranges)
+        data = PairsConfig(seed=args.seed, exclude_takes=tuple(args.exclude_take or ()), exclude_ranges=exclude_ranges)
     train = replace(preset(args.preset).train, seed=args.seed)
     with _stage_bars() as bar:
+
         def on_step(it, total, losses):
-            note = (f"W {losses['wasserstein']:.2f} gp {losses['gradient_penalty']:.2f} "
-                    f"L1 {losses['generator_l1']:.3f}" if "generator_l1" in losses else None)
+            note = (
+                f"W {losses['wasserstein']:.2f} gp {losses['gradient_penalty']:.2f} L1 {losses['generator_l1']:.3f}"
+                if "generator_l1" in losses
+                else None
+            )
             _advance(bar("training the refiner", total, "it"), it, note=note)
 
-        out = train_refiner(db, args.out, preset_name=args.preset, iterations=args.iterations, train=train,
-                            data=data, resume=args.resume, overwrite=args.force, device=args.device,
-                            keep_train_state=not args.no_train_state, on_step=on_step,
-                            on_pairs=lambda done, total: _advance(bar("k-NN training pairs", total, "window"), done))
+        out = train_refiner(
+            db,
+            args.out,
+            preset_name=args.preset,
+            iterations=args.iterations,
+            train=train,
+            data=data,
+            resume=args.resume,
+            overwrite=args.force,
+            device=args.device,
+            keep_train_state=not args.no_train_state,
+            on_step=on_step,
+            on_pairs=lambda done, total: _advance(bar("k-NN training pairs", total, "window"), done),
+        )
     from .refine.infer import read_refiner_config
 
     cfg = read_refiner_config(out)
@@ -302,12 +351,21 @@ def _cmd_evaluate(args) -> int:
     from .outputs import check_output
 
     check_output(out, "evaluation", overwrite=args.force, inputs=[db.path])  # before the long part
-    config = SynthesisConfig(k=args.k, step=args.step, seed=args.seed, init=args.init_pose,
-                             mask_rule=args.mask_rule, blend=args.blend)
+    config = SynthesisConfig(
+        k=args.k, step=args.step, seed=args.seed, init=args.init_pose, mask_rule=args.mask_rule, blend=args.blend
+    )
     with _progress_bar(None, "step", "evaluating") as bar:
-        ev = run_evaluation(db, holdout=args.holdout, systems=args.systems, config=config,
-                            control=control, fgd_model=args.fgd_model, refiner=args.refiner, sigma=args.beat_sigma,
-                            progress=lambda done, total, what: _advance(bar, done, total, what[-30:]))
+        ev = run_evaluation(
+            db,
+            holdout=args.holdout,
+            systems=args.systems,
+            config=config,
+            control=control,
+            fgd_model=args.fgd_model,
+            refiner=args.refiner,
+            sigma=args.beat_sigma,
+            progress=lambda done, total, what: _advance(bar, done, total, what[-30:]),
+        )
     print(ev.to_markdown())
     written = ev.save(out, overwrite=args.force)
     print(f"wrote {', '.join(str(p) for p in written)}")
@@ -335,20 +393,26 @@ def _cmd_train_fgd(args) -> int:
     exclude = db.exclusion_mask(takes=takes, ranges=ranges) if (takes or ranges) else None
     config = FGDConfig(steps=args.steps, seed=args.seed, window=args.window, latent=args.latent)
     with _progress_bar(config.steps, "step", "training the FGD autoencoder") as bar:
-        model = train_fgd_model(db, config=config, exclude=exclude,
-                                progress=lambda step, steps, loss: _advance(bar, step, note=f"loss {loss:.4f}"))
+        model = train_fgd_model(
+            db,
+            config=config,
+            exclude=exclude,
+            progress=lambda step, steps, loss: _advance(bar, step, note=f"loss {loss:.4f}"),
+        )
     model.info["held_out"] = list(args.holdout or ())
     model.save(out, overwrite=args.force)
-    print(f"FGD autoencoder: {model.info['clips_used']} clips used, {model.info['clips_held_out']} held out, "
-          f"final reconstruction loss {model.info['final_loss']:.4f}")
+    print(
+        f"FGD autoencoder: {model.info['clips_used']} clips used, {model.info['clips_held_out']} held out, "
+        f"final reconstruction loss {model.info['final_loss']:.4f}"
+    )
     return _done(args, f"saved to {out}")
 
 
 def _cmd_stimuli(args) -> int:
+    import re
+
     from .study import make_stimuli
     from .workspace import open_database
-
-    import re
 
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", args.resolution)
     if not m:
@@ -362,23 +426,39 @@ def _cmd_stimuli(args) -> int:
     db = open_database(args.db)
     with _stage_bars() as bar:
         res = make_stimuli(
-            db, out=args.out, audio=args.audio or (), holdouts=args.holdout or (), systems=args.systems,
-            seed=args.seed, participants=args.participants, control=control,
-            refiner=args.refiner, resolution=(int(m.group(1)), int(m.group(2))), loudness_lufs=args.loudness,
-            workers=args.workers, scheduler=args.scheduler, overwrite=args.force,
+            db,
+            out=args.out,
+            audio=args.audio or (),
+            holdouts=args.holdout or (),
+            systems=args.systems,
+            seed=args.seed,
+            participants=args.participants,
+            control=control,
+            refiner=args.refiner,
+            resolution=(int(m.group(1)), int(m.group(2))),
+            loudness_lufs=args.loudness,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            overwrite=args.force,
             progress=lambda stage, done, total: _advance(bar(stage, total, "stimulus"), done),
         )
-    print(f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "
-          f"systems) in {res.folder / 'videos'}")
+    print(
+        f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "
+        f"systems) in {res.folder / 'videos'}"
+    )
     print(f"manifest (the key; keep it from raters): {res.folder / 'manifest.csv'}")
     print(f"presentation order for {res.settings['participants']} participants: {res.folder / 'order.csv'}")
     return _done(args)
 
 
 def _add_max_speech(parser) -> None:
-    parser.add_argument("--max-speech-minutes", type=float, metavar="MIN",
-                        help="refuse speech files longer than this (default 60, or the environment "
-                             "variable GESTUREKIT_MAX_SPEECH_MINUTES)")
+    parser.add_argument(
+        "--max-speech-minutes",
+        type=float,
+        metavar="MIN",
+        help="refuse speech files longer than this (default 60, or the environment "
+        "variable GESTUREKIT_MAX_SPEECH_MINUTES)",
+    )
 
 
 #: Each command"s line in ``gesturekit --help`` and the paragraph of its own ``--help``.
@@ -434,20 +514,35 @@ def _add_search(parser, *, seed: str) -> None:
     parser.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
     parser.add_argument("--step", type=int, default=8, help="frames per search step, N (default 8)")
     parser.add_argument("--seed", type=int, default=0, help=f"seed of {seed} (default 0)")
-    parser.add_argument("--init-pose", choices=["random", "rest"], default="random",
-                        help="initial pose: a random admissible database frame (the paper) or the rest pose")
-    parser.add_argument("--mask-rule", choices=["ends", "all"], default="ends",
-                        help="a control must hold at a window's first and last frame (ends: the paper) or every "
-                             "frame")
-    parser.add_argument("--blend", choices=["none", "offset"], default="none",
-                        help="none: the paper's hard joins; offset: a short fade at each join (ours)")
+    parser.add_argument(
+        "--init-pose",
+        choices=["random", "rest"],
+        default="random",
+        help="initial pose: a random admissible database frame (the paper) or the rest pose",
+    )
+    parser.add_argument(
+        "--mask-rule",
+        choices=["ends", "all"],
+        default="ends",
+        help="a control must hold at a window's first and last frame (ends: the paper) or every frame",
+    )
+    parser.add_argument(
+        "--blend",
+        choices=["none", "offset"],
+        default="none",
+        help="none: the paper's hard joins; offset: a short fade at each join (ours)",
+    )
 
 
 def _add_exclusions(parser, *, out_of: str) -> None:
     """``--exclude-take`` and ``--exclude-range``, keeping parts of the database out of ``out_of``."""
     parser.add_argument("--exclude-take", action="append", metavar="TAKE", help=f"keep a database take out of {out_of}")
-    parser.add_argument("--exclude-range", action="append", metavar="TAKE:START-END",
-                        help=f"keep a stretch of a take (seconds) out of {out_of}")
+    parser.add_argument(
+        "--exclude-range",
+        action="append",
+        metavar="TAKE:START-END",
+        help=f"keep a stretch of a take (seconds) out of {out_of}",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -466,9 +561,17 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--kind", default="auto", choices=["auto", "bvh", "positions", "habibie2021"])
     b.add_argument("--fps", type=float, help="frame rate of joint-position files")
     b.add_argument("--units", default="auto", choices=["auto", "cm", "m"], help="units of the motion files")
-    b.add_argument("--overlap-stride", type=int, help="also store an overlapping cut (stride in frames) for the refiner")
-    b.add_argument("--percentiles", type=float, nargs=2, default=(15.0, 85.0), metavar=("LOW", "HIGH"),
-                   help="attribute percentiles that define low/high controls (default 15 85)")
+    b.add_argument(
+        "--overlap-stride", type=int, help="also store an overlapping cut (stride in frames) for the refiner"
+    )
+    b.add_argument(
+        "--percentiles",
+        type=float,
+        nargs=2,
+        default=(15.0, 85.0),
+        metavar=("LOW", "HIGH"),
+        help="attribute percentiles that define low/high controls (default 15 85)",
+    )
     b.add_argument("--no-audio", action="store_true", help="do not keep the takes' audio in the database")
     b.add_argument("--label", help="a description stored with the database")
     b.add_argument("--force", action="store_true", help="replace an existing database")
@@ -486,17 +589,29 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--out", default="out", help="output folder (default: out)")
     _add_search(y, seed="the random initial pose")
     y.add_argument("--topk", type=int, default=10, help="candidates per step to record (default 10)")
-    y.add_argument("--control", help='control track: "0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric" '
-                   "(seconds) or a CSV/JSON file with start_s, end_s, constraint")
+    y.add_argument(
+        "--control",
+        help='control track: "0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric" '
+        "(seconds) or a CSV/JSON file with start_s, end_s, constraint",
+    )
     _add_exclusions(y, out_of="the search")
-    y.add_argument("--refiner", metavar="PATH", help="refine the k-NN motion with a trained refiner folder "
-                   "(from train-refiner), 'demo' for the one shipped with the demo database, or 'none'; "
-                   "default: a refiner trained on the database if there is one (DB/refiner, or the shipped "
-                   "one for the demo database), else none. The npz keeps both motions")
-    y.add_argument("--refiner-keep-hz", type=float, default=None, metavar="HZ",
-                   help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
-                   "controls) and take the faster content from the refiner (default 2); 0: the refiner's "
-                   "output as it is (the paper)")
+    y.add_argument(
+        "--refiner",
+        metavar="PATH",
+        help="refine the k-NN motion with a trained refiner folder "
+        "(from train-refiner), 'demo' for the one shipped with the demo database, or 'none'; "
+        "default: a refiner trained on the database if there is one (DB/refiner, or the shipped "
+        "one for the demo database), else none. The npz keeps both motions",
+    )
+    y.add_argument(
+        "--refiner-keep-hz",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
+        "controls) and take the faster content from the refiner (default 2); 0: the refiner's "
+        "output as it is (the paper)",
+    )
     y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
     y.add_argument("--force", action="store_true", help="replace existing output files")
     _add_max_speech(y)
@@ -505,29 +620,47 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--db", help="matching database folder (built with --overlap-stride)")
     r.add_argument("--demo", action="store_true", help="train on the default demo database (built if missing)")
     r.add_argument("--out", required=True, help="refiner folder to write")
-    r.add_argument("--preset", choices=["quick", "paper"], default="quick",
-                   help="quick: small networks, ~10 min on a 2-core CPU; paper: the paper's sizes (GPU)")
-    r.add_argument("--iterations", type=int, help="critic iterations (default: the preset's; with --resume: "
-                   "train on up to this many)")
+    r.add_argument(
+        "--preset",
+        choices=["quick", "paper"],
+        default="quick",
+        help="quick: small networks, ~10 min on a 2-core CPU; paper: the paper's sizes (GPU)",
+    )
+    r.add_argument(
+        "--iterations",
+        type=int,
+        help="critic iterations (default: the preset's; with --resume: train on up to this many)",
+    )
     r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
     r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
     r.add_argument("--seed", type=int, default=0, help="seed of the weights, batches and k draws (default 0)")
     _add_exclusions(r, out_of="training")
-    r.add_argument("--no-train-state", action="store_true",
-                   help="leave out the optimiser state at the end (a smaller folder that cannot be resumed)")
+    r.add_argument(
+        "--no-train-state",
+        action="store_true",
+        help="leave out the optimiser state at the end (a smaller folder that cannot be resumed)",
+    )
     r.add_argument("--force", action="store_true", help="replace an existing refiner folder")
     from .evaluate.baselines import SYSTEMS
 
     e = _command(sub, "evaluate", _cmd_evaluate)
     e.add_argument("--db", help="matching database folder (default: the demo database)")
-    e.add_argument("--holdout", required=True, metavar="TAKE[:START-END]",
-                   help="held-out take, or time range of one in seconds (e.g. 067_Speech_2_x_1_0:50-68.8)")
-    e.add_argument("--systems", default=",".join(SYSTEMS),
-                   help=f"comma-separated systems (default: all of {','.join(SYSTEMS)})")
+    e.add_argument(
+        "--holdout",
+        required=True,
+        metavar="TAKE[:START-END]",
+        help="held-out take, or time range of one in seconds (e.g. 067_Speech_2_x_1_0:50-68.8)",
+    )
+    e.add_argument(
+        "--systems", default=",".join(SYSTEMS), help=f"comma-separated systems (default: all of {','.join(SYSTEMS)})"
+    )
     e.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
     e.add_argument("--fgd-model", help="FGD autoencoder from `gesturekit train-fgd` (default: train one now)")
-    e.add_argument("--control", help="control track of the controlled runs (seconds of the held-out speech); "
-                   "default: six equal stretches asking for left hand low/high, slow/fast, symmetric/asymmetric")
+    e.add_argument(
+        "--control",
+        help="control track of the controlled runs (seconds of the held-out speech); "
+        "default: six equal stretches asking for left hand low/high, slow/fast, symmetric/asymmetric",
+    )
     e.add_argument("--beat-sigma", type=float, default=0.1, help="beat-consistency tolerance, seconds (default 0.1)")
     _add_search(e, seed="the initial pose and the random baseline")
     e.add_argument("--out", default="evaluation", help="folder for the tables (default: evaluation)")
@@ -536,8 +669,12 @@ def build_parser() -> argparse.ArgumentParser:
     f = _command(sub, "train-fgd", _cmd_train_fgd)
     f.add_argument("--db", help="matching database folder (default: the demo database)")
     f.add_argument("--out", required=True, help="model folder to write")
-    f.add_argument("--holdout", action="append", metavar="TAKE[:START-END]",
-                   help="leave a take or a time range out of training (repeatable)")
+    f.add_argument(
+        "--holdout",
+        action="append",
+        metavar="TAKE[:START-END]",
+        help="leave a take or a time range out of training (repeatable)",
+    )
     f.add_argument("--steps", type=int, default=2000, help="training steps (default 2000)")
     f.add_argument("--window", type=int, default=32, help="frames per window, a multiple of 8 (default 32)")
     f.add_argument("--latent", type=int, default=32, help="size of the latent feature (default 32)")
@@ -547,13 +684,20 @@ def build_parser() -> argparse.ArgumentParser:
     s = _command(sub, "stimuli", _cmd_stimuli)
     s.add_argument("--db", help="matching database folder (default: the demo database)")
     s.add_argument("--audio", nargs="+", help="speech files or folders of them")
-    s.add_argument("--holdout", action="append", metavar="TAKE[:START-END]",
-                   help="a held-out part of the database as a speech with recorded motion, for gt (repeatable)")
+    s.add_argument(
+        "--holdout",
+        action="append",
+        metavar="TAKE[:START-END]",
+        help="a held-out part of the database as a speech with recorded motion, for gt (repeatable)",
+    )
     s.add_argument("--systems", default="gt,knn,knn+cgan", help="comma-separated systems (default gt,knn,knn+cgan)")
     s.add_argument("--out", required=True, help="study folder to write")
     s.add_argument("--seed", type=int, default=0, help="seed of the ids, the order and the synthesis (default 0)")
-    s.add_argument("--participants", type=int, help="participants to plan the order for "
-                   "(default: the rows of the balanced Latin square)")
+    s.add_argument(
+        "--participants",
+        type=int,
+        help="participants to plan the order for (default: the rows of the balanced Latin square)",
+    )
     s.add_argument("--control", help="control track for every synthesised stimulus")
     s.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
     s.add_argument("--resolution", default="640x480", help="video size WIDTHxHEIGHT (default 640x480)")

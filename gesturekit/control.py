@@ -9,6 +9,7 @@ is below the 15th, "high" above the 85th). A :class:`ControlTrack` says which
 constraints hold over which stretches of the output, e.g.
 ``"0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric"``.
 """
+
 from __future__ import annotations
 
 import csv
@@ -39,15 +40,15 @@ __all__ = [
 
 #: Per-frame attributes, in the order of the database's ``attributes`` array (units in brackets).
 ATTRIBUTE_NAMES: tuple[str, ...] = (
-    "left_hand_height",   # left wrist height above the pelvis [m]
+    "left_hand_height",  # left wrist height above the pelvis [m]
     "right_hand_height",  # right wrist height above the pelvis [m]
-    "left_hand_speed",    # left wrist speed [m/s]
-    "right_hand_speed",   # right wrist speed [m/s]
-    "hand_speed",         # mean of both wrist speeds [m/s]
-    "left_hand_width",    # horizontal distance of the left wrist from the body's vertical axis [m]
-    "right_hand_width",   # same, right wrist [m]
-    "hand_width",         # mean of both widths [m]
-    "asymmetry",          # distance between the left wrist and the mirrored right wrist [m]
+    "left_hand_speed",  # left wrist speed [m/s]
+    "right_hand_speed",  # right wrist speed [m/s]
+    "hand_speed",  # mean of both wrist speeds [m/s]
+    "left_hand_width",  # horizontal distance of the left wrist from the body's vertical axis [m]
+    "right_hand_width",  # same, right wrist [m]
+    "hand_width",  # mean of both widths [m]
+    "asymmetry",  # distance between the left wrist and the mirrored right wrist [m]
 )
 
 #: The unit of each attribute: metres for heights, widths and asymmetry, metres per second for speeds.
@@ -198,7 +199,7 @@ class ControlTrack:
         return buf.getvalue()
 
     @classmethod
-    def from_records(cls, records, *, source: str = "control") -> "ControlTrack":
+    def from_records(cls, records, *, source: str = "control") -> ControlTrack:
         """From dicts/rows with start_s, end_s and constraint (``"a=b+c=d"``)."""
         segs = []
         for i, r in enumerate(records):
@@ -326,11 +327,15 @@ def load_control_file(path: str | os.PathLike) -> ControlTrack:
             if not isinstance(data, list):
                 raise InputFileError(
                     f"a JSON control file must hold a list of segments (objects with {', '.join(_CONTROL_COLUMNS)}), "
-                    f"found {type(data).__name__}", path=p)
+                    f"found {type(data).__name__}",
+                    path=p,
+                )
             for i, r in enumerate(data):
                 if not isinstance(r, dict):
-                    raise InputFileError(f"row {i + 1} must be an object with {', '.join(_CONTROL_COLUMNS)}, "
-                                         f"found {type(r).__name__}", path=p)
+                    raise InputFileError(
+                        f"row {i + 1} must be an object with {', '.join(_CONTROL_COLUMNS)}, found {type(r).__name__}",
+                        path=p,
+                    )
             return ControlTrack.from_records(data, source=p)
         reader = csv.DictReader(io.StringIO(text))
         columns = reader.fieldnames or []
@@ -338,14 +343,16 @@ def load_control_file(path: str | os.PathLike) -> ControlTrack:
         if missing:
             raise InputFileError(
                 f"a CSV control file needs the columns {', '.join(_CONTROL_COLUMNS)}; missing {', '.join(missing)} "
-                f"(found {', '.join(columns) or 'no header'})", path=p)
+                f"(found {', '.join(columns) or 'no header'})",
+                path=p,
+            )
         return ControlTrack.from_records(list(reader), source=p)
     except json.JSONDecodeError as exc:
         raise InputFileError(f"not valid JSON ({exc.msg} at line {exc.lineno})", path=p) from None
     except ConfigError as exc:
         problem = exc.problem
         if problem.startswith(p + ": "):
-            problem = problem[len(p) + 2:]
+            problem = problem[len(p) + 2 :]
         raise InputFileError(problem, path=p) from None
 
 

@@ -27,12 +27,13 @@ of :mod:`gesturekit.outputs` (``database.json`` is the marker that lets
 ``--force`` recognise a database). Writing, reading and checking the folder
 is :mod:`gesturekit._database_folder`'s part; building is this module's.
 """
+
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable
 
 import numpy as np
 
@@ -55,9 +56,13 @@ from .motion import AUDIO_SR, Take, resample_positions
 from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES
 
 __all__ = [
-    "FORMAT_VERSION", "BuildConfig", "TakeFeatures", "take_features", "MatchingDatabase", "normalise_exclusions",
+    "FORMAT_VERSION",
+    "BuildConfig",
+    "TakeFeatures",
+    "take_features",
+    "MatchingDatabase",
+    "normalise_exclusions",
 ]
-
 
 
 @dataclass
@@ -419,8 +424,9 @@ class MatchingDatabase:
         ]
         if d["overlap_windows"]:
             lines.append(f"overlap    {d['overlap_windows']} windows for refiner training")
-        lines.append("attributes (min / low threshold / high threshold / max; heights, widths and asymmetry "
-                     "in m, speeds in m/s)")
+        lines.append(
+            "attributes (min / low threshold / high threshold / max; heights, widths and asymmetry in m, speeds in m/s)"
+        )
         for name, r in d["attributes"].items():
             unit = ATTRIBUTE_UNITS.get(name, "")
             values = f"{r['min']:8.3f} {r['low']:8.3f} {r['high']:8.3f} {r['max']:8.3f}"
@@ -454,7 +460,9 @@ class MatchingDatabase:
         return self.meta["takes"][int(take)]
 
     # ---- held-out data ------------------------------------------------------------------------
-    def exclusion_mask(self, *, takes: Iterable[str] = (), ranges: Iterable[tuple[str, float, float]] = ()) -> np.ndarray:
+    def exclusion_mask(
+        self, *, takes: Iterable[str] = (), ranges: Iterable[tuple[str, float, float]] = ()
+    ) -> np.ndarray:
         """Frames to keep out of the search, shape (M, 64), bool.
 
         Parameters
@@ -497,7 +505,7 @@ class MatchingDatabase:
         *,
         config: BuildConfig | None = None,
         progress: Callable[[int, str], None] | None = None,
-    ) -> "MatchingDatabase":
+    ) -> MatchingDatabase:
         """Build a database in memory from takes.
 
         Parameters
@@ -529,9 +537,7 @@ class MatchingDatabase:
         # z-scoring statistics over the frames that can start a segment (no padding inside)
         allv = np.concatenate([t.valid for t in per_take])
         if not allv.any():
-            raise ConfigError(
-                f"every take is shorter than {LAYOUT.audio_lookahead + 1} frames; nothing can be matched"
-            )
+            raise ConfigError(f"every take is shorter than {LAYOUT.audio_lookahead + 1} frames; nothing can be matched")
         stats = {}
         for key, attr in (("F", "f"), ("P", "p"), ("A", "a")):
             z = ZScore.fit(np.concatenate([getattr(t, attr) for t in per_take])[allv])
@@ -645,7 +651,7 @@ class MatchingDatabase:
         return path
 
     @classmethod
-    def load(cls, path: str | os.PathLike, *, mmap: bool = True) -> "MatchingDatabase":
+    def load(cls, path: str | os.PathLike, *, mmap: bool = True) -> MatchingDatabase:
         """Open a database folder; big arrays are memory-mapped (opening costs milliseconds).
 
         ``database.json`` is checked against the structure :meth:`save` writes

@@ -1,9 +1,10 @@
 """The embedded default: a matching database of the generated demo speaker."""
+
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from .database import BuildConfig, MatchingDatabase
 from .errors import DatabaseError

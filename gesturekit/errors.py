@@ -5,13 +5,14 @@ subclass of :class:`GestureKitError` with a message that names the file (when
 there is one) and the problem, so the command line and the app can show it as
 a plain message instead of a traceback.
 """
+
 from __future__ import annotations
 
 import contextlib
 import os
 import threading
 import warnings
-from typing import Iterator
+from collections.abc import Iterator
 
 __all__ = [
     "GestureKitError",

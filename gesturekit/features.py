@@ -13,6 +13,7 @@ Audio feature (``f_t``, 112): ``[m_t, m_{t+2}, ..., m_{t+14}]``, one second of l
 Pose feature (``p_t``, 96): positions of the 8 feature joints at ``t, t+2, t+4, t+6``.
 cGAN audio (28): ``m_t`` and its first time derivative (per frame).
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
@@ -113,7 +114,11 @@ class FeatureLayout:
 
 LAYOUT = FeatureLayout()
 assert (LAYOUT.frame_dim, LAYOUT.audio_dim, LAYOUT.pose_dim, LAYOUT.motion_dim, LAYOUT.cgan_audio_dim) == (
-    14, 112, 96, 165, 28,
+    14,
+    112,
+    96,
+    165,
+    28,
 )
 
 
@@ -339,7 +344,7 @@ class ZScore:
     std: np.ndarray = field()
 
     @classmethod
-    def fit(cls, x: np.ndarray, *, floor: float = 1e-6) -> "ZScore":
+    def fit(cls, x: np.ndarray, *, floor: float = 1e-6) -> ZScore:
         """Statistics of ``x`` of shape (..., dims), accumulated in float64."""
         x2 = np.asarray(x).reshape(-1, np.asarray(x).shape[-1])
         mean = x2.mean(axis=0, dtype=np.float64)

@@ -11,6 +11,7 @@ time and compares results for several ``k``.
 Times are in seconds, motions are :class:`~gesturekit.motion.Motion` objects
 (frames, 55, 3) in metres, audio is mono float32 at 16 kHz.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -18,8 +19,8 @@ import io
 import json
 import math
 import tempfile
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -62,8 +63,9 @@ __all__ = [
 SEGMENT_COLUMNS: tuple[str, ...] = ("start_s", "end_s", "constraint")
 
 #: Every single constraint a table row can hold, as ``"name=value"`` (see :data:`gesturekit.control.CONSTRAINTS`).
-CONSTRAINT_CHOICES: tuple[str, ...] = tuple(f"{name}={value}" for name, (_, values) in CONSTRAINTS.items()
-                                            for value in values)
+CONSTRAINT_CHOICES: tuple[str, ...] = tuple(
+    f"{name}={value}" for name, (_, values) in CONSTRAINTS.items() for value in values
+)
 
 #: Example speech the app offers: label -> (seconds, seed) of a take of the generated demo speaker.
 #: The seeds are not among those of the demo database's takes, so the examples are unseen speech.
@@ -89,10 +91,16 @@ _TIME_DECIMALS = 2  # box-selected times are rounded to 10 ms
 
 # ---- the control segment table ------------------------------------------------------------------
 
+
 def empty_segments() -> pd.DataFrame:
     """A control table without rows, with the column types the editor needs."""
-    return pd.DataFrame({"start_s": pd.Series([], dtype="float64"), "end_s": pd.Series([], dtype="float64"),
-                         "constraint": pd.Series([], dtype="object")})
+    return pd.DataFrame(
+        {
+            "start_s": pd.Series([], dtype="float64"),
+            "end_s": pd.Series([], dtype="float64"),
+            "constraint": pd.Series([], dtype="object"),
+        }
+    )
 
 
 def segments_frame(track: ControlTrack) -> pd.DataFrame:
@@ -106,10 +114,16 @@ def segments_frame(track: ControlTrack) -> pd.DataFrame:
     pandas.DataFrame
         Columns :data:`SEGMENT_COLUMNS`; ``start_s`` and ``end_s`` in seconds.
     """
-    rows = [{"start_s": float(s.start_s), "end_s": float(s.end_s), "constraint": f"{n}={v}"}
-            for s in track.segments for n, v in s.constraints]
-    return pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS)).astype({"start_s": "float64", "end_s": "float64"}) \
-        if rows else empty_segments()
+    rows = [
+        {"start_s": float(s.start_s), "end_s": float(s.end_s), "constraint": f"{n}={v}"}
+        for s in track.segments
+        for n, v in s.constraints
+    ]
+    return (
+        pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS)).astype({"start_s": "float64", "end_s": "float64"})
+        if rows
+        else empty_segments()
+    )
 
 
 def _is_blank(value) -> bool:
@@ -163,8 +177,9 @@ def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack
             raise ConfigError(f"control row {i}: start_s and end_s must be numbers of seconds") from None
         text = str(r["constraint"]).strip()
         if text not in CONSTRAINT_CHOICES:
-            raise ConfigError(f"control row {i}: unknown constraint {text!r}; choose one of "
-                              f"{', '.join(CONSTRAINT_CHOICES)}")
+            raise ConfigError(
+                f"control row {i}: unknown constraint {text!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}"
+            )
         try:
             Segment(start, end, (tuple(text.split("=", 1)),))
         except ConfigError as exc:
@@ -172,8 +187,9 @@ def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack
         key = (round(start, 6), round(end, 6))
         name = text.split("=", 1)[0]
         if any(n == name for n, _ in groups.get(key, [])):
-            raise ConfigError(f"control row {i}: {name} is set twice for {start:g}-{end:g} s "
-                              f"(also in row {first_row[key]})")
+            raise ConfigError(
+                f"control row {i}: {name} is set twice for {start:g}-{end:g} s (also in row {first_row[key]})"
+            )
         groups.setdefault(key, []).append(tuple(text.split("=", 1)))
         first_row.setdefault(key, i)
     return ControlTrack(tuple(Segment(a, b, tuple(c)) for (a, b), c in groups.items()))
@@ -258,6 +274,7 @@ def selected_time_range(selection: Mapping | None, *, duration: float) -> tuple[
 
 
 # ---- speech -------------------------------------------------------------------------------------
+
 
 def example_speech(label: str) -> np.ndarray:
     """Generated example speech of the demo speaker (deterministic).
@@ -345,6 +362,7 @@ def wav_bytes(audio: np.ndarray, *, sr: int = AUDIO_SR) -> bytes:
 
 # ---- what to show ------------------------------------------------------------------------------
 
+
 def display_motions(result: SynthesisResult) -> tuple[list[Motion], list[str]]:
     """The motions to show for a result: k-NN and refined side by side when refined, else the output."""
     if result.refined_motion is not None:
@@ -354,6 +372,7 @@ def display_motions(result: SynthesisResult) -> tuple[list[Motion], list[str]]:
 
 
 # ---- exports ------------------------------------------------------------------------------------
+
 
 def export_filename(result: SynthesisResult, kind: str) -> str:
     """A safe download name, e.g. ``"speech_k0_seed0.bvh"``, from the speech's name and the settings."""
@@ -388,8 +407,12 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
         return path.read_bytes()
 
 
-def render_mp4(result: SynthesisResult, *, progress: Callable[[int, int], None] | None = None,
-               resolution: tuple[int, int] = (640, 480)) -> bytes:
+def render_mp4(
+    result: SynthesisResult,
+    *,
+    progress: Callable[[int, int], None] | None = None,
+    resolution: tuple[int, int] = (640, 480),
+) -> bytes:
     """The result as an MP4 (H.264 + AAC, the speech as soundtrack); k-NN and refined side by side if refined.
 
     Parameters
@@ -401,12 +424,14 @@ def render_mp4(result: SynthesisResult, *, progress: Callable[[int, int], None] 
     """
     with tempfile.TemporaryDirectory(prefix="gesturekit-video-") as tmp:
         path = Path(tmp) / "result.mp4"
-        result.save_video(path, progress=progress, side_by_side=result.refined_motion is not None,
-                          resolution=resolution)
+        result.save_video(
+            path, progress=progress, side_by_side=result.refined_motion is not None, resolution=resolution
+        )
         return path.read_bytes()
 
 
 # ---- the search record --------------------------------------------------------------------------
+
 
 def _source(db: MatchingDatabase, clip: int, start: int) -> tuple[str, float]:
     """Take name and time (seconds into the take) of frame ``start`` of ``clip``."""
@@ -452,26 +477,50 @@ def candidates_table(result: SynthesisResult, db: MatchingDatabase, step: int) -
     for p in np.flatnonzero(s.cand_clip[step] >= 0):
         clip, start = int(s.cand_clip[step, p]), int(s.cand_start[step, p])
         take, t = _source(db, clip, start)
-        rows.append({
-            "position": int(p), "clip": clip, "start": start, "take": take, "source_s": t,
-            "pose_dist": float(s.cand_pose_dist[step, p]), "audio_dist": float(s.cand_audio_dist[step, p]),
-            "pose_rank": int(s.cand_pose_rank[step, p]), "audio_rank": int(s.cand_audio_rank[step, p]),
-            "combined": int(s.cand_combined[step, p]), "chosen": bool(p == s.position[step]),
-        })
-    return pd.DataFrame(rows, columns=["position", "clip", "start", "take", "source_s", "pose_dist", "audio_dist",
-                                       "pose_rank", "audio_rank", "combined", "chosen"])
+        rows.append(
+            {
+                "position": int(p),
+                "clip": clip,
+                "start": start,
+                "take": take,
+                "source_s": t,
+                "pose_dist": float(s.cand_pose_dist[step, p]),
+                "audio_dist": float(s.cand_audio_dist[step, p]),
+                "pose_rank": int(s.cand_pose_rank[step, p]),
+                "audio_rank": int(s.cand_audio_rank[step, p]),
+                "combined": int(s.cand_combined[step, p]),
+                "chosen": bool(p == s.position[step]),
+            }
+        )
+    return pd.DataFrame(
+        rows,
+        columns=[
+            "position",
+            "clip",
+            "start",
+            "take",
+            "source_s",
+            "pose_dist",
+            "audio_dist",
+            "pose_rank",
+            "audio_rank",
+            "combined",
+            "chosen",
+        ],
+    )
 
 
 def candidate_motion(db: MatchingDatabase, clip: int, start: int, n_frames: int) -> Motion:
     """Frames ``start .. start + n_frames`` of a database clip (fewer at the clip's end)."""
-    g = np.asarray(db.G[int(clip), int(start): int(start) + int(n_frames)], dtype=np.float32)
+    g = np.asarray(db.G[int(clip), int(start) : int(start) + int(n_frames)], dtype=np.float32)
     if g.shape[0] == 0:
         raise ConfigError(f"clip {clip} has no frame {start}")
     return Motion.from_flat(g, db.fps)
 
 
-def segment_in_context(db: MatchingDatabase, clip: int, start: int, n_frames: int, *,
-                       context_s: float = 1.0) -> tuple[np.ndarray, float, float, float]:
+def segment_in_context(
+    db: MatchingDatabase, clip: int, start: int, n_frames: int, *, context_s: float = 1.0
+) -> tuple[np.ndarray, float, float, float]:
     """A database window's speech with up to ``context_s`` seconds of its take on either side.
 
     A step's window is short (8 frames: 0.53 s); the words around it tell
@@ -520,8 +569,9 @@ def step_speech(result: SynthesisResult, step: int) -> np.ndarray:
     return np.asarray(result.audio[a:b], dtype=np.float32)
 
 
-def compare_k(audio, *, db: MatchingDatabase, config: SynthesisConfig, ks: Sequence[int], refiner=None,
-              source: str | None = None) -> list[SynthesisResult]:
+def compare_k(
+    audio, *, db: MatchingDatabase, config: SynthesisConfig, ks: Sequence[int], refiner=None, source: str | None = None
+) -> list[SynthesisResult]:
     """Results for several ``k`` with everything else (speech, controls, pins, seed) the same.
 
     One batched search serves all (:func:`synthesize_batch`), refined by ``refiner`` if given.
@@ -584,12 +634,14 @@ def comparison_table(results: Sequence[SynthesisResult], thresholds: Mapping[str
     for r in results:
         s = r.search
         idx = np.flatnonzero(s.position >= 0)
-        rows.append({
-            "k": r.config.k,
-            "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
-            "audio_dist": float(np.mean(s.cand_audio_dist[idx, s.position[idx]])) if idx.size else float("nan"),
-            "relaxed_steps": len(r.relaxed_steps),
-            "pinned_steps": int(np.count_nonzero(s.pinned)),
-            "control_met": control_adherence(r.motion, r.control, thresholds),
-        })
+        rows.append(
+            {
+                "k": r.config.k,
+                "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
+                "audio_dist": float(np.mean(s.cand_audio_dist[idx, s.position[idx]])) if idx.size else float("nan"),
+                "relaxed_steps": len(r.relaxed_steps),
+                "pinned_steps": int(np.count_nonzero(s.pinned)),
+                "control_met": control_adherence(r.motion, r.control, thresholds),
+            }
+        )
     return pd.DataFrame(rows)

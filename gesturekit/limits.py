@@ -24,16 +24,22 @@ The values are read from the environment at each check, so a test or a
 long-running server sees a change at once; :func:`override` sets one for a
 block of code (the command line's options), in this thread or task only.
 """
+
 from __future__ import annotations
 
 import contextlib
 import contextvars
 import math
 import os
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import Iterator
+from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 from .errors import ConfigError, InputFileError, MotionFileError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "Limit",
@@ -108,7 +114,10 @@ class Limit:
         return f"set the environment variable {self.env} to change it"
 
 
-_overrides: contextvars.ContextVar[dict] = contextvars.ContextVar("gesturekit_limits", default={})
+# an immutable default: a mapping shared by every context must not be changed in place
+_overrides: contextvars.ContextVar[Mapping[str, tuple[float, str | None]]] = contextvars.ContextVar(
+    "gesturekit_limits", default=MappingProxyType({})
+)
 
 
 @contextlib.contextmanager
@@ -188,8 +197,15 @@ def describe_bytes(n: float) -> str:
     return f"{int(n)} bytes"
 
 
-def check_duration(seconds: float, *, what: str, path=None, speech: bool = False,
-                   max_seconds: float | None = None, option: str | None = None) -> None:
+def check_duration(
+    seconds: float,
+    *,
+    what: str,
+    path=None,
+    speech: bool = False,
+    max_seconds: float | None = None,
+    option: str | None = None,
+) -> None:
     """Refuse an input whose header asks for more than the duration limit.
 
     Parameters
@@ -282,8 +298,10 @@ def check_fps(fps: float, *, what: str, path=None, option: str | None = None) ->
         fps = math.nan
     if math.isfinite(fps) and lo <= fps <= hi:
         return
-    message = (f"{what} is {fps:g} fps, outside the accepted range of {lo:g}-{hi:g} fps "
-               f"(set {MIN_FPS.env} or {MAX_FPS.env} to change it)")
+    message = (
+        f"{what} is {fps:g} fps, outside the accepted range of {lo:g}-{hi:g} fps "
+        f"(set {MIN_FPS.env} or {MAX_FPS.env} to change it)"
+    )
     if path is None:
         raise ConfigError(f"{option}: {message}" if option else message)
     raise InputFileError(message, path=path)
@@ -314,7 +332,7 @@ def check_bytes(n: float, *, what: str, path=None) -> None:
     )
 
 
-def npy_header(f, *, path=None, name: str = "npy") -> tuple[tuple[int, ...], "np.dtype", int]:
+def npy_header(f, *, path=None, name: str = "npy") -> tuple[tuple[int, ...], np.dtype, int]:
     """Shape, dtype and header length of an ``.npy`` stream, read without loading the array.
 
     Parameters
@@ -355,7 +373,7 @@ def npy_header(f, *, path=None, name: str = "npy") -> tuple[tuple[int, ...], "np
     return tuple(int(n) for n in shape), dtype, offset
 
 
-def npz_headers(path) -> dict[str, tuple[tuple[int, ...], "np.dtype"]]:
+def npz_headers(path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     """Shape and dtype of every array in an ``.npz`` archive, read without loading the arrays.
 
     Parameters

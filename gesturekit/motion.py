@@ -1,4 +1,5 @@
 """Motion: joint positions with their frame rate, and a take (motion + speech)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -52,7 +53,7 @@ class Motion:
         return self.positions.reshape(self.n_frames, N_JOINTS * 3)
 
     @classmethod
-    def from_flat(cls, g: np.ndarray, fps: float) -> "Motion":
+    def from_flat(cls, g: np.ndarray, fps: float) -> Motion:
         """Motion from g vectors of shape (frames, 165)."""
         g = np.asarray(g)
         return cls(g.reshape(g.shape[0], N_JOINTS, 3), fps)
@@ -63,7 +64,7 @@ class Motion:
         d = self.positions[:, child] - self.positions[:, PARENTS[child]]
         return np.linalg.norm(d, axis=-1)
 
-    def slice(self, start: int, stop: int) -> "Motion":
+    def slice(self, start: int, stop: int) -> Motion:
         return Motion(self.positions[start:stop], self.fps)
 
 

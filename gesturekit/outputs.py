@@ -31,6 +31,7 @@ same rules hold everywhere:
   permission denied) becomes an :class:`~gesturekit.errors.OutputError` naming
   the path (:func:`write_errors`).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -42,8 +43,8 @@ import re
 import shutil
 import threading
 import zipfile
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
 
 from .errors import OutputError
 
@@ -244,12 +245,15 @@ def check_output(
             raise OutputError("is a folder, not a file; refusing to replace it", path=path)
         if not overwrite:
             raise OutputError(
-                "already exists; pass overwrite=True (--force on the command line) to replace it", path=path)
+                "already exists; pass overwrite=True (--force on the command line) to replace it", path=path
+            )
         if not path.is_file() or not _file_is_owned(path):
             what = FILE_KINDS.get(path.suffix.lower())
             raise OutputError(
                 f"is a file that gesturekit did not write{'' if what is None else f' (not {what} of gesturekit)'}; "
-                "refusing to replace it", path=path)
+                "refusing to replace it",
+                path=path,
+            )
         return True
     _marker, _fmt, name = FOLDER_KINDS[kind]
     if not path.is_dir():
@@ -265,12 +269,14 @@ def check_output(
         if not overwrite:
             raise OutputError(
                 f"{name} already exists here; pass overwrite=True (--force on the command line) to replace it",
-                path=path)
+                path=path,
+            )
         return True
     if found is not None:
         raise OutputError(f"holds {FOLDER_KINDS[found][2]}, not {name}; refusing to replace it", path=path)
     raise OutputError(
-        f"holds {_describe_contents(path)} that gesturekit did not write; refusing to replace it", path=path)
+        f"holds {_describe_contents(path)} that gesturekit did not write; refusing to replace it", path=path
+    )
 
 
 # ---- locks ------------------------------------------------------------------------------------------
@@ -313,8 +319,8 @@ def output_lock(path: str | os.PathLike) -> Iterator[None]:
             os.close(fd)
             who = f"pid {holder}" if holder.isdigit() else "pid unknown"
             raise OutputError(
-                f"another gesturekit process ({who}) is writing this output; try again when it has finished",
-                path=path) from None
+                f"another gesturekit process ({who}) is writing this output; try again when it has finished", path=path
+            ) from None
         # the file may have been removed by a holder that finished between our open and flock
         try:
             same = os.fstat(fd).st_ino == os.stat(lock).st_ino
@@ -372,8 +378,7 @@ def clean_stale(path: str | os.PathLike, *, own: bool = False) -> list[Path]:
     if not folder.is_dir():
         return []
     name = re.escape(path.name)
-    pattern = re.compile(
-        rf"^(?:\.{name}\.(?:tmp|old)-(\d+)|\.{re.escape(path.name[:64])}\.(\d+)-[0-9a-f]+\.tmp)$")
+    pattern = re.compile(rf"^(?:\.{name}\.(?:tmp|old)-(\d+)|\.{re.escape(path.name[:64])}\.(\d+)-[0-9a-f]+\.tmp)$")
     stale = []
     for entry in folder.iterdir():
         m = pattern.match(entry.name)

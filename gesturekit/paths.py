@@ -1,5 +1,6 @@
 """Where gesturekit keeps what it generates itself (the demo database, its refiner), and which
 folders a served app may read and write (:func:`allowed_roots`, :func:`check_allowed`)."""
+
 from __future__ import annotations
 
 import os

@@ -10,6 +10,7 @@ The body joints do not include the pelvis itself: pelvis-relative positions
 would make it the constant origin. ``spine_mid`` is therefore a root of the
 joint tree (parent ``-1``); its offset from the pelvis is implicit.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -52,9 +53,7 @@ BODY_JOINTS: tuple[tuple[str, str | None], ...] = (
 FINGERS = ("thumb", "index", "middle", "ring", "pinky")
 
 #: Suffixes of the 21 joints of one hand, in order: wrist, then finger joints 1 (root) .. 4 (tip).
-HAND_JOINT_SUFFIXES: tuple[str, ...] = ("wrist",) + tuple(
-    f"{finger}{i}" for finger in FINGERS for i in range(1, 5)
-)
+HAND_JOINT_SUFFIXES: tuple[str, ...] = ("wrist",) + tuple(f"{finger}{i}" for finger in FINGERS for i in range(1, 5))
 
 
 def _build() -> tuple[tuple[str, ...], np.ndarray]:
@@ -80,8 +79,14 @@ assert N_JOINTS == 55 and np.all(PARENTS < np.arange(N_JOINTS)), "parents must p
 
 #: The 8 joints of the pose feature: left/right elbow, wrist, index root, little-finger root.
 POSE_FEATURE_JOINTS: tuple[str, ...] = (
-    "left_elbow", "left_wrist", "left_index1", "left_pinky1",
-    "right_elbow", "right_wrist", "right_index1", "right_pinky1",
+    "left_elbow",
+    "left_wrist",
+    "left_index1",
+    "left_pinky1",
+    "right_elbow",
+    "right_wrist",
+    "right_index1",
+    "right_pinky1",
 )
 
 

@@ -28,6 +28,7 @@ Rendering runs in parallel: on all cores by default (a process pool), or on a
 Dask distributed cluster given its scheduler address (or a
 ``distributed.Client``); both give the same files.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -38,9 +39,9 @@ import os
 import re
 import subprocess
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -118,8 +119,8 @@ def balanced_latin_square(n: int) -> np.ndarray:
 
 @dataclass
 class _Plan:
-    conditions: "pd.DataFrame"  # noqa: F821
-    order: "pd.DataFrame"  # noqa: F821
+    conditions: pd.DataFrame  # noqa: F821
+    order: pd.DataFrame  # noqa: F821
 
 
 def plan_stimuli(
@@ -168,8 +169,18 @@ def plan_stimuli(
         raise ConfigError("two stimuli got the same id; choose another seed")
     syn_seed = seed if synthesis_seed is None else int(synthesis_seed)
     conditions = pd.DataFrame(
-        [{"id": ids[(a, s)], "file": f"videos/{ids[(a, s)]}.mp4", "audio": a, "system": s,
-          "controls": controls or "none", "seed": syn_seed} for a in speeches for s in systems]
+        [
+            {
+                "id": ids[(a, s)],
+                "file": f"videos/{ids[(a, s)]}.mp4",
+                "audio": a,
+                "system": s,
+                "controls": controls or "none",
+                "seed": syn_seed,
+            }
+            for a in speeches
+            for s in systems
+        ]
     )
     sq_sys, sq_sp = balanced_latin_square(len(systems)), balanced_latin_square(len(speeches))
     if participants is None:
@@ -186,8 +197,15 @@ def plan_stimuli(
             speech = speeches[perm_sp[a_idx]]
             for position, s_idx in enumerate(sq_sys[(p + trial) % len(sq_sys)]):
                 slot += 1
-                rows.append({"participant": p + 1, "trial": trial + 1, "position": position + 1, "slot": slot,
-                             "id": ids[(speech, systems[perm_sys[s_idx]])]})
+                rows.append(
+                    {
+                        "participant": p + 1,
+                        "trial": trial + 1,
+                        "position": position + 1,
+                        "slot": slot,
+                        "id": ids[(speech, systems[perm_sys[s_idx]])],
+                    }
+                )
     return _Plan(conditions, pd.DataFrame(rows, columns=["participant", "trial", "position", "slot", "id"]))
 
 
@@ -208,19 +226,39 @@ def measure_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR) -> float:
     if a.ndim != 1 or a.size == 0:
         raise ConfigError(f"audio must be mono samples, shape (samples,), got {a.shape}")
     run = subprocess.run(
-        [_ffmpeg(), "-hide_banner", "-nostdin", "-f", "f32le", "-ar", str(int(sr)), "-ac", "1", "-i", "pipe:0",
-         "-af", "ebur128=framelog=quiet", "-f", "null", "-"],
-        input=a.tobytes(), capture_output=True,
+        [
+            _ffmpeg(),
+            "-hide_banner",
+            "-nostdin",
+            "-f",
+            "f32le",
+            "-ar",
+            str(int(sr)),
+            "-ac",
+            "1",
+            "-i",
+            "pipe:0",
+            "-af",
+            "ebur128=framelog=quiet",
+            "-f",
+            "null",
+            "-",
+        ],
+        input=a.tobytes(),
+        capture_output=True,
     )
     m = _LOUDNESS_RE.search(run.stderr.decode("utf-8", "replace"))
     if run.returncode != 0 or m is None:
-        raise GestureKitError("ffmpeg could not measure the loudness of the speech: "
-                              + run.stderr.decode("utf-8", "replace").strip()[-300:])
+        raise GestureKitError(
+            "ffmpeg could not measure the loudness of the speech: "
+            + run.stderr.decode("utf-8", "replace").strip()[-300:]
+        )
     return -70.0 if m.group(1) == "-inf" else float(m.group(1))
 
 
-def normalise_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR, target_lufs: float = -23.0,
-                       peak: float = 0.98) -> tuple[np.ndarray, float]:
+def normalise_loudness(
+    audio: np.ndarray, *, sr: int = AUDIO_SR, target_lufs: float = -23.0, peak: float = 0.98
+) -> tuple[np.ndarray, float]:
     """Scale speech to an integrated loudness, never past a sample peak.
 
     Parameters
@@ -331,8 +369,15 @@ def _render_stimulus(job: dict) -> str:
 
     motion = Motion(job["positions"], job["fps"])
     # one process per stimulus already keeps every core busy
-    render_video(job["path"], motion, audio=job["audio"], resolution=tuple(job["resolution"]), workers=1,
-                 overwrite=True, style=stimulus_style())
+    render_video(
+        job["path"],
+        motion,
+        audio=job["audio"],
+        resolution=tuple(job["resolution"]),
+        workers=1,
+        overwrite=True,
+        style=stimulus_style(),
+    )
     return job["id"]
 
 
@@ -372,8 +417,7 @@ def _run_jobs(jobs: list[dict], *, workers: int | None, scheduler, progress) -> 
 
     # fresh interpreters: no rendering or threading state is inherited from the caller
     try:
-        with cf.ProcessPoolExecutor(max_workers=min(n, total),
-                                    mp_context=multiprocessing.get_context("spawn")) as pool:
+        with cf.ProcessPoolExecutor(max_workers=min(n, total), mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = [pool.submit(_render_stimulus, job) for job in jobs]
             for fut in cf.as_completed(futures):
                 fut.result()
@@ -381,7 +425,7 @@ def _run_jobs(jobs: list[dict], *, workers: int | None, scheduler, progress) -> 
     except cf.process.BrokenProcessPool:
         raise GestureKitError(
             "a rendering process died; if make_stimuli is called from a script, put the call under "
-            "`if __name__ == \"__main__\":` (worker processes import the main script), or pass workers=1"
+            '`if __name__ == "__main__":` (worker processes import the main script), or pass workers=1'
         ) from None
 
 
@@ -404,8 +448,8 @@ class StudyResult:
     """
 
     folder: Path
-    manifest: "pd.DataFrame"  # noqa: F821
-    order: "pd.DataFrame"  # noqa: F821
+    manifest: pd.DataFrame  # noqa: F821
+    order: pd.DataFrame  # noqa: F821
     videos: list = field(default_factory=list)
     settings: dict = field(default_factory=dict)
 
@@ -508,13 +552,48 @@ def make_stimuli(
     with output_lock(out):
         check_output(out, "study", overwrite=overwrite, inputs=[getattr(db, "path", None), *audio])
         return _make_stimuli_locked(
-            db, out=out, audio=audio, holdouts=holdouts, systems=systems, seed=seed, participants=participants,
-            track=track, config=config, refiner=refiner, refiner_name=refiner_name, width=width, height=height,
-            loudness_lufs=loudness_lufs, workers=workers, scheduler=scheduler, progress=progress, t0=t0)
+            db,
+            out=out,
+            audio=audio,
+            holdouts=holdouts,
+            systems=systems,
+            seed=seed,
+            participants=participants,
+            track=track,
+            config=config,
+            refiner=refiner,
+            refiner_name=refiner_name,
+            width=width,
+            height=height,
+            loudness_lufs=loudness_lufs,
+            workers=workers,
+            scheduler=scheduler,
+            progress=progress,
+            t0=t0,
+        )
 
 
-def _make_stimuli_locked(db, *, out, audio, holdouts, systems, seed, participants, track, config, refiner,
-                         refiner_name, width, height, loudness_lufs, workers, scheduler, progress, t0):
+def _make_stimuli_locked(
+    db,
+    *,
+    out,
+    audio,
+    holdouts,
+    systems,
+    seed,
+    participants,
+    track,
+    config,
+    refiner,
+    refiner_name,
+    width,
+    height,
+    loudness_lufs,
+    workers,
+    scheduler,
+    progress,
+    t0,
+):
     """:func:`make_stimuli` once the study folder is checked and locked."""
     from .evaluate.baselines import SystemUnavailable, run_system
     from .outputs import write_errors
@@ -525,11 +604,19 @@ def _make_stimuli_locked(db, *, out, audio, holdouts, systems, seed, participant
     if "gt" in systems:
         missing = [s.name for s in speeches if s.gt is None]
         if missing:
-            raise SystemUnavailable(f"gt needs recorded motion, which only held-out parts of the database have "
-                                    f"(--holdout TAKE:START-END); none for {', '.join(missing)}")
+            raise SystemUnavailable(
+                f"gt needs recorded motion, which only held-out parts of the database have "
+                f"(--holdout TAKE:START-END); none for {', '.join(missing)}"
+            )
     base = config or SynthesisConfig(seed=int(seed))
-    plan = plan_stimuli([s.name for s in speeches], systems, seed=seed, participants=participants,
-                        controls=track.to_text(), synthesis_seed=base.seed)
+    plan = plan_stimuli(
+        [s.name for s in speeches],
+        systems,
+        seed=seed,
+        participants=participants,
+        controls=track.to_text(),
+        synthesis_seed=base.seed,
+    )
     with write_errors(out):
         (out / "videos").mkdir(parents=True, exist_ok=True)
         if not study_path.exists():
@@ -541,16 +628,30 @@ def _make_stimuli_locked(db, *, out, audio, holdouts, systems, seed, participant
     ids = dict(zip(zip(plan.conditions["audio"], plan.conditions["system"]), plan.conditions["id"]))
     n_total, n_done = len(speeches) * len(systems), 0
     for sp in speeches:
-        cfg = SynthesisConfig.from_dict({**base.to_dict(), "control": "", "pins": {},
-                                         "exclude_takes": list(sp.exclude_takes),
-                                         "exclude_ranges": [list(r) for r in sp.exclude_ranges]})
+        cfg = SynthesisConfig.from_dict(
+            {
+                **base.to_dict(),
+                "control": "",
+                "pins": {},
+                "exclude_takes": list(sp.exclude_takes),
+                "exclude_ranges": [list(r) for r in sp.exclude_ranges],
+            }
+        )
         sound, _ = normalise_loudness(sp.audio, target_lufs=loudness_lufs)
         durations[sp.name] = len(sp.audio) / AUDIO_SR
         for system in systems:
             res = run_system(system, db=db, audio=sp.audio, config=cfg, control=track, gt=sp.gt, refiner=refiner)
             sid = ids[(sp.name, system)]
-            jobs.append({"id": sid, "path": str(out / "videos" / f"{sid}.mp4"), "positions": res.motion.positions,
-                         "fps": float(res.motion.fps), "audio": sound, "resolution": (width, height)})
+            jobs.append(
+                {
+                    "id": sid,
+                    "path": str(out / "videos" / f"{sid}.mp4"),
+                    "positions": res.motion.positions,
+                    "fps": float(res.motion.fps),
+                    "audio": sound,
+                    "resolution": (width, height),
+                }
+            )
             n_done += 1
             if progress is not None:
                 progress("synthesis", n_done, n_total)
@@ -565,8 +666,12 @@ def _make_stimuli_locked(db, *, out, audio, holdouts, systems, seed, participant
             if isinstance(f, str) and f not in keep and re.fullmatch(r"videos/[0-9a-f]+\.mp4", f):
                 (out / f).unlink(missing_ok=True)
 
-    _run_jobs(jobs, workers=workers, scheduler=scheduler,
-              progress=None if progress is None else (lambda d, t: progress("rendering", d, t)))
+    _run_jobs(
+        jobs,
+        workers=workers,
+        scheduler=scheduler,
+        progress=None if progress is None else (lambda d, t: progress("rendering", d, t)),
+    )
 
     manifest = plan.conditions.copy()
     manifest["duration_s"] = [round(durations[a], 6) for a in manifest["audio"]]

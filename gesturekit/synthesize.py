@@ -6,6 +6,7 @@ record (every step's chosen clip and top-K candidates) and the configuration
 that made it, with methods to export npz, BVH and MP4. :func:`synthesize_batch`
 searches several speeches together, scanning the database once per step.
 """
+
 from __future__ import annotations
 
 import numbers
@@ -16,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._version import __version__
 from ._config import config_from_dict, config_to_dict
+from ._version import __version__
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control
 from .database import MatchingDatabase, normalise_exclusions
@@ -91,9 +92,19 @@ class SynthesisConfig:
     exclude_ranges: tuple = ()
     refiner_keep_hz: float = KEEP_BELOW_HZ
 
-    def __init__(self, search: SearchConfig | None = None, *, init: str = "random", blend: str = "none",
-                 blend_frames: int = 4, control: str | ControlTrack = "", exclude_takes=(), exclude_ranges=(),
-                 refiner_keep_hz: float = KEEP_BELOW_HZ, **search_options):
+    def __init__(
+        self,
+        search: SearchConfig | None = None,
+        *,
+        init: str = "random",
+        blend: str = "none",
+        blend_frames: int = 4,
+        control: str | ControlTrack = "",
+        exclude_takes=(),
+        exclude_ranges=(),
+        refiner_keep_hz: float = KEEP_BELOW_HZ,
+        **search_options,
+    ):
         unknown = set(search_options) - set(SEARCH_OPTIONS)
         if unknown:
             raise ConfigError(f"unknown synthesis options: {', '.join(sorted(unknown))}")
@@ -103,8 +114,9 @@ class SynthesisConfig:
         if search_options:
             search = replace(search, **search_options)
         if search.init_pose != "random":
-            raise ConfigError("the initial pose of a synthesis is chosen by init ('random' or 'rest'), "
-                              "not by search.init_pose")
+            raise ConfigError(
+                "the initial pose of a synthesis is chosen by init ('random' or 'rest'), not by search.init_pose"
+            )
         hz = refiner_keep_hz
         if isinstance(hz, bool) or not isinstance(hz, numbers.Real) or not (np.isfinite(hz) and hz >= 0):
             raise ConfigError(f"refiner_keep_hz must be a frequency >= 0 (0: off), got {hz!r}")
@@ -116,9 +128,17 @@ class SynthesisConfig:
             raise ConfigError(f"blend_frames must be a positive integer, got {blend_frames!r}")
         track = control if isinstance(control, ControlTrack) else parse_control(control)  # validates
         takes, ranges = normalise_exclusions(exclude_takes, exclude_ranges)
-        for name, value in (("search", search), ("init", init), ("blend", blend), ("blend_frames", blend_frames),
-                            ("control", track.to_text()), ("exclude_takes", takes), ("exclude_ranges", ranges),
-                            ("refiner_keep_hz", float(hz)), ("_track", track)):
+        for name, value in (
+            ("search", search),
+            ("init", init),
+            ("blend", blend),
+            ("blend_frames", blend_frames),
+            ("control", track.to_text()),
+            ("exclude_takes", takes),
+            ("exclude_ranges", ranges),
+            ("refiner_keep_hz", float(hz)),
+            ("_track", track),
+        ):
             object.__setattr__(self, name, value)
 
     # the search's options, read through ``search`` (one source of truth)
@@ -147,7 +167,7 @@ class SynthesisConfig:
         return out
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "SynthesisConfig":
+    def from_dict(cls, d: Mapping) -> SynthesisConfig:
         """Inverse of :meth:`to_dict`; also reads a nested ``"search"`` object.
 
         Raises
@@ -183,13 +203,13 @@ class SynthesisConfig:
                 out.append(f"{form.format(value)} (paper {paper_text})")
         return out
 
-    def with_pin(self, step: int, clip: int, start: int) -> "SynthesisConfig":
+    def with_pin(self, step: int, clip: int, start: int) -> SynthesisConfig:
         """A copy with one more pinned choice (replacing any pin at that step)."""
         pins = dict(self.pins)
         pins[int(step)] = (int(clip), int(start))
         return replace(self, pins=pins)
 
-    def without_pin(self, step: int) -> "SynthesisConfig":
+    def without_pin(self, step: int) -> SynthesisConfig:
         pins = {i: v for i, v in self.pins.items() if i != int(step)}
         return replace(self, pins=pins)
 
@@ -305,7 +325,8 @@ class SynthesisResult:
                 verb = "produced" if who == "the refiner" else "holds"
                 raise GestureKitError(
                     f"not written: {who} {verb} NaN or infinite positions (from frame {int(np.argmax(bad))} on)",
-                    path=path)
+                    path=path,
+                )
 
     def save_npz(self, path, *, overwrite: bool = False) -> Path:
         """npz with positions (the final motion), fps, knn_positions, the search record and the config."""
@@ -326,17 +347,27 @@ class SynthesisResult:
         self.check_finite(path)
         return write_bvh(path, self.motion, overwrite=overwrite, units=units)
 
-    def save_video(self, path, *, overwrite: bool = False, progress=None, side_by_side: bool = False, resolution=(640, 480)) -> Path:
+    def save_video(
+        self, path, *, overwrite: bool = False, progress=None, side_by_side: bool = False, resolution=(640, 480)
+    ) -> Path:
         """MP4 of the skeleton with the speech (h264 + aac); k-NN and refined side by side if asked."""
         from .export.video import render_video
 
         self.check_finite(path)
         if side_by_side and self.refined_motion is not None:
-            return render_video(path, self.knn_motion, audio=self.audio, side_by_side=self.refined_motion,
-                                labels=("k-NN", "k-NN + refiner"), overwrite=overwrite, progress=progress,
-                                resolution=resolution)
-        return render_video(path, self.motion, audio=self.audio, overwrite=overwrite, progress=progress,
-                            resolution=resolution)
+            return render_video(
+                path,
+                self.knn_motion,
+                audio=self.audio,
+                side_by_side=self.refined_motion,
+                labels=("k-NN", "k-NN + refiner"),
+                overwrite=overwrite,
+                progress=progress,
+                resolution=resolution,
+            )
+        return render_video(
+            path, self.motion, audio=self.audio, overwrite=overwrite, progress=progress, resolution=resolution
+        )
 
 
 def _index(db: MatchingDatabase) -> SearchIndex:
@@ -468,8 +499,9 @@ def synthesize_batch(
         exclude=plans[0].exclude,
         fps=db.fps,
     )
-    out = [_finish(db, r, plan, samples, name, c)
-           for r, plan, (samples, name), c in zip(results, plans, speeches, configs)]
+    out = [
+        _finish(db, r, plan, samples, name, c) for r, plan, (samples, name), c in zip(results, plans, speeches, configs)
+    ]
     if refiner is not None:
         for res in out:
             _refine(db, res, refiner)
@@ -487,8 +519,10 @@ def _provenance(refiner, db) -> dict | None:
         return None
     if not trained_on(config, db):
         name = db.label or (db.path.name if db.path is not None else "this database")
-        warn(f"refiner {path} was trained on {describe_training(config)}, not on {name}: "
-             "its output may not suit this database (train one on it with `gesturekit train-refiner --db ...`)")
+        warn(
+            f"refiner {path} was trained on {describe_training(config)}, not on {name}: "
+            "its output may not suit this database (train one on it with `gesturekit train-refiner --db ...`)"
+        )
     return provenance(path, config)
 
 

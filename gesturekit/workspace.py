@@ -12,12 +12,13 @@ One place for what both front ends do with the folders a user names:
 
 Nothing here draws or prints; progress is reported through callbacks.
 """
+
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Iterable
 
 from .database import BuildConfig, MatchingDatabase
 from .datasets.takes import AUDIO_EXTENSIONS, count_takes, discover_takes, iter_takes
@@ -62,8 +63,7 @@ def is_generated(db: MatchingDatabase) -> bool:
     if str(db.meta.get("build", {}).get("source", "")).startswith("demo"):
         return True
     return any(
-        str(t.get("sources", {}).get("generator", "")).startswith(_GENERATOR_MODULE)
-        for t in db.meta.get("takes", [])
+        str(t.get("sources", {}).get("generator", "")).startswith(_GENERATOR_MODULE) for t in db.meta.get("takes", [])
     )
 
 
@@ -147,8 +147,9 @@ def build_database(
     sources = discover_takes(folder, kind=kind)
     jmap = _read_joint_map(joint_map, {s.kind for s in sources})
     total = count_takes(sources)
-    config = replace(config or BuildConfig(), source=str(folder.resolve()),
-                     joint_map=None if joint_map is None else str(joint_map))
+    config = replace(
+        config or BuildConfig(), source=str(folder.resolve()), joint_map=None if joint_map is None else str(joint_map)
+    )
 
     def on_take(done: int, name: str) -> None:
         if progress is not None:

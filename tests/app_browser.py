@@ -12,6 +12,7 @@ used. The server runs from the repository root (so it reads the app's
 with ``GESTUREKIT_HOME`` in a folder of the caller's choosing, so it never
 touches the user's databases.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,8 +25,8 @@ import sys
 import tempfile
 import time
 import urllib.request
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 REPO = Path(__file__).resolve().parents[1]
 HOME_SCRIPT = REPO / "app" / "Home.py"
@@ -35,8 +36,14 @@ CHROMIUM_PATHS = ("/usr/bin/chromium", "/usr/lib/chromium/chromium", "/usr/bin/c
 
 #: Flags for a headless Chromium that reaches nothing but the app.
 CHROMIUM_FLAGS = (
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
 )
 
 #: Seconds to wait for the server, a page, or a result.
@@ -89,20 +96,39 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
     if demo_minutes is not None:
         env["GESTUREKIT_DEMO_MINUTES"] = f"{demo_minutes:g}"
     log = log or Path(home) / "streamlit.log"
-    cmd = [sys.executable, "-m", "streamlit", "run", str(HOME_SCRIPT), "--server.address", "127.0.0.1",
-           "--server.port", str(port), "--server.headless", "true", "--browser.gatherUsageStats", "false",
-           "--server.fileWatcherType", "none", "--global.developmentMode", "false"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "streamlit",
+        "run",
+        str(HOME_SCRIPT),
+        "--server.address",
+        "127.0.0.1",
+        "--server.port",
+        str(port),
+        "--server.headless",
+        "true",
+        "--browser.gatherUsageStats",
+        "false",
+        "--server.fileWatcherType",
+        "none",
+        "--global.developmentMode",
+        "false",
+    ]
     with open(log, "wb") as out:
         # from the repository root, as a user starts it: Streamlit reads ./.streamlit/config.toml
         # (the viewer toolbar, error details kept to the log), so the tests see what a user sees
-        proc = subprocess.Popen(cmd, env=env, cwd=str(REPO), stdout=out, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL)
+        proc = subprocess.Popen(
+            cmd, env=env, cwd=str(REPO), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+        )
     url = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + TIMEOUT_S
         while True:
             if proc.poll() is not None:
-                raise RuntimeError(f"streamlit exited with {proc.returncode}:\n{log.read_text(errors='replace')[-3000:]}")
+                raise RuntimeError(
+                    f"streamlit exited with {proc.returncode}:\n{log.read_text(errors='replace')[-3000:]}"
+                )
             try:
                 with urllib.request.urlopen(f"{url}/_stcore/health", timeout=2) as r:
                     if r.status == 200:
@@ -110,8 +136,9 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
             except OSError:
                 pass
             if time.monotonic() > deadline:
-                raise RuntimeError(f"streamlit did not answer within {TIMEOUT_S} s:\n"
-                                   f"{log.read_text(errors='replace')[-3000:]}")
+                raise RuntimeError(
+                    f"streamlit did not answer within {TIMEOUT_S} s:\n{log.read_text(errors='replace')[-3000:]}"
+                )
             time.sleep(0.2)
         yield url
     finally:
@@ -201,8 +228,7 @@ def synthesize_ready(page) -> None:
     page.get_by_role("button", name="Run", exact=True).wait_for()
 
 
-def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_hands=high",
-               tries: int = 3) -> None:
+def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_hands=high", tries: int = 3) -> None:
     """Drag across the waveform chart (the first chart of the Synthesize page) between two fractions
     of its plot area's width, and wait until the band ``label`` of the new segment is drawn on it.
 
@@ -241,7 +267,7 @@ def run_and_wait(page) -> None:
 
 def skeleton_canvas(page, key: str):
     """The canvas of the skeleton viewer with key ``key`` (gesturekit.viz.viewer), once it has drawn."""
-    frame = page.frame_locator(f'iframe[srcdoc*=\'data-key="{key}"\']')
+    frame = page.frame_locator(f"iframe[srcdoc*='data-key=\"{key}\"']")
     frame.locator('body[data-drawn="1"]').wait_for(state="attached")
     canvas = frame.locator("canvas#c")
     canvas.wait_for(state="visible")
@@ -274,7 +300,7 @@ def problems(page) -> list[str]:
     out = [e.inner_text() for e in page.locator('[data-testid="stException"]').all()]
     body = page.inner_text("body")
     if "Traceback" in body:
-        out.append(body[body.index("Traceback"):][:2000])
+        out.append(body[body.index("Traceback") :][:2000])
     return out
 
 
@@ -287,7 +313,8 @@ def _fit_viewport(page, *, width: int = 1440, most: int = 6000) -> None:
     page.set_viewport_size({"width": width, "height": 1000})
     height = page.evaluate(
         "() => { const m = document.querySelector('[data-testid=\"stMain\"]');"
-        " return m ? m.scrollHeight : document.documentElement.scrollHeight; }")
+        " return m ? m.scrollHeight : document.documentElement.scrollHeight; }"
+    )
     page.set_viewport_size({"width": width, "height": int(min(max(height, 600), most))})
     wait_idle(page)
 
@@ -306,9 +333,12 @@ def screenshot(page, path: Path) -> Path:
 def viewer_screenshot(page, key: str, path: Path, *, at: float = 0.4) -> Path:
     """Save a PNG of the 3D view with key ``key`` alone, showing the frame ``at`` of the way through."""
     view = viewer_frame(page, key)
-    view.evaluate("""(at) => { const s = document.getElementById("s");
-        s.value = String(Math.round(at * Number(s.max))); s.dispatchEvent(new Event("input")); }""", at)
-    element = page.locator(f'iframe[srcdoc*=\'data-key="{key}"\']').first
+    view.evaluate(
+        """(at) => { const s = document.getElementById("s");
+        s.value = String(Math.round(at * Number(s.max))); s.dispatchEvent(new Event("input")); }""",
+        at,
+    )
+    element = page.locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
     element.scroll_into_view_if_needed()
     page.wait_for_timeout(300)
     part = path.with_name(f".{path.name}.part")
@@ -326,8 +356,11 @@ def make_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 
     """
     shots = []
     with _result_page(out, seconds=seconds, demo_minutes=demo_minutes, box=(0.3, 0.55)) as page:
-        for name, title in (("synthesize", None), ("retrieval_inspector", "Retrieval inspector"),
-                            ("database", "Database")):
+        for name, title in (
+            ("synthesize", None),
+            ("retrieval_inspector", "Retrieval inspector"),
+            ("database", "Database"),
+        ):
             if title is not None:
                 go_to(page, title)
             if problems(page):

@@ -6,6 +6,7 @@ and says what is wrong, no traceback, and nothing that existed before changed.
 case would cost a second of imports each); an exception that escapes ``main``
 is turned into the traceback a user would have seen, so the assertions catch it.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -65,8 +66,9 @@ def snapshot(*roots: str | os.PathLike) -> dict[str, tuple]:
     return state
 
 
-def assert_refused(run: CliRun, *, names: str | os.PathLike | None, problem: str | tuple[str, ...],
-                   before: dict | None = None) -> None:
+def assert_refused(
+    run: CliRun, *, names: str | os.PathLike | None, problem: str | tuple[str, ...], before: dict | None = None
+) -> None:
     """Assert a clean failure.
 
     Parameters

@@ -1,4 +1,5 @@
 """Shared fixtures: the read-only test data beside the repository, tiny generated takes."""
+
 from __future__ import annotations
 
 import os

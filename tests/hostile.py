@@ -4,6 +4,7 @@ Each writes a small file whose header asks for far more than the file holds
 (a 1 Hz WAV, a BVH frame time of 100000 s, an npy header claiming a terabyte),
 or a valid recording cut short. Speech is generated here, never copied in.
 """
+
 from __future__ import annotations
 
 import json
@@ -33,14 +34,23 @@ def speech_like(seconds: float, rate: int = SR, seed: int = 0) -> np.ndarray:
     return (0.5 * x / np.max(np.abs(x))).astype(np.float32)
 
 
-def wav_with_header(path: Path, *, rate: int, n_samples: int = 8000, channels: int = 1,
-                    declared_bytes: int | None = None) -> Path:
+def wav_with_header(
+    path: Path, *, rate: int, n_samples: int = 8000, channels: int = 1, declared_bytes: int | None = None
+) -> Path:
     """A 16-bit PCM WAV of ``n_samples`` noise samples whose header states ``rate`` (and a data size)."""
     data = (np.random.default_rng(1).standard_normal(n_samples * channels) * 3000).astype("<i2").tobytes()
     size = len(data) if declared_bytes is None else declared_bytes
     fmt = struct.pack("<IHHIIHH", 16, 1, channels, rate % 2**32, (rate * 2 * channels) % 2**32, 2 * channels, 16)
-    path.write_bytes(b"RIFF" + struct.pack("<I", (36 + size) % 2**32) + b"WAVE" + b"fmt " + fmt
-                     + b"data" + struct.pack("<I", size) + data)
+    path.write_bytes(
+        b"RIFF"
+        + struct.pack("<I", (36 + size) % 2**32)
+        + b"WAVE"
+        + b"fmt "
+        + fmt
+        + b"data"
+        + struct.pack("<I", size)
+        + data
+    )
     return path
 
 
@@ -50,10 +60,10 @@ def flac_declaring(path: Path, total_samples: int, seconds: float = 2.0) -> Path
     raw = bytearray(path.read_bytes())
     assert raw[:4] == b"fLaC" and raw[4] & 0x7F == 0  # the first metadata block is STREAMINFO
     # STREAMINFO bytes 10..17 (from its start at 8): 20 bits rate, 3 channels-1, 5 bps-1, 36 total samples
-    field = int.from_bytes(raw[8 + 10: 8 + 18], "big")
+    field = int.from_bytes(raw[8 + 10 : 8 + 18], "big")
     field = (field & ~((1 << 36) - 1)) | (total_samples & ((1 << 36) - 1))
-    raw[8 + 10: 8 + 18] = field.to_bytes(8, "big")
-    raw[8 + 18: 8 + 34] = bytes(16)  # MD5 0: unknown, so decoders do not check it
+    raw[8 + 10 : 8 + 18] = field.to_bytes(8, "big")
+    raw[8 + 18 : 8 + 34] = bytes(16)  # MD5 0: unknown, so decoders do not check it
     path.write_bytes(bytes(raw))
     return path
 
@@ -71,9 +81,12 @@ def encoded(folder: Path, seconds: float = 20.0) -> dict[str, Path]:
     sf.write(src, speech_like(seconds), SR, subtype="PCM_16")
     out = {"wav": src, "flac": folder / "speech.flac"}
     sf.write(out["flac"], speech_like(seconds), SR, format="FLAC")
-    for name, args in (("ogg", ("-c:a", "libvorbis")), ("opus", ("-c:a", "libopus")),
-                       ("mp3", ("-c:a", "libmp3lame", "-write_xing", "0")),
-                       ("xing.mp3", ("-c:a", "libmp3lame"))):
+    for name, args in (
+        ("ogg", ("-c:a", "libvorbis")),
+        ("opus", ("-c:a", "libopus")),
+        ("mp3", ("-c:a", "libmp3lame", "-write_xing", "0")),
+        ("xing.mp3", ("-c:a", "libmp3lame")),
+    ):
         dst = folder / f"speech.{name}" if name != "opus" else folder / "speech.opus.ogg"
         ffmpeg("-i", src, *args, dst)
         out[name] = dst
@@ -93,8 +106,16 @@ def cut(src: Path, dst: Path, fraction: float) -> Path:
 MARK = 4321.5  # a channel value replaced in the text by the hostile one
 
 
-def bvh_take(folder: Path, name: str = "take", *, frame_time: str = "0.0333333333", frames: str | None = None,
-             marks: dict[tuple[int, int], str] | None = None, n_frames: int = 30, audio: bool = True) -> Path:
+def bvh_take(
+    folder: Path,
+    name: str = "take",
+    *,
+    frame_time: str = "0.0333333333",
+    frames: str | None = None,
+    marks: dict[tuple[int, int], str] | None = None,
+    n_frames: int = 30,
+    audio: bool = True,
+) -> Path:
     """A ZEGGS-named BVH take (and its speech) in ``folder``; returns the BVH path.
 
     ``marks`` puts text (``"1e300"``) in place of channel values at (frame, column).
@@ -102,7 +123,7 @@ def bvh_take(folder: Path, name: str = "take", *, frame_time: str = "0.033333333
     folder.mkdir(parents=True, exist_ok=True)
     joints = zeggs_like_skeleton()
     values = random_values(joints, n_frames, np.random.default_rng(0))
-    for (f, c) in (marks or {}):
+    for f, c in marks or {}:
         values[f, c] = MARK
     text = bvh_text(joints, values, frame_time=1 / 30, frames_header=frames)
     text = text.replace("Frame Time: 0.0333333333", f"Frame Time: {frame_time}")

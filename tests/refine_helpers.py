@@ -1,4 +1,5 @@
 """What the refiner tests share: a tiny model size and one torch thread per test module."""
+
 import pytest
 import torch
 

@@ -1,4 +1,5 @@
 """The app shell (Home, sidebar) and the Database page, run headless with Streamlit's AppTest."""
+
 from __future__ import annotations
 
 import shutil
@@ -13,7 +14,8 @@ from gesturekit.datasets.synthetic import DEMO_LABEL
 from gesturekit.demo import build_demo_database
 from gesturekit.skeleton import bones
 
-from .conftest import chart_spec as _chart, plotly_array as _array, viewer
+from .conftest import chart_spec as _chart
+from .conftest import viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 DATABASE_PAGE = "views/3_Database.py"
@@ -65,7 +67,11 @@ def test_home_opens_the_demo_database_and_labels_it_generated(app_env):
     assert any("Habibie" in m.value for m in at.markdown)
     assert any(str(app_env / "db" / "demo") in m.value for m in at.markdown)
     assert [link.proto.label for link in at.get("page_link")] == [
-        "Synthesize", "Retrieval inspector", "Database", "Study stimuli"]
+        "Synthesize",
+        "Retrieval inspector",
+        "Database",
+        "Study stimuli",
+    ]
 
 
 def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):
@@ -89,8 +95,11 @@ def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):
     assert skel["up"] == [0, 1, 0]
     np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 0), atol=1e-6)
     # the clip's speech plays in the viewer, on its clock: no separate player
-    np.testing.assert_allclose(skel["audio"][:db.clip_frames * 16000 // 15],
-                               db.segment_audio(0, 0, db.clip_frames)[:db.clip_frames * 16000 // 15], atol=1e-4)
+    np.testing.assert_allclose(
+        skel["audio"][: db.clip_frames * 16000 // 15],
+        db.segment_audio(0, 0, db.clip_frames)[: db.clip_frames * 16000 // 15],
+        atol=1e-4,
+    )
     assert len(at.get("audio")) == 0
     # the clip's attributes, each with its unit
     (attrs,) = [d for d in at.dataframe if "clip mean" in d.value.columns]

@@ -1,4 +1,5 @@
 """The Retrieval inspector page, run headless with Streamlit's AppTest: candidates per step, pins, k comparison."""
+
 from __future__ import annotations
 
 import io
@@ -10,11 +11,13 @@ import pytest
 import soundfile as sf
 from streamlit.testing.v1 import AppTest
 
+from gesturekit import interactive as gs
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
-from gesturekit import interactive as gs
 
-from .conftest import chart_spec as chart, plotly_array as array, viewer
+from .conftest import chart_spec as chart
+from .conftest import plotly_array as array
+from .conftest import viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
@@ -40,8 +43,10 @@ def synthesized() -> AppTest:
     at.switch_page(SYNTH).run()
     at.file_uploader(key="synth.upload").set_value(("talk.wav", speech_wav(), "audio/wav")).run()
     at.session_state["synth.segments_editor"] = {
-        "edited_rows": {}, "deleted_rows": [],
-        "added_rows": [{"start_s": 1.0, "end_s": 3.0, "constraint": "right_hand=high"}]}
+        "edited_rows": {},
+        "deleted_rows": [],
+        "added_rows": [{"start_s": 1.0, "end_s": 3.0, "constraint": "right_hand=high"}],
+    }
     at.number_input(key="_w.synth.topk").set_value(TOPK).run()
     at.button(key="synth.go").click().run()
     at.switch_page(INSPECT).run()
@@ -100,7 +105,7 @@ def test_every_step_lists_its_k_candidates_with_their_sources(app_env, db):
     # the candidate's own speech, and that with a second of its take around it; this step's plays in the 3D view
     assert len(at.get("audio")) == 2
     step_speech = gs.step_speech(res, s.n_steps - 1)
-    np.testing.assert_allclose(views["audio"][:len(step_speech)], step_speech, atol=1e-4)
+    np.testing.assert_allclose(views["audio"][: len(step_speech)], step_speech, atol=1e-4)
 
 
 def test_a_candidates_speech_comes_with_its_context_marked(app_env, db):
@@ -120,8 +125,9 @@ def test_a_candidates_speech_comes_with_its_context_marked(app_env, db):
     assert f"the window is {before:.2f}–{before + n / db.fps:.2f} s" in caption
     assert f"{row['take']} at {s0 / 16000:.2f}" in caption
     excerpt, a, b, t0 = __import__("gesturekit.interactive", fromlist=["x"]).segment_in_context(
-        db, int(row["clip"]), int(row["start"]), n)
-    np.testing.assert_array_equal(excerpt, take[round(t0 * 16000): round(t0 * 16000) + len(excerpt)])
+        db, int(row["clip"]), int(row["start"]), n
+    )
+    np.testing.assert_array_equal(excerpt, take[round(t0 * 16000) : round(t0 * 16000) + len(excerpt)])
     assert (a, b) == (pytest.approx(before), pytest.approx(band["x1"]))
 
 
@@ -153,8 +159,11 @@ def test_pinning_a_candidate_changes_that_step_and_can_be_undone(app_env):
     at.button(key="inspect.use").click().run()
     assert not at.exception and not [e.value for e in at.error]
     after = result(at)
-    assert (after.search.clip[2], after.search.start[2]) == (row["clip"], row["start"]) != \
-        (before.search.clip[2], before.search.start[2])
+    assert (
+        (after.search.clip[2], after.search.start[2])
+        == (row["clip"], row["start"])
+        != (before.search.clip[2], before.search.start[2])
+    )
     assert after.search.pinned.tolist() == [i == 2 for i in range(after.search.n_steps)]
     np.testing.assert_array_equal(after.search.clip[:2], before.search.clip[:2])  # earlier steps unchanged
     assert table(at, "audio_dist")["chosen"].tolist()[3] or after.search.position[2] == -1

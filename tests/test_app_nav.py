@@ -1,4 +1,5 @@
 """The app's pages are declared once (app/nav.py): every page script, at the URLs users and tests open."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -24,6 +25,9 @@ def test_every_page_script_is_declared_once_in_menu_order(nav):
 
 def test_the_pages_keep_their_titles_and_urls(nav):
     assert [(p.title, p.url_path) for p in nav.PAGES] == [
-        ("Synthesize", "Synthesize"), ("Retrieval inspector", "Retrieval_inspector"),
-        ("Database", "Database"), ("Study stimuli", "Study_stimuli")]
+        ("Synthesize", "Synthesize"),
+        ("Retrieval inspector", "Retrieval_inspector"),
+        ("Database", "Database"),
+        ("Study stimuli", "Study_stimuli"),
+    ]
     assert all(p.purpose and p.icon for p in nav.PAGES)

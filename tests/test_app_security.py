@@ -1,5 +1,6 @@
 """The app as served: local by default, only the allowed folders, no traceback or server path in
 the browser. The server is started as the README says; pages run headless with AppTest."""
+
 from __future__ import annotations
 
 import ipaddress
@@ -10,12 +11,12 @@ import socket
 import subprocess
 import sys
 import time
-import tomllib
 import urllib.request
 from pathlib import Path
 
 import pytest
 import soundfile as sf
+import tomllib
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from streamlit.testing.v1 import AppTest
@@ -35,6 +36,7 @@ GENERIC = re.compile(r"^Something went wrong; the details are in the server log 
 
 
 # ---- the project's Streamlit config ------------------------------------------------------------
+
 
 def test_the_config_binds_locally_hides_developer_options_and_error_details():
     config = tomllib.loads((ROOT / ".streamlit" / "config.toml").read_text(encoding="utf-8"))
@@ -65,6 +67,7 @@ for key in ("server.address", "client.toolbarMode", "client.showErrorDetails", "
 
 # ---- the server, started as the README says ----------------------------------------------------
 
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -86,7 +89,7 @@ def _listening(port: int) -> set[str]:
                 continue
             raw = bytes.fromhex(address)
             # the kernel prints the address as 32-bit words in host (little-endian) order
-            words = b"".join(raw[i:i + 4][::-1] for i in range(0, len(raw), 4))
+            words = b"".join(raw[i : i + 4][::-1] for i in range(0, len(raw), 4))
             found.add(str(ipaddress.ip_address(words[:width])))
     return found
 
@@ -100,8 +103,17 @@ def test_the_readme_command_serves_on_127_0_0_1_only(demo_home, tmp_path):
     env = {**os.environ, "GESTUREKIT_HOME": str(demo_home), "PYTHONPATH": str(ROOT)}
     env.pop(APP_ROOTS_ENV, None)
     log = tmp_path / "streamlit.log"
-    cmd = [sys.executable, "-m", "streamlit", "run", "app/Home.py", "--server.port", str(port),
-           "--server.headless", "true"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "streamlit",
+        "run",
+        "app/Home.py",
+        "--server.port",
+        str(port),
+        "--server.headless",
+        "true",
+    ]
     with log.open("wb") as out:
         proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT)
     try:
@@ -121,6 +133,7 @@ def test_the_readme_command_serves_on_127_0_0_1_only(demo_home, tmp_path):
 
 
 # ---- allowed folders ----------------------------------------------------------------------------
+
 
 @pytest.fixture
 def outside(tmp_path_factory) -> Path:
@@ -142,7 +155,7 @@ def _texts(at: AppTest) -> str:
 def _refusal(message: str, typed: str, what: str) -> str:
     """The message with the typed path taken out: what a refusal of that kind says."""
     assert message.startswith(f"{typed}: the {what} must be inside one of the folders"), message
-    return message[len(typed):]
+    return message[len(typed) :]
 
 
 def _type_database(at: AppTest, path: str) -> AppTest:
@@ -156,8 +169,12 @@ def test_a_database_outside_the_allowed_folders_is_refused_alike(app_env, tmp_pa
     shutil.copytree(app_env / "db" / "demo", db)  # a readable database: only the rule stops it
     if kind == "symlink":  # a link inside an allowed folder to a folder outside
         (tmp_path / "link").symlink_to(db, target_is_directory=True)
-    typed = {"a database": str(db), "missing": str(outside / "nowhere"),
-             "dot-dot": str(tmp_path / ".." / outside.name / "db"), "symlink": str(tmp_path / "link")}[kind]
+    typed = {
+        "a database": str(db),
+        "missing": str(outside / "nowhere"),
+        "dot-dot": str(tmp_path / ".." / outside.name / "db"),
+        "symlink": str(tmp_path / "link"),
+    }[kind]
     at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
     _type_database(at, typed)
     assert not at.exception
@@ -168,7 +185,7 @@ def test_a_database_outside_the_allowed_folders_is_refused_alike(app_env, tmp_pa
     # the same words whether the folder holds a database or nothing at all: no probing
     with pytest.raises(ConfigError) as missing:
         check_allowed(outside / "nowhere", what="database folder")
-    assert said == str(missing.value)[len(str(outside / "nowhere")):]
+    assert said == str(missing.value)[len(str(outside / "nowhere")) :]
     # nothing of the database is shown
     assert not at.get("dataframe") and not at.get("iframe") and not at.get("plotly_chart")
     assert "clip" not in " ".join(c.value for c in at.sidebar.caption)
@@ -252,8 +269,9 @@ def test_building_a_database_reads_and_writes_only_allowed_folders(app_env, tmp_
     else:
         joint_map = typed = str(outside / "map.json")
         what = "joint map"
-    at = _build(AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run(), folder=folder, out=out,
-                joint_map=joint_map)
+    at = _build(
+        AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run(), folder=folder, out=out, joint_map=joint_map
+    )
     assert not at.exception
     (message,) = [e.value for e in at.sidebar.error]
     _refusal(message, typed, what)
@@ -276,6 +294,7 @@ def test_a_refiner_outside_is_refused_and_the_shipped_one_is_not(app_env, outsid
 
 
 # ---- nothing of the server in the browser --------------------------------------------------------
+
 
 def test_an_unexpected_error_shows_a_reference_not_a_traceback(app_env, monkeypatch, caplog):
     secret = "/srv/private/lab-notes"
@@ -300,8 +319,9 @@ def test_an_unexpected_error_shows_a_reference_not_a_traceback(app_env, monkeypa
 
 @pytest.mark.parametrize("inside", [True, False], ids=["inside", "outside"])
 @pytest.mark.parametrize("error", ["OSError", "GestureKitError"])
-def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(app_env, tmp_path, monkeypatch, inside,
-                                                                          error):
+def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(
+    app_env, tmp_path, monkeypatch, inside, error
+):
     missing = (tmp_path if inside else Path("/srv/private")) / "stats.npz"
 
     def broken(self):
@@ -318,17 +338,27 @@ def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(app_en
 
 
 @settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(parts=st.lists(st.text(st.characters(blacklist_characters="/\0", blacklist_categories=["Cs"]), min_size=1,
-                              max_size=8).filter(lambda p: p not in (".", "..")), min_size=1, max_size=4),
-       kind=st.sampled_from(["OSError", "GestureKitError"]))
+@given(
+    parts=st.lists(
+        st.text(st.characters(blacklist_characters="/\0", blacklist_categories=["Cs"]), min_size=1, max_size=8).filter(
+            lambda p: p not in (".", "..")
+        ),
+        min_size=1,
+        max_size=4,
+    ),
+    kind=st.sampled_from(["OSError", "GestureKitError"]),
+)
 def test_an_error_text_keeps_folders_outside_private(app_env, outside, monkeypatch, parts, kind):
     """Whatever the file, only its last part is shown when it lies outside the allowed folders."""
     monkeypatch.syspath_prepend(str(ROOT / "app"))
     import display
 
     path = outside.joinpath(*parts)
-    exc = (PermissionError(13, "Permission denied", str(path)) if kind == "OSError"
-           else InputFileError("cannot be read", path=path))
+    exc = (
+        PermissionError(13, "Permission denied", str(path))
+        if kind == "OSError"
+        else InputFileError("cannot be read", path=path)
+    )
     text = display.error_text(exc)
     assert text == f"{parts[-1]}: " + ("Permission denied" if kind == "OSError" else "cannot be read")
     assert str(outside) not in text

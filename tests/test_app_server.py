@@ -1,5 +1,6 @@
 """The app's server start: ``streamlit run app/Home.py`` serves Home's ``st.App``, whose lifespan
 prepares the default database's search and refiner in the background."""
+
 from __future__ import annotations
 
 import asyncio

@@ -1,8 +1,8 @@
 """The Study stimuli page, run headless with Streamlit's AppTest."""
+
 from pathlib import Path
 
 import pandas as pd
-import pytest
 import soundfile as sf
 from streamlit.testing.v1 import AppTest
 

@@ -1,4 +1,5 @@
 """The Synthesize page, run headless with Streamlit's AppTest: upload, controls, settings, run, result, exports."""
+
 from __future__ import annotations
 
 import io
@@ -10,15 +11,17 @@ import soundfile as sf
 from scipy.signal import resample_poly
 from streamlit.testing.v1 import AppTest
 
+from gesturekit import interactive as gs
 from gesturekit.control import frame_attributes
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.export.video import probe_media
 from gesturekit.skeleton import N_JOINTS
-from gesturekit import interactive as gs
 from gesturekit.viz.figures import WRIST_ROWS
 
-from .conftest import chart_spec as chart, plotly_array as array, viewer
+from .conftest import chart_spec as chart
+from .conftest import plotly_array as array
+from .conftest import viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 PAGE = "views/1_Synthesize.py"
@@ -62,14 +65,25 @@ def add_rows(at: AppTest, *rows: dict) -> AppTest:
 
 def box(at: AppTest, x0: float, x1: float) -> AppTest:
     """Box-select a time range on the waveform, as the browser would report it."""
-    at.session_state["synth.waveform"] = {"selection": {"points": [], "point_indices": [], "lasso": [],
-                                                        "box": [{"xref": "x", "yref": "y", "x": [x0, x1], "y": [-1, 1]}]}}
+    at.session_state["synth.waveform"] = {
+        "selection": {
+            "points": [],
+            "point_indices": [],
+            "lasso": [],
+            "box": [{"xref": "x", "yref": "y", "x": [x0, x1], "y": [-1, 1]}],
+        }
+    }
     return at.run()
 
 
 def bands(spec: dict) -> list[tuple[float, float, str]]:
-    return sorted({(round(s["x0"], 6), round(s["x1"], 6), s["name"]) for s in spec["layout"].get("shapes", [])
-                   if s["type"] == "rect"})
+    return sorted(
+        {
+            (round(s["x0"], 6), round(s["x1"], 6), s["name"])
+            for s in spec["layout"].get("shapes", [])
+            if s["type"] == "rect"
+        }
+    )
 
 
 def errors(at: AppTest) -> list[str]:
@@ -118,7 +132,7 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
 
     # the uploaded speech's player; the result's speech plays in the 3D view, on its clock
     assert len(at.get("audio")) == 1
-    np.testing.assert_allclose(skel["audio"][:len(res.audio)], res.audio, atol=1e-4)
+    np.testing.assert_allclose(skel["audio"][: len(res.audio)], res.audio, atol=1e-4)
     labels = [d.proto.label for d in at.get("download_button")]
     assert labels == ["Motion + search (npz)", "Motion (BVH)", "Control track (CSV)", "Config (JSON)"]
     assert any(c.value == "MP4: render it above" for c in at.caption)
@@ -209,16 +223,20 @@ def test_settings_that_differ_from_the_paper_are_named(app_env):
     at.button(key="synth.go").click().run()
     assert not at.exception and not errors(at)
     assert result(at).config.step == 6
-    assert any("differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)" in c.value
-               for c in at.caption if "seed" in c.value)
+    assert any(
+        "differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)" in c.value
+        for c in at.caption
+        if "seed" in c.value
+    )
 
 
 def test_a_silent_upload_is_accepted_with_a_warning(app_env):
     buf = io.BytesIO()
     sf.write(buf, np.zeros(32000, np.float32), 16000, format="WAV")
     at = upload(open_page(), buf.getvalue(), name="quiet.wav")
-    assert [w.value for w in at.main.warning if "silent" in w.value] == ["quiet.wav: the audio is silent (peak level "
-                                                                        "at or below -80 dBFS)"]
+    assert [w.value for w in at.main.warning if "silent" in w.value] == [
+        "quiet.wav: the audio is silent (peak level at or below -80 dBFS)"
+    ]
     assert not errors(at) and not at.button(key="synth.go").disabled
 
 
@@ -251,7 +269,9 @@ def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
     at.switch_page(PAGE).run()
     assert not at.exception
     assert at.number_input(key="_w.synth.k").value == 2 and at.selectbox(key="_w.synth.blend").value == "offset"
-    assert at.data_editor[0].value.to_dict("records") == [{"start_s": 0.0, "end_s": 2.0, "constraint": "both_hands=low"}]
+    assert at.data_editor[0].value.to_dict("records") == [
+        {"start_s": 0.0, "end_s": 2.0, "constraint": "both_hands=low"}
+    ]
     assert viewer(at, "synth.skeleton")  # the result is still there
 
     other = open_page()  # another user sees none of it: a first visit, on the example speech

@@ -1,5 +1,6 @@
 """Tests of gesturekit.datasets.audio: every format, rate and channel count gives the
 features of the original signal; every bad file gives an AudioFileError naming it."""
+
 from __future__ import annotations
 
 import functools
@@ -28,7 +29,7 @@ NARROW_BAND = 3800.0  # Hz; what an 8 kHz file can hold
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def speech_like(rate: int, band: float = FULL_BAND) -> np.ndarray:
     """A 3 s speech-like signal defined in continuous time, sampled at ``rate`` Hz.
 
@@ -71,7 +72,7 @@ def speech_like(rate: int, band: float = FULL_BAND) -> np.ndarray:
     return x
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def reference_features(band: float = FULL_BAND) -> np.ndarray:
     """Features of the original signal at 16 kHz, shape (45, 14)."""
     return audio_frame_features(speech_like(SR, band).astype(np.float32))

@@ -1,6 +1,7 @@
 """Bad-input suite: control strings and files, time ranges, database folders, Habibie npz files,
 refiner folders and numeric options. Each case runs the command line and expects a clean refusal:
 exit 2, the file or option named, the problem stated, no traceback, nothing changed."""
+
 from __future__ import annotations
 
 import json
@@ -43,18 +44,21 @@ def _synth(work: Path, *extra: str):
 
 
 # ---- control strings ---------------------------------------------------------------------------
-@pytest.mark.parametrize("text, problem", [
-    ("1..2-3:left_hand=high", "START-END"),
-    ("nan-3:left_hand=high", "START-END"),
-    ("0-inf:left_hand=high", "START-END"),
-    ("1e400-2:left_hand=high", "START-END"),
-    ("3-1:left_hand=high", "end must be after start"),
-    ("2-2:left_hand=high", "end must be after start"),
-    ("-1-2:left_hand=high", "START-END"),
-    ("0-1:left_hand=sideways", "takes low or high"),
-    ("0-1:" + "+".join(["left_hand=high"] * 30), "twice"),
-    (",".join(f"{i}-{i + 1}:left_hand=high" for i in range(20)) + ",20-21:bogus=1", "unknown control"),
-])
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ("1..2-3:left_hand=high", "START-END"),
+        ("nan-3:left_hand=high", "START-END"),
+        ("0-inf:left_hand=high", "START-END"),
+        ("1e400-2:left_hand=high", "START-END"),
+        ("3-1:left_hand=high", "end must be after start"),
+        ("2-2:left_hand=high", "end must be after start"),
+        ("-1-2:left_hand=high", "START-END"),
+        ("0-1:left_hand=sideways", "takes low or high"),
+        ("0-1:" + "+".join(["left_hand=high"] * 30), "twice"),
+        (",".join(f"{i}-{i + 1}:left_hand=high" for i in range(20)) + ",20-21:bogus=1", "unknown control"),
+    ],
+)
 def test_control_string_refused(work, text, problem):
     before = snapshot(work)
     run = _synth(work, f"--control={text}")  # "=": a value starting with "-" is not an option
@@ -71,8 +75,7 @@ def test_long_valid_control_string_is_not_taken_for_a_path(work):
     assert len(text) > 255
     assert _control_from_arg(text) == parse_control(text).to_text()
     before = snapshot(work)
-    run = run_cli("synthesize", work / "speech.wav", "--db", work / "no-db", "--out", work / "out",
-                  "--control", text)
+    run = run_cli("synthesize", work / "speech.wav", "--db", work / "no-db", "--out", work / "out", "--control", text)
     assert_refused(run, names=work / "no-db", problem="no database folder", before=before)
 
 
@@ -83,17 +86,20 @@ def test_missing_control_file_is_named_as_a_file(work):
     assert_refused(run, names=work / "controls.csv", problem="control file not found", before=before)
 
 
-@pytest.mark.parametrize("name, content, problem", [
-    ("c.csv", "start_s,end_s,constraint\n0,1,left_hand=h\xe9\n".encode("latin-1"), "UTF-8"),
-    ("c.json", b"42", "list"),
-    ("c.json", b'"0-1:left_hand=high"', "list"),
-    ("c.json", b"[1, 2]", "row 1"),
-    ("c.json", b'[{"start_s": 0, "end_s": 1}]', "constraint"),
-    ("c.json", b'{"segments": 5}', "list"),
-    ("c.json", b'[{"start_s": "nan", "end_s": 1, "constraint": "left_hand=high"}]', "finite"),
-    ("c.csv", b"start_s,constraint\n0,left_hand=high\n", "end_s"),
-    ("c.csv", b"a;b;c\n1;2;3\n", "start_s"),
-])
+@pytest.mark.parametrize(
+    "name, content, problem",
+    [
+        ("c.csv", "start_s,end_s,constraint\n0,1,left_hand=h\xe9\n".encode("latin-1"), "UTF-8"),
+        ("c.json", b"42", "list"),
+        ("c.json", b'"0-1:left_hand=high"', "list"),
+        ("c.json", b"[1, 2]", "row 1"),
+        ("c.json", b'[{"start_s": 0, "end_s": 1}]', "constraint"),
+        ("c.json", b'{"segments": 5}', "list"),
+        ("c.json", b'[{"start_s": "nan", "end_s": 1, "constraint": "left_hand=high"}]', "finite"),
+        ("c.csv", b"start_s,constraint\n0,left_hand=high\n", "end_s"),
+        ("c.csv", b"a;b;c\n1;2;3\n", "start_s"),
+    ],
+)
 def test_control_file_refused(work, name, content, problem):
     f = work / name
     f.write_bytes(content)
@@ -103,24 +109,30 @@ def test_control_file_refused(work, name, content, problem):
 
 
 # ---- time ranges: --exclude-range and --holdout ------------------------------------------------
-@pytest.mark.parametrize("text, problem", [
-    ("demo0_000:1..2-3", "TAKE:START-END"),
-    ("demo0_000:nan-3", "TAKE:START-END"),
-    ("demo0_000:0-inf", "TAKE:START-END"),
-    ("demo0_000:3-1", "end must be after start"),
-    ("demo0_000:-1-2", "TAKE:START-END"),
-])
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ("demo0_000:1..2-3", "TAKE:START-END"),
+        ("demo0_000:nan-3", "TAKE:START-END"),
+        ("demo0_000:0-inf", "TAKE:START-END"),
+        ("demo0_000:3-1", "end must be after start"),
+        ("demo0_000:-1-2", "TAKE:START-END"),
+    ],
+)
 def test_exclude_range_refused(work, text, problem):
     before = snapshot(work)
     run = _synth(work, "--exclude-range", text)
     assert_refused(run, names="--exclude-range", problem=problem, before=before)
 
 
-@pytest.mark.parametrize("text, problem", [
-    ("demo0_000:1..2-3", "TAKE:START-END"),
-    ("demo0_000:nan-3", "TAKE:START-END"),
-    ("demo0_000:5-2", "end must be after start"),
-])
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ("demo0_000:1..2-3", "TAKE:START-END"),
+        ("demo0_000:nan-3", "TAKE:START-END"),
+        ("demo0_000:5-2", "end must be after start"),
+    ],
+)
 def test_holdout_refused(work, text, problem):
     before = snapshot(work)
     run = run_cli("evaluate", "--db", work / "db", "--holdout", text, "--out", work / "ev")
@@ -158,6 +170,7 @@ def _del(key):
     def edit(m):
         del m[key]
         return m
+
     return edit
 
 
@@ -168,6 +181,7 @@ def _set(path, value):
             d = d[k]
         d[path[-1]] = value
         return m
+
     return edit
 
 
@@ -209,31 +223,34 @@ def _stats_is_dir(db: Path):
     (db / "stats.npz").mkdir()
 
 
-@pytest.mark.parametrize("breakage, problem", [
-    (lambda db: (db / "stats.npz").unlink(), "stats.npz is missing"),
-    (lambda db: _truncate(db / "stats.npz"), "stats.npz"),
-    (_pickled_stats, ("object", "pickle")),
-    (_stats_wrong_shape, "P_std"),
-    (_stats_is_dir, "stats.npz"),
-    (lambda db: (db / "database.json").write_text("[]"), "not a gesturekit"),
-    (lambda db: _edit_json(db, _del("takes")), "takes"),
-    (lambda db: _edit_json(db, _del("build")), "build"),
-    (lambda db: _edit_json(db, _del("thresholds")), "thresholds"),
-    (lambda db: _edit_json(db, _set(["thresholds", "hand_speed"], "fast")), "hand_speed"),
-    (lambda db: _edit_json(db, lambda m: {**m, "thresholds": {ATTRIBUTE_NAMES[0]: [0, 1]}}), "thresholds"),
-    (lambda db: _edit_json(db, _set(["takes"], {"a": 1})), "takes"),
-    (lambda db: _edit_json(db, _set(["takes", 0, "n_frames"], "many")), "n_frames"),
-    (lambda db: _edit_json(db, _set(["build", "clip_frames"], 0)), "clip_frames"),
-    (lambda db: _edit_json(db, _set(["counts", "clips"], 3)), "clips"),
-    (_zero_clips, "no clips"),
-    (_clip_take_beyond, "clip_take"),
-    (_clip_start_beyond, "clip_start"),
-    (_negative_start, "clip_start"),
-    (_short_clips, "G.npy"),
-    (_float_clip_take, "clip_take"),
-    (lambda db: _truncate(db / "F.npy", 0.9), "F.npy"),
-    (lambda db: (db / "database.json").write_bytes(b"\xff\xfe{}"), "database.json"),
-])
+@pytest.mark.parametrize(
+    "breakage, problem",
+    [
+        (lambda db: (db / "stats.npz").unlink(), "stats.npz is missing"),
+        (lambda db: _truncate(db / "stats.npz"), "stats.npz"),
+        (_pickled_stats, ("object", "pickle")),
+        (_stats_wrong_shape, "P_std"),
+        (_stats_is_dir, "stats.npz"),
+        (lambda db: (db / "database.json").write_text("[]"), "not a gesturekit"),
+        (lambda db: _edit_json(db, _del("takes")), "takes"),
+        (lambda db: _edit_json(db, _del("build")), "build"),
+        (lambda db: _edit_json(db, _del("thresholds")), "thresholds"),
+        (lambda db: _edit_json(db, _set(["thresholds", "hand_speed"], "fast")), "hand_speed"),
+        (lambda db: _edit_json(db, lambda m: {**m, "thresholds": {ATTRIBUTE_NAMES[0]: [0, 1]}}), "thresholds"),
+        (lambda db: _edit_json(db, _set(["takes"], {"a": 1})), "takes"),
+        (lambda db: _edit_json(db, _set(["takes", 0, "n_frames"], "many")), "n_frames"),
+        (lambda db: _edit_json(db, _set(["build", "clip_frames"], 0)), "clip_frames"),
+        (lambda db: _edit_json(db, _set(["counts", "clips"], 3)), "clips"),
+        (_zero_clips, "no clips"),
+        (_clip_take_beyond, "clip_take"),
+        (_clip_start_beyond, "clip_start"),
+        (_negative_start, "clip_start"),
+        (_short_clips, "G.npy"),
+        (_float_clip_take, "clip_take"),
+        (lambda db: _truncate(db / "F.npy", 0.9), "F.npy"),
+        (lambda db: (db / "database.json").write_bytes(b"\xff\xfe{}"), "database.json"),
+    ],
+)
 def test_database_refused(work, breakage, problem):
     db = work / "db"
     breakage(db)
@@ -253,8 +270,11 @@ def test_broken_database_refused_by_synthesize(work):
 def _habibie_npz(f: Path, seconds: float = 6.0):
     n, s = int(seconds * 15), int(seconds * 16000)
     rng = np.random.default_rng(0)
-    np.savez(f, wav=(0.1 * rng.standard_normal((1, s))).astype(np.float32),
-             body=(0.1 * rng.standard_normal((1, n, 165))).astype(np.float32))
+    np.savez(
+        f,
+        wav=(0.1 * rng.standard_normal((1, s))).astype(np.float32),
+        body=(0.1 * rng.standard_normal((1, n, 165))).astype(np.float32),
+    )
 
 
 def _truncated_npz(folder: Path) -> Path:
@@ -282,12 +302,15 @@ def _not_zip_npz(folder: Path) -> Path:
     return f
 
 
-@pytest.mark.parametrize("make, problem", [
-    (_truncated_npz, ("npz", "zip", "truncated")),
-    (_object_npz, ("object", "pickle")),
-    (_object_wav_npz, ("object", "pickle")),
-    (_not_zip_npz, ("npz", "zip")),
-])
+@pytest.mark.parametrize(
+    "make, problem",
+    [
+        (_truncated_npz, ("npz", "zip", "truncated")),
+        (_object_npz, ("object", "pickle")),
+        (_object_wav_npz, ("object", "pickle")),
+        (_not_zip_npz, ("npz", "zip")),
+    ],
+)
 @pytest.mark.parametrize("kind", ["auto", "habibie2021"])
 def test_habibie_npz_refused(tmp_path, make, problem, kind):
     folder = tmp_path / "takes"
@@ -305,18 +328,21 @@ def _refiner_json(ref: Path, edit):
     (ref / "config.json").write_text(json.dumps(edit(cfg)))
 
 
-@pytest.mark.parametrize("breakage, problem", [
-    (lambda r: _refiner_json(r, lambda c: {**c, "files": list(c["files"])}), "files"),
-    (lambda r: _refiner_json(r, lambda c: {**c, "files": {"generator.pt": 5}}), "files"),
-    (lambda r: _refiner_json(r, lambda c: {**c, "model": [1, 2]}), "model"),
-    (lambda r: _refiner_json(r, lambda c: {**c, "model": {**c["model"], "window": "wide"}}), "window"),
-    (lambda r: _refiner_json(r, lambda c: {**c, "layout": "x"}), "layout"),
-    (lambda r: _refiner_json(r, lambda c: {**c, "iteration": -3}), "iteration"),
-    (lambda r: (r / "config.json").write_text("[]"), "config.json"),
-    (lambda r: _truncate(r / "stats.npz"), "stats.npz"),
-    (lambda r: (r / "stats.npz").unlink(), "stats.npz"),
-    (lambda r: _truncate(r / "generator.pt"), "generator.pt"),
-])
+@pytest.mark.parametrize(
+    "breakage, problem",
+    [
+        (lambda r: _refiner_json(r, lambda c: {**c, "files": list(c["files"])}), "files"),
+        (lambda r: _refiner_json(r, lambda c: {**c, "files": {"generator.pt": 5}}), "files"),
+        (lambda r: _refiner_json(r, lambda c: {**c, "model": [1, 2]}), "model"),
+        (lambda r: _refiner_json(r, lambda c: {**c, "model": {**c["model"], "window": "wide"}}), "window"),
+        (lambda r: _refiner_json(r, lambda c: {**c, "layout": "x"}), "layout"),
+        (lambda r: _refiner_json(r, lambda c: {**c, "iteration": -3}), "iteration"),
+        (lambda r: (r / "config.json").write_text("[]"), "config.json"),
+        (lambda r: _truncate(r / "stats.npz"), "stats.npz"),
+        (lambda r: (r / "stats.npz").unlink(), "stats.npz"),
+        (lambda r: _truncate(r / "generator.pt"), "generator.pt"),
+    ],
+)
 def test_refiner_refused(work, breakage, problem):
     ref = work / "refiner"
     shutil.copytree(DEMO_REFINER, ref)
@@ -355,8 +381,9 @@ def test_positions_fps_refused(tmp_path, fps):
     np.save(folder / "t.npy", np.zeros((60, 55, 3), np.float32))
     sf.write(folder / "t.wav", np.zeros(64000, np.float32), 16000)
     before = snapshot(tmp_path)
-    run = run_cli("build-db", folder, "--kind", "positions", "--joint-map", "zeggs", "--fps", fps,
-                  "--out", tmp_path / "db")
+    run = run_cli(
+        "build-db", folder, "--kind", "positions", "--joint-map", "zeggs", "--fps", fps, "--out", tmp_path / "db"
+    )
     assert_refused(run, names="--fps", problem="positive", before=before)
 
 
@@ -375,16 +402,20 @@ def test_joint_map_text_too_long_is_not_a_file(tmp_path):
     sf.write(folder / "t.wav", np.zeros(64000, np.float32), 16000)
     spec = "j" * 300
     before = snapshot(tmp_path)
-    run = run_cli("build-db", folder, "--kind", "positions", "--joint-map", spec, "--fps", "30",
-                  "--out", tmp_path / "db")
+    run = run_cli(
+        "build-db", folder, "--kind", "positions", "--joint-map", spec, "--fps", "30", "--out", tmp_path / "db"
+    )
     assert_refused(run, names=spec, problem="joint map file not found", before=before)
 
 
-@pytest.mark.parametrize("option, value, problem", [
-    ("--beat-sigma", "nan", "positive"),
-    ("--beat-sigma", "inf", "positive"),
-    ("--beat-sigma", "0", "positive"),
-])
+@pytest.mark.parametrize(
+    "option, value, problem",
+    [
+        ("--beat-sigma", "nan", "positive"),
+        ("--beat-sigma", "inf", "positive"),
+        ("--beat-sigma", "0", "positive"),
+    ],
+)
 def test_evaluate_numbers_refused(work, option, value, problem):
     before = snapshot(work)
     run = run_cli("evaluate", "--db", work / "db", "--holdout", "demo0_000:1-9", option, value, "--out", work / "ev")
@@ -394,6 +425,16 @@ def test_evaluate_numbers_refused(work, option, value, problem):
 @pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
 def test_stimuli_loudness_refused(work, value):
     before = snapshot(work)
-    run = run_cli("stimuli", "--db", work / "db", "--holdout", "demo0_000:1-9", "--systems", "gt",
-                  f"--loudness={value}", "--out", work / "st")
+    run = run_cli(
+        "stimuli",
+        "--db",
+        work / "db",
+        "--holdout",
+        "demo0_000:1-9",
+        "--systems",
+        "gt",
+        f"--loudness={value}",
+        "--out",
+        work / "st",
+    )
     assert_refused(run, names="--loudness", problem="finite", before=before)

@@ -4,6 +4,7 @@ Speech goes through ``gesturekit synthesize``, takes through ``gesturekit build-
 Every case must exit 2 with one message that names the file (or option) and the
 problem, without a traceback, leaving the inputs and the output folder as they were.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -47,24 +48,28 @@ def _truncated(kind, fraction=0.4):
     def make(d, speech):
         src = speech[kind]
         return h.cut(src, d / ("cut_" + src.name), fraction)
+
     return make
 
 
 SPEECH_CASES = {
     "wav_header_1_hz": (lambda d, s: h.wav_with_header(d / "one_hz.wav", rate=1), "sample rate of 1 Hz"),
     "wav_header_1e9_hz": (lambda d, s: h.wav_with_header(d / "giga.wav", rate=10**9), "outside the accepted range"),
-    "wav_header_4_gb_of_data": (lambda d, s: h.wav_with_header(d / "huge.wav", rate=16000, declared_bytes=2**32 - 2),
-                                "truncated"),
-    "flac_declaring_2_pow_36_samples": (lambda d, s: h.flac_declaring(d / "huge.flac", 2**36 - 1),
-                                        "beyond the limit"),
+    "wav_header_4_gb_of_data": (
+        lambda d, s: h.wav_with_header(d / "huge.wav", rate=16000, declared_bytes=2**32 - 2),
+        "truncated",
+    ),
+    "flac_declaring_2_pow_36_samples": (lambda d, s: h.flac_declaring(d / "huge.flac", 2**36 - 1), "beyond the limit"),
     "ogg_vorbis_cut_to_40_percent": (_truncated("ogg"), "truncated"),
     "ogg_opus_cut_to_60_percent": (_truncated("opus", 0.6), "truncated"),
     "mp3_without_xing_cut_to_40_percent": (_truncated("mp3"), "last MP3 frame is cut off"),
     "mp3_with_xing_cut_to_40_percent": (_truncated("xing.mp3"), "truncated"),
     "flac_cut_to_40_percent": (_truncated("flac"), "truncated"),
     "wav_cut_to_40_percent": (_truncated("wav"), "truncated"),
-    "text_named_wav": (lambda d, s: (d / "notes.wav").write_text("hello, this is not audio\n" * 20) and d / "notes.wav",
-                       "not an audio file"),
+    "text_named_wav": (
+        lambda d, s: (d / "notes.wav").write_text("hello, this is not audio\n" * 20) and d / "notes.wav",
+        "not an audio file",
+    ),
     "empty_mp3": (lambda d, s: (d / "empty.mp3").write_bytes(b"") or d / "empty.mp3", "empty"),
 }
 
@@ -97,8 +102,9 @@ def test_speech_beyond_the_option_limit_is_refused(tmp_path, tiny_db, speech):
 
 @pytest.mark.parametrize("value", ["nan", "0", "-5"])
 def test_bad_max_speech_minutes(value, tmp_path, tiny_db, speech):
-    run = run_cli("synthesize", speech["wav"], "--db", tiny_db, "--out", tmp_path / "out",
-                  "--max-speech-minutes", value)
+    run = run_cli(
+        "synthesize", speech["wav"], "--db", tiny_db, "--out", tmp_path / "out", "--max-speech-minutes", value
+    )
     assert_refused(run, names="--max-speech-minutes", problem="positive number")
 
 
@@ -162,15 +168,19 @@ def _positions_folder(tmp_path: Path, make) -> tuple[Path, Path, Path]:
 
 POSITION_CASES = {
     "npy_header_claiming_10_pow_12_frames": (
-        lambda d: h.npy_claiming(d / "take.npy", (10**12, N_JOINTS, 3)), "beyond the limit"),
+        lambda d: h.npy_claiming(d / "take.npy", (10**12, N_JOINTS, 3)),
+        "beyond the limit",
+    ),
     "npy_header_claiming_a_billion_joints": (
-        lambda d: h.npy_claiming(d / "take.npy", (100, 10**9, 3)), "beyond the limit"),
-    "npy_header_larger_than_the_file": (
-        lambda d: h.npy_claiming(d / "take.npy", (600, N_JOINTS, 3)), "truncated"),
-    "npy_of_wrong_dimensions": (
-        lambda d: np.save(d / "take.npy", np.zeros((5, 7, 2, 2))) or d / "take.npy", "shape"),
+        lambda d: h.npy_claiming(d / "take.npy", (100, 10**9, 3)),
+        "beyond the limit",
+    ),
+    "npy_header_larger_than_the_file": (lambda d: h.npy_claiming(d / "take.npy", (600, N_JOINTS, 3)), "truncated"),
+    "npy_of_wrong_dimensions": (lambda d: np.save(d / "take.npy", np.zeros((5, 7, 2, 2))) or d / "take.npy", "shape"),
     "npz_member_claiming_10_pow_12_frames": (
-        lambda d: h.npz_claiming(d / "take.npz", {"positions": (10**12, N_JOINTS * 3)}), "beyond the limit"),
+        lambda d: h.npz_claiming(d / "take.npz", {"positions": (10**12, N_JOINTS * 3)}),
+        "beyond the limit",
+    ),
 }
 
 
@@ -188,8 +198,9 @@ def test_hostile_position_take_is_refused(case, tmp_path):
 def test_position_fps_outside_the_range_is_refused(fps, tmp_path):
     folder, _, jmap = _positions_folder(tmp_path, lambda d: h.position_take(d))
     before = snapshot(folder, tmp_path / "db")
-    run = run_cli("build-db", folder, "--kind", "positions", "--joint-map", jmap, "--fps", fps,
-                  "--out", tmp_path / "db")
+    run = run_cli(
+        "build-db", folder, "--kind", "positions", "--joint-map", jmap, "--fps", fps, "--out", tmp_path / "db"
+    )
     assert_refused(run, names="--fps", problem="outside the accepted range", before=before)
 
 

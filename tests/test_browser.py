@@ -5,6 +5,7 @@ Skipped, with the reason, where the playwright package or Chromium is missing
 ``docs/screenshots`` only when ``GESTUREKIT_SCREENSHOTS=1`` (``python -m
 tests.app_browser`` makes them too); otherwise to the test's temporary folder.
 """
+
 from __future__ import annotations
 
 import os
@@ -16,8 +17,9 @@ import pytest
 
 from tests import app_browser
 
-pytestmark = pytest.mark.skipif(app_browser.unavailable() is not None,
-                                reason=f"no browser test: {app_browser.unavailable()}")
+pytestmark = pytest.mark.skipif(
+    app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
+)
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +90,7 @@ def test_upload_box_select_run_then_inspect(served, tmp_path):
         box = canvas.bounding_box()
         assert box["width"] > 200 and box["height"] > 200
         assert canvas.get_attribute("data-frame") == "0"
-        page.frame_locator('iframe[srcdoc*=\'data-key="synth.skeleton"\']').locator("#play").click()
+        page.frame_locator("iframe[srcdoc*='data-key=\"synth.skeleton\"']").locator("#play").click()
         page.wait_for_timeout(1200)
         assert int(canvas.get_attribute("data-frame")) > 0
         for row in ("left wrist height", "right wrist height", "left wrist speed", "right wrist speed"):

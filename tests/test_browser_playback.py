@@ -5,6 +5,7 @@ Headless Debian Chromium driven by Playwright against ``streamlit run app/Home.p
 The speech is the shared BEAT excerpt (82 s) when present, else 82 s of the
 generated speaker.
 """
+
 from __future__ import annotations
 
 import math
@@ -14,8 +15,9 @@ import pytest
 
 from tests import app_browser
 
-pytestmark = pytest.mark.skipif(app_browser.unavailable() is not None,
-                                reason=f"no browser test: {app_browser.unavailable()}")
+pytestmark = pytest.mark.skipif(
+    app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
+)
 
 BEAT = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "speech" / "beat_lawrence_0_19_19.wav"
 SECONDS = 82.0

@@ -5,6 +5,7 @@ are drawn; the settings, the control table and the next run must come back
 unchanged. Skipped, with the reason, where the playwright package or Chromium
 is missing (see ``tests/app_browser.py``).
 """
+
 from __future__ import annotations
 
 import json
@@ -13,8 +14,9 @@ import pytest
 
 from tests import app_browser
 
-pytestmark = pytest.mark.skipif(app_browser.unavailable() is not None,
-                                reason=f"no browser test: {app_browser.unavailable()}")
+pytestmark = pytest.mark.skipif(
+    app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
+)
 
 #: What the test sets on Synthesize: label of the number input -> value.
 SETTINGS = {
@@ -106,8 +108,12 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
             page.wait_for_timeout(200)
         if at is None:
             continue
-        for key, steps in (("ArrowDown", row - at[0]), ("ArrowUp", at[0] - row),
-                           ("ArrowRight", column - at[1]), ("ArrowLeft", at[1] - column)):
+        for key, steps in (
+            ("ArrowDown", row - at[0]),
+            ("ArrowUp", at[0] - row),
+            ("ArrowRight", column - at[1]),
+            ("ArrowLeft", at[1] - column),
+        ):
             for _ in range(max(steps, 0)):
                 page.keyboard.press(key)
         if _selected_cell(grid) != (row, column):

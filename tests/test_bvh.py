@@ -1,4 +1,5 @@
 """Tests of gesturekit.datasets.bvh: parsing, forward kinematics, resampling, errors."""
+
 from __future__ import annotations
 
 import math
@@ -76,8 +77,15 @@ def zeggs_like_skeleton(scale=1.0, drop=()):
     def add(name, parent, offset, channels=ROT, end=None):
         if name in drop:
             return None
-        joints.append((name, -1 if parent is None else parent, np.array(offset, float) * scale, channels,
-                       None if end is None else np.array(end, float) * scale))
+        joints.append(
+            (
+                name,
+                -1 if parent is None else parent,
+                np.array(offset, float) * scale,
+                channels,
+                None if end is None else np.array(end, float) * scale,
+            )
+        )
         return len(joints) - 1
 
     hips = add("Hips", None, (0, 90, 0), POS + ROT)
@@ -89,8 +97,13 @@ def zeggs_like_skeleton(scale=1.0, drop=()):
     neck1 = add("Neck1", neck, (0, 5, 0))
     head = add("Head", neck1, (0, 5, 0))
     add("HeadEnd", head, (0, 12, 0), end=(0, 0, 0))
-    finger_roots = {"Thumb": (4, -3, 3), "Index": (10, 0, 2.3), "Middle": (9.5, 0, 0),
-                    "Ring": (9, 0, -2.3), "Pinky": (8, 0, -4.5)}
+    finger_roots = {
+        "Thumb": (4, -3, 3),
+        "Index": (10, 0, 2.3),
+        "Middle": (9.5, 0, 0),
+        "Ring": (9, 0, -2.3),
+        "Pinky": (8, 0, -4.5),
+    }
     for side, sx in (("Left", 1), ("Right", -1)):
         sh = add(f"{side}Shoulder", s3, (3 * sx, 11, 0))
         arm = add(f"{side}Arm", sh, (11 * sx, 0, 0))
@@ -109,7 +122,7 @@ def zeggs_like_skeleton(scale=1.0, drop=()):
 
 def random_values(joints, n_frames, rng, *, angle=30.0, root_pos=(0.0, 90.0, 0.0)):
     cols = []
-    for _, parent, _, channels, _ in joints:
+    for _, _, _, channels, _ in joints:
         for ch in channels:
             if ch.endswith("position"):
                 base = root_pos["XYZ".index(ch[0])]
@@ -134,7 +147,7 @@ def scipy_fk(data, frame):
     world_r, world_p = [], []
     for j in range(data.n_joints):
         chans = data.channels[j]
-        vals = data.values[frame, starts[j]:starts[j] + len(chans)]
+        vals = data.values[frame, starts[j] : starts[j] + len(chans)]
         offset = data.offsets[j].copy()
         axes, angles = "", []
         for ch, v in zip(chans, vals):
@@ -254,7 +267,7 @@ def hierarchies(draw):
             path = [0]
             continue
         pop = draw(st.integers(0, len(path) - 1))
-        path = path[:len(path) - pop]
+        path = path[: len(path) - pop]
         parents.append(path[-1])
         path.append(j)
     joints = []
@@ -277,8 +290,12 @@ def hierarchies(draw):
         joints.append((f"J{j}", parents[j], np.array(offset), channels, None if end is None else np.array(end)))
     n_frames = draw(st.integers(1, 3))
     n_ch = sum(len(c) for *_, c, _ in joints)
-    values = np.array(draw(st.lists(st.lists(st.floats(-180, 180), min_size=n_ch, max_size=n_ch),
-                                    min_size=n_frames, max_size=n_frames)), dtype=float).reshape(n_frames, n_ch)
+    values = np.array(
+        draw(
+            st.lists(st.lists(st.floats(-180, 180), min_size=n_ch, max_size=n_ch), min_size=n_frames, max_size=n_frames)
+        ),
+        dtype=float,
+    ).reshape(n_frames, n_ch)
     style = draw(st.sampled_from([("\n", "\t"), ("\r\n", "  "), ("\n", " "), ("\r\n", "\t")]))
     return joints, values, style
 
@@ -303,8 +320,10 @@ def test_fk_equals_scipy_composition(case):
 
 def test_fk_known_answer_intrinsic_order():
     # root rotates Z 90 then (intrinsic) X 90: the child at +Y goes to R(z90)R(x90) @ (0,1,0) = (0,0,1)
-    joints = [("A", -1, np.zeros(3), ["Zrotation", "Xrotation", "Yrotation"], None),
-              ("B", 0, np.array([0.0, 1.0, 0.0]), ["Zrotation", "Xrotation", "Yrotation"], None)]
+    joints = [
+        ("A", -1, np.zeros(3), ["Zrotation", "Xrotation", "Yrotation"], None),
+        ("B", 0, np.array([0.0, 1.0, 0.0]), ["Zrotation", "Xrotation", "Yrotation"], None),
+    ]
     values = np.array([[90.0, 90.0, 0.0, 0.0, 0.0, 0.0]])
     data = parse_bvh_text(bvh_text(joints, values))
     np.testing.assert_allclose(forward_kinematics(data)[0, 1], [0.0, 0.0, 1.0], atol=1e-12)
@@ -359,8 +378,10 @@ def test_parses_formatting_variations(tmp_path):
 
 
 def test_position_channels_replace_offset_on_any_joint():
-    joints = [("A", -1, np.array([100.0, 100.0, 100.0]), ["Xposition", "Yposition", "Zposition"], None),
-              ("B", 0, np.array([7.0, 8.0, 9.0]), ["Yposition", "Xrotation"], None)]
+    joints = [
+        ("A", -1, np.array([100.0, 100.0, 100.0]), ["Xposition", "Yposition", "Zposition"], None),
+        ("B", 0, np.array([7.0, 8.0, 9.0]), ["Yposition", "Xrotation"], None),
+    ]
     values = np.array([[1.0, 2.0, 3.0, 50.0, 0.0]])
     data = parse_bvh_text(bvh_text(joints, values))
     pos = forward_kinematics(data)[0]
@@ -386,8 +407,15 @@ def test_cm_and_m_files_give_the_same_metres(tmp_path):
     np.testing.assert_allclose(load_bvh_motion(cm, units="cm").positions, auto_m.positions, atol=1e-6)
     np.testing.assert_allclose(load_bvh_motion(m, units="m").positions, auto_m.positions, atol=1e-6)
     # forearm of the generated skeleton: 28 cm
-    assert abs(np.linalg.norm(auto_m.positions[0, joint_index("left_elbow")]
-                              - auto_m.positions[0, joint_index("left_shoulder")]) - 0.28) < 1e-5
+    assert (
+        abs(
+            np.linalg.norm(
+                auto_m.positions[0, joint_index("left_elbow")] - auto_m.positions[0, joint_index("left_shoulder")]
+            )
+            - 0.28
+        )
+        < 1e-5
+    )
     with pytest.raises(ConfigError):
         load_bvh_motion(cm, units="inch")
 
@@ -452,8 +480,7 @@ def test_slerp_resampling_follows_a_constant_rotation():
 
 def test_slerp_takes_the_short_way_and_lerps_translation():
     # from 170 to -170 degrees the short way passes 180, not 0
-    joints = [("A", -1, np.zeros(3), ["Xposition", "Yrotation"], None),
-              ("B", 0, np.array([1.0, 0.0, 0.0]), [], None)]
+    joints = [("A", -1, np.zeros(3), ["Xposition", "Yrotation"], None), ("B", 0, np.array([1.0, 0.0, 0.0]), [], None)]
     values = np.array([[0.0, 170.0], [10.0, -170.0], [10.0, -170.0], [10.0, -170.0]])
     data = parse_bvh_text(bvh_text(joints, values, frame_time=1 / 20))
     out = resample_world_positions(data, fps=40)  # frame 1 lies halfway between source frames 0 and 1
@@ -464,8 +491,9 @@ def test_slerp_takes_the_short_way_and_lerps_translation():
 # ----------------------------------------------------------------------------- errors
 
 
-GOOD = bvh_text([("A", -1, np.zeros(3), list(POS + ROT), None), ("B", 0, np.ones(3), list(ROT), (0, 1, 0))],
-                np.zeros((2, 9)))
+GOOD = bvh_text(
+    [("A", -1, np.zeros(3), list(POS + ROT), None), ("B", 0, np.ones(3), list(ROT), (0, 1, 0))], np.zeros((2, 9))
+)
 
 
 def _bad_files():
@@ -486,7 +514,7 @@ def _bad_files():
         "truncated": "\n".join(lines[:-1]) + "\n",
         "no_motion": "\n".join(lines[:motion]) + "\n",
         "unbalanced": GOOD.replace("MOTION", "}\nMOTION"),
-        "unclosed": "\n".join(lines[:motion - 1] + lines[motion:]) + "\n",
+        "unclosed": "\n".join(lines[: motion - 1] + lines[motion:]) + "\n",
         "bad_channel": GOOD.replace("CHANNELS 3 Zrotation", "CHANNELS 3 Wrotation"),
         "bad_count": GOOD.replace("CHANNELS 3", "CHANNELS three"),
         "bad_frame_time": GOOD.replace("Frame Time: ", "Frame Time: x"),

@@ -112,8 +112,11 @@ def test_long_user_text_is_never_a_failed_file_lookup(tmp_path):
     assert is_file(tmp_path / "f.csv") and not is_dir(tmp_path / "f.csv") and is_dir(tmp_path)
 
 
-@pytest.mark.parametrize("names", [("a.wav", "a.mp3"), ("talk one.wav", "talk_one.flac"), ("b.ogg", "b.wav", "c.wav")],
-                         ids=["same-stem", "same-safe-name", "folder"])
+@pytest.mark.parametrize(
+    "names",
+    [("a.wav", "a.mp3"), ("talk one.wav", "talk_one.flac"), ("b.ogg", "b.wav", "c.wav")],
+    ids=["same-stem", "same-safe-name", "folder"],
+)
 def test_synthesize_refuses_speech_files_written_to_the_same_outputs(tmp_path, names):
     from .badinput import assert_refused, run_cli, snapshot
 

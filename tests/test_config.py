@@ -1,5 +1,6 @@
 """One JSON form for every configuration dataclass (gesturekit._config): written from the fields,
 read back to equal objects, unknown options refused with the class's own words."""
+
 from __future__ import annotations
 
 import json
@@ -20,18 +21,40 @@ names = st.text("abcdefghij_", min_size=1, max_size=8)
 ranges = st.tuples(names, st.floats(0, 49), st.floats(50, 100))  # start < end
 
 CONFIGS = st.one_of(
-    st.builds(ModelConfig, generator_channels=st.tuples(*[st.integers(1, 512)] * 4),
-              critic_channels=st.tuples(*[st.integers(1, 512)] * 3)),
-    st.builds(TrainConfig, iterations=st.integers(1, 10**6), betas=st.tuples(st.floats(0, 0.99), st.floats(0, 0.99)),
-              seed=st.integers(0, 99)),
-    st.builds(PairsConfig, seed=st.integers(0, 99), step=st.integers(1, 16), k_max=st.integers(2, 20),
-              exclude_takes=st.lists(names, max_size=3).map(tuple), exclude_ranges=st.lists(ranges, max_size=3).map(tuple)),
-    st.builds(SearchConfig, k=st.integers(0, 9), step=st.integers(1, 16),
-              init_pose=st.one_of(st.just("random"), st.lists(st.floats(-5, 5), min_size=1, max_size=6).map(tuple)),
-              pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3)),
-    st.builds(SynthesisConfig, k=st.integers(0, 9), init=st.sampled_from(["random", "rest"]),
-              exclude_takes=st.lists(names, max_size=3).map(tuple), exclude_ranges=st.lists(ranges, max_size=3).map(tuple),
-              control=st.sampled_from(["", "0-3:left_hand=low", "1-2:speed=fast+width=wide,4-6:symmetry=symmetric"])),
+    st.builds(
+        ModelConfig,
+        generator_channels=st.tuples(*[st.integers(1, 512)] * 4),
+        critic_channels=st.tuples(*[st.integers(1, 512)] * 3),
+    ),
+    st.builds(
+        TrainConfig,
+        iterations=st.integers(1, 10**6),
+        betas=st.tuples(st.floats(0, 0.99), st.floats(0, 0.99)),
+        seed=st.integers(0, 99),
+    ),
+    st.builds(
+        PairsConfig,
+        seed=st.integers(0, 99),
+        step=st.integers(1, 16),
+        k_max=st.integers(2, 20),
+        exclude_takes=st.lists(names, max_size=3).map(tuple),
+        exclude_ranges=st.lists(ranges, max_size=3).map(tuple),
+    ),
+    st.builds(
+        SearchConfig,
+        k=st.integers(0, 9),
+        step=st.integers(1, 16),
+        init_pose=st.one_of(st.just("random"), st.lists(st.floats(-5, 5), min_size=1, max_size=6).map(tuple)),
+        pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3),
+    ),
+    st.builds(
+        SynthesisConfig,
+        k=st.integers(0, 9),
+        init=st.sampled_from(["random", "rest"]),
+        exclude_takes=st.lists(names, max_size=3).map(tuple),
+        exclude_ranges=st.lists(ranges, max_size=3).map(tuple),
+        control=st.sampled_from(["", "0-3:left_hand=low", "1-2:speed=fast+width=wide,4-6:symmetry=symmetric"]),
+    ),
 )
 
 
@@ -42,11 +65,16 @@ def test_every_config_reads_back_from_its_json(config):
     assert type(config).from_dict(saved) == config
 
 
-@pytest.mark.parametrize("cls, words", [(ModelConfig, "unknown model options: extra"),
-                                        (TrainConfig, "unknown training options: extra"),
-                                        (PairsConfig, "unknown training-data options: extra"),
-                                        (SearchConfig, "unknown SearchConfig keys: extra"),
-                                        (SynthesisConfig, "unknown synthesis options: extra")])
+@pytest.mark.parametrize(
+    "cls, words",
+    [
+        (ModelConfig, "unknown model options: extra"),
+        (TrainConfig, "unknown training options: extra"),
+        (PairsConfig, "unknown training-data options: extra"),
+        (SearchConfig, "unknown SearchConfig keys: extra"),
+        (SynthesisConfig, "unknown synthesis options: extra"),
+    ],
+)
 def test_unknown_options_are_refused_by_name(cls, words):
     with pytest.raises(ConfigError, match=words):
         cls.from_dict({**cls().to_dict(), "extra": 1})

@@ -150,8 +150,9 @@ def test_time_range_accepts_plain_decimals_with_start_before_end(a, b):
             parse_time_range(text)
 
 
-@pytest.mark.parametrize("text", ["1..2-3", "nan-3", "0-inf", "1e3-2e3", "-1-2", "+1-2", "1-", "-", "1 2-3", "",
-                                  "0x1-2", "1_0-20"])
+@pytest.mark.parametrize(
+    "text", ["1..2-3", "nan-3", "0-inf", "1e3-2e3", "-1-2", "+1-2", "1-", "-", "1 2-3", "", "0x1-2", "1_0-20"]
+)
 def test_time_range_refuses_what_is_not_two_plain_numbers(text):
     with pytest.raises(ConfigError, match="START-END in seconds"):
         parse_time_range(text)
@@ -185,16 +186,19 @@ def test_control_file_of_any_bytes_is_read_or_refused_by_name(tmp_path_factory, 
     assert isinstance(track, ControlTrack)
 
 
-@pytest.mark.parametrize("name, content, message", [
-    ("c.csv", "start_s,end_s,constraint\n0,1,left_hand=h\xe9\n".encode("latin-1"), "not UTF-8"),
-    ("c.json", b"42", "must hold a list of segments"),
-    ("c.json", b'{"segments": "0-1:left_hand=high"}', "must hold a list of segments"),
-    ("c.json", b'[["0", "1", "left_hand=high"]]', "row 1 must be an object"),
-    ("c.json", b'[{"start_s": 0, "end_s": 1, "constraint": "left_hand=high"}, {"start_s": 2}]', "row 2 needs"),
-    ("c.json", b'[{"start_s": 1, "end_s": 0.5, "constraint": "left_hand=high"}]', "row 1: .*end must be after"),
-    ("c.csv", b"start,end,constraint\n0,1,left_hand=high\n", "missing start_s, end_s"),
-    ("c.csv", b"", "no header"),
-])
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("c.csv", "start_s,end_s,constraint\n0,1,left_hand=h\xe9\n".encode("latin-1"), "not UTF-8"),
+        ("c.json", b"42", "must hold a list of segments"),
+        ("c.json", b'{"segments": "0-1:left_hand=high"}', "must hold a list of segments"),
+        ("c.json", b'[["0", "1", "left_hand=high"]]', "row 1 must be an object"),
+        ("c.json", b'[{"start_s": 0, "end_s": 1, "constraint": "left_hand=high"}, {"start_s": 2}]', "row 2 needs"),
+        ("c.json", b'[{"start_s": 1, "end_s": 0.5, "constraint": "left_hand=high"}]', "row 1: .*end must be after"),
+        ("c.csv", b"start,end,constraint\n0,1,left_hand=high\n", "missing start_s, end_s"),
+        ("c.csv", b"", "no header"),
+    ],
+)
 def test_control_file_structure_errors(tmp_path, name, content, message):
     f = tmp_path / name
     f.write_bytes(content)

@@ -8,7 +8,7 @@ import pytest
 from gesturekit.control import ATTRIBUTE_NAMES
 from gesturekit.database import BuildConfig, MatchingDatabase, take_features
 from gesturekit.errors import ConfigError, DatabaseError, GestureKitWarning, OutputError, collect_warnings
-from gesturekit.features import LAYOUT, pose_features
+from gesturekit.features import LAYOUT
 
 from .conftest import make_take
 
@@ -71,8 +71,15 @@ def test_zscore_statistics_are_of_valid_frames(db, takes):
 
 # every array under a readable name, with the paper's letter as an alias where it has one
 ARRAY_PROPERTIES = {
-    "audio_features": "F", "pose_features": "P", "poses": "G", "cgan_audio_features": "A", "valid": None,
-    "attributes": None, "pose_track": None, "clip_take": None, "clip_start": None,
+    "audio_features": "F",
+    "pose_features": "P",
+    "poses": "G",
+    "cgan_audio_features": "A",
+    "valid": None,
+    "attributes": None,
+    "pose_track": None,
+    "clip_take": None,
+    "clip_start": None,
 }
 
 
@@ -225,7 +232,10 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 _json = st.recursive(
-    st.none() | st.booleans() | st.integers(-3, 10**7) | st.floats(allow_nan=False, allow_infinity=False)
+    st.none()
+    | st.booleans()
+    | st.integers(-3, 10**7)
+    | st.floats(allow_nan=False, allow_infinity=False)
     | st.text(max_size=4),
     lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner, max_size=3),
     max_leaves=5,
@@ -280,15 +290,18 @@ def _resave(path, name, array):
     np.save(path / f"{name}.npy", array)
 
 
-@pytest.mark.parametrize("name, change, message", [
-    ("clip_take", lambda a: a[::-1].copy(), "does not match the takes"),
-    ("clip_take", lambda a: a.astype(np.float64), "must be integers"),
-    ("clip_start", lambda a: a[:-1], "clip_start.npy has"),
-    ("clip_start", lambda a: a + 10_000, "outside take"),
-    ("valid", lambda a: a[:, :10], r"valid.npy has shape"),
-    ("pose_track", lambda a: a[:, :64], "pose_track.npy has shape"),
-    ("clip_take", lambda a: a[:0], "no clips"),
-])
+@pytest.mark.parametrize(
+    "name, change, message",
+    [
+        ("clip_take", lambda a: a[::-1].copy(), "does not match the takes"),
+        ("clip_take", lambda a: a.astype(np.float64), "must be integers"),
+        ("clip_start", lambda a: a[:-1], "clip_start.npy has"),
+        ("clip_start", lambda a: a + 10_000, "outside take"),
+        ("valid", lambda a: a[:, :10], r"valid.npy has shape"),
+        ("pose_track", lambda a: a[:, :64], "pose_track.npy has shape"),
+        ("clip_take", lambda a: a[:0], "no clips"),
+    ],
+)
 def test_inconsistent_arrays_are_refused(db, tmp_path, name, change, message):
     path = db.save(tmp_path / "db")
     _resave(path, name, change(np.load(path / f"{name}.npy")))
@@ -305,20 +318,34 @@ def test_overlap_cut_is_checked_too(db, tmp_path):
         MatchingDatabase.load(path)
 
 
-@pytest.mark.parametrize("breakage, message", [
-    (lambda p: (p / "stats.npz").write_bytes((p / "stats.npz").read_bytes()[:300]), "stats.npz cannot be read"),
-    (lambda p: np.savez(p / "stats.npz", F_mean=np.array([None], dtype=object)), "stats.npz cannot be read"),
-    (lambda p: np.savez(p / "stats.npz", F_mean=np.zeros(LAYOUT.audio_dim)), "stats.npz lacks F_std"),
-    (lambda p: np.savez(p / "stats.npz", **{f"{k}_{s}": np.full(n, np.nan) for k, n in
-                                            (("F", LAYOUT.audio_dim), ("P", LAYOUT.pose_dim),
-                                             ("A", LAYOUT.cgan_audio_dim)) for s in ("mean", "std")}),
-     "F_mean must be 112 finite numbers"),
-    (lambda p: (p / "audio.npy").write_bytes(b"not an array"), "audio.npy cannot be read"),
-    (lambda p: np.save(p / "audio.npy", np.zeros(10, np.int16)), "audio.npy must be int16 samples"),
-    (lambda p: ((p / "F.npy").unlink(), (p / "F.npy").mkdir()), "F.npy cannot be read"),
-    (lambda p: (p / "database.json").write_text('{"format": "gesturekit-matching-database", "format_version": 1}'),
-     "feature layout"),
-])
+@pytest.mark.parametrize(
+    "breakage, message",
+    [
+        (lambda p: (p / "stats.npz").write_bytes((p / "stats.npz").read_bytes()[:300]), "stats.npz cannot be read"),
+        (lambda p: np.savez(p / "stats.npz", F_mean=np.array([None], dtype=object)), "stats.npz cannot be read"),
+        (lambda p: np.savez(p / "stats.npz", F_mean=np.zeros(LAYOUT.audio_dim)), "stats.npz lacks F_std"),
+        (
+            lambda p: np.savez(
+                p / "stats.npz",
+                **{
+                    f"{k}_{s}": np.full(n, np.nan)
+                    for k, n in (("F", LAYOUT.audio_dim), ("P", LAYOUT.pose_dim), ("A", LAYOUT.cgan_audio_dim))
+                    for s in ("mean", "std")
+                },
+            ),
+            "F_mean must be 112 finite numbers",
+        ),
+        (lambda p: (p / "audio.npy").write_bytes(b"not an array"), "audio.npy cannot be read"),
+        (lambda p: np.save(p / "audio.npy", np.zeros(10, np.int16)), "audio.npy must be int16 samples"),
+        (lambda p: ((p / "F.npy").unlink(), (p / "F.npy").mkdir()), "F.npy cannot be read"),
+        (
+            lambda p: (p / "database.json").write_text(
+                '{"format": "gesturekit-matching-database", "format_version": 1}'
+            ),
+            "feature layout",
+        ),
+    ],
+)
 def test_damaged_files_are_refused(db, tmp_path, breakage, message):
     path = db.save(tmp_path / "db")
     breakage(path)

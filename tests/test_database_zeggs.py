@@ -1,4 +1,5 @@
 """Acceptance on the real ZEGGS take: BVH + WAV folder -> matching database."""
+
 import numpy as np
 import pytest
 
@@ -58,7 +59,8 @@ def test_zeggs_hands_follow_wrists(zeggs_db):
 
 
 def test_zeggs_build_in_python_matches_cli(zeggs_db, zeggs_files):
-    db = MatchingDatabase.build(iter_takes(discover_takes(zeggs_files[0].parent), joint_map="zeggs"),
-                                config=BuildConfig())
+    db = MatchingDatabase.build(
+        iter_takes(discover_takes(zeggs_files[0].parent), joint_map="zeggs"), config=BuildConfig()
+    )
     np.testing.assert_array_equal(db.G, zeggs_db.G)
     np.testing.assert_array_equal(db.F, zeggs_db.F)

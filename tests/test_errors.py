@@ -1,4 +1,5 @@
 """gesturekit's warnings: issued as GestureKitWarning, or collected per thread."""
+
 import io
 import threading
 import warnings

@@ -1,4 +1,5 @@
 """The baseline systems against literal loops of their definitions, and running every system."""
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -39,7 +40,7 @@ def _literal_admissible(valid, step, exclude, mask, rule):
 @given(st.integers(0, 10_000), st.integers(1, 6), st.sampled_from(["ends", "all"]))
 def test_admissible_windows_equal_the_definition(seed, step, rule):
     rng = np.random.default_rng(seed)
-    valid, exclude, mask = (rng.random((3, 4, 10)) < [[[0.8]], [[0.15]], [[0.7]]])
+    valid, exclude, mask = rng.random((3, 4, 10)) < [[[0.8]], [[0.15]], [[0.7]]]
     got = admissible_windows(valid, step=step, exclude=exclude, mask=mask, mask_rule=rule)
     np.testing.assert_array_equal(got, _literal_admissible(valid, step, exclude, mask, rule))
 
@@ -102,8 +103,9 @@ def test_random_segments_are_admissible_seeded_and_relax_impossible_controls():
     exclude[:3] = True
     masks = np.stack([np.ones_like(valid), np.zeros_like(valid)])
     step_mask = np.array([0, 1, -1, 0, 1])
-    frames, relaxed = random_segments(valid, n_frames=40, step=8, seed=5, exclude=exclude, masks=masks,
-                                      step_mask=step_mask)
+    frames, relaxed = random_segments(
+        valid, n_frames=40, step=8, seed=5, exclude=exclude, masks=masks, step_mask=step_mask
+    )
     assert relaxed.tolist() == [False, True, False, False, True]
     adm = _literal_admissible(valid, 8, exclude, None, "ends")
     for i in range(5):

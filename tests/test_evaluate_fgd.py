@@ -1,4 +1,5 @@
 """The FGD autoencoder: training, determinism, saving and loading (tensors only), the distance."""
+
 import json
 from fractions import Fraction
 
@@ -48,8 +49,12 @@ def test_training_is_deterministic_and_leaves_the_global_rng_alone(db, model):
 def test_training_falls_and_held_out_clips_are_not_used(db):
     losses = []
     exclude = db.exclusion_mask(takes=["t1"])
-    m = train_fgd_model(db, config=FGDConfig(**{**TINY.__dict__, "steps": 150}), exclude=exclude,
-                        progress=lambda i, n, loss: losses.append(loss))
+    m = train_fgd_model(
+        db,
+        config=FGDConfig(**{**TINY.__dict__, "steps": 150}),
+        exclude=exclude,
+        progress=lambda i, n, loss: losses.append(loss),
+    )
     assert m.info["clips_held_out"] == int((np.asarray(db.clip_take) == 1).sum())
     assert m.info["clips_used"] == int((np.asarray(db.clip_take) == 0).sum())
     assert losses[-1] < 0.7 * losses[0]

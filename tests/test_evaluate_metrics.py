@@ -1,4 +1,5 @@
 """The objective measures on constructed motions and sounds with known answers."""
+
 import math
 
 import numpy as np
@@ -75,14 +76,21 @@ def _pick_peaks_literal(x, pre_max, post_max, pre_avg, post_avg, delta, wait):
 
 
 @settings(max_examples=200, deadline=None)
-@given(x=st.lists(st.integers(0, 6), min_size=0, max_size=60),
-       pre_max=st.integers(0, 4), post_max=st.integers(1, 4), pre_avg=st.integers(0, 6),
-       post_avg=st.integers(1, 6), delta=st.sampled_from([0.0, 0.25, 0.5, 1.0]), wait=st.integers(0, 5))
+@given(
+    x=st.lists(st.integers(0, 6), min_size=0, max_size=60),
+    pre_max=st.integers(0, 4),
+    post_max=st.integers(1, 4),
+    pre_avg=st.integers(0, 6),
+    post_avg=st.integers(1, 6),
+    delta=st.sampled_from([0.0, 0.25, 0.5, 1.0]),
+    wait=st.integers(0, 5),
+)
 def test_pick_peaks_equals_the_literal_rule(x, pre_max, post_max, pre_avg, post_avg, delta, wait):
     # small integers in float: many ties and plateaus, and exact means
     xs = np.asarray(x, dtype=np.float64) / 2
-    got = M.pick_peaks(xs, pre_max=pre_max, post_max=post_max, pre_avg=pre_avg, post_avg=post_avg,
-                       delta=delta, wait=wait)
+    got = M.pick_peaks(
+        xs, pre_max=pre_max, post_max=post_max, pre_avg=pre_avg, post_avg=post_avg, delta=delta, wait=wait
+    )
     assert got.tolist() == _pick_peaks_literal(xs, pre_max, post_max, pre_avg, post_avg, delta, wait)
 
 
@@ -233,12 +241,15 @@ def test_control_adherence_counts_frames_meeting_the_constraint():
     x[:30, LW, 1] = 0.6  # left wrist high for the first two seconds
     x[30:, LW, 1] = -0.3
     thresholds = {name: (0.0, 0.4) for name in ATTRIBUTE_NAMES}
-    table = M.control_adherence(x, parse_control("0-2:left_hand=high,2-4:left_hand=low"), thresholds=thresholds, fps=FPS)
+    table = M.control_adherence(
+        x, parse_control("0-2:left_hand=high,2-4:left_hand=low"), thresholds=thresholds, fps=FPS
+    )
     assert list(table["adherence"]) == [1.0, 1.0]
     assert list(table["frames"]) == [30, 30]
     assert table["left_hand_height_mean"].tolist() == pytest.approx([0.6, -0.3])
-    swapped = M.control_adherence(x, parse_control("0-2:left_hand=low,2-3:left_hand=high"), thresholds=thresholds,
-                                  fps=FPS)
+    swapped = M.control_adherence(
+        x, parse_control("0-2:left_hand=low,2-3:left_hand=high"), thresholds=thresholds, fps=FPS
+    )
     assert list(swapped["adherence"]) == [0.0, 0.0]
     assert M.overall_adherence(swapped) == 0.0
     # half the frames of a segment

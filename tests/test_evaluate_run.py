@@ -1,4 +1,5 @@
 """Evaluation on a held-out part of the demo database, its tables, and the evaluate / train-fgd commands."""
+
 import warnings
 from dataclasses import replace
 
@@ -78,7 +79,7 @@ def test_held_out_part_is_the_take_itself(demo_db):
     audio = demo_db.take_audio(take)
     np.testing.assert_array_equal(ref.audio[:16000], audio[960000:976000])
     # the margin before the range: the look-ahead (14 frames) and one step (8 frames)
-    (name, a, b), = ref.exclude_ranges
+    ((name, a, b),) = ref.exclude_ranges
     assert (name, b) == ("demo0_001", 90.0) and a == pytest.approx(60 - 22 / 15)
     whole = held_out(demo_db, "demo0_000")
     assert whole.exclude_takes == ("demo0_000",) and whole.n_frames == 28 * 64
@@ -142,8 +143,7 @@ def _beat_consistency(db, holdout, *, seeds=(0,), systems=("knn", "random")) -> 
     onsets = metrics.audio_onsets(ref.audio)
     out = {system: [] for system in systems}
     for seed in seeds:
-        config = replace(SynthesisConfig(seed=seed), exclude_takes=ref.exclude_takes,
-                         exclude_ranges=ref.exclude_ranges)
+        config = replace(SynthesisConfig(seed=seed), exclude_takes=ref.exclude_takes, exclude_ranges=ref.exclude_ranges)
         for system in systems:
             made = run_system(system, db=db, audio=ref.audio, config=config, control=ControlTrack(()), gt=ref.motion)
             x = made.motion.positions[: ref.n_frames]
@@ -156,8 +156,10 @@ def test_demo_knn_beats_follow_the_speech_better_than_random_segments(demo_db, e
     table = evaluation.table.set_index("system")["beat_consistency"]
     again = _beat_consistency(demo_db, HOLDOUT)
     assert again["knn"][0] == pytest.approx(table["knn"]) and again["random"][0] == pytest.approx(table["random"])
-    rows = [_beat_consistency(demo_db, holdout, seeds=BEAT_SEEDS, systems=("knn", "random", "gt"))
-            for holdout in BEAT_RANGES]
+    rows = [
+        _beat_consistency(demo_db, holdout, seeds=BEAT_SEEDS, systems=("knn", "random", "gt"))
+        for holdout in BEAT_RANGES
+    ]
     knn, rnd = (np.concatenate([r[system] for r in rows]) for system in ("knn", "random"))
     gt = np.array([r["gt"][0] for r in rows])  # the recording does not depend on the seed
     # the demo speaker's strokes end on stressed syllables: its recorded motion beats fall on the
@@ -196,12 +198,22 @@ def test_markdown_table():
 
 def test_commands_train_fgd_and_evaluate(demo_path, tmp_path, capsys):
     model = tmp_path / "fgd"
-    assert main(["train-fgd", "--db", str(demo_path), "--out", str(model), "--steps", "30",
-                 "--holdout", HOLDOUT]) == 0
+    assert main(["train-fgd", "--db", str(demo_path), "--out", str(model), "--steps", "30", "--holdout", HOLDOUT]) == 0
     assert "held out" in capsys.readouterr().out
     out = tmp_path / "eval"
-    args = ["evaluate", "--db", str(demo_path), "--holdout", HOLDOUT, "--systems", "gt,pose-only",
-            "--fgd-model", str(model), "--out", str(out)]
+    args = [
+        "evaluate",
+        "--db",
+        str(demo_path),
+        "--holdout",
+        HOLDOUT,
+        "--systems",
+        "gt,pose-only",
+        "--fgd-model",
+        str(model),
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     printed = capsys.readouterr().out
     assert "| system" in printed and "pose-only" in printed
@@ -211,6 +223,20 @@ def test_commands_train_fgd_and_evaluate(demo_path, tmp_path, capsys):
     assert set(pd.read_csv(out / "controls.csv")["system"]) == {"gt", "pose-only"}
     assert main(args) == 2
     assert "exists already" in capsys.readouterr().err
-    assert main(["evaluate", "--db", str(demo_path), "--holdout", "nope:1-2", "--out", str(tmp_path / "x"),
-                 "--fgd-model", str(model)]) == 2
+    assert (
+        main(
+            [
+                "evaluate",
+                "--db",
+                str(demo_path),
+                "--holdout",
+                "nope:1-2",
+                "--out",
+                str(tmp_path / "x"),
+                "--fgd-model",
+                str(model),
+            ]
+        )
+        == 2
+    )
     assert "no take named" in capsys.readouterr().err

@@ -4,6 +4,7 @@ Exported files are read back by readers that share no code with the writer:
 the ``bvhio`` package, and a small parser with scipy forward kinematics
 defined here.
 """
+
 from __future__ import annotations
 
 import os
@@ -17,10 +18,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from gesturekit._io import atomic_write, safe_filename
 from gesturekit.errors import ConfigError, OutputError
 from gesturekit.export import bvh as bvh_module
 from gesturekit.export.bvh import ROTATION_ORDERS, euler_from_matrices, write_bvh
-from gesturekit._io import atomic_write, safe_filename
 from gesturekit.motion import Motion
 from gesturekit.skeleton import FINGERS, JOINT_NAMES, N_JOINTS, PARENTS, joint_index
 
@@ -44,8 +45,10 @@ def parse_bvh(path):
             joints.append({"name": tokens[i + 1], "parent": stack[-1] if stack else -1, "channels": [], "end": None})
             i += 2
         elif tok == "End":
-            assert tokens[i + 1] == "Site" and tokens[i + 2] == "{" and tokens[i + 3] == "OFFSET" and tokens[i + 7] == "}"
-            joints[stack[-1]]["end"] = np.array(tokens[i + 4:i + 7], dtype=float)
+            assert (
+                tokens[i + 1] == "Site" and tokens[i + 2] == "{" and tokens[i + 3] == "OFFSET" and tokens[i + 7] == "}"
+            )
+            joints[stack[-1]]["end"] = np.array(tokens[i + 4 : i + 7], dtype=float)
             i += 8
         elif tok == "{":
             stack.append(len(joints) - 1)
@@ -54,18 +57,18 @@ def parse_bvh(path):
             stack.pop()
             i += 1
         elif tok == "OFFSET":
-            joints[stack[-1]]["offset"] = np.array(tokens[i + 1:i + 4], dtype=float)
+            joints[stack[-1]]["offset"] = np.array(tokens[i + 1 : i + 4], dtype=float)
             i += 4
         elif tok == "CHANNELS":
             n = int(tokens[i + 1])
-            joints[stack[-1]]["channels"] = tokens[i + 2:i + 2 + n]
+            joints[stack[-1]]["channels"] = tokens[i + 2 : i + 2 + n]
             i += 2 + n
         else:
             raise AssertionError(f"unexpected token {tok!r}")
     assert not stack
-    assert tokens[i + 1] == "Frames:" and tokens[i + 3:i + 5] == ["Frame", "Time:"]
+    assert tokens[i + 1] == "Frames:" and tokens[i + 3 : i + 5] == ["Frame", "Time:"]
     frames, frame_time = int(tokens[i + 2]), float(tokens[i + 5])
-    data = np.array(tokens[i + 6:], dtype=float)
+    data = np.array(tokens[i + 6 :], dtype=float)
     n_channels = sum(len(j["channels"]) for j in joints)
     assert data.size == frames * n_channels
     return joints, 1.0 / frame_time, data.reshape(frames, n_channels)
@@ -77,7 +80,7 @@ def scipy_fk(path):
     out, rots, col = {}, [], 0
     for j in joints:
         chans = j["channels"]
-        vals = data[:, col:col + len(chans)]
+        vals = data[:, col : col + len(chans)]
         col += len(chans)
         pos = np.broadcast_to(j["offset"], (len(data), 3)).copy()
         order, angles = "", []
@@ -87,7 +90,11 @@ def scipy_fk(path):
             else:
                 order += name[0]
                 angles.append(vals[:, c])
-        local = Rotation.from_euler(order, np.stack(angles, axis=1), degrees=True) if order else Rotation.identity(len(data))
+        local = (
+            Rotation.from_euler(order, np.stack(angles, axis=1), degrees=True)
+            if order
+            else Rotation.identity(len(data))
+        )
         if j["parent"] < 0:
             world, glob = pos, local
         else:
@@ -124,14 +131,24 @@ def read_positions(path, scale=100.0):
 def _offsets():
     """A plausible 55-joint skeleton (metres), character facing +Z, its left +X."""
     o = {
-        "chest": (0, 0.12, 0.01), "upper_chest": (0, 0.13, -0.01), "neck": (0, 0.16, -0.02),
-        "neck_upper": (0, 0.05, 0.01), "head": (0, 0.06, 0.02), "head_top": (0, 0.13, 0.0),
-        "left_collar": (0.05, 0.11, 0.0), "left_shoulder": (0.13, -0.01, -0.02),
-        "left_elbow": (0.28, 0, 0), "left_wrist": (0.25, 0, 0.01),
+        "chest": (0, 0.12, 0.01),
+        "upper_chest": (0, 0.13, -0.01),
+        "neck": (0, 0.16, -0.02),
+        "neck_upper": (0, 0.05, 0.01),
+        "head": (0, 0.06, 0.02),
+        "head_top": (0, 0.13, 0.0),
+        "left_collar": (0.05, 0.11, 0.0),
+        "left_shoulder": (0.13, -0.01, -0.02),
+        "left_elbow": (0.28, 0, 0),
+        "left_wrist": (0.25, 0, 0.01),
     }
-    hand = {"thumb": ((0.03, -0.01, 0.03), (0.035, 0.03, 0.025)), "index": ((0.09, 0.0, 0.025), (0.045, 0.025, 0.02)),
-            "middle": ((0.09, 0.0, 0.005), (0.05, 0.03, 0.02)), "ring": ((0.085, 0.0, -0.015), (0.045, 0.028, 0.02)),
-            "pinky": ((0.08, -0.005, -0.03), (0.035, 0.02, 0.018))}
+    hand = {
+        "thumb": ((0.03, -0.01, 0.03), (0.035, 0.03, 0.025)),
+        "index": ((0.09, 0.0, 0.025), (0.045, 0.025, 0.02)),
+        "middle": ((0.09, 0.0, 0.005), (0.05, 0.03, 0.02)),
+        "ring": ((0.085, 0.0, -0.015), (0.045, 0.028, 0.02)),
+        "pinky": ((0.08, -0.005, -0.03), (0.035, 0.02, 0.018)),
+    }
     for finger, (root, phalanges) in hand.items():
         o[f"left_{finger}1"] = root
         direction = np.array(root) / np.linalg.norm(root) + np.array([0.0, -0.1, 0.0])
@@ -273,11 +290,24 @@ def test_zeggs_take_round_trips(tmp_path):
     if not ZEGGS_BVH.is_file():
         pytest.skip("shared test data (../shared/data/zeggs) not present")
     fk_world = scipy_fk(ZEGGS_BVH)
-    names = {"spine_mid": "Spine1", "chest": "Spine2", "upper_chest": "Spine3", "neck": "Neck",
-             "neck_upper": "Neck1", "head": "Head", "head_top": "HeadEnd"}
+    names = {
+        "spine_mid": "Spine1",
+        "chest": "Spine2",
+        "upper_chest": "Spine3",
+        "neck": "Neck",
+        "neck_upper": "Neck1",
+        "head": "Head",
+        "head_top": "HeadEnd",
+    }
     for side, big in (("left", "Left"), ("right", "Right")):
-        names.update({f"{side}_collar": f"{big}Shoulder", f"{side}_shoulder": f"{big}Arm",
-                      f"{side}_elbow": f"{big}ForeArm", f"{side}_wrist": f"{big}Hand"})
+        names.update(
+            {
+                f"{side}_collar": f"{big}Shoulder",
+                f"{side}_shoulder": f"{big}Arm",
+                f"{side}_elbow": f"{big}ForeArm",
+                f"{side}_wrist": f"{big}Hand",
+            }
+        )
         for finger in FINGERS:
             for k in range(1, 5):
                 names[f"{side}_{finger}{k}"] = f"{big}Hand{finger.capitalize()}{k}"
@@ -505,8 +535,17 @@ def test_long_names_stay_distinct(name):
 
 @pytest.mark.parametrize(
     "name,expected",
-    [("../../etc/passwd", "etc_passwd"), ("my take 01", "my_take_01"), ("café", "cafe"), ("a..b.bvh", "a.b.bvh"),
-     ("C:\\x\\y", "C_x_y"), ("line\nbreak\x00", "line_break"), ("con", "_con"), ("-rf", "rf"), (".hidden", "hidden")],
+    [
+        ("../../etc/passwd", "etc_passwd"),
+        ("my take 01", "my_take_01"),
+        ("café", "cafe"),
+        ("a..b.bvh", "a.b.bvh"),
+        ("C:\\x\\y", "C_x_y"),
+        ("line\nbreak\x00", "line_break"),
+        ("con", "_con"),
+        ("-rf", "rf"),
+        (".hidden", "hidden"),
+    ],
 )
 def test_safe_filename_examples(name, expected):
     assert safe_filename(name) == expected

@@ -1,4 +1,5 @@
 """Tests of gesturekit.export.npz."""
+
 from __future__ import annotations
 
 import io
@@ -36,15 +37,25 @@ def write_zip(path, entries):
 
 
 def valid_entries(motion):
-    return {"positions": motion.positions, "fps": np.array(15.0), "joint_names": np.array(JOINT_NAMES),
-            "parents": PARENTS, "config": np.array("{}")}
+    return {
+        "positions": motion.positions,
+        "fps": np.array(15.0),
+        "joint_names": np.array(JOINT_NAMES),
+        "parents": PARENTS,
+        "config": np.array("{}"),
+    }
 
 
 def test_round_trip(tmp_path):
     motion = make_motion()
     knn = make_motion(seed=1).positions
-    arrays = {"knn_positions": knn, "refined_positions": knn + 1, "candidates": np.arange(12).reshape(3, 4),
-              "chosen": np.array([True, False]), "labels": np.array(["a", "bé"])}
+    arrays = {
+        "knn_positions": knn,
+        "refined_positions": knn + 1,
+        "candidates": np.arange(12).reshape(3, 4),
+        "chosen": np.array([True, False]),
+        "labels": np.array(["a", "bé"]),
+    }
     config = {"k": 5, "threshold": 0.25, "nested": {"list": [1, 2.5, "x"]}, "seed": None}
     path = save_npz(tmp_path / "out.npz", motion=motion, arrays=arrays, config=config)
     back, extras, cfg = load_npz(path)
@@ -84,8 +95,9 @@ def test_same_inputs_same_bytes_whatever_the_clock(tmp_path, monkeypatch):
     # a different day, and the extras and settings given in another order
     real_time = time.time
     monkeypatch.setattr(time, "time", lambda: real_time() + 86400 * 400)
-    second = save_npz(tmp_path / "2.npz", motion=motion, arrays=dict(reversed(list(arrays.items()))),
-                      config={"y": 2, "x": 1}).read_bytes()
+    second = save_npz(
+        tmp_path / "2.npz", motion=motion, arrays=dict(reversed(list(arrays.items()))), config={"y": 2, "x": 1}
+    ).read_bytes()
     assert first == second
     stored = save_npz(tmp_path / "3.npz", motion=motion, arrays=arrays, config={"x": 1, "y": 2}, compress=False)
     assert stored.read_bytes() != first and len(stored.read_bytes()) > len(first)

@@ -5,6 +5,7 @@ Videos are checked by reading them back: stream facts with ``probe_media``
 skeleton is a small hand-made pose whose right arm swings up; rendering is
 offscreen and in software, so resolutions are kept small.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -35,8 +36,12 @@ def rest_pose() -> np.ndarray:
     """A standing upper body with arms down and open hands, shape (55, 3), metres, facing +Z."""
     pose = np.zeros((N_JOINTS, 3))
     body = {
-        "spine_mid": (0, 0.11, 0), "chest": (0, 0.23, 0), "upper_chest": (0, 0.35, 0),
-        "neck": (0, 0.49, 0), "neck_upper": (0, 0.54, 0), "head": (0, 0.59, 0.01),
+        "spine_mid": (0, 0.11, 0),
+        "chest": (0, 0.23, 0),
+        "upper_chest": (0, 0.35, 0),
+        "neck": (0, 0.49, 0),
+        "neck_upper": (0, 0.54, 0),
+        "head": (0, 0.59, 0.01),
         "head_top": (0, 0.72, 0.02),
     }
     for name, p in body.items():
@@ -171,8 +176,11 @@ def test_frames_show_a_moving_skeleton(tmp_path):
 
 def test_side_by_side_has_both_figures_and_labels(tmp_path):
     out = render_video(
-        tmp_path / "pair.mp4", still_motion(6), side_by_side=swinging_motion(6),
-        labels=["k-NN", "refined"], resolution=(320, 160),
+        tmp_path / "pair.mp4",
+        still_motion(6),
+        side_by_side=swinging_motion(6),
+        labels=["k-NN", "refined"],
+        resolution=(320, 160),
     )
     frame = decode(out)[0]
     mask = figure_mask(frame)
@@ -200,7 +208,7 @@ def test_the_body_has_a_head_above_its_neck_and_fills_the_view():
     col, row = np.round(head).astype(int)
     assert mask[row, col]
     # the head is the motion's colour, lighter (its tint)
-    r, g, b = image[row - 1:row + 2, col - 1:col + 2].reshape(-1, 3).mean(axis=0)
+    r, g, b = image[row - 1 : row + 2, col - 1 : col + 2].reshape(-1, 3).mean(axis=0)
     assert b > r + 20
     # framed to fill the view: the figure spans most of the picture's height
     rows, cols = np.nonzero(mask)
@@ -214,8 +222,14 @@ def test_the_body_has_a_head_above_its_neck_and_fills_the_view():
 
 def test_progress_counts_every_frame(tmp_path):
     calls = []
-    render_video(tmp_path / "p.mp4", swinging_motion(5), audio=tone(0.6), sr=SR,
-                 resolution=(64, 48), progress=lambda done, total: calls.append((done, total)))
+    render_video(
+        tmp_path / "p.mp4",
+        swinging_motion(5),
+        audio=tone(0.6),
+        sr=SR,
+        resolution=(64, 48),
+        progress=lambda done, total: calls.append((done, total)),
+    )
     assert calls == [(i, 9) for i in range(1, 10)]
 
 
@@ -229,11 +243,27 @@ def test_parallel_render_gives_the_same_bytes_as_serial(tmp_path):
     # 70 frames are three chunks: each of two processes renders some, the parent puts them in order
     motion, other = swinging_motion(70), still_motion(64)
     calls = []
-    serial = render_video(tmp_path / "serial.mp4", motion, side_by_side=other, labels=["a", "b"], audio=tone(5.0),
-                          sr=SR, resolution=(96, 64), workers=1)
-    parallel = render_video(tmp_path / "parallel.mp4", motion, side_by_side=other, labels=["a", "b"],
-                            audio=tone(5.0), sr=SR, resolution=(96, 64), workers=2,
-                            progress=lambda done, total: calls.append((done, total)))
+    serial = render_video(
+        tmp_path / "serial.mp4",
+        motion,
+        side_by_side=other,
+        labels=["a", "b"],
+        audio=tone(5.0),
+        sr=SR,
+        resolution=(96, 64),
+        workers=1,
+    )
+    parallel = render_video(
+        tmp_path / "parallel.mp4",
+        motion,
+        side_by_side=other,
+        labels=["a", "b"],
+        audio=tone(5.0),
+        sr=SR,
+        resolution=(96, 64),
+        workers=2,
+        progress=lambda done, total: calls.append((done, total)),
+    )
     assert serial.read_bytes() == parallel.read_bytes()
     assert calls == [(i, 75) for i in range(1, 76)]  # in order, up to the audio's 75 frames
 
@@ -331,7 +361,7 @@ def test_front_view_shows_the_character_facing_the_camera():
     # every joint lands on a drawn pixel, fingertips included
     mask = figure_mask(image)
     for col, row in np.round(px).astype(int):
-        assert mask[row - 1:row + 2, col - 1:col + 2].any()
+        assert mask[row - 1 : row + 2, col - 1 : col + 2].any()
 
 
 def test_stimuli_are_framed_identically_and_previews_fit_the_motion():
@@ -396,8 +426,12 @@ def test_a_style_travels_to_the_rendering_processes_unchanged():
 
     from gesturekit.viz.appearance import Appearance
 
-    style = RenderStyle(appearance=Appearance(motion_colors=("#112233", "#445566")), fit_motion=False,
-                        view_box=((-1, 1), (-0.5, 1), (-0.3, 0.5)), elevation=5.0)
+    style = RenderStyle(
+        appearance=Appearance(motion_colors=("#112233", "#445566")),
+        fit_motion=False,
+        view_box=((-1, 1), (-0.5, 1), (-0.3, 0.5)),
+        elevation=5.0,
+    )
     assert RenderStyle.from_json(json.loads(json.dumps(style.to_json()))) == style
     with pytest.raises(ConfigError, match="appearance must be an Appearance"):
         RenderStyle(appearance="blue")

@@ -1,5 +1,6 @@
 """Tests of gesturekit.features: the 15 fps frame grid, per-frame audio features,
 feature stacking and padding, the layout, and z-scoring."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -139,8 +140,10 @@ def literal_frame_features(audio: np.ndarray, t: int) -> np.ndarray:
     return np.concatenate([mfcc, [energy]])
 
 
-@pytest.mark.parametrize("sr, n_fft, n_mels", [(SR, LAYOUT.n_fft, LAYOUT.n_mels), (22050, 2048, 128), (16000, 512, 64),
-                                                (8000, 256, 20), (44100, 1024, 80)])
+@pytest.mark.parametrize(
+    "sr, n_fft, n_mels",
+    [(SR, LAYOUT.n_fft, LAYOUT.n_mels), (22050, 2048, 128), (16000, 512, 64), (8000, 256, 20), (44100, 1024, 80)],
+)
 def test_mel_filterbank_is_librosas_bit_for_bit(sr, n_fft, n_mels):
     ours = mel_filterbank(sr=sr, n_fft=n_fft, n_mels=n_mels)
     theirs = librosa.filters.mel(sr=sr, n_fft=n_fft, n_mels=n_mels, fmin=0.0, fmax=sr / 2)
@@ -282,7 +285,11 @@ def test_cgan_audio_features_append_the_time_derivative():
 
 def test_layout_sizes_and_slices():
     assert (LAYOUT.frame_dim, LAYOUT.audio_dim, LAYOUT.pose_dim, LAYOUT.motion_dim, LAYOUT.cgan_audio_dim) == (
-        14, 112, 96, 165, 28,
+        14,
+        112,
+        96,
+        165,
+        28,
     )
     assert (LAYOUT.audio_lookahead, LAYOUT.pose_lookahead) == (14, 6)
     s = LAYOUT.slices

@@ -1,4 +1,5 @@
 """Tests of gesturekit.datasets.habibie2021: the npz layout of Habibie et al. 2021."""
+
 from __future__ import annotations
 
 import warnings
@@ -60,8 +61,7 @@ def test_joint_order(tmp_path):
     takes = load_habibie2021(path, joint_order=order)
     np.testing.assert_array_equal(takes[0].motion.positions, body[0].reshape(FRAMES, 55, 3)[:, order])
     np.savez(path, wav=wav, body=body, joint_order=order)
-    np.testing.assert_array_equal(load_habibie2021(path)[1].motion.positions,
-                                  body[1].reshape(FRAMES, 55, 3)[:, order])
+    np.testing.assert_array_equal(load_habibie2021(path)[1].motion.positions, body[1].reshape(FRAMES, 55, 3)[:, order])
     # the argument wins over the stored order
     np.testing.assert_array_equal(load_habibie2021(path, joint_order=np.arange(55))[1].motion.flat(), body[1])
     with pytest.raises(ConfigError, match="permutation"):
@@ -71,11 +71,14 @@ def test_joint_order(tmp_path):
         load_habibie2021(path)
 
 
-@pytest.mark.parametrize("samples, frames_kept, samples_kept, gap", [
-    (AUDIO_SR, 15, AUDIO_SR, "1.000 s"),  # audio 1 s shorter: motion trimmed
-    (3 * AUDIO_SR, FRAMES, SAMPLES, "1.000 s"),  # audio 1 s longer: audio trimmed
-    (SAMPLES - 4000, 26, 27733, "0.250 s"),  # a quarter second shorter
-])
+@pytest.mark.parametrize(
+    "samples, frames_kept, samples_kept, gap",
+    [
+        (AUDIO_SR, 15, AUDIO_SR, "1.000 s"),  # audio 1 s shorter: motion trimmed
+        (3 * AUDIO_SR, FRAMES, SAMPLES, "1.000 s"),  # audio 1 s longer: audio trimmed
+        (SAMPLES - 4000, 26, 27733, "0.250 s"),  # a quarter second shorter
+    ],
+)
 def test_length_mismatch_trims_with_a_warning(tmp_path, samples, frames_kept, samples_kept, gap):
     wav, body, _ = make(n_seq=2, samples=samples)
     path = tmp_path / "mismatch.npz"

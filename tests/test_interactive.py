@@ -1,4 +1,5 @@
 """The app's computations without streamlit: control tables, box selections, uploads, exports, the search record."""
+
 from __future__ import annotations
 
 import io
@@ -11,13 +12,13 @@ import soundfile as sf
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
+from gesturekit import interactive as gs
 from gesturekit.control import ControlTrack, Segment, parse_control
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import AudioFileError, ConfigError, GestureKitWarning
 from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.skeleton import N_JOINTS, joint_index
 from gesturekit.synthesize import SynthesisConfig, synthesize
-from gesturekit import interactive as gs
 
 
 @pytest.fixture(scope="module")
@@ -34,28 +35,52 @@ def result(db):
 
 # ---- the control table --------------------------------------------------------------------------
 
+
 def test_rows_with_the_same_times_form_one_segment_and_blank_rows_are_ignored():
-    table = pd.DataFrame([
-        {"start_s": 3.0, "end_s": 4.0, "constraint": "speed=slow"},
-        {"start_s": None, "end_s": None, "constraint": None},  # a row just added in the editor
-        {"start_s": 0.5, "end_s": 2.0, "constraint": "left_hand=high"},
-        {"start_s": 0.5, "end_s": 2.0, "constraint": "width=wide"},
-    ])
+    table = pd.DataFrame(
+        [
+            {"start_s": 3.0, "end_s": 4.0, "constraint": "speed=slow"},
+            {"start_s": None, "end_s": None, "constraint": None},  # a row just added in the editor
+            {"start_s": 0.5, "end_s": 2.0, "constraint": "left_hand=high"},
+            {"start_s": 0.5, "end_s": 2.0, "constraint": "width=wide"},
+        ]
+    )
     track = gs.track_from_segments(table)
     assert track.to_text() == "0.5-2:left_hand=high+width=wide,3-4:speed=slow"
 
 
-@pytest.mark.parametrize("rows, message", [
-    ([{"start_s": 1.0, "end_s": None, "constraint": "speed=slow"}], "control row 1: fill in end_s"),
-    ([{"start_s": 1.0, "end_s": 2.0, "constraint": "speed=slow"},
-      {"start_s": 3.0, "end_s": 2.0, "constraint": "speed=fast"}], "control row 2: .*end must be after start"),
-    ([{"start_s": 1.0, "end_s": 2.0, "constraint": "hands=up"}], "control row 1: unknown constraint 'hands=up'"),
-    ([{"start_s": 1.0, "end_s": 2.0, "constraint": "speed=slow"},
-      {"start_s": 1.0, "end_s": 2.0, "constraint": "speed=fast"}], "control row 2: speed is set twice .*row 1"),
-    ([{"start_s": 1.0, "end_s": 3.0, "constraint": "speed=slow"},
-      {"start_s": 2.0, "end_s": 4.0, "constraint": "width=wide"}], "overlap"),
-    ([{"start_s": "soon", "end_s": 2.0, "constraint": "speed=slow"}], "control row 1: start_s and end_s must be numbers"),
-])
+@pytest.mark.parametrize(
+    "rows, message",
+    [
+        ([{"start_s": 1.0, "end_s": None, "constraint": "speed=slow"}], "control row 1: fill in end_s"),
+        (
+            [
+                {"start_s": 1.0, "end_s": 2.0, "constraint": "speed=slow"},
+                {"start_s": 3.0, "end_s": 2.0, "constraint": "speed=fast"},
+            ],
+            "control row 2: .*end must be after start",
+        ),
+        ([{"start_s": 1.0, "end_s": 2.0, "constraint": "hands=up"}], "control row 1: unknown constraint 'hands=up'"),
+        (
+            [
+                {"start_s": 1.0, "end_s": 2.0, "constraint": "speed=slow"},
+                {"start_s": 1.0, "end_s": 2.0, "constraint": "speed=fast"},
+            ],
+            "control row 2: speed is set twice .*row 1",
+        ),
+        (
+            [
+                {"start_s": 1.0, "end_s": 3.0, "constraint": "speed=slow"},
+                {"start_s": 2.0, "end_s": 4.0, "constraint": "width=wide"},
+            ],
+            "overlap",
+        ),
+        (
+            [{"start_s": "soon", "end_s": 2.0, "constraint": "speed=slow"}],
+            "control row 1: start_s and end_s must be numbers",
+        ),
+    ],
+)
 def test_invalid_rows_are_config_errors_naming_the_row(rows, message):
     with pytest.raises(ConfigError, match=message):
         gs.track_from_segments(rows)
@@ -84,11 +109,12 @@ def test_a_track_survives_the_table(track):
 def test_adding_a_segment_cuts_what_it_overlaps():
     table = gs.segments_frame(parse_control("0-4:speed=slow,5-6:width=wide"))
     out = gs.add_segment(table, 1.0, 2.0, "left_hand=high")
-    assert gs.track_from_segments(out).to_text() == \
-        "0-1:speed=slow,1-2:left_hand=high,2-4:speed=slow,5-6:width=wide"
+    assert gs.track_from_segments(out).to_text() == "0-1:speed=slow,1-2:left_hand=high,2-4:speed=slow,5-6:width=wide"
     out = gs.add_segment(out, 3.5, 5.5, "speed=fast")
-    assert gs.track_from_segments(out).to_text() == \
-        "0-1:speed=slow,1-2:left_hand=high,2-3.5:speed=slow,3.5-5.5:speed=fast,5.5-6:width=wide"
+    assert (
+        gs.track_from_segments(out).to_text()
+        == "0-1:speed=slow,1-2:left_hand=high,2-3.5:speed=slow,3.5-5.5:speed=fast,5.5-6:width=wide"
+    )
     with pytest.raises(ConfigError, match="unknown constraint"):
         gs.add_segment(out, 0, 1, "nonsense")
 
@@ -106,18 +132,22 @@ def test_any_sequence_of_additions_leaves_a_valid_table_ending_with_the_last_ran
     assert len(covering) == 1 and covering[0].constraints == ((name, value),)
 
 
-@pytest.mark.parametrize("selection, expected", [
-    ({"box": [{"x": [2.3456, 0.5], "y": [0, 1]}]}, (0.5, 2.35)),
-    ({"box": [{"x": [1, 2]}, {"x": [-1.0, 9.0]}]}, (0.0, 6.0)),  # the latest box, clipped to the speech
-    ({"box": [{"x": [1.0, 1.02]}]}, None),  # a click, not a range
-    ({"box": [], "points": [{"x": 1}]}, None),
-    (None, None),
-])
+@pytest.mark.parametrize(
+    "selection, expected",
+    [
+        ({"box": [{"x": [2.3456, 0.5], "y": [0, 1]}]}, (0.5, 2.35)),
+        ({"box": [{"x": [1, 2]}, {"x": [-1.0, 9.0]}]}, (0.0, 6.0)),  # the latest box, clipped to the speech
+        ({"box": [{"x": [1.0, 1.02]}]}, None),  # a click, not a range
+        ({"box": [], "points": [{"x": 1}]}, None),
+        (None, None),
+    ],
+)
 def test_box_selection_gives_a_time_range(selection, expected):
     assert gs.selected_time_range(selection, duration=6.0) == expected
 
 
 # ---- speech -------------------------------------------------------------------------------------
+
 
 def test_an_upload_in_any_layout_becomes_mono_16k_and_keeps_its_name():
     t = np.arange(2 * 44100) / 44100
@@ -145,6 +175,7 @@ def test_example_speech_is_generated_and_deterministic():
 
 # ---- exports ------------------------------------------------------------------------------------
 
+
 def test_exports_hold_the_result_and_how_it_was_made(result, tmp_path):
     data = gs.export_bytes(result, "npz")
     (tmp_path / "r.npz").write_bytes(data)
@@ -152,8 +183,10 @@ def test_exports_hold_the_result_and_how_it_was_made(result, tmp_path):
         np.testing.assert_array_equal(z["positions"], result.motion.positions)
         np.testing.assert_array_equal(z["search_clip"], result.search.clip)
     assert gs.export_bytes(result, "bvh").startswith(b"HIERARCHY")
-    assert gs.export_bytes(result, "csv").decode() == \
-        "start_s,end_s,constraint\n1.0,2.5,left_hand=high\n2.5,3.0,speed=slow\n"
+    assert (
+        gs.export_bytes(result, "csv").decode()
+        == "start_s,end_s,constraint\n1.0,2.5,left_hand=high\n2.5,3.0,speed=slow\n"
+    )
     meta = json.loads(gs.export_bytes(result, "json"))
     assert SynthesisConfig.from_dict(meta["synthesis"]) == result.config
     assert meta["frames"] == result.n_frames
@@ -170,6 +203,7 @@ def test_download_names_are_safe(result):
 
 
 # ---- the search record --------------------------------------------------------------------------
+
 
 def test_candidates_table_lists_the_recorded_candidates_with_their_source(result, db):
     s = result.search
@@ -190,7 +224,7 @@ def test_step_audio_and_candidate_motion_cover_one_step(result, db):
     N = result.config.step
     assert len(gs.step_speech(result, 2)) == N * AUDIO_SR // 15
     m = gs.candidate_motion(db, int(result.search.clip[2]), int(result.search.start[2]), N)
-    np.testing.assert_array_equal(m.positions, result.knn_motion.positions[2 * N: 3 * N])
+    np.testing.assert_array_equal(m.positions, result.knn_motion.positions[2 * N : 3 * N])
 
 
 def test_comparing_k_matches_single_runs(result, db):

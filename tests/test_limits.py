@@ -1,4 +1,5 @@
 """Input limits: the limits themselves, memory of refused inputs, truncated compressed audio, absurd BVH values."""
+
 from __future__ import annotations
 
 import json
@@ -25,8 +26,15 @@ from . import hostile as h
 from .test_bvh import bvh_text, random_values, zeggs_like_skeleton
 
 SHARED_SPEECH = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "speech"
-LIMIT_VARS = [limits.SPEECH_MINUTES, limits.TAKE_HOURS, limits.MIN_SAMPLE_RATE, limits.MAX_SAMPLE_RATE,
-              limits.MIN_FPS, limits.MAX_FPS, limits.INPUT_GB]
+LIMIT_VARS = [
+    limits.SPEECH_MINUTES,
+    limits.TAKE_HOURS,
+    limits.MIN_SAMPLE_RATE,
+    limits.MAX_SAMPLE_RATE,
+    limits.MIN_FPS,
+    limits.MAX_FPS,
+    limits.INPUT_GB,
+]
 
 
 @pytest.fixture(autouse=True)
@@ -174,6 +182,7 @@ _MEASURE = textwrap.dedent("""
 @pytest.mark.skipif(not Path("/proc/self/clear_refs").exists(), reason="needs Linux /proc to read peak memory")
 def test_refusing_a_hostile_input_costs_less_than_200_mb(tmp_path):
     """Each hostile file asks for gigabytes (the 1 Hz WAV once took 2.7 GB); refusing it must not."""
+
     def bvh_folder(name, **kwargs):
         folder = tmp_path / name
         h.bvh_take(folder, **kwargs)
@@ -200,23 +209,52 @@ def test_refusing_a_hostile_input_costs_less_than_200_mb(tmp_path):
         "flac declaring 2^36 samples": ["build-db", str(huge_flac), "--out", out],
         "bvh frame time 100000": ["build-db", str(bvh_folder("slow", frame_time="100000")), "--out", out],
         "bvh Frames: 10^12": ["build-db", str(bvh_folder("many", frames="1000000000000")), "--out", out],
-        "positions --fps 1e-300": ["build-db", str(positions), "--kind", "positions", "--joint-map", str(jmap),
-                                   "--fps", "1e-300", "--out", out],
-        "npy header 10^12 frames": ["build-db", str(big_npy), "--kind", "positions", "--joint-map", str(jmap),
-                                    "--fps", "30", "--out", out],
+        "positions --fps 1e-300": [
+            "build-db",
+            str(positions),
+            "--kind",
+            "positions",
+            "--joint-map",
+            str(jmap),
+            "--fps",
+            "1e-300",
+            "--out",
+            out,
+        ],
+        "npy header 10^12 frames": [
+            "build-db",
+            str(big_npy),
+            "--kind",
+            "positions",
+            "--joint-map",
+            str(jmap),
+            "--fps",
+            "30",
+            "--out",
+            out,
+        ],
         "habibie npz 10^8 frames": ["build-db", str(habibie), "--kind", "habibie2021", "--out", out],
     }
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
-    proc = subprocess.run([sys.executable, "-c", _MEASURE, json.dumps(cases)], capture_output=True, text=True,
-                          env=env, timeout=300, check=False)
+    proc = subprocess.run(
+        [sys.executable, "-c", _MEASURE, json.dumps(cases)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+        check=False,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     results = json.loads(proc.stdout.strip().splitlines()[-1])
     assert 95 < results.pop("calibration")["above_mb"] < 130  # a 100 MiB array is seen
     for name, r in results.items():
         assert r["code"] == 2, (name, proc.stderr[-2000:])
         assert r["above_mb"] < MEMORY_BOUND_MB, (name, r)
-    print("\n".join(f"{n}: {r['above_mb']:.1f} MB above the process, peak {r['peak_mb']:.0f} MB"
-                    for n, r in results.items()))
+    print(
+        "\n".join(
+            f"{n}: {r['above_mb']:.1f} MB above the process, peak {r['peak_mb']:.0f} MB" for n, r in results.items()
+        )
+    )
 
 
 # ----------------------------------------------------------------------------- truncated compressed audio
@@ -227,8 +265,10 @@ def speech(tmp_path_factory) -> dict[str, Path]:
     return h.encoded(tmp_path_factory.mktemp("speech"), seconds=20.0)
 
 
-@pytest.mark.parametrize("kind, fmt", [("wav", "WAV"), ("flac", "FLAC"), ("ogg", "OGG"), ("opus", "OGG"),
-                                       ("mp3", "MP3"), ("xing.mp3", "MP3")])
+@pytest.mark.parametrize(
+    "kind, fmt",
+    [("wav", "WAV"), ("flac", "FLAC"), ("ogg", "OGG"), ("opus", "OGG"), ("mp3", "MP3"), ("xing.mp3", "MP3")],
+)
 def test_whole_files_still_load(kind, fmt, speech):
     audio, info = load_audio_with_info(speech[kind])
     assert info.format == fmt
@@ -265,8 +305,11 @@ def test_ogg_message_says_how_much_is_left(speech, tmp_path):
 @pytest.mark.parametrize("fraction", [0.4, 0.71, 0.93])
 def test_mp3_without_xing_cut_inside_a_frame(fraction, speech, tmp_path):
     path = h.cut(speech["mp3"], tmp_path / "cut.mp3", fraction)
-    with pytest.raises(AudioFileError, match=r"the last MP3 frame is cut off \(\d+ of its bytes are missing\); "
-                                             r"the audio ends after [\d.]+ s") as info:
+    with pytest.raises(
+        AudioFileError,
+        match=r"the last MP3 frame is cut off \(\d+ of its bytes are missing\); "
+        r"the audio ends after [\d.]+ s",
+    ) as info:
         load_audio(path)
     seconds = float(str(info.value).split("ends after ")[1].split(" s")[0])
     assert seconds == pytest.approx(20.0 * fraction, abs=0.5)  # constant bitrate: bytes are time
@@ -285,8 +328,9 @@ def test_mp3_cut_between_frames_is_caught_by_its_id3_length(tmp_path):
     # 32 kbit/s at 16 kHz: every frame is exactly 144 bytes, so a cut can fall between two frames
     bare = tmp_path / "bare.mp3"
     sf.write(tmp_path / "s.wav", h.speech_like(10.0), h.SR)
-    h.ffmpeg("-i", tmp_path / "s.wav", "-c:a", "libmp3lame", "-b:a", "32k", "-write_xing", "0",
-             "-id3v2_version", "0", bare)
+    h.ffmpeg(
+        "-i", tmp_path / "s.wav", "-c:a", "libmp3lame", "-b:a", "32k", "-write_xing", "0", "-id3v2_version", "0", bare
+    )
     raw = bare.read_bytes()
     assert raw[:2] == b"\xff\xf3" and raw[144:146] == b"\xff\xf3"
     whole = tmp_path / "whole.mp3"
@@ -294,8 +338,11 @@ def test_mp3_cut_between_frames_is_caught_by_its_id3_length(tmp_path):
     assert abs(load_audio_with_info(whole)[1].duration - 10.0) < 0.2
     cut = tmp_path / "cut.mp3"
     cut.write_bytes(_id3_with_length(10_000) + raw[: 144 * 150])  # 150 frames of 576 samples: 5.4 s
-    with pytest.raises(AudioFileError, match=r"cut\.mp3: the file is truncated: it ends after 5\.4 s of the 10\.0 s "
-                                             r"its ID3 tag declares"):
+    with pytest.raises(
+        AudioFileError,
+        match=r"cut\.mp3: the file is truncated: it ends after 5\.4 s of the 10\.0 s "
+        r"its ID3 tag declares",
+    ):
         load_audio(cut)
 
 
@@ -303,8 +350,11 @@ def test_audio_longer_than_the_take_limit_is_refused_before_decoding(tmp_path, m
     path = tmp_path / "long.flac"
     sf.write(path, h.speech_like(3.0), h.SR, format="FLAC")
     monkeypatch.setenv("GESTUREKIT_MAX_TAKE_HOURS", str(2.0 / 3600))
-    with pytest.raises(InputFileError, match=r"long\.flac: the FLAC header says 48000 samples at 16000 Hz: 3\.0 s, "
-                                             r"beyond the limit of 2\.0 s for one take"):
+    with pytest.raises(
+        InputFileError,
+        match=r"long\.flac: the FLAC header says 48000 samples at 16000 Hz: 3\.0 s, "
+        r"beyond the limit of 2\.0 s for one take",
+    ):
         load_audio(path, take=True)
     assert load_audio(path).shape == (48000,)  # speech has its own limit
 
@@ -313,8 +363,11 @@ def test_many_channels_beyond_the_memory_limit(tmp_path, monkeypatch):
     path = tmp_path / "wide.wav"
     h.wav_with_header(path, rate=16000, n_samples=16000, channels=64)
     monkeypatch.setenv("GESTUREKIT_MAX_INPUT_GB", "0.001")  # 1 MB; 64 channels of 1 s take 4 MB
-    with pytest.raises(InputFileError, match=r"wide\.wav: the WAV header says 16000 samples of 64 channels: "
-                                             r"4\.16 MB once decoded, beyond the limit of 1 MB"):
+    with pytest.raises(
+        InputFileError,
+        match=r"wide\.wav: the WAV header says 16000 samples of 64 channels: "
+        r"4\.16 MB once decoded, beyond the limit of 1 MB",
+    ):
         load_audio(path)
 
 
@@ -329,8 +382,11 @@ def m4a(tmp_path_factory) -> Path:
 
 def test_a_container_read_by_ffmpeg_is_checked_from_its_header(m4a, monkeypatch):
     monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.1")
-    with pytest.raises(InputFileError, match=r"speech\.m4a: the AAC container header says 192000 samples at "
-                                             r"16000 Hz: 12\.0 s, beyond the limit of 6\.0 s for speech"):
+    with pytest.raises(
+        InputFileError,
+        match=r"speech\.m4a: the AAC container header says 192000 samples at "
+        r"16000 Hz: 12\.0 s, beyond the limit of 6\.0 s for speech",
+    ):
         load_audio(m4a)
     monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.5")
     assert load_audio_with_info(m4a)[1].duration == pytest.approx(12.0, abs=0.1)
@@ -341,8 +397,11 @@ def test_a_stream_of_unstated_length_is_decoded_only_up_to_the_limit(m4a, monkey
 
     monkeypatch.setattr(audio_module, "_probe_ffmpeg", lambda exe, path, budget: None)  # a header that says nothing
     monkeypatch.setenv("GESTUREKIT_MAX_SPEECH_MINUTES", "0.1")
-    with pytest.raises(InputFileError, match=r"speech\.m4a: decoding stopped past the limit, at: 7\.0 s, "
-                                             r"beyond the limit of 6\.0 s for speech"):
+    with pytest.raises(
+        InputFileError,
+        match=r"speech\.m4a: decoding stopped past the limit, at: 7\.0 s, "
+        r"beyond the limit of 6\.0 s for speech",
+    ):
         load_audio(m4a)
 
 
@@ -373,9 +432,12 @@ def _skeleton_with(tmp_path, *, offset_scale=1.0, root_shift=0.0, name="t.bvh"):
 
 def test_a_bone_kilometres_long_is_refused_after_forward_kinematics(tmp_path):
     path = _skeleton_with(tmp_path, offset_scale=1e6)  # 3.2 cm -> 32 km
-    with pytest.raises(MotionFileError, match=r"absurd positions after forward kinematics: joint "
-                                              r"'LeftHandIndex\d(_End)?' at frame 0 \(0\.00 s\) lies [\d.e+]+ m from "
-                                              r"the pelvis 'Hips' along one axis \(more than 1 km\)") as info:
+    with pytest.raises(
+        MotionFileError,
+        match=r"absurd positions after forward kinematics: joint "
+        r"'LeftHandIndex\d(_End)?' at frame 0 \(0\.00 s\) lies [\d.e+]+ m from "
+        r"the pelvis 'Hips' along one axis \(more than 1 km\)",
+    ) as info:
         load_bvh_motion(path)
     assert str(path) in str(info.value)
 
@@ -386,18 +448,23 @@ def test_plausible_large_values_still_load(tmp_path):
     assert np.isfinite(motion.positions).all() and np.abs(motion.positions).max() < 2.0
 
 
-@pytest.mark.parametrize("value, problem", [("1e300", "absurd rotation"), ("-1e300", "absurd rotation"),
-                                            ("2e6", "absurd rotation")])
+@pytest.mark.parametrize(
+    "value, problem", [("1e300", "absurd rotation"), ("-1e300", "absurd rotation"), ("2e6", "absurd rotation")]
+)
 def test_rotation_values_no_pose_can_have(value, problem, tmp_path):
     path = h.bvh_take(tmp_path, marks={(17, 8): value}, audio=False)
     with pytest.raises(MotionFileError, match=problem + r".*at frame 17 \(0\.57 s\); 1 frames affected"):
         load_bvh_motion(path)
 
 
-@pytest.mark.parametrize("kwargs, problem", [(dict(frame_time="100000"), "outside the accepted range"),
-                                             (dict(frames="1000000000"), "beyond the limit of 4.0 h")])
-def test_bvh_header_beyond_the_limits_is_refused_before_the_file_is_read_whole(kwargs, problem, tmp_path,
-                                                                               monkeypatch):
+@pytest.mark.parametrize(
+    "kwargs, problem",
+    [
+        (dict(frame_time="100000"), "outside the accepted range"),
+        (dict(frames="1000000000"), "beyond the limit of 4.0 h"),
+    ],
+)
+def test_bvh_header_beyond_the_limits_is_refused_before_the_file_is_read_whole(kwargs, problem, tmp_path, monkeypatch):
     from gesturekit.datasets.bvh import parse_bvh
 
     path = h.bvh_take(tmp_path, audio=False, **kwargs)

@@ -4,6 +4,7 @@ Each notebook is executed in a fresh Jupyter kernel (nbclient) on a small demo
 database built once per test process in a temporary ``GESTUREKIT_HOME``; a
 notebook's own cells assert what it shows (03 checks the control figures).
 """
+
 from __future__ import annotations
 
 import ast
@@ -57,8 +58,9 @@ def test_stored_without_outputs_and_importing_only_gesturekit(name):
                 assert top == "gesturekit" or top in ALLOWED_IMPORTS, f"{name} imports {m}"
     # one variable at the top points the notebook to another database
     first = ast.parse(cells[0].source)
-    assigned = {t.id: n.value for n in first.body if isinstance(n, ast.Assign) for t in n.targets
-                if isinstance(t, ast.Name)}
+    assigned = {
+        t.id: n.value for n in first.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)
+    }
     assert isinstance(assigned.get("DATABASE"), ast.Constant) and assigned["DATABASE"].value is None
 
 
@@ -82,8 +84,9 @@ def test_notebook_runs_top_to_bottom(name, demo_home, monkeypatch, capsys, tmp_p
     monkeypatch.setenv("GESTUREKIT_DEMO_MINUTES", str(DEMO_MINUTES))
     # and a numba cache of its own: compiled code cached by one process can crash another
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
-    client = nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
-                                     resources={"metadata": {"path": str(NOTEBOOKS)}})
+    client = nbclient.NotebookClient(
+        nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}
+    )
     t0 = time.perf_counter()
     client.execute()  # raises CellExecutionError, with the failing cell and its traceback
     seconds = time.perf_counter() - t0

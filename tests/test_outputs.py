@@ -1,4 +1,5 @@
 """Outputs: what --force may replace, overlap with inputs, locks, stale temporaries, all-or-nothing writes."""
+
 import errno
 import json
 import os
@@ -15,10 +16,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gesturekit import outputs
+from gesturekit._io import atomic_write
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import DatabaseError, GestureKitError, OutputError
 from gesturekit.export.bvh import write_bvh
-from gesturekit._io import atomic_write
 from gesturekit.export.npz import save_npz
 from gesturekit.motion import Motion
 from gesturekit.outputs import check_not_input, check_output, clean_stale, output_lock, write_folder
@@ -31,8 +32,14 @@ REPO = Path(__file__).resolve().parents[1]
 def run_script(code: str, *args, timeout=120) -> subprocess.CompletedProcess:
     """Run a Python snippet in a fresh interpreter that imports this checkout of gesturekit."""
     env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(code), *map(str, args)], cwd=REPO, env=env,
-                          capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code), *map(str, args)],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
 def dead_pid() -> int:
@@ -44,8 +51,10 @@ def dead_pid() -> int:
 
 @pytest.fixture(scope="module")
 def small_db():
-    return MatchingDatabase.build([make_take(9.0, seed=1, name="a"), make_take(5.0, seed=2, name="b")],
-                                  config=BuildConfig(overlap_stride=16, store_audio=False))
+    return MatchingDatabase.build(
+        [make_take(9.0, seed=1, name="a"), make_take(5.0, seed=2, name="b")],
+        config=BuildConfig(overlap_stride=16, store_audio=False),
+    )
 
 
 def still(frames=3, seed=0):
@@ -69,7 +78,9 @@ def test_a_foreign_folder_is_refused_saying_what_is_there(tmp_path):
     (thesis / "chapters").mkdir(parents=True)
     for i in range(11):
         (thesis / "chapters" / f"{i}.tex").write_text("text")
-    with pytest.raises(OutputError, match=r"thesis: holds 11 files and 1 folder that gesturekit did not write; refusing"):
+    with pytest.raises(
+        OutputError, match=r"thesis: holds 11 files and 1 folder that gesturekit did not write; refusing"
+    ):
         check_output(thesis, "database", overwrite=True)
 
 
@@ -133,8 +144,10 @@ def test_outputs_overlapping_inputs_are_refused(tmp_path):
 
 
 @settings(max_examples=60, deadline=None)
-@given(a=st.lists(st.sampled_from("xyz"), min_size=1, max_size=4),
-       b=st.lists(st.sampled_from("xyz"), min_size=1, max_size=4))
+@given(
+    a=st.lists(st.sampled_from("xyz"), min_size=1, max_size=4),
+    b=st.lists(st.sampled_from("xyz"), min_size=1, max_size=4),
+)
 def test_overlap_means_one_path_is_a_prefix_of_the_other(tmp_path_factory, a, b):
     root = tmp_path_factory.getbasetemp() / "overlap"
     out, inp = root.joinpath(*a), root.joinpath(*b)
@@ -188,8 +201,9 @@ def test_stale_temporaries_of_dead_processes_are_removed(tmp_path):
     (tmp_path / ".dbx.tmp-1").mkdir()  # another output's
     removed = clean_stale(tmp_path / "db")
     assert sorted(p.name for p in removed) == sorted([f".db.tmp-{dead}", f".db.old-{dead}"])
-    assert sorted(os.listdir(tmp_path)) == sorted(["db", f".db.tmp-{alive}", f".out.npz.{dead}-0123abcd.tmp",
-                                                   f".db.{alive}-0123abcd.tmp", ".dbx.tmp-1"])
+    assert sorted(os.listdir(tmp_path)) == sorted(
+        ["db", f".db.tmp-{alive}", f".out.npz.{dead}-0123abcd.tmp", f".db.{alive}-0123abcd.tmp", ".dbx.tmp-1"]
+    )
     # an atomic write of out.npz removes its own kind of leftover
     atomic_write(tmp_path / "out.npz", lambda f: f.write(b"new"))
     assert not (tmp_path / f".out.npz.{dead}-0123abcd.tmp").exists()
@@ -209,8 +223,14 @@ def test_a_swap_cut_short_is_undone(tmp_path):
 # ---- write errors --------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("code, words", [(errno.ENOSPC, "the disk is full"), (errno.EACCES, "permission denied"),
-                                         (errno.EROFS, "the file system is read-only")])
+@pytest.mark.parametrize(
+    "code, words",
+    [
+        (errno.ENOSPC, "the disk is full"),
+        (errno.EACCES, "permission denied"),
+        (errno.EROFS, "the file system is read-only"),
+    ],
+)
 def test_write_errors_name_the_path_and_the_cause(tmp_path, monkeypatch, code, words):
     def refuse(*a, **k):
         raise OSError(code, os.strerror(code))
@@ -271,8 +291,9 @@ def test_a_database_with_nan_is_not_written(small_db, tmp_path):
     arrays = dict(small_db.arrays)
     arrays["G"] = np.array(arrays["G"])
     arrays["G"][2, 10, 5] = np.nan
-    bad = MatchingDatabase(meta=small_db.meta, arrays=arrays, stats=small_db.stats, audio=None,
-                           overlap=small_db.overlap)
+    bad = MatchingDatabase(
+        meta=small_db.meta, arrays=arrays, stats=small_db.stats, audio=None, overlap=small_db.overlap
+    )
     with pytest.raises(DatabaseError, match=r"db: the database's array G holds NaN or infinite values \(clip 2\)"):
         bad.save(tmp_path / "db")
     assert os.listdir(tmp_path) == []
@@ -294,12 +315,20 @@ def test_a_refiner_that_yields_nan_is_named(tmp_path):
     knn = still(6)
     refined = Motion(np.full_like(knn.positions, np.nan), knn.fps)
     # the check comes before anything else of the result is used, so no search record is needed
-    res = SynthesisResult(motion=refined, knn_motion=knn, search=None, audio=np.zeros(3200, np.float32),
-                          config=SynthesisConfig(), database="test", source="x.wav",
-                          refined_motion=refined)
+    res = SynthesisResult(
+        motion=refined,
+        knn_motion=knn,
+        search=None,
+        audio=np.zeros(3200, np.float32),
+        config=SynthesisConfig(),
+        database="test",
+        source="x.wav",
+        refined_motion=refined,
+    )
     for save, name in ((res.save_npz, "r.npz"), (res.save_bvh, "r.bvh"), (res.save_video, "r.mp4")):
-        with pytest.raises(GestureKitError, match=f"{name}: not written: the refiner produced NaN or infinite "
-                                                  "positions .from frame 0"):
+        with pytest.raises(
+            GestureKitError, match=f"{name}: not written: the refiner produced NaN or infinite positions .from frame 0"
+        ):
             save(tmp_path / name)
     res.refined_motion, res.knn_motion = None, refined
     with pytest.raises(GestureKitError, match="the k-NN motion .poses read from the database"):
@@ -322,7 +351,9 @@ _BUILD = """
 
 def test_kill_during_a_database_save_keeps_the_previous_one(tmp_path):
     out = tmp_path / "db"
-    run = run_script(_BUILD + """
+    run = run_script(
+        _BUILD
+        + """
     build(1).save(sys.argv[1])
     real, calls = np.save, []
 
@@ -334,7 +365,9 @@ def test_kill_during_a_database_save_keeps_the_previous_one(tmp_path):
 
     np.save = dying
     build(2).save(sys.argv[1], overwrite=True)
-    """, out)
+    """,
+        out,
+    )
     assert run.returncode == -9, run.stderr
     left = sorted(os.listdir(tmp_path))
     # the killed writer's lock file and temporary folder stay behind, until the next writer
@@ -353,7 +386,10 @@ def test_two_builds_to_one_folder_one_wins_the_other_says_so(tmp_path):
 
     out, ready, go = tmp_path / "db", tmp_path / "ready", tmp_path / "go"
     first = subprocess.Popen(
-        [sys.executable, "-c", textwrap.dedent("""
+        [
+            sys.executable,
+            "-c",
+            textwrap.dedent("""
         import sys, time
         from pathlib import Path
         import gesturekit.datasets.synthetic as synthetic
@@ -368,8 +404,17 @@ def test_two_builds_to_one_folder_one_wins_the_other_says_so(tmp_path):
 
         synthetic.generate_demo_takes = takes
         sys.exit(main(["build-db", "--demo", "--out", sys.argv[1]]))
-        """), str(out), str(ready), str(go)],
-        cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        """),
+            str(out),
+            str(ready),
+            str(go),
+        ],
+        cwd=REPO,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         for _ in range(3000):
             if ready.exists() or first.poll() is not None:
@@ -378,8 +423,9 @@ def test_two_builds_to_one_folder_one_wins_the_other_says_so(tmp_path):
         assert ready.exists(), first.communicate()[1]
         before = snapshot(out)
         second = run_cli("build-db", "--demo", "--minutes", "0.1", "--out", out, "--force")
-        assert_refused(second, names=out, problem=f"another gesturekit process (pid {first.pid}) is writing",
-                       before=before)
+        assert_refused(
+            second, names=out, problem=f"another gesturekit process (pid {first.pid}) is writing", before=before
+        )
     finally:
         go.touch()
         _, err = first.communicate(timeout=120)
@@ -438,8 +484,13 @@ def test_kill_during_a_checkpoint_keeps_the_last_complete_one(small_db, tmp_path
             train_refiner(db, cut, resume=True, device="cpu")
     assert json.loads((cut / "config.json").read_text())["iteration"] == 4
     resumed = train_refiner(db, cut, resume=True, device="cpu")
-    straight = train_refiner(db, tmp_path / "straight", model=TINY, device="cpu",
-                             train=TrainConfig(iterations=10, batch_size=4, checkpoint_every=4, log_every=2))
+    straight = train_refiner(
+        db,
+        tmp_path / "straight",
+        model=TINY,
+        device="cpu",
+        train=TrainConfig(iterations=10, batch_size=4, checkpoint_every=4, log_every=2),
+    )
     a = torch.load(straight / "generator.pt", weights_only=True)
     b = torch.load(resumed / "generator.pt", weights_only=True)
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
@@ -449,12 +500,14 @@ def test_kill_during_a_checkpoint_keeps_the_last_complete_one(small_db, tmp_path
 def test_without_an_atomic_exchange_the_swap_uses_two_renames(tmp_path, monkeypatch):
     monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)
     for n in (1, 2):
-        write_folder(tmp_path / "s", "study",
-                     lambda tmp: (tmp / "study.json").write_text(json.dumps({"format": "gesturekit-study", "n": n})),
-                     overwrite=True)
+        write_folder(
+            tmp_path / "s",
+            "study",
+            lambda tmp, n=n: (tmp / "study.json").write_text(json.dumps({"format": "gesturekit-study", "n": n})),
+            overwrite=True,
+        )
         assert json.loads((tmp_path / "s" / "study.json").read_text())["n"] == n
     assert os.listdir(tmp_path) == ["s"]
-
 
 
 def test_a_dataset_bvh_is_not_taken_for_gesturekit_output(zeggs_files, tmp_path):

@@ -1,4 +1,5 @@
 """gesturekit.paths: gesturekit's home, and the folders a served app may read and write."""
+
 from __future__ import annotations
 
 import os

@@ -1,4 +1,5 @@
 """Tests of gesturekit.datasets.positions: joint-position files as 55-joint motions."""
+
 from __future__ import annotations
 
 import json
@@ -108,26 +109,30 @@ def test_resampled_to_15_fps(fps, n):
     np.testing.assert_allclose(motion.positions, want, atol=1e-6)
     if fps in (30, 60, 120):  # whole multiples subsample exactly
         step = fps // 15
-        np.testing.assert_allclose(motion.positions, expected(array, ours, pelvis)[::step][:motion.n_frames],
-                                   atol=1e-6)
+        np.testing.assert_allclose(
+            motion.positions, expected(array, ours, pelvis)[::step][: motion.n_frames], atol=1e-6
+        )
 
 
-@pytest.mark.parametrize("make, fragment", [
-    (lambda p: np.save(p.with_suffix(".npy"), np.zeros((5, 60, 2))), "shape"),
-    (lambda p: np.save(p.with_suffix(".npy"), np.zeros((5, 10))), "shape"),
-    (lambda p: np.save(p.with_suffix(".npy"), np.zeros((0, 60, 3))), "no frames"),
-    (lambda p: np.save(p.with_suffix(".npy"), np.full((5, 60, 3), np.nan)), "NaN"),
-    (lambda p: np.save(p.with_suffix(".npy"), np.array([{"a": 1}], dtype=object)), "cannot read"),
-    (lambda p: np.save(p.with_suffix(".npy"), np.array(["a", "b"])), "numbers"),
-    (lambda p: np.savez(p.with_suffix(".npz"), a=np.zeros((5, 60, 3)), b=np.zeros(3)), "positions"),
-    (lambda p: p.with_suffix(".txt").write_text("1 2 3\n4 5\n"), "cannot read"),
-    (lambda p: p.with_suffix(".txt").write_text("1 2 x\n"), "cannot read"),
-    (lambda p: p.with_suffix(".txt").write_text("\n\n"), "no frames"),
-    (lambda p: p.with_suffix(".npy").write_bytes(b""), "empty"),
-    (lambda p: p.with_suffix(".npy").write_bytes(b"not numpy at all"), "cannot read"),
-    (lambda p: p.with_suffix(".npz").write_bytes(b"not a zip"), "cannot read"),
-    (lambda p: p.with_suffix(".pkl").write_bytes(b"x"), "unsupported"),
-])
+@pytest.mark.parametrize(
+    "make, fragment",
+    [
+        (lambda p: np.save(p.with_suffix(".npy"), np.zeros((5, 60, 2))), "shape"),
+        (lambda p: np.save(p.with_suffix(".npy"), np.zeros((5, 10))), "shape"),
+        (lambda p: np.save(p.with_suffix(".npy"), np.zeros((0, 60, 3))), "no frames"),
+        (lambda p: np.save(p.with_suffix(".npy"), np.full((5, 60, 3), np.nan)), "NaN"),
+        (lambda p: np.save(p.with_suffix(".npy"), np.array([{"a": 1}], dtype=object)), "cannot read"),
+        (lambda p: np.save(p.with_suffix(".npy"), np.array(["a", "b"])), "numbers"),
+        (lambda p: np.savez(p.with_suffix(".npz"), a=np.zeros((5, 60, 3)), b=np.zeros(3)), "positions"),
+        (lambda p: p.with_suffix(".txt").write_text("1 2 3\n4 5\n"), "cannot read"),
+        (lambda p: p.with_suffix(".txt").write_text("1 2 x\n"), "cannot read"),
+        (lambda p: p.with_suffix(".txt").write_text("\n\n"), "no frames"),
+        (lambda p: p.with_suffix(".npy").write_bytes(b""), "empty"),
+        (lambda p: p.with_suffix(".npy").write_bytes(b"not numpy at all"), "cannot read"),
+        (lambda p: p.with_suffix(".npz").write_bytes(b"not a zip"), "cannot read"),
+        (lambda p: p.with_suffix(".pkl").write_bytes(b"x"), "unsupported"),
+    ],
+)
 def test_bad_files_raise_motion_file_error_naming_the_file(tmp_path, layout, make, fragment):
     _, _, _, map_path = layout
     make(tmp_path / "broken")
@@ -171,9 +176,12 @@ def test_incomplete_or_bad_joint_maps(tmp_path):
     assert "pmap.json" in message and "left_wrist" in message and "right_ring3" in message and "tail" in message
     with pytest.raises(ConfigError, match="left_wrist"):
         load_position_joint_map({"pelvis": 0, "joints": partial})
-    for content, fragment in [("{oops", "not valid JSON"), ('{"joints": {}}', "pelvis"),
-                              ('{"pelvis": 1.5, "joints": {}}', "pelvis"),
-                              ('{"pelvis": 0, "joints": {}, "names": "abc"}', "names")]:
+    for content, fragment in [
+        ("{oops", "not valid JSON"),
+        ('{"joints": {}}', "pelvis"),
+        ('{"pelvis": 1.5, "joints": {}}', "pelvis"),
+        ('{"pelvis": 0, "joints": {}, "names": "abc"}', "names"),
+    ]:
         path.write_text(content)
         with pytest.raises(InputFileError, match=fragment):
             load_position_joint_map(path)

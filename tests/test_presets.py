@@ -1,4 +1,5 @@
 """Tests of gesturekit.datasets.presets: the built-in joint maps and JSON joint maps."""
+
 from __future__ import annotations
 
 import json
@@ -18,8 +19,7 @@ ZEGGS = DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
 
 def _chain(names, first, step, *, last_children=(), end=(0, 0, 0)):
     """Nested nodes (name, offset, children, end_site) for a chain of joints."""
-    node = (names[-1], first if len(names) == 1 else step, list(last_children),
-            None if last_children else end)
+    node = (names[-1], first if len(names) == 1 else step, list(last_children), None if last_children else end)
     for i in range(len(names) - 2, -1, -1):
         node = (names[i], first if i == 0 else step, [node], None)
     return node
@@ -32,16 +32,31 @@ def _beat_tree():
     for side, sx in (("Right", -1), ("Left", 1)):
         fingers = [_chain([f"{side}HandMiddle{k}" for k in range(1, 5)], (9 * sx, 0, 0), (3 * sx, 0, 0))]
         for finger, z in (("Ring", -1), ("Pinky", -2), ("Index", 1)):
-            fingers.append(_chain([f"{side}Hand{finger}"] + [f"{side}Hand{finger}{k}" for k in range(1, 5)],
-                                  (2 * sx, 0, z), (3 * sx, 0, 0)))
+            fingers.append(
+                _chain(
+                    [f"{side}Hand{finger}"] + [f"{side}Hand{finger}{k}" for k in range(1, 5)],
+                    (2 * sx, 0, z),
+                    (3 * sx, 0, 0),
+                )
+            )
         fingers.append(_chain([f"{side}HandThumb{k}" for k in range(1, 5)], (3 * sx, -2, 3), (3 * sx, 0, 0)))
-        arm = _chain([f"{side}Shoulder", f"{side}Arm", f"{side}ForeArm", f"{side}Hand"],
-                     (3 * sx, 11, 0), (20 * sx, 0, 0), last_children=fingers)
+        arm = _chain(
+            [f"{side}Shoulder", f"{side}Arm", f"{side}ForeArm", f"{side}Hand"],
+            (3 * sx, 11, 0),
+            (20 * sx, 0, 0),
+            last_children=fingers,
+        )
         arms.append(arm)
     head = _chain(["Neck", "Neck1", "Head", "HeadEnd"], (0, 15, 1), (0, 6, 0))
     spine = _chain(["Spine", "Spine1", "Spine2", "Spine3"], (0, 8, -2), (0, 12, 0), last_children=[head] + arms)
-    legs = [_chain([f"{s}UpLeg", f"{s}Leg", f"{s}Foot", f"{s}ForeFoot", f"{s}ToeBase", f"{s}ToeBaseEnd"],
-                   (10 * sx, 0, 0), (0, -20, 0)) for s, sx in (("Right", -1), ("Left", 1))]
+    legs = [
+        _chain(
+            [f"{s}UpLeg", f"{s}Leg", f"{s}Foot", f"{s}ForeFoot", f"{s}ToeBase", f"{s}ToeBaseEnd"],
+            (10 * sx, 0, 0),
+            (0, -20, 0),
+        )
+        for s, sx in (("Right", -1), ("Left", 1))
+    ]
     return ("Hips", (0, 95, 0), [spine] + legs, None)
 
 
@@ -53,8 +68,9 @@ def beat_like_bvh(prefix="", n_frames=16, seed=0):
     def write(node, root=False):
         nonlocal n_channels
         name, offset, children, end = node
-        lines.extend([f"{'ROOT' if root else 'JOINT'} {prefix}{name}", "{",
-                      "OFFSET " + " ".join(str(float(v)) for v in offset)])
+        lines.extend(
+            [f"{'ROOT' if root else 'JOINT'} {prefix}{name}", "{", "OFFSET " + " ".join(str(float(v)) for v in offset)]
+        )
         if root:
             lines.append("CHANNELS 6 Xposition Yposition Zposition Xrotation Yrotation Zrotation")
             n_channels += 6
@@ -133,8 +149,9 @@ def test_beat_preset_reads_a_beat_like_file(tmp_path):
     rigid = np.array([c not in spanning for c in children])
     assert np.ptp(lengths[:, rigid], axis=0).max() < 1e-5
     with pytest.raises(MotionFileError, match="missing"):
-        load_bvh_motion(path, joint_map={"pelvis": "Hips", "joints": {
-            **PRESETS["beat"].joints, "left_index1": "LeftHandIndex0"}})
+        load_bvh_motion(
+            path, joint_map={"pelvis": "Hips", "joints": {**PRESETS["beat"].joints, "left_index1": "LeftHandIndex0"}}
+        )
 
 
 def test_json_joint_map_file_matches_the_preset(tmp_path):
@@ -142,8 +159,7 @@ def test_json_joint_map_file_matches_the_preset(tmp_path):
     plain.write_text(beat_like_bvh(seed=3))
     prefixed = tmp_path / "prefixed.bvh"
     prefixed.write_text(beat_like_bvh(prefix="mixamorig:", seed=3))
-    spec = {"pelvis": "mixamorig:Hips",
-            "joints": {k: f"mixamorig:{v}" for k, v in PRESETS["beat"].joints.items()}}
+    spec = {"pelvis": "mixamorig:Hips", "joints": {k: f"mixamorig:{v}" for k, v in PRESETS["beat"].joints.items()}}
     map_path = tmp_path / "map.json"
     map_path.write_text(json.dumps(spec))
     jmap = load_joint_map(map_path)
@@ -173,13 +189,16 @@ def test_missing_joints_are_listed(tmp_path):
     assert "left_pinky4" in message and "head_top" in message and "left_pinky5" in message
 
 
-@pytest.mark.parametrize("content, fragment", [
-    ("{not json", "not valid JSON"),
-    ("[1, 2]", "JSON object"),
-    ('{"joints": {}}', "pelvis"),
-    ('{"pelvis": "Hips", "joints": 3}', "joints"),
-    ('{"pelvis": "Hips", "joints": {}, "extra": 1}', "unexpected keys"),
-])
+@pytest.mark.parametrize(
+    "content, fragment",
+    [
+        ("{not json", "not valid JSON"),
+        ("[1, 2]", "JSON object"),
+        ('{"joints": {}}', "pelvis"),
+        ('{"pelvis": "Hips", "joints": 3}', "joints"),
+        ('{"pelvis": "Hips", "joints": {}, "extra": 1}', "unexpected keys"),
+    ],
+)
 def test_bad_json_maps_name_the_file(tmp_path, content, fragment):
     path = tmp_path / "bad_map.json"
     path.write_text(content)

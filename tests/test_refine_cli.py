@@ -1,4 +1,5 @@
 """The refiner on the command line and in synthesis: train-refiner, synthesize --refiner."""
+
 import json
 
 import numpy as np
@@ -60,8 +61,24 @@ def test_synthesize_refuses_a_refiner_of_another_layout(setup):
 def test_cli_train_refiner_and_synthesize(setup, tmp_path, capsys):
     base, db, _, _ = setup
     out = tmp_path / "ref"
-    assert main(["train-refiner", "--db", str(base / "db"), "--out", str(out), "--iterations", "3",
-                 "--device", "cpu", "--exclude-range", "a:2-5"]) == 0
+    assert (
+        main(
+            [
+                "train-refiner",
+                "--db",
+                str(base / "db"),
+                "--out",
+                str(out),
+                "--iterations",
+                "3",
+                "--device",
+                "cpu",
+                "--exclude-range",
+                "a:2-5",
+            ]
+        )
+        == 0
+    )
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["preset"] == "quick" and cfg["iteration"] == 3
     assert cfg["data"]["exclude_ranges"] == [["a", 2.0, 5.0]]
@@ -69,12 +86,31 @@ def test_cli_train_refiner_and_synthesize(setup, tmp_path, capsys):
     # an existing folder needs --resume or --force
     assert main(["train-refiner", "--db", str(base / "db"), "--out", str(out), "--iterations", "3"]) == 2
     assert "--resume" in capsys.readouterr().err
-    assert main(["train-refiner", "--db", str(base / "db"), "--out", str(out), "--iterations", "4",
-                 "--resume", "--device", "cpu"]) == 0
+    assert (
+        main(
+            [
+                "train-refiner",
+                "--db",
+                str(base / "db"),
+                "--out",
+                str(out),
+                "--iterations",
+                "4",
+                "--resume",
+                "--device",
+                "cpu",
+            ]
+        )
+        == 0
+    )
     assert json.loads((out / "config.json").read_text())["iteration"] == 4
     syn = tmp_path / "syn"
-    assert main(["synthesize", str(base / "speech.wav"), "--db", str(base / "db"), "--refiner", str(out),
-                 "--out", str(syn)]) == 0
+    assert (
+        main(
+            ["synthesize", str(base / "speech.wav"), "--db", str(base / "db"), "--refiner", str(out), "--out", str(syn)]
+        )
+        == 0
+    )
     with np.load(syn / "speech.npz", allow_pickle=False) as z:
         assert z["refined_positions"].shape == z["knn_positions"].shape == z["positions"].shape
         np.testing.assert_array_equal(z["positions"], z["refined_positions"])
@@ -82,8 +118,23 @@ def test_cli_train_refiner_and_synthesize(setup, tmp_path, capsys):
         kept = z["refined_positions"]
         assert json.loads(str(z["config"]))["synthesis"]["refiner_keep_hz"] == 2.0
     # --refiner-keep-hz 0: the refiner's output as it is
-    assert main(["synthesize", str(base / "speech.wav"), "--db", str(base / "db"), "--refiner", str(out),
-                 "--refiner-keep-hz", "0", "--out", str(tmp_path / "raw")]) == 0
+    assert (
+        main(
+            [
+                "synthesize",
+                str(base / "speech.wav"),
+                "--db",
+                str(base / "db"),
+                "--refiner",
+                str(out),
+                "--refiner-keep-hz",
+                "0",
+                "--out",
+                str(tmp_path / "raw"),
+            ]
+        )
+        == 0
+    )
     with np.load(tmp_path / "raw" / "speech.npz", allow_pickle=False) as z:
         assert json.loads(str(z["config"]))["synthesis"]["refiner_keep_hz"] == 0.0
         np.testing.assert_array_equal(z["knn_positions"], np.load(syn / "speech.npz")["knn_positions"])
@@ -94,8 +145,21 @@ def test_cli_errors(setup, tmp_path, capsys):
     base, _, _, _ = setup
     assert main(["train-refiner", "--out", str(tmp_path / "x")]) == 2
     assert "--db" in capsys.readouterr().err
-    assert main(["synthesize", str(base / "speech.wav"), "--db", str(base / "db"), "--refiner",
-                 str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+    assert (
+        main(
+            [
+                "synthesize",
+                str(base / "speech.wav"),
+                "--db",
+                str(base / "db"),
+                "--refiner",
+                str(tmp_path / "missing"),
+                "--out",
+                str(tmp_path / "o"),
+            ]
+        )
+        == 2
+    )
     assert "no refiner folder" in capsys.readouterr().err
     plain = tmp_path / "plain"
     MatchingDatabase.build([make_take(6.0, seed=3, name="p")], config=BuildConfig(store_audio=False)).save(plain)

@@ -1,4 +1,5 @@
 """Training pairs of the refiner: the k-NN search over the overlapping cut, as the authors made them."""
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -56,8 +57,14 @@ def test_each_pair_is_the_search_of_its_window(db, pairs):
         w = pairs.window[i]
         take, frame = db.clip_take[:, None], db.clip_start[:, None] + np.arange(64)[None, :]
         own = (take == ov["clip_take"][w]) & (frame >= ov["clip_start"][w]) & (frame < ov["clip_start"][w] + 64)
-        res = search(db.P, db.F, db.valid, ov["F"][w], exclude=own,
-                     config=SearchConfig(k=int(pairs.k[i]), topk=1, init_pose=ov["P"][w, 0], mask_rule="all"))
+        res = search(
+            db.P,
+            db.F,
+            db.valid,
+            ov["F"][w],
+            exclude=own,
+            config=SearchConfig(k=int(pairs.k[i]), topk=1, init_pose=ov["P"][w, 0], mask_rule="all"),
+        )
         np.testing.assert_array_equal(res.frames, pairs.frames[i])
 
 

@@ -1,4 +1,5 @@
 """Refiner inference: any length, no seam every 64 frames, checkpoint loading, layout checks."""
+
 import copy
 import json
 from pathlib import Path
@@ -9,11 +10,11 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from gesturekit.blend import keep_slow
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError, DatabaseError, InputFileError
 from gesturekit.features import LAYOUT
 from gesturekit.refine import default_refiner_path, load_refiner
-from gesturekit.blend import keep_slow
 from gesturekit.refine.infer import Refiner
 from gesturekit.refine.model import ModelConfig, build_models
 from gesturekit.refine.train import TrainConfig, train_refiner
@@ -29,8 +30,12 @@ def random_refiner(seed=0, channels=(8, 8, 8, 8)):
     for m in gen.modules():
         if isinstance(m, torch.nn.BatchNorm1d):
             m.running_mean.uniform_(-0.2, 0.2, generator=torch.Generator().manual_seed(seed))
-    stats = {"audio_mean": np.zeros(28, np.float32), "audio_std": np.ones(28, np.float32),
-             "motion_mean": np.zeros(165, np.float32), "motion_std": np.full(165, 0.1, np.float32)}
+    stats = {
+        "audio_mean": np.zeros(28, np.float32),
+        "audio_std": np.ones(28, np.float32),
+        "motion_mean": np.zeros(165, np.float32),
+        "motion_std": np.full(165, 0.1, np.float32),
+    }
     return Refiner(gen, stats=stats, config={"layout": LAYOUT.signature(), "joint_names": list(JOINT_NAMES)})
 
 
@@ -211,9 +216,11 @@ def test_check_refiner_reads_the_folder_without_torch_and_refuses_another_layout
     with pytest.raises(InputFileError, match="no refiner folder"):
         check_refiner(tmp_path / "nothing", db)
     # the app checks a chosen folder on every page view: that must not import torch
-    code = ("import sys; from gesturekit.database import MatchingDatabase; from gesturekit.refine import check_refiner; "
-            f"check_refiner({str(out)!r}, MatchingDatabase.load({str(Path(db.path))!r})); "
-            "assert 'torch' not in sys.modules, 'torch was imported'")
+    code = (
+        "import sys; from gesturekit.database import MatchingDatabase; from gesturekit.refine import check_refiner; "
+        f"check_refiner({str(out)!r}, MatchingDatabase.load({str(Path(db.path))!r})); "
+        "assert 'torch' not in sys.modules, 'torch was imported'"
+    )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
 
 
@@ -264,7 +271,10 @@ from gesturekit.refine.folder import read_refiner_config  # noqa: E402
 
 _DEMO = Path(__file__).resolve().parents[1] / "gesturekit" / "assets" / "demo-refiner"
 _json = st.recursive(
-    st.none() | st.booleans() | st.integers(-3, 300) | st.floats(allow_nan=False, allow_infinity=False)
+    st.none()
+    | st.booleans()
+    | st.integers(-3, 300)
+    | st.floats(allow_nan=False, allow_infinity=False)
     | st.text(max_size=4),
     lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner, max_size=3),
     max_leaves=5,
@@ -301,16 +311,19 @@ def test_a_damaged_config_is_refused_or_loads(demo_copy, data):
     assert refiner.window % 8 == 0
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda c: {**c, "files": list(c["files"])}, "'files' must be an object, found list"),
-    (lambda c: {**c, "files": {"generator.pt": "abc"}}, "files.generator.pt must be the file's SHA-256"),
-    (lambda c: {**c, "model": {**c["model"], "generator_channels": [32, "64"]}}, "model.generator_channels"),
-    (lambda c: {**c, "model": {**c["model"], "window": True}}, "model.window must be a positive integer"),
-    (lambda c: {**c, "iteration": 1.5}, "'iteration' must be an integer"),
-    (lambda c: {**c, "resumable": "yes"}, "'resumable' must be true or false"),
-    (lambda c: {**c, "training": []}, "'training' must be an object"),
-    (lambda c: {k: v for k, v in c.items() if k != "joint_names"}, "'joint_names' must be a list"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda c: {**c, "files": list(c["files"])}, "'files' must be an object, found list"),
+        (lambda c: {**c, "files": {"generator.pt": "abc"}}, "files.generator.pt must be the file's SHA-256"),
+        (lambda c: {**c, "model": {**c["model"], "generator_channels": [32, "64"]}}, "model.generator_channels"),
+        (lambda c: {**c, "model": {**c["model"], "window": True}}, "model.window must be a positive integer"),
+        (lambda c: {**c, "iteration": 1.5}, "'iteration' must be an integer"),
+        (lambda c: {**c, "resumable": "yes"}, "'resumable' must be true or false"),
+        (lambda c: {**c, "training": []}, "'training' must be an object"),
+        (lambda c: {k: v for k, v in c.items() if k != "joint_names"}, "'joint_names' must be a list"),
+    ],
+)
 def test_config_of_the_wrong_structure_is_named(demo_copy, tmp_path, edit, message):
     import shutil
 
@@ -322,14 +335,31 @@ def test_config_of_the_wrong_structure_is_named(demo_copy, tmp_path, edit, messa
     assert info.value.path == str(folder)
 
 
-@pytest.mark.parametrize("stats, message", [
-    (b"PK\x03\x04 truncated", "stats.npz cannot be read"),
-    ({"audio_mean": np.array([None], dtype=object)}, "stats.npz cannot be read"),
-    ({"audio_mean": np.zeros(28), "audio_std": np.ones(28), "motion_mean": np.zeros(165),
-      "motion_std": np.full(165, np.inf)}, "motion_std must be a vector of finite numbers"),
-    ({"audio_mean": np.zeros(28), "audio_std": np.ones(27), "motion_mean": np.zeros(165),
-      "motion_std": np.ones(165)}, "does not fit the model"),
-])
+@pytest.mark.parametrize(
+    "stats, message",
+    [
+        (b"PK\x03\x04 truncated", "stats.npz cannot be read"),
+        ({"audio_mean": np.array([None], dtype=object)}, "stats.npz cannot be read"),
+        (
+            {
+                "audio_mean": np.zeros(28),
+                "audio_std": np.ones(28),
+                "motion_mean": np.zeros(165),
+                "motion_std": np.full(165, np.inf),
+            },
+            "motion_std must be a vector of finite numbers",
+        ),
+        (
+            {
+                "audio_mean": np.zeros(28),
+                "audio_std": np.ones(27),
+                "motion_mean": np.zeros(165),
+                "motion_std": np.ones(165),
+            },
+            "does not fit the model",
+        ),
+    ],
+)
 def test_damaged_stats_are_refused(demo_copy, tmp_path, stats, message):
     import shutil
 
@@ -353,16 +383,24 @@ def test_a_name_too_long_is_no_refiner_folder(tmp_path):
 def _db_like(source: str, *, path=None, takes: int = 10, clips: int = 280):
     from types import SimpleNamespace
 
-    return SimpleNamespace(path=path, meta={"build": {"source": source}}, take_names=[f"t{i}" for i in range(takes)],
-                           n_clips=clips, label="")
+    return SimpleNamespace(
+        path=path,
+        meta={"build": {"source": source}},
+        take_names=[f"t{i}" for i in range(takes)],
+        n_clips=clips,
+        label="",
+    )
 
 
-@pytest.mark.parametrize("source, takes, clips, expected", [
-    ("demo (seed 0, 20 min)", 10, 280, True),
-    ("demo (seed 0, 2 min)", 1, 28, True),  # the same generated speaker, shorter
-    ("demo (seed 1, 20 min)", 10, 280, False),
-    ("/data/zeggs", 10, 280, False),
-])
+@pytest.mark.parametrize(
+    "source, takes, clips, expected",
+    [
+        ("demo (seed 0, 20 min)", 10, 280, True),
+        ("demo (seed 0, 2 min)", 1, 28, True),  # the same generated speaker, shorter
+        ("demo (seed 1, 20 min)", 10, 280, False),
+        ("/data/zeggs", 10, 280, False),
+    ],
+)
 def test_trained_on_the_demo_speaker(source, takes, clips, expected):
     from gesturekit.refine import refiner_for, trained_on
     from gesturekit.refine.folder import read_refiner_config

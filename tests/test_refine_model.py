@@ -1,4 +1,5 @@
 """The refiner's networks: shapes, the paper's structure, initialisation."""
+
 import pytest
 import torch
 from hypothesis import given, settings
@@ -58,7 +59,7 @@ def test_xavier_init_is_seeded_and_biases_are_zero():
     g1, c1 = build_models(TINY, seed=3)
     g2, _ = build_models(TINY, seed=3)
     g3, _ = build_models(TINY, seed=4)
-    for (n, a), (_, b), (_, c) in zip(g1.state_dict().items(), g2.state_dict().items(), g3.state_dict().items()):
+    for (n, a), (_, b), _ in zip(g1.state_dict().items(), g2.state_dict().items(), g3.state_dict().items()):
         assert torch.equal(a, b), n
     assert not torch.equal(g1.enc1[0].weight, g3.enc1[0].weight)
     convs = [m for m in list(g1.modules()) + list(c1.modules()) if isinstance(m, (nn.Conv1d, nn.Linear))]

@@ -1,4 +1,5 @@
 """WGAN-GP training of the refiner: penalty, schedule, determinism, learning, checkpoints, resume."""
+
 import csv
 import json
 
@@ -116,8 +117,10 @@ def test_a_training_step_is_deterministic_with_a_seed():
     for tr in (a, b, c):
         for _ in range(5):  # includes a generator update
             tr.step()
-    for x, y in zip(list(a.generator.state_dict().values()) + list(a.critic.state_dict().values()),
-                    list(b.generator.state_dict().values()) + list(b.critic.state_dict().values())):
+    for x, y in zip(
+        list(a.generator.state_dict().values()) + list(a.critic.state_dict().values()),
+        list(b.generator.state_dict().values()) + list(b.critic.state_dict().values()),
+    ):
         assert torch.equal(x, y)
     assert not torch.equal(a.generator.enc1[0].weight, c.generator.enc1[0].weight)
 
@@ -130,8 +133,13 @@ def test_a_tiny_model_overfits_a_tiny_batch():
     t = np.linspace(0, 2 * np.pi, 16)[None, :, None]
     motion = np.sin(t * rng.uniform(0.5, 2, size=(4, 1, 165)) + rng.uniform(0, 6, size=(4, 1, 165))).astype(np.float32)
     audio = rng.normal(size=(4, 16, 28)).astype(np.float32)
-    tr = Trainer(model=ModelConfig(window=16, generator_channels=(32, 32, 32, 32), critic_channels=(4, 4, 4)),
-                 train=TrainConfig(batch_size=4, lr=5e-3, seed=0), audio=audio, knn=motion, real=motion)
+    tr = Trainer(
+        model=ModelConfig(window=16, generator_channels=(32, 32, 32, 32), critic_channels=(4, 4, 4)),
+        train=TrainConfig(batch_size=4, lr=5e-3, seed=0),
+        audio=audio,
+        knn=motion,
+        real=motion,
+    )
     l1 = [tr.step().get("generator_l1") for _ in range(300)]
     l1 = [v for v in l1 if v is not None]
     assert len(l1) == 60
@@ -147,7 +155,14 @@ def test_training_config_validation():
     paper = PRESETS["paper"]
     assert paper.model == ModelConfig()
     t = paper.train
-    assert (t.batch_size, t.lr, t.betas, t.gp_weight, t.l1_weight, t.generator_every) == (100, 1e-4, (0.0, 0.9), 100.0, 0.1, 5)
+    assert (t.batch_size, t.lr, t.betas, t.gp_weight, t.l1_weight, t.generator_every) == (
+        100,
+        1e-4,
+        (0.0, 0.9),
+        100.0,
+        0.1,
+        5,
+    )
 
 
 # ---- the whole job on a tiny database ----------------------------------------------------------

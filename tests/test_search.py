@@ -1,6 +1,7 @@
 """Tests of gesturekit.search: the fast search equals the loop-for-loop reference
 (gesturekit.search.reference) decision for decision, and the rules of Algorithm 1
 (exclusions, controls, relaxation, k beyond the survivors, pins, seeds, batches) hold."""
+
 from __future__ import annotations
 
 import json
@@ -458,7 +459,7 @@ def test_same_seed_same_result_other_seed_other_start():
 @settings(max_examples=20, deadline=None)
 def test_all_rule_uses_only_frames_inside_the_mask(seed, N):
     P, F, valid, rng = small_db(seed, M=10)
-    masks = (rng.random((2,) + valid.shape) < 0.8)
+    masks = rng.random((2,) + valid.shape) < 0.8
     query = rng.standard_normal((30, F.shape[2])).astype(np.float32)
     n_steps = -(-30 // N)
     step_mask = rng.integers(-1, 2, n_steps)
@@ -486,7 +487,9 @@ def test_pins_force_the_choice_and_the_search_continues_from_them():
     assert np.array_equal(pinned.clip[:1], free.clip[:1])
     # step 2 searches from the pinned segment's last pose
     P2 = P.copy()
-    expected = search(P2, F, valid, query[12:], config=SearchConfig(step=6, init_pose=tuple(P[alt[0], alt[1] + 5].tolist())))
+    expected = search(
+        P2, F, valid, query[12:], config=SearchConfig(step=6, init_pose=tuple(P[alt[0], alt[1] + 5].tolist()))
+    )
     assert (pinned.clip[2], pinned.start[2]) == (expected.clip[0], expected.start[0])
     exclude = np.zeros_like(valid)
     exclude[alt[0], alt[1] + 2] = True
@@ -519,7 +522,16 @@ def test_candidate_frame_and_config_round_trip():
     res = search(P, F, valid, query, config=cfg)
     df = res.candidates_frame()
     assert list(df.columns) == [
-        "step", "position", "clip", "start", "pose_dist", "audio_dist", "pose_rank", "audio_rank", "combined", "chosen",
+        "step",
+        "position",
+        "clip",
+        "start",
+        "pose_dist",
+        "audio_dist",
+        "pose_rank",
+        "audio_rank",
+        "combined",
+        "chosen",
     ]
     assert len(df) == 6 and df.chosen.sum() == 1  # step 1 is pinned to a window outside the table
     row = df[df.chosen].iloc[0]
@@ -558,7 +570,8 @@ def test_bad_inputs_raise_config_errors(change, message):
 
 
 @pytest.mark.parametrize(
-    "bad", [dict(k=-1), dict(step=0), dict(mask_rule="middle"), dict(init_pose="rest"), dict(pins={0: 3}), dict(seed=True)]
+    "bad",
+    [dict(k=-1), dict(step=0), dict(mask_rule="middle"), dict(init_pose="rest"), dict(pins={0: 3}), dict(seed=True)],
 )
 def test_bad_config_values_raise(bad):
     with pytest.raises(ConfigError):

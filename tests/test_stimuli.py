@@ -1,4 +1,5 @@
 """User-study stimuli: the balanced design, opaque ids, the stimuli command, and the Dask path."""
+
 import hashlib
 import re
 import subprocess
@@ -17,6 +18,7 @@ from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SystemUnavailable
+from gesturekit.export.video import _ffmpeg, probe_media
 from gesturekit.study import (
     balanced_latin_square,
     make_stimuli,
@@ -25,7 +27,6 @@ from gesturekit.study import (
     plan_stimuli,
     stimulus_id,
 )
-from gesturekit.export.video import _ffmpeg, probe_media
 
 SYSTEMS = ["knn", "random", "audio-only"]
 
@@ -99,15 +100,45 @@ def test_loudness_normalisation():
 
 
 def _soundtrack_loudness(path) -> float:
-    raw = subprocess.run([_ffmpeg(), "-nostdin", "-loglevel", "error", "-i", f"file:{path}", "-f", "f32le", "-ac",
-                          "1", "-ar", "16000", "-"], capture_output=True, check=True).stdout
+    raw = subprocess.run(
+        [
+            _ffmpeg(),
+            "-nostdin",
+            "-loglevel",
+            "error",
+            "-i",
+            f"file:{path}",
+            "-f",
+            "f32le",
+            "-ac",
+            "1",
+            "-ar",
+            "16000",
+            "-",
+        ],
+        capture_output=True,
+        check=True,
+    ).stdout
     return measure_loudness(np.frombuffer(raw, dtype="<f4"))
 
 
 def test_stimuli_command_three_speeches_by_three_systems(demo_path, speech_folder, tmp_path, capsys):
     out = tmp_path / "study"
-    args = ["stimuli", "--db", str(demo_path), "--audio", str(speech_folder), "--systems", ",".join(SYSTEMS),
-            "--out", str(out), "--resolution", "320x240", "--seed", "3"]
+    args = [
+        "stimuli",
+        "--db",
+        str(demo_path),
+        "--audio",
+        str(speech_folder),
+        "--systems",
+        ",".join(SYSTEMS),
+        "--out",
+        str(out),
+        "--resolution",
+        "320x240",
+        "--seed",
+        "3",
+    ]
     assert main(args) == 0
     assert "9 stimuli" in capsys.readouterr().out
     videos = sorted((out / "videos").iterdir())
@@ -157,11 +188,13 @@ def test_dask_cluster_gives_the_same_study_as_local_processes(demo_path, speech_
     from distributed import LocalCluster
 
     db = MatchingDatabase.load(demo_path)
-    options = dict(holdouts=["demo0_000:10-11.2", "demo0_000:30-31.6"], systems="gt,knn", resolution=(160, 120),
-                   seed=11)
+    options = dict(
+        holdouts=["demo0_000:10-11.2", "demo0_000:30-31.6"], systems="gt,knn", resolution=(160, 120), seed=11
+    )
     local = make_stimuli(db, out=tmp_path / "local", workers=1, **options)
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, host="127.0.0.1", protocol="tcp://",
-                      dashboard_address=None) as cluster:
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, host="127.0.0.1", protocol="tcp://", dashboard_address=None
+    ) as cluster:
         assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
         remote = make_stimuli(db, out=tmp_path / "dask", scheduler=cluster.scheduler_address, **options)
     pd.testing.assert_frame_equal(local.manifest, remote.manifest)

@@ -1,6 +1,6 @@
 """Synthesis: the pipeline, its options and the acceptance items of the command line."""
+
 import hashlib
-import warnings
 
 import numpy as np
 import pytest
@@ -61,10 +61,18 @@ def test_matches_the_reference_search(demo_db, speech):
     from gesturekit.search import SearchConfig
 
     fq, _ = demo_db.query_features(speech)
-    masks, smask = step_masks(parse_control(cfg.control), np.asarray(demo_db.attributes), demo_db.thresholds,
-                              n_frames=len(fq), step=8)
-    ref = search_reference(np.asarray(demo_db.P), np.asarray(demo_db.F), np.asarray(demo_db.valid), fq,
-                           config=SearchConfig(k=1, seed=3), masks=masks, step_mask=smask)
+    masks, smask = step_masks(
+        parse_control(cfg.control), np.asarray(demo_db.attributes), demo_db.thresholds, n_frames=len(fq), step=8
+    )
+    ref = search_reference(
+        np.asarray(demo_db.P),
+        np.asarray(demo_db.F),
+        np.asarray(demo_db.valid),
+        fq,
+        config=SearchConfig(k=1, seed=3),
+        masks=masks,
+        step_mask=smask,
+    )
     np.testing.assert_array_equal(res.search.clip, ref.clip)
     np.testing.assert_array_equal(res.search.start, ref.start)
     g = np.asarray(demo_db.G)[ref.frames[:, 0], ref.frames[:, 1]]
@@ -211,8 +219,7 @@ def test_zeggs_left_hand_high_paper_rule(zeggs_db, beat_speech):
 
 
 def test_zeggs_left_hand_high_every_frame_rule(zeggs_db, beat_speech):
-    res = synthesize(beat_speech, db=zeggs_db,
-                     config=SynthesisConfig(control="0-1000:left_hand=high", mask_rule="all"))
+    res = synthesize(beat_speech, db=zeggs_db, config=SynthesisConfig(control="0-1000:left_hand=high", mask_rule="all"))
     high = res.motion.positions[:, LW, 1] > zeggs_db.thresholds["left_hand_height"][1]
     relaxed_frames = np.zeros(res.n_frames, bool)
     for i in res.relaxed_steps:
@@ -246,8 +253,21 @@ def test_cli_synthesize_with_video_and_controls(zeggs_db, shared_data, tmp_path,
     control = tmp_path / "control.csv"
     control.write_text("start_s,end_s,constraint\n0,4,left_hand=low\n4,8,speed=fast+width=wide\n")
     out = tmp_path / "out"
-    args = ["synthesize", str(speech), "--db", str(zeggs_db.path), "--out", str(out), "--control", str(control),
-            "--k", "1", "--seed", "3", "--video"]
+    args = [
+        "synthesize",
+        str(speech),
+        "--db",
+        str(zeggs_db.path),
+        "--out",
+        str(out),
+        "--control",
+        str(control),
+        "--k",
+        "1",
+        "--seed",
+        "3",
+        "--video",
+    ]
     assert main(args) == 0
     printed = capsys.readouterr().out
     assert "espeak_en_us.wav: 253 frames" in printed
@@ -267,14 +287,26 @@ def test_cli_synthesize_with_video_and_controls(zeggs_db, shared_data, tmp_path,
 
 
 @settings(max_examples=60, deadline=None)
-@given(k=st.integers(0, 3), step=st.integers(1, 12), init=st.sampled_from(["random", "rest"]),
-       blend=st.sampled_from(["none", "offset"]), mask_rule=st.sampled_from(["ends", "all"]),
-       keep=st.sampled_from([0.0, 1.5, 2.0]), refined=st.booleans())
+@given(
+    k=st.integers(0, 3),
+    step=st.integers(1, 12),
+    init=st.sampled_from(["random", "rest"]),
+    blend=st.sampled_from(["none", "offset"]),
+    mask_rule=st.sampled_from(["ends", "all"]),
+    keep=st.sampled_from([0.0, 1.5, 2.0]),
+    refined=st.booleans(),
+)
 def test_paper_differences_name_exactly_the_settings_that_differ(k, step, init, blend, mask_rule, keep, refined):
     config = SynthesisConfig(k=k, step=step, init=init, blend=blend, mask_rule=mask_rule, refiner_keep_hz=keep)
     notes = config.paper_differences(refined=refined)
-    expected = {"k = ": k != 0, "N = ": step != 8, "initial pose": init != "random", "blending": blend != "none",
-                "control held at": mask_rule != "ends", "kept below": refined and keep != 0}
+    expected = {
+        "k = ": k != 0,
+        "N = ": step != 8,
+        "initial pose": init != "random",
+        "blending": blend != "none",
+        "control held at": mask_rule != "ends",
+        "kept below": refined and keep != 0,
+    }
     for text, differs in expected.items():
         assert sum(text in n for n in notes) == int(differs), (text, notes)
     assert len(notes) == sum(expected.values())
@@ -321,9 +353,15 @@ def test_the_result_keeps_the_plan_it_searched_with(demo_db, speech):
 
 
 @settings(max_examples=40, deadline=None)
-@given(k=st.integers(0, 5), step=st.integers(1, 16), topk=st.integers(1, 12), seed=st.integers(0, 9),
-       rule=st.sampled_from(["ends", "all"]), init=st.sampled_from(["random", "rest"]),
-       pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3))
+@given(
+    k=st.integers(0, 5),
+    step=st.integers(1, 16),
+    topk=st.integers(1, 12),
+    seed=st.integers(0, 9),
+    rule=st.sampled_from(["ends", "all"]),
+    init=st.sampled_from(["random", "rest"]),
+    pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3),
+)
 def test_the_search_options_live_in_one_nested_config(k, step, topk, seed, rule, init, pins):
     import dataclasses
     import json
@@ -332,24 +370,56 @@ def test_the_search_options_live_in_one_nested_config(k, step, topk, seed, rule,
 
     flat = SynthesisConfig(k=k, step=step, topk=topk, seed=seed, mask_rule=rule, init=init, pins=pins)
     nested = SynthesisConfig(SearchConfig(k=k, step=step, topk=topk, seed=seed, mask_rule=rule, pins=pins), init=init)
-    assert flat == nested and flat.search == SearchConfig(k=k, step=step, topk=topk, seed=seed, mask_rule=rule,
-                                                          pins=pins)
+    assert flat == nested and flat.search == SearchConfig(
+        k=k, step=step, topk=topk, seed=seed, mask_rule=rule, pins=pins
+    )
     assert (flat.k, flat.step, flat.topk, flat.seed, flat.mask_rule, flat.pins) == (
-        k, step, topk, seed, rule, flat.search.pins)
+        k,
+        step,
+        topk,
+        seed,
+        rule,
+        flat.search.pins,
+    )
     assert dataclasses.replace(flat, k=k + 1).search == dataclasses.replace(flat.search, k=k + 1)
     saved = json.loads(json.dumps(flat.to_dict()))
     # the saved form is the flat one earlier versions wrote (and read), and reads back
-    assert set(saved) == {"k", "step", "topk", "seed", "init", "mask_rule", "blend", "blend_frames", "control",
-                          "exclude_takes", "exclude_ranges", "pins", "refiner_keep_hz"}
+    assert set(saved) == {
+        "k",
+        "step",
+        "topk",
+        "seed",
+        "init",
+        "mask_rule",
+        "blend",
+        "blend_frames",
+        "control",
+        "exclude_takes",
+        "exclude_ranges",
+        "pins",
+        "refiner_keep_hz",
+    }
     assert SynthesisConfig.from_dict(saved) == flat
     search = {name: saved.pop(name) for name in ("k", "step", "topk", "seed", "mask_rule", "pins")}
     assert SynthesisConfig.from_dict({**saved, "search": search}) == flat
 
 
 def test_a_config_saved_by_an_earlier_version_reads_back():
-    saved = {"k": 2, "step": 6, "topk": 7, "seed": 5, "init": "rest", "mask_rule": "all", "blend": "offset",
-             "blend_frames": 3, "control": "0-4.25:both_hands=high", "exclude_takes": ["a"],
-             "exclude_ranges": [["b", 1.0, 2.5]], "pins": {"3": [4, 5]}, "refiner_keep_hz": 1.5}
+    saved = {
+        "k": 2,
+        "step": 6,
+        "topk": 7,
+        "seed": 5,
+        "init": "rest",
+        "mask_rule": "all",
+        "blend": "offset",
+        "blend_frames": 3,
+        "control": "0-4.25:both_hands=high",
+        "exclude_takes": ["a"],
+        "exclude_ranges": [["b", 1.0, 2.5]],
+        "pins": {"3": [4, 5]},
+        "refiner_keep_hz": 1.5,
+    }
     cfg = SynthesisConfig.from_dict(saved)
     assert (cfg.k, cfg.step, cfg.topk, cfg.seed, cfg.init, cfg.mask_rule) == (2, 6, 7, 5, "rest", "all")
     assert cfg.pins == {3: (4, 5)} and cfg.exclude_ranges == (("b", 1.0, 2.5),) and cfg.exclude_takes == ("a",)
@@ -359,4 +429,6 @@ def test_a_config_saved_by_an_earlier_version_reads_back():
     with pytest.raises(ConfigError, match="unknown synthesis options: nope"):
         SynthesisConfig(nope=1)
     with pytest.raises(ConfigError, match="init_pose"):
-        SynthesisConfig(search=__import__("gesturekit.search", fromlist=["SearchConfig"]).SearchConfig(init_pose=(1.0,)))
+        SynthesisConfig(
+            search=__import__("gesturekit.search", fromlist=["SearchConfig"]).SearchConfig(init_pose=(1.0,))
+        )

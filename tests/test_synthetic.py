@@ -4,6 +4,7 @@ The measures below are computed from the generated audio and positions with
 plain signal processing, and cross-checked with the ground-truth events the
 generator reports.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -305,7 +306,7 @@ def test_strokes_end_on_stressed_syllables(takes):
         speeds = _wrist_speeds(take.motion.positions)
         minima = _speed_minima(speeds)
 
-        def share_on(times):
+        def share_on(times, minima=minima):
             # share of the times with a velocity minimum (a motion beat) within about a frame
             return np.mean(np.abs(minima[:, None] - times[None, :]).min(axis=0) <= 0.07)
 

@@ -1,4 +1,5 @@
 """Analysis figures: loss curves, the speed profile around joins, beats against onsets, evaluation bars."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -27,10 +28,17 @@ def _still(n: int = 60) -> np.ndarray:
 
 # ---- loss curves ---------------------------------------------------------------------------------
 
+
 def test_loss_curves_draw_each_logged_loss_on_its_side():
-    log = pd.DataFrame({"iteration": [10, 20, 30, 40], "elapsed_s": [1, 2, 3, 4],
-                        "critic_loss": [4.0, 2.0, 1.0, 3.0], "wasserstein": [1, 2, 3, 4],
-                        "generator_l1": [0.9, 0.7, 0.6, 0.5]})
+    log = pd.DataFrame(
+        {
+            "iteration": [10, 20, 30, 40],
+            "elapsed_s": [1, 2, 3, 4],
+            "critic_loss": [4.0, 2.0, 1.0, 3.0],
+            "wasserstein": [1, 2, 3, 4],
+            "generator_l1": [0.9, 0.7, 0.6, 0.5],
+        }
+    )
     fig = loss_curves_figure(log)
     lines = {t.meta["column"]: t for t in fig.data}
     assert set(lines) == {"critic_loss", "wasserstein", "generator_l1"}  # elapsed_s is not a loss
@@ -54,9 +62,14 @@ def test_loss_curves_refuse_a_log_without_losses():
 
 # ---- joins ------------------------------------------------------------------------------------------
 
+
 @settings(max_examples=30, deadline=None)
-@given(jump=st.floats(0.01, 1.0), drift=st.floats(0.0, 0.05), radius=st.integers(0, 5),
-       joins=st.lists(st.integers(8, 52), min_size=1, max_size=5, unique=True))
+@given(
+    jump=st.floats(0.01, 1.0),
+    drift=st.floats(0.0, 0.05),
+    radius=st.integers(0, 5),
+    joins=st.lists(st.integers(8, 52), min_size=1, max_size=5, unique=True),
+)
 def test_join_profile_shows_a_jump_at_offset_zero_only(jump, drift, radius, joins):
     x = _still(60)
     x[:, :, 0] = np.arange(60)[:, None] * drift  # every joint moves `drift` metres per frame along x
@@ -104,6 +117,7 @@ def test_join_profile_figure_overlays_one_line_per_motion():
 
 # ---- beats ------------------------------------------------------------------------------------------
 
+
 def test_beats_figure_marks_motion_beats_and_speech_onsets_in_the_range():
     t = np.arange(90) / 15
     x = _still(90)
@@ -126,9 +140,17 @@ def test_beats_figure_marks_motion_beats_and_speech_onsets_in_the_range():
 
 # ---- evaluation tables ----------------------------------------------------------------------------
 
+
 def test_metrics_figure_has_one_subplot_per_measure_and_skips_nan():
-    table = pd.DataFrame({"system": ["gt", "knn", "random"], "frames": [10, 10, 10],
-                          "fgd": [0.0, 2.0, np.nan], "mean_jerk": [1.0, 3.0, 9.0], "relaxed_steps": [0, 1, 0]})
+    table = pd.DataFrame(
+        {
+            "system": ["gt", "knn", "random"],
+            "frames": [10, 10, 10],
+            "fgd": [0.0, 2.0, np.nan],
+            "mean_jerk": [1.0, 3.0, 9.0],
+            "relaxed_steps": [0, 1, 0],
+        }
+    )
     fig = metrics_figure(table)
     bars = {t.meta["column"]: t for t in fig.data}
     assert set(bars) == {"fgd", "mean_jerk"}  # frames and relaxed_steps are not measures
@@ -146,12 +168,21 @@ def test_adherence_figure_groups_bars_by_run_and_system():
     for system in ("knn", "random"):
         for run in ("controlled", "uncontrolled"):
             for i, c in enumerate(("left_hand=low", "speed=slow")):
-                rows.append({"system": system, "run": run, "start_s": 3.0 * i, "end_s": 3.0 * i + 3,
-                             "constraint": c, "adherence": 0.9 if run == "controlled" else 0.1})
+                rows.append(
+                    {
+                        "system": system,
+                        "run": run,
+                        "start_s": 3.0 * i,
+                        "end_s": 3.0 * i + 3,
+                        "constraint": c,
+                        "adherence": 0.9 if run == "controlled" else 0.1,
+                    }
+                )
     fig = adherence_figure(pd.DataFrame(rows))
     bars = [t for t in fig.data if t.meta["part"] == "adherence"]
-    assert {(t.meta["system"], t.meta["run"]) for t in bars} == {(s, r) for s in ("knn", "random")
-                                                                  for r in ("controlled", "uncontrolled")}
+    assert {(t.meta["system"], t.meta["run"]) for t in bars} == {
+        (s, r) for s in ("knn", "random") for r in ("controlled", "uncontrolled")
+    }
     knn = next(t for t in bars if t.meta == {"part": "adherence", "system": "knn", "run": "controlled"})
     assert list(knn.x) == ["0-3 s: left_hand=low", "3-6 s: speed=slow"] and list(knn.y) == [0.9, 0.9]
     assert knn.yaxis == "y" and next(t for t in bars if t.meta["run"] == "uncontrolled").yaxis == "y2"

@@ -1,4 +1,5 @@
 """The one appearance: every bone becomes a shape, derived points sit where the body is, one light rule."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,7 +14,9 @@ from gesturekit.viz.appearance import APPEARANCE, DERIVED_POINTS, Appearance, he
 
 def _positions(n: int, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
-    return (rng.normal(0, 0.3, (1, N_JOINTS, 3)) + np.cumsum(rng.normal(0, 0.01, (n, N_JOINTS, 3)), 0)).astype(np.float32)
+    return (rng.normal(0, 0.3, (1, N_JOINTS, 3)) + np.cumsum(rng.normal(0, 0.01, (n, N_JOINTS, 3)), 0)).astype(
+        np.float32
+    )
 
 
 def test_every_bone_is_a_capsule_or_inside_a_sphere_and_nothing_else_points_nowhere():

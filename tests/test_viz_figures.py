@@ -1,4 +1,5 @@
 """Plotly figures: skeleton bones and animation frames, attribute thresholds, waveform bands."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,7 +14,6 @@ from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS, bones
 from gesturekit.viz._plotly import _typed
-from gesturekit.viz.skeleton_figure import _chains
 from gesturekit.viz.figures import (
     DEFAULT_MAX_FRAMES,
     attribute_histograms,
@@ -21,7 +21,7 @@ from gesturekit.viz.figures import (
     skeleton_figure,
     waveform_figure,
 )
-
+from gesturekit.viz.skeleton_figure import _chains
 
 
 def _motion(n_frames: int, *, seed: int = 0, fps: float = 15.0) -> Motion:
@@ -54,6 +54,7 @@ def _expected_bones(positions: np.ndarray) -> set:
 
 
 # ---- skeleton_figure -------------------------------------------------------------------------
+
 
 def test_skeleton_draws_all_54_bones_at_the_joint_positions():
     m = _motion(20)
@@ -194,6 +195,7 @@ def test_default_frame_budget():
 
 # ---- attribute_histograms --------------------------------------------------------------------
 
+
 class _FakeDB:
     """Two attributes with known values and thresholds."""
 
@@ -201,8 +203,10 @@ class _FakeDB:
     meta = {"build": {"percentiles": (15.0, 85.0)}}
 
     def __init__(self):
-        self.values = {"left_hand_height": np.linspace(0, 1, 128).reshape(2, 64),
-                       "hand_speed": np.linspace(-2, 3, 192).reshape(3, 64)}
+        self.values = {
+            "left_hand_height": np.linspace(0, 1, 128).reshape(2, 64),
+            "hand_speed": np.linspace(-2, 3, 192).reshape(3, 64),
+        }
         self.thresholds = {"left_hand_height": (0.2, 0.7), "hand_speed": (-1.0, 2.5)}
 
     def attribute(self, name):
@@ -266,10 +270,11 @@ def test_histograms_of_a_matching_database():
     rng = np.random.default_rng(3)
     attrs = rng.gamma(2.0, 0.1, size=(5, 64, len(ATTRIBUTE_NAMES))).astype(np.float32)
     flat = attrs.reshape(-1, len(ATTRIBUTE_NAMES))
-    thresholds = {n: [float(np.percentile(flat[:, i], 15)), float(np.percentile(flat[:, i], 85))]
-                  for i, n in enumerate(ATTRIBUTE_NAMES)}
-    meta = {"attribute_names": list(ATTRIBUTE_NAMES), "thresholds": thresholds,
-            "build": {"percentiles": [15.0, 85.0]}}
+    thresholds = {
+        n: [float(np.percentile(flat[:, i], 15)), float(np.percentile(flat[:, i], 85))]
+        for i, n in enumerate(ATTRIBUTE_NAMES)
+    }
+    meta = {"attribute_names": list(ATTRIBUTE_NAMES), "thresholds": thresholds, "build": {"percentiles": [15.0, 85.0]}}
     db = MatchingDatabase(meta=meta, arrays={"attributes": attrs}, stats={})
     fig = attribute_histograms(db)
     assert len(fig.data) == len(db.attribute_names) == 9
@@ -282,6 +287,7 @@ def test_histograms_of_a_matching_database():
 
 
 # ---- waveform_figure -------------------------------------------------------------------------
+
 
 def test_waveform_envelope_rms_and_bands():
     sr = 16000

@@ -1,4 +1,5 @@
 """The canvas viewer: its page carries every bone of every frame as a body, side by side, with the speech, offline."""
+
 from __future__ import annotations
 
 import re
@@ -9,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as hst
 
 from gesturekit.errors import ConfigError
-from gesturekit.motion import AUDIO_SR, Motion
+from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS, bones
 from gesturekit.viz.appearance import APPEARANCE, DERIVED_POINTS
 from gesturekit.viz.figures import skeleton_figure
@@ -66,14 +67,14 @@ def test_the_speech_is_embedded_and_decodes_to_its_samples(n, seed, sr):
     m = _motion(n, seed=seed)
     rng = np.random.default_rng(seed)
     audio = rng.uniform(-1, 1, int(sr * n / 15.0) + int(rng.integers(-200, 200))).astype(np.float32)
-    audio = audio[:max(1, len(audio))]
+    audio = audio[: max(1, len(audio))]
     data = read_viewer_data(skeleton_viewer(m, audio=audio, sr=sr))
     assert data["audio_sr"] == sr
     got = data["audio"]
-    np.testing.assert_allclose(got[:len(audio)], audio, atol=1 / 32767 + 1e-7)  # 16-bit PCM
+    np.testing.assert_allclose(got[: len(audio)], audio, atol=1 / 32767 + 1e-7)  # 16-bit PCM
     # silence after shorter speech, so the speech's clock reaches the last frame
     assert len(got) >= max(len(audio), int(np.ceil(n / 15.0 * sr)))
-    assert np.all(got[len(audio):] == 0)
+    assert np.all(got[len(audio) :] == 0)
 
 
 def test_without_speech_there_is_no_audio_element():
@@ -84,8 +85,13 @@ def test_without_speech_there_is_no_audio_element():
 
 def test_page_is_offline_and_names_survive_any_text():
     label = 'k-NN </script><b>"&'
-    page = skeleton_viewer(_motion(10), labels=[label], title="t </script> __AUDIO__", key='a"b<c __DATA__',
-                           audio=np.zeros(1000, np.float32))
+    page = skeleton_viewer(
+        _motion(10),
+        labels=[label],
+        title="t </script> __AUDIO__",
+        key='a"b<c __DATA__',
+        audio=np.zeros(1000, np.float32),
+    )
     # nothing fetched: the only source is the speech's data URI
     assert not re.search(r"(src|href)\s*=\s*\"(?!data:audio/wav;base64,)|https?://|@import", page)
     data = read_viewer_data(page)
@@ -100,20 +106,25 @@ def test_default_camera_faces_the_character_and_the_framing_holds_every_surface_
     assert data["up"] == [0, 1, 0] and data["eye"][2] > 0 and abs(data["eye"][0]) < 1e-9
     pts = data["motions"][0]["points"].reshape(-1, 3)
     lo, hi = np.asarray(data["lo"]), np.asarray(data["hi"])
-    assert np.all(lo <= pts.min(axis=0) - APPEARANCE.head_radius) and np.all(hi >= pts.max(axis=0) + APPEARANCE.head_radius)
+    assert np.all(lo <= pts.min(axis=0) - APPEARANCE.head_radius) and np.all(
+        hi >= pts.max(axis=0) + APPEARANCE.head_radius
+    )
     assert data["ground"] < pts[:, 1].min() and lo[1] <= data["ground"]
     # framed to fill: the margin is a small fraction of the box on each axis
     inner_lo, inner_hi = pts.min(axis=0) - APPEARANCE.head_radius, pts.max(axis=0) + APPEARANCE.head_radius
     assert np.all((inner_lo - lo) <= 0.2 * (hi - lo)) and np.all((hi - inner_hi) <= 0.2 * (hi - lo))
 
 
-@pytest.mark.parametrize("kwargs, problem", [
-    (dict(motions=[]), "at least one motion"),
-    (dict(max_frames=0), "max_frames must be at least 1"),
-    (dict(fps=0.0), "fps must be positive"),
-    (dict(audio=np.zeros((10, 2), np.float32)), "mono samples"),
-    (dict(audio=np.zeros(10, np.float32), sr=0), "sample rate"),
-])
+@pytest.mark.parametrize(
+    "kwargs, problem",
+    [
+        (dict(motions=[]), "at least one motion"),
+        (dict(max_frames=0), "max_frames must be at least 1"),
+        (dict(fps=0.0), "fps must be positive"),
+        (dict(audio=np.zeros((10, 2), np.float32)), "mono samples"),
+        (dict(audio=np.zeros(10, np.float32), sr=0), "sample rate"),
+    ],
+)
 def test_bad_input_is_refused(kwargs, problem):
     kwargs = dict(kwargs)
     motions = kwargs.pop("motions", _motion(5))

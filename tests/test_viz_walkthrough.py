@@ -1,4 +1,5 @@
 """One search step explained: equal to the search, decision for decision, for every clip; its figures."""
+
 from __future__ import annotations
 
 import warnings
@@ -68,9 +69,15 @@ def _check_step(db, res, query, i, *, N, k, mask, exclude, rule):
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(seed=st.integers(0, 10_000), k=st.integers(0, 8), N=st.sampled_from([1, 3, 4, 8]),
-       rule=st.sampled_from(["ends", "all"]), levels=st.sampled_from([0, 1, 2]),
-       controlled=st.booleans(), excluded=st.booleans())
+@given(
+    seed=st.integers(0, 10_000),
+    k=st.integers(0, 8),
+    N=st.sampled_from([1, 3, 4, 8]),
+    rule=st.sampled_from(["ends", "all"]),
+    levels=st.sampled_from([0, 1, 2]),
+    controlled=st.booleans(),
+    excluded=st.booleans(),
+)
 def test_every_step_equals_the_search(seed, k, N, rule, levels, controlled, excluded):
     db = _db(seed, levels=levels)
     rng = np.random.default_rng(seed + 1)
@@ -170,8 +177,17 @@ def test_synthesis_steps_are_explained_with_their_controls_and_exclusions(small_
         inp = step_inputs(res, db, i)
         assert inp["t"] == i * cfg.step and inp["k"] == 1
         assert (inp["mask"] is not None) == (i in (0, 1, 2, 3, 6, 7, 8))  # middle frame 8i+3 controlled
-        e = _check_step(db, res.search, inp["query_features"], i, N=cfg.step, k=1, mask=inp["mask"],
-                        exclude=inp["exclude"], rule=cfg.mask_rule)
+        e = _check_step(
+            db,
+            res.search,
+            inp["query_features"],
+            i,
+            N=cfg.step,
+            k=1,
+            mask=inp["mask"],
+            exclude=inp["exclude"],
+            rule=cfg.mask_rule,
+        )
         assert int(db.clip_take[e.clip]) != 1  # the excluded take is never used
         same = explain_synthesis_step(res, db, i)
         assert (same.clip, same.start) == (e.clip, e.start)
@@ -180,6 +196,7 @@ def test_synthesis_steps_are_explained_with_their_controls_and_exclusions(small_
 
 
 # ---- figures ----------------------------------------------------------------------------------------
+
 
 def test_rankings_figure_places_every_survivor_by_its_two_ranks():
     db = _db(8, M=12)
@@ -219,6 +236,7 @@ def test_feature_blocks_tile_the_layout_and_the_heatmap_marks_them():
 
 # ---- tables -----------------------------------------------------------------------------------------
 
+
 def test_constraints_table_counts_what_each_constraint_admits(small_db):
     db = small_db
     table = constraints_table(db, segment=8).set_index("constraint")
@@ -230,10 +248,12 @@ def test_constraints_table_counts_what_each_constraint_admits(small_db):
     assert row["side"] == "below" and row["threshold"] == f"{lo:.3f}"
     assert row["frames"] == pytest.approx(np.mean(height < lo))
     high = height > hi
-    ends = sum(window_admissible(m, s, 8, valid=db.valid, mask=high, rule="ends")
-               for m in range(db.n_clips) for s in range(64))
-    every = sum(window_admissible(m, s, 8, valid=db.valid, mask=high, rule="all")
-                for m in range(db.n_clips) for s in range(64))
+    ends = sum(
+        window_admissible(m, s, 8, valid=db.valid, mask=high, rule="ends") for m in range(db.n_clips) for s in range(64)
+    )
+    every = sum(
+        window_admissible(m, s, 8, valid=db.valid, mask=high, rule="all") for m in range(db.n_clips) for s in range(64)
+    )
     assert (table.loc["left_hand=high", "windows_ends"], table.loc["left_hand=high", "windows_all"]) == (ends, every)
     assert (table["windows_all"] <= table["windows_ends"]).all()
     assert table.loc["both_hands=high", "attributes"] == "left_hand_height+right_hand_height"

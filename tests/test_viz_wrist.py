@@ -1,4 +1,5 @@
 """Wrist height/speed plots (the paper's supplementary Figs. 2-3) and the candidates plot of a search step."""
+
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -14,8 +15,12 @@ from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS, joint_index
 from gesturekit.viz.figures import WRIST_ROWS, candidates_figure, waveform_figure, wrist_figure
 
-THRESHOLDS = {"left_hand_height": (0.05, 0.4), "right_hand_height": (0.06, 0.41),
-              "left_hand_speed": (0.1, 1.2), "right_hand_speed": (0.11, 1.3)}
+THRESHOLDS = {
+    "left_hand_height": (0.05, 0.4),
+    "right_hand_height": (0.06, 0.41),
+    "left_hand_speed": (0.1, 1.2),
+    "right_hand_speed": (0.11, 1.3),
+}
 
 
 def _lifting(n: int, fps: float, *, speed: float) -> Motion:
@@ -75,13 +80,18 @@ def test_control_segments_shade_every_row_with_the_waveforms_colours():
     assert sorted({(s.x0, s.x1) for s in high}) == [(0.5, 1.0), (1.6, 1.9)]
     assert {s.yref for s in slow} == {"y domain", "y2 domain", "y3 domain", "y4 domain"}
     assert len({s.fillcolor for s in high}) == 1 and high[0].fillcolor != slow[0].fillcolor
-    assert sorted(a.text for a in fig.layout.annotations if a.text in ("left_hand=high", "speed=slow")) == \
-        ["left_hand=high", "left_hand=high", "speed=slow"]
+    assert sorted(a.text for a in fig.layout.annotations if a.text in ("left_hand=high", "speed=slow")) == [
+        "left_hand=high",
+        "left_hand=high",
+        "speed=slow",
+    ]
     # the same bands on the waveform get the same colours, so the two charts read together
-    wave = waveform_figure(np.zeros(32000, np.float32), 16000,
-                           bands=[(s.start_s, s.end_s, s.label()) for s in track.segments])
-    assert {s.name: s.fillcolor for s in wave.layout.shapes} == {s.name: s.fillcolor for s in fig.layout.shapes
-                                                                 if s.type == "rect"}
+    wave = waveform_figure(
+        np.zeros(32000, np.float32), 16000, bands=[(s.start_s, s.end_s, s.label()) for s in track.segments]
+    )
+    assert {s.name: s.fillcolor for s in wave.layout.shapes} == {
+        s.name: s.fillcolor for s in fig.layout.shapes if s.type == "rect"
+    }
 
 
 @settings(max_examples=25, deadline=None)
@@ -94,13 +104,16 @@ def test_time_axis_covers_the_motion(n, fps, speed):
     assert tuple(fig.layout.xaxis.range) == pytest.approx((0.0, n / fps))
 
 
-@pytest.mark.parametrize("call, message", [
-    (lambda m: wrist_figure([]), "at least one motion"),
-    (lambda m: wrist_figure([m, m], labels=["one"]), "1 labels for 2 motions"),
-    (lambda m: wrist_figure(m, thresholds={"left_hand_height": (0, 1)}), "thresholds lack right_hand_height"),
-    (lambda m: wrist_figure(m, bands=[(2.0, 1.0, "x")]), r"end \(1\.0\) must be after start"),
-    (lambda m: wrist_figure(m.positions), "takes Motion objects"),
-])
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda m: wrist_figure([]), "at least one motion"),
+        (lambda m: wrist_figure([m, m], labels=["one"]), "1 labels for 2 motions"),
+        (lambda m: wrist_figure(m, thresholds={"left_hand_height": (0, 1)}), "thresholds lack right_hand_height"),
+        (lambda m: wrist_figure(m, bands=[(2.0, 1.0, "x")]), r"end \(1\.0\) must be after start"),
+        (lambda m: wrist_figure(m.positions), "takes Motion objects"),
+    ],
+)
 def test_bad_arguments_are_config_errors(call, message):
     with pytest.raises(ConfigError, match=message):
         call(_lifting(10, 15.0, speed=0.1))
@@ -108,11 +121,13 @@ def test_bad_arguments_are_config_errors(call, message):
 
 # ---- candidates_figure ---------------------------------------------------------------------------
 
+
 def _record(position: int) -> SimpleNamespace:
     """Two steps of a search record with 4 columns; step 1 has only 3 candidates (padded)."""
     clip = np.array([[5, 6, 7, 8], [9, 3, 4, -1]])
     return SimpleNamespace(
-        cand_clip=clip, cand_start=np.array([[0, 1, 2, 3], [4, 5, 6, -1]]),
+        cand_clip=clip,
+        cand_start=np.array([[0, 1, 2, 3], [4, 5, 6, -1]]),
         cand_pose_dist=np.array([[1.0, 2.0, 3.0, 4.0], [0.5, 1.5, 2.5, np.nan]]),
         cand_audio_dist=np.array([[0.4, 0.3, 0.2, 0.1], [0.9, 0.8, 0.7, np.nan]]),
         cand_pose_rank=np.array([[0, 1, 2, 3], [0, 1, 2, -1]]),
@@ -167,9 +182,15 @@ def test_the_candidates_plot_holds_every_point_and_room_for_its_label(points):
     n = len(points)
     col = lambda v, dt=np.int64: np.asarray([v], dtype=dt)  # noqa: E731  (one step)
     rec = SimpleNamespace(
-        cand_clip=col(list(range(n))), cand_start=col([0] * n), cand_pose_rank=col(list(range(n))),
-        cand_audio_rank=col(list(range(n))), cand_combined=col(list(range(n))), position=np.asarray([0]),
-        cand_pose_dist=col([p for p, _ in points], np.float64), cand_audio_dist=col([a for _, a in points], np.float64))
+        cand_clip=col(list(range(n))),
+        cand_start=col([0] * n),
+        cand_pose_rank=col(list(range(n))),
+        cand_audio_rank=col(list(range(n))),
+        cand_combined=col(list(range(n))),
+        position=np.asarray([0]),
+        cand_pose_dist=col([p for p, _ in points], np.float64),
+        cand_audio_dist=col([a for _, a in points], np.float64),
+    )
     fig = candidates_figure(rec, 0)
     (x0, x1), (y0, y1) = fig.layout.xaxis.range, fig.layout.yaxis.range
     xs, ys = [p for p, _ in points], [a for _, a in points]

@@ -1,4 +1,5 @@
 """gesturekit.workspace: the databases and speech files a user's folders hold (shared by the CLI and the app)."""
+
 from __future__ import annotations
 
 import tempfile
@@ -24,8 +25,11 @@ from gesturekit.workspace import (
 
 from .test_cli import _positions_folder
 
-_SUFFIXES = [e.upper() if i % 2 else e for i, e in enumerate(AUDIO_EXTENSIONS)] + list(AUDIO_EXTENSIONS) + [
-    ".txt", ".bvh", ".wav.bak", ".npz", "", ".WAVE", ".mp4"]
+_SUFFIXES = (
+    [e.upper() if i % 2 else e for i, e in enumerate(AUDIO_EXTENSIONS)]
+    + list(AUDIO_EXTENSIONS)
+    + [".txt", ".bvh", ".wav.bak", ".npz", "", ".WAVE", ".mp4"]
+)
 _entries = st.dictionaries(
     st.text("abcxyz_-0123", min_size=1, max_size=6),
     st.tuples(st.sampled_from(_SUFFIXES), st.sampled_from(["file", "folder"])),
@@ -104,16 +108,25 @@ def test_database_folders_lists_the_default_first_then_built_databases(tmp_path,
 def test_database_folders_without_any_database_offers_the_default_only(tmp_path, monkeypatch):
     monkeypatch.setenv("GESTUREKIT_HOME", str(tmp_path / "nothing"))
     assert database_folders(cwd=tmp_path / "nowhere") == {
-        str((tmp_path / "nothing" / "db" / "demo").resolve()): DEMO_DATABASE_LABEL}
+        str((tmp_path / "nothing" / "db" / "demo").resolve()): DEMO_DATABASE_LABEL
+    }
 
 
-@pytest.mark.parametrize("meta, generated", [
-    ({"build": {"source": "demo (seed 0, 20 min)"}, "takes": []}, True),
-    ({"build": {"source": "/data/takes"}, "takes": [{"sources": {"generator": "gesturekit.datasets.synthetic"}}]},
-     True),
-    ({"build": {"source": "/data/takes"}, "takes": [{"sources": {"motion": "a.bvh", "audio": "a.wav"}}]}, False),
-    ({}, False),
-])
+@pytest.mark.parametrize(
+    "meta, generated",
+    [
+        ({"build": {"source": "demo (seed 0, 20 min)"}, "takes": []}, True),
+        (
+            {
+                "build": {"source": "/data/takes"},
+                "takes": [{"sources": {"generator": "gesturekit.datasets.synthetic"}}],
+            },
+            True,
+        ),
+        ({"build": {"source": "/data/takes"}, "takes": [{"sources": {"motion": "a.bvh", "audio": "a.wav"}}]}, False),
+        ({}, False),
+    ],
+)
 def test_is_generated_reads_the_build_source_and_the_takes(meta, generated):
     assert is_generated(SimpleNamespace(meta=meta)) is generated
 
@@ -122,8 +135,9 @@ def test_build_database_reads_the_takes_saves_and_records_where_they_came_from(t
     folder, jm = _positions_folder(tmp_path)
     out = tmp_path / "db"
     calls = []
-    db = build_database(folder, out, config=BuildConfig(label="two takes"), joint_map=jm, fps=30.0,
-                        progress=lambda *a: calls.append(a))
+    db = build_database(
+        folder, out, config=BuildConfig(label="two takes"), joint_map=jm, fps=30.0, progress=lambda *a: calls.append(a)
+    )
     assert calls == [(1, 2, "t0"), (2, 2, "t1")]
     assert db.take_names == ["t0", "t1"] and db.n_clips == 4  # 9 s at 15 fps = 135 frames = 2 clips each
     saved = MatchingDatabase.load(out)

@@ -1,22 +1,23 @@
 """Speech in, gestures out: choose speech, draw controls, set the search, run, watch, download."""
+
 import functools
 import time
 
+import display
 import numpy as np
 import pandas as pd
-import streamlit as st
-
-import display
 import resources
 import sidebar
 import state
+import streamlit as st
+
+from gesturekit import interactive as gs
 from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
 from gesturekit.search import describe_steps
 from gesturekit.synthesize import SynthesisConfig
-from gesturekit import interactive as gs
 from gesturekit.viz.figures import waveform_figure, wrist_figure
 
 SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}
@@ -49,11 +50,19 @@ def _use_example(label: str) -> None:
 def speech_input() -> dict | None:
     """Upload or example; returns the user's speech, or None when there is none yet."""
     ss = st.session_state
-    mode = ss["synth.mode"] = st.radio("Speech", [UPLOAD, EXAMPLE], horizontal=True, label_visibility="collapsed",
-                                       key=state.persistent_key("synth.mode", UPLOAD))
+    mode = ss["synth.mode"] = st.radio(
+        "Speech",
+        [UPLOAD, EXAMPLE],
+        horizontal=True,
+        label_visibility="collapsed",
+        key=state.persistent_key("synth.mode", UPLOAD),
+    )
     if mode == UPLOAD:
-        up = st.file_uploader("Speech file: wav, flac, ogg or mp3, any sample rate and channels",
-                              type=["wav", "flac", "ogg", "mp3"], key="synth.upload")
+        up = st.file_uploader(
+            "Speech file: wav, flac, ogg or mp3, any sample rate and channels",
+            type=["wav", "flac", "ogg", "mp3"],
+            key="synth.upload",
+        )
         if up is not None:
             token = ("upload", up.file_id)
             failed = ss.get(_FAILED)
@@ -79,8 +88,9 @@ def speech_input() -> dict | None:
     else:
         labels = list(gs.SPEECH_EXAMPLES)
         key = state.persistent_key("synth.example", labels[0])
-        label = ss["synth.example"] = st.selectbox("Example", labels, key=key,
-                                                   help="new speech of the generated demo speaker, not in the database")
+        label = ss["synth.example"] = st.selectbox(
+            "Example", labels, key=key, help="new speech of the generated demo speaker, not in the database"
+        )
         if ss.get(SPEECH, {}).get("token") != ("example", label):
             _use_example(label)
     return ss.get(SPEECH)
@@ -118,20 +128,28 @@ def controls(speech: dict) -> ControlTrack | None:
     duration = len(speech["audio"]) / AUDIO_SR
     new_key = state.persistent_key("synth.new_constraint", "both_hands=high")
     new_constraint = ss["synth.new_constraint"] = st.selectbox(
-        "Constraint for a box-selected range", gs.CONSTRAINT_CHOICES, key=new_key,
+        "Constraint for a box-selected range",
+        gs.CONSTRAINT_CHOICES,
+        key=new_key,
         help="Drag across the waveform to select a time range: a segment with this constraint is added "
-             "(replacing what it overlaps). Edit, add or delete rows in the table below.")
+        "(replacing what it overlaps). Edit, add or delete rows in the table below.",
+    )
     chart_slot = st.container()  # drawn after the table, so the bands show the latest edits
     key = state.remount_key(EDITOR)
     table = st.data_editor(
-        _editor_base(key), key=key, num_rows="dynamic", hide_index=True, width="stretch",
+        _editor_base(key),
+        key=key,
+        num_rows="dynamic",
+        hide_index=True,
+        width="stretch",
         column_config={
-            "start_s": st.column_config.NumberColumn("start [s]", min_value=0.0, step=0.01, format="%.2f",
-                                                     required=True),
-            "end_s": st.column_config.NumberColumn("end [s]", min_value=0.0, step=0.01, format="%.2f",
-                                                   required=True),
-            "constraint": st.column_config.SelectboxColumn("constraint", options=list(gs.CONSTRAINT_CHOICES),
-                                                           required=True),
+            "start_s": st.column_config.NumberColumn(
+                "start [s]", min_value=0.0, step=0.01, format="%.2f", required=True
+            ),
+            "end_s": st.column_config.NumberColumn("end [s]", min_value=0.0, step=0.01, format="%.2f", required=True),
+            "constraint": st.column_config.SelectboxColumn(
+                "constraint", options=list(gs.CONSTRAINT_CHOICES), required=True
+            ),
         },
     )
     ss[SEGMENTS] = table
@@ -144,8 +162,9 @@ def controls(speech: dict) -> ControlTrack | None:
         bands = [(s.start_s, s.end_s, s.label()) for s in track.segments] if track else []
         fig = waveform_figure(speech["audio"], AUDIO_SR, bands=bands, height=230)
         fig.update_layout(dragmode="select", selectdirection="h")
-        event = st.plotly_chart(fig, key="synth.waveform", on_select="rerun", selection_mode="box",
-                                config={"displaylogo": False})
+        event = st.plotly_chart(
+            fig, key="synth.waveform", on_select="rerun", selection_mode="box", config={"displaylogo": False}
+        )
     selection = event["selection"] if event is not None and "selection" in event else None
     box = gs.selected_time_range(selection, duration=duration)
     if box is None:
@@ -156,54 +175,93 @@ def controls(speech: dict) -> ControlTrack | None:
     cols = st.columns([1, 4])
     if cols[0].button("Clear segments", key="synth.clear_segments", disabled=table.empty):
         _replace_table(gs.empty_segments())
-    cols[1].caption("Rows with the same start and end form one segment whose constraints must all hold. "
-                    "Low/high compare with the database's percentile thresholds (see the Database page).")
+    cols[1].caption(
+        "Rows with the same start and end form one segment whose constraints must all hold. "
+        "Low/high compare with the database's percentile thresholds (see the Database page)."
+    )
     if problem:
         st.error(problem, icon="⚠️")
     return track
 
 
 def settings(db) -> dict:
-    """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can run."""
+    """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can
+    run."""
     ss = st.session_state
     pk = state.persistent_key
     step_key = pk("synth.step", 8)
     if ss[step_key] > db.clip_frames:  # a database of shorter clips: say so, never change it unseen
-        st.warning(f"N was {ss[step_key]}, more than this database's clips hold ({db.clip_frames} frames): "
-                   f"it is now {db.clip_frames}.", icon="⚠️")
+        st.warning(
+            f"N was {ss[step_key]}, more than this database's clips hold ({db.clip_frames} frames): "
+            f"it is now {db.clip_frames}.",
+            icon="⚠️",
+        )
         ss[step_key] = ss["synth.step"] = db.clip_frames
     c = st.columns(4)
     out = {
-        "k": c[0].number_input("k (0 = best match)", min_value=0, max_value=100, step=1, key=pk("synth.k", 0),
-                               help="take the k-th best window of the combined ranking at every step"),
-        "step": c[1].number_input("N (frames per step)", min_value=1, max_value=db.clip_frames, step=1,
-                                  key=step_key, help="8 in the paper: a new search every 0.53 s"),
-        "seed": c[2].number_input("Seed", min_value=0, max_value=2**31 - 1, step=1, key=pk("synth.seed", 0),
-                                  help="of the random initial pose"),
-        "topk": c[3].number_input("Candidates recorded per step", min_value=1, max_value=50, step=1,
-                                  key=pk("synth.topk", 10), help="shown in the Retrieval inspector"),
+        "k": c[0].number_input(
+            "k (0 = best match)",
+            min_value=0,
+            max_value=100,
+            step=1,
+            key=pk("synth.k", 0),
+            help="take the k-th best window of the combined ranking at every step",
+        ),
+        "step": c[1].number_input(
+            "N (frames per step)",
+            min_value=1,
+            max_value=db.clip_frames,
+            step=1,
+            key=step_key,
+            help="8 in the paper: a new search every 0.53 s",
+        ),
+        "seed": c[2].number_input(
+            "Seed", min_value=0, max_value=2**31 - 1, step=1, key=pk("synth.seed", 0), help="of the random initial pose"
+        ),
+        "topk": c[3].number_input(
+            "Candidates recorded per step",
+            min_value=1,
+            max_value=50,
+            step=1,
+            key=pk("synth.topk", 10),
+            help="shown in the Retrieval inspector",
+        ),
     }
     c = st.columns(4)
-    out["init"] = c[0].selectbox("Initial pose", list(_INIT_LABELS), format_func=_INIT_LABELS.get,
-                                 key=pk("synth.init", "random"))
-    out["blend"] = c[1].selectbox("Blending", list(BLEND_MODES), format_func=lambda m: _BLEND_LABELS.get(m, m),
-                                  key=pk("synth.blend", "none"))
-    out["mask_rule"] = c[2].selectbox("A control must hold at", list(_MASK_LABELS), format_func=_MASK_LABELS.get,
-                                      key=pk("synth.mask_rule", "ends"))
+    out["init"] = c[0].selectbox(
+        "Initial pose", list(_INIT_LABELS), format_func=_INIT_LABELS.get, key=pk("synth.init", "random")
+    )
+    out["blend"] = c[1].selectbox(
+        "Blending", list(BLEND_MODES), format_func=lambda m: _BLEND_LABELS.get(m, m), key=pk("synth.blend", "none")
+    )
+    out["mask_rule"] = c[2].selectbox(
+        "A control must hold at", list(_MASK_LABELS), format_func=_MASK_LABELS.get, key=pk("synth.mask_rule", "ends")
+    )
     for name, value in out.items():
         ss[f"synth.{name}"] = value
     refiner, ok = None, True
     default = resources.default_refiner(db)
-    on = ss["synth.refine"] = c[3].toggle("Refiner (cGAN)", key=pk("synth.refine", bool(default)),
-                                          help="smooth and re-time the k-NN motion with a trained refiner")
+    on = ss["synth.refine"] = c[3].toggle(
+        "Refiner (cGAN)",
+        key=pk("synth.refine", bool(default)),
+        help="smooth and re-time the k-NN motion with a trained refiner",
+    )
     folder = ss["synth.refiner_path"] = c[3].text_input(
-        "Refiner folder", key=pk("synth.refiner_path", default), disabled=not on,
-        placeholder="folder written by gesturekit train-refiner")
+        "Refiner folder",
+        key=pk("synth.refiner_path", default),
+        disabled=not on,
+        placeholder="folder written by gesturekit train-refiner",
+    )
     out["refiner_keep_hz"] = ss["synth.refiner_keep_hz"] = c[3].number_input(
-        "Keep k-NN motion below (Hz)", min_value=0.0, max_value=7.5, step=0.5, disabled=not on,
+        "Keep k-NN motion below (Hz)",
+        min_value=0.0,
+        max_value=7.5,
+        step=0.5,
+        disabled=not on,
         key=pk("synth.refiner_keep_hz", KEEP_BELOW_HZ),
         help="the k-NN motion's slow content (hand height, width, symmetry: what controls set) is kept, "
-        "the refiner supplies the faster content (joins, timing); 0: the refiner's output as it is (the paper)")
+        "the refiner supplies the faster content (joins, timing); 0: the refiner's output as it is (the paper)",
+    )
     if on:
         ok = False  # until the refiner is checked: a run must not silently go without it
         with display.user_errors():
@@ -268,8 +326,10 @@ def video(record) -> None:
         seconds = time.perf_counter() - t0
         bar.empty()
         frames = shown["frames"]
-        note = (f"Rendered {frames} frames in {seconds:.1f} s ({frames / max(seconds, 1e-9):.0f} frames/s); "
-                "download it below.")
+        note = (
+            f"Rendered {frames} frames in {seconds:.1f} s ({frames / max(seconds, 1e-9):.0f} frames/s); "
+            "download it below."
+        )
         ss[_VIDEO] = {"run": record["run"], "bytes": data, "note": note}
         st.video(data, format="video/mp4")
         st.caption(note)
@@ -304,28 +364,45 @@ def show_result(db, record) -> None:
         display.show_skeletons(motions, labels=labels, title=title, key="synth.skeleton", audio=result.audio)
     with right:
         st.markdown("**Speech**")
-        st.caption("▶ Play under the 3D view plays the speech, and the view follows it frame by frame; "
-                   "or render the video:")
+        st.caption(
+            "▶ Play under the 3D view plays the speech, and the view follows it frame by frame; or render the video:"
+        )
         video(record)
     st.subheader("Wrist height and speed")
     st.caption("Shaded: the control segments. Dashed: the database's low and high thresholds of each quantity.")
-    wrists = _figure(record, "wrists", lambda: wrist_figure(motions, labels=labels, bands=result.control,
-                                                             thresholds=db.thresholds))
+    wrists = _figure(
+        record, "wrists", lambda: wrist_figure(motions, labels=labels, bands=result.control, thresholds=db.thresholds)
+    )
     st.plotly_chart(wrists, key="synth.wrists", config={"displaylogo": False})
 
     st.subheader("Downloads")
     cols = st.columns(5)
-    labels = {"npz": "Motion + search (npz)", "bvh": "Motion (BVH)", "csv": "Control track (CSV)",
-              "json": "Config (JSON)"}
+    labels = {
+        "npz": "Motion + search (npz)",
+        "bvh": "Motion (BVH)",
+        "csv": "Control track (CSV)",
+        "json": "Config (JSON)",
+    }
     for col, kind in zip(cols, ("npz", "bvh", "csv", "json")):
         # made when clicked: a BVH takes a moment, and most results are never downloaded
-        col.download_button(labels[kind], data=functools.partial(gs.export_bytes, result, kind),
-                            file_name=gs.export_filename(result, kind),
-                            mime=gs.EXPORT_KINDS[kind][1], key=f"synth.download_{kind}", on_click="ignore")
+        col.download_button(
+            labels[kind],
+            data=functools.partial(gs.export_bytes, result, kind),
+            file_name=gs.export_filename(result, kind),
+            mime=gs.EXPORT_KINDS[kind][1],
+            key=f"synth.download_{kind}",
+            on_click="ignore",
+        )
     done = ss.get(_VIDEO)
     if done is not None and done["run"] == record["run"]:
-        cols[4].download_button("Video (MP4)", data=done["bytes"], file_name=gs.export_filename(result, "mp4"),
-                                mime="video/mp4", key="synth.download_mp4", on_click="ignore")
+        cols[4].download_button(
+            "Video (MP4)",
+            data=done["bytes"],
+            file_name=gs.export_filename(result, "mp4"),
+            mime="video/mp4",
+            key="synth.download_mp4",
+            on_click="ignore",
+        )
     else:
         cols[4].caption("MP4: render it above")
 
@@ -360,8 +437,10 @@ def main() -> None:
     pins = dict(ss.get(state.PINS_KEY, {}))
     if pins:
         c = st.columns([4, 1])
-        c[0].caption("Pinned choices from the Retrieval inspector (step: clip, start): "
-                     + ", ".join(f"{i}: {m}, {s}" for i, (m, s) in sorted(pins.items())))
+        c[0].caption(
+            "Pinned choices from the Retrieval inspector (step: clip, start): "
+            + ", ".join(f"{i}: {m}, {s}" for i, (m, s) in sorted(pins.items()))
+        )
         if c[1].button("Clear pins", key="synth.clear_pins"):
             ss[state.PINS_KEY] = {}
             st.rerun()

@@ -1,12 +1,13 @@
 """Step through the search: each step's candidates, their distances and clips; pin a choice; compare k."""
-import streamlit as st
 
 import display
 import nav
 import sidebar
 import state
-from gesturekit.motion import AUDIO_SR
+import streamlit as st
+
 from gesturekit import interactive as gs
+from gesturekit.motion import AUDIO_SR
 from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
 
 STEP = "inspect.step"  # the step shown (per user)
@@ -18,23 +19,38 @@ CONTEXT_S = 1.0  # seconds of a candidate's take heard around it
 _n, _t = st.column_config.NumberColumn, st.column_config.TextColumn
 #: Every column of the page's tables, named in words (ranks count from 0, the best).
 CANDIDATE_COLUMNS = {
-    "position": _n("combined position"), "clip": _n("clip"), "start": _n("start frame"), "take": _t("take"),
-    "source_s": _n("source time [s]", format="%.2f"), "pose_dist": _n("pose distance", format="%.3f"),
-    "audio_dist": _n("audio distance", format="%.4f"), "pose_rank": _n("pose rank"),
-    "audio_rank": _n("audio rank"), "combined": _n("combined rank"),
+    "position": _n("combined position"),
+    "clip": _n("clip"),
+    "start": _n("start frame"),
+    "take": _t("take"),
+    "source_s": _n("source time [s]", format="%.2f"),
+    "pose_dist": _n("pose distance", format="%.3f"),
+    "audio_dist": _n("audio distance", format="%.4f"),
+    "pose_rank": _n("pose rank"),
+    "audio_rank": _n("audio rank"),
+    "combined": _n("combined rank"),
     "chosen": st.column_config.CheckboxColumn("chosen"),
 }
 STEPS_COLUMNS = {
-    "step": _n("step"), "first_frame": _n("first frame"), "start_s": _n("time [s]", format="%.2f"),
-    "clip": _n("clip"), "start": _n("start frame"), "take": _t("take"),
-    "source_s": _n("source time [s]", format="%.2f"), "position": _n("combined position"),
-    "candidates": _n("clips that survived"), "relaxed": st.column_config.CheckboxColumn("control relaxed"),
+    "step": _n("step"),
+    "first_frame": _n("first frame"),
+    "start_s": _n("time [s]", format="%.2f"),
+    "clip": _n("clip"),
+    "start": _n("start frame"),
+    "take": _t("take"),
+    "source_s": _n("source time [s]", format="%.2f"),
+    "position": _n("combined position"),
+    "candidates": _n("clips that survived"),
+    "relaxed": st.column_config.CheckboxColumn("control relaxed"),
     "pinned": st.column_config.CheckboxColumn("pinned"),
 }
 COMPARE_COLUMNS = {
-    "k": _n("k"), "pose_dist": _n("mean pose distance", format="%.3f"),
-    "audio_dist": _n("mean audio distance", format="%.4f"), "relaxed_steps": _n("steps relaxed"),
-    "pinned_steps": _n("steps pinned"), "control_met": _n("control met", format="%d%%"),
+    "k": _n("k"),
+    "pose_dist": _n("mean pose distance", format="%.3f"),
+    "audio_dist": _n("mean audio distance", format="%.4f"),
+    "relaxed_steps": _n("steps relaxed"),
+    "pinned_steps": _n("steps pinned"),
+    "control_met": _n("control met", format="%d%%"),
 }
 
 
@@ -51,8 +67,14 @@ def pick_step(db, result) -> int:
     table = gs.steps_overview(result, db)
     with st.expander(f"All {len(table)} steps", expanded=False):
         event = st.dataframe(
-            table, hide_index=True, key="inspect.steps_table", on_select="rerun", selection_mode="single-row",
-            height=240, column_config=STEPS_COLUMNS)
+            table,
+            hide_index=True,
+            key="inspect.steps_table",
+            on_select="rerun",
+            selection_mode="single-row",
+            height=240,
+            column_config=STEPS_COLUMNS,
+        )
     rows = list(event.selection.rows) if event is not None else []
     selected = int(rows[0]) if rows and rows[0] < len(table) else None
     key = state.persistent_key(STEP, 0)
@@ -60,8 +82,9 @@ def pick_step(db, result) -> int:
         ss[key] = selected
     ss[_LAST_ROW] = selected
     ss[key] = int(min(max(int(ss[key]), 0), len(table) - 1))  # a new result may have fewer steps
-    step = st.number_input("Step", min_value=0, max_value=len(table) - 1, step=1, key=key,
-                           help="or select a row of the steps table")
+    step = st.number_input(
+        "Step", min_value=0, max_value=len(table) - 1, step=1, key=key, help="or select a row of the steps table"
+    )
     ss[STEP] = int(step)
     return int(step)
 
@@ -86,24 +109,29 @@ def step_view(db, record, step: int) -> None:
     with plot:
         names = [f"{r.take} at {r.source_s:.2f} s" for r in table.itertuples()]
         names += [""] * (s.cand_clip.shape[1] - len(names))
-        st.plotly_chart(candidates_figure(s, step, names=names, height=300), key="inspect.candidates_plot",
-                        config={"displaylogo": False})
+        st.plotly_chart(
+            candidates_figure(s, step, names=names, height=300),
+            key="inspect.candidates_plot",
+            config={"displaylogo": False},
+        )
     with views:
         others = table[~table["chosen"]]
         shown = 0
         if len(others):
             key = state.persistent_key("inspect.n_views", 4)
             ss[key] = min(int(ss[key]), len(others))
-            shown = ss["inspect.n_views"] = st.slider("Alternatives shown in 3D", min_value=0,
-                                                      max_value=len(others), key=key)
+            shown = ss["inspect.n_views"] = st.slider(
+                "Alternatives shown in 3D", min_value=0, max_value=len(others), key=key
+            )
         motions = [gs.candidate_motion(db, int(s.clip[step]), int(s.start[step]), b - a)]
         labels = ["chosen" + (" (pinned)" if s.pinned[step] else f" #{int(s.position[step])}")]
         for r in others.head(shown).itertuples():
             motions.append(gs.candidate_motion(db, r.clip, r.start, b - a))
             labels.append(f"#{r.position}")
         # the step's input speech is the clock: it is what every candidate was matched against
-        display.show_skeletons(motions, labels=labels, height=360, key="inspect.views",
-                              audio=gs.step_speech(result, step))
+        display.show_skeletons(
+            motions, labels=labels, height=360, key="inspect.views", audio=gs.step_speech(result, step)
+        )
 
     st.markdown("**Listen and choose**")
     positions = [int(p) for p in table["position"]]
@@ -112,9 +140,14 @@ def step_view(db, record, step: int) -> None:
         ss[key] = positions[0]
     row_of = {int(r.position): r for r in table.itertuples()}
     pick = ss[CANDIDATE] = st.selectbox(
-        "Candidate", positions, key=key,
-        format_func=lambda p: f"#{p}: clip {row_of[p].clip} from frame {row_of[p].start} "
-                              f"({row_of[p].take} at {row_of[p].source_s:.2f} s)" + (" · chosen" if row_of[p].chosen else ""))
+        "Candidate",
+        positions,
+        key=key,
+        format_func=lambda p: (
+            f"#{p}: clip {row_of[p].clip} from frame {row_of[p].start} "
+            f"({row_of[p].take} at {row_of[p].source_s:.2f} s)" + (" · chosen" if row_of[p].chosen else "")
+        ),
+    )
     r = row_of[pick]
     c = st.columns(3)
     with c[0]:
@@ -127,16 +160,23 @@ def step_view(db, record, step: int) -> None:
         else:
             st.caption("(this database was built without audio)")
     with c[2]:
-        if st.button("Use this candidate instead", key="inspect.use", disabled=bool(r.chosen), type="primary",
-                     help="pin it at this step and run the synthesis again; later steps continue from it"):
+        if st.button(
+            "Use this candidate instead",
+            key="inspect.use",
+            disabled=bool(r.chosen),
+            type="primary",
+            help="pin it at this step and run the synthesis again; later steps continue from it",
+        ):
             _rerun_with(db, record, result.config.with_pin(step, r.clip, r.start))
 
 
 def context(db, r, n_frames: int) -> None:
     """The candidate's speech with a second of its take on either side, the window shaded."""
     audio, a, b, t0 = gs.segment_in_context(db, r.clip, r.start, n_frames, context_s=CONTEXT_S)
-    st.caption(f"…with up to {CONTEXT_S:g} s around it: the window is {a:.2f}–{b:.2f} s of this "
-               f"{len(audio) / AUDIO_SR:.2f} s excerpt ({r.take} at {t0 + a:.2f}–{t0 + b:.2f} s)")
+    st.caption(
+        f"…with up to {CONTEXT_S:g} s around it: the window is {a:.2f}–{b:.2f} s of this "
+        f"{len(audio) / AUDIO_SR:.2f} s excerpt ({r.take} at {t0 + a:.2f}–{t0 + b:.2f} s)"
+    )
     st.audio(gs.wav_bytes(audio), format="audio/wav")
     fig = waveform_figure(audio, AUDIO_SR, bands=[(a, b, "window")], height=150)
     fig.update_layout(showlegend=False, margin=dict(l=10, r=10, t=25, b=10), yaxis_title=None)
@@ -153,8 +193,10 @@ def pins_view(db, record) -> None:
     for i, (clip, start) in pins.items():
         take = db.take_names[int(db.clip_take[clip])]
         c = st.columns([4, 1])
-        c[0].markdown(f"step **{i}**: clip {clip} from frame {start} ({take} at "
-                      f"{(int(db.clip_start[clip]) + start) / db.fps:.2f} s)")
+        c[0].markdown(
+            f"step **{i}**: clip {clip} from frame {start} ({take} at "
+            f"{(int(db.clip_start[clip]) + start) / db.fps:.2f} s)"
+        )
         if c[1].button("Remove", key=f"inspect.unpin_{i}"):
             _rerun_with(db, record, result.config.without_pin(i))
     if len(pins) > 1 and st.button("Remove all pins", key="inspect.unpin_all"):
@@ -172,8 +214,14 @@ def compare_view(db, record) -> None:
     ks = ss["inspect.ks"] = st.multiselect("k", list(range(10)), key=state.persistent_key("inspect.ks", [0, 1, 2]))
     if st.button("Compare", key="inspect.compare_go", disabled=not ks):
         with st.spinner("Searching…"):
-            results = gs.compare_k(result.audio, db=db, config=result.config, ks=sorted(ks), refiner=record["refiner"],
-                                   source=result.source)
+            results = gs.compare_k(
+                result.audio,
+                db=db,
+                config=result.config,
+                ks=sorted(ks),
+                refiner=record["refiner"],
+                source=result.source,
+            )
         ss[COMPARE] = {"run": record["run"], "ks": sorted(ks), "results": results}
     done = ss.get(COMPARE)
     if done is None or done["run"] != record["run"]:
@@ -184,8 +232,11 @@ def compare_view(db, record) -> None:
     table = gs.comparison_table(done["results"], db.thresholds)
     table["control_met"] = (100 * table["control_met"]).round()  # whole percent, one format for every row
     st.dataframe(table, hide_index=True, key="inspect.compare_table", column_config=COMPARE_COLUMNS)
-    st.plotly_chart(wrist_figure(motions, labels=labels, bands=result.control, thresholds=db.thresholds),
-                    key="inspect.compare_wrists", config={"displaylogo": False})
+    st.plotly_chart(
+        wrist_figure(motions, labels=labels, bands=result.control, thresholds=db.thresholds),
+        key="inspect.compare_wrists",
+        config={"displaylogo": False},
+    )
 
 
 def main() -> None:
@@ -197,8 +248,10 @@ def main() -> None:
         nav.link("Synthesize")
         return
     result = record["result"]
-    st.caption(f"**{result.source}** · {result.search.n_steps} steps of {result.config.step} frames · "
-               f"k = {result.config.k} · candidates in the combined ranking of pose rank + audio rank, best first")
+    st.caption(
+        f"**{result.source}** · {result.search.n_steps} steps of {result.config.step} frames · "
+        f"k = {result.config.k} · candidates in the combined ranking of pose rank + audio rank, best first"
+    )
     step = pick_step(db, result)
     step_view(db, record, step)
     pins_view(db, record)

@@ -1,11 +1,12 @@
 """The matching database: its takes and clips, the control attributes, and any clip in 3D with its sound."""
-import numpy as np
-import pandas as pd
-import streamlit as st
 
 import display
+import numpy as np
+import pandas as pd
 import sidebar
 import state
+import streamlit as st
+
 from gesturekit.control import ATTRIBUTE_UNITS
 from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.viz.figures import attribute_histograms, waveform_figure
@@ -20,7 +21,9 @@ def summary(db) -> None:
     cols = st.columns(5)
     cols[0].metric("Clips", f"{d['clips']}", help=f"{d['clip_frames']} frames each")
     cols[1].metric("Takes", f"{d['takes']}")
-    cols[2].metric("Minutes in clips", f"{d['minutes_in_clips']:.1f}", help=f"of {d['minutes_of_takes']:.1f} in the takes")
+    cols[2].metric(
+        "Minutes in clips", f"{d['minutes_in_clips']:.1f}", help=f"of {d['minutes_of_takes']:.1f} in the takes"
+    )
     cols[3].metric("Frame rate", f"{d['fps']} fps")
     cols[4].metric("Audio", "stored" if d["has_audio"] else "none")
     st.markdown(
@@ -36,8 +39,12 @@ def pick_clip(db) -> int:
     """Takes and clips tables; a selected row or the number input picks the clip to view."""
     ss = st.session_state
     st.subheader("Takes")
-    st.dataframe(db.takes_table(), hide_index=True, key="db.takes_table",
-                 column_config={"duration_s": st.column_config.NumberColumn("duration [s]", format="%.1f")})
+    st.dataframe(
+        db.takes_table(),
+        hide_index=True,
+        key="db.takes_table",
+        column_config={"duration_s": st.column_config.NumberColumn("duration [s]", format="%.1f")},
+    )
 
     st.subheader("Clips")
     takes = ["all takes"] + db.take_names
@@ -49,9 +56,16 @@ def pick_clip(db) -> int:
     if which != "all takes":
         table = table[table["take"] == which].reset_index(drop=True)
     event = st.dataframe(
-        table, hide_index=True, key="db.clips_table", on_select="rerun", selection_mode="single-row", height=260,
-        column_config={"start_s": st.column_config.NumberColumn("start [s]", format="%.2f"),
-                       "end_s": st.column_config.NumberColumn("end [s]", format="%.2f")},
+        table,
+        hide_index=True,
+        key="db.clips_table",
+        on_select="rerun",
+        selection_mode="single-row",
+        height=260,
+        column_config={
+            "start_s": st.column_config.NumberColumn("start [s]", format="%.2f"),
+            "end_s": st.column_config.NumberColumn("end [s]", format="%.2f"),
+        },
     )
     rows = list(event.selection.rows) if event is not None else []
     selected = int(table.iloc[rows[0]]["clip"]) if rows and rows[0] < len(table) else None
@@ -60,8 +74,14 @@ def pick_clip(db) -> int:
         ss[key] = selected  # a new row selection wins over the number input
     ss[_LAST_ROW] = selected
     ss[key] = int(min(max(int(ss[key]), 0), db.n_clips - 1))  # another database may have fewer clips
-    clip = st.number_input("Clip to view", min_value=0, max_value=db.n_clips - 1, step=1, key=key,
-                           help="or select a row of the clips table")
+    clip = st.number_input(
+        "Clip to view",
+        min_value=0,
+        max_value=db.n_clips - 1,
+        step=1,
+        key=key,
+        help="or select a row of the clips table",
+    )
     ss[CLIP] = int(clip)
     return int(clip)
 
@@ -72,9 +92,17 @@ def clip_attributes(db, clip: int) -> pd.DataFrame:
     for name in db.attribute_names:
         v = np.asarray(db.attribute(name)[clip], dtype=np.float64)
         lo, hi = db.thresholds[name]
-        rows.append({"attribute": name, "unit": ATTRIBUTE_UNITS.get(name, ""), "clip mean": v.mean(),
-                     "low threshold": lo, "high threshold": hi,
-                     "frames low [%]": 100 * np.mean(v < lo), "frames high [%]": 100 * np.mean(v > hi)})
+        rows.append(
+            {
+                "attribute": name,
+                "unit": ATTRIBUTE_UNITS.get(name, ""),
+                "clip mean": v.mean(),
+                "low threshold": lo,
+                "high threshold": hi,
+                "frames low [%]": 100 * np.mean(v < lo),
+                "frames high [%]": 100 * np.mean(v > hi),
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -82,14 +110,17 @@ def viewer(db, clip: int) -> None:
     clips = db.clips_table()
     row = clips.iloc[clip]
     st.subheader(f"Clip {clip}")
-    st.caption(f"take **{row['take']}**, frames {row['start_frame']}–{row['start_frame'] + db.clip_frames - 1} "
-               f"({row['start_s']:.2f}–{row['end_s']:.2f} s)")
+    st.caption(
+        f"take **{row['take']}**, frames {row['start_frame']}–{row['start_frame'] + db.clip_frames - 1} "
+        f"({row['start_s']:.2f}–{row['end_s']:.2f} s)"
+    )
     motion = Motion.from_flat(np.asarray(db.G[clip]), db.fps)
     audio = db.segment_audio(clip, 0, db.clip_frames) if db.audio is not None else None
     left, right = st.columns([3, 2])
     with left:
-        display.show_skeletons(motion, title=f"clip {clip}: {row['take']} at {row['start_s']:.2f} s", key="db.skeleton",
-                              audio=audio)
+        display.show_skeletons(
+            motion, title=f"clip {clip}: {row['take']} at {row['start_s']:.2f} s", key="db.skeleton", audio=audio
+        )
     with right:
         if audio is not None:
             st.caption("▶ Play under the 3D view plays the clip's speech with it.")
@@ -98,10 +129,16 @@ def viewer(db, clip: int) -> None:
             st.caption("This database was built without audio.")
     # the whole page's width: every column readable; mean and thresholds in the row's unit
     st.markdown(f"**Control attributes of clip {clip}**")
-    st.dataframe(clip_attributes(db, clip), hide_index=True, key="db.clip_attributes", width="stretch",
-                 column_config={c: st.column_config.NumberColumn(format="%.3f")
-                                for c in ("clip mean", "low threshold", "high threshold")}
-                 | {c: st.column_config.NumberColumn(format="%.0f") for c in ("frames low [%]", "frames high [%]")})
+    st.dataframe(
+        clip_attributes(db, clip),
+        hide_index=True,
+        key="db.clip_attributes",
+        width="stretch",
+        column_config={
+            c: st.column_config.NumberColumn(format="%.3f") for c in ("clip mean", "low threshold", "high threshold")
+        }
+        | {c: st.column_config.NumberColumn(format="%.0f") for c in ("frames low [%]", "frames high [%]")},
+    )
 
 
 def main() -> None:
@@ -111,9 +148,11 @@ def main() -> None:
     clip = pick_clip(db)
     viewer(db, clip)
     st.subheader("Control attributes")
-    st.caption("How each attribute is distributed over all clip frames. Controls compare an attribute with "
-               "its low and high thresholds: a 'low' control keeps frames left of the low line, 'high' right "
-               "of the high line.")
+    st.caption(
+        "How each attribute is distributed over all clip frames. Controls compare an attribute with "
+        "its low and high thresholds: a 'low' control keeps frames left of the low line, 'high' right "
+        "of the high line."
+    )
     st.plotly_chart(attribute_histograms(db), key="db.histograms")
 
 

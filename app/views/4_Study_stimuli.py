@@ -1,18 +1,19 @@
 """User-study stimuli: speeches x systems as identical-looking videos, a manifest, a balanced order."""
+
 import os
 import tempfile
 from pathlib import Path
 
-import streamlit as st
-
 import display
 import sidebar
 import state
+import streamlit as st
+
 from gesturekit.datasets.takes import AUDIO_EXTENSIONS
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SYSTEM_DESCRIPTIONS, SYSTEMS
-from gesturekit.study import make_stimuli, plan_stimuli
 from gesturekit.paths import home
+from gesturekit.study import make_stimuli, plan_stimuli
 from gesturekit.workspace import speech_files
 
 RESULT = "study.result"  # the user's last study: folder, manifest, order (per session)
@@ -35,45 +36,75 @@ def settings(db) -> dict:
     with left:
         st.markdown("**Speech**")
         folder = ss["study.folder"] = st.text_input(
-            "Folder of speech files", key=pk("study.folder", ""),
-            help=f"every {'/'.join(AUDIO_EXTENSIONS)} file in it, in name order")
-        uploads = st.file_uploader("…and/or upload speech files", type=[e[1:] for e in AUDIO_EXTENSIONS],
-                                   accept_multiple_files=True, key="study.uploads")
+            "Folder of speech files",
+            key=pk("study.folder", ""),
+            help=f"every {'/'.join(AUDIO_EXTENSIONS)} file in it, in name order",
+        )
+        uploads = st.file_uploader(
+            "…and/or upload speech files",
+            type=[e[1:] for e in AUDIO_EXTENSIONS],
+            accept_multiple_files=True,
+            key="study.uploads",
+        )
         holdouts = ss["study.holdouts"] = st.text_input(
-            "Held-out parts of the database (needed for gt)", key=pk("study.holdouts", ""),
-            placeholder="TAKE:START-END, TAKE:START-END", help="their recorded motion is the ground truth; "
-            "every system's search leaves them out")
+            "Held-out parts of the database (needed for gt)",
+            key=pk("study.holdouts", ""),
+            placeholder="TAKE:START-END, TAKE:START-END",
+            help="their recorded motion is the ground truth; every system's search leaves them out",
+        )
     with right:
         st.markdown("**Systems and design**")
         systems = ss["study.systems"] = st.multiselect(
-            "Systems", list(SYSTEMS), key=pk("study.systems", ["knn", "random"]),
-            format_func=lambda s: f"{s}: {SYSTEM_DESCRIPTIONS[s]}")
+            "Systems",
+            list(SYSTEMS),
+            key=pk("study.systems", ["knn", "random"]),
+            format_func=lambda s: f"{s}: {SYSTEM_DESCRIPTIONS[s]}",
+        )
         c = st.columns(3)
         seed = ss["study.seed"] = int(c[0].number_input("Seed", min_value=0, step=1, key=pk("study.seed", 0)))
-        participants = ss["study.participants"] = int(c[1].number_input(
-            "Participants (0: one per row of the Latin square)", min_value=0, step=1,
-            key=pk("study.participants", 0)))
-        resolution = ss["study.resolution"] = c[2].selectbox("Resolution", RESOLUTIONS,
-                                                              key=pk("study.resolution", "640x480"))
+        participants = ss["study.participants"] = int(
+            c[1].number_input(
+                "Participants (0: one per row of the Latin square)",
+                min_value=0,
+                step=1,
+                key=pk("study.participants", 0),
+            )
+        )
+        resolution = ss["study.resolution"] = c[2].selectbox(
+            "Resolution", RESOLUTIONS, key=pk("study.resolution", "640x480")
+        )
         control = ss["study.control"] = st.text_input(
-            "Control track (optional)", key=pk("study.control", ""), placeholder="0-3:left_hand=high")
+            "Control track (optional)", key=pk("study.control", ""), placeholder="0-3:left_hand=high"
+        )
         refiner = ""
         if "knn+cgan" in systems:
-            refiner = ss["study.refiner"] = st.text_input("Refiner folder (for knn+cgan)",
-                                                          key=pk("study.refiner", ""))
+            refiner = ss["study.refiner"] = st.text_input("Refiner folder (for knn+cgan)", key=pk("study.refiner", ""))
         c = st.columns([3, 1])
         out = ss["study.out"] = c[0].text_input("Study folder to write", key=pk("study.out", str(home() / "study")))
-        workers = ss["study.workers"] = int(c[1].number_input("Parallel renders", min_value=1, step=1,
-                                                               key=pk("study.workers", os.cpu_count() or 1)))
-        overwrite = st.checkbox("replace an existing study there", key="study.overwrite",
-                                help="replaces only a study gesturekit made; any other folder is kept")
+        workers = ss["study.workers"] = int(
+            c[1].number_input("Parallel renders", min_value=1, step=1, key=pk("study.workers", os.cpu_count() or 1))
+        )
+        overwrite = st.checkbox(
+            "replace an existing study there",
+            key="study.overwrite",
+            help="replaces only a study gesturekit made; any other folder is kept",
+        )
     names = [f.name for f in _speech_files(folder)] + [u.name for u in uploads or []]
     holdout_list = [h.strip() for h in holdouts.split(",") if h.strip()]
     return {
-        "folder": folder, "uploads": uploads or [], "holdouts": holdout_list, "systems": systems, "seed": seed,
-        "participants": participants or None, "resolution": tuple(int(v) for v in resolution.split("x")),
-        "control": control.strip(), "refiner": refiner.strip() or None, "out": out.strip(), "workers": workers,
-        "overwrite": overwrite, "names": names + holdout_list,
+        "folder": folder,
+        "uploads": uploads or [],
+        "holdouts": holdout_list,
+        "systems": systems,
+        "seed": seed,
+        "participants": participants or None,
+        "resolution": tuple(int(v) for v in resolution.split("x")),
+        "control": control.strip(),
+        "refiner": refiner.strip() or None,
+        "out": out.strip(),
+        "workers": workers,
+        "overwrite": overwrite,
+        "names": names + holdout_list,
     }
 
 
@@ -82,12 +113,15 @@ def conditions(opts) -> bool:
     if not opts["names"] or not opts["systems"]:
         st.info("Choose speech (a folder, uploads or held-out parts) and at least one system.")
         return False
-    plan = plan_stimuli(opts["names"], opts["systems"], seed=opts["seed"], participants=opts["participants"],
-                        controls=opts["control"])
+    plan = plan_stimuli(
+        opts["names"], opts["systems"], seed=opts["seed"], participants=opts["participants"], controls=opts["control"]
+    )
     st.subheader("Conditions")
-    st.caption(f"{len(opts['names'])} speeches × {len(opts['systems'])} systems = {len(plan.conditions)} stimuli, "
-               f"ordered for {plan.order['participant'].nunique()} participants. The ids are the file names; "
-               "this table is the key and stays with the experimenter.")
+    st.caption(
+        f"{len(opts['names'])} speeches × {len(opts['systems'])} systems = {len(plan.conditions)} stimuli, "
+        f"ordered for {plan.order['participant'].nunique()} participants. The ids are the file names; "
+        "this table is the key and stays with the experimenter."
+    )
     st.dataframe(plan.conditions, hide_index=True, key="study.conditions")
     return True
 
@@ -112,10 +146,19 @@ def run(db, opts) -> None:
             target.write_bytes(up.getvalue())
             files.append(target)
         res = make_stimuli(
-            db, out=opts["out"], audio=files, holdouts=opts["holdouts"], systems=opts["systems"],
-            seed=opts["seed"], participants=opts["participants"], control=opts["control"],
-            refiner=opts["refiner"], resolution=opts["resolution"], workers=opts["workers"],
-            overwrite=opts["overwrite"], progress=progress,
+            db,
+            out=opts["out"],
+            audio=files,
+            holdouts=opts["holdouts"],
+            systems=opts["systems"],
+            seed=opts["seed"],
+            participants=opts["participants"],
+            control=opts["control"],
+            refiner=opts["refiner"],
+            resolution=opts["resolution"],
+            workers=opts["workers"],
+            overwrite=opts["overwrite"],
+            progress=progress,
         )
     bar.progress(1.0, text=f"{len(res.videos)} stimuli written")
     st.session_state[RESULT] = {"folder": str(res.folder), "manifest": res.manifest, "order": res.order}
@@ -127,8 +170,10 @@ def show_result() -> None:
         return
     folder = Path(result["folder"])
     st.subheader("Study")
-    st.success(f"Videos in `{folder / 'videos'}`; manifest (the key) `{folder / 'manifest.csv'}`; "
-               f"presentation order `{folder / 'order.csv'}`.")
+    st.success(
+        f"Videos in `{folder / 'videos'}`; manifest (the key) `{folder / 'manifest.csv'}`; "
+        f"presentation order `{folder / 'order.csv'}`."
+    )
     first = result["order"][result["order"]["participant"] == 1]["id"].tolist()[:PREVIEWS]
     st.markdown(f"**Preview**: the first {len(first)} stimuli participant 1 sees, as they will see them")
     cols = st.columns(max(len(first), 1))
@@ -143,8 +188,10 @@ def show_result() -> None:
 
 def main() -> None:
     st.title("Study stimuli")
-    st.caption("Every speech rendered with every system in one look (fixed camera, same size and frame rate, "
-               "speech at one loudness), named by opaque ids, with a balanced presentation order per participant.")
+    st.caption(
+        "Every speech rendered with every system in one look (fixed camera, same size and frame rate, "
+        "speech at one loudness), named by opaque ids, with a balanced presentation order per participant."
+    )
     db = sidebar.sidebar_database()
     opts = settings(db)
     ready = conditions(opts)

@@ -7,6 +7,7 @@ rotations by two-bone inverse kinematics and posed by forward kinematics
 the rest skeleton, so bone lengths are exactly constant. The torso sways, leans
 and the head nods on stressed syllables. Part of :mod:`gesturekit.datasets.synthetic`.
 """
+
 from __future__ import annotations
 
 import functools
@@ -166,7 +167,6 @@ def _reachable(pose: np.ndarray) -> np.ndarray:
     return pose
 
 
-
 def _min_jerk_track(times: np.ndarray, poses: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Keyposes joined by minimum-jerk moves, sampled at ``t``.
 
@@ -186,7 +186,6 @@ def _min_jerk_track(times: np.ndarray, poses: np.ndarray, t: np.ndarray) -> np.n
     s = np.clip((t - times[i]) / (times[i + 1] - times[i]), 0.0, 1.0)
     w = s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
     return poses[i] + w[:, None] * (poses[i + 1] - poses[i])
-
 
 
 # ---------------------------------------------------------------------------------------------

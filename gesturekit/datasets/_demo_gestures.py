@@ -4,6 +4,7 @@ Gesture phrases over the spoken phrases: a preparation, strokes that end on
 the vowel onsets of stressed syllables, rebounds and holds, and a retraction
 to the rest pose in long pauses. Part of :mod:`gesturekit.datasets.synthetic`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,7 +13,6 @@ import numpy as np
 
 from ._demo_body import _CURL, _DEV, _FLEX, _POSE_DIM, _ROLL, _SPREAD, _SWIVEL, _WRIST, _reachable, _unit
 from ._demo_speech import _draw, _Speech
-
 
 # ---------------------------------------------------------------------------------------------
 # gesture plan: keyposes per arm

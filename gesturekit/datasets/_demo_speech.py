@@ -6,6 +6,7 @@ glottal-like pulse train shaped by formant resonators for vowels, band-passed
 noise for fricatives and bursts. Also the random draws the gesture plan and
 the body share. Part of :mod:`gesturekit.datasets.synthetic`.
 """
+
 from __future__ import annotations
 
 import functools
@@ -17,7 +18,6 @@ from scipy import signal
 from scipy.ndimage import gaussian_filter1d
 
 from ..motion import AUDIO_SR
-
 
 # ---------------------------------------------------------------------------------------------
 # speech plan
@@ -184,7 +184,7 @@ def _resonator_sos(freqs: np.ndarray, sr: int) -> np.ndarray:
     return np.array(sos)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _filters(sr: int) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
     """Voiced and noise filters, each scaled to unit output RMS for its reference input."""
     n = sr // 4

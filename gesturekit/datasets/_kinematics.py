@@ -5,6 +5,7 @@ translations (3, J, F), matrices (3, 3, J, F)), so that every component is a
 contiguous vector over frames and the arithmetic below is a few dozen fast
 vector operations per joint rather than many tiny 3x3 products.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,12 +17,14 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of quaternions (w, x, y, z) stored components first: (4, ...)."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
-    return np.stack([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ])
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:

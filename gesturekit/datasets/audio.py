@@ -24,6 +24,7 @@ Xing/VBRI byte count or ID3 length, an MP3 frame cut off at the end, and an
 Ogg stream that ends without its end-of-stream page. An MP3 without such
 headers cut exactly between two frames cannot be told from a shorter recording.
 """
+
 from __future__ import annotations
 
 import io
@@ -47,6 +48,7 @@ __all__ = ["AudioInfo", "load_audio", "load_audio_with_info", "resample", "SILEN
 SILENCE_PEAK = 1e-4
 
 _SF_ERR_MALFORMED_FILE = 3  # libsndfile: "Supported file format but file is malformed"
+
 
 @dataclass(frozen=True)
 class AudioInfo:
@@ -298,8 +300,14 @@ def _decode(path: Path, label: str | None, budget: Budget) -> tuple[np.ndarray, 
 def _info(path: Path, fmt: str, subtype: str | None, rate: int, channels: int, n: int, reader: str) -> AudioInfo:
     """An :class:`AudioInfo` with the duration derived from ``n`` samples at ``rate`` Hz."""
     return AudioInfo(
-        path=str(path), format=fmt, subtype=subtype, sample_rate=int(rate), channels=int(channels),
-        n_samples=int(n), duration=n / rate if rate > 0 else 0.0, reader=reader,
+        path=str(path),
+        format=fmt,
+        subtype=subtype,
+        sample_rate=int(rate),
+        channels=int(channels),
+        n_samples=int(n),
+        duration=n / rate if rate > 0 else 0.0,
+        reader=reader,
     )
 
 
@@ -363,13 +371,25 @@ def _read_ffmpeg(path: Path, budget: Budget) -> tuple[np.ndarray, int]:
 
     _probe_ffmpeg(exe, path, budget)
     cmd = [
-        exe, "-nostdin", "-hide_banner", "-v", "error",
-        "-protocol_whitelist", "file",  # never let a file make ffmpeg open URLs
-        "-i", "file:" + os.path.abspath(path),
-        "-map", "0:a:0",
+        exe,
+        "-nostdin",
+        "-hide_banner",
+        "-v",
+        "error",
+        "-protocol_whitelist",
+        "file",  # never let a file make ffmpeg open URLs
+        "-i",
+        "file:" + os.path.abspath(path),
+        "-map",
+        "0:a:0",
         # the duration is known only once decoded: stop one second past the limit
-        "-t", f"{budget.seconds() + 1.0:.3f}",
-        "-f", "wav", "-c:a", "pcm_f32le", "-",
+        "-t",
+        f"{budget.seconds() + 1.0:.3f}",
+        "-f",
+        "wav",
+        "-c:a",
+        "pcm_f32le",
+        "-",
     ]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     if proc.returncode != 0 or len(proc.stdout) <= 44:

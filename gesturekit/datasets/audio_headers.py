@@ -7,6 +7,7 @@ returns the container sniffed from its first bytes; :class:`Budget` refuses,
 from a header, a sample rate, duration or decoded size beyond
 :mod:`gesturekit.limits`. Decoding is :mod:`gesturekit.datasets.audio`'s part.
 """
+
 from __future__ import annotations
 
 import functools
@@ -41,8 +42,6 @@ _SIGNATURES: tuple[tuple[int, bytes, str], ...] = (
 )
 
 
-
-
 @dataclass(frozen=True)
 class Budget:
     """What one file may cost: the duration limit that applies to it and the memory limit."""
@@ -59,8 +58,7 @@ class Budget:
         return limits.max_take_seconds() if self.take else limits.max_speech_seconds()
 
     def check_duration(self, seconds: float, what: str) -> None:
-        limits.check_duration(seconds, what=what, path=self.path, speech=not self.take,
-                              max_seconds=self.max_seconds)
+        limits.check_duration(seconds, what=what, path=self.path, speech=not self.take, max_seconds=self.max_seconds)
 
     def check_header(self, fmt: str, rate: int, channels: int, frames: int) -> None:
         """Refuse before decoding what the header says: rate, duration, decoded bytes.
@@ -80,8 +78,9 @@ class Budget:
         self.check_duration(seconds, f"the {fmt} header says {frames} samples at {rate} Hz")
         # float32 samples of every channel, plus the mono float32 copy at the output rate
         decoded = 4.0 * frames * max(channels, 1) + 4.0 * seconds * self.sr
-        limits.check_bytes(decoded, what=f"the {fmt} header says {frames} samples of {channels} channels",
-                           path=self.path)
+        limits.check_bytes(
+            decoded, what=f"the {fmt} header says {frames} samples of {channels} channels", path=self.path
+        )
 
 
 def check_file(path: Path, budget: Budget) -> str | None:
@@ -201,8 +200,7 @@ def _id3v2_length_ms(tag: bytes) -> float | None:
     while pos + 10 <= end and major in (3, 4):
         fid = tag[pos : pos + 4]
         raw = tag[pos + 4 : pos + 8]
-        size = (sum((b & 0x7F) << (7 * (3 - i)) for i, b in enumerate(raw)) if major == 4
-                else int.from_bytes(raw, "big"))
+        size = sum((b & 0x7F) << (7 * (3 - i)) for i, b in enumerate(raw)) if major == 4 else int.from_bytes(raw, "big")
         if not fid.strip(b"\x00") or size <= 0:
             return None
         if fid == b"TLEN":
@@ -257,12 +255,16 @@ def _mp3_truncation(path: Path, size: int, budget: Budget) -> str | None:
             samples, cut = _mp3_walk(data, start, size, first)
     rate = first[2]
     if cut is not None:
-        return (f"the file is truncated: the last MP3 frame is cut off ({cut} of its bytes are missing); "
-                f"the audio ends after {samples / rate:.1f} s")
+        return (
+            f"the file is truncated: the last MP3 frame is cut off ({cut} of its bytes are missing); "
+            f"the audio ends after {samples / rate:.1f} s"
+        )
     declared_ms = _id3v2_length_ms(tag) if tag else None
     if samples is not None and declared_ms is not None and samples / rate < 0.98 * declared_ms / 1000 - 0.1:
-        return (f"the file is truncated: it ends after {samples / rate:.1f} s of the "
-                f"{declared_ms / 1000:.1f} s its ID3 tag declares")
+        return (
+            f"the file is truncated: it ends after {samples / rate:.1f} s of the "
+            f"{declared_ms / 1000:.1f} s its ID3 tag declares"
+        )
     return None
 
 
@@ -362,7 +364,7 @@ def _ogg_truncation(path: Path, size: int) -> str | None:
     rate = None
     page = _ogg_page_at(first, 0)
     if page is not None:
-        body = first[27 + first[26]:]
+        body = first[27 + first[26] :]
         if body[:7] == b"\x01vorbis" and len(body) >= 16:
             rate = int.from_bytes(body[12:16], "little")
         elif body[:8] == b"OpusHead":

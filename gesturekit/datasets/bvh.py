@@ -22,6 +22,7 @@ target rate frames are subsampled; otherwise local rotations are interpolated
 by quaternion slerp (translations linearly) at the target times before
 forward kinematics, so bone lengths stay exactly those of the skeleton.
 """
+
 from __future__ import annotations
 
 import math
@@ -127,9 +128,9 @@ def forward_kinematics(data: BvhData, *, frames=None) -> np.ndarray:
     idx = _frame_indices(data, frames)
     out = np.empty((idx.size, data.n_joints, 3))
     for s in range(0, idx.size, _FK_BLOCK):
-        block = idx[s:s + _FK_BLOCK]
+        block = idx[s : s + _FK_BLOCK]
         quats, trans = _local_pose(data, block)
-        out[s:s + block.size] = world_positions(data.parents, quat_to_matrix(quats), trans)
+        out[s : s + block.size] = world_positions(data.parents, quat_to_matrix(quats), trans)
     return out
 
 
@@ -171,10 +172,10 @@ def resample_world_positions(data: BvhData, *, fps: float = FPS) -> np.ndarray:
         w = np.where((w < 1e-9) | (i1 == i0), 0.0, w)
         needed, inverse = np.unique(np.concatenate([i0, i1]), return_inverse=True)
         quats, trans = _local_pose(data, needed)
-        a, b = inverse[:i0.size], inverse[i0.size:]
+        a, b = inverse[: i0.size], inverse[i0.size :]
         q = slerp(quats[..., a], quats[..., b], w)
         t = trans[..., a] * (1.0 - w) + trans[..., b] * w
-        out[s:s + src.size] = world_positions(data.parents, quat_to_matrix(q), t)
+        out[s : s + src.size] = world_positions(data.parents, quat_to_matrix(q), t)
     return out
 
 
@@ -262,20 +263,21 @@ def load_bvh_motion(
     missing = list(dict.fromkeys(n for n in wanted if n not in present))
     if missing:
         raise MotionFileError(
-            f"{len(missing)} joints of the joint map {jmap.name!r} are missing from the file: "
-            f"{', '.join(missing)}", path=path)
+            f"{len(missing)} joints of the joint map {jmap.name!r} are missing from the file: {', '.join(missing)}",
+            path=path,
+        )
     scale = unit_scale(data, units=units)
     _check_channels(data, scale, path)
     positions = resample_world_positions(data, fps=fps)
     if positions.shape[0] == 0:
         raise MotionFileError(
-            f"too short: {data.n_frames} frames at {data.fps:g} fps give no frame at {fps:g} fps", path=path)
+            f"too short: {data.n_frames} frames at {data.fps:g} fps give no frame at {fps:g} fps", path=path
+        )
     idx = np.array([data.index(n) for n in jmap.source_names()], dtype=np.int64)
     pelvis = data.index(jmap.pelvis)
     _check_positions(data, positions, scale, pelvis, fps, path)
-    rel = (positions[:, idx] - positions[:, pelvis:pelvis + 1]) * scale
+    rel = (positions[:, idx] - positions[:, pelvis : pelvis + 1]) * scale
     return Motion(rel.astype(np.float32), float(fps))
-
 
 
 def _check_channels(data: BvhData, scale: float, path) -> None:
@@ -301,11 +303,15 @@ def _check_channels(data: BvhData, scale: float, path) -> None:
     if rot[column]:
         what = f"absurd rotation: {channel} {value:g} degrees (more than {_MAX_ANGLE_DEG:g})"
     else:
-        what = (f"absurd position: {channel} {value:g} file units ({abs(value) * scale:.3g} m, "
-                f"more than {_MAX_FROM_ORIGIN_M / 1000:g} km)")
+        what = (
+            f"absurd position: {channel} {value:g} file units ({abs(value) * scale:.3g} m, "
+            f"more than {_MAX_FROM_ORIGIN_M / 1000:g} km)"
+        )
     raise MotionFileError(
         f"{what} for joint {data.names[joint]!r} at frame {frame} ({frame * data.frame_time:.2f} s); "
-        f"{int(bad.any(axis=1).sum())} frames affected", path=path)
+        f"{int(bad.any(axis=1).sum())} frames affected",
+        path=path,
+    )
 
 
 def _check_positions(data: BvhData, positions: np.ndarray, scale: float, pelvis: int, fps: float, path) -> None:
@@ -319,9 +325,13 @@ def _check_positions(data: BvhData, positions: np.ndarray, scale: float, pelvis:
     with np.errstate(over="ignore", invalid="ignore"):
         # the largest coordinate, not the norm: squares of 1e200 would overflow
         from_origin = np.abs(metres).max(axis=2)
-        from_pelvis = np.abs(metres - metres[:, pelvis:pelvis + 1]).max(axis=2)
-    bad = ~np.isfinite(from_origin) | ~np.isfinite(from_pelvis) | (from_origin > _MAX_FROM_ORIGIN_M) \
+        from_pelvis = np.abs(metres - metres[:, pelvis : pelvis + 1]).max(axis=2)
+    bad = (
+        ~np.isfinite(from_origin)
+        | ~np.isfinite(from_pelvis)
+        | (from_origin > _MAX_FROM_ORIGIN_M)
         | (from_pelvis > _MAX_FROM_PELVIS_M)
+    )
     if not bad.any():
         return
     frame, joint = (int(v) for v in np.argwhere(bad)[0])
@@ -329,11 +339,16 @@ def _check_positions(data: BvhData, positions: np.ndarray, scale: float, pelvis:
     if not (np.isfinite(from_origin[frame, joint]) and np.isfinite(from_pelvis[frame, joint])):
         what = "is not finite (NaN or infinity)"
     elif from_origin[frame, joint] > _MAX_FROM_ORIGIN_M:
-        what = (f"lies {from_origin[frame, joint]:.3g} m from the origin along one axis "
-                f"(more than {_MAX_FROM_ORIGIN_M / 1000:g} km)")
+        what = (
+            f"lies {from_origin[frame, joint]:.3g} m from the origin along one axis "
+            f"(more than {_MAX_FROM_ORIGIN_M / 1000:g} km)"
+        )
     else:
-        what = (f"lies {from_pelvis[frame, joint]:.3g} m from the pelvis {data.names[pelvis]!r} along one axis "
-                f"(more than {_MAX_FROM_PELVIS_M / 1000:g} km)")
+        what = (
+            f"lies {from_pelvis[frame, joint]:.3g} m from the pelvis {data.names[pelvis]!r} along one axis "
+            f"(more than {_MAX_FROM_PELVIS_M / 1000:g} km)"
+        )
     raise MotionFileError(
-        f"absurd positions after forward kinematics: {where} {what}; "
-        f"{int(bad.any(axis=1).sum())} frames affected", path=path)
+        f"absurd positions after forward kinematics: {where} {what}; {int(bad.any(axis=1).sum())} frames affected",
+        path=path,
+    )

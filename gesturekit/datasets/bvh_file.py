@@ -9,6 +9,7 @@ frame line. ``End Site`` entries become joints named ``f"{parent}_End"`` with
 no channels. Turning channel values into positions is
 :mod:`gesturekit.datasets.bvh`'s part.
 """
+
 from __future__ import annotations
 
 import math
@@ -194,7 +195,7 @@ def _hierarchy_tokens(lines, start, stop):
         lineno = i + 1
         head = line.split()[0]
         if head.upper() in ("ROOT", "JOINT"):
-            rest = line[len(head):].strip()
+            rest = line[len(head) :].strip()
             brace = rest.endswith("{")
             if brace:
                 rest = rest[:-1].strip()
@@ -307,8 +308,11 @@ def _parse_hierarchy(lines, start, stop, path):
                 ch, ch_line = take("a channel name")
                 m = _CHANNEL_RE.match(ch)
                 if m is None:
-                    fail(f"unknown channel {ch!r} of joint {names[stack[-1]]!r} "
-                         f"(expected X/Y/Z rotation or position; CHANNELS says {count})", ch_line)
+                    fail(
+                        f"unknown channel {ch!r} of joint {names[stack[-1]]!r} "
+                        f"(expected X/Y/Z rotation or position; CHANNELS says {count})",
+                        ch_line,
+                    )
                 norm = m.group(1).upper() + m.group(2).lower()
                 if norm in seen:
                     fail(f"channel {norm} twice for joint {names[stack[-1]]!r}", ch_line)
@@ -341,14 +345,18 @@ def _check_motion_limits(n_frames, frame_time, frames_line, time_line, time_text
     :func:`gesturekit.limits.check_fps`), and frames x frame time the take's
     duration (within :func:`gesturekit.limits.max_take_seconds`).
     """
-    limits.check_fps(1.0 / frame_time, what=f"line {time_line}: 'Frame Time: {time_text}' gives a frame rate that",
-                     path=path)
+    limits.check_fps(
+        1.0 / frame_time, what=f"line {time_line}: 'Frame Time: {time_text}' gives a frame rate that", path=path
+    )
     if lines_present is not None and n_frames > lines_present:
         raise MotionFileError(
-            f"the header says {n_frames} frames but the file has {lines_present} frame lines (truncated?)",
-            path=path)
-    limits.check_duration(n_frames * frame_time, path=path,
-                          what=f"line {frames_line}: the header says {n_frames} frames of {frame_time:g} s")
+            f"the header says {n_frames} frames but the file has {lines_present} frame lines (truncated?)", path=path
+        )
+    limits.check_duration(
+        n_frames * frame_time,
+        path=path,
+        what=f"line {frames_line}: the header says {n_frames} frames of {frame_time:g} s",
+    )
 
 
 def _check_motion_header_early(head: bytes, path) -> None:
@@ -387,32 +395,35 @@ def _parse_motion(lines, start, n_channels, path):
         raise MotionFileError(f"line {frames_line}: malformed frame count {m.group(1)!r}", path=path) from None
     m = _FRAME_TIME_RE.match(time_text)
     if m is None:
-        raise MotionFileError(f"line {time_line}: expected 'Frame Time: <seconds>', found {time_text[:40]!r}",
-                              path=path)
+        raise MotionFileError(
+            f"line {time_line}: expected 'Frame Time: <seconds>', found {time_text[:40]!r}", path=path
+        )
     try:
         frame_time = float(m.group(1))
     except ValueError:
         raise MotionFileError(f"line {time_line}: malformed frame time {m.group(1)!r}", path=path) from None
     if not (math.isfinite(frame_time) and frame_time > 0):
-        raise MotionFileError(f"line {time_line}: frame time must be a positive number, got {m.group(1)}",
-                              path=path)
+        raise MotionFileError(f"line {time_line}: frame time must be a positive number, got {m.group(1)}", path=path)
     if n_frames <= 0:
         raise MotionFileError(f"the file has no frames (Frames: {n_frames})", path=path)
     data = body[2:]
-    _check_motion_limits(n_frames, frame_time, frames_line, time_line, m.group(1), path,
-                         lines_present=len(data) if n_channels else None)
+    _check_motion_limits(
+        n_frames, frame_time, frames_line, time_line, m.group(1), path, lines_present=len(data) if n_channels else None
+    )
     if n_channels == 0:
         return frame_time, np.zeros((n_frames, 0))
     if len(data) != n_frames:
         raise MotionFileError(
             f"the header says {n_frames} frames but the file has {len(data)} frame lines"
-            + (" (truncated?)" if len(data) < n_frames else ""), path=path)
+            + (" (truncated?)" if len(data) < n_frames else ""),
+            path=path,
+        )
     rows = [text.split() for _, text in data]
     for (lineno, _), row in zip(data, rows):
         if len(row) != n_channels:
             raise MotionFileError(
-                f"line {lineno}: {len(row)} values on a frame line, the hierarchy has {n_channels} channels",
-                path=path)
+                f"line {lineno}: {len(row)} values on a frame line, the hierarchy has {n_channels} channels", path=path
+            )
     try:
         values = np.array([tok for row in rows for tok in row], dtype=np.float64)
     except ValueError:
@@ -430,5 +441,6 @@ def _parse_motion(lines, start, n_channels, path):
         raise MotionFileError(
             f"line {data[frame][0]}: motion values contain NaN or infinity "
             f"({int(bad.any(axis=1).sum())} frames affected; first at frame {frame}, column {column})",
-            path=path)
+            path=path,
+        )
     return frame_time, values

@@ -18,6 +18,7 @@ One ``.npz`` archive holds many fixed-length sequences of one speaker:
 
 Each sequence becomes one :class:`~gesturekit.motion.Take`.
 """
+
 from __future__ import annotations
 
 import os
@@ -100,19 +101,19 @@ def load_habibie2021(
         body = body.reshape(body.shape[0], body.shape[1], N_JOINTS * 3)
     if body.ndim != 3 or body.shape[2] != N_JOINTS * 3:
         raise MotionFileError(
-            f"'body' must have shape (sequences, frames, {N_JOINTS * 3}), got {body.shape}", path=path)
+            f"'body' must have shape (sequences, frames, {N_JOINTS * 3}), got {body.shape}", path=path
+        )
     n_seq = body.shape[0]
     if wav.shape[0] != n_seq:
-        raise MotionFileError(
-            f"'wav' has {wav.shape[0]} sequences but 'body' has {n_seq}", path=path)
+        raise MotionFileError(f"'wav' has {wav.shape[0]} sequences but 'body' has {n_seq}", path=path)
     if n_seq == 0 or body.shape[1] == 0 or wav.shape[1] == 0:
-        raise MotionFileError(
-            f"no data: 'body' has shape {body.shape} and 'wav' has shape {wav.shape}", path=path)
+        raise MotionFileError(f"no data: 'body' has shape {body.shape} and 'wav' has shape {wav.shape}", path=path)
     if "mfcc" in arrays:
         mfcc = arrays["mfcc"]
         if mfcc.ndim != 3 or mfcc.shape[0] != n_seq:
             raise MotionFileError(
-                f"'mfcc' must have shape ({n_seq}, frames, coefficients), got {mfcc.shape}", path=path)
+                f"'mfcc' must have shape ({n_seq}, frames, coefficients), got {mfcc.shape}", path=path
+            )
 
     audio = _audio_float32(wav, path)
     motion = _numeric(body, "body", path).reshape(n_seq, body.shape[1], N_JOINTS, 3)
@@ -126,15 +127,15 @@ def load_habibie2021(
     n_frames, n_samples = body.shape[1], audio.shape[1]
     frames, samples, gap = _aligned_lengths(n_frames, n_samples)
     if frames == 0:
-        raise MotionFileError(
-            f"the audio ({n_samples} samples) is shorter than one motion frame", path=path)
+        raise MotionFileError(f"the audio ({n_samples} samples) is shorter than one motion frame", path=path)
     if gap is not None:
         longer = "motion" if gap > 0 else "audio"
         warn(
             f"{path}: motion ({n_frames} frames, {n_frames / FPS:.3f} s) and audio "
             f"({n_samples} samples, {n_samples / AUDIO_SR:.3f} s) differ by {abs(gap):.3f} s in all "
             f"{n_seq} sequences; the {longer} was trimmed to the shorter",
-            stacklevel=2)
+            stacklevel=2,
+        )
     stem = path.stem
     return [
         Take(
@@ -188,23 +189,24 @@ def count_sequences(path: str | os.PathLike) -> int:
         raise MotionFileError("missing key body", path=path)
     shape, dtype = headers["body"]
     if dtype.hasobject:
-        raise MotionFileError("'body' holds Python objects (dtype object); gesturekit reads numbers only and "
-                              "never unpickles", path=path)
+        raise MotionFileError(
+            "'body' holds Python objects (dtype object); gesturekit reads numbers only and never unpickles", path=path
+        )
     return int(shape[0]) if len(shape) >= 3 else 1
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
     loaded = _open_npz(path)
     if not isinstance(loaded, np.lib.npyio.NpzFile):
-        raise MotionFileError("expected an npz archive with keys 'wav' and 'body', found a single array",
-                              path=path)
+        raise MotionFileError("expected an npz archive with keys 'wav' and 'body', found a single array", path=path)
     with loaded as npz:
         keys = set(npz.files)
         missing = [k for k in ("wav", "body") if k not in keys]
         if missing:
             raise MotionFileError(
                 f"missing key(s) {', '.join(missing)}; the archive has {', '.join(sorted(keys)) or 'no arrays'}",
-                path=path)
+                path=path,
+            )
         try:
             return {k: npz[k] for k in ("wav", "body", "mfcc", "joint_order") if k in keys}
         except _READ_ERRORS as exc:
@@ -230,10 +232,14 @@ def _check_limits(path: Path) -> None:
         per, unit, converted = rates.get(key, (None, None, 0))
         total += limits.array_bytes(shape, dtype.itemsize + converted)
         if per is not None and len(shape) >= 2:
-            limits.check_duration(shape[1] / per, path=path,
-                                  what=f"the npz header of {key!r} says {shape[1]} {unit} per sequence at {per} Hz")
-    limits.check_bytes(total, what=f"the npz headers say {', '.join(f'{k} {v[0]}' for k, v in headers.items())}",
-                       path=path)
+            limits.check_duration(
+                shape[1] / per,
+                path=path,
+                what=f"the npz header of {key!r} says {shape[1]} {unit} per sequence at {per} Hz",
+            )
+    limits.check_bytes(
+        total, what=f"the npz headers say {', '.join(f'{k} {v[0]}' for k, v in headers.items())}", path=path
+    )
 
 
 def _numeric(array: np.ndarray, key: str, path) -> np.ndarray:
@@ -256,7 +262,8 @@ def _check_finite(array: np.ndarray, key: str, path) -> None:
     if not finite.all():
         bad = np.flatnonzero(~finite)
         raise MotionFileError(
-            f"'{key}' contains NaN or infinity in {bad.size} sequences (first: sequence {bad[0]})", path=path)
+            f"'{key}' contains NaN or infinity in {bad.size} sequences (first: sequence {bad[0]})", path=path
+        )
 
 
 def _joint_order(argument, stored, path) -> np.ndarray | None:
@@ -267,8 +274,11 @@ def _joint_order(argument, stored, path) -> np.ndarray | None:
         order, source = stored, "'joint_order' in the file"
     else:
         return None
-    valid = (order.shape == (N_JOINTS,) and np.issubdtype(order.dtype, np.integer)
-             and np.array_equal(np.sort(order), np.arange(N_JOINTS)))
+    valid = (
+        order.shape == (N_JOINTS,)
+        and np.issubdtype(order.dtype, np.integer)
+        and np.array_equal(np.sort(order), np.arange(N_JOINTS))
+    )
     if not valid:
         message = f"{source} must be a permutation of 0..{N_JOINTS - 1}, got shape {order.shape}"
         if argument is not None:

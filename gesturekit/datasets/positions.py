@@ -17,6 +17,7 @@ resampled to 15 fps by linear interpolation
 (:func:`gesturekit.motion.resample_positions`), which shortens bones slightly
 between samples when the source rate is not a multiple of 15.
 """
+
 from __future__ import annotations
 
 import json
@@ -83,7 +84,9 @@ class PositionJointMap:
         if self.names is not None and len(self.names) != n_source:
             raise MotionFileError(
                 f"joint map {self.name!r} lists {len(self.names)} source joint names "
-                f"but the file has {n_source} joints", path=path)
+                f"but the file has {n_source} joints",
+                path=path,
+            )
         lookup = {} if self.names is None else {n: i for i, n in enumerate(self.names)}
         problems: list[str] = []
 
@@ -104,8 +107,7 @@ class PositionJointMap:
         idx = np.array([one(n, self.joints[n]) for n in JOINT_NAMES], dtype=np.int64)
         pelvis = None if self.pelvis is None else one("pelvis", self.pelvis)
         if problems:
-            raise MotionFileError(
-                f"joint map {self.name!r} does not fit the file: {'; '.join(problems)}", path=path)
+            raise MotionFileError(f"joint map {self.name!r} does not fit the file: {'; '.join(problems)}", path=path)
         return idx, pelvis
 
 
@@ -127,8 +129,11 @@ def load_position_joint_map(spec: str | os.PathLike | Mapping | PositionJointMap
         A dict that is not a complete map.
     """
     if isinstance(spec, PositionJointMap):
-        spec = {"pelvis": spec.pelvis, "joints": dict(spec.joints),
-                **({} if spec.names is None else {"names": list(spec.names)})}
+        spec = {
+            "pelvis": spec.pelvis,
+            "joints": dict(spec.joints),
+            **({} if spec.names is None else {"names": list(spec.names)}),
+        }
         return _validate(spec, name="joint map", path=None)
     if isinstance(spec, Mapping):
         return _validate(spec, name="joint map", path=None)
@@ -174,12 +179,16 @@ def _validate(content, *, name: str, path) -> PositionJointMap:
         fail("'names' must be a list of source joint names")
     if names is not None and len(set(names)) != len(names):
         fail("'names' has duplicates")
-    problems = mapping_problems(joints, value_ok=lambda v: _is_index(v) or (isinstance(v, str) and bool(v)),
-                                values_must_be="values must be joint indices or names")
+    problems = mapping_problems(
+        joints,
+        value_ok=lambda v: _is_index(v) or (isinstance(v, str) and bool(v)),
+        values_must_be="values must be joint indices or names",
+    )
     if problems:
         fail("; ".join(problems))
-    return PositionJointMap(name=name, pelvis=pelvis, joints=dict(joints),
-                            names=None if names is None else tuple(names))
+    return PositionJointMap(
+        name=name, pelvis=pelvis, joints=dict(joints), names=None if names is None else tuple(names)
+    )
 
 
 def read_position_array(path: str | os.PathLike, *, fps: float | None = None) -> np.ndarray:
@@ -213,8 +222,7 @@ def read_position_array(path: str | os.PathLike, *, fps: float | None = None) ->
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in _SUFFIXES:
-        raise MotionFileError(f"unsupported position file type {suffix!r} (expected {', '.join(_SUFFIXES)})",
-                              path=path)
+        raise MotionFileError(f"unsupported position file type {suffix!r} (expected {', '.join(_SUFFIXES)})", path=path)
     if not path.is_file():
         raise MotionFileError("file not found", path=path)
     size = path.stat().st_size
@@ -224,8 +232,7 @@ def read_position_array(path: str | os.PathLike, *, fps: float | None = None) ->
         _check_header(path, suffix, size, fps)
     else:
         # a number and its separator take at least 2 bytes of text and 8 once read
-        limits.check_bytes(4.0 * size, what=f"the text file of {size} bytes may hold {size // 2} numbers",
-                           path=path)
+        limits.check_bytes(4.0 * size, what=f"the text file of {size} bytes may hold {size // 2} numbers", path=path)
     try:
         if suffix == ".npy":
             array = np.load(path, allow_pickle=False)
@@ -235,8 +242,7 @@ def read_position_array(path: str | os.PathLike, *, fps: float | None = None) ->
             with warnings.catch_warnings():
                 # a text file of blank lines: reported below as "no frames"
                 warnings.simplefilter("ignore", UserWarning)
-                array = np.loadtxt(path, delimiter="," if suffix == ".csv" else None,
-                                   dtype=np.float64, ndmin=2)
+                array = np.loadtxt(path, delimiter="," if suffix == ".csv" else None, dtype=np.float64, ndmin=2)
     except MotionFileError:
         raise
     except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
@@ -250,13 +256,15 @@ def read_position_array(path: str | os.PathLike, *, fps: float | None = None) ->
         array = array.reshape(array.shape[0], array.shape[1] // 3, 3)
     if array.ndim != 3 or array.shape[2] != 3 or array.shape[1] == 0:
         raise MotionFileError(
-            f"positions must have shape (frames, joints, 3) or (frames, joints*3), got {array.shape}", path=path)
+            f"positions must have shape (frames, joints, 3) or (frames, joints*3), got {array.shape}", path=path
+        )
     array = array.astype(np.float64)
     finite = np.isfinite(array).all(axis=(1, 2))
     if not finite.all():
         bad = np.flatnonzero(~finite)
         raise MotionFileError(
-            f"positions contain NaN or infinity in {bad.size} frames (first: frame {bad[0]})", path=path)
+            f"positions contain NaN or infinity in {bad.size} frames (first: frame {bad[0]})", path=path
+        )
     return array
 
 
@@ -274,17 +282,20 @@ def _check_header(path: Path, suffix: str, size: int, fps: float | None) -> None
         shape, dtype = headers[key]
         what = f"the npz header of {key!r} says"
     if dtype.hasobject:
-        raise MotionFileError(f"cannot read positions stored as Python objects ({what} dtype {dtype}); "
-                              "they must be numbers", path=path)
+        raise MotionFileError(
+            f"cannot read positions stored as Python objects ({what} dtype {dtype}); they must be numbers", path=path
+        )
     if dtype.kind not in "biuf":
         raise MotionFileError(f"positions must be numbers, {what} dtype {dtype}", path=path)
     flat_ok = len(shape) == 2 and shape[1] % 3 == 0 and shape[1] > 0
     if not (flat_ok or (len(shape) == 3 and shape[2] == 3 and shape[1] > 0)) and not (shape and shape[0] == 0):
         raise MotionFileError(
-            f"positions must have shape (frames, joints, 3) or (frames, joints*3), {what} {shape}", path=path)
+            f"positions must have shape (frames, joints, 3) or (frames, joints*3), {what} {shape}", path=path
+        )
     # float64 after conversion, and the array as stored
-    limits.check_bytes(limits.array_bytes(shape, 8 + dtype.itemsize),
-                       what=f"{what} shape {shape} of {dtype}", path=path)
+    limits.check_bytes(
+        limits.array_bytes(shape, 8 + dtype.itemsize), what=f"{what} shape {shape} of {dtype}", path=path
+    )
     if fps is not None and shape:
         limits.check_duration(shape[0] / fps, what=f"{what} {shape[0]} frames at {fps:g} fps", path=path)
     if suffix == ".npy":
@@ -292,7 +303,9 @@ def _check_header(path: Path, suffix: str, size: int, fps: float | None) -> None
         if offset + stored > size:
             raise MotionFileError(
                 f"the file is truncated: the npy header says shape {shape} of {dtype} "
-                f"({limits.describe_bytes(stored)}) but only {size - offset} bytes follow", path=path)
+                f"({limits.describe_bytes(stored)}) but only {size - offset} bytes follow",
+                path=path,
+            )
 
 
 def _from_npz(path: Path) -> np.ndarray:
@@ -303,8 +316,9 @@ def _from_npz(path: Path) -> np.ndarray:
         if len(keys) == 1:
             return npz[keys[0]]
         raise MotionFileError(
-            f"npz holds {len(keys)} arrays ({', '.join(keys) or 'none'}); "
-            "expected one array or one named 'positions'", path=path)
+            f"npz holds {len(keys)} arrays ({', '.join(keys) or 'none'}); expected one array or one named 'positions'",
+            path=path,
+        )
 
 
 def load_positions_motion(
@@ -354,10 +368,11 @@ def load_positions_motion(
     idx, pelvis = jmap.resolve(array.shape[1], path=path)
     positions = array[:, idx]
     if pelvis is not None:
-        positions = positions - array[:, pelvis:pelvis + 1]
+        positions = positions - array[:, pelvis : pelvis + 1]
     positions = positions * _UNIT_SCALE[units]
     out = resample_positions(positions, float(fps), float(FPS))
     if out.shape[0] == 0:
         raise MotionFileError(
-            f"too short: {array.shape[0]} frames at {fps:g} fps give no frame at {FPS} fps", path=path)
+            f"too short: {array.shape[0]} frames at {fps:g} fps give no frame at {FPS} fps", path=path
+        )
     return Motion(out.astype(np.float32), float(FPS))

@@ -36,6 +36,7 @@ Custom maps are JSON files (or dicts) of the form
 ``{"pelvis": "Hips", "joints": {"spine_mid": "Spine1", ...}}`` naming all 55
 joints; see :func:`load_joint_map`.
 """
+
 from __future__ import annotations
 
 import json
@@ -155,10 +156,12 @@ def _mixamo_like(name: str) -> JointMap:
 
 
 #: The built-in joint maps by name.
-PRESETS: Mapping[str, JointMap] = MappingProxyType({
-    "zeggs": _mixamo_like("zeggs"),
-    "beat": _mixamo_like("beat"),
-})
+PRESETS: Mapping[str, JointMap] = MappingProxyType(
+    {
+        "zeggs": _mixamo_like("zeggs"),
+        "beat": _mixamo_like("beat"),
+    }
+)
 
 
 def load_joint_map(spec: str | os.PathLike | Mapping | JointMap) -> JointMap:
@@ -209,6 +212,7 @@ def load_joint_map(spec: str | os.PathLike | Mapping | JointMap) -> JointMap:
 
 def _validate(content, *, name: str, path) -> JointMap:
     """Check a ``{"pelvis", "joints"}`` mapping and build the :class:`JointMap`."""
+
     def fail(message: str):
         if path is not None:
             raise InputFileError(message, path=path)
@@ -225,8 +229,11 @@ def _validate(content, *, name: str, path) -> JointMap:
     joints = content.get("joints")
     if not isinstance(joints, Mapping):
         fail("'joints' must map each of our joint names to a source joint name")
-    problems = mapping_problems(joints, value_ok=lambda v: isinstance(v, str) and bool(v),
-                                values_must_be="source joint names must be non-empty strings")
+    problems = mapping_problems(
+        joints,
+        value_ok=lambda v: isinstance(v, str) and bool(v),
+        values_must_be="source joint names must be non-empty strings",
+    )
     if problems:
         fail("; ".join(problems))
     return JointMap(name=name, pelvis=pelvis, joints=dict(joints))

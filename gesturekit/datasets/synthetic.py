@@ -45,11 +45,12 @@ How a take is made
 All randomness comes from :class:`numpy.random.Generator` streams spawned from
 the seed, so a seed gives byte-identical audio and motion.
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -8,12 +8,13 @@ A folder of takes is one of:
   read with a JSON joint map and a source frame rate;
 - ``habibie2021``: ``*.npz`` files with keys ``wav`` and ``body`` (several sequences each).
 """
+
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 from ..errors import ConfigError, InputFileError
 from ..motion import Take
@@ -147,7 +148,9 @@ def iter_takes(
             from .positions import load_positions_motion
 
             if joint_map is None or fps_in is None:
-                raise ConfigError("joint-position files need a JSON joint map (--joint-map) and their frame rate (--fps)")
+                raise ConfigError(
+                    "joint-position files need a JSON joint map (--joint-map) and their frame rate (--fps)"
+                )
             motion = load_positions_motion(
                 src.motion, joint_map=joint_map, fps=fps_in, units="m" if units == "auto" else units
             )

@@ -20,6 +20,7 @@ same rule from the same seed, and a pose candidate at distance exactly 0 (the
 query's own frame) is skipped. Distances are computed in float64 and ties go
 to the lowest (clip, start), so the results are reproducible.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -147,8 +148,9 @@ class _Steps:
 
     def _adm(self, j: int) -> np.ndarray:
         if j not in self._cache:
-            self._cache[j] = admissible_starts(self.valid, self.step, exclude=self.exclude,
-                                               mask=None if j < 0 else self.masks[j], rule=self.rule)
+            self._cache[j] = admissible_starts(
+                self.valid, self.step, exclude=self.exclude, mask=None if j < 0 else self.masks[j], rule=self.rule
+            )
         return self._cache[j]
 
     def __call__(self, i: int) -> tuple[np.ndarray, bool]:
@@ -177,7 +179,14 @@ def _check_n(n_frames, step):
 
 
 def random_segments(
-    valid, *, n_frames: int, step: int = 8, seed: int = 0, exclude=None, masks=None, step_mask=None,
+    valid,
+    *,
+    n_frames: int,
+    step: int = 8,
+    seed: int = 0,
+    exclude=None,
+    masks=None,
+    step_mask=None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random admissible windows, one per step.
@@ -213,7 +222,15 @@ def random_segments(
 
 
 def audio_nearest_segments(
-    F, valid, query, *, step: int = 8, exclude=None, masks=None, step_mask=None, mask_rule: str = "ends",
+    F,
+    valid,
+    query,
+    *,
+    step: int = 8,
+    exclude=None,
+    masks=None,
+    step_mask=None,
+    mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose audio feature is nearest the query's (cosine distance).
 
@@ -267,8 +284,17 @@ def _initial_pose(P, adm, seed):
 
 
 def pose_nearest_segments(
-    P, valid, *, n_frames: int, step: int = 8, seed: int = 0, init_pose=None, exclude=None, masks=None,
-    step_mask=None, mask_rule: str = "ends",
+    P,
+    valid,
+    *,
+    n_frames: int,
+    step: int = 8,
+    seed: int = 0,
+    init_pose=None,
+    exclude=None,
+    masks=None,
+    step_mask=None,
+    mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose pose feature is nearest the last output pose feature.
 
@@ -325,8 +351,10 @@ def pose_nearest_segments(
 def refiner_unavailable_reason(refiner) -> str | None:
     """Why ``knn+cgan`` cannot run with this refiner (None: it can), said before any work starts."""
     if refiner is None:
-        return ("knn+cgan is unavailable: it needs a trained refiner (give --refiner MODEL; train one with "
-                "`gesturekit train-refiner`)")
+        return (
+            "knn+cgan is unavailable: it needs a trained refiner (give --refiner MODEL; train one with "
+            "`gesturekit train-refiner`)"
+        )
     return None
 
 
@@ -404,8 +432,9 @@ def run_system(
     plan = plan_search(db, audio, config)
     n, options = plan.n_frames, plan.config
     valid = np.asarray(db.valid)
-    common = dict(step=N, exclude=plan.exclude, masks=plan.masks, step_mask=plan.step_mask_index,
-                  mask_rule=options.mask_rule)
+    common = dict(
+        step=N, exclude=plan.exclude, masks=plan.masks, step_mask=plan.step_mask_index, mask_rule=options.mask_rule
+    )
     if system == "random":
         frames, relaxed = random_segments(valid, n_frames=n, seed=options.seed, **common)
     elif system == "audio-only":

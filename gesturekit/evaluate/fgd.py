@@ -15,15 +15,16 @@ The project trains it on a matching database (``gesturekit train-fgd --db DB
 dict and the normalisation statistics, tensors only), read with
 ``torch.load(..., weights_only=True)``.
 """
+
 from __future__ import annotations
 
 import contextlib
 import json
 import os
 import pickle
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -111,9 +112,12 @@ def _network(config: FGDConfig, dims: int):
         def __init__(self):
             super().__init__()
             self.conv = nn.Sequential(
-                nn.Conv1d(dims, c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
-                nn.Conv1d(c, c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
-                nn.Conv1d(c, c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
+                nn.Conv1d(dims, c, 4, stride=2, padding=1),
+                nn.LeakyReLU(0.2),
+                nn.Conv1d(c, c, 4, stride=2, padding=1),
+                nn.LeakyReLU(0.2),
+                nn.Conv1d(c, c, 4, stride=2, padding=1),
+                nn.LeakyReLU(0.2),
             )
             self.out = nn.Linear(c * t, config.latent)
 
@@ -126,8 +130,10 @@ def _network(config: FGDConfig, dims: int):
             self.inp = nn.Linear(config.latent, c * t)
             self.deconv = nn.Sequential(
                 nn.LeakyReLU(0.2),
-                nn.ConvTranspose1d(c, c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
-                nn.ConvTranspose1d(c, c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
+                nn.ConvTranspose1d(c, c, 4, stride=2, padding=1),
+                nn.LeakyReLU(0.2),
+                nn.ConvTranspose1d(c, c, 4, stride=2, padding=1),
+                nn.LeakyReLU(0.2),
                 nn.ConvTranspose1d(c, dims, 4, stride=2, padding=1),
             )
 
@@ -199,8 +205,10 @@ class FGDModel:
         if win.shape[0] == 0:
             return np.zeros((0, self.config.latent))
         with torch.no_grad(), _one_thread():
-            out = [self.net.encoder(torch.from_numpy(win[i : i + 512])).double().numpy()
-                   for i in range(0, win.shape[0], 512)]
+            out = [
+                self.net.encoder(torch.from_numpy(win[i : i + 512])).double().numpy()
+                for i in range(0, win.shape[0], 512)
+            ]
         return np.concatenate(out)
 
     def reconstruction_error(self, positions) -> float:
@@ -232,8 +240,14 @@ class FGDModel:
         state["std"] = torch.from_numpy(self.std.copy())
         buf = io.BytesIO()
         torch.save(state, buf)
-        meta = {"format": _FORMAT, "format_version": _FORMAT_VERSION, "config": asdict(self.config),
-                "motion_dim": int(self.mean.shape[0]), "fps": LAYOUT.fps, "info": self.info}
+        meta = {
+            "format": _FORMAT,
+            "format_version": _FORMAT_VERSION,
+            "config": asdict(self.config),
+            "motion_dim": int(self.mean.shape[0]),
+            "fps": LAYOUT.fps,
+            "info": self.info,
+        }
         text = json.dumps(meta, indent=1).encode("utf-8")
 
         def fill(tmp: Path) -> None:
@@ -256,8 +270,10 @@ def load_fgd_model(path: str | os.PathLike) -> FGDModel:
     path = Path(path)
     meta_file, weights = path / "fgd.json", path / "weights.pt"
     if not meta_file.is_file() or not weights.is_file():
-        raise InputFileError("not an FGD model folder (fgd.json and weights.pt expected; "
-                             "train one with `gesturekit train-fgd`)", path=path)
+        raise InputFileError(
+            "not an FGD model folder (fgd.json and weights.pt expected; train one with `gesturekit train-fgd`)",
+            path=path,
+        )
     try:
         meta = json.loads(meta_file.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -265,8 +281,11 @@ def load_fgd_model(path: str | os.PathLike) -> FGDModel:
     if meta.get("format") != _FORMAT or meta.get("format_version") != _FORMAT_VERSION:
         raise InputFileError("not a gesturekit FGD model of a supported version", path=path)
     if meta.get("fps") != LAYOUT.fps or meta.get("motion_dim") != LAYOUT.motion_dim:
-        raise InputFileError(f"trained for {meta.get('motion_dim')} values at {meta.get('fps')} fps; "
-                             f"this gesturekit uses {LAYOUT.motion_dim} at {LAYOUT.fps} fps", path=path)
+        raise InputFileError(
+            f"trained for {meta.get('motion_dim')} values at {meta.get('fps')} fps; "
+            f"this gesturekit uses {LAYOUT.motion_dim} at {LAYOUT.fps} fps",
+            path=path,
+        )
     try:
         config = FGDConfig(**meta["config"])
         state = torch.load(weights, map_location="cpu", weights_only=True)
@@ -365,6 +384,8 @@ def fgd(model: FGDModel, generated, reference) -> float:
     """
     a, b = model.embed(generated), model.embed(reference)
     if a.shape[0] < 2 or b.shape[0] < 2:
-        raise ConfigError(f"FGD needs motions of at least {model.config.window + model.config.stride} frames "
-                          f"(two windows), got {len(np.asarray(generated))} and {len(np.asarray(reference))}")
+        raise ConfigError(
+            f"FGD needs motions of at least {model.config.window + model.config.stride} frames "
+            f"(two windows), got {len(np.asarray(generated))} and {len(np.asarray(reference))}"
+        )
     return frechet_distance(*gaussian_statistics(a), *gaussian_statistics(b))

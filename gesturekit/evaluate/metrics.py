@@ -36,10 +36,11 @@ Kinematic measures use :data:`KINEMATIC_JOINTS` (the upper body and both
 wrists, as the cited works use the upper body) unless told otherwise; finger
 joints, dense and small, would otherwise dominate the averages.
 """
+
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -196,8 +197,7 @@ def motion_beats(
     return idx / _fps(fps)
 
 
-def pick_peaks(x, *, pre_max: int, post_max: int, pre_avg: int, post_avg: int, delta: float,
-               wait: int) -> np.ndarray:
+def pick_peaks(x, *, pre_max: int, post_max: int, pre_avg: int, post_avg: int, delta: float, wait: int) -> np.ndarray:
     """Greedy peak picking of an onset envelope (Boeck et al. 2012, the rule librosa uses).
 
     Frame ``n`` is a peak when ``x[n] == max(x[n - pre_max : n + post_max])``,
@@ -283,9 +283,15 @@ def audio_onsets(audio, *, sr: int = AUDIO_SR, hop_length: int = 160) -> np.ndar
     if not env.any() or not np.all(np.isfinite(env)):
         return np.zeros(0)
     # window lengths exactly as onset_detect derives them (floor, then ceil to int)
-    frames = pick_peaks(env, pre_max=math.ceil(0.03 * sr // hop), post_max=math.ceil(0.00 * sr // hop + 1),
-                        pre_avg=math.ceil(0.10 * sr // hop), post_avg=math.ceil(0.10 * sr // hop + 1),
-                        wait=math.ceil(0.03 * sr // hop), delta=0.07)
+    frames = pick_peaks(
+        env,
+        pre_max=math.ceil(0.03 * sr // hop),
+        post_max=math.ceil(0.00 * sr // hop + 1),
+        pre_avg=math.ceil(0.10 * sr // hop),
+        post_avg=math.ceil(0.10 * sr // hop + 1),
+        wait=math.ceil(0.03 * sr // hop),
+        delta=0.07,
+    )
     return librosa.frames_to_time(frames, sr=sr, hop_length=hop).astype(np.float64)
 
 
@@ -435,8 +441,9 @@ def frechet_distance(mean1, cov1, mean2, cov2) -> float:
     c1, c2 = np.atleast_2d(np.asarray(cov1, np.float64)), np.atleast_2d(np.asarray(cov2, np.float64))
     d = m1.shape[0] if m1.ndim == 1 else -1
     if m1.shape != m2.shape or m1.ndim != 1 or c1.shape != (d, d) or c2.shape != (d, d):
-        raise ConfigError(f"means (dims,) and covariances (dims, dims) must agree, got {m1.shape}, {c1.shape}, "
-                          f"{m2.shape}, {c2.shape}")
+        raise ConfigError(
+            f"means (dims,) and covariances (dims, dims) must agree, got {m1.shape}, {c1.shape}, {m2.shape}, {c2.shape}"
+        )
     if np.array_equal(m1, m2) and np.array_equal(c1, c2):
         return 0.0
     s1 = _psd_sqrt(c1)
@@ -598,7 +605,7 @@ def control_adherence(
     *,
     thresholds: dict,
     fps: float,
-) -> "pd.DataFrame":  # noqa: F821
+) -> pd.DataFrame:  # noqa: F821
     """Per control segment: the fraction of frames meeting its constraint, and attribute statistics.
 
     The attributes of the motion are computed as for database frames
@@ -640,8 +647,13 @@ def control_adherence(
             continue
         seg_attrs = attrs[a:b]
         ok = constraint_mask(seg_attrs, seg.constraints, thresholds)
-        row = {"start_s": seg.start_s, "end_s": seg.end_s, "constraint": seg.label(), "frames": b - a,
-               "adherence": float(ok.mean())}
+        row = {
+            "start_s": seg.start_s,
+            "end_s": seg.end_s,
+            "constraint": seg.label(),
+            "frames": b - a,
+            "adherence": float(ok.mean()),
+        }
         for name in _STAT_ATTRIBUTES:
             col = seg_attrs[:, ATTRIBUTE_NAMES.index(name)].astype(np.float64)
             row[f"{name}_mean"] = float(col.mean())

@@ -28,15 +28,16 @@ hands, symmetric and asymmetric hands. :attr:`Evaluation.controls` holds the
 per-segment statistics (left-wrist height, speed, asymmetry) like the paper's
 control table.
 """
+
 from __future__ import annotations
 
 import json
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -90,8 +91,12 @@ METRIC_COLUMNS: tuple[str, ...] = (
 
 #: The default control track's constraints, one per equal stretch of the speech.
 DEFAULT_CONTROLS: tuple[tuple[str, str], ...] = (
-    ("left_hand", "low"), ("left_hand", "high"), ("speed", "slow"), ("speed", "fast"),
-    ("symmetry", "symmetric"), ("symmetry", "asymmetric"),
+    ("left_hand", "low"),
+    ("left_hand", "high"),
+    ("speed", "slow"),
+    ("speed", "fast"),
+    ("symmetry", "symmetric"),
+    ("symmetry", "asymmetric"),
 )
 
 
@@ -219,8 +224,10 @@ def held_out(db, holdout, *, margin_s: float | None = None) -> HeldOut:
     h = parse_holdout(holdout)
     names = db.take_names
     if h.take not in names:
-        raise ConfigError(f"no take named {h.take!r} in the database; takes: {', '.join(names[:10])}"
-                          + (" ..." if len(names) > 10 else ""))
+        raise ConfigError(
+            f"no take named {h.take!r} in the database; takes: {', '.join(names[:10])}"
+            + (" ..." if len(names) > 10 else "")
+        )
     ti = names.index(h.take)
     fps = db.fps
     L = db.clip_frames
@@ -244,8 +251,10 @@ def held_out(db, holdout, *, margin_s: float | None = None) -> HeldOut:
             raise ConfigError(f"margin_s must be >= 0, got {margin}")
         ex_takes, ex_ranges = (), ((h.take, max(0.0, h.start_s - margin), float(h.end_s)),)
     if f1 - f0 < 2:
-        raise ConfigError(f"held-out part {h.to_text()} holds no frames of the database's clips "
-                          f"(its clips cover 0-{covered / fps:.2f} s)")
+        raise ConfigError(
+            f"held-out part {h.to_text()} holds no frames of the database's clips "
+            f"(its clips cover 0-{covered / fps:.2f} s)"
+        )
     G = np.asarray(db.G[clips]).reshape(-1, np.asarray(db.G).shape[-1])
     motion = Motion.from_flat(G[f0:f1], fps)
     take_audio = db.take_audio(ti)
@@ -292,8 +301,8 @@ class Evaluation:
         Everything that made the numbers (JSON-able).
     """
 
-    table: "pd.DataFrame"  # noqa: F821
-    controls: "pd.DataFrame"  # noqa: F821
+    table: pd.DataFrame  # noqa: F821
+    controls: pd.DataFrame  # noqa: F821
     held_out: HeldOut
     outputs: dict
     notes: list = field(default_factory=list)
@@ -325,8 +334,12 @@ class Evaluation:
         from ..outputs import write_folder
 
         folder = Path(folder)
-        meta = {"format": "gesturekit-evaluation", "held_out": self.held_out.describe(), "settings": self.settings,
-                "notes": self.notes}
+        meta = {
+            "format": "gesturekit-evaluation",
+            "held_out": self.held_out.describe(),
+            "settings": self.settings,
+            "notes": self.notes,
+        }
 
         def fill(tmp: Path) -> None:
             write_csv(self.table, tmp / "results.csv")
@@ -347,8 +360,10 @@ def _fgd_model(db, fgd_model, exclude, notes):
         return fgd_model
     if fgd_model is not None:
         return load_fgd_model(fgd_model)
-    notes.append("FGD autoencoder trained for this run on the database without the held-out part "
-                 "(save one with `gesturekit train-fgd` and pass it with --fgd-model to reuse it)")
+    notes.append(
+        "FGD autoencoder trained for this run on the database without the held-out part "
+        "(save one with `gesturekit train-fgd` and pass it with --fgd-model to reuse it)"
+    )
     return train_fgd_model(db, config=FGDConfig(), exclude=exclude)
 
 
@@ -454,13 +469,15 @@ def run_evaluation(
     for system in systems:
         before = done
         try:
-            free = run_system(system, db=db, audio=ref.audio, config=base, control=ControlTrack(()), gt=ref.motion,
-                              refiner=refiner)
+            free = run_system(
+                system, db=db, audio=ref.audio, config=base, control=ControlTrack(()), gt=ref.motion, refiner=refiner
+            )
             tick(f"{system}")
             ctrl = None
             if system != "gt":
-                ctrl = run_system(system, db=db, audio=ref.audio, config=base, control=track, gt=ref.motion,
-                                  refiner=refiner)
+                ctrl = run_system(
+                    system, db=db, audio=ref.audio, config=base, control=track, gt=ref.motion, refiner=refiner
+                )
             tick(f"{system} with the control")
         except SystemUnavailable as exc:
             warn(str(exc), stacklevel=2)
@@ -474,8 +491,9 @@ def run_evaluation(
             if out is None:
                 row[f"adherence_{mode}"] = float("nan")
                 continue
-            table = metrics.control_adherence(out.motion.positions[: ref.n_frames], track,
-                                              thresholds=db.thresholds, fps=db.fps)
+            table = metrics.control_adherence(
+                out.motion.positions[: ref.n_frames], track, thresholds=db.thresholds, fps=db.fps
+            )
             row[f"adherence_{mode}"] = metrics.overall_adherence(table)
             table.insert(0, "run", mode)
             table.insert(0, "system", system)
@@ -483,8 +501,11 @@ def run_evaluation(
         row["relaxed_steps"] = 0 if ctrl is None else ctrl.relaxed_steps
         rows.append(row)
     table = pd.DataFrame(rows, columns=["system", "frames", *METRIC_COLUMNS, "relaxed_steps"])
-    controls = (pd.concat(control_rows, ignore_index=True) if control_rows
-                else pd.DataFrame(columns=["system", "run", "start_s", "end_s", "constraint", "frames", "adherence"]))
+    controls = (
+        pd.concat(control_rows, ignore_index=True)
+        if control_rows
+        else pd.DataFrame(columns=["system", "run", "start_s", "end_s", "constraint", "frames", "adherence"])
+    )
     settings = {
         "database": str(db.path) if db.path is not None else (db.label or "in-memory database"),
         "holdout": ref.holdout.to_text(),
@@ -498,7 +519,7 @@ def run_evaluation(
     return Evaluation(table, controls, ref, outputs, notes, settings)
 
 
-def evaluate(db, *, holdout, systems=DEFAULT_SYSTEMS, **options) -> "pd.DataFrame":  # noqa: F821
+def evaluate(db, *, holdout, systems=DEFAULT_SYSTEMS, **options) -> pd.DataFrame:  # noqa: F821
     """:func:`run_evaluation`'s table: one row per system, one column per measure."""
     return run_evaluation(db, holdout=holdout, systems=systems, **options).table
 
@@ -518,13 +539,15 @@ def markdown_table(df, *, floatfmt: str = ".4g") -> str:
     """A pandas DataFrame as a GitHub-flavoured markdown table (numbers right-aligned; NaN as "–")."""
     cols = list(df.columns)
     body = [[_cell(v, floatfmt) for v in row] for row in df.itertuples(index=False, name=None)]
-    numeric = [bool(len(df)) and all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-                                     for v in df[c]) for c in cols]
+    numeric = [
+        bool(len(df))
+        and all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) for v in df[c])
+        for c in cols
+    ]
     widths = [max([len(str(c))] + [len(r[i]) for r in body]) for i, c in enumerate(cols)]
 
     def line(cells):
-        return "| " + " | ".join(c.rjust(w) if num else c.ljust(w)
-                                 for c, w, num in zip(cells, widths, numeric)) + " |"
+        return "| " + " | ".join(c.rjust(w) if num else c.ljust(w) for c, w, num in zip(cells, widths, numeric)) + " |"
 
     rule = "|" + "|".join(("-" * (w + 1) + ":") if num else ("-" * (w + 2)) for w, num in zip(widths, numeric)) + "|"
     return "\n".join([line([str(c) for c in cols]), rule] + [line(r) for r in body])

@@ -50,6 +50,7 @@ given by ``rotation_order`` (the order of the channels: ``"ZXY"`` means
 ``parent + R_parent_global @ o``). Angles are kept continuous over frames
 (no jumps of 360 degrees) for smooth curves in animation tools.
 """
+
 from __future__ import annotations
 
 import io
@@ -58,12 +59,20 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io import atomic_write
 from ..errors import ConfigError
 from ..motion import Motion
 from ..skeleton import FINGERS, JOINT_NAMES, N_JOINTS, PARENTS, joint_index
-from .._io import atomic_write
 
-__all__ = ["ROTATION_ORDERS", "TWIST_REFERENCES", "UNITS", "write_bvh", "rest_offsets", "solve_rotations", "euler_from_matrices"]
+__all__ = [
+    "ROTATION_ORDERS",
+    "TWIST_REFERENCES",
+    "UNITS",
+    "write_bvh",
+    "rest_offsets",
+    "solve_rotations",
+    "euler_from_matrices",
+]
 
 #: Rotation orders that :func:`write_bvh` can write (intrinsic, channel order).
 ROTATION_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
@@ -150,7 +159,9 @@ def write_bvh(
     if units not in UNITS:
         raise ConfigError(f"units must be one of {', '.join(UNITS)}, got {units!r}", path=path)
     if rotation_order not in ROTATION_ORDERS:
-        raise ConfigError(f"rotation_order must be one of {', '.join(ROTATION_ORDERS)}, got {rotation_order!r}", path=path)
+        raise ConfigError(
+            f"rotation_order must be one of {', '.join(ROTATION_ORDERS)}, got {rotation_order!r}", path=path
+        )
     if not isinstance(decimals, (int, np.integer)) or not 3 <= decimals <= 10:
         raise ConfigError(f"decimals must be an integer from 3 to 10, got {decimals!r}", path=path)
     if motion.n_frames == 0:
@@ -219,7 +230,9 @@ def rest_offsets(
     else:
         rest = np.asarray(rest, dtype=np.float64)
         if rest.shape != (N_JOINTS, 3) or not np.isfinite(rest).all():
-            raise ConfigError(f"rest must be finite joint positions of shape ({N_JOINTS}, 3), got {rest.shape}", path=path)
+            raise ConfigError(
+                f"rest must be finite joint positions of shape ({N_JOINTS}, 3), got {rest.shape}", path=path
+            )
         directions = np.zeros((N_JOINTS, 3))
         directions[child] = rest[child] - rest[PARENTS[child]]
     norms = np.linalg.norm(directions, axis=-1, keepdims=True)
@@ -247,8 +260,12 @@ def _tpose_directions(positions: np.ndarray) -> np.ndarray:
     # upper_chest carries neck and collars rigidly: the data's mean shape, collars along X, neck up
     uc = joint_index("upper_chest")
     shape = dict(zip(_CHILDREN[uc], _mean_shape(positions, uc)))
-    basis = _basis(shape[joint_index("left_collar")] - shape[joint_index("right_collar")],
-                   shape[joint_index("neck")], first="x", second="y")
+    basis = _basis(
+        shape[joint_index("left_collar")] - shape[joint_index("right_collar")],
+        shape[joint_index("neck")],
+        first="x",
+        second="y",
+    )
     for c, v in shape.items():
         d[c] = basis.T @ v
 
@@ -256,9 +273,12 @@ def _tpose_directions(positions: np.ndarray) -> np.ndarray:
     for side, sign in (("left", 1.0), ("right", -1.0)):
         w = joint_index(f"{side}_wrist")
         shape = dict(zip(_CHILDREN[w], _mean_shape(positions, w)))
-        basis = _basis(sign * shape[joint_index(f"{side}_middle1")],
-                       shape[joint_index(f"{side}_index1")] - shape[joint_index(f"{side}_pinky1")],
-                       first="x", second="z")
+        basis = _basis(
+            sign * shape[joint_index(f"{side}_middle1")],
+            shape[joint_index(f"{side}_index1")] - shape[joint_index(f"{side}_pinky1")],
+            first="x",
+            second="z",
+        )
         for c, v in shape.items():
             d[c] = basis.T @ v
         # straight fingers, continuing the direction from the wrist to the finger root

@@ -18,6 +18,7 @@ The same inputs always give the same bytes: entries are written in a fixed
 order with a fixed time stamp, extra arrays sorted by name and the settings
 as JSON with sorted keys.
 """
+
 from __future__ import annotations
 
 import io
@@ -25,15 +26,16 @@ import json
 import os
 import re
 import zipfile
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
+from .._io import atomic_write
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
-from .._io import atomic_write
 
 __all__ = ["FORMAT_VERSION", "RESERVED_KEYS", "save_npz", "load_npz"]
 
@@ -109,8 +111,9 @@ def save_npz(
         if (name == "positions" or name.endswith("_positions")) and np.issubdtype(arr.dtype, np.floating):
             bad = np.atleast_1d(~np.isfinite(arr).all(axis=tuple(range(1, arr.ndim))))
             if bad.any():
-                raise ConfigError(f"not written: {name} holds NaN or infinite values (from frame "
-                                  f"{int(np.argmax(bad))} on)", path=path)
+                raise ConfigError(
+                    f"not written: {name} holds NaN or infinite values (from frame {int(np.argmax(bad))} on)", path=path
+                )
     if overwrite:
         from ..outputs import check_output
 
@@ -160,7 +163,9 @@ def _checked_extra(name: str, value: Any, path) -> np.ndarray:
         raise ConfigError(f"extra array name {name!r} is reserved; reserved: {', '.join(RESERVED_KEYS)}", path=path)
     arr = np.asarray(value)
     if arr.dtype.hasobject or arr.dtype.kind not in "biufcSUmM":
-        raise ConfigError(f"extra array {name!r} has dtype {arr.dtype}, which cannot be saved without pickling", path=path)
+        raise ConfigError(
+            f"extra array {name!r} has dtype {arr.dtype}, which cannot be saved without pickling", path=path
+        )
     # (np.ascontiguousarray would turn a 0-d array into shape (1,))
     return np.asarray(arr, order="C")
 

@@ -11,6 +11,7 @@ that is too short holds its last pose, one that is too long is cut.
 :func:`probe_media` reads codecs, sizes, rates and durations of any media file
 with the same binary; tests and the app use it to check what was written.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -20,16 +21,16 @@ import re
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Callable, Sequence
 from fractions import Fraction
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 
+from .._io import atomic_write
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG
-from .._io import atomic_write
 
 __all__ = ["render_video", "probe_media", "AUDIO_OUT_SR"]
 
@@ -128,8 +129,10 @@ def render_video(
     for m in [motion] + ([] if side_by_side is None else [side_by_side]):
         bad = ~np.isfinite(np.asarray(m.positions)).all(axis=(1, 2))
         if bad.any():
-            raise ConfigError(f"not written: the motion holds NaN or infinite positions (from frame "
-                              f"{int(np.argmax(bad))} on)", path=path)
+            raise ConfigError(
+                f"not written: the motion holds NaN or infinite positions (from frame {int(np.argmax(bad))} on)",
+                path=path,
+            )
     width, height = _check_resolution(resolution)
     if audio is not None:
         audio = _check_audio(audio, sr)
@@ -180,9 +183,7 @@ def _check_audio(audio, sr) -> np.ndarray:
         raise ConfigError(f"sr must be a whole number of Hz within 1000..384000, got {sr!r}")
     audio = np.asarray(audio)
     if audio.ndim != 1 or not np.issubdtype(audio.dtype, np.floating):
-        raise ConfigError(
-            f"audio must be mono float samples, shape (samples,), got {audio.dtype} {audio.shape}"
-        )
+        raise ConfigError(f"audio must be mono float samples, shape (samples,), got {audio.dtype} {audio.shape}")
     if audio.size == 0:
         raise ConfigError("audio is empty")
     if not np.all(np.isfinite(audio)):
@@ -200,28 +201,59 @@ def _write_wav(path: Path, audio: np.ndarray, sr: int) -> None:
 def _encode_command(out: Path, width: int, height: int, fps: float, wav: Path | None, seconds: float | None):
     rate = Fraction(fps).limit_denominator(1001)
     cmd = [
-        _ffmpeg(), "-hide_banner", "-nostdin", "-loglevel", "error", "-y",
-        "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}",
-        "-framerate", f"{rate.numerator}/{rate.denominator}", "-i", "pipe:0",
+        _ffmpeg(),
+        "-hide_banner",
+        "-nostdin",
+        "-loglevel",
+        "error",
+        "-y",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-s",
+        f"{width}x{height}",
+        "-framerate",
+        f"{rate.numerator}/{rate.denominator}",
+        "-i",
+        "pipe:0",
     ]
     if wav is not None:
         cmd += ["-i", f"file:{wav}", "-map", "0:v:0", "-map", "1:a:0"]
     cmd += [
         # "veryfast": half the encoder's time of "medium" for a file about 3 % larger at the same quality
-        "-c:v", "libx264", "-preset", "veryfast", "-crf", str(_CRF), "-pix_fmt", "yuv420p",
+        "-c:v",
+        "libx264",
+        "-preset",
+        "veryfast",
+        "-crf",
+        str(_CRF),
+        "-pix_fmt",
+        "yuv420p",
         # a key frame every two seconds, so a player can seek
-        "-g", str(max(1, round(2 * fps))),
+        "-g",
+        str(max(1, round(2 * fps))),
     ]
     if wav is not None:
-        cmd += ["-c:a", "aac", "-b:a", _AUDIO_BITRATE, "-ar", str(AUDIO_OUT_SR), "-ac", "1",
-                "-t", f"{seconds:.6f}"]
+        cmd += ["-c:a", "aac", "-b:a", _AUDIO_BITRATE, "-ar", str(AUDIO_OUT_SR), "-ac", "1", "-t", f"{seconds:.6f}"]
     cmd += [
-        "-movflags", "+faststart",
+        "-movflags",
+        "+faststart",
         # no encoder versions or dates in the file: the same inputs give the same bytes
-        "-map_metadata", "-1", "-fflags", "+bitexact", "-flags:v", "+bitexact", "-flags:a", "+bitexact",
+        "-map_metadata",
+        "-1",
+        "-fflags",
+        "+bitexact",
+        "-flags:v",
+        "+bitexact",
+        "-flags:a",
+        "+bitexact",
         # the tag by which a later --force recognises the file as gesturekit's own
-        "-metadata", f"comment={MP4_TAG}",
-        "-f", "mp4", f"file:{out}",
+        "-metadata",
+        f"comment={MP4_TAG}",
+        "-f",
+        "mp4",
+        f"file:{out}",
     ]
     return cmd
 
@@ -255,17 +287,25 @@ def _encode(cmd, frames, rendered: int, n_frames: int, progress, log_path: Path,
         if code != 0:
             log.seek(0)
             message = log.read().decode("utf-8", "replace").strip()[-2000:]
-            raise GestureKitError(
-                f"ffmpeg could not encode the video (exit code {code}): {message}", path=target
-            )
+            raise GestureKitError(f"ffmpeg could not encode the video (exit code {code}): {message}", path=target)
 
 
 # -- reading -------------------------------------------------------------------------------------
 
 _STREAM_RE = re.compile(r"^\s*Stream #\d+:(\d+)\S*: (Video|Audio): (.*)$", re.MULTILINE)
 _DURATION_RE = re.compile(r"Duration: (\d+):(\d+):(\d+(?:\.\d+)?)")
-_LAYOUT_CHANNELS = {"mono": 1, "stereo": 2, "2.1": 3, "3.0": 3, "quad": 4, "4.0": 4, "5.0": 5, "5.1": 6,
-                    "6.1": 7, "7.1": 8}
+_LAYOUT_CHANNELS = {
+    "mono": 1,
+    "stereo": 2,
+    "2.1": 3,
+    "3.0": 3,
+    "quad": 4,
+    "4.0": 4,
+    "5.0": 5,
+    "5.1": 6,
+    "6.1": 7,
+    "7.1": 8,
+}
 
 
 def probe_media(path: str | os.PathLike, *, decode: bool = True) -> dict:
@@ -302,7 +342,8 @@ def probe_media(path: str | os.PathLike, *, decode: bool = True) -> dict:
     source = f"file:{path.resolve()}"
     header = subprocess.run(
         [_ffmpeg(), "-hide_banner", "-nostdin", "-i", source],
-        stdin=subprocess.DEVNULL, capture_output=True,
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
     ).stderr.decode("utf-8", "replace")
     info = _parse_header(header)
     if info["video"] is None and info["audio"] is None:
@@ -377,9 +418,9 @@ def _measure(source: str, info: dict, path: Path) -> None:
         maps += ["-map", "0:a:0"]
     # framecrc lists every decoded frame with its time stamp and duration; no pixels are kept
     run = subprocess.run(
-        [_ffmpeg(), "-hide_banner", "-nostdin", "-loglevel", "error", "-i", source, *maps,
-         "-f", "framecrc", "-"],
-        stdin=subprocess.DEVNULL, capture_output=True,
+        [_ffmpeg(), "-hide_banner", "-nostdin", "-loglevel", "error", "-i", source, *maps, "-f", "framecrc", "-"],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
     )
     if run.returncode != 0:
         message = run.stderr.decode("utf-8", "replace").strip()[-500:]

@@ -7,6 +7,7 @@
 
 torch is imported by the submodules only, so ``import gesturekit.refine`` stays light.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -15,8 +16,16 @@ from pathlib import Path
 
 from ..errors import GestureKitError
 
-__all__ = ["default_refiner_path", "load_refiner", "check_layout", "check_refiner", "trained_on",
-           "refiner_for", "provenance", "describe_training"]
+__all__ = [
+    "default_refiner_path",
+    "load_refiner",
+    "check_layout",
+    "check_refiner",
+    "trained_on",
+    "refiner_for",
+    "provenance",
+    "describe_training",
+]
 
 
 def default_refiner_path() -> Path:
@@ -113,8 +122,7 @@ def trained_on(config: dict, db) -> bool:
         return False
     if source.startswith("demo") and theirs.startswith("demo"):
         return _speaker(source) == _speaker(theirs)
-    return (source == theirs and trained.get("takes") == len(db.take_names)
-            and trained.get("clips") == db.n_clips)
+    return source == theirs and trained.get("takes") == len(db.take_names) and trained.get("clips") == db.n_clips
 
 
 def describe_training(config: dict) -> str:

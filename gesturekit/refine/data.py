@@ -18,10 +18,11 @@ per step for a whole chunk of windows; each window's own frames are excluded
 through its own mask. Windows touching held-out takes or time ranges are not
 used, and the search never uses held-out frames either.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -75,7 +76,6 @@ class PairsConfig(JsonConfig):
         takes, ranges = normalise_exclusions(self.exclude_takes, self.exclude_ranges)
         object.__setattr__(self, "exclude_takes", takes)
         object.__setattr__(self, "exclude_ranges", ranges)
-
 
 
 @dataclass

@@ -1,4 +1,5 @@
 """A refiner folder's ``config.json``, read without torch (the app checks folders before loading them)."""
+
 from __future__ import annotations
 
 import os
@@ -17,7 +18,7 @@ _MESSAGES = {
     "no_file": "not a refiner folder: config.json is missing",
     "other_format": "config.json does not describe a gesturekit refiner",
     "other_version": "refiner format version {found} is not supported (this gesturekit reads version {supported}); "
-                     "train it again",
+    "train it again",
 }
 
 
@@ -36,8 +37,9 @@ def read_refiner_config(path: str | os.PathLike) -> dict:
         or a key of the wrong type.
     """
     path = Path(path)
-    cfg = read_json_marker(path, "config.json", marker_format=FORMAT, version=FORMAT_VERSION, error=InputFileError,
-                           messages=_MESSAGES)
+    cfg = read_json_marker(
+        path, "config.json", marker_format=FORMAT, version=FORMAT_VERSION, error=InputFileError, messages=_MESSAGES
+    )
     _check_structure(cfg, path)
     return cfg
 

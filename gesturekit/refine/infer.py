@@ -22,10 +22,10 @@ agree closely; the full pass costs about ``64 / hop`` times less.
 :func:`gesturekit.blend.keep_slow`) keeps the k-NN motion's content slower than
 that frequency and takes only the faster content from the generator.
 """
+
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import zipfile
 import zlib
@@ -45,7 +45,6 @@ from .model import GENERATOR_STRIDE, Generator, ModelConfig
 __all__ = ["FORMAT", "FORMAT_VERSION", "Refiner", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
 
 STATE_FILES = ("generator.pt", "critic.pt", "train_state.pt")
-
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -100,8 +99,9 @@ def read_stats(path: str | os.PathLike) -> dict[str, np.ndarray]:
         if key not in stats:
             raise InputFileError(f"stats.npz lacks {key}", path=path)
         if stats[key].ndim != 1 or not np.isfinite(stats[key]).all():
-            raise InputFileError(f"stats.npz: {key} must be a vector of finite numbers, found shape "
-                                 f"{stats[key].shape}", path=path)
+            raise InputFileError(
+                f"stats.npz: {key} must be a vector of finite numbers, found shape {stats[key].shape}", path=path
+            )
     return stats
 
 
@@ -148,7 +148,7 @@ class Refiner:
 
     # ---- loading ----------------------------------------------------------------------------
     @classmethod
-    def load(cls, path: str | os.PathLike, *, device: str = "cpu") -> "Refiner":
+    def load(cls, path: str | os.PathLike, *, device: str = "cpu") -> Refiner:
         """Open a refiner folder (weights read with ``torch.load(..., weights_only=True)``).
 
         Raises
@@ -177,8 +177,11 @@ class Refiner:
         except (RuntimeError, TypeError) as exc:
             raise InputFileError(f"generator.pt does not fit the model in config.json ({exc})", path=path) from None
         stats = read_stats(path)
-        if any(stats[f"{k}_{part}"].shape != (dim,) for k, dim in (("audio", mcfg.audio_dim), ("motion", mcfg.motion_dim))
-               for part in ("mean", "std")):
+        if any(
+            stats[f"{k}_{part}"].shape != (dim,)
+            for k, dim in (("audio", mcfg.audio_dim), ("motion", mcfg.motion_dim))
+            for part in ("mean", "std")
+        ):
             raise InputFileError("stats.npz does not fit the model's channel counts", path=path)
         return cls(gen, stats=stats, config=cfg, path=path, device=device)
 
@@ -197,7 +200,13 @@ class Refiner:
 
     # ---- refining ---------------------------------------------------------------------------
     def refine(
-        self, motion, audio, *, mode: str = "full", hop: int = 16, batch: int = 256,
+        self,
+        motion,
+        audio,
+        *,
+        mode: str = "full",
+        hop: int = 16,
+        batch: int = 256,
         keep_below_hz: float | None = None,
     ) -> np.ndarray:
         """Refine k-NN motion with the audio of the same frames.

@@ -18,13 +18,14 @@ block is two (Conv1d k=3, BatchNorm, LeakyReLU 0.2). The critic is three such
 blocks with InstanceNorm (512, 256, 128 channels), each followed by an average
 pool by 2, then a linear layer to one score (no sigmoid: WGAN).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import torch
-from torch import nn
 import torch.nn.functional as F
+from torch import nn
 
 from .._config import JsonConfig
 from ..errors import ConfigError
@@ -74,7 +75,6 @@ class ModelConfig(JsonConfig):
             raise ConfigError(f"window must be a positive multiple of {GENERATOR_STRIDE}, got {self.window}")
         if self.audio_dim < 1 or self.motion_dim < 1:
             raise ConfigError("audio_dim and motion_dim must be positive")
-
 
 
 def _double_conv(cin: int, cout: int, norm) -> nn.Sequential:

@@ -18,6 +18,7 @@ from the last checkpoint. Random draws come from one seeded ``torch.Generator``
 whose state is checkpointed, so a resumed run ends with the same weights as an
 uninterrupted one.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -29,18 +30,18 @@ import shutil
 import signal
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
 
-from .._version import __version__
 from .._config import JsonConfig
+from .._io import atomic_write
+from .._version import __version__
 from ..database import MatchingDatabase
 from ..errors import ConfigError, DatabaseError, InputFileError
-from .._io import atomic_write
 from ..features import LAYOUT
 from ..skeleton import JOINT_NAMES
 from .data import PairsConfig, TrainingPairs, make_training_pairs
@@ -136,7 +137,6 @@ class TrainConfig(JsonConfig):
             raise ConfigError(f"l1_reduction must be 'window_sum' or 'mean', got {self.l1_reduction!r}")
         if self.gp_weight < 0 or self.l1_weight < 0:
             raise ConfigError("gp_weight and l1_weight must not be negative")
-
 
 
 @dataclass(frozen=True)
@@ -362,7 +362,12 @@ def _write_log(path: Path, rows: list[dict]) -> None:
     w = csv.DictWriter(text, fieldnames=LOG_COLUMNS, lineterminator="\n")
     w.writeheader()
     for row in rows:
-        w.writerow({k: ("" if row.get(k) is None else (f"{row[k]:.6g}" if isinstance(row[k], float) else row[k])) for k in LOG_COLUMNS})
+        w.writerow(
+            {
+                k: ("" if row.get(k) is None else (f"{row[k]:.6g}" if isinstance(row[k], float) else row[k]))
+                for k in LOG_COLUMNS
+            }
+        )
     data = text.getvalue().encode("utf-8")
     atomic_write(path, lambda f: f.write(data), overwrite=True)
 
@@ -379,11 +384,19 @@ def _read_log(path: Path, upto: int) -> list[dict]:
             except (KeyError, ValueError):
                 raise InputFileError("loss_log.csv has a row without an iteration number", path=path) from None
             if it <= upto:
-                rows.append({k: (int(v) if k == "iteration" else (float(v) if v != "" else None)) for k, v in row.items() if k in LOG_COLUMNS})
+                rows.append(
+                    {
+                        k: (int(v) if k == "iteration" else (float(v) if v != "" else None))
+                        for k, v in row.items()
+                        if k in LOG_COLUMNS
+                    }
+                )
     return rows
 
 
-def _save_checkpoint(out: Path, trainer: Trainer, meta: dict, stats: dict, rows: list[dict], *, train_state: bool) -> None:
+def _save_checkpoint(
+    out: Path, trainer: Trainer, meta: dict, stats: dict, rows: list[dict], *, train_state: bool
+) -> None:
     """Write a whole checkpoint folder beside ``out`` and swap it in: all of it or nothing.
 
     The files go into ``.NAME.tmp-PID`` (``config.json`` last, with the hashes of
@@ -504,13 +517,25 @@ def train_refiner(
     with output_lock(out):
         # a checkpoint swap cut short by a kill is undone, its temporary folder removed
         clean_stale(out, own=True)
-        return _train_locked(db, out, preset_name=preset_name, iterations=iterations, model=model, train=train,
-                             data=data, resume=resume, device=device, keep_train_state=keep_train_state,
-                             on_pairs=on_pairs, on_step=on_step)
+        return _train_locked(
+            db,
+            out,
+            preset_name=preset_name,
+            iterations=iterations,
+            model=model,
+            train=train,
+            data=data,
+            resume=resume,
+            device=device,
+            keep_train_state=keep_train_state,
+            on_pairs=on_pairs,
+            on_step=on_step,
+        )
 
 
-def _train_locked(db, out: Path, *, preset_name, iterations, model, train, data, resume, device,
-                  keep_train_state, on_pairs, on_step) -> Path:
+def _train_locked(
+    db, out: Path, *, preset_name, iterations, model, train, data, resume, device, keep_train_state, on_pairs, on_step
+) -> Path:
     """:func:`train_refiner` once the output is checked and locked."""
     p = preset(preset_name)
     model = model or p.model
@@ -525,11 +550,15 @@ def _train_locked(db, out: Path, *, preset_name, iterations, model, train, data,
         if not prev.get("resumable") or not (out / "train_state.pt").is_file():
             raise InputFileError("this refiner folder holds no training state to resume from", path=out)
         if prev.get("layout") != db.meta.get("layout"):
-            raise DatabaseError("the database has another feature layout than the checkpoint was trained on", path=db.path)
+            raise DatabaseError(
+                "the database has another feature layout than the checkpoint was trained on", path=db.path
+            )
         was = {k: prev.get("database", {}).get(k) for k in ("takes", "clips", "overlap_windows")}
         now = {k: _database_summary(db)[k] for k in was}
         if was != now:
-            raise DatabaseError(f"the checkpoint was trained on another database ({was}; this one: {now})", path=db.path)
+            raise DatabaseError(
+                f"the checkpoint was trained on another database ({was}; this one: {now})", path=db.path
+            )
         model = ModelConfig.from_dict(prev["model"])
         old_train = TrainConfig.from_dict(prev["training"])
         train = replace(old_train, iterations=train.iterations if iterations is not None else old_train.iterations)

@@ -30,6 +30,7 @@ threads
 kernels
     The compiled (numba) loops, imported when a search first runs.
 """
+
 from __future__ import annotations
 
 from .admissible import admissible_starts

@@ -9,6 +9,7 @@ the baselines and the walkthrough tables all use it.
 :func:`gesturekit.search.reference.window_admissible` states the same rule for
 one window, loop for loop; the tests hold the two equal.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -99,7 +100,11 @@ def control_starts(mask: np.ndarray, n: int, rule: str = "ends") -> np.ndarray:
 
 
 def admissible_starts(
-    valid: np.ndarray, n: int, *, exclude: np.ndarray | None = None, mask: np.ndarray | None = None,
+    valid: np.ndarray,
+    n: int,
+    *,
+    exclude: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
     rule: str = "ends",
 ) -> np.ndarray:
     """Every admissible window start of a step (rule 1 of Algorithm 1).

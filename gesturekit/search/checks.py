@@ -3,6 +3,7 @@
 Every check raises :class:`~gesturekit.errors.ConfigError` naming the input and
 the problem; the normalised inputs come back as C-contiguous arrays.
 """
+
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
@@ -125,4 +126,3 @@ def checked_sqnorms(x2: np.ndarray, name: str, workers: int = 1) -> np.ndarray:
     if max(top for _, top in stats) > MAX_ABS:
         raise ConfigError(f"{name} features exceed {MAX_ABS:g} in magnitude (are they z-scored?)")
     return out
-

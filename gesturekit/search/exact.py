@@ -6,6 +6,7 @@ at once, bit for bit. The fast search estimates distances in float32 and
 re-checks every near-tie with these; the bounds below say how far an estimate
 may be from the exact value (see :mod:`gesturekit.search.index`).
 """
+
 from __future__ import annotations
 
 import functools

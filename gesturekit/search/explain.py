@@ -14,6 +14,7 @@ for bit. :func:`explain_plan_step` does it for a step of a finished search from
 its :class:`~gesturekit.search.plan.SearchPlan`. The figures that draw it are in
 :mod:`gesturekit.viz.walkthrough`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -64,7 +65,7 @@ class StepExplanation:
         The control admitted no window and was dropped, as the search does.
     """
 
-    table: "pd.DataFrame"  # noqa: F821
+    table: pd.DataFrame  # noqa: F821
     clip: int
     start: int
     position: int
@@ -101,7 +102,7 @@ def _nearest(P, pose, ok) -> tuple[np.ndarray, np.ndarray]:
     rows = np.flatnonzero(flat_ok)
     P2 = P.reshape(M * T, D)
     for a in range(0, rows.size, _CHUNK_ROWS):
-        r = rows[a:a + _CHUNK_ROWS]
+        r = rows[a : a + _CHUNK_ROWS]
         d2[r] = exact_pose_sqdist(np.asarray(P2[r], dtype=np.float32), pose)
     d2[d2 == 0.0] = np.inf  # the query's own frame
     d2 = d2.reshape(M, T)
@@ -109,7 +110,6 @@ def _nearest(P, pose, ok) -> tuple[np.ndarray, np.ndarray]:
     best = d2[np.arange(M), start]
     start = np.where(np.isfinite(best), start, -1)
     return start.astype(np.int64), best
-
 
 
 def explain_step(
@@ -189,8 +189,10 @@ def explain_step(
         start, d2 = _nearest(P, pose, ok)
     alive = np.flatnonzero(start >= 0)
     if alive.size == 0:
-        raise ConfigError(f"no database window is admissible at t={t} (valid start, {n} frames inside "
-                          "the clip, no excluded frame) other than the query's own frame")
+        raise ConfigError(
+            f"no database window is admissible at t={t} (valid start, {n} frames inside "
+            "the clip, no excluded frame) other than the query's own frame"
+        )
 
     audio = exact_cosine_distance(np.asarray(F[alive, start[alive]], dtype=np.float32), f_t)
     n_alive = alive.size
@@ -212,24 +214,33 @@ def explain_step(
         out[alive] = values
         return out
 
-    table = pd.DataFrame({
-        "clip": np.arange(M),
-        "start": start,
-        "admissible": ok.sum(axis=1),
-        "pose_dist": full(np.sqrt(d2[alive]), np.nan, np.float64),
-        "audio_dist": full(audio, np.nan, np.float64),
-        "pose_rank": full(pose_rank, -1, np.int64),
-        "audio_rank": full(audio_rank, -1, np.int64),
-        "combined": full(combined, -1, np.int64),
-        "position": full(position, -1, np.int64),
-        "chosen": np.arange(M) == chosen,
-    })
-    return StepExplanation(
-        table=table, clip=chosen, start=c_start, position=pos,
-        next_pose=np.asarray(P[chosen, c_start + n - 1], dtype=np.float32).copy(),
-        pose=pose, audio=f_t.copy(), t=t, segment=n, k=k, relaxed=relaxed,
+    table = pd.DataFrame(
+        {
+            "clip": np.arange(M),
+            "start": start,
+            "admissible": ok.sum(axis=1),
+            "pose_dist": full(np.sqrt(d2[alive]), np.nan, np.float64),
+            "audio_dist": full(audio, np.nan, np.float64),
+            "pose_rank": full(pose_rank, -1, np.int64),
+            "audio_rank": full(audio_rank, -1, np.int64),
+            "combined": full(combined, -1, np.int64),
+            "position": full(position, -1, np.int64),
+            "chosen": np.arange(M) == chosen,
+        }
     )
-
+    return StepExplanation(
+        table=table,
+        clip=chosen,
+        start=c_start,
+        position=pos,
+        next_pose=np.asarray(P[chosen, c_start + n - 1], dtype=np.float32).copy(),
+        pose=pose,
+        audio=f_t.copy(),
+        t=t,
+        segment=n,
+        k=k,
+        relaxed=relaxed,
+    )
 
 
 def plan_step_inputs(plan: SearchPlan, result: SearchResult, pose_features: np.ndarray, step: int) -> dict:
@@ -260,8 +271,16 @@ def plan_step_inputs(plan: SearchPlan, result: SearchResult, pose_features: np.n
         pose = np.asarray(result.init_pose, dtype=np.float32)
     else:
         pose = np.asarray(pose_features[int(result.clip[i - 1]), int(result.start[i - 1]) + n - 1], dtype=np.float32)
-    return {"query_features": plan.query, "pose": pose, "t": i * n, "segment": n, "k": plan.config.k,
-            "mask": plan.mask_at(i), "exclude": plan.exclude, "mask_rule": plan.config.mask_rule}
+    return {
+        "query_features": plan.query,
+        "pose": pose,
+        "t": i * n,
+        "segment": n,
+        "k": plan.config.k,
+        "mask": plan.mask_at(i),
+        "exclude": plan.exclude,
+        "mask_rule": plan.config.mask_rule,
+    }
 
 
 def explain_plan_step(db, plan: SearchPlan, result: SearchResult, step: int) -> StepExplanation:

@@ -30,6 +30,7 @@ float32 product or sum overflows.
 Error bound (audio). The cosine distance is estimated from a float32 dot product
 (any summation order) and float64 norms; its error is below ``(A + 16) u``.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -269,9 +270,25 @@ class SearchIndex:
                 amc = np.empty(nc, np.float32)
                 und = np.empty(nc, bool)
                 bias2 = biases[0][r0:r1].reshape(nc, T)
-                compiled().scan_one(self._P3[c0:c1], Qp[0], bias2, float(nq[0]), self._npmax[c0:c1],
-                                    self._pose_c, TINY, G2, s0c, amc, und, self._F3[c0:c1], self._na2[c0:c1],
-                                    fqp[0], float(nbp[0]), av[c0:c1, 0], inexact[c0:c1, 0])
+                compiled().scan_one(
+                    self._P3[c0:c1],
+                    Qp[0],
+                    bias2,
+                    float(nq[0]),
+                    self._npmax[c0:c1],
+                    self._pose_c,
+                    TINY,
+                    G2,
+                    s0c,
+                    amc,
+                    und,
+                    self._F3[c0:c1],
+                    self._na2[c0:c1],
+                    fqp[0],
+                    float(nbp[0]),
+                    av[c0:c1, 0],
+                    inexact[c0:c1, 0],
+                )
                 s0[c0:c1, 0] = s0c
                 amin[c0:c1, 0] = amc
                 ci = np.flatnonzero(und)
@@ -286,13 +303,21 @@ class SearchIndex:
                 return found
             G3 = G[: nc * L].reshape(nc, L, B)
             product(self._P3[c0:c1, :L], W, G3)
-            for (bias, j0, j1) in ranges:
+            for bias, j0, j1 in ranges:
                 bias2 = bias[r0:r1].reshape(nc, T)[:, :L]
                 s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
                 s0[c0:c1, j0:j1] = s0c
                 amin[c0:c1, j0:j1] = amc
-                compiled().audio_at(self._F3[c0:c1], self._na2[c0:c1], s0c, amc, fqp[j0:j1], nbp[j0:j1],
-                                    av[c0:c1, j0:j1], inexact[c0:c1, j0:j1])
+                compiled().audio_at(
+                    self._F3[c0:c1],
+                    self._na2[c0:c1],
+                    s0c,
+                    amc,
+                    fqp[j0:j1],
+                    nbp[j0:j1],
+                    av[c0:c1, j0:j1],
+                    inexact[c0:c1, j0:j1],
+                )
                 ci, bj = np.nonzero(und)
                 if ci.size:
                     rows = np.full((ci.size, T), np.float32(np.inf))
@@ -334,8 +359,18 @@ class SearchIndex:
 
     # -- exact decisions for one query ----------------------------------------------------------
 
-    def _decide(self, best_start, best_est, q_sqnorm, undecided, query_pose, query_audio, scan_audio_est,
-                scan_audio_inexact, width):
+    def _decide(
+        self,
+        best_start,
+        best_est,
+        q_sqnorm,
+        undecided,
+        query_pose,
+        query_audio,
+        scan_audio_est,
+        scan_audio_inexact,
+        width,
+    ):
         """Steps 1-4 of Algorithm 1 for one query, after the scan; None when no clip survives.
 
         Step 1 (per clip the nearest admissible non-zero start) takes the scan's float32
@@ -359,9 +394,25 @@ class SearchIndex:
         work, estimates = scratch
         windows = work[7:9]  # rows 0-6 are rank_top's scratch
         undecided_clips, undecided_rows = undecided
-        n = k.survivors(best_start, best_est, float(q_sqnorm), self._npmax, self._pose_c, TINY, undecided_clips,
-                        undecided_rows, self._P3, query_pose, self._F3, query_audio, scan_audio_est, scan_audio_inexact,
-                        self._audio_e, windows, estimates)
+        n = k.survivors(
+            best_start,
+            best_est,
+            float(q_sqnorm),
+            self._npmax,
+            self._pose_c,
+            TINY,
+            undecided_clips,
+            undecided_rows,
+            self._P3,
+            query_pose,
+            self._F3,
+            query_audio,
+            scan_audio_est,
+            scan_audio_inexact,
+            self._audio_e,
+            windows,
+            estimates,
+        )
         if n == 0:
             return None
         windows, estimates = windows[:, :n], estimates[:, :n]
@@ -371,8 +422,25 @@ class SearchIndex:
         while True:  # sorted prefixes first; whole orders when they cannot decide
             pose_order, n_pose_sorted = _initial_order(estimates[0], prefix)
             audio_order, n_audio_sorted = _initial_order(estimates[2], prefix)
-            if k.rank_top(estimates, pose_order, n_pose_sorted, audio_order, n_audio_sorted, windows, self._P3,
-                          self._F3, query_pose, query_audio, width, out_i, out_f, work) >= 0:
+            if (
+                k.rank_top(
+                    estimates,
+                    pose_order,
+                    n_pose_sorted,
+                    audio_order,
+                    n_audio_sorted,
+                    windows,
+                    self._P3,
+                    self._F3,
+                    query_pose,
+                    query_audio,
+                    width,
+                    out_i,
+                    out_f,
+                    work,
+                )
+                >= 0
+            ):
                 break
             if prefix >= n:  # pragma: no cover - whole orders always decide
                 raise RuntimeError("rank_top could not decide with whole orders")
@@ -396,8 +464,9 @@ class SearchIndex:
         """Run Algorithm 1 for one query; see :func:`search` for the parameters."""
         return self.search_batch([query], configs=[config], masks=masks, step_masks=[step_mask], exclude=exclude)[0]
 
-    def search_batch(self, queries, *, configs=None, masks=None, step_masks=None, exclude=None,
-                     fps: float | None = None) -> list[SearchResult]:
+    def search_batch(
+        self, queries, *, configs=None, masks=None, step_masks=None, exclude=None, fps: float | None = None
+    ) -> list[SearchResult]:
         """Run Algorithm 1 for several queries with one scan of the database per step.
 
         Parameters
@@ -527,8 +596,9 @@ class SearchIndex:
 
         def decide(j):
             b = active[j]
-            return self._decide(s0[j], amin[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j],
-                                calls[b].config.table_width)
+            return self._decide(
+                s0[j], amin[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j], calls[b].config.table_width
+            )
 
         return dict(zip(active, run(decide, range(len(active)))))
 

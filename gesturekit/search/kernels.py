@@ -13,6 +13,7 @@ scan (see :meth:`gesturekit.search.index.SearchIndex._decide`): :func:`survivors
 ``best_est`` the scan's per-clip minimum, ``*_est`` an estimate, ``*_err`` its error
 bound, ``q_sqnorm`` ``|p_{t-1}|^2``.
 """
+
 from __future__ import annotations
 
 import numba
@@ -87,8 +88,25 @@ def dot32(row, query):
 
 
 @numba.njit(cache=True, nogil=True)
-def scan_one(poses, query_pose, bias, q_sqnorm, clip_max_sqnorm, err_factor, tiny, est, best_start, best_est, undecided,
-             audio, audio_sqnorms, query_audio, query_audio_sqnorm, audio_est, audio_inexact):
+def scan_one(
+    poses,
+    query_pose,
+    bias,
+    q_sqnorm,
+    clip_max_sqnorm,
+    err_factor,
+    tiny,
+    est,
+    best_start,
+    best_est,
+    undecided,
+    audio,
+    audio_sqnorms,
+    query_audio,
+    query_audio_sqnorm,
+    audio_est,
+    audio_inexact,
+):
     """The scan of one query, one pass per clip: estimates, reductions and the audio estimate.
 
     Parameters
@@ -337,9 +355,25 @@ def resolve_clip(row_est, clip, q_sqnorm, err, poses, query_pose):
 
 
 @numba.njit(cache=True, nogil=True)
-def survivors(best_start, best_est, q_sqnorm, clip_max_sqnorm, err_factor, tiny, undecided_clips, undecided_rows,
-              poses, query_pose, audio, query_audio, scan_audio_est, scan_audio_inexact, audio_bound, windows,
-              estimates):
+def survivors(
+    best_start,
+    best_est,
+    q_sqnorm,
+    clip_max_sqnorm,
+    err_factor,
+    tiny,
+    undecided_clips,
+    undecided_rows,
+    poses,
+    query_pose,
+    audio,
+    query_audio,
+    scan_audio_est,
+    scan_audio_inexact,
+    audio_bound,
+    windows,
+    estimates,
+):
     """Step 1 of Algorithm 1 for one query after the scan: each clip's nearest admissible start.
 
     Parameters
@@ -401,8 +435,22 @@ def survivors(best_start, best_est, q_sqnorm, clip_max_sqnorm, err_factor, tiny,
 
 
 @numba.njit(cache=True, nogil=True)
-def settle(est, err, order, lo, hi, candidates, is_pose, clips, start, poses, audio, query_pose, query_audio,
-           query_audio_sqnorm):
+def settle(
+    est,
+    err,
+    order,
+    lo,
+    hi,
+    candidates,
+    is_pose,
+    clips,
+    start,
+    poses,
+    audio,
+    query_pose,
+    query_audio,
+    query_audio_sqnorm,
+):
     """Make ``order`` exact inside the group of every element of ``candidates``.
 
     The group's members get exact values (pose ``d2`` when ``is_pose``, else cosine distances;
@@ -473,8 +521,22 @@ def kth_smallest(x, k):
 
 
 @numba.njit(cache=True, nogil=True)
-def rank_top(estimates, pose_order, n_pose_sorted, audio_order, n_audio_sorted, windows, poses, audio,
-             query_pose, query_audio, width, out_i, out_f, work):
+def rank_top(
+    estimates,
+    pose_order,
+    n_pose_sorted,
+    audio_order,
+    n_audio_sorted,
+    windows,
+    poses,
+    audio,
+    query_pose,
+    query_audio,
+    width,
+    out_i,
+    out_f,
+    work,
+):
     """Steps 2-4 of Algorithm 1 for one query: the top ``width`` of the combined ranking.
 
     Parameters
@@ -533,10 +595,38 @@ def rank_top(estimates, pose_order, n_pose_sorted, audio_order, n_audio_sorted, 
         if plo[i] + alo[i] <= bound:
             candidates[nc] = i
             nc += 1
-    settle(v, e, pose_order, plo, phi, candidates, True, clips, start, poses, audio, query_pose, query_audio,
-           query_audio_sqnorm)
-    settle(av, ae, audio_order, alo, ahi, candidates, False, clips, start, poses, audio, query_pose, query_audio,
-           query_audio_sqnorm)
+    settle(
+        v,
+        e,
+        pose_order,
+        plo,
+        phi,
+        candidates,
+        True,
+        clips,
+        start,
+        poses,
+        audio,
+        query_pose,
+        query_audio,
+        query_audio_sqnorm,
+    )
+    settle(
+        av,
+        ae,
+        audio_order,
+        alo,
+        ahi,
+        candidates,
+        False,
+        clips,
+        start,
+        poses,
+        audio,
+        query_pose,
+        query_audio,
+        query_audio_sqnorm,
+    )
     prank = np.empty(nc, np.int64)
     arank = np.empty(nc, np.int64)
     key = np.empty(nc, np.int64)

@@ -7,6 +7,7 @@ pose resolved) and the control track. The synthesis searches with it and keeps i
 in its result; the baselines and the step explanations read the same plan, so
 what they show is what the search was given.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -138,5 +139,11 @@ def plan_search(db: MatchingDatabase, speech: np.ndarray, config: SynthesisConfi
     exclude = None
     if config.exclude_takes or config.exclude_ranges:
         exclude = db.exclusion_mask(takes=config.exclude_takes, ranges=config.exclude_ranges)
-    return SearchPlan(query=np.ascontiguousarray(query, dtype=np.float32), config=search, control=track,
-                      masks=masks, step_mask_index=np.asarray(index, dtype=np.int64), exclude=exclude)
+    return SearchPlan(
+        query=np.ascontiguousarray(query, dtype=np.float32),
+        config=search,
+        control=track,
+        masks=masks,
+        step_mask_index=np.asarray(index, dtype=np.int64),
+        exclude=exclude,
+    )

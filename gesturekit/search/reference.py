@@ -61,6 +61,7 @@ from the algorithm as written; these rules follow the algorithm:
   modulo N, and when fewer than ``k + 1`` clips survive; here the last step is cut
   to the query's length (rule 5) and the last survivor is taken (rule 4, ``short``).
 """
+
 from __future__ import annotations
 
 import math
@@ -287,6 +288,7 @@ def search_reference(
         p_prev = P[m, s + N - 1].tolist()
 
     if relaxed_steps:
-        warn(f"control relaxed at {describe_steps(relaxed_steps, step=N)}: no database window satisfies it",
-             stacklevel=2)
+        warn(
+            f"control relaxed at {describe_steps(relaxed_steps, step=N)}: no database window satisfies it", stacklevel=2
+        )
     return res

@@ -5,6 +5,7 @@ thread each while it runs (:func:`single_threaded_blas`), and a batch's matrix
 product goes to the routine that handles its tall, thin shape best
 (:func:`matrix_product`).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -95,4 +96,3 @@ def single_threaded_blas():
             limiter.restore_original_limits()
         if threads is not None:
             torch.set_num_threads(threads)
-

@@ -4,6 +4,7 @@ Both are plain data: the configuration is validated when it is made and saved
 with every result (:meth:`SearchConfig.to_dict`); the result holds the chosen
 window of every step and the table of its best candidates.
 """
+
 from __future__ import annotations
 
 import numbers
@@ -73,7 +74,8 @@ class SearchConfig:
                 raise ConfigError(f"SearchConfig.init_pose must be 'random' or a pose feature vector: {exc}") from None
             if arr.ndim != 1 or arr.size == 0 or not np.all(np.isfinite(arr)):
                 raise ConfigError(
-                    f"SearchConfig.init_pose must be a finite 1-D pose feature vector, got shape {arr.shape}")
+                    f"SearchConfig.init_pose must be a finite 1-D pose feature vector, got shape {arr.shape}"
+                )
             object.__setattr__(self, "init_pose", tuple(float(x) for x in arr.astype(np.float32)))
         if not isinstance(self.pins, Mapping):
             raise ConfigError(f"SearchConfig.pins must map step -> (clip, start), got {type(self.pins).__name__}")
@@ -96,7 +98,7 @@ class SearchConfig:
         return config_to_dict(self)
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "SearchConfig":
+    def from_dict(cls, d: Mapping) -> SearchConfig:
         """Inverse of :meth:`to_dict` (also of earlier versions' ``init``); unknown keys raise :class:`ConfigError`."""
         d = dict(d)
         if "init" in d and "init_pose" not in d:
@@ -180,7 +182,7 @@ class SearchResult:
     config: SearchConfig
 
     @classmethod
-    def empty(cls, n_steps: int, n_frames: int, width: int, *, config, init_pose, init_frame) -> "SearchResult":
+    def empty(cls, n_steps: int, n_frames: int, width: int, *, config, init_pose, init_frame) -> SearchResult:
         """A result to fill in: every table entry padded, every flag False."""
 
         def ints(*shape):
@@ -223,7 +225,7 @@ class SearchResult:
         out["init_frame"] = np.asarray(self.init_frame, dtype=np.int64)
         return out
 
-    def equals(self, other: "SearchResult") -> bool:
+    def equals(self, other: SearchResult) -> bool:
         """Whether two results are identical (arrays bit for bit, NaN equal to NaN, same config)."""
         if self.config != other.config:
             return False
@@ -298,4 +300,3 @@ def describe_steps(steps, *, step: int, fps: float | None = None, most: int = 3)
     if fps is not None:
         text += f" ({len(steps)} step{'s' if len(steps) != 1 else ''})"
     return text
-

@@ -5,6 +5,7 @@ base64), the form plotly itself serialises them to; :func:`data_array` reads
 any form back. Used by :mod:`gesturekit.viz.skeleton_figure`,
 :mod:`gesturekit.viz.charts` and :mod:`gesturekit.viz.viewer`.
 """
+
 from __future__ import annotations
 
 import base64
@@ -15,7 +16,6 @@ import numpy as np
 from ..errors import ConfigError
 from ..motion import Motion
 from .appearance import APPEARANCE
-
 
 #: Colours of the motions of a figure, in order (repeated past the end): the appearance's, so a
 #: motion has one colour in every view.
@@ -54,12 +54,18 @@ def data_array(value) -> np.ndarray:
         if value.get("shape"):
             out = out.reshape([int(d) for d in str(value["shape"]).split(",")])
         return out.astype(np.float64)
-    return np.array([np.nan if v is None else v for v in np.asarray(value, dtype=object).ravel()],
-                    dtype=np.float64).reshape(np.shape(value))
+    return np.array(
+        [np.nan if v is None else v for v in np.asarray(value, dtype=object).ravel()], dtype=np.float64
+    ).reshape(np.shape(value))
 
 
 def _motions_and_labels(
-    motions, labels, *, who: str, empty_ok: bool = False, label_one: bool = False,
+    motions,
+    labels,
+    *,
+    who: str,
+    empty_ok: bool = False,
+    label_one: bool = False,
 ) -> tuple[list[Motion], list[str]]:
     """One motion or a list of them, with one label each (checked; ``who`` names the caller in errors).
 

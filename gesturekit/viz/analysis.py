@@ -9,10 +9,11 @@ system (:func:`metrics_figure`, :func:`adherence_figure`). Every function
 returns a :class:`plotly.graph_objects.Figure`; traces carry a ``meta`` dict
 saying what they show. Units: metres, seconds, m/s.
 """
+
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import plotly.graph_objects as go
@@ -86,19 +87,32 @@ def loss_curves_figure(log, *, smooth: int = 1, title: str | None = None, height
             y = log[name].astype(float)
             if smooth > 1:
                 y = y.rolling(int(smooth), center=True, min_periods=1).mean()
-            fig.add_trace(go.Scatter(x=x, y=y.to_numpy(), mode="lines", name=name,
-                                     line=dict(color=MOTION_COLORS[k % len(MOTION_COLORS)], width=1.5),
-                                     meta={"part": "loss", "column": name}), row=1, col=col)
+            fig.add_trace(
+                go.Scatter(
+                    x=x,
+                    y=y.to_numpy(),
+                    mode="lines",
+                    name=name,
+                    line=dict(color=MOTION_COLORS[k % len(MOTION_COLORS)], width=1.5),
+                    meta={"part": "loss", "column": name},
+                ),
+                row=1,
+                col=col,
+            )
             k += 1
     fig.update_xaxes(title_text="iteration")
-    fig.update_layout(title=dict(text=title) if title else None, height=height,
-                      margin=dict(l=10, r=10, t=60 if title else 40, b=10),
-                      legend=dict(orientation="h", y=-0.2))
+    fig.update_layout(
+        title=dict(text=title) if title else None,
+        height=height,
+        margin=dict(l=10, r=10, t=60 if title else 40, b=10),
+        legend=dict(orientation="h", y=-0.2),
+    )
     return fig
 
 
-def join_profile(positions, boundaries, *, fps: float, radius: int = 4,
-                 joints: Sequence[int] | None = KINEMATIC_JOINTS) -> tuple[np.ndarray, np.ndarray]:
+def join_profile(
+    positions, boundaries, *, fps: float, radius: int = 4, joints: Sequence[int] | None = KINEMATIC_JOINTS
+) -> tuple[np.ndarray, np.ndarray]:
     """Mean joint speed frame by frame around the joins of concatenated segments.
 
     Offset 0 is the step across a join, from frame ``b - 1`` (the last of a
@@ -143,8 +157,15 @@ def join_profile(positions, boundaries, *, fps: float, radius: int = 4,
     return offsets, disp[(b - 1)[:, None] + offsets[None, :]].mean(axis=0)
 
 
-def join_profile_figure(motions, boundaries, *, labels: Sequence[str] | None = None, radius: int = 4,
-                        title: str | None = None, height: int = 340) -> go.Figure:
+def join_profile_figure(
+    motions,
+    boundaries,
+    *,
+    labels: Sequence[str] | None = None,
+    radius: int = 4,
+    title: str | None = None,
+    height: int = 340,
+) -> go.Figure:
     """:func:`join_profile` of several motions with the same joins (e.g. k-NN and refined), overlaid.
 
     Parameters
@@ -167,20 +188,38 @@ def join_profile_figure(motions, boundaries, *, labels: Sequence[str] | None = N
     fig = go.Figure()
     for i, (m, label) in enumerate(zip(motions, labels)):
         off, v = join_profile(m.positions, boundaries, fps=m.fps, radius=radius)
-        fig.add_trace(go.Scatter(x=off, y=v, mode="lines+markers", name=label,
-                                 line=dict(color=MOTION_COLORS[i % len(MOTION_COLORS)], width=2),
-                                 meta={"part": "join", "motion": i}))
+        fig.add_trace(
+            go.Scatter(
+                x=off,
+                y=v,
+                mode="lines+markers",
+                name=label,
+                line=dict(color=MOTION_COLORS[i % len(MOTION_COLORS)], width=2),
+                meta={"part": "join", "motion": i},
+            )
+        )
     fig.add_vline(x=0, line=dict(color="#888", dash="dot", width=1), name="join")
-    fig.update_layout(title=dict(text=title) if title else None, height=height,
-                      margin=dict(l=10, r=10, t=40 if title else 10, b=10),
-                      xaxis=dict(title="frames from the join (0: the step across it)", dtick=1),
-                      yaxis=dict(title="mean joint speed [m/s]", rangemode="tozero"))
+    fig.update_layout(
+        title=dict(text=title) if title else None,
+        height=height,
+        margin=dict(l=10, r=10, t=40 if title else 10, b=10),
+        xaxis=dict(title="frames from the join (0: the step across it)", dtick=1),
+        yaxis=dict(title="mean joint speed [m/s]", rangemode="tozero"),
+    )
     return fig
 
 
-def beats_figure(motions, audio, *, labels: Sequence[str] | None = None, sr: int = AUDIO_SR,
-                 start_s: float = 0.0, end_s: float | None = None, title: str | None = None,
-                 height: int = 360) -> go.Figure:
+def beats_figure(
+    motions,
+    audio,
+    *,
+    labels: Sequence[str] | None = None,
+    sr: int = AUDIO_SR,
+    start_s: float = 0.0,
+    end_s: float | None = None,
+    title: str | None = None,
+    height: int = 360,
+) -> go.Figure:
     """Kinetic velocity of motions with their beats (velocity minima) against the speech's onsets.
 
     The quantities of :func:`gesturekit.evaluate.metrics.beat_consistency_score`: a beat
@@ -220,25 +259,69 @@ def beats_figure(motions, audio, *, labels: Sequence[str] | None = None, sr: int
         beats = beats[(beats >= start_s) & (beats <= end)]
         bi = np.round(beats * m.fps).astype(np.int64)
         top = max(top, float(v[keep].max()) if keep.any() else 0.0)
-        fig.add_trace(go.Scatter(x=t[keep], y=v[keep], mode="lines", name=label, line=dict(color=color, width=1.6),
-                                 legendgroup=f"m{i}", meta={"part": "velocity", "motion": i}))
-        fig.add_trace(go.Scatter(x=beats, y=v[bi], mode="markers", name=f"{label} beats", legendgroup=f"m{i}",
-                                 marker=dict(color=color, size=7, symbol="triangle-up"), showlegend=False,
-                                 meta={"part": "beats", "motion": i}))
-    fig.add_trace(go.Scatter(x=onsets, y=np.zeros_like(onsets), mode="markers", name="speech onsets",
-                             marker=dict(color="#444", size=8, symbol="line-ns-open"), meta={"part": "onsets"}))
-    fig.update_layout(shapes=[dict(type="line", x0=float(o), x1=float(o), yref="y domain", y0=0, y1=1,
-                                   line=dict(color="#bbb", width=1), layer="below", name="onset") for o in onsets])
-    fig.update_layout(title=dict(text=title) if title else None, height=height,
-                      margin=dict(l=10, r=10, t=40 if title else 10, b=10),
-                      xaxis=dict(title="time [s]", range=[start_s, end]),
-                      yaxis=dict(title="kinetic velocity [m/s]", range=[-0.05 * top, 1.05 * top if top else 1]),
-                      legend=dict(orientation="h", y=1.02, x=1, xanchor="right", yanchor="bottom"))
+        fig.add_trace(
+            go.Scatter(
+                x=t[keep],
+                y=v[keep],
+                mode="lines",
+                name=label,
+                line=dict(color=color, width=1.6),
+                legendgroup=f"m{i}",
+                meta={"part": "velocity", "motion": i},
+            )
+        )
+        fig.add_trace(
+            go.Scatter(
+                x=beats,
+                y=v[bi],
+                mode="markers",
+                name=f"{label} beats",
+                legendgroup=f"m{i}",
+                marker=dict(color=color, size=7, symbol="triangle-up"),
+                showlegend=False,
+                meta={"part": "beats", "motion": i},
+            )
+        )
+    fig.add_trace(
+        go.Scatter(
+            x=onsets,
+            y=np.zeros_like(onsets),
+            mode="markers",
+            name="speech onsets",
+            marker=dict(color="#444", size=8, symbol="line-ns-open"),
+            meta={"part": "onsets"},
+        )
+    )
+    fig.update_layout(
+        shapes=[
+            dict(
+                type="line",
+                x0=float(o),
+                x1=float(o),
+                yref="y domain",
+                y0=0,
+                y1=1,
+                line=dict(color="#bbb", width=1),
+                layer="below",
+                name="onset",
+            )
+            for o in onsets
+        ]
+    )
+    fig.update_layout(
+        title=dict(text=title) if title else None,
+        height=height,
+        margin=dict(l=10, r=10, t=40 if title else 10, b=10),
+        xaxis=dict(title="time [s]", range=[start_s, end]),
+        yaxis=dict(title="kinetic velocity [m/s]", range=[-0.05 * top, 1.05 * top if top else 1]),
+        legend=dict(orientation="h", y=1.02, x=1, xanchor="right", yanchor="bottom"),
+    )
     return fig
 
 
-def metrics_figure(table, *, columns: Sequence[str] | None = None, cols: int = 4, title: str | None = None,
-                   height: int | None = None) -> go.Figure:
+def metrics_figure(
+    table, *, columns: Sequence[str] | None = None, cols: int = 4, title: str | None = None, height: int | None = None
+) -> go.Figure:
     """An evaluation table as bars: one subplot per measure, one bar per system.
 
     Parameters
@@ -259,28 +342,43 @@ def metrics_figure(table, *, columns: Sequence[str] | None = None, cols: int = 4
     if "system" not in getattr(table, "columns", ()):
         raise ConfigError("the table needs a 'system' column")
     if columns is None:
-        columns = [c for c in table.columns if c not in ("system", "frames", "relaxed_steps")
-                   and np.issubdtype(np.asarray(table[c]).dtype, np.number)]
+        columns = [
+            c
+            for c in table.columns
+            if c not in ("system", "frames", "relaxed_steps") and np.issubdtype(np.asarray(table[c]).dtype, np.number)
+        ]
     columns = list(columns)
     missing = [c for c in columns if c not in table.columns]
     if missing or not columns or cols < 1:
         raise ConfigError(f"metrics_figure: unknown or no columns ({', '.join(missing) or 'none given'})")
     cols = min(cols, len(columns))
     rows = int(math.ceil(len(columns) / cols))
-    fig = make_subplots(rows=rows, cols=cols, subplot_titles=columns, vertical_spacing=0.5 / rows,
-                        horizontal_spacing=0.05)
+    fig = make_subplots(
+        rows=rows, cols=cols, subplot_titles=columns, vertical_spacing=0.5 / rows, horizontal_spacing=0.05
+    )
     systems = [str(s) for s in table["system"]]
     colors = [MOTION_COLORS[i % len(MOTION_COLORS)] for i in range(len(systems))]
     for i, name in enumerate(columns):
         y = np.asarray(table[name], dtype=np.float64)
         ok = np.isfinite(y)
-        fig.add_trace(go.Bar(x=[s for s, k in zip(systems, ok) if k], y=y[ok],
-                             marker=dict(color=[c for c, k in zip(colors, ok) if k]), name=name, showlegend=False,
-                             meta={"part": "metric", "column": name},
-                             hovertemplate="%{x}: %{y:.4g}<extra></extra>"),
-                      row=i // cols + 1, col=i % cols + 1)
-    fig.update_layout(title=dict(text=title) if title else None, height=height or 260 * rows,
-                      margin=dict(l=10, r=10, t=60 if title else 30, b=10))
+        fig.add_trace(
+            go.Bar(
+                x=[s for s, k in zip(systems, ok) if k],
+                y=y[ok],
+                marker=dict(color=[c for c, k in zip(colors, ok) if k]),
+                name=name,
+                showlegend=False,
+                meta={"part": "metric", "column": name},
+                hovertemplate="%{x}: %{y:.4g}<extra></extra>",
+            ),
+            row=i // cols + 1,
+            col=i % cols + 1,
+        )
+    fig.update_layout(
+        title=dict(text=title) if title else None,
+        height=height or 260 * rows,
+        margin=dict(l=10, r=10, t=60 if title else 30, b=10),
+    )
     return fig
 
 
@@ -307,8 +405,9 @@ def adherence_figure(controls, *, title: str | None = None, height: int = 420) -
     runs = [r for r in ("controlled", "uncontrolled") if (controls["run"] == r).any()]
     if not runs:
         raise ConfigError("controls has no 'controlled' or 'uncontrolled' row")
-    fig = make_subplots(rows=len(runs), cols=1, shared_xaxes=True, vertical_spacing=0.12,
-                        subplot_titles=[f"{r} run" for r in runs])
+    fig = make_subplots(
+        rows=len(runs), cols=1, shared_xaxes=True, vertical_spacing=0.12, subplot_titles=[f"{r} run" for r in runs]
+    )
     systems = list(dict.fromkeys(controls["system"]))
     shown = set()
     for r, run in enumerate(runs, start=1):
@@ -317,14 +416,26 @@ def adherence_figure(controls, *, title: str | None = None, height: int = 420) -
             if part.empty:
                 continue
             x = [f"{a:.3g}-{b:.3g} s: {c}" for a, b, c in zip(part["start_s"], part["end_s"], part["constraint"])]
-            fig.add_trace(go.Bar(x=x, y=part["adherence"].to_numpy(dtype=float), name=system,
-                                 marker=dict(color=MOTION_COLORS[i % len(MOTION_COLORS)]), legendgroup=system,
-                                 showlegend=system not in shown,
-                                 meta={"part": "adherence", "system": system, "run": run}),
-                          row=r, col=1)
+            fig.add_trace(
+                go.Bar(
+                    x=x,
+                    y=part["adherence"].to_numpy(dtype=float),
+                    name=system,
+                    marker=dict(color=MOTION_COLORS[i % len(MOTION_COLORS)]),
+                    legendgroup=system,
+                    showlegend=system not in shown,
+                    meta={"part": "adherence", "system": system, "run": run},
+                ),
+                row=r,
+                col=1,
+            )
             shown.add(system)
     fig.update_yaxes(range=[0, 1.05], title_text="frames meeting it")
-    fig.update_layout(barmode="group", title=dict(text=title) if title else None, height=height,
-                      margin=dict(l=10, r=10, t=90 if title else 60, b=10),
-                      legend=dict(orientation="h", y=0.99, yanchor="top", yref="container", x=1, xanchor="right"))
+    fig.update_layout(
+        barmode="group",
+        title=dict(text=title) if title else None,
+        height=height,
+        margin=dict(l=10, r=10, t=90 if title else 60, b=10),
+        legend=dict(orientation="h", y=0.99, yanchor="top", yref="container", x=1, xanchor="right"),
+    )
     return fig

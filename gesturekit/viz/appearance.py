@@ -13,6 +13,7 @@ second (refined) orange.
 Everything here is plain numpy: each drawing backend (the page's 2D canvas, a
 plotly figure, a pyvista render) reads the same numbers and draws them its own way.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -100,7 +101,7 @@ class BodyShapes:
 def hex_to_rgb(color: str) -> np.ndarray:
     """``"#rrggbb"`` as floats in [0, 1], shape (3,)."""
     c = color.lstrip("#")
-    return np.array([int(c[i:i + 2], 16) for i in (0, 2, 4)], dtype=np.float64) / 255.0
+    return np.array([int(c[i : i + 2], 16) for i in (0, 2, 4)], dtype=np.float64) / 255.0
 
 
 def rgb_to_hex(rgb) -> str:
@@ -266,15 +267,31 @@ class Appearance:
             Capsule(lchest, rchest, self.chest_radius, "torso"),
         ]
         radius = {
-            "chest": self.torso_radius, "upper_chest": self.torso_radius,
-            "neck": self.neck_base_radius, "neck_upper": self.neck_radius, "head": self.neck_radius,
-            "left_collar": self.shoulder_radius, "left_shoulder": self.shoulder_radius,
-            "right_collar": self.shoulder_radius, "right_shoulder": self.shoulder_radius,
-            "left_elbow": self.upper_arm_radius, "right_elbow": self.upper_arm_radius,
+            "chest": self.torso_radius,
+            "upper_chest": self.torso_radius,
+            "neck": self.neck_base_radius,
+            "neck_upper": self.neck_radius,
+            "head": self.neck_radius,
+            "left_collar": self.shoulder_radius,
+            "left_shoulder": self.shoulder_radius,
+            "right_collar": self.shoulder_radius,
+            "right_shoulder": self.shoulder_radius,
+            "left_elbow": self.upper_arm_radius,
+            "right_elbow": self.upper_arm_radius,
         }
-        part = {"chest": "torso", "upper_chest": "torso", "neck": "torso", "neck_upper": "neck", "head": "neck",
-                "left_collar": "torso", "left_shoulder": "torso", "right_collar": "torso",
-                "right_shoulder": "torso", "left_elbow": "upper_arm", "right_elbow": "upper_arm"}
+        part = {
+            "chest": "torso",
+            "upper_chest": "torso",
+            "neck": "torso",
+            "neck_upper": "neck",
+            "head": "neck",
+            "left_collar": "torso",
+            "left_shoulder": "torso",
+            "right_collar": "torso",
+            "right_shoulder": "torso",
+            "left_elbow": "upper_arm",
+            "right_elbow": "upper_arm",
+        }
         for child in range(1, N_JOINTS):
             parent = int(PARENTS[child])
             if parent < 0 or (child, parent) == head_bone:
@@ -320,14 +337,17 @@ class Appearance:
         across = _unit(p[:, j("left_shoulder")] - p[:, j("right_shoulder")])
         head, top = p[:, j("head")], p[:, j("head_top")]
         breast = chest + (p[:, j("upper_chest")] - chest) * self.chest_height  # broadest high on the chest
-        derived = np.stack([
-            pelvis,
-            pelvis + across * self.hip_half_width,
-            pelvis - across * self.hip_half_width,
-            head + (top - head) * self.head_centre,
-            breast + across * self.chest_half_width,
-            breast - across * self.chest_half_width,
-        ], axis=1)
+        derived = np.stack(
+            [
+                pelvis,
+                pelvis + across * self.hip_half_width,
+                pelvis - across * self.hip_half_width,
+                head + (top - head) * self.head_centre,
+                breast + across * self.chest_half_width,
+                breast - across * self.chest_half_width,
+            ],
+            axis=1,
+        )
         caps, spheres = self.shapes()
         points = np.concatenate([p, derived], axis=1).astype(np.float32)
         return BodyShapes(points=points, capsules=caps, spheres=spheres)

@@ -5,6 +5,7 @@ tube between its two points plus a ball of its radius at each end; the
 appearance's spheres (the head) are balls. Each frame only rewrites the
 meshes' points and normals in numpy. Part of :mod:`gesturekit.viz.render`.
 """
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -81,8 +82,9 @@ class BodyMeshes:
             caps = [c for c in capsules if c.part == part]
             ends = sorted({(c.a, c.radius) for c in caps} | {(c.b, c.radius) for c in caps})
             # a finger's balls cover a few pixels: a coarse sphere is enough, and much cheaper
-            balls = [(p, r, self._ball, ball_tris) if r >= _SMALL_BALL else (p, r, self._small, small_tris)
-                     for p, r in ends]
+            balls = [
+                (p, r, self._ball, ball_tris) if r >= _SMALL_BALL else (p, r, self._small, small_tris) for p, r in ends
+            ]
             balls.sort(key=lambda ball: ball[2] is self._small)  # each template's balls in one run of points
             balls += [(s.centre, s.radius, self._head, head_tris) for s in spheres if s.part == part]
             polygons, n = [], 0
@@ -97,20 +99,24 @@ class BodyMeshes:
             mesh = _mesh_with_normals(n, polygons)
             normals = mesh.point_data["Normals"]
             for (_, _, template, _), start in zip(balls, ball_index):
-                normals[start:start + len(template)] = template  # a ball's normals never change
+                normals[start : start + len(template)] = template  # a ball's normals never change
             # balls of one template are moved together: (centres, radii, template, first point)
             groups = []
             for template in (self._ball, self._small, self._head):
                 mine = [(p, r, start) for (p, r, t, _), start in zip(balls, ball_index) if t is template]
                 if mine:
-                    groups.append((np.array([m[0] for m in mine]), np.array([m[1] for m in mine]), template,
-                                   mine[0][2]))
-            self._layout.append((
-                mesh,
-                np.array([c.a for c in caps], dtype=np.int64), np.array([c.b for c in caps], dtype=np.int64),
-                np.array([c.radius for c in caps]),
-                groups,
-            ))
+                    groups.append(
+                        (np.array([m[0] for m in mine]), np.array([m[1] for m in mine]), template, mine[0][2])
+                    )
+            self._layout.append(
+                (
+                    mesh,
+                    np.array([c.a for c in caps], dtype=np.int64),
+                    np.array([c.b for c in caps], dtype=np.int64),
+                    np.array([c.radius for c in caps]),
+                    groups,
+                )
+            )
             self.parts[part] = mesh
 
     def update(self, points: np.ndarray) -> None:
@@ -138,7 +144,7 @@ class BodyMeshes:
                 normals[:nt] = np.concatenate([radial, radial], axis=1).reshape(-1, 3)
             for centres, r, template, at in groups:
                 balls = points[centres][:, None, :] + r[:, None, None] * template[None]
-                xyz[at:at + balls.shape[0] * balls.shape[1]] = balls.reshape(-1, 3)
+                xyz[at : at + balls.shape[0] * balls.shape[1]] = balls.reshape(-1, 3)
             mesh.GetPoints().Modified()
             mesh.GetPointData().GetNormals().Modified()
             mesh.Modified()

@@ -3,10 +3,11 @@
 Line charts put their legend under the plot (:data:`BOTTOM_LEGEND`) and mark
 control segments as coloured bands. Part of :mod:`gesturekit.viz.figures`.
 """
+
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import plotly.graph_objects as go
@@ -17,11 +18,9 @@ from ..errors import ConfigError
 from ..motion import Motion
 from ._plotly import _BAND_COLORS, MOTION_COLORS, _motions_and_labels
 
-
 #: Where the line charts put their legend: under the plot, at the figure's bottom left, clear of
 #: the chart toolbar a page shows at the top right (and of the control labels above the plot).
-BOTTOM_LEGEND = dict(orientation="h", x=0, xanchor="left", xref="container", y=0, yanchor="bottom",
-                     yref="container")
+BOTTOM_LEGEND = dict(orientation="h", x=0, xanchor="left", xref="container", y=0, yanchor="bottom", yref="container")
 
 #: Pixels above the plots of :func:`attribute_histograms`: its two-line title, then the subplot titles.
 HISTOGRAM_TOP = 100
@@ -75,8 +74,11 @@ def attribute_histograms(db, *, bins: int = 40, names: Sequence[str] | None = No
     cols = min(cols, len(names))
     rows = int(math.ceil(len(names) / cols))
     fig = make_subplots(
-        rows=rows, cols=cols, subplot_titles=[f"{n} [{_attribute_unit(n)}]" for n in names],
-        horizontal_spacing=0.06, vertical_spacing=0.5 / rows,
+        rows=rows,
+        cols=cols,
+        subplot_titles=[f"{n} [{_attribute_unit(n)}]" for n in names],
+        horizontal_spacing=0.06,
+        vertical_spacing=0.5 / rows,
     )
     for i, name in enumerate(names):
         values = np.asarray(db.attribute(name), dtype=np.float64).ravel()
@@ -88,26 +90,39 @@ def attribute_histograms(db, *, bins: int = 40, names: Sequence[str] | None = No
         row, col = i // cols + 1, i % cols + 1
         fig.add_trace(
             go.Bar(
-                x=centres.astype(np.float32), y=counts, width=np.diff(edges).astype(np.float32),
-                marker=dict(color=colors.tolist(), line=dict(width=0)), name=name, showlegend=False,
+                x=centres.astype(np.float32),
+                y=counts,
+                width=np.diff(edges).astype(np.float32),
+                marker=dict(color=colors.tolist(), line=dict(width=0)),
+                name=name,
+                showlegend=False,
                 meta={"part": "histogram", "attribute": name},
                 hovertemplate=f"{name}: %{{x:.3f}} {_attribute_unit(name)}<br>%{{y}} frames<extra></extra>",
             ),
-            row=row, col=col,
+            row=row,
+            col=col,
         )
         for which, x, color in (("low", lo, "#1f4e79"), ("high", hi, "#a3222b")):
-            fig.add_vline(x=float(x), row=row, col=col, line=dict(color=color, dash="dash", width=1.5),
-                          name=f"{name} {which}")
+            fig.add_vline(
+                x=float(x), row=row, col=col, line=dict(color=color, dash="dash", width=1.5), name=f"{name} {which}"
+            )
     pct = (getattr(db, "meta", None) or {}).get("build", {}).get("percentiles")
     subtitle = (
         f"dashed lines: the {pct[0]:g}th (low) and {pct[1]:g}th (high) percentiles"
-        if pct else "dashed lines: the low and high thresholds"
+        if pct
+        else "dashed lines: the low and high thresholds"
     )
     fig.update_layout(
         # the title sits at the figure's top, the subplot titles in room of their own below it
-        title=dict(text=f"Control attributes of the database frames<br><sup>{subtitle}</sup>",
-                   y=1 - 16 / (230 * rows + HISTOGRAM_TOP), yref="container", yanchor="top"),
-        height=230 * rows + HISTOGRAM_TOP, margin=dict(l=10, r=10, t=HISTOGRAM_TOP, b=10), bargap=0,
+        title=dict(
+            text=f"Control attributes of the database frames<br><sup>{subtitle}</sup>",
+            y=1 - 16 / (230 * rows + HISTOGRAM_TOP),
+            yref="container",
+            yanchor="top",
+        ),
+        height=230 * rows + HISTOGRAM_TOP,
+        margin=dict(l=10, r=10, t=HISTOGRAM_TOP, b=10),
+        bargap=0,
     )
     return fig
 
@@ -189,26 +204,75 @@ def waveform_figure(
 
     fig = go.Figure()
     line = dict(color="#6b7f99", width=1)
-    fig.add_trace(go.Scatter(x=t_bins.astype(np.float32), y=padded.max(axis=1), mode="lines", line=line,
-                             name="waveform", hoverinfo="skip", meta={"part": "waveform_max"}))
-    fig.add_trace(go.Scatter(x=t_bins.astype(np.float32), y=padded.min(axis=1), mode="lines", line=line,
-                             fill="tonexty", fillcolor="rgba(107,127,153,0.45)", showlegend=False,
-                             hoverinfo="skip", meta={"part": "waveform_min"}))
-    fig.add_trace(go.Scatter(x=t_rms.astype(np.float32), y=rms.astype(np.float32), mode="lines",
-                             line=dict(color="#d1495b", width=1.5), name="RMS energy", meta={"part": "rms"},
-                             hovertemplate="%{x:.2f} s: RMS %{y:.3f}<extra></extra>"))
+    fig.add_trace(
+        go.Scatter(
+            x=t_bins.astype(np.float32),
+            y=padded.max(axis=1),
+            mode="lines",
+            line=line,
+            name="waveform",
+            hoverinfo="skip",
+            meta={"part": "waveform_max"},
+        )
+    )
+    fig.add_trace(
+        go.Scatter(
+            x=t_bins.astype(np.float32),
+            y=padded.min(axis=1),
+            mode="lines",
+            line=line,
+            fill="tonexty",
+            fillcolor="rgba(107,127,153,0.45)",
+            showlegend=False,
+            hoverinfo="skip",
+            meta={"part": "waveform_min"},
+        )
+    )
+    fig.add_trace(
+        go.Scatter(
+            x=t_rms.astype(np.float32),
+            y=rms.astype(np.float32),
+            mode="lines",
+            line=dict(color="#d1495b", width=1.5),
+            name="RMS energy",
+            meta={"part": "rms"},
+            hovertemplate="%{x:.2f} s: RMS %{y:.3f}<extra></extra>",
+        )
+    )
     colors: dict[str, str] = {}
     for a, b, label in bands:
         color = colors.setdefault(label, _BAND_COLORS[len(colors) % len(_BAND_COLORS)])
-        fig.add_shape(type="rect", xref="x", yref="y domain", x0=a, x1=b, y0=0, y1=1, fillcolor=color,
-                      opacity=0.18, line=dict(width=0), layer="below", name=label)
+        fig.add_shape(
+            type="rect",
+            xref="x",
+            yref="y domain",
+            x0=a,
+            x1=b,
+            y0=0,
+            y1=1,
+            fillcolor=color,
+            opacity=0.18,
+            line=dict(width=0),
+            layer="below",
+            name=label,
+        )
         if label:
-            fig.add_annotation(x=(a + b) / 2, y=1, xref="x", yref="y domain", yanchor="bottom", text=label,
-                               showarrow=False, font=dict(size=10, color=color))
+            fig.add_annotation(
+                x=(a + b) / 2,
+                y=1,
+                xref="x",
+                yref="y domain",
+                yanchor="bottom",
+                text=label,
+                showarrow=False,
+                font=dict(size=10, color=color),
+            )
     fig.update_layout(
-        title=dict(text=title) if title else None, height=height,
+        title=dict(text=title) if title else None,
+        height=height,
         margin=dict(l=10, r=10, t=40 if title or bands else 10, b=10 + LEGEND_ROOM),
-        xaxis=dict(title="time [s]", range=[0, n / sr]), yaxis=dict(title="amplitude"),
+        xaxis=dict(title="time [s]", range=[0, n / sr]),
+        yaxis=dict(title="amplitude"),
         legend=BOTTOM_LEGEND,
         uirevision="waveform",
     )
@@ -298,8 +362,9 @@ def wrist_figure(
 
     columns = [ATTRIBUTE_NAMES.index(a) for a, _ in WRIST_ROWS]
     n_rows = len(WRIST_ROWS)
-    fig = make_subplots(rows=n_rows, cols=1, shared_xaxes=True, vertical_spacing=0.045,
-                        subplot_titles=[t for _, t in WRIST_ROWS])
+    fig = make_subplots(
+        rows=n_rows, cols=1, shared_xaxes=True, vertical_spacing=0.045, subplot_titles=[t for _, t in WRIST_ROWS]
+    )
     traces, rows = [], []
     for i, (m, label) in enumerate(zip(motions, labels)):
         values = frame_attributes(m.positions, fps=m.fps)[:, columns]
@@ -307,11 +372,19 @@ def wrist_figure(
         color = MOTION_COLORS[i % len(MOTION_COLORS)]
         for r, (attr, _) in enumerate(WRIST_ROWS):
             unit = _attribute_unit(attr)
-            traces.append(go.Scatter(
-                x=t, y=values[:, r], mode="lines", line=dict(color=color, width=1.6),
-                name=label or "motion", legendgroup=f"motion{i}", showlegend=r == 0 and len(motions) > 1,
-                meta={"part": "wrist", "motion": i, "attribute": attr},
-                hovertemplate=f"{label + ': ' if label else ''}%{{x:.2f}} s, %{{y:.3f}} {unit}<extra></extra>"))
+            traces.append(
+                go.Scatter(
+                    x=t,
+                    y=values[:, r],
+                    mode="lines",
+                    line=dict(color=color, width=1.6),
+                    name=label or "motion",
+                    legendgroup=f"motion{i}",
+                    showlegend=r == 0 and len(motions) > 1,
+                    meta={"part": "wrist", "motion": i, "attribute": attr},
+                    hovertemplate=f"{label + ': ' if label else ''}%{{x:.2f}} s, %{{y:.3f}} {unit}<extra></extra>",
+                )
+            )
             rows.append(r + 1)
     fig.add_traces(traces, rows=rows, cols=[1] * len(rows))
 
@@ -325,33 +398,71 @@ def wrist_figure(
             xa, ya = axes(r)
             lo, hi = thresholds[attr]
             for which, y, color in (("low", lo, "#1f4e79"), ("high", hi, "#a3222b")):
-                shapes.append(dict(type="line", xref=f"{xa} domain", x0=0, x1=1, yref=ya, y0=float(y), y1=float(y),
-                                   line=dict(color=color, dash="dash", width=1), name=f"{attr} {which}"))
+                shapes.append(
+                    dict(
+                        type="line",
+                        xref=f"{xa} domain",
+                        x0=0,
+                        x1=1,
+                        yref=ya,
+                        y0=float(y),
+                        y1=float(y),
+                        line=dict(color=color, dash="dash", width=1),
+                        name=f"{attr} {which}",
+                    )
+                )
     colors: dict[str, str] = {}
     for a, b, label in bands:
         color = colors.setdefault(label, _BAND_COLORS[len(colors) % len(_BAND_COLORS)])
         for r in range(n_rows):
             xa, ya = axes(r)
-            shapes.append(dict(type="rect", xref=xa, x0=a, x1=b, yref=f"{ya} domain", y0=0, y1=1, fillcolor=color,
-                               opacity=0.18, line=dict(width=0), layer="below", name=label))
+            shapes.append(
+                dict(
+                    type="rect",
+                    xref=xa,
+                    x0=a,
+                    x1=b,
+                    yref=f"{ya} domain",
+                    y0=0,
+                    y1=1,
+                    fillcolor=color,
+                    opacity=0.18,
+                    line=dict(width=0),
+                    layer="below",
+                    name=label,
+                )
+            )
         if label:
-            notes.append(dict(x=(a + b) / 2, y=1.0, xref="x", yref="y domain", yanchor="top", text=label,
-                              showarrow=False, font=dict(size=10, color=color)))
+            notes.append(
+                dict(
+                    x=(a + b) / 2,
+                    y=1.0,
+                    xref="x",
+                    yref="y domain",
+                    yanchor="top",
+                    text=label,
+                    showarrow=False,
+                    font=dict(size=10, color=color),
+                )
+            )
     fig.update_layout(shapes=shapes, annotations=list(fig.layout.annotations) + notes)
     duration = max(m.duration for m in motions)
     fig.update_xaxes(range=[0, duration])
     fig.update_xaxes(title_text="time [s]", row=n_rows, col=1)
     fig.update_layout(
-        title=dict(text=title) if title else None, height=height,
+        title=dict(text=title) if title else None,
+        height=height,
         margin=dict(l=10, r=10, t=70 if title else 45, b=10 + (LEGEND_ROOM if len(motions) > 1 else 0)),
         legend=BOTTOM_LEGEND,
-        showlegend=len(motions) > 1, uirevision="wrists",
+        showlegend=len(motions) > 1,
+        uirevision="wrists",
     )
     return fig
 
 
-def candidates_figure(search, step: int, *, names: Sequence[str] | None = None, title: str | None = None,
-                      height: int = 320) -> go.Figure:
+def candidates_figure(
+    search, step: int, *, names: Sequence[str] | None = None, title: str | None = None, height: int = 320
+) -> go.Figure:
     """The candidates of one search step: pose distance against audio distance, the chosen one ringed.
 
     Parameters
@@ -393,30 +504,53 @@ def candidates_figure(search, step: int, *, names: Sequence[str] | None = None, 
     keep = np.flatnonzero(np.asarray(search.cand_clip[step]) >= 0)
     x = np.asarray(search.cand_pose_dist[step], dtype=np.float64)[keep]
     y = np.asarray(search.cand_audio_dist[step], dtype=np.float64)[keep]
-    custom = np.stack([np.asarray(getattr(search, f"cand_{c}")[step])[keep]
-                       for c in ("clip", "start", "pose_rank", "audio_rank", "combined")], axis=1)
-    hover = ("#%{text}: clip %{customdata[0]} from frame %{customdata[1]}<br>pose distance %{x:.3f} "
-             "(rank %{customdata[2]})<br>audio distance %{y:.4f} (rank %{customdata[3]})<br>"
-             "combined rank %{customdata[4]}")
+    custom = np.stack(
+        [
+            np.asarray(getattr(search, f"cand_{c}")[step])[keep]
+            for c in ("clip", "start", "pose_rank", "audio_rank", "combined")
+        ],
+        axis=1,
+    )
+    hover = (
+        "#%{text}: clip %{customdata[0]} from frame %{customdata[1]}<br>pose distance %{x:.3f} "
+        "(rank %{customdata[2]})<br>audio distance %{y:.4f} (rank %{customdata[3]})<br>"
+        "combined rank %{customdata[4]}"
+    )
     if names is not None:
         hover += "<br>%{hovertext}"
     fig = go.Figure()
-    fig.add_trace(go.Scatter(
-        x=x, y=y, mode="markers+text", text=[str(p) for p in keep], textposition="top center",
-        customdata=custom, hovertext=None if names is None else [str(names[p]) for p in keep],
-        hovertemplate=hover + "<extra></extra>", marker=dict(size=9, color="#6b7f99"),
-        name="candidates", meta={"part": "candidates"},
-    ))
+    fig.add_trace(
+        go.Scatter(
+            x=x,
+            y=y,
+            mode="markers+text",
+            text=[str(p) for p in keep],
+            textposition="top center",
+            customdata=custom,
+            hovertext=None if names is None else [str(names[p]) for p in keep],
+            hovertemplate=hover + "<extra></extra>",
+            marker=dict(size=9, color="#6b7f99"),
+            name="candidates",
+            meta={"part": "candidates"},
+        )
+    )
     chosen = int(search.position[step])
     if chosen >= 0 and chosen in keep:
         j = int(np.flatnonzero(keep == chosen)[0])
-        fig.add_trace(go.Scatter(
-            x=[x[j]], y=[y[j]], mode="markers", name="chosen", hoverinfo="skip",
-            marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#c0502d", width=3)),
-            meta={"part": "chosen"},
-        ))
+        fig.add_trace(
+            go.Scatter(
+                x=[x[j]],
+                y=[y[j]],
+                mode="markers",
+                name="chosen",
+                hoverinfo="skip",
+                marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#c0502d", width=3)),
+                meta={"part": "chosen"},
+            )
+        )
     fig.update_layout(
-        title=dict(text=title) if title else None, height=height,
+        title=dict(text=title) if title else None,
+        height=height,
         margin=dict(l=10, r=10, t=40 if title else 10, b=10),
         xaxis=dict(title="pose distance (z-scored)", range=_padded(x, low=0.08, high=0.08)),
         # more room above: each point's label is written over it

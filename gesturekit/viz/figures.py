@@ -18,6 +18,7 @@ The figures are made in :mod:`gesturekit.viz.skeleton_figure` (the 3D
 skeleton) and :mod:`gesturekit.viz.charts` (histograms, waveforms, wrist
 tracks, candidates); this module is the one place to import them from.
 """
+
 from __future__ import annotations
 
 from ._plotly import MOTION_COLORS, data_array

@@ -21,6 +21,7 @@ class. The Debian packages ``libegl1``, ``libegl-mesa0`` and
 ``libgl1-mesa-dri`` provide EGL and the rasteriser; without EGL, VTK falls
 back to OSMesa (``libosmesa6``).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -34,9 +35,9 @@ import subprocess
 import sys
 import tempfile
 import threading
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import pyvista as pv
@@ -110,17 +111,14 @@ class RenderStyle:
         box = np.asarray(self.view_box, dtype=np.float64)
         if box.shape != (3, 2) or not np.all(np.isfinite(box)) or np.any(box[:, 1] <= box[:, 0]):
             raise ConfigError(
-                "view_box must be ((xmin, xmax), (ymin, ymax), (zmin, zmax)) with min < max, "
-                f"got {self.view_box}"
+                f"view_box must be ((xmin, xmax), (ymin, ymax), (zmin, zmax)) with min < max, got {self.view_box}"
             )
         if not 0 < self.view_angle < 120:
             raise ConfigError(f"view_angle must be in (0, 120) degrees, got {self.view_angle}")
         if not 0 <= self.elevation < 60:
             raise ConfigError(f"elevation must be in [0, 60) degrees, got {self.elevation}")
         if self.capsule_sides < 3 or min(self.sphere_resolution, self.head_resolution) < 4:
-            raise ConfigError(
-                "capsule_sides must be at least 3, sphere_resolution and head_resolution at least 4"
-            )
+            raise ConfigError("capsule_sides must be at least 3, sphere_resolution and head_resolution at least 4")
         if self.multi_samples < 0:
             raise ConfigError("multi_samples must not be negative")
 
@@ -129,7 +127,7 @@ class RenderStyle:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, data: dict) -> "RenderStyle":
+    def from_json(cls, data: dict) -> RenderStyle:
         """The style :meth:`to_json` wrote."""
         fields = {k: _to_tuples(v) for k, v in data.items() if k != "appearance"}
         appearance = Appearance(**{k: _to_tuples(v) for k, v in data["appearance"].items()})
@@ -305,11 +303,12 @@ class SkeletonScene:
         if s.fit_motion:
             # the framing rule on what is drawn: every surface over the clip, and the floor under it
             ground = a.ground_height(every)
-            pelvis = every[N_JOINTS + DERIVED_POINTS.index("pelvis")::len(self._points[0][0])]
+            pelvis = every[N_JOINTS + DERIVED_POINTS.index("pelvis") :: len(self._points[0][0])]
             under = pelvis.mean(axis=0) * [1, 0, 1] + [0, ground, 0]  # where the shadow lies
             reach = np.tile(_reach(a), len(every) // len(self._points[0][0]))
-            position, focal, up, clip = _camera(np.vstack([every, under]), aspect, s,
-                                                pad=np.append(reach, 0.0), margin=a.frame_margin)
+            position, focal, up, clip = _camera(
+                np.vstack([every, under]), aspect, s, pad=np.append(reach, 0.0), margin=a.frame_margin
+            )
         else:
             ground = float(box[1, 0])
             corners = np.array([[x, y, z] for x in box[0] for y in box[1] for z in box[2]])
@@ -317,7 +316,7 @@ class SkeletonScene:
         # the appearance's rule, colour * (ambient + diffuse * max(0, n . l)), light fixed to the camera
         surface = dict(ambient=a.ambient, diffuse=a.diffuse, specular=0.0)
         light = a.light()
-        for i, motion in enumerate(motions):
+        for i in range(len(motions)):
             pl.subplot(0, i)
             self._floor_and_shadow(box, ground, self._points[i])
             body = BodyMeshes(s)
@@ -327,8 +326,9 @@ class SkeletonScene:
                 actor.prop.interpolation = "gouraud"  # our own normals, smoothly interpolated
             if labels is not None:
                 pl.add_text(str(labels[i]), position="upper_edge", font_size=s.font_size, color=a.color(i))
-            pl.renderer.add_light(pv.Light(position=tuple(light), focal_point=(0.0, 0.0, 0.0),
-                                           light_type="camera light", intensity=1.0))
+            pl.renderer.add_light(
+                pv.Light(position=tuple(light), focal_point=(0.0, 0.0, 0.0), light_type="camera light", intensity=1.0)
+            )
             camera = pl.renderer.GetActiveCamera()
             camera.SetPosition(*position)
             camera.SetFocalPoint(*focal)
@@ -343,8 +343,12 @@ class SkeletonScene:
         contact shadow on it under the body (where its pelvis stands on average)."""
         pl, a = self._plotter, self.style.appearance
         width = box[0, 1] - box[0, 0]
-        floor = pv.Plane(center=(box[0].mean(), ground, box[2, 1]), direction=(0, 1, 0),
-                         i_size=width * 6, j_size=2 * (box[2, 1] - box[2, 0]) + 20.0)
+        floor = pv.Plane(
+            center=(box[0].mean(), ground, box[2, 1]),
+            direction=(0, 1, 0),
+            i_size=width * 6,
+            j_size=2 * (box[2, 1] - box[2, 0]) + 20.0,
+        )
         pl.add_mesh(floor, color=a.ground_color, lighting=False)
         pelvis = points[:, -len(DERIVED_POINTS) + DERIVED_POINTS.index("pelvis")].mean(axis=0)
         half = 2.2 * a.hip_half_width + a.hip_radius  # the shadow's half width, metres, across X
@@ -432,7 +436,7 @@ class SkeletonScene:
             self._plotter.close()
             self._plotter = None
 
-    def __enter__(self) -> "SkeletonScene":
+    def __enter__(self) -> SkeletonScene:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -574,8 +578,7 @@ def render_frames(
     motions = list(motions)
     style = style or RenderStyle()
     _check_scene(motions, labels, resolution)
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer))
-                                or workers < 1):
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ConfigError(f"workers must be a positive whole number, got {workers!r}")
     n_frames = max(m.n_frames for m in motions)
     chunks = -(-n_frames // CHUNK_FRAMES)
@@ -631,6 +634,7 @@ def _parallel_frames(motions, labels, resolution, style, workers: int) -> Iterat
 
     def read(proc: subprocess.Popen, out: queue.Queue) -> None:
         """Move one process's frames into its queue, then None (end or failure)."""
+
         def put(item) -> bool:
             while not stop.is_set():
                 try:
@@ -662,10 +666,18 @@ def _parallel_frames(motions, labels, resolution, style, workers: int) -> Iterat
             for k in range(workers):
                 log = open(Path(tmp) / f"worker{k}.log", "w+b")
                 logs.append(log)
-                cmd = [sys.executable, "-m", "gesturekit.viz.render_worker", str(job), str(k), str(workers),
-                       str(CHUNK_FRAMES)]
-                procs.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                              stderr=log, env=env))
+                cmd = [
+                    sys.executable,
+                    "-m",
+                    "gesturekit.viz.render_worker",
+                    str(job),
+                    str(k),
+                    str(workers),
+                    str(CHUNK_FRAMES),
+                ]
+                procs.append(
+                    subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=log, env=env)
+                )
                 queues.append(queue.Queue(maxsize=waiting))
                 threads.append(threading.Thread(target=read, args=(procs[k], queues[k]), daemon=True))
                 threads[k].start()

@@ -12,6 +12,7 @@ its own program (not a ``multiprocessing`` child) means the caller's main
 script is never imported again, whatever it is: the command line, a notebook,
 the app's server or a user's unguarded script.
 """
+
 from __future__ import annotations
 
 import sys

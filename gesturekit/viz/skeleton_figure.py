@@ -4,9 +4,10 @@ The bones are drawn as a few polylines per motion (body and fingers), the
 torso and head as the house appearance draws them; frames hold the same traces
 at each shown time. Part of :mod:`gesturekit.viz.figures`.
 """
+
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import plotly.graph_objects as go
@@ -15,7 +16,6 @@ from ..motion import Motion
 from ..skeleton import BODY_JOINTS, N_JOINTS, bones, joint_index
 from ._plotly import _frames_at, _motions_and_labels, _time_grid, _xyz
 from .appearance import APPEARANCE
-
 
 #: Most animation frames a skeleton figure holds (20 s at 15 fps). Longer motions are
 #: shown at a lower frame rate; each frame then lasts longer, so playback keeps real time.
@@ -197,8 +197,9 @@ def skeleton_figure(
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure")
     # per motion: (body polylines, finger polylines), each (frames, points, 3); markers at the
     # points draw every joint, since every joint is on a bone
-    grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(motions, fps=fps, max_frames=max_frames,
-                                                                    spacing=spacing)
+    grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(
+        motions, fps=fps, max_frames=max_frames, spacing=spacing
+    )
 
     # the torso's volume and the head, as the render and the page draw them
     extras = _torso_and_head(motions, times, offsets)
@@ -235,9 +236,13 @@ def skeleton_figure(
             common["meta"] = {"motion": i, "part": part}
             traces.append(
                 go.Scatter3d(
-                    **_xyz(points[0]), mode="lines+markers", line=dict(color=color, width=w),
+                    **_xyz(points[0]),
+                    mode="lines+markers",
+                    line=dict(color=color, width=w),
                     # markers at the joints, as wide as the line: round ends, as the capsules have
-                    marker=dict(color=color, size=w / 3, line=dict(width=0)), name=name, showlegend=legend,
+                    marker=dict(color=color, size=w / 3, line=dict(width=0)),
+                    name=name,
+                    showlegend=legend,
                     **common,
                 )
             )
@@ -245,9 +250,12 @@ def skeleton_figure(
         color = a.part_color(i, "head")
         traces.append(
             go.Scatter3d(
-                **_xyz(head[0]), mode="markers", marker=dict(color=color, size=size(a.head_radius), opacity=1.0,
-                                                             line=dict(width=0)),
-                name=f"{label} head".strip(), showlegend=False, **common,
+                **_xyz(head[0]),
+                mode="markers",
+                marker=dict(color=color, size=size(a.head_radius), opacity=1.0, line=dict(width=0)),
+                name=f"{label} head".strip(),
+                showlegend=False,
+                **common,
             )
         )
 
@@ -275,10 +283,14 @@ def skeleton_figure(
         aspectmode="manual",
         aspectratio=dict(x=float(aspect[0]), y=float(aspect[1]), z=float(aspect[2])),
         # in front of the character (+Z), slightly above, looking at the scene centre
-        camera=dict(up=dict(x=0, y=1, z=0), eye=dict(x=0.0, y=0.15, z=1.9), center=dict(x=0, y=0, z=0),
-                    projection=dict(type="perspective")),
+        camera=dict(
+            up=dict(x=0, y=1, z=0),
+            eye=dict(x=0.0, y=0.15, z=1.9),
+            center=dict(x=0, y=0, z=0),
+            projection=dict(type="perspective"),
+        ),
         annotations=annotations,
-        dragmode="orbit"  # "turntable" assumes Z up and would draw this Y-up scene upside down
+        dragmode="orbit",  # "turntable" assumes Z up and would draw this Y-up scene upside down
     )
     frame_ms = 1000.0 * step / grid_fps
     layout = dict(
@@ -292,25 +304,45 @@ def skeleton_figure(
         meta={"fps": grid_fps, "frame_step": step, "times": [round(float(t), 4) for t in times]},
     )
     if frames:
-        play = dict(frame=dict(duration=frame_ms, redraw=True), fromcurrent=True, mode="immediate",
-                    transition=dict(duration=0))
+        play = dict(
+            frame=dict(duration=frame_ms, redraw=True), fromcurrent=True, mode="immediate", transition=dict(duration=0)
+        )
         pause = dict(frame=dict(duration=0, redraw=False), mode="immediate", transition=dict(duration=0))
         layout["updatemenus"] = [
             dict(
-                type="buttons", direction="left", x=0.0, y=0.0, xanchor="left", yanchor="top",
-                pad=dict(t=45, r=10), showactive=False,
-                buttons=[dict(label="▶ Play", method="animate", args=[None, play]),
-                         dict(label="❚❚ Pause", method="animate", args=[[None], pause])],
+                type="buttons",
+                direction="left",
+                x=0.0,
+                y=0.0,
+                xanchor="left",
+                yanchor="top",
+                pad=dict(t=45, r=10),
+                showactive=False,
+                buttons=[
+                    dict(label="▶ Play", method="animate", args=[None, play]),
+                    dict(label="❚❚ Pause", method="animate", args=[[None], pause]),
+                ],
             )
         ]
         layout["sliders"] = [
             dict(
-                active=0, x=0.18, y=0.0, len=0.82, xanchor="left", yanchor="top", pad=dict(t=30),
+                active=0,
+                x=0.18,
+                y=0.0,
+                len=0.82,
+                xanchor="left",
+                yanchor="top",
+                pad=dict(t=30),
                 currentvalue=dict(prefix="t = ", suffix=" s", visible=True),
                 steps=[
-                    dict(label=f"{t:.2f}", method="animate",
-                         args=[[str(k)], dict(frame=dict(duration=0, redraw=True), mode="immediate",
-                                              transition=dict(duration=0))])
+                    dict(
+                        label=f"{t:.2f}",
+                        method="animate",
+                        args=[
+                            [str(k)],
+                            dict(frame=dict(duration=0, redraw=True), mode="immediate", transition=dict(duration=0)),
+                        ],
+                    )
                     for k, t in enumerate(times)
                 ],
             )

@@ -21,6 +21,7 @@ The page loads nothing from the network. Its data are one JSON object in a
 :func:`viewer_data`), the points as base64 float32 typed arrays like a plotly
 figure's (:func:`gesturekit.viz.figures.data_array` reads them).
 """
+
 from __future__ import annotations
 
 import base64
@@ -30,18 +31,17 @@ import json
 import math
 import re
 import wave
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import N_JOINTS, joint_index
-from .appearance import APPEARANCE, DERIVED_POINTS, Appearance
 from ._plotly import _frames_at, _motions_and_labels, _time_grid, _typed, data_array
+from .appearance import APPEARANCE, DERIVED_POINTS, Appearance
 
-__all__ = ["CONTROLS_HEIGHT", "VIEWER_MAX_FRAMES", "skeleton_viewer", "viewer_data", "read_viewer_data",
-           "wav_data_uri"]
+__all__ = ["CONTROLS_HEIGHT", "VIEWER_MAX_FRAMES", "skeleton_viewer", "viewer_data", "read_viewer_data", "wav_data_uri"]
 
 #: Pixels the controls (play button, slider, time, note) take below the drawing.
 CONTROLS_HEIGHT = 48
@@ -81,7 +81,7 @@ def wav_data_uri(audio, *, sr: int = AUDIO_SR) -> str:
 
 
 def _read_wav_uri(uri: str) -> tuple[np.ndarray, int]:
-    with wave.open(io.BytesIO(base64.b64decode(uri[len(_AUDIO_PREFIX):])), "rb") as w:
+    with wave.open(io.BytesIO(base64.b64decode(uri[len(_AUDIO_PREFIX) :])), "rb") as w:
         sr, n = w.getframerate(), w.getnframes()
         pcm = np.frombuffer(w.readframes(n), dtype="<i2")
     return pcm.astype(np.float64) / 32767.0, sr
@@ -162,13 +162,21 @@ def viewer_data(
     for i, (label, p, dx) in enumerate(zip(labels, points, offsets)):
         spec = _typed(p.reshape(-1))
         spec["shape"] = f"{p.shape[0]},{p.shape[1]},3"
-        out.append({"label": label or "", "color": appearance.color(i),
-                    "colors": {part: appearance.part_color(i, part) for part in parts},
-                    "offset": float(dx), "points": spec})
+        out.append(
+            {
+                "label": label or "",
+                "color": appearance.color(i),
+                "colors": {part: appearance.part_color(i, part) for part in parts},
+                "offset": float(dx),
+                "points": spec,
+            }
+        )
     note = ""
     if step > 1:
-        note = (f"every {_ordinal(step)} frame shown: {n_grid} frames are more than the viewer keeps "
-                f"({max_frames}); the MP4 has them all")
+        note = (
+            f"every {_ordinal(step)} frame shown: {n_grid} frames are more than the viewer keeps "
+            f"({max_frames}); the MP4 has them all"
+        )
     return {
         "title": title or "",
         "fps": grid_fps,
@@ -205,14 +213,14 @@ def read_viewer_data(page: str) -> dict:
         samples in [-1, 1], shape (samples,)) or None; ``audio_sr`` its rate (Hz) or None.
     """
     start = page.index(f'id="{_DATA_ID}">') + len(f'id="{_DATA_ID}">')
-    data = json.loads(page[start: page.index("</script>", start)])
+    data = json.loads(page[start : page.index("</script>", start)])
     for m in data["motions"]:
         m["points"] = data_array(m["points"])
-    data["key"] = html.unescape(page[page.index('data-key="') + 10:].split('"', 1)[0])
+    data["key"] = html.unescape(page[page.index('data-key="') + 10 :].split('"', 1)[0])
     data["audio"] = data["audio_sr"] = None
     at = page.find(f'src="{_AUDIO_PREFIX}')
     if at >= 0:
-        uri = page[at + 5: page.index('"', at + 5)]
+        uri = page[at + 5 : page.index('"', at + 5)]
         data["audio"], data["audio_sr"] = _read_wav_uri(uri)
     return data
 
@@ -263,8 +271,9 @@ def skeleton_viewer(
     ConfigError
         As :func:`viewer_data`; ``audio`` not one-dimensional or ``sr`` not positive.
     """
-    data = viewer_data(motions, labels=labels, fps=fps, title=title, max_frames=max_frames, spacing=spacing,
-                       appearance=appearance)
+    data = viewer_data(
+        motions, labels=labels, fps=fps, title=title, max_frames=max_frames, spacing=spacing, appearance=appearance
+    )
     audio_tag = ""
     if audio is not None:
         a = np.asarray(audio, dtype=np.float32)
@@ -278,8 +287,13 @@ def skeleton_viewer(
         audio_tag = f'<audio id="gk-audio" preload="auto" src="{wav_data_uri(a, sr=int(sr))}"></audio>'
     # "</" cannot end the data element early: JSON escapes are valid inside a string
     payload = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
-    fill = {"HEIGHT": str(int(height)), "KEY": html.escape(key, quote=True), "BG": appearance.background,
-            "AUDIO": audio_tag, "DATA": payload}
+    fill = {
+        "HEIGHT": str(int(height)),
+        "KEY": html.escape(key, quote=True),
+        "BG": appearance.background,
+        "AUDIO": audio_tag,
+        "DATA": payload,
+    }
     # one pass, so no inserted text is read as a placeholder
     return re.sub(r"__(HEIGHT|KEY|BG|AUDIO|DATA)__", lambda m: fill[m.group(1)], _PAGE)
 

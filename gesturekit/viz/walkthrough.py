@@ -14,9 +14,10 @@ the paper's control statistics (:func:`control_statistics`). The figures
 (:func:`rankings_figure`, :func:`feature_figure`) are plotly, like
 :mod:`gesturekit.viz.figures`, for the notebooks and the app.
 """
+
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 import plotly.graph_objects as go
@@ -113,16 +114,18 @@ def constraints_table(db, *, segment: int = 8):
             mask = constraint_mask(attrs, ((name, value),), th)
             ends = admissible_starts(valid, int(segment), mask=mask, rule="ends")
             every = admissible_starts(valid, int(segment), mask=mask, rule="all")
-            rows.append({
-                "constraint": f"{name}={value}",
-                "attributes": "+".join(names),
-                "side": "below" if side == "low" else "above",
-                "threshold": ", ".join(f"{th[a][0 if side == 'low' else 1]:.3f}" for a in names),
-                "frames": float(mask.mean()),
-                "windows_ends": int(ends.sum()),
-                "windows_all": int(every.sum()),
-                "clips": int(ends.any(axis=1).sum()),
-            })
+            rows.append(
+                {
+                    "constraint": f"{name}={value}",
+                    "attributes": "+".join(names),
+                    "side": "below" if side == "low" else "above",
+                    "threshold": ", ".join(f"{th[a][0 if side == 'low' else 1]:.3f}" for a in names),
+                    "frames": float(mask.mean()),
+                    "windows_ends": int(ends.sum()),
+                    "windows_all": int(every.sum()),
+                    "clips": int(ends.any(axis=1).sum()),
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -161,15 +164,21 @@ def synthesis_table(results, *, labels=None):
         N = r.config.step
         x = r.motion.positions
         joins = boundary_jumps(x, np.arange(1, s.n_steps) * N)
-        rows.append({
-            "label": str(label), "k": r.config.k, "step": N, "steps": s.n_steps,
-            "clips_used": int(np.unique(s.clip).size),
-            "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
-            "audio_dist": float(np.mean(s.cand_audio_dist[idx, s.position[idx]])) if idx.size else float("nan"),
-            "relaxed_steps": len(r.relaxed_steps),
-            "boundary_jump": joins["jump"], "boundary_jump_ratio": joins["ratio"],
-            "mean_jerk": mean_jerk(x, fps=r.motion.fps),
-        })
+        rows.append(
+            {
+                "label": str(label),
+                "k": r.config.k,
+                "step": N,
+                "steps": s.n_steps,
+                "clips_used": int(np.unique(s.clip).size),
+                "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
+                "audio_dist": float(np.mean(s.cand_audio_dist[idx, s.position[idx]])) if idx.size else float("nan"),
+                "relaxed_steps": len(r.relaxed_steps),
+                "boundary_jump": joins["jump"],
+                "boundary_jump_ratio": joins["ratio"],
+                "mean_jerk": mean_jerk(x, fps=r.motion.fps),
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -211,8 +220,13 @@ def motion_measures(motions, *, labels=None, boundaries=(), audio=None, sr: int 
     for label, m in zip(labels, motions):
         x, fps = m.positions, m.fps
         joins = metrics.boundary_jumps(x, boundaries)
-        row = {"label": label, "boundary_jump": joins["jump"], "boundary_jump_ratio": joins["ratio"],
-               "mean_acceleration": metrics.mean_acceleration(x, fps=fps), "mean_jerk": metrics.mean_jerk(x, fps=fps)}
+        row = {
+            "label": label,
+            "boundary_jump": joins["jump"],
+            "boundary_jump_ratio": joins["ratio"],
+            "mean_acceleration": metrics.mean_acceleration(x, fps=fps),
+            "mean_jerk": metrics.mean_jerk(x, fps=fps),
+        }
         if onsets is not None:
             row["beat_consistency"] = metrics.beat_consistency_score(x, audio, fps=fps, sr=sr, onsets=onsets)
             row["motion_beats_per_s"] = metrics.motion_beats(x, fps=fps).size / m.duration
@@ -255,8 +269,13 @@ def control_statistics(runs, *, thresholds):
         if not track:
             # the whole motion as one segment, with the statistics control_adherence reports
             attrs = frame_attributes(motion.positions, fps=motion.fps).astype(np.float64)
-            row = {"start_s": 0.0, "end_s": motion.n_frames / motion.fps, "constraint": "none",
-                   "frames": motion.n_frames, "adherence": np.nan}
+            row = {
+                "start_s": 0.0,
+                "end_s": motion.n_frames / motion.fps,
+                "constraint": "none",
+                "frames": motion.n_frames,
+                "adherence": np.nan,
+            }
             for c in (c for c in table.columns if c.endswith(("_mean", "_std"))):
                 name, stat = c.rsplit("_", 1)
                 col = attrs[:, ATTRIBUTE_NAMES.index(name)]
@@ -272,8 +291,9 @@ def control_statistics(runs, *, thresholds):
 # ---- figures --------------------------------------------------------------------------------------
 
 
-def rankings_figure(explanation: StepExplanation, *, names: Mapping[int, str] | None = None,
-                    title: str | None = None, height: int = 420) -> go.Figure:
+def rankings_figure(
+    explanation: StepExplanation, *, names: Mapping[int, str] | None = None, title: str | None = None, height: int = 420
+) -> go.Figure:
     """Every surviving clip of a step placed by its pose rank (x) and audio rank (y).
 
     Clips on a line ``x + y = c`` share the combined rank ``c``; the dashed line passes
@@ -296,28 +316,71 @@ def rankings_figure(explanation: StepExplanation, *, names: Mapping[int, str] | 
         with the chosen clip; a line shape named ``"combined rank"``.
     """
     r = explanation.ranking()
-    hover = [f"clip {c} from frame {s}<br>pose distance {pd_:.3f} (rank {pr})<br>audio distance {ad:.4f} "
-             f"(rank {ar})<br>combined {cb}, place {p}" + (f"<br>{names[c]}" if names and c in names else "")
-             for c, s, pd_, ad, pr, ar, cb, p in zip(*(r[col] for col in (
-                 "clip", "start", "pose_dist", "audio_dist", "pose_rank", "audio_rank", "combined", "position")))]
+    hover = [
+        f"clip {c} from frame {s}<br>pose distance {pd_:.3f} (rank {pr})<br>audio distance {ad:.4f} "
+        f"(rank {ar})<br>combined {cb}, place {p}" + (f"<br>{names[c]}" if names and c in names else "")
+        for c, s, pd_, ad, pr, ar, cb, p in zip(
+            *(
+                r[col]
+                for col in (
+                    "clip",
+                    "start",
+                    "pose_dist",
+                    "audio_dist",
+                    "pose_rank",
+                    "audio_rank",
+                    "combined",
+                    "position",
+                )
+            )
+        )
+    ]
     fig = go.Figure()
-    fig.add_trace(go.Scatter(
-        x=r["pose_rank"].to_numpy(), y=r["audio_rank"].to_numpy(), mode="markers",
-        marker=dict(size=7, color=r["position"].to_numpy(), colorscale="Viridis_r", showscale=True,
-                    colorbar=dict(title="place")),
-        hovertext=hover, hoverinfo="text", name="clips", meta={"part": "clips"},
-    ))
+    fig.add_trace(
+        go.Scatter(
+            x=r["pose_rank"].to_numpy(),
+            y=r["audio_rank"].to_numpy(),
+            mode="markers",
+            marker=dict(
+                size=7,
+                color=r["position"].to_numpy(),
+                colorscale="Viridis_r",
+                showscale=True,
+                colorbar=dict(title="place"),
+            ),
+            hovertext=hover,
+            hoverinfo="text",
+            name="clips",
+            meta={"part": "clips"},
+        )
+    )
     c = r[r["chosen"]].iloc[0]
-    fig.add_trace(go.Scatter(
-        x=[int(c["pose_rank"])], y=[int(c["audio_rank"])], mode="markers", name="chosen", hoverinfo="skip",
-        marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#c0502d", width=3)), meta={"part": "chosen"},
-    ))
+    fig.add_trace(
+        go.Scatter(
+            x=[int(c["pose_rank"])],
+            y=[int(c["audio_rank"])],
+            mode="markers",
+            name="chosen",
+            hoverinfo="skip",
+            marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#c0502d", width=3)),
+            meta={"part": "chosen"},
+        )
+    )
     total = int(c["combined"])
-    fig.add_shape(type="line", x0=0, y0=total, x1=total, y1=0, line=dict(color="#c0502d", dash="dash", width=1),
-                  name="combined rank")
+    fig.add_shape(
+        type="line",
+        x0=0,
+        y0=total,
+        x1=total,
+        y1=0,
+        line=dict(color="#c0502d", dash="dash", width=1),
+        name="combined rank",
+    )
     pad = 0.02 * len(r) + 1  # room for the ring of a clip at rank 0
     fig.update_layout(
-        title=dict(text=title) if title else None, height=height, showlegend=False,
+        title=dict(text=title) if title else None,
+        height=height,
+        showlegend=False,
         margin=dict(l=10, r=10, t=40 if title else 10, b=10),
         xaxis=dict(title="pose rank (0 = nearest pose)", range=[-pad, len(r) - 1 + pad]),
         yaxis=dict(title="audio rank (0 = nearest audio)", range=[-pad, len(r) - 1 + pad]),
@@ -348,8 +411,15 @@ def feature_blocks(kind: str, *, layout=None) -> dict[str, slice]:
     return {fmt.format(o): slice(i * size, (i + 1) * size) for i, o in enumerate(offsets)}
 
 
-def feature_figure(values: np.ndarray, *, blocks: Mapping[str, slice] | None = None, fps: float = 15.0,
-                   title: str | None = None, zmax: float = 3.0, height: int = 360) -> go.Figure:
+def feature_figure(
+    values: np.ndarray,
+    *,
+    blocks: Mapping[str, slice] | None = None,
+    fps: float = 15.0,
+    title: str | None = None,
+    zmax: float = 3.0,
+    height: int = 360,
+) -> go.Figure:
     """A feature sequence as a heatmap: time across, feature dimensions down, blocks marked.
 
     Parameters
@@ -372,22 +442,41 @@ def feature_figure(values: np.ndarray, *, blocks: Mapping[str, slice] | None = N
     v = np.asarray(values, dtype=np.float32)
     if v.ndim != 2 or v.shape[0] < 1:
         raise ConfigError(f"values must have shape (frames >= 1, dims), got {v.shape}")
-    fig = go.Figure(go.Heatmap(
-        z=v.T, x=(np.arange(v.shape[0]) / fps).astype(np.float32), y=np.arange(v.shape[1]),
-        zmin=-zmax, zmax=zmax, colorscale="RdBu_r", colorbar=dict(title="z"), meta={"part": "features"},
-        hovertemplate="%{x:.2f} s, dim %{y}: %{z:.2f}<extra></extra>",
-    ))
+    fig = go.Figure(
+        go.Heatmap(
+            z=v.T,
+            x=(np.arange(v.shape[0]) / fps).astype(np.float32),
+            y=np.arange(v.shape[1]),
+            zmin=-zmax,
+            zmax=zmax,
+            colorscale="RdBu_r",
+            colorbar=dict(title="z"),
+            meta={"part": "features"},
+            hovertemplate="%{x:.2f} s, dim %{y}: %{z:.2f}<extra></extra>",
+        )
+    )
     yaxis = dict(title="dimension", autorange="reversed")
     if blocks:
         # each block labelled on the y axis at its centre, a line at its first row
         for name, sl in blocks.items():
-            fig.add_shape(type="line", xref="x domain", x0=0, x1=1, y0=sl.start - 0.5, y1=sl.start - 0.5,
-                          line=dict(color="black", width=1), name=name)
-        yaxis.update(title=None, tickvals=[(sl.start + sl.stop - 1) / 2 for sl in blocks.values()],
-                     ticktext=list(blocks))
+            fig.add_shape(
+                type="line",
+                xref="x domain",
+                x0=0,
+                x1=1,
+                y0=sl.start - 0.5,
+                y1=sl.start - 0.5,
+                line=dict(color="black", width=1),
+                name=name,
+            )
+        yaxis.update(
+            title=None, tickvals=[(sl.start + sl.stop - 1) / 2 for sl in blocks.values()], ticktext=list(blocks)
+        )
     fig.update_layout(
-        title=dict(text=title) if title else None, height=height,
+        title=dict(text=title) if title else None,
+        height=height,
         margin=dict(l=10, r=10, t=40 if title else 10, b=10),
-        xaxis=dict(title="time [s]"), yaxis=yaxis,
+        xaxis=dict(title="time [s]"),
+        yaxis=yaxis,
     )
     return fig
