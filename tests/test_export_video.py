@@ -23,7 +23,8 @@ from gesturekit.export.video import AUDIO_OUT_SR, probe_media, render_video
 from gesturekit.motion import Motion
 from gesturekit.skeleton import FINGERS, N_JOINTS, hand_indices, joint_index
 from gesturekit.viz.appearance import APPEARANCE, DERIVED_POINTS
-from gesturekit.viz.render import CHUNK_FRAMES, RenderStyle, SkeletonScene, render_frames, render_image, view_bounds
+from gesturekit.viz.render import RenderStyle, SkeletonScene, render_image, view_bounds
+from gesturekit.viz.render_pool import CHUNK_FRAMES, render_frames
 
 FPS = 15.0
 SR = 16000

@@ -303,7 +303,7 @@ def video(record) -> None:
         return
     st.caption("For exact audio-video sync, render the motion offscreen to an MP4 with the speech as soundtrack.")
     if st.button("Render MP4 with sound", key="synth.render"):
-        from gesturekit.viz.render import default_workers  # the rendering libraries load only when rendering
+        from gesturekit.viz.render_pool import default_workers  # the rendering libraries load only when rendering
 
         workers = default_workers()
         bar = st.progress(0.0, text=f"rendering on {workers} core{'s' if workers > 1 else ''}…")
