@@ -197,6 +197,16 @@ def test_two_motions_have_their_own_colours_in_their_own_halves():
     assert orange(left).sum() == 0 and blue(right).sum() == 0
 
 
+def test_a_closed_scene_refuses_to_draw_and_closes_twice():
+    scene = SkeletonScene([still_motion(2)], resolution=(48, 32))
+    assert scene.render_frame(1).shape == (32, 48, 3)
+    scene.close()
+    scene.close()  # closing again is harmless
+    for draw in (lambda: scene.render_frame(0), lambda: scene.project(np.zeros((1, 3))), lambda: scene.backend):
+        with pytest.raises(GestureKitError, match="closed"):
+            draw()
+
+
 def test_the_body_has_a_head_above_its_neck_and_fills_the_view():
     motion = still_motion(1)
     with SkeletonScene([motion], resolution=(160, 120)) as scene:
