@@ -33,6 +33,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pyvista as pv
@@ -100,7 +101,7 @@ class RenderStyle:
     multi_samples: int = 0
     font_size: int = 14
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not isinstance(self.appearance, Appearance):
             raise ConfigError(f"appearance must be an Appearance, got {type(self.appearance).__name__}")
         box = np.asarray(self.view_box, dtype=np.float64)
@@ -187,7 +188,9 @@ def view_bounds(motions: Sequence[Motion], *, style: RenderStyle | None = None) 
     return np.stack([lo - pad, hi + pad], axis=1)
 
 
-def _camera(points: np.ndarray, aspect: float, style: RenderStyle, *, pad=0.0, margin: float = 0.0):
+def _camera(
+    points: np.ndarray, aspect: float, style: RenderStyle, *, pad: float | np.ndarray = 0.0, margin: float = 0.0
+) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, float]]:
     """Camera in front of the points (+Z), looking down by ``style.elevation``, as close as it
     can be with every point (grown by ``pad`` metres) in view and a ``margin`` (a fraction of
     the view) left free on every side.
@@ -286,7 +289,7 @@ class SkeletonScene:
         self._frame = 0  # the meshes hold the first frame's pose
         self._pixels = vtkUnsignedCharArray()
 
-    def _build(self, labels) -> None:
+    def _build(self, labels: Sequence[str] | None) -> None:
         """Add every body's meshes, the floor, the shadows, the labels, the light and the camera."""
         pl, s, motions = self._live(), self.style, self.motions
         a = s.appearance
@@ -447,7 +450,7 @@ class SkeletonScene:
         self.close()
 
 
-def _check_scene(motions: list, labels, resolution) -> None:
+def _check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int]) -> None:
     if not 1 <= len(motions) <= 2:
         raise ConfigError(f"a scene shows one or two motions, got {len(motions)}")
     for m in motions:
@@ -510,7 +513,7 @@ def render_image(
         return scene.render_frame(frame)
 
 
-def _to_tuples(value):
+def _to_tuples(value: Any) -> Any:
     """JSON lists back to tuples, recursively (the style's fields are tuples)."""
     if isinstance(value, list):
         return tuple(_to_tuples(v) for v in value)
