@@ -20,13 +20,19 @@ import contextlib
 import logging
 import os
 import secrets
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import streamlit as st
 
 from gesturekit.errors import GestureKitError, collect_warnings
 from gesturekit.paths import PathNotAllowedError, check_allowed, is_allowed
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from gesturekit.motion import Motion
 
 __all__ = ["LOG", "allowed", "error_text", "run_page", "show_skeletons", "user_errors", "warnings_shown"]
 
@@ -120,7 +126,15 @@ def warnings_shown() -> Iterator[list[str]]:
                 st.warning(message)
 
 
-def show_skeletons(motions, *, key: str, labels=None, title: str | None = None, height: int = 520, audio=None) -> None:
+def show_skeletons(
+    motions: Motion | Sequence[Motion],
+    *,
+    key: str,
+    labels: Sequence[str] | None = None,
+    title: str | None = None,
+    height: int = 520,
+    audio: np.ndarray | None = None,
+) -> None:
     """Show motions side by side in gesturekit's 3D viewer (:func:`gesturekit.viz.viewer.skeleton_viewer`).
 
     The viewer draws on a 2D canvas: a browser without a GPU shows it at once, where

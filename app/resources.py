@@ -22,7 +22,9 @@ import contextlib
 import logging
 import os
 import threading
+from collections.abc import AsyncIterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import streamlit as st
 from display import allowed, warnings_shown
@@ -31,6 +33,11 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, collect_warnings
 from gesturekit.paths import default_database_path
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from gesturekit.refine.infer import Refiner
 
 __all__ = [
     "DEMO_MINUTES_ENV",
@@ -182,7 +189,7 @@ def _in_background(name: str, *steps) -> threading.Thread:
 
 
 @st.cache_resource(show_spinner="Generating the example speech…", max_entries=4)
-def example_audio(label: str):
+def example_audio(label: str) -> np.ndarray:
     """Example speech (a key of :data:`gesturekit.interactive.SPEECH_EXAMPLES`): mono float32 at
     16 kHz, read-only, made once per server and shared by every session."""
     from gesturekit.interactive import example_speech
@@ -279,7 +286,7 @@ def warm_up(db: MatchingDatabase) -> None:
 
 
 @contextlib.asynccontextmanager
-async def server_lifespan(app):
+async def server_lifespan(app: object) -> AsyncIterator[None]:
     """The server's start and stop (``st.App``'s lifespan, see ``Home.py``): at start,
     the default database's search and refiner are prepared in the background.
 
@@ -361,7 +368,7 @@ def _allowed_refiner(path: str | os.PathLike) -> Path:
     return allowed(path, what="refiner folder")
 
 
-def load_refiner(path: str | os.PathLike, db: MatchingDatabase):
+def load_refiner(path: str | os.PathLike, db: MatchingDatabase) -> Refiner:
     """Open a trained refiner folder once per process and version, checked against ``db``.
 
     The returned object is shared by every session: do not modify it.

@@ -10,6 +10,7 @@ default (demo) database is built on first use.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import resources
 import streamlit as st
@@ -70,7 +71,7 @@ def _select_database() -> Path:
     return path
 
 
-def show_database_label(db: MatchingDatabase, *, container=st) -> None:
+def show_database_label(db: MatchingDatabase, *, container: Any = st) -> None:
     """Say which database is open and what it holds; generated data is flagged as such."""
     name = db.path.name if db.path is not None else "(in memory)"
     if is_generated(db):

@@ -14,11 +14,20 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import streamlit as st
 from display import warnings_shown
 
 from gesturekit.database import MatchingDatabase
+
+if TYPE_CHECKING:
+    import os
+
+    import numpy as np
+
+    from gesturekit.refine.infer import Refiner
+    from gesturekit.synthesize import SynthesisConfig
 
 __all__ = [
     "PINS_KEY",
@@ -48,7 +57,7 @@ def page_setup(title: str, *, icon: str = "🖐️") -> None:
     st.session_state[_RUN_KEY] = st.session_state.get(_RUN_KEY, 0) + 1
 
 
-def persistent_key(name: str, default) -> str:
+def persistent_key(name: str, default: object) -> str:
     """The widget key for a value that survives page switches and pages stopped early.
 
     Use the returned key as the widget's ``key`` and store the value it
@@ -107,7 +116,14 @@ def remount_key(key: str) -> str:
     return key if n == 0 else f"{key}.{n}"
 
 
-def run_synthesis(db: MatchingDatabase, audio, *, config, source: str, refiner=None) -> dict:
+def run_synthesis(
+    db: MatchingDatabase,
+    audio: np.ndarray,
+    *,
+    config: SynthesisConfig,
+    source: str,
+    refiner: Refiner | str | os.PathLike[str] | None = None,
+) -> dict:
     """Synthesise with a spinner, store the result as the user's synthesis and return that record.
 
     Parameters

@@ -3,7 +3,7 @@
 Synthesizes the speech on a small generated demo database (not timed), then renders the
 MP4 the Synthesize page renders (640x480, both motions side by side, the speech as
 soundtrack) twice in one run: in one process, and on every core
-(:func:`gesturekit.viz.render.render_frames`). Prints the wall time and frames per
+(:func:`gesturekit.viz.render_pool.render_frames`). Prints the wall time and frames per
 second of each, their ratio, the CPU seconds the rendering processes and the encoder
 spent together, the load average (other work on the machine slows both), and whether the
 two files are the same bytes.
@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     from gesturekit.demo import build_demo_database
     from gesturekit.export.video import render_video
     from gesturekit.synthesize import synthesize
-    from gesturekit.viz.render import default_workers
+    from gesturekit.viz.render_pool import default_workers
 
     print(f"machine: {_machine()}")
     with tempfile.TemporaryDirectory(prefix="gesturekit-bench-video-") as tmp:

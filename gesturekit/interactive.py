@@ -18,9 +18,11 @@ import dataclasses
 import io
 import json
 import math
+import os
 import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -31,6 +33,10 @@ from .database import MatchingDatabase
 from .errors import ConfigError, GestureKitError, collect_warnings, warn
 from .motion import AUDIO_SR, Motion
 from .synthesize import SynthesisConfig, SynthesisResult, synthesize_batch
+
+if TYPE_CHECKING:
+    from .datasets.audio import AudioInfo
+    from .refine.infer import Refiner
 
 __all__ = [
     "SEGMENT_COLUMNS",
@@ -181,7 +187,7 @@ def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack
                 f"control row {i}: unknown constraint {text!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}"
             )
         try:
-            Segment(start, end, (tuple(text.split("=", 1)),))
+            Segment(start, end, (_constraint_pair(text),))
         except ConfigError as exc:
             raise ConfigError(f"control row {i}: {exc.problem}") from None
         key = (round(start, 6), round(end, 6))
@@ -190,9 +196,15 @@ def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack
             raise ConfigError(
                 f"control row {i}: {name} is set twice for {start:g}-{end:g} s (also in row {first_row[key]})"
             )
-        groups.setdefault(key, []).append(tuple(text.split("=", 1)))
+        groups.setdefault(key, []).append(_constraint_pair(text))
         first_row.setdefault(key, i)
     return ControlTrack(tuple(Segment(a, b, tuple(c)) for (a, b), c in groups.items()))
+
+
+def _constraint_pair(text: str) -> tuple[str, str]:
+    """``"name=value"`` (one of :data:`CONSTRAINT_CHOICES`) -> ``(name, value)``."""
+    name, _, value = text.partition("=")
+    return name, value
 
 
 def add_segment(table: pd.DataFrame, start_s: float, end_s: float, constraint: str) -> pd.DataFrame:
@@ -223,7 +235,7 @@ def add_segment(table: pd.DataFrame, start_s: float, end_s: float, constraint: s
     """
     if constraint not in CONSTRAINT_CHOICES:
         raise ConfigError(f"unknown constraint {constraint!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}")
-    new = Segment(float(start_s), float(end_s), (tuple(constraint.split("=", 1)),))
+    new = Segment(float(start_s), float(end_s), (_constraint_pair(constraint),))
     rows = []
     for r in table.to_dict("records"):
         if all(_is_blank(r.get(c)) for c in SEGMENT_COLUMNS):
@@ -298,7 +310,7 @@ def example_speech(label: str) -> np.ndarray:
     return take.audio
 
 
-def read_speech_upload(name: str, data: bytes):
+def read_speech_upload(name: str, data: bytes) -> tuple[np.ndarray, AudioInfo]:
     """Decode an uploaded speech file (any format the audio reader takes) via a temporary folder.
 
     Parameters
@@ -570,7 +582,13 @@ def step_speech(result: SynthesisResult, step: int) -> np.ndarray:
 
 
 def compare_k(
-    audio, *, db: MatchingDatabase, config: SynthesisConfig, ks: Sequence[int], refiner=None, source: str | None = None
+    audio: str | os.PathLike[str] | np.ndarray,
+    *,
+    db: MatchingDatabase,
+    config: SynthesisConfig,
+    ks: Sequence[int],
+    refiner: Refiner | str | os.PathLike[str] | None = None,
+    source: str | None = None,
 ) -> list[SynthesisResult]:
     """Results for several ``k`` with everything else (speech, controls, pins, seed) the same.
 
@@ -596,7 +614,7 @@ def compare_k(
     ks = [int(k) for k in ks]
     if not ks:
         raise ConfigError("choose at least one k to compare")
-    configs = [dataclasses.replace(config, k=k) for k in ks]
+    configs = [dataclasses.replace(config, search=dataclasses.replace(config.search, k=k)) for k in ks]
     results = synthesize_batch([audio] * len(ks), db=db, config=configs, refiner=refiner)
     if source is not None:
         results = [dataclasses.replace(r, source=source) for r in results]

@@ -37,17 +37,27 @@ import json
 import math
 import os
 import re
-import subprocess
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
 from ._io import atomic_write
 from .errors import ConfigError, GestureKitError
+from .export.loudness import measure_loudness, normalise_loudness
 from .motion import AUDIO_SR, Motion
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from distributed import Client
+
+    from .database import MatchingDatabase
+    from .refine.infer import Refiner
+    from .synthesize import SynthesisConfig
+    from .viz.render import RenderStyle
 
 __all__ = [
     "StimulusSpeech",
@@ -63,7 +73,6 @@ __all__ = [
 ]
 
 _ID_DIGITS = 10
-_LOUDNESS_RE = re.compile(r"Integrated loudness:\s*I:\s*(-?[0-9.]+|-inf)\s*LUFS", re.S)
 
 
 # ---- the design ---------------------------------------------------------------------------------
@@ -119,8 +128,8 @@ def balanced_latin_square(n: int) -> np.ndarray:
 
 @dataclass
 class _Plan:
-    conditions: pd.DataFrame  # noqa: F821
-    order: pd.DataFrame  # noqa: F821
+    conditions: pd.DataFrame
+    order: pd.DataFrame
 
 
 def plan_stimuli(
@@ -209,85 +218,6 @@ def plan_stimuli(
     return _Plan(conditions, pd.DataFrame(rows, columns=["participant", "trial", "position", "slot", "id"]))
 
 
-# ---- loudness -----------------------------------------------------------------------------------
-
-
-def measure_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR) -> float:
-    """Integrated loudness (EBU R 128 / ITU-R BS.1770) of mono audio, LUFS, measured by ffmpeg.
-
-    Returns
-    -------
-    float
-        LUFS, 0.1 LU resolution; about -70 (the gate) for silence or audio under 0.4 s.
-    """
-    from .export.video import _ffmpeg
-
-    a = np.ascontiguousarray(audio, dtype="<f4")
-    if a.ndim != 1 or a.size == 0:
-        raise ConfigError(f"audio must be mono samples, shape (samples,), got {a.shape}")
-    run = subprocess.run(
-        [
-            _ffmpeg(),
-            "-hide_banner",
-            "-nostdin",
-            "-f",
-            "f32le",
-            "-ar",
-            str(int(sr)),
-            "-ac",
-            "1",
-            "-i",
-            "pipe:0",
-            "-af",
-            "ebur128=framelog=quiet",
-            "-f",
-            "null",
-            "-",
-        ],
-        input=a.tobytes(),
-        capture_output=True,
-    )
-    m = _LOUDNESS_RE.search(run.stderr.decode("utf-8", "replace"))
-    if run.returncode != 0 or m is None:
-        raise GestureKitError(
-            "ffmpeg could not measure the loudness of the speech: "
-            + run.stderr.decode("utf-8", "replace").strip()[-300:]
-        )
-    return -70.0 if m.group(1) == "-inf" else float(m.group(1))
-
-
-def normalise_loudness(
-    audio: np.ndarray, *, sr: int = AUDIO_SR, target_lufs: float = -23.0, peak: float = 0.98
-) -> tuple[np.ndarray, float]:
-    """Scale speech to an integrated loudness, never past a sample peak.
-
-    Parameters
-    ----------
-    audio : np.ndarray, shape (samples,)
-    sr : int
-    target_lufs : float
-        Target loudness, LUFS (EBU R 128 broadcast: -23).
-    peak : float
-        Largest absolute sample allowed after scaling; when the target needs more, the gain
-        stops there (the clip is then quieter than the target).
-
-    Returns
-    -------
-    audio : np.ndarray, shape (samples,), float32
-    gain_db : float
-        The gain applied (0 for silence).
-    """
-    a = np.asarray(audio, dtype=np.float32)
-    level = measure_loudness(a, sr=sr)
-    if level <= -69.0:
-        return a.copy(), 0.0
-    gain = 10 ** ((target_lufs - level) / 20)
-    top = float(np.max(np.abs(a)))
-    if top > 0 and top * gain > peak:
-        gain = peak / top
-    return (a * np.float32(gain)).astype(np.float32), 20 * math.log10(gain)
-
-
 # ---- speeches -----------------------------------------------------------------------------------
 
 
@@ -313,7 +243,9 @@ class StimulusSpeech:
     exclude_ranges: tuple = ()
 
 
-def speech_sources(db, *, audio=(), holdouts=()) -> list[StimulusSpeech]:
+def speech_sources(
+    db: MatchingDatabase, *, audio: Sequence[str | os.PathLike[str]] = (), holdouts: Sequence[Any] = ()
+) -> list[StimulusSpeech]:
     """The speeches of a study: speech files (or folders of them) and held-out parts of the database.
 
     Parameters
@@ -356,7 +288,7 @@ def speech_sources(db, *, audio=(), holdouts=()) -> list[StimulusSpeech]:
 # ---- rendering ----------------------------------------------------------------------------------
 
 
-def stimulus_style():
+def stimulus_style() -> RenderStyle:
     """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion)."""
     from .viz.render import RenderStyle
 
@@ -381,7 +313,13 @@ def _render_stimulus(job: dict) -> str:
     return job["id"]
 
 
-def _run_jobs(jobs: list[dict], *, workers: int | None, scheduler, progress) -> None:
+def _run_jobs(
+    jobs: list[dict],
+    *,
+    workers: int | None,
+    scheduler: str | Client | None,
+    progress: Callable[[int, int], None] | None,
+) -> None:
     total = len(jobs)
     done = 0
 
@@ -418,9 +356,9 @@ def _run_jobs(jobs: list[dict], *, workers: int | None, scheduler, progress) -> 
     # fresh interpreters: no rendering or threading state is inherited from the caller
     try:
         with cf.ProcessPoolExecutor(max_workers=min(n, total), mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(_render_stimulus, job) for job in jobs]
-            for fut in cf.as_completed(futures):
-                fut.result()
+            pending = [pool.submit(_render_stimulus, job) for job in jobs]
+            for done_job in cf.as_completed(pending):
+                done_job.result()
                 tick()
     except cf.process.BrokenProcessPool:
         raise GestureKitError(
@@ -448,33 +386,37 @@ class StudyResult:
     """
 
     folder: Path
-    manifest: pd.DataFrame  # noqa: F821
-    order: pd.DataFrame  # noqa: F821
+    manifest: pd.DataFrame
+    order: pd.DataFrame
     videos: list = field(default_factory=list)
     settings: dict = field(default_factory=dict)
 
 
 def _write_text(path: Path, text: str) -> None:
     data = text.encode("utf-8")
-    atomic_write(path, lambda f: f.write(data), overwrite=True)
+
+    def write(f: BinaryIO) -> None:
+        f.write(data)
+
+    atomic_write(path, write, overwrite=True)
 
 
 def make_stimuli(
-    db,
+    db: MatchingDatabase,
     *,
     out: str | os.PathLike,
-    audio: Sequence = (),
-    holdouts: Sequence = (),
-    systems=("gt", "knn", "knn+cgan"),
+    audio: Sequence[str | os.PathLike[str]] = (),
+    holdouts: Sequence[Any] = (),
+    systems: str | Sequence[str] = ("gt", "knn", "knn+cgan"),
     seed: int = 0,
     participants: int | None = None,
     control: str = "",
-    config=None,
-    refiner=None,
+    config: SynthesisConfig | None = None,
+    refiner: Refiner | str | os.PathLike[str] | None = None,
     resolution: tuple[int, int] = (640, 480),
     loudness_lufs: float = -23.0,
     workers: int | None = None,
-    scheduler=None,
+    scheduler: str | Client | None = None,
     overwrite: bool = False,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> StudyResult:

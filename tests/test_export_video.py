@@ -23,7 +23,8 @@ from gesturekit.export.video import AUDIO_OUT_SR, probe_media, render_video
 from gesturekit.motion import Motion
 from gesturekit.skeleton import FINGERS, N_JOINTS, hand_indices, joint_index
 from gesturekit.viz.appearance import APPEARANCE, DERIVED_POINTS
-from gesturekit.viz.render import CHUNK_FRAMES, RenderStyle, SkeletonScene, render_frames, render_image, view_bounds
+from gesturekit.viz.render import RenderStyle, SkeletonScene, render_image, view_bounds
+from gesturekit.viz.render_pool import CHUNK_FRAMES, render_frames
 
 FPS = 15.0
 SR = 16000
@@ -194,6 +195,16 @@ def test_two_motions_have_their_own_colours_in_their_own_halves():
     left, right = image[:, :100], image[:, 100:]
     assert blue(left).sum() > 400 and orange(right).sum() > 400
     assert orange(left).sum() == 0 and blue(right).sum() == 0
+
+
+def test_a_closed_scene_refuses_to_draw_and_closes_twice():
+    scene = SkeletonScene([still_motion(2)], resolution=(48, 32))
+    assert scene.render_frame(1).shape == (32, 48, 3)
+    scene.close()
+    scene.close()  # closing again is harmless
+    for draw in (lambda: scene.render_frame(0), lambda: scene.project(np.zeros((1, 3))), lambda: scene.backend):
+        with pytest.raises(GestureKitError, match="closed"):
+            draw()
 
 
 def test_the_body_has_a_head_above_its_neck_and_fills_the_view():

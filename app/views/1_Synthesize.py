@@ -1,5 +1,7 @@
 """Speech in, gestures out: choose speech, draw controls, set the search, run, watch, download."""
 
+from __future__ import annotations
+
 import functools
 import time
 
@@ -14,6 +16,7 @@ import streamlit as st
 from gesturekit import interactive as gs
 from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
+from gesturekit.database import MatchingDatabase
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
 from gesturekit.search import describe_steps
@@ -184,7 +187,7 @@ def controls(speech: dict) -> ControlTrack | None:
     return track
 
 
-def settings(db) -> dict:
+def settings(db: MatchingDatabase) -> dict:
     """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can
     run."""
     ss = st.session_state
@@ -292,7 +295,7 @@ def _figure(record, name: str, build):
     return cache[name]
 
 
-def video(record) -> None:
+def video(record: dict) -> None:
     """The MP4 with sound, rendered on demand on every core, then played in the page."""
     ss = st.session_state
     result = record["result"]
@@ -303,7 +306,7 @@ def video(record) -> None:
         return
     st.caption("For exact audio-video sync, render the motion offscreen to an MP4 with the speech as soundtrack.")
     if st.button("Render MP4 with sound", key="synth.render"):
-        from gesturekit.viz.render import default_workers  # the rendering libraries load only when rendering
+        from gesturekit.viz.render_pool import default_workers  # the rendering libraries load only when rendering
 
         workers = default_workers()
         bar = st.progress(0.0, text=f"rendering on {workers} core{'s' if workers > 1 else ''}…")
@@ -335,7 +338,7 @@ def video(record) -> None:
         st.caption(note)
 
 
-def show_result(db, record) -> None:
+def show_result(db: MatchingDatabase, record: dict) -> None:
     ss = st.session_state
     result = record["result"]
     st.header("Result")

@@ -1,5 +1,9 @@
 """Step through the search: each step's candidates, their distances and clips; pin a choice; compare k."""
 
+from __future__ import annotations
+
+from typing import Any
+
 import display
 import nav
 import sidebar
@@ -7,7 +11,9 @@ import state
 import streamlit as st
 
 from gesturekit import interactive as gs
+from gesturekit.database import MatchingDatabase
 from gesturekit.motion import AUDIO_SR
+from gesturekit.synthesize import SynthesisResult
 from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
 
 STEP = "inspect.step"  # the step shown (per user)
@@ -61,7 +67,7 @@ def _rerun_with(db, record, config) -> None:
     st.rerun()
 
 
-def pick_step(db, result) -> int:
+def pick_step(db: MatchingDatabase, result: SynthesisResult) -> int:
     """The steps table (a selected row picks the step) and the step number input."""
     ss = st.session_state
     table = gs.steps_overview(result, db)
@@ -89,7 +95,7 @@ def pick_step(db, result) -> int:
     return int(step)
 
 
-def step_view(db, record, step: int) -> None:
+def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
     ss = st.session_state
     result = record["result"]
     s, N, fps = result.search, result.config.step, result.motion.fps
@@ -170,8 +176,11 @@ def step_view(db, record, step: int) -> None:
             _rerun_with(db, record, result.config.with_pin(step, r.clip, r.start))
 
 
-def context(db, r, n_frames: int) -> None:
-    """The candidate's speech with a second of its take on either side, the window shaded."""
+def context(db: MatchingDatabase, r: Any, n_frames: int) -> None:
+    """The candidate's speech with a second of its take on either side, the window shaded.
+
+    ``r``: a row of the candidates table (``clip``, ``start``, ``take``).
+    """
     audio, a, b, t0 = gs.segment_in_context(db, r.clip, r.start, n_frames, context_s=CONTEXT_S)
     st.caption(
         f"…with up to {CONTEXT_S:g} s around it: the window is {a:.2f}–{b:.2f} s of this "
@@ -183,7 +192,7 @@ def context(db, r, n_frames: int) -> None:
     st.plotly_chart(fig, key="inspect.context", config={"displaylogo": False})
 
 
-def pins_view(db, record) -> None:
+def pins_view(db: MatchingDatabase, record: dict) -> None:
     result = record["result"]
     pins = result.config.pins
     st.subheader("Pins")
@@ -206,7 +215,7 @@ def pins_view(db, record) -> None:
         _rerun_with(db, record, config)
 
 
-def compare_view(db, record) -> None:
+def compare_view(db: MatchingDatabase, record: dict) -> None:
     ss = st.session_state
     result = record["result"]
     st.subheader("Compare k")

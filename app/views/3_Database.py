@@ -1,5 +1,7 @@
 """The matching database: its takes and clips, the control attributes, and any clip in 3D with its sound."""
 
+from __future__ import annotations
+
 import display
 import numpy as np
 import pandas as pd
@@ -8,6 +10,7 @@ import state
 import streamlit as st
 
 from gesturekit.control import ATTRIBUTE_UNITS
+from gesturekit.database import MatchingDatabase
 from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.viz.figures import attribute_histograms, waveform_figure
 
@@ -15,7 +18,7 @@ CLIP = "db.clip"  # the clip shown in the viewer (per user)
 _LAST_ROW = "_db.last_selected_clip"  # the table selection already applied
 
 
-def summary(db) -> None:
+def summary(db: MatchingDatabase) -> None:
     d = db.describe()
     st.subheader("Summary")
     cols = st.columns(5)
@@ -35,7 +38,7 @@ def summary(db) -> None:
     )
 
 
-def pick_clip(db) -> int:
+def pick_clip(db: MatchingDatabase) -> int:
     """Takes and clips tables; a selected row or the number input picks the clip to view."""
     ss = st.session_state
     st.subheader("Takes")
@@ -86,7 +89,7 @@ def pick_clip(db) -> int:
     return int(clip)
 
 
-def clip_attributes(db, clip: int) -> pd.DataFrame:
+def clip_attributes(db: MatchingDatabase, clip: int) -> pd.DataFrame:
     """Each control attribute over the clip's frames, against the database's thresholds."""
     rows = []
     for name in db.attribute_names:
@@ -106,7 +109,7 @@ def clip_attributes(db, clip: int) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def viewer(db, clip: int) -> None:
+def viewer(db: MatchingDatabase, clip: int) -> None:
     clips = db.clips_table()
     row = clips.iloc[clip]
     st.subheader(f"Clip {clip}")

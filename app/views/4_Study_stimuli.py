@@ -1,5 +1,7 @@
 """User-study stimuli: speeches x systems as identical-looking videos, a manifest, a balanced order."""
 
+from __future__ import annotations
+
 import os
 import tempfile
 from pathlib import Path
@@ -9,6 +11,7 @@ import sidebar
 import state
 import streamlit as st
 
+from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.takes import AUDIO_EXTENSIONS
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SYSTEM_DESCRIPTIONS, SYSTEMS
@@ -29,7 +32,7 @@ def _speech_files(folder: str) -> list[Path]:
     return speech_files(p)
 
 
-def settings(db) -> dict:
+def settings(db: MatchingDatabase) -> dict:
     """The study's widgets; returns the options of make_stimuli and the speech names."""
     ss, pk = st.session_state, state.persistent_key
     left, right = st.columns(2)
@@ -108,7 +111,7 @@ def settings(db) -> dict:
     }
 
 
-def conditions(opts) -> bool:
+def conditions(opts: dict) -> bool:
     """The table of conditions the study will have; False when it has none yet."""
     if not opts["names"] or not opts["systems"]:
         st.info("Choose speech (a folder, uploads or held-out parts) and at least one system.")
@@ -126,7 +129,7 @@ def conditions(opts) -> bool:
     return True
 
 
-def run(db, opts) -> None:
+def run(db: MatchingDatabase, opts: dict) -> None:
     if not opts["out"]:
         raise ConfigError("type the study folder to write")
     display.allowed(opts["out"], what="study folder to write", write=True)

@@ -56,6 +56,7 @@ from __future__ import annotations
 import io
 import os
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -190,7 +191,11 @@ def write_bvh(
         decimals=int(decimals),
     )
     data = text.encode("ascii")
-    return atomic_write(path, lambda f: f.write(data), overwrite=overwrite)
+
+    def write(f: BinaryIO) -> None:
+        f.write(data)
+
+    return atomic_write(path, write, overwrite=overwrite)
 
 
 # ----------------------------------------------------------------------------- rest pose

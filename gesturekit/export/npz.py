@@ -105,8 +105,9 @@ def save_npz(
         ("config", np.array(_config_json(config, path), dtype=np.str_)),
         ("format_version", np.array(FORMAT_VERSION, dtype=np.int64)),
     ]
-    for name in sorted(arrays or {}):
-        entries.append((name, _checked_extra(name, arrays[name], path)))
+    extra = arrays or {}
+    for name in sorted(extra):
+        entries.append((name, _checked_extra(name, extra[name], path)))
     for name, arr in entries:
         if (name == "positions" or name.endswith("_positions")) and np.issubdtype(arr.dtype, np.floating):
             bad = np.atleast_1d(~np.isfinite(arr).all(axis=tuple(range(1, arr.ndim))))

@@ -21,9 +21,10 @@ import re
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from fractions import Fraction
 from pathlib import Path
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from .._io import atomic_write
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG
+
+if TYPE_CHECKING:
+    from ..viz.render import RenderStyle
 
 __all__ = ["render_video", "probe_media", "AUDIO_OUT_SR"]
 
@@ -61,7 +65,7 @@ def render_video(
     progress: Callable[[int, int], None] | None = None,
     side_by_side: Motion | None = None,
     labels: Sequence[str] | None = None,
-    style=None,
+    style: RenderStyle | None = None,
     workers: int | None = None,
 ) -> Path:
     """Render a motion to an MP4 file (H.264 + AAC) that plays in a browser.
@@ -101,7 +105,7 @@ def render_video(
     workers : int, optional
         Rendering processes; 1 renders in this process. By default one per
         core for clips of at least
-        :data:`gesturekit.viz.render.PARALLEL_MIN_FRAMES` frames. The file is
+        :data:`gesturekit.viz.render_pool.PARALLEL_MIN_FRAMES` frames. The file is
         the same, byte for byte, whatever the number.
 
     Returns
@@ -138,7 +142,7 @@ def render_video(
         audio = _check_audio(audio, sr)
     motions = [motion] if side_by_side is None else [motion, side_by_side]
 
-    from ..viz.render import render_frames  # rendering libraries load only when rendering
+    from ..viz.render_pool import render_frames  # rendering libraries load only when rendering
 
     # checks the motions, labels and workers before anything starts
     frames = render_frames(motions, labels=labels, resolution=(width, height), style=style, workers=workers)
@@ -156,14 +160,14 @@ def render_video(
         cmd = _encode_command(encoded, width, height, fps, wav, seconds)
         _encode(cmd, frames, rendered, n_frames, progress, Path(tmp) / "ffmpeg.log", path)
 
-        def copy(f):
+        def copy(f: IO[bytes]) -> None:
             with open(encoded, "rb") as src:
                 shutil.copyfileobj(src, f, length=1 << 20)
 
         return atomic_write(path, copy, overwrite=overwrite)
 
 
-def _check_resolution(resolution) -> tuple[int, int]:
+def _check_resolution(resolution: Any) -> tuple[int, int]:
     try:
         width, height = (int(v) for v in resolution)
         whole = len(resolution) == 2 and width == resolution[0] and height == resolution[1]
@@ -178,7 +182,7 @@ def _check_resolution(resolution) -> tuple[int, int]:
     return width, height
 
 
-def _check_audio(audio, sr) -> np.ndarray:
+def _check_audio(audio: Any, sr: Any) -> np.ndarray:
     if isinstance(sr, bool) or not isinstance(sr, (int, np.integer)) or not 1000 <= sr <= 384000:
         raise ConfigError(f"sr must be a whole number of Hz within 1000..384000, got {sr!r}")
     audio = np.asarray(audio)
@@ -198,7 +202,9 @@ def _write_wav(path: Path, audio: np.ndarray, sr: int) -> None:
     soundfile.write(path, audio, int(sr), subtype="FLOAT")
 
 
-def _encode_command(out: Path, width: int, height: int, fps: float, wav: Path | None, seconds: float | None):
+def _encode_command(
+    out: Path, width: int, height: int, fps: float, wav: Path | None, seconds: float | None
+) -> list[str]:
     rate = Fraction(fps).limit_denominator(1001)
     cmd = [
         _ffmpeg(),
@@ -258,25 +264,35 @@ def _encode_command(out: Path, width: int, height: int, fps: float, wav: Path | 
     return cmd
 
 
-def _encode(cmd, frames, rendered: int, n_frames: int, progress, log_path: Path, target: Path) -> None:
+def _encode(
+    cmd: list[str],
+    frames: Iterator[np.ndarray],
+    rendered: int,
+    n_frames: int,
+    progress: Callable[[int, int], None] | None,
+    log_path: Path,
+    target: Path,
+) -> None:
     """Write ``n_frames`` pictures into ffmpeg's standard input: the ``rendered`` ones of
-    ``frames``, then the last of them again."""
+    ``frames`` (at least one), then the last of them again."""
     with open(log_path, "w+b") as log:
         proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
+        stdin = proc.stdin
+        assert stdin is not None  # stdin=PIPE
         try:
-            image = None
+            image = next(frames)
             for i in range(n_frames):
                 # past the end of the motion the picture no longer changes
-                if i < rendered:
+                if 0 < i < rendered:
                     image = next(frames)
                 try:
-                    proc.stdin.write(image.data)
+                    stdin.write(image.data)
                 except (BrokenPipeError, OSError):
                     break  # ffmpeg stopped; its log says why
                 if progress is not None:
                     progress(i + 1, n_frames)
             try:
-                proc.stdin.close()
+                stdin.close()
             except (BrokenPipeError, OSError):
                 pass
             code = proc.wait()
@@ -356,7 +372,9 @@ def probe_media(path: str | os.PathLike, *, decode: bool = True) -> dict:
 
 def _split_top_level(text: str) -> list[str]:
     """Split ffmpeg's stream description at commas outside parentheses and brackets."""
-    parts, depth, current = [], 0, []
+    parts: list[str] = []
+    current: list[str] = []
+    depth = 0
     for ch in text:
         if ch in "([":
             depth += 1
@@ -432,11 +450,11 @@ def _measure(source: str, info: dict, path: Path) -> None:
     count: dict[int, int] = {}
     for line in run.stdout.decode("ascii", "replace").splitlines():
         if line.startswith("#tb "):
-            index, value = line[4:].split(":")
-            time_base[int(index)] = Fraction(value.strip())
+            stream, value = line[4:].split(":")
+            time_base[int(stream)] = Fraction(value.strip())
         elif line.startswith("#media_type "):
-            index, value = line[12:].split(":")
-            kinds[int(index)] = value.strip()
+            stream, value = line[12:].split(":")
+            kinds[int(stream)] = value.strip()
         elif line and not line.startswith("#"):
             fields = [f.strip() for f in line.split(",")]
             index, pts, duration = int(fields[0]), int(fields[2]), int(fields[3])

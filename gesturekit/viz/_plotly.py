@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import base64
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +36,7 @@ def _xyz(points: np.ndarray) -> dict:
     return {"x": _typed(points[:, 0]), "y": _typed(points[:, 1]), "z": _typed(points[:, 2])}
 
 
-def data_array(value) -> np.ndarray:
+def data_array(value: dict | Sequence[Any] | np.ndarray) -> np.ndarray:
     """A plotly data array as numbers, whichever form it takes.
 
     Parameters
@@ -54,9 +56,8 @@ def data_array(value) -> np.ndarray:
         if value.get("shape"):
             out = out.reshape([int(d) for d in str(value["shape"]).split(",")])
         return out.astype(np.float64)
-    return np.array(
-        [np.nan if v is None else v for v in np.asarray(value, dtype=object).ravel()], dtype=np.float64
-    ).reshape(np.shape(value))
+    cells = np.asarray(value, dtype=object)
+    return np.array([np.nan if v is None else v for v in cells.ravel()], dtype=np.float64).reshape(cells.shape)
 
 
 def _motions_and_labels(

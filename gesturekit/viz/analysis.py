@@ -14,15 +14,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
 from ..errors import ConfigError
 from ..evaluate.metrics import KINEMATIC_JOINTS, audio_onsets, kinetic_velocity, motion_beats
-from ..motion import AUDIO_SR
+from ..motion import AUDIO_SR, Motion
 from ._plotly import MOTION_COLORS, _motions_and_labels
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "LOSS_GROUPS",
@@ -43,7 +48,7 @@ LOSS_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
 )
 
 
-def loss_curves_figure(log, *, smooth: int = 1, title: str | None = None, height: int = 380) -> go.Figure:
+def loss_curves_figure(log: pd.DataFrame, *, smooth: int = 1, title: str | None = None, height: int = 380) -> go.Figure:
     """Training curves of a refiner: the critic's losses, the generator's loss and its terms.
 
     Parameters
@@ -111,7 +116,12 @@ def loss_curves_figure(log, *, smooth: int = 1, title: str | None = None, height
 
 
 def join_profile(
-    positions, boundaries, *, fps: float, radius: int = 4, joints: Sequence[int] | None = KINEMATIC_JOINTS
+    positions: npt.ArrayLike,
+    boundaries: Sequence[int],
+    *,
+    fps: float,
+    radius: int = 4,
+    joints: Sequence[int] | None = KINEMATIC_JOINTS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Mean joint speed frame by frame around the joins of concatenated segments.
 
@@ -158,8 +168,8 @@ def join_profile(
 
 
 def join_profile_figure(
-    motions,
-    boundaries,
+    motions: Motion | Sequence[Motion],
+    boundaries: Sequence[int],
     *,
     labels: Sequence[str] | None = None,
     radius: int = 4,
@@ -210,8 +220,8 @@ def join_profile_figure(
 
 
 def beats_figure(
-    motions,
-    audio,
+    motions: Motion | Sequence[Motion],
+    audio: np.ndarray,
     *,
     labels: Sequence[str] | None = None,
     sr: int = AUDIO_SR,
@@ -320,7 +330,12 @@ def beats_figure(
 
 
 def metrics_figure(
-    table, *, columns: Sequence[str] | None = None, cols: int = 4, title: str | None = None, height: int | None = None
+    table: pd.DataFrame,
+    *,
+    columns: Sequence[str] | None = None,
+    cols: int = 4,
+    title: str | None = None,
+    height: int | None = None,
 ) -> go.Figure:
     """An evaluation table as bars: one subplot per measure, one bar per system.
 
@@ -382,7 +397,7 @@ def metrics_figure(
     return fig
 
 
-def adherence_figure(controls, *, title: str | None = None, height: int = 420) -> go.Figure:
+def adherence_figure(controls: pd.DataFrame, *, title: str | None = None, height: int = 420) -> go.Figure:
     """Control adherence per control segment and system, with and without the control.
 
     Parameters

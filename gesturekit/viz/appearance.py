@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import ConfigError
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS, joint_index
@@ -104,7 +105,7 @@ def hex_to_rgb(color: str) -> np.ndarray:
     return np.array([int(c[i : i + 2], 16) for i in (0, 2, 4)], dtype=np.float64) / 255.0
 
 
-def rgb_to_hex(rgb) -> str:
+def rgb_to_hex(rgb: npt.ArrayLike) -> str:
     """Floats in [0, 1] (clipped), shape (3,), as ``"#rrggbb"``."""
     v = np.clip(np.round(np.asarray(rgb, dtype=np.float64) * 255.0), 0, 255).astype(int)
     return "#{:02x}{:02x}{:02x}".format(*v)
@@ -229,7 +230,7 @@ class Appearance:
         """The unit direction towards the light, camera frame, shape (3,)."""
         return _unit(np.asarray(self.light_direction, dtype=np.float64))
 
-    def shade(self, color: str, normals) -> np.ndarray:
+    def shade(self, color: str, normals: npt.ArrayLike) -> np.ndarray:
         """The lit colour of surface points.
 
         Parameters
@@ -309,7 +310,7 @@ class Appearance:
         spheres = (Sphere(head_c, self.head_radius, "head", covers=(head_bone,)),)
         return tuple(caps), spheres
 
-    def body(self, positions) -> BodyShapes:
+    def body(self, positions: npt.ArrayLike) -> BodyShapes:
         """The shapes to draw for a motion: its points (joints and derived points) and capsules.
 
         Parameters
@@ -352,7 +353,7 @@ class Appearance:
         points = np.concatenate([p, derived], axis=1).astype(np.float32)
         return BodyShapes(points=points, capsules=caps, spheres=spheres)
 
-    def bounds(self, points, *, margin: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def bounds(self, points: npt.ArrayLike, *, margin: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """The box every drawn surface stays in over the whole motion: the framing rule.
 
         Parameters
@@ -379,7 +380,7 @@ class Appearance:
             lo, hi = lo - m, hi + m
         return lo, hi
 
-    def ground_height(self, points) -> float:
+    def ground_height(self, points: npt.ArrayLike) -> float:
         """The floor's height (Y, metres): :attr:`ground_gap` below the lowest surface of the motion.
 
         Parameters

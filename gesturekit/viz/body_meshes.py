@@ -99,7 +99,8 @@ class BodyMeshes:
             mesh = _mesh_with_normals(n, polygons)
             normals = mesh.point_data["Normals"]
             for (_, _, template, _), start in zip(balls, ball_index):
-                normals[start : start + len(template)] = template  # a ball's normals never change
+                # a ball's normals never change; pyvista's stubs type a slice index too narrowly
+                normals[start : start + len(template)] = template  # type: ignore[index]
             # balls of one template are moved together: (centres, radii, template, first point)
             groups = []
             for template in (self._ball, self._small, self._head):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import plotly.graph_objects as go
@@ -17,6 +18,10 @@ from ..control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, ControlTrack, frame_attr
 from ..errors import ConfigError
 from ..motion import Motion
 from ._plotly import _BAND_COLORS, MOTION_COLORS, _motions_and_labels
+
+if TYPE_CHECKING:
+    from ..database import MatchingDatabase
+    from ..search import SearchResult
 
 #: Where the line charts put their legend: under the plot, at the figure's bottom left, clear of
 #: the chart toolbar a page shows at the top right (and of the control labels above the plot).
@@ -33,7 +38,9 @@ def _attribute_unit(name: str) -> str:
     return ATTRIBUTE_UNITS.get(name, "m/s" if "speed" in name else "m")
 
 
-def attribute_histograms(db, *, bins: int = 40, names: Sequence[str] | None = None, cols: int = 3) -> go.Figure:
+def attribute_histograms(
+    db: MatchingDatabase, *, bins: int = 40, names: Sequence[str] | None = None, cols: int = 3
+) -> go.Figure:
     """Histograms of the database's control attributes, with their low/high thresholds.
 
     Parameters
@@ -461,7 +468,7 @@ def wrist_figure(
 
 
 def candidates_figure(
-    search, step: int, *, names: Sequence[str] | None = None, title: str | None = None, height: int = 320
+    search: SearchResult, step: int, *, names: Sequence[str] | None = None, title: str | None = None, height: int = 320
 ) -> go.Figure:
     """The candidates of one search step: pose distance against audio distance, the chosen one ringed.
 
@@ -527,7 +534,7 @@ def candidates_figure(
             text=[str(p) for p in keep],
             textposition="top center",
             customdata=custom,
-            hovertext=None if names is None else [str(names[p]) for p in keep],
+            hovertext=None if names is None else [str(names[int(p)]) for p in keep],
             hovertemplate=hover + "<extra></extra>",
             marker=dict(size=9, color="#6b7f99"),
             name="candidates",

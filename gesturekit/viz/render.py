@@ -11,7 +11,8 @@ so the figure fills the view and no hand is ever cut; a fixed box instead
 (``RenderStyle(fit_motion=False)``) frames the clips of every system of a user
 study alike. The meshes are built once; each frame only rewrites their points
 (in numpy), so a long clip costs little more than the rasterisation itself.
-:func:`render_frames` renders a clip's frames on every core, in order.
+:func:`gesturekit.viz.render_pool.render_frames` renders a clip's frames on every
+core, in order.
 
 Rendering needs no display server. On Linux without ``DISPLAY`` or
 ``WAYLAND_DISPLAY`` the scene asks VTK for its EGL render window (Mesa's
@@ -27,17 +28,12 @@ from __future__ import annotations
 import contextlib
 import ctypes.util
 import dataclasses
-import json
 import math
 import os
-import queue
-import subprocess
 import sys
-import tempfile
-import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyvista as pv
@@ -50,7 +46,7 @@ from ..skeleton import N_JOINTS
 from .appearance import APPEARANCE, DERIVED_POINTS, Appearance, hex_to_rgb
 from .body_meshes import BodyMeshes
 
-__all__ = ["RenderStyle", "SkeletonScene", "default_workers", "render_frames", "render_image", "view_bounds"]
+__all__ = ["RenderStyle", "SkeletonScene", "render_image", "view_bounds"]
 
 _WINDOW_ENV = "VTK_DEFAULT_OPENGL_WINDOW"
 
@@ -105,7 +101,7 @@ class RenderStyle:
     multi_samples: int = 0
     font_size: int = 14
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not isinstance(self.appearance, Appearance):
             raise ConfigError(f"appearance must be an Appearance, got {type(self.appearance).__name__}")
         box = np.asarray(self.view_box, dtype=np.float64)
@@ -192,7 +188,9 @@ def view_bounds(motions: Sequence[Motion], *, style: RenderStyle | None = None) 
     return np.stack([lo - pad, hi + pad], axis=1)
 
 
-def _camera(points: np.ndarray, aspect: float, style: RenderStyle, *, pad=0.0, margin: float = 0.0):
+def _camera(
+    points: np.ndarray, aspect: float, style: RenderStyle, *, pad: float | np.ndarray = 0.0, margin: float = 0.0
+) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, float]]:
     """Camera in front of the points (+Z), looking down by ``style.elevation``, as close as it
     can be with every point (grown by ``pad`` metres) in view and a ``margin`` (a fraction of
     the view) left free on every side.
@@ -275,7 +273,7 @@ class SkeletonScene:
         theme.multi_samples = int(s.multi_samples)
         theme.anti_aliasing = "msaa" if s.multi_samples > 0 else None
         with _opengl_window_choice():
-            self._plotter = pv.Plotter(
+            self._plotter: pv.Plotter | None = pv.Plotter(
                 off_screen=True,
                 shape=(1, len(motions)),
                 border=False,
@@ -291,9 +289,9 @@ class SkeletonScene:
         self._frame = 0  # the meshes hold the first frame's pose
         self._pixels = vtkUnsignedCharArray()
 
-    def _build(self, labels) -> None:
+    def _build(self, labels: Sequence[str] | None) -> None:
         """Add every body's meshes, the floor, the shadows, the labels, the light and the camera."""
-        pl, s, motions = self._plotter, self.style, self.motions
+        pl, s, motions = self._live(), self.style, self.motions
         a = s.appearance
         self._bodies = []
         self._points = [a.body(m.positions).points for m in motions]  # (frames, 61, 3) each
@@ -314,7 +312,6 @@ class SkeletonScene:
             corners = np.array([[x, y, z] for x in box[0] for y in box[1] for z in box[2]])
             position, focal, up, clip = _camera(corners, aspect, s)
         # the appearance's rule, colour * (ambient + diffuse * max(0, n . l)), light fixed to the camera
-        surface = dict(ambient=a.ambient, diffuse=a.diffuse, specular=0.0)
         light = a.light()
         for i in range(len(motions)):
             pl.subplot(0, i)
@@ -322,7 +319,9 @@ class SkeletonScene:
             body = BodyMeshes(s)
             body.update(self._points[i][0])
             for part, mesh in body.parts.items():
-                actor = pl.add_mesh(mesh, color=a.part_color(i, part), **surface)
+                actor = pl.add_mesh(
+                    mesh, color=a.part_color(i, part), ambient=a.ambient, diffuse=a.diffuse, specular=0.0
+                )
                 actor.prop.interpolation = "gouraud"  # our own normals, smoothly interpolated
             if labels is not None:
                 pl.add_text(str(labels[i]), position="upper_edge", font_size=s.font_size, color=a.color(i))
@@ -341,7 +340,7 @@ class SkeletonScene:
     def _floor_and_shadow(self, box: np.ndarray, ground: float, points: np.ndarray) -> None:
         """The floor, unlit, from behind the framed region to under the camera, and a soft
         contact shadow on it under the body (where its pelvis stands on average)."""
-        pl, a = self._plotter, self.style.appearance
+        pl, a = self._live(), self.style.appearance
         width = box[0, 1] - box[0, 0]
         floor = pv.Plane(
             center=(box[0].mean(), ground, box[2, 1]),
@@ -365,7 +364,7 @@ class SkeletonScene:
     @property
     def backend(self) -> str:
         """Class name of VTK's render window, e.g. ``"vtkEGLRenderWindow"`` when headless."""
-        return type(self._plotter.render_window).__name__
+        return type(self._live().render_window).__name__
 
     # -- per frame ---------------------------------------------------------------------------
     def set_frame(self, frame: int) -> None:
@@ -382,7 +381,9 @@ class SkeletonScene:
     def render_frame(self, frame: int) -> np.ndarray:
         """The picture of one frame, shape (height, width, 3), uint8 RGB, top row first."""
         self.set_frame(frame)
-        window = self._plotter.render_window
+        window = self._live().render_window
+        if window is None:
+            raise GestureKitError("the scene's render window is gone")
         window.Render()
         w, h = self.resolution
         window.GetPixelData(0, 0, w - 1, h - 1, 0, self._pixels, 0)
@@ -416,7 +417,7 @@ class SkeletonScene:
             Column (from the left) and row (from the top) in the whole
             picture, pixels.
         """
-        renderer = self._plotter.renderers[panel]
+        renderer = self._live().renderers[panel]
         x0, y0, x1, y1 = renderer.GetViewport()
         w, h = self.resolution
         pw, ph = (x1 - x0) * w, (y1 - y0) * h
@@ -430,6 +431,12 @@ class SkeletonScene:
         return np.stack([col, row], axis=1)
 
     # -- lifetime ----------------------------------------------------------------------------
+    def _live(self) -> pv.Plotter:
+        """The scene's plotter; a closed scene draws nothing more."""
+        if self._plotter is None:
+            raise GestureKitError("the scene is closed")
+        return self._plotter
+
     def close(self) -> None:
         """Release the render window and its OpenGL context."""
         if self._plotter is not None:
@@ -443,7 +450,7 @@ class SkeletonScene:
         self.close()
 
 
-def _check_scene(motions: list, labels, resolution) -> None:
+def _check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int]) -> None:
     if not 1 <= len(motions) <= 2:
         raise ConfigError(f"a scene shows one or two motions, got {len(motions)}")
     for m in motions:
@@ -506,201 +513,8 @@ def render_image(
         return scene.render_frame(frame)
 
 
-# -- many frames on every core ----------------------------------------------------------------------
-
-#: Frames one rendering process renders in a row before the next process's turn (2 s at 15 fps).
-CHUNK_FRAMES = 30
-
-#: With ``workers=None``, clips shorter than this render in the calling process: starting
-#: the rendering processes (about a second) would cost more than it saves.
-PARALLEL_MIN_FRAMES = 150
-
-# the most frame bytes waiting in the parent for their turn, all processes together
-_BUFFER_BYTES = 256 << 20
-
-
-def default_workers() -> int:
-    """The cores this process may run on: the number of rendering processes used by default."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
-def render_frames(
-    motions: Sequence[Motion],
-    *,
-    labels: Sequence[str] | None = None,
-    resolution: tuple[int, int] = (640, 480),
-    style: RenderStyle | None = None,
-    workers: int | None = None,
-) -> Iterator[np.ndarray]:
-    """Every frame of a scene's clip, in order, rendered on several cores.
-
-    The frames are exactly those of :meth:`SkeletonScene.render_frame` for
-    frames ``0 .. n_frames - 1``, whichever number of processes renders them.
-    With more than one worker, each is a separate Python process
-    (:mod:`gesturekit.viz.render_worker`) with its own offscreen window that
-    renders every ``workers``-th chunk of :data:`CHUNK_FRAMES` frames; the
-    frames come back through pipes and are handed out in order, at most about
-    256 MB of them waiting at any time.
-
-    Parameters
-    ----------
-    motions : sequence of Motion
-        One or two motions of equal fps, as for :class:`SkeletonScene`.
-    labels : sequence of str, optional
-        One label per motion.
-    resolution : (int, int)
-        Width and height of the pictures, pixels.
-    style : RenderStyle, optional
-        Look of the scene.
-    workers : int, optional
-        Rendering processes; 1 renders in this process. By default one per
-        core (:func:`default_workers`), or this process alone for clips
-        shorter than :data:`PARALLEL_MIN_FRAMES` frames.
-
-    Returns
-    -------
-    iterator of np.ndarray
-        One picture per frame of the longest motion, each shape
-        (height, width, 3), uint8 RGB, top row first. Close the iterator (or
-        exhaust it) to stop the rendering processes early.
-
-    Raises
-    ------
-    ConfigError
-        Bad motions, labels, resolution or ``workers`` (raised by this call,
-        before anything is rendered).
-    GestureKitError
-        A rendering process failed (raised while iterating; its message is included).
-    """
-    motions = list(motions)
-    style = style or RenderStyle()
-    _check_scene(motions, labels, resolution)
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
-        raise ConfigError(f"workers must be a positive whole number, got {workers!r}")
-    n_frames = max(m.n_frames for m in motions)
-    chunks = -(-n_frames // CHUNK_FRAMES)
-    if workers is None:
-        workers = default_workers() if n_frames >= PARALLEL_MIN_FRAMES else 1
-    workers = min(int(workers), chunks)
-    resolution = (int(resolution[0]), int(resolution[1]))
-    if workers == 1:
-        return _serial_frames(motions, labels, resolution, style)
-    return _parallel_frames(motions, labels, resolution, style, workers)
-
-
-def _serial_frames(motions, labels, resolution, style) -> Iterator[np.ndarray]:
-    with SkeletonScene(motions, labels=labels, resolution=resolution, style=style) as scene:
-        for frame in range(scene.n_frames):
-            yield scene.render_frame(frame)
-
-
-def _to_tuples(value):
+def _to_tuples(value: Any) -> Any:
     """JSON lists back to tuples, recursively (the style's fields are tuples)."""
     if isinstance(value, list):
         return tuple(_to_tuples(v) for v in value)
     return value
-
-
-def _write_job(path: Path, motions, labels, resolution, style: RenderStyle) -> None:
-    spec = {
-        "fps": float(motions[0].fps),
-        "labels": None if labels is None else [str(x) for x in labels],
-        "resolution": list(resolution),
-        "style": style.to_json(),
-    }
-    arrays = {f"motion{i}": np.asarray(m.positions) for i, m in enumerate(motions)}
-    np.savez(path, spec=np.array(json.dumps(spec)), **arrays)
-
-
-def _scene_from_job(path: str) -> SkeletonScene:
-    """The scene a job file written by :func:`_write_job` describes (in a rendering process)."""
-    with np.load(path, allow_pickle=False) as data:
-        spec = json.loads(str(data["spec"]))
-        positions = [data[f"motion{i}"] for i in range(2) if f"motion{i}" in data.files]
-    style = RenderStyle.from_json(spec["style"])
-    motions = [Motion(p, spec["fps"]) for p in positions]
-    return SkeletonScene(motions, labels=spec["labels"], resolution=tuple(spec["resolution"]), style=style)
-
-
-def _parallel_frames(motions, labels, resolution, style, workers: int) -> Iterator[np.ndarray]:
-    width, height = resolution
-    size = width * height * 3
-    n_frames = max(m.n_frames for m in motions)
-    waiting = max(2, min(CHUNK_FRAMES, _BUFFER_BYTES // (size * workers)))
-    stop = threading.Event()
-
-    def read(proc: subprocess.Popen, out: queue.Queue) -> None:
-        """Move one process's frames into its queue, then None (end or failure)."""
-
-        def put(item) -> bool:
-            while not stop.is_set():
-                try:
-                    out.put(item, timeout=0.1)
-                    return True
-                except queue.Full:
-                    continue
-            return False
-
-        try:
-            while True:
-                data = proc.stdout.read(size)
-                if len(data) < size or not put(data):
-                    break
-        finally:
-            put(None)
-
-    # the package this module belongs to, first on the path: the processes render with this same code
-    root = str(Path(__file__).resolve().parents[2])
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
-    # one rasteriser thread per process (Mesa's llvmpipe): the processes are the parallelism
-    env.setdefault("LP_NUM_THREADS", "1")
-    with tempfile.TemporaryDirectory(prefix="gesturekit-render-") as tmp:
-        job = Path(tmp) / "job.npz"
-        _write_job(job, motions, labels, resolution, style)
-        procs, queues, threads, logs = [], [], [], []
-        try:
-            for k in range(workers):
-                log = open(Path(tmp) / f"worker{k}.log", "w+b")
-                logs.append(log)
-                cmd = [
-                    sys.executable,
-                    "-m",
-                    "gesturekit.viz.render_worker",
-                    str(job),
-                    str(k),
-                    str(workers),
-                    str(CHUNK_FRAMES),
-                ]
-                procs.append(
-                    subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=log, env=env)
-                )
-                queues.append(queue.Queue(maxsize=waiting))
-                threads.append(threading.Thread(target=read, args=(procs[k], queues[k]), daemon=True))
-                threads[k].start()
-            for frame in range(n_frames):
-                k = (frame // CHUNK_FRAMES) % workers
-                data = queues[k].get()
-                if data is None:
-                    code = procs[k].wait()
-                    logs[k].seek(0)
-                    message = logs[k].read().decode("utf-8", "replace").strip()[-2000:] or "no message"
-                    raise GestureKitError(
-                        f"a rendering process stopped at frame {frame} of {n_frames} (exit code {code}): {message}"
-                    )
-                yield np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)
-        finally:
-            stop.set()
-            for proc in procs:
-                if proc.poll() is None:
-                    proc.kill()
-                proc.wait()
-            for thread in threads:
-                thread.join()
-            for proc in procs:
-                proc.stdout.close()
-            for log in logs:
-                log.close()

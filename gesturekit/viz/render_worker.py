@@ -1,6 +1,6 @@
 """A rendering process: some chunks of a scene's frames, as raw RGB on standard output.
 
-:func:`gesturekit.viz.render.render_frames` starts one of these per core
+:func:`gesturekit.viz.render_pool.render_frames` starts one of these per core
 (``python -m gesturekit.viz.render_worker JOB WORKER WORKERS CHUNK``) so that
 a long clip renders on every core while the frames still reach the encoder in
 order. ``JOB`` is an ``.npz`` file written by the parent: ``motion0`` (and
@@ -20,7 +20,7 @@ import sys
 
 def main(argv: list[str]) -> int:
     job, worker, workers, chunk = argv[0], int(argv[1]), int(argv[2]), int(argv[3])
-    from .render import _scene_from_job
+    from .render_pool import _scene_from_job
 
     scene = _scene_from_job(job)
     out = sys.stdout.buffer

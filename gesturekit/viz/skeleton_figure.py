@@ -8,6 +8,7 @@ at each shown time. Part of :mod:`gesturekit.viz.figures`.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import plotly.graph_objects as go
@@ -225,7 +226,7 @@ def skeleton_figure(
     traces = []
     for i, (label, _) in enumerate(zip(labels, parts)):
         group = f"motion{i}"
-        common = dict(legendgroup=group, hoverinfo="skip", meta=None)
+        common: dict[str, Any] = dict(legendgroup=group, hoverinfo="skip", meta=None)
         body, hands, torso, head = parts[i]
         looks = (
             ("body", body, a.part_color(i, "upper_arm"), width(a.forearm_radius), label or "body", len(motions) > 1),
@@ -293,7 +294,7 @@ def skeleton_figure(
         dragmode="orbit",  # "turntable" assumes Z up and would draw this Y-up scene upside down
     )
     frame_ms = 1000.0 * step / grid_fps
-    layout = dict(
+    layout: dict[str, Any] = dict(
         title=dict(text=title) if title else None,
         height=height,
         margin=dict(l=0, r=0, t=40 if title else 10, b=0),

@@ -34,6 +34,7 @@ import wave
 from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
@@ -54,7 +55,7 @@ _DATA_ID = "gk-data"
 _AUDIO_PREFIX = "data:audio/wav;base64,"
 
 
-def wav_data_uri(audio, *, sr: int = AUDIO_SR) -> str:
+def wav_data_uri(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> str:
     """Mono audio as a ``data:audio/wav;base64,...`` URI: 16-bit PCM at ``sr``.
 
     Parameters
@@ -233,7 +234,7 @@ def skeleton_viewer(
     title: str | None = None,
     max_frames: int = VIEWER_MAX_FRAMES,
     spacing: float | None = None,
-    audio=None,
+    audio: npt.ArrayLike | None = None,
     sr: int = AUDIO_SR,
     height: int = 520,
     key: str = "skeleton",

@@ -17,7 +17,8 @@ the paper's control statistics (:func:`control_statistics`). The figures
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import plotly.graph_objects as go
@@ -26,6 +27,16 @@ from ..control import ATTRIBUTE_NAMES, CONSTRAINTS, constraint_mask
 from ..errors import ConfigError
 from ..search.admissible import admissible_starts
 from ..search.explain import StepExplanation, explain_plan_step, explain_step, plan_step_inputs
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..control import ControlTrack
+    from ..database import MatchingDatabase
+    from ..features import FeatureLayout
+    from ..motion import Motion
+    from ..search.plan import SearchPlan
+    from ..synthesize import SynthesisResult
 
 __all__ = [
     "StepExplanation",
@@ -43,7 +54,7 @@ __all__ = [
 ]
 
 
-def _plan(result, db):
+def _plan(result: SynthesisResult, db: MatchingDatabase) -> SearchPlan:
     """The plan a synthesis searched with (made again only for a result that does not keep one)."""
     if result.plan is not None:
         return result.plan
@@ -52,7 +63,7 @@ def _plan(result, db):
     return plan_search(db, result.audio, result.config)
 
 
-def step_inputs(result, db, step: int) -> dict:
+def step_inputs(result: SynthesisResult, db: MatchingDatabase, step: int) -> dict:
     """What step ``step`` of a synthesis searched with: the keyword arguments of :func:`explain_step`.
 
     Parameters
@@ -72,7 +83,7 @@ def step_inputs(result, db, step: int) -> dict:
     return plan_step_inputs(_plan(result, db), result.search, db.P, step)
 
 
-def explain_synthesis_step(result, db, step: int) -> StepExplanation:
+def explain_synthesis_step(result: SynthesisResult, db: MatchingDatabase, step: int) -> StepExplanation:
     """:func:`explain_step` for step ``step`` of a finished synthesis (see :func:`step_inputs`).
 
     A pinned step is explained by the search's rule; its actual window is the pin
@@ -84,7 +95,7 @@ def explain_synthesis_step(result, db, step: int) -> StepExplanation:
 # ---- tables ---------------------------------------------------------------------------------------
 
 
-def constraints_table(db, *, segment: int = 8):
+def constraints_table(db: MatchingDatabase, *, segment: int = 8) -> pd.DataFrame:
     """Every constraint a control can set, with its threshold and how much of the database it admits.
 
     Parameters
@@ -129,7 +140,7 @@ def constraints_table(db, *, segment: int = 8):
     return pd.DataFrame(rows)
 
 
-def synthesis_table(results, *, labels=None):
+def synthesis_table(results: Sequence[SynthesisResult], *, labels: Sequence[str] | None = None) -> pd.DataFrame:
     """Syntheses side by side: their settings, the chosen windows' distances and the joins they make.
 
     Parameters
@@ -182,7 +193,14 @@ def synthesis_table(results, *, labels=None):
     return pd.DataFrame(rows)
 
 
-def motion_measures(motions, *, labels=None, boundaries=(), audio=None, sr: int | None = None):
+def motion_measures(
+    motions: Sequence[Motion],
+    *,
+    labels: Sequence[str] | None = None,
+    boundaries: Sequence[int] = (),
+    audio: np.ndarray | None = None,
+    sr: int | None = None,
+) -> pd.DataFrame:
     """Kinematic and timing measures of motions made for one speech, one row each.
 
     Parameters
@@ -234,7 +252,9 @@ def motion_measures(motions, *, labels=None, boundaries=(), audio=None, sr: int 
     return pd.DataFrame(rows)
 
 
-def control_statistics(runs, *, thresholds):
+def control_statistics(
+    runs: Sequence[tuple[str, Motion, ControlTrack | str]], *, thresholds: Mapping[str, tuple[float, float]]
+) -> pd.DataFrame:
     """The paper's control statistics: per run and control segment, adherence and wrist statistics.
 
     Parameters
@@ -388,7 +408,7 @@ def rankings_figure(
     return fig
 
 
-def feature_blocks(kind: str, *, layout=None) -> dict[str, slice]:
+def feature_blocks(kind: str, *, layout: FeatureLayout | None = None) -> dict[str, slice]:
     """Named column blocks of a search feature: one per time offset.
 
     Parameters
@@ -455,7 +475,7 @@ def feature_figure(
             hovertemplate="%{x:.2f} s, dim %{y}: %{z:.2f}<extra></extra>",
         )
     )
-    yaxis = dict(title="dimension", autorange="reversed")
+    yaxis: dict[str, Any] = dict(title="dimension", autorange="reversed")
     if blocks:
         # each block labelled on the y axis at its centre, a line at its first row
         for name, sl in blocks.items():
