@@ -1,4 +1,5 @@
-"""The package's layout: each thing in its room, files a reader can hold, no import back up through __init__."""
+"""The package's layout: each thing in its room, no import back up through __init__ (file lengths and the
+layers: test_layering.py)."""
 
 import ast
 import importlib
@@ -10,31 +11,10 @@ import gesturekit
 from gesturekit import _version
 
 PACKAGE = Path(gesturekit.__file__).resolve().parent
-MAX_LINES = 700
-# the search and what consumes it are being reorganised around one search plan; they are held to the
-# limit once that lands
-NOT_YET = {
-    "search.py",
-    "_search_kernels.py",
-    "search_reference.py",
-    "synthesize.py",
-    "evaluate/baselines.py",
-    "viz/walkthrough.py",
-    "cli.py",
-}
 
 
 def _modules():
     return sorted(p for p in PACKAGE.rglob("*.py") if "__pycache__" not in p.parts)
-
-
-def test_no_module_is_longer_than_a_reader_can_hold():
-    long = {
-        str(p.relative_to(PACKAGE)): n
-        for p in _modules()
-        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES
-    }
-    assert set(long) <= NOT_YET, f"over {MAX_LINES} lines: {long}"
 
 
 def test_no_module_imports_the_version_back_through_the_package():
