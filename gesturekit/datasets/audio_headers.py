@@ -14,9 +14,13 @@ import functools
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .. import limits
 from ..errors import AudioFileError
+
+if TYPE_CHECKING:
+    import mmap
 
 __all__ = ["Budget", "check_file"]
 
@@ -289,7 +293,9 @@ def _mp3_declared_bytes(frame: bytes, available: int) -> str | None:
     return None
 
 
-def _mp3_walk(data, start: int, size: int, first) -> tuple[int | None, int | None]:
+def _mp3_walk(
+    data: mmap.mmap, start: int, size: int, first: tuple[int, int, int, tuple[int, int]]
+) -> tuple[int | None, int | None]:
     """Walk the frame headers from ``start``: (samples counted, bytes missing from a cut-off last frame).
 
     Samples are None when the walk lost the frames' rhythm (junk between frames,

@@ -281,7 +281,7 @@ def load_bvh_motion(
     return Motion(rel.astype(np.float32), float(fps))
 
 
-def _check_channels(data: BvhData, scale: float, path) -> None:
+def _check_channels(data: BvhData, scale: float, path: str | os.PathLike | None) -> None:
     """Refuse channel values of any source frame that no pose can have, naming the first frame and joint.
 
     Rotations beyond :data:`_MAX_ANGLE_DEG` degrees, positions beyond
@@ -315,7 +315,9 @@ def _check_channels(data: BvhData, scale: float, path) -> None:
     )
 
 
-def _check_positions(data: BvhData, positions: np.ndarray, scale: float, pelvis: int, fps: float, path) -> None:
+def _check_positions(
+    data: BvhData, positions: np.ndarray, scale: float, pelvis: int, fps: float, path: str | os.PathLike | None
+) -> None:
     """Refuse world positions (frames, J, 3) in file units that are not finite or absurdly far.
 
     Far is more than :data:`_MAX_FROM_ORIGIN_M` from the origin or

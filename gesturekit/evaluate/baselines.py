@@ -201,7 +201,8 @@ def _frames(choices: list[tuple[int, int]], n_frames: int, step: int) -> np.ndar
     return out
 
 
-def _check_n(n_frames, step):
+def _check_n(n_frames: int, step: int) -> int:
+    """Steps of ``step`` frames that cover ``n_frames`` (checked to be a positive integer)."""
     if not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
         raise ConfigError(f"n_frames must be a positive integer, got {n_frames!r}")
     return -(-int(n_frames) // int(step))
@@ -305,7 +306,7 @@ def audio_nearest_segments(
     return _frames(choices, q.shape[0], step), relaxed
 
 
-def _initial_pose(P, adm, seed):
+def _initial_pose(P: np.ndarray, adm: np.ndarray, seed: int) -> np.ndarray:
     """The search's rule: a random admissible frame of step 0, drawn with ``default_rng(seed)``."""
     flat = np.flatnonzero(adm)
     pick = int(flat[int(np.random.default_rng(seed).integers(flat.size))])

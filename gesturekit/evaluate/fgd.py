@@ -303,7 +303,7 @@ def load_fgd_model(path: str | os.PathLike) -> FGDModel:
     return FGDModel(config, net, mean, std, meta.get("info", {}))
 
 
-def _training_windows(db, exclude: np.ndarray | None, window: int) -> tuple[np.ndarray, np.ndarray]:
+def _training_windows(db: MatchingDatabase, exclude: np.ndarray | None, window: int) -> tuple[np.ndarray, np.ndarray]:
     """Clips usable for training (no excluded frame) as (clips, 64, 165) float32, and their count."""
     G = np.asarray(db.G, dtype=np.float32)
     keep = np.ones(G.shape[0], bool) if exclude is None else ~np.asarray(exclude).any(axis=1)

@@ -82,7 +82,7 @@ KINEMATIC_JOINTS: tuple[int, ...] = tuple(joint_index(n) for n, _ in BODY_JOINTS
 )
 
 
-def _positions(positions, *, name: str = "positions") -> np.ndarray:
+def _positions(positions: np.ndarray, *, name: str = "positions") -> np.ndarray:
     x = np.asarray(positions, dtype=np.float64)
     if x.ndim != 3 or x.shape[2] != 3:
         raise ConfigError(f"{name} must have shape (frames, joints, 3), got {x.shape}")
@@ -97,7 +97,7 @@ def _fps(fps) -> float:
     return float(fps)
 
 
-def _select(x: np.ndarray, joints) -> np.ndarray:
+def _select(x: np.ndarray, joints: Sequence[int] | None) -> np.ndarray:
     if joints is None:
         return x
     idx = np.asarray(joints, dtype=np.int64)

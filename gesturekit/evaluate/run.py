@@ -49,6 +49,7 @@ from ..motion import AUDIO_SR, Motion
 from . import metrics
 from .baselines import (
     SYSTEMS,
+    SystemOutput,
     SystemUnavailable,
     load_refiner_for,
     parse_systems,
@@ -128,7 +129,7 @@ class Holdout:
             raise ConfigError("a held-out part needs a take name")
         if (self.start_s is None) != (self.end_s is None):
             raise ConfigError("give both the start and the end of a held-out range, or neither")
-        if self.start_s is not None and not (0 <= self.start_s < self.end_s):
+        if self.start_s is not None and self.end_s is not None and not (0 <= self.start_s < self.end_s):
             raise ConfigError(f"held-out range {self.start_s}-{self.end_s} s: need 0 <= start < end")
 
     def to_text(self) -> str:
@@ -364,7 +365,12 @@ class Evaluation:
         return [folder / n for n in ("results.csv", "results.md", "controls.csv", "controls.md", "evaluation.json")]
 
 
-def _fgd_model(db, fgd_model, exclude, notes):
+def _fgd_model(
+    db: MatchingDatabase,
+    fgd_model: FGDModel | str | os.PathLike[str] | None,
+    exclude: np.ndarray | None,
+    notes: list[str],
+) -> FGDModel:
     from .fgd import FGDConfig, FGDModel, load_fgd_model, train_fgd_model
 
     if isinstance(fgd_model, FGDModel):
@@ -378,7 +384,7 @@ def _fgd_model(db, fgd_model, exclude, notes):
     return train_fgd_model(db, config=FGDConfig(), exclude=exclude)
 
 
-def _measure(out, ref: HeldOut, onsets, fgd_model, sigma) -> dict:
+def _measure(out: SystemOutput, ref: HeldOut, onsets: np.ndarray, fgd_model: FGDModel | None, sigma: float) -> dict:
     x = out.motion.positions[: ref.n_frames]
     gt = ref.motion.positions[: x.shape[0]]
     fps = ref.motion.fps
@@ -546,7 +552,7 @@ def evaluate(
 # ---- writers ------------------------------------------------------------------------------------
 
 
-def _cell(v, floatfmt: str) -> str:
+def _cell(v: object, floatfmt: str) -> str:
     if isinstance(v, (float, np.floating)):
         if math.isnan(v):
             return "–"

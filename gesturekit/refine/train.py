@@ -366,7 +366,7 @@ class Trainer:
 # ---- checkpoint folder ---------------------------------------------------------------------------
 
 
-def _save_torch(path: Path, obj) -> str:
+def _save_torch(path: Path, obj: object) -> str:
     buf = io.BytesIO()
     torch.save(obj, buf)
     data = buf.getvalue()
