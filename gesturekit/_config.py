@@ -18,6 +18,7 @@ from .errors import ConfigError
 __all__ = ["JsonConfig", "config_to_dict", "config_from_dict"]
 
 C = TypeVar("C")
+J = TypeVar("J", bound="JsonConfig")
 
 
 def _jsonable(value: Any) -> Any:
@@ -79,6 +80,8 @@ def config_from_dict(cls: type[C], data: Mapping, *, what: str) -> C:
     ConfigError
         ``data`` is not a mapping, or holds keys that are not fields of ``cls``.
     """
+    if not dataclasses.is_dataclass(cls):
+        raise TypeError(f"{cls!r} is not a dataclass")
     if not isinstance(data, Mapping):
         raise ConfigError(f"{what} must be a JSON object, got {type(data).__name__}")
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
@@ -89,8 +92,10 @@ def config_from_dict(cls: type[C], data: Mapping, *, what: str) -> C:
     for name, value in data.items():
         f = fields[name]
         default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
-        if dataclasses.is_dataclass(default) and isinstance(value, Mapping):
-            value = type(default).from_dict(value)
+        if dataclasses.is_dataclass(default) and not isinstance(default, type) and isinstance(value, Mapping):
+            # the nested class's own reader where it has one, as _jsonable uses its own writer
+            from_dict = getattr(type(default), "from_dict", None)
+            value = from_dict(value) if from_dict is not None else config_from_dict(type(default), value, what=what)
         elif isinstance(default, tuple):
             value = _tuples(value)
         kwargs[name] = value
@@ -110,6 +115,6 @@ class JsonConfig:
         return config_to_dict(self)
 
     @classmethod
-    def from_dict(cls, d: Mapping):
+    def from_dict(cls: type[J], d: Mapping) -> J:
         """Inverse of :meth:`to_dict`; unknown options raise :class:`~gesturekit.errors.ConfigError`."""
         return config_from_dict(cls, d, what=cls.OPTIONS_NAME)

@@ -16,7 +16,7 @@ import os
 import zipfile
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -69,7 +69,8 @@ def write_database(
     def fill(tmp: Path) -> None:
         for k, v in db.arrays.items():
             np.save(tmp / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
-        np.savez(tmp / "stats.npz", **{k: np.asarray(v) for k, v in db.stats.items()})
+        stats: dict[str, Any] = {k: np.asarray(v) for k, v in db.stats.items()}
+        np.savez(tmp / "stats.npz", **stats)
         if db.audio is not None:
             np.save(tmp / "audio.npy", np.asarray(db.audio), allow_pickle=False)
         if db.overlap is not None:
@@ -133,7 +134,7 @@ def read_database(path: Path, *, mmap: bool) -> dict:
             path=path,
         )
     _check_meta(meta, path)
-    mode = "r" if mmap else None
+    mode: Literal["r"] | None = "r" if mmap else None
 
     def read(p: Path):
         try:

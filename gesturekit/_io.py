@@ -35,7 +35,7 @@ _RESERVED_NAMES = frozenset(
 
 def atomic_write(
     path: str | os.PathLike,
-    write_fn: Callable[[BinaryIO], None],
+    write_fn: Callable[[BinaryIO], object],
     *,
     overwrite: bool = False,
 ) -> Path:
@@ -51,7 +51,7 @@ def atomic_write(
     path : str or os.PathLike
         The file to create. Its folder must exist.
     write_fn : callable
-        ``write_fn(fileobj)``; writes the whole content to ``fileobj``.
+        ``write_fn(fileobj)``; writes the whole content to ``fileobj`` (what it returns is ignored).
     overwrite : bool
         Replace ``path`` if it exists. When False an existing file is an error,
         also when it appears while ``write_fn`` runs.

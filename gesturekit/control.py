@@ -17,7 +17,9 @@ import io
 import json
 import os
 import re
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -199,7 +201,7 @@ class ControlTrack:
         return buf.getvalue()
 
     @classmethod
-    def from_records(cls, records, *, source: str = "control") -> ControlTrack:
+    def from_records(cls, records: Iterable[Mapping[str, Any]], *, source: str = "control") -> ControlTrack:
         """From dicts/rows with start_s, end_s and constraint (``"a=b+c=d"``)."""
         segs = []
         for i, r in enumerate(records):

@@ -34,6 +34,7 @@ import os
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -54,6 +55,9 @@ from .features import (
 )
 from .motion import AUDIO_SR, Take, resample_positions
 from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "FORMAT_VERSION",
@@ -173,7 +177,9 @@ def take_features(take: Take, *, layout: FeatureLayout = LAYOUT) -> TakeFeatures
     )
 
 
-def normalise_exclusions(takes, ranges) -> tuple[tuple[str, ...], tuple[tuple[str, float, float], ...]]:
+def normalise_exclusions(
+    takes: Iterable[object], ranges: Iterable[Any]
+) -> tuple[tuple[str, ...], tuple[tuple[str, float, float], ...]]:
     """Held-out takes and (take, start_s, end_s) ranges as plain tuples, for configs.
 
     Raises
@@ -228,7 +234,16 @@ class MatchingDatabase:
     ``G`` and ``A`` name the first four too.
     """
 
-    def __init__(self, *, meta: dict, arrays: dict, stats: dict, audio=None, overlap=None, path=None):
+    def __init__(
+        self,
+        *,
+        meta: dict,
+        arrays: dict,
+        stats: dict,
+        audio: np.ndarray | None = None,
+        overlap: dict[str, np.ndarray] | None = None,
+        path: str | os.PathLike[str] | None = None,
+    ):
         self.meta = meta
         self.arrays = arrays
         self.stats = stats
@@ -344,7 +359,7 @@ class MatchingDatabase:
         return self.arrays["attributes"][..., self.attribute_names.index(name)]
 
     # ---- tables and descriptions --------------------------------------------------------
-    def clips_table(self):
+    def clips_table(self) -> pd.DataFrame:
         """Clip metadata as a pandas DataFrame: clip, take, take_index, start_frame, start_s, end_s."""
         import pandas as pd
 
@@ -362,7 +377,7 @@ class MatchingDatabase:
             }
         )
 
-    def takes_table(self):
+    def takes_table(self) -> pd.DataFrame:
         """Take metadata as a pandas DataFrame: name, frames, duration_s, clips, source."""
         import pandas as pd
 
@@ -547,7 +562,10 @@ class MatchingDatabase:
         overlap_parts: dict[str, list] | None = (
             {k: [] for k in CLIP_ARRAYS + ("clip_take", "clip_start")} if config.overlap_stride else None
         )
-        clip_take, clip_start, take_meta, audio_parts = [], [], [], []
+        clip_take: list[int] = []
+        clip_start: list[int] = []
+        take_meta: list[dict] = []
+        audio_parts: list[np.ndarray] = []
         audio_offset = 0
         for ti, tf in enumerate(per_take):
             starts = _windows(tf.n_frames, L, L)
@@ -557,7 +575,7 @@ class MatchingDatabase:
             first_clip = len(clip_take)
             clip_take += [ti] * len(starts)
             clip_start += starts.tolist()
-            if overlap_parts is not None:
+            if overlap_parts is not None and config.overlap_stride is not None:
                 ostarts = _windows(tf.n_frames, L, config.overlap_stride)
                 ocut = _cut(tf, ostarts, L, track_len)
                 for k in CLIP_ARRAYS:

@@ -44,7 +44,9 @@ def build_demo_database(
         return _build_demo(out, minutes=minutes, seed=seed, overwrite=overwrite, progress=progress)
 
 
-def _build_demo(out: Path, *, minutes: float, seed: int, overwrite: bool, progress) -> MatchingDatabase:
+def _build_demo(
+    out: Path, *, minutes: float, seed: int, overwrite: bool, progress: Callable[[float, float], None] | None
+) -> MatchingDatabase:
     from .datasets.synthetic import DEMO_LABEL, generate_demo_takes
 
     total = minutes * 60.0
@@ -69,7 +71,10 @@ def _build_demo(out: Path, *, minutes: float, seed: int, overwrite: bool, progre
 
 
 def open_default_database(
-    *, build_if_missing: bool = True, minutes: float = DEMO_MINUTES, progress=None
+    *,
+    build_if_missing: bool = True,
+    minutes: float = DEMO_MINUTES,
+    progress: Callable[[float, float], None] | None = None,
 ) -> MatchingDatabase:
     """Open the demo database at the default path, building it first if it is not there.
 

@@ -145,7 +145,7 @@ _MEL_MIN_LOG_MEL = (_MEL_MIN_LOG_HZ - 0.0) / _MEL_F_SP
 _MEL_LOGSTEP = np.log(6.4) / 27.0
 
 
-def _hz_to_mel(hz) -> np.ndarray:
+def _hz_to_mel(hz: float | np.ndarray) -> np.ndarray:
     """Slaney mel of frequencies ``hz`` (array, Hz)."""
     hz = np.atleast_1d(np.asarray(hz, dtype=np.float64))
     mel = (hz - 0.0) / _MEL_F_SP
@@ -154,7 +154,7 @@ def _hz_to_mel(hz) -> np.ndarray:
     return mel
 
 
-def _mel_to_hz(mel) -> np.ndarray:
+def _mel_to_hz(mel: float | np.ndarray) -> np.ndarray:
     """Inverse of :func:`_hz_to_mel`."""
     mel = np.atleast_1d(np.asarray(mel, dtype=np.float64))
     hz = 0.0 + _MEL_F_SP * mel

@@ -40,6 +40,7 @@ from .errors import ConfigError, InputFileError, MotionFileError
 
 if TYPE_CHECKING:
     import numpy as np
+    from _typeshed import SupportsRead
 
 __all__ = [
     "Limit",
@@ -201,7 +202,7 @@ def check_duration(
     seconds: float,
     *,
     what: str,
-    path=None,
+    path: str | os.PathLike[str] | None = None,
     speech: bool = False,
     max_seconds: float | None = None,
     option: str | None = None,
@@ -247,7 +248,7 @@ def check_duration(
     )
 
 
-def check_sample_rate(rate: float, *, what: str, path=None) -> None:
+def check_sample_rate(rate: float, *, what: str, path: str | os.PathLike[str] | None = None) -> None:
     """Refuse a sample rate outside :data:`MIN_SAMPLE_RATE` .. :data:`MAX_SAMPLE_RATE`.
 
     Parameters
@@ -273,7 +274,7 @@ def check_sample_rate(rate: float, *, what: str, path=None) -> None:
     )
 
 
-def check_fps(fps: float, *, what: str, path=None, option: str | None = None) -> None:
+def check_fps(fps: float, *, what: str, path: str | os.PathLike[str] | None = None, option: str | None = None) -> None:
     """Refuse a motion frame rate outside :data:`MIN_FPS` .. :data:`MAX_FPS`.
 
     Parameters
@@ -307,7 +308,7 @@ def check_fps(fps: float, *, what: str, path=None, option: str | None = None) ->
     raise InputFileError(message, path=path)
 
 
-def check_bytes(n: float, *, what: str, path=None) -> None:
+def check_bytes(n: float, *, what: str, path: str | os.PathLike[str] | None = None) -> None:
     """Refuse an input that would take more than :data:`INPUT_GB` once decoded.
 
     Parameters
@@ -332,7 +333,9 @@ def check_bytes(n: float, *, what: str, path=None) -> None:
     )
 
 
-def npy_header(f, *, path=None, name: str = "npy") -> tuple[tuple[int, ...], np.dtype, int]:
+def npy_header(
+    f: SupportsRead[bytes], *, path: str | os.PathLike[str] | None = None, name: str = "npy"
+) -> tuple[tuple[int, ...], np.dtype, int]:
     """Shape, dtype and header length of an ``.npy`` stream, read without loading the array.
 
     Parameters
@@ -373,7 +376,7 @@ def npy_header(f, *, path=None, name: str = "npy") -> tuple[tuple[int, ...], np.
     return tuple(int(n) for n in shape), dtype, offset
 
 
-def npz_headers(path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+def npz_headers(path: str | os.PathLike[str]) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     """Shape and dtype of every array in an ``.npz`` archive, read without loading the arrays.
 
     Parameters

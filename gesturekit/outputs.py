@@ -150,8 +150,8 @@ def _file_is_owned(path: Path) -> bool:
     try:
         if suffix == ".npz":
             with zipfile.ZipFile(path) as zf:
-                names = set(zf.namelist())
-            return {"config.npy", "format_version.npy", "positions.npy"} <= names
+                members = set(zf.namelist())
+            return {"config.npy", "format_version.npy", "positions.npy"} <= members
         with open(path, "rb") as f:
             head = f.read(_HEAD_BYTES)
         if suffix == ".bvh":
@@ -160,8 +160,8 @@ def _file_is_owned(path: Path) -> bool:
             text = head.decode("ascii", "replace")
             if not text.startswith("HIERARCHY"):
                 return False
-            names = re.findall(r"^\s*(?:ROOT|JOINT)\s+(\S+)", text.split("MOTION")[0], re.M)
-            return sorted(names) == sorted(JOINT_NAMES)
+            joints = re.findall(r"^\s*(?:ROOT|JOINT)\s+(\S+)", text.split("MOTION")[0], re.M)
+            return sorted(joints) == sorted(JOINT_NAMES)
         if suffix == ".mp4":
             if MP4_TAG.encode() in head:
                 return True
@@ -519,6 +519,6 @@ def write_errors(path: str | os.PathLike) -> Iterator[None]:
             errno.EROFS: "the file system is read-only",
             errno.ENOTDIR: "a part of the path is a file, not a folder",
             errno.EEXIST: "something is in the way",
-        }.get(exc.errno, exc.strerror or str(exc))
+        }.get(exc.errno or 0, exc.strerror or str(exc))  # no errno: the message
         where = f" ({exc.filename})" if exc.filename and os.fspath(exc.filename) != os.fspath(path) else ""
         raise OutputError(f"cannot write: {reason}{where}", path=path) from None

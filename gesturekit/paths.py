@@ -127,7 +127,7 @@ def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) ->
     )
 
 
-def is_file(path) -> bool:
+def is_file(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` names an existing regular file; never raises.
 
     For text a user typed that may be a file name or something else (a control
@@ -140,7 +140,7 @@ def is_file(path) -> bool:
         return False
 
 
-def is_dir(path) -> bool:
+def is_dir(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` names an existing folder; never raises (see :func:`is_file`)."""
     try:
         return Path(path).is_dir()

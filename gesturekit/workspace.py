@@ -19,11 +19,16 @@ import os
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .database import BuildConfig, MatchingDatabase
 from .datasets.takes import AUDIO_EXTENSIONS, count_takes, discover_takes, iter_takes
 from .errors import InputFileError
 from .paths import default_database_path, home, is_dir
+
+if TYPE_CHECKING:
+    from .datasets.positions import PositionJointMap
+    from .datasets.presets import JointMap
 
 __all__ = [
     "DEMO_DATABASE_LABEL",
@@ -96,7 +101,7 @@ def build_database(
     out: str | os.PathLike,
     *,
     config: BuildConfig | None = None,
-    joint_map=None,
+    joint_map: str | os.PathLike[str] | None = None,
     kind: str = "auto",
     fps: float | None = None,
     units: str = "auto",
@@ -161,7 +166,9 @@ def build_database(
     return db
 
 
-def _read_joint_map(joint_map, kinds: set[str]):
+def _read_joint_map(
+    joint_map: str | os.PathLike[str] | None, kinds: set[str]
+) -> str | os.PathLike[str] | JointMap | PositionJointMap | None:
     """``joint_map`` read (and checked) for the kinds of takes found, so a bad one fails before any take
     is read; as given when no take needs it."""
     if joint_map is None:

@@ -3,12 +3,14 @@ read back to equal objects, unknown options refused with the class's own words."
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from gesturekit._config import config_from_dict, config_to_dict
 from gesturekit.datasets.presets import PRESETS, JointMap
 from gesturekit.errors import ConfigError
 from gesturekit.refine.data import PairsConfig
@@ -84,3 +86,32 @@ def test_a_joint_map_is_written_without_its_name():
     preset = next(iter(PRESETS.values()))
     d = json.loads(json.dumps(preset.to_dict()))
     assert set(d) == {"pelvis", "joints"} and JointMap(name=preset.name, **d) == preset
+
+
+@dataclasses.dataclass(frozen=True)
+class _Inner:
+    pair: tuple = (0, 0)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Outer:
+    inner: _Inner = dataclasses.field(default_factory=_Inner)
+    n: int = 0
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.tuples(st.integers(), st.integers()), st.integers())
+def test_a_nested_configuration_without_its_own_reader_is_read_by_its_fields(pair, n):
+    config = _Outer(_Inner(pair), n)
+    saved = json.loads(json.dumps(config_to_dict(config)))
+    assert config_from_dict(_Outer, saved, what="outer options") == config
+
+
+def test_a_nested_configuration_refuses_unknown_options_in_the_outer_words():
+    with pytest.raises(ConfigError, match="unknown outer options: extra"):
+        config_from_dict(_Outer, {"inner": {"extra": 1}}, what="outer options")
+
+
+def test_only_a_dataclass_is_read_from_a_json_form():
+    with pytest.raises(TypeError, match="not a dataclass"):
+        config_from_dict(dict, {}, what="options")

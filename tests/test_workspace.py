@@ -11,8 +11,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gesturekit.database import BuildConfig, MatchingDatabase
-from gesturekit.datasets.takes import AUDIO_EXTENSIONS
-from gesturekit.errors import InputFileError, OutputError
+from gesturekit.datasets.positions import load_position_joint_map
+from gesturekit.datasets.presets import PRESETS
+from gesturekit.datasets.takes import AUDIO_EXTENSIONS, TakeSource, discover_takes, iter_takes
+from gesturekit.errors import ConfigError, InputFileError, OutputError
 from gesturekit.workspace import (
     DEMO_DATABASE_LABEL,
     build_database,
@@ -170,3 +172,20 @@ def test_build_database_with_a_bad_joint_map_fails_before_reading_a_take(tmp_pat
     with pytest.raises(InputFileError) as info:
         build_database(folder, tmp_path / "db", joint_map=bad, fps=30.0, progress=lambda *a: calls.append(a))
     assert str(bad) in str(info.value) and calls == [] and not (tmp_path / "db").exists()
+
+
+def test_a_take_source_without_speech_is_refused_naming_its_motion_file(tmp_path):
+    folder, jm = _positions_folder(tmp_path)
+    source = TakeSource("positions", folder / "t0.npy", None)  # made by hand, not discovered
+    with pytest.raises(InputFileError, match="no speech file") as info:
+        next(iter_takes([source], joint_map=jm, fps_in=30.0))
+    assert info.value.path == str(folder / "t0.npy")
+
+
+def test_takes_are_read_only_with_a_joint_map_of_their_kind(tmp_path):
+    folder, jm = _positions_folder(tmp_path)
+    with pytest.raises(ConfigError, match="joint-position map, not a BVH joint map"):
+        next(iter_takes(discover_takes(folder), joint_map=PRESETS["zeggs"], fps_in=30.0))
+    bvh = TakeSource("bvh", tmp_path / "missing.bvh", tmp_path / "missing.wav")  # refused before any read
+    with pytest.raises(ConfigError, match="BVH joint map, not a joint-position map"):
+        next(iter_takes([bvh], joint_map=load_position_joint_map(jm)))

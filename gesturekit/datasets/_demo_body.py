@@ -100,9 +100,9 @@ def _rest_offsets() -> np.ndarray:
     for finger in FINGERS:
         d = _unit(_FINGER_DIRS[finger])
         chain = [np.asarray(_FINGER_ROOTS[finger])] + [length * d for length in _PHALANGES[finger]]
-        for i, o in enumerate(chain, start=1):
-            off[joint_index(f"left_{finger}{i}")] = o
-            off[joint_index(f"right_{finger}{i}")] = _MIRROR @ o
+        for i, link in enumerate(chain, start=1):
+            off[joint_index(f"left_{finger}{i}")] = link
+            off[joint_index(f"right_{finger}{i}")] = _MIRROR @ link
     off.setflags(write=False)
     return off
 

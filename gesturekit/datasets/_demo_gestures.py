@@ -224,8 +224,9 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
         # repeated beats of a gesture phrase go much the same way (the hands of a symmetric phrase
         # mirror each other; the secondary hand of an asymmetric one goes its own way)
         phrase_dir = {i: _stroke_direction(rng) for i in used}
-        prev_dir: dict[int, np.ndarray | None] = {i: None for i in used}
-        prev_start: dict[int, np.ndarray | None] = {i: None for i in used}
+        # a hand's last stroke direction and start pose, set by its first stroke (read only after one)
+        prev_dir: dict[int, np.ndarray] = {}
+        prev_start: dict[int, np.ndarray] = {}
         rebound_at = {i: 0.0 for i in used}  # when the hand's rebound from its last stroke is due to end
         at_stroke_end = {i: False for i in used}  # the hand has just ended a stroke and not yet rebounded
         for n, k in enumerate(chosen):

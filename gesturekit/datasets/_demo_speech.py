@@ -82,9 +82,11 @@ class _Speech:
 
 def _plan_speech(rng: np.random.Generator, duration: float) -> _Speech:
     """Phrases, syllables and their segments; a plain loop over syllables (a few per second)."""
-    phrases, arousal = [], []
-    syl = []  # (start, nucleus, end, stressed, phrase, emphasis)
-    voiced, noise = [], []
+    phrases: list[tuple[float, float]] = []
+    arousal: list[float] = []
+    syl: list[tuple[float, float, float, bool, int, float]] = []  # (start, nucleus, end, stressed, phrase, emphasis)
+    voiced: list[tuple[float, ...]] = []
+    noise: list[tuple[float, ...]] = []
     t = rng.uniform(0.25, 0.6)
     while t < duration - 0.8:
         p = len(phrases)
@@ -93,7 +95,8 @@ def _plan_speech(rng: np.random.Generator, duration: float) -> _Speech:
         tempo = 1.0 + 0.15 * (a - 0.5) + rng.normal(0.0, 0.05)  # aroused speech is a little faster
         level = 0.06 * 10 ** ((a - 0.5) * 16.0 / 20.0)  # +-8 dB with arousal
         stop_by = duration - 0.25
-        durs, stress = [], []
+        durs: list[float] = []
+        stress: list[bool] = []
         acc = 0.0
         while acc < target:
             prev_stressed = bool(stress) and stress[-1]

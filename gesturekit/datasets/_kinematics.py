@@ -8,6 +8,8 @@ vector operations per joint rather than many tiny 3x3 products.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 __all__ = ["world_positions", "quat_mul", "quat_to_matrix", "slerp"]
@@ -58,7 +60,7 @@ def slerp(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=0)
 
 
-def world_positions(parents, rot: np.ndarray, trans: np.ndarray) -> np.ndarray:
+def world_positions(parents: Sequence[int] | np.ndarray, rot: np.ndarray, trans: np.ndarray) -> np.ndarray:
     """Forward kinematics: world positions of every joint from local rotations and translations.
 
     A joint's local transform is its translation followed by its rotation:

@@ -14,9 +14,13 @@ import functools
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .. import limits
 from ..errors import AudioFileError
+
+if TYPE_CHECKING:
+    import mmap
 
 __all__ = ["Budget", "check_file"]
 
@@ -254,7 +258,7 @@ def _mp3_truncation(path: Path, size: int, budget: Budget) -> str | None:
         with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
             samples, cut = _mp3_walk(data, start, size, first)
     rate = first[2]
-    if cut is not None:
+    if cut is not None and samples is not None:  # a walk that finds a cut frame has counted its samples
         return (
             f"the file is truncated: the last MP3 frame is cut off ({cut} of its bytes are missing); "
             f"the audio ends after {samples / rate:.1f} s"
@@ -289,7 +293,9 @@ def _mp3_declared_bytes(frame: bytes, available: int) -> str | None:
     return None
 
 
-def _mp3_walk(data, start: int, size: int, first) -> tuple[int | None, int | None]:
+def _mp3_walk(
+    data: mmap.mmap, start: int, size: int, first: tuple[int, int, int, tuple[int, int]]
+) -> tuple[int | None, int | None]:
     """Walk the frame headers from ``start``: (samples counted, bytes missing from a cut-off last frame).
 
     Samples are None when the walk lost the frames' rhythm (junk between frames,
@@ -379,7 +385,7 @@ def _ogg_truncation(path: Path, size: int) -> str | None:
         if page is not None:
             cut_after = cut_after or pos + page[2] > len(tail)
         pos = tail.rfind(b"OggS", 0, pos)
-    if pos < 0:
+    if pos < 0 or page is None:
         return None  # no whole page in the last 128 KB: not for us to judge; the decoder decides
     flags, granule, length, _ = page
     if flags & 0x04:

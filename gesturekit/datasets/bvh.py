@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -98,7 +99,7 @@ def _local_pose(data: BvhData, frames: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return quats, trans
 
 
-def _frame_indices(data: BvhData, frames) -> np.ndarray:
+def _frame_indices(data: BvhData, frames: slice | Sequence[int] | np.ndarray | None) -> np.ndarray:
     if frames is None:
         return np.arange(data.n_frames)
     if isinstance(frames, slice):
@@ -111,7 +112,7 @@ def _frame_indices(data: BvhData, frames) -> np.ndarray:
     return idx
 
 
-def forward_kinematics(data: BvhData, *, frames=None) -> np.ndarray:
+def forward_kinematics(data: BvhData, *, frames: slice | Sequence[int] | np.ndarray | None = None) -> np.ndarray:
     """World positions of every joint.
 
     Parameters
@@ -215,7 +216,7 @@ def _check_fps(fps) -> None:
 def load_bvh_motion(
     path: str | os.PathLike,
     *,
-    joint_map: str | os.PathLike | dict | JointMap = "zeggs",
+    joint_map: str | os.PathLike | Mapping | JointMap = "zeggs",
     fps: float = FPS,
     units: str = "auto",
 ) -> Motion:
@@ -225,7 +226,7 @@ def load_bvh_motion(
     ----------
     path : str or os.PathLike
         The ``.bvh`` file (Y up).
-    joint_map : str, os.PathLike, dict or JointMap
+    joint_map : str, os.PathLike, Mapping or JointMap
         Which source joint is each of our joints: a preset name (``"zeggs"``,
         ``"beat"``), a JSON file or a dict (see
         :func:`gesturekit.datasets.presets.load_joint_map`).
@@ -280,7 +281,7 @@ def load_bvh_motion(
     return Motion(rel.astype(np.float32), float(fps))
 
 
-def _check_channels(data: BvhData, scale: float, path) -> None:
+def _check_channels(data: BvhData, scale: float, path: str | os.PathLike | None) -> None:
     """Refuse channel values of any source frame that no pose can have, naming the first frame and joint.
 
     Rotations beyond :data:`_MAX_ANGLE_DEG` degrees, positions beyond
@@ -314,7 +315,9 @@ def _check_channels(data: BvhData, scale: float, path) -> None:
     )
 
 
-def _check_positions(data: BvhData, positions: np.ndarray, scale: float, pelvis: int, fps: float, path) -> None:
+def _check_positions(
+    data: BvhData, positions: np.ndarray, scale: float, pelvis: int, fps: float, path: str | os.PathLike | None
+) -> None:
     """Refuse world positions (frames, J, 3) in file units that are not finite or absurdly far.
 
     Far is more than :data:`_MAX_FROM_ORIGIN_M` from the origin or

@@ -17,6 +17,7 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -185,7 +186,7 @@ def parse_bvh_text(text: str, *, path: str | os.PathLike | None = None) -> BvhDa
     )
 
 
-def _hierarchy_tokens(lines, start, stop):
+def _hierarchy_tokens(lines: list[str], start: int, stop: int) -> list[tuple[str, int]]:
     """(token, line number) pairs; a ROOT/JOINT name is one token (it may hold spaces)."""
     tokens: list[tuple[str, int]] = []
     for i in range(start, stop):
@@ -210,7 +211,10 @@ def _hierarchy_tokens(lines, start, stop):
     return tokens
 
 
-def _parse_hierarchy(lines, start, stop, path):
+def _parse_hierarchy(
+    lines: list[str], start: int, stop: int, path: str | os.PathLike | None
+) -> tuple[list[str], list[int], list[list[float] | None], list[list[str]]]:
+    """Joint names, parent indices (-1: a root), offsets and channel names of the HIERARCHY lines."""
     tokens = _hierarchy_tokens(lines, start, stop)
     names: list[str] = []
     parents: list[int] = []
@@ -220,10 +224,10 @@ def _parse_hierarchy(lines, start, stop, path):
     stack: list[int] = []
     i = 0
 
-    def fail(message, lineno):
+    def fail(message: str, lineno: int) -> NoReturn:
         raise MotionFileError(f"line {lineno}: {message}", path=path)
 
-    def take(what):
+    def take(what: str) -> tuple[str, int]:
         nonlocal i
         if i >= len(tokens):
             last = tokens[-1][1] if tokens else start
@@ -232,12 +236,12 @@ def _parse_hierarchy(lines, start, stop, path):
         i += 1
         return tok
 
-    def expect_brace():
+    def expect_brace() -> None:
         tok, lineno = take("'{'")
         if tok != "{":
             fail(f"expected '{{', found {tok!r}", lineno)
 
-    def open_joint(name, parent, *, is_end_site):
+    def open_joint(name: str, parent: int, *, is_end_site: bool) -> None:
         # a joint's OFFSET and CHANNELS follow inside its braces
         parents.append(parent)
         names.append(name)
@@ -247,7 +251,7 @@ def _parse_hierarchy(lines, start, stop, path):
         stack.append(len(names) - 1)
         expect_brace()
 
-    def number(what):
+    def number(what: str) -> float:
         tok, lineno = take(what)
         try:
             value = float(tok)
@@ -303,7 +307,7 @@ def _parse_hierarchy(lines, start, stop, path):
                 fail(f"malformed channel count {count_tok!r}", count_line)
             if count < 0:
                 fail(f"negative channel count {count}", count_line)
-            seen = set()
+            seen: set[str] = set()
             for _ in range(count):
                 ch, ch_line = take("a channel name")
                 m = _CHANNEL_RE.match(ch)

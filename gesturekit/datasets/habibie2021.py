@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 import zipfile
 import zlib
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -242,13 +243,13 @@ def _check_limits(path: Path) -> None:
     )
 
 
-def _numeric(array: np.ndarray, key: str, path) -> np.ndarray:
+def _numeric(array: np.ndarray, key: str, path: str | os.PathLike | None) -> np.ndarray:
     if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
         raise MotionFileError(f"'{key}' must hold numbers, got dtype {array.dtype}", path=path)
     return array.astype(np.float64, copy=False)
 
 
-def _audio_float32(wav: np.ndarray, path) -> np.ndarray:
+def _audio_float32(wav: np.ndarray, path: str | os.PathLike | None) -> np.ndarray:
     """Speech as float32 in [-1, 1]: int16 is scaled, floats are kept."""
     if wav.dtype == np.int16:
         return wav.astype(np.float32) / 32768.0
@@ -257,7 +258,7 @@ def _audio_float32(wav: np.ndarray, path) -> np.ndarray:
     return wav.astype(np.float32, copy=False)
 
 
-def _check_finite(array: np.ndarray, key: str, path) -> None:
+def _check_finite(array: np.ndarray, key: str, path: str | os.PathLike | None) -> None:
     finite = np.isfinite(array).reshape(array.shape[0], -1).all(axis=1)
     if not finite.all():
         bad = np.flatnonzero(~finite)
@@ -266,7 +267,9 @@ def _check_finite(array: np.ndarray, key: str, path) -> None:
         )
 
 
-def _joint_order(argument, stored, path) -> np.ndarray | None:
+def _joint_order(
+    argument: Sequence[int] | np.ndarray | None, stored: np.ndarray | None, path: str | os.PathLike | None
+) -> np.ndarray | None:
     """The validated permutation, or None for the identity."""
     if argument is not None:
         order, source = np.asarray(argument), "joint_order argument"

@@ -72,7 +72,7 @@ class PositionJointMap:
         if self.names is not None:
             object.__setattr__(self, "names", tuple(self.names))
 
-    def resolve(self, n_source: int, *, path=None) -> tuple[np.ndarray, int | None]:
+    def resolve(self, n_source: int, *, path: str | os.PathLike[str] | None = None) -> tuple[np.ndarray, int | None]:
         """Source indices of our 55 joints (shape (55,)) and of the pelvis (or None).
 
         Raises

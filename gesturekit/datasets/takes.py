@@ -12,12 +12,17 @@ A folder of takes is one of:
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from ..errors import ConfigError, InputFileError
 from ..motion import Take
+
+if TYPE_CHECKING:
+    from .positions import PositionJointMap
+    from .presets import JointMap
 
 __all__ = ["AUDIO_EXTENSIONS", "TakeSource", "discover_takes", "iter_takes", "count_takes"]
 
@@ -115,10 +120,17 @@ def count_takes(sources: list[TakeSource]) -> int:
     return n
 
 
+def _speech_file(src: TakeSource) -> Path:
+    """The speech file of a one-take source; a source made by hand may lack one."""
+    if src.audio is None:
+        raise InputFileError("this take has no speech file", path=src.motion)
+    return src.audio
+
+
 def iter_takes(
     sources: list[TakeSource],
     *,
-    joint_map=None,
+    joint_map: str | os.PathLike[str] | Mapping[str, Any] | JointMap | PositionJointMap | None = None,
     fps_in: float | None = None,
     units: str = "auto",
 ) -> Iterator[Take]:
@@ -128,8 +140,9 @@ def iter_takes(
     ----------
     sources : list of TakeSource
         From :func:`discover_takes`.
-    joint_map : str, path or dict
-        Preset name (``"zeggs"``, ``"beat"``) or JSON joint map; required for ``positions``.
+    joint_map : str, path, dict, JointMap or PositionJointMap
+        Preset name (``"zeggs"``, ``"beat"``) or JSON joint map, or one already read for the
+        kind of the takes; required for ``positions``.
     fps_in : float
         Frame rate of joint-position files (they do not carry one).
     units : {"auto", "cm", "m"}
@@ -140,13 +153,19 @@ def iter_takes(
     for src in sources:
         if src.kind == "bvh":
             from .bvh import load_bvh_motion
+            from .positions import PositionJointMap
 
+            if isinstance(joint_map, PositionJointMap):
+                raise ConfigError("BVH takes need a BVH joint map, not a joint-position map")
             motion = load_bvh_motion(src.motion, joint_map=joint_map or "zeggs", units=units)
-            audio = load_audio(src.audio, take=True)
+            audio = load_audio(_speech_file(src), take=True)
             yield Take(src.motion.stem, motion, audio, {"motion": str(src.motion), "audio": str(src.audio)})
         elif src.kind == "positions":
             from .positions import load_positions_motion
+            from .presets import JointMap
 
+            if isinstance(joint_map, JointMap):
+                raise ConfigError("joint-position files need a joint-position map, not a BVH joint map")
             if joint_map is None or fps_in is None:
                 raise ConfigError(
                     "joint-position files need a JSON joint map (--joint-map) and their frame rate (--fps)"
@@ -154,7 +173,7 @@ def iter_takes(
             motion = load_positions_motion(
                 src.motion, joint_map=joint_map, fps=fps_in, units="m" if units == "auto" else units
             )
-            audio = load_audio(src.audio, take=True)
+            audio = load_audio(_speech_file(src), take=True)
             yield Take(src.motion.stem, motion, audio, {"motion": str(src.motion), "audio": str(src.audio)})
         else:
             from .habibie2021 import load_habibie2021

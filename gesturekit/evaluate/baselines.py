@@ -23,7 +23,10 @@ to the lowest (clip, start), so the results are reproducible.
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +37,11 @@ from ..search.admissible import admissible_starts
 from ..search.checks import check_segment
 from ..search.plan import plan_search
 from ..search.types import SearchConfig
+
+if TYPE_CHECKING:
+    from ..database import MatchingDatabase
+    from ..refine.infer import Refiner
+    from ..synthesize import SynthesisConfig
 
 __all__ = [
     "SYSTEMS",
@@ -87,7 +95,7 @@ class SystemOutput:
     relaxed_steps: int = 0
 
 
-def parse_systems(systems) -> tuple[str, ...]:
+def parse_systems(systems: str | Sequence[str]) -> tuple[str, ...]:
     """``"gt,knn"`` or a sequence -> a tuple of known system names (order kept, duplicates dropped)."""
     if isinstance(systems, str):
         systems = [s.strip() for s in systems.split(",")]
@@ -107,7 +115,14 @@ def parse_systems(systems) -> tuple[str, ...]:
 # ---- admissible windows -------------------------------------------------------------------------
 
 
-def admissible_windows(valid, *, step: int, exclude=None, mask=None, mask_rule: str = "ends") -> np.ndarray:
+def admissible_windows(
+    valid: np.ndarray,
+    *,
+    step: int,
+    exclude: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    mask_rule: str = "ends",
+) -> np.ndarray:
     """Start frames of windows of ``step`` frames the search may use
     (:func:`gesturekit.search.admissible.admissible_starts`, the search's own rule).
 
@@ -137,7 +152,16 @@ def admissible_windows(valid, *, step: int, exclude=None, mask=None, mask_rule: 
 class _Steps:
     """Admissible windows per step, with the search's relaxation rule, cached per mask."""
 
-    def __init__(self, valid, step, exclude, masks, step_mask, mask_rule, n_steps):
+    def __init__(
+        self,
+        valid: np.ndarray,
+        step: int,
+        exclude: np.ndarray | None,
+        masks: np.ndarray | None,
+        step_mask: np.ndarray | None,
+        mask_rule: str,
+        n_steps: int,
+    ):
         self.valid, self.step, self.exclude, self.masks, self.rule = valid, step, exclude, masks, mask_rule
         self.step_mask = np.full(n_steps, -1, np.int64) if step_mask is None else np.asarray(step_mask, np.int64)
         if self.step_mask.shape != (n_steps,):
@@ -149,7 +173,12 @@ class _Steps:
     def _adm(self, j: int) -> np.ndarray:
         if j not in self._cache:
             self._cache[j] = admissible_starts(
-                self.valid, self.step, exclude=self.exclude, mask=None if j < 0 else self.masks[j], rule=self.rule
+                self.valid,
+                self.step,
+                exclude=self.exclude,
+                # no masks means every step's index is -1 (checked in __init__)
+                mask=None if j < 0 or self.masks is None else self.masks[j],
+                rule=self.rule,
             )
         return self._cache[j]
 
@@ -172,21 +201,22 @@ def _frames(choices: list[tuple[int, int]], n_frames: int, step: int) -> np.ndar
     return out
 
 
-def _check_n(n_frames, step):
+def _check_n(n_frames: int, step: int) -> int:
+    """Steps of ``step`` frames that cover ``n_frames`` (checked to be a positive integer)."""
     if not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
         raise ConfigError(f"n_frames must be a positive integer, got {n_frames!r}")
     return -(-int(n_frames) // int(step))
 
 
 def random_segments(
-    valid,
+    valid: np.ndarray,
     *,
     n_frames: int,
     step: int = 8,
     seed: int = 0,
-    exclude=None,
-    masks=None,
-    step_mask=None,
+    exclude: np.ndarray | None = None,
+    masks: np.ndarray | None = None,
+    step_mask: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random admissible windows, one per step.
@@ -222,14 +252,14 @@ def random_segments(
 
 
 def audio_nearest_segments(
-    F,
-    valid,
-    query,
+    F: np.ndarray,
+    valid: np.ndarray,
+    query: np.ndarray,
     *,
     step: int = 8,
-    exclude=None,
-    masks=None,
-    step_mask=None,
+    exclude: np.ndarray | None = None,
+    masks: np.ndarray | None = None,
+    step_mask: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose audio feature is nearest the query's (cosine distance).
@@ -276,7 +306,7 @@ def audio_nearest_segments(
     return _frames(choices, q.shape[0], step), relaxed
 
 
-def _initial_pose(P, adm, seed):
+def _initial_pose(P: np.ndarray, adm: np.ndarray, seed: int) -> np.ndarray:
     """The search's rule: a random admissible frame of step 0, drawn with ``default_rng(seed)``."""
     flat = np.flatnonzero(adm)
     pick = int(flat[int(np.random.default_rng(seed).integers(flat.size))])
@@ -284,16 +314,16 @@ def _initial_pose(P, adm, seed):
 
 
 def pose_nearest_segments(
-    P,
-    valid,
+    P: np.ndarray,
+    valid: np.ndarray,
     *,
     n_frames: int,
     step: int = 8,
     seed: int = 0,
-    init_pose=None,
-    exclude=None,
-    masks=None,
-    step_mask=None,
+    init_pose: np.ndarray | None = None,
+    exclude: np.ndarray | None = None,
+    masks: np.ndarray | None = None,
+    step_mask: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose pose feature is nearest the last output pose feature.
@@ -348,7 +378,7 @@ def pose_nearest_segments(
 # ---- running a system ---------------------------------------------------------------------------
 
 
-def refiner_unavailable_reason(refiner) -> str | None:
+def refiner_unavailable_reason(refiner: Refiner | str | os.PathLike[str] | None) -> str | None:
     """Why ``knn+cgan`` cannot run with this refiner (None: it can), said before any work starts."""
     if refiner is None:
         return (
@@ -358,10 +388,8 @@ def refiner_unavailable_reason(refiner) -> str | None:
     return None
 
 
-def load_refiner_for(refiner):
+def load_refiner_for(refiner: Refiner | str | os.PathLike[str] | None) -> Refiner | None:
     """A refiner given as a path, opened (:func:`gesturekit.refine.load_refiner`); objects pass through."""
-    import os
-
     if not isinstance(refiner, (str, os.PathLike)):
         return refiner
     from ..refine import load_refiner
@@ -372,12 +400,12 @@ def load_refiner_for(refiner):
 def run_system(
     system: str,
     *,
-    db,
+    db: MatchingDatabase,
     audio: np.ndarray,
-    config=None,
+    config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
     gt: Motion | None = None,
-    refiner=None,
+    refiner: Refiner | str | os.PathLike[str] | None = None,
 ) -> SystemOutput:
     """Make the motion of one system for one speech.
 
@@ -414,7 +442,10 @@ def run_system(
         raise ConfigError(f"unknown system {system!r}; known systems: {', '.join(SYSTEMS)}")
     config = config or SynthesisConfig()
     if control is not None:  # the config records the control every system uses
-        config = replace(config, control=control)
+        # SynthesisConfig takes a ControlTrack as it is (its field holds the text); passed as a
+        # keyword mapping because the dataclass field's type says str
+        change: dict[str, Any] = {"control": control}
+        config = replace(config, **change)
     audio = np.asarray(audio, dtype=np.float32)
     N = config.step
     if system == "gt":

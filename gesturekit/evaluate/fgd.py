@@ -25,12 +25,18 @@ import pickle
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ConfigError, InputFileError
 from ..features import LAYOUT
 from .metrics import frechet_distance, gaussian_statistics
+
+if TYPE_CHECKING:
+    import torch
+
+    from ..database import MatchingDatabase
 
 __all__ = ["FGDConfig", "FGDModel", "train_fgd_model", "load_fgd_model", "fgd"]
 
@@ -166,14 +172,16 @@ class FGDModel:
         What it was trained on (database, excluded ranges, final loss).
     """
 
-    def __init__(self, config: FGDConfig, net, mean: np.ndarray, std: np.ndarray, info: dict | None = None):
+    def __init__(
+        self, config: FGDConfig, net: torch.nn.Module, mean: np.ndarray, std: np.ndarray, info: dict | None = None
+    ):
         self.config = config
         self.net = net.eval()
         self.mean = np.asarray(mean, np.float32)
         self.std = np.asarray(std, np.float32)
         self.info = dict(info or {})
 
-    def windows(self, positions) -> np.ndarray:
+    def windows(self, positions: np.ndarray) -> np.ndarray:
         """Normalised windows of a motion, shape (n, 165, window), float32 (n = 0 if it is too short)."""
         x = np.asarray(positions, dtype=np.float32)
         if x.ndim == 3:
@@ -187,7 +195,7 @@ class FGDModel:
         starts = np.arange(0, x.shape[0] - w + 1, s)
         return np.ascontiguousarray(z[starts[:, None] + np.arange(w)[None, :]].transpose(0, 2, 1))
 
-    def embed(self, positions) -> np.ndarray:
+    def embed(self, positions: np.ndarray) -> np.ndarray:
         """Latent features of every window of a motion.
 
         Parameters
@@ -204,14 +212,12 @@ class FGDModel:
         win = self.windows(positions)
         if win.shape[0] == 0:
             return np.zeros((0, self.config.latent))
+        encoder = self.net.get_submodule("encoder")
         with torch.no_grad(), _one_thread():
-            out = [
-                self.net.encoder(torch.from_numpy(win[i : i + 512])).double().numpy()
-                for i in range(0, win.shape[0], 512)
-            ]
+            out = [encoder(torch.from_numpy(win[i : i + 512])).double().numpy() for i in range(0, win.shape[0], 512)]
         return np.concatenate(out)
 
-    def reconstruction_error(self, positions) -> float:
+    def reconstruction_error(self, positions: np.ndarray) -> float:
         """Mean squared reconstruction error of a motion's windows (z-scored units)."""
         import torch
 
@@ -297,7 +303,7 @@ def load_fgd_model(path: str | os.PathLike) -> FGDModel:
     return FGDModel(config, net, mean, std, meta.get("info", {}))
 
 
-def _training_windows(db, exclude: np.ndarray | None, window: int) -> tuple[np.ndarray, np.ndarray]:
+def _training_windows(db: MatchingDatabase, exclude: np.ndarray | None, window: int) -> tuple[np.ndarray, np.ndarray]:
     """Clips usable for training (no excluded frame) as (clips, 64, 165) float32, and their count."""
     G = np.asarray(db.G, dtype=np.float32)
     keep = np.ones(G.shape[0], bool) if exclude is None else ~np.asarray(exclude).any(axis=1)
@@ -309,7 +315,7 @@ def _training_windows(db, exclude: np.ndarray | None, window: int) -> tuple[np.n
 
 
 def train_fgd_model(
-    db,
+    db: MatchingDatabase,
     *,
     config: FGDConfig | None = None,
     exclude: np.ndarray | None = None,
@@ -369,7 +375,7 @@ def train_fgd_model(
     return FGDModel(config, net, mean, std, info)
 
 
-def fgd(model: FGDModel, generated, reference) -> float:
+def fgd(model: FGDModel, generated: np.ndarray, reference: np.ndarray) -> float:
     """Fréchet Gesture Distance between a generated and a reference motion.
 
     Parameters

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -48,6 +49,9 @@ from ..control import ATTRIBUTE_NAMES, ControlTrack, constraint_mask, frame_attr
 from ..errors import ConfigError
 from ..motion import AUDIO_SR
 from ..skeleton import BODY_JOINTS, joint_index
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "KINEMATIC_JOINTS",
@@ -78,7 +82,7 @@ KINEMATIC_JOINTS: tuple[int, ...] = tuple(joint_index(n) for n, _ in BODY_JOINTS
 )
 
 
-def _positions(positions, *, name: str = "positions") -> np.ndarray:
+def _positions(positions: np.ndarray, *, name: str = "positions") -> np.ndarray:
     x = np.asarray(positions, dtype=np.float64)
     if x.ndim != 3 or x.shape[2] != 3:
         raise ConfigError(f"{name} must have shape (frames, joints, 3), got {x.shape}")
@@ -93,7 +97,7 @@ def _fps(fps) -> float:
     return float(fps)
 
 
-def _select(x: np.ndarray, joints) -> np.ndarray:
+def _select(x: np.ndarray, joints: Sequence[int] | None) -> np.ndarray:
     if joints is None:
         return x
     idx = np.asarray(joints, dtype=np.int64)
@@ -105,7 +109,7 @@ def _select(x: np.ndarray, joints) -> np.ndarray:
 # ---- beats -------------------------------------------------------------------------------------
 
 
-def joint_speeds(positions, *, fps: float, joints: Sequence[int] | None = None) -> np.ndarray:
+def joint_speeds(positions: np.ndarray, *, fps: float, joints: Sequence[int] | None = None) -> np.ndarray:
     """Speed of every joint in every frame.
 
     Parameters
@@ -129,7 +133,7 @@ def joint_speeds(positions, *, fps: float, joints: Sequence[int] | None = None) 
 
 
 def kinetic_velocity(
-    positions, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS, smooth_s: float = 1 / 15
+    positions: np.ndarray, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS, smooth_s: float = 1 / 15
 ) -> np.ndarray:
     """Mean joint speed per frame, smoothed with a Gaussian (the "kinetic velocity" of AI Choreographer).
 
@@ -159,7 +163,7 @@ def kinetic_velocity(
 
 
 def motion_beats(
-    positions,
+    positions: np.ndarray,
     *,
     fps: float,
     joints: Sequence[int] | None = KINEMATIC_JOINTS,
@@ -197,7 +201,9 @@ def motion_beats(
     return idx / _fps(fps)
 
 
-def pick_peaks(x, *, pre_max: int, post_max: int, pre_avg: int, post_avg: int, delta: float, wait: int) -> np.ndarray:
+def pick_peaks(
+    x: np.ndarray, *, pre_max: int, post_max: int, pre_avg: int, post_avg: int, delta: float, wait: int
+) -> np.ndarray:
     """Greedy peak picking of an onset envelope (Boeck et al. 2012, the rule librosa uses).
 
     Frame ``n`` is a peak when ``x[n] == max(x[n - pre_max : n + post_max])``,
@@ -247,7 +253,7 @@ def pick_peaks(x, *, pre_max: int, post_max: int, pre_avg: int, post_avg: int, d
     return np.asarray(peaks, dtype=np.int64)
 
 
-def audio_onsets(audio, *, sr: int = AUDIO_SR, hop_length: int = 160) -> np.ndarray:
+def audio_onsets(audio: np.ndarray, *, sr: int = AUDIO_SR, hop_length: int = 160) -> np.ndarray:
     """Onset times of speech: peaks of librosa's spectral-flux onset envelope.
 
     The envelope is ``librosa.onset.onset_strength``, scaled to [0, 1]; the
@@ -295,7 +301,7 @@ def audio_onsets(audio, *, sr: int = AUDIO_SR, hop_length: int = 160) -> np.ndar
     return librosa.frames_to_time(frames, sr=sr, hop_length=hop).astype(np.float64)
 
 
-def beat_consistency(motion_beat_times, onset_times, *, sigma: float = 0.1) -> float:
+def beat_consistency(motion_beat_times: np.ndarray, onset_times: np.ndarray, *, sigma: float = 0.1) -> float:
     """Gaussian beat-alignment score of motion beats against audio onsets.
 
     ``mean over onsets o of exp(-min_b (o - b)^2 / (2 sigma^2))`` with ``b`` the motion beats.
@@ -329,14 +335,14 @@ def beat_consistency(motion_beat_times, onset_times, *, sigma: float = 0.1) -> f
 
 
 def beat_consistency_score(
-    positions,
-    audio,
+    positions: np.ndarray,
+    audio: np.ndarray,
     *,
     fps: float,
     sr: int = AUDIO_SR,
     sigma: float = 0.1,
     onsets: np.ndarray | None = None,
-    **beat_options,
+    **beat_options: Any,
 ) -> float:
     """:func:`beat_consistency` of a motion and the speech it goes with.
 
@@ -364,7 +370,7 @@ def beat_consistency_score(
 # ---- diversity ---------------------------------------------------------------------------------
 
 
-def diversity_l1(positions, *, window: int = 15, joints: Sequence[int] | None = None) -> float:
+def diversity_l1(positions: np.ndarray, *, window: int = 15, joints: Sequence[int] | None = None) -> float:
     """BEAT's L1 diversity over non-overlapping windows of the motion.
 
     The windows (``window`` frames each, flattened) are the samples; the
@@ -399,7 +405,7 @@ def diversity_l1(positions, *, window: int = 15, joints: Sequence[int] | None = 
 # ---- Fréchet distance --------------------------------------------------------------------------
 
 
-def gaussian_statistics(features) -> tuple[np.ndarray, np.ndarray]:
+def gaussian_statistics(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean and covariance of a feature set.
 
     Parameters
@@ -422,7 +428,7 @@ def _psd_sqrt(c: np.ndarray) -> np.ndarray:
     return (v * np.sqrt(np.clip(w, 0, None))) @ v.T
 
 
-def frechet_distance(mean1, cov1, mean2, cov2) -> float:
+def frechet_distance(mean1: np.ndarray, cov1: np.ndarray, mean2: np.ndarray, cov2: np.ndarray) -> float:
     """Fréchet (2-Wasserstein) distance between two Gaussians, squared as FID/FGD report it.
 
     ``|m1 - m2|^2 + tr(C1) + tr(C2) - 2 tr((C1^1/2 C2 C1^1/2)^1/2)``, computed with
@@ -457,7 +463,7 @@ def frechet_distance(mean1, cov1, mean2, cov2) -> float:
 
 
 def kinematic_magnitudes(
-    positions, *, fps: float, order: int = 1, joints: Sequence[int] | None = KINEMATIC_JOINTS
+    positions: np.ndarray, *, fps: float, order: int = 1, joints: Sequence[int] | None = KINEMATIC_JOINTS
 ) -> np.ndarray:
     """Magnitudes of the ``order``-th finite difference of every joint, in SI units.
 
@@ -483,7 +489,7 @@ def kinematic_magnitudes(
     return (np.linalg.norm(np.diff(x, n=order, axis=0), axis=2) * fps**order).ravel()
 
 
-def hellinger_distance(p, q) -> float:
+def hellinger_distance(p: np.ndarray, q: np.ndarray) -> float:
     """Hellinger distance between two histograms (normalised here), ``sqrt(1 - sum sqrt(p q))``.
 
     Computed as ``sqrt(sum (sqrt p - sqrt q)^2 / 2)``, the same value, which is exactly 0 for
@@ -505,8 +511,8 @@ def hellinger_distance(p, q) -> float:
 
 
 def kinematic_hellinger(
-    positions,
-    reference,
+    positions: np.ndarray,
+    reference: np.ndarray,
     *,
     fps: float,
     order: int = 1,
@@ -551,19 +557,21 @@ def kinematic_hellinger(
     return hellinger_distance(ha, hb)
 
 
-def mean_acceleration(positions, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS) -> float:
+def mean_acceleration(positions: np.ndarray, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS) -> float:
     """Mean magnitude of joint acceleration (second differences), m/s^2; NaN under 3 frames."""
     v = kinematic_magnitudes(positions, fps=fps, order=2, joints=joints)
     return float(v.mean()) if v.size else float("nan")
 
 
-def mean_jerk(positions, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS) -> float:
+def mean_jerk(positions: np.ndarray, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS) -> float:
     """Mean magnitude of joint jerk (third differences), m/s^3; 0 for a constant pose, NaN under 4 frames."""
     v = kinematic_magnitudes(positions, fps=fps, order=3, joints=joints)
     return float(v.mean()) if v.size else float("nan")
 
 
-def boundary_jumps(positions, boundaries, *, joints: Sequence[int] | None = KINEMATIC_JOINTS) -> dict:
+def boundary_jumps(
+    positions: np.ndarray, boundaries: np.ndarray, *, joints: Sequence[int] | None = KINEMATIC_JOINTS
+) -> dict:
     """How far the joints move across segment joins, against any other pair of frames.
 
     Parameters
@@ -600,12 +608,12 @@ _STAT_ATTRIBUTES = ("left_hand_height", "left_hand_speed", "hand_speed", "asymme
 
 
 def control_adherence(
-    positions,
+    positions: np.ndarray,
     track: ControlTrack,
     *,
     thresholds: dict,
     fps: float,
-) -> pd.DataFrame:  # noqa: F821
+) -> pd.DataFrame:
     """Per control segment: the fraction of frames meeting its constraint, and attribute statistics.
 
     The attributes of the motion are computed as for database frames
@@ -665,7 +673,7 @@ def control_adherence(
     return pd.DataFrame(rows, columns=columns)
 
 
-def overall_adherence(table) -> float:
+def overall_adherence(table: pd.DataFrame) -> float:
     """Frame-weighted mean adherence of a :func:`control_adherence` table (NaN if it has no frame)."""
     frames = np.asarray(table["frames"], dtype=np.float64)
     if frames.sum() <= 0:

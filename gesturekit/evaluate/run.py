@@ -35,9 +35,10 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -48,12 +49,21 @@ from ..motion import AUDIO_SR, Motion
 from . import metrics
 from .baselines import (
     SYSTEMS,
+    SystemOutput,
     SystemUnavailable,
     load_refiner_for,
     parse_systems,
     refiner_unavailable_reason,
     run_system,
 )
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..database import MatchingDatabase
+    from ..refine.infer import Refiner
+    from ..synthesize import SynthesisConfig
+    from .fgd import FGDModel
 
 __all__ = [
     "DEFAULT_SYSTEMS",
@@ -119,7 +129,7 @@ class Holdout:
             raise ConfigError("a held-out part needs a take name")
         if (self.start_s is None) != (self.end_s is None):
             raise ConfigError("give both the start and the end of a held-out range, or neither")
-        if self.start_s is not None and not (0 <= self.start_s < self.end_s):
+        if self.start_s is not None and self.end_s is not None and not (0 <= self.start_s < self.end_s):
             raise ConfigError(f"held-out range {self.start_s}-{self.end_s} s: need 0 <= start < end")
 
     def to_text(self) -> str:
@@ -128,7 +138,7 @@ class Holdout:
         return f"{self.take}:{self.start_s:g}-{self.end_s:g}"
 
 
-def parse_holdout(text) -> Holdout:
+def parse_holdout(text: str | Holdout) -> Holdout:
     """``"TAKE"`` or ``"TAKE:START-END"`` (seconds) -> :class:`Holdout`.
 
     Text after the last ``:`` is the time range (see
@@ -201,7 +211,7 @@ class HeldOut:
         }
 
 
-def held_out(db, holdout, *, margin_s: float | None = None) -> HeldOut:
+def held_out(db: MatchingDatabase, holdout: Holdout | str, *, margin_s: float | None = None) -> HeldOut:
     """Resolve a held-out part: its recorded motion, its speech, and what to exclude.
 
     Parameters
@@ -240,7 +250,9 @@ def held_out(db, holdout, *, margin_s: float | None = None) -> HeldOut:
     covered = int(starts[-1] + L) if clips.size else 0
     if clips.size and not np.array_equal(starts, np.arange(clips.size) * L):
         raise ConfigError(f"take {h.take!r}: its clips are not a contiguous cut from frame 0")
-    if h.start_s is None:
+    ex_takes: tuple[str, ...]
+    ex_ranges: tuple[tuple[str, float, float], ...]
+    if h.start_s is None or h.end_s is None:  # a whole take (a Holdout has both ends or neither)
         f0, f1 = 0, covered
         ex_takes, ex_ranges = (h.take,), ()
     else:
@@ -266,7 +278,7 @@ def held_out(db, holdout, *, margin_s: float | None = None) -> HeldOut:
     return HeldOut(h, f0, motion, audio, ex_takes, ex_ranges)
 
 
-def default_control_track(duration_s: float, *, controls=DEFAULT_CONTROLS) -> ControlTrack:
+def default_control_track(duration_s: float, *, controls: Sequence[tuple[str, str]] = DEFAULT_CONTROLS) -> ControlTrack:
     """Equal stretches of ``duration_s`` seconds, each asking for one constraint in turn."""
     if not duration_s > 0:
         raise ConfigError(f"duration must be positive, got {duration_s}")
@@ -301,8 +313,8 @@ class Evaluation:
         Everything that made the numbers (JSON-able).
     """
 
-    table: pd.DataFrame  # noqa: F821
-    controls: pd.DataFrame  # noqa: F821
+    table: pd.DataFrame
+    controls: pd.DataFrame
     held_out: HeldOut
     outputs: dict
     notes: list = field(default_factory=list)
@@ -353,7 +365,12 @@ class Evaluation:
         return [folder / n for n in ("results.csv", "results.md", "controls.csv", "controls.md", "evaluation.json")]
 
 
-def _fgd_model(db, fgd_model, exclude, notes):
+def _fgd_model(
+    db: MatchingDatabase,
+    fgd_model: FGDModel | str | os.PathLike[str] | None,
+    exclude: np.ndarray | None,
+    notes: list[str],
+) -> FGDModel:
     from .fgd import FGDConfig, FGDModel, load_fgd_model, train_fgd_model
 
     if isinstance(fgd_model, FGDModel):
@@ -367,7 +384,7 @@ def _fgd_model(db, fgd_model, exclude, notes):
     return train_fgd_model(db, config=FGDConfig(), exclude=exclude)
 
 
-def _measure(out, ref: HeldOut, onsets, fgd_model, sigma) -> dict:
+def _measure(out: SystemOutput, ref: HeldOut, onsets: np.ndarray, fgd_model: FGDModel | None, sigma: float) -> dict:
     x = out.motion.positions[: ref.n_frames]
     gt = ref.motion.positions[: x.shape[0]]
     fps = ref.motion.fps
@@ -392,14 +409,14 @@ def _measure(out, ref: HeldOut, onsets, fgd_model, sigma) -> dict:
 
 
 def run_evaluation(
-    db,
+    db: MatchingDatabase,
     *,
-    holdout,
-    systems=DEFAULT_SYSTEMS,
-    config=None,
+    holdout: Holdout | str,
+    systems: str | Sequence[str] = DEFAULT_SYSTEMS,
+    config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
-    fgd_model=None,
-    refiner=None,
+    fgd_model: FGDModel | str | os.PathLike[str] | None = None,
+    refiner: Refiner | str | os.PathLike[str] | None = None,
     sigma: float = 0.1,
     margin_s: float | None = None,
     progress: Callable[[int, int, str], None] | None = None,
@@ -443,7 +460,13 @@ def run_evaluation(
     systems = parse_systems(systems)
     ref = held_out(db, holdout, margin_s=margin_s)
     base = config or SynthesisConfig()
-    base = replace(base, control="", exclude_takes=ref.exclude_takes, exclude_ranges=ref.exclude_ranges, pins={})
+    base = replace(
+        base,
+        search=replace(base.search, pins={}),
+        control="",
+        exclude_takes=ref.exclude_takes,
+        exclude_ranges=ref.exclude_ranges,
+    )
     track = control if control is not None else default_control_track(ref.duration)
     if isinstance(track, str):
         track = parse_control(track)
@@ -519,7 +542,9 @@ def run_evaluation(
     return Evaluation(table, controls, ref, outputs, notes, settings)
 
 
-def evaluate(db, *, holdout, systems=DEFAULT_SYSTEMS, **options) -> pd.DataFrame:  # noqa: F821
+def evaluate(
+    db: MatchingDatabase, *, holdout: Holdout | str, systems: str | Sequence[str] = DEFAULT_SYSTEMS, **options: Any
+) -> pd.DataFrame:
     """:func:`run_evaluation`'s table: one row per system, one column per measure."""
     return run_evaluation(db, holdout=holdout, systems=systems, **options).table
 
@@ -527,7 +552,7 @@ def evaluate(db, *, holdout, systems=DEFAULT_SYSTEMS, **options) -> pd.DataFrame
 # ---- writers ------------------------------------------------------------------------------------
 
 
-def _cell(v, floatfmt: str) -> str:
+def _cell(v: object, floatfmt: str) -> str:
     if isinstance(v, (float, np.floating)):
         if math.isnan(v):
             return "–"
@@ -535,7 +560,7 @@ def _cell(v, floatfmt: str) -> str:
     return str(v).replace("|", "\\|")
 
 
-def markdown_table(df, *, floatfmt: str = ".4g") -> str:
+def markdown_table(df: pd.DataFrame, *, floatfmt: str = ".4g") -> str:
     """A pandas DataFrame as a GitHub-flavoured markdown table (numbers right-aligned; NaN as "–")."""
     cols = list(df.columns)
     body = [[_cell(v, floatfmt) for v in row] for row in df.itertuples(index=False, name=None)]
@@ -553,7 +578,7 @@ def markdown_table(df, *, floatfmt: str = ".4g") -> str:
     return "\n".join([line([str(c) for c in cols]), rule] + [line(r) for r in body])
 
 
-def write_text(text: str, path, *, overwrite: bool = False) -> Path:
+def write_text(text: str, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
     """Write a UTF-8 text file atomically."""
     from .._io import atomic_write
 
@@ -561,6 +586,6 @@ def write_text(text: str, path, *, overwrite: bool = False) -> Path:
     return atomic_write(path, lambda f: f.write(data), overwrite=overwrite)
 
 
-def write_csv(df, path, *, overwrite: bool = False) -> Path:
+def write_csv(df: pd.DataFrame, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
     """Write a DataFrame as CSV (no index, full float precision) atomically."""
     return write_text(df.to_csv(index=False, lineterminator="\n"), path, overwrite=overwrite)

@@ -11,10 +11,16 @@ torch is imported by the submodules only, so ``import gesturekit.refine`` stays 
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import GestureKitError
+
+if TYPE_CHECKING:
+    from ..database import MatchingDatabase
+    from .infer import Refiner
 
 __all__ = [
     "default_refiner_path",
@@ -37,7 +43,7 @@ def default_refiner_path() -> Path:
     return Path(__file__).resolve().parents[1] / "assets" / "demo-refiner"
 
 
-def load_refiner(path=None, *, device: str = "cpu"):
+def load_refiner(path: str | os.PathLike[str] | None = None, *, device: str = "cpu") -> Refiner:
     """A :class:`~gesturekit.refine.infer.Refiner` from a folder; ``None`` or ``"demo"``: the shipped one."""
     from .infer import Refiner
 
@@ -46,7 +52,7 @@ def load_refiner(path=None, *, device: str = "cpu"):
     return Refiner.load(path, device=device)
 
 
-def check_layout(config: dict, db, *, where) -> None:
+def check_layout(config: dict, db: MatchingDatabase, *, where: str | os.PathLike[str]) -> None:
     """Refuse a database whose features have another layout than a refiner's training data.
 
     Parameters
@@ -77,7 +83,7 @@ def check_layout(config: dict, db, *, where) -> None:
         )
 
 
-def check_refiner(path, db) -> Path:
+def check_refiner(path: str | os.PathLike[str], db: MatchingDatabase) -> Path:
     """Check a refiner folder against a database without loading its weights (nor torch).
 
     Reads ``config.json`` (format, version) and compares the feature layout and
@@ -108,7 +114,7 @@ def _speaker(source: str) -> str:
     return re.sub(r",\s*[0-9.]+\s*min\)", ")", source) if source.startswith("demo") else source
 
 
-def trained_on(config: dict, db) -> bool:
+def trained_on(config: dict, db: MatchingDatabase) -> bool:
     """Whether a refiner (its ``config.json``) was trained on ``db``: the same folder, or the same
     recorded source with the same takes and clips; for the generated demo speaker, the same
     generator seed at any length."""
@@ -133,7 +139,7 @@ def describe_training(config: dict) -> str:
     return f"{name}{counts}"
 
 
-def refiner_for(db) -> Path | None:
+def refiner_for(db: MatchingDatabase) -> Path | None:
     """The refiner applied to ``db`` when none is named: one in ``<db>/refiner`` or the shipped
     demo refiner (:func:`default_refiner_path`), whichever was trained on ``db`` (:func:`trained_on`);
     None when neither was."""
@@ -152,7 +158,7 @@ def refiner_for(db) -> Path | None:
     return None
 
 
-def provenance(path, config: dict) -> dict:
+def provenance(path: str | os.PathLike[str], config: dict) -> dict:
     """What reproduces a refined result: the refiner's folder, the database it was trained on
     (from its ``config.json``) and the sha256 of its weights (``generator.pt``), hex."""
     folder = Path(path).expanduser().resolve()

@@ -30,6 +30,7 @@ import os
 import zipfile
 import zlib
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -41,6 +42,11 @@ from ..motion import Motion
 from ..skeleton import FPS, JOINT_NAMES
 from .folder import FORMAT, FORMAT_VERSION, read_refiner_config
 from .model import GENERATOR_STRIDE, Generator, ModelConfig
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..database import MatchingDatabase
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "Refiner", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
 
@@ -105,7 +111,7 @@ def read_stats(path: str | os.PathLike) -> dict[str, np.ndarray]:
     return stats
 
 
-def read_loss_log(path: str | os.PathLike):
+def read_loss_log(path: str | os.PathLike) -> pd.DataFrame:
     """The loss log of a refiner folder as a pandas DataFrame (one row per logging interval).
 
     Columns: iteration, elapsed_s, critic_loss, wasserstein, gradient_penalty,
@@ -138,7 +144,15 @@ class Refiner:
     device : str or torch.device
     """
 
-    def __init__(self, generator: Generator, *, stats: dict, config: dict, path=None, device="cpu"):
+    def __init__(
+        self,
+        generator: Generator,
+        *,
+        stats: dict,
+        config: dict,
+        path: str | os.PathLike[str] | None = None,
+        device: str | torch.device = "cpu",
+    ):
         self.device = torch.device(device)
         self.generator = generator.to(self.device).eval()
         self.stats = {k: np.asarray(v, dtype=np.float32) for k, v in stats.items()}
@@ -186,7 +200,7 @@ class Refiner:
         return cls(gen, stats=stats, config=cfg, path=path, device=device)
 
     # ---- compatibility ----------------------------------------------------------------------
-    def check_database(self, db) -> None:
+    def check_database(self, db: MatchingDatabase) -> None:
         """Refuse a database whose features have another layout than the refiner's training data.
 
         Raises
@@ -201,8 +215,8 @@ class Refiner:
     # ---- refining ---------------------------------------------------------------------------
     def refine(
         self,
-        motion,
-        audio,
+        motion: np.ndarray,
+        audio: np.ndarray,
         *,
         mode: str = "full",
         hop: int = 16,
@@ -260,7 +274,7 @@ class Refiner:
         out = (out * self.stats["motion_std"] + self.stats["motion_mean"]).astype(np.float32)
         return out if keep_below_hz is None else keep_slow(out, g, keep_below_hz)
 
-    def refine_motion(self, motion: Motion, audio: np.ndarray, **options) -> Motion:
+    def refine_motion(self, motion: Motion, audio: np.ndarray, **options: Any) -> Motion:
         """:meth:`refine` for a :class:`~gesturekit.motion.Motion` at 15 fps; returns a Motion."""
         if motion.fps != FPS:
             raise ConfigError(f"the refiner works at {FPS} fps; the motion has {motion.fps} fps")

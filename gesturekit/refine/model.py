@@ -21,6 +21,7 @@ pool by 2, then a linear layer to one score (no sigmoid: WGAN).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
@@ -77,7 +78,7 @@ class ModelConfig(JsonConfig):
             raise ConfigError("audio_dim and motion_dim must be positive")
 
 
-def _double_conv(cin: int, cout: int, norm) -> nn.Sequential:
+def _double_conv(cin: int, cout: int, norm: Callable[[int], nn.Module]) -> nn.Sequential:
     return nn.Sequential(
         nn.Conv1d(cin, cout, kernel_size=3, padding=1),
         norm(cout),

@@ -172,7 +172,15 @@ def preset(name: str) -> Preset:
     return PRESETS[name]
 
 
-def gradient_penalty(critic, audio, real, fake, *, eps, weight: float = 100.0) -> torch.Tensor:
+def gradient_penalty(
+    critic: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    audio: torch.Tensor,
+    real: torch.Tensor,
+    fake: torch.Tensor,
+    *,
+    eps: torch.Tensor,
+    weight: float = 100.0,
+) -> torch.Tensor:
     """WGAN-GP penalty at points between real and generated motion (same audio).
 
     ``weight * mean_b (|| d critic(audio_b, x) / d x ||_2 - 1)^2`` at
@@ -245,7 +253,16 @@ class Trainer:
     device : str or torch.device
     """
 
-    def __init__(self, *, model: ModelConfig, train: TrainConfig, audio, knn, real, device="cpu"):
+    def __init__(
+        self,
+        *,
+        model: ModelConfig,
+        train: TrainConfig,
+        audio: np.ndarray,
+        knn: np.ndarray,
+        real: np.ndarray,
+        device: str | torch.device = "cpu",
+    ):
         self.model_config = model
         self.config = train
         self.device = torch.device(device)
@@ -349,7 +366,7 @@ class Trainer:
 # ---- checkpoint folder ---------------------------------------------------------------------------
 
 
-def _save_torch(path: Path, obj) -> str:
+def _save_torch(path: Path, obj: object) -> str:
     buf = io.BytesIO()
     torch.save(obj, buf)
     data = buf.getvalue()
