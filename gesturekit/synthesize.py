@@ -26,6 +26,7 @@ from .errors import ConfigError, GestureKitError, warn
 from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 from .search.plan import SearchPlan, plan_search, rest_pose_frame
+from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
 
 __all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
 
@@ -34,7 +35,7 @@ __all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize",
 #: applied (the paper uses the refiner's output as it is).
 PAPER_SETTINGS = {
     "k": (0, "k = {}", "0"),
-    "step": (8, "N = {}", "8"),
+    "segment": (8, "N = {}", "8"),
     "init": ("random", "initial pose: {}", "random"),
     "blend": ("none", "blending: {}", "none"),
     "mask_rule": ("ends", "control held at: {}", "ends"),
@@ -44,7 +45,7 @@ PAPER_SETTINGS = {
 
 #: The options of :class:`SynthesisConfig` that belong to its search (:class:`SearchConfig`);
 #: the saved form lists them beside the others, as it always has.
-SEARCH_OPTIONS = ("k", "step", "topk", "seed", "mask_rule", "pins")
+SEARCH_OPTIONS = ("k", "segment", "record", "seed", "mask_rule", "pins")
 
 
 @dataclass(frozen=True, init=False)
@@ -52,14 +53,14 @@ class SynthesisConfig:
     """Every option of a synthesis; saved with every output.
 
     The search's options live in ``search`` (a :class:`SearchConfig`) and are read
-    through it; ``k``, ``step``, ``topk``, ``seed``, ``mask_rule`` and ``pins`` are
+    through it; ``k``, ``segment``, ``record``, ``seed``, ``mask_rule`` and ``pins`` are
     accepted as keywords (and by :func:`dataclasses.replace`) and read as attributes,
     both passing through to ``search``.
 
     Parameters
     ----------
     search : SearchConfig, optional
-        k, N (``step``), recorded candidates (``topk``), seed, mask rule and pins.
+        k, N (``segment``), recorded candidates (``record``), seed, mask rule and pins.
         Its ``init_pose`` must be ``"random"``: the initial pose is chosen by ``init``.
     init : {"random", "rest"}
         ``random``: a random database frame that satisfies the first step's control
@@ -79,7 +80,7 @@ class SynthesisConfig:
         the faster content from the refiner (see :func:`gesturekit.blend.keep_slow`),
         so controls of hand height, width and symmetry survive refinement; 0: the
         refiner's output as it is (the paper).
-    k, step, topk, seed, mask_rule, pins
+    k, segment, record, seed, mask_rule, pins
         The options of ``search`` (see :class:`SearchConfig`); given, they replace its values.
     """
 
@@ -143,8 +144,8 @@ class SynthesisConfig:
 
     # the search's options, read through ``search`` (one source of truth)
     k = property(lambda self: self.search.k, doc="Take the k-th best of the combined ranking (0 = best).")
-    step = property(lambda self: self.search.step, doc="Frames per search step, N (8 in the paper).")
-    topk = property(lambda self: self.search.topk, doc="Candidates per step recorded for inspection.")
+    segment = property(lambda self: self.search.segment, doc="Frames per search step, N (8 in the paper).")
+    record = property(lambda self: self.search.record, doc="Candidates per step recorded for inspection.")
     seed = property(lambda self: self.search.seed, doc="Seed of the random initial pose.")
     mask_rule = property(lambda self: self.search.mask_rule, doc="Where a control must hold in a window.")
     pins = property(lambda self: self.search.pins, doc="Step -> (clip, start): forced choices.")
@@ -158,7 +159,7 @@ class SynthesisConfig:
         """A JSON-able dict, the search's options beside the others (the saved form of every
         version); :meth:`from_dict` reads it back."""
         search = self.search.to_dict()
-        out = {name: search[name] for name in ("k", "step", "topk", "seed")}
+        out = {name: search[name] for name in ("k", "segment", "record", "seed")}
         out["init"] = self.init
         out["mask_rule"] = search["mask_rule"]
         out.update(config_to_dict(self, exclude=("search", "init", "refiner_keep_hz")))
@@ -179,7 +180,10 @@ class SynthesisConfig:
             raise ConfigError(f"synthesis options must be a JSON object, got {type(d).__name__}")
         d = dict(d)
         search = dict(d.pop("search", None) or {})
-        search.update({name: d.pop(name) for name in SEARCH_OPTIONS if name in d})
+        # earlier versions' flat "step" and "topk" belong to the search too ("init" is ours)
+        flat = [*SEARCH_OPTIONS, *(old for old in RENAMED_SEARCH_KEYS if old != "init")]
+        search.update({name: d.pop(name) for name in flat if name in d})
+        search = renamed_search_keys(search)
         d["search"] = SearchConfig.from_dict(search)
         return config_from_dict(cls, d, what="synthesis options")
 
@@ -276,7 +280,7 @@ class SynthesisResult:
 
         s = self.search
         n = s.n_steps
-        N = self.config.step
+        N = self.config.segment
         return pd.DataFrame(
             {
                 "step": np.arange(n),
@@ -395,7 +399,7 @@ def _finish(db, res: SearchResult, plan: SearchPlan, samples, name, config) -> S
     G = db.G
     g = np.asarray(G[res.frames[:, 0], res.frames[:, 1]], dtype=np.float32)  # (T, 165)
     knn = Motion.from_flat(g, db.fps)
-    boundaries = np.arange(1, res.n_steps) * config.step
+    boundaries = np.arange(1, res.n_steps) * config.segment
     out = Motion.from_flat(blend_segments(g, boundaries, mode=config.blend, frames=config.blend_frames), db.fps)
     return SynthesisResult(
         motion=out,
@@ -495,7 +499,7 @@ def synthesize_batch(
         [plan.query for plan in plans],
         configs=[plan.config for plan in plans],
         masks=np.stack(stack) if stack else None,
-        step_masks=step_idx,
+        step_mask_indices=step_idx,
         exclude=plans[0].exclude,
         fps=db.fps,
     )

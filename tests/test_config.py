@@ -20,6 +20,25 @@ from gesturekit.synthesize import SynthesisConfig
 names = st.text("abcdefghij_", min_size=1, max_size=8)
 ranges = st.tuples(names, st.floats(0, 49), st.floats(50, 100))  # start < end
 
+# the configurations with options that earlier versions saved under other names
+RENAMED = st.one_of(
+    st.builds(
+        PairsConfig,
+        seed=st.integers(0, 99),
+        segment=st.integers(1, 16),
+        k_max=st.integers(2, 20),
+        exclude_takes=st.lists(names, max_size=3).map(tuple),
+        exclude_ranges=st.lists(ranges, max_size=3).map(tuple),
+    ),
+    st.builds(
+        SearchConfig,
+        k=st.integers(0, 9),
+        segment=st.integers(1, 16),
+        record=st.integers(1, 20),
+        init_pose=st.one_of(st.just("random"), st.lists(st.floats(-5, 5), min_size=1, max_size=6).map(tuple)),
+        pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3),
+    ),
+)
 CONFIGS = st.one_of(
     st.builds(
         ModelConfig,
@@ -32,21 +51,7 @@ CONFIGS = st.one_of(
         betas=st.tuples(st.floats(0, 0.99), st.floats(0, 0.99)),
         seed=st.integers(0, 99),
     ),
-    st.builds(
-        PairsConfig,
-        seed=st.integers(0, 99),
-        step=st.integers(1, 16),
-        k_max=st.integers(2, 20),
-        exclude_takes=st.lists(names, max_size=3).map(tuple),
-        exclude_ranges=st.lists(ranges, max_size=3).map(tuple),
-    ),
-    st.builds(
-        SearchConfig,
-        k=st.integers(0, 9),
-        step=st.integers(1, 16),
-        init_pose=st.one_of(st.just("random"), st.lists(st.floats(-5, 5), min_size=1, max_size=6).map(tuple)),
-        pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3),
-    ),
+    RENAMED,
     st.builds(
         SynthesisConfig,
         k=st.integers(0, 9),
@@ -84,3 +89,15 @@ def test_a_joint_map_is_written_without_its_name():
     preset = next(iter(PRESETS.values()))
     d = json.loads(json.dumps(preset.to_dict()))
     assert set(d) == {"pelvis", "joints"} and JointMap(name=preset.name, **d) == preset
+
+
+OLD_NAMES = {"init": "init_pose", "step": "segment", "topk": "record"}
+
+
+@settings(max_examples=60, deadline=None)
+@given(RENAMED)
+def test_configs_saved_under_earlier_names_read_back(config):
+    saved = json.loads(json.dumps(config.to_dict()))
+    old = {next((o for o, n in OLD_NAMES.items() if n == name), name): value for name, value in saved.items()}
+    assert old != saved  # N was "step" in every one of them
+    assert type(config).from_dict(old) == config

@@ -171,12 +171,12 @@ def explain_step(
         raise ConfigError(f"pose must have {P.shape[-1]} values, got shape {pose.shape}")
     if not 0 <= int(t) < q.shape[0]:
         raise ConfigError(f"t must be in 0..{q.shape[0] - 1}, got {t}")
-    options = SearchConfig(k=k, step=segment, mask_rule=mask_rule)  # checks them as the search does
-    check_segment(options.step, T)
+    options = SearchConfig(k=k, segment=segment, mask_rule=mask_rule)  # checks them as the search does
+    check_segment(options.segment, T)
     for name, arr in (("mask", mask), ("exclude", exclude)):
         if arr is not None and np.shape(arr) != (M, T):
             raise ConfigError(f"{name} must have shape ({M}, {T}), got {np.shape(arr)}")
-    t, n, k = int(t), options.step, options.k
+    t, n, k = int(t), options.segment, options.k
     exclude = None if exclude is None else np.asarray(exclude, dtype=bool)
     f_t = q[t]
 

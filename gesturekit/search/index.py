@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -459,13 +460,28 @@ class SearchIndex:
     # -- public ---------------------------------------------------------------------------------
 
     def search(
-        self, query, *, config: SearchConfig | None = None, masks=None, step_mask=None, exclude=None
+        self,
+        query: np.ndarray,
+        *,
+        config: SearchConfig | None = None,
+        masks: np.ndarray | None = None,
+        step_mask_index: np.ndarray | None = None,
+        exclude: np.ndarray | None = None,
     ) -> SearchResult:
         """Run Algorithm 1 for one query; see :func:`search` for the parameters."""
-        return self.search_batch([query], configs=[config], masks=masks, step_masks=[step_mask], exclude=exclude)[0]
+        return self.search_batch(
+            [query], configs=[config], masks=masks, step_mask_indices=[step_mask_index], exclude=exclude
+        )[0]
 
     def search_batch(
-        self, queries, *, configs=None, masks=None, step_masks=None, exclude=None, fps: float | None = None
+        self,
+        queries: Sequence[np.ndarray],
+        *,
+        configs: SearchConfig | Sequence[SearchConfig | None] | None = None,
+        masks: np.ndarray | None = None,
+        step_mask_indices: Sequence[np.ndarray | None] | None = None,
+        exclude: np.ndarray | None = None,
+        fps: float | None = None,
     ) -> list[SearchResult]:
         """Run Algorithm 1 for several queries with one scan of the database per step.
 
@@ -477,7 +493,7 @@ class SearchIndex:
             One for all, or one per query (step length, k, pins ... may differ).
         masks : np.ndarray, shape (n_masks, M, T), bool, optional
             Control masks shared by the queries.
-        step_masks : sequence of (np.ndarray of shape (n_steps_b,), int, or None), optional
+        step_mask_indices : sequence of (np.ndarray of shape (n_steps_b,), int, or None), optional
             Per query, the mask index of each step (-1: no control).
         exclude : np.ndarray, shape (M, T), bool, optional
             Frames no query may use.
@@ -503,14 +519,15 @@ class SearchIndex:
         B = len(queries)
         if B == 0:
             return []
-        if configs is None or isinstance(configs, SearchConfig):
-            configs = [configs] * B
-        if step_masks is None:
-            step_masks = [None] * B
-        configs, step_masks = list(configs), list(step_masks)
-        if len(configs) != B or len(step_masks) != B:
-            raise ConfigError(f"{B} queries need {B} configs and step masks, got {len(configs)} and {len(step_masks)}")
-        calls = [validate_call(self.shape, q, c, masks, sm, exclude) for q, c, sm in zip(queries, configs, step_masks)]
+        per_query: list[SearchConfig | None] = (
+            [configs] * B if configs is None or isinstance(configs, SearchConfig) else list(configs)
+        )
+        indices = [None] * B if step_mask_indices is None else list(step_mask_indices)
+        if len(per_query) != B or len(indices) != B:
+            raise ConfigError(
+                f"{B} queries need {B} configs and step mask indices, got {len(per_query)} and {len(indices)}"
+            )
+        calls = [validate_call(self.shape, q, c, masks, sm, exclude) for q, c, sm in zip(queries, per_query, indices)]
         masks = calls[0].masks
         exclude = calls[0].exclude
         M, T, D, _ = self.shape
@@ -518,8 +535,8 @@ class SearchIndex:
 
         def step_key(b, i, relaxed=False):
             c = calls[b]
-            j = -1 if (relaxed or c.step_mask is None) else int(c.step_mask[i])
-            return self._admissible(cache, c.config.step, c.config.mask_rule, j, masks, exclude)
+            j = -1 if (relaxed or c.step_mask_index is None) else int(c.step_mask_index[i])
+            return self._admissible(cache, c.config.segment, c.config.mask_rule, j, masks, exclude)
 
         results, poses = [], np.empty((B, D), np.float32)
         for b, c in enumerate(calls):
@@ -577,7 +594,7 @@ class SearchIndex:
 
         for r in results:
             if r.relaxed.any():
-                where = describe_steps(np.flatnonzero(r.relaxed), step=r.config.step, fps=fps)
+                where = describe_steps(np.flatnonzero(r.relaxed), segment=r.config.segment, fps=fps)
                 warn(f"control relaxed at {where}: no database window satisfies it", stacklevel=3)
         return results
 
@@ -589,7 +606,7 @@ class SearchIndex:
         """
         run = map if pool is None or len(active) < 4 else pool.map
         biases = [self._bias(cache, keys[b]) for b in active]
-        fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
+        fq = np.stack([calls[b].query[i * calls[b].config.segment] for b in active])
         s0, amin, nq, undecided, (av, inexact) = self._scan(
             poses[active], biases, fq, cache.setdefault("scratch", {}), pool
         )
@@ -605,7 +622,7 @@ class SearchIndex:
     def _record(self, res, call, i, d, poses, b):
         """Write step ``i``'s table and choice (the k-th, or the pin) into ``res``; advance ``p_{t-1}``."""
         cfg = call.config
-        N = cfg.step
+        N = cfg.segment
         if d is None and i not in cfg.pins:
             raise ConfigError(
                 f"step {i}: no database window is admissible (valid start, {N} frames inside the clip, "
@@ -636,7 +653,15 @@ class SearchIndex:
 
 
 def search(
-    P, F, valid, query, *, config: SearchConfig | None = None, masks=None, step_mask=None, exclude=None
+    P: np.ndarray,
+    F: np.ndarray,
+    valid: np.ndarray,
+    query: np.ndarray,
+    *,
+    config: SearchConfig | None = None,
+    masks: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
+    exclude: np.ndarray | None = None,
 ) -> SearchResult:
     """Algorithm 1: the k-NN motion search for one speech query.
 
@@ -654,7 +679,7 @@ def search(
         Defaults: k = 0, N = 8, 10 candidates recorded, random initial pose with seed 0.
     masks : np.ndarray, shape (n_masks, M, T), bool, optional
         Control masks: which database frames may be used.
-    step_mask : np.ndarray, shape (n_steps,), int, optional
+    step_mask_index : np.ndarray, shape (n_steps,), int, optional
         Per step (``n_steps = ceil(T_out / N)``), the index into ``masks``, -1 for no control.
     exclude : np.ndarray, shape (M, T), bool, optional
         Frames never to use (held-out takes); a window containing one is inadmissible.
@@ -678,19 +703,29 @@ def search(
     -----
     Builds a :class:`SearchIndex` on every call; keep one to search the same database repeatedly.
     """
-    return SearchIndex(P, F, valid).search(query, config=config, masks=masks, step_mask=step_mask, exclude=exclude)
+    return SearchIndex(P, F, valid).search(
+        query, config=config, masks=masks, step_mask_index=step_mask_index, exclude=exclude
+    )
 
 
 def search_batch(
-    P, F, valid, queries, *, configs=None, masks=None, step_masks=None, exclude=None
+    P: np.ndarray,
+    F: np.ndarray,
+    valid: np.ndarray,
+    queries: Sequence[np.ndarray],
+    *,
+    configs: SearchConfig | Sequence[SearchConfig | None] | None = None,
+    masks: np.ndarray | None = None,
+    step_mask_indices: Sequence[np.ndarray | None] | None = None,
+    exclude: np.ndarray | None = None,
 ) -> list[SearchResult]:
     """Algorithm 1 for several queries with one scan of the database per step.
 
     Parameters are those of :func:`search`, with ``queries`` a sequence of query
     arrays, ``configs`` one :class:`SearchConfig` or one per query, and
-    ``step_masks`` one step mask (or None) per query. Returns one
+    ``step_mask_indices`` one step mask index (or None) per query. Returns one
     :class:`SearchResult` per query, identical to separate :func:`search` calls.
     """
     return SearchIndex(P, F, valid).search_batch(
-        queries, configs=configs, masks=masks, step_masks=step_masks, exclude=exclude
+        queries, configs=configs, masks=masks, step_mask_indices=step_mask_indices, exclude=exclude
     )

@@ -141,7 +141,7 @@ def synthesis_table(results, *, labels=None):
     Returns
     -------
     pandas.DataFrame
-        One row per result: ``label``, ``k``, ``step`` (N), ``steps``, ``clips_used``
+        One row per result: ``label``, ``k``, ``segment`` (N), ``steps``, ``clips_used``
         (distinct database clips), ``pose_dist`` and ``audio_dist`` (means over the steps of
         the chosen window's distances, pinned windows outside the record left out),
         ``relaxed_steps``, ``boundary_jump`` (mean joint displacement across the joins of the
@@ -154,21 +154,21 @@ def synthesis_table(results, *, labels=None):
 
     results = list(results)
     if labels is None:
-        labels = [f"k={r.config.k}, N={r.config.step}" for r in results]
+        labels = [f"k={r.config.k}, N={r.config.segment}" for r in results]
     if len(labels) != len(results):
         raise ConfigError(f"synthesis_table got {len(labels)} labels for {len(results)} results")
     rows = []
     for label, r in zip(labels, results):
         s = r.search
         idx = np.flatnonzero(s.position >= 0)
-        N = r.config.step
+        N = r.config.segment
         x = r.motion.positions
         joins = boundary_jumps(x, np.arange(1, s.n_steps) * N)
         rows.append(
             {
                 "label": str(label),
                 "k": r.config.k,
-                "step": N,
+                "segment": N,
                 "steps": s.n_steps,
                 "clips_used": int(np.unique(s.clip).size),
                 "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
