@@ -12,6 +12,7 @@ import math
 import sys
 import time
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
@@ -751,7 +752,7 @@ def _os_error_text(exc: OSError) -> str:
     return f"{names}: {problem}"
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = build_parser().parse_args(argv)
     args.started = time.perf_counter()

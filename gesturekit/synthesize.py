@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import numbers
 import os
-from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 import numpy as np
 
@@ -27,6 +28,16 @@ from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 from .search.plan import SearchPlan, plan_search, rest_pose_frame
 from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
+
+if TYPE_CHECKING:  # named in annotations only: the refiner sits above the synthesis
+    import pandas as pd
+
+    from .refine.infer import Refiner
+
+#: Speech: a file in any format the readers take, or mono float32 samples at 16 kHz.
+Speech: TypeAlias = "str | os.PathLike[str] | np.ndarray"
+#: A refiner, or its folder (``"demo"``: the one shipped with the demo database).
+RefinerChoice: TypeAlias = "Refiner | str | os.PathLike[str]"
 
 __all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
 
@@ -92,6 +103,8 @@ class SynthesisConfig:
     exclude_takes: tuple = ()
     exclude_ranges: tuple = ()
     refiner_keep_hz: float = KEEP_BELOW_HZ
+    if TYPE_CHECKING:  # set by __init__: the control parsed once (not an option of its own)
+        _track: ControlTrack = field(init=False, repr=False, compare=False)
 
     def __init__(
         self,
@@ -101,11 +114,11 @@ class SynthesisConfig:
         blend: str = "none",
         blend_frames: int = 4,
         control: str | ControlTrack = "",
-        exclude_takes=(),
-        exclude_ranges=(),
+        exclude_takes: Sequence[str] = (),
+        exclude_ranges: Sequence[tuple[str, float, float]] = (),
         refiner_keep_hz: float = KEEP_BELOW_HZ,
-        **search_options,
-    ):
+        **search_options: Any,
+    ) -> None:
         unknown = set(search_options) - set(SEARCH_OPTIONS)
         if unknown:
             raise ConfigError(f"unknown synthesis options: {', '.join(sorted(unknown))}")
@@ -207,15 +220,22 @@ class SynthesisConfig:
                 out.append(f"{form.format(value)} (paper {paper_text})")
         return out
 
+    def with_control(self, control: str | ControlTrack) -> SynthesisConfig:
+        """A copy with another control track (its text, or the track itself)."""
+        options: dict[str, Any] = {f.name: getattr(self, f.name) for f in fields(self)}
+        options["control"] = control
+        return SynthesisConfig(**options)
+
     def with_pin(self, step: int, clip: int, start: int) -> SynthesisConfig:
         """A copy with one more pinned choice (replacing any pin at that step)."""
         pins = dict(self.pins)
         pins[int(step)] = (int(clip), int(start))
-        return replace(self, pins=pins)
+        return replace(self, search=replace(self.search, pins=pins))
 
     def without_pin(self, step: int) -> SynthesisConfig:
+        """A copy without the pinned choice at ``step`` (if any)."""
         pins = {i: v for i, v in self.pins.items() if i != int(step)}
-        return replace(self, pins=pins)
+        return replace(self, search=replace(self.search, pins=pins))
 
 
 @dataclass
@@ -274,7 +294,7 @@ class SynthesisResult:
         """Steps whose control admitted no window and was dropped for that step."""
         return np.flatnonzero(self.search.relaxed).tolist()
 
-    def steps_table(self):
+    def steps_table(self) -> pd.DataFrame:
         """One row per step: frames, chosen clip and start, position in the ranking, relaxed, pinned."""
         import pandas as pd
 
@@ -312,7 +332,7 @@ class SynthesisResult:
             "refiner": self.refiner,
         }
 
-    def check_finite(self, path=None) -> None:
+    def check_finite(self, path: str | os.PathLike[str] | None = None) -> None:
         """Refuse to write a result with NaN or infinite positions, naming where they came from.
 
         Raises
@@ -332,7 +352,7 @@ class SynthesisResult:
                     path=path,
                 )
 
-    def save_npz(self, path, *, overwrite: bool = False) -> Path:
+    def save_npz(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
         """npz with positions (the final motion), fps, knn_positions, the search record and the config."""
         from .export.npz import save_npz
 
@@ -344,7 +364,7 @@ class SynthesisResult:
         arrays.update({f"search_{k}": np.asarray(v) for k, v in self.search.array_fields().items()})
         return save_npz(path, motion=self.motion, arrays=arrays, config=self.metadata(), overwrite=overwrite)
 
-    def save_bvh(self, path, *, overwrite: bool = False, units: str = "cm") -> Path:
+    def save_bvh(self, path: str | os.PathLike[str], *, overwrite: bool = False, units: str = "cm") -> Path:
         """BVH of the final motion (55-joint hierarchy, rotations that reproduce the positions)."""
         from .export.bvh import write_bvh
 
@@ -352,7 +372,13 @@ class SynthesisResult:
         return write_bvh(path, self.motion, overwrite=overwrite, units=units)
 
     def save_video(
-        self, path, *, overwrite: bool = False, progress=None, side_by_side: bool = False, resolution=(640, 480)
+        self,
+        path: str | os.PathLike[str],
+        *,
+        overwrite: bool = False,
+        progress: Callable[[int, int], None] | None = None,
+        side_by_side: bool = False,
+        resolution: tuple[int, int] = (640, 480),
     ) -> Path:
         """MP4 of the skeleton with the speech (h264 + aac); k-NN and refined side by side if asked."""
         from .export.video import render_video
@@ -382,7 +408,7 @@ def _index(db: MatchingDatabase) -> SearchIndex:
     return idx
 
 
-def _load_speech(audio) -> tuple[np.ndarray, str]:
+def _load_speech(audio: Speech) -> tuple[np.ndarray, str]:
     if isinstance(audio, (str, os.PathLike)):
         from .datasets.audio import load_audio
 
@@ -395,7 +421,9 @@ def _load_speech(audio) -> tuple[np.ndarray, str]:
     return a, "audio"
 
 
-def _finish(db, res: SearchResult, plan: SearchPlan, samples, name, config) -> SynthesisResult:
+def _finish(
+    db: MatchingDatabase, res: SearchResult, plan: SearchPlan, samples: np.ndarray, name: str, config: SynthesisConfig
+) -> SynthesisResult:
     G = db.G
     g = np.asarray(G[res.frames[:, 0], res.frames[:, 1]], dtype=np.float32)  # (T, 165)
     knn = Motion.from_flat(g, db.fps)
@@ -414,12 +442,12 @@ def _finish(db, res: SearchResult, plan: SearchPlan, samples, name, config) -> S
 
 
 def synthesize(
-    audio,
+    audio: Speech,
     *,
     db: MatchingDatabase,
     config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
-    refiner=None,
+    refiner: RefinerChoice | None = None,
 ) -> SynthesisResult:
     """Synthesise gesture motion for speech.
 
@@ -446,12 +474,12 @@ def synthesize(
 
 
 def synthesize_batch(
-    audios,
+    audios: Iterable[Speech],
     *,
     db: MatchingDatabase,
-    config: SynthesisConfig | list[SynthesisConfig] | None = None,
-    controls=None,
-    refiner=None,
+    config: SynthesisConfig | Sequence[SynthesisConfig] | None = None,
+    controls: Sequence[ControlTrack | str | None] | None = None,
+    refiner: RefinerChoice | None = None,
 ) -> list[SynthesisResult]:
     """Synthesise several speeches together: one scan of the database per step serves all.
 
@@ -472,7 +500,11 @@ def synthesize_batch(
     audios = list(audios)
     if not audios:
         return []
-    configs = config if isinstance(config, (list, tuple)) else [config or SynthesisConfig()] * len(audios)
+    configs: list[SynthesisConfig]
+    if config is None or isinstance(config, SynthesisConfig):
+        configs = [config or SynthesisConfig()] * len(audios)
+    else:
+        configs = list(config)
     controls = list(controls) if controls is not None else [None] * len(audios)
     if len(configs) != len(audios) or len(controls) != len(audios):
         raise ConfigError("give one config and one control per speech (or one config for all)")
@@ -484,11 +516,12 @@ def synthesize_batch(
         refiner = _open_refiner(refiner, db)
         made_by = _provenance(refiner, db)
     # a given control replaces the config's: the config a result records is the one searched
-    configs = [c if ctl is None else replace(c, control=ctl) for c, ctl in zip(configs, controls)]
+    configs = [c if ctl is None else c.with_control(ctl) for c, ctl in zip(configs, controls)]
     speeches = [_load_speech(a) for a in audios]
     plans = [plan_search(db, samples, c) for (samples, _), c in zip(speeches, configs)]
     # masks differ per speech; the search shares one mask stack, so stack them with offsets
-    stack, step_idx = [], []
+    stack: list[np.ndarray] = []
+    step_idx: list[np.ndarray] = []
     for plan in plans:
         index = plan.step_mask_index.copy()
         if plan.masks is not None:
@@ -513,7 +546,7 @@ def synthesize_batch(
     return out
 
 
-def _provenance(refiner, db) -> dict | None:
+def _provenance(refiner: Refiner, db: MatchingDatabase) -> dict | None:
     """Which refiner this is (None for one not loaded from a folder); warns when it was trained
     on another database than ``db``."""
     from .refine import describe_training, provenance, trained_on
@@ -530,16 +563,15 @@ def _provenance(refiner, db) -> dict | None:
     return provenance(path, config)
 
 
-def _open_refiner(refiner, db):
+def _open_refiner(refiner: RefinerChoice, db: MatchingDatabase) -> Refiner:
     from .refine import load_refiner
 
-    if isinstance(refiner, (str, os.PathLike)):
-        refiner = load_refiner(refiner)
-    refiner.check_database(db)
-    return refiner
+    opened = load_refiner(refiner) if isinstance(refiner, (str, os.PathLike)) else refiner
+    opened.check_database(db)
+    return opened
 
 
-def _refine(db: MatchingDatabase, res: SynthesisResult, refiner) -> None:
+def _refine(db: MatchingDatabase, res: SynthesisResult, refiner: Refiner) -> None:
     """Refine the k-NN motion with the speech's cGAN audio features (keeping its content below
     ``refiner_keep_hz``); it becomes the output."""
     _, a = db.query_features(res.audio, n_frames=res.n_frames)

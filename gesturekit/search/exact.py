@@ -10,6 +10,7 @@ may be from the exact value (see :mod:`gesturekit.search.index`).
 from __future__ import annotations
 
 import functools
+from types import ModuleType
 
 import numpy as np
 
@@ -84,7 +85,7 @@ def exact_cosine_distance(rows: np.ndarray, f: np.ndarray) -> np.ndarray:
 
 
 @functools.cache
-def compiled():
+def compiled() -> ModuleType:
     """The compiled loops of the search (:mod:`gesturekit.search.kernels`), imported on first use."""
     from . import kernels  # numba is heavy: imported when a search first runs
 

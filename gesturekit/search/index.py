@@ -145,7 +145,7 @@ class SearchIndex:
     of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
     """
 
-    def __init__(self, P, F, valid):
+    def __init__(self, P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> None:
         self.P, self.F, self.valid = validate_db(P, F, valid)
         M, T, D = self.P.shape
         self.shape = (M, T, D, self.F.shape[2])

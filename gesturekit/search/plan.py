@@ -103,7 +103,8 @@ def rest_pose_frame(db: MatchingDatabase) -> tuple[int, int]:
     if not ok.any():
         ok = np.asarray(db.valid)
     score = np.where(ok, height, np.inf)
-    return tuple(int(x) for x in np.unravel_index(int(np.argmin(score)), score.shape))
+    clip, frame = np.unravel_index(int(np.argmin(score)), score.shape)
+    return int(clip), int(frame)
 
 
 def plan_search(db: MatchingDatabase, speech: np.ndarray, config: SynthesisConfig) -> SearchPlan:

@@ -65,6 +65,7 @@ from the algorithm as written; these rules follow the algorithm:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -75,7 +76,7 @@ from .types import SearchConfig, SearchResult, describe_steps
 __all__ = ["pose_sqdist", "cosine_distance", "window_admissible", "search_reference"]
 
 
-def pose_sqdist(a, b) -> float:
+def pose_sqdist(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
     """Squared Euclidean distance, exactly as defined for the search.
 
     Parameters
@@ -95,7 +96,7 @@ def pose_sqdist(a, b) -> float:
     return total
 
 
-def cosine_distance(a, b) -> float:
+def cosine_distance(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
     """Cosine distance ``1 - a.b / (|a| |b|)`` of two audio features (A float32 values each),
     exactly as defined for the search: in [0, 2], and 1 when either vector is all zeros."""
     dot = na = nb = 0.0
@@ -109,7 +110,16 @@ def cosine_distance(a, b) -> float:
     return 1.0 - dot / math.sqrt(na * nb)
 
 
-def window_admissible(m, s, n, *, valid, exclude=None, mask=None, rule="ends") -> bool:
+def window_admissible(
+    m: int,
+    s: int,
+    n: int,
+    *,
+    valid: np.ndarray,
+    exclude: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    rule: str = "ends",
+) -> bool:
     """Whether the window of ``n`` frames starting at frame ``s`` of clip ``m`` may be used.
 
     Parameters

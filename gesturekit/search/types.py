@@ -8,14 +8,17 @@ window of every step and the table of its best candidates.
 from __future__ import annotations
 
 import numbers
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .._config import config_from_dict, config_to_dict
 from ..errors import ConfigError
+
+if TYPE_CHECKING:  # imported where the candidate table is made
+    import pandas as pd
 
 __all__ = ["SearchConfig", "SearchResult", "CANDIDATE_FIELDS", "describe_steps"]
 
@@ -196,17 +199,26 @@ class SearchResult:
     cand_audio_rank: np.ndarray
     cand_combined: np.ndarray
     init_pose: np.ndarray
-    init_frame: tuple
+    init_frame: tuple[int, int]
     config: SearchConfig
 
     @classmethod
-    def empty(cls, n_steps: int, n_frames: int, width: int, *, config, init_pose, init_frame) -> SearchResult:
+    def empty(
+        cls,
+        n_steps: int,
+        n_frames: int,
+        width: int,
+        *,
+        config: SearchConfig,
+        init_pose: np.ndarray | Sequence[float],
+        init_frame: tuple[int, int] | Sequence[int],
+    ) -> SearchResult:
         """A result to fill in: every table entry padded, every flag False."""
 
-        def ints(*shape):
+        def ints(*shape: int) -> np.ndarray:
             return np.full(shape, -1, dtype=np.int64)
 
-        def floats(*shape):
+        def floats(*shape: int) -> np.ndarray:
             return np.full(shape, np.nan, dtype=np.float64)
 
         return cls(
@@ -250,7 +262,7 @@ class SearchResult:
         a, b = self.array_fields(), other.array_fields()
         return all(a[n].shape == b[n].shape and np.array_equal(a[n], b[n], equal_nan=a[n].dtype.kind == "f") for n in a)
 
-    def candidates_frame(self):
+    def candidates_frame(self) -> pd.DataFrame:
         """The candidate record as a pandas DataFrame, one row per (step, position).
 
         Columns: ``step, position, clip, start, pose_dist, audio_dist, pose_rank,
