@@ -169,8 +169,8 @@ class SynthesisConfig:
         return self._track
 
     def to_dict(self) -> dict:
-        """A JSON-able dict, the search's options beside the others (the saved form of every
-        version); :meth:`from_dict` reads it back."""
+        """A JSON-able dict, the search's options beside the others (the layout of every
+        version's saved form); :meth:`from_dict` reads it back."""
         search = self.search.to_dict()
         out = {name: search[name] for name in ("k", "segment", "record", "seed")}
         out["init"] = self.init
@@ -182,7 +182,8 @@ class SynthesisConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> SynthesisConfig:
-        """Inverse of :meth:`to_dict`; also reads a nested ``"search"`` object.
+        """Inverse of :meth:`to_dict`; also reads a nested ``"search"`` object, and the names
+        earlier versions saved N and the recorded candidates under (``step``, ``topk``).
 
         Raises
         ------

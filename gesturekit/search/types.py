@@ -62,7 +62,7 @@ class SearchConfig:
     mask_rule: str = "ends"
     pins: dict = field(default_factory=dict, hash=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, low in (("k", 0), ("segment", 1), ("record", 1), ("seed", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
