@@ -513,14 +513,8 @@ def _command(sub, name: str, func) -> argparse.ArgumentParser:
 def _add_search(parser, *, seed: str) -> None:
     """The options of the search that ``synthesize`` and ``evaluate`` share; ``seed``: what the seed seeds."""
     parser.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
-    parser.add_argument(
-        "--segment",
-        "--step",  # the option's earlier name
-        dest="segment",
-        type=int,
-        default=8,
-        metavar="N",
-        help="frames per search step, N (default 8; --step is its earlier name)",
+    parser.add_argument(  # --step: the option's earlier name
+        "--segment", "--step", dest="segment", type=int, default=8, help="frames per search step, N (default 8)"
     )
     parser.add_argument("--seed", type=int, default=0, help=f"seed of {seed} (default 0)")
     parser.add_argument(
@@ -597,14 +591,8 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--db", help="matching database folder (default: the demo database)")
     y.add_argument("--out", default="out", help="output folder (default: out)")
     _add_search(y, seed="the random initial pose")
-    y.add_argument(
-        "--record",
-        "--topk",  # the option's earlier name
-        dest="record",
-        type=int,
-        default=10,
-        metavar="K",
-        help="candidates per step to record (default 10; --topk is its earlier name)",
+    y.add_argument(  # --topk: the option's earlier name
+        "--record", "--topk", dest="record", type=int, default=10, help="candidates per step to record (default 10)"
     )
     y.add_argument(
         "--control",

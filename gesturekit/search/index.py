@@ -43,7 +43,7 @@ import numpy as np
 from ..errors import ConfigError, warn
 from .admissible import base_starts, control_starts
 from .checks import checked_sqnorms, validate_call, validate_db
-from .exact import TINY, audio_err, compiled, pose_err_factor
+from .exact import TINY, audio_err, compiled, pose_err_factor, reduce_chunk
 from .threads import matrix_product, single_threaded_blas, worker_count
 from .types import CANDIDATE_FIELDS, SearchConfig, SearchResult, describe_steps
 
@@ -78,52 +78,6 @@ def _initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
     head = order[:prefix]
     order[:prefix] = head[np.argsort(key[head])]
     return order, prefix
-
-
-def _reduce_chunk(G3, bias, nq, npmax, c_err):
-    """Per clip and query of a chunk: the float32 argmin and minimum of the estimates
-    ``A = G3 + bias`` over the clip's starts, and whether that minimum is not decisive:
-    another start within twice the error bound of it, or a minimum that may be an exact zero.
-
-    Parameters
-    ----------
-    G3 : (nc, T, b) float32
-        ``-2 q.p`` per clip, start and query (a view; may be strided). With one query
-        it is overwritten with ``A``.
-    bias : (nc, T) float32
-        ``|p|^2``, or +inf where the start is not admissible.
-    nq : (b,) float64
-        ``|q|^2`` per query.
-    npmax : (nc,) float64
-        Largest ``|p|^2`` per clip.
-    c_err : float
-        :func:`pose_err_factor` of the pose dimension.
-
-    Returns
-    -------
-    s0 : (nc, b) int64, amin : (nc, b) float32, undecided : (nc, b) bool
-    """
-    nc, T, b = G3.shape
-    if b > 1:  # several queries: numpy's reductions along the strided axis are slow
-        s0 = np.empty((nc, b), np.int64)
-        amin = np.empty((nc, b), np.float32)
-        undecided = np.empty((nc, b), bool)
-        compiled().reduce_many(G3, bias, nq, npmax, c_err, TINY, s0, amin, undecided)
-        return s0, amin, undecided
-    A = G3[:, :, 0]
-    A += bias
-    A = G3[:, :, 0]
-    s0 = A.argmin(axis=1)
-    amin = np.take_along_axis(A, s0[:, None], axis=1)[:, 0]
-    err = c_err * (npmax + nq[0]) + TINY
-    am64 = amin.astype(np.float64)
-    finite = np.isfinite(amin)
-    with np.errstate(invalid="ignore"):
-        thr = np.where(finite, am64 + 2.0 * err, -np.inf).astype(np.float32)
-    thr = np.nextafter(thr, np.float32(np.inf))  # round the float32 threshold up
-    count = np.count_nonzero(A <= thr[:, None], axis=1)
-    undecided = finite & ((count > 1) | (am64 + nq[0] <= err))
-    return s0[:, None], amin[:, None], undecided[:, None]
 
 
 class SearchIndex:
@@ -306,7 +260,7 @@ class SearchIndex:
             product(self._P3[c0:c1, :L], W, G3)
             for bias, j0, j1 in ranges:
                 bias2 = bias[r0:r1].reshape(nc, T)[:, :L]
-                s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
+                s0c, amc, und = reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
                 s0[c0:c1, j0:j1] = s0c
                 amin[c0:c1, j0:j1] = amc
                 compiled().audio_at(

@@ -32,7 +32,7 @@ def reduce_many(
     best_est: np.ndarray,
     undecided: np.ndarray,
 ) -> None:
-    """:func:`gesturekit.search.index._reduce_chunk` for several queries, one pass per clip.
+    """:func:`gesturekit.search.exact.reduce_chunk` for several queries, one pass per clip.
 
     Parameters
     ----------
