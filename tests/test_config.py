@@ -101,3 +101,14 @@ def test_configs_saved_under_earlier_names_read_back(config):
     old = {next((o for o, n in OLD_NAMES.items() if n == name), name): value for name, value in saved.items()}
     assert old != saved  # N was "step" in every one of them
     assert type(config).from_dict(old) == config
+
+
+def test_the_shipped_demo_refiners_data_options_read_back():
+    # saved before N was called "segment": a resumed training must still see the same options
+    from importlib import resources
+
+    saved = json.loads((resources.files("gesturekit") / "assets" / "demo-refiner" / "config.json").read_text())
+    assert "step" in saved["data"]
+    data = PairsConfig.from_dict(saved["data"])
+    assert data == PairsConfig(segment=saved["data"]["step"], seed=saved["data"]["seed"])
+    assert "segment" in data.to_dict() and "step" not in data.to_dict()
