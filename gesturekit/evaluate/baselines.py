@@ -107,7 +107,14 @@ def parse_systems(systems) -> tuple[str, ...]:
 # ---- admissible windows -------------------------------------------------------------------------
 
 
-def admissible_windows(valid, *, segment: int, exclude=None, mask=None, mask_rule: str = "ends") -> np.ndarray:
+def admissible_windows(
+    valid: np.ndarray,
+    *,
+    segment: int,
+    exclude: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    mask_rule: str = "ends",
+) -> np.ndarray:
     """Start frames of windows of ``segment`` frames the search may use
     (:func:`gesturekit.search.admissible.admissible_starts`, the search's own rule).
 
@@ -183,14 +190,14 @@ def _check_n(n_frames, segment):
 
 
 def random_segments(
-    valid,
+    valid: np.ndarray,
     *,
     n_frames: int,
     segment: int = 8,
     seed: int = 0,
-    exclude=None,
-    masks=None,
-    step_mask_index=None,
+    exclude: np.ndarray | None = None,
+    masks: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random admissible windows, one per step.
@@ -226,14 +233,14 @@ def random_segments(
 
 
 def audio_nearest_segments(
-    F,
-    valid,
-    query,
+    F: np.ndarray,
+    valid: np.ndarray,
+    query: np.ndarray,
     *,
     segment: int = 8,
-    exclude=None,
-    masks=None,
-    step_mask_index=None,
+    exclude: np.ndarray | None = None,
+    masks: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose audio feature is nearest the query's (cosine distance).
@@ -288,16 +295,16 @@ def _initial_pose(P, adm, seed):
 
 
 def pose_nearest_segments(
-    P,
-    valid,
+    P: np.ndarray,
+    valid: np.ndarray,
     *,
     n_frames: int,
     segment: int = 8,
     seed: int = 0,
-    init_pose=None,
-    exclude=None,
-    masks=None,
-    step_mask_index=None,
+    init_pose: np.ndarray | None = None,
+    exclude: np.ndarray | None = None,
+    masks: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose pose feature is nearest the last output pose feature.
