@@ -244,7 +244,7 @@ def _warm_up(path: str, stamp: int) -> threading.Thread:
     return _in_background(
         "gesturekit-warm-up",
         lambda: _first_use(noise),
-        lambda: synthesize(noise, db=db, config=SynthesisConfig(topk=1)),
+        lambda: synthesize(noise, db=db, config=SynthesisConfig(record=1)),
     )
 
 

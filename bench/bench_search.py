@@ -69,10 +69,10 @@ def main(argv=None):
     db_bytes = P.nbytes + F.nbytes + valid.nbytes
     print(f"database: {M} clips x {T} frames, pose {D} + audio {A} float32 = {db_bytes / 2**20:.0f} MiB")
     query = rng.standard_normal((900, A), dtype=np.float32)  # 60 s at 15 fps
-    cfg = SearchConfig(k=0, step=8, seed=1)
+    cfg = SearchConfig(k=0, segment=8, seed=1)
     n_b = int(round(args.batch_seconds * 15))
     queries = [rng.standard_normal((n_b, A), dtype=np.float32) for _ in range(args.batch)]
-    configs = [SearchConfig(k=int(i % 3), step=8, seed=i) for i in range(args.batch)]
+    configs = [SearchConfig(k=int(i % 3), segment=8, seed=i) for i in range(args.batch)]
 
     # warm-up on a small database: compiled kernels and torch load outside every measurement
     Pw, Fw, vw = make_db(64, rng)
@@ -107,7 +107,7 @@ def main(argv=None):
     P2 = P.reshape(-1, D)
     q = P2[12345].copy()
     out = np.empty(P2.shape[0], np.float32)
-    part = query[: 30 * cfg.step]  # 30 steps
+    part = query[: 30 * cfg.segment]  # 30 steps
     ratios, steps, gemvs = [], [], []
     for _ in range(3 * args.reps):
         g0 = best_of(lambda: np.dot(P2, q, out=out), 3)
@@ -120,7 +120,7 @@ def main(argv=None):
         gemvs.append(0.5 * (g0 + g1))
     t_step, t_gemv = float(np.median(steps)), float(np.median(gemvs))
     print(
-        f"\n[per step] {cfg.step} frames per step: {t_step * 1e3:.1f} ms per step (median of {len(steps)} runs of "
+        f"\n[per step] {cfg.segment} frames per step: {t_step * 1e3:.1f} ms per step (median of {len(steps)} runs of "
         f"30 steps); one float32 matrix-vector product over ({P2.shape[0]}, {D}): {t_gemv * 1e3:.1f} ms; "
         f"ratio per pair: median {np.median(ratios):.2f}x, best {min(ratios):.2f}x (target <= 1.5x)"
     )

@@ -12,6 +12,7 @@ import math
 import sys
 import time
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
@@ -199,8 +200,8 @@ def _cmd_synthesize(args) -> int:
     db = open_database(args.db)
     config = SynthesisConfig(
         k=args.k,
-        step=args.step,
-        topk=args.topk,
+        segment=args.segment,
+        record=args.record,
         seed=args.seed,
         init=args.init_pose,
         mask_rule=args.mask_rule,
@@ -245,7 +246,7 @@ def _cmd_synthesize(args) -> int:
                 written.append(targets[(stem, "mp4")])
             relaxed = res.relaxed_steps
             note = (
-                f"; control relaxed at {describe_steps(relaxed, step=res.config.step, fps=res.motion.fps)}"
+                f"; control relaxed at {describe_steps(relaxed, segment=res.config.segment, fps=res.motion.fps)}"
                 if relaxed
                 else ""
             )
@@ -352,7 +353,7 @@ def _cmd_evaluate(args) -> int:
 
     check_output(out, "evaluation", overwrite=args.force, inputs=[db.path])  # before the long part
     config = SynthesisConfig(
-        k=args.k, step=args.step, seed=args.seed, init=args.init_pose, mask_rule=args.mask_rule, blend=args.blend
+        k=args.k, segment=args.segment, seed=args.seed, init=args.init_pose, mask_rule=args.mask_rule, blend=args.blend
     )
     with _progress_bar(None, "step", "evaluating") as bar:
         ev = run_evaluation(
@@ -512,7 +513,9 @@ def _command(sub, name: str, func) -> argparse.ArgumentParser:
 def _add_search(parser, *, seed: str) -> None:
     """The options of the search that ``synthesize`` and ``evaluate`` share; ``seed``: what the seed seeds."""
     parser.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
-    parser.add_argument("--step", type=int, default=8, help="frames per search step, N (default 8)")
+    parser.add_argument(  # --step: the option's earlier name
+        "--segment", "--step", dest="segment", type=int, default=8, help="frames per search step, N (default 8)"
+    )
     parser.add_argument("--seed", type=int, default=0, help=f"seed of {seed} (default 0)")
     parser.add_argument(
         "--init-pose",
@@ -588,7 +591,9 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--db", help="matching database folder (default: the demo database)")
     y.add_argument("--out", default="out", help="output folder (default: out)")
     _add_search(y, seed="the random initial pose")
-    y.add_argument("--topk", type=int, default=10, help="candidates per step to record (default 10)")
+    y.add_argument(  # --topk: the option's earlier name
+        "--record", "--topk", dest="record", type=int, default=10, help="candidates per step to record (default 10)"
+    )
     y.add_argument(
         "--control",
         help='control track: "0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric" '
@@ -735,7 +740,7 @@ def _os_error_text(exc: OSError) -> str:
     return f"{names}: {problem}"
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = build_parser().parse_args(argv)
     args.started = time.perf_counter()

@@ -394,7 +394,7 @@ def step_masks(
     thresholds: dict[str, tuple[float, float]],
     *,
     n_frames: int,
-    step: int,
+    segment: int,
     fps: float = FPS,
 ) -> tuple[np.ndarray | None, np.ndarray]:
     """Frame masks for the search, one per distinct constraint set, and each step's index into them.
@@ -405,20 +405,22 @@ def step_masks(
     ----------
     attributes : np.ndarray, shape (M, 64, n_attributes)
     n_frames : int
-        Output frames; steps cover ``[i*step, min((i+1)*step, n_frames))``.
+        Output frames; steps cover ``[i*segment, min((i+1)*segment, n_frames))``.
+    segment : int
+        Frames per search step, N.
 
     Returns
     -------
     masks : np.ndarray, shape (n_masks, M, 64), bool, or None when nothing is constrained
-    step_mask : np.ndarray, shape (n_steps,), int64
+    step_mask_index : np.ndarray, shape (n_steps,), int64
         Index into ``masks`` per step, ``-1`` for an unconstrained step.
     """
-    n_steps = -(-n_frames // step)
+    n_steps = -(-n_frames // segment)
     labels = track.frame_labels(n_frames, fps=fps)
     keys: list[tuple] = []
     idx = np.full(n_steps, -1, dtype=np.int64)
     for i in range(n_steps):
-        a, b = i * step, min((i + 1) * step, n_frames)
+        a, b = i * segment, min((i + 1) * segment, n_frames)
         c = labels[(a + b - 1) // 2]
         if c:
             if c not in keys:

@@ -474,7 +474,7 @@ def candidates_table(result: SynthesisResult, db: MatchingDatabase, step: int) -
     Returns
     -------
     pandas.DataFrame
-        One row per recorded candidate (at most ``config.topk``, at least
+        One row per recorded candidate (at most ``config.record``, at least
         ``k + 1``): ``position`` (in the combined ranking, 0 = best),
         ``clip``, ``start`` (frame in the clip), ``take``, ``source_s``
         (seconds into the take), ``pose_dist`` (z-scored units),
@@ -574,7 +574,7 @@ def segment_in_context(
 
 def step_speech(result: SynthesisResult, step: int) -> np.ndarray:
     """The input speech under one step's output frames, float32 at 16 kHz."""
-    n = result.config.step
+    n = result.config.segment
     fps = result.motion.fps
     a = int(round(step * n * AUDIO_SR / fps))
     b = int(round(min((step + 1) * n, result.n_frames) * AUDIO_SR / fps))

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import numbers
 import os
-from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 import numpy as np
 
@@ -26,6 +27,17 @@ from .errors import ConfigError, GestureKitError, warn
 from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 from .search.plan import SearchPlan, plan_search, rest_pose_frame
+from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
+
+if TYPE_CHECKING:  # named in annotations only: the refiner sits above the synthesis
+    import pandas as pd
+
+    from .refine.infer import Refiner
+
+#: Speech: a file in any format the readers take, or mono float32 samples at 16 kHz.
+Speech: TypeAlias = "str | os.PathLike[str] | np.ndarray"
+#: A refiner, or its folder (``"demo"``: the one shipped with the demo database).
+RefinerChoice: TypeAlias = "Refiner | str | os.PathLike[str]"
 
 __all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
 
@@ -34,7 +46,7 @@ __all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize",
 #: applied (the paper uses the refiner's output as it is).
 PAPER_SETTINGS = {
     "k": (0, "k = {}", "0"),
-    "step": (8, "N = {}", "8"),
+    "segment": (8, "N = {}", "8"),
     "init": ("random", "initial pose: {}", "random"),
     "blend": ("none", "blending: {}", "none"),
     "mask_rule": ("ends", "control held at: {}", "ends"),
@@ -44,7 +56,7 @@ PAPER_SETTINGS = {
 
 #: The options of :class:`SynthesisConfig` that belong to its search (:class:`SearchConfig`);
 #: the saved form lists them beside the others, as it always has.
-SEARCH_OPTIONS = ("k", "step", "topk", "seed", "mask_rule", "pins")
+SEARCH_OPTIONS = ("k", "segment", "record", "seed", "mask_rule", "pins")
 
 
 @dataclass(frozen=True, init=False)
@@ -52,14 +64,14 @@ class SynthesisConfig:
     """Every option of a synthesis; saved with every output.
 
     The search's options live in ``search`` (a :class:`SearchConfig`) and are read
-    through it; ``k``, ``step``, ``topk``, ``seed``, ``mask_rule`` and ``pins`` are
+    through it; ``k``, ``segment``, ``record``, ``seed``, ``mask_rule`` and ``pins`` are
     accepted as keywords (and by :func:`dataclasses.replace`) and read as attributes,
     both passing through to ``search``.
 
     Parameters
     ----------
     search : SearchConfig, optional
-        k, N (``step``), recorded candidates (``topk``), seed, mask rule and pins.
+        k, N (``segment``), recorded candidates (``record``), seed, mask rule and pins.
         Its ``init_pose`` must be ``"random"``: the initial pose is chosen by ``init``.
     init : {"random", "rest"}
         ``random``: a random database frame that satisfies the first step's control
@@ -79,7 +91,7 @@ class SynthesisConfig:
         the faster content from the refiner (see :func:`gesturekit.blend.keep_slow`),
         so controls of hand height, width and symmetry survive refinement; 0: the
         refiner's output as it is (the paper).
-    k, step, topk, seed, mask_rule, pins
+    k, segment, record, seed, mask_rule, pins
         The options of ``search`` (see :class:`SearchConfig`); given, they replace its values.
     """
 
@@ -91,6 +103,8 @@ class SynthesisConfig:
     exclude_takes: tuple = ()
     exclude_ranges: tuple = ()
     refiner_keep_hz: float = KEEP_BELOW_HZ
+    if TYPE_CHECKING:  # set by __init__: the control parsed once (not an option of its own)
+        _track: ControlTrack = field(init=False, repr=False, compare=False)
 
     def __init__(
         self,
@@ -100,11 +114,11 @@ class SynthesisConfig:
         blend: str = "none",
         blend_frames: int = 4,
         control: str | ControlTrack = "",
-        exclude_takes=(),
-        exclude_ranges=(),
+        exclude_takes: Sequence[str] = (),
+        exclude_ranges: Sequence[tuple[str, float, float]] = (),
         refiner_keep_hz: float = KEEP_BELOW_HZ,
-        **search_options,
-    ):
+        **search_options: Any,
+    ) -> None:
         unknown = set(search_options) - set(SEARCH_OPTIONS)
         if unknown:
             raise ConfigError(f"unknown synthesis options: {', '.join(sorted(unknown))}")
@@ -143,8 +157,8 @@ class SynthesisConfig:
 
     # the search's options, read through ``search`` (one source of truth)
     k = property(lambda self: self.search.k, doc="Take the k-th best of the combined ranking (0 = best).")
-    step = property(lambda self: self.search.step, doc="Frames per search step, N (8 in the paper).")
-    topk = property(lambda self: self.search.topk, doc="Candidates per step recorded for inspection.")
+    segment = property(lambda self: self.search.segment, doc="Frames per search step, N (8 in the paper).")
+    record = property(lambda self: self.search.record, doc="Candidates per step recorded for inspection.")
     seed = property(lambda self: self.search.seed, doc="Seed of the random initial pose.")
     mask_rule = property(lambda self: self.search.mask_rule, doc="Where a control must hold in a window.")
     pins = property(lambda self: self.search.pins, doc="Step -> (clip, start): forced choices.")
@@ -155,10 +169,10 @@ class SynthesisConfig:
         return self._track
 
     def to_dict(self) -> dict:
-        """A JSON-able dict, the search's options beside the others (the saved form of every
-        version); :meth:`from_dict` reads it back."""
+        """A JSON-able dict, the search's options beside the others (the layout of every
+        version's saved form); :meth:`from_dict` reads it back."""
         search = self.search.to_dict()
-        out = {name: search[name] for name in ("k", "step", "topk", "seed")}
+        out = {name: search[name] for name in ("k", "segment", "record", "seed")}
         out["init"] = self.init
         out["mask_rule"] = search["mask_rule"]
         out.update(config_to_dict(self, exclude=("search", "init", "refiner_keep_hz")))
@@ -168,7 +182,8 @@ class SynthesisConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> SynthesisConfig:
-        """Inverse of :meth:`to_dict`; also reads a nested ``"search"`` object.
+        """Inverse of :meth:`to_dict`; also reads a nested ``"search"`` object, and the names
+        earlier versions saved N and the recorded candidates under (``step``, ``topk``).
 
         Raises
         ------
@@ -179,7 +194,10 @@ class SynthesisConfig:
             raise ConfigError(f"synthesis options must be a JSON object, got {type(d).__name__}")
         d = dict(d)
         search = dict(d.pop("search", None) or {})
-        search.update({name: d.pop(name) for name in SEARCH_OPTIONS if name in d})
+        # earlier versions' flat "step" and "topk" belong to the search too ("init" is ours)
+        flat = [*SEARCH_OPTIONS, *(old for old in RENAMED_SEARCH_KEYS if old != "init")]
+        search.update({name: d.pop(name) for name in flat if name in d})
+        search = renamed_search_keys(search)
         d["search"] = SearchConfig.from_dict(search)
         return config_from_dict(cls, d, what="synthesis options")
 
@@ -203,15 +221,22 @@ class SynthesisConfig:
                 out.append(f"{form.format(value)} (paper {paper_text})")
         return out
 
+    def with_control(self, control: str | ControlTrack) -> SynthesisConfig:
+        """A copy with another control track (its text, or the track itself)."""
+        options: dict[str, Any] = {f.name: getattr(self, f.name) for f in fields(self)}
+        options["control"] = control
+        return SynthesisConfig(**options)
+
     def with_pin(self, step: int, clip: int, start: int) -> SynthesisConfig:
         """A copy with one more pinned choice (replacing any pin at that step)."""
         pins = dict(self.pins)
         pins[int(step)] = (int(clip), int(start))
-        return replace(self, pins=pins)
+        return replace(self, search=replace(self.search, pins=pins))
 
     def without_pin(self, step: int) -> SynthesisConfig:
+        """A copy without the pinned choice at ``step`` (if any)."""
         pins = {i: v for i, v in self.pins.items() if i != int(step)}
-        return replace(self, pins=pins)
+        return replace(self, search=replace(self.search, pins=pins))
 
 
 @dataclass
@@ -270,13 +295,13 @@ class SynthesisResult:
         """Steps whose control admitted no window and was dropped for that step."""
         return np.flatnonzero(self.search.relaxed).tolist()
 
-    def steps_table(self):
+    def steps_table(self) -> pd.DataFrame:
         """One row per step: frames, chosen clip and start, position in the ranking, relaxed, pinned."""
         import pandas as pd
 
         s = self.search
         n = s.n_steps
-        N = self.config.step
+        N = self.config.segment
         return pd.DataFrame(
             {
                 "step": np.arange(n),
@@ -308,7 +333,7 @@ class SynthesisResult:
             "refiner": self.refiner,
         }
 
-    def check_finite(self, path=None) -> None:
+    def check_finite(self, path: str | os.PathLike[str] | None = None) -> None:
         """Refuse to write a result with NaN or infinite positions, naming where they came from.
 
         Raises
@@ -328,7 +353,7 @@ class SynthesisResult:
                     path=path,
                 )
 
-    def save_npz(self, path, *, overwrite: bool = False) -> Path:
+    def save_npz(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
         """npz with positions (the final motion), fps, knn_positions, the search record and the config."""
         from .export.npz import save_npz
 
@@ -340,7 +365,7 @@ class SynthesisResult:
         arrays.update({f"search_{k}": np.asarray(v) for k, v in self.search.array_fields().items()})
         return save_npz(path, motion=self.motion, arrays=arrays, config=self.metadata(), overwrite=overwrite)
 
-    def save_bvh(self, path, *, overwrite: bool = False, units: str = "cm") -> Path:
+    def save_bvh(self, path: str | os.PathLike[str], *, overwrite: bool = False, units: str = "cm") -> Path:
         """BVH of the final motion (55-joint hierarchy, rotations that reproduce the positions)."""
         from .export.bvh import write_bvh
 
@@ -348,7 +373,13 @@ class SynthesisResult:
         return write_bvh(path, self.motion, overwrite=overwrite, units=units)
 
     def save_video(
-        self, path, *, overwrite: bool = False, progress=None, side_by_side: bool = False, resolution=(640, 480)
+        self,
+        path: str | os.PathLike[str],
+        *,
+        overwrite: bool = False,
+        progress: Callable[[int, int], None] | None = None,
+        side_by_side: bool = False,
+        resolution: tuple[int, int] = (640, 480),
     ) -> Path:
         """MP4 of the skeleton with the speech (h264 + aac); k-NN and refined side by side if asked."""
         from .export.video import render_video
@@ -378,7 +409,7 @@ def _index(db: MatchingDatabase) -> SearchIndex:
     return idx
 
 
-def _load_speech(audio) -> tuple[np.ndarray, str]:
+def _load_speech(audio: Speech) -> tuple[np.ndarray, str]:
     if isinstance(audio, (str, os.PathLike)):
         from .datasets.audio import load_audio
 
@@ -391,11 +422,13 @@ def _load_speech(audio) -> tuple[np.ndarray, str]:
     return a, "audio"
 
 
-def _finish(db, res: SearchResult, plan: SearchPlan, samples, name, config) -> SynthesisResult:
+def _finish(
+    db: MatchingDatabase, res: SearchResult, plan: SearchPlan, samples: np.ndarray, name: str, config: SynthesisConfig
+) -> SynthesisResult:
     G = db.G
     g = np.asarray(G[res.frames[:, 0], res.frames[:, 1]], dtype=np.float32)  # (T, 165)
     knn = Motion.from_flat(g, db.fps)
-    boundaries = np.arange(1, res.n_steps) * config.step
+    boundaries = np.arange(1, res.n_steps) * config.segment
     out = Motion.from_flat(blend_segments(g, boundaries, mode=config.blend, frames=config.blend_frames), db.fps)
     return SynthesisResult(
         motion=out,
@@ -410,12 +443,12 @@ def _finish(db, res: SearchResult, plan: SearchPlan, samples, name, config) -> S
 
 
 def synthesize(
-    audio,
+    audio: Speech,
     *,
     db: MatchingDatabase,
     config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
-    refiner=None,
+    refiner: RefinerChoice | None = None,
 ) -> SynthesisResult:
     """Synthesise gesture motion for speech.
 
@@ -442,12 +475,12 @@ def synthesize(
 
 
 def synthesize_batch(
-    audios,
+    audios: Iterable[Speech],
     *,
     db: MatchingDatabase,
-    config: SynthesisConfig | list[SynthesisConfig] | None = None,
-    controls=None,
-    refiner=None,
+    config: SynthesisConfig | Sequence[SynthesisConfig] | None = None,
+    controls: Sequence[ControlTrack | str | None] | None = None,
+    refiner: RefinerChoice | None = None,
 ) -> list[SynthesisResult]:
     """Synthesise several speeches together: one scan of the database per step serves all.
 
@@ -468,7 +501,11 @@ def synthesize_batch(
     audios = list(audios)
     if not audios:
         return []
-    configs = config if isinstance(config, (list, tuple)) else [config or SynthesisConfig()] * len(audios)
+    configs: list[SynthesisConfig]
+    if config is None or isinstance(config, SynthesisConfig):
+        configs = [config or SynthesisConfig()] * len(audios)
+    else:
+        configs = list(config)
     controls = list(controls) if controls is not None else [None] * len(audios)
     if len(configs) != len(audios) or len(controls) != len(audios):
         raise ConfigError("give one config and one control per speech (or one config for all)")
@@ -480,11 +517,12 @@ def synthesize_batch(
         refiner = _open_refiner(refiner, db)
         made_by = _provenance(refiner, db)
     # a given control replaces the config's: the config a result records is the one searched
-    configs = [c if ctl is None else replace(c, control=ctl) for c, ctl in zip(configs, controls)]
+    configs = [c if ctl is None else c.with_control(ctl) for c, ctl in zip(configs, controls)]
     speeches = [_load_speech(a) for a in audios]
     plans = [plan_search(db, samples, c) for (samples, _), c in zip(speeches, configs)]
     # masks differ per speech; the search shares one mask stack, so stack them with offsets
-    stack, step_idx = [], []
+    stack: list[np.ndarray] = []
+    step_idx: list[np.ndarray] = []
     for plan in plans:
         index = plan.step_mask_index.copy()
         if plan.masks is not None:
@@ -495,7 +533,7 @@ def synthesize_batch(
         [plan.query for plan in plans],
         configs=[plan.config for plan in plans],
         masks=np.stack(stack) if stack else None,
-        step_masks=step_idx,
+        step_mask_indices=step_idx,
         exclude=plans[0].exclude,
         fps=db.fps,
     )
@@ -509,7 +547,7 @@ def synthesize_batch(
     return out
 
 
-def _provenance(refiner, db) -> dict | None:
+def _provenance(refiner: Refiner, db: MatchingDatabase) -> dict | None:
     """Which refiner this is (None for one not loaded from a folder); warns when it was trained
     on another database than ``db``."""
     from .refine import describe_training, provenance, trained_on
@@ -526,16 +564,15 @@ def _provenance(refiner, db) -> dict | None:
     return provenance(path, config)
 
 
-def _open_refiner(refiner, db):
+def _open_refiner(refiner: RefinerChoice, db: MatchingDatabase) -> Refiner:
     from .refine import load_refiner
 
-    if isinstance(refiner, (str, os.PathLike)):
-        refiner = load_refiner(refiner)
-    refiner.check_database(db)
-    return refiner
+    opened = load_refiner(refiner) if isinstance(refiner, (str, os.PathLike)) else refiner
+    opened.check_database(db)
+    return opened
 
 
-def _refine(db: MatchingDatabase, res: SynthesisResult, refiner) -> None:
+def _refine(db: MatchingDatabase, res: SynthesisResult, refiner: Refiner) -> None:
     """Refine the k-NN motion with the speech's cGAN audio features (keeping its content below
     ``refiner_keep_hz``); it becomes the output."""
     _, a = db.query_features(res.audio, n_frames=res.n_frames)

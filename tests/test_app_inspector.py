@@ -47,7 +47,7 @@ def synthesized() -> AppTest:
         "deleted_rows": [],
         "added_rows": [{"start_s": 1.0, "end_s": 3.0, "constraint": "right_hand=high"}],
     }
-    at.number_input(key="_w.synth.topk").set_value(TOPK).run()
+    at.number_input(key="_w.synth.record").set_value(TOPK).run()
     at.button(key="synth.go").click().run()
     at.switch_page(INSPECT).run()
     assert not at.exception and not [e.value for e in at.error], at.exception
@@ -96,7 +96,7 @@ def test_every_step_lists_its_k_candidates_with_their_sources(app_env, db):
         assert cands["chosen"].tolist().index(True) == s.position[step]
         # the chosen window and four alternatives, animated together; one point per candidate
         views = viewer(at, "inspect.views")
-        step_frames = min((step + 1) * res.config.step, res.n_frames) - step * res.config.step
+        step_frames = min((step + 1) * res.config.segment, res.n_frames) - step * res.config.segment
         assert len(views["motions"]) == 5 and len(views["times"]) == step_frames
         assert views["motions"][0]["label"].startswith("chosen")
         (points,) = [t for t in chart(at, "inspect.candidates_plot")["data"] if t["meta"]["part"] == "candidates"]
@@ -112,7 +112,7 @@ def test_a_candidates_speech_comes_with_its_context_marked(app_env, db):
     at = set_step(synthesized(), 3)
     res = result(at)
     row = table(at, "audio_dist").iloc[0]
-    n = res.config.step
+    n = res.config.segment
     (caption,) = [c.value for c in at.caption if "the window is" in c.value]
     spec = chart(at, "inspect.context")
     (band,) = [sh for sh in spec["layout"]["shapes"] if sh["type"] == "rect"]

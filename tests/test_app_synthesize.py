@@ -216,13 +216,13 @@ def test_settings_that_differ_from_the_paper_are_named(app_env):
     if at.toggle(key="_w.synth.refine").value:
         at.toggle(key="_w.synth.refine").set_value(False).run()
     assert not [c.value for c in at.caption if "Differs from the paper" in c.value]  # the defaults are the paper's
-    at.number_input(key="_w.synth.step").set_value(6)
+    at.number_input(key="_w.synth.segment").set_value(6)
     at.selectbox(key="_w.synth.init").set_value("rest").run()
     (note,) = [c.value for c in at.caption if c.value.startswith("Differs from the paper")]
     assert note == "Differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)"
     at.button(key="synth.go").click().run()
     assert not at.exception and not errors(at)
-    assert result(at).config.step == 6
+    assert result(at).config.segment == 6
     assert any(
         "differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)" in c.value
         for c in at.caption
@@ -253,7 +253,7 @@ def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
     at.radio(key="_w.synth.mode").set_value("Example speech").run()
     at.number_input(key="_w.synth.k").set_value(2)
     at.number_input(key="_w.synth.seed").set_value(3)
-    at.number_input(key="_w.synth.topk").set_value(4)
+    at.number_input(key="_w.synth.record").set_value(4)
     at.selectbox(key="_w.synth.init").set_value("rest")
     at.selectbox(key="_w.synth.blend").set_value("offset")
     at.selectbox(key="_w.synth.mask_rule").set_value("all").run()
@@ -261,7 +261,7 @@ def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
     at.button(key="synth.go").click().run()
     assert not at.exception and not errors(at)
     c = result(at).config
-    assert (c.k, c.seed, c.topk, c.init, c.blend, c.mask_rule) == (2, 3, 4, "rest", "offset", "all")
+    assert (c.k, c.seed, c.record, c.init, c.blend, c.mask_rule) == (2, 3, 4, "rest", "offset", "all")
     assert c.control == "0-2:both_hands=low"
     assert result(at).n_frames == 8 * 15  # the 8 s example
 

@@ -198,7 +198,7 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
             page.get_by_role("button", name="Config (JSON)").click()
         config = json.loads(open(info.value.path(), encoding="utf-8").read())
         settings = config["synthesis"]
-        assert (settings["k"], settings["step"], settings["seed"], settings["topk"]) == (2, 6, 5, 7)
+        assert (settings["k"], settings["segment"], settings["seed"], settings["record"]) == (2, 6, 5, 7)
         assert settings["refiner_keep_hz"] == pytest.approx(1.5)
         assert settings["control"] == f"{float(cells[0]):g}-4.25:both_hands=high"
         assert app_browser.problems(page) == []

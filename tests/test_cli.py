@@ -132,3 +132,22 @@ def test_synthesize_refuses_speech_files_written_to_the_same_outputs(tmp_path, n
     assert_refused(run, names=folder / clash[0], problem="would both be written", before=before)
     assert str(folder / clash[1]) in run.stderr
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "command, given, expected",
+    [
+        ("synthesize", ["--segment", "6", "--record", "4"], (6, 4)),
+        ("synthesize", ["--step", "6", "--topk", "4"], (6, 4)),  # the options' earlier names
+        ("synthesize", [], (8, 10)),
+        ("evaluate", ["--step", "5"], (5, None)),
+        ("evaluate", ["--segment", "5"], (5, None)),
+    ],
+)
+def test_segment_and_record_options_read_their_earlier_names_too(command, given, expected):
+    from gesturekit.cli import build_parser
+
+    positional = ["speech.wav"] if command == "synthesize" else ["--holdout", "take"]
+    args = build_parser().parse_args([command, *positional, *given])
+    assert (args.segment, getattr(args, "record", None)) == expected
+    assert not hasattr(args, "step") and not hasattr(args, "topk")

@@ -22,6 +22,25 @@ from gesturekit.synthesize import SynthesisConfig
 names = st.text("abcdefghij_", min_size=1, max_size=8)
 ranges = st.tuples(names, st.floats(0, 49), st.floats(50, 100))  # start < end
 
+# the configurations with options that earlier versions saved under other names
+RENAMED = st.one_of(
+    st.builds(
+        PairsConfig,
+        seed=st.integers(0, 99),
+        segment=st.integers(1, 16),
+        k_max=st.integers(2, 20),
+        exclude_takes=st.lists(names, max_size=3).map(tuple),
+        exclude_ranges=st.lists(ranges, max_size=3).map(tuple),
+    ),
+    st.builds(
+        SearchConfig,
+        k=st.integers(0, 9),
+        segment=st.integers(1, 16),
+        record=st.integers(1, 20),
+        init_pose=st.one_of(st.just("random"), st.lists(st.floats(-5, 5), min_size=1, max_size=6).map(tuple)),
+        pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3),
+    ),
+)
 CONFIGS = st.one_of(
     st.builds(
         ModelConfig,
@@ -34,21 +53,7 @@ CONFIGS = st.one_of(
         betas=st.tuples(st.floats(0, 0.99), st.floats(0, 0.99)),
         seed=st.integers(0, 99),
     ),
-    st.builds(
-        PairsConfig,
-        seed=st.integers(0, 99),
-        step=st.integers(1, 16),
-        k_max=st.integers(2, 20),
-        exclude_takes=st.lists(names, max_size=3).map(tuple),
-        exclude_ranges=st.lists(ranges, max_size=3).map(tuple),
-    ),
-    st.builds(
-        SearchConfig,
-        k=st.integers(0, 9),
-        step=st.integers(1, 16),
-        init_pose=st.one_of(st.just("random"), st.lists(st.floats(-5, 5), min_size=1, max_size=6).map(tuple)),
-        pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3),
-    ),
+    RENAMED,
     st.builds(
         SynthesisConfig,
         k=st.integers(0, 9),
@@ -115,3 +120,26 @@ def test_a_nested_configuration_refuses_unknown_options_in_the_outer_words():
 def test_only_a_dataclass_is_read_from_a_json_form():
     with pytest.raises(TypeError, match="not a dataclass"):
         config_from_dict(dict, {}, what="options")
+
+
+OLD_NAMES = {"init": "init_pose", "step": "segment", "topk": "record"}
+
+
+@settings(max_examples=60, deadline=None)
+@given(RENAMED)
+def test_configs_saved_under_earlier_names_read_back(config):
+    saved = json.loads(json.dumps(config.to_dict()))
+    old = {next((o for o, n in OLD_NAMES.items() if n == name), name): value for name, value in saved.items()}
+    assert old != saved  # N was "step" in every one of them
+    assert type(config).from_dict(old) == config
+
+
+def test_the_shipped_demo_refiners_data_options_read_back():
+    # saved before N was called "segment": a resumed training must still see the same options
+    from importlib import resources
+
+    saved = json.loads((resources.files("gesturekit") / "assets" / "demo-refiner" / "config.json").read_text())
+    assert "step" in saved["data"]
+    data = PairsConfig.from_dict(saved["data"])
+    assert data == PairsConfig(segment=saved["data"]["step"], seed=saved["data"]["seed"])
+    assert "segment" in data.to_dict() and "step" not in data.to_dict()

@@ -128,11 +128,11 @@ def test_step_masks_use_each_steps_middle_frame():
     thr = {n: (0.5, 0.5) for n in ATTRIBUTE_NAMES}  # every frame is "low", none is "high"
     # 0-1 s = frames 0..14 low left hand; steps of 8: [0,8) mid 3, [8,16) mid 11, [16,24) mid 19
     tr = parse_control("0-1:left_hand=low,2-3:speed=fast")
-    masks, idx = step_masks(tr, attrs, thr, n_frames=45, step=8)
+    masks, idx = step_masks(tr, attrs, thr, n_frames=45, segment=8)
     # [32,40) mid 35 and [40,45) mid 42 lie in 2-3 s (frames 30..44)
     assert list(idx) == [0, 0, -1, -1, 1, 1]
     assert masks.shape == (2, 2, 64) and masks[0].all() and not masks[1].any()
-    masks, idx = step_masks(ControlTrack(()), attrs, thr, n_frames=45, step=8)
+    masks, idx = step_masks(ControlTrack(()), attrs, thr, n_frames=45, segment=8)
     assert masks is None and (idx == -1).all()
 
 

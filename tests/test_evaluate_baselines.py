@@ -41,7 +41,7 @@ def _literal_admissible(valid, step, exclude, mask, rule):
 def test_admissible_windows_equal_the_definition(seed, step, rule):
     rng = np.random.default_rng(seed)
     valid, exclude, mask = rng.random((3, 4, 10)) < [[[0.8]], [[0.15]], [[0.7]]]
-    got = admissible_windows(valid, step=step, exclude=exclude, mask=mask, mask_rule=rule)
+    got = admissible_windows(valid, segment=step, exclude=exclude, mask=mask, mask_rule=rule)
     np.testing.assert_array_equal(got, _literal_admissible(valid, step, exclude, mask, rule))
 
 
@@ -59,7 +59,7 @@ def test_audio_nearest_equals_a_literal_loop(seed):
     P, F, valid = _arrays(seed)
     rng = np.random.default_rng(seed + 1)
     q = rng.normal(size=(21, 6)).astype(np.float32)
-    frames, relaxed = audio_nearest_segments(F, valid, q, step=4)
+    frames, relaxed = audio_nearest_segments(F, valid, q, segment=4)
     adm = _literal_admissible(valid, 4, None, None, "ends")
     for i in range(-(-21 // 4)):
         f = q[4 * i].astype(np.float64)
@@ -80,7 +80,7 @@ def test_audio_nearest_equals_a_literal_loop(seed):
 @given(st.integers(0, 10_000))
 def test_pose_nearest_equals_a_literal_loop(seed):
     P, F, valid = _arrays(seed)
-    frames, _ = pose_nearest_segments(P, valid, n_frames=18, step=4, init_pose=P[0, 0])
+    frames, _ = pose_nearest_segments(P, valid, n_frames=18, segment=4, init_pose=P[0, 0])
     adm = _literal_admissible(valid, 4, None, None, "ends")
     p = P[0, 0].astype(np.float64)
     for i in range(-(-18 // 4)):
@@ -104,18 +104,22 @@ def test_random_segments_are_admissible_seeded_and_relax_impossible_controls():
     masks = np.stack([np.ones_like(valid), np.zeros_like(valid)])
     step_mask = np.array([0, 1, -1, 0, 1])
     frames, relaxed = random_segments(
-        valid, n_frames=40, step=8, seed=5, exclude=exclude, masks=masks, step_mask=step_mask
+        valid, n_frames=40, segment=8, seed=5, exclude=exclude, masks=masks, step_mask_index=step_mask
     )
     assert relaxed.tolist() == [False, True, False, False, True]
     adm = _literal_admissible(valid, 8, exclude, None, "ends")
     for i in range(5):
         c, s = frames[8 * i]
         assert adm[c, s] and c >= 3
-    again, _ = random_segments(valid, n_frames=40, step=8, seed=5, exclude=exclude, masks=masks, step_mask=step_mask)
-    other, _ = random_segments(valid, n_frames=40, step=8, seed=6, exclude=exclude, masks=masks, step_mask=step_mask)
+    again, _ = random_segments(
+        valid, n_frames=40, segment=8, seed=5, exclude=exclude, masks=masks, step_mask_index=step_mask
+    )
+    other, _ = random_segments(
+        valid, n_frames=40, segment=8, seed=6, exclude=exclude, masks=masks, step_mask_index=step_mask
+    )
     assert np.array_equal(frames, again) and not np.array_equal(frames, other)
     with pytest.raises(ConfigError, match="no admissible"):
-        random_segments(valid, n_frames=8, step=8, exclude=np.ones_like(valid))
+        random_segments(valid, n_frames=8, segment=8, exclude=np.ones_like(valid))
 
 
 def test_parse_systems():

@@ -29,7 +29,7 @@ def db(tmp_path_factory):
 @pytest.fixture(scope="module")
 def result(db):
     speech = gs.example_speech("demo speaker, 8 s (generated)")[: 5 * AUDIO_SR]
-    config = SynthesisConfig(topk=6, control="1-2.5:left_hand=high,2.5-3:speed=slow")
+    config = SynthesisConfig(record=6, control="1-2.5:left_hand=high,2.5-3:speed=slow")
     return synthesize(speech, db=db, config=config)
 
 
@@ -221,7 +221,7 @@ def test_candidates_table_lists_the_recorded_candidates_with_their_source(result
 
 
 def test_step_audio_and_candidate_motion_cover_one_step(result, db):
-    N = result.config.step
+    N = result.config.segment
     assert len(gs.step_speech(result, 2)) == N * AUDIO_SR // 15
     m = gs.candidate_motion(db, int(result.search.clip[2]), int(result.search.start[2]), N)
     np.testing.assert_array_equal(m.positions, result.knn_motion.positions[2 * N : 3 * N])

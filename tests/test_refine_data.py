@@ -63,7 +63,7 @@ def test_each_pair_is_the_search_of_its_window(db, pairs):
             db.valid,
             ov["F"][w],
             exclude=own,
-            config=SearchConfig(k=int(pairs.k[i]), topk=1, init_pose=ov["P"][w, 0], mask_rule="all"),
+            config=SearchConfig(k=int(pairs.k[i]), record=1, init_pose=ov["P"][w, 0], mask_rule="all"),
         )
         np.testing.assert_array_equal(res.frames, pairs.frames[i])
 

@@ -102,7 +102,7 @@ def problems(draw, *, max_clips=7):
     if draw(st.booleans()):
         n_masks = draw(st.integers(1, 2))
         kw["masks"] = rng.random((n_masks, M, T)) < draw(st.sampled_from([0.9, 0.5, 0.1]))
-        kw["step_mask"] = rng.integers(-1, n_masks, size=n_steps)
+        kw["step_mask_index"] = rng.integers(-1, n_masks, size=n_steps)
     if draw(st.booleans()):
         kw["exclude"] = rng.random((M, T)) < 0.1
     init = "random"
@@ -117,8 +117,8 @@ def problems(draw, *, max_clips=7):
             kw["exclude"][pins[i][0], pins[i][1] : pins[i][1] + N] = False
     kw["config"] = SearchConfig(
         k=draw(st.integers(0, M + 1)),
-        step=N,
-        topk=draw(st.integers(1, 4)),
+        segment=N,
+        record=draw(st.integers(1, 4)),
         seed=draw(st.integers(0, 5)),
         init_pose=init,
         mask_rule=draw(st.sampled_from(["ends", "all"])),
@@ -229,7 +229,7 @@ def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k
     # the decisions sort only a prefix of each ranking and fall back to whole orders when
     # it cannot decide: short prefixes exercise both ways
     P, F, valid, query = _prefix_problem(seed, offset)
-    cfg = SearchConfig(k=k, step=4, topk=3, seed=seed % 5)
+    cfg = SearchConfig(k=k, segment=4, record=3, seed=seed % 5)
     assert_same(*_with_prefix(prefix, lambda: run_both(P, F, valid, query, config=cfg)))
 
 
@@ -253,7 +253,7 @@ def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
 
     monkeypatch.setattr(search_module, "compiled", lambda: Recording())
     P, F, valid, query = _prefix_problem(0, 0.0)
-    cfg = SearchConfig(step=4, topk=3)
+    cfg = SearchConfig(segment=4, record=3)
     results = {}
     for prefix, expected in ((60, {"prefix"}), (3, {"retry", "whole"}), (10**6, {"whole"})):
         seen.clear()
@@ -288,7 +288,7 @@ def test_fast_search_equals_reference_on_a_larger_database(seed, grid, k):
     F[rng.integers(0, M, 20)] = F[rng.integers(0, M, 20)]
     valid = np.ones((M, T), bool)
     query = rng.standard_normal((20, A)).astype(np.float32)
-    cfg = SearchConfig(k=k, step=4, topk=3, seed=seed % 7)
+    cfg = SearchConfig(k=k, segment=4, record=3, seed=seed % 7)
     assert_same(*run_both(P, F, valid, query, config=cfg))
 
 
@@ -303,13 +303,13 @@ def test_batch_equals_single_runs(problem, n_queries, seed):
     for _ in range(n_queries):
         cfg = SearchConfig(
             k=int(rng.integers(0, 3)),
-            step=int(rng.integers(1, min(P.shape[1], 6) + 1)),
-            topk=int(rng.integers(1, 4)),
+            segment=int(rng.integers(1, min(P.shape[1], 6) + 1)),
+            record=int(rng.integers(1, 4)),
             seed=int(rng.integers(0, 9)),
             mask_rule=str(rng.choice(["ends", "all"])),
         )
         q = rng.standard_normal((int(rng.integers(1, 25)), A)).astype(np.float32)
-        n_steps = -(-q.shape[0] // cfg.step)
+        n_steps = -(-q.shape[0] // cfg.segment)
         sm = None if masks is None or rng.random() < 0.3 else rng.integers(-1, masks.shape[0], n_steps)
         queries.append(q)
         configs.append(cfg)
@@ -318,18 +318,19 @@ def test_batch_equals_single_runs(problem, n_queries, seed):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", GestureKitWarning)
-            batch = search_batch(P, F, valid, queries, configs=configs, step_masks=step_masks, **common)
+            batch = search_batch(P, F, valid, queries, configs=configs, step_mask_indices=step_masks, **common)
     except ConfigError:
         # then some query alone must fail too
         with pytest.raises(ConfigError), warnings.catch_warnings():
             warnings.simplefilter("ignore", GestureKitWarning)
             for q, c, sm in zip(queries, configs, step_masks):
-                search(P, F, valid, q, config=c, step_mask=sm, **common)
+                search(P, F, valid, q, config=c, step_mask_index=sm, **common)
         return
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GestureKitWarning)
         singles = [
-            search(P, F, valid, q, config=c, step_mask=sm, **common) for q, c, sm in zip(queries, configs, step_masks)
+            search(P, F, valid, q, config=c, step_mask_index=sm, **common)
+            for q, c, sm in zip(queries, configs, step_masks)
         ]
     assert all(a.equals(b) for a, b in zip(batch, singles))
 
@@ -346,13 +347,13 @@ def test_batch_skips_inadmissible_starts_and_clips_without_any(threads):
     masks = np.zeros((1, M, T), bool)
     masks[0, : M // 3, :10] = True
     queries = [rng.standard_normal((30, A)).astype(np.float32) for _ in range(3)]
-    configs = [SearchConfig(k=k, step=4, topk=5, mask_rule="all") for k in range(3)]
+    configs = [SearchConfig(k=k, segment=4, record=5, mask_rule="all") for k in range(3)]
     step_masks = [np.zeros(8, np.int64), np.where(np.arange(8) % 2, 0, -1), np.zeros(8, np.int64)]
     index = SearchIndex(P, F, valid)
     index._workers = threads
-    batch = index.search_batch(queries, configs=configs, masks=masks, step_masks=step_masks)
+    batch = index.search_batch(queries, configs=configs, masks=masks, step_mask_indices=step_masks)
     for q, c, sm, b in zip(queries, configs, step_masks, batch):
-        single = search(P, F, valid, q, config=c, masks=masks, step_mask=sm)
+        single = search(P, F, valid, q, config=c, masks=masks, step_mask_index=sm)
         assert b.equals(single)
         controlled = np.flatnonzero(sm >= 0)
         assert (b.clip[controlled] < M // 3).all() and (b.start[controlled] <= 6).all()
@@ -371,7 +372,7 @@ def small_db(seed=0, M=12, T=20, D=6, A=5):
 
 
 def windows(res):
-    N = res.config.step
+    N = res.config.segment
     return [(m, s + j) for m, s in zip(res.clip, res.start) for j in range(N)]
 
 
@@ -382,7 +383,7 @@ def test_excluded_frames_are_never_used(seed, rate):
     exclude = rng.random(valid.shape) < rate
     query = rng.standard_normal((37, F.shape[2])).astype(np.float32)
     try:
-        res = search(P, F, valid, query, config=SearchConfig(step=4, k=int(rng.integers(0, 4))), exclude=exclude)
+        res = search(P, F, valid, query, config=SearchConfig(segment=4, k=int(rng.integers(0, 4))), exclude=exclude)
     except ConfigError:
         # legitimate only when at most one window of 4 frames avoids the exclusions: that
         # window is then the random initial frame, at distance 0 from itself
@@ -409,7 +410,7 @@ def test_unsatisfiable_control_is_relaxed_reported_and_warned():
     masks = np.stack([np.zeros_like(valid), rng.random(valid.shape) < 0.7])
     step_mask = np.array([1, 0, 0, 1, -1])
     with pytest.warns(GestureKitWarning, match=r"relaxed at steps 1-2:"):
-        res = search(P, F, valid, query, masks=masks, step_mask=step_mask)
+        res = search(P, F, valid, query, masks=masks, step_mask_index=step_mask)
     assert res.relaxed.tolist() == [False, True, True, False, False]
     for i in (0, 3):  # the satisfiable control is obeyed
         m, s = res.clip[i], res.start[i]
@@ -437,7 +438,7 @@ def test_the_query_frame_itself_is_skipped_and_nothing_left_is_an_error():
 def test_k_beyond_the_survivors_takes_the_last_and_records_it():
     P, F, valid, rng = small_db(3, M=4)
     query = rng.standard_normal((24, F.shape[2])).astype(np.float32)
-    res = search(P, F, valid, query, config=SearchConfig(k=9, topk=2))
+    res = search(P, F, valid, query, config=SearchConfig(k=9, record=2))
     assert res.cand_clip.shape == (3, 10)
     assert np.all(res.short) and np.all(res.n_candidates == 4)
     assert np.all(res.position == 3)
@@ -465,9 +466,9 @@ def test_all_rule_uses_only_frames_inside_the_mask(seed, N):
     step_mask = rng.integers(-1, 2, n_steps)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GestureKitWarning)
-        kw = dict(masks=masks, step_mask=step_mask)
-        res = search(P, F, valid, query, config=SearchConfig(step=N, mask_rule="all"), **kw)
-        ends = search(P, F, valid, query, config=SearchConfig(step=N, mask_rule="ends"), **kw)
+        kw = dict(masks=masks, step_mask_index=step_mask)
+        res = search(P, F, valid, query, config=SearchConfig(segment=N, mask_rule="all"), **kw)
+        ends = search(P, F, valid, query, config=SearchConfig(segment=N, mask_rule="ends"), **kw)
     for i in range(n_steps):
         if step_mask[i] >= 0 and not res.relaxed[i]:
             assert masks[step_mask[i], res.clip[i], res.start[i] : res.start[i] + N].all()
@@ -479,30 +480,30 @@ def test_all_rule_uses_only_frames_inside_the_mask(seed, N):
 def test_pins_force_the_choice_and_the_search_continues_from_them():
     P, F, valid, rng = small_db(5)
     query = rng.standard_normal((30, F.shape[2])).astype(np.float32)
-    free = search(P, F, valid, query, config=SearchConfig(step=6))
+    free = search(P, F, valid, query, config=SearchConfig(segment=6))
     alt = (int(free.cand_clip[1, 1]), int(free.cand_start[1, 1]))  # "use this candidate instead"
-    pinned = search(P, F, valid, query, config=SearchConfig(step=6, pins={1: alt}))
+    pinned = search(P, F, valid, query, config=SearchConfig(segment=6, pins={1: alt}))
     assert (pinned.clip[1], pinned.start[1]) == alt and pinned.pinned.tolist() == [False, True, False, False, False]
     assert pinned.position[1] == 1
     assert np.array_equal(pinned.clip[:1], free.clip[:1])
     # step 2 searches from the pinned segment's last pose
     P2 = P.copy()
     expected = search(
-        P2, F, valid, query[12:], config=SearchConfig(step=6, init_pose=tuple(P[alt[0], alt[1] + 5].tolist()))
+        P2, F, valid, query[12:], config=SearchConfig(segment=6, init_pose=tuple(P[alt[0], alt[1] + 5].tolist()))
     )
     assert (pinned.clip[2], pinned.start[2]) == (expected.clip[0], expected.start[0])
     exclude = np.zeros_like(valid)
     exclude[alt[0], alt[1] + 2] = True
     with pytest.raises(ConfigError, match="excluded"):
-        search(P, F, valid, query, config=SearchConfig(step=6, pins={1: alt}), exclude=exclude)
+        search(P, F, valid, query, config=SearchConfig(segment=6, pins={1: alt}), exclude=exclude)
     with pytest.raises(ConfigError, match="only 5 steps"):
-        search(P, F, valid, query, config=SearchConfig(step=6, pins={7: alt}))
+        search(P, F, valid, query, config=SearchConfig(segment=6, pins={7: alt}))
 
 
 def test_frames_follow_the_chosen_windows_and_the_last_step_is_cut():
     P, F, valid, rng = small_db(6)
     query = rng.standard_normal((21, F.shape[2])).astype(np.float32)
-    res = search(P, F, valid, query, config=SearchConfig(step=8))
+    res = search(P, F, valid, query, config=SearchConfig(segment=8))
     assert res.frames.shape == (21, 2) and res.n_steps == 3
     for t in range(21):
         i = t // 8
@@ -518,7 +519,7 @@ def test_frames_follow_the_chosen_windows_and_the_last_step_is_cut():
 def test_candidate_frame_and_config_round_trip():
     P, F, valid, rng = small_db(7)
     query = rng.standard_normal((16, F.shape[2])).astype(np.float32)
-    cfg = SearchConfig(k=1, topk=3, seed=2, init_pose=tuple(np.zeros(6)), mask_rule="all", pins={1: (2, 3)})
+    cfg = SearchConfig(k=1, record=3, seed=2, init_pose=tuple(np.zeros(6)), mask_rule="all", pins={1: (2, 3)})
     res = search(P, F, valid, query, config=cfg)
     df = res.candidates_frame()
     assert list(df.columns) == [
@@ -555,9 +556,9 @@ def test_candidate_frame_and_config_round_trip():
         (dict(valid=np.ones((12, 20), np.uint8)), "valid must be a bool array"),
         (dict(query=np.zeros((5, 4), np.float32)), "query audio features must have shape"),
         (dict(query=np.full((5, 5), np.nan, np.float32)), "NaN"),
-        (dict(config=SearchConfig(step=21)), "longer than a database clip"),
+        (dict(config=SearchConfig(segment=21)), "longer than a database clip"),
         (dict(config=SearchConfig(init_pose=(1.0, 2.0))), "initial pose must have 6 values"),
-        (dict(step_mask=np.array([0, 0])), "step_mask entries must be -1 or an index below 0"),
+        (dict(step_mask_index=np.array([0, 0])), "step_mask_index entries must be -1 or an index below 0"),
         (dict(exclude=np.zeros((12, 19), bool)), "exclude must be a bool array"),
     ],
 )
@@ -571,7 +572,7 @@ def test_bad_inputs_raise_config_errors(change, message):
 
 @pytest.mark.parametrize(
     "bad",
-    [dict(k=-1), dict(step=0), dict(mask_rule="middle"), dict(init_pose="rest"), dict(pins={0: 3}), dict(seed=True)],
+    [dict(k=-1), dict(segment=0), dict(mask_rule="middle"), dict(init_pose="rest"), dict(pins={0: 3}), dict(seed=True)],
 )
 def test_bad_config_values_raise(bad):
     with pytest.raises(ConfigError):
@@ -586,8 +587,8 @@ def test_read_only_database_and_reused_index():
     queries = [rng.standard_normal((n, 5)).astype(np.float32) for n in (9, 17, 33)]
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no warning about the read-only arrays
-        batch = idx.search_batch(queries, configs=SearchConfig(step=4, k=1))
-    singles = [search_reference(P, F, valid, q, config=SearchConfig(step=4, k=1)) for q in queries]
+        batch = idx.search_batch(queries, configs=SearchConfig(segment=4, k=1))
+    singles = [search_reference(P, F, valid, q, config=SearchConfig(segment=4, k=1)) for q in queries]
     assert all(a.equals(b) for a, b in zip(batch, singles))
 
 
@@ -608,7 +609,7 @@ def test_thread_settings_are_restored_after_a_search():
 @given(st.sets(st.integers(0, 40), min_size=1, max_size=30), st.integers(1, 12))
 def test_describe_steps_covers_exactly_the_steps_in_seconds(steps, N):
     fps = 15.0
-    text = describe_steps(steps, step=N, fps=fps, most=100)
+    text = describe_steps(steps, segment=N, fps=fps, most=100)
     assert text.endswith(f"({len(steps)} step{'s' if len(steps) > 1 else ''})")
     covered = set()
     for part in text.rsplit(" (", 1)[0].split(", "):
@@ -618,8 +619,8 @@ def test_describe_steps_covers_exactly_the_steps_in_seconds(steps, N):
 
 
 def test_describe_steps_joins_runs_and_shortens_long_lists():
-    assert describe_steps(range(1, 9), step=8, fps=15.0) == "0.53-4.80 s (8 steps)"
-    assert describe_steps([1, 2], step=8) == "steps 1-2"
-    assert describe_steps([3], step=8) == "step 3"
-    many = describe_steps([0, 2, 4, 6, 8], step=8, fps=15.0)
+    assert describe_steps(range(1, 9), segment=8, fps=15.0) == "0.53-4.80 s (8 steps)"
+    assert describe_steps([1, 2], segment=8) == "steps 1-2"
+    assert describe_steps([3], segment=8) == "step 3"
+    many = describe_steps([0, 2, 4, 6, 8], segment=8, fps=15.0)
     assert many == "0.00-0.53 s, 1.07-1.60 s, 2.13-2.67 s, and 2 more stretches (5 steps)"

@@ -62,7 +62,7 @@ def test_matches_the_reference_search(demo_db, speech):
 
     fq, _ = demo_db.query_features(speech)
     masks, smask = step_masks(
-        parse_control(cfg.control), np.asarray(demo_db.attributes), demo_db.thresholds, n_frames=len(fq), step=8
+        parse_control(cfg.control), np.asarray(demo_db.attributes), demo_db.thresholds, n_frames=len(fq), segment=8
     )
     ref = search_reference(
         np.asarray(demo_db.P),
@@ -71,7 +71,7 @@ def test_matches_the_reference_search(demo_db, speech):
         fq,
         config=SearchConfig(k=1, seed=3),
         masks=masks,
-        step_mask=smask,
+        step_mask_index=smask,
     )
     np.testing.assert_array_equal(res.search.clip, ref.clip)
     np.testing.assert_array_equal(res.search.start, ref.start)
@@ -139,9 +139,9 @@ def test_batch_equals_single_runs(demo_db, speech):
         np.testing.assert_array_equal(single.motion.positions, b.motion.positions)
 
 
-def test_k_changes_the_choice_and_records_topk(demo_db, speech):
-    r0 = synthesize(speech, db=demo_db, config=SynthesisConfig(k=0, topk=5))
-    r2 = synthesize(speech, db=demo_db, config=SynthesisConfig(k=2, topk=5))
+def test_k_changes_the_choice_and_records_the_candidates(demo_db, speech):
+    r0 = synthesize(speech, db=demo_db, config=SynthesisConfig(k=0, record=5))
+    r2 = synthesize(speech, db=demo_db, config=SynthesisConfig(k=2, record=5))
     assert r0.search.cand_clip.shape[1] == 5
     assert (r2.search.position == 2).all()
     assert r0.search.clip[0] != r2.search.clip[0] or r0.search.start[0] != r2.search.start[0]
@@ -289,19 +289,19 @@ def test_cli_synthesize_with_video_and_controls(zeggs_db, shared_data, tmp_path,
 @settings(max_examples=60, deadline=None)
 @given(
     k=st.integers(0, 3),
-    step=st.integers(1, 12),
+    segment=st.integers(1, 12),
     init=st.sampled_from(["random", "rest"]),
     blend=st.sampled_from(["none", "offset"]),
     mask_rule=st.sampled_from(["ends", "all"]),
     keep=st.sampled_from([0.0, 1.5, 2.0]),
     refined=st.booleans(),
 )
-def test_paper_differences_name_exactly_the_settings_that_differ(k, step, init, blend, mask_rule, keep, refined):
-    config = SynthesisConfig(k=k, step=step, init=init, blend=blend, mask_rule=mask_rule, refiner_keep_hz=keep)
+def test_paper_differences_name_exactly_the_settings_that_differ(k, segment, init, blend, mask_rule, keep, refined):
+    config = SynthesisConfig(k=k, segment=segment, init=init, blend=blend, mask_rule=mask_rule, refiner_keep_hz=keep)
     notes = config.paper_differences(refined=refined)
     expected = {
         "k = ": k != 0,
-        "N = ": step != 8,
+        "N = ": segment != 8,
         "initial pose": init != "random",
         "blending": blend != "none",
         "control held at": mask_rule != "ends",
@@ -310,14 +310,14 @@ def test_paper_differences_name_exactly_the_settings_that_differ(k, step, init, 
     for text, differs in expected.items():
         assert sum(text in n for n in notes) == int(differs), (text, notes)
     assert len(notes) == sum(expected.values())
-    if step != 8:
-        assert f"N = {step} (paper 8)" in notes
+    if segment != 8:
+        assert f"N = {segment} (paper 8)" in notes
 
 
 def test_the_paper_search_has_no_differences():
     assert SynthesisConfig(refiner_keep_hz=0.0).paper_differences(refined=True) == []
     assert SynthesisConfig().paper_differences(refined=False) == []
-    assert SynthesisConfig(seed=9, topk=3).paper_differences(refined=False) == []  # no effect on the method
+    assert SynthesisConfig(seed=9, record=3).paper_differences(refined=False) == []  # no effect on the method
 
 
 # -- one plan, one source of truth for the search's options and the control track ---------------------
@@ -336,7 +336,7 @@ def test_a_given_control_is_the_one_searched_and_recorded(demo_db, speech):
 def test_the_result_keeps_the_plan_it_searched_with(demo_db, speech):
     from gesturekit.search import plan_search
 
-    cfg = SynthesisConfig(k=1, step=6, init="rest", control="1-5:speed=slow", exclude_takes=(demo_db.take_names[0],))
+    cfg = SynthesisConfig(k=1, segment=6, init="rest", control="1-5:speed=slow", exclude_takes=(demo_db.take_names[0],))
     res = synthesize(speech, db=demo_db, config=cfg)
     plan = res.plan
     again = plan_search(demo_db, speech, cfg)
@@ -355,28 +355,30 @@ def test_the_result_keeps_the_plan_it_searched_with(demo_db, speech):
 @settings(max_examples=40, deadline=None)
 @given(
     k=st.integers(0, 5),
-    step=st.integers(1, 16),
-    topk=st.integers(1, 12),
+    segment=st.integers(1, 16),
+    record=st.integers(1, 12),
     seed=st.integers(0, 9),
     rule=st.sampled_from(["ends", "all"]),
     init=st.sampled_from(["random", "rest"]),
     pins=st.dictionaries(st.integers(0, 9), st.tuples(st.integers(0, 9), st.integers(0, 9)), max_size=3),
 )
-def test_the_search_options_live_in_one_nested_config(k, step, topk, seed, rule, init, pins):
+def test_the_search_options_live_in_one_nested_config(k, segment, record, seed, rule, init, pins):
     import dataclasses
     import json
 
     from gesturekit.search import SearchConfig
 
-    flat = SynthesisConfig(k=k, step=step, topk=topk, seed=seed, mask_rule=rule, init=init, pins=pins)
-    nested = SynthesisConfig(SearchConfig(k=k, step=step, topk=topk, seed=seed, mask_rule=rule, pins=pins), init=init)
-    assert flat == nested and flat.search == SearchConfig(
-        k=k, step=step, topk=topk, seed=seed, mask_rule=rule, pins=pins
+    flat = SynthesisConfig(k=k, segment=segment, record=record, seed=seed, mask_rule=rule, init=init, pins=pins)
+    nested = SynthesisConfig(
+        SearchConfig(k=k, segment=segment, record=record, seed=seed, mask_rule=rule, pins=pins), init=init
     )
-    assert (flat.k, flat.step, flat.topk, flat.seed, flat.mask_rule, flat.pins) == (
+    assert flat == nested and flat.search == SearchConfig(
+        k=k, segment=segment, record=record, seed=seed, mask_rule=rule, pins=pins
+    )
+    assert (flat.k, flat.segment, flat.record, flat.seed, flat.mask_rule, flat.pins) == (
         k,
-        step,
-        topk,
+        segment,
+        record,
         seed,
         rule,
         flat.search.pins,
@@ -386,8 +388,8 @@ def test_the_search_options_live_in_one_nested_config(k, step, topk, seed, rule,
     # the saved form is the flat one earlier versions wrote (and read), and reads back
     assert set(saved) == {
         "k",
-        "step",
-        "topk",
+        "segment",
+        "record",
         "seed",
         "init",
         "mask_rule",
@@ -400,7 +402,10 @@ def test_the_search_options_live_in_one_nested_config(k, step, topk, seed, rule,
         "refiner_keep_hz",
     }
     assert SynthesisConfig.from_dict(saved) == flat
-    search = {name: saved.pop(name) for name in ("k", "step", "topk", "seed", "mask_rule", "pins")}
+    search = {name: saved.pop(name) for name in ("k", "segment", "record", "seed", "mask_rule", "pins")}
+    assert SynthesisConfig.from_dict({**saved, "search": search}) == flat
+    # a nested search saved under the earlier names reads back too
+    search["step"], search["topk"] = search.pop("segment"), search.pop("record")
     assert SynthesisConfig.from_dict({**saved, "search": search}) == flat
 
 
@@ -421,9 +426,12 @@ def test_a_config_saved_by_an_earlier_version_reads_back():
         "refiner_keep_hz": 1.5,
     }
     cfg = SynthesisConfig.from_dict(saved)
-    assert (cfg.k, cfg.step, cfg.topk, cfg.seed, cfg.init, cfg.mask_rule) == (2, 6, 7, 5, "rest", "all")
+    assert (cfg.k, cfg.segment, cfg.record, cfg.seed, cfg.init, cfg.mask_rule) == (2, 6, 7, 5, "rest", "all")
     assert cfg.pins == {3: (4, 5)} and cfg.exclude_ranges == (("b", 1.0, 2.5),) and cfg.exclude_takes == ("a",)
-    assert cfg.control_track.to_text() == "0-4.25:both_hands=high" and cfg.to_dict() == saved
+    # written back under the current names: N is "segment", the recorded candidates "record"
+    renamed = {{"step": "segment", "topk": "record"}.get(name, name): value for name, value in saved.items()}
+    assert cfg.control_track.to_text() == "0-4.25:both_hands=high" and cfg.to_dict() == renamed
+    assert SynthesisConfig.from_dict(renamed) == cfg
     with pytest.raises(ConfigError, match="unknown synthesis options: nope"):
         SynthesisConfig.from_dict({**saved, "nope": 1})
     with pytest.raises(ConfigError, match="unknown synthesis options: nope"):

@@ -93,11 +93,13 @@ def test_every_step_equals_the_search(seed, k, N, rule, levels, controlled, excl
         exclude = np.zeros(db.valid.shape, bool)
         exclude[0] = True
         exclude[1, 4:9] = True
-    cfg = SearchConfig(k=k, step=N, topk=6, seed=seed, mask_rule=rule)
+    cfg = SearchConfig(k=k, segment=N, record=6, seed=seed, mask_rule=rule)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GestureKitWarning)
         try:
-            res = search(db.P, db.F, db.valid, query, config=cfg, masks=masks, step_mask=step_mask, exclude=exclude)
+            res = search(
+                db.P, db.F, db.valid, query, config=cfg, masks=masks, step_mask_index=step_mask, exclude=exclude
+            )
         except ConfigError:
             return  # nothing admissible at all: the explanation raises too (tested below)
     for i in range(res.n_steps):
@@ -175,14 +177,14 @@ def test_synthesis_steps_are_explained_with_their_controls_and_exclusions(small_
         res = synthesize(audio, db=db, config=cfg)
     for i in range(res.search.n_steps):
         inp = step_inputs(res, db, i)
-        assert inp["t"] == i * cfg.step and inp["k"] == 1
+        assert inp["t"] == i * cfg.segment and inp["k"] == 1
         assert (inp["mask"] is not None) == (i in (0, 1, 2, 3, 6, 7, 8))  # middle frame 8i+3 controlled
         e = _check_step(
             db,
             res.search,
             inp["query_features"],
             i,
-            N=cfg.step,
+            N=cfg.segment,
             k=1,
             mask=inp["mask"],
             exclude=inp["exclude"],
@@ -262,7 +264,7 @@ def test_constraints_table_counts_what_each_constraint_admits(small_db):
 def test_synthesis_and_motion_tables_measure_the_outputs(small_db):
     db = small_db
     audio = make_take(4.0, seed=11).audio
-    results = [synthesize(audio, db=db, config=SynthesisConfig(k=k, step=n, seed=1)) for k, n in ((0, 8), (3, 4))]
+    results = [synthesize(audio, db=db, config=SynthesisConfig(k=k, segment=n, seed=1)) for k, n in ((0, 8), (3, 4))]
     table = synthesis_table(results)
     assert list(table["label"]) == ["k=0, N=8", "k=3, N=4"]
     for row, r in zip(table.itertuples(), results):
@@ -270,7 +272,7 @@ def test_synthesis_and_motion_tables_measure_the_outputs(small_db):
         assert row.steps == s.n_steps and row.clips_used == len(set(s.clip.tolist()))
         assert row.pose_dist == pytest.approx(np.mean(s.cand_pose_dist[np.arange(s.n_steps), s.position]))
         assert row.audio_dist == pytest.approx(np.mean(s.cand_audio_dist[np.arange(s.n_steps), s.position]))
-        joins = metrics.boundary_jumps(r.motion.positions, np.arange(1, s.n_steps) * row.step)
+        joins = metrics.boundary_jumps(r.motion.positions, np.arange(1, s.n_steps) * row.segment)
         assert row.boundary_jump == pytest.approx(joins["jump"])
     with pytest.raises(ConfigError, match="labels"):
         synthesis_table(results, labels=["one"])

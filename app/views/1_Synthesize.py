@@ -192,14 +192,14 @@ def settings(db: MatchingDatabase) -> dict:
     run."""
     ss = st.session_state
     pk = state.persistent_key
-    step_key = pk("synth.step", 8)
-    if ss[step_key] > db.clip_frames:  # a database of shorter clips: say so, never change it unseen
+    segment_key = pk("synth.segment", 8)
+    if ss[segment_key] > db.clip_frames:  # a database of shorter clips: say so, never change it unseen
         st.warning(
-            f"N was {ss[step_key]}, more than this database's clips hold ({db.clip_frames} frames): "
+            f"N was {ss[segment_key]}, more than this database's clips hold ({db.clip_frames} frames): "
             f"it is now {db.clip_frames}.",
             icon="⚠️",
         )
-        ss[step_key] = ss["synth.step"] = db.clip_frames
+        ss[segment_key] = ss["synth.segment"] = db.clip_frames
     c = st.columns(4)
     out = {
         "k": c[0].number_input(
@@ -210,23 +210,23 @@ def settings(db: MatchingDatabase) -> dict:
             key=pk("synth.k", 0),
             help="take the k-th best window of the combined ranking at every step",
         ),
-        "step": c[1].number_input(
+        "segment": c[1].number_input(
             "N (frames per step)",
             min_value=1,
             max_value=db.clip_frames,
             step=1,
-            key=step_key,
+            key=segment_key,
             help="8 in the paper: a new search every 0.53 s",
         ),
         "seed": c[2].number_input(
             "Seed", min_value=0, max_value=2**31 - 1, step=1, key=pk("synth.seed", 0), help="of the random initial pose"
         ),
-        "topk": c[3].number_input(
+        "record": c[3].number_input(
             "Candidates recorded per step",
             min_value=1,
             max_value=50,
             step=1,
-            key=pk("synth.topk", 10),
+            key=pk("synth.record", 10),
             help="shown in the Retrieval inspector",
         ),
     }
@@ -343,7 +343,7 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
     result = record["result"]
     st.header("Result")
     c = result.config
-    parts = [f"k = {c.k}", f"N = {c.step}", f"seed {c.seed}", f"initial pose: {c.init}", f"blend: {c.blend}"]
+    parts = [f"k = {c.k}", f"N = {c.segment}", f"seed {c.seed}", f"initial pose: {c.init}", f"blend: {c.blend}"]
     if result.control:
         parts.append(f"controls: `{result.control.to_text()}`")
     if c.pins:
@@ -356,7 +356,7 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         parts.append("differs from the paper: " + "; ".join(differs))
     st.caption(" · ".join(parts))
     if result.relaxed_steps:
-        where = describe_steps(result.relaxed_steps, step=c.step, fps=result.motion.fps)
+        where = describe_steps(result.relaxed_steps, segment=c.segment, fps=result.motion.fps)
         st.warning(f"No database window satisfied the control at {where}; the control was dropped there.", icon="⚠️")
     motions, labels = gs.display_motions(result)
     labels = labels if len(motions) > 1 else None

@@ -98,7 +98,7 @@ def pick_step(db: MatchingDatabase, result: SynthesisResult) -> int:
 def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
     ss = st.session_state
     result = record["result"]
-    s, N, fps = result.search, result.config.step, result.motion.fps
+    s, N, fps = result.search, result.config.segment, result.motion.fps
     a, b = step * N, min((step + 1) * N, result.n_frames)
     overview = gs.steps_overview(result, db).iloc[step]
     flags = (" · **pinned**" if s.pinned[step] else "") + (" · control relaxed" if s.relaxed[step] else "")
@@ -258,7 +258,7 @@ def main() -> None:
         return
     result = record["result"]
     st.caption(
-        f"**{result.source}** · {result.search.n_steps} steps of {result.config.step} frames · "
+        f"**{result.source}** · {result.search.n_steps} steps of {result.config.segment} frames · "
         f"k = {result.config.k} · candidates in the combined ranking of pose rank + audio rank, best first"
     )
     step = pick_step(db, result)

@@ -118,19 +118,19 @@ def parse_systems(systems: str | Sequence[str]) -> tuple[str, ...]:
 def admissible_windows(
     valid: np.ndarray,
     *,
-    step: int,
+    segment: int,
     exclude: np.ndarray | None = None,
     mask: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> np.ndarray:
-    """Start frames of windows of ``step`` frames the search may use
+    """Start frames of windows of ``segment`` frames the search may use
     (:func:`gesturekit.search.admissible.admissible_starts`, the search's own rule).
 
     Parameters
     ----------
     valid : array, shape (M, T), bool
         Frames that may start a segment.
-    step : int
+    segment : int
         Window length N, frames (1..T).
     exclude : array, shape (M, T), bool, optional
         Held-out frames: no window may contain one.
@@ -144,9 +144,9 @@ def admissible_windows(
     np.ndarray, shape (M, T), bool
     """
     valid = np.asarray(valid, dtype=bool)
-    options = SearchConfig(step=step, mask_rule=mask_rule)  # checked as the search checks them
-    check_segment(options.step, valid.shape[1])
-    return admissible_starts(valid, options.step, exclude=exclude, mask=mask, rule=options.mask_rule)
+    options = SearchConfig(segment=segment, mask_rule=mask_rule)  # checked as the search checks them
+    check_segment(options.segment, valid.shape[1])
+    return admissible_starts(valid, options.segment, exclude=exclude, mask=mask, rule=options.mask_rule)
 
 
 class _Steps:
@@ -155,26 +155,30 @@ class _Steps:
     def __init__(
         self,
         valid: np.ndarray,
-        step: int,
+        segment: int,
         exclude: np.ndarray | None,
         masks: np.ndarray | None,
-        step_mask: np.ndarray | None,
+        step_mask_index: np.ndarray | None,
         mask_rule: str,
         n_steps: int,
     ):
-        self.valid, self.step, self.exclude, self.masks, self.rule = valid, step, exclude, masks, mask_rule
-        self.step_mask = np.full(n_steps, -1, np.int64) if step_mask is None else np.asarray(step_mask, np.int64)
-        if self.step_mask.shape != (n_steps,):
-            raise ConfigError(f"step_mask must have one entry per step ({n_steps}), got {self.step_mask.shape}")
-        if masks is None and np.any(self.step_mask >= 0):
-            raise ConfigError("step_mask refers to control masks, but none were given")
+        self.valid, self.segment, self.exclude, self.masks, self.rule = valid, segment, exclude, masks, mask_rule
+        self.step_mask_index = (
+            np.full(n_steps, -1, np.int64) if step_mask_index is None else np.asarray(step_mask_index, np.int64)
+        )
+        if self.step_mask_index.shape != (n_steps,):
+            raise ConfigError(
+                f"step_mask_index must have one entry per step ({n_steps}), got {self.step_mask_index.shape}"
+            )
+        if masks is None and np.any(self.step_mask_index >= 0):
+            raise ConfigError("step_mask_index refers to control masks, but none were given")
         self._cache: dict[int, np.ndarray] = {}
 
     def _adm(self, j: int) -> np.ndarray:
         if j not in self._cache:
             self._cache[j] = admissible_starts(
                 self.valid,
-                self.step,
+                self.segment,
                 exclude=self.exclude,
                 # no masks means every step's index is -1 (checked in __init__)
                 mask=None if j < 0 or self.masks is None else self.masks[j],
@@ -183,7 +187,7 @@ class _Steps:
         return self._cache[j]
 
     def __call__(self, i: int) -> tuple[np.ndarray, bool]:
-        adm = self._adm(int(self.step_mask[i]))
+        adm = self._adm(int(self.step_mask_index[i]))
         if adm.any():
             return adm, False
         adm = self._adm(-1)
@@ -192,31 +196,31 @@ class _Steps:
         return adm, True
 
 
-def _frames(choices: list[tuple[int, int]], n_frames: int, step: int) -> np.ndarray:
+def _frames(choices: list[tuple[int, int]], n_frames: int, segment: int) -> np.ndarray:
     out = np.empty((n_frames, 2), np.int64)
     for i, (c, s) in enumerate(choices):
-        a, b = i * step, min((i + 1) * step, n_frames)
+        a, b = i * segment, min((i + 1) * segment, n_frames)
         out[a:b, 0] = c
         out[a:b, 1] = s + np.arange(b - a)
     return out
 
 
-def _check_n(n_frames: int, step: int) -> int:
-    """Steps of ``step`` frames that cover ``n_frames`` (checked to be a positive integer)."""
+def _check_n(n_frames: int, segment: int) -> int:
+    """Steps of ``segment`` frames that cover ``n_frames`` (checked to be a positive integer)."""
     if not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
         raise ConfigError(f"n_frames must be a positive integer, got {n_frames!r}")
-    return -(-int(n_frames) // int(step))
+    return -(-int(n_frames) // int(segment))
 
 
 def random_segments(
     valid: np.ndarray,
     *,
     n_frames: int,
-    step: int = 8,
+    segment: int = 8,
     seed: int = 0,
     exclude: np.ndarray | None = None,
     masks: np.ndarray | None = None,
-    step_mask: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random admissible windows, one per step.
@@ -226,10 +230,10 @@ def random_segments(
     valid : array, shape (M, T), bool
     n_frames : int
         Output frames.
-    step : int
+    segment : int
         Frames per window.
     seed : int
-    exclude, masks, step_mask, mask_rule
+    exclude, masks, step_mask_index, mask_rule
         As for the search: held-out frames (M, T); control masks (n_masks, M, T) and each
         step's index into them (-1: none).
 
@@ -239,8 +243,8 @@ def random_segments(
         (clip, frame) of every output frame.
     relaxed : np.ndarray, shape (n_steps,), bool
     """
-    n_steps = _check_n(n_frames, step)
-    steps = _Steps(np.asarray(valid, bool), step, exclude, masks, step_mask, mask_rule, n_steps)
+    n_steps = _check_n(n_frames, segment)
+    steps = _Steps(np.asarray(valid, bool), segment, exclude, masks, step_mask_index, mask_rule, n_steps)
     rng = np.random.default_rng(seed)
     T = np.asarray(valid).shape[1]
     choices, relaxed = [], np.zeros(n_steps, bool)
@@ -248,7 +252,7 @@ def random_segments(
         adm, relaxed[i] = steps(i)
         flat = np.flatnonzero(adm)
         choices.append(divmod(int(flat[rng.integers(flat.size)]), T))
-    return _frames(choices, int(n_frames), step), relaxed
+    return _frames(choices, int(n_frames), segment), relaxed
 
 
 def audio_nearest_segments(
@@ -256,10 +260,10 @@ def audio_nearest_segments(
     valid: np.ndarray,
     query: np.ndarray,
     *,
-    step: int = 8,
+    segment: int = 8,
     exclude: np.ndarray | None = None,
     masks: np.ndarray | None = None,
-    step_mask: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose audio feature is nearest the query's (cosine distance).
@@ -270,8 +274,8 @@ def audio_nearest_segments(
         z-scored audio features of the database.
     valid : array, shape (M, T), bool
     query : array, shape (n_frames, A)
-        z-scored audio features of the speech (step ``i`` matches ``query[i * step]``).
-    step, exclude, masks, step_mask, mask_rule
+        z-scored audio features of the speech (step ``i`` matches ``query[i * segment]``).
+    segment, exclude, masks, step_mask_index, mask_rule
         See :func:`random_segments`.
 
     Returns
@@ -284,10 +288,10 @@ def audio_nearest_segments(
     q = np.asarray(query, dtype=np.float64)
     if q.ndim != 2 or q.shape[1] != A:
         raise ConfigError(f"query must have shape (frames, {A}), got {q.shape}")
-    n_steps = _check_n(q.shape[0], step)
-    steps = _Steps(np.asarray(valid, bool), step, exclude, masks, step_mask, mask_rule, n_steps)
+    n_steps = _check_n(q.shape[0], segment)
+    steps = _Steps(np.asarray(valid, bool), segment, exclude, masks, step_mask_index, mask_rule, n_steps)
     rows = F.reshape(M * T, A)
-    Q = q[np.arange(n_steps) * step]
+    Q = q[np.arange(n_steps) * segment]
     qn = np.linalg.norm(Q, axis=1)
     # cosine distances of every database frame to every step's query, chunk by chunk of rows
     dist = np.empty((n_steps, M * T))
@@ -303,7 +307,7 @@ def audio_nearest_segments(
         adm, relaxed[i] = steps(i)
         best = int(np.argmin(np.where(adm.ravel(), dist[i], np.inf)))  # first of equals: lowest index
         choices.append(divmod(best, T))
-    return _frames(choices, q.shape[0], step), relaxed
+    return _frames(choices, q.shape[0], segment), relaxed
 
 
 def _initial_pose(P: np.ndarray, adm: np.ndarray, seed: int) -> np.ndarray:
@@ -318,12 +322,12 @@ def pose_nearest_segments(
     valid: np.ndarray,
     *,
     n_frames: int,
-    step: int = 8,
+    segment: int = 8,
     seed: int = 0,
     init_pose: np.ndarray | None = None,
     exclude: np.ndarray | None = None,
     masks: np.ndarray | None = None,
-    step_mask: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
     mask_rule: str = "ends",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose pose feature is nearest the last output pose feature.
@@ -336,12 +340,12 @@ def pose_nearest_segments(
         z-scored pose features of the database.
     valid : array, shape (M, T), bool
     n_frames : int
-    step : int
+    segment : int
     seed : int
         Seed of the random initial pose (when ``init_pose`` is None).
     init_pose : array, shape (D,), optional
         The initial pose feature instead of a random one.
-    exclude, masks, step_mask, mask_rule
+    exclude, masks, step_mask_index, mask_rule
         See :func:`random_segments`.
 
     Returns
@@ -351,8 +355,8 @@ def pose_nearest_segments(
     """
     P = np.asarray(P)
     M, T, D = P.shape
-    n_steps = _check_n(n_frames, step)
-    steps = _Steps(np.asarray(valid, bool), step, exclude, masks, step_mask, mask_rule, n_steps)
+    n_steps = _check_n(n_frames, segment)
+    steps = _Steps(np.asarray(valid, bool), segment, exclude, masks, step_mask_index, mask_rule, n_steps)
     rows = P.reshape(M * T, D)
     if init_pose is None:
         init_adm, _ = steps(0)
@@ -371,8 +375,8 @@ def pose_nearest_segments(
             raise ConfigError(f"step {i}: no admissible window other than the query's own frame")
         c, s = divmod(int(flat[int(np.argmin(d2))]), T)
         choices.append((c, s))
-        p = np.asarray(P[c, s + step - 1], dtype=np.float32)
-    return _frames(choices, int(n_frames), step), relaxed
+        p = np.asarray(P[c, s + segment - 1], dtype=np.float32)
+    return _frames(choices, int(n_frames), segment), relaxed
 
 
 # ---- running a system ---------------------------------------------------------------------------
@@ -417,8 +421,8 @@ def run_system(
     audio : np.ndarray, shape (samples,), float32
         The speech at 16 kHz.
     config : SynthesisConfig, optional
-        k, step, seed, initial pose, mask rule, blending, exclusions (all systems but ``gt``
-        use its step, seed, mask rule and exclusions; ``knn`` uses all of it).
+        k, N (``segment``), seed, initial pose, mask rule, blending, exclusions (all systems but ``gt``
+        use its N, seed, mask rule and exclusions; ``knn`` uses all of it).
     control : ControlTrack or str, optional
         Replaces ``config.control`` (``gt`` ignores controls).
     gt : Motion, optional
@@ -447,7 +451,7 @@ def run_system(
         change: dict[str, Any] = {"control": control}
         config = replace(config, **change)
     audio = np.asarray(audio, dtype=np.float32)
-    N = config.step
+    N = config.segment
     if system == "gt":
         if gt is None:
             raise SystemUnavailable("gt needs the recorded motion of the speech (a held-out part of the database)")
@@ -464,7 +468,11 @@ def run_system(
     n, options = plan.n_frames, plan.config
     valid = np.asarray(db.valid)
     common = dict(
-        step=N, exclude=plan.exclude, masks=plan.masks, step_mask=plan.step_mask_index, mask_rule=options.mask_rule
+        segment=N,
+        exclude=plan.exclude,
+        masks=plan.masks,
+        step_mask_index=plan.step_mask_index,
+        mask_rule=options.mask_rule,
     )
     if system == "random":
         frames, relaxed = random_segments(valid, n_frames=n, seed=options.seed, **common)

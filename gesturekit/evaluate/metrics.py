@@ -570,7 +570,7 @@ def mean_jerk(positions: np.ndarray, *, fps: float, joints: Sequence[int] | None
 
 
 def boundary_jumps(
-    positions: np.ndarray, boundaries: np.ndarray, *, joints: Sequence[int] | None = KINEMATIC_JOINTS
+    positions: np.ndarray, boundaries: np.ndarray | Sequence[int], *, joints: Sequence[int] | None = KINEMATIC_JOINTS
 ) -> dict:
     """How far the joints move across segment joins, against any other pair of frames.
 

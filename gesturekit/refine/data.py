@@ -21,7 +21,7 @@ used, and the search never uses held-out frames either.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,8 +45,9 @@ class PairsConfig(JsonConfig):
     ----------
     seed : int
         Seed of the per-window draw of ``k``.
-    step : int
-        Frames per search step, N (8 in the paper).
+    segment : int
+        Frames per search step, N (8 in the paper). (Refiners saved by earlier
+        versions call it ``step``; :meth:`from_dict` reads both.)
     k_one_fraction : float
         Fraction of windows searched with k = 1 (the authors: one half).
     k_max : int
@@ -60,7 +61,7 @@ class PairsConfig(JsonConfig):
     OPTIONS_NAME = "training-data options"
 
     seed: int = 0
-    step: int = 8
+    segment: int = 8
     k_one_fraction: float = 0.5
     k_max: int = 15
     exclude_takes: tuple = ()
@@ -71,11 +72,19 @@ class PairsConfig(JsonConfig):
             raise ConfigError(f"k_one_fraction must be in [0, 1], got {self.k_one_fraction}")
         if self.k_max < 2:
             raise ConfigError(f"k_max must be at least 2, got {self.k_max}")
-        if self.step < 1:
-            raise ConfigError(f"step must be at least 1, got {self.step}")
+        if self.segment < 1:
+            raise ConfigError(f"segment must be at least 1, got {self.segment}")
         takes, ranges = normalise_exclusions(self.exclude_takes, self.exclude_ranges)
         object.__setattr__(self, "exclude_takes", takes)
         object.__setattr__(self, "exclude_ranges", ranges)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> PairsConfig:
+        """Inverse of :meth:`to_dict` (also of earlier versions' ``step``); unknown options raise
+        :class:`~gesturekit.errors.ConfigError`."""
+        if isinstance(d, Mapping) and "step" in d and "segment" not in d:
+            d = {("segment" if name == "step" else name): value for name, value in d.items()}
+        return super().from_dict(d)
 
 
 @dataclass
@@ -222,9 +231,10 @@ def make_training_pairs(
         for j, w in enumerate(idx):
             own = (clip_take[:, None] == o_take[w]) & (clip_frame >= o_start[w]) & (clip_frame < o_start[w] + L)
             np.logical_and(allowed, ~own, out=masks[j])
-        n_steps = -(-L // config.step)
+        n_steps = -(-L // config.segment)
         configs = [
-            SearchConfig(k=int(k_all[w]), step=config.step, topk=1, init_pose=P0[w], mask_rule="all") for w in idx
+            SearchConfig(k=int(k_all[w]), segment=config.segment, record=1, init_pose=P0[w], mask_rule="all")
+            for w in idx
         ]
         with collect_warnings():
             # a relaxed step could use the window's own frames: such windows are dropped below
@@ -232,7 +242,7 @@ def make_training_pairs(
                 [np.asarray(ov["F"][w]) for w in idx],
                 configs=configs,
                 masks=masks,
-                step_masks=[np.full(n_steps, j, np.int64) for j in range(idx.size)],
+                step_mask_indices=[np.full(n_steps, j, np.int64) for j in range(idx.size)],
                 exclude=held if held.any() else None,
             )
         for j, res in enumerate(results):

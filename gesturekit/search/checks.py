@@ -7,7 +7,7 @@ the problem; the normalised inputs come back as C-contiguous arrays.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from types import SimpleNamespace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -15,16 +15,46 @@ from ..errors import ConfigError
 from .exact import MAX_ABS, compiled
 from .types import SearchConfig
 
-__all__ = ["validate", "validate_db", "validate_call", "check_segment", "checked_sqnorms"]
+__all__ = ["CheckedCall", "validate", "validate_db", "validate_call", "check_segment", "checked_sqnorms"]
 
 
 def check_segment(n: int, clip_frames: int) -> None:
     """Refuse a segment length N (frames per step, already a positive integer) longer than a clip."""
     if n > clip_frames:
-        raise ConfigError(f"step {n} is longer than a database clip ({clip_frames} frames)")
+        raise ConfigError(f"segment N = {n} is longer than a database clip ({clip_frames} frames)")
 
 
-def validate_db(P, F, valid):
+@dataclass
+class CheckedCall:
+    """One search's inputs after :func:`validate_call`: C-contiguous arrays of the checked dtypes.
+
+    Attributes
+    ----------
+    query : np.ndarray, shape (T_out, A), float32
+    config : SearchConfig
+    masks : np.ndarray, shape (n_masks, M, T), bool, or None
+    step_mask_index : np.ndarray, shape (n_steps,), int64, or None
+        Per step, the index into ``masks`` (-1: unconstrained).
+    exclude : np.ndarray, shape (M, T), bool, or None
+    n_steps : int
+    P, F, valid : np.ndarray or None
+        The database's features and valid frames, set by :func:`validate` (not by :func:`validate_call`).
+    """
+
+    query: np.ndarray
+    config: SearchConfig
+    masks: np.ndarray | None
+    step_mask_index: np.ndarray | None
+    exclude: np.ndarray | None
+    n_steps: int
+    P: np.ndarray | None = None
+    F: np.ndarray | None = None
+    valid: np.ndarray | None = None
+
+
+def validate_db(P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The database's pose features (M, T, D), audio features (M, T, A) and valid frames (M, T) checked
+    for shape and dtype, as C-contiguous float32, float32 and bool arrays."""
     P = np.ascontiguousarray(P, dtype=np.float32)
     F = np.ascontiguousarray(F, dtype=np.float32)
     valid = np.ascontiguousarray(valid)
@@ -39,7 +69,21 @@ def validate_db(P, F, valid):
     return P, F, valid
 
 
-def validate_call(shape, query, config, masks, step_mask, exclude):
+def validate_call(
+    shape: tuple[int, int, int, int],
+    query: np.ndarray,
+    config: SearchConfig | None,
+    masks: np.ndarray | None,
+    step_mask_index: np.ndarray | None,
+    exclude: np.ndarray | None,
+) -> CheckedCall:
+    """One search's inputs checked against a database of ``shape = (M, T, D, A)``.
+
+    Raises
+    ------
+    ConfigError
+        A wrong shape, dtype or value, naming the input.
+    """
     M, T, D, A = shape
     config = SearchConfig() if config is None else config
     if not isinstance(config, SearchConfig):
@@ -51,7 +95,7 @@ def validate_call(shape, query, config, masks, step_mask, exclude):
         raise ConfigError("query audio features contain NaN or infinite values")
     if np.abs(query).max() > MAX_ABS:
         raise ConfigError(f"query audio features exceed {MAX_ABS:g} in magnitude (are they z-scored?)")
-    N = config.step
+    N = config.segment
     check_segment(N, T)
     if not isinstance(config.init_pose, str):
         if len(config.init_pose) != D:
@@ -65,18 +109,18 @@ def validate_call(shape, query, config, masks, step_mask, exclude):
             raise ConfigError(
                 f"masks must be a bool array of shape (n_masks, {M}, {T}), got {masks.dtype} {masks.shape}"
             )
-    if step_mask is not None:
-        step_mask = np.asarray(step_mask)
-        if step_mask.shape != (n_steps,) or step_mask.dtype.kind not in "iu":
+    if step_mask_index is not None:
+        index = np.asarray(step_mask_index)
+        if index.shape != (n_steps,) or index.dtype.kind not in "iu":
             raise ConfigError(
-                f"step_mask must be {n_steps} integers (one per step of {N} frames), got {step_mask.shape}"
+                f"step_mask_index must be {n_steps} integers (one per step of {N} frames), got {index.shape}"
             )
         n_masks = 0 if masks is None else masks.shape[0]
-        if step_mask.size and (step_mask.min() < -1 or step_mask.max() >= n_masks):
-            raise ConfigError(f"step_mask entries must be -1 or an index below {n_masks} (the number of masks)")
-        step_mask = step_mask.astype(np.int64)
+        if index.size and (index.min() < -1 or index.max() >= n_masks):
+            raise ConfigError(f"step_mask_index entries must be -1 or an index below {n_masks} (the number of masks)")
+        step_mask_index = index.astype(np.int64)
     elif masks is not None:
-        raise ConfigError("masks were given without step_mask (which mask each step uses)")
+        raise ConfigError("masks were given without step_mask_index (which mask each step uses)")
     if exclude is not None:
         exclude = np.ascontiguousarray(exclude)
         if exclude.shape != (M, T) or exclude.dtype != bool:
@@ -88,18 +132,27 @@ def validate_call(shape, query, config, masks, step_mask, exclude):
             raise ConfigError(f"pin at step {i}: window (clip {m}, start {s}) of {N} frames is outside the database")
         if exclude is not None and exclude[m, s : s + N].any():
             raise ConfigError(f"pin at step {i}: window (clip {m}, start {s}) contains excluded frames")
-    return SimpleNamespace(
-        query=query, config=config, masks=masks, step_mask=step_mask, exclude=exclude, n_steps=n_steps
+    return CheckedCall(
+        query=query, config=config, masks=masks, step_mask_index=step_mask_index, exclude=exclude, n_steps=n_steps
     )
 
 
-def validate(P, F, valid, query, config, masks, step_mask, exclude):
+def validate(
+    P: np.ndarray,
+    F: np.ndarray,
+    valid: np.ndarray,
+    query: np.ndarray,
+    config: SearchConfig | None,
+    masks: np.ndarray | None,
+    step_mask_index: np.ndarray | None,
+    exclude: np.ndarray | None,
+) -> CheckedCall:
     """Shared input checks of the fast and the reference search; returns the normalised inputs."""
     P, F, valid = validate_db(P, F, valid)
     M, T = valid.shape
     checked_sqnorms(P.reshape(M * T, -1), "pose")  # the values, as SearchIndex checks them
     checked_sqnorms(F.reshape(M * T, -1), "audio")
-    call = validate_call((*P.shape, F.shape[2]), query, config, masks, step_mask, exclude)
+    call = validate_call((*P.shape, F.shape[2]), query, config, masks, step_mask_index, exclude)
     call.P, call.F, call.valid = P, F, valid
     return call
 

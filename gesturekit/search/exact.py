@@ -4,16 +4,26 @@
 :mod:`gesturekit.search.reference` (float64, summed left to right) for many rows
 at once, bit for bit. The fast search estimates distances in float32 and
 re-checks every near-tie with these; the bounds below say how far an estimate
-may be from the exact value (see :mod:`gesturekit.search.index`).
+may be from the exact value (see :mod:`gesturekit.search.index`); :func:`reduce_chunk`
+finds each clip's least estimate and whether it is decisive under those bounds.
 """
 
 from __future__ import annotations
 
 import functools
+from types import ModuleType
 
 import numpy as np
 
-__all__ = ["exact_pose_sqdist", "exact_cosine_distance", "pose_err_factor", "audio_err", "compiled", "MAX_ABS"]
+__all__ = [
+    "exact_pose_sqdist",
+    "exact_cosine_distance",
+    "pose_err_factor",
+    "audio_err",
+    "compiled",
+    "reduce_chunk",
+    "MAX_ABS",
+]
 
 U32 = 2.0**-24
 #: Absolute slack for float32 underflow in products.
@@ -84,8 +94,57 @@ def exact_cosine_distance(rows: np.ndarray, f: np.ndarray) -> np.ndarray:
 
 
 @functools.cache
-def compiled():
+def compiled() -> ModuleType:
     """The compiled loops of the search (:mod:`gesturekit.search.kernels`), imported on first use."""
     from . import kernels  # numba is heavy: imported when a search first runs
 
     return kernels
+
+
+def reduce_chunk(
+    G3: np.ndarray, bias: np.ndarray, nq: np.ndarray, npmax: np.ndarray, c_err: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per clip and query of a chunk: the float32 argmin and minimum of the estimates
+    ``A = G3 + bias`` over the clip's starts, and whether that minimum is not decisive:
+    another start within twice the error bound of it, or a minimum that may be an exact zero
+    (the scan of :class:`~gesturekit.search.index.SearchIndex`, chunk by chunk of clips).
+
+    Parameters
+    ----------
+    G3 : (nc, T, b) float32
+        ``-2 q.p`` per clip, start and query (a view; may be strided). With one query
+        it is overwritten with ``A``.
+    bias : (nc, T) float32
+        ``|p|^2``, or +inf where the start is not admissible.
+    nq : (b,) float64
+        ``|q|^2`` per query.
+    npmax : (nc,) float64
+        Largest ``|p|^2`` per clip.
+    c_err : float
+        :func:`pose_err_factor` of the pose dimension.
+
+    Returns
+    -------
+    s0 : (nc, b) int64, amin : (nc, b) float32, undecided : (nc, b) bool
+    """
+    nc, T, b = G3.shape
+    if b > 1:  # several queries: numpy's reductions along the strided axis are slow
+        s0 = np.empty((nc, b), np.int64)
+        amin = np.empty((nc, b), np.float32)
+        undecided = np.empty((nc, b), bool)
+        compiled().reduce_many(G3, bias, nq, npmax, c_err, TINY, s0, amin, undecided)
+        return s0, amin, undecided
+    A = G3[:, :, 0]
+    A += bias
+    A = G3[:, :, 0]
+    s0 = A.argmin(axis=1)
+    amin = np.take_along_axis(A, s0[:, None], axis=1)[:, 0]
+    err = c_err * (npmax + nq[0]) + TINY
+    am64 = amin.astype(np.float64)
+    finite = np.isfinite(amin)
+    with np.errstate(invalid="ignore"):
+        thr = np.where(finite, am64 + 2.0 * err, -np.inf).astype(np.float32)
+    thr = np.nextafter(thr, np.float32(np.inf))  # round the float32 threshold up
+    count = np.count_nonzero(A <= thr[:, None], axis=1)
+    undecided = finite & ((count > 1) | (am64 + nq[0] <= err))
+    return s0[:, None], amin[:, None], undecided[:, None]

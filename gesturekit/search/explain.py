@@ -18,6 +18,7 @@ its :class:`~gesturekit.search.plan.SearchPlan`. The figures that draw it are in
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,11 @@ from .checks import check_segment
 from .exact import exact_cosine_distance, exact_pose_sqdist
 from .plan import SearchPlan
 from .types import SearchConfig, SearchResult
+
+if TYPE_CHECKING:  # named in annotations only: pandas is imported where a table is made
+    import pandas as pd
+
+    from ..database import MatchingDatabase
 
 __all__ = ["StepExplanation", "explain_step", "plan_step_inputs", "explain_plan_step"]
 
@@ -65,7 +71,7 @@ class StepExplanation:
         The control admitted no window and was dropped, as the search does.
     """
 
-    table: pd.DataFrame  # noqa: F821
+    table: pd.DataFrame
     clip: int
     start: int
     position: int
@@ -82,7 +88,7 @@ class StepExplanation:
         """Clips with an admissible window (the rest drop out of this step)."""
         return int(np.count_nonzero(self.table["start"].to_numpy() >= 0))
 
-    def ranking(self):
+    def ranking(self) -> pd.DataFrame:
         """The surviving clips in combined-rank order (best first), as a DataFrame."""
         t = self.table[self.table["start"] >= 0]
         return t.sort_values("position").reset_index(drop=True)
@@ -113,7 +119,7 @@ def _nearest(P, pose, ok) -> tuple[np.ndarray, np.ndarray]:
 
 
 def explain_step(
-    db,
+    db: MatchingDatabase,
     query_features: np.ndarray,
     pose: np.ndarray,
     *,
@@ -171,12 +177,12 @@ def explain_step(
         raise ConfigError(f"pose must have {P.shape[-1]} values, got shape {pose.shape}")
     if not 0 <= int(t) < q.shape[0]:
         raise ConfigError(f"t must be in 0..{q.shape[0] - 1}, got {t}")
-    options = SearchConfig(k=k, step=segment, mask_rule=mask_rule)  # checks them as the search does
-    check_segment(options.step, T)
+    options = SearchConfig(k=k, segment=segment, mask_rule=mask_rule)  # checks them as the search does
+    check_segment(options.segment, T)
     for name, arr in (("mask", mask), ("exclude", exclude)):
         if arr is not None and np.shape(arr) != (M, T):
             raise ConfigError(f"{name} must have shape ({M}, {T}), got {np.shape(arr)}")
-    t, n, k = int(t), options.step, options.k
+    t, n, k = int(t), options.segment, options.k
     exclude = None if exclude is None else np.asarray(exclude, dtype=bool)
     f_t = q[t]
 
@@ -283,7 +289,7 @@ def plan_step_inputs(plan: SearchPlan, result: SearchResult, pose_features: np.n
     }
 
 
-def explain_plan_step(db, plan: SearchPlan, result: SearchResult, step: int) -> StepExplanation:
+def explain_plan_step(db: MatchingDatabase, plan: SearchPlan, result: SearchResult, step: int) -> StepExplanation:
     """:func:`explain_step` for step ``step`` of a finished search (see :func:`plan_step_inputs`).
 
     A pinned step is explained by the search's rule; its actual window is the pin

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -42,7 +43,7 @@ import numpy as np
 from ..errors import ConfigError, warn
 from .admissible import base_starts, control_starts
 from .checks import checked_sqnorms, validate_call, validate_db
-from .exact import TINY, audio_err, compiled, pose_err_factor
+from .exact import TINY, audio_err, compiled, pose_err_factor, reduce_chunk
 from .threads import matrix_product, single_threaded_blas, worker_count
 from .types import CANDIDATE_FIELDS, SearchConfig, SearchResult, describe_steps
 
@@ -79,52 +80,6 @@ def _initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
     return order, prefix
 
 
-def _reduce_chunk(G3, bias, nq, npmax, c_err):
-    """Per clip and query of a chunk: the float32 argmin and minimum of the estimates
-    ``A = G3 + bias`` over the clip's starts, and whether that minimum is not decisive:
-    another start within twice the error bound of it, or a minimum that may be an exact zero.
-
-    Parameters
-    ----------
-    G3 : (nc, T, b) float32
-        ``-2 q.p`` per clip, start and query (a view; may be strided). With one query
-        it is overwritten with ``A``.
-    bias : (nc, T) float32
-        ``|p|^2``, or +inf where the start is not admissible.
-    nq : (b,) float64
-        ``|q|^2`` per query.
-    npmax : (nc,) float64
-        Largest ``|p|^2`` per clip.
-    c_err : float
-        :func:`pose_err_factor` of the pose dimension.
-
-    Returns
-    -------
-    s0 : (nc, b) int64, amin : (nc, b) float32, undecided : (nc, b) bool
-    """
-    nc, T, b = G3.shape
-    if b > 1:  # several queries: numpy's reductions along the strided axis are slow
-        s0 = np.empty((nc, b), np.int64)
-        amin = np.empty((nc, b), np.float32)
-        undecided = np.empty((nc, b), bool)
-        compiled().reduce_many(G3, bias, nq, npmax, c_err, TINY, s0, amin, undecided)
-        return s0, amin, undecided
-    A = G3[:, :, 0]
-    A += bias
-    A = G3[:, :, 0]
-    s0 = A.argmin(axis=1)
-    amin = np.take_along_axis(A, s0[:, None], axis=1)[:, 0]
-    err = c_err * (npmax + nq[0]) + TINY
-    am64 = amin.astype(np.float64)
-    finite = np.isfinite(amin)
-    with np.errstate(invalid="ignore"):
-        thr = np.where(finite, am64 + 2.0 * err, -np.inf).astype(np.float32)
-    thr = np.nextafter(thr, np.float32(np.inf))  # round the float32 threshold up
-    count = np.count_nonzero(A <= thr[:, None], axis=1)
-    undecided = finite & ((count > 1) | (am64 + nq[0] <= err))
-    return s0[:, None], amin[:, None], undecided[:, None]
-
-
 class SearchIndex:
     """A database prepared for fast exact search (norms and per-clip bounds computed once).
 
@@ -144,7 +99,7 @@ class SearchIndex:
     of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
     """
 
-    def __init__(self, P, F, valid):
+    def __init__(self, P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> None:
         self.P, self.F, self.valid = validate_db(P, F, valid)
         M, T, D = self.P.shape
         self.shape = (M, T, D, self.F.shape[2])
@@ -305,7 +260,7 @@ class SearchIndex:
             product(self._P3[c0:c1, :L], W, G3)
             for bias, j0, j1 in ranges:
                 bias2 = bias[r0:r1].reshape(nc, T)[:, :L]
-                s0c, amc, und = _reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
+                s0c, amc, und = reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
                 s0[c0:c1, j0:j1] = s0c
                 amin[c0:c1, j0:j1] = amc
                 compiled().audio_at(
@@ -459,13 +414,28 @@ class SearchIndex:
     # -- public ---------------------------------------------------------------------------------
 
     def search(
-        self, query, *, config: SearchConfig | None = None, masks=None, step_mask=None, exclude=None
+        self,
+        query: np.ndarray,
+        *,
+        config: SearchConfig | None = None,
+        masks: np.ndarray | None = None,
+        step_mask_index: np.ndarray | None = None,
+        exclude: np.ndarray | None = None,
     ) -> SearchResult:
         """Run Algorithm 1 for one query; see :func:`search` for the parameters."""
-        return self.search_batch([query], configs=[config], masks=masks, step_masks=[step_mask], exclude=exclude)[0]
+        return self.search_batch(
+            [query], configs=[config], masks=masks, step_mask_indices=[step_mask_index], exclude=exclude
+        )[0]
 
     def search_batch(
-        self, queries, *, configs=None, masks=None, step_masks=None, exclude=None, fps: float | None = None
+        self,
+        queries: Sequence[np.ndarray],
+        *,
+        configs: SearchConfig | Sequence[SearchConfig | None] | None = None,
+        masks: np.ndarray | None = None,
+        step_mask_indices: Sequence[np.ndarray | None] | None = None,
+        exclude: np.ndarray | None = None,
+        fps: float | None = None,
     ) -> list[SearchResult]:
         """Run Algorithm 1 for several queries with one scan of the database per step.
 
@@ -477,7 +447,7 @@ class SearchIndex:
             One for all, or one per query (step length, k, pins ... may differ).
         masks : np.ndarray, shape (n_masks, M, T), bool, optional
             Control masks shared by the queries.
-        step_masks : sequence of (np.ndarray of shape (n_steps_b,), int, or None), optional
+        step_mask_indices : sequence of (np.ndarray of shape (n_steps_b,), int, or None), optional
             Per query, the mask index of each step (-1: no control).
         exclude : np.ndarray, shape (M, T), bool, optional
             Frames no query may use.
@@ -503,14 +473,15 @@ class SearchIndex:
         B = len(queries)
         if B == 0:
             return []
-        if configs is None or isinstance(configs, SearchConfig):
-            configs = [configs] * B
-        if step_masks is None:
-            step_masks = [None] * B
-        configs, step_masks = list(configs), list(step_masks)
-        if len(configs) != B or len(step_masks) != B:
-            raise ConfigError(f"{B} queries need {B} configs and step masks, got {len(configs)} and {len(step_masks)}")
-        calls = [validate_call(self.shape, q, c, masks, sm, exclude) for q, c, sm in zip(queries, configs, step_masks)]
+        per_query: list[SearchConfig | None] = (
+            [configs] * B if configs is None or isinstance(configs, SearchConfig) else list(configs)
+        )
+        indices = [None] * B if step_mask_indices is None else list(step_mask_indices)
+        if len(per_query) != B or len(indices) != B:
+            raise ConfigError(
+                f"{B} queries need {B} configs and step mask indices, got {len(per_query)} and {len(indices)}"
+            )
+        calls = [validate_call(self.shape, q, c, masks, sm, exclude) for q, c, sm in zip(queries, per_query, indices)]
         masks = calls[0].masks
         exclude = calls[0].exclude
         M, T, D, _ = self.shape
@@ -518,8 +489,8 @@ class SearchIndex:
 
         def step_key(b, i, relaxed=False):
             c = calls[b]
-            j = -1 if (relaxed or c.step_mask is None) else int(c.step_mask[i])
-            return self._admissible(cache, c.config.step, c.config.mask_rule, j, masks, exclude)
+            j = -1 if (relaxed or c.step_mask_index is None) else int(c.step_mask_index[i])
+            return self._admissible(cache, c.config.segment, c.config.mask_rule, j, masks, exclude)
 
         results, poses = [], np.empty((B, D), np.float32)
         for b, c in enumerate(calls):
@@ -577,7 +548,7 @@ class SearchIndex:
 
         for r in results:
             if r.relaxed.any():
-                where = describe_steps(np.flatnonzero(r.relaxed), step=r.config.step, fps=fps)
+                where = describe_steps(np.flatnonzero(r.relaxed), segment=r.config.segment, fps=fps)
                 warn(f"control relaxed at {where}: no database window satisfies it", stacklevel=3)
         return results
 
@@ -589,7 +560,7 @@ class SearchIndex:
         """
         run = map if pool is None or len(active) < 4 else pool.map
         biases = [self._bias(cache, keys[b]) for b in active]
-        fq = np.stack([calls[b].query[i * calls[b].config.step] for b in active])
+        fq = np.stack([calls[b].query[i * calls[b].config.segment] for b in active])
         s0, amin, nq, undecided, (av, inexact) = self._scan(
             poses[active], biases, fq, cache.setdefault("scratch", {}), pool
         )
@@ -605,7 +576,7 @@ class SearchIndex:
     def _record(self, res, call, i, d, poses, b):
         """Write step ``i``'s table and choice (the k-th, or the pin) into ``res``; advance ``p_{t-1}``."""
         cfg = call.config
-        N = cfg.step
+        N = cfg.segment
         if d is None and i not in cfg.pins:
             raise ConfigError(
                 f"step {i}: no database window is admissible (valid start, {N} frames inside the clip, "
@@ -636,7 +607,15 @@ class SearchIndex:
 
 
 def search(
-    P, F, valid, query, *, config: SearchConfig | None = None, masks=None, step_mask=None, exclude=None
+    P: np.ndarray,
+    F: np.ndarray,
+    valid: np.ndarray,
+    query: np.ndarray,
+    *,
+    config: SearchConfig | None = None,
+    masks: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
+    exclude: np.ndarray | None = None,
 ) -> SearchResult:
     """Algorithm 1: the k-NN motion search for one speech query.
 
@@ -654,7 +633,7 @@ def search(
         Defaults: k = 0, N = 8, 10 candidates recorded, random initial pose with seed 0.
     masks : np.ndarray, shape (n_masks, M, T), bool, optional
         Control masks: which database frames may be used.
-    step_mask : np.ndarray, shape (n_steps,), int, optional
+    step_mask_index : np.ndarray, shape (n_steps,), int, optional
         Per step (``n_steps = ceil(T_out / N)``), the index into ``masks``, -1 for no control.
     exclude : np.ndarray, shape (M, T), bool, optional
         Frames never to use (held-out takes); a window containing one is inadmissible.
@@ -678,19 +657,29 @@ def search(
     -----
     Builds a :class:`SearchIndex` on every call; keep one to search the same database repeatedly.
     """
-    return SearchIndex(P, F, valid).search(query, config=config, masks=masks, step_mask=step_mask, exclude=exclude)
+    return SearchIndex(P, F, valid).search(
+        query, config=config, masks=masks, step_mask_index=step_mask_index, exclude=exclude
+    )
 
 
 def search_batch(
-    P, F, valid, queries, *, configs=None, masks=None, step_masks=None, exclude=None
+    P: np.ndarray,
+    F: np.ndarray,
+    valid: np.ndarray,
+    queries: Sequence[np.ndarray],
+    *,
+    configs: SearchConfig | Sequence[SearchConfig | None] | None = None,
+    masks: np.ndarray | None = None,
+    step_mask_indices: Sequence[np.ndarray | None] | None = None,
+    exclude: np.ndarray | None = None,
 ) -> list[SearchResult]:
     """Algorithm 1 for several queries with one scan of the database per step.
 
     Parameters are those of :func:`search`, with ``queries`` a sequence of query
     arrays, ``configs`` one :class:`SearchConfig` or one per query, and
-    ``step_masks`` one step mask (or None) per query. Returns one
+    ``step_mask_indices`` one step mask index (or None) per query. Returns one
     :class:`SearchResult` per query, identical to separate :func:`search` calls.
     """
     return SearchIndex(P, F, valid).search_batch(
-        queries, configs=configs, masks=masks, step_masks=step_masks, exclude=exclude
+        queries, configs=configs, masks=masks, step_mask_indices=step_mask_indices, exclude=exclude
     )

@@ -21,8 +21,18 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
-def reduce_many(products, bias, q_sqnorm, clip_max_sqnorm, err_factor, tiny, best_start, best_est, undecided):
-    """:func:`gesturekit.search.index._reduce_chunk` for several queries, one pass per clip.
+def reduce_many(
+    products: np.ndarray,
+    bias: np.ndarray,
+    q_sqnorm: np.ndarray,
+    clip_max_sqnorm: np.ndarray,
+    err_factor: float,
+    tiny: float,
+    best_start: np.ndarray,
+    best_est: np.ndarray,
+    undecided: np.ndarray,
+) -> None:
+    """:func:`gesturekit.search.exact.reduce_chunk` for several queries, one pass per clip.
 
     Parameters
     ----------
@@ -79,7 +89,7 @@ def reduce_many(products, bias, q_sqnorm, clip_max_sqnorm, err_factor, tiny, bes
 
 # float32 products in any order (reassociation, FMA, SIMD lanes): the pose error bound allows it
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
-def dot32(row, query):
+def dot32(row: np.ndarray, query: np.ndarray) -> float:
     """``row . query`` in float32, summed in any order (the pose error bound allows it)."""
     acc = np.float32(0.0)
     for j in range(row.shape[0]):
@@ -89,24 +99,24 @@ def dot32(row, query):
 
 @numba.njit(cache=True, nogil=True)
 def scan_one(
-    poses,
-    query_pose,
-    bias,
-    q_sqnorm,
-    clip_max_sqnorm,
-    err_factor,
-    tiny,
-    est,
-    best_start,
-    best_est,
-    undecided,
-    audio,
-    audio_sqnorms,
-    query_audio,
-    query_audio_sqnorm,
-    audio_est,
-    audio_inexact,
-):
+    poses: np.ndarray,
+    query_pose: np.ndarray,
+    bias: np.ndarray,
+    q_sqnorm: float,
+    clip_max_sqnorm: np.ndarray,
+    err_factor: float,
+    tiny: float,
+    est: np.ndarray,
+    best_start: np.ndarray,
+    best_est: np.ndarray,
+    undecided: np.ndarray,
+    audio: np.ndarray,
+    audio_sqnorms: np.ndarray,
+    query_audio: np.ndarray,
+    query_audio_sqnorm: float,
+    audio_est: np.ndarray,
+    audio_inexact: np.ndarray,
+) -> None:
     """The scan of one query, one pass per clip: estimates, reductions and the audio estimate.
 
     Parameters
@@ -176,7 +186,7 @@ def scan_one(
 
 
 @numba.njit(cache=True, nogil=True)
-def admissible_ends(bias):
+def admissible_ends(bias: np.ndarray) -> np.ndarray:
     """Per clip, one past its last admissible start (0: none); ``bias`` (M, T) is +inf where not admissible."""
     M, T = bias.shape
     ends = np.zeros(M, np.int64)
@@ -189,7 +199,7 @@ def admissible_ends(bias):
 
 
 @numba.njit(cache=True, nogil=True)
-def row_stats(rows, sqnorms):
+def row_stats(rows: np.ndarray, sqnorms: np.ndarray) -> tuple[bool, float]:
     """Float64 squared norms of ``rows`` (n, d) into ``sqnorms`` (n,).
 
     Returns (whether all values are finite, the largest magnitude): one pass for validation and norms.
@@ -209,7 +219,16 @@ def row_stats(rows, sqnorms):
 
 
 @numba.njit(cache=True, nogil=True)
-def prefix_groups(est, err, order, n_sorted, lo, hi, scratch_lo, scratch_hi):
+def prefix_groups(
+    est: np.ndarray,
+    err: np.ndarray,
+    order: np.ndarray,
+    n_sorted: int,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    scratch_lo: np.ndarray,
+    scratch_hi: np.ndarray,
+) -> int:
     """Groups of near-equal estimates over the sorted prefix of an order.
 
     Each ``est[k]`` lies within ``err[k]`` of its exact value. ``order`` lists the elements,
@@ -255,7 +274,16 @@ def prefix_groups(est, err, order, n_sorted, lo, hi, scratch_lo, scratch_hi):
 
 
 @numba.njit(cache=True, nogil=True)
-def audio_at(audio, audio_sqnorms, best_start, best_est, query_audio, query_audio_sqnorm, audio_est, audio_inexact):
+def audio_at(
+    audio: np.ndarray,
+    audio_sqnorms: np.ndarray,
+    best_start: np.ndarray,
+    best_est: np.ndarray,
+    query_audio: np.ndarray,
+    query_audio_sqnorm: np.ndarray,
+    audio_est: np.ndarray,
+    audio_inexact: np.ndarray,
+) -> None:
     """The audio estimates at each clip's best start, for several queries.
 
     ``audio`` (nc, T, A) and ``audio_sqnorms`` (nc, T) of the clips; ``best_start``,
@@ -282,7 +310,7 @@ def audio_at(audio, audio_sqnorms, best_start, best_est, query_audio, query_audi
 
 
 @numba.njit(cache=True, nogil=True)
-def pose_d2(poses, clip, start, query_pose):
+def pose_d2(poses: np.ndarray, clip: int, start: int, query_pose: np.ndarray) -> float:
     """Exact squared distance of ``poses[clip, start]`` to ``query_pose`` (float64, left to right)."""
     acc = 0.0
     for j in range(query_pose.shape[0]):
@@ -292,7 +320,7 @@ def pose_d2(poses, clip, start, query_pose):
 
 
 @numba.njit(cache=True, nogil=True)
-def sq64(x):
+def sq64(x: np.ndarray) -> float:
     """Exact squared norm of ``x`` (float64, left to right)."""
     acc = 0.0
     for j in range(x.shape[0]):
@@ -302,7 +330,7 @@ def sq64(x):
 
 
 @numba.njit(cache=True, nogil=True)
-def cos_d(audio, clip, start, query_audio, query_sqnorm):
+def cos_d(audio: np.ndarray, clip: int, start: int, query_audio: np.ndarray, query_sqnorm: float) -> float:
     """Exact cosine distance of ``audio[clip, start]`` to ``query_audio`` (squared norm ``query_sqnorm``)."""
     dot = 0.0
     sqnorm = 0.0
@@ -316,7 +344,9 @@ def cos_d(audio, clip, start, query_audio, query_sqnorm):
 
 
 @numba.njit(cache=True, nogil=True)
-def resolve_clip(row_est, clip, q_sqnorm, err, poses, query_pose):
+def resolve_clip(
+    row_est: np.ndarray, clip: int, q_sqnorm: float, err: float, poses: np.ndarray, query_pose: np.ndarray
+) -> tuple[int, float]:
     """A clip's nearest admissible non-zero start, exactly, from its row of estimates.
 
     Exact values are computed tier by tier (the starts within ``2 err`` of the smallest
@@ -356,24 +386,24 @@ def resolve_clip(row_est, clip, q_sqnorm, err, poses, query_pose):
 
 @numba.njit(cache=True, nogil=True)
 def survivors(
-    best_start,
-    best_est,
-    q_sqnorm,
-    clip_max_sqnorm,
-    err_factor,
-    tiny,
-    undecided_clips,
-    undecided_rows,
-    poses,
-    query_pose,
-    audio,
-    query_audio,
-    scan_audio_est,
-    scan_audio_inexact,
-    audio_bound,
-    windows,
-    estimates,
-):
+    best_start: np.ndarray,
+    best_est: np.ndarray,
+    q_sqnorm: float,
+    clip_max_sqnorm: np.ndarray,
+    err_factor: float,
+    tiny: float,
+    undecided_clips: np.ndarray,
+    undecided_rows: np.ndarray,
+    poses: np.ndarray,
+    query_pose: np.ndarray,
+    audio: np.ndarray,
+    query_audio: np.ndarray,
+    scan_audio_est: np.ndarray,
+    scan_audio_inexact: np.ndarray,
+    audio_bound: float,
+    windows: np.ndarray,
+    estimates: np.ndarray,
+) -> int:
     """Step 1 of Algorithm 1 for one query after the scan: each clip's nearest admissible start.
 
     Parameters
@@ -436,21 +466,21 @@ def survivors(
 
 @numba.njit(cache=True, nogil=True)
 def settle(
-    est,
-    err,
-    order,
-    lo,
-    hi,
-    candidates,
-    is_pose,
-    clips,
-    start,
-    poses,
-    audio,
-    query_pose,
-    query_audio,
-    query_audio_sqnorm,
-):
+    est: np.ndarray,
+    err: np.ndarray,
+    order: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    candidates: np.ndarray,
+    is_pose: bool,
+    clips: np.ndarray,
+    start: np.ndarray,
+    poses: np.ndarray,
+    audio: np.ndarray,
+    query_pose: np.ndarray,
+    query_audio: np.ndarray,
+    query_audio_sqnorm: float,
+) -> None:
     """Make ``order`` exact inside the group of every element of ``candidates``.
 
     The group's members get exact values (pose ``d2`` when ``is_pose``, else cosine distances;
@@ -485,7 +515,7 @@ def settle(
 
 
 @numba.njit(cache=True, nogil=True)
-def position(order, lo, hi, i):
+def position(order: np.ndarray, lo: np.ndarray, hi: np.ndarray, i: int) -> int:
     """The position of element ``i`` in ``order``: inside its group ``[lo[i], hi[i]]``."""
     for r in range(lo[i], hi[i] + 1):
         if order[r] == i:
@@ -494,7 +524,7 @@ def position(order, lo, hi, i):
 
 
 @numba.njit(cache=True, nogil=True)
-def kth_smallest(x, k):
+def kth_smallest(x: np.ndarray, k: int) -> float:
     """The ``k``-th smallest value of ``x`` (``k >= 1``).
 
     A sorted buffer of the ``k`` smallest so far: one pass, and for the small ``k`` of a
@@ -522,21 +552,21 @@ def kth_smallest(x, k):
 
 @numba.njit(cache=True, nogil=True)
 def rank_top(
-    estimates,
-    pose_order,
-    n_pose_sorted,
-    audio_order,
-    n_audio_sorted,
-    windows,
-    poses,
-    audio,
-    query_pose,
-    query_audio,
-    width,
-    out_i,
-    out_f,
-    work,
-):
+    estimates: np.ndarray,
+    pose_order: np.ndarray,
+    n_pose_sorted: int,
+    audio_order: np.ndarray,
+    n_audio_sorted: int,
+    windows: np.ndarray,
+    poses: np.ndarray,
+    audio: np.ndarray,
+    query_pose: np.ndarray,
+    query_audio: np.ndarray,
+    width: int,
+    out_i: np.ndarray,
+    out_f: np.ndarray,
+    work: np.ndarray,
+) -> int:
     """Steps 2-4 of Algorithm 1 for one query: the top ``width`` of the combined ranking.
 
     Parameters

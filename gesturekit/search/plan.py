@@ -64,7 +64,7 @@ class SearchPlan:
     @property
     def segment(self) -> int:
         """Frames per search step, N."""
-        return self.config.step
+        return self.config.segment
 
     @property
     def n_steps(self) -> int:
@@ -103,7 +103,8 @@ def rest_pose_frame(db: MatchingDatabase) -> tuple[int, int]:
     if not ok.any():
         ok = np.asarray(db.valid)
     score = np.where(ok, height, np.inf)
-    return tuple(int(x) for x in np.unravel_index(int(np.argmin(score)), score.shape))
+    clip, frame = np.unravel_index(int(np.argmin(score)), score.shape)
+    return int(clip), int(frame)
 
 
 def plan_search(db: MatchingDatabase, speech: np.ndarray, config: SynthesisConfig) -> SearchPlan:
@@ -130,10 +131,10 @@ def plan_search(db: MatchingDatabase, speech: np.ndarray, config: SynthesisConfi
     samples = np.asarray(speech, dtype=np.float32)
     n = n_audio_frames(len(samples))
     search = config.search
-    check_segment(search.step, np.shape(db.valid)[1])
+    check_segment(search.segment, np.shape(db.valid)[1])
     query, _ = db.query_features(samples, n_frames=n)
     track = config.control_track
-    masks, index = step_masks(track, np.asarray(db.attributes), db.thresholds, n_frames=n, step=search.step)
+    masks, index = step_masks(track, np.asarray(db.attributes), db.thresholds, n_frames=n, segment=search.segment)
     if config.init == "rest":
         search = replace(search, init_pose=tuple(float(x) for x in db.P[rest_pose_frame(db)]))
     exclude = None

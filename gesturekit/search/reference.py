@@ -65,6 +65,7 @@ from the algorithm as written; these rules follow the algorithm:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -75,7 +76,7 @@ from .types import SearchConfig, SearchResult, describe_steps
 __all__ = ["pose_sqdist", "cosine_distance", "window_admissible", "search_reference"]
 
 
-def pose_sqdist(a, b) -> float:
+def pose_sqdist(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
     """Squared Euclidean distance, exactly as defined for the search.
 
     Parameters
@@ -95,7 +96,7 @@ def pose_sqdist(a, b) -> float:
     return total
 
 
-def cosine_distance(a, b) -> float:
+def cosine_distance(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
     """Cosine distance ``1 - a.b / (|a| |b|)`` of two audio features (A float32 values each),
     exactly as defined for the search: in [0, 2], and 1 when either vector is all zeros."""
     dot = na = nb = 0.0
@@ -109,7 +110,16 @@ def cosine_distance(a, b) -> float:
     return 1.0 - dot / math.sqrt(na * nb)
 
 
-def window_admissible(m, s, n, *, valid, exclude=None, mask=None, rule="ends") -> bool:
+def window_admissible(
+    m: int,
+    s: int,
+    n: int,
+    *,
+    valid: np.ndarray,
+    exclude: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    rule: str = "ends",
+) -> bool:
     """Whether the window of ``n`` frames starting at frame ``s`` of clip ``m`` may be used.
 
     Parameters
@@ -159,15 +169,15 @@ def _nearest_per_clip(P, p_prev, n, *, valid, exclude, mask, rule):
 
 
 def search_reference(
-    P,
-    F,
-    valid,
-    query,
+    P: np.ndarray,
+    F: np.ndarray,
+    valid: np.ndarray,
+    query: np.ndarray,
     *,
     config: SearchConfig | None = None,
-    masks=None,
-    step_mask=None,
-    exclude=None,
+    masks: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
+    exclude: np.ndarray | None = None,
 ) -> SearchResult:
     """Algorithm 1, loop for loop. Same parameters and result as :func:`gesturekit.search.search`.
 
@@ -183,7 +193,7 @@ def search_reference(
         z-scored audio features of the speech to synthesise, 15 fps.
     config : SearchConfig, optional
     masks : np.ndarray, shape (n_masks, M, T), bool, optional
-    step_mask : np.ndarray, shape (n_steps,), int, optional
+    step_mask_index : np.ndarray, shape (n_steps,), int, optional
         Index into ``masks`` per step, -1 for no control.
     exclude : np.ndarray, shape (M, T), bool, optional
 
@@ -191,17 +201,18 @@ def search_reference(
     -------
     SearchResult
     """
-    v = validate(P, F, valid, query, config, masks, step_mask, exclude)
+    v = validate(P, F, valid, query, config, masks, step_mask_index, exclude)
+    assert v.P is not None and v.F is not None and v.valid is not None  # set by validate
     P, F, valid, query, cfg = v.P, v.F, v.valid, v.query, v.config
-    exclude, masks, step_mask = v.exclude, v.masks, v.step_mask
+    exclude, masks, step_mask_index = v.exclude, v.masks, v.step_mask_index
     M, T = valid.shape
-    N, k = cfg.step, cfg.k
-    K = max(cfg.topk, k + 1)
+    N, k = cfg.segment, cfg.k
+    K = cfg.table_width
     T_out = query.shape[0]
     n_steps = -(-T_out // N)
 
     def control(i):
-        j = -1 if step_mask is None else int(step_mask[i])
+        j = -1 if step_mask_index is None else int(step_mask_index[i])
         return None if j < 0 else masks[j]
 
     # p_{-1}
@@ -289,6 +300,7 @@ def search_reference(
 
     if relaxed_steps:
         warn(
-            f"control relaxed at {describe_steps(relaxed_steps, step=N)}: no database window satisfies it", stacklevel=2
+            f"control relaxed at {describe_steps(relaxed_steps, segment=N)}: no database window satisfies it",
+            stacklevel=2,
         )
     return res

@@ -14,6 +14,8 @@ import os
 import sys
 import threading
 import warnings
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +31,15 @@ def worker_count() -> int:
 _WARNINGS_LOCK = threading.Lock()
 
 
-def matrix_product(n_queries: int):
+#: ``product(rows, W, out)``: writes ``rows @ W.T`` into ``out`` (see :func:`matrix_product`).
+MatrixProduct = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
+
+
+def _numpy_product(rows: np.ndarray, W: np.ndarray, out: np.ndarray) -> None:
+    np.matmul(rows, W.T, out=out)
+
+
+def matrix_product(n_queries: int) -> MatrixProduct:
     """``out[:] = rows @ W.T`` for float32 arrays; the fastest routine for the shape on a CPU.
 
     ``rows`` (c, L, D) may be a strided view (the first ``L`` starts of ``c`` clips);
@@ -42,21 +52,17 @@ def matrix_product(n_queries: int):
     product is memory-bound: more threads per product would not read faster, and
     BLAS's idle threads keep spinning and slow down the work that follows.
     """
-    torch = None
-    if n_queries > 1:
-        try:
-            import torch  # optional and heavy: only for batches
-        except ImportError:  # pragma: no cover - torch is a dependency of the refiner
-            torch = None
+    if n_queries <= 1:
+        return _numpy_product
+    try:
+        import torch  # optional and heavy: only for batches
+    except ImportError:  # pragma: no cover - torch is a dependency of the refiner
+        return _numpy_product
     # the error bound assumes true float32 products: torch may be set to use bfloat16/TF32
-    if torch is None or torch.get_float32_matmul_precision() != "highest":
+    if torch.get_float32_matmul_precision() != "highest":
+        return _numpy_product
 
-        def product(rows, W, out):
-            np.matmul(rows, W.T, out=out)
-
-        return product
-
-    def product(rows, W, out):
+    def product(rows: np.ndarray, W: np.ndarray, out: np.ndarray) -> None:
         if rows.flags.writeable:
             a = torch.from_numpy(rows)
         else:  # a read-only (memory-mapped) database is only read here
@@ -70,7 +76,7 @@ def matrix_product(n_queries: int):
 
 
 @functools.cache
-def _blas_controller():
+def _blas_controller() -> Any:
     """threadpoolctl's controller of the loaded BLAS libraries (None without threadpoolctl)."""
     try:
         from threadpoolctl import ThreadpoolController  # comes with scikit-learn (a librosa dependency)
@@ -80,19 +86,19 @@ def _blas_controller():
 
 
 @contextlib.contextmanager
-def single_threaded_blas():
+def single_threaded_blas() -> Iterator[None]:
     """numpy's BLAS, and torch when it is loaded, limited to one thread while a search
     runs (the search runs its own threads); restored afterwards."""
     ctl = _blas_controller()
     limiter = None if ctl is None else ctl.limit(limits=1, user_api="blas")
     torch = sys.modules.get("torch")
     threads = None if torch is None else torch.get_num_threads()
-    if threads is not None:
+    if torch is not None:
         torch.set_num_threads(1)
     try:
         yield
     finally:
         if limiter is not None:
             limiter.restore_original_limits()
-        if threads is not None:
+        if torch is not None and threads is not None:
             torch.set_num_threads(threads)

@@ -8,13 +8,17 @@ window of every step and the table of its best candidates.
 from __future__ import annotations
 
 import numbers
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .._config import config_from_dict, config_to_dict
 from ..errors import ConfigError
+
+if TYPE_CHECKING:  # imported where the candidate table is made
+    import pandas as pd
 
 __all__ = ["SearchConfig", "SearchResult", "CANDIDATE_FIELDS", "describe_steps"]
 
@@ -27,10 +31,13 @@ class SearchConfig:
     ----------
     k : int
         Which candidate of the combined ranking to take (0 = best).
-    step : int
-        Frames per search step, ``N`` (8 in the authors' code).
-    topk : int
+    segment : int
+        Frames per search step, ``N`` (8 in the authors' code): the length of the
+        database segment each step copies. (Saved configurations of earlier
+        versions call it ``step``; :meth:`from_dict` reads both.)
+    record : int
         Candidates per step kept in the record (at least ``k + 1`` are kept).
+        (Earlier versions' ``topk``; :meth:`from_dict` reads both.)
     seed : int
         Seed of the random initial pose.
     init_pose : "random" or sequence of float
@@ -48,15 +55,15 @@ class SearchConfig:
     """
 
     k: int = 0
-    step: int = 8
-    topk: int = 10
+    segment: int = 8
+    record: int = 10
     seed: int = 0
     init_pose: str | tuple[float, ...] = "random"
     mask_rule: str = "ends"
     pins: dict = field(default_factory=dict, hash=False)
 
-    def __post_init__(self):
-        for name, low in (("k", 0), ("step", 1), ("topk", 1), ("seed", 0)):
+    def __post_init__(self) -> None:
+        for name, low in (("k", 0), ("segment", 1), ("record", 1), ("seed", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
                 raise ConfigError(f"SearchConfig.{name} must be an integer >= {low}, got {value!r}")
@@ -99,16 +106,30 @@ class SearchConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> SearchConfig:
-        """Inverse of :meth:`to_dict` (also of earlier versions' ``init``); unknown keys raise :class:`ConfigError`."""
-        d = dict(d)
-        if "init" in d and "init_pose" not in d:
-            d["init_pose"] = d.pop("init")
-        return config_from_dict(cls, d, what="SearchConfig keys")
+        """Inverse of :meth:`to_dict` (also of earlier versions' ``init``, ``step`` and ``topk``);
+        unknown keys raise :class:`ConfigError`."""
+        if not isinstance(d, Mapping):
+            raise ConfigError(f"SearchConfig keys must be a JSON object, got {type(d).__name__}")
+        return config_from_dict(cls, renamed_search_keys(d), what="SearchConfig keys")
 
     @property
     def table_width(self) -> int:
-        """Candidates recorded per step: ``max(topk, k + 1)``, so the chosen one is always among them."""
-        return max(self.topk, self.k + 1)
+        """Candidates recorded per step: ``max(record, k + 1)``, so the chosen one is always among them."""
+        return max(self.record, self.k + 1)
+
+
+#: Search options saved under other names by earlier versions: old key -> current field.
+RENAMED_SEARCH_KEYS = {"init": "init_pose", "step": "segment", "topk": "record"}
+
+
+def renamed_search_keys(d: Mapping[str, Any]) -> dict[str, Any]:
+    """``d`` with the search options earlier versions saved under other names renamed
+    (:data:`RENAMED_SEARCH_KEYS`); a current name given beside its old one wins."""
+    out = dict(d)
+    for old, new in RENAMED_SEARCH_KEYS.items():
+        if old in out and new not in out:
+            out[new] = out.pop(old)
+    return out
 
 
 CANDIDATE_FIELDS = (
@@ -178,17 +199,26 @@ class SearchResult:
     cand_audio_rank: np.ndarray
     cand_combined: np.ndarray
     init_pose: np.ndarray
-    init_frame: tuple
+    init_frame: tuple[int, int]
     config: SearchConfig
 
     @classmethod
-    def empty(cls, n_steps: int, n_frames: int, width: int, *, config, init_pose, init_frame) -> SearchResult:
+    def empty(
+        cls,
+        n_steps: int,
+        n_frames: int,
+        width: int,
+        *,
+        config: SearchConfig,
+        init_pose: np.ndarray | Sequence[float],
+        init_frame: tuple[int, int] | Sequence[int],
+    ) -> SearchResult:
         """A result to fill in: every table entry padded, every flag False."""
 
-        def ints(*shape):
+        def ints(*shape: int) -> np.ndarray:
             return np.full(shape, -1, dtype=np.int64)
 
-        def floats(*shape):
+        def floats(*shape: int) -> np.ndarray:
             return np.full(shape, np.nan, dtype=np.float64)
 
         return cls(
@@ -232,7 +262,7 @@ class SearchResult:
         a, b = self.array_fields(), other.array_fields()
         return all(a[n].shape == b[n].shape and np.array_equal(a[n], b[n], equal_nan=a[n].dtype.kind == "f") for n in a)
 
-    def candidates_frame(self):
+    def candidates_frame(self) -> pd.DataFrame:
         """The candidate record as a pandas DataFrame, one row per (step, position).
 
         Columns: ``step, position, clip, start, pose_dist, audio_dist, pose_rank,
@@ -262,14 +292,14 @@ class SearchResult:
         return df[keep].reset_index(drop=True)
 
 
-def describe_steps(steps, *, step: int, fps: float | None = None, most: int = 3) -> str:
+def describe_steps(steps: Iterable[int], *, segment: int, fps: float | None = None, most: int = 3) -> str:
     """Search steps said briefly: runs of consecutive steps joined, long lists cut short.
 
     Parameters
     ----------
-    steps : sequence of int
-        Step indices (step ``i`` covers output frames ``i * step`` to ``(i + 1) * step``).
-    step : int
+    steps : iterable of int
+        Step indices (step ``i`` covers output frames ``i * segment`` to ``(i + 1) * segment``).
+    segment : int
         Frames per step (N).
     fps : float, optional
         Frame rate of the output; given, the runs are said in seconds.
@@ -281,22 +311,22 @@ def describe_steps(steps, *, step: int, fps: float | None = None, most: int = 3)
     str
         E.g. ``"0.53-4.80 s (8 steps)"`` with ``fps``, ``"steps 1-8"`` without.
     """
-    steps = sorted({int(i) for i in steps})
+    indices = sorted({int(i) for i in steps})
     runs: list[list[int]] = []
-    for i in steps:
+    for i in indices:
         if runs and i == runs[-1][1] + 1:
             runs[-1][1] = i
         else:
             runs.append([i, i])
     if fps is None:
         parts = [f"{a}" if a == b else f"{a}-{b}" for a, b in runs[:most]]
-        head = "step " if len(steps) == 1 else "steps "
+        head = "step " if len(indices) == 1 else "steps "
     else:
-        parts = [f"{a * step / fps:.2f}-{(b + 1) * step / fps:.2f} s" for a, b in runs[:most]]
+        parts = [f"{a * segment / fps:.2f}-{(b + 1) * segment / fps:.2f} s" for a, b in runs[:most]]
         head = ""
     if len(runs) > most:
         parts.append(f"and {len(runs) - most} more stretch{'es' if len(runs) - most > 1 else ''}")
     text = head + ", ".join(parts)
     if fps is not None:
-        text += f" ({len(steps)} step{'s' if len(steps) != 1 else ''})"
+        text += f" ({len(indices)} step{'s' if len(indices) != 1 else ''})"
     return text

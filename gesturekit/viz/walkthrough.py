@@ -152,7 +152,7 @@ def synthesis_table(results: Sequence[SynthesisResult], *, labels: Sequence[str]
     Returns
     -------
     pandas.DataFrame
-        One row per result: ``label``, ``k``, ``step`` (N), ``steps``, ``clips_used``
+        One row per result: ``label``, ``k``, ``segment`` (N), ``steps``, ``clips_used``
         (distinct database clips), ``pose_dist`` and ``audio_dist`` (means over the steps of
         the chosen window's distances, pinned windows outside the record left out),
         ``relaxed_steps``, ``boundary_jump`` (mean joint displacement across the joins of the
@@ -165,21 +165,21 @@ def synthesis_table(results: Sequence[SynthesisResult], *, labels: Sequence[str]
 
     results = list(results)
     if labels is None:
-        labels = [f"k={r.config.k}, N={r.config.step}" for r in results]
+        labels = [f"k={r.config.k}, N={r.config.segment}" for r in results]
     if len(labels) != len(results):
         raise ConfigError(f"synthesis_table got {len(labels)} labels for {len(results)} results")
     rows = []
     for label, r in zip(labels, results):
         s = r.search
         idx = np.flatnonzero(s.position >= 0)
-        N = r.config.step
+        N = r.config.segment
         x = r.motion.positions
         joins = boundary_jumps(x, np.arange(1, s.n_steps) * N)
         rows.append(
             {
                 "label": str(label),
                 "k": r.config.k,
-                "step": N,
+                "segment": N,
                 "steps": s.n_steps,
                 "clips_used": int(np.unique(s.clip).size),
                 "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
@@ -233,7 +233,8 @@ def motion_measures(
     if len(labels) != len(motions):
         raise ConfigError(f"motion_measures got {len(labels)} labels for {len(motions)} motions")
     sr = AUDIO_SR if sr is None else int(sr)
-    onsets = None if audio is None else metrics.audio_onsets(np.asarray(audio, dtype=np.float32), sr=sr)
+    speech = None if audio is None else np.asarray(audio, dtype=np.float32)
+    onsets = None if speech is None else metrics.audio_onsets(speech, sr=sr)
     rows = []
     for label, m in zip(labels, motions):
         x, fps = m.positions, m.fps
@@ -245,8 +246,8 @@ def motion_measures(
             "mean_acceleration": metrics.mean_acceleration(x, fps=fps),
             "mean_jerk": metrics.mean_jerk(x, fps=fps),
         }
-        if onsets is not None:
-            row["beat_consistency"] = metrics.beat_consistency_score(x, audio, fps=fps, sr=sr, onsets=onsets)
+        if speech is not None:
+            row["beat_consistency"] = metrics.beat_consistency_score(x, speech, fps=fps, sr=sr, onsets=onsets)
             row["motion_beats_per_s"] = metrics.motion_beats(x, fps=fps).size / m.duration
         rows.append(row)
     return pd.DataFrame(rows)
