@@ -34,13 +34,12 @@ import os
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
 from .errors import ConfigError, InputFileError, MotionFileError
 
 if TYPE_CHECKING:
     import numpy as np
-    from _typeshed import SupportsRead
 
 __all__ = [
     "Limit",
@@ -334,7 +333,7 @@ def check_bytes(n: float, *, what: str, path: str | os.PathLike[str] | None = No
 
 
 def npy_header(
-    f: SupportsRead[bytes], *, path: str | os.PathLike[str] | None = None, name: str = "npy"
+    f: IO[bytes], *, path: str | os.PathLike[str] | None = None, name: str = "npy"
 ) -> tuple[tuple[int, ...], np.dtype, int]:
     """Shape, dtype and header length of an ``.npy`` stream, read without loading the array.
 
