@@ -178,7 +178,9 @@ def _refiner_choice(given: str | None, db):
 def _cmd_synthesize(args) -> int:
     from ._io import safe_filename
     from .datasets.audio import load_audio
+    from .export.result import save_result_bvh, save_result_npz, save_result_video
     from .outputs import check_output, output_lock, write_errors
+    from .refine import open_refiner
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
     from .workspace import expand_speech, open_database
@@ -223,7 +225,8 @@ def _cmd_synthesize(args) -> int:
         # with --force too: only files gesturekit wrote are replaced, and never a folder
         check_output(p, "file", overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
-    results = synthesize_batch(audios, db=db, config=config, refiner=_refiner_choice(args.refiner, db))
+    refiner = open_refiner(_refiner_choice(args.refiner, db))
+    results = synthesize_batch(audios, db=db, config=config, refiner=refiner)
     with write_errors(out):
         out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     with contextlib.ExitStack() as held:
@@ -234,13 +237,16 @@ def _cmd_synthesize(args) -> int:
             check_output(p, "file", overwrite=args.force, inputs=files)
         for f, stem, res in zip(files, stems, results):
             res.source = f.name
-            res.save_npz(targets[(stem, "npz")], overwrite=args.force)
-            res.save_bvh(targets[(stem, "bvh")], overwrite=args.force)
+            save_result_npz(res, targets[(stem, "npz")], overwrite=args.force)
+            save_result_bvh(res, targets[(stem, "bvh")], overwrite=args.force)
             written = [targets[(stem, "npz")], targets[(stem, "bvh")]]
             if args.video:
                 with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
-                    res.save_video(
-                        targets[(stem, "mp4")], overwrite=args.force, progress=lambda done, total: _advance(bar, done)
+                    save_result_video(
+                        res,
+                        targets[(stem, "mp4")],
+                        overwrite=args.force,
+                        progress=lambda done, total: _advance(bar, done),
                     )
                 written.append(targets[(stem, "mp4")])
             relaxed = res.relaxed_steps
@@ -306,7 +312,7 @@ def _cmd_train_refiner(args) -> int:
             on_step=on_step,
             on_pairs=lambda done, total: _advance(bar("k-NN training pairs", total, "window"), done),
         )
-    from .refine.infer import read_refiner_config
+    from .refine.folder import read_refiner_config
 
     cfg = read_refiner_config(out)
     print(f"refiner    {out}")

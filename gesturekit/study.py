@@ -525,11 +525,11 @@ def make_stimuli(
     from .control import parse_control
     from .evaluate.baselines import (
         SystemUnavailable,
-        load_refiner_for,
         parse_systems,
         refiner_unavailable_reason,
     )
     from .export.video import _check_resolution
+    from .refine import open_refiner
 
     t0 = time.perf_counter()
     systems = parse_systems(systems)
@@ -543,7 +543,7 @@ def make_stimuli(
         reason = refiner_unavailable_reason(refiner)
         if reason:
             raise SystemUnavailable(reason)
-        refiner = load_refiner_for(refiner)
+        refiner = open_refiner(refiner)
     from .outputs import check_output, output_lock
 
     out = Path(out)

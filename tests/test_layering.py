@@ -20,9 +20,10 @@ dependency); only imports under ``if TYPE_CHECKING:`` do not, as they never run.
 module name, so modules that do not exist yet (or any more) cost nothing; a module of
 gesturekit/ that is in no layer fails the test until it is placed.
 
-``PENDING`` lists the imports that ran back up when the map was made: issue 17's refactor
-removes them. The main test fails on any other; ``test_no_pending_imports_left`` fails while
-any of them is still there (expected to fail until then).
+A refiner reaches synthesis as an object (``gesturekit.synthesize.MotionRefiner``), opened from
+its folder above it; results are written by ``gesturekit.export.result``; output folders are
+recognised by their markers (``gesturekit._io.folder_kind``); the demo speaker takes its frame
+count from ``gesturekit.motion``.
 """
 
 from __future__ import annotations
@@ -66,22 +67,6 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("cli/app", ("gesturekit.cli", "gesturekit.__main__", "app")),
 ]
 RANK = {name: i for i, (name, _) in enumerate(LAYERS)}
-
-# Imports running back up when this map was made (importer, imported), on this branch and on the
-# merged layout; issue 17's refactor removes them. Entries for modules that do not exist match nothing.
-PENDING: set[tuple[str, str]] = {
-    # the demo speaker's gestures use the feature layout's frame count
-    ("gesturekit.datasets.synthetic", "gesturekit.features"),
-    # output folders know a database's clip arrays
-    ("gesturekit.outputs", "gesturekit.database"),
-    ("gesturekit.outputs", "gesturekit._database_folder"),
-    # synthesize writes its own files and loads a refiner given as a path
-    ("gesturekit.synthesize", "gesturekit.export.npz"),
-    ("gesturekit.synthesize", "gesturekit.export.bvh"),
-    ("gesturekit.synthesize", "gesturekit.export.video"),
-    ("gesturekit.synthesize", "gesturekit.refine"),
-}
-
 
 def layer_of(module: str) -> str | None:
     best = None
@@ -169,15 +154,9 @@ def test_every_module_has_a_layer():
 
 
 def test_no_import_runs_back_up():
-    bad = violations() - PENDING
+    bad = violations()
     lines = [f"{a} ({layer_of(a)}) imports {b} ({layer_of(b)})" for a, b in sorted(bad)]
     assert not bad, "imports running back up the layers:\n" + "\n".join(lines)
-
-
-@pytest.mark.xfail(strict=False, reason="issue 17: the imports in PENDING are being moved")
-def test_no_pending_imports_left():
-    left = sorted(violations() & PENDING)
-    assert not left, f"still running back up: {left}"
 
 
 def test_the_core_never_imports_streamlit():

@@ -46,7 +46,6 @@ __all__ = [
     "audio_nearest_segments",
     "pose_nearest_segments",
     "refiner_unavailable_reason",
-    "load_refiner_for",
     "run_system",
 ]
 
@@ -358,17 +357,6 @@ def refiner_unavailable_reason(refiner) -> str | None:
     return None
 
 
-def load_refiner_for(refiner):
-    """A refiner given as a path, opened (:func:`gesturekit.refine.load_refiner`); objects pass through."""
-    import os
-
-    if not isinstance(refiner, (str, os.PathLike)):
-        return refiner
-    from ..refine import load_refiner
-
-    return load_refiner(refiner)
-
-
 def run_system(
     system: str,
     *,
@@ -426,7 +414,10 @@ def run_system(
             reason = refiner_unavailable_reason(refiner)
             if reason:
                 raise SystemUnavailable(reason)
-        res = synthesize(audio, db=db, config=config, refiner=refiner if system == "knn+cgan" else None)
+        from ..refine import open_refiner
+
+        opened = open_refiner(refiner) if system == "knn+cgan" else None
+        res = synthesize(audio, db=db, config=config, refiner=opened)
         motion = res.motion
         return SystemOutput(system, motion, np.arange(N, motion.n_frames, N, dtype=np.int64), len(res.relaxed_steps))
     plan = plan_search(db, audio, config)

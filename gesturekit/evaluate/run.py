@@ -45,11 +45,11 @@ from ..control import ControlTrack, Segment, parse_control, parse_time_range
 from ..errors import ConfigError, warn
 from ..features import LAYOUT
 from ..motion import AUDIO_SR, Motion
+from ..refine import open_refiner
 from . import metrics
 from .baselines import (
     SYSTEMS,
     SystemUnavailable,
-    load_refiner_for,
     parse_systems,
     refiner_unavailable_reason,
     run_system,
@@ -458,7 +458,7 @@ def run_evaluation(
             progress(done, total, what)
 
     if "knn+cgan" in systems and refiner is not None and refiner_unavailable_reason(refiner) is None:
-        refiner = load_refiner_for(refiner)  # opened once for both runs
+        refiner = open_refiner(refiner)  # opened once for both runs
     exclude = db.exclusion_mask(takes=ref.exclude_takes, ranges=ref.exclude_ranges)
     model = _fgd_model(db, fgd_model, exclude, notes)
     tick("FGD autoencoder")

@@ -11,6 +11,7 @@ torch is imported by the submodules only, so ``import gesturekit.refine`` stays 
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from ..errors import GestureKitError
 __all__ = [
     "default_refiner_path",
     "load_refiner",
+    "open_refiner",
     "check_layout",
     "check_refiner",
     "trained_on",
@@ -44,6 +46,25 @@ def load_refiner(path=None, *, device: str = "cpu"):
     if path is None or str(path) == "demo":
         path = default_refiner_path()
     return Refiner.load(path, device=device)
+
+
+def open_refiner(refiner):
+    """A refiner to give to synthesis: a folder or ``"demo"`` is loaded (:func:`load_refiner`),
+    a loaded refiner (any object with ``check_database`` and ``refine_motion``) and None pass through.
+
+    The one place where the command line, the app, evaluation and studies turn a refiner they
+    were given into the object :func:`gesturekit.synthesize.synthesize` takes.
+
+    Raises
+    ------
+    MissingDependencyError
+        A folder given, and torch (the ``refiner`` extra) is not installed.
+    InputFileError
+        No refiner folder there, or a damaged one.
+    """
+    if refiner is None or not isinstance(refiner, (str, os.PathLike)):
+        return refiner
+    return load_refiner(refiner)
 
 
 def check_layout(config: dict, db, *, where) -> None:
