@@ -161,11 +161,11 @@ def _parse_holdouts(texts) -> list:
 def _refiner_choice(given: str | None, db):
     """The refiner of ``synthesize``: the one named, none for ``none``, else one trained on ``db``
     (:func:`gesturekit.refine.refiner_for`; the app's default too)."""
-    import importlib.util
+    from ._optional import installed
 
     if given is not None:
         return None if given == "none" else given
-    if importlib.util.find_spec("torch") is None:  # a gesturekit installed without the refiner's torch
+    if not installed("torch"):  # a gesturekit installed without the refiner's torch
         return None
     from .refine import refiner_for
 
@@ -198,6 +198,11 @@ def _cmd_synthesize(args) -> int:
                 "or synthesise them in separate runs"
             )
         first[stem] = f
+    if args.video:  # before the search, so that nothing is written
+        from ._optional import require
+
+        require("pyvista", purpose="--video")
+        require("imageio_ffmpeg", purpose="--video")
     db = open_database(args.db)
     config = SynthesisConfig(
         k=args.k,
@@ -265,6 +270,9 @@ def _cmd_synthesize(args) -> int:
 def _cmd_train_refiner(args) -> int:
     from dataclasses import replace
 
+    from ._optional import require
+
+    require("torch", purpose="train-refiner")
     from .refine.data import PairsConfig
     from .refine.train import preset, train_refiner
     from .workspace import open_database

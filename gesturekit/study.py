@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from ._io import atomic_write
+from ._optional import require
 from .errors import ConfigError, GestureKitError
 from .motion import AUDIO_SR, Motion
 
@@ -358,6 +359,7 @@ def speech_sources(db, *, audio=(), holdouts=()) -> list[StimulusSpeech]:
 
 def stimulus_style():
     """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion)."""
+    require("pyvista", purpose="rendering stimuli")
     from .viz.render import RenderStyle
 
     return RenderStyle(fit_motion=False)
@@ -392,9 +394,9 @@ def _run_jobs(jobs: list[dict], *, workers: int | None, scheduler, progress) -> 
             progress(done, total)
 
     if scheduler is not None:
-        from distributed import Client, as_completed
-
-        client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+        distributed = require("distributed", purpose="rendering on a Dask cluster (a scheduler)")
+        as_completed = distributed.as_completed
+        client = scheduler if isinstance(scheduler, distributed.Client) else distributed.Client(scheduler)
         try:
             futures = client.map(_render_stimulus, jobs, key=[f"stimulus-{j['id']}" for j in jobs], pure=False)
             for fut in as_completed(futures):
@@ -534,6 +536,11 @@ def make_stimuli(
     t0 = time.perf_counter()
     systems = parse_systems(systems)
     width, height = _check_resolution(resolution)
+    # what rendering needs, before the long part (the workers import it again)
+    require("pyvista", purpose="rendering stimuli")
+    require("imageio_ffmpeg", purpose="rendering stimuli")
+    if scheduler is not None and isinstance(scheduler, str):
+        require("distributed", purpose="rendering on a Dask cluster (a scheduler)")
     if not math.isfinite(loudness_lufs):
         # a NaN target would scale every soundtrack to NaN samples
         raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {loudness_lufs!r}")

@@ -2,7 +2,7 @@
 
 From the bottom up (the data's way through the package, issue 17's acceptance)::
 
-    base        errors, _io, _version, _config, limits, paths, outputs, skeleton, motion, control
+    base        errors, _io, _optional, _version, _config, limits, paths, outputs, skeleton, motion, control
     datasets    the readers and the generated demo speaker (gesturekit/datasets/)
     features    audio and pose features, their layout
     database    MatchingDatabase, its folder on disk, the demo database, finding databases
@@ -44,6 +44,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         (
             "gesturekit.errors",
             "gesturekit._io",
+            "gesturekit._optional",
             "gesturekit._version",
             "gesturekit._config",
             "gesturekit.limits",
@@ -67,6 +68,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("cli/app", ("gesturekit.cli", "gesturekit.__main__", "app")),
 ]
 RANK = {name: i for i, (name, _) in enumerate(LAYERS)}
+
 
 def layer_of(module: str) -> str | None:
     best = None

@@ -13,8 +13,8 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import ConfigError, GestureKitWarning
 from gesturekit.export.result import save_result_bvh, save_result_npz
-from gesturekit.search.reference import search_reference
 from gesturekit.motion import Motion
+from gesturekit.search.reference import search_reference
 from gesturekit.skeleton import joint_index
 from gesturekit.synthesize import SynthesisConfig, rest_pose_frame, synthesize, synthesize_batch
 
@@ -219,9 +219,9 @@ def test_a_refiner_is_an_object_and_a_folder_is_opened_above(demo_db, speech, tm
     assert refiner.checked == [demo_db] and res.refiner is None  # no provenance: nothing recorded
     np.testing.assert_allclose(res.motion.positions, 0.5 * res.knn_motion.positions)
     # a folder given to synthesis itself: a message saying how to open it, before any search
-    for given in (str(tmp_path), tmp_path, "demo"):
+    for folder in (str(tmp_path), tmp_path, "demo"):
         with pytest.raises(ConfigError, match=r"refiner must be a loaded refiner, got .*open_refiner"):
-            synthesize(speech[:16000], db=demo_db, refiner=given)
+            synthesize(speech[:16000], db=demo_db, refiner=folder)
 
 
 @pytest.fixture(scope="module")

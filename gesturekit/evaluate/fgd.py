@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._optional import require
 from ..errors import ConfigError, InputFileError
 from ..features import LAYOUT
 from .metrics import frechet_distance, gaussian_statistics
@@ -35,6 +36,7 @@ from .metrics import frechet_distance, gaussian_statistics
 __all__ = ["FGDConfig", "FGDModel", "train_fgd_model", "load_fgd_model", "fgd"]
 
 _FORMAT = "gesturekit-fgd-autoencoder"
+_PURPOSE = "the FGD metric"
 _FORMAT_VERSION = 1
 
 
@@ -92,7 +94,7 @@ def _one_thread():
     shared (tests in parallel, a busy machine) torch's spinning threads slow
     it down many times over.
     """
-    import torch
+    torch = require("torch", purpose=_PURPOSE)
 
     old = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -104,6 +106,7 @@ def _one_thread():
 
 def _network(config: FGDConfig, dims: int):
     """Encoder and decoder: three stride-2 convolutions down, a linear latent, and back."""
+    require("torch", purpose=_PURPOSE)
     import torch.nn as nn
 
     c, t = config.channels, config.window // 8
@@ -199,7 +202,7 @@ class FGDModel:
         np.ndarray, shape (windows, latent), float64
             Windows every ``config.stride`` frames; none when the motion is shorter than a window.
         """
-        import torch
+        torch = require("torch", purpose=_PURPOSE)
 
         win = self.windows(positions)
         if win.shape[0] == 0:
@@ -213,7 +216,7 @@ class FGDModel:
 
     def reconstruction_error(self, positions) -> float:
         """Mean squared reconstruction error of a motion's windows (z-scored units)."""
-        import torch
+        torch = require("torch", purpose=_PURPOSE)
 
         win = self.windows(positions)
         if win.shape[0] == 0:
@@ -229,7 +232,7 @@ class FGDModel:
         """
         import io
 
-        import torch
+        torch = require("torch", purpose=_PURPOSE)
 
         from .._io import atomic_write
         from ..outputs import write_folder
@@ -265,7 +268,7 @@ def load_fgd_model(path: str | os.PathLike) -> FGDModel:
     InputFileError
         Missing files, another format, or weights that do not fit the configuration.
     """
-    import torch
+    torch = require("torch", purpose=_PURPOSE)
 
     path = Path(path)
     meta_file, weights = path / "fgd.json", path / "weights.pt"
@@ -332,7 +335,7 @@ def train_fgd_model(
         The same database, configuration and seed give the same weights (on one machine and
         torch version; the global random state is left as it was).
     """
-    import torch
+    torch = require("torch", purpose=_PURPOSE)
 
     config = config or FGDConfig()
     clips, used = _training_windows(db, exclude, config.window)

@@ -15,6 +15,7 @@ import os
 import re
 from pathlib import Path
 
+from .._optional import require
 from ..errors import GestureKitError
 
 __all__ = [
@@ -41,6 +42,7 @@ def default_refiner_path() -> Path:
 
 def load_refiner(path=None, *, device: str = "cpu"):
     """A :class:`~gesturekit.refine.infer.Refiner` from a folder; ``None`` or ``"demo"``: the shipped one."""
+    require("torch", purpose="a refiner")
     from .infer import Refiner
 
     if path is None or str(path) == "demo":

@@ -17,6 +17,8 @@ import warnings
 
 import numpy as np
 
+from .._optional import optional
+
 __all__ = ["matrix_product", "single_threaded_blas", "worker_count"]
 
 
@@ -42,12 +44,8 @@ def matrix_product(n_queries: int):
     product is memory-bound: more threads per product would not read faster, and
     BLAS's idle threads keep spinning and slow down the work that follows.
     """
-    torch = None
-    if n_queries > 1:
-        try:
-            import torch  # optional and heavy: only for batches
-        except ImportError:  # pragma: no cover - torch is a dependency of the refiner
-            torch = None
+    # optional (the refiner's extra) and heavy: only for batches
+    torch = optional("torch") if n_queries > 1 else None
     # the error bound assumes true float32 products: torch may be set to use bfloat16/TF32
     if torch is None or torch.get_float32_matmul_precision() != "highest":
 
