@@ -525,22 +525,15 @@ def make_stimuli(
         The same inputs and seed give the same ids, order and videos.
     """
     from .control import parse_control
-    from .evaluate.baselines import (
-        SystemUnavailable,
-        parse_systems,
-        refiner_unavailable_reason,
-    )
+    from .evaluate.baselines import SystemUnavailable, parse_systems, refiner_unavailable_reason
     from .export.video import _check_resolution
     from .refine import open_refiner
 
     t0 = time.perf_counter()
     systems = parse_systems(systems)
     width, height = _check_resolution(resolution)
-    # what rendering needs, before the long part (the workers import it again)
-    require("pyvista", purpose="rendering stimuli")
-    require("imageio_ffmpeg", purpose="rendering stimuli")
-    if scheduler is not None and isinstance(scheduler, str):
-        require("distributed", purpose="rendering on a Dask cluster (a scheduler)")
+    for needed in ("pyvista", "imageio_ffmpeg") + (("distributed",) if isinstance(scheduler, str) else ()):
+        require(needed, purpose="rendering stimuli")  # before the long part (the workers import them again)
     if not math.isfinite(loudness_lufs):
         # a NaN target would scale every soundtrack to NaN samples
         raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {loudness_lufs!r}")

@@ -14,9 +14,13 @@ import hashlib
 import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .._optional import require
 from ..errors import GestureKitError
+
+if TYPE_CHECKING:
+    from ..synthesize import MotionRefiner
 
 __all__ = [
     "default_refiner_path",
@@ -50,7 +54,7 @@ def load_refiner(path=None, *, device: str = "cpu"):
     return Refiner.load(path, device=device)
 
 
-def open_refiner(refiner):
+def open_refiner(refiner: MotionRefiner | str | os.PathLike[str] | None) -> MotionRefiner | None:
     """A refiner to give to synthesis: a folder or ``"demo"`` is loaded (:func:`load_refiner`),
     a loaded refiner (any object with ``check_database`` and ``refine_motion``) and None pass through.
 

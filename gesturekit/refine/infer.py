@@ -30,6 +30,7 @@ import os
 import zipfile
 import zlib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -41,6 +42,9 @@ from ..motion import Motion
 from ..skeleton import FPS, JOINT_NAMES
 from .folder import FORMAT, FORMAT_VERSION, read_refiner_config
 from .model import GENERATOR_STRIDE, Generator, ModelConfig
+
+if TYPE_CHECKING:
+    from ..database import MatchingDatabase
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "Refiner", "read_refiner_config", "read_loss_log", "load_state", "file_sha256"]
 
@@ -307,7 +311,7 @@ class Refiner:
         ap = np.pad(az, ((0, pad), (0, 0)), mode="edge")
         return self._run(ap[None], gp[None])[0, :T]
 
-    def provenance(self, db) -> dict | None:
+    def provenance(self, db: MatchingDatabase) -> dict | None:
         """What reproduces a result refined for ``db`` (:func:`gesturekit.refine.provenance`); None
         for a refiner not loaded from a folder. Warns when it was trained on another database.
         """
