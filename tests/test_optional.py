@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
+from packaging.requirements import Requirement
 
 from gesturekit import _optional
 from gesturekit._optional import EXTRAS, install_hint, installed, optional, require
@@ -25,6 +26,7 @@ from gesturekit.errors import GestureKitError, MissingDependencyError
 
 from .badinput import assert_refused, run_cli, snapshot
 from .test_layering import PACKAGE, ROOT, is_module, module_name
+from .test_packaging import declared
 
 
 @pytest.fixture(scope="module")
@@ -64,10 +66,10 @@ def test_only_declared_extras_are_optional():
         optional("streamlit")  # the core never imports streamlit, not even optionally
     assert install_hint("pyvista") == "pip install 'gesturekit[render]'"
     assert install_hint("distributed") == "pip install 'gesturekit[scale]'"
-    # every extra named exists in pyproject.toml
-    text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
-    for _package, extra in EXTRAS.values():
-        assert f"\n{extra} = [" in text
+    # each package is declared in pyproject.toml, in the extra the message names
+    for package, extra in EXTRAS.values():
+        assert Requirement(package).name in declared((extra,)), (package, extra)
+        assert Requirement(package).name not in declared(), package  # and is not in the core
 
 
 def test_a_dependency_of_the_optional_package_missing_names_its_own_extra(monkeypatch):
@@ -181,6 +183,28 @@ def test_a_core_only_install_synthesizes_and_refuses_the_refiner_clearly(base, t
         run.stderr
     )
     assert not (tmp_path / "out2").exists()
+
+
+@pytest.mark.parametrize("missing", ["pyvista", "imageio_ffmpeg"])
+def test_the_apps_video_without_the_render_extra_is_a_message(monkeypatch, missing):
+    """The app's MP4 (gesturekit.interactive.render_mp4): a GestureKitError the page shows as a message."""
+    from gesturekit.interactive import render_mp4
+    from gesturekit.motion import Motion
+    from gesturekit.synthesize import SynthesisConfig, SynthesisResult
+
+    motion = Motion(np.zeros((15, 55, 3), np.float32), 15)
+    result = SynthesisResult(
+        motion=motion,
+        knn_motion=motion,
+        search=None,  # not read when rendering
+        audio=np.zeros(16000, np.float32),
+        config=SynthesisConfig(),
+        database="test",
+        source="x.wav",
+    )
+    monkeypatch.setitem(sys.modules, missing, None)
+    with pytest.raises(MissingDependencyError, match=r"needs .*pip install 'gesturekit\[render\]'"):
+        render_mp4(result)
 
 
 # ---- the rule, read from the source ---------------------------------------------------------------
