@@ -135,18 +135,20 @@ def run_synthesis(
     source : str
         Name of the speech, stored in the result (download names, metadata).
     refiner : optional
-        A refiner (folder or loaded), applied by :func:`gesturekit.synthesize.synthesize`.
+        A refiner (folder or loaded, opened by :func:`gesturekit.refine.open_refiner`), applied by
+        :func:`gesturekit.synthesize.synthesize`.
 
     Raises
     ------
     GestureKitError
         Impossible settings (shown by :func:`display.run_page` / :func:`display.user_errors`).
     """
+    from gesturekit.refine import open_refiner
     from gesturekit.synthesize import synthesize
 
     ss = st.session_state
     with st.spinner("Searching the database…"), warnings_shown():
-        result = synthesize(audio, db=db, config=config, refiner=refiner)
+        result = synthesize(audio, db=db, config=config, refiner=open_refiner(refiner))
     ss[_RUN_COUNTER] = ss.get(_RUN_COUNTER, 0) + 1
     record = {
         "result": replace(result, source=source),

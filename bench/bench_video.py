@@ -51,6 +51,7 @@ def main(argv=None) -> int:
     from gesturekit.datasets.synthetic import generate_demo_take
     from gesturekit.demo import build_demo_database
     from gesturekit.export.video import render_video
+    from gesturekit.refine import open_refiner
     from gesturekit.synthesize import synthesize
     from gesturekit.viz.render_pool import default_workers
 
@@ -63,7 +64,7 @@ def main(argv=None) -> int:
         else:
             take, _ = generate_demo_take(seconds=args.seconds, seed=7, name="speech")
             audio, name = take.audio, f"{args.seconds:g} s of the generated speaker"
-        result = synthesize(audio, db=db, refiner="demo")
+        result = synthesize(audio, db=db, refiner=open_refiner("demo"))
         left, right = result.knn_motion, result.refined_motion  # what the page shows side by side
         print(
             f"speech: {name}, {len(result.audio) / 16000:.1f} s; {result.n_frames} frames side by side, "

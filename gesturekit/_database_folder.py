@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from ._io import read_json_marker
+from ._io import DATABASE_CLIP_ARRAYS, read_json_marker
 from .control import ATTRIBUTE_NAMES
 from .errors import DatabaseError
 from .features import LAYOUT
@@ -33,8 +33,8 @@ __all__ = ["FORMAT", "FORMAT_VERSION", "CLIP_ARRAYS", "write_database", "read_da
 
 FORMAT = "gesturekit-matching-database"
 FORMAT_VERSION = 1
-# the per-clip arrays of a cut, each with M clips first; clip_take and clip_start index them
-CLIP_ARRAYS = ("F", "P", "G", "A", "valid", "attributes", "pose_track")
+# the per-clip arrays of a cut, each with M clips first (declared in _io); clip_take and clip_start index them
+CLIP_ARRAYS = DATABASE_CLIP_ARRAYS
 _INDEX_ARRAYS = ("clip_take", "clip_start")
 _MESSAGES = {
     "no_folder": "no database folder here (build one with `gesturekit build-db`)",

@@ -25,7 +25,32 @@ from typing import BinaryIO
 from .errors import ConfigError, GestureKitError
 from .paths import is_dir
 
-__all__ = ["atomic_write", "safe_filename", "read_json_marker"]
+__all__ = ["atomic_write", "safe_filename", "read_json_marker", "FOLDER_KINDS", "DATABASE_CLIP_ARRAYS", "folder_kind"]
+
+#: Folder kinds gesturekit writes: kind -> (marker file, its ``format`` value, what it is called in messages).
+FOLDER_KINDS = {
+    "database": ("database.json", "gesturekit-matching-database", "a matching database"),
+    "refiner": ("config.json", "gesturekit-refiner", "a refiner folder"),
+    "study": ("study.json", "gesturekit-study", "a study folder"),
+    "fgd": ("fgd.json", "gesturekit-fgd-autoencoder", "an FGD model folder"),
+    "evaluation": ("evaluation.json", "gesturekit-evaluation", "an evaluation folder"),
+}
+
+#: The per-clip arrays of a database folder (``NAME.npy``), each with M clips first; declared
+#: here, below the database, so that a database folder is recognised without loading one.
+DATABASE_CLIP_ARRAYS = ("F", "P", "G", "A", "valid", "attributes", "pose_track")
+
+# every name a folder of each kind can hold, its marker included
+_FOLDER_NAMES = {
+    "database": frozenset(
+        [f"{a}.npy" for a in (*DATABASE_CLIP_ARRAYS, "clip_take", "clip_start", "audio")]
+        + ["stats.npz", "overlap", "database.json"]
+    ),
+    "refiner": frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"]),
+    "study": frozenset(["study.json", "manifest.csv", "order.csv", "videos"]),
+    "fgd": frozenset(["fgd.json", "weights.pt"]),
+    "evaluation": frozenset(["evaluation.json", "results.csv", "results.md", "controls.csv", "controls.md"]),
+}
 
 # names Windows refuses whatever the extension, compared case-insensitively
 _RESERVED_NAMES = frozenset(
@@ -268,3 +293,41 @@ def read_json_marker(
             messages["other_version"].format(found=content.get("format_version"), supported=version), path=folder
         )
     return content
+
+
+def folder_kind(path: str | os.PathLike[str]) -> str | None:
+    """Which of gesturekit's folders (a key of :data:`FOLDER_KINDS`) ``path`` is, from its marker file.
+
+    A marker that cannot be read (damaged, not JSON) or has no ``format`` (written by an
+    earlier gesturekit) still counts when every name in the folder is one that kind of
+    folder holds: a database whose ``database.json`` was cut short can be rebuilt in place.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An existing folder.
+
+    Returns
+    -------
+    str or None
+        The kind, or None when the folder is none of gesturekit's.
+    """
+    path = Path(path)
+    names = None
+    for kind, (marker, fmt, _) in FOLDER_KINDS.items():
+        try:
+            meta = json.loads((path / marker).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            continue
+        except (OSError, ValueError):
+            meta = None
+        if isinstance(meta, dict):
+            if meta.get("format") == fmt:
+                return kind
+            if "format" in meta:
+                continue
+        if names is None:
+            names = {p.name for p in path.iterdir()}
+        if names and names <= _FOLDER_NAMES[kind]:
+            return kind
+    return None

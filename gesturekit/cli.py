@@ -6,7 +6,6 @@ Every command turns errors of the gesturekit family into one line on stderr
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import math
 import sys
@@ -15,6 +14,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
+from ._cli_parser import build_parser
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
 from .paths import is_file
 
@@ -162,11 +162,11 @@ def _parse_holdouts(texts) -> list:
 def _refiner_choice(given: str | None, db):
     """The refiner of ``synthesize``: the one named, none for ``none``, else one trained on ``db``
     (:func:`gesturekit.refine.refiner_for`; the app's default too)."""
-    import importlib.util
+    from ._optional import installed
 
     if given is not None:
         return None if given == "none" else given
-    if importlib.util.find_spec("torch") is None:  # a gesturekit installed without the refiner's torch
+    if not installed("torch"):  # a gesturekit installed without the refiner's torch
         return None
     from .refine import refiner_for
 
@@ -179,7 +179,9 @@ def _refiner_choice(given: str | None, db):
 def _cmd_synthesize(args) -> int:
     from ._io import safe_filename
     from .datasets.audio import load_audio
+    from .export.result import save_result_bvh, save_result_npz, save_result_video
     from .outputs import check_output, output_lock, write_errors
+    from .refine import open_refiner
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
     from .workspace import expand_speech, open_database
@@ -197,6 +199,11 @@ def _cmd_synthesize(args) -> int:
                 "or synthesise them in separate runs"
             )
         first[stem] = f
+    if args.video:  # before the search, so that nothing is written
+        from ._optional import require
+
+        require("pyvista", purpose="--video")
+        require("imageio_ffmpeg", purpose="--video")
     db = open_database(args.db)
     config = SynthesisConfig(
         k=args.k,
@@ -224,7 +231,8 @@ def _cmd_synthesize(args) -> int:
         # with --force too: only files gesturekit wrote are replaced, and never a folder
         check_output(p, "file", overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
-    results = synthesize_batch(audios, db=db, config=config, refiner=_refiner_choice(args.refiner, db))
+    refiner = open_refiner(_refiner_choice(args.refiner, db))
+    results = synthesize_batch(audios, db=db, config=config, refiner=refiner)
     with write_errors(out):
         out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     with contextlib.ExitStack() as held:
@@ -235,13 +243,16 @@ def _cmd_synthesize(args) -> int:
             check_output(p, "file", overwrite=args.force, inputs=files)
         for f, stem, res in zip(files, stems, results):
             res.source = f.name
-            res.save_npz(targets[(stem, "npz")], overwrite=args.force)
-            res.save_bvh(targets[(stem, "bvh")], overwrite=args.force)
+            save_result_npz(res, targets[(stem, "npz")], overwrite=args.force)
+            save_result_bvh(res, targets[(stem, "bvh")], overwrite=args.force)
             written = [targets[(stem, "npz")], targets[(stem, "bvh")]]
             if args.video:
                 with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
-                    res.save_video(
-                        targets[(stem, "mp4")], overwrite=args.force, progress=lambda done, total: _advance(bar, done)
+                    save_result_video(
+                        res,
+                        targets[(stem, "mp4")],
+                        overwrite=args.force,
+                        progress=lambda done, total: _advance(bar, done),
                     )
                 written.append(targets[(stem, "mp4")])
             relaxed = res.relaxed_steps
@@ -260,6 +271,9 @@ def _cmd_synthesize(args) -> int:
 def _cmd_train_refiner(args) -> int:
     from dataclasses import replace
 
+    from ._optional import require
+
+    require("torch", purpose="train-refiner")
     from .refine.data import PairsConfig
     from .refine.train import preset, train_refiner
     from .workspace import open_database
@@ -307,7 +321,7 @@ def _cmd_train_refiner(args) -> int:
             on_step=on_step,
             on_pairs=lambda done, total: _advance(bar("k-NN training pairs", total, "window"), done),
         )
-    from .refine.infer import read_refiner_config
+    from .refine.folder import read_refiner_config
 
     cfg = read_refiner_config(out)
     print(f"refiner    {out}")
@@ -452,268 +466,6 @@ def _cmd_stimuli(args) -> int:
     return _done(args)
 
 
-def _add_max_speech(parser) -> None:
-    parser.add_argument(
-        "--max-speech-minutes",
-        type=float,
-        metavar="MIN",
-        help="refuse speech files longer than this (default 60, or the environment "
-        "variable GESTUREKIT_MAX_SPEECH_MINUTES)",
-    )
-
-
-#: Each command"s line in ``gesturekit --help`` and the paragraph of its own ``--help``.
-_ABOUT = {
-    "build-db": (
-        "build a matching database from a folder of takes (or the generated demo speaker)",
-        "Build a matching database from a folder of takes: BVH + speech (ZEGGS, BEAT, any BVH with a joint "
-        "map), joint-position files + speech, or npz files of the Habibie et al. 2021 layout.",
-    ),
-    "info": ("describe a matching database", None),
-    "synthesize": (
-        "gesture motion for speech: npz + BVH (+ MP4 with --video)",
-        "Synthesise gesture motion for one or more speech files (or folders of them) by motion matching. "
-        "Several files are searched together, scanning the database once per step.",
-    ),
-    "train-refiner": (
-        "train the resynchronisation cGAN (refiner) on a database",
-        "Train the paper's resynchronisation cGAN on a matching database built with --overlap-stride: k-NN "
-        "motion for every window of the overlapping cut, then WGAN-GP training with a progress bar, "
-        "checkpoints in the output folder (--resume goes on from the last one) and a loss log "
-        "(loss_log.csv). Uses the GPU when torch sees one.",
-    ),
-    "evaluate": (
-        "objective measures of every system on a held-out part of a database",
-        "Keep a take or a time range of one out of the database, synthesise its speech with each system, and "
-        "print and save (CSV + markdown) beat consistency, diversity, FGD, Hellinger distances of velocity "
-        "and acceleration histograms, jerk, acceleration, boundary jumps and control adherence.",
-    ),
-    "train-fgd": (
-        "train the motion autoencoder of the FGD measure on a database",
-        "Train the small convolutional autoencoder whose latent space the Frechet Gesture Distance is "
-        "measured in, on the poses of a matching database, leaving held-out parts out.",
-    ),
-    "stimuli": (
-        "user-study videos: every speech x system, opaque ids, manifest and presentation order",
-        "Render every speech with every system as an MP4 in one identical style (fixed camera, resolution, "
-        "frame rate, loudness-normalised speech), named by opaque ids, with a manifest CSV kept apart from "
-        "the videos and a balanced presentation order per participant (Latin squares).",
-    ),
-}
-
-
-def _command(sub, name: str, func) -> argparse.ArgumentParser:
-    """Add the subcommand ``name``, run by ``func(args)``, described by :data:`_ABOUT`."""
-    summary, description = _ABOUT[name]
-    parser = sub.add_parser(name, help=summary, description=description)
-    parser.set_defaults(func=func)
-    return parser
-
-
-def _add_search(parser, *, seed: str) -> None:
-    """The options of the search that ``synthesize`` and ``evaluate`` share; ``seed``: what the seed seeds."""
-    parser.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
-    parser.add_argument(  # --step: the option's earlier name
-        "--segment", "--step", dest="segment", type=int, default=8, help="frames per search step, N (default 8)"
-    )
-    parser.add_argument("--seed", type=int, default=0, help=f"seed of {seed} (default 0)")
-    parser.add_argument(
-        "--init-pose",
-        choices=["random", "rest"],
-        default="random",
-        help="initial pose: a random admissible database frame (the paper) or the rest pose",
-    )
-    parser.add_argument(
-        "--mask-rule",
-        choices=["ends", "all"],
-        default="ends",
-        help="a control must hold at a window's first and last frame (ends: the paper) or every frame",
-    )
-    parser.add_argument(
-        "--blend",
-        choices=["none", "offset"],
-        default="none",
-        help="none: the paper's hard joins; offset: a short fade at each join (ours)",
-    )
-
-
-def _add_exclusions(parser, *, out_of: str) -> None:
-    """``--exclude-take`` and ``--exclude-range``, keeping parts of the database out of ``out_of``."""
-    parser.add_argument("--exclude-take", action="append", metavar="TAKE", help=f"keep a database take out of {out_of}")
-    parser.add_argument(
-        "--exclude-range",
-        action="append",
-        metavar="TAKE:START-END",
-        help=f"keep a stretch of a take (seconds) out of {out_of}",
-    )
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="gesturekit",
-        description="Controllable speech-driven gesture synthesis by motion matching.",
-    )
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    sub.required = True
-
-    b = _command(sub, "build-db", _cmd_build_db)
-    b.add_argument("folder", nargs="?", help="folder of takes")
-    b.add_argument("--out", help="database folder to write (default for --demo: the app's default path)")
-    b.add_argument("--preset", choices=["zeggs", "beat"], help="joint naming preset of the BVH files")
-    b.add_argument("--joint-map", help="JSON joint map for other skeletons or joint-position files")
-    b.add_argument("--kind", default="auto", choices=["auto", "bvh", "positions", "habibie2021"])
-    b.add_argument("--fps", type=float, help="frame rate of joint-position files")
-    b.add_argument("--units", default="auto", choices=["auto", "cm", "m"], help="units of the motion files")
-    b.add_argument(
-        "--overlap-stride", type=int, help="also store an overlapping cut (stride in frames) for the refiner"
-    )
-    b.add_argument(
-        "--percentiles",
-        type=float,
-        nargs=2,
-        default=(15.0, 85.0),
-        metavar=("LOW", "HIGH"),
-        help="attribute percentiles that define low/high controls (default 15 85)",
-    )
-    b.add_argument("--no-audio", action="store_true", help="do not keep the takes' audio in the database")
-    b.add_argument("--label", help="a description stored with the database")
-    b.add_argument("--force", action="store_true", help="replace an existing database")
-    b.add_argument("--demo", action="store_true", help="build the generated demo speaker's database")
-    b.add_argument("--minutes", type=float, default=20.0, help="minutes of demo speaker (with --demo)")
-    b.add_argument("--seed", type=int, default=0, help="seed of the demo speaker (with --demo)")
-
-    i = _command(sub, "info", _cmd_info)
-    i.add_argument("database", nargs="?", help="database folder (default: the demo database)")
-    i.add_argument("--takes", action="store_true", help="also list the takes")
-
-    y = _command(sub, "synthesize", _cmd_synthesize)
-    y.add_argument("speech", nargs="+", help="speech files (wav, flac, ogg, mp3; any rate) or folders of them")
-    y.add_argument("--db", help="matching database folder (default: the demo database)")
-    y.add_argument("--out", default="out", help="output folder (default: out)")
-    _add_search(y, seed="the random initial pose")
-    y.add_argument(  # --topk: the option's earlier name
-        "--record", "--topk", dest="record", type=int, default=10, help="candidates per step to record (default 10)"
-    )
-    y.add_argument(
-        "--control",
-        help='control track: "0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric" '
-        "(seconds) or a CSV/JSON file with start_s, end_s, constraint",
-    )
-    _add_exclusions(y, out_of="the search")
-    y.add_argument(
-        "--refiner",
-        metavar="PATH",
-        help="refine the k-NN motion with a trained refiner folder "
-        "(from train-refiner), 'demo' for the one shipped with the demo database, or 'none'; "
-        "default: a refiner trained on the database if there is one (DB/refiner, or the shipped "
-        "one for the demo database), else none. The npz keeps both motions",
-    )
-    y.add_argument(
-        "--refiner-keep-hz",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
-        "controls) and take the faster content from the refiner (default 2); 0: the refiner's "
-        "output as it is (the paper)",
-    )
-    y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
-    y.add_argument("--force", action="store_true", help="replace existing output files")
-    _add_max_speech(y)
-
-    r = _command(sub, "train-refiner", _cmd_train_refiner)
-    r.add_argument("--db", help="matching database folder (built with --overlap-stride)")
-    r.add_argument("--demo", action="store_true", help="train on the default demo database (built if missing)")
-    r.add_argument("--out", required=True, help="refiner folder to write")
-    r.add_argument(
-        "--preset",
-        choices=["quick", "paper"],
-        default="quick",
-        help="quick: small networks, ~10 min on a 2-core CPU; paper: the paper's sizes (GPU)",
-    )
-    r.add_argument(
-        "--iterations",
-        type=int,
-        help="critic iterations (default: the preset's; with --resume: train on up to this many)",
-    )
-    r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
-    r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
-    r.add_argument("--seed", type=int, default=0, help="seed of the weights, batches and k draws (default 0)")
-    _add_exclusions(r, out_of="training")
-    r.add_argument(
-        "--no-train-state",
-        action="store_true",
-        help="leave out the optimiser state at the end (a smaller folder that cannot be resumed)",
-    )
-    r.add_argument("--force", action="store_true", help="replace an existing refiner folder")
-    from .evaluate.baselines import SYSTEMS
-
-    e = _command(sub, "evaluate", _cmd_evaluate)
-    e.add_argument("--db", help="matching database folder (default: the demo database)")
-    e.add_argument(
-        "--holdout",
-        required=True,
-        metavar="TAKE[:START-END]",
-        help="held-out take, or time range of one in seconds (e.g. 067_Speech_2_x_1_0:50-68.8)",
-    )
-    e.add_argument(
-        "--systems", default=",".join(SYSTEMS), help=f"comma-separated systems (default: all of {','.join(SYSTEMS)})"
-    )
-    e.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
-    e.add_argument("--fgd-model", help="FGD autoencoder from `gesturekit train-fgd` (default: train one now)")
-    e.add_argument(
-        "--control",
-        help="control track of the controlled runs (seconds of the held-out speech); "
-        "default: six equal stretches asking for left hand low/high, slow/fast, symmetric/asymmetric",
-    )
-    e.add_argument("--beat-sigma", type=float, default=0.1, help="beat-consistency tolerance, seconds (default 0.1)")
-    _add_search(e, seed="the initial pose and the random baseline")
-    e.add_argument("--out", default="evaluation", help="folder for the tables (default: evaluation)")
-    e.add_argument("--force", action="store_true", help="replace existing tables")
-
-    f = _command(sub, "train-fgd", _cmd_train_fgd)
-    f.add_argument("--db", help="matching database folder (default: the demo database)")
-    f.add_argument("--out", required=True, help="model folder to write")
-    f.add_argument(
-        "--holdout",
-        action="append",
-        metavar="TAKE[:START-END]",
-        help="leave a take or a time range out of training (repeatable)",
-    )
-    f.add_argument("--steps", type=int, default=2000, help="training steps (default 2000)")
-    f.add_argument("--window", type=int, default=32, help="frames per window, a multiple of 8 (default 32)")
-    f.add_argument("--latent", type=int, default=32, help="size of the latent feature (default 32)")
-    f.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    f.add_argument("--force", action="store_true", help="replace an existing model")
-
-    s = _command(sub, "stimuli", _cmd_stimuli)
-    s.add_argument("--db", help="matching database folder (default: the demo database)")
-    s.add_argument("--audio", nargs="+", help="speech files or folders of them")
-    s.add_argument(
-        "--holdout",
-        action="append",
-        metavar="TAKE[:START-END]",
-        help="a held-out part of the database as a speech with recorded motion, for gt (repeatable)",
-    )
-    s.add_argument("--systems", default="gt,knn,knn+cgan", help="comma-separated systems (default gt,knn,knn+cgan)")
-    s.add_argument("--out", required=True, help="study folder to write")
-    s.add_argument("--seed", type=int, default=0, help="seed of the ids, the order and the synthesis (default 0)")
-    s.add_argument(
-        "--participants",
-        type=int,
-        help="participants to plan the order for (default: the rows of the balanced Latin square)",
-    )
-    s.add_argument("--control", help="control track for every synthesised stimulus")
-    s.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
-    s.add_argument("--resolution", default="640x480", help="video size WIDTHxHEIGHT (default 640x480)")
-    s.add_argument("--loudness", type=float, default=-23.0, help="loudness of every soundtrack, LUFS (default -23)")
-    s.add_argument("--workers", type=int, help="rendering processes (default: all cores)")
-    s.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask distributed cluster (tcp://host:8786)")
-    s.add_argument("--force", action="store_true", help="replace an existing study")
-    _add_max_speech(s)
-    return p
-
-
 def _done(args, what: str = "done") -> int:
     """Say that the command is done and how long it took (since :func:`main` began it); exit status 0."""
     print(f"{what} in {time.perf_counter() - args.started:.1f} s")
@@ -743,6 +495,8 @@ def _os_error_text(exc: OSError) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = build_parser().parse_args(argv)
+    # the command's function, named after it (build-db -> _cmd_build_db; options: _cli_parser.py)
+    command = globals()["_cmd_" + args.command.replace("-", "_")]
     args.started = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("always", GestureKitWarning)
@@ -750,7 +504,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         warnings.formatwarning = _format_warning
         try:
             with _limits_of(args):
-                return args.func(args)
+                return command(args)
         except GestureKitError as exc:
             print(f"gesturekit: error: {exc}", file=sys.stderr)
             return 2

@@ -22,6 +22,7 @@ __all__ = [
     "DatabaseError",
     "ConfigError",
     "OutputError",
+    "MissingDependencyError",
     "GestureKitWarning",
     "warn",
     "collect_warnings",
@@ -67,6 +68,10 @@ class ConfigError(GestureKitError):
 
 class OutputError(ConfigError):
     """An output cannot be written where asked: something else is there, another writer, or the write failed."""
+
+
+class MissingDependencyError(GestureKitError):
+    """A feature needs an optional package that is not installed; the message says which extra installs it."""
 
 
 class GestureKitWarning(UserWarning):

@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .errors import ConfigError
-from .motion import AUDIO_SR
+from .motion import AUDIO_SR, n_audio_frames
 from .skeleton import FPS, JOINT_NAMES, N_JOINTS, POSE_FEATURE_JOINTS
 
 __all__ = [
@@ -120,11 +120,6 @@ assert (LAYOUT.frame_dim, LAYOUT.audio_dim, LAYOUT.pose_dim, LAYOUT.motion_dim, 
     165,
     28,
 )
-
-
-def n_audio_frames(n_samples: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> int:
-    """Whole frames at ``fps`` in ``n_samples`` of audio at ``sr`` Hz: ``floor(n_samples * fps / sr)``."""
-    return (int(n_samples) * int(fps)) // int(sr)
 
 
 def frame_centres(n_frames: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> np.ndarray:

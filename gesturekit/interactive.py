@@ -31,7 +31,9 @@ from ._io import safe_filename
 from .control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_attributes
 from .database import MatchingDatabase
 from .errors import ConfigError, GestureKitError, collect_warnings, warn
+from .export.result import save_result_bvh, save_result_npz, save_result_video
 from .motion import AUDIO_SR, Motion
+from .refine import open_refiner
 from .synthesize import SynthesisConfig, SynthesisResult, synthesize_batch
 
 if TYPE_CHECKING:
@@ -401,7 +403,7 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
     Parameters
     ----------
     kind : {"npz", "bvh", "csv", "json"}
-        ``npz``: :meth:`SynthesisResult.save_npz`; ``bvh``: the final motion;
+        ``npz``: :func:`~gesturekit.export.result.save_result_npz`; ``bvh``: the final motion;
         ``csv``: the control track (start_s, end_s, constraint); ``json``: how
         the result was made (:meth:`SynthesisResult.metadata`, with the
         synthesis config under ``"synthesis"``). ``mp4`` is made by
@@ -415,7 +417,7 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
         raise ConfigError(f"export_bytes makes npz, bvh, csv or json, not {kind!r}")
     with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
         path = Path(tmp) / f"result.{kind}"
-        (result.save_npz if kind == "npz" else result.save_bvh)(path)
+        (save_result_npz if kind == "npz" else save_result_bvh)(result, path)
         return path.read_bytes()
 
 
@@ -436,8 +438,8 @@ def render_mp4(
     """
     with tempfile.TemporaryDirectory(prefix="gesturekit-video-") as tmp:
         path = Path(tmp) / "result.mp4"
-        result.save_video(
-            path, progress=progress, side_by_side=result.refined_motion is not None, resolution=resolution
+        save_result_video(
+            result, path, progress=progress, side_by_side=result.refined_motion is not None, resolution=resolution
         )
         return path.read_bytes()
 
@@ -603,7 +605,8 @@ def compare_k(
     ks : sequence of int
         The values of ``k`` (>= 0), in the order of the results.
     refiner : optional
-        Applied to every result (see :func:`synthesize_batch`).
+        Applied to every result (see :func:`synthesize_batch`): a loaded refiner, or a folder
+        (opened by :func:`gesturekit.refine.open_refiner`).
     source : str, optional
         Name of the speech stored in the results.
 
@@ -615,7 +618,7 @@ def compare_k(
     if not ks:
         raise ConfigError("choose at least one k to compare")
     configs = [dataclasses.replace(config, search=dataclasses.replace(config.search, k=k)) for k in ks]
-    results = synthesize_batch([audio] * len(ks), db=db, config=configs, refiner=refiner)
+    results = synthesize_batch([audio] * len(ks), db=db, config=configs, refiner=open_refiner(refiner))
     if source is not None:
         results = [dataclasses.replace(r, source=source) for r in results]
     return results

@@ -7,12 +7,21 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ConfigError
-from .skeleton import N_JOINTS, PARENTS
+from .skeleton import FPS, N_JOINTS, PARENTS
 
-__all__ = ["Motion", "Take", "AUDIO_SR", "resample_positions", "output_frame_count"]
+__all__ = ["Motion", "Take", "AUDIO_SR", "resample_positions", "output_frame_count", "n_audio_frames"]
 
 #: Sample rate of all audio inside gesturekit, Hz.
 AUDIO_SR = 16000
+
+
+def n_audio_frames(n_samples: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> int:
+    """Whole frames at ``fps`` in ``n_samples`` of audio at ``sr`` Hz: ``floor(n_samples * fps / sr)``.
+
+    Declared here, beside the sample rate, so that the readers and the demo speaker below the
+    features agree with them on a take's length (:mod:`gesturekit.features` re-exports it).
+    """
+    return (int(n_samples) * int(fps)) // int(sr)
 
 
 @dataclass(frozen=True)

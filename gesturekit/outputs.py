@@ -37,7 +37,6 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
-import json
 import os
 import re
 import shutil
@@ -46,6 +45,7 @@ import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
+from ._io import FOLDER_KINDS, folder_kind
 from .errors import OutputError
 
 __all__ = [
@@ -62,15 +62,6 @@ __all__ = [
     "pid_alive",
 ]
 
-#: Folder kinds: kind -> (marker file, its ``format`` value, what it is called in messages).
-FOLDER_KINDS = {
-    "database": ("database.json", "gesturekit-matching-database", "a matching database"),
-    "refiner": ("config.json", "gesturekit-refiner", "a refiner folder"),
-    "study": ("study.json", "gesturekit-study", "a study folder"),
-    "fgd": ("fgd.json", "gesturekit-fgd-autoencoder", "an FGD model folder"),
-    "evaluation": ("evaluation.json", "gesturekit-evaluation", "an evaluation folder"),
-}
-
 #: File kinds gesturekit can recognise as its own, by suffix.
 FILE_KINDS = {".npz": "an npz archive", ".bvh": "a BVH file", ".mp4": "an MP4 video"}
 
@@ -82,51 +73,6 @@ _HEAD_BYTES = 1 << 16
 
 
 # ---- what is there --------------------------------------------------------------------------------
-
-
-def _layout(kind: str) -> frozenset[str]:
-    """Every name a folder of this kind can hold (its marker included)."""
-    if kind == "database":
-        from ._database_folder import CLIP_ARRAYS
-
-        arrays = (*CLIP_ARRAYS, "clip_take", "clip_start", "audio")
-        return frozenset([f"{a}.npy" for a in arrays] + ["stats.npz", "overlap", "database.json"])
-    if kind == "refiner":
-        return frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"])
-    if kind == "study":
-        return frozenset(["study.json", "manifest.csv", "order.csv", "videos"])
-    if kind == "fgd":
-        return frozenset(["fgd.json", "weights.pt"])
-    if kind == "evaluation":
-        return frozenset(["evaluation.json", "results.csv", "results.md", "controls.csv", "controls.md"])
-    return frozenset()
-
-
-def _folder_kind(path: Path) -> str | None:
-    """The gesturekit kind of a folder, from its marker file; None when it has none.
-
-    A marker that cannot be read (damaged, not JSON) or has no ``format`` (written by an
-    earlier gesturekit) still counts when every name in the folder is one that kind of
-    folder holds: a database whose ``database.json`` was cut short can be rebuilt in place.
-    """
-    names = None
-    for kind, (marker, fmt, _) in FOLDER_KINDS.items():
-        try:
-            meta = json.loads((path / marker).read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            continue
-        except (OSError, ValueError):
-            meta = None
-        if isinstance(meta, dict):
-            if meta.get("format") == fmt:
-                return kind
-            if "format" in meta:
-                continue
-        if names is None:
-            names = {p.name for p in path.iterdir()}
-        if names and names <= _layout(kind):
-            return kind
-    return None
 
 
 def _describe_contents(path: Path, limit: int = 10_000) -> str:
@@ -264,7 +210,7 @@ def check_output(
         raise OutputError(f"cannot be read ({exc.strerror or exc})", path=path) from None
     if empty:
         return False
-    found = _folder_kind(path)
+    found = folder_kind(path)
     if found == kind:
         if not overwrite:
             raise OutputError(

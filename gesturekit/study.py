@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 import numpy as np
 
 from ._io import atomic_write
+from ._optional import require
 from .errors import ConfigError, GestureKitError
 from .export.loudness import measure_loudness, normalise_loudness
 from .motion import AUDIO_SR, Motion
@@ -55,8 +56,7 @@ if TYPE_CHECKING:
     from distributed import Client
 
     from .database import MatchingDatabase
-    from .refine.infer import Refiner
-    from .synthesize import SynthesisConfig
+    from .synthesize import MotionRefiner, SynthesisConfig
     from .viz.render import RenderStyle
 
 __all__ = [
@@ -290,6 +290,7 @@ def speech_sources(
 
 def stimulus_style() -> RenderStyle:
     """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion)."""
+    require("pyvista", purpose="rendering stimuli")
     from .viz.render import RenderStyle
 
     return RenderStyle(fit_motion=False)
@@ -330,9 +331,9 @@ def _run_jobs(
             progress(done, total)
 
     if scheduler is not None:
-        from distributed import Client, as_completed
-
-        client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+        distributed = require("distributed", purpose="rendering on a Dask cluster (a scheduler)")
+        as_completed = distributed.as_completed
+        client = scheduler if isinstance(scheduler, distributed.Client) else distributed.Client(scheduler)
         try:
             futures = client.map(_render_stimulus, jobs, key=[f"stimulus-{j['id']}" for j in jobs], pure=False)
             for fut in as_completed(futures):
@@ -412,7 +413,7 @@ def make_stimuli(
     participants: int | None = None,
     control: str = "",
     config: SynthesisConfig | None = None,
-    refiner: Refiner | str | os.PathLike[str] | None = None,
+    refiner: MotionRefiner | str | os.PathLike[str] | None = None,
     resolution: tuple[int, int] = (640, 480),
     loudness_lufs: float = -23.0,
     workers: int | None = None,
@@ -465,17 +466,15 @@ def make_stimuli(
         The same inputs and seed give the same ids, order and videos.
     """
     from .control import parse_control
-    from .evaluate.baselines import (
-        SystemUnavailable,
-        load_refiner_for,
-        parse_systems,
-        refiner_unavailable_reason,
-    )
+    from .evaluate.baselines import SystemUnavailable, parse_systems, refiner_unavailable_reason
     from .export.video import _check_resolution
+    from .refine import open_refiner
 
     t0 = time.perf_counter()
     systems = parse_systems(systems)
     width, height = _check_resolution(resolution)
+    for needed in ("pyvista", "imageio_ffmpeg") + (("distributed",) if isinstance(scheduler, str) else ()):
+        require(needed, purpose="rendering stimuli")  # before the long part (the workers import them again)
     if not math.isfinite(loudness_lufs):
         # a NaN target would scale every soundtrack to NaN samples
         raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {loudness_lufs!r}")
@@ -485,7 +484,7 @@ def make_stimuli(
         reason = refiner_unavailable_reason(refiner)
         if reason:
             raise SystemUnavailable(reason)
-        refiner = load_refiner_for(refiner)
+        refiner = open_refiner(refiner)
     from .outputs import check_output, output_lock
 
     out = Path(out)

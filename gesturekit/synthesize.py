@@ -3,18 +3,20 @@
 :func:`synthesize` takes speech (a file or samples) and a matching database and
 returns a :class:`SynthesisResult`: the motion, the raw k-NN motion, the search
 record (every step's chosen clip and top-K candidates) and the configuration
-that made it, with methods to export npz, BVH and MP4. :func:`synthesize_batch`
-searches several speeches together, scanning the database once per step.
+that made it; :mod:`gesturekit.export.result` writes it as npz, BVH and MP4.
+:func:`synthesize_batch` searches several speeches together, scanning the
+database once per step. A refiner is given as an object (:class:`MotionRefiner`);
+the layers above open one from its folder (:func:`gesturekit.refine.open_refiner`).
 """
 
 from __future__ import annotations
 
 import numbers
 import os
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeAlias
+from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, runtime_checkable
 
 import numpy as np
 
@@ -23,7 +25,7 @@ from ._version import __version__
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control
 from .database import MatchingDatabase, normalise_exclusions
-from .errors import ConfigError, GestureKitError, warn
+from .errors import ConfigError, GestureKitError
 from .motion import AUDIO_SR, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 from .search.plan import SearchPlan, plan_search, rest_pose_frame
@@ -32,14 +34,19 @@ from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
 if TYPE_CHECKING:  # named in annotations only: the refiner sits above the synthesis
     import pandas as pd
 
-    from .refine.infer import Refiner
 
 #: Speech: a file in any format the readers take, or mono float32 samples at 16 kHz.
 Speech: TypeAlias = "str | os.PathLike[str] | np.ndarray"
-#: A refiner, or its folder (``"demo"``: the one shipped with the demo database).
-RefinerChoice: TypeAlias = "Refiner | str | os.PathLike[str]"
 
-__all__ = ["PAPER_SETTINGS", "SynthesisConfig", "SynthesisResult", "synthesize", "synthesize_batch", "rest_pose_frame"]
+__all__ = [
+    "PAPER_SETTINGS",
+    "SynthesisConfig",
+    "SynthesisResult",
+    "MotionRefiner",
+    "synthesize",
+    "synthesize_batch",
+    "rest_pose_frame",
+]
 
 #: The settings of Habibie et al. 2022: option -> (the paper's value, how a value is written,
 #: the paper's value as written after it). ``refiner_keep_hz`` counts only when a refiner is
@@ -239,6 +246,21 @@ class SynthesisConfig:
         return replace(self, search=replace(self.search, pins=pins))
 
 
+@runtime_checkable
+class MotionRefiner(Protocol):
+    """What synthesis needs of a refiner; :class:`gesturekit.refine.infer.Refiner` is one.
+
+    A refiner may also have ``provenance(db) -> dict | None``: what the result records of it
+    (:attr:`SynthesisResult.refiner`).
+    """
+
+    def check_database(self, db: MatchingDatabase, /) -> None:
+        """Raise a :class:`~gesturekit.errors.GestureKitError` when ``db``'s features do not suit it."""
+
+    def refine_motion(self, motion: Motion, audio_features: np.ndarray, /) -> Motion:
+        """The refined ``motion`` (T, 55, 3), given the speech's cGAN audio features (T, 28)."""
+
+
 @dataclass
 class SynthesisResult:
     """A synthesised motion and everything that made it.
@@ -353,53 +375,6 @@ class SynthesisResult:
                     path=path,
                 )
 
-    def save_npz(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
-        """npz with positions (the final motion), fps, knn_positions, the search record and the config."""
-        from .export.npz import save_npz
-
-        self.check_finite(path)
-
-        arrays = {"knn_positions": self.knn_motion.positions}
-        if self.refined_motion is not None:
-            arrays["refined_positions"] = self.refined_motion.positions
-        arrays.update({f"search_{k}": np.asarray(v) for k, v in self.search.array_fields().items()})
-        return save_npz(path, motion=self.motion, arrays=arrays, config=self.metadata(), overwrite=overwrite)
-
-    def save_bvh(self, path: str | os.PathLike[str], *, overwrite: bool = False, units: str = "cm") -> Path:
-        """BVH of the final motion (55-joint hierarchy, rotations that reproduce the positions)."""
-        from .export.bvh import write_bvh
-
-        self.check_finite(path)
-        return write_bvh(path, self.motion, overwrite=overwrite, units=units)
-
-    def save_video(
-        self,
-        path: str | os.PathLike[str],
-        *,
-        overwrite: bool = False,
-        progress: Callable[[int, int], None] | None = None,
-        side_by_side: bool = False,
-        resolution: tuple[int, int] = (640, 480),
-    ) -> Path:
-        """MP4 of the skeleton with the speech (h264 + aac); k-NN and refined side by side if asked."""
-        from .export.video import render_video
-
-        self.check_finite(path)
-        if side_by_side and self.refined_motion is not None:
-            return render_video(
-                path,
-                self.knn_motion,
-                audio=self.audio,
-                side_by_side=self.refined_motion,
-                labels=("k-NN", "k-NN + refiner"),
-                overwrite=overwrite,
-                progress=progress,
-                resolution=resolution,
-            )
-        return render_video(
-            path, self.motion, audio=self.audio, overwrite=overwrite, progress=progress, resolution=resolution
-        )
-
 
 def _index(db: MatchingDatabase) -> SearchIndex:
     idx = db.__dict__.get("_search_index")
@@ -448,7 +423,7 @@ def synthesize(
     db: MatchingDatabase,
     config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
-    refiner: RefinerChoice | None = None,
+    refiner: MotionRefiner | None = None,
 ) -> SynthesisResult:
     """Synthesise gesture motion for speech.
 
@@ -460,11 +435,11 @@ def synthesize(
     config : SynthesisConfig, optional
     control : ControlTrack or str, optional
         Replaces ``config.control``; the result's config records it.
-    refiner : Refiner or path, optional
-        A trained refiner (:class:`gesturekit.refine.infer.Refiner`, a refiner folder, or
-        ``"demo"`` for the one shipped with the demo database). It refines the k-NN
-        motion with the speech's cGAN audio features; the result is ``refined_motion``
-        and also ``motion``.
+    refiner : MotionRefiner, optional
+        A trained refiner (:class:`gesturekit.refine.infer.Refiner`; open a folder, or
+        ``"demo"`` for the one shipped with the demo database, with
+        :func:`gesturekit.refine.open_refiner`). It refines the k-NN motion with the
+        speech's cGAN audio features; the result is ``refined_motion`` and also ``motion``.
 
     Returns
     -------
@@ -480,7 +455,7 @@ def synthesize_batch(
     db: MatchingDatabase,
     config: SynthesisConfig | Sequence[SynthesisConfig] | None = None,
     controls: Sequence[ControlTrack | str | None] | None = None,
-    refiner: RefinerChoice | None = None,
+    refiner: MotionRefiner | None = None,
 ) -> list[SynthesisResult]:
     """Synthesise several speeches together: one scan of the database per step serves all.
 
@@ -491,7 +466,7 @@ def synthesize_batch(
         Exclusions must be the same for all speeches in one batch.
     controls : sequence of ControlTrack, str or None, optional
         Per speech, replaces its config's ``control``; the result's config records it.
-    refiner : Refiner or path, optional
+    refiner : MotionRefiner, optional
         As in :func:`synthesize`, applied to every speech.
 
     Returns
@@ -512,10 +487,7 @@ def synthesize_batch(
     excl = {(c.exclude_takes, c.exclude_ranges) for c in configs}
     if len(excl) > 1:
         raise ConfigError("all speeches of one batch must exclude the same database takes and ranges")
-    made_by = None
-    if refiner is not None:
-        refiner = _open_refiner(refiner, db)
-        made_by = _provenance(refiner, db)
+    made_by = None if refiner is None else _check_refiner(refiner, db)
     # a given control replaces the config's: the config a result records is the one searched
     configs = [c if ctl is None else c.with_control(ctl) for c, ctl in zip(configs, controls)]
     speeches = [_load_speech(a) for a in audios]
@@ -547,32 +519,20 @@ def synthesize_batch(
     return out
 
 
-def _provenance(refiner: Refiner, db: MatchingDatabase) -> dict | None:
-    """Which refiner this is (None for one not loaded from a folder); warns when it was trained
-    on another database than ``db``."""
-    from .refine import describe_training, provenance, trained_on
-
-    config, path = getattr(refiner, "config", None), getattr(refiner, "path", None)
-    if not isinstance(config, dict) or path is None:
-        return None
-    if not trained_on(config, db):
-        name = db.label or (db.path.name if db.path is not None else "this database")
-        warn(
-            f"refiner {path} was trained on {describe_training(config)}, not on {name}: "
-            "its output may not suit this database (train one on it with `gesturekit train-refiner --db ...`)"
+def _check_refiner(refiner: object, db: MatchingDatabase) -> dict | None:
+    """Refuse what is no refiner or one of another feature layout than ``db``; what the result
+    records of it (its ``provenance(db)``, when it has one)."""
+    if not isinstance(refiner, MotionRefiner):
+        raise ConfigError(
+            f"refiner must be a loaded refiner, got {type(refiner).__name__} (open a refiner folder with "
+            "gesturekit.refine.open_refiner)"
         )
-    return provenance(path, config)
+    refiner.check_database(db)
+    describe = getattr(refiner, "provenance", None)
+    return describe(db) if callable(describe) else None
 
 
-def _open_refiner(refiner: RefinerChoice, db: MatchingDatabase) -> Refiner:
-    from .refine import load_refiner
-
-    opened = load_refiner(refiner) if isinstance(refiner, (str, os.PathLike)) else refiner
-    opened.check_database(db)
-    return opened
-
-
-def _refine(db: MatchingDatabase, res: SynthesisResult, refiner: Refiner) -> None:
+def _refine(db: MatchingDatabase, res: SynthesisResult, refiner: MotionRefiner) -> None:
     """Refine the k-NN motion with the speech's cGAN audio features (keeping its content below
     ``refiner_keep_hz``); it becomes the output."""
     _, a = db.query_features(res.audio, n_frames=res.n_frames)

@@ -145,9 +145,25 @@ def test_synthesize_refuses_speech_files_written_to_the_same_outputs(tmp_path, n
     ],
 )
 def test_segment_and_record_options_read_their_earlier_names_too(command, given, expected):
-    from gesturekit.cli import build_parser
+    from gesturekit._cli_parser import build_parser
 
     positional = ["speech.wav"] if command == "synthesize" else ["--holdout", "take"]
     args = build_parser().parse_args([command, *positional, *given])
     assert (args.segment, getattr(args, "record", None)) == expected
     assert not hasattr(args, "step") and not hasattr(args, "topk")
+
+
+def test_every_command_of_the_parser_runs_its_own_function():
+    """The options live in _cli_parser.py, the commands in cli.py: each parsed command finds its function."""
+    import argparse
+
+    import gesturekit.cli as cli
+    from gesturekit._cli_parser import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    names = sorted(sub.choices)
+    assert names == sorted(["build-db", "info", "synthesize", "train-refiner", "evaluate", "train-fgd", "stimuli"])
+    for name in names:
+        assert callable(getattr(cli, "_cmd_" + name.replace("-", "_"))), name
+    assert parser.parse_args(["info"]).command == "info"

@@ -21,6 +21,7 @@ from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import DatabaseError, GestureKitError, OutputError
 from gesturekit.export.bvh import write_bvh
 from gesturekit.export.npz import save_npz
+from gesturekit.export.result import save_result_bvh, save_result_npz, save_result_video
 from gesturekit.motion import Motion
 from gesturekit.outputs import check_not_input, check_output, clean_stale, output_lock, write_folder
 
@@ -325,14 +326,14 @@ def test_a_refiner_that_yields_nan_is_named(tmp_path):
         source="x.wav",
         refined_motion=refined,
     )
-    for save, name in ((res.save_npz, "r.npz"), (res.save_bvh, "r.bvh"), (res.save_video, "r.mp4")):
+    for save, name in ((save_result_npz, "r.npz"), (save_result_bvh, "r.bvh"), (save_result_video, "r.mp4")):
         with pytest.raises(
             GestureKitError, match=f"{name}: not written: the refiner produced NaN or infinite positions .from frame 0"
         ):
-            save(tmp_path / name)
+            save(res, tmp_path / name)
     res.refined_motion, res.knn_motion = None, refined
     with pytest.raises(GestureKitError, match="the k-NN motion .poses read from the database"):
-        res.save_npz(tmp_path / "k.npz")
+        save_result_npz(res, tmp_path / "k.npz")
     assert os.listdir(tmp_path) == []
 
 
@@ -514,3 +515,16 @@ def test_a_dataset_bvh_is_not_taken_for_gesturekit_output(zeggs_files, tmp_path)
     bvh, _ = zeggs_files
     with pytest.raises(OutputError, match="is a file that gesturekit did not write"):
         check_output(bvh, "file", overwrite=True)
+
+
+def test_the_folder_markers_are_those_the_writers_write():
+    """outputs recognises folders by the markers declared in _io: the writers' own formats and files."""
+    from gesturekit import _database_folder
+    from gesturekit._io import DATABASE_CLIP_ARRAYS, FOLDER_KINDS
+    from gesturekit.evaluate import fgd
+    from gesturekit.refine import folder
+
+    assert FOLDER_KINDS["database"][:2] == ("database.json", _database_folder.FORMAT)
+    assert FOLDER_KINDS["refiner"][:2] == ("config.json", folder.FORMAT)
+    assert FOLDER_KINDS["fgd"][1] == fgd._FORMAT
+    assert _database_folder.CLIP_ARRAYS == DATABASE_CLIP_ARRAYS

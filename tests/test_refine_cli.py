@@ -31,7 +31,7 @@ def setup(tmp_path_factory):
 
 def test_synthesize_with_a_refiner_keeps_both_motions(setup):
     base, db, path, speech = setup
-    res = synthesize(speech, db=db, refiner=path)
+    res = synthesize(speech, db=db, refiner=Refiner.load(path))
     plain = synthesize(speech, db=db)
     np.testing.assert_array_equal(res.knn_motion.positions, plain.knn_motion.positions)
     assert res.refined_motion is not None and res.motion is res.refined_motion
@@ -42,7 +42,7 @@ def test_synthesize_with_a_refiner_keeps_both_motions(setup):
     np.testing.assert_allclose(res.refined_motion.flat(), want, atol=1e-6)
     assert res.metadata()["refined"]
     # refiner_keep_hz = 0: the refiner's output as it is (the paper)
-    raw = synthesize(speech, db=db, config=SynthesisConfig(refiner_keep_hz=0), refiner=path)
+    raw = synthesize(speech, db=db, config=SynthesisConfig(refiner_keep_hz=0), refiner=Refiner.load(path))
     np.testing.assert_allclose(raw.refined_motion.flat(), generator, atol=1e-6)
     assert not np.allclose(raw.refined_motion.flat(), res.refined_motion.flat(), atol=1e-4)
     assert SynthesisConfig.from_dict(raw.config.to_dict()).refiner_keep_hz == 0.0
@@ -171,7 +171,9 @@ def test_exclusion_config_reaches_the_held_out_synthesis(setup):
     # the held-out evaluation recipe: train without a stretch, synthesise it with the same exclusion
     base, db, path, _ = setup
     audio = np.asarray(make_take(12.0, seed=1).audio)[2 * 16000 : 5 * 16000]
-    res = synthesize(audio, db=db, config=SynthesisConfig(exclude_ranges=(("a", 2.0, 5.0),)), refiner=path)
+    res = synthesize(
+        audio, db=db, config=SynthesisConfig(exclude_ranges=(("a", 2.0, 5.0),)), refiner=Refiner.load(path)
+    )
     t = db.clip_start[res.search.frames[:, 0]] + res.search.frames[:, 1]
     held = (db.clip_take[res.search.frames[:, 0]] == 0) & (t >= 30) & (t < 75)
     assert not held.any() and res.refined_motion.n_frames == res.n_frames

@@ -14,7 +14,7 @@ from gesturekit.blend import keep_slow
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError, DatabaseError, InputFileError
 from gesturekit.features import LAYOUT
-from gesturekit.refine import default_refiner_path, load_refiner
+from gesturekit.refine import default_refiner_path, load_refiner, open_refiner
 from gesturekit.refine.infer import Refiner
 from gesturekit.refine.model import ModelConfig, build_models
 from gesturekit.refine.train import TrainConfig, train_refiner
@@ -432,7 +432,7 @@ def test_a_result_records_its_refiner_and_another_database_is_warned(tiny, tmp_p
     audio = make_take(4.0, seed=5, name="q").audio
     with warnings.catch_warnings():
         warnings.simplefilter("error", GestureKitWarning)  # its own database: no warning
-        res = synthesize(audio, db=db, refiner=out)
+        res = synthesize(audio, db=db, refiner=open_refiner(out))
     meta = json.loads(json.dumps(res.metadata()))
     assert meta["refined"] is True
     assert meta["refiner"]["path"] == str(Path(out).resolve())
@@ -444,7 +444,7 @@ def test_a_result_records_its_refiner_and_another_database_is_warned(tiny, tmp_p
     other.save(tmp_path / "other")
     other = MatchingDatabase.load(tmp_path / "other")
     with pytest.warns(GestureKitWarning, match=r"refiner .* was trained on .*, not on"):
-        res = synthesize(audio, db=other, refiner=out)
+        res = synthesize(audio, db=other, refiner=open_refiner(out))
     assert res.metadata()["refiner"]["trained_on"]["path"] == str(db.path)
 
 

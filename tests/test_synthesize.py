@@ -12,6 +12,8 @@ from gesturekit.control import parse_control
 from gesturekit.database import MatchingDatabase
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import ConfigError, GestureKitWarning
+from gesturekit.export.result import save_result_bvh, save_result_npz
+from gesturekit.motion import Motion
 from gesturekit.search.reference import search_reference
 from gesturekit.skeleton import joint_index
 from gesturekit.synthesize import SynthesisConfig, rest_pose_frame, synthesize, synthesize_batch
@@ -97,8 +99,8 @@ def test_excluded_takes_and_ranges_are_never_used(demo_db, speech):
 
 def test_same_seed_gives_byte_identical_npz(demo_db, speech, tmp_path):
     cfg = SynthesisConfig(seed=7, control="0-5:right_hand=high")
-    a = synthesize(speech, db=demo_db, config=cfg).save_npz(tmp_path / "a.npz")
-    b = synthesize(speech, db=demo_db, config=cfg).save_npz(tmp_path / "b.npz")
+    a = save_result_npz(synthesize(speech, db=demo_db, config=cfg), tmp_path / "a.npz")
+    b = save_result_npz(synthesize(speech, db=demo_db, config=cfg), tmp_path / "b.npz")
     assert hashlib.sha256(a.read_bytes()).digest() == hashlib.sha256(b.read_bytes()).digest()
     c = synthesize(speech, db=demo_db, config=SynthesisConfig(seed=8, control="0-5:right_hand=high"))
     assert not np.array_equal(c.search.clip, synthesize(speech, db=demo_db, config=cfg).search.clip)
@@ -108,7 +110,7 @@ def test_npz_holds_motion_record_and_config(demo_db, speech, tmp_path):
     from gesturekit.export.npz import load_npz
 
     res = synthesize(speech, db=demo_db, config=SynthesisConfig(blend="offset", control="1-4:width=wide"))
-    motion, arrays, config = load_npz(res.save_npz(tmp_path / "r.npz"))
+    motion, arrays, config = load_npz(save_result_npz(res, tmp_path / "r.npz"))
     np.testing.assert_array_equal(motion.positions, res.motion.positions)
     np.testing.assert_array_equal(arrays["knn_positions"], res.knn_motion.positions)
     np.testing.assert_array_equal(arrays["search_cand_clip"], res.search.cand_clip)
@@ -192,6 +194,36 @@ def test_bad_options_are_config_errors(demo_db, speech):
 # ---- acceptance on the real ZEGGS take ----------------------------------------------------------
 
 
+class _HalfRefiner:
+    """A stand-in refiner (the MotionRefiner protocol without provenance): halves the motion."""
+
+    def __init__(self):
+        self.checked = []
+
+    def check_database(self, db, /):
+        self.checked.append(db)
+
+    def refine_motion(self, motion, audio_features, /):
+        assert audio_features.shape == (motion.n_frames, 28)
+        return Motion(motion.positions * 0.5, motion.fps)
+
+
+def test_a_refiner_is_an_object_and_a_folder_is_opened_above(demo_db, speech, tmp_path):
+    from gesturekit.refine import open_refiner
+    from gesturekit.synthesize import MotionRefiner
+
+    refiner = _HalfRefiner()
+    assert isinstance(refiner, MotionRefiner) and open_refiner(refiner) is refiner and open_refiner(None) is None
+    cfg = SynthesisConfig(refiner_keep_hz=0)
+    res = synthesize(speech[: 16000 * 3], db=demo_db, config=cfg, refiner=refiner)
+    assert refiner.checked == [demo_db] and res.refiner is None  # no provenance: nothing recorded
+    np.testing.assert_allclose(res.motion.positions, 0.5 * res.knn_motion.positions)
+    # a folder given to synthesis itself: a message saying how to open it, before any search
+    for folder in (str(tmp_path), tmp_path, "demo"):
+        with pytest.raises(ConfigError, match=r"refiner must be a loaded refiner, got .*open_refiner"):
+            synthesize(speech[:16000], db=demo_db, refiner=folder)
+
+
 @pytest.fixture(scope="module")
 def zeggs_db(tmp_path_factory):
     from .conftest import ZEGGS_BVH
@@ -232,7 +264,7 @@ def test_zeggs_bvh_export_read_back_independently(zeggs_db, shared_data, tmp_pat
 
     speech = shared_data / "speech" / "espeak_en_us.wav"
     res = synthesize(speech, db=zeggs_db, config=SynthesisConfig(control="2-6:right_hand=high"))
-    path = res.save_bvh(tmp_path / "out.bvh", units="m")
+    path = save_result_bvh(res, tmp_path / "out.bvh", units="m")
     root = bvhio.readAsHierarchy(str(path))
     names = [j.Name for j, _, _ in root.layout()]
     from gesturekit.skeleton import JOINT_NAMES

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import limits
+from .._optional import optional
 from ..errors import AudioFileError, ConfigError, InputFileError, warn
 from ..motion import AUDIO_SR
 from .audio_headers import Budget, check_file
@@ -361,11 +362,12 @@ def _read_audioread(path: Path, budget: Budget) -> tuple[np.ndarray, int]:
 
 def _read_ffmpeg(path: Path, budget: Budget) -> tuple[np.ndarray, int]:
     """Decode the first audio stream with the ffmpeg binary of imageio-ffmpeg, at most the duration limit."""
+    imageio_ffmpeg = optional("imageio_ffmpeg")
+    if imageio_ffmpeg is None:
+        raise _Unreadable("not installed")
     try:
-        import imageio_ffmpeg
-
         exe = imageio_ffmpeg.get_ffmpeg_exe()
-    except (ImportError, RuntimeError):
+    except RuntimeError:
         raise _Unreadable("not installed") from None
     import soundfile as sf
 

@@ -55,8 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConfigError
-from ..features import n_audio_frames
-from ..motion import AUDIO_SR, Motion, Take
+from ..motion import AUDIO_SR, Motion, Take, n_audio_frames
 from ..skeleton import FPS
 from ._demo_body import _render_motion
 from ._demo_gestures import _plan_gestures

@@ -40,8 +40,7 @@ from ..search.types import SearchConfig
 
 if TYPE_CHECKING:
     from ..database import MatchingDatabase
-    from ..refine.infer import Refiner
-    from ..synthesize import SynthesisConfig
+    from ..synthesize import MotionRefiner, SynthesisConfig
 
 __all__ = [
     "SYSTEMS",
@@ -54,7 +53,6 @@ __all__ = [
     "audio_nearest_segments",
     "pose_nearest_segments",
     "refiner_unavailable_reason",
-    "load_refiner_for",
     "run_system",
 ]
 
@@ -382,7 +380,7 @@ def pose_nearest_segments(
 # ---- running a system ---------------------------------------------------------------------------
 
 
-def refiner_unavailable_reason(refiner: Refiner | str | os.PathLike[str] | None) -> str | None:
+def refiner_unavailable_reason(refiner: MotionRefiner | str | os.PathLike[str] | None) -> str | None:
     """Why ``knn+cgan`` cannot run with this refiner (None: it can), said before any work starts."""
     if refiner is None:
         return (
@@ -390,15 +388,6 @@ def refiner_unavailable_reason(refiner: Refiner | str | os.PathLike[str] | None)
             "`gesturekit train-refiner`)"
         )
     return None
-
-
-def load_refiner_for(refiner: Refiner | str | os.PathLike[str] | None) -> Refiner | None:
-    """A refiner given as a path, opened (:func:`gesturekit.refine.load_refiner`); objects pass through."""
-    if not isinstance(refiner, (str, os.PathLike)):
-        return refiner
-    from ..refine import load_refiner
-
-    return load_refiner(refiner)
 
 
 def run_system(
@@ -409,7 +398,7 @@ def run_system(
     config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
     gt: Motion | None = None,
-    refiner: Refiner | str | os.PathLike[str] | None = None,
+    refiner: MotionRefiner | str | os.PathLike[str] | None = None,
 ) -> SystemOutput:
     """Make the motion of one system for one speech.
 
@@ -461,7 +450,10 @@ def run_system(
             reason = refiner_unavailable_reason(refiner)
             if reason:
                 raise SystemUnavailable(reason)
-        res = synthesize(audio, db=db, config=config, refiner=refiner if system == "knn+cgan" else None)
+        from ..refine import open_refiner
+
+        opened = open_refiner(refiner) if system == "knn+cgan" else None
+        res = synthesize(audio, db=db, config=config, refiner=opened)
         motion = res.motion
         return SystemOutput(system, motion, np.arange(N, motion.n_frames, N, dtype=np.int64), len(res.relaxed_steps))
     plan = plan_search(db, audio, config)

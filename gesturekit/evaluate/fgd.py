@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._optional import require
 from ..errors import ConfigError, InputFileError
 from ..features import LAYOUT
 from .metrics import frechet_distance, gaussian_statistics
@@ -41,6 +42,7 @@ if TYPE_CHECKING:
 __all__ = ["FGDConfig", "FGDModel", "train_fgd_model", "load_fgd_model", "fgd"]
 
 _FORMAT = "gesturekit-fgd-autoencoder"
+_PURPOSE = "the FGD metric"
 _FORMAT_VERSION = 1
 
 
@@ -98,7 +100,7 @@ def _one_thread():
     shared (tests in parallel, a busy machine) torch's spinning threads slow
     it down many times over.
     """
-    import torch
+    torch = require("torch", purpose=_PURPOSE)
 
     old = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -110,6 +112,7 @@ def _one_thread():
 
 def _network(config: FGDConfig, dims: int):
     """Encoder and decoder: three stride-2 convolutions down, a linear latent, and back."""
+    require("torch", purpose=_PURPOSE)
     import torch.nn as nn
 
     c, t = config.channels, config.window // 8
@@ -207,7 +210,7 @@ class FGDModel:
         np.ndarray, shape (windows, latent), float64
             Windows every ``config.stride`` frames; none when the motion is shorter than a window.
         """
-        import torch
+        torch = require("torch", purpose=_PURPOSE)
 
         win = self.windows(positions)
         if win.shape[0] == 0:
@@ -219,7 +222,7 @@ class FGDModel:
 
     def reconstruction_error(self, positions: np.ndarray) -> float:
         """Mean squared reconstruction error of a motion's windows (z-scored units)."""
-        import torch
+        torch = require("torch", purpose=_PURPOSE)
 
         win = self.windows(positions)
         if win.shape[0] == 0:
@@ -235,7 +238,7 @@ class FGDModel:
         """
         import io
 
-        import torch
+        torch = require("torch", purpose=_PURPOSE)
 
         from .._io import atomic_write
         from ..outputs import write_folder
@@ -271,7 +274,7 @@ def load_fgd_model(path: str | os.PathLike) -> FGDModel:
     InputFileError
         Missing files, another format, or weights that do not fit the configuration.
     """
-    import torch
+    torch = require("torch", purpose=_PURPOSE)
 
     path = Path(path)
     meta_file, weights = path / "fgd.json", path / "weights.pt"
@@ -338,7 +341,7 @@ def train_fgd_model(
         The same database, configuration and seed give the same weights (on one machine and
         torch version; the global random state is left as it was).
     """
-    import torch
+    torch = require("torch", purpose=_PURPOSE)
 
     config = config or FGDConfig()
     clips, used = _training_windows(db, exclude, config.window)

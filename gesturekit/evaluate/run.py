@@ -46,12 +46,12 @@ from ..control import ControlTrack, Segment, parse_control, parse_time_range
 from ..errors import ConfigError, warn
 from ..features import LAYOUT
 from ..motion import AUDIO_SR, Motion
+from ..refine import open_refiner
 from . import metrics
 from .baselines import (
     SYSTEMS,
     SystemOutput,
     SystemUnavailable,
-    load_refiner_for,
     parse_systems,
     refiner_unavailable_reason,
     run_system,
@@ -61,8 +61,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from ..database import MatchingDatabase
-    from ..refine.infer import Refiner
-    from ..synthesize import SynthesisConfig
+    from ..synthesize import MotionRefiner, SynthesisConfig
     from .fgd import FGDModel
 
 __all__ = [
@@ -416,7 +415,7 @@ def run_evaluation(
     config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
     fgd_model: FGDModel | str | os.PathLike[str] | None = None,
-    refiner: Refiner | str | os.PathLike[str] | None = None,
+    refiner: MotionRefiner | str | os.PathLike[str] | None = None,
     sigma: float = 0.1,
     margin_s: float | None = None,
     progress: Callable[[int, int, str], None] | None = None,
@@ -481,7 +480,7 @@ def run_evaluation(
             progress(done, total, what)
 
     if "knn+cgan" in systems and refiner is not None and refiner_unavailable_reason(refiner) is None:
-        refiner = load_refiner_for(refiner)  # opened once for both runs
+        refiner = open_refiner(refiner)  # opened once for both runs
     exclude = db.exclusion_mask(takes=ref.exclude_takes, ranges=ref.exclude_ranges)
     model = _fgd_model(db, fgd_model, exclude, notes)
     tick("FGD autoencoder")

@@ -29,6 +29,7 @@ from typing import IO, TYPE_CHECKING, Any
 import numpy as np
 
 from .._io import atomic_write
+from .._optional import require
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG
@@ -49,9 +50,7 @@ _AUDIO_BITRATE = "96k"
 
 def _ffmpeg() -> str:
     # imported here: the binary is looked up (and checked) only when a video is made or read
-    import imageio_ffmpeg
-
-    return imageio_ffmpeg.get_ffmpeg_exe()
+    return require("imageio_ffmpeg", purpose="writing or reading a video").get_ffmpeg_exe()
 
 
 def render_video(
@@ -142,7 +141,8 @@ def render_video(
         audio = _check_audio(audio, sr)
     motions = [motion] if side_by_side is None else [motion, side_by_side]
 
-    from ..viz.render_pool import render_frames  # rendering libraries load only when rendering
+    require("pyvista", purpose="rendering a video")  # the rendering libraries load only when rendering
+    from ..viz.render_pool import render_frames
 
     # checks the motions, labels and workers before anything starts
     frames = render_frames(motions, labels=labels, resolution=(width, height), style=style, workers=workers)

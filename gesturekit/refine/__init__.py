@@ -16,15 +16,18 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .._optional import require
 from ..errors import GestureKitError
 
 if TYPE_CHECKING:
     from ..database import MatchingDatabase
+    from ..synthesize import MotionRefiner
     from .infer import Refiner
 
 __all__ = [
     "default_refiner_path",
     "load_refiner",
+    "open_refiner",
     "check_layout",
     "check_refiner",
     "trained_on",
@@ -45,11 +48,31 @@ def default_refiner_path() -> Path:
 
 def load_refiner(path: str | os.PathLike[str] | None = None, *, device: str = "cpu") -> Refiner:
     """A :class:`~gesturekit.refine.infer.Refiner` from a folder; ``None`` or ``"demo"``: the shipped one."""
+    require("torch", purpose="a refiner")
     from .infer import Refiner
 
     if path is None or str(path) == "demo":
         path = default_refiner_path()
     return Refiner.load(path, device=device)
+
+
+def open_refiner(refiner: MotionRefiner | str | os.PathLike[str] | None) -> MotionRefiner | None:
+    """A refiner to give to synthesis: a folder or ``"demo"`` is loaded (:func:`load_refiner`),
+    a loaded refiner (any object with ``check_database`` and ``refine_motion``) and None pass through.
+
+    The one place where the command line, the app, evaluation and studies turn a refiner they
+    were given into the object :func:`gesturekit.synthesize.synthesize` takes.
+
+    Raises
+    ------
+    MissingDependencyError
+        A folder given, and torch (the ``refiner`` extra) is not installed.
+    InputFileError
+        No refiner folder there, or a damaged one.
+    """
+    if refiner is None or not isinstance(refiner, (str, os.PathLike)):
+        return refiner
+    return load_refiner(refiner)
 
 
 def check_layout(config: dict, db: MatchingDatabase, *, where: str | os.PathLike[str]) -> None:

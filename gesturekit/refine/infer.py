@@ -321,6 +321,23 @@ class Refiner:
         ap = np.pad(az, ((0, pad), (0, 0)), mode="edge")
         return self._run(ap[None], gp[None])[0, :T]
 
+    def provenance(self, db: MatchingDatabase) -> dict | None:
+        """What reproduces a result refined for ``db`` (:func:`gesturekit.refine.provenance`); None
+        for a refiner not loaded from a folder. Warns when it was trained on another database.
+        """
+        from ..errors import warn
+        from . import describe_training, provenance, trained_on
+
+        if self.path is None:
+            return None
+        if not trained_on(self.config, db):
+            name = db.label or (db.path.name if db.path is not None else "this database")
+            warn(
+                f"refiner {self.path} was trained on {describe_training(self.config)}, not on {name}: "
+                "its output may not suit this database (train one on it with `gesturekit train-refiner --db ...`)"
+            )
+        return provenance(self.path, self.config)
+
     # ---- description ------------------------------------------------------------------------
     def describe(self) -> dict:
         """Summary: path, preset, iterations, model sizes, training database."""

@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from .._optional import optional
+
 __all__ = ["matrix_product", "single_threaded_blas", "worker_count"]
 
 
@@ -54,9 +56,8 @@ def matrix_product(n_queries: int) -> MatrixProduct:
     """
     if n_queries <= 1:
         return _numpy_product
-    try:
-        import torch  # optional and heavy: only for batches
-    except ImportError:  # pragma: no cover - torch is a dependency of the refiner
+    torch = optional("torch")  # the refiner's extra, heavy: only for batches
+    if torch is None:
         return _numpy_product
     # the error bound assumes true float32 products: torch may be set to use bfloat16/TF32
     if torch.get_float32_matmul_precision() != "highest":

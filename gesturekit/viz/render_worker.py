@@ -20,6 +20,9 @@ import sys
 
 def main(argv: list[str]) -> int:
     job, worker, workers, chunk = argv[0], int(argv[1]), int(argv[2]), int(argv[3])
+    from .._optional import require
+
+    require("pyvista", purpose="rendering")
     from .render_pool import _scene_from_job
 
     scene = _scene_from_job(job)

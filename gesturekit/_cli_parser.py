@@ -1,0 +1,272 @@
+"""The command line's options: one subparser per command, its help and its arguments.
+
+:func:`build_parser` is used by :func:`gesturekit.cli.main`, which runs the command
+named by ``args.command``; ``gesturekit COMMAND --help`` prints what is declared here.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["build_parser"]
+
+
+def _add_max_speech(parser) -> None:
+    parser.add_argument(
+        "--max-speech-minutes",
+        type=float,
+        metavar="MIN",
+        help="refuse speech files longer than this (default 60, or the environment "
+        "variable GESTUREKIT_MAX_SPEECH_MINUTES)",
+    )
+
+
+#: Each command's line in ``gesturekit --help`` and the paragraph of its own ``--help``.
+_ABOUT = {
+    "build-db": (
+        "build a matching database from a folder of takes (or the generated demo speaker)",
+        "Build a matching database from a folder of takes: BVH + speech (ZEGGS, BEAT, any BVH with a joint "
+        "map), joint-position files + speech, or npz files of the Habibie et al. 2021 layout.",
+    ),
+    "info": ("describe a matching database", None),
+    "synthesize": (
+        "gesture motion for speech: npz + BVH (+ MP4 with --video)",
+        "Synthesise gesture motion for one or more speech files (or folders of them) by motion matching. "
+        "Several files are searched together, scanning the database once per step.",
+    ),
+    "train-refiner": (
+        "train the resynchronisation cGAN (refiner) on a database",
+        "Train the paper's resynchronisation cGAN on a matching database built with --overlap-stride: k-NN "
+        "motion for every window of the overlapping cut, then WGAN-GP training with a progress bar, "
+        "checkpoints in the output folder (--resume goes on from the last one) and a loss log "
+        "(loss_log.csv). Uses the GPU when torch sees one.",
+    ),
+    "evaluate": (
+        "objective measures of every system on a held-out part of a database",
+        "Keep a take or a time range of one out of the database, synthesise its speech with each system, and "
+        "print and save (CSV + markdown) beat consistency, diversity, FGD, Hellinger distances of velocity "
+        "and acceleration histograms, jerk, acceleration, boundary jumps and control adherence.",
+    ),
+    "train-fgd": (
+        "train the motion autoencoder of the FGD measure on a database",
+        "Train the small convolutional autoencoder whose latent space the Frechet Gesture Distance is "
+        "measured in, on the poses of a matching database, leaving held-out parts out.",
+    ),
+    "stimuli": (
+        "user-study videos: every speech x system, opaque ids, manifest and presentation order",
+        "Render every speech with every system as an MP4 in one identical style (fixed camera, resolution, "
+        "frame rate, loudness-normalised speech), named by opaque ids, with a manifest CSV kept apart from "
+        "the videos and a balanced presentation order per participant (Latin squares).",
+    ),
+}
+
+
+def _command(sub, name: str) -> argparse.ArgumentParser:
+    """Add the subcommand ``name`` (``args.command``), described by :data:`_ABOUT`."""
+    summary, description = _ABOUT[name]
+    return sub.add_parser(name, help=summary, description=description)
+
+
+def _add_search(parser, *, seed: str) -> None:
+    """The options of the search that ``synthesize`` and ``evaluate`` share; ``seed``: what the seed seeds."""
+    parser.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
+    parser.add_argument(  # --step: the option's earlier name
+        "--segment", "--step", dest="segment", type=int, default=8, help="frames per search step, N (default 8)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help=f"seed of {seed} (default 0)")
+    parser.add_argument(
+        "--init-pose",
+        choices=["random", "rest"],
+        default="random",
+        help="initial pose: a random admissible database frame (the paper) or the rest pose",
+    )
+    parser.add_argument(
+        "--mask-rule",
+        choices=["ends", "all"],
+        default="ends",
+        help="a control must hold at a window's first and last frame (ends: the paper) or every frame",
+    )
+    parser.add_argument(
+        "--blend",
+        choices=["none", "offset"],
+        default="none",
+        help="none: the paper's hard joins; offset: a short fade at each join (ours)",
+    )
+
+
+def _add_exclusions(parser, *, out_of: str) -> None:
+    """``--exclude-take`` and ``--exclude-range``, keeping parts of the database out of ``out_of``."""
+    parser.add_argument("--exclude-take", action="append", metavar="TAKE", help=f"keep a database take out of {out_of}")
+    parser.add_argument(
+        "--exclude-range",
+        action="append",
+        metavar="TAKE:START-END",
+        help=f"keep a stretch of a take (seconds) out of {out_of}",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``gesturekit``'s command line; ``args.command`` names the command given."""
+    p = argparse.ArgumentParser(
+        prog="gesturekit",
+        description="Controllable speech-driven gesture synthesis by motion matching.",
+    )
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    b = _command(sub, "build-db")
+    b.add_argument("folder", nargs="?", help="folder of takes")
+    b.add_argument("--out", help="database folder to write (default for --demo: the app's default path)")
+    b.add_argument("--preset", choices=["zeggs", "beat"], help="joint naming preset of the BVH files")
+    b.add_argument("--joint-map", help="JSON joint map for other skeletons or joint-position files")
+    b.add_argument("--kind", default="auto", choices=["auto", "bvh", "positions", "habibie2021"])
+    b.add_argument("--fps", type=float, help="frame rate of joint-position files")
+    b.add_argument("--units", default="auto", choices=["auto", "cm", "m"], help="units of the motion files")
+    b.add_argument(
+        "--overlap-stride", type=int, help="also store an overlapping cut (stride in frames) for the refiner"
+    )
+    b.add_argument(
+        "--percentiles",
+        type=float,
+        nargs=2,
+        default=(15.0, 85.0),
+        metavar=("LOW", "HIGH"),
+        help="attribute percentiles that define low/high controls (default 15 85)",
+    )
+    b.add_argument("--no-audio", action="store_true", help="do not keep the takes' audio in the database")
+    b.add_argument("--label", help="a description stored with the database")
+    b.add_argument("--force", action="store_true", help="replace an existing database")
+    b.add_argument("--demo", action="store_true", help="build the generated demo speaker's database")
+    b.add_argument("--minutes", type=float, default=20.0, help="minutes of demo speaker (with --demo)")
+    b.add_argument("--seed", type=int, default=0, help="seed of the demo speaker (with --demo)")
+
+    i = _command(sub, "info")
+    i.add_argument("database", nargs="?", help="database folder (default: the demo database)")
+    i.add_argument("--takes", action="store_true", help="also list the takes")
+
+    y = _command(sub, "synthesize")
+    y.add_argument("speech", nargs="+", help="speech files (wav, flac, ogg, mp3; any rate) or folders of them")
+    y.add_argument("--db", help="matching database folder (default: the demo database)")
+    y.add_argument("--out", default="out", help="output folder (default: out)")
+    _add_search(y, seed="the random initial pose")
+    y.add_argument(  # --topk: the option's earlier name
+        "--record", "--topk", dest="record", type=int, default=10, help="candidates per step to record (default 10)"
+    )
+    y.add_argument(
+        "--control",
+        help='control track: "0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric" '
+        "(seconds) or a CSV/JSON file with start_s, end_s, constraint",
+    )
+    _add_exclusions(y, out_of="the search")
+    y.add_argument(
+        "--refiner",
+        metavar="PATH",
+        help="refine the k-NN motion with a trained refiner folder "
+        "(from train-refiner), 'demo' for the one shipped with the demo database, or 'none'; "
+        "default: a refiner trained on the database if there is one (DB/refiner, or the shipped "
+        "one for the demo database), else none. The npz keeps both motions",
+    )
+    y.add_argument(
+        "--refiner-keep-hz",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
+        "controls) and take the faster content from the refiner (default 2); 0: the refiner's "
+        "output as it is (the paper)",
+    )
+    y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
+    y.add_argument("--force", action="store_true", help="replace existing output files")
+    _add_max_speech(y)
+
+    r = _command(sub, "train-refiner")
+    r.add_argument("--db", help="matching database folder (built with --overlap-stride)")
+    r.add_argument("--demo", action="store_true", help="train on the default demo database (built if missing)")
+    r.add_argument("--out", required=True, help="refiner folder to write")
+    r.add_argument(
+        "--preset",
+        choices=["quick", "paper"],
+        default="quick",
+        help="quick: small networks, ~10 min on a 2-core CPU; paper: the paper's sizes (GPU)",
+    )
+    r.add_argument(
+        "--iterations",
+        type=int,
+        help="critic iterations (default: the preset's; with --resume: train on up to this many)",
+    )
+    r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
+    r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
+    r.add_argument("--seed", type=int, default=0, help="seed of the weights, batches and k draws (default 0)")
+    _add_exclusions(r, out_of="training")
+    r.add_argument(
+        "--no-train-state",
+        action="store_true",
+        help="leave out the optimiser state at the end (a smaller folder that cannot be resumed)",
+    )
+    r.add_argument("--force", action="store_true", help="replace an existing refiner folder")
+    from .evaluate.baselines import SYSTEMS
+
+    e = _command(sub, "evaluate")
+    e.add_argument("--db", help="matching database folder (default: the demo database)")
+    e.add_argument(
+        "--holdout",
+        required=True,
+        metavar="TAKE[:START-END]",
+        help="held-out take, or time range of one in seconds (e.g. 067_Speech_2_x_1_0:50-68.8)",
+    )
+    e.add_argument(
+        "--systems", default=",".join(SYSTEMS), help=f"comma-separated systems (default: all of {','.join(SYSTEMS)})"
+    )
+    e.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
+    e.add_argument("--fgd-model", help="FGD autoencoder from `gesturekit train-fgd` (default: train one now)")
+    e.add_argument(
+        "--control",
+        help="control track of the controlled runs (seconds of the held-out speech); "
+        "default: six equal stretches asking for left hand low/high, slow/fast, symmetric/asymmetric",
+    )
+    e.add_argument("--beat-sigma", type=float, default=0.1, help="beat-consistency tolerance, seconds (default 0.1)")
+    _add_search(e, seed="the initial pose and the random baseline")
+    e.add_argument("--out", default="evaluation", help="folder for the tables (default: evaluation)")
+    e.add_argument("--force", action="store_true", help="replace existing tables")
+
+    f = _command(sub, "train-fgd")
+    f.add_argument("--db", help="matching database folder (default: the demo database)")
+    f.add_argument("--out", required=True, help="model folder to write")
+    f.add_argument(
+        "--holdout",
+        action="append",
+        metavar="TAKE[:START-END]",
+        help="leave a take or a time range out of training (repeatable)",
+    )
+    f.add_argument("--steps", type=int, default=2000, help="training steps (default 2000)")
+    f.add_argument("--window", type=int, default=32, help="frames per window, a multiple of 8 (default 32)")
+    f.add_argument("--latent", type=int, default=32, help="size of the latent feature (default 32)")
+    f.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    f.add_argument("--force", action="store_true", help="replace an existing model")
+
+    s = _command(sub, "stimuli")
+    s.add_argument("--db", help="matching database folder (default: the demo database)")
+    s.add_argument("--audio", nargs="+", help="speech files or folders of them")
+    s.add_argument(
+        "--holdout",
+        action="append",
+        metavar="TAKE[:START-END]",
+        help="a held-out part of the database as a speech with recorded motion, for gt (repeatable)",
+    )
+    s.add_argument("--systems", default="gt,knn,knn+cgan", help="comma-separated systems (default gt,knn,knn+cgan)")
+    s.add_argument("--out", required=True, help="study folder to write")
+    s.add_argument("--seed", type=int, default=0, help="seed of the ids, the order and the synthesis (default 0)")
+    s.add_argument(
+        "--participants",
+        type=int,
+        help="participants to plan the order for (default: the rows of the balanced Latin square)",
+    )
+    s.add_argument("--control", help="control track for every synthesised stimulus")
+    s.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
+    s.add_argument("--resolution", default="640x480", help="video size WIDTHxHEIGHT (default 640x480)")
+    s.add_argument("--loudness", type=float, default=-23.0, help="loudness of every soundtrack, LUFS (default -23)")
+    s.add_argument("--workers", type=int, help="rendering processes (default: all cores)")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask distributed cluster (tcp://host:8786)")
+    s.add_argument("--force", action="store_true", help="replace an existing study")
+    _add_max_speech(s)
+    return p

@@ -1,0 +1,86 @@
+"""A synthesis result written as files: npz (everything), BVH (the motion), MP4 (the motion with its speech).
+
+Each writer refuses a result whose motion is not finite
+(:meth:`~gesturekit.synthesize.SynthesisResult.check_finite`), writes atomically and
+replaces an existing file only with ``overwrite=True``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..synthesize import SynthesisResult
+from .bvh import write_bvh
+from .npz import save_npz
+from .video import render_video
+
+__all__ = ["save_result_npz", "save_result_bvh", "save_result_video"]
+
+
+def save_result_npz(result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+    """An npz archive of a synthesis (read it back with :func:`gesturekit.export.npz.load_npz`).
+
+    It holds ``positions`` (the final motion, (T, 55, 3) metres), ``fps``,
+    ``knn_positions`` (the k-NN motion), ``refined_positions`` (with a refiner),
+    the search record as ``search_*`` arrays and :meth:`SynthesisResult.metadata` as its config.
+
+    Returns
+    -------
+    Path
+        ``path``, complete.
+    """
+    result.check_finite(path)
+    arrays = {"knn_positions": result.knn_motion.positions}
+    if result.refined_motion is not None:
+        arrays["refined_positions"] = result.refined_motion.positions
+    arrays.update({f"search_{k}": np.asarray(v) for k, v in result.search.array_fields().items()})
+    return save_npz(path, motion=result.motion, arrays=arrays, config=result.metadata(), overwrite=overwrite)
+
+
+def save_result_bvh(
+    result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False, units: str = "cm"
+) -> Path:
+    """A BVH file of the final motion (55-joint hierarchy, rotations that reproduce the positions).
+
+    ``units`` (``"cm"`` or ``"m"``) are those of the file's offsets and root positions.
+    """
+    result.check_finite(path)
+    return write_bvh(path, result.motion, overwrite=overwrite, units=units)
+
+
+def save_result_video(
+    result: SynthesisResult,
+    path: str | os.PathLike[str],
+    *,
+    overwrite: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    side_by_side: bool = False,
+    resolution: tuple[int, int] = (640, 480),
+) -> Path:
+    """An MP4 of the skeleton with the speech (H.264 + AAC); the k-NN and the refined motion side by
+    side when ``side_by_side`` and the result was refined. ``resolution`` is (width, height) in pixels.
+
+    Raises
+    ------
+    MissingDependencyError
+        The rendering libraries (the ``render`` extra) are not installed.
+    """
+    result.check_finite(path)
+    if side_by_side and result.refined_motion is not None:
+        return render_video(
+            path,
+            result.knn_motion,
+            audio=result.audio,
+            side_by_side=result.refined_motion,
+            labels=("k-NN", "k-NN + refiner"),
+            overwrite=overwrite,
+            progress=progress,
+            resolution=resolution,
+        )
+    return render_video(
+        path, result.motion, audio=result.audio, overwrite=overwrite, progress=progress, resolution=resolution
+    )
