@@ -108,8 +108,7 @@ def _add_exclusions(parser, *, out_of: str) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``gesturekit``'s command line; ``args.command`` names the command given."""
     p = argparse.ArgumentParser(
-        prog="gesturekit",
-        description="Controllable speech-driven gesture synthesis by motion matching.",
+        prog="gesturekit", description="Controllable speech-driven gesture synthesis by motion matching."
     )
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True

@@ -46,12 +46,7 @@ _MESSAGES = {
 
 
 def write_database(
-    db: MatchingDatabase,
-    path: Path,
-    *,
-    overwrite: bool,
-    inputs: Iterable[str | os.PathLike | None],
-    locked: bool,
+    db: MatchingDatabase, path: Path, *, overwrite: bool, inputs: Iterable[str | os.PathLike | None], locked: bool
 ) -> None:
     """Write ``db`` as the folder ``path`` by the rules of :func:`gesturekit.outputs.write_folder`.
 
@@ -130,8 +125,7 @@ def read_database(path: Path, *, mmap: bool) -> dict:
     )
     if meta.get("layout") != LAYOUT.signature():
         raise DatabaseError(
-            "database was built with another feature layout; rebuild it with `gesturekit build-db --force`",
-            path=path,
+            "database was built with another feature layout; rebuild it with `gesturekit build-db --force`", path=path
         )
     _check_meta(meta, path)
     mode: Literal["r"] | None = "r" if mmap else None

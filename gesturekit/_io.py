@@ -58,12 +58,7 @@ _RESERVED_NAMES = frozenset(
 )
 
 
-def atomic_write(
-    path: str | os.PathLike,
-    write_fn: Callable[[BinaryIO], object],
-    *,
-    overwrite: bool = False,
-) -> Path:
+def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], object], *, overwrite: bool = False) -> Path:
     """Write a file atomically: all of it under its final name, or nothing.
 
     ``write_fn`` receives a binary file object opened on a temporary file in
@@ -129,10 +124,7 @@ def atomic_write(
 
 
 def _exists_error(path: Path) -> ConfigError:
-    return ConfigError(
-        "already exists; pass overwrite=True (--force on the command line) to replace it",
-        path=path,
-    )
+    return ConfigError("already exists; pass overwrite=True (--force on the command line) to replace it", path=path)
 
 
 def _create_temp(folder: Path, name: str) -> tuple[Path, int]:

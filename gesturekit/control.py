@@ -359,9 +359,7 @@ def load_control_file(path: str | os.PathLike) -> ControlTrack:
 
 
 def constraint_mask(
-    attributes: np.ndarray,
-    constraints: tuple[tuple[str, str], ...],
-    thresholds: dict[str, tuple[float, float]],
+    attributes: np.ndarray, constraints: tuple[tuple[str, str], ...], thresholds: dict[str, tuple[float, float]]
 ) -> np.ndarray:
     """Frames of the database that satisfy all ``constraints``.
 

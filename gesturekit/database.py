@@ -59,14 +59,7 @@ from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = [
-    "FORMAT_VERSION",
-    "BuildConfig",
-    "TakeFeatures",
-    "take_features",
-    "MatchingDatabase",
-    "normalise_exclusions",
-]
+__all__ = ["FORMAT_VERSION", "BuildConfig", "TakeFeatures", "take_features", "MatchingDatabase", "normalise_exclusions"]
 
 
 @dataclass

@@ -194,11 +194,7 @@ def mel_filterbank(*, sr: int, n_fft: int, n_mels: int, fmin: float = 0.0, fmax:
 
 
 def audio_frame_features(
-    audio: np.ndarray,
-    *,
-    n_frames: int | None = None,
-    layout: FeatureLayout = LAYOUT,
-    chunk_frames: int = 4096,
+    audio: np.ndarray, *, n_frames: int | None = None, layout: FeatureLayout = LAYOUT, chunk_frames: int = 4096
 ) -> np.ndarray:
     """Per-frame audio features ``m_t``: 13 MFCCs and the log mean energy.
 

@@ -149,11 +149,7 @@ def check_not_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike |
 
 
 def check_output(
-    path: str | os.PathLike,
-    kind: str,
-    *,
-    overwrite: bool,
-    inputs: Iterable[str | os.PathLike | None] = (),
+    path: str | os.PathLike, kind: str, *, overwrite: bool, inputs: Iterable[str | os.PathLike | None] = ()
 ) -> bool:
     """Check that ``path`` may be written as an output of ``kind``.
 

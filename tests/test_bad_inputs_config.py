@@ -410,11 +410,7 @@ def test_joint_map_text_too_long_is_not_a_file(tmp_path):
 
 @pytest.mark.parametrize(
     "option, value, problem",
-    [
-        ("--beat-sigma", "nan", "positive"),
-        ("--beat-sigma", "inf", "positive"),
-        ("--beat-sigma", "0", "positive"),
-    ],
+    [("--beat-sigma", "nan", "positive"), ("--beat-sigma", "inf", "positive"), ("--beat-sigma", "0", "positive")],
 )
 def test_evaluate_numbers_refused(work, option, value, problem):
     before = snapshot(work)

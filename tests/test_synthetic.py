@@ -14,13 +14,7 @@ from hypothesis import strategies as st
 from scipy import signal
 from scipy.ndimage import gaussian_filter1d, uniform_filter1d
 
-from gesturekit.datasets.synthetic import (
-    DEMO_LABEL,
-    GENERATOR,
-    DemoEvents,
-    generate_demo_take,
-    generate_demo_takes,
-)
+from gesturekit.datasets.synthetic import DEMO_LABEL, GENERATOR, DemoEvents, generate_demo_take, generate_demo_takes
 from gesturekit.errors import ConfigError
 from gesturekit.features import audio_frame_features
 from gesturekit.motion import AUDIO_SR, Take
@@ -175,10 +169,7 @@ def test_generate_demo_takes_cuts_the_total_into_labelled_takes():
         again, _ = generate_demo_take(seconds=t.sources["seconds"], seed=t.sources["take_seed"], name="x")
         assert again.audio.tobytes() == t.audio.tobytes()  # each take is reproducible on its own
     assert takes[0].sources["take_seed"] != takes[1].sources["take_seed"]
-    assert [len(t.audio) for t in generate_demo_takes(minutes=0.5, take_seconds=20.0)] == [
-        20 * AUDIO_SR,
-        10 * AUDIO_SR,
-    ]
+    assert [len(t.audio) for t in generate_demo_takes(minutes=0.5, take_seconds=20.0)] == [20 * AUDIO_SR, 10 * AUDIO_SR]
 
 
 @pytest.mark.parametrize(

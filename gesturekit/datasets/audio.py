@@ -204,8 +204,7 @@ def load_audio_with_info(
         )
     if info.duration < min_duration:
         raise AudioFileError(
-            f"the audio is {info.duration:.2f} s long, shorter than the minimum of {min_duration:.2f} s",
-            path=path,
+            f"the audio is {info.duration:.2f} s long, shorter than the minimum of {min_duration:.2f} s", path=path
         )
 
     mono = data[:, 0] if data.shape[1] == 1 else data.mean(axis=1, dtype=np.float32)

@@ -44,10 +44,7 @@ _UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
 
 def load_habibie2021(
-    path: str | os.PathLike,
-    *,
-    units: str = "m",
-    joint_order: np.ndarray | list[int] | None = None,
+    path: str | os.PathLike, *, units: str = "m", joint_order: np.ndarray | list[int] | None = None
 ) -> list[Take]:
     """Read an npz archive in the layout of Habibie et al. 2021 as takes.
 

@@ -322,11 +322,7 @@ def _from_npz(path: Path) -> np.ndarray:
 
 
 def load_positions_motion(
-    path: str | os.PathLike,
-    *,
-    joint_map: str | os.PathLike | Mapping | PositionJointMap,
-    fps: float,
-    units: str = "m",
+    path: str | os.PathLike, *, joint_map: str | os.PathLike | Mapping | PositionJointMap, fps: float, units: str = "m"
 ) -> Motion:
     """Read a joint-position file as a 55-joint motion at 15 fps.
 

@@ -156,12 +156,7 @@ def _mixamo_like(name: str) -> JointMap:
 
 
 #: The built-in joint maps by name.
-PRESETS: Mapping[str, JointMap] = MappingProxyType(
-    {
-        "zeggs": _mixamo_like("zeggs"),
-        "beat": _mixamo_like("beat"),
-    }
-)
+PRESETS: Mapping[str, JointMap] = MappingProxyType({"zeggs": _mixamo_like("zeggs"), "beat": _mixamo_like("beat")})
 
 
 def load_joint_map(spec: str | os.PathLike | Mapping | JointMap) -> JointMap:

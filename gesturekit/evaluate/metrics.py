@@ -607,13 +607,7 @@ def boundary_jumps(
 _STAT_ATTRIBUTES = ("left_hand_height", "left_hand_speed", "hand_speed", "asymmetry")
 
 
-def control_adherence(
-    positions: np.ndarray,
-    track: ControlTrack,
-    *,
-    thresholds: dict,
-    fps: float,
-) -> pd.DataFrame:
+def control_adherence(positions: np.ndarray, track: ControlTrack, *, thresholds: dict, fps: float) -> pd.DataFrame:
     """Per control segment: the fraction of frames meeting its constraint, and attribute statistics.
 
     The attributes of the motion are computed as for database frames

@@ -48,14 +48,7 @@ from ..features import LAYOUT
 from ..motion import AUDIO_SR, Motion
 from ..refine import open_refiner
 from . import metrics
-from .baselines import (
-    SYSTEMS,
-    SystemOutput,
-    SystemUnavailable,
-    parse_systems,
-    refiner_unavailable_reason,
-    run_system,
-)
+from .baselines import SYSTEMS, SystemOutput, SystemUnavailable, parse_systems, refiner_unavailable_reason, run_system
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -357,9 +357,7 @@ def probe_media(path: str | os.PathLike, *, decode: bool = True) -> dict:
         raise InputFileError("does not exist or is not a file", path=path)
     source = f"file:{path.resolve()}"
     header = subprocess.run(
-        [_ffmpeg(), "-hide_banner", "-nostdin", "-i", source],
-        stdin=subprocess.DEVNULL,
-        capture_output=True,
+        [_ffmpeg(), "-hide_banner", "-nostdin", "-i", source], stdin=subprocess.DEVNULL, capture_output=True
     ).stderr.decode("utf-8", "replace")
     info = _parse_header(header)
     if info["video"] is None and info["audio"] is None:

@@ -178,10 +178,7 @@ def draw_k(n: int, config: PairsConfig) -> np.ndarray:
 
 
 def make_training_pairs(
-    db: MatchingDatabase,
-    *,
-    config: PairsConfig = PairsConfig(),
-    progress: Callable[[int, int], None] | None = None,
+    db: MatchingDatabase, *, config: PairsConfig = PairsConfig(), progress: Callable[[int, int], None] | None = None
 ) -> TrainingPairs:
     """Run the k-NN search for every training window of the overlapping cut.
 

@@ -100,12 +100,7 @@ def control_starts(mask: np.ndarray, n: int, rule: str = "ends") -> np.ndarray:
 
 
 def admissible_starts(
-    valid: np.ndarray,
-    n: int,
-    *,
-    exclude: np.ndarray | None = None,
-    mask: np.ndarray | None = None,
-    rule: str = "ends",
+    valid: np.ndarray, n: int, *, exclude: np.ndarray | None = None, mask: np.ndarray | None = None, rule: str = "ends"
 ) -> np.ndarray:
     """Every admissible window start of a step (rule 1 of Algorithm 1).
 

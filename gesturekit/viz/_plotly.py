@@ -61,12 +61,7 @@ def data_array(value: dict | Sequence[Any] | np.ndarray) -> np.ndarray:
 
 
 def _motions_and_labels(
-    motions,
-    labels,
-    *,
-    who: str,
-    empty_ok: bool = False,
-    label_one: bool = False,
+    motions, labels, *, who: str, empty_ok: bool = False, label_one: bool = False
 ) -> tuple[list[Motion], list[str]]:
     """One motion or a list of them, with one label each (checked; ``who`` names the caller in errors).
 

@@ -24,16 +24,7 @@ import numpy.typing as npt
 from ..errors import ConfigError
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS, joint_index
 
-__all__ = [
-    "APPEARANCE",
-    "Appearance",
-    "BodyShapes",
-    "Capsule",
-    "DERIVED_POINTS",
-    "Sphere",
-    "hex_to_rgb",
-    "rgb_to_hex",
-]
+__all__ = ["APPEARANCE", "Appearance", "BodyShapes", "Capsule", "DERIVED_POINTS", "Sphere", "hex_to_rgb", "rgb_to_hex"]
 
 #: Points :meth:`Appearance.body` adds after the 55 joints, in this order (indices 55, 56, ...).
 DERIVED_POINTS: tuple[str, ...] = ("pelvis", "left_hip", "right_hip", "head_centre", "left_chest", "right_chest")

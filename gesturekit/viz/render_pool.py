@@ -122,11 +122,7 @@ def _serial_frames(
 
 
 def _write_job(
-    path: Path,
-    motions: list[Motion],
-    labels: Sequence[str] | None,
-    resolution: tuple[int, int],
-    style: RenderStyle,
+    path: Path, motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int], style: RenderStyle
 ) -> None:
     spec = {
         "fps": float(motions[0].fps),
@@ -150,11 +146,7 @@ def _scene_from_job(path: str) -> SkeletonScene:
 
 
 def _parallel_frames(
-    motions: list[Motion],
-    labels: Sequence[str] | None,
-    resolution: tuple[int, int],
-    style: RenderStyle,
-    workers: int,
+    motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int], style: RenderStyle, workers: int
 ) -> Generator[np.ndarray, None, None]:
     width, height = resolution
     size = width * height * 3
