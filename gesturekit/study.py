@@ -258,21 +258,10 @@ def speech_sources(
         kept out of every system's search.
     """
     from .datasets.audio import load_audio
-    from .datasets.takes import AUDIO_EXTENSIONS
-    from .errors import InputFileError
     from .evaluate.run import held_out
-    from .paths import is_dir
+    from .workspace import expand_speech
 
-    out: list[StimulusSpeech] = []
-    for item in audio:
-        p = Path(item)
-        files = [p]
-        if is_dir(p):
-            files = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in AUDIO_EXTENSIONS)
-            if not files:
-                raise InputFileError(f"no speech files ({'/'.join(AUDIO_EXTENSIONS)}) in this folder", path=p)
-        for f in files:
-            out.append(StimulusSpeech(f.name, load_audio(f)))
+    out = [StimulusSpeech(f.name, load_audio(f)) for f in expand_speech(audio)]
     for h in holdouts:
         ref = held_out(db, h)
         out.append(StimulusSpeech(ref.holdout.to_text(), ref.audio, ref.motion, ref.exclude_takes, ref.exclude_ranges))
