@@ -31,10 +31,20 @@ from gesturekit.paths import PathNotAllowedError, check_allowed, is_allowed
 
 if TYPE_CHECKING:
     import numpy as np
+    import pandas as pd
 
     from gesturekit.motion import Motion
 
-__all__ = ["LOG", "allowed", "error_text", "run_page", "show_skeletons", "user_errors", "warnings_shown"]
+__all__ = [
+    "LOG",
+    "allowed",
+    "error_text",
+    "run_page",
+    "selected_row",
+    "show_skeletons",
+    "user_errors",
+    "warnings_shown",
+]
 
 #: The server log of the app: unexpected errors (with their tracebacks) and failed background work.
 LOG = logging.getLogger("gesturekit.app")
@@ -124,6 +134,21 @@ def warnings_shown() -> Iterator[list[str]]:
         finally:
             for message in messages:
                 st.warning(message)
+
+
+def selected_row(table: pd.DataFrame, *, key: str, height: int, column_config: dict | None = None) -> int | None:
+    """Show ``table`` with one row selectable (a selection reruns the page); the selected row's position, or None."""
+    event = st.dataframe(
+        table,
+        hide_index=True,
+        key=key,
+        on_select="rerun",
+        selection_mode="single-row",
+        height=height,
+        column_config=column_config,
+    )
+    rows = list(event.selection.rows) if event is not None else []
+    return int(rows[0]) if rows and rows[0] < len(table) else None
 
 
 def show_skeletons(

@@ -35,6 +35,7 @@ __all__ = [
     "current_synthesis",
     "page_setup",
     "persistent_key",
+    "picked_key",
     "remount_key",
     "run_synthesis",
 ]
@@ -86,6 +87,22 @@ def persistent_key(name: str, default: object) -> str:
     if key in ss:
         ss[name] = ss[key]
     ss[key] = ss.get(name, default)
+    return key
+
+
+def picked_key(name: str, selected: int | None, *, last: str, n: int) -> str:
+    """The :func:`persistent_key` of a number input (0 to ``n - 1``) that a table row selection also sets.
+
+    A row selected since the previous run (``selected``; ``last`` names where that run's
+    selection is kept) wins over the number typed; the value is then clipped to the range,
+    as another database or result may hold fewer rows.
+    """
+    ss = st.session_state
+    key = persistent_key(name, 0)
+    if selected is not None and selected != ss.get(last):
+        ss[key] = selected
+    ss[last] = selected
+    ss[key] = int(min(max(int(ss[key]), 0), n - 1))
     return key
 
 

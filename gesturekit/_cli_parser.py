@@ -67,6 +67,11 @@ def _command(sub, name: str) -> argparse.ArgumentParser:
     return sub.add_parser(name, help=summary, description=description)
 
 
+def _add_choice(parser, flag: str, choices: list[str], help: str) -> None:
+    """An option that takes one of ``choices``, the first of them by default."""
+    parser.add_argument(flag, choices=choices, default=choices[0], help=help)
+
+
 def _add_search(parser, *, seed: str) -> None:
     """The options of the search that ``synthesize`` and ``evaluate`` share; ``seed``: what the seed seeds."""
     parser.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
@@ -74,23 +79,20 @@ def _add_search(parser, *, seed: str) -> None:
         "--segment", "--step", dest="segment", type=int, default=8, help="frames per search step, N (default 8)"
     )
     parser.add_argument("--seed", type=int, default=0, help=f"seed of {seed} (default 0)")
-    parser.add_argument(
+    _add_choice(
+        parser,
         "--init-pose",
-        choices=["random", "rest"],
-        default="random",
-        help="initial pose: a random admissible database frame (the paper) or the rest pose",
+        ["random", "rest"],
+        "initial pose: a random admissible database frame (the paper) or the rest pose",
     )
-    parser.add_argument(
+    _add_choice(
+        parser,
         "--mask-rule",
-        choices=["ends", "all"],
-        default="ends",
-        help="a control must hold at a window's first and last frame (ends: the paper) or every frame",
+        ["ends", "all"],
+        "a control must hold at a window's first and last frame (ends: the paper) or every frame",
     )
-    parser.add_argument(
-        "--blend",
-        choices=["none", "offset"],
-        default="none",
-        help="none: the paper's hard joins; offset: a short fade at each join (ours)",
+    _add_choice(
+        parser, "--blend", ["none", "offset"], "none: the paper's hard joins; offset: a short fade at each join (ours)"
     )
 
 
@@ -182,11 +184,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--db", help="matching database folder (built with --overlap-stride)")
     r.add_argument("--demo", action="store_true", help="train on the default demo database (built if missing)")
     r.add_argument("--out", required=True, help="refiner folder to write")
-    r.add_argument(
+    _add_choice(
+        r,
         "--preset",
-        choices=["quick", "paper"],
-        default="quick",
-        help="quick: small networks, ~10 min on a 2-core CPU; paper: the paper's sizes (GPU)",
+        ["quick", "paper"],
+        "quick: small networks, ~10 min on a 2-core CPU; paper: the paper's sizes (GPU)",
     )
     r.add_argument(
         "--iterations",

@@ -34,7 +34,7 @@ import os
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
@@ -215,6 +215,22 @@ def _cut(tf: TakeFeatures, starts: np.ndarray, length: int, track_len: int) -> d
     }
 
 
+class _Array(property):
+    """A read-only property of :class:`MatchingDatabase` that is one of its clip arrays
+    (``db.arrays[key]``), documented by ``doc``; type checkers and IDEs see an ``np.ndarray``."""
+
+    def __init__(self, key: str, doc: str) -> None:
+        super().__init__(lambda db: db.arrays[key])
+        self.__doc__ = doc  # on the instance: the class's own docstring would shadow property's doc
+
+    @overload
+    def __get__(self, db: None, owner: type, /) -> _Array: ...
+    @overload
+    def __get__(self, db: Any, owner: type | None = None, /) -> np.ndarray: ...
+    def __get__(self, db: Any, owner: type | None = None, /) -> Any:
+        return super().__get__(db, owner)
+
+
 class MatchingDatabase:
     """The matching database of the search: clips with their features, poses and attributes.
 
@@ -246,71 +262,29 @@ class MatchingDatabase:
 
     # ---- array access -------------------------------------------------------------------
     # readable names first; the paper's letters (Habibie et al. 2022, Sec. 3) are aliases below
-    @property
-    def audio_features(self) -> np.ndarray:
-        """The z-scored audio features f_t of every clip frame, shape (M, 64, 112), float32."""
-        return self.arrays["F"]
-
-    @property
-    def pose_features(self) -> np.ndarray:
-        """The z-scored pose features p_t of every clip frame, shape (M, 64, 96), float32."""
-        return self.arrays["P"]
-
-    @property
-    def poses(self) -> np.ndarray:
-        """The output poses g_t: 55 joint positions per frame, flattened, shape (M, 64, 165), metres."""
-        return self.arrays["G"]
-
-    @property
-    def cgan_audio_features(self) -> np.ndarray:
-        """The refiner's audio input (MFCCs m_t and their deltas), not z-scored, shape (M, 64, 28), float32."""
-        return self.arrays["A"]
-
-    @property
-    def valid(self) -> np.ndarray:
-        """Whether each clip frame may start a segment (its look-ahead lies in the take), shape (M, 64), bool."""
-        return self.arrays["valid"]
-
-    @property
-    def attributes(self) -> np.ndarray:
-        """The control attributes of every clip frame, shape (M, 64, 9), float32, in the order of
-        :attr:`attribute_names` (units: :data:`gesturekit.control.ATTRIBUTE_UNITS`)."""
-        return self.arrays["attributes"]
-
-    @property
-    def pose_track(self) -> np.ndarray:
-        """Raw feature-joint positions of frames s..s+69 of each clip, shape (M, 70, 24), metres."""
-        return self.arrays["pose_track"]
-
-    @property
-    def clip_take(self) -> np.ndarray:
-        """The take index of each clip, shape (M,), int32."""
-        return self.arrays["clip_take"]
-
-    @property
-    def clip_start(self) -> np.ndarray:
-        """The first frame of each clip in its take, shape (M,), int32."""
-        return self.arrays["clip_start"]
-
-    @property
-    def F(self) -> np.ndarray:
-        """The paper's name for :attr:`audio_features`."""
-        return self.audio_features
-
-    @property
-    def P(self) -> np.ndarray:
-        """The paper's name for :attr:`pose_features`."""
-        return self.pose_features
-
-    @property
-    def G(self) -> np.ndarray:
-        """The paper's name for :attr:`poses`."""
-        return self.poses
-
-    @property
-    def A(self) -> np.ndarray:
-        """The paper's name for :attr:`cgan_audio_features`."""
-        return self.cgan_audio_features
+    audio_features = _Array("F", "The z-scored audio features f_t of every clip frame, shape (M, 64, 112), float32.")
+    pose_features = _Array("P", "The z-scored pose features p_t of every clip frame, shape (M, 64, 96), float32.")
+    poses = _Array("G", "The output poses g_t: 55 joint positions per frame, flattened, shape (M, 64, 165), metres.")
+    cgan_audio_features = _Array(
+        "A", "The refiner's audio input (MFCCs m_t and their deltas), not z-scored, shape (M, 64, 28), float32."
+    )
+    valid = _Array(
+        "valid", "Whether each clip frame may start a segment (its look-ahead lies in the take), shape (M, 64), bool."
+    )
+    attributes = _Array(
+        "attributes",
+        "The control attributes of every clip frame, shape (M, 64, 9), float32, in the order of "
+        ":attr:`attribute_names` (units: :data:`gesturekit.control.ATTRIBUTE_UNITS`).",
+    )
+    pose_track = _Array(
+        "pose_track", "Raw feature-joint positions of frames s..s+69 of each clip, shape (M, 70, 24), metres."
+    )
+    clip_take = _Array("clip_take", "The take index of each clip, shape (M,), int32.")
+    clip_start = _Array("clip_start", "The first frame of each clip in its take, shape (M,), int32.")
+    F = _Array("F", "The paper's name for :attr:`audio_features`.")
+    P = _Array("P", "The paper's name for :attr:`pose_features`.")
+    G = _Array("G", "The paper's name for :attr:`poses`.")
+    A = _Array("A", "The paper's name for :attr:`cgan_audio_features`.")
 
     @property
     def n_clips(self) -> int:

@@ -9,7 +9,7 @@ import numpy as np
 from .errors import ConfigError
 from .skeleton import FPS, N_JOINTS, PARENTS
 
-__all__ = ["Motion", "Take", "AUDIO_SR", "resample_positions", "output_frame_count", "n_audio_frames"]
+__all__ = ["Motion", "HoldsMotion", "Take", "AUDIO_SR", "resample_positions", "output_frame_count", "n_audio_frames"]
 
 #: Sample rate of all audio inside gesturekit, Hz.
 AUDIO_SR = 16000
@@ -75,6 +75,22 @@ class Motion:
 
     def slice(self, start: int, stop: int) -> Motion:
         return Motion(self.positions[start:stop], self.fps)
+
+
+class HoldsMotion:
+    """Base of the records built around a :class:`Motion` in ``motion``: its length in frames and seconds."""
+
+    motion: Motion
+
+    @property
+    def n_frames(self) -> int:
+        """Frames of ``motion``."""
+        return self.motion.n_frames
+
+    @property
+    def duration(self) -> float:
+        """Seconds of ``motion``."""
+        return self.motion.duration
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control
 from .database import MatchingDatabase, normalise_exclusions
 from .errors import ConfigError, GestureKitError
-from .motion import AUDIO_SR, Motion
+from .motion import AUDIO_SR, HoldsMotion, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 from .search.plan import SearchPlan, plan_search, rest_pose_frame
 from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
@@ -262,7 +262,7 @@ class MotionRefiner(Protocol):
 
 
 @dataclass
-class SynthesisResult:
+class SynthesisResult(HoldsMotion):
     """A synthesised motion and everything that made it.
 
     Attributes
@@ -307,10 +307,6 @@ class SynthesisResult:
     def control(self) -> ControlTrack:
         """The control track the search used (``config.control``, parsed)."""
         return self.config.control_track
-
-    @property
-    def n_frames(self) -> int:
-        return self.motion.n_frames
 
     @property
     def relaxed_steps(self) -> list[int]:

@@ -187,6 +187,11 @@ def controls(speech: dict) -> ControlTrack | None:
     return track
 
 
+def _whole(col, label: str, key: str, lo: int, hi: int, help: str) -> int:
+    """A whole-number input from ``lo`` to ``hi`` in the column ``col``."""
+    return col.number_input(label, min_value=lo, max_value=hi, step=1, key=key, help=help)
+
+
 def settings(db: MatchingDatabase) -> dict:
     """The search settings: SynthesisConfig arguments, the refiner's checked folder (or None), and whether they can
     run."""
@@ -202,32 +207,20 @@ def settings(db: MatchingDatabase) -> dict:
         ss[segment_key] = ss["synth.segment"] = db.clip_frames
     c = st.columns(4)
     out = {
-        "k": c[0].number_input(
+        "k": _whole(
+            c[0],
             "k (0 = best match)",
-            min_value=0,
-            max_value=100,
-            step=1,
-            key=pk("synth.k", 0),
-            help="take the k-th best window of the combined ranking at every step",
+            pk("synth.k", 0),
+            0,
+            100,
+            "take the k-th best window of the combined ranking at every step",
         ),
-        "segment": c[1].number_input(
-            "N (frames per step)",
-            min_value=1,
-            max_value=db.clip_frames,
-            step=1,
-            key=segment_key,
-            help="8 in the paper: a new search every 0.53 s",
+        "segment": _whole(
+            c[1], "N (frames per step)", segment_key, 1, db.clip_frames, "8 in the paper: a new search every 0.53 s"
         ),
-        "seed": c[2].number_input(
-            "Seed", min_value=0, max_value=2**31 - 1, step=1, key=pk("synth.seed", 0), help="of the random initial pose"
-        ),
-        "record": c[3].number_input(
-            "Candidates recorded per step",
-            min_value=1,
-            max_value=50,
-            step=1,
-            key=pk("synth.record", 10),
-            help="shown in the Retrieval inspector",
+        "seed": _whole(c[2], "Seed", pk("synth.seed", 0), 0, 2**31 - 1, "of the random initial pose"),
+        "record": _whole(
+            c[3], "Candidates recorded per step", pk("synth.record", 10), 1, 50, "shown in the Retrieval inspector"
         ),
     }
     c = st.columns(4)

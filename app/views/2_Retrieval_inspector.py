@@ -72,22 +72,8 @@ def pick_step(db: MatchingDatabase, result: SynthesisResult) -> int:
     ss = st.session_state
     table = gs.steps_overview(result, db)
     with st.expander(f"All {len(table)} steps", expanded=False):
-        event = st.dataframe(
-            table,
-            hide_index=True,
-            key="inspect.steps_table",
-            on_select="rerun",
-            selection_mode="single-row",
-            height=240,
-            column_config=STEPS_COLUMNS,
-        )
-    rows = list(event.selection.rows) if event is not None else []
-    selected = int(rows[0]) if rows and rows[0] < len(table) else None
-    key = state.persistent_key(STEP, 0)
-    if selected is not None and selected != ss.get(_LAST_ROW):
-        ss[key] = selected
-    ss[_LAST_ROW] = selected
-    ss[key] = int(min(max(int(ss[key]), 0), len(table) - 1))  # a new result may have fewer steps
+        selected = display.selected_row(table, key="inspect.steps_table", height=240, column_config=STEPS_COLUMNS)
+    key = state.picked_key(STEP, selected, last=_LAST_ROW, n=len(table))  # a new result may have fewer steps
     step = st.number_input(
         "Step", min_value=0, max_value=len(table) - 1, step=1, key=key, help="or select a row of the steps table"
     )

@@ -58,25 +58,17 @@ def pick_clip(db: MatchingDatabase) -> int:
     table = db.clips_table()
     if which != "all takes":
         table = table[table["take"] == which].reset_index(drop=True)
-    event = st.dataframe(
+    row = display.selected_row(
         table,
-        hide_index=True,
         key="db.clips_table",
-        on_select="rerun",
-        selection_mode="single-row",
         height=260,
         column_config={
             "start_s": st.column_config.NumberColumn("start [s]", format="%.2f"),
             "end_s": st.column_config.NumberColumn("end [s]", format="%.2f"),
         },
     )
-    rows = list(event.selection.rows) if event is not None else []
-    selected = int(table.iloc[rows[0]]["clip"]) if rows and rows[0] < len(table) else None
-    key = state.persistent_key(CLIP, 0)
-    if selected is not None and selected != ss.get(_LAST_ROW):
-        ss[key] = selected  # a new row selection wins over the number input
-    ss[_LAST_ROW] = selected
-    ss[key] = int(min(max(int(ss[key]), 0), db.n_clips - 1))  # another database may have fewer clips
+    selected = None if row is None else int(table.iloc[row]["clip"])
+    key = state.picked_key(CLIP, selected, last=_LAST_ROW, n=db.n_clips)  # another database may have fewer clips
     clip = st.number_input(
         "Clip to view",
         min_value=0,

@@ -34,6 +34,7 @@ import subprocess
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -43,7 +44,10 @@ from ..errors import AudioFileError, ConfigError, InputFileError, warn
 from ..motion import AUDIO_SR
 from .audio_headers import Budget, check_file
 
-__all__ = ["AudioInfo", "load_audio", "load_audio_with_info", "resample", "SILENCE_PEAK"]
+if TYPE_CHECKING:
+    from typing_extensions import Unpack  # typing.Unpack is Python 3.11+; only the type checker reads it
+
+__all__ = ["AudioInfo", "LoadOptions", "load_audio", "load_audio_with_info", "resample", "SILENCE_PEAK"]
 
 #: Peak amplitude (full scale = 1) at or below which audio counts as silent: -80 dBFS.
 SILENCE_PEAK = 1e-4
@@ -96,14 +100,25 @@ class _Unreadable(Exception):
     """A decoder could not read the file; carries its reason for the final message."""
 
 
-def load_audio(
-    path: str | os.PathLike,
-    *,
-    sr: int = AUDIO_SR,
-    min_duration: float = 1.0,
-    max_duration: float | None = None,
-    take: bool = False,
-) -> np.ndarray:
+class LoadOptions(TypedDict, total=False):
+    """The keywords of :func:`load_audio`, which passes them on to :func:`load_audio_with_info`
+    (the one signature that names them, with their defaults).
+
+    Attributes
+    ----------
+    sr : int
+    min_duration : float
+    max_duration : float or None
+    take : bool
+    """
+
+    sr: int
+    min_duration: float
+    max_duration: float | None
+    take: bool
+
+
+def load_audio(path: str | os.PathLike, **options: Unpack[LoadOptions]) -> np.ndarray:
     """Read an audio file as mono float32 at ``sr`` Hz.
 
     Parameters
@@ -112,9 +127,9 @@ def load_audio(
         Any audio file soundfile can read (WAV, FLAC, OGG, MP3, ...); other
         containers (M4A, WebM, ...) when audioread or ffmpeg can decode them.
     sr : int
-        Output sample rate, Hz.
+        Output sample rate, Hz (default 16000).
     min_duration : float
-        Shortest accepted duration, seconds.
+        Shortest accepted duration, seconds (default 1).
     max_duration : float, optional
         Longest accepted duration, seconds, checked from the header before
         decoding. Default: the limit for speech
@@ -122,7 +137,7 @@ def load_audio(
         take with ``take=True`` (:func:`gesturekit.limits.max_take_seconds`).
     take : bool
         The audio of a database take rather than speech to synthesise for:
-        only which default limit applies and what the message says.
+        only which default limit applies and what the message says (default False).
 
     Returns
     -------
@@ -143,7 +158,7 @@ def load_audio(
     GestureKitWarning
         The audio is silent (peak at or below :data:`SILENCE_PEAK`).
     """
-    return load_audio_with_info(path, sr=sr, min_duration=min_duration, max_duration=max_duration, take=take)[0]
+    return load_audio_with_info(path, **options)[0]
 
 
 def load_audio_with_info(

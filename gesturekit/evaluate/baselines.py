@@ -26,7 +26,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -39,6 +39,8 @@ from ..search.plan import plan_search
 from ..search.types import SearchConfig
 
 if TYPE_CHECKING:
+    from typing_extensions import Unpack  # typing.Unpack is Python 3.11+; only the type checker reads it
+
     from ..database import MatchingDatabase
     from ..synthesize import MotionRefiner, SynthesisConfig
 
@@ -52,6 +54,7 @@ __all__ = [
     "random_segments",
     "audio_nearest_segments",
     "pose_nearest_segments",
+    "WindowRules",
     "refiner_unavailable_reason",
     "run_system",
 ]
@@ -147,19 +150,51 @@ def admissible_windows(
     return admissible_starts(valid, options.segment, exclude=exclude, mask=mask, rule=options.mask_rule)
 
 
+class WindowRules(TypedDict, total=False):
+    """Which windows a baseline's step may use, as the search decides it: the keywords shared by
+    :func:`random_segments`, :func:`audio_nearest_segments` and :func:`pose_nearest_segments`.
+
+    Attributes
+    ----------
+    segment : int
+        Frames per window (default 8).
+    exclude : np.ndarray, shape (M, T), bool, or None
+        Held-out frames.
+    masks : np.ndarray, shape (n_masks, M, T), bool, or None
+        Control masks.
+    step_mask_index : np.ndarray, shape (n_steps,), int, or None
+        Each step's index into ``masks`` (-1: none).
+    mask_rule : {"ends", "all"}
+        Where a mask must hold (default "ends").
+    """
+
+    segment: int
+    exclude: np.ndarray | None
+    masks: np.ndarray | None
+    step_mask_index: np.ndarray | None
+    mask_rule: str
+
+
 class _Steps:
-    """Admissible windows per step, with the search's relaxation rule, cached per mask."""
+    """Admissible windows per step, with the search's relaxation rule, cached per mask.
+
+    Its signature is the one place that names :class:`WindowRules` (an unknown keyword is a
+    ``TypeError`` here); ``n_frames`` output frames make ``n_steps`` steps of ``segment``.
+    """
 
     def __init__(
         self,
         valid: np.ndarray,
-        segment: int,
-        exclude: np.ndarray | None,
-        masks: np.ndarray | None,
-        step_mask_index: np.ndarray | None,
-        mask_rule: str,
-        n_steps: int,
+        n_frames: int,
+        *,
+        segment: int = 8,
+        exclude: np.ndarray | None = None,
+        masks: np.ndarray | None = None,
+        step_mask_index: np.ndarray | None = None,
+        mask_rule: str = "ends",
     ):
+        self.n_steps = n_steps = _check_n(n_frames, segment)
+        valid = np.asarray(valid, bool)
         self.valid, self.segment, self.exclude, self.masks, self.rule = valid, segment, exclude, masks, mask_rule
         self.step_mask_index = (
             np.full(n_steps, -1, np.int64) if step_mask_index is None else np.asarray(step_mask_index, np.int64)
@@ -211,15 +246,7 @@ def _check_n(n_frames: int, segment: int) -> int:
 
 
 def random_segments(
-    valid: np.ndarray,
-    *,
-    n_frames: int,
-    segment: int = 8,
-    seed: int = 0,
-    exclude: np.ndarray | None = None,
-    masks: np.ndarray | None = None,
-    step_mask_index: np.ndarray | None = None,
-    mask_rule: str = "ends",
+    valid: np.ndarray, *, n_frames: int, seed: int = 0, **rules: Unpack[WindowRules]
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random admissible windows, one per step.
 
@@ -231,8 +258,9 @@ def random_segments(
     segment : int
         Frames per window.
     seed : int
-    exclude, masks, step_mask_index, mask_rule
-        As for the search: held-out frames (M, T); control masks (n_masks, M, T) and each
+    **rules
+        The :class:`WindowRules` (``exclude``, ``masks``, ``step_mask_index``, ``mask_rule``)
+        as for the search: held-out frames (M, T); control masks (n_masks, M, T) and each
         step's index into them (-1: none).
 
     Returns
@@ -241,8 +269,8 @@ def random_segments(
         (clip, frame) of every output frame.
     relaxed : np.ndarray, shape (n_steps,), bool
     """
-    n_steps = _check_n(n_frames, segment)
-    steps = _Steps(np.asarray(valid, bool), segment, exclude, masks, step_mask_index, mask_rule, n_steps)
+    steps = _Steps(valid, n_frames, **rules)
+    n_steps, segment = steps.n_steps, steps.segment
     rng = np.random.default_rng(seed)
     T = np.asarray(valid).shape[1]
     choices, relaxed = [], np.zeros(n_steps, bool)
@@ -254,15 +282,7 @@ def random_segments(
 
 
 def audio_nearest_segments(
-    F: np.ndarray,
-    valid: np.ndarray,
-    query: np.ndarray,
-    *,
-    segment: int = 8,
-    exclude: np.ndarray | None = None,
-    masks: np.ndarray | None = None,
-    step_mask_index: np.ndarray | None = None,
-    mask_rule: str = "ends",
+    F: np.ndarray, valid: np.ndarray, query: np.ndarray, **rules: Unpack[WindowRules]
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose audio feature is nearest the query's (cosine distance).
 
@@ -273,8 +293,8 @@ def audio_nearest_segments(
     valid : array, shape (M, T), bool
     query : array, shape (n_frames, A)
         z-scored audio features of the speech (step ``i`` matches ``query[i * segment]``).
-    segment, exclude, masks, step_mask_index, mask_rule
-        See :func:`random_segments`.
+    **rules
+        The :class:`WindowRules`; see :func:`random_segments`.
 
     Returns
     -------
@@ -286,8 +306,8 @@ def audio_nearest_segments(
     q = np.asarray(query, dtype=np.float64)
     if q.ndim != 2 or q.shape[1] != A:
         raise ConfigError(f"query must have shape (frames, {A}), got {q.shape}")
-    n_steps = _check_n(q.shape[0], segment)
-    steps = _Steps(np.asarray(valid, bool), segment, exclude, masks, step_mask_index, mask_rule, n_steps)
+    steps = _Steps(valid, q.shape[0], **rules)
+    n_steps, segment = steps.n_steps, steps.segment
     rows = F.reshape(M * T, A)
     Q = q[np.arange(n_steps) * segment]
     qn = np.linalg.norm(Q, axis=1)
@@ -320,13 +340,9 @@ def pose_nearest_segments(
     valid: np.ndarray,
     *,
     n_frames: int,
-    segment: int = 8,
     seed: int = 0,
     init_pose: np.ndarray | None = None,
-    exclude: np.ndarray | None = None,
-    masks: np.ndarray | None = None,
-    step_mask_index: np.ndarray | None = None,
-    mask_rule: str = "ends",
+    **rules: Unpack[WindowRules],
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step, the admissible window whose pose feature is nearest the last output pose feature.
 
@@ -338,13 +354,12 @@ def pose_nearest_segments(
         z-scored pose features of the database.
     valid : array, shape (M, T), bool
     n_frames : int
-    segment : int
     seed : int
         Seed of the random initial pose (when ``init_pose`` is None).
     init_pose : array, shape (D,), optional
         The initial pose feature instead of a random one.
-    exclude, masks, step_mask_index, mask_rule
-        See :func:`random_segments`.
+    **rules
+        The :class:`WindowRules` (``segment`` ...); see :func:`random_segments`.
 
     Returns
     -------
@@ -353,8 +368,8 @@ def pose_nearest_segments(
     """
     P = np.asarray(P)
     M, T, D = P.shape
-    n_steps = _check_n(n_frames, segment)
-    steps = _Steps(np.asarray(valid, bool), segment, exclude, masks, step_mask_index, mask_rule, n_steps)
+    steps = _Steps(valid, n_frames, **rules)
+    n_steps, segment = steps.n_steps, steps.segment
     rows = P.reshape(M * T, D)
     if init_pose is None:
         init_adm, _ = steps(0)
@@ -459,7 +474,7 @@ def run_system(
     plan = plan_search(db, audio, config)
     n, options = plan.n_frames, plan.config
     valid = np.asarray(db.valid)
-    common = dict(
+    common = WindowRules(
         segment=N,
         exclude=plan.exclude,
         masks=plan.masks,

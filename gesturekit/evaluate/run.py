@@ -45,7 +45,7 @@ import numpy as np
 from ..control import ControlTrack, Segment, parse_control, parse_time_range
 from ..errors import ConfigError, warn
 from ..features import LAYOUT
-from ..motion import AUDIO_SR, Motion
+from ..motion import AUDIO_SR, HoldsMotion, Motion
 from ..refine import open_refiner
 from . import metrics
 from .baselines import SYSTEMS, SystemOutput, SystemUnavailable, parse_systems, refiner_unavailable_reason, run_system
@@ -158,7 +158,7 @@ def parse_holdout(text: str | Holdout) -> Holdout:
 
 
 @dataclass
-class HeldOut:
+class HeldOut(HoldsMotion):
     """A held-out part resolved against a database.
 
     Attributes
@@ -180,14 +180,6 @@ class HeldOut:
     audio: np.ndarray
     exclude_takes: tuple
     exclude_ranges: tuple
-
-    @property
-    def n_frames(self) -> int:
-        return self.motion.n_frames
-
-    @property
-    def duration(self) -> float:
-        return self.motion.duration
 
     def describe(self) -> dict:
         fps = self.motion.fps

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -15,7 +16,18 @@ from ..errors import ConfigError
 from .exact import MAX_ABS, compiled
 from .types import SearchConfig
 
-__all__ = ["CheckedCall", "validate", "validate_db", "validate_call", "check_segment", "checked_sqnorms"]
+if TYPE_CHECKING:  # typing.Unpack is Python 3.11+; only the type checker reads it
+    from typing_extensions import Unpack
+
+__all__ = [
+    "CheckedCall",
+    "SearchOptions",
+    "validate",
+    "validate_db",
+    "validate_call",
+    "check_segment",
+    "checked_sqnorms",
+]
 
 
 def check_segment(n: int, clip_frames: int) -> None:
@@ -52,6 +64,25 @@ class CheckedCall:
     valid: np.ndarray | None = None
 
 
+class SearchOptions(TypedDict, total=False):
+    """The keyword arguments of one search, shared by :func:`gesturekit.search.search`,
+    :meth:`gesturekit.search.SearchIndex.search` and the reference; :func:`validate_call`
+    is the one signature that names them (an unknown keyword is a ``TypeError`` there).
+
+    Attributes
+    ----------
+    config : SearchConfig or None
+    masks : np.ndarray, shape (n_masks, M, T), bool, or None
+    step_mask_index : np.ndarray, shape (n_steps,), int, or None
+    exclude : np.ndarray, shape (M, T), bool, or None
+    """
+
+    config: SearchConfig | None
+    masks: np.ndarray | None
+    step_mask_index: np.ndarray | None
+    exclude: np.ndarray | None
+
+
 def validate_db(P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The database's pose features (M, T, D), audio features (M, T, A) and valid frames (M, T) checked
     for shape and dtype, as C-contiguous float32, float32 and bool arrays."""
@@ -72,10 +103,11 @@ def validate_db(P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> tuple[np.nda
 def validate_call(
     shape: tuple[int, int, int, int],
     query: np.ndarray,
-    config: SearchConfig | None,
-    masks: np.ndarray | None,
-    step_mask_index: np.ndarray | None,
-    exclude: np.ndarray | None,
+    *,
+    config: SearchConfig | None = None,
+    masks: np.ndarray | None = None,
+    step_mask_index: np.ndarray | None = None,
+    exclude: np.ndarray | None = None,
 ) -> CheckedCall:
     """One search's inputs checked against a database of ``shape = (M, T, D, A)``.
 
@@ -138,21 +170,14 @@ def validate_call(
 
 
 def validate(
-    P: np.ndarray,
-    F: np.ndarray,
-    valid: np.ndarray,
-    query: np.ndarray,
-    config: SearchConfig | None,
-    masks: np.ndarray | None,
-    step_mask_index: np.ndarray | None,
-    exclude: np.ndarray | None,
+    P: np.ndarray, F: np.ndarray, valid: np.ndarray, query: np.ndarray, **options: Unpack[SearchOptions]
 ) -> CheckedCall:
     """Shared input checks of the fast and the reference search; returns the normalised inputs."""
     P, F, valid = validate_db(P, F, valid)
     M, T = valid.shape
     checked_sqnorms(P.reshape(M * T, -1), "pose")  # the values, as SearchIndex checks them
     checked_sqnorms(F.reshape(M * T, -1), "audio")
-    call = validate_call((*P.shape, F.shape[2]), query, config, masks, step_mask_index, exclude)
+    call = validate_call((*P.shape, F.shape[2]), query, **options)
     call.P, call.F, call.valid = P, F, valid
     return call
 

@@ -132,7 +132,7 @@ def reduce_chunk(
         s0 = np.empty((nc, b), np.int64)
         amin = np.empty((nc, b), np.float32)
         undecided = np.empty((nc, b), bool)
-        compiled().reduce_many(G3, bias, nq, npmax, c_err, TINY, s0, amin, undecided)
+        compiled().reduce_many(G3, bias, nq, (npmax, c_err, TINY), (s0, amin, undecided))
         return s0, amin, undecided
     A = G3[:, :, 0]
     A += bias

@@ -37,15 +37,19 @@ import contextlib
 import threading
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ConfigError, warn
 from .admissible import base_starts, control_starts
-from .checks import checked_sqnorms, validate_call, validate_db
+from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
 from .exact import TINY, audio_err, compiled, pose_err_factor, reduce_chunk
 from .threads import matrix_product, single_threaded_blas, worker_count
 from .types import CANDIDATE_FIELDS, SearchConfig, SearchResult, describe_steps
+
+if TYPE_CHECKING:  # typing.Unpack is Python 3.11+; only the type checker reads it
+    from typing_extensions import Unpack
 
 __all__ = ["SearchIndex", "search", "search_batch"]
 
@@ -230,13 +234,9 @@ class SearchIndex:
                     Qp[0],
                     bias2,
                     float(nq[0]),
-                    self._npmax[c0:c1],
-                    self._pose_c,
-                    TINY,
+                    (self._npmax[c0:c1], self._pose_c, TINY),
                     G2,
-                    s0c,
-                    amc,
-                    und,
+                    (s0c, amc, und),
                     self._F3[c0:c1],
                     self._na2[c0:c1],
                     fqp[0],
@@ -266,12 +266,10 @@ class SearchIndex:
                 compiled().audio_at(
                     self._F3[c0:c1],
                     self._na2[c0:c1],
-                    s0c,
-                    amc,
+                    (s0c, amc),
                     fqp[j0:j1],
                     nbp[j0:j1],
-                    av[c0:c1, j0:j1],
-                    inexact[c0:c1, j0:j1],
+                    (av[c0:c1, j0:j1], inexact[c0:c1, j0:j1]),
                 )
                 ci, bj = np.nonzero(und)
                 if ci.size:
@@ -353,9 +351,7 @@ class SearchIndex:
             best_start,
             best_est,
             float(q_sqnorm),
-            self._npmax,
-            self._pose_c,
-            TINY,
+            (self._npmax, self._pose_c, TINY),
             undecided_clips,
             undecided_rows,
             self._P3,
@@ -413,18 +409,11 @@ class SearchIndex:
 
     # -- public ---------------------------------------------------------------------------------
 
-    def search(
-        self,
-        query: np.ndarray,
-        *,
-        config: SearchConfig | None = None,
-        masks: np.ndarray | None = None,
-        step_mask_index: np.ndarray | None = None,
-        exclude: np.ndarray | None = None,
-    ) -> SearchResult:
+    def search(self, query: np.ndarray, **options: Unpack[SearchOptions]) -> SearchResult:
         """Run Algorithm 1 for one query; see :func:`search` for the parameters."""
+        c = validate_call(self.shape, query, **options)  # names the keywords, checks them once here
         return self.search_batch(
-            [query], configs=[config], masks=masks, step_mask_indices=[step_mask_index], exclude=exclude
+            [c.query], configs=[c.config], masks=c.masks, step_mask_indices=[c.step_mask_index], exclude=c.exclude
         )[0]
 
     def search_batch(
@@ -481,7 +470,10 @@ class SearchIndex:
             raise ConfigError(
                 f"{B} queries need {B} configs and step mask indices, got {len(per_query)} and {len(indices)}"
             )
-        calls = [validate_call(self.shape, q, c, masks, sm, exclude) for q, c, sm in zip(queries, per_query, indices)]
+        calls = [
+            validate_call(self.shape, q, config=c, masks=masks, step_mask_index=sm, exclude=exclude)
+            for q, c, sm in zip(queries, per_query, indices)
+        ]
         masks = calls[0].masks
         exclude = calls[0].exclude
         M, T, D, _ = self.shape
@@ -607,15 +599,7 @@ class SearchIndex:
 
 
 def search(
-    P: np.ndarray,
-    F: np.ndarray,
-    valid: np.ndarray,
-    query: np.ndarray,
-    *,
-    config: SearchConfig | None = None,
-    masks: np.ndarray | None = None,
-    step_mask_index: np.ndarray | None = None,
-    exclude: np.ndarray | None = None,
+    P: np.ndarray, F: np.ndarray, valid: np.ndarray, query: np.ndarray, **options: Unpack[SearchOptions]
 ) -> SearchResult:
     """Algorithm 1: the k-NN motion search for one speech query.
 
@@ -657,9 +641,7 @@ def search(
     -----
     Builds a :class:`SearchIndex` on every call; keep one to search the same database repeatedly.
     """
-    return SearchIndex(P, F, valid).search(
-        query, config=config, masks=masks, step_mask_index=step_mask_index, exclude=exclude
-    )
+    return SearchIndex(P, F, valid).search(query, **options)
 
 
 def search_batch(

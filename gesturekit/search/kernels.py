@@ -25,12 +25,8 @@ def reduce_many(
     products: np.ndarray,
     bias: np.ndarray,
     q_sqnorm: np.ndarray,
-    clip_max_sqnorm: np.ndarray,
-    err_factor: float,
-    tiny: float,
-    best_start: np.ndarray,
-    best_est: np.ndarray,
-    undecided: np.ndarray,
+    pose_bound: tuple[np.ndarray, float, float],
+    scan_out: tuple[np.ndarray, np.ndarray, np.ndarray],
 ) -> None:
     """:func:`gesturekit.search.exact.reduce_chunk` for several queries, one pass per clip.
 
@@ -42,14 +38,15 @@ def reduce_many(
         ``|p|^2`` where the start is admissible, +inf elsewhere.
     q_sqnorm : (B,) float64
         ``|q|^2`` per query.
-    clip_max_sqnorm : (nc,) float64
-        Largest ``|p|^2`` per clip.
-    err_factor, tiny : float
-        The pose error bound is ``err_factor (clip_max_sqnorm + q_sqnorm) + tiny``.
-    best_start, best_est, undecided : (nc, B) int64, float32, bool
+    pose_bound : (clip_max_sqnorm, err_factor, tiny)
+        ``clip_max_sqnorm`` (nc,) float64, the largest ``|p|^2`` per clip, and two floats:
+        the pose error bound is ``err_factor (clip_max_sqnorm + q_sqnorm) + tiny``.
+    scan_out : (best_start, best_est, undecided), each (nc, B): int64, float32, bool
         Out: per clip and query the first start of least estimate, that estimate, and
         whether it is not decisive (another start within twice the bound, or a possible zero).
     """
+    clip_max_sqnorm, err_factor, tiny = pose_bound
+    best_start, best_est, undecided = scan_out
     nc, T, n_queries = products.shape
     best = np.empty(n_queries, dtype=np.float32)
     thr = np.empty(n_queries, dtype=np.float32)
@@ -98,18 +95,27 @@ def dot32(row: np.ndarray, query: np.ndarray) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
+def audio_estimate(
+    audio: np.ndarray, audio_sqnorms: np.ndarray, clip: int, start: int, query_audio: np.ndarray, query_sqnorm: float
+) -> tuple[float, bool]:
+    """The cosine distance estimate of ``audio[clip, start]`` to ``query_audio`` (float32 product,
+    float64 norms ``audio_sqnorms`` and ``query_sqnorm``) and whether it is inexact: a zero
+    vector gets the definition's value 1, exactly."""
+    d = audio_sqnorms[clip, start] * query_sqnorm
+    if d == 0.0:
+        return 1.0, False
+    return 1.0 - np.float64(dot32(audio[clip, start], query_audio)) / np.sqrt(d), True
+
+
+@numba.njit(cache=True, nogil=True)
 def scan_one(
     poses: np.ndarray,
     query_pose: np.ndarray,
     bias: np.ndarray,
     q_sqnorm: float,
-    clip_max_sqnorm: np.ndarray,
-    err_factor: float,
-    tiny: float,
+    pose_bound: tuple[np.ndarray, float, float],
     est: np.ndarray,
-    best_start: np.ndarray,
-    best_est: np.ndarray,
-    undecided: np.ndarray,
+    scan_out: tuple[np.ndarray, np.ndarray, np.ndarray],
     audio: np.ndarray,
     audio_sqnorms: np.ndarray,
     query_audio: np.ndarray,
@@ -129,12 +135,11 @@ def scan_one(
         ``|p|^2`` where the start is admissible, +inf elsewhere (those rows are never read).
     q_sqnorm : float
         ``|p_{t-1}|^2``.
-    clip_max_sqnorm : (nc,) float64
-    err_factor, tiny : float
+    pose_bound : (clip_max_sqnorm, err_factor, tiny)
         As for :func:`reduce_many`.
     est : (nc, T) float32
         Out: ``|p|^2 - 2 p.q`` per start (+inf where not admissible).
-    best_start, best_est, undecided : (nc,) int64, float32, bool
+    scan_out : (best_start, best_est, undecided), each (nc,)
         Out: as for :func:`reduce_many`.
     audio : (nc, T, A) float32
         Audio features of the clips.
@@ -147,6 +152,8 @@ def scan_one(
         Out: the cosine distance estimate at each clip's ``best_start`` (float32 product,
         float64 norms), and False where that value is exact (a zero norm).
     """
+    clip_max_sqnorm, err_factor, tiny = pose_bound
+    best_start, best_est, undecided = scan_out
     nc, T, _ = poses.shape
     inf = np.float32(np.inf)
     for c in range(nc):
@@ -176,13 +183,9 @@ def scan_one(
         undecided[c] = np.isfinite(best) and (count > 1 or np.float64(best) + q_sqnorm <= err)
         # the audio estimate of that start (while the clip is at hand): float32 product, float64 norms
         if best < inf:
-            d = audio_sqnorms[c, arg] * query_audio_sqnorm
-            if d == 0.0:
-                audio_est[c] = 1.0
-                audio_inexact[c] = False
-            else:
-                audio_est[c] = 1.0 - np.float64(dot32(audio[c, arg], query_audio)) / np.sqrt(d)
-                audio_inexact[c] = True
+            audio_est[c], audio_inexact[c] = audio_estimate(
+                audio, audio_sqnorms, c, arg, query_audio, query_audio_sqnorm
+            )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -277,31 +280,27 @@ def prefix_groups(
 def audio_at(
     audio: np.ndarray,
     audio_sqnorms: np.ndarray,
-    best_start: np.ndarray,
-    best_est: np.ndarray,
+    scan: tuple[np.ndarray, np.ndarray],
     query_audio: np.ndarray,
     query_audio_sqnorm: np.ndarray,
-    audio_est: np.ndarray,
-    audio_inexact: np.ndarray,
+    out: tuple[np.ndarray, np.ndarray],
 ) -> None:
     """The audio estimates at each clip's best start, for several queries.
 
-    ``audio`` (nc, T, A) and ``audio_sqnorms`` (nc, T) of the clips; ``best_start``,
-    ``best_est`` (nc, B) from the scan; ``query_audio`` (B, A) and ``query_audio_sqnorm`` (B,).
-    Out: ``audio_est`` (nc, B) cosine distance estimates and ``audio_inexact`` (False: exact).
+    ``audio`` (nc, T, A) and ``audio_sqnorms`` (nc, T) of the clips; ``scan``: ``best_start``
+    and ``best_est`` (nc, B) from the scan; ``query_audio`` (B, A) and ``query_audio_sqnorm`` (B,).
+    ``out``: ``audio_est`` (nc, B), the cosine distance estimates, and ``audio_inexact``
+    (nc, B) (False: exact), written.
     """
+    best_start, best_est = scan
+    audio_est, audio_inexact = out
     nc, n_queries = best_start.shape
     for c in range(nc):  # one clip's rows serve all its queries while they are in cache
         for j in range(n_queries):
             if best_est[c, j] < np.inf:
-                s = best_start[c, j]
-                d = audio_sqnorms[c, s] * query_audio_sqnorm[j]
-                if d == 0.0:  # a zero vector: the definition's value, exactly
-                    audio_est[c, j] = 1.0
-                    audio_inexact[c, j] = False
-                else:
-                    audio_est[c, j] = 1.0 - np.float64(dot32(audio[c, s], query_audio[j])) / np.sqrt(d)
-                    audio_inexact[c, j] = True
+                audio_est[c, j], audio_inexact[c, j] = audio_estimate(
+                    audio, audio_sqnorms, c, best_start[c, j], query_audio[j], query_audio_sqnorm[j]
+                )
 
 
 # -- the exact decisions of one query (steps 1-4 of Algorithm 1 after the scan) --------------
@@ -389,9 +388,7 @@ def survivors(
     best_start: np.ndarray,
     best_est: np.ndarray,
     q_sqnorm: float,
-    clip_max_sqnorm: np.ndarray,
-    err_factor: float,
-    tiny: float,
+    pose_bound: tuple[np.ndarray, float, float],
     undecided_clips: np.ndarray,
     undecided_rows: np.ndarray,
     poses: np.ndarray,
@@ -410,7 +407,7 @@ def survivors(
     ----------
     best_start, best_est : (M,) int64, float32
         The scan's first start of least estimate per clip and that estimate (+inf: none).
-    q_sqnorm, clip_max_sqnorm, err_factor, tiny
+    q_sqnorm, pose_bound
         As for :func:`reduce_many` (one query).
     undecided_clips, undecided_rows : (c,) int64, (c, T) float32
         Clips whose minimum was not decisive and their rows of estimates (resolved exactly).
@@ -431,6 +428,7 @@ def survivors(
     int
         The number of survivors (the first columns of ``windows`` and ``estimates``).
     """
+    clip_max_sqnorm, err_factor, tiny = pose_bound
     M = best_start.shape[0]
     clips, start = windows[0], windows[1]
     pose_est, pose_err, audio_est, audio_err = estimates[0], estimates[1], estimates[2], estimates[3]
@@ -466,26 +464,22 @@ def survivors(
 
 @numba.njit(cache=True, nogil=True)
 def settle(
-    est: np.ndarray,
-    err: np.ndarray,
-    order: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
+    ranking: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     candidates: np.ndarray,
     is_pose: bool,
-    clips: np.ndarray,
-    start: np.ndarray,
-    poses: np.ndarray,
-    audio: np.ndarray,
-    query_pose: np.ndarray,
-    query_audio: np.ndarray,
-    query_audio_sqnorm: float,
+    exact: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float],
 ) -> None:
     """Make ``order`` exact inside the group of every element of ``candidates``.
 
-    The group's members get exact values (pose ``d2`` when ``is_pose``, else cosine distances;
-    ``err`` becomes 0) and are sorted by (value, index); each group once.
+    ``ranking`` is ``(est, err, order, lo, hi)``: the survivors' estimates and their error
+    bounds, their order and each one's group in it (as :func:`prefix_groups` leaves them).
+    ``exact`` is ``(clips, start, poses, audio, query_pose, query_audio, query_audio_sqnorm)``:
+    the survivors' windows and what their exact distances are computed from. The group's
+    members get exact values (pose ``d2`` when ``is_pose``, else cosine distances; ``err``
+    becomes 0) and are sorted by (value, index); each group once.
     """
+    est, err, order, lo, hi = ranking
+    clips, start, poses, audio, query_pose, query_audio, query_audio_sqnorm = exact
     for ci in range(candidates.shape[0]):
         a = lo[candidates[ci]]
         b = hi[candidates[ci]]
@@ -625,38 +619,9 @@ def rank_top(
         if plo[i] + alo[i] <= bound:
             candidates[nc] = i
             nc += 1
-    settle(
-        v,
-        e,
-        pose_order,
-        plo,
-        phi,
-        candidates,
-        True,
-        clips,
-        start,
-        poses,
-        audio,
-        query_pose,
-        query_audio,
-        query_audio_sqnorm,
-    )
-    settle(
-        av,
-        ae,
-        audio_order,
-        alo,
-        ahi,
-        candidates,
-        False,
-        clips,
-        start,
-        poses,
-        audio,
-        query_pose,
-        query_audio,
-        query_audio_sqnorm,
-    )
+    exact = (clips, start, poses, audio, query_pose, query_audio, query_audio_sqnorm)
+    settle((v, e, pose_order, plo, phi), candidates, True, exact)
+    settle((av, ae, audio_order, alo, ahi), candidates, False, exact)
     prank = np.empty(nc, np.int64)
     arank = np.empty(nc, np.int64)
     key = np.empty(nc, np.int64)

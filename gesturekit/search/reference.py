@@ -66,12 +66,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ConfigError, warn
-from .checks import validate
-from .types import SearchConfig, SearchResult, describe_steps
+from .checks import SearchOptions, validate
+from .types import SearchResult, describe_steps
+
+if TYPE_CHECKING:  # typing.Unpack is Python 3.11+; only the type checker reads it
+    from typing_extensions import Unpack
 
 __all__ = ["pose_sqdist", "cosine_distance", "window_admissible", "search_reference"]
 
@@ -169,39 +173,17 @@ def _nearest_per_clip(P, p_prev, n, *, valid, exclude, mask, rule):
 
 
 def search_reference(
-    P: np.ndarray,
-    F: np.ndarray,
-    valid: np.ndarray,
-    query: np.ndarray,
-    *,
-    config: SearchConfig | None = None,
-    masks: np.ndarray | None = None,
-    step_mask_index: np.ndarray | None = None,
-    exclude: np.ndarray | None = None,
+    P: np.ndarray, F: np.ndarray, valid: np.ndarray, query: np.ndarray, **options: Unpack[SearchOptions]
 ) -> SearchResult:
-    """Algorithm 1, loop for loop. Same parameters and result as :func:`gesturekit.search.search`.
+    """Algorithm 1, loop for loop: the literal search the fast one is tested against.
 
-    Parameters
-    ----------
-    P : np.ndarray, shape (M, T, 96), float32
-        z-scored pose features of the database clips.
-    F : np.ndarray, shape (M, T, 112), float32
-        z-scored audio features of the database clips.
-    valid : np.ndarray, shape (M, T), bool
-        Frames that may start a segment.
-    query : np.ndarray, shape (T_out, 112)
-        z-scored audio features of the speech to synthesise, 15 fps.
-    config : SearchConfig, optional
-    masks : np.ndarray, shape (n_masks, M, T), bool, optional
-    step_mask_index : np.ndarray, shape (n_steps,), int, optional
-        Index into ``masks`` per step, -1 for no control.
-    exclude : np.ndarray, shape (M, T), bool, optional
-
-    Returns
-    -------
-    SearchResult
+    Takes what :func:`gesturekit.search.search` takes: the database's z-scored pose
+    features ``P`` (M, T, D) and audio features ``F`` (M, T, A), float32, the frames
+    ``valid`` (M, T) that may start a segment, the query's z-scored audio features
+    (T_out, A) at 15 fps and the keywords of :class:`~gesturekit.search.checks.SearchOptions`;
+    returns the same :class:`SearchResult`.
     """
-    v = validate(P, F, valid, query, config, masks, step_mask_index, exclude)
+    v = validate(P, F, valid, query, **options)
     assert v.P is not None and v.F is not None and v.valid is not None  # set by validate
     P, F, valid, query, cfg = v.P, v.F, v.valid, v.query, v.config
     exclude, masks, step_mask_index = v.exclude, v.masks, v.step_mask_index

@@ -146,6 +146,39 @@ def _band_check(bands) -> list[tuple[float, float, str]]:
     return out
 
 
+def _band_marks(
+    bands: Sequence[tuple[float, float, str]], axes: Sequence[tuple[str, str]], *, label_anchor: str
+) -> tuple[list[dict], list[dict]]:
+    """Layout shapes and annotations shading time bands (start_s, end_s, label).
+
+    One rectangle per band on each (x axis, y axis) pair of ``axes``, over the axis's
+    full height and below the traces; bands with the same label share a colour. Each
+    labelled band gets its label at the top of the first row, anchored by
+    ``label_anchor`` ("bottom": above the plot, "top": inside it).
+    """
+    shapes, notes = [], []
+    colors: dict[str, str] = {}
+    for a, b, label in bands:
+        color = colors.setdefault(label, _BAND_COLORS[len(colors) % len(_BAND_COLORS)])
+        style = dict(fillcolor=color, opacity=0.18, line=dict(width=0), layer="below", name=label)
+        for xa, ya in axes:
+            shapes.append(dict(type="rect", xref=xa, x0=a, x1=b, yref=f"{ya} domain", y0=0, y1=1, **style))
+        if label:
+            notes.append(
+                dict(
+                    x=(a + b) / 2,
+                    y=1.0,
+                    xref="x",
+                    yref="y domain",
+                    yanchor=label_anchor,
+                    text=label,
+                    showarrow=False,
+                    font=dict(size=10, color=color),
+                )
+            )
+    return shapes, notes
+
+
 def waveform_figure(
     audio: np.ndarray,
     sr: int,
@@ -211,30 +244,27 @@ def waveform_figure(
 
     fig = go.Figure()
     line = dict(color="#6b7f99", width=1)
-    fig.add_trace(
-        go.Scatter(
-            x=t_bins.astype(np.float32),
-            y=padded.max(axis=1),
-            mode="lines",
-            line=line,
-            name="waveform",
-            hoverinfo="skip",
-            meta={"part": "waveform_max"},
-        )
+    # the envelope: the max line, then the min line filled up to it
+    envelope = (
+        ("waveform_max", padded.max(axis=1), dict(name="waveform")),
+        (
+            "waveform_min",
+            padded.min(axis=1),
+            dict(fill="tonexty", fillcolor="rgba(107,127,153,0.45)", showlegend=False),
+        ),
     )
-    fig.add_trace(
-        go.Scatter(
-            x=t_bins.astype(np.float32),
-            y=padded.min(axis=1),
-            mode="lines",
-            line=line,
-            fill="tonexty",
-            fillcolor="rgba(107,127,153,0.45)",
-            showlegend=False,
-            hoverinfo="skip",
-            meta={"part": "waveform_min"},
+    for part, y, style in envelope:
+        fig.add_trace(
+            go.Scatter(
+                x=t_bins.astype(np.float32),
+                y=y,
+                mode="lines",
+                line=line,
+                hoverinfo="skip",
+                meta={"part": part},
+                **style,
+            )
         )
-    )
     fig.add_trace(
         go.Scatter(
             x=t_rms.astype(np.float32),
@@ -246,34 +276,8 @@ def waveform_figure(
             hovertemplate="%{x:.2f} s: RMS %{y:.3f}<extra></extra>",
         )
     )
-    colors: dict[str, str] = {}
-    for a, b, label in bands:
-        color = colors.setdefault(label, _BAND_COLORS[len(colors) % len(_BAND_COLORS)])
-        fig.add_shape(
-            type="rect",
-            xref="x",
-            yref="y domain",
-            x0=a,
-            x1=b,
-            y0=0,
-            y1=1,
-            fillcolor=color,
-            opacity=0.18,
-            line=dict(width=0),
-            layer="below",
-            name=label,
-        )
-        if label:
-            fig.add_annotation(
-                x=(a + b) / 2,
-                y=1,
-                xref="x",
-                yref="y domain",
-                yanchor="bottom",
-                text=label,
-                showarrow=False,
-                font=dict(size=10, color=color),
-            )
+    shapes, notes = _band_marks(bands, [("x", "y")], label_anchor="bottom")
+    fig.update_layout(shapes=shapes, annotations=notes)
     fig.update_layout(
         title=dict(text=title) if title else None,
         height=height,
@@ -399,7 +403,7 @@ def wrist_figure(
     def axes(r: int) -> tuple[str, str]:
         return ("x", "y") if r == 0 else (f"x{r + 1}", f"y{r + 1}")
 
-    shapes, notes = [], []
+    shapes: list[dict] = []
     if thresholds is not None:
         for r, (attr, _) in enumerate(WRIST_ROWS):
             xa, ya = axes(r)
@@ -418,40 +422,8 @@ def wrist_figure(
                         name=f"{attr} {which}",
                     )
                 )
-    colors: dict[str, str] = {}
-    for a, b, label in bands:
-        color = colors.setdefault(label, _BAND_COLORS[len(colors) % len(_BAND_COLORS)])
-        for r in range(n_rows):
-            xa, ya = axes(r)
-            shapes.append(
-                dict(
-                    type="rect",
-                    xref=xa,
-                    x0=a,
-                    x1=b,
-                    yref=f"{ya} domain",
-                    y0=0,
-                    y1=1,
-                    fillcolor=color,
-                    opacity=0.18,
-                    line=dict(width=0),
-                    layer="below",
-                    name=label,
-                )
-            )
-        if label:
-            notes.append(
-                dict(
-                    x=(a + b) / 2,
-                    y=1.0,
-                    xref="x",
-                    yref="y domain",
-                    yanchor="top",
-                    text=label,
-                    showarrow=False,
-                    font=dict(size=10, color=color),
-                )
-            )
+    band_shapes, notes = _band_marks(bands, [axes(r) for r in range(n_rows)], label_anchor="top")
+    shapes += band_shapes
     fig.update_layout(shapes=shapes, annotations=list(fig.layout.annotations) + notes)
     duration = max(m.duration for m in motions)
     fig.update_xaxes(range=[0, duration])

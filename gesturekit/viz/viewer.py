@@ -32,6 +32,7 @@ import math
 import re
 import wave
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -42,7 +43,18 @@ from ..skeleton import N_JOINTS, joint_index
 from ._plotly import _frames_at, _motions_and_labels, _time_grid, _typed, data_array
 from .appearance import APPEARANCE, DERIVED_POINTS, Appearance
 
-__all__ = ["CONTROLS_HEIGHT", "VIEWER_MAX_FRAMES", "skeleton_viewer", "viewer_data", "read_viewer_data", "wav_data_uri"]
+if TYPE_CHECKING:
+    from typing_extensions import Unpack  # typing.Unpack is Python 3.11+; only the type checker reads it
+
+__all__ = [
+    "CONTROLS_HEIGHT",
+    "VIEWER_MAX_FRAMES",
+    "ViewOptions",
+    "skeleton_viewer",
+    "viewer_data",
+    "read_viewer_data",
+    "wav_data_uri",
+]
 
 #: Pixels the controls (play button, slider, time, note) take below the drawing.
 CONTROLS_HEIGHT = 48
@@ -90,6 +102,28 @@ def _read_wav_uri(uri: str) -> tuple[np.ndarray, int]:
 
 def _ordinal(n: int) -> str:
     return f"{n}{'th' if 10 <= n % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(n % 10, 'th')}"
+
+
+class ViewOptions(TypedDict, total=False):
+    """How :func:`viewer_data` lays the motions out: the keywords :func:`skeleton_viewer` passes on to it.
+
+    Attributes
+    ----------
+    labels : sequence of str or None
+    fps : float or None
+    title : str or None
+    max_frames : int
+    spacing : float or None
+    appearance : Appearance
+        As for :func:`viewer_data` (which names them, with their defaults).
+    """
+
+    labels: Sequence[str] | None
+    fps: float | None
+    title: str | None
+    max_frames: int
+    spacing: float | None
+    appearance: Appearance
 
 
 def viewer_data(
@@ -229,22 +263,17 @@ def read_viewer_data(page: str) -> dict:
 def skeleton_viewer(
     motions: Motion | Sequence[Motion],
     *,
-    labels: Sequence[str] | None = None,
-    fps: float | None = None,
-    title: str | None = None,
-    max_frames: int = VIEWER_MAX_FRAMES,
-    spacing: float | None = None,
     audio: npt.ArrayLike | None = None,
     sr: int = AUDIO_SR,
     height: int = 520,
     key: str = "skeleton",
-    appearance: Appearance = APPEARANCE,
+    **view: Unpack[ViewOptions],
 ) -> str:
     """A self-contained HTML page that plays one or several motions side by side, with their speech.
 
     Parameters
     ----------
-    motions, labels, fps, title, max_frames, spacing, appearance
+    motions
         As for :func:`viewer_data`.
     audio : array_like, optional
         The speech, shape (samples,), float in [-1, 1], starting with the motions' first
@@ -257,6 +286,9 @@ def skeleton_viewer(
         Height of the drawing in pixels (the controls come below it: :data:`CONTROLS_HEIGHT`).
     key : str
         A name for the page (``data-key`` of its body), by which pages and tests find it.
+    **view
+        :class:`ViewOptions` (``labels``, ``fps``, ``title``, ``max_frames``, ``spacing``,
+        ``appearance``), passed on to :func:`viewer_data`.
 
     Returns
     -------
@@ -272,9 +304,7 @@ def skeleton_viewer(
     ConfigError
         As :func:`viewer_data`; ``audio`` not one-dimensional or ``sr`` not positive.
     """
-    data = viewer_data(
-        motions, labels=labels, fps=fps, title=title, max_frames=max_frames, spacing=spacing, appearance=appearance
-    )
+    data = viewer_data(motions, **view)
     audio_tag = ""
     if audio is not None:
         a = np.asarray(audio, dtype=np.float32)
@@ -291,7 +321,7 @@ def skeleton_viewer(
     fill = {
         "HEIGHT": str(int(height)),
         "KEY": html.escape(key, quote=True),
-        "BG": appearance.background,
+        "BG": view.get("appearance", APPEARANCE).background,
         "AUDIO": audio_tag,
         "DATA": payload,
     }
