@@ -34,6 +34,8 @@ from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 from packaging.version import Version
 
+from .test_layering import _type_checking_only as type_checking_only
+
 tomllib = pytest.importorskip("tomllib", reason="reading pyproject.toml needs Python 3.11's tomllib")
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,11 +47,18 @@ CPU_INDEX = "https://download.pytorch.org/whl/cpu"
 
 
 def third_party_imports(folder: Path) -> dict[str, set[str]]:
-    """Top-level names of the non-stdlib, non-project modules imported in ``folder`` -> files."""
+    """Top-level names of the non-stdlib, non-project modules imported in ``folder`` -> files.
+
+    Imports under ``if TYPE_CHECKING:`` never run, so they are no dependency of the package
+    (the type checker's own are in requirements-test.txt)."""
     found: dict[str, set[str]] = {}
     local = {p.stem for p in folder.glob("*.py")} | {p.name for p in folder.iterdir() if p.is_dir()}
     for path in sorted(folder.rglob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        checker_only = type_checking_only(tree)
+        for node in ast.walk(tree):
+            if id(node) in checker_only:
+                continue
             if isinstance(node, ast.Import):
                 names = [alias.name for alias in node.names]
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
