@@ -66,7 +66,7 @@ def user_errors() -> Iterator[None]:
     try:
         yield
     except (GestureKitError, OSError) as exc:
-        st.error(error_text(exc), icon="⚠️")
+        st.error(error_text(exc), icon=":material/error:")
 
 
 def error_text(exc: GestureKitError | OSError) -> str:
@@ -103,7 +103,9 @@ def run_page(body: Callable[[], None]) -> None:
     except Exception:  # noqa: BLE001  (the browser gets a reference; the log gets the rest)
         reference = secrets.token_hex(4)
         LOG.exception("unexpected error in a page (reference %s)", reference)
-        st.error(f"Something went wrong; the details are in the server log (reference {reference}).", icon="⚠️")
+        st.error(
+            f"Something went wrong; the details are in the server log (reference {reference}).", icon=":material/error:"
+        )
 
 
 def allowed(path: str | os.PathLike, *, what: str, write: bool = False) -> Path:

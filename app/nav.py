@@ -46,25 +46,25 @@ PAGES: tuple[Page, ...] = (
     Page(
         "views/1_Synthesize.py",
         "Synthesize",
-        "🎙️",
+        ":material/mic:",
         "speech in, gestures out: choose controls, run the search, refine, export",
     ),
     Page(
         "views/2_Retrieval_inspector.py",
         "Retrieval inspector",
-        "🔎",
+        ":material/manage_search:",
         "step through the search: the candidates of every step, their distances and clips",
     ),
     Page(
         "views/3_Database.py",
         "Database",
-        "🗂️",
+        ":material/storage:",
         "what the matching database holds: takes, clips, control attributes, any clip in 3D with its sound",
     ),
     Page(
         "views/4_Study_stimuli.py",
         "Study stimuli",
-        "🎬",
+        ":material/movie:",
         "user-study videos: speeches x systems in one style, opaque ids, balanced order",
     ),
 )
@@ -82,7 +82,8 @@ def run(home: Callable[[], None]) -> None:
     Call once per run, from the entrypoint (``Home.py``).
     """
     page = st.navigation(
-        [st.Page(home, title=HOME_TITLE, icon="🖐️", default=True)] + [p.streamlit_page() for p in PAGES]
+        [st.Page(home, title=HOME_TITLE, icon=":material/waving_hand:", default=True)]
+        + [p.streamlit_page() for p in PAGES]
     )
     state.page_setup(page.title)
     display.run_page(page.run)

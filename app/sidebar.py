@@ -75,9 +75,9 @@ def show_database_label(db: MatchingDatabase, *, container: Any = st) -> None:
     """Say which database is open and what it holds; generated data is flagged as such."""
     name = db.path.name if db.path is not None else "(in memory)"
     if is_generated(db):
-        container.warning(f"**Generated data** · {name}: {db.label or 'the demo speaker'}", icon="🧪")
+        container.warning(f"**Generated data** · {name}: {db.label or 'the demo speaker'}", icon=":material/science:")
     else:
-        container.info(f"**{name}**" + (f": {db.label}" if db.label else ""), icon="🗂️")
+        container.info(f"**{name}**" + (f": {db.label}" if db.label else ""), icon=":material/storage:")
 
 
 def sidebar_database() -> MatchingDatabase:
@@ -104,7 +104,7 @@ def sidebar_database() -> MatchingDatabase:
         try:
             db = resources.load_database(path)
         except DatabaseError as exc:  # e.g. built by an older gesturekit: offer to rebuild it
-            st.error(str(exc), icon="⚠️")
+            st.error(str(exc), icon=":material/error:")
             if st.button("Rebuild the demo database", key="_gk.rebuild_demo"):
                 resources.rebuild_demo(path)
                 st.rerun()

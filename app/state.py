@@ -51,7 +51,7 @@ PINS_KEY = "gk.pins"
 _RUN_COUNTER = "gk.run_counter"
 
 
-def page_setup(title: str, *, icon: str = "🖐️") -> None:
+def page_setup(title: str, *, icon: str = ":material/waving_hand:") -> None:
     """Page title and wide layout; called before every page is drawn (it also counts the
     session's runs, see :func:`remount_key`)."""
     st.set_page_config(page_title=f"{title} · gesturekit", page_icon=icon, layout="wide")

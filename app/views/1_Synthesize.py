@@ -70,7 +70,7 @@ def speech_input() -> dict | None:
             token = ("upload", up.file_id)
             failed = ss.get(_FAILED)
             if failed is not None and failed[0] == token:
-                st.error(failed[1], icon="⚠️")
+                st.error(failed[1], icon=":material/error:")
                 return _kept_speech()
             if ss.get(SPEECH, {}).get("token") != token:
                 try:
@@ -79,7 +79,7 @@ def speech_input() -> dict | None:
                 except (GestureKitError, OSError) as exc:
                     # remembered, so the same upload is not decoded again on every rerun
                     ss[_FAILED] = (token, display.error_text(exc))
-                    st.error(ss[_FAILED][1], icon="⚠️")
+                    st.error(ss[_FAILED][1], icon=":material/error:")
                     return _kept_speech()
                 _set_speech(token, up.name, audio, info.summary(), notes)
         elif SPEECH not in ss:
@@ -183,7 +183,7 @@ def controls(speech: dict) -> ControlTrack | None:
         "Low/high compare with the database's percentile thresholds (see the Database page)."
     )
     if problem:
-        st.error(problem, icon="⚠️")
+        st.error(problem, icon=":material/error:")
     return track
 
 
@@ -202,7 +202,7 @@ def settings(db: MatchingDatabase) -> dict:
         st.warning(
             f"N was {ss[segment_key]}, more than this database's clips hold ({db.clip_frames} frames): "
             f"it is now {db.clip_frames}.",
-            icon="⚠️",
+            icon=":material/warning:",
         )
         ss[segment_key] = ss["synth.segment"] = db.clip_frames
     c = st.columns(4)
@@ -350,7 +350,10 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
     st.caption(" · ".join(parts))
     if result.relaxed_steps:
         where = describe_steps(result.relaxed_steps, segment=c.segment, fps=result.motion.fps)
-        st.warning(f"No database window satisfied the control at {where}; the control was dropped there.", icon="⚠️")
+        st.warning(
+            f"No database window satisfied the control at {where}; the control was dropped there.",
+            icon=":material/warning:",
+        )
     motions, labels = gs.display_motions(result)
     labels = labels if len(motions) > 1 else None
     left, right = st.columns([3, 2])
@@ -419,7 +422,7 @@ def main() -> None:
         return
     st.caption(f"**{speech['name']}** · {speech['summary']}")
     for note in speech["notes"]:
-        st.warning(note, icon="⚠️")
+        st.warning(note, icon=":material/warning:")
     st.audio(gs.wav_bytes(speech["audio"]), format="audio/wav")
 
     st.subheader("2 · Controls")
