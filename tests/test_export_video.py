@@ -254,26 +254,10 @@ def test_parallel_render_gives_the_same_bytes_as_serial(tmp_path):
     # 70 frames are three chunks: each of two processes renders some, the parent puts them in order
     motion, other = swinging_motion(70), still_motion(64)
     calls = []
-    serial = render_video(
-        tmp_path / "serial.mp4",
-        motion,
-        side_by_side=other,
-        labels=["a", "b"],
-        audio=tone(5.0),
-        sr=SR,
-        resolution=(96, 64),
-        workers=1,
-    )
+    same = dict(side_by_side=other, labels=["a", "b"], audio=tone(5.0), sr=SR, resolution=(96, 64))
+    serial = render_video(tmp_path / "serial.mp4", motion, workers=1, **same)
     parallel = render_video(
-        tmp_path / "parallel.mp4",
-        motion,
-        side_by_side=other,
-        labels=["a", "b"],
-        audio=tone(5.0),
-        sr=SR,
-        resolution=(96, 64),
-        workers=2,
-        progress=lambda done, total: calls.append((done, total)),
+        tmp_path / "parallel.mp4", motion, workers=2, progress=lambda done, total: calls.append((done, total)), **same
     )
     assert serial.read_bytes() == parallel.read_bytes()
     assert calls == [(i, 75) for i in range(1, 76)]  # in order, up to the audio's 75 frames

@@ -61,24 +61,8 @@ def test_synthesize_refuses_a_refiner_of_another_layout(setup):
 def test_cli_train_refiner_and_synthesize(setup, tmp_path, capsys):
     base, db, _, _ = setup
     out = tmp_path / "ref"
-    assert (
-        main(
-            [
-                "train-refiner",
-                "--db",
-                str(base / "db"),
-                "--out",
-                str(out),
-                "--iterations",
-                "3",
-                "--device",
-                "cpu",
-                "--exclude-range",
-                "a:2-5",
-            ]
-        )
-        == 0
-    )
+    train = ["train-refiner", "--db", str(base / "db"), "--out", str(out), "--device", "cpu"]
+    assert main([*train, "--iterations", "3", "--exclude-range", "a:2-5"]) == 0
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["preset"] == "quick" and cfg["iteration"] == 3
     assert cfg["data"]["exclude_ranges"] == [["a", 2.0, 5.0]]
@@ -86,23 +70,7 @@ def test_cli_train_refiner_and_synthesize(setup, tmp_path, capsys):
     # an existing folder needs --resume or --force
     assert main(["train-refiner", "--db", str(base / "db"), "--out", str(out), "--iterations", "3"]) == 2
     assert "--resume" in capsys.readouterr().err
-    assert (
-        main(
-            [
-                "train-refiner",
-                "--db",
-                str(base / "db"),
-                "--out",
-                str(out),
-                "--iterations",
-                "4",
-                "--resume",
-                "--device",
-                "cpu",
-            ]
-        )
-        == 0
-    )
+    assert main([*train, "--iterations", "4", "--resume"]) == 0
     assert json.loads((out / "config.json").read_text())["iteration"] == 4
     syn = tmp_path / "syn"
     assert (
