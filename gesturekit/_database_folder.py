@@ -24,7 +24,7 @@ from ._io import DATABASE_CLIP_ARRAYS, read_json_marker
 from .control import ATTRIBUTE_NAMES
 from .errors import DatabaseError
 from .features import LAYOUT
-from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES
+from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
 
 if TYPE_CHECKING:
     from .database import MatchingDatabase
@@ -216,6 +216,12 @@ def _check_meta(meta: dict, path: Path) -> None:
         for key in ("n_frames", "first_clip", "n_clips", "audio_offset", "audio_samples"):
             if not (_is_int(t.get(key)) and t[key] >= 0):
                 raise bad(f"takes[{i}].{key} must be an integer >= 0, found {t.get(key)!r}")
+    joints = meta.get("joints")
+    if joints is not None:
+        try:
+            JointPresence(tuple(joints))
+        except (TypeError, ValueError) as exc:
+            raise bad(f"'joints' must list the status of each of the 55 joints ({exc})") from None
     counts = meta.get("counts")
     if counts is not None:
         if not (isinstance(counts, dict) and _is_int(counts.get("clips")) and _is_int(counts.get("takes"))):

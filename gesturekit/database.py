@@ -54,7 +54,7 @@ from .features import (
     valid_starts,
 )
 from .motion import AUDIO_SR, Take, resample_positions
-from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES
+from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -299,6 +299,13 @@ class MatchingDatabase:
         return int(self.meta["layout"]["fps"])
 
     @property
+    def joint_presence(self) -> JointPresence:
+        """Which of the 55 joints the takes hold (recorded, derived or absent); all recorded unless
+        the database was built from a partial skeleton."""
+        joints = self.meta.get("joints")
+        return JointPresence.full() if joints is None else JointPresence(tuple(joints))
+
+    @property
     def label(self) -> str:
         return self.meta["build"].get("label", "")
 
@@ -502,7 +509,17 @@ class MatchingDatabase:
         L = config.clip_frames
         track_len = L + LAYOUT.pose_lookahead
         per_take: list[TakeFeatures] = []
+        presence: JointPresence | None = None
         for i, take in enumerate(takes):
+            # every take of a database holds the same joints: what a clip shows must not depend on its take
+            this = take.motion.presence
+            if presence is None:
+                presence = this
+            elif this != presence:
+                raise ConfigError(
+                    f"take {take.name!r} holds other joints than the takes before it "
+                    f"({this.describe()} against {presence.describe()}); read every take with the same joint map"
+                )
             tf = take_features(take)
             if np.isnan(tf.positions).any():
                 raise ConfigError(f"take {take.name!r} has NaN positions")
@@ -600,6 +617,8 @@ class MatchingDatabase:
             "thresholds": thresholds,
             "takes": take_meta,
         }
+        if presence is not None and not presence.is_full:
+            meta["joints"] = presence.to_list()
         audio = np.concatenate(audio_parts) if config.store_audio else None
         return cls(meta=meta, arrays=arrays, stats=stats, audio=audio, overlap=overlap)
 

@@ -529,7 +529,7 @@ def candidate_motion(db: MatchingDatabase, clip: int, start: int, n_frames: int)
     g = np.asarray(db.G[int(clip), int(start) : int(start) + int(n_frames)], dtype=np.float32)
     if g.shape[0] == 0:
         raise ConfigError(f"clip {clip} has no frame {start}")
-    return Motion.from_flat(g, db.fps)
+    return Motion.from_flat(g, db.fps, db.joint_presence)
 
 
 def segment_in_context(

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ConfigError
-from .skeleton import FPS, N_JOINTS, PARENTS
+from .skeleton import FPS, N_JOINTS, PARENTS, JointPresence
 
 __all__ = ["Motion", "HoldsMotion", "Take", "AUDIO_SR", "resample_positions", "output_frame_count", "n_audio_frames"]
 
@@ -35,10 +35,14 @@ class Motion:
         :data:`gesturekit.skeleton.JOINT_NAMES`.
     fps : float
         Frames per second.
+    joints : JointPresence or None
+        Which joints the data holds (recorded, derived from others, or absent: sitting on
+        their parent and not drawn); None means all 55 are recorded.
     """
 
     positions: np.ndarray
     fps: float
+    joints: JointPresence | None = None
 
     def __post_init__(self):
         pos = np.asarray(self.positions, dtype=np.float32)
@@ -53,6 +57,11 @@ class Motion:
         return int(self.positions.shape[0])
 
     @property
+    def presence(self) -> JointPresence:
+        """Which joints the data holds (:attr:`joints`, or all recorded when it is None)."""
+        return self.joints if self.joints is not None else JointPresence.full()
+
+    @property
     def duration(self) -> float:
         """Duration in seconds (frames / fps)."""
         return self.n_frames / self.fps
@@ -62,10 +71,10 @@ class Motion:
         return self.positions.reshape(self.n_frames, N_JOINTS * 3)
 
     @classmethod
-    def from_flat(cls, g: np.ndarray, fps: float) -> Motion:
+    def from_flat(cls, g: np.ndarray, fps: float, joints: JointPresence | None = None) -> Motion:
         """Motion from g vectors of shape (frames, 165)."""
         g = np.asarray(g)
-        return cls(g.reshape(g.shape[0], N_JOINTS, 3), fps)
+        return cls(g.reshape(g.shape[0], N_JOINTS, 3), fps, joints)
 
     def bone_lengths(self) -> np.ndarray:
         """Length of every bone in every frame, shape (frames, 54), metres."""
@@ -74,7 +83,7 @@ class Motion:
         return np.linalg.norm(d, axis=-1)
 
     def slice(self, start: int, stop: int) -> Motion:
-        return Motion(self.positions[start:stop], self.fps)
+        return Motion(self.positions[start:stop], self.fps, self.joints)
 
 
 class HoldsMotion:

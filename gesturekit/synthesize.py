@@ -398,9 +398,11 @@ def _finish(
 ) -> SynthesisResult:
     G = db.G
     g = np.asarray(G[res.frames[:, 0], res.frames[:, 1]], dtype=np.float32)  # (T, 165)
-    knn = Motion.from_flat(g, db.fps)
+    knn = Motion.from_flat(g, db.fps, db.joint_presence)
     boundaries = np.arange(1, res.n_steps) * config.segment
-    out = Motion.from_flat(blend_segments(g, boundaries, mode=config.blend, frames=config.blend_frames), db.fps)
+    out = Motion.from_flat(
+        blend_segments(g, boundaries, mode=config.blend, frames=config.blend_frames), db.fps, db.joint_presence
+    )
     return SynthesisResult(
         motion=out,
         knn_motion=knn,
@@ -536,6 +538,6 @@ def _refine(db: MatchingDatabase, res: SynthesisResult, refiner: MotionRefiner) 
     hz = res.config.refiner_keep_hz
     if hz > 0:
         kept = keep_slow(refined.flat(), res.knn_motion.flat(), hz, fps=res.knn_motion.fps)
-        refined = Motion.from_flat(kept, refined.fps)
+        refined = Motion.from_flat(kept, refined.fps, res.knn_motion.joints)
     res.refined_motion = refined
     res.motion = res.refined_motion

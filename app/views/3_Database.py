@@ -109,7 +109,7 @@ def viewer(db: MatchingDatabase, clip: int) -> None:
         f"take **{row['take']}**, frames {row['start_frame']}–{row['start_frame'] + db.clip_frames - 1} "
         f"({row['start_s']:.2f}–{row['end_s']:.2f} s)"
     )
-    motion = Motion.from_flat(np.asarray(db.G[clip]), db.fps)
+    motion = Motion.from_flat(np.asarray(db.G[clip]), db.fps, db.joint_presence)
     audio = db.segment_audio(clip, 0, db.clip_frames) if db.audio is not None else None
     left, right = st.columns([3, 2])
     with left:

@@ -489,5 +489,5 @@ def run_system(
         init = None if options.init_pose == "random" else np.asarray(options.init_pose, dtype=np.float32)
         frames, relaxed = pose_nearest_segments(db.P, valid, n_frames=n, seed=options.seed, init_pose=init, **common)
     g = np.asarray(db.G[frames[:, 0], frames[:, 1]], dtype=np.float32)
-    motion = Motion.from_flat(g, db.fps)
+    motion = Motion.from_flat(g, db.fps, db.joint_presence)
     return SystemOutput(system, motion, np.arange(N, n, N, dtype=np.int64), int(relaxed.sum()))

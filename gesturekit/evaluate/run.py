@@ -252,7 +252,7 @@ def held_out(db: MatchingDatabase, holdout: Holdout | str, *, margin_s: float | 
             f"(its clips cover 0-{covered / fps:.2f} s)"
         )
     G = np.asarray(db.G[clips]).reshape(-1, np.asarray(db.G).shape[-1])
-    motion = Motion.from_flat(G[f0:f1], fps)
+    motion = Motion.from_flat(G[f0:f1], fps, db.joint_presence)
     take_audio = db.take_audio(ti)
     s0 = int(round(f0 * AUDIO_SR / fps))
     s1 = int(math.ceil(f1 * AUDIO_SR / fps))

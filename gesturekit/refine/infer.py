@@ -278,7 +278,7 @@ class Refiner:
         """:meth:`refine` for a :class:`~gesturekit.motion.Motion` at 15 fps; returns a Motion."""
         if motion.fps != FPS:
             raise ConfigError(f"the refiner works at {FPS} fps; the motion has {motion.fps} fps")
-        return Motion.from_flat(self.refine(motion.flat(), audio, **options), motion.fps)
+        return Motion.from_flat(self.refine(motion.flat(), audio, **options), motion.fps, motion.joints)
 
     def _run(self, az: np.ndarray, gz: np.ndarray) -> np.ndarray:
         with torch.inference_mode():
