@@ -2,7 +2,7 @@
 
 From the bottom up (the data's way through the package, issue 17's acceptance)::
 
-    base        errors, _io, _optional, _version, _config, limits, paths, outputs, skeleton, motion, control
+    base        errors, _io, _optional, _version, _config, limits, paths, outputs, skeleton, bones, motion, control
     datasets    the readers and the generated demo speaker (gesturekit/datasets/)
     features    audio and pose features, their layout
     database    MatchingDatabase, its folder on disk, the demo database, finding databases
@@ -49,6 +49,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.paths",
             "gesturekit.outputs",
             "gesturekit.skeleton",
+            "gesturekit.bones",
             "gesturekit.motion",
             "gesturekit.control",
         ),
