@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gesturekit.datasets.synthetic import generate_demo_take
-from gesturekit.errors import MotionFileError
+from gesturekit.errors import ConfigError, MotionFileError
 from gesturekit.export.npz import load_npz, save_npz
 from gesturekit.export.video import render_video
 from gesturekit.motion import Motion
@@ -353,3 +353,15 @@ def test_stimuli_of_a_partial_skeleton_share_one_box_fitted_to_what_they_draw():
     # the default box assumes a pelvis origin: there a neck-relative body sits in the lower half
     default = np.flatnonzero(foreground(render_image(motion, resolution=(96, h), style=stimulus_style())).any(axis=1))
     assert default.min() > h / 3
+
+
+@pytest.mark.parametrize("view", ["figure", "viewer", "render"])
+def test_a_motion_with_every_joint_absent_is_refused_by_every_view(view):
+    nothing = Motion(_demo()[:2], 15.0, JointPresence((ABSENT,) * N_JOINTS))
+    draw = {
+        "figure": lambda: skeleton_figure(nothing),
+        "viewer": lambda: viewer_data(nothing),
+        "render": lambda: render_image(nothing, resolution=(32, 24)),
+    }[view]
+    with pytest.raises(ConfigError, match="all absent: nothing to draw"):
+        draw()

@@ -478,6 +478,8 @@ def _check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution
             raise ConfigError(f"expected a gesturekit Motion, got {type(m).__name__}")
         if m.n_frames == 0:
             raise ConfigError("cannot render a motion with no frames")
+        if not m.presence.drawn.any():
+            raise ConfigError("cannot render a motion whose joints are all absent: nothing to draw")
         if not np.all(np.isfinite(m.positions)):
             raise ConfigError("cannot render a motion with NaN or infinite positions")
     if len(motions) == 2 and motions[0].fps != motions[1].fps:

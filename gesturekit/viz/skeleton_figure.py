@@ -225,7 +225,7 @@ def skeleton_figure(
         No motion, a motion with no frame, labels of the wrong length, or a
         non-positive ``fps``/``max_frames``.
     """
-    motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure")
+    motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure", drawn=True)
     # per motion: (body, finger, derived polylines), each (frames, points, 3); markers at the
     # points draw every joint that exists, since every such joint is on a bone
     grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(

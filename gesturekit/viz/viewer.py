@@ -180,7 +180,7 @@ def viewer_data(
         No motion, a motion with no frame, labels of another count, a non-positive fps
         or ``max_frames`` below 1.
     """
-    motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer")
+    motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer", drawn=True)
     grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
     bodies = [appearance.body(m.positions[_frames_at(m, times)], m.presence) for m in motions]
     if spacing is None:
