@@ -365,3 +365,16 @@ def test_a_motion_with_every_joint_absent_is_refused_by_every_view(view):
     }[view]
     with pytest.raises(ConfigError, match="all absent: nothing to draw"):
         draw()
+
+
+def test_the_app_says_under_a_view_what_is_derived_and_what_is_absent(monkeypatch):
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "app"))
+    import display
+
+    partial, full = upper_body(2), Motion(_demo()[:2], 15.0)
+    assert display.skeleton_note(full) == "" and display.skeleton_note([full, full]) == ""
+    note = display.skeleton_note([partial, full, partial])  # one line per distinct partial skeleton
+    assert note.startswith(f"grey: {len(DERIVED_TORSO)} derived joints") and "head_top" in note
+    assert note.endswith(f"{len(THUMBS)} joints absent from the data, not drawn") and "|" not in note
