@@ -249,7 +249,8 @@ class SkeletonScene:
     ----------
     motions : sequence of Motion
         One or two motions of equal fps. A motion shorter than the longest
-        holds its last pose.
+        holds its last pose. Each is drawn as its ``presence`` says: absent
+        joints not at all (nor framed), derived ones in the derived grey.
     labels : sequence of str, optional
         One label per motion, drawn at the top of its panel.
     resolution : (int, int)
