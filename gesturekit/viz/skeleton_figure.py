@@ -222,12 +222,12 @@ def skeleton_figure(
     Raises
     ------
     ConfigError
-        No motion, a motion with no frame, labels of the wrong length, or a
-        non-positive ``fps``/``max_frames``.
+        No motion, a motion with no frame or with every joint absent, labels of
+        the wrong length, or a non-positive ``fps``/``max_frames``.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure", drawn=True)
     # per motion: (body, finger, derived polylines), each (frames, points, 3); markers at the
-    # points draw every joint that exists, since every such joint is on a bone
+    # points draw every joint that exists (on a bone, or a lone point)
     grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(
         motions, fps=fps, max_frames=max_frames, spacing=spacing
     )

@@ -177,7 +177,8 @@ def viewer_data(
     Raises
     ------
     ConfigError
-        No motion, a motion with no frame, labels of another count, a non-positive fps
+        No motion, a motion with no frame or with every joint absent, labels of another
+        count, a non-positive fps
         or ``max_frames`` below 1.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer", drawn=True)
