@@ -178,8 +178,7 @@ def viewer_data(
     ------
     ConfigError
         No motion, a motion with no frame or with every joint absent, labels of another
-        count, a non-positive fps
-        or ``max_frames`` below 1.
+        count, a non-positive fps or ``max_frames`` below 1.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer", drawn=True)
     grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
