@@ -42,6 +42,7 @@ __all__ = [
     "run_page",
     "selected_row",
     "show_skeletons",
+    "skeleton_note",
     "user_errors",
     "warnings_shown",
 ]
@@ -175,3 +176,28 @@ def show_skeletons(
 
     page = skeleton_viewer(motions, labels=labels, title=title, height=height, key=key, audio=audio)
     st.iframe(page, height=int(height) + CONTROLS_HEIGHT)
+    note = skeleton_note(motions)
+    if note:
+        st.caption(note)
+
+
+def skeleton_note(motions: Motion | Sequence[Motion]) -> str:
+    """What a view of a partial skeleton leaves out or derives, in one line ("" for complete skeletons)."""
+    from gesturekit.motion import Motion
+    from gesturekit.skeleton import ABSENT, DERIVED
+
+    seen = []
+    for m in [motions] if isinstance(motions, Motion) else list(motions):
+        if not m.presence.is_full and m.presence not in seen:
+            seen.append(m.presence)
+    parts = []
+    for presence in seen:
+        derived, absent = presence.names(DERIVED), presence.names(ABSENT)
+        line = []
+        if derived:
+            names = ", ".join(derived)
+            line.append(f"grey: {len(derived)} derived joints, placed from the neck and shoulders ({names})")
+        if absent:
+            line.append(f"{len(absent)} joints absent from the data, not drawn")
+        parts.append("; ".join(line))
+    return " | ".join(parts)

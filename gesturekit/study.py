@@ -50,6 +50,7 @@ from ._optional import require
 from .errors import ConfigError, GestureKitError
 from .export.loudness import measure_loudness, normalise_loudness
 from .motion import AUDIO_SR, Motion
+from .skeleton import JointPresence
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -277,19 +278,46 @@ def speech_sources(
 # ---- rendering ----------------------------------------------------------------------------------
 
 
-def stimulus_style() -> RenderStyle:
-    """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion)."""
+def stimulus_style(view_box: Sequence[Sequence[float]] | None = None) -> RenderStyle:
+    """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion).
+
+    Parameters
+    ----------
+    view_box : ((xmin, xmax), (ymin, ymax), (zmin, zmax)), optional
+        The region every stimulus frames, metres; default the style's pelvis-relative
+        upper body. A partial skeleton (e.g. neck-relative) passes the box of all its
+        stimuli together (:func:`_study_view_box`), so they still share one camera.
+    """
     require("pyvista", purpose="rendering stimuli")
     from .viz.render import RenderStyle
 
-    return RenderStyle(fit_motion=False)
+    if view_box is None:
+        return RenderStyle(fit_motion=False)
+    return RenderStyle(fit_motion=False, view_box=tuple(tuple(float(v) for v in row) for row in view_box))
+
+
+def _study_view_box(motions: Sequence[Motion]) -> list[list[float]] | None:
+    """One fixed box for all stimuli of a partial skeleton: the fitted bounds of what every one of
+    them draws, shape (3, 2) as lists, metres; None for complete skeletons (the default box)."""
+    if all(m.presence.is_full for m in motions):
+        return None
+    require("pyvista", purpose="rendering stimuli")
+    from .viz.render import RenderStyle, view_bounds
+
+    return view_bounds(motions, style=RenderStyle()).tolist()
+
+
+def _job_motion(job: dict) -> Motion:
+    """A stimulus job's motion; the joints the database holds travel with the positions."""
+    joints = job.get("joints")
+    return Motion(job["positions"], job["fps"], None if joints is None else JointPresence(tuple(joints)))
 
 
 def _render_stimulus(job: dict) -> str:
     """Render one stimulus (runs in a worker process or on a Dask worker)."""
     from .export.video import render_video
 
-    motion = Motion(job["positions"], job["fps"])
+    motion = _job_motion(job)
     # one process per stimulus already keeps every core busy
     render_video(
         job["path"],
@@ -298,7 +326,7 @@ def _render_stimulus(job: dict) -> str:
         resolution=tuple(job["resolution"]),
         workers=1,
         overwrite=True,
-        style=stimulus_style(),
+        style=stimulus_style(job.get("view_box")),
     )
     return job["id"]
 
@@ -578,6 +606,7 @@ def _make_stimuli_locked(
                     "path": str(out / "videos" / f"{sid}.mp4"),
                     "positions": res.motion.positions,
                     "fps": float(res.motion.fps),
+                    "joints": None if res.motion.joints is None else res.motion.joints.to_list(),
                     "audio": sound,
                     "resolution": (width, height),
                 }
@@ -596,6 +625,9 @@ def _make_stimuli_locked(
             if isinstance(f, str) and f not in keep and re.fullmatch(r"videos/[0-9a-f]+\.mp4", f):
                 (out / f).unlink(missing_ok=True)
 
+    box = _study_view_box([_job_motion(j) for j in jobs])
+    for j in jobs:
+        j["view_box"] = box
     _run_jobs(
         jobs,
         workers=workers,
@@ -622,6 +654,8 @@ def _make_stimuli_locked(
         "render_style": "gesturekit house style, fixed camera (fit_motion=False), no labels",
         "refiner": refiner_name,
     }
+    if box is not None:
+        settings["view_box"] = box  # a partial skeleton's stimuli share this fitted, fixed frame
     _write_text(study_path, json.dumps(settings, indent=1) + "\n")
     settings["seconds"] = round(time.perf_counter() - t0, 3)
     return StudyResult(out, manifest, plan.order, [out / f for f in manifest["file"]], settings)

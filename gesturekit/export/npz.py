@@ -9,6 +9,10 @@ key                shape, dtype        meaning
 ``fps``            () f8               frames per second
 ``joint_names``    (55,) unicode       :data:`gesturekit.skeleton.JOINT_NAMES`
 ``parents``        (55,) i8            :data:`gesturekit.skeleton.PARENTS`
+``joint_status``   (55,) unicode       per joint ``recorded``, ``derived`` (placed
+                                       from others) or ``absent`` (not in the
+                                       data; sits on its parent); an archive
+                                       without it holds a complete skeleton
 ``config``         () unicode          the settings that made the motion, JSON
 ``format_version`` () i8               :data:`FORMAT_VERSION`
 any other name     any                 extra arrays (``knn_positions``, ...)
@@ -35,7 +39,7 @@ import numpy as np
 from .._io import atomic_write
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion
-from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
+from ..skeleton import JOINT_NAMES, JOINT_STATES, N_JOINTS, PARENTS, JointPresence
 
 __all__ = ["FORMAT_VERSION", "RESERVED_KEYS", "save_npz", "load_npz"]
 
@@ -43,7 +47,7 @@ __all__ = ["FORMAT_VERSION", "RESERVED_KEYS", "save_npz", "load_npz"]
 FORMAT_VERSION = 1
 
 #: Keys of the archive that extra arrays may not use.
-RESERVED_KEYS = ("positions", "fps", "joint_names", "parents", "config", "format_version")
+RESERVED_KEYS = ("positions", "fps", "joint_names", "parents", "joint_status", "config", "format_version")
 
 # the earliest time a zip entry can carry; a fixed stamp makes the bytes reproducible
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
@@ -69,7 +73,8 @@ def save_npz(
     path : str or os.PathLike
         The archive to create.
     motion : Motion
-        Positions (frames, 55, 3) in metres and the frame rate.
+        Positions (frames, 55, 3) in metres (exactly as they are), the frame rate and
+        which joints are real (:attr:`Motion.presence`, stored as ``joint_status``).
     arrays : mapping of str to np.ndarray, optional
         Extra arrays, e.g. ``"knn_positions"`` (frames, 55, 3) or the search
         record's candidate indices. Names are identifiers (letters, digits,
@@ -102,6 +107,7 @@ def save_npz(
         ("fps", np.array(float(motion.fps), dtype=np.float64)),
         ("joint_names", np.array(JOINT_NAMES, dtype=np.str_)),
         ("parents", np.asarray(PARENTS, dtype=np.int64)),
+        ("joint_status", np.array(motion.presence.status, dtype=np.str_)),
         ("config", np.array(_config_json(config, path), dtype=np.str_)),
         ("format_version", np.array(FORMAT_VERSION, dtype=np.int64)),
     ]
@@ -184,7 +190,8 @@ def load_npz(path: str | os.PathLike) -> tuple[Motion, dict[str, np.ndarray], di
     Returns
     -------
     motion : Motion
-        Positions (frames, 55, 3) float32 metres and fps.
+        Positions (frames, 55, 3) float32 metres, fps and ``joints`` (from ``joint_status``;
+        None, a complete skeleton, when the archive has none or every joint is recorded).
     arrays : dict of str to np.ndarray
         The extra arrays, by name.
     config : dict
@@ -245,6 +252,8 @@ def load_npz(path: str | os.PathLike) -> tuple[Motion, dict[str, np.ndarray], di
     if fps.shape != () or fps.dtype.kind not in "fiu" or not np.isfinite(fps) or not fps > 0:
         raise MotionFileError(f"fps must be one positive number, got {fps!r}", path=path)
 
+    joints = _joint_status(data.get("joint_status"), path)
+
     config: dict[str, Any] = {}
     if "config" in data:
         text = data["config"]
@@ -258,4 +267,17 @@ def load_npz(path: str | os.PathLike) -> tuple[Motion, dict[str, np.ndarray], di
             raise MotionFileError("config must be a JSON object", path=path)
 
     extras = {k: v for k, v in data.items() if k not in RESERVED_KEYS}
-    return Motion(positions.astype(np.float32, copy=False), float(fps)), extras, config
+    return Motion(positions.astype(np.float32, copy=False), float(fps), joints), extras, config
+
+
+def _joint_status(status: np.ndarray | None, path: Path) -> JointPresence | None:
+    """The archive's ``joint_status`` as a presence; None (every joint recorded) when absent or full."""
+    if status is None:
+        return None  # written before archives listed which joints are real: a complete skeleton
+    if status.shape != (N_JOINTS,) or status.dtype.kind != "U":
+        raise MotionFileError(f"joint_status must be {N_JOINTS} strings, got {status.dtype} {status.shape}", path=path)
+    bad = sorted(set(status.tolist()) - set(JOINT_STATES))
+    if bad:
+        raise MotionFileError(f"joint_status holds {bad}; expected {', '.join(JOINT_STATES)}", path=path)
+    presence = JointPresence(tuple(status.tolist()))
+    return None if presence.is_full else presence

@@ -80,7 +80,9 @@ def render_video(
     path : str or os.PathLike
         The ``.mp4`` file to write; its folder must exist.
     motion : Motion
-        The motion to show, positions (frames, 55, 3) in metres.
+        The motion to show, positions (frames, 55, 3) in metres. Only the joints its
+        :attr:`~gesturekit.motion.Motion.presence` says exist are drawn and framed;
+        derived ones in grey (:attr:`~gesturekit.viz.appearance.Appearance.derived_color`).
     audio : np.ndarray, shape (samples,), float, optional
         Mono speech in [-1, 1] starting with the motion's first frame. Without
         it the video is silent and lasts as long as the motion.

@@ -61,13 +61,14 @@ def data_array(value: dict | Sequence[Any] | np.ndarray) -> np.ndarray:
 
 
 def _motions_and_labels(
-    motions, labels, *, who: str, empty_ok: bool = False, label_one: bool = False
+    motions, labels, *, who: str, empty_ok: bool = False, label_one: bool = False, drawn: bool = False
 ) -> tuple[list[Motion], list[str]]:
     """One motion or a list of them, with one label each (checked; ``who`` names the caller in errors).
 
     A motion with no frame is refused unless ``empty_ok``; without ``labels``
     the motions are called "motion 1", "motion 2", ..., a lone motion only if
-    ``label_one`` (else its label is empty).
+    ``label_one`` (else its label is empty). With ``drawn``, a motion whose joints are all
+    absent (nothing to draw) is refused.
     """
     motions = [motions] if isinstance(motions, Motion) else list(motions)
     if not motions:
@@ -77,6 +78,8 @@ def _motions_and_labels(
             raise ConfigError(f"{who} takes Motion objects, got {type(m).__name__}")
         if m.n_frames < 1 and not empty_ok:
             raise ConfigError(f"{who} got a motion with no frame")
+        if drawn and not m.presence.drawn.any():
+            raise ConfigError(f"{who} got a motion whose joints are all absent: nothing to draw")
     if labels is None:
         labels = [f"motion {i + 1}" for i in range(len(motions))] if len(motions) > 1 or label_one else [""]
     labels = [str(s) for s in labels]

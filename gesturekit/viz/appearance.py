@@ -22,12 +22,65 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError
-from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS, joint_index
+from ..skeleton import ABSENT, DERIVED, JOINT_NAMES, N_JOINTS, PARENTS, RECORDED, JointPresence, joint_index
 
-__all__ = ["APPEARANCE", "Appearance", "BodyShapes", "Capsule", "DERIVED_POINTS", "Sphere", "hex_to_rgb", "rgb_to_hex"]
+__all__ = [
+    "APPEARANCE",
+    "Appearance",
+    "BodyShapes",
+    "Capsule",
+    "DERIVED_PART",
+    "DERIVED_POINTS",
+    "Sphere",
+    "hex_to_rgb",
+    "point_states",
+    "rgb_to_hex",
+]
 
 #: Points :meth:`Appearance.body` adds after the 55 joints, in this order (indices 55, 56, ...).
 DERIVED_POINTS: tuple[str, ...] = ("pelvis", "left_hip", "right_hip", "head_centre", "left_chest", "right_chest")
+
+#: The part of every shape that touches a derived joint: drawn in :attr:`Appearance.derived_color`.
+DERIVED_PART = "derived"
+
+#: The joints each derived point is placed from (:meth:`Appearance.body`).
+_POINT_SOURCES: tuple[tuple[str, ...], ...] = (
+    ("spine_mid", "chest"),
+    ("spine_mid", "chest", "left_shoulder", "right_shoulder"),
+    ("spine_mid", "chest", "left_shoulder", "right_shoulder"),
+    ("head", "head_top"),
+    ("chest", "upper_chest", "left_shoulder", "right_shoulder"),
+    ("chest", "upper_chest", "left_shoulder", "right_shoulder"),
+)
+
+
+def point_states(presence: JointPresence | None) -> tuple[str, ...]:
+    """The state of each body point (the 55 joints, then :data:`DERIVED_POINTS`).
+
+    A derived point is absent when a joint it is placed from is absent, derived when one
+    is derived, else recorded. The pelvis and the hips extend the spine downwards: they
+    are drawn only when ``spine_mid`` and ``chest`` are recorded, since an extension of a
+    derived spine would show a body the data does not have.
+
+    Parameters
+    ----------
+    presence : JointPresence or None
+        None: every joint recorded.
+
+    Returns
+    -------
+    tuple of str, length 55 + len(DERIVED_POINTS)
+    """
+    joints = (presence or JointPresence.full()).status
+    out = list(joints)
+    for k, sources in enumerate(_POINT_SOURCES):
+        states = {joints[joint_index(n)] for n in sources}
+        hips = DERIVED_POINTS[k] in ("pelvis", "left_hip", "right_hip")  # placed from the spine alone
+        if ABSENT in states or (hips and states != {RECORDED}):
+            out.append(ABSENT)
+        else:
+            out.append(DERIVED if DERIVED in states else RECORDED)
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -82,12 +135,23 @@ class BodyShapes:
         Shape (frames, 55 + len(DERIVED_POINTS), 3), float32, metres: the joints, then the
         :data:`DERIVED_POINTS`.
     capsules : tuple of Capsule
+        Only those to draw: none touching an absent point; those touching a derived one
+        have the part :data:`DERIVED_PART`.
     spheres : tuple of Sphere
+        As the capsules.
+    drawn : numpy.ndarray
+        Shape (55 + len(DERIVED_POINTS),) bool: the points that exist (recorded or derived);
+        what the view frames.
     """
 
     points: np.ndarray
     capsules: tuple[Capsule, ...]
     spheres: tuple[Sphere, ...]
+    drawn: np.ndarray
+
+    def drawn_points(self) -> np.ndarray:
+        """The points that exist, shape (frames, drawn points, 3), float32, metres."""
+        return self.points[:, self.drawn]
 
 
 def hex_to_rgb(color: str) -> np.ndarray:
@@ -158,6 +222,8 @@ class Appearance:
         Towards the light, camera frame (normalised where used).
     ambient, diffuse : float
         Shading: ``colour * min(1, ambient + diffuse * max(0, normal . light))``.
+    derived_color : str
+        Every shape of a derived joint (placed from others, not recorded): grey, whatever the motion.
     background : str
     ground_color : str
         The floor a figure stands on (drawn as a band below it).
@@ -199,6 +265,7 @@ class Appearance:
     ambient: float = 0.5
     diffuse: float = 0.62
     # the scene: a background, the floor the figure stands on and its contact shadow
+    derived_color: str = "#a2a8af"
     background: str = "#f4f5f7"
     ground_color: str = "#e3e6ea"
     shadow_color: str = "#000000"
@@ -212,7 +279,11 @@ class Appearance:
         return self.motion_colors[motion % len(self.motion_colors)]
 
     def part_color(self, motion: int, part: str) -> str:
-        """The colour of one body part of the ``motion``-th motion, before shading."""
+        """The colour of one body part of the ``motion``-th motion, before shading.
+
+        The :data:`DERIVED_PART` is :attr:`derived_color` for every motion."""
+        if part == DERIVED_PART:
+            return self.derived_color
         tint = dict(self.part_tint).get(part, 0.0)
         rgb = hex_to_rgb(self.color(motion))
         return rgb_to_hex(rgb + (1.0 - rgb) * tint)
@@ -241,13 +312,43 @@ class Appearance:
         k = np.minimum(1.0, self.ambient + self.diffuse * lambert)
         return hex_to_rgb(color) * k[..., None]
 
-    def shapes(self) -> tuple[tuple[Capsule, ...], tuple[Sphere, ...]]:
+    def shapes(self, presence: JointPresence | None = None) -> tuple[tuple[Capsule, ...], tuple[Sphere, ...]]:
         """The capsules and spheres of the body, independent of the pose.
 
         Every one of the 54 bones is a capsule, except ``head`` to ``head_top``, which the
         head sphere stands for (its ``covers``). The torso adds capsules between the
         derived points: the hips and across the chest.
+
+        Parameters
+        ----------
+        presence : JointPresence, optional
+            Which joints exist (default all recorded). Shapes touching an absent point
+            (:func:`point_states`) are left out; those touching a derived one get the
+            part :data:`DERIVED_PART`.
         """
+        caps, spheres = self._all_shapes()
+        if presence is None or presence.is_full:
+            return caps, spheres
+        state = point_states(presence)
+
+        def look(ends: tuple[int, ...]) -> str | None:
+            states = {state[e] for e in ends}
+            return None if ABSENT in states else DERIVED_PART if DERIVED in states else ""
+
+        kept_caps = []
+        for c in caps:
+            part = look((c.a, c.b))
+            if part is not None:
+                kept_caps.append(Capsule(c.a, c.b, c.radius, part or c.part))
+        kept_spheres = []
+        for sp in spheres:
+            part = look((sp.centre,))
+            if part is not None:
+                kept_spheres.append(Sphere(sp.centre, sp.radius, part or sp.part, sp.covers))
+        return tuple(kept_caps), tuple(kept_spheres)
+
+    def _all_shapes(self) -> tuple[tuple[Capsule, ...], tuple[Sphere, ...]]:
+        """Every capsule and sphere of a complete body."""
         j = joint_index
         n = N_JOINTS
         pelvis, lhip, rhip, head_c, lchest, rchest = (n + i for i in range(len(DERIVED_POINTS)))
@@ -301,13 +402,16 @@ class Appearance:
         spheres = (Sphere(head_c, self.head_radius, "head", covers=(head_bone,)),)
         return tuple(caps), spheres
 
-    def body(self, positions: npt.ArrayLike) -> BodyShapes:
+    def body(self, positions: npt.ArrayLike, presence: JointPresence | None = None) -> BodyShapes:
         """The shapes to draw for a motion: its points (joints and derived points) and capsules.
 
         Parameters
         ----------
         positions : array_like
             Shape (frames, 55, 3), metres, Y up, the character facing +Z.
+        presence : JointPresence, optional
+            Which joints exist (a motion's :attr:`~gesturekit.motion.Motion.presence`);
+            default all recorded. Absent joints get no shape; derived ones the derived look.
 
         Returns
         -------
@@ -340,9 +444,10 @@ class Appearance:
             ],
             axis=1,
         )
-        caps, spheres = self.shapes()
+        caps, spheres = self.shapes(presence)
         points = np.concatenate([p, derived], axis=1).astype(np.float32)
-        return BodyShapes(points=points, capsules=caps, spheres=spheres)
+        drawn = np.array([s != ABSENT for s in point_states(presence)], dtype=bool)
+        return BodyShapes(points=points, capsules=caps, spheres=spheres, drawn=drawn)
 
     def bounds(self, points: npt.ArrayLike, *, margin: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """The box every drawn surface stays in over the whole motion: the framing rule.
@@ -391,6 +496,7 @@ class Appearance:
             "ambient": self.ambient,
             "diffuse": self.diffuse,
             "background": self.background,
+            "derived": self.derived_color,
             "ground": self.ground_color,
             "shadow": self.shadow_color,
             "shadow_alpha": self.shadow_alpha,

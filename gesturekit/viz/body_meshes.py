@@ -14,6 +14,7 @@ import numpy as np
 import pyvista as pv
 
 if TYPE_CHECKING:
+    from ..skeleton import JointPresence
     from .render import RenderStyle
 
 __all__ = ["BodyMeshes"]
@@ -60,12 +61,14 @@ class BodyMeshes:
     Attributes
     ----------
     parts : dict of str to pyvista.PolyData
-        One mesh per body part (``"torso"``, ``"head"``, ``"finger"``, ...).
+        One mesh per body part (``"torso"``, ``"head"``, ``"finger"``, ..., and ``"derived"``
+        for the shapes of derived joints), of the joints ``presence`` says exist (default all).
     """
 
-    def __init__(self, style: RenderStyle):
+    def __init__(self, style: RenderStyle, presence: JointPresence | None = None):
         a = style.appearance
-        capsules, spheres = a.shapes()
+        # absent joints get no surface; derived ones are their own part, in the derived colour
+        capsules, spheres = a.shapes(presence)
         sides = style.capsule_sides
         angles = 2 * np.pi * np.arange(sides) / sides
         self._cos, self._sin = np.cos(angles), np.sin(angles)

@@ -42,8 +42,8 @@ from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
-from ..skeleton import N_JOINTS
-from .appearance import APPEARANCE, DERIVED_POINTS, Appearance, hex_to_rgb
+from ..skeleton import N_JOINTS, JointPresence
+from .appearance import APPEARANCE, DERIVED_POINTS, Appearance, BodyShapes, hex_to_rgb
 from .body_meshes import BodyMeshes
 
 __all__ = ["RenderStyle", "SkeletonScene", "render_image", "view_bounds"]
@@ -156,10 +156,10 @@ def _opengl_window_choice() -> Iterator[None]:
         os.environ.pop(_WINDOW_ENV, None)
 
 
-def _reach(a: Appearance) -> np.ndarray:
+def _reach(a: Appearance, presence: JointPresence | None = None) -> np.ndarray:
     """How far the surface reaches around each body point, metres, shape (points,): the largest
-    radius of the capsules and spheres on it."""
-    capsules, spheres = a.shapes()
+    radius of the capsules and spheres drawn on it (0 where nothing is drawn)."""
+    capsules, spheres = a.shapes(presence)
     reach = np.zeros(N_JOINTS + len(DERIVED_POINTS))
     for c in capsules:
         reach[[c.a, c.b]] = np.maximum(reach[[c.a, c.b]], c.radius)
@@ -168,12 +168,24 @@ def _reach(a: Appearance) -> np.ndarray:
     return reach
 
 
+_PELVIS = N_JOINTS + DERIVED_POINTS.index("pelvis")
+
+
+def _shadow_centre(*bodies: BodyShapes) -> np.ndarray:
+    """Where bodies stand on average over all their frames, shape (3,), metres: their pelvis,
+    or, when one lacks a pelvis, the mean of the points drawn."""
+    if all(b.drawn[_PELVIS] for b in bodies):
+        return np.concatenate([b.points[:, _PELVIS] for b in bodies]).mean(axis=0)
+    return np.concatenate([b.drawn_points().reshape(-1, 3) for b in bodies]).mean(axis=0)
+
+
 def view_bounds(motions: Sequence[Motion], *, style: RenderStyle | None = None) -> np.ndarray:
     """The region a scene frames, shape (3, 2): (min, max) of x, y, z in metres.
 
     With ``style.fit_motion`` (the default), the appearance's framing rule:
-    the bounds of every drawn surface of every motion over the whole clip,
-    the floor included, grown by its ``frame_margin`` on each side (per axis).
+    the bounds of every drawn surface of every motion over the whole clip
+    (recorded and derived joints; absent ones are not drawn), the floor
+    included, grown by its ``frame_margin`` on each side (per axis).
     Without it, the style's fixed ``view_box``. The floor lies at the bottom
     of the region.
     """
@@ -181,7 +193,8 @@ def view_bounds(motions: Sequence[Motion], *, style: RenderStyle | None = None) 
     if not style.fit_motion:
         return np.asarray(style.view_box, dtype=np.float64).copy()
     a = style.appearance
-    every = np.concatenate([a.body(m.positions).points.reshape(-1, 3) for m in motions])
+    # only what is drawn: absent joints sit on their parents and would only shift the box
+    every = np.concatenate([a.body(m.positions, m.presence).drawn_points().reshape(-1, 3) for m in motions])
     lo, hi = a.bounds(every, margin=False)
     lo[1] = min(lo[1], a.ground_height(every))
     pad = a.frame_margin * (hi - lo)
@@ -236,7 +249,8 @@ class SkeletonScene:
     ----------
     motions : sequence of Motion
         One or two motions of equal fps. A motion shorter than the longest
-        holds its last pose.
+        holds its last pose. Each is drawn as its ``presence`` says: absent
+        joints not at all (nor framed), derived ones in the derived grey.
     labels : sequence of str, optional
         One label per motion, drawn at the top of its panel.
     resolution : (int, int)
@@ -294,16 +308,20 @@ class SkeletonScene:
         pl, s, motions = self._live(), self.style, self.motions
         a = s.appearance
         self._bodies = []
-        self._points = [a.body(m.positions).points for m in motions]  # (frames, 61, 3) each
+        shapes = [a.body(m.positions, m.presence) for m in motions]
+        self._points = [b.points for b in shapes]  # (frames, 61, 3) each
         box = view_bounds(motions, style=s)
-        every = np.concatenate([p.reshape(-1, 3) for p in self._points])
+        # only the points that exist are framed (a neck-relative upper body fills the view too)
+        drawn = [b.drawn_points() for b in shapes]
+        every = np.concatenate([p.reshape(-1, 3) for p in drawn])
         aspect = (self.resolution[0] / len(motions)) / self.resolution[1]
         if s.fit_motion:
             # the framing rule on what is drawn: every surface over the clip, and the floor under it
             ground = a.ground_height(every)
-            pelvis = every[N_JOINTS + DERIVED_POINTS.index("pelvis") :: len(self._points[0][0])]
-            under = pelvis.mean(axis=0) * [1, 0, 1] + [0, ground, 0]  # where the shadow lies
-            reach = np.tile(_reach(a), len(every) // len(self._points[0][0]))
+            under = _shadow_centre(*shapes) * [1, 0, 1] + [0, ground, 0]  # where the shadow lies
+            reach = np.concatenate(
+                [np.tile(_reach(a, m.presence)[b.drawn], len(b.points)) for m, b in zip(motions, shapes)]
+            )
             position, focal, up, clip = _camera(
                 np.vstack([every, under]), aspect, s, pad=np.append(reach, 0.0), margin=a.frame_margin
             )
@@ -315,8 +333,8 @@ class SkeletonScene:
         light = a.light()
         for i in range(len(motions)):
             pl.subplot(0, i)
-            self._floor_and_shadow(box, ground, self._points[i])
-            body = BodyMeshes(s)
+            self._floor_and_shadow(box, ground, shapes[i])
+            body = BodyMeshes(s, motions[i].presence)
             body.update(self._points[i][0])
             for part, mesh in body.parts.items():
                 actor = pl.add_mesh(
@@ -337,9 +355,10 @@ class SkeletonScene:
             pl.renderer.camera_set = True
             self._bodies.append(body)
 
-    def _floor_and_shadow(self, box: np.ndarray, ground: float, points: np.ndarray) -> None:
+    def _floor_and_shadow(self, box: np.ndarray, ground: float, body: BodyShapes) -> None:
         """The floor, unlit, from behind the framed region to under the camera, and a soft
-        contact shadow on it under the body (where its pelvis stands on average)."""
+        contact shadow on it under the body (where its pelvis stands on average; none for a
+        body without a pelvis, which stands on nothing)."""
         pl, a = self._live(), self.style.appearance
         width = box[0, 1] - box[0, 0]
         floor = pv.Plane(
@@ -349,7 +368,9 @@ class SkeletonScene:
             j_size=2 * (box[2, 1] - box[2, 0]) + 20.0,
         )
         pl.add_mesh(floor, color=a.ground_color, lighting=False)
-        pelvis = points[:, -len(DERIVED_POINTS) + DERIVED_POINTS.index("pelvis")].mean(axis=0)
+        if not body.drawn[_PELVIS]:
+            return
+        pelvis = _shadow_centre(body)
         half = 2.2 * a.hip_half_width + a.hip_radius  # the shadow's half width, metres, across X
         # three stacked discs, each darker and smaller: a shadow that fades at its rim; opaque, the
         # colour of the floor seen through the shadow, since translucency costs a render pass
@@ -458,6 +479,8 @@ def _check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution
             raise ConfigError(f"expected a gesturekit Motion, got {type(m).__name__}")
         if m.n_frames == 0:
             raise ConfigError("cannot render a motion with no frames")
+        if not m.presence.drawn.any():
+            raise ConfigError("cannot render a motion whose joints are all absent: nothing to draw")
         if not np.all(np.isfinite(m.positions)):
             raise ConfigError("cannot render a motion with NaN or infinite positions")
     if len(motions) == 2 and motions[0].fps != motions[1].fps:

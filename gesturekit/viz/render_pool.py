@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
+from ..skeleton import JointPresence
 from .render import RenderStyle, SkeletonScene, _check_scene
 
 __all__ = ["CHUNK_FRAMES", "PARALLEL_MIN_FRAMES", "default_workers", "render_frames"]
@@ -129,6 +130,8 @@ def _write_job(
         "labels": None if labels is None else [str(x) for x in labels],
         "resolution": list(resolution),
         "style": style.to_json(),
+        # which joints exist, per motion: the rendering processes draw what the parent would
+        "joints": [None if m.joints is None else m.joints.to_list() for m in motions],
     }
     arrays = {f"motion{i}": np.asarray(m.positions) for i, m in enumerate(motions)}
     arrays["spec"] = np.array(json.dumps(spec))
@@ -141,7 +144,10 @@ def _scene_from_job(path: str) -> SkeletonScene:
         spec = json.loads(str(data["spec"]))
         positions = [data[f"motion{i}"] for i in range(2) if f"motion{i}" in data.files]
     style = RenderStyle.from_json(spec["style"])
-    motions = [Motion(p, spec["fps"]) for p in positions]
+    joints = spec.get("joints") or [None] * len(positions)
+    motions = [
+        Motion(p, spec["fps"], None if j is None else JointPresence(tuple(j))) for p, j in zip(positions, joints)
+    ]
     return SkeletonScene(motions, labels=spec["labels"], resolution=tuple(spec["resolution"]), style=style)
 
 

@@ -14,21 +14,25 @@ import numpy as np
 import plotly.graph_objects as go
 
 from ..motion import Motion
-from ..skeleton import BODY_JOINTS, N_JOINTS, bones, joint_index
+from ..skeleton import BODY_JOINTS, N_JOINTS, JointPresence, joint_index
 from ._plotly import _frames_at, _motions_and_labels, _time_grid, _xyz
-from .appearance import APPEARANCE
+from .appearance import APPEARANCE, DERIVED_PART
 
 #: Most animation frames a skeleton figure holds (20 s at 15 fps). Longer motions are
 #: shown at a lower frame rate; each frame then lasts longer, so playback keeps real time.
 DEFAULT_MAX_FRAMES = 300
 
 
-def _bone_groups() -> tuple[np.ndarray, np.ndarray]:
-    """(child, parent) pairs of the body bones (up to the wrists) and of the 40 finger bones."""
-    pairs = bones()
+def _bone_groups(presence: JointPresence | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(child, parent) pairs of the body bones (up to the wrists), of the finger bones, and of the
+    derived bones (an end derived), each shape (B, 2); bones with an absent end are in none.
+    A complete skeleton has 14 body bones, 40 finger bones and no derived bone."""
+    presence = presence or JointPresence.full()
+    pairs = presence.drawn_bones()
+    derived = presence.derived[pairs].any(axis=1)
     wrists = {joint_index("left_wrist"), joint_index("right_wrist")}
-    body = np.array([c < len(BODY_JOINTS) or c in wrists for c in pairs[:, 0]])
-    return pairs[body], pairs[~body]
+    body = np.array([c < len(BODY_JOINTS) or c in wrists for c in pairs[:, 0]], dtype=bool)
+    return pairs[body & ~derived], pairs[~body & ~derived], pairs[derived]
 
 
 def _chains(pairs: np.ndarray) -> list[list[int]]:
@@ -82,49 +86,72 @@ def _polylines(positions: np.ndarray, chains: list[list[int]]) -> np.ndarray:
     np.ndarray, shape (frames, points, 3), float32
         The joints of each path in order, then a NaN point (plotly leaves a gap there).
     """
+    if not chains:
+        return np.zeros((len(positions), 0, 3), np.float32)
     idx = np.concatenate([np.append(np.asarray(c), -1) for c in chains])
     out = np.asarray(positions, np.float32)[:, idx]
     out[:, idx < 0] = np.nan
     return out
 
 
-def _skeleton_paths(motions: list[Motion], *, fps, max_frames: int, spacing):
+def _skeleton_paths(
+    motions: list[Motion], *, fps: float | None, max_frames: int, spacing: float | None
+) -> tuple[float, int, np.ndarray, np.ndarray, list[tuple[np.ndarray, np.ndarray, np.ndarray]], np.ndarray, np.ndarray]:
     """What a skeleton view shows: the time grid and each motion's joint paths at its times.
 
     Returns ``(grid_fps, step, times, offsets, parts, lo, hi)``: the time grid's frame
     rate, the decimation step (every ``step``-th grid time is shown), the shown times
     in seconds, the motions' X offsets in metres (side by side), per motion its
-    (body, finger) polylines of :func:`_polylines` at those times (sample and hold,
-    offset along X), each (len(times), points, 3) float32, and the bounds of every
-    shown pose, 0.1 m added on each side.
+    (body, finger, derived) polylines of :func:`_polylines` at those times (sample and
+    hold, offset along X), each (len(times), points, 3) float32, and the bounds of every
+    shown joint that exists (absent ones are not drawn), 0.1 m added on each side.
     """
     grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
     shown = [np.asarray(m.positions[_frames_at(m, times)], dtype=np.float32) for m in motions]
+    drawn = [m.presence.drawn for m in motions]
     if spacing is None:
-        widest = max(float(np.ptp(p[..., 0])) for p in shown)
+        widest = max(float(np.ptp(p[:, d, 0])) for p, d in zip(shown, drawn))
         spacing = max(0.8, widest + 0.4)
     offsets = (np.arange(len(motions)) - (len(motions) - 1) / 2) * float(spacing)
     shown = [p + np.array([dx, 0, 0], dtype=np.float32) for p, dx in zip(shown, offsets)]
-    allp = np.concatenate([p.reshape(-1, 3) for p in shown])
-    body_chains, hand_chains = (_chains(pairs) for pairs in _bone_groups())
-    parts = [(_polylines(p, body_chains), _polylines(p, hand_chains)) for p in shown]
+    allp = np.concatenate([p[:, d].reshape(-1, 3) for p, d in zip(shown, drawn)])
+    parts = []
+    n_body = len(BODY_JOINTS)
+    for m, p in zip(motions, shown):
+        groups = [_chains(pairs) for pairs in _bone_groups(m.presence)]
+        # a joint that exists but has no bone to a drawn joint is still shown, as a lone point
+        on_bone = np.zeros(N_JOINTS, dtype=bool)
+        on_bone[m.presence.drawn_bones().ravel()] = True
+        for j in np.flatnonzero(m.presence.drawn & ~on_bone).tolist():
+            group = 2 if m.presence.derived[j] else 0 if j < n_body else 1
+            groups[group].append([j])
+        body, hands, derived = (_polylines(p, chains) for chains in groups)
+        parts.append((body, hands, derived))
     return grid_fps, step, times, offsets, parts, allp.min(axis=0) - 0.1, allp.max(axis=0) + 0.1
 
 
-def _torso_and_head(motions: list[Motion], times: np.ndarray, offsets: np.ndarray):
+def _torso_and_head(
+    motions: list[Motion], times: np.ndarray, offsets: np.ndarray
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, bool]]:
     """Per motion, at the shown times (sample and hold, offset along X): the torso's capsules of
-    the appearance as NaN-separated segments, shape (times, points, 3), and the head's centre,
-    shape (times, 1, 3), float32, metres."""
+    the appearance as NaN-separated segments, shape (times, points, 3), those of derived joints
+    alike, the head's centre, shape (times, 0 or 1, 3), float32, metres, and whether the head is
+    derived. Shapes of absent joints are left out."""
     a = APPEARANCE
-    capsules, spheres = a.shapes()
-    torso = [(c.a, c.b) for c in capsules if c.a >= N_JOINTS or c.b >= N_JOINTS]
-    idx = np.array([j for pair in torso for j in (*pair, -1)])
     out = []
     for m, dx in zip(motions, offsets):
+        capsules, spheres = a.shapes(m.presence)
+        torso = [(c.a, c.b, c.part == DERIVED_PART) for c in capsules if c.a >= N_JOINTS or c.b >= N_JOINTS]
         points = a.body(m.positions[_frames_at(m, times)]).points + np.array([dx, 0, 0], dtype=np.float32)
-        segments = points[:, idx]
-        segments[:, idx < 0] = np.nan
-        out.append((segments, points[:, [s.centre for s in spheres]]))
+        segs = []
+        for derived in (False, True):
+            idx = np.array([j for u, v, d in torso if d == derived for j in (u, v, -1)], dtype=np.int64)
+            segments = points[:, idx]
+            segments[:, idx < 0] = np.nan
+            segs.append(segments)
+        out.append(
+            (segs[0], segs[1], points[:, [sp.centre for sp in spheres]], any(sp.part == DERIVED_PART for sp in spheres))
+        )
     return out
 
 
@@ -183,7 +210,10 @@ def skeleton_figure(
         its tip) separated by NaN points, every pair of consecutive finite
         points a bone and the joints its markers; ``"torso"`` (the
         appearance's torso capsules, NaN-separated segments); ``"head"`` (one
-        marker at the head's centre).
+        marker at the head's centre; ``meta["derived"]`` says whether it is derived, then
+        grey). A motion with derived joints (placed from others) has a fifth trace,
+        ``"derived"``: the bones and torso capsules touching them, grey, dashed and
+        translucent, named "derived" in the legend. Absent joints are in no trace.
         One ``go.Frame`` per shown time (named by its index,
         ``layout.meta`` holds ``{"fps", "frame_step", "times"}`` with the
         times in seconds), and a scene camera with ``up = (0, 1, 0)`` and the
@@ -192,24 +222,26 @@ def skeleton_figure(
     Raises
     ------
     ConfigError
-        No motion, a motion with no frame, labels of the wrong length, or a
-        non-positive ``fps``/``max_frames``.
+        No motion, a motion with no frame or with every joint absent, labels of
+        the wrong length, or a non-positive ``fps``/``max_frames``.
     """
-    motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure")
-    # per motion: (body polylines, finger polylines), each (frames, points, 3); markers at the
-    # points draw every joint, since every joint is on a bone
+    motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure", drawn=True)
+    # per motion: (body, finger, derived polylines), each (frames, points, 3); markers at the
+    # points draw every joint that exists (on a bone, or a lone point)
     grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(
         motions, fps=fps, max_frames=max_frames, spacing=spacing
     )
 
     # the torso's volume and the head, as the render and the page draw them
     extras = _torso_and_head(motions, times, offsets)
-    parts = [(body, hands, torso, head) for (body, hands), (torso, head) in zip(parts, extras)]
-    every = np.concatenate([np.concatenate([t.reshape(-1, 3), h.reshape(-1, 3)]) for t, h in extras])
+    every = np.concatenate(
+        [np.concatenate([t.reshape(-1, 3), d.reshape(-1, 3), h.reshape(-1, 3)]) for t, d, h, _ in extras]
+    )
     every = every[np.isfinite(every).all(axis=1)]
     a = APPEARANCE
-    lo = np.minimum(lo, every.min(axis=0) - a.head_radius)
-    hi = np.maximum(hi, every.max(axis=0) + a.head_radius)
+    if len(every):
+        lo = np.minimum(lo, every.min(axis=0) - a.head_radius)
+        hi = np.maximum(hi, every.max(axis=0) + a.head_radius)
     # fixed ranges over every shown frame: the view must not jump while playing
     centre, extent = (lo + hi) / 2, np.maximum(hi - lo, 0.3)
     # plotly sizes 3D lines and markers in screen pixels: the appearance's radii (metres) become
@@ -224,10 +256,11 @@ def skeleton_figure(
         return max(1.0, 2 * radius * px / 3)
 
     traces = []
-    for i, (label, _) in enumerate(zip(labels, parts)):
+    arrays: list[np.ndarray] = []  # each trace's points at every shown time, in trace order
+    for i, label in enumerate(labels):
         group = f"motion{i}"
         common: dict[str, Any] = dict(legendgroup=group, hoverinfo="skip", meta=None)
-        body, hands, torso, head = parts[i]
+        (body, hands, derived_bones), (torso, derived_torso, head, head_derived) = parts[i], extras[i]
         looks = (
             ("body", body, a.part_color(i, "upper_arm"), width(a.forearm_radius), label or "body", len(motions) > 1),
             ("hands", hands, a.part_color(i, "finger"), width(a.finger_radius), f"{label} hands".strip(), False),
@@ -247,24 +280,47 @@ def skeleton_figure(
                     **common,
                 )
             )
-        common["meta"] = {"motion": i, "part": "head"}
-        color = a.part_color(i, "head")
+            arrays.append(points)
+        common["meta"] = {"motion": i, "part": "head", "derived": head_derived}
+        color = a.part_color(i, DERIVED_PART if head_derived else "head")
         traces.append(
             go.Scatter3d(
                 **_xyz(head[0]),
                 mode="markers",
                 marker=dict(color=color, size=size(a.head_radius), opacity=1.0, line=dict(width=0)),
-                name=f"{label} head".strip(),
+                name=f"{label} head{' (derived)' if head_derived else ''}".strip(),
                 showlegend=False,
                 **common,
             )
         )
+        arrays.append(head)
+        if derived_bones.shape[1] or derived_torso.shape[1]:
+            # joints placed from others (a torso and head from the neck and shoulders): thin,
+            # grey and dashed, named in the legend, so nobody takes them for recorded data
+            points = np.concatenate([derived_bones, derived_torso], axis=1)
+            color = a.part_color(i, DERIVED_PART)
+            traces.append(
+                go.Scatter3d(
+                    **_xyz(points[0]),
+                    mode="lines+markers",
+                    line=dict(color=color, width=width(a.forearm_radius), dash="dash"),
+                    marker=dict(color=color, size=width(a.finger_radius) / 3, line=dict(width=0)),
+                    opacity=0.7,
+                    name=f"{label} derived".strip() if len(motions) > 1 else "derived (placed from neck and shoulders)",
+                    showlegend=True,
+                    hovertext="derived",
+                    legendgroup=group,
+                    hoverinfo="text",
+                    meta={"motion": i, "part": DERIVED_PART},
+                )
+            )
+            arrays.append(points)
 
     frames = []
     if len(times) > 1:
         trace_ids = list(range(len(traces)))
         for k in range(len(times)):
-            data = [dict(type="scatter3d", **_xyz(p[k])) for part in parts for p in part]
+            data = [dict(type="scatter3d", **_xyz(p[k])) for p in arrays]
             frames.append(dict(data=data, traces=trace_ids, name=str(k)))
 
     lo, hi = centre - extent / 2, centre + extent / 2
@@ -299,7 +355,7 @@ def skeleton_figure(
         height=height,
         margin=dict(l=0, r=0, t=40 if title else 10, b=0),
         scene=scene,
-        showlegend=len(motions) > 1,
+        showlegend=len(motions) > 1 or any(not m.presence.is_full for m in motions),
         legend=dict(orientation="h", y=1.0, x=0.5, xanchor="center"),
         uirevision="skeleton",  # keep the user's camera when the figure is redrawn
         meta={"fps": grid_fps, "frame_step": step, "times": [round(float(t), 4) for t in times]},

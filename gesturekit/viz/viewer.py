@@ -39,7 +39,7 @@ import numpy.typing as npt
 
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
-from ..skeleton import N_JOINTS, joint_index
+from ..skeleton import DERIVED, N_JOINTS, joint_index
 from ._plotly import _frames_at, _motions_and_labels, _time_grid, _typed, data_array
 from .appearance import APPEARANCE, DERIVED_POINTS, Appearance
 
@@ -167,6 +167,9 @@ def viewer_data(
         ``spheres`` (``[centre, radius, part]`` rows) indexing each motion's points; ``axis``
         (the points from pelvis to upper chest, along which merged parts are shaded);
         ``motions``: one dict per motion with ``label``, ``color``, ``colors`` (per part),
+        ``capsules`` and ``spheres`` (its own, as above: only the joints that exist, those of
+        derived joints with the part ``"derived"``), ``shadow`` (whether it has a pelvis to
+        stand on), ``derived`` (names of its derived joints; the page says what grey means),
         ``offset`` (metres along X) and ``points``, a typed-array spec of shape
         (shown frames, 61, 3): :meth:`Appearance.body`'s points at the shown times
         (sample and hold), offset along X.
@@ -174,29 +177,30 @@ def viewer_data(
     Raises
     ------
     ConfigError
-        No motion, a motion with no frame, labels of another count, a non-positive fps
-        or ``max_frames`` below 1.
+        No motion, a motion with no frame or with every joint absent, labels of another
+        count, a non-positive fps or ``max_frames`` below 1.
     """
-    motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer")
+    motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer", drawn=True)
     grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
-    bodies = [appearance.body(m.positions[_frames_at(m, times)]) for m in motions]
+    bodies = [appearance.body(m.positions[_frames_at(m, times)], m.presence) for m in motions]
     if spacing is None:
-        widest = max(float(np.ptp(b.points[..., 0])) for b in bodies)
+        widest = max(float(np.ptp(b.drawn_points()[..., 0])) for b in bodies)
         spacing = max(0.8, widest + 0.25)
     offsets = (np.arange(len(motions)) - (len(motions) - 1) / 2) * float(spacing)
     points = [b.points + np.array([dx, 0, 0], dtype=np.float32) for b, dx in zip(bodies, offsets)]
-    every = np.concatenate([p.reshape(-1, 3) for p in points])
+    # framed on what is drawn: absent joints sit on their parents and have no shape
+    every = np.concatenate([p[:, b.drawn].reshape(-1, 3) for p, b in zip(points, bodies)])
     ground = appearance.ground_height(every)
     lo, hi = appearance.bounds(every, margin=False)
     lo[1] = min(lo[1], ground)
     pad = appearance.frame_margin * (hi - lo)  # per axis: side by side, X must not shrink Y's margin
     lo, hi = lo - pad, hi + pad
     caps, spheres = bodies[0].capsules, bodies[0].spheres
-    parts = sorted({c.part for c in caps} | {s.part for s in spheres})
     out = []
-    for i, (label, p, dx) in enumerate(zip(labels, points, offsets)):
+    for i, (label, p, dx, b) in enumerate(zip(labels, points, offsets, bodies)):
         spec = _typed(p.reshape(-1))
         spec["shape"] = f"{p.shape[0]},{p.shape[1]},3"
+        parts = sorted({c.part for c in b.capsules} | {s.part for s in b.spheres})
         out.append(
             {
                 "label": label or "",
@@ -204,6 +208,11 @@ def viewer_data(
                 "colors": {part: appearance.part_color(i, part) for part in parts},
                 "offset": float(dx),
                 "points": spec,
+                # this motion's shapes: only its joints that exist, derived ones in their own part
+                "capsules": [[c.a, c.b, c.radius, c.part] for c in b.capsules],
+                "spheres": [[sp.centre, sp.radius, sp.part] for sp in b.spheres],
+                "shadow": bool(b.drawn[N_JOINTS + DERIVED_POINTS.index("pelvis")]),
+                "derived": list(motions[i].presence.names(DERIVED)),
             }
         )
     note = ""
@@ -352,7 +361,8 @@ __AUDIO__
     for (let i = 0; i < n; i++) u[i] = b.charCodeAt(i);
     return {a: new Float32Array(u.buffer), n: Number(spec.shape.split(",")[1])};
   };
-  const M = D.motions.map(m => ({label: m.label, color: m.color, colors: m.colors, offset: m.offset, pts: dec(m.points)}));
+  const M = D.motions.map(m => ({label: m.label, color: m.color, colors: m.colors, offset: m.offset, pts: dec(m.points),
+    caps: m.capsules, sph: m.spheres, shadow: m.shadow, derived: m.derived || []}));
   const N = D.times.length, shownFps = D.fps / D.frame_step, look = D.look, L = look.light;
   const canvas = document.getElementById("c"), ctx = canvas.getContext("2d");
   const slider = document.getElementById("s"), tlabel = document.getElementById("t"), play = document.getElementById("play");
@@ -401,6 +411,7 @@ __AUDIO__
     for (let i = 1; i < 4; i++) ctx.lineTo(q[i][0], q[i][1]);
     ctx.closePath(); ctx.fill();
     for (const m of M) {
+      if (m.shadow === false) continue;  // a body without a pelvis stands on nothing
       const a = m.pts.a, o = (frame * m.pts.n + 55) * 3;  // the pelvis, the first derived point
       const c = P(a[o], g, a[o + 2]), ex = P(a[o] + 0.28, g, a[o + 2]), ez = P(a[o], g, a[o + 2] + 0.2);
       const rx = Math.hypot(ex[0] - c[0], ex[1] - c[1]), ry = Math.max(2, Math.hypot(ez[0] - c[0], ez[1] - c[1]));
@@ -442,7 +453,7 @@ __AUDIO__
       const a = m.pts.a, n = m.pts.n, o = frame * n * 3, q = new Array(n);
       for (let i = 0; i < n; i++) q[i] = P(a[o + 3 * i], a[o + 3 * i + 1], a[o + 3 * i + 2]);
       const merged = {};
-      for (const c of D.capsules) {
+      for (const c of (m.caps || D.capsules)) {
         const p = q[c[0]], r = q[c[1]];
         const it = {z: (p[2] + r[2]) / 2, cap: true, p: p, r: r, rad: c[2] * (p[3] + r[3]) / 2, col: base[mi][c[3]]};
         if (look.merged.indexOf(c[3]) < 0) { items.push(it); continue; }
@@ -453,7 +464,7 @@ __AUDIO__
         const caps = merged[part], a = q[D.axis[0]], b = q[D.axis[1]];
         items.push({z: caps.reduce((s, c) => s + c.z, 0) / caps.length, group: caps, p: a, r: b, col: base[mi][part]});
       }
-      for (const s of D.spheres) { const p = q[s[0]]; items.push({z: p[2], cap: false, p: p, rad: s[1] * p[3], col: base[mi][s[2]]}); }
+      for (const s of (m.sph || D.spheres)) { const p = q[s[0]]; items.push({z: p[2], cap: false, p: p, rad: s[1] * p[3], col: base[mi][s[2]]}); }
     });
     items.sort((u, v) => u.z - v.z);
     ctx.lineCap = "round";
@@ -484,6 +495,11 @@ __AUDIO__
       if (!m.label) continue;
       const q = P(centre[0] + m.offset, hi[1], centre[2]);
       ctx.fillText(m.label, q[0], Math.max(14, q[1]));
+    }
+    if (M.some(m => m.derived.length)) {
+      // joints the data does not hold, placed from others, are grey: say so on the picture
+      ctx.fillStyle = look.derived; ctx.font = "12px sans-serif"; ctx.textAlign = "right";
+      ctx.fillText("grey: derived (placed from neck and shoulders)", w - 8, h - 8);
     }
     if (D.title) { ctx.font = "15px sans-serif"; ctx.textAlign = "left"; ctx.fillText(D.title, 8, 20); }
     if (D.note) { ctx.fillStyle = "#9a6700"; ctx.font = "12px sans-serif"; ctx.textAlign = "left"; ctx.fillText(D.note, 8, h - 8); }
