@@ -94,10 +94,16 @@ def bvh_parents(presence: JointPresence, *, path: str | os.PathLike[str] | None 
         else:
             parents[j] = p
     if orphans:
+        # everything hanging from an orphan is cut off with it
+        cut = np.zeros(N_JOINTS, dtype=bool)
+        for j in range(N_JOINTS):
+            cut[j] = JOINT_NAMES[j] in orphans or (parents[j] >= 0 and cut[parents[j]])
+        below = int(cut.sum()) - len(orphans)
+        tail = f" (with {below} drawn joint{'s' if below != 1 else ''} below)" if below else ""
         raise ConfigError(
-            f"the drawn joints do not form one tree: {', '.join(orphans)} "
+            f"the drawn joints do not form one tree: {', '.join(orphans)}{tail} "
             f"{'is' if len(orphans) == 1 else 'are'} not connected to the root {JOINT_NAMES[root]} "
-            "through drawn joints",
+            "through drawn joints (the joints between them are absent)",
             path=path,
         )
     return parents

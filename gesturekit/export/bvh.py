@@ -56,8 +56,9 @@ along a chain. With constant bone lengths the file reproduces the positions to
 the precision of the written numbers; with bone lengths that vary, each joint
 is off by about the variation of its own bone. (Aiming every bone along its
 direction in the data instead, as :func:`gesturekit.bones.normalise_bone_lengths`
-does, lets the errors add up along the chains: on the demo motion with 3 %
-noise on every bone, a mean error of 14 mm against 4.6 mm.)
+does, lets the errors add up along the chains: on a demo take with every
+bone's length scaled by up to 3 % frame by frame, 20.1 mm largest and 6.7 mm
+mean error against 17.4 mm and 3.6 mm.)
 
 Error report
 ------------
@@ -323,7 +324,8 @@ def export_bvh(
         warn(
             f"{report.path}: the BVH file is up to {report.max_error * 100:.1f} cm off the motion "
             f"({report.worst_joint}, frame {report.worst_frame}; mean {report.mean_error * 1000:.1f} mm): "
-            "its bones have one length each and the motion's bone lengths vary. The npz keeps the exact "
+            "its bones have one length each (and the bones leaving one joint keep one shape), the motion's "
+            "vary. The npz keeps the exact "
             "positions; a database built with `build-db --normalize-bones` gives every bone one length.",
             stacklevel=2,
         )
