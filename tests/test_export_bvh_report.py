@@ -224,3 +224,97 @@ def test_constant_bone_lengths_reproduce_to_the_written_precision(tmp_path, pos,
     bound = 30 * report.precision + 20 * np.radians(0.5 * 10.0**-decimals) + 2e-7
     assert report.max_error <= bound
     assert_report_matches_file(report, pos, np.ones(N_JOINTS, bool), scale={"cm": 100.0, "m": 1.0}[units])
+
+
+# ----------------------------------------------------------------------------- the command line
+
+
+def _cli_world(root, presence=None, *, demo=False):
+    """A small database (of demo takes, rigid bones, or of random walks, bones of any length) and a speech file."""
+    import soundfile as sf
+
+    from gesturekit.database import BuildConfig, MatchingDatabase
+    from gesturekit.motion import Take
+
+    from .conftest import make_take
+
+    if demo:
+        takes = [generate_demo_take(seconds=9.0, seed=s, name=f"t{s}")[0] for s in (1, 2)]
+    else:
+        takes = [make_take(9.0, seed=1, name="a"), make_take(6.0, seed=2, name="b")]
+    if presence is not None:
+        takes = [
+            Take(t.name, Motion(collapsed(t.motion.positions, presence), t.motion.fps, presence), t.audio, t.sources)
+            for t in takes
+        ]
+    MatchingDatabase.build(takes, config=BuildConfig(overlap_stride=16, store_audio=False)).save(root / "db")
+    sf.write(root / "speech.wav", make_take(3.0, seed=4).audio, 16000, subtype="PCM_16")
+    return root / "db", root / "speech.wav"
+
+
+def _bvh_line(stdout):
+    lines = [line.strip() for line in stdout.splitlines() if line.strip().startswith("BVH ")]
+    assert len(lines) == 1, stdout
+    return lines[0]
+
+
+def test_cli_prints_the_report_and_warns(tmp_path):
+    from .badinput import run_cli
+
+    db, speech = _cli_world(tmp_path)
+    out = tmp_path / "out"
+    # (in this process the warning goes to pytest; run as a command it is a "warning: ..." line)
+    with pytest.warns(GestureKitWarning, match="npz keeps the exact positions") as caught:
+        run = run_cli("synthesize", speech, "--db", db, "--out", out, "--refiner", "none")
+    assert run.code == 0, run.stderr
+    line = _bvh_line(run.stdout)
+    assert line.startswith("BVH speech.bvh: position error max ")
+    # the numbers printed are those of the file against the npz's exact positions
+    from gesturekit.export.npz import load_npz
+
+    positions = load_npz(out / "speech.npz")[0].positions.astype(np.float64)
+    err, _ = independent_errors(out / "speech.bvh", positions, np.ones(N_JOINTS, bool))
+    assert f"max {err.max() * 1000:.2f} mm" in line and f"mean {err.mean() * 1000:.2f} mm" in line
+    assert err.max() > WARN_ABOVE  # these takes' bones have any length: the warning is due
+    message = str(caught[0].message)
+    assert "speech.bvh" in message and "--normalize-bones" in message
+
+
+def test_cli_partial_skeleton_says_what_it_wrote(tmp_path):
+    from .badinput import run_cli
+
+    presence = JointPresence.from_names(recorded=set(JOINT_NAMES) - set(THUMBS) - set(TORSO), derived=TORSO)
+    db, speech = _cli_world(tmp_path, presence, demo=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GestureKitWarning)  # rigid bones: nothing to warn about
+        run = run_cli("synthesize", speech, "--db", db, "--out", tmp_path / "out", "--refiner", "none")
+    assert run.code == 0, run.stderr
+    line = _bvh_line(run.stdout)
+    assert "root at the derived spine_mid; 8 finger joints left out: left_thumb1" in line
+    names = parse_bvh(tmp_path / "out" / "speech.bvh").names
+    assert not set(THUMBS) & set(names) and "left_index4_End" in names
+
+
+# ----------------------------------------------------------------------------- the app
+
+
+def test_app_shows_the_report_beside_the_download(app_env):
+    from .test_app_synthesize import open_page, result, speech_file, upload
+
+    at = upload(open_page(), speech_file(3.0))
+    if at.toggle(key="_w.synth.refine").value:
+        at.toggle(key="_w.synth.refine").set_value(False).run()
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not at.error
+    shown = [c.value for c in at.caption if c.value.startswith("BVH ")]
+    data, report = gs_export(result(at))
+    assert shown == [f"BVH {report.summary()}"] and shown[0].startswith("BVH speech_")
+    assert data.startswith(b"HIERARCHY") and any(d.proto.label == "Motion (BVH)" for d in at.get("download_button"))
+    over = [w.value for w in at.warning if "off the motion" in w.value]
+    assert len(over) == int(report.exceeds)
+
+
+def gs_export(res):
+    from gesturekit import interactive as gs
+
+    return gs.export_bvh_bytes(res, gs.export_filename(res, "bvh"))

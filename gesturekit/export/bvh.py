@@ -177,6 +177,18 @@ class BvhReport:
         """The largest error is over :data:`WARN_ABOVE`."""
         return self.max_error > WARN_ABOVE
 
+    def warning(self) -> str | None:
+        """What the warning over :data:`WARN_ABOVE` says (without the file's path); None below it."""
+        if not self.exceeds:
+            return None
+        return (
+            f"the BVH file is up to {self.max_error * 100:.1f} cm off the motion "
+            f"({self.worst_joint}, frame {self.worst_frame}; mean {self.mean_error * 1000:.1f} mm): "
+            "its bones have one length each (and the bones leaving one joint keep one shape), the motion's "
+            "vary. The npz keeps the exact positions; a database built with `build-db --normalize-bones` "
+            "gives every bone one length."
+        )
+
     def summary(self) -> str:
         """One line, e.g. ``"take.bvh: position error max 0.00 mm ..., root at the derived spine_mid; ..."``."""
         root = f"the derived {self.root}" if self.root in self.derived else self.root
@@ -320,15 +332,9 @@ def export_bvh(
         f.write(data)
 
     atomic_write(path, write, overwrite=overwrite)
-    if report.exceeds:
-        warn(
-            f"{report.path}: the BVH file is up to {report.max_error * 100:.1f} cm off the motion "
-            f"({report.worst_joint}, frame {report.worst_frame}; mean {report.mean_error * 1000:.1f} mm): "
-            "its bones have one length each (and the bones leaving one joint keep one shape), the motion's "
-            "vary. The npz keeps the exact "
-            "positions; a database built with `build-db --normalize-bones` gives every bone one length.",
-            stacklevel=2,
-        )
+    message = report.warning()
+    if message is not None:
+        warn(f"{report.path}: {message}", stacklevel=2)
     return report
 
 
