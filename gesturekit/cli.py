@@ -179,6 +179,7 @@ def _refiner_choice(given: str | None, db):
 def _cmd_synthesize(args) -> int:
     from ._io import safe_filename
     from .datasets.audio import load_audio
+    from .export.bvh import bvh_parents
     from .export.result import export_result_bvh, save_result_npz, save_result_video
     from .outputs import check_output, output_lock, write_errors
     from .refine import open_refiner
@@ -205,6 +206,10 @@ def _cmd_synthesize(args) -> int:
         require("pyvista", purpose="--video")
         require("imageio_ffmpeg", purpose="--video")
     db = open_database(args.db)
+    try:  # a skeleton no BVH can hold is refused before the search
+        bvh_parents(db.joint_presence)
+    except ConfigError as exc:
+        raise ConfigError(f"synthesize writes a BVH of every result, and {exc.problem}", path=args.db) from None
     config = SynthesisConfig(
         k=args.k,
         segment=args.segment,

@@ -318,3 +318,21 @@ def gs_export(res):
     from gesturekit import interactive as gs
 
     return gs.export_bvh_bytes(res, gs.export_filename(res, "bvh"))
+
+
+@pytest.mark.parametrize(
+    "absent,problem",
+    [
+        (("spine_mid", "neck"), "a BVH needs spine_mid or the neck as its root, and neither is drawn"),
+        (("spine_mid",), "the drawn joints do not form one tree: chest"),
+    ],
+)
+def test_cli_refuses_a_skeleton_no_bvh_can_hold_before_writing(tmp_path, absent, problem):
+    from .badinput import assert_refused, run_cli, snapshot
+
+    presence = JointPresence.from_names(recorded=set(JOINT_NAMES) - set(absent))
+    db, speech = _cli_world(tmp_path, presence)
+    out = tmp_path / "out"
+    before = snapshot(tmp_path)
+    run = run_cli("synthesize", speech, "--db", db, "--out", out, "--refiner", "none")
+    assert_refused(run, names=db, problem=problem, before=before)
