@@ -224,6 +224,9 @@ def write_bvh(
 ) -> Path:
     """Write a motion as a BVH file, atomically; :func:`export_bvh` without its report.
 
+    The parameters, the warning over :data:`WARN_ABOVE` and the errors raised are those of
+    :func:`export_bvh`.
+
     Returns
     -------
     pathlib.Path
