@@ -179,7 +179,8 @@ def _refiner_choice(given: str | None, db):
 def _cmd_synthesize(args) -> int:
     from ._io import safe_filename
     from .datasets.audio import load_audio
-    from .export.result import save_result_bvh, save_result_npz, save_result_video
+    from .export.bvh import bvh_parents
+    from .export.result import export_result_bvh, save_result_npz, save_result_video
     from .outputs import check_output, output_lock, write_errors
     from .refine import open_refiner
     from .search import describe_steps
@@ -205,6 +206,10 @@ def _cmd_synthesize(args) -> int:
         require("pyvista", purpose="--video")
         require("imageio_ffmpeg", purpose="--video")
     db = open_database(args.db)
+    try:  # a skeleton no BVH can hold is refused before the search
+        bvh_parents(db.joint_presence)
+    except ConfigError as exc:
+        raise ConfigError(f"synthesize writes a BVH of every result, and {exc.problem}", path=args.db) from None
     config = SynthesisConfig(
         k=args.k,
         segment=args.segment,
@@ -244,7 +249,7 @@ def _cmd_synthesize(args) -> int:
         for f, stem, res in zip(files, stems, results):
             res.source = f.name
             save_result_npz(res, targets[(stem, "npz")], overwrite=args.force)
-            save_result_bvh(res, targets[(stem, "bvh")], overwrite=args.force)
+            bvh_report = export_result_bvh(res, targets[(stem, "bvh")], overwrite=args.force)
             written = [targets[(stem, "npz")], targets[(stem, "bvh")]]
             if args.video:
                 with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
@@ -265,6 +270,7 @@ def _cmd_synthesize(args) -> int:
                 f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
                 f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}"
             )
+            print(f"  BVH {bvh_report.summary()}")
     return _done(args)
 
 

@@ -31,7 +31,8 @@ from ._io import safe_filename
 from .control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_attributes
 from .database import MatchingDatabase
 from .errors import ConfigError, GestureKitError, collect_warnings, warn
-from .export.result import save_result_bvh, save_result_npz, save_result_video
+from .export.bvh import BvhReport
+from .export.result import export_result_bvh, save_result_npz, save_result_video
 from .motion import AUDIO_SR, Motion
 from .refine import open_refiner
 from .synthesize import SynthesisConfig, SynthesisResult, synthesize_batch
@@ -56,6 +57,7 @@ __all__ = [
     "display_motions",
     "export_filename",
     "export_bytes",
+    "export_bvh_bytes",
     "render_mp4",
     "steps_overview",
     "candidates_table",
@@ -413,12 +415,35 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
         return result.control.to_csv().encode("utf-8")
     if kind == "json":
         return (json.dumps(result.metadata(), indent=2) + "\n").encode("utf-8")
-    if kind not in ("npz", "bvh"):
+    if kind == "bvh":
+        return export_bvh_bytes(result)[0]
+    if kind != "npz":
         raise ConfigError(f"export_bytes makes npz, bvh, csv or json, not {kind!r}")
     with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
-        path = Path(tmp) / f"result.{kind}"
-        (save_result_npz if kind == "npz" else save_result_bvh)(result, path)
+        path = Path(tmp) / "result.npz"
+        save_result_npz(result, path)
         return path.read_bytes()
+
+
+def export_bvh_bytes(result: SynthesisResult, name: str = "result.bvh") -> tuple[bytes, BvhReport]:
+    """The result's BVH file, and its report (:func:`~gesturekit.export.result.export_result_bvh`).
+
+    Parameters
+    ----------
+    name : str
+        The file name the report speaks of (the download's).
+
+    Returns
+    -------
+    bytes
+        The file.
+    BvhReport
+        Its position error against the motion (metres), root, joints left out and derived.
+    """
+    with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
+        path = Path(tmp) / name
+        report = export_result_bvh(result, path)
+        return path.read_bytes(), report
 
 
 def render_mp4(

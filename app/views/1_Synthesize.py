@@ -18,6 +18,7 @@ from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.database import MatchingDatabase
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
+from gesturekit.export.bvh import BvhReport
 from gesturekit.motion import AUDIO_SR
 from gesturekit.search import describe_steps
 from gesturekit.synthesize import SynthesisConfig
@@ -382,11 +383,20 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         "csv": "Control track (CSV)",
         "json": "Config (JSON)",
     }
+    # the BVH is made once per result, for the report of its error shown under the buttons
+    bvh_data: bytes | None = None
+    try:
+        bvh_data, bvh_report = _figure(record, "bvh", lambda: _bvh_export(result))
+    except GestureKitError as exc:  # a skeleton a BVH cannot hold: said under the buttons
+        bvh_problem = exc.problem
     for col, kind in zip(cols, ("npz", "bvh", "csv", "json")):
-        # made when clicked: a BVH takes a moment, and most results are never downloaded
+        if kind == "bvh" and bvh_data is None:
+            col.caption("BVH: see below")
+            continue
+        # the others are made when clicked: most results are never downloaded
         col.download_button(
             labels[kind],
-            data=functools.partial(gs.export_bytes, result, kind),
+            data=bvh_data if kind == "bvh" else functools.partial(gs.export_bytes, result, kind),
             file_name=gs.export_filename(result, kind),
             mime=gs.EXPORT_KINDS[kind][1],
             key=f"synth.download_{kind}",
@@ -404,6 +414,19 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         )
     else:
         cols[4].caption("MP4: render it above")
+    if bvh_data is None:
+        st.error(f"No BVH file: {bvh_problem}", icon=":material/error:")
+        return
+    st.caption(f"BVH {bvh_report.summary()}")
+    message = bvh_report.warning()
+    if message is not None:
+        st.warning(message[0].upper() + message[1:], icon=":material/warning:")
+
+
+def _bvh_export(result) -> tuple[bytes, BvhReport]:
+    """The BVH download and its report; the warning over 1 cm is shown from the report, beside it."""
+    with collect_warnings():
+        return gs.export_bvh_bytes(result, gs.export_filename(result, "bvh"))
 
 
 def main() -> None:

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from ..synthesize import SynthesisResult
-from .bvh import write_bvh
+from .bvh import BvhReport, export_bvh
 from .npz import save_npz
 from .video import render_video
 
-__all__ = ["save_result_npz", "save_result_bvh", "save_result_video"]
+__all__ = ["save_result_npz", "save_result_bvh", "export_result_bvh", "save_result_video"]
 
 
 def save_result_npz(result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
@@ -44,12 +44,34 @@ def save_result_npz(result: SynthesisResult, path: str | os.PathLike[str], *, ov
 def save_result_bvh(
     result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False, units: str = "cm"
 ) -> Path:
-    """A BVH file of the final motion (55-joint hierarchy, rotations that reproduce the positions).
+    """A BVH file of the final motion; :func:`export_result_bvh` without its report.
 
-    ``units`` (``"cm"`` or ``"m"``) are those of the file's offsets and root positions.
+    Returns
+    -------
+    Path
+        ``path``, complete.
+    """
+    return export_result_bvh(result, path, overwrite=overwrite, units=units).path
+
+
+def export_result_bvh(
+    result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False, units: str = "cm"
+) -> BvhReport:
+    """A BVH file of the final motion, and how well it reproduces the motion's positions.
+
+    The hierarchy is that of the motion's drawn joints, every bone with one length (the
+    median); see :func:`gesturekit.export.bvh.export_bvh`, which also warns when the file
+    is more than 1 cm off the positions. ``units`` (``"cm"`` or ``"m"``) are those of the
+    file's offsets and root positions.
+
+    Returns
+    -------
+    BvhReport
+        The file, its largest and mean position error (metres), root and joints left out;
+        ``report.summary()`` is one line.
     """
     result.check_finite(path)
-    return write_bvh(path, result.motion, overwrite=overwrite, units=units)
+    return export_bvh(path, result.motion, overwrite=overwrite, units=units)
 
 
 def save_result_video(
