@@ -44,6 +44,8 @@ def test_build_and_info_from_position_files(tmp_path, capsys):
                 "y",
                 "--forward",
                 "z",
+                "--units",
+                "m",
                 "--out",
                 str(out),
             ]
@@ -84,6 +86,8 @@ def test_existing_database_needs_force(tmp_path, capsys):
         "y",
         "--forward",
         "z",
+        "--units",
+        "m",
         "--out",
         str(out),
     ]

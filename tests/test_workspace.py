@@ -145,6 +145,7 @@ def test_build_database_reads_the_takes_saves_and_records_where_they_came_from(t
         fps=30.0,
         up="y",
         forward="z",
+        units="m",
         progress=lambda *a: calls.append(a),
     )
     assert calls == [(1, 2, "t0"), (2, 2, "t1")]
