@@ -122,7 +122,7 @@ def _cmd_build_db(args) -> int:
 
 def _print_readings(db) -> None:
     """How the takes were read (axes, units, derived and absent joints, bone lengths), when recorded."""
-    from .datasets._reading import reading_lines
+    from .datasets.takes import reading_lines
 
     for line in reading_lines(db.meta.get("takes", [])):
         print(line)

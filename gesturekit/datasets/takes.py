@@ -21,6 +21,8 @@ import numpy as np
 
 from ..errors import ConfigError, InputFileError
 from ..motion import Motion, Take
+from ._axes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES
+from ._reading import reading_lines
 
 if TYPE_CHECKING:
     from .positions import PositionJointMap
@@ -29,6 +31,10 @@ if TYPE_CHECKING:
 __all__ = [
     "AUDIO_EXTENSIONS",
     "POSITION_EXTENSIONS",
+    "UNIT_CHOICES",
+    "UP_CHOICES",
+    "FORWARD_CHOICES",
+    "reading_lines",
     "ReadOptions",
     "TakeSource",
     "discover_takes",
