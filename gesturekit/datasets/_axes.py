@@ -189,8 +189,10 @@ def check_upright(
 
     Upright means (see :func:`upright_scores`): the upper arms hang below the
     shoulders most of the time, the shoulders are level, and a recorded head is
-    above them. When another axis passes, the message says which ``--up`` to
-    pass.
+    above them; and the upper arms hang, and a recorded head points, along Y
+    more than along any other axis (so that a body tilted by more than 45-55
+    degrees is refused). When another axis passes, the
+    message says which ``--up`` to pass.
 
     Parameters
     ----------
@@ -209,18 +211,23 @@ def check_upright(
         Not upright; the message names ``--up`` and, where one axis passes, its value.
     """
     scores = upright_scores(positions, recorded)
-    if _passes(scores["y"]):
+    # the axis the body stands along: the head's direction from the shoulders where there is a head
+    # (upper arms may hang at an angle to the body), else the axis the upper arms hang along most
+    has_head = not np.isnan(scores["y"]["head"])
+    along = max(_SIGNED_AXES, key=lambda a: scores[a]["head" if has_head else "arms_down"])
+    arms_along = max(_SIGNED_AXES, key=lambda a: scores[a]["arms_down"])
+    if along == "y" and arms_along == "y" and _passes(scores["y"]):
         return
     y = scores["y"]
     seen = f"elbows below shoulders {y['arms_down']:+.2f} upper arms, shoulder tilt {y['level']:.2f} widths" + (
         "" if np.isnan(y["head"]) else f", head above shoulders {y['head']:+.2f} widths"
     )
-    fitting = [a for a in _SIGNED_AXES if a != "y" and _passes(scores[a])]
-    best = max(fitting, key=lambda a: scores[a]["arms_down"]) if fitting else None
-    if best in UP_CHOICES:
-        hint = f"it looks like its up axis is {best}: pass --up {best}"
-    elif best is not None:
-        hint = f"its up axis looks like {best}, which --up does not take; rotate the data so that y or z is up"
+    if along == "y":
+        hint = "check the joint map, or pass --up y if the data is upright after all"
+    elif along in UP_CHOICES and _passes(scores[along]):
+        hint = f"it looks like its up axis is {along}: pass --up {along}"
+    elif _passes(scores[along]):
+        hint = f"its up axis looks like {along}, which --up does not take; rotate the data so that y or z is up"
     else:
         hint = "no axis makes it upright; check the joint map, or pass --up if the axes are known"
     raise MotionFileError(f"{what} does not stand upright with y as up ({seen}); {hint}", path=path)

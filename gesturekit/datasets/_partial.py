@@ -24,7 +24,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from ..errors import MotionFileError
-from ..skeleton import DERIVABLE_JOINTS, JOINT_NAMES, PARENTS, JointPresence, joint_index, missing_required
+from ..skeleton import JOINT_NAMES, PARENTS, JointPresence, joint_index, missing_required
 
 __all__ = ["TORSO_BELOW_NECK", "HEAD_ABOVE_NECK", "COLLAR_FRACTION", "check_required", "complete_skeleton"]
 
@@ -95,7 +95,6 @@ def complete_skeleton(positions: np.ndarray, recorded: np.ndarray) -> tuple[np.n
         if name not in names:
             pos[:, joint_index(name)] = neck + COLLAR_FRACTION * (pos[:, shoulder] - neck)
             derived.append(name)
-    assert set(derived) <= set(DERIVABLE_JOINTS)
     placed = rec.copy()
     placed[[joint_index(n) for n in derived]] = True
     for j in range(len(JOINT_NAMES)):  # parents precede children

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..bones import normalise_bone_lengths
 from ..motion import Motion
-from ..skeleton import ABSENT, DERIVED, JointPresence
+from ..skeleton import JointPresence
 from ._axes import UNIT_SCALE, check_upright, detect_units, to_our_frame
 from ._partial import complete_skeleton
 
@@ -156,9 +156,3 @@ def reading_lines(takes: Iterable[Mapping]) -> list[str]:
         shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
         lines.append(f"reading    {head}  (takes {shown})")
     return lines + bones
-
-
-def joint_states_text(presence: JointPresence) -> str:
-    """Which joints are derived and which absent, for a message; ``""`` when every joint is recorded."""
-    parts = [f"{state}: {', '.join(presence.names(state))}" for state in (DERIVED, ABSENT) if presence.names(state)]
-    return "; ".join(parts)

@@ -204,7 +204,6 @@ def _validate(content: object, *, name: str, path: Path | None) -> PositionJoint
         fail("'names' must be a list of source joint names")
     if names is not None and len(set(names)) != len(names):
         fail("'names' has duplicates")
-    assert isinstance(content, Mapping) and isinstance(joints, Mapping)
     _, unknown = missing_and_unknown(joints)
     problems = []
     if unknown:
