@@ -29,6 +29,7 @@ __all__ = [
     "to_our_frame",
     "upright_scores",
     "check_upright",
+    "body_axis",
     "body_size",
     "detect_units",
     "check_axes_options",
@@ -50,8 +51,10 @@ _HEAD_JOINTS = tuple(joint_index(n) for n in ("head_top", "head", "neck_upper"))
 _ARMS_DOWN = 0.25
 # ... the shoulder line tilts less than this (fraction of the shoulder width, median) ...
 _SHOULDERS_LEVEL = 0.5
-# ... and a recorded head is above the mid-shoulder point by this fraction of the shoulder width.
+# ... and a recorded head is above the mid-shoulder point by this fraction of the shoulder width ...
 _HEAD_ABOVE = 0.1
+# ... and the body's axis (body_axis) is within this angle of the up axis, degrees.
+_MAX_TILT_DEG = 45.0
 
 # units="auto": a body size (see body_size) in metres that a human can have
 _PLAUSIBLE_SIZE_M = (0.08, 0.7)
@@ -173,6 +176,34 @@ def upright_scores(positions: np.ndarray, recorded: np.ndarray | None = None) ->
     return out
 
 
+def body_axis(positions: np.ndarray, recorded: np.ndarray | None = None) -> np.ndarray:
+    """The direction the body stands along, a unit vector (3,), from medians over the frames.
+
+    Per frame: the direction from the mid-shoulder point to a recorded head (without
+    one: the mean direction the upper arms hang in, negated, i.e. from elbows to
+    shoulders), with its component along the shoulder line removed (the body's
+    axis is across the shoulders). The median of each coordinate over the
+    frames, normalised.
+    """
+    pos = np.asarray(positions, dtype=np.float64)
+    rec = np.ones(pos.shape[1], dtype=bool) if recorded is None else np.asarray(recorded, dtype=bool)
+    across = pos[:, _LS] - pos[:, _RS]
+    across /= np.maximum(np.linalg.norm(across, axis=-1, keepdims=True), 1e-12)
+    head = next((j for j in _HEAD_JOINTS if rec[j]), None)
+    if head is not None:
+        d = pos[:, head] - 0.5 * (pos[:, _LS] + pos[:, _RS])
+    else:
+        d = np.zeros_like(across)
+        for s, e in ((_LS, _LE), (_RS, _RE)):
+            arm = pos[:, s] - pos[:, e]
+            d += arm / np.maximum(np.linalg.norm(arm, axis=-1, keepdims=True), 1e-12)
+    d = d - np.sum(d * across, axis=-1, keepdims=True) * across
+    d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+    axis = np.median(d, axis=0)
+    norm = float(np.linalg.norm(axis))
+    return axis / norm if norm > 0 else np.array([0.0, 1.0, 0.0])
+
+
 def _passes(score: dict[str, float]) -> bool:
     head_ok = np.isnan(score["head"]) or score["head"] > _HEAD_ABOVE
     return score["arms_down"] > _ARMS_DOWN and score["level"] < _SHOULDERS_LEVEL and bool(head_ok)
@@ -187,12 +218,11 @@ def check_upright(
 ) -> None:
     """Refuse a motion that does not stand upright along +Y.
 
-    Upright means (see :func:`upright_scores`): the upper arms hang below the
-    shoulders most of the time, the shoulders are level, and a recorded head is
-    above them; and the upper arms hang, and a recorded head points, along Y
-    more than along any other axis (so that a body tilted by more than 45-55
-    degrees is refused). When another axis passes, the
-    message says which ``--up`` to pass.
+    Upright means (see :func:`upright_scores` and :func:`body_axis`): the body's
+    axis is within 45 degrees of +Y, the upper arms hang below the shoulders most
+    of the time, the shoulders are level, and a recorded head is above them.
+    When the body stands along another axis, the message says which ``--up``
+    to pass.
 
     Parameters
     ----------
@@ -211,17 +241,16 @@ def check_upright(
         Not upright; the message names ``--up`` and, where one axis passes, its value.
     """
     scores = upright_scores(positions, recorded)
-    # the axis the body stands along: the head's direction from the shoulders where there is a head
-    # (upper arms may hang at an angle to the body), else the axis the upper arms hang along most
-    has_head = not np.isnan(scores["y"]["head"])
-    along = max(_SIGNED_AXES, key=lambda a: scores[a]["head" if has_head else "arms_down"])
-    arms_along = max(_SIGNED_AXES, key=lambda a: scores[a]["arms_down"])
-    if along == "y" and arms_along == "y" and _passes(scores["y"]):
+    axis = body_axis(positions, recorded)
+    tilt = float(np.degrees(np.arccos(np.clip(axis[1], -1.0, 1.0))))
+    if tilt <= _MAX_TILT_DEG and _passes(scores["y"]):
         return
+    along = _name_of(axis)
     y = scores["y"]
-    seen = f"elbows below shoulders {y['arms_down']:+.2f} upper arms, shoulder tilt {y['level']:.2f} widths" + (
-        "" if np.isnan(y["head"]) else f", head above shoulders {y['head']:+.2f} widths"
-    )
+    seen = f"body {tilt:.0f} degrees from y, elbows below shoulders {y['arms_down']:+.2f} upper arms, "
+    seen += f"shoulder tilt {y['level']:.2f} widths"
+    if not np.isnan(y["head"]):
+        seen += f", head above shoulders {y['head']:+.2f} widths"
     if along == "y":
         hint = "check the joint map, or pass --up y if the data is upright after all"
     elif along in UP_CHOICES and _passes(scores[along]):
