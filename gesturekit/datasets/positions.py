@@ -47,6 +47,7 @@ from ..skeleton import FPS, JOINT_NAMES, missing_required
 from ._axes import check_axes_options
 from ._reading import Reading, convert_and_complete
 from .presets import missing_and_unknown
+from .takes import POSITION_EXTENSIONS as _SUFFIXES  # the files a folder of takes is searched for
 
 __all__ = [
     "PositionJointMap",
@@ -55,8 +56,6 @@ __all__ = [
     "load_positions_motion",
     "read_positions_take",
 ]
-
-_SUFFIXES = (".npy", ".npz", ".txt", ".csv")
 
 
 @dataclass(frozen=True)
