@@ -267,3 +267,26 @@ def test_keypoint_positions_of_every_joint_name(examples):
     for col, name in ((0, "neck"), (KEYPOINT_NAMES.index("r_elbow"), "right_elbow"), (48, "right_pinky4")):
         want = (ours[:, joint_index(name)] - neck) * np.array([1.0, -1.0, -1.0])
         np.testing.assert_allclose(out[:, col], want, atol=1e-12)
+
+
+def test_axes_are_refused_for_habibie2021_takes(tmp_path):
+    from tests.test_habibie2021 import make
+
+    folder = tmp_path / "npz"
+    folder.mkdir()
+    wav, body, mfcc = make(n_seq=1)
+    np.savez(folder / "a.npz", wav=wav, body=body, mfcc=mfcc)
+    out = tmp_path / "db"
+    before = snapshot(folder, out)
+    run = run_cli("build-db", folder, "--kind", "habibie2021", "--up", "-z", "--out", out)
+    assert_refused(run, names="--up", problem="not the habibie2021 kind", before=before)
+
+
+def test_negative_axes_are_read_as_values_on_the_command_line():
+    from gesturekit._cli_parser import build_parser, join_axis_values
+
+    assert join_axis_values(["synthesize", "--out", "-y"]) == ["synthesize", "--out", "-y"]  # only --up, --forward
+    argv = join_axis_values(["build-db", "f", "--up", "-z", "--forward", "-x", "--out", "db"])
+    assert argv == ["build-db", "f", "--up=-z", "--forward=-x", "--out", "db"]
+    args = build_parser().parse_args(argv)
+    assert (args.up, args.forward, args.units, args.normalize_bones) == ("-z", "-x", "auto", False)
