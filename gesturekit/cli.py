@@ -13,10 +13,14 @@ import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ._cli_parser import build_parser, join_axis_values
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
 from .paths import is_file
+
+if TYPE_CHECKING:
+    from .database import MatchingDatabase
 
 __all__ = ["main", "build_parser"]
 
@@ -120,7 +124,7 @@ def _cmd_build_db(args) -> int:
     return _done(args, "built")
 
 
-def _print_readings(db) -> None:
+def _print_readings(db: MatchingDatabase) -> None:
     """How the takes were read (axes, units, derived and absent joints, bone lengths), when recorded."""
     from .datasets.takes import reading_lines
 
