@@ -290,3 +290,28 @@ def test_negative_axes_are_read_as_values_on_the_command_line():
     assert argv == ["build-db", "f", "--up=-z", "--forward=-x", "--out", "db"]
     args = build_parser().parse_args(argv)
     assert (args.up, args.forward, args.units, args.normalize_bones) == ("-z", "-x", "auto", False)
+
+
+def test_the_readme_keypoint_example_runs_as_written(tmp_path, monkeypatch):
+    import re
+    import shlex
+
+    from gesturekit.datasets import keypoint_example
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    section = readme[readme.index("### Joint-position files") : readme.index("### Habibie et al. 2021")]
+    block = re.search(r"```bash\n(python -m gesturekit\.datasets\.keypoint_example.*?)```", section, re.S)
+    assert block, "the README shows no keypoint example"
+    monkeypatch.chdir(tmp_path)
+    printed = []
+    for line in block.group(1).splitlines():
+        words = shlex.split(line.split("#")[0])
+        if words[:3] == ["python", "-m", "gesturekit.datasets.keypoint_example"]:
+            assert keypoint_example.main(words[3:]) == 0
+        else:
+            assert words[0] == "gesturekit", line
+            run = run_cli(*words[1:])
+            assert run.code == 0, run.stderr
+            printed.append(run.stdout)
+    assert "reading    up -y (given)" in printed[-1] and "bone lengths normalised" in printed[-1]
+    assert MatchingDatabase.load(tmp_path / "db" / "kp").joint_presence.names(DERIVED) == DERIVED_HERE
