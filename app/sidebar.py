@@ -17,6 +17,7 @@ import streamlit as st
 from display import allowed, user_errors, warnings_shown
 
 from gesturekit.database import BuildConfig, MatchingDatabase
+from gesturekit.datasets.takes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES, reading_lines
 from gesturekit.errors import ConfigError, DatabaseError
 from gesturekit.paths import default_database_path, home
 from gesturekit.workspace import database_folders, is_generated
@@ -124,6 +125,10 @@ def _build_from_folder(
     overwrite: bool = False,
     fps: float | None = None,
     label: str = "",
+    units: str = "auto",
+    up: str | None = None,
+    forward: str = "auto",
+    normalize_bones: bool = False,
     progress=None,
 ) -> MatchingDatabase:
     """Build and save a database from a folder of takes, as typed in the sidebar's form
@@ -141,6 +146,8 @@ def _build_from_folder(
         Frame rate of joint-position files (they do not carry one).
     label : str
         Description stored with the database.
+    units, up, forward, normalize_bones
+        How to read the motion files (:class:`gesturekit.datasets.takes.ReadOptions`).
     progress : callable(done, total, take_name), optional
         Called after each take is read.
 
@@ -167,9 +174,36 @@ def _build_from_folder(
         config=BuildConfig(label=label),
         joint_map=joint_map,
         fps=fps,
+        units=units,
+        up=up,
+        forward=forward,
+        normalize_bones=normalize_bones,
         overwrite=overwrite,
         progress=progress,
     )
+
+
+def _reading_inputs() -> tuple[str, str | None, str, bool]:
+    """The form's units, up axis, forward axis and bone normalisation (``build-db``'s options of the same names)."""
+    left, right = st.columns(2)
+    units = left.selectbox(
+        "Units", list(UNIT_CHOICES), key="_gk.build_units", help="auto: from the body's size (BVH: the skeleton's)"
+    )
+    up = right.selectbox(
+        "Up axis",
+        ["y (checked)", *UP_CHOICES],
+        key="_gk.build_up",
+        help="the files' up axis; 'y (checked)' refuses a take that does not stand upright with y up",
+    )
+    forward = left.selectbox(
+        "Forward axis", list(FORWARD_CHOICES), key="_gk.build_forward", help="auto: from the shoulders"
+    )
+    normalize = right.checkbox(
+        "normalise bone lengths",
+        key="_gk.build_bones",
+        help="one length per bone and take, for keypoints whose bone lengths vary from frame to frame",
+    )
+    return str(units), None if str(up).startswith("y (") else str(up), str(forward), bool(normalize)
 
 
 def _count(n: int, noun: str) -> str:
@@ -202,6 +236,7 @@ def _build_expander() -> None:
             step=1.0,
             key="_gk.build_fps",
         )
+        units, up, forward, normalize = _reading_inputs()
         out = st.text_input(
             "Database folder to write", key="_gk.build_out", placeholder=str(home() / "db" / "<folder name>")
         )
@@ -238,6 +273,10 @@ def _build_expander() -> None:
                     overwrite=overwrite,
                     fps=fps or None,
                     label=label.strip(),
+                    units=units,
+                    up=up,
+                    forward=forward,
+                    normalize_bones=normalize,
                     progress=progress,
                 )
             bar.progress(1.0, text="saved")
@@ -249,5 +288,6 @@ def _build_expander() -> None:
                     f"Built {_count(db.n_clips, 'clip')} from {_count(len(db.take_names), 'take')} into {db.path}",
                 )
             ]
+            st.session_state[_FLASH_KEY] += [("info", line) for line in reading_lines(db.meta.get("takes", []))]
             st.session_state[_FLASH_KEY] += [("warning", w) for w in warned]
             st.rerun()

@@ -7,8 +7,9 @@ named by ``args.command``; ``gesturekit COMMAND --help`` prints what is declared
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 
-__all__ = ["build_parser"]
+__all__ = ["build_parser", "join_axis_values"]
 
 
 def _add_max_speech(parser) -> None:
@@ -107,6 +108,28 @@ def _add_exclusions(parser, *, out_of: str) -> None:
     )
 
 
+_AXIS_OPTIONS = ("--up", "--forward")
+
+
+def join_axis_values(argv: Sequence[str]) -> list[str]:
+    """``argv`` with ``--up -y`` written as ``--up=-y`` (also ``--forward``).
+
+    argparse takes a value that starts with ``-`` for an option; a negative axis
+    is the natural way to write these two.
+    """
+    out: list[str] = []
+    args = list(argv)
+    i = 0
+    while i < len(args):
+        if args[i] in _AXIS_OPTIONS and i + 1 < len(args) and args[i + 1] in ("-x", "-y", "-z"):
+            out.append(f"{args[i]}={args[i + 1]}")
+            i += 2
+            continue
+        out.append(args[i])
+        i += 1
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``gesturekit``'s command line; ``args.command`` names the command given."""
     p = argparse.ArgumentParser(
@@ -122,7 +145,28 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--joint-map", help="JSON joint map for other skeletons or joint-position files")
     b.add_argument("--kind", default="auto", choices=["auto", "bvh", "positions", "habibie2021"])
     b.add_argument("--fps", type=float, help="frame rate of joint-position files")
-    b.add_argument("--units", default="auto", choices=["auto", "cm", "m"], help="units of the motion files")
+    b.add_argument(
+        "--units",
+        default="auto",
+        choices=["auto", "m", "cm", "mm"],
+        help="units of the motion files (default auto: detected from the body's size)",
+    )
+    b.add_argument(
+        "--up",
+        choices=["y", "-y", "z", "-z"],
+        help="up axis of the motion files (default: y, and each take must look upright)",
+    )
+    b.add_argument(
+        "--forward",
+        default="auto",
+        choices=["auto", "x", "-x", "y", "-y", "z", "-z"],
+        help="axis the body faces in the motion files (default auto: from the shoulders)",
+    )
+    b.add_argument(
+        "--normalize-bones",
+        action="store_true",
+        help="give every bone one length per take (for keypoints whose bone lengths vary)",
+    )
     b.add_argument(
         "--overlap-stride", type=int, help="also store an overlapping cut (stride in frames) for the refiner"
     )

@@ -13,10 +13,14 @@ import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ._cli_parser import build_parser
+from ._cli_parser import build_parser, join_axis_values
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
 from .paths import is_file
+
+if TYPE_CHECKING:
+    from .database import MatchingDatabase
 
 __all__ = ["main", "build_parser"]
 
@@ -108,12 +112,24 @@ def _cmd_build_db(args) -> int:
                 kind=args.kind,
                 fps=args.fps,
                 units=args.units,
+                up=args.up,
+                forward=args.forward,
+                normalize_bones=args.normalize_bones,
                 overwrite=args.force,
                 locked=True,
                 progress=lambda done, total, name: _advance(bar("reading takes", total, "take"), done, note=name[-30:]),
             )
     print(db.summary_text())
+    _print_readings(db)
     return _done(args, "built")
+
+
+def _print_readings(db: MatchingDatabase) -> None:
+    """How the takes were read (axes, units, derived and absent joints, bone lengths), when recorded."""
+    from .datasets.takes import reading_lines
+
+    for line in reading_lines(db.meta.get("takes", [])):
+        print(line)
 
 
 def _cmd_info(args) -> int:
@@ -122,6 +138,7 @@ def _cmd_info(args) -> int:
 
     db = MatchingDatabase.load(args.database or default_database_path())
     print(db.summary_text())
+    _print_readings(db)
     if args.takes:
         print()
         print(db.takes_table().to_string(index=False))
@@ -500,7 +517,7 @@ def _os_error_text(exc: OSError) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(join_axis_values(sys.argv[1:] if argv is None else argv))
     # the command's function, named after it (build-db -> _cmd_build_db; options: _cli_parser.py)
     command = globals()["_cmd_" + args.command.replace("-", "_")]
     args.started = time.perf_counter()

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .database import BuildConfig, MatchingDatabase
-from .datasets.takes import AUDIO_EXTENSIONS, count_takes, discover_takes, iter_takes
+from .datasets.takes import AUDIO_EXTENSIONS, ReadOptions, count_takes, discover_takes, iter_takes
 from .errors import InputFileError
 from .paths import default_database_path, home, is_dir
 
@@ -105,6 +105,9 @@ def build_database(
     kind: str = "auto",
     fps: float | None = None,
     units: str = "auto",
+    up: str | None = None,
+    forward: str = "auto",
+    normalize_bones: bool = False,
     overwrite: bool = False,
     locked: bool = False,
     progress: Callable[[int, int, str], None] | None = None,
@@ -128,8 +131,14 @@ def build_database(
         The kind of takes (see :func:`~gesturekit.datasets.takes.discover_takes`).
     fps : float, optional
         Frame rate of joint-position files (they do not carry one), frames per second.
-    units : {"auto", "cm", "m"}
-        Units of the motion files.
+    units : {"auto", "m", "cm", "mm"}
+        Units of the motion files (``auto`` detects them).
+    up : {"y", "-y", "z", "-z"} or None
+        Up axis of the motion files; None: Y, and every take must look upright.
+    forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
+        The axis the bodies face; ``auto`` finds it from the shoulders.
+    normalize_bones : bool
+        Give every bone one length per take (for keypoints with jittery bone lengths).
     overwrite : bool
         Replace an earlier database at ``out`` (only a database gesturekit built).
     locked : bool
@@ -149,6 +158,7 @@ def build_database(
         that may not be written; the message names the path.
     """
     folder = Path(folder).expanduser()
+    options = ReadOptions(units=units, up=up, forward=forward, normalize_bones=normalize_bones)
     sources = discover_takes(folder, kind=kind)
     jmap = _read_joint_map(joint_map, {s.kind for s in sources})
     total = count_takes(sources)
@@ -160,7 +170,7 @@ def build_database(
         if progress is not None:
             progress(done, total, name)
 
-    takes = iter_takes(sources, joint_map=jmap, fps_in=fps, units=units)
+    takes = iter_takes(sources, joint_map=jmap, fps_in=fps, options=options)
     db = MatchingDatabase.build(takes, config=config, progress=on_take)
     db.save(Path(out).expanduser(), overwrite=overwrite, inputs=[folder], locked=locked)
     return db

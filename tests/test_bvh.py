@@ -31,6 +31,9 @@ ZEGGS = DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
 
 # ----------------------------------------------------------------------------- writing test files
 
+# random joint angles are no upright body: read them with the axes as they are
+AS_IS = {"up": "y", "forward": "z"}
+
 
 def bvh_text(joints, values, *, frame_time=1 / 30, newline="\n", indent="\t", frames_header=None):
     """BVH text of ``joints`` = [(name, parent, offset, channels, end_site_offset or None)] in preorder."""
@@ -175,7 +178,7 @@ def zeggs():
     if not ZEGGS.is_file():
         pytest.skip(f"shared test data not found: {ZEGGS}")
     data = parse_bvh(ZEGGS)
-    motion = load_bvh_motion(ZEGGS, joint_map="zeggs")
+    motion = load_bvh_motion(ZEGGS, joint_map="zeggs", **AS_IS)
     return data, motion
 
 
@@ -402,10 +405,10 @@ def test_cm_and_m_files_give_the_same_metres(tmp_path):
     values_m[:, pos_cols] *= 0.01
     cm = write(tmp_path, "cm.bvh", bvh_text(joints_cm, values_cm))
     m = write(tmp_path, "m.bvh", bvh_text(joints_m, values_m))
-    auto_cm, auto_m = load_bvh_motion(cm), load_bvh_motion(m)
+    auto_cm, auto_m = load_bvh_motion(cm, **AS_IS), load_bvh_motion(m, **AS_IS)
     np.testing.assert_allclose(auto_cm.positions, auto_m.positions, atol=1e-6)
-    np.testing.assert_allclose(load_bvh_motion(cm, units="cm").positions, auto_m.positions, atol=1e-6)
-    np.testing.assert_allclose(load_bvh_motion(m, units="m").positions, auto_m.positions, atol=1e-6)
+    np.testing.assert_allclose(load_bvh_motion(cm, units="cm", **AS_IS).positions, auto_m.positions, atol=1e-6)
+    np.testing.assert_allclose(load_bvh_motion(m, units="m", **AS_IS).positions, auto_m.positions, atol=1e-6)
     # forearm of the generated skeleton: 28 cm
     assert (
         abs(
@@ -417,7 +420,7 @@ def test_cm_and_m_files_give_the_same_metres(tmp_path):
         < 1e-5
     )
     with pytest.raises(ConfigError):
-        load_bvh_motion(cm, units="inch")
+        load_bvh_motion(cm, units="inch", **AS_IS)
 
 
 def test_output_is_pelvis_relative(tmp_path):
@@ -426,8 +429,8 @@ def test_output_is_pelvis_relative(tmp_path):
     values = random_values(joints, 5, rng)
     moved = values.copy()
     moved[:, :3] += np.array([300.0, -20.0, 55.0])  # translate the whole body
-    a = load_bvh_motion(write(tmp_path, "a.bvh", bvh_text(joints, values)))
-    b = load_bvh_motion(write(tmp_path, "b.bvh", bvh_text(joints, moved)))
+    a = load_bvh_motion(write(tmp_path, "a.bvh", bvh_text(joints, values)), **AS_IS)
+    b = load_bvh_motion(write(tmp_path, "b.bvh", bvh_text(joints, moved)), **AS_IS)
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-5)
     # the pelvis-relative spine_mid is Spine + Spine1 above the hips at rest-ish angles: within 30 cm
     assert np.linalg.norm(a.positions[:, joint_index("spine_mid")], axis=-1).max() < 0.3
@@ -439,7 +442,7 @@ def test_integer_ratio_is_exact_subsampling(tmp_path):
     values = random_values(joints, 9, rng)
     path = write(tmp_path, "s.bvh", bvh_text(joints, values, frame_time=1 / 60))
     data = parse_bvh(path)
-    motion = load_bvh_motion(path)
+    motion = load_bvh_motion(path, **AS_IS)
     full = forward_kinematics(data) * 0.01
     names = PRESETS["zeggs"].source_names()
     idx = [data.index(n) for n in names]
@@ -458,7 +461,7 @@ def test_resampling_frame_count_and_rigid_bones(tmp_path, fps_in):
     n = 61
     values = random_values(joints, n, rng, angle=60.0)
     path = write(tmp_path, f"r{fps_in}.bvh", bvh_text(joints, values, frame_time=1 / fps_in))
-    motion = load_bvh_motion(path)
+    motion = load_bvh_motion(path, **AS_IS)
     assert motion.n_frames == output_frame_count(n, fps_in, 15) == math.floor(n * 15 / fps_in + 1e-9)
     assert motion.fps == 15
     lengths = motion.bone_lengths()
@@ -533,7 +536,7 @@ def test_malformed_files_raise_motion_file_error_naming_the_file(tmp_path, case)
     with pytest.raises(MotionFileError, match=f"bad_{case}.bvh"):
         parse_bvh(path)
     with pytest.raises(MotionFileError, match=f"bad_{case}.bvh"):
-        load_bvh_motion(path)
+        load_bvh_motion(path, **AS_IS)
 
 
 def test_specific_error_messages(tmp_path):
@@ -556,7 +559,7 @@ def test_missing_and_binary_files(tmp_path):
     with pytest.raises(MotionFileError, match="nothere.bvh.*not found"):
         parse_bvh(tmp_path / "nothere.bvh")
     with pytest.raises(MotionFileError, match="nothere.bvh"):
-        load_bvh_motion(tmp_path / "nothere.bvh")
+        load_bvh_motion(tmp_path / "nothere.bvh", **AS_IS)
     binary = tmp_path / "binary.bvh"
     binary.write_bytes(b"\x00\x01\x02HIERARCHY\x00")
     with pytest.raises(MotionFileError, match="binary.bvh"):
@@ -571,7 +574,7 @@ def test_missing_map_joints_are_all_listed_in_one_error(tmp_path):
     joints = zeggs_like_skeleton(drop=drop)
     path = write(tmp_path, "incomplete.bvh", bvh_text(joints, random_values(joints, 3, rng)))
     with pytest.raises(MotionFileError) as info:
-        load_bvh_motion(path, joint_map="zeggs")
+        load_bvh_motion(path, joint_map="zeggs", **AS_IS)
     message = str(info.value)
     assert "incomplete.bvh" in message and "'zeggs'" in message
     for name in drop:
@@ -584,7 +587,7 @@ def test_too_short_for_one_output_frame(tmp_path):
     joints = zeggs_like_skeleton()
     path = write(tmp_path, "short.bvh", bvh_text(joints, random_values(joints, 1, rng), frame_time=1 / 30))
     with pytest.raises(MotionFileError, match="short.bvh.*too short"):
-        load_bvh_motion(path)
+        load_bvh_motion(path, **AS_IS)
 
 
 def test_all_55_joints_come_from_the_map(tmp_path):
@@ -593,7 +596,7 @@ def test_all_55_joints_come_from_the_map(tmp_path):
     joints = zeggs_like_skeleton()
     path = write(tmp_path, "map.bvh", bvh_text(joints, random_values(joints, 2, rng), frame_time=1 / 15))
     data = parse_bvh(path)
-    motion = load_bvh_motion(path)
+    motion = load_bvh_motion(path, **AS_IS)
     full = forward_kinematics(data) * 0.01
     hips = data.index("Hips")
     for ours in JOINT_NAMES:

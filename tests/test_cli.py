@@ -31,7 +31,27 @@ def _positions_folder(tmp_path):
 def test_build_and_info_from_position_files(tmp_path, capsys):
     folder, jm = _positions_folder(tmp_path)
     out = tmp_path / "db"
-    assert main(["build-db", str(folder), "--joint-map", str(jm), "--fps", "30", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "build-db",
+                str(folder),
+                "--joint-map",
+                str(jm),
+                "--fps",
+                "30",
+                "--up",
+                "y",
+                "--forward",
+                "z",
+                "--units",
+                "m",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "takes      2" in printed and "clips      4 x 64 frames" in printed and "built in" in printed
     db = MatchingDatabase.load(out)
@@ -55,7 +75,22 @@ def test_errors_are_one_line_with_exit_status_2(tmp_path, capsys):
 def test_existing_database_needs_force(tmp_path, capsys):
     folder, jm = _positions_folder(tmp_path)
     out = tmp_path / "db"
-    args = ["build-db", str(folder), "--joint-map", str(jm), "--fps", "30", "--out", str(out)]
+    args = [
+        "build-db",
+        str(folder),
+        "--joint-map",
+        str(jm),
+        "--fps",
+        "30",
+        "--up",
+        "y",
+        "--forward",
+        "z",
+        "--units",
+        "m",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     assert main(args) == 2
     assert "already exists" in capsys.readouterr().err

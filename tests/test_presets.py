@@ -16,6 +16,9 @@ from gesturekit.skeleton import JOINT_NAMES, PARENTS
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 ZEGGS = DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
 
+# random joint angles are no upright body: read them with the axes as they are
+AS_IS = {"up": "y", "forward": "z"}
+
 
 def _chain(names, first, step, *, last_children=(), end=(0, 0, 0)):
     """Nested nodes (name, offset, children, end_site) for a chain of joints."""
@@ -138,7 +141,7 @@ def test_beat_preset_reads_a_beat_like_file(tmp_path):
     data = parse_bvh(path)
     assert data.n_joints == 75 + 1 + 10 + 2  # BEAT's 75 joints; End Sites of HeadEnd, 10 finger tips, 2 toes
     assert data.names[data.parents[data.index("LeftHandIndex1")]] == "LeftHandIndex"
-    motion = load_bvh_motion(path, joint_map="beat")
+    motion = load_bvh_motion(path, joint_map="beat", **AS_IS)
     assert motion.n_frames == 2 and motion.fps == 15  # 16 frames at 120 fps
     assert "HeadEnd_End" in data.names and "LeftHandPinky4_End" in data.names
     # every bone is rigid except wrist -> first joint of index, ring and pinky, which spans
@@ -150,7 +153,9 @@ def test_beat_preset_reads_a_beat_like_file(tmp_path):
     assert np.ptp(lengths[:, rigid], axis=0).max() < 1e-5
     with pytest.raises(MotionFileError, match="missing"):
         load_bvh_motion(
-            path, joint_map={"pelvis": "Hips", "joints": {**PRESETS["beat"].joints, "left_index1": "LeftHandIndex0"}}
+            path,
+            joint_map={"pelvis": "Hips", "joints": {**PRESETS["beat"].joints, "left_index1": "LeftHandIndex0"}},
+            **AS_IS,
         )
 
 
@@ -164,13 +169,13 @@ def test_json_joint_map_file_matches_the_preset(tmp_path):
     map_path.write_text(json.dumps(spec))
     jmap = load_joint_map(map_path)
     assert jmap.name == str(map_path) and jmap.pelvis == "mixamorig:Hips"
-    expected = load_bvh_motion(plain, joint_map="beat").positions
-    np.testing.assert_array_equal(load_bvh_motion(prefixed, joint_map=map_path).positions, expected)
-    np.testing.assert_array_equal(load_bvh_motion(prefixed, joint_map=str(map_path)).positions, expected)
-    np.testing.assert_array_equal(load_bvh_motion(prefixed, joint_map=spec).positions, expected)
+    expected = load_bvh_motion(plain, joint_map="beat", **AS_IS).positions
+    np.testing.assert_array_equal(load_bvh_motion(prefixed, joint_map=map_path, **AS_IS).positions, expected)
+    np.testing.assert_array_equal(load_bvh_motion(prefixed, joint_map=str(map_path), **AS_IS).positions, expected)
+    np.testing.assert_array_equal(load_bvh_motion(prefixed, joint_map=spec, **AS_IS).positions, expected)
     # the map's own name appears when the file lacks its joints
     with pytest.raises(MotionFileError, match="map.json"):
-        load_bvh_motion(plain, joint_map=map_path)
+        load_bvh_motion(plain, joint_map=map_path, **AS_IS)
 
 
 def test_missing_joints_are_listed(tmp_path):

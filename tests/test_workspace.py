@@ -138,7 +138,15 @@ def test_build_database_reads_the_takes_saves_and_records_where_they_came_from(t
     out = tmp_path / "db"
     calls = []
     db = build_database(
-        folder, out, config=BuildConfig(label="two takes"), joint_map=jm, fps=30.0, progress=lambda *a: calls.append(a)
+        folder,
+        out,
+        config=BuildConfig(label="two takes"),
+        joint_map=jm,
+        fps=30.0,
+        up="y",
+        forward="z",
+        units="m",
+        progress=lambda *a: calls.append(a),
     )
     assert calls == [(1, 2, "t0"), (2, 2, "t1")]
     assert db.take_names == ["t0", "t1"] and db.n_clips == 4  # 9 s at 15 fps = 135 frames = 2 clips each
@@ -157,10 +165,10 @@ def test_build_database_reads_the_takes_saves_and_records_where_they_came_from(t
 def test_build_database_never_replaces_a_database_unasked(tmp_path):
     folder, jm = _positions_folder(tmp_path)
     out = tmp_path / "db"
-    build_database(folder, out, joint_map=jm, fps=30.0)
+    build_database(folder, out, joint_map=jm, fps=30.0, up="y", forward="z", units="m")
     before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
     with pytest.raises(OutputError):
-        build_database(folder, out, joint_map=jm, fps=30.0)
+        build_database(folder, out, joint_map=jm, fps=30.0, up="y", forward="z", units="m")
     assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
 
 

@@ -15,7 +15,9 @@ Xrotation Yrotation`` means ``R = Rz @ Rx @ Ry``); a joint's local transform
 is a translation (its OFFSET, with any position channels replacing the
 corresponding components) followed by that rotation. ``End Site`` entries
 become joints named ``f"{parent}_End"`` with no channels. The file's up axis
-is taken to be Y, as in nearly all BVH files.
+is Y unless ``up`` says otherwise (a BVH exported with Z up: ``up="z"``); without
+``up`` the motion must look upright, and the axis the body faces becomes +Z
+(:mod:`gesturekit.datasets._axes`).
 
 Resampling keeps bones rigid: when the source rate is a whole multiple of the
 target rate frames are subsampled; otherwise local rotations are interpolated
@@ -28,6 +30,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -35,11 +38,14 @@ from .. import limits
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion, output_frame_count
 from ..skeleton import FPS
+from ._axes import check_axes_options
 from ._kinematics import quat_mul, quat_to_matrix, slerp, world_positions
+from ._reading import Reading, convert_and_complete
 from .bvh_file import BvhData, parse_bvh, parse_bvh_text
 from .presets import JointMap, load_joint_map
 
 __all__ = [
+    "read_bvh_take",
     "BvhData",
     "parse_bvh",
     "parse_bvh_text",
@@ -219,8 +225,26 @@ def load_bvh_motion(
     joint_map: str | os.PathLike | Mapping | JointMap = "zeggs",
     fps: float = FPS,
     units: str = "auto",
+    up: str | None = None,
+    forward: str = "auto",
 ) -> Motion:
-    """Read a BVH file as a 55-joint motion.
+    """Read a BVH file as a 55-joint motion (see :func:`read_bvh_take`)."""
+    return read_bvh_take(path, joint_map=joint_map, fps=fps, units=units, up=up, forward=forward)[0]
+
+
+def read_bvh_take(
+    path: str | os.PathLike,
+    *,
+    joint_map: str | os.PathLike | Mapping | JointMap = "zeggs",
+    fps: float = FPS,
+    units: str = "auto",
+    up: str | None = None,
+    forward: str = "auto",
+) -> tuple[Motion, Reading]:
+    """Read a BVH file as a 55-joint motion, and say how it was read.
+
+    A BVH joint map names all 55 joints (partial maps are for joint-position
+    files), so every joint is recorded.
 
     Parameters
     ----------
@@ -234,12 +258,19 @@ def load_bvh_motion(
         Output frame rate (default 15).
     units : {"auto", "cm", "m", "mm"}
         Length unit of the file (see :func:`unit_scale`).
+    up : {"y", "-y", "z", "-z"} or None
+        The file's up axis. ``None``: Y, and the motion must look upright
+        (:func:`gesturekit.datasets._axes.check_upright`).
+    forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
+        The axis the body faces; ``auto`` takes it from the shoulders.
 
     Returns
     -------
-    Motion
-        Positions of shape (frames, 55, 3), metres, relative to the world
-        position of the map's pelvis joint in the same frame, at ``fps``.
+    motion : Motion
+        Positions of shape (frames, 55, 3), metres, Y up, facing +Z, relative
+        to the world position of the map's pelvis joint in the same frame, at ``fps``.
+    reading : Reading
+        The axes and units used.
 
     Raises
     ------
@@ -249,12 +280,13 @@ def load_bvh_motion(
         one output frame, or holds values no pose can have: rotations beyond
         1e6 degrees, positions beyond 1000 km from the origin, or joints
         beyond 1 km from the pelvis after forward kinematics (the message
-        names the first frame and joint).
+        names the first frame and joint), or is not upright (without ``up``).
     ConfigError, InputFileError
         The joint map or an option is invalid, or the file is beyond the
         limits (:mod:`gesturekit.limits`).
     """
     _check_units(units)
+    check_axes_options(up, forward, "auto")
     _check_fps(fps)
     limits.check_fps(fps, what="the output frame rate", option="fps")
     jmap = load_joint_map(joint_map)
@@ -278,7 +310,12 @@ def load_bvh_motion(
     pelvis = data.index(jmap.pelvis)
     _check_positions(data, positions, scale, pelvis, fps, path)
     rel = (positions[:, idx] - positions[:, pelvis : pelvis + 1]) * scale
-    return Motion(rel.astype(np.float32), float(fps))
+    placed, reading = convert_and_complete(
+        rel, np.ones(rel.shape[1], dtype=bool), units="m", up=up, forward=forward, path=path
+    )
+    found = units if units != "auto" else next((u for u, f in _UNIT_SCALE.items() if f == scale), f"x{scale:g}")
+    reading = replace(reading, units=found, units_given=units != "auto")
+    return Motion(placed.astype(np.float32), float(fps)), reading
 
 
 def _check_channels(data: BvhData, scale: float, path: str | os.PathLike | None) -> None:

@@ -7,15 +7,21 @@ which source joint is each of ours and which is the pelvis:
 .. code-block:: json
 
     {"pelvis": 0,
-     "joints": {"spine_mid": 3, "chest": "Chest", ...all 55...},
-     "names": ["Hips", "LeftHip", "RightHip", "Spine", "Chest", ...]}
+     "joints": {"neck": 0, "left_shoulder": "LShoulder", "spine_mid": null, ...},
+     "names": ["Neck", "LShoulder", ...]}
 
 Joints are given by column index (0-based, in joints) or by name; names need
 the optional ``"names"`` list (one per source joint). ``"pelvis"`` may be
-``null`` when the positions are already pelvis-relative. Positions are
-resampled to 15 fps by linear interpolation
-(:func:`gesturekit.motion.resample_positions`), which shortens bones slightly
-between samples when the source rate is not a multiple of 15.
+``null`` when the positions are already relative to a root (the pelvis, or the
+neck of keypoints lifted from video). A map may leave joints out, or map them
+to ``null``, as long as it has the joints the matching needs
+(:data:`gesturekit.skeleton.REQUIRED_JOINTS`); the torso, head and collars a
+source lacks are derived from the neck and shoulders, other joints it lacks are
+absent (see :mod:`gesturekit.datasets._partial`). Axes and units are converted
+to ours (:mod:`gesturekit.datasets._axes`). Positions are resampled to 15 fps
+by linear interpolation (:func:`gesturekit.motion.resample_positions`), which
+shortens bones slightly between samples when the source rate is not a multiple
+of 15.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
+from typing import NoReturn
 
 import numpy as np
 
@@ -36,13 +43,19 @@ from .. import limits
 from ..errors import ConfigError, InputFileError, MotionFileError
 from ..motion import Motion, resample_positions
 from ..paths import is_file
-from ..skeleton import FPS, JOINT_NAMES
-from .presets import mapping_problems
+from ..skeleton import FPS, JOINT_NAMES, missing_required
+from ._axes import check_axes_options
+from ._reading import Reading, convert_and_complete
+from .presets import missing_and_unknown
+from .takes import POSITION_EXTENSIONS as _SUFFIXES  # the files a folder of takes is searched for
 
-__all__ = ["PositionJointMap", "load_position_joint_map", "read_position_array", "load_positions_motion"]
-
-_UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
-_SUFFIXES = (".npy", ".npz", ".txt", ".csv")
+__all__ = [
+    "PositionJointMap",
+    "load_position_joint_map",
+    "read_position_array",
+    "load_positions_motion",
+    "read_positions_take",
+]
 
 
 @dataclass(frozen=True)
@@ -56,24 +69,25 @@ class PositionJointMap:
     pelvis : int, str or None
         Source joint (index or name) subtracted from every joint; ``None`` when
         the positions are already pelvis-relative.
-    joints : Mapping[str, int or str]
-        Our joint name (all 55) -> source joint index or name.
+    joints : Mapping[str, int or str or None]
+        Our joint name -> source joint index or name; joints left out or
+        ``None`` are not in the source.
     names : tuple of str or None
         Source joint names, one per source joint, needed to resolve names.
     """
 
     name: str
     pelvis: int | str | None
-    joints: Mapping[str, int | str]
+    joints: Mapping[str, int | str | None]
     names: tuple[str, ...] | None = None
 
-    def __post_init__(self):
-        object.__setattr__(self, "joints", MappingProxyType(dict(self.joints)))
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "joints", MappingProxyType({k: v for k, v in self.joints.items() if v is not None}))
         if self.names is not None:
             object.__setattr__(self, "names", tuple(self.names))
 
     def resolve(self, n_source: int, *, path: str | os.PathLike[str] | None = None) -> tuple[np.ndarray, int | None]:
-        """Source indices of our 55 joints (shape (55,)) and of the pelvis (or None).
+        """Source indices of our 55 joints (shape (55,), 0 for joints not mapped) and of the pelvis (or None).
 
         Raises
         ------
@@ -90,7 +104,7 @@ class PositionJointMap:
         lookup = {} if self.names is None else {n: i for i, n in enumerate(self.names)}
         problems: list[str] = []
 
-        def one(label, ref):
+        def one(label: str, ref: int | str) -> int:
             if isinstance(ref, str):
                 if self.names is None:
                     problems.append(f"{label} -> {ref!r} (a name, but the map has no 'names' list)")
@@ -104,15 +118,24 @@ class PositionJointMap:
                 return 0
             return ref
 
-        idx = np.array([one(n, self.joints[n]) for n in JOINT_NAMES], dtype=np.int64)
+        refs = {n: r for n, r in self.joints.items() if r is not None}
+        idx = np.array([one(n, refs[n]) if n in refs else 0 for n in JOINT_NAMES], dtype=np.int64)
         pelvis = None if self.pelvis is None else one("pelvis", self.pelvis)
         if problems:
             raise MotionFileError(f"joint map {self.name!r} does not fit the file: {'; '.join(problems)}", path=path)
         return idx, pelvis
 
+    @property
+    def recorded(self) -> np.ndarray:
+        """Shape (55,) bool: our joints the map takes from the source."""
+        return np.array([n in self.joints for n in JOINT_NAMES], dtype=bool)
 
-def load_position_joint_map(spec: str | os.PathLike | Mapping | PositionJointMap) -> PositionJointMap:
-    """A complete position joint map from a JSON file or a dict.
+
+def load_position_joint_map(spec: str | os.PathLike[str] | Mapping | PositionJointMap) -> PositionJointMap:
+    """A position joint map from a JSON file or a dict.
+
+    The map may leave out joints or map them to ``null``, but must map the
+    joints :data:`gesturekit.skeleton.REQUIRED_JOINTS` lists.
 
     Parameters
     ----------
@@ -123,10 +146,11 @@ def load_position_joint_map(spec: str | os.PathLike | Mapping | PositionJointMap
     Raises
     ------
     InputFileError
-        The JSON file is missing, not JSON, or not a complete map (the
-        message names the file and lists missing or unknown joints).
+        The JSON file is missing, not JSON, or not a sound map (the message
+        names the file and lists unknown joints, bad values, and the required
+        joints missing, per need).
     ConfigError
-        A dict that is not a complete map.
+        A dict that is not a sound map.
     """
     if isinstance(spec, PositionJointMap):
         spec = {
@@ -151,12 +175,12 @@ def load_position_joint_map(spec: str | os.PathLike | Mapping | PositionJointMap
     return _validate(content, name=os.fspath(path), path=path)
 
 
-def _is_index(v) -> bool:
+def _is_index(v: object) -> bool:
     return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
 
 
-def _validate(content, *, name: str, path) -> PositionJointMap:
-    def fail(message):
+def _validate(content: object, *, name: str, path: Path | None) -> PositionJointMap:
+    def fail(message: str) -> NoReturn:
         if path is not None:
             raise InputFileError(message, path=path)
         raise ConfigError(f"{name}: {message}")
@@ -179,11 +203,19 @@ def _validate(content, *, name: str, path) -> PositionJointMap:
         fail("'names' must be a list of source joint names")
     if names is not None and len(set(names)) != len(names):
         fail("'names' has duplicates")
-    problems = mapping_problems(
-        joints,
-        value_ok=lambda v: _is_index(v) or (isinstance(v, str) and bool(v)),
-        values_must_be="values must be joint indices or names",
+    _, unknown = missing_and_unknown(joints)
+    problems = []
+    if unknown:
+        problems.append(f"not joints of our skeleton: {', '.join(unknown)}")
+    bad = sorted(
+        str(k) for k, v in joints.items() if not (v is None or _is_index(v) or (isinstance(v, str) and bool(v)))
     )
+    if bad:
+        problems.append(f"values must be joint indices, names or null: {', '.join(bad)}")
+    mapped = [k for k, v in joints.items() if v is not None]
+    lack = missing_required(mapped)
+    if lack:
+        problems.append(f"joints gesturekit needs are not mapped: {'; '.join(lack)}")
     if problems:
         fail("; ".join(problems))
     return PositionJointMap(
@@ -322,40 +354,68 @@ def _from_npz(path: Path) -> np.ndarray:
 
 
 def load_positions_motion(
-    path: str | os.PathLike, *, joint_map: str | os.PathLike | Mapping | PositionJointMap, fps: float, units: str = "m"
+    path: str | os.PathLike[str],
+    *,
+    joint_map: str | os.PathLike[str] | Mapping | PositionJointMap,
+    fps: float,
+    units: str = "m",
+    up: str | None = None,
+    forward: str = "auto",
 ) -> Motion:
-    """Read a joint-position file as a 55-joint motion at 15 fps.
+    """Read a joint-position file as a 55-joint motion at 15 fps (see :func:`read_positions_take`)."""
+    return read_positions_take(path, joint_map=joint_map, fps=fps, units=units, up=up, forward=forward)[0]
+
+
+def read_positions_take(
+    path: str | os.PathLike[str],
+    *,
+    joint_map: str | os.PathLike[str] | Mapping | PositionJointMap,
+    fps: float,
+    units: str = "auto",
+    up: str | None = None,
+    forward: str = "auto",
+) -> tuple[Motion, Reading]:
+    """Read a joint-position file as a 55-joint motion at 15 fps, and say how it was read.
 
     Parameters
     ----------
     path : str or os.PathLike
-        Positions of shape (frames, joints, 3) or (frames, joints*3), Y up
+        Positions of shape (frames, joints, 3) or (frames, joints*3)
         (see :func:`read_position_array`).
     joint_map : str, os.PathLike, Mapping or PositionJointMap
         The position joint map (see :func:`load_position_joint_map`).
     fps : float
         Frame rate of the file, frames per second.
-    units : {"m", "cm", "mm"}
-        Length unit of the file.
+    units : {"auto", "m", "cm", "mm"}
+        Length unit of the file; ``auto`` picks the one in which the shoulder
+        width and upper arms have a human size.
+    up : {"y", "-y", "z", "-z"} or None
+        The file's up axis. ``None``: Y, and the data must look upright
+        (:func:`gesturekit.datasets._axes.check_upright`).
+    forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
+        The axis the body faces; ``auto`` takes it from the shoulders.
 
     Returns
     -------
-    Motion
-        Positions of shape (frames_out, 55, 3), metres, relative to the
-        pelvis (if the map names one), at 15 fps; ``frames_out =
-        floor(frames / fps * 15)``.
+    motion : Motion
+        Positions of shape (frames_out, 55, 3), metres, Y up, facing +Z,
+        relative to the pelvis (if the map names one), at 15 fps, with the
+        joints the source lacks derived or absent (``motion.joints``);
+        ``frames_out = floor(frames / fps * 15)``.
+    reading : Reading
+        The axes, units and joints used.
 
     Raises
     ------
     MotionFileError
-        The file is unreadable, malformed, too short for one output frame, or
-        does not have the joints the map names.
+        The file is unreadable, malformed, too short for one output frame,
+        does not have the joints the map names, is not upright (without
+        ``up``), or has no human size in any unit (``units="auto"``).
     ConfigError, InputFileError
         Bad options or joint map; ``fps`` outside the accepted range, or a
         header beyond the limits (:mod:`gesturekit.limits`).
     """
-    if units not in _UNIT_SCALE:
-        raise ConfigError(f"units must be 'm', 'cm' or 'mm', got {units!r}")
+    check_axes_options(up, forward, units)
     if not (isinstance(fps, (int, float, np.integer, np.floating)) and math.isfinite(fps) and fps > 0):
         raise ConfigError(f"fps must be a positive number, got {fps!r}")
     limits.check_fps(fps, what="the frame rate of the position file", option="fps")
@@ -365,10 +425,14 @@ def load_positions_motion(
     positions = array[:, idx]
     if pelvis is not None:
         positions = positions - array[:, pelvis : pelvis + 1]
-    positions = positions * _UNIT_SCALE[units]
+    recorded = jmap.recorded
+    positions[:, ~recorded] = 0.0
     out = resample_positions(positions, float(fps), float(FPS))
     if out.shape[0] == 0:
         raise MotionFileError(
             f"too short: {array.shape[0]} frames at {fps:g} fps give no frame at {FPS} fps", path=path
         )
-    return Motion(out.astype(np.float32), float(FPS))
+    placed, reading = convert_and_complete(out, recorded, units=units, up=up, forward=forward, path=path)
+    return Motion(
+        placed.astype(np.float32), float(FPS), None if reading.presence.is_full else reading.presence
+    ), reading

@@ -4,7 +4,7 @@ A folder of takes is one of:
 
 - ``bvh``: ``NAME.bvh`` with speech ``NAME.wav`` (or .flac/.ogg/.mp3) beside it (ZEGGS, BEAT,
   any BVH with a joint map);
-- ``positions``: ``NAME.npy|.npz|.txt`` joint positions (frames x joints x 3) with ``NAME.wav``,
+- ``positions``: ``NAME.npy|.npz|.txt|.csv`` joint positions (frames x joints x 3) with ``NAME.wav``,
   read with a JSON joint map and a source frame rate;
 - ``habibie2021``: ``*.npz`` files with keys ``wav`` and ``body`` (several sequences each).
 """
@@ -17,17 +17,33 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from ..errors import ConfigError, InputFileError
-from ..motion import Take
+from ..motion import Motion, Take
+from ._axes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES
+from ._reading import reading_lines
 
 if TYPE_CHECKING:
     from .positions import PositionJointMap
     from .presets import JointMap
 
-__all__ = ["AUDIO_EXTENSIONS", "TakeSource", "discover_takes", "iter_takes", "count_takes"]
+__all__ = [
+    "AUDIO_EXTENSIONS",
+    "POSITION_EXTENSIONS",
+    "UNIT_CHOICES",
+    "UP_CHOICES",
+    "FORWARD_CHOICES",
+    "reading_lines",
+    "ReadOptions",
+    "TakeSource",
+    "discover_takes",
+    "iter_takes",
+    "count_takes",
+]
 
 AUDIO_EXTENSIONS = (".wav", ".flac", ".ogg", ".mp3")
-_POSITION_EXTENSIONS = (".npy", ".npz", ".txt")
+POSITION_EXTENSIONS = (".npy", ".npz", ".txt", ".csv")
 KINDS = ("auto", "bvh", "positions", "habibie2021")
 
 
@@ -87,7 +103,7 @@ def discover_takes(folder: str | os.PathLike, *, kind: str = "auto") -> list[Tak
     if kind == "habibie2021":
         out = [TakeSource(kind, p, None) for p in files if p.suffix.lower() == ".npz" and _is_habibie_npz(p)]
     else:
-        exts = (".bvh",) if kind == "bvh" else _POSITION_EXTENSIONS
+        exts = (".bvh",) if kind == "bvh" else POSITION_EXTENSIONS
         out = []
         missing = []
         for p in files:
@@ -127,14 +143,55 @@ def _speech_file(src: TakeSource) -> Path:
     return src.audio
 
 
+@dataclass(frozen=True)
+class ReadOptions:
+    """How to read the motion files of takes (the ``build-db`` options of the same names).
+
+    Parameters
+    ----------
+    units : {"auto", "m", "cm", "mm"}
+        Length unit of the motion files; ``auto`` detects it (BVH: from the
+        skeleton's size; positions: from the shoulder width and upper arms).
+    up : {"y", "-y", "z", "-z"} or None
+        Up axis of the files; None: Y, and each take must look upright.
+    forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
+        The axis the body faces; ``auto`` finds it from the shoulders.
+    normalize_bones : bool
+        Give every bone one length per take (:func:`gesturekit.bones.normalise_bone_lengths`),
+        for keypoints whose bone lengths vary from frame to frame.
+    """
+
+    units: str = "auto"
+    up: str | None = None
+    forward: str = "auto"
+    normalize_bones: bool = False
+
+    def __post_init__(self) -> None:
+        from ._axes import check_axes_options
+
+        check_axes_options(self.up, self.forward, self.units)
+        if not isinstance(self.normalize_bones, bool):
+            raise ConfigError(f"normalize_bones must be True or False, got {self.normalize_bones!r}")
+
+    def text(self) -> str:
+        """The options as command-line flags, e.g. ``"--units auto --up -y --forward auto"``."""
+        flags = f"--units {self.units}" + (f" --up {self.up}" if self.up else "") + f" --forward {self.forward}"
+        return flags + (" --normalize-bones" if self.normalize_bones else "")
+
+
 def iter_takes(
     sources: list[TakeSource],
     *,
     joint_map: str | os.PathLike[str] | Mapping[str, Any] | JointMap | PositionJointMap | None = None,
     fps_in: float | None = None,
     units: str = "auto",
+    options: ReadOptions | None = None,
 ) -> Iterator[Take]:
     """Read the takes one at a time.
+
+    Each take's ``sources`` holds, under ``"reading"``, how it was read (axes,
+    units, derived and absent joints, bone normalisation:
+    :meth:`gesturekit.datasets._reading.Reading.text`).
 
     Parameters
     ----------
@@ -145,37 +202,64 @@ def iter_takes(
         kind of the takes; required for ``positions``.
     fps_in : float
         Frame rate of joint-position files (they do not carry one).
-    units : {"auto", "cm", "m"}
-        Units of the motion files (``auto`` detects BVH units; position files default to metres).
+    units : {"auto", "m", "cm", "mm"}
+        Units of the motion files, when ``options`` is not given.
+    options : ReadOptions, optional
+        Units, axes and bone normalisation (default: ``ReadOptions(units=units)``).
     """
+    from ._reading import READING_KEY, normalise_motion
     from .audio import load_audio
 
+    opts = options if options is not None else ReadOptions(units=units)
     for src in sources:
-        if src.kind == "bvh":
-            from .bvh import load_bvh_motion
-            from .positions import PositionJointMap
+        if src.kind in ("bvh", "positions"):
+            speech = _speech_file(src)  # a take without speech is refused before its motion is read
+            if src.kind == "bvh":
+                from .bvh import read_bvh_take
+                from .positions import PositionJointMap
 
-            if isinstance(joint_map, PositionJointMap):
-                raise ConfigError("BVH takes need a BVH joint map, not a joint-position map")
-            motion = load_bvh_motion(src.motion, joint_map=joint_map or "zeggs", units=units)
-            audio = load_audio(_speech_file(src), take=True)
-            yield Take(src.motion.stem, motion, audio, {"motion": str(src.motion), "audio": str(src.audio)})
-        elif src.kind == "positions":
-            from .positions import load_positions_motion
-            from .presets import JointMap
-
-            if isinstance(joint_map, JointMap):
-                raise ConfigError("joint-position files need a joint-position map, not a BVH joint map")
-            if joint_map is None or fps_in is None:
-                raise ConfigError(
-                    "joint-position files need a JSON joint map (--joint-map) and their frame rate (--fps)"
+                if isinstance(joint_map, PositionJointMap):
+                    raise ConfigError("BVH takes need a BVH joint map, not a joint-position map")
+                motion, reading = read_bvh_take(
+                    src.motion, joint_map=joint_map or "zeggs", units=opts.units, up=opts.up, forward=opts.forward
                 )
-            motion = load_positions_motion(
-                src.motion, joint_map=joint_map, fps=fps_in, units="m" if units == "auto" else units
-            )
-            audio = load_audio(_speech_file(src), take=True)
-            yield Take(src.motion.stem, motion, audio, {"motion": str(src.motion), "audio": str(src.audio)})
+            else:
+                from .positions import read_positions_take
+                from .presets import JointMap
+
+                if isinstance(joint_map, JointMap):
+                    raise ConfigError("joint-position files need a joint-position map, not a BVH joint map")
+                if joint_map is None or fps_in is None:
+                    raise ConfigError(
+                        "joint-position files need a JSON joint map (--joint-map) and their frame rate (--fps)"
+                    )
+                motion, reading = read_positions_take(
+                    src.motion, joint_map=joint_map, fps=fps_in, units=opts.units, up=opts.up, forward=opts.forward
+                )
+            if opts.normalize_bones:
+                motion, reading = normalise_motion(motion, reading)
+            audio = load_audio(speech, take=True)
+            info = {"motion": str(src.motion), "audio": str(src.audio), READING_KEY: reading.text()}
+            yield Take(src.motion.stem, motion, audio, info)
         else:
             from .habibie2021 import load_habibie2021
 
-            yield from load_habibie2021(src.motion, units="m" if units == "auto" else units)
+            if opts.up is not None or opts.forward != "auto":
+                raise ConfigError("--up and --forward are for BVH and joint-position files, not the habibie2021 kind")
+            for take in load_habibie2021(src.motion, units="m" if opts.units == "auto" else opts.units):
+                if opts.normalize_bones:
+                    positions, report = _normalise(take.motion)
+                    take = Take(
+                        take.name,
+                        Motion(positions, take.motion.fps, take.motion.joints),
+                        take.audio,
+                        {**take.sources, READING_KEY: f"habibie2021 layout; bones: {report}"},
+                    )
+                yield take
+
+
+def _normalise(motion: Motion) -> tuple[np.ndarray, str]:
+    from ..bones import normalise_bone_lengths
+
+    positions, report = normalise_bone_lengths(motion.positions, motion.presence)
+    return positions.astype(np.float32), report.summary()

@@ -1,0 +1,231 @@
+"""Example takes in the layout of keypoints lifted from video, generated from the demo speaker.
+
+The layout of the paper's own data (speakers filmed, their keypoints lifted to 3D):
+49 source joints, neck-relative, image-like axes, 15 fps, bone lengths that vary
+from frame to frame:
+
+- column 0: ``neck``;
+- columns 1-6: ``r_shoulder, r_elbow, r_wrist, l_shoulder, l_elbow, l_wrist``;
+- columns 7-27: the left hand, ``l_hand0`` .. ``l_hand20``; 28-48 the right hand.
+  A hand is its root (which repeats the wrist), then thumb, index, middle, ring
+  and little finger, four joints each from the root to the tip;
+- axes: x to the image's right (the speaker's left), y down, z away from the
+  camera (the speaker faces the camera): up is ``-y``, forward is ``-z``;
+- metres, relative to the neck; no pelvis, spine or head.
+
+:func:`write_keypoint_example` writes such takes (``NAME.txt|.csv|.npy`` with the
+speech ``NAME.wav`` beside each) and the JSON joint map for the layout
+(``joint_map.json``, mapping the torso and head joints to ``null``). From the
+command line::
+
+    python -m gesturekit.datasets.keypoint_example OUT [--format txt|csv|npy] [--takes N] [--seconds S]
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import sys
+import wave
+from collections.abc import Sequence
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from .._io import atomic_write
+from ..errors import ConfigError, GestureKitError
+from ..motion import AUDIO_SR
+from ..skeleton import FPS, HAND_JOINT_SUFFIXES, N_JOINTS, PARENTS, joint_index
+from .synthetic import generate_demo_take
+
+__all__ = ["KEYPOINT_NAMES", "FORMATS", "keypoint_joint_map", "keypoint_positions", "write_keypoint_example", "main"]
+
+_ARMS = ("shoulder", "elbow", "wrist")
+#: The 49 source joints of the layout, in column order.
+KEYPOINT_NAMES: tuple[str, ...] = (
+    ("neck",)
+    + tuple(f"{s}_{j}" for s in ("r", "l") for j in _ARMS)
+    + tuple(f"{s}_hand{i}" for s in ("l", "r") for i in range(21))
+)
+FORMATS: tuple[str, ...] = ("txt", "csv", "npy")
+#: Relative standard deviation of each bone's length per frame (a few per cent).
+BONE_NOISE = 0.03
+# ours (Y up, faces +Z, left +X) -> the layout's (x right = the speaker's left, y down, z away)
+_TO_IMAGE = np.diag([1.0, -1.0, -1.0])
+
+
+def _our_joint_of_column() -> dict[str, str | None]:
+    """Source column name -> our joint (None for the hand roots, which repeat the wrists)."""
+    out: dict[str, str | None] = {"neck": "neck"}
+    for s, side in (("r", "right"), ("l", "left")):
+        for j in _ARMS:
+            out[f"{s}_{j}"] = f"{side}_{j}"
+        for i, suffix in enumerate(HAND_JOINT_SUFFIXES):
+            out[f"{s}_hand{i}"] = None if suffix == "wrist" else f"{side}_{suffix}"
+    return out
+
+
+def keypoint_joint_map() -> dict:
+    """The position joint map of the layout: a dict for :func:`gesturekit.datasets.positions.load_position_joint_map`.
+
+    The torso, head and collars, which the layout lacks, are mapped to ``null``
+    (derived when read); the hand roots are not used (they repeat the wrists).
+    """
+    joints: dict[str, str | None] = {
+        n: None
+        for n in ("spine_mid", "chest", "upper_chest", "neck_upper", "head", "head_top", "left_collar", "right_collar")
+    }
+    joints.update({ours: col for col, ours in _our_joint_of_column().items() if ours is not None})
+    return {"pelvis": None, "names": list(KEYPOINT_NAMES), "joints": joints}
+
+
+def keypoint_positions(positions: np.ndarray, *, seed: int, noise: float = BONE_NOISE) -> np.ndarray:
+    """Our 55-joint positions as the keypoint layout: 49 joints, neck-relative, image axes, noisy bones.
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (frames, 55, 3)
+        Metres, Y up, facing +Z (a :class:`~gesturekit.motion.Motion`'s positions).
+    seed : int
+        Seed of the bone-length noise.
+    noise : float
+        Relative standard deviation of each bone's length per frame.
+
+    Returns
+    -------
+    np.ndarray, shape (frames, 49, 3), float64
+        In the order of :data:`KEYPOINT_NAMES`, metres.
+    """
+    pos = np.asarray(positions, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    # every bone's length scaled per frame, rebuilt along the chains (parents precede children)
+    scale = 1.0 + noise * rng.standard_normal((pos.shape[0], N_JOINTS))
+    noisy = pos.copy()
+    for j in range(N_JOINTS):
+        p = PARENTS[j]
+        if p >= 0:
+            noisy[:, j] = noisy[:, p] + scale[:, j, None] * (pos[:, j] - pos[:, p])
+    noisy = noisy - noisy[:, [joint_index("neck")]]
+    ours = _our_joint_of_column()
+    # a hand root repeats its wrist
+    side = {"l": "left", "r": "right"}
+    columns = [joint_index(ours[c] or f"{side[c[0]]}_wrist") for c in KEYPOINT_NAMES]
+    return noisy[:, columns] @ _TO_IMAGE.T
+
+
+def _wav_bytes(audio: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    with wave.open(buf, "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(AUDIO_SR)
+        w.writeframes(np.clip(np.round(audio * 32767), -32768, 32767).astype("<i2").tobytes())
+    return buf.getvalue()
+
+
+def _array_bytes(array: np.ndarray, fmt: str) -> bytes:
+    buf = io.BytesIO()
+    flat = array.reshape(array.shape[0], -1)
+    if fmt == "npy":
+        np.save(buf, array.astype(np.float32), allow_pickle=False)
+    else:
+        np.savetxt(buf, flat, fmt="%.5f", delimiter="," if fmt == "csv" else " ")
+    return buf.getvalue()
+
+
+def write_keypoint_example(
+    out: str | os.PathLike[str],
+    *,
+    fmt: str = "txt",
+    takes: int = 2,
+    seconds: float = 30.0,
+    seed: int = 0,
+    noise: float = BONE_NOISE,
+) -> list[Path]:
+    """Write takes of the keypoint layout, their speech, and the layout's joint map into ``out``.
+
+    Parameters
+    ----------
+    out : path
+        Folder to write into (created if missing); existing files are not replaced.
+    fmt : {"txt", "csv", "npy"}
+        Format of the position files: whitespace- or comma-separated text, one frame
+        of 49 x 3 numbers per row, or an npy array of shape (frames, 49, 3).
+    takes : int
+        Number of takes (``take_00`` ...), each a demo-speaker take of its own seed.
+    seconds : float
+        Duration of each take, seconds (2-3600).
+    seed : int
+        Non-negative seed: the same seed gives the same files.
+    noise : float
+        Relative standard deviation of each bone's length per frame.
+
+    Returns
+    -------
+    list of Path
+        The files written: ``joint_map.json``, then per take its positions and ``.wav``.
+
+    Raises
+    ------
+    ConfigError
+        A bad option, or a file that already exists.
+    """
+    if fmt not in FORMATS:
+        raise ConfigError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    if not (isinstance(takes, int) and 1 <= takes <= 1000):
+        raise ConfigError(f"--takes must be a whole number from 1 to 1000, got {takes!r}")
+    if not (isinstance(noise, (int, float)) and 0 <= noise < 0.5):
+        raise ConfigError(f"noise must be in [0, 0.5), got {noise!r}")
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = [_write(folder / "joint_map.json", _map_bytes())]
+    seeds = np.random.SeedSequence(seed).generate_state(takes)
+    for k in range(takes):
+        name = f"take_{k:02d}"
+        take, _ = generate_demo_take(seconds=seconds, seed=int(seeds[k]), name=name)
+        array = keypoint_positions(take.motion.positions, seed=int(seeds[k]) + 1, noise=float(noise))
+        data, sound = _array_bytes(array, fmt), _wav_bytes(take.audio)
+        written.append(_write(folder / f"{name}.{fmt}", data))
+        written.append(_write(folder / f"{name}.wav", sound))
+    return written
+
+
+def _write(path: Path, data: bytes) -> Path:
+    def put(f: BinaryIO) -> None:
+        f.write(data)
+
+    return atomic_write(path, put)
+
+
+def _map_bytes() -> bytes:
+    return (json.dumps(keypoint_joint_map(), indent=1) + "\n").encode()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The command line: ``python -m gesturekit.datasets.keypoint_example OUT [options]``."""
+    p = argparse.ArgumentParser(
+        prog="python -m gesturekit.datasets.keypoint_example",
+        description="Write example takes in the layout of keypoints lifted from video (49 joints, Y down).",
+    )
+    p.add_argument("out", help="folder to write into")
+    p.add_argument("--format", default="txt", choices=FORMATS, help="position file format (default txt)")
+    p.add_argument("--takes", type=int, default=2, help="number of takes (default 2)")
+    p.add_argument("--seconds", type=float, default=30.0, help="seconds per take (default 30)")
+    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    args = p.parse_args(argv)
+    try:
+        files = write_keypoint_example(
+            args.out, fmt=args.format, takes=args.takes, seconds=args.seconds, seed=args.seed
+        )
+    except GestureKitError as exc:
+        print(f"keypoint_example: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {len(files)} files to {args.out} ({FPS} fps; joint map: {files[0]})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
