@@ -474,19 +474,19 @@ class MatchingDatabase:
         takes : names of takes to exclude entirely.
         ranges : (take, start_s, end_s) time ranges of takes to exclude.
         """
-        names = self.take_names
-        ti = np.asarray(self.arrays["clip_take"])
-        frame = np.asarray(self.arrays["clip_start"])[:, None] + np.arange(self.clip_frames)[None, :]
         mask = np.zeros((self.n_clips, self.clip_frames), dtype=bool)
+        # a take's clips are consecutive (checked on load): only their rows are touched, so that
+        # at a hundred hours no per-frame temporaries of the whole database are made
         for name in takes:
-            self._take(name)
-            mask[ti == names.index(name)] = True
+            t = self._take(name)
+            mask[t["first_clip"] : t["first_clip"] + t["n_clips"]] = True
         for name, a, b in ranges:
-            self._take(name)
+            t = self._take(name)
             if not b > a:
                 raise ConfigError(f"held-out range {a}-{b} s of {name!r}: end must be after start")
-            t = frame / self.fps
-            mask |= (ti == names.index(name))[:, None] & (t >= a) & (t < b)
+            rows = slice(t["first_clip"], t["first_clip"] + t["n_clips"])
+            sec = (np.asarray(self.arrays["clip_start"][rows])[:, None] + np.arange(self.clip_frames)) / self.fps
+            mask[rows] |= (sec >= a) & (sec < b)
         return mask
 
     # ---- queries ------------------------------------------------------------------------------
