@@ -49,6 +49,35 @@ def best_of(fn, reps: int) -> float:
     return min(ts)
 
 
+def step_vs_matvec(
+    index: SearchIndex, P2: np.ndarray, query: np.ndarray, cfg: SearchConfig, *, runs: int, steps: int = 30
+) -> tuple[float, float, list[float]]:
+    """One search step vs one float32 matrix-vector product over the pose matrix ``P2`` (M T, D).
+
+    Pairs are taken back to back (a search of ``steps`` steps bracketed by products), so
+    both members of a pair see the same machine state; ``P2`` may be memory-mapped (the
+    products then read it from the disk cache, as the search does).
+
+    Returns
+    -------
+    (median seconds per step, median seconds per product, ratio of each pair)
+    """
+    q = np.array(P2[min(12345, P2.shape[0] - 1)], dtype=np.float32)
+    out = np.empty(P2.shape[0], np.float32)
+    part = query[: steps * cfg.segment]
+    ratios, t_steps, gemvs = [], [], []
+    for _ in range(runs):
+        g0 = best_of(lambda: np.dot(P2, q, out=out), 3)
+        t0 = time.perf_counter()
+        r = index.search(part, config=cfg)
+        step = (time.perf_counter() - t0) / r.n_steps
+        g1 = best_of(lambda: np.dot(P2, q, out=out), 3)
+        ratios.append(step / (0.5 * (g0 + g1)))
+        t_steps.append(step)
+        gemvs.append(0.5 * (g0 + g1))
+    return float(np.median(t_steps)), float(np.median(gemvs)), ratios
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--clips", type=int, default=M_OLIVER)
@@ -102,25 +131,11 @@ def main(argv=None):
         f"{peak_batch / 2**20:.1f} MiB -> {(index_bytes + peak_batch) / db_bytes:.1%} (target < 10%)"
     )
 
-    # 2. per step vs one matrix-vector product: pairs taken back to back (a 2 s search
-    # bracketed by products), so both members of a pair see the same machine state
+    # 2. per step vs one matrix-vector product
     P2 = P.reshape(-1, D)
-    q = P2[12345].copy()
-    out = np.empty(P2.shape[0], np.float32)
-    part = query[: 30 * cfg.segment]  # 30 steps
-    ratios, steps, gemvs = [], [], []
-    for _ in range(3 * args.reps):
-        g0 = best_of(lambda: np.dot(P2, q, out=out), 3)
-        t0 = time.perf_counter()
-        r = index.search(part, config=cfg)
-        step = (time.perf_counter() - t0) / r.n_steps
-        g1 = best_of(lambda: np.dot(P2, q, out=out), 3)
-        ratios.append(step / (0.5 * (g0 + g1)))
-        steps.append(step)
-        gemvs.append(0.5 * (g0 + g1))
-    t_step, t_gemv = float(np.median(steps)), float(np.median(gemvs))
+    t_step, t_gemv, ratios = step_vs_matvec(index, P2, query, cfg, runs=3 * args.reps)
     print(
-        f"\n[per step] {cfg.segment} frames per step: {t_step * 1e3:.1f} ms per step (median of {len(steps)} runs of "
+        f"\n[per step] {cfg.segment} frames per step: {t_step * 1e3:.1f} ms per step (median of {len(ratios)} runs of "
         f"30 steps); one float32 matrix-vector product over ({P2.shape[0]}, {D}): {t_gemv * 1e3:.1f} ms; "
         f"ratio per pair: median {np.median(ratios):.2f}x, best {min(ratios):.2f}x (target <= 1.5x)"
     )

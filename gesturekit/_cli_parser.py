@@ -179,6 +179,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="attribute percentiles that define low/high controls (default 15 85)",
     )
     b.add_argument("--no-audio", action="store_true", help="do not keep the takes' audio in the database")
+    b.add_argument(
+        "--audio-format",
+        choices=["pcm", "flac"],
+        help="how the kept audio is stored: pcm (int16, the default) or flac (lossless, about half the size)",
+    )
+    b.add_argument(
+        "--audio-rate",
+        type=int,
+        metavar="HZ",
+        help="sample rate of the kept audio, 4000-16000 Hz (default 16000; lower rates are for listening only)",
+    )
     b.add_argument("--label", help="a description stored with the database")
     b.add_argument("--force", action="store_true", help="replace an existing database")
     b.add_argument("--demo", action="store_true", help="build the generated demo speaker's database")

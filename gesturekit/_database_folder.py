@@ -20,10 +20,12 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from ._database_audio import AudioStorage, encode_take_audio, read_take_audio, take_audio_fields
 from ._io import DATABASE_CLIP_ARRAYS, read_json_marker
 from .control import ATTRIBUTE_NAMES
 from .errors import DatabaseError
 from .features import LAYOUT
+from .motion import AUDIO_SR
 from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
 
 if TYPE_CHECKING:
@@ -66,18 +68,51 @@ def write_database(
             np.save(tmp / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
         stats: dict[str, Any] = {k: np.asarray(v) for k, v in db.stats.items()}
         np.savez(tmp / "stats.npz", **stats)
+        meta = dict(db.meta)
         if db.audio is not None:
-            np.save(tmp / "audio.npy", np.asarray(db.audio), allow_pickle=False)
+            audio, meta = _stored_audio(db)
+            np.save(tmp / "audio.npy", audio, allow_pickle=False)
         if db.overlap is not None:
             (tmp / "overlap").mkdir()
             for k, v in db.overlap.items():
                 np.save(tmp / "overlap" / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
-        meta = dict(db.meta)
         meta["counts"] = {"clips": db.n_clips, "takes": len(db.meta["takes"])}
         # the marker that lets a later --force recognise this folder, written last
         (tmp / "database.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
 
     write_folder(path, "database", fill, overwrite=overwrite, inputs=inputs, locked=locked)
+
+
+def _stored_audio(db: MatchingDatabase) -> tuple[np.ndarray, dict]:
+    """``audio.npy``'s array and ``database.json``'s content for the storage the build asked for.
+
+    A database built in memory holds int16 at 16 kHz; when its build asked for another
+    storage (``audio_format``, ``audio_rate``) each take is encoded here, and the takes'
+    audio entries and the ``"audio"`` entry are written for it. A database that holds
+    what its build asked for is written as it is.
+    """
+    meta = dict(db.meta)
+    held = AudioStorage.from_meta(meta)
+    build = meta.get("build", {})
+    wanted = AudioStorage(format=build.get("audio_format", "pcm"), rate=build.get("audio_rate", AUDIO_SR))
+    audio = np.asarray(db.audio)
+    if wanted == held:
+        return audio, meta
+    parts, takes, offset = [], [], 0
+    for t in meta["takes"]:
+        # the default holds the int16 samples themselves: encoded from them, with no round trip through float
+        a0 = t["audio_offset"]
+        samples = audio[a0 : a0 + t["audio_samples"]] if held.is_default else read_take_audio(audio, t, held)
+        encoded = encode_take_audio(samples, wanted)
+        parts.append(encoded.data)
+        entry = {k: v for k, v in t.items() if k != "audio_size"}
+        takes.append({**entry, **take_audio_fields(encoded, offset, wanted)})
+        offset += encoded.data.size
+    meta["takes"] = takes
+    meta.pop("audio", None)
+    if wanted.to_meta() is not None:
+        meta["audio"] = wanted.to_meta()
+    return (np.concatenate(parts) if parts else np.zeros(0, wanted.dtype)), meta
 
 
 def _check_finite(db: MatchingDatabase, path: Path) -> None:
@@ -151,10 +186,13 @@ def read_database(path: Path, *, mmap: bool) -> dict:
     if overlap is not None:
         _check_arrays(meta, overlap, stats, path, where="overlap/")
     if audio is not None:
-        need = max((t["audio_offset"] + t["audio_samples"] for t in meta["takes"]), default=0)
-        if audio.ndim != 1 or audio.dtype != np.int16 or audio.shape[0] < need:
+        storage = AudioStorage.from_meta(meta)
+        size = "audio_samples" if storage.is_default else "audio_size"
+        need = max((t["audio_offset"] + t[size] for t in meta["takes"]), default=0)
+        what = "int16 samples" if storage.format == "pcm" else "uint8 bytes of FLAC streams"
+        if audio.ndim != 1 or audio.dtype != storage.dtype or audio.shape[0] < need:
             raise DatabaseError(
-                f"audio.npy must be int16 samples, at least {need} of them; found {audio.dtype} of shape {audio.shape}",
+                f"audio.npy must be {what}, at least {need} of them; found {audio.dtype} of shape {audio.shape}",
                 path=path,
             )
     return {"meta": meta, "arrays": arrays, "stats": stats, "audio": audio, "overlap": overlap}
@@ -216,6 +254,14 @@ def _check_meta(meta: dict, path: Path) -> None:
         for key in ("n_frames", "first_clip", "n_clips", "audio_offset", "audio_samples"):
             if not (_is_int(t.get(key)) and t[key] >= 0):
                 raise bad(f"takes[{i}].{key} must be an integer >= 0, found {t.get(key)!r}")
+    try:
+        storage = AudioStorage.from_meta(meta)
+    except DatabaseError as exc:
+        raise DatabaseError(exc.problem, path=path) from None
+    if not storage.is_default:
+        for i, t in enumerate(takes):
+            if not (_is_int(t.get("audio_size")) and t["audio_size"] >= 0):
+                raise bad(f"takes[{i}].audio_size must be an integer >= 0, found {t.get('audio_size')!r}")
     joints = meta.get("joints")
     if joints is not None:
         try:

@@ -102,6 +102,7 @@ def _cmd_build_db(args) -> int:
             percentiles=tuple(args.percentiles),
             store_audio=not args.no_audio,
             label=args.label or "",
+            **_audio_options(args),
         )
         with output_lock(out), _stage_bars() as bar:  # the bar shows once the first take is read
             db = build_database(
@@ -130,6 +131,21 @@ def _print_readings(db: MatchingDatabase) -> None:
 
     for line in reading_lines(db.meta.get("takes", [])):
         print(line)
+
+
+def _audio_options(args) -> dict:
+    """``--audio-format`` and ``--audio-rate`` as BuildConfig fields, checked against each other and ``--no-audio``."""
+    from ._database_audio import MIN_AUDIO_RATE, AudioStorage
+    from .motion import AUDIO_SR
+
+    given = {k: v for k, v in (("audio_format", args.audio_format), ("audio_rate", args.audio_rate)) if v is not None}
+    if given and args.no_audio:
+        named = " and ".join("--" + k.replace("_", "-") for k in given)
+        raise ConfigError(f"{named} choose how the audio is kept, but --no-audio keeps none; give one or the other")
+    if args.audio_rate is not None and not MIN_AUDIO_RATE <= args.audio_rate <= AUDIO_SR:
+        raise ConfigError(f"--audio-rate {args.audio_rate}: the rate must be {MIN_AUDIO_RATE} to {AUDIO_SR} Hz")
+    AudioStorage(**{k.removeprefix("audio_"): v for k, v in given.items()})
+    return given
 
 
 def _cmd_info(args) -> int:

@@ -18,7 +18,7 @@ On disk a database is a folder::
     pose_track.npy (M,70,24) raw feature-joint positions of frames s..s+69
     clip_take.npy, clip_start.npy (M,)  take index and start frame of each clip
     stats.npz            z-scoring statistics (F, P, A)
-    audio.npy            all takes' audio, int16 at 16 kHz (optional)
+    audio.npy            all takes' audio, int16 at 16 kHz, a lower rate or FLAC (optional; _database_audio)
     overlap/             the overlapping cut, same arrays per window (optional)
 
 Every array is a plain ``.npy`` (memory-mapped on load, never pickled); the
@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
+from ._database_audio import AudioStorage, read_take_audio
 from ._database_folder import CLIP_ARRAYS, FORMAT, FORMAT_VERSION, read_database, write_database
 from ._version import __version__
 from .control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, frame_attributes
@@ -76,6 +77,11 @@ class BuildConfig:
         Percentiles of each control attribute that define "low" and "high".
     store_audio : bool
         Keep the takes' audio (int16) so clips can be listened to.
+    audio_format : {"pcm", "flac"}
+        How the kept audio is stored: raw int16 samples, or FLAC (lossless, smaller).
+    audio_rate : int
+        Sample rate of the kept audio, Hz (4000 to 16000; below 16000 the audio is for
+        browsing only: it is resampled back to 16 kHz when read). See :mod:`gesturekit._database_audio`.
     label : str
         A description shown to users (e.g. that the data is generated).
     source : str
@@ -91,8 +97,10 @@ class BuildConfig:
     label: str = ""
     source: str = ""
     joint_map: str | None = None
+    audio_format: str = "pcm"
+    audio_rate: int = AUDIO_SR
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.clip_frames < 16:
             raise ConfigError(f"clip_frames must be at least 16, got {self.clip_frames}")
         if self.overlap_stride is not None and not 1 <= self.overlap_stride <= self.clip_frames:
@@ -101,6 +109,9 @@ class BuildConfig:
         if not 0 <= lo < hi <= 100:
             raise ConfigError(f"percentiles must satisfy 0 <= low < high <= 100, got {self.percentiles}")
         self.percentiles = (float(lo), float(hi))
+        storage = AudioStorage(format=self.audio_format, rate=self.audio_rate)  # checks both
+        if not self.store_audio and not storage.is_default:
+            raise ConfigError("an audio format or rate was given, but the database keeps no audio (store_audio=False)")
 
 
 @dataclass
@@ -423,13 +434,17 @@ class MatchingDatabase:
         return "\n".join(lines)
 
     # ---- audio of the database -------------------------------------------------------------
+    @property
+    def audio_storage(self) -> AudioStorage:
+        """How :attr:`audio` holds the takes' audio (int16 at 16 kHz, a lower rate, or FLAC)."""
+        return AudioStorage.from_meta(self.meta)
+
     def take_audio(self, take: int | str) -> np.ndarray:
-        """A take's audio, float32 at 16 kHz (requires a database built with ``store_audio``)."""
+        """A take's audio, float32 at 16 kHz, shape (samples,), whatever form it is stored in
+        (requires a database built with ``store_audio``; see :mod:`gesturekit._database_audio`)."""
         if self.audio is None:
             raise DatabaseError("this database was built without audio (store_audio=False)")
-        t = self._take(take)
-        a = np.asarray(self.audio[t["audio_offset"] : t["audio_offset"] + t["audio_samples"]])
-        return a.astype(np.float32) / 32767.0
+        return read_take_audio(self.audio, self._take(take), self.audio_storage, path=self.path)
 
     def segment_audio(self, clip: int, start: int, n_frames: int) -> np.ndarray:
         """Audio of frames ``start .. start+n_frames`` of a clip, float32 at 16 kHz."""
@@ -459,19 +474,19 @@ class MatchingDatabase:
         takes : names of takes to exclude entirely.
         ranges : (take, start_s, end_s) time ranges of takes to exclude.
         """
-        names = self.take_names
-        ti = np.asarray(self.arrays["clip_take"])
-        frame = np.asarray(self.arrays["clip_start"])[:, None] + np.arange(self.clip_frames)[None, :]
         mask = np.zeros((self.n_clips, self.clip_frames), dtype=bool)
+        # a take's clips are consecutive (checked on load): only their rows are touched, so that
+        # at a hundred hours no per-frame temporaries of the whole database are made
         for name in takes:
-            self._take(name)
-            mask[ti == names.index(name)] = True
+            t = self._take(name)
+            mask[t["first_clip"] : t["first_clip"] + t["n_clips"]] = True
         for name, a, b in ranges:
-            self._take(name)
+            t = self._take(name)
             if not b > a:
                 raise ConfigError(f"held-out range {a}-{b} s of {name!r}: end must be after start")
-            t = frame / self.fps
-            mask |= (ti == names.index(name))[:, None] & (t >= a) & (t < b)
+            rows = slice(t["first_clip"], t["first_clip"] + t["n_clips"])
+            sec = (np.asarray(self.arrays["clip_start"][rows])[:, None] + np.arange(self.clip_frames)) / self.fps
+            mask[rows] |= (sec >= a) & (sec < b)
         return mask
 
     # ---- queries ------------------------------------------------------------------------------

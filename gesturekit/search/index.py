@@ -491,11 +491,13 @@ class SearchIndex:
                 adm, _ = step_key(b, 0)
                 if not adm.any():
                     adm, _ = step_key(b, 0, relaxed=True)
-                flat = np.flatnonzero(adm)
-                if flat.size == 0:
+                # the k-th admissible frame in clip order, found per clip (no index of every frame)
+                before = np.cumsum(adm.sum(axis=1))
+                if before[-1] == 0:
                     raise ConfigError("no admissible database frame to draw the initial pose from")
-                pick = int(flat[int(np.random.default_rng(cfg.seed).integers(flat.size))])
-                init_frame = divmod(pick, T)
+                k = int(np.random.default_rng(cfg.seed).integers(int(before[-1])))
+                clip = int(np.searchsorted(before, k, side="right"))
+                init_frame = (clip, int(np.flatnonzero(adm[clip])[k - (int(before[clip - 1]) if clip else 0)]))
                 init_pose = self.P[init_frame]
             else:
                 init_frame = (-1, -1)

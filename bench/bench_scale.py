@@ -1,0 +1,382 @@
+"""Scale benchmark: build and search a database of H hours of demo takes written to disk as BVH and wav.
+
+The demo speaker's takes are written as BVH files (30 fps, so reading and resampling
+them is timed as for captured data) and 16 kHz wav files to a temporary folder; then
+for two sizes, H/2 and H hours, it prints, measured in this one run:
+
+* the build (``gesturekit.workspace.build_database``, in a subprocess) with 1 worker
+  and with all workers (where the build takes ``workers``), as a multiple of real
+  time, and its peak resident memory (the process, and its largest worker);
+* the database's size on disk and the stored audio's share of it (and what FLAC or
+  8 kHz storage would make of it);
+* the time to open it, a search step vs one float32 matrix-vector product over the
+  pose matrix read from the disk cache (target <= 1.5x), 60 s of speech end to end
+  (``synthesize``) vs 113 such products (target <= 1.6x), and the memory the search
+  allocates beyond the database (target < 10 %);
+
+then a projection to 100 hours from the slope between the two sizes. With
+``--tile-hours T`` the search figures are also measured on the larger database
+repeated to T hours on disk (the clips repeat; the search's work does not depend on it).
+
+Usage: python bench/bench_scale.py --hours 1 [--workers N] [--keep] [--tile-hours 100]
+"""
+
+from __future__ import annotations
+
+import argparse
+import filecmp
+import inspect
+import json
+import math
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import tracemalloc
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from bench_search import best_of, step_vs_matvec
+
+FPS_BVH = 30.0
+STEPS_60S = 113  # 60 s of speech at 15 fps in steps of 8 frames
+
+# the build, in a fresh process so that its peak resident memory is its own
+_CHILD = """
+import inspect, json, resource, sys, time
+from gesturekit.workspace import build_database
+a = json.loads(sys.argv[1])
+kw = {"workers": a["workers"]} if "workers" in inspect.signature(build_database).parameters else {}
+t0 = time.perf_counter()
+db = build_database(a["folder"], a["out"], joint_map=a["map"], **kw)
+dt = time.perf_counter() - t0
+kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+print(json.dumps({"seconds": dt, "rss": kb[0] * 1024, "rss_workers": kb[1] * 1024, "clips": db.n_clips}))
+"""
+
+
+def machine() -> str:
+    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+    return (
+        f"machine: {os.cpu_count()} cores, {mem:.0f} GiB RAM, {platform.machine()}, GPU none (CPU only); "
+        f"python {platform.python_version()}, numpy {np.__version__}; "
+        f"load average {' '.join(f'{x:.1f}' for x in os.getloadavg())}"
+    )
+
+
+def _write_take(job: tuple[Path, str, float, int]) -> float:
+    """Write one demo take as ``name.bvh`` (30 fps) and ``name.wav`` (16 kHz int16); returns its seconds."""
+    import soundfile as sf
+
+    from gesturekit.datasets.synthetic import generate_demo_take
+    from gesturekit.export.bvh import write_bvh
+    from gesturekit.motion import Motion, resample_positions
+
+    folder, name, seconds, seed = job
+    take, _ = generate_demo_take(seconds=seconds, seed=seed, name=name)
+    pos = resample_positions(take.motion.positions, take.motion.fps, FPS_BVH).astype(np.float32)
+    write_bvh(folder / f"{name}.bvh", Motion(pos, FPS_BVH))
+    sf.write(folder / f"{name}.wav", take.audio, 16000, subtype="PCM_16")
+    return seconds
+
+
+def write_takes(root: Path, hours: float, take_seconds: float, workers: int) -> tuple[Path, Path, float, float]:
+    """Takes of ``hours`` in ``root/all`` and hard links to the first half of them in ``root/half``.
+
+    Returns (half folder, all folder, seconds in half, seconds in all).
+    """
+    n = max(2, round(hours * 3600 / take_seconds))
+    half, full = root / "half", root / "all"
+    half.mkdir()
+    full.mkdir()
+    jobs = [(full, f"take{k:05d}", take_seconds, 1000 + k) for k in range(n)]
+    with ProcessPoolExecutor(workers) as pool:
+        secs = list(pool.map(_write_take, jobs))
+    for _, name, _, _ in jobs[: n // 2]:
+        for ext in (".bvh", ".wav"):
+            os.link(full / f"{name}{ext}", half / f"{name}{ext}")
+    return half, full, float(sum(secs[: n // 2])), float(sum(secs))
+
+
+def joint_map(root: Path) -> Path:
+    """A JSON joint map for the BVH files gesturekit writes (its own joint names)."""
+    from gesturekit.skeleton import JOINT_NAMES
+
+    path = root / "gesturekit-joints.json"
+    path.write_text(json.dumps({"pelvis": JOINT_NAMES[0], "joints": {n: n for n in JOINT_NAMES}}))
+    return path
+
+
+def build(folder: Path, out: Path, jmap: Path, workers: int | None) -> dict:
+    arg = json.dumps({"folder": str(folder), "out": str(out), "map": str(jmap), "workers": workers})
+    run = subprocess.run([sys.executable, "-c", _CHILD, arg], capture_output=True, text=True, check=False)
+    if run.returncode != 0:
+        raise SystemExit(f"the build of {folder} failed:\n{run.stderr[-3000:]}")
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def folder_bytes(path: Path) -> int:
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+
+
+def anon_rss() -> int:
+    """Resident memory not backed by files (the database's memory-mapped pages are not in it), bytes."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("RssAnon:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+class AnonPeak:
+    """The largest :func:`anon_rss` seen while the block runs, sampled every 2 ms."""
+
+    def __enter__(self) -> AnonPeak:
+        self.base = self.peak = anon_rss()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+        return self
+
+    def _watch(self) -> None:
+        while not self._stop.wait(0.002):
+            self.peak = max(self.peak, anon_rss())
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, anon_rss())
+
+
+def audio_options(path: Path) -> str:
+    """What FLAC and 8 kHz storage would make of the stored audio, encoded take by take."""
+    from gesturekit._database_audio import AudioStorage, encode_take_audio
+    from gesturekit.database import MatchingDatabase
+
+    db = MatchingDatabase.load(path)
+    if db.audio is None:
+        return "no audio stored"
+    raw = int(db.audio.nbytes)
+    sizes = {}
+    for s in (AudioStorage("flac"), AudioStorage("pcm", 8000), AudioStorage("flac", 8000)):
+        sizes[s] = sum(
+            encode_take_audio(db.audio[t["audio_offset"] :][: t["audio_samples"]], s).data.nbytes
+            for t in db.meta["takes"]
+        )
+    return ", ".join(f"{s.format} {s.rate // 1000} kHz {n / raw:.0%}" for s, n in sizes.items()) + " of int16 16 kHz"
+
+
+def search_figures(path: Path, runs: int) -> dict:
+    """Open, per step vs mat-vec, 60 s end to end, and memory beyond the database, on the database at ``path``."""
+    from gesturekit.database import MatchingDatabase
+    from gesturekit.datasets.synthetic import generate_demo_take
+    from gesturekit.search import SearchConfig, SearchIndex
+    from gesturekit.synthesize import synthesize
+
+    speech = generate_demo_take(seconds=60.0, seed=7, name="query")[0].audio
+    # compiled kernels and lazy imports load outside the measurements, on another instance of the database
+    synthesize(speech[: 4 * 16000], db=MatchingDatabase.load(path))
+    t_open = best_of(lambda: MatchingDatabase.load(path), 3)
+    db = MatchingDatabase.load(path)
+    P2 = db.P.reshape(-1, db.P.shape[-1])
+    searched = P2.nbytes + db.F.nbytes + db.valid.nbytes
+    for a in (db.P, db.F, db.valid, db.G, db.attributes):  # into the disk cache, as a database in use is
+        for i in range(0, a.shape[0], 4096):
+            np.asarray(a[i : i + 4096]).max()
+    tracemalloc.start()
+    with AnonPeak() as mem:
+        t0 = time.perf_counter()
+        first = synthesize(speech, db=db)  # prepares the search index (kept with the database)
+        t_first = time.perf_counter() - t0
+    traced = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    index = db.__dict__["_search_index"]
+    assert isinstance(index, SearchIndex) and np.may_share_memory(index._P3, db.P), "the index copied the pose matrix"
+    t_e2e = best_of(lambda: synthesize(speech, db=db), 2)
+    cfg = SearchConfig(k=0, segment=8, seed=1)
+    query = first.plan.query
+    t_step, t_gemv, ratios = step_vs_matvec(index, P2, query, cfg, runs=runs)
+    return {
+        "open": t_open,
+        "frames": P2.shape[0],
+        "searched": searched,
+        "folder": folder_bytes(path),
+        "step": t_step,
+        "gemv": t_gemv,
+        "ratio": float(np.median(ratios)),
+        "e2e": t_e2e,
+        "e2e_first": t_first,
+        "traced": traced,
+        "anon": mem.peak - mem.base,
+    }
+
+
+def tile(src: Path, dst: Path, hours: float) -> Path:
+    """``src`` (without its audio and overlapping cut) repeated to at least ``hours`` of clips at ``dst``."""
+    from gesturekit._database_folder import CLIP_ARRAYS
+
+    meta = json.loads((src / "database.json").read_text())
+    ct = np.load(src / "clip_take.npy", allow_pickle=False)
+    M, n_takes = ct.shape[0], len(meta["takes"])
+    reps = max(1, math.ceil(hours * 3600 * 15 / (M * meta["build"]["clip_frames"])))
+    dst.mkdir()
+    for k in CLIP_ARRAYS + ("clip_take", "clip_start"):
+        a = np.load(src / f"{k}.npy", mmap_mode="r", allow_pickle=False)
+        out = np.lib.format.open_memmap(dst / f"{k}.npy", mode="w+", dtype=a.dtype, shape=(M * reps,) + a.shape[1:])
+        for r in range(reps):
+            out[r * M : (r + 1) * M] = a + r * n_takes if k == "clip_take" else a
+        out.flush()
+        del out
+    shutil.copy(src / "stats.npz", dst / "stats.npz")
+    takes = []
+    for r in range(reps):
+        for t in meta["takes"]:
+            entry = {k: v for k, v in t.items() if k != "audio_size"}
+            takes.append({**entry, "name": f"{t['name']}~{r}", "first_clip": t["first_clip"] + r * M})
+            takes[-1].update(audio_offset=0, audio_samples=0)
+    meta.update(takes=takes, counts={"clips": M * reps, "takes": len(takes)})
+    meta["build"].update(store_audio=False, overlap_stride=None)
+    meta.pop("audio", None)
+    (dst / "database.json").write_text(json.dumps(meta))
+    return dst
+
+
+def _fmt_bytes(n: float) -> str:
+    return f"{n / 2**30:.2f} GiB" if abs(n) >= 2**30 else f"{n / 2**20:.0f} MiB"
+
+
+def print_search(label: str, s: dict) -> None:
+    print(
+        f"  {label}: {s['frames'] / 1e6:.2f} M frames; opened in {s['open'] * 1e3:.0f} ms; "
+        f"step {s['step'] * 1e3:.1f} ms vs mat-vec {s['gemv'] * 1e3:.1f} ms = {s['ratio']:.2f}x (target <= 1.5x); "
+        f"60 s of speech {s['e2e']:.2f} s = {s['e2e'] / (STEPS_60S * s['gemv']):.2f}x 113 mat-vecs (target <= 1.6x; "
+        f"first call, index prepared: {s['e2e_first']:.2f} s)"
+    )
+    print(
+        f"    memory beyond the database during the first synthesis: numpy {_fmt_bytes(s['traced'])}, "
+        f"anonymous RSS {_fmt_bytes(s['anon'])} = {max(s['traced'], s['anon']) / s['searched']:.1%} of the "
+        f"searched arrays P, F, valid ({_fmt_bytes(s['searched'])}), "
+        f"{max(s['traced'], s['anon']) / s['folder']:.1%} of the folder (target < 10 %)"
+    )
+
+
+def project(a: dict, b: dict, hours: float = 100.0) -> None:
+    """Print each figure at ``hours`` on the line through its values at the two measured sizes."""
+    print(f"\n[projection to {hours:g} h from the slope between {a['hours']:.2f} h and {b['hours']:.2f} h]")
+
+    def at(get, clamp: bool = False) -> float:
+        slope = (get(b) - get(a)) / (b["hours"] - a["hours"])
+        if slope < 0:  # noise larger than the difference: nothing grows measurably, or the sizes are too small
+            return get(b) if clamp else float("nan")
+        return get(b) + slope * (hours - b["hours"])
+
+    for w in sorted({int(k[5:]) for k in b if k.startswith("build")}):
+        t = at(lambda r, w=w: r[f"build{w}"])
+        print(
+            f"  build, {w} worker{'s' * (w > 1)}: {t / 3600:.2f} h = {hours * 3600 / t:.0f}x real time; "
+            f"peak RSS {_fmt_bytes(at(lambda r, w=w: r[f'rss{w}']))}"
+        )
+    extra = at(lambda r: r["search"]["traced"], clamp=True)
+    searched = at(lambda r: r["search"]["searched"])
+    print(
+        f"  on disk {_fmt_bytes(at(lambda r: r['size']))}; memory beyond the database during a synthesis "
+        f"(numpy's allocations) {_fmt_bytes(extra)} = {extra / searched:.1%} of P, F, valid ({_fmt_bytes(searched)})"
+    )
+    if a["search"]["searched"] < 2**28:  # the mat-vec still runs from the processor's caches
+        print("  search: the smaller size is too small to project from (under 256 MiB of P, F); see --tile-hours")
+        return
+    step, e2e, gemv = (at(lambda r, k=k: r["search"][k]) for k in ("step", "e2e", "gemv"))
+    print(
+        f"  search step {step * 1e3:.0f} ms vs mat-vec {gemv * 1e3:.0f} ms = {step / gemv:.2f}x; "
+        f"60 s of speech {e2e:.1f} s = {e2e / (STEPS_60S * gemv):.2f}x 113 mat-vecs "
+        "(nan: no slope could be measured)"
+    )
+
+
+def same_bytes(x: Path, y: Path) -> bool:
+    """Whether two database folders hold the same files with the same bytes."""
+    fx = sorted(p.relative_to(x) for p in x.rglob("*") if p.is_file())
+    if fx != sorted(p.relative_to(y) for p in y.rglob("*") if p.is_file()):
+        return False
+    return all(filecmp.cmp(x / f, y / f, shallow=False) for f in fx)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--hours", type=float, default=1.0, help="hours of takes (the smaller size is half)")
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="workers of the parallel build")
+    ap.add_argument("--take-seconds", type=float, default=120.0, help="length of each take")
+    ap.add_argument("--tile-hours", type=float, help="also search the database repeated to this many hours")
+    ap.add_argument("--runs", type=int, default=5, help="pairs of (search, mat-vec) timed per size")
+    ap.add_argument("--keep", action="store_true", help="keep the takes and databases (the folder is printed)")
+    ap.add_argument("--dir", help="where to make the temporary folder (default: the system's)")
+    args = ap.parse_args(argv)
+    if not args.hours > 0 or args.workers < 1:
+        ap.error("--hours must be positive and --workers at least 1")
+
+    from gesturekit.workspace import build_database
+
+    parallel = "workers" in inspect.signature(build_database).parameters
+    print(machine())
+    root = Path(tempfile.mkdtemp(prefix="gesturekit-scale-", dir=args.dir))
+    try:
+        t0 = time.perf_counter()
+        half, full, s_half, s_full = write_takes(root, args.hours, args.take_seconds, args.workers)
+        jmap = joint_map(root)
+        print(
+            f"takes: {len(list(full.glob('*.bvh')))} of {args.take_seconds:g} s as BVH ({FPS_BVH:g} fps) + wav "
+            f"({_fmt_bytes(folder_bytes(full))}), written in {time.perf_counter() - t0:.0f} s to {root}"
+        )
+        if not parallel:
+            print("  (this build takes no workers: the build with all workers is not run)")
+        rows = []
+        for label, folder, secs in (("half", half, s_half), ("all", full, s_full)):
+            hours = secs / 3600
+            print(f"\n[{hours:.2f} h: {folder.name}]")
+            row: dict = {"hours": hours}
+            for w in [1, args.workers] if parallel and args.workers > 1 else [1]:
+                out = root / f"db-{label}-{w}"
+                b = build(folder, out, jmap, w)
+                row[f"build{w}"], row[f"rss{w}"] = b["seconds"], max(b["rss"], b["rss_workers"])
+                print(
+                    f"  build, {w} worker{'s' * (w > 1)}: {b['seconds']:.1f} s = {secs / b['seconds']:.0f}x real time; "
+                    f"peak RSS {_fmt_bytes(b['rss'])}"
+                    + (f" (largest worker {_fmt_bytes(b['rss_workers'])})" if w > 1 else "")
+                    + "; "
+                    f"{b['clips']} clips"
+                    + (f"; the same bytes as with 1 worker: {same_bytes(root / f'db-{label}-1', out)}" if w > 1 else "")
+                )
+                if w > 1:
+                    shutil.rmtree(out)
+            db_path = root / f"db-{label}-1"
+            size, audio = folder_bytes(db_path), (db_path / "audio.npy").stat().st_size
+            row["size"] = size
+            other = f"; stored otherwise: {audio_options(db_path)}" if label == "all" else ""
+            print(f"  on disk {_fmt_bytes(size)}, of which audio {_fmt_bytes(audio)} ({audio / size:.0%}){other}")
+            row["search"] = search_figures(db_path, args.runs)
+            print_search("search", row["search"])
+            rows.append(row)
+
+        project(*rows)
+        if args.tile_hours:
+            t0 = time.perf_counter()
+            tiled = tile(root / "db-all-1", root / "db-tiled", args.tile_hours)
+            print(
+                f"\n[{args.tile_hours:g} h: the {rows[-1]['hours']:.2f} h database repeated, written in "
+                f"{time.perf_counter() - t0:.0f} s, {_fmt_bytes(folder_bytes(tiled))} without audio]"
+            )
+            print_search("search", search_figures(tiled, args.runs))
+    finally:
+        if args.keep:
+            print(f"\nkept: {root}")
+        else:
+            shutil.rmtree(root, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
