@@ -62,10 +62,11 @@ def recorded_joint_map(out: str | os.PathLike[str]) -> str | None:
 
 def _append_config(build: dict[str, Any], given: BuildConfig | None, out: Path) -> BuildConfig:
     """The database's build options, checked against those given for the new takes."""
+    lo, hi = build.get("percentiles") or (15.0, 85.0)
     old = BuildConfig(
         clip_frames=int(build["clip_frames"]),
         overlap_stride=build.get("overlap_stride"),
-        percentiles=tuple(build.get("percentiles", (15.0, 85.0))),  # type: ignore[arg-type]  # checked by BuildConfig
+        percentiles=(float(lo), float(hi)),
         store_audio=bool(build.get("store_audio", True)),
         label=str(build.get("label", "")),
         source=str(build.get("source", "")),
@@ -193,8 +194,9 @@ def build_from_sources(
             base["path"] = out
             config = _append_config(base["meta"]["build"], config, out)
             old_names = tuple(t["name"] for t in base["meta"]["takes"])
-            new = [(s, None, old_names) for s in sources if s.kind == "habibie2021" or s.motion.stem not in old_names]
-            units = new if keep_stats else [(s, o, ()) for s, o in _recorded_sources(base["meta"]["takes"], out)] + new
+            units = [(s, None, old_names) for s in sources if s.kind == "habibie2021" or s.motion.stem not in old_names]
+            if not keep_stats:
+                units = [(s, o, ()) for s, o in _recorded_sources(base["meta"]["takes"], out)] + units
         else:
             config = config or BuildConfig()
             units = [(s, None, ()) for s in sources]
@@ -214,12 +216,15 @@ def build_from_sources(
         ]
         staged = _stage(jobs, count_takes([s for s, _, _ in units]), workers, scheduler, on_progress, say)
         staged.sort(key=lambda s: s.name)
+        n_new = 0
         if append and base is not None:
             n_new = sum(1 for s in staged if s.name not in old_names)
             if n_new == 0:
                 say(f"nothing to append: the database at {out} holds every take of the folder already")
                 remove_staging(staging)
                 return
+        elif not staged:
+            raise ConfigError("no takes to build a database from")
         cfg = config
 
         def fill(tmp: Path) -> None:
@@ -267,8 +272,6 @@ def _stage(
             on_progress(BuildProgress(len(staged), max(total, len(staged)), name, seconds, reused))
 
     run_jobs(jobs, workers=workers, scheduler=scheduler, on_result=on_result)
-    if not staged:
-        raise ConfigError("no takes to build a database from")
     if reused:
         say(f"reused {reused} takes staged by an interrupted build")
     return staged

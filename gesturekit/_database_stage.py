@@ -383,7 +383,7 @@ def stage_job(job: StageJob) -> dict[str, Any]:
     tmp = staging / f"{job.key}.tmp-{uuid.uuid4().hex[:12]}"
     tmp.mkdir()
     try:
-        records = []
+        records: list[dict[str, Any]] = []
         with collect_warnings() as messages:
             for take in iter_takes([job.source], **job.reading):
                 if take.name in job.skip or (job.only is not None and take.name not in job.only):

@@ -6,6 +6,7 @@ Every command turns errors of the gesturekit family into one line on stderr
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import math
 import sys
@@ -139,7 +140,7 @@ def _cmd_build_db(args) -> int:
     return _done(args, "built")
 
 
-def _check_scale_options(args) -> None:
+def _check_scale_options(args: argparse.Namespace) -> None:
     """``--workers``, ``--scheduler``, ``--append`` and ``--keep-stats`` make sense together."""
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be a positive number of processes, got {args.workers}")
@@ -153,7 +154,7 @@ def _check_scale_options(args) -> None:
         raise ConfigError("give either --append (add takes to the database) or --force (replace it), not both")
 
 
-def _build_options_given(args) -> bool:
+def _build_options_given(args: argparse.Namespace) -> bool:
     """Whether build options other than the defaults were given (with --append they must match the database's)."""
     return args.overlap_stride is not None or args.no_audio or tuple(args.percentiles) != (15.0, 85.0)
 
