@@ -29,11 +29,14 @@ Staged unit ``KEY/``::
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import shutil
+import threading
 import uuid
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -214,6 +217,24 @@ def cut(tf: TakeFeatures, starts: np.ndarray, length: int, track_len: int) -> di
 # ---- one take -----------------------------------------------------------------------------------
 
 
+_FEATURES_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _one_blas_thread() -> Iterator[None]:
+    """numpy's BLAS held to one thread while a take is featurised, then as it was.
+
+    A matrix product's last bits depend on how many threads share it: a database must not
+    depend on the machine's cores, the number of workers or other threads' settings. The
+    limit is process-wide in some BLAS builds, so threads of one process (a Dask worker's)
+    featurise one at a time (reading the files, the longer part, still overlaps).
+    """
+    from threadpoolctl import threadpool_limits
+
+    with _FEATURES_LOCK, threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
 def _moments(x: np.ndarray) -> np.ndarray:
     """(2, dims) float64: the mean and the sum of squared deviations of the rows of ``x`` (zeros for none)."""
     if x.shape[0] == 0:
@@ -243,7 +264,8 @@ def stage_take(take: Take, folder: Path, index: int, config: BuildConfig) -> dic
     ConfigError
         The take has NaN positions, non-finite features, or no frame.
     """
-    tf = take_features(take)
+    with _one_blas_thread():
+        tf = take_features(take)
     if np.isnan(tf.positions).any():
         raise ConfigError(f"take {take.name!r} has NaN positions")
     L = config.clip_frames
