@@ -137,7 +137,9 @@ def run_jobs(
     import multiprocessing
 
     # fresh interpreters: nothing of the caller's threads or state is inherited
-    pool = cf.ProcessPoolExecutor(max_workers=min(n, len(jobs)), mp_context=multiprocessing.get_context("spawn"))
+    pool = cf.ProcessPoolExecutor(
+        max_workers=min(n, len(jobs)), mp_context=multiprocessing.get_context("spawn"), initializer=_worker_setup
+    )
     try:
         pending = {pool.submit(stage_job, job): job for job in jobs}
         for fut in cf.as_completed(pending):
@@ -149,6 +151,14 @@ def run_jobs(
         ) from None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _worker_setup() -> None:
+    """A build worker process computes with one thread: the processes share the cores, and idle
+    BLAS threads of several processes would spin against each other."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1)
 
 
 # ---- second pass ------------------------------------------------------------------------------------
