@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from ._database_build import BuildProgress, StagedTake, assemble, reemit, run_jobs
 from ._database_folder import read_database
-from ._database_stage import BuildConfig, StageJob, job_key, open_staging, remove_staging, staging_folder
+from ._database_stage import BuildConfig, StageJob, job_key, open_staging, remove_staging, staged_takes, staging_folder
 from .errors import ConfigError, DatabaseError, InputFileError
 
 if TYPE_CHECKING:
@@ -214,7 +214,14 @@ def build_from_sources(
             )
             for s, only, skip in units
         ]
-        staged = _stage(jobs, count_takes([s for s, _, _ in units]), workers, scheduler, on_progress, say)
+        try:
+            staged = _stage(jobs, count_takes([s for s, _, _ in units]), workers, scheduler, on_progress, say)
+        except BaseException:
+            # kept for the next run to resume from, unless nothing was staged (a first take that fails
+            # leaves nothing behind)
+            if not any(staged_takes(staging, j.key) is not None for j in jobs):
+                remove_staging(staging)
+            raise
         staged.sort(key=lambda s: s.name)
         n_new = 0
         if append and base is not None:
