@@ -116,7 +116,7 @@ def run_jobs(
         from ._optional import require
 
         distributed = require("distributed", purpose="building a database on a Dask cluster (--scheduler)")
-        client = scheduler if isinstance(scheduler, distributed.Client) else distributed.Client(scheduler)
+        client = scheduler if isinstance(scheduler, distributed.Client) else _connect(distributed, scheduler)
         try:
             futures = client.map(stage_job, list(jobs), key=[f"gesturekit-stage-{j.key}" for j in jobs], pure=False)
             by_key = {f.key: j for f, j in zip(futures, jobs)}
@@ -151,6 +151,19 @@ def run_jobs(
         ) from None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+#: How long to try reaching a Dask scheduler before giving up.
+SCHEDULER_TIMEOUT = "30s"
+
+
+def _connect(distributed: Any, address: str) -> Client:
+    """A client of the Dask scheduler at ``address``; a scheduler that cannot be reached is a
+    :class:`~gesturekit.errors.ConfigError` naming the address."""
+    try:
+        return distributed.Client(address, timeout=SCHEDULER_TIMEOUT)
+    except (OSError, ValueError, TypeError) as exc:
+        raise ConfigError(f"--scheduler {address}: cannot reach a Dask scheduler there ({exc})") from None
 
 
 def _worker_setup() -> None:

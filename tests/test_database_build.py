@@ -381,6 +381,17 @@ def test_scale_options_are_refused_with_demo(tmp_path, option):
     assert_refused(run, names=option.split("=")[0], problem="--demo generates", before=before)
 
 
+def test_a_scheduler_that_cannot_be_reached_is_refused(five, joint_map, tmp_path, monkeypatch):
+    pytest.importorskip("distributed", reason="dask.distributed is not installed")
+    import gesturekit._database_build as build_module
+
+    monkeypatch.setattr(build_module, "SCHEDULER_TIMEOUT", "1s")
+    before = snapshot(five, tmp_path)
+    address = "tcp://127.0.0.1:1"
+    run = run_cli("build-db", five, "--joint-map", joint_map, "--out", tmp_path / "db", "--scheduler", address)
+    assert_refused(run, names=address, problem="cannot reach", before=before)
+
+
 def test_append_without_a_database_is_refused(five, joint_map, tmp_path):
     before = snapshot(five, tmp_path)
     run = run_cli("build-db", five, "--joint-map", joint_map, "--out", tmp_path / "db", "--append")
