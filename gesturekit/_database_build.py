@@ -116,7 +116,7 @@ def run_jobs(
         from ._optional import require
 
         distributed = require("distributed", purpose="building a database on a Dask cluster (--scheduler)")
-        client = scheduler if isinstance(scheduler, distributed.Client) else _connect(distributed, scheduler)
+        client = _connect(distributed, scheduler) if isinstance(scheduler, str) else scheduler
         try:
             futures = client.map(stage_job, list(jobs), key=[f"gesturekit-stage-{j.key}" for j in jobs], pure=False)
             by_key = {f.key: j for f, j in zip(futures, jobs)}

@@ -63,6 +63,7 @@ def _cmd_build_db(args) -> int:
     from .paths import default_database_path
 
     _check_positive("--fps", args.fps, "frame rate")
+    notes: list[str] = []
     if args.demo:
         _check_positive("--minutes", args.minutes, "number of minutes")
         if args.folder is not None:
@@ -109,7 +110,6 @@ def _cmd_build_db(args) -> int:
                 store_audio=not args.no_audio,
                 label=args.label or "",
             )
-        notes: list[str] = []
         with output_lock(out), _stage_bars() as bar:  # the bar shows once the first take is read
             db = build_database(
                 args.folder,
@@ -132,11 +132,9 @@ def _cmd_build_db(args) -> int:
                 ),
                 notes=notes.append,
             )
-        print(db.summary_text())
-        for line in notes:
-            print(line)
-        return _done(args, "built")
     print(db.summary_text())
+    for line in notes:  # staged takes reused, what --append did
+        print(line)
     return _done(args, "built")
 
 
