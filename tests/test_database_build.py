@@ -354,6 +354,54 @@ def test_npy_written_row_by_row_is_what_numpy_saves(tmp_path_factory, rows, dtyp
     np.testing.assert_array_equal(np.load(folder / "appended.npy"), np.concatenate([whole, whole]))
 
 
+@settings(max_examples=30, deadline=None)
+@given(
+    clips=st.integers(1, 9),
+    frames=st.integers(1, 5),
+    chunk_rows=st.integers(1, 7),
+    seed=st.integers(0, 2**31 - 1),
+    q=st.tuples(st.floats(0, 49), st.floats(51, 100)),
+)
+def test_thresholds_read_in_pieces_are_the_percentiles_of_every_frame(
+    tmp_path_factory, clips, frames, chunk_rows, seed, q
+):
+    """Percentiles of each attribute column, read from attributes.npy a few rows at a time, are
+    numpy's over the whole (clips * frames, 9) array."""
+    from gesturekit import _database_build
+    from gesturekit.control import ATTRIBUTE_NAMES
+
+    n = len(ATTRIBUTE_NAMES)
+    attrs = np.random.default_rng(seed).normal(size=(clips, frames, n)).astype(np.float32)
+    path = tmp_path_factory.mktemp("attrs") / "attributes.npy"
+    np.save(path, attrs)
+    chunk = _database_build._CHUNK_BYTES
+    _database_build._CHUNK_BYTES = chunk_rows * n * 4  # pieces of a few frames, crossing clip boundaries
+    try:
+        got = _database_build._column_percentiles(path, q)
+    finally:
+        _database_build._CHUNK_BYTES = chunk
+    flat = attrs.reshape(-1, n).astype(np.float64)
+    for i, name in enumerate(ATTRIBUTE_NAMES):
+        assert got[name] == [float(np.percentile(flat[:, i], q[0])), float(np.percentile(flat[:, i], q[1]))]
+
+
+def test_warnings_of_worker_processes_reach_the_command_line(joint_map, tmp_path):
+    """A take whose speech is shorter than its motion is trimmed with a warning, also when a worker
+    process reads it (the warning is issued again in the command's process, once)."""
+    import soundfile as sf
+
+    folder = write_takes(tmp_path / "takes", ["t000", "t001"])
+    audio, sr = sf.read(folder / "t001.wav", dtype="float32")
+    sf.write(folder / "t001.wav", audio[: len(audio) - sr], sr)  # one second short
+    from gesturekit.errors import GestureKitWarning
+
+    with pytest.warns(GestureKitWarning) as caught:
+        run = run_cli("build-db", folder, "--joint-map", joint_map, "--out", tmp_path / "db", "--workers", "2")
+    assert run.code == 0, run.stderr
+    messages = [str(w.message) for w in caught if issubclass(w.category, GestureKitWarning)]
+    assert messages == ["t001: motion has 10.00 s and audio 9.00 s; trimmed the motion by 1.00 s to 9.00 s"]
+
+
 # ---- bad input -------------------------------------------------------------------------------------
 
 
