@@ -9,6 +9,7 @@ default (demo) database is built on first use.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -130,6 +131,7 @@ def _build_from_folder(
     forward: str = "auto",
     normalize_bones: bool = False,
     progress=None,
+    workers: int = 1,
 ) -> MatchingDatabase:
     """Build and save a database from a folder of takes, as typed in the sidebar's form
     (:func:`gesturekit.workspace.build_database`, what ``gesturekit build-db FOLDER`` does).
@@ -150,6 +152,8 @@ def _build_from_folder(
         How to read the motion files (:class:`gesturekit.datasets.takes.ReadOptions`).
     progress : callable(done, total, take_name), optional
         Called after each take is read.
+    workers : int
+        Processes that read takes at once (the database is the same for any number).
 
     Raises
     ------
@@ -180,6 +184,7 @@ def _build_from_folder(
         normalize_bones=normalize_bones,
         overwrite=overwrite,
         progress=progress,
+        workers=workers,
     )
 
 
@@ -241,6 +246,14 @@ def _build_expander() -> None:
             "Database folder to write", key="_gk.build_out", placeholder=str(home() / "db" / "<folder name>")
         )
         label = st.text_input("Label (optional)", key="_gk.build_label")
+        workers = st.number_input(
+            "Worker processes",
+            min_value=1,
+            value=os.cpu_count() or 1,
+            step=1,
+            key="_gk.build_workers",
+            help="takes read at once; the database is the same for any number",
+        )
         overwrite = st.checkbox(
             "overwrite an existing database",
             key="_gk.build_overwrite",
@@ -278,6 +291,7 @@ def _build_expander() -> None:
                     forward=forward,
                     normalize_bones=normalize,
                     progress=progress,
+                    workers=int(workers),
                 )
             bar.progress(1.0, text="saved")
             st.session_state[_PENDING_KEY] = str(Path(db.path).resolve())

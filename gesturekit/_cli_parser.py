@@ -192,6 +192,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--label", help="a description stored with the database")
     b.add_argument("--force", action="store_true", help="replace an existing database")
+    b.add_argument(
+        "--workers",
+        type=int,
+        help="processes that read takes at once (default: all cores); the database is the same for any number",
+    )
+    b.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="read the takes on a Dask cluster (tcp://host:8786); the output must be on a file system its "
+        "workers share",
+    )
+    b.add_argument(
+        "--append",
+        action="store_true",
+        help="add the folder's takes that the database at --out lacks (statistics and thresholds recomputed over "
+        "all takes, the old ones read again from their files)",
+    )
+    b.add_argument(
+        "--keep-stats",
+        action="store_true",
+        help="with --append: keep the database's statistics, thresholds and arrays (fast; the new takes are "
+        "z-scored with them)",
+    )
     b.add_argument("--demo", action="store_true", help="build the generated demo speaker's database")
     b.add_argument("--minutes", type=float, default=20.0, help="minutes of demo speaker (with --demo)")
     b.add_argument("--seed", type=int, default=0, help="seed of the demo speaker (with --demo)")

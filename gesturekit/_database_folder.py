@@ -31,7 +31,7 @@ from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
 if TYPE_CHECKING:
     from .database import MatchingDatabase
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "CLIP_ARRAYS", "write_database", "read_database"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "CLIP_ARRAYS", "write_database", "write_stats", "write_meta", "read_database"]
 
 FORMAT = "gesturekit-matching-database"
 FORMAT_VERSION = 1
@@ -66,8 +66,7 @@ def write_database(
     def fill(tmp: Path) -> None:
         for k, v in db.arrays.items():
             np.save(tmp / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
-        stats: dict[str, Any] = {k: np.asarray(v) for k, v in db.stats.items()}
-        np.savez(tmp / "stats.npz", **stats)
+        write_stats(tmp / "stats.npz", db.stats)
         meta = dict(db.meta)
         if db.audio is not None:
             audio, meta = _stored_audio(db)
@@ -76,9 +75,7 @@ def write_database(
             (tmp / "overlap").mkdir()
             for k, v in db.overlap.items():
                 np.save(tmp / "overlap" / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
-        meta["counts"] = {"clips": db.n_clips, "takes": len(db.meta["takes"])}
-        # the marker that lets a later --force recognise this folder, written last
-        (tmp / "database.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
+        write_meta(tmp, meta, n_clips=db.n_clips)
 
     write_folder(path, "database", fill, overwrite=overwrite, inputs=inputs, locked=locked)
 
@@ -113,6 +110,29 @@ def _stored_audio(db: MatchingDatabase) -> tuple[np.ndarray, dict]:
     if wanted.to_meta() is not None:
         meta["audio"] = wanted.to_meta()
     return (np.concatenate(parts) if parts else np.zeros(0, wanted.dtype)), meta
+
+
+def write_stats(path: Path, stats: dict[str, Any]) -> None:
+    """Write the z-scoring statistics as ``stats.npz``, the same bytes for the same statistics.
+
+    :func:`numpy.savez` stamps each member with the time of writing; here every
+    member carries the zip format's earliest date, so that two builds of the
+    same takes give identical folders.
+    """
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED) as zf:
+        for k, v in stats.items():
+            info = zipfile.ZipInfo(f"{k}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.external_attr = 0o644 << 16
+            with zf.open(info, "w") as member:
+                np.lib.format.write_array(member, np.asarray(v), allow_pickle=False)
+
+
+def write_meta(folder: Path, meta: dict[str, Any], *, n_clips: int) -> None:
+    """Write ``database.json`` (``meta`` with the counts of clips and takes) into ``folder``: the marker
+    that lets a later ``--force`` recognise the folder, so written last."""
+    meta = dict(meta)
+    meta["counts"] = {"clips": int(n_clips), "takes": len(meta["takes"])}
+    (folder / "database.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
 
 
 def _check_finite(db: MatchingDatabase, path: Path) -> None:

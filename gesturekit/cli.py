@@ -6,6 +6,7 @@ Every command turns errors of the gesturekit family into one line on stderr
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import math
 import sys
@@ -66,10 +67,15 @@ def _cmd_build_db(args) -> int:
     from .paths import default_database_path
 
     _check_positive("--fps", args.fps, "frame rate")
+    notes: list[str] = []
     if args.demo:
         _check_positive("--minutes", args.minutes, "number of minutes")
         if args.folder is not None:
             raise ConfigError("give either a folder of takes or --demo, not both")
+        given = [o for o, v in (("--append", args.append), ("--keep-stats", args.keep_stats)) if v]
+        given += [o for o, v in (("--workers", args.workers), ("--scheduler", args.scheduler)) if v is not None]
+        if given:
+            raise ConfigError(f"{', '.join(given)} build from a folder of takes; --demo generates its takes")
         out = Path(args.out) if args.out else default_database_path()
         total = args.minutes * 60
         with _progress_bar(round(total), "s", "demo speaker") as bar:
@@ -92,18 +98,23 @@ def _cmd_build_db(args) -> int:
         from .outputs import check_output, output_lock
 
         out = Path(args.out)
+        _check_scale_options(args)
         # before reading any take: the output must be free, ours to replace, and apart from the takes
-        check_output(out, "database", overwrite=args.force, inputs=[args.folder])
+        there = check_output(out, "database", overwrite=args.force or args.append, inputs=[args.folder])
+        if args.append and not there:
+            raise ConfigError(f"--append adds takes to a database, and there is none at {out}; build it first")
         from .database import BuildConfig
         from .workspace import build_database
 
-        config = BuildConfig(
-            overlap_stride=args.overlap_stride,
-            percentiles=tuple(args.percentiles),
-            store_audio=not args.no_audio,
-            label=args.label or "",
-            **_audio_options(args),
-        )
+        config = None
+        if not args.append or _build_options_given(args):  # --append alone: the database's options
+            config = BuildConfig(
+                overlap_stride=args.overlap_stride,
+                percentiles=tuple(args.percentiles),
+                store_audio=not args.no_audio,
+                label=args.label or "",
+                **_audio_options(args),
+            )
         with output_lock(out), _stage_bars() as bar:  # the bar shows once the first take is read
             db = build_database(
                 args.folder,
@@ -118,11 +129,47 @@ def _cmd_build_db(args) -> int:
                 normalize_bones=args.normalize_bones,
                 overwrite=args.force,
                 locked=True,
-                progress=lambda done, total, name: _advance(bar("reading takes", total, "take"), done, note=name[-30:]),
+                workers=args.workers,
+                scheduler=args.scheduler,
+                append=args.append,
+                keep_stats=args.keep_stats,
+                on_progress=lambda p: _advance(
+                    bar("reading takes", p.total, "take"),
+                    p.done,
+                    note=f"{p.seconds / 3600:.2f} h of data, {p.name[-24:]}",
+                ),
+                notes=notes.append,
             )
     print(db.summary_text())
     _print_readings(db)
+    for line in notes:  # staged takes reused, what --append did
+        print(line)
     return _done(args, "built")
+
+
+def _check_scale_options(args: argparse.Namespace) -> None:
+    """``--workers``, ``--scheduler``, ``--append`` and ``--keep-stats`` make sense together."""
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be a positive number of processes, got {args.workers}")
+    if args.workers is not None and args.scheduler:
+        raise ConfigError("give either --workers (processes here) or --scheduler (a Dask cluster), not both")
+    if args.scheduler is not None and not args.scheduler.strip():
+        raise ConfigError("--scheduler must be the address of a Dask scheduler, e.g. tcp://host:8786")
+    if args.keep_stats and not args.append:
+        raise ConfigError("--keep-stats keeps the statistics of a database appended to; it needs --append")
+    if args.append and args.force:
+        raise ConfigError("give either --append (add takes to the database) or --force (replace it), not both")
+
+
+def _build_options_given(args: argparse.Namespace) -> bool:
+    """Whether build options other than the defaults were given (with --append they must match the database's)."""
+    return (
+        args.overlap_stride is not None
+        or args.no_audio
+        or tuple(args.percentiles) != (15.0, 85.0)
+        or args.audio_format is not None
+        or args.audio_rate is not None
+    )
 
 
 def _print_readings(db: MatchingDatabase) -> None:

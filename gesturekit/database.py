@@ -25,160 +25,34 @@ Every array is a plain ``.npy`` (memory-mapped on load, never pickled); the
 folder is written under a temporary name and swapped into place, by the rules
 of :mod:`gesturekit.outputs` (``database.json`` is the marker that lets
 ``--force`` recognise a database). Writing, reading and checking the folder
-is :mod:`gesturekit._database_folder`'s part; building is this module's.
+is :mod:`gesturekit._database_folder`'s part; building, in two passes over
+takes staged on disk, :mod:`gesturekit._database_stage` and
+:mod:`gesturekit._database_build`'s.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
 from ._database_audio import AudioStorage, read_take_audio
-from ._database_folder import CLIP_ARRAYS, FORMAT, FORMAT_VERSION, read_database, write_database
-from ._version import __version__
-from .control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, frame_attributes
-from .errors import ConfigError, DatabaseError, warn
-from .features import (
-    LAYOUT,
-    FeatureLayout,
-    ZScore,
-    audio_frame_features,
-    cgan_audio_features,
-    n_audio_frames,
-    pose_features,
-    stack_audio_features,
-    valid_starts,
-)
-from .motion import AUDIO_SR, Take, resample_positions
-from .skeleton import FPS, JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
+from ._database_build import build_in_memory
+from ._database_folder import FORMAT_VERSION, read_database, write_database
+from ._database_stage import BuildConfig, TakeFeatures, take_features
+from .control import ATTRIBUTE_UNITS
+from .errors import ConfigError, DatabaseError
+from .features import ZScore, audio_frame_features, cgan_audio_features, stack_audio_features
+from .motion import AUDIO_SR, Take
+from .skeleton import JointPresence
 
 if TYPE_CHECKING:
     import pandas as pd
 
 __all__ = ["FORMAT_VERSION", "BuildConfig", "TakeFeatures", "take_features", "MatchingDatabase", "normalise_exclusions"]
-
-
-@dataclass
-class BuildConfig:
-    """How a database is built; stored in ``database.json``.
-
-    Parameters
-    ----------
-    clip_frames : int
-        Frames per clip (the paper's T_match = 64).
-    overlap_stride : int or None
-        If set, also store the overlapping cut with this stride (frames), for the refiner.
-    percentiles : (float, float)
-        Percentiles of each control attribute that define "low" and "high".
-    store_audio : bool
-        Keep the takes' audio (int16) so clips can be listened to.
-    audio_format : {"pcm", "flac"}
-        How the kept audio is stored: raw int16 samples, or FLAC (lossless, smaller).
-    audio_rate : int
-        Sample rate of the kept audio, Hz (4000 to 16000; below 16000 the audio is for
-        browsing only: it is resampled back to 16 kHz when read). See :mod:`gesturekit._database_audio`.
-    label : str
-        A description shown to users (e.g. that the data is generated).
-    source : str
-        Where the takes came from (a folder, ``"demo"``).
-    joint_map : str or None
-        The joint map or preset used to read the takes.
-    """
-
-    clip_frames: int = 64
-    overlap_stride: int | None = None
-    percentiles: tuple[float, float] = (15.0, 85.0)
-    store_audio: bool = True
-    label: str = ""
-    source: str = ""
-    joint_map: str | None = None
-    audio_format: str = "pcm"
-    audio_rate: int = AUDIO_SR
-
-    def __post_init__(self) -> None:
-        if self.clip_frames < 16:
-            raise ConfigError(f"clip_frames must be at least 16, got {self.clip_frames}")
-        if self.overlap_stride is not None and not 1 <= self.overlap_stride <= self.clip_frames:
-            raise ConfigError(f"overlap_stride must be in 1..{self.clip_frames}, got {self.overlap_stride}")
-        lo, hi = self.percentiles
-        if not 0 <= lo < hi <= 100:
-            raise ConfigError(f"percentiles must satisfy 0 <= low < high <= 100, got {self.percentiles}")
-        self.percentiles = (float(lo), float(hi))
-        storage = AudioStorage(format=self.audio_format, rate=self.audio_rate)  # checks both
-        if not self.store_audio and not storage.is_default:
-            raise ConfigError("an audio format or rate was given, but the database keeps no audio (store_audio=False)")
-
-
-@dataclass
-class TakeFeatures:
-    """Per-frame arrays of one take at 15 fps (features not yet z-scored).
-
-    Attributes
-    ----------
-    positions : (T,55,3) metres; m : (T,14); f : (T,112); p : (T,96); a : (T,28);
-    valid : (T,) bool; attributes : (T,9); track : (T,24) feature-joint positions.
-    """
-
-    name: str
-    positions: np.ndarray
-    m: np.ndarray
-    f: np.ndarray
-    p: np.ndarray
-    a: np.ndarray
-    valid: np.ndarray
-    attributes: np.ndarray
-    track: np.ndarray
-    audio: np.ndarray
-    sources: dict = field(default_factory=dict)
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.positions.shape[0])
-
-
-def take_features(take: Take, *, layout: FeatureLayout = LAYOUT) -> TakeFeatures:
-    """Compute every per-frame array of a take, trimming motion and audio to the shorter.
-
-    Motion at another frame rate is resampled to 15 fps (linear in positions;
-    readers with rotations resample before this). A length mismatch is trimmed
-    with a :class:`GestureKitWarning` that says by how much.
-    """
-    pos = take.motion.positions
-    if take.motion.fps != layout.fps:
-        pos = resample_positions(pos, take.motion.fps, layout.fps)
-    n_motion = pos.shape[0]
-    n_audio = n_audio_frames(len(take.audio), sr=layout.sr, fps=layout.fps)
-    n = min(n_motion, n_audio)
-    if n_motion != n_audio:
-        longer = "motion" if n_motion > n_audio else "audio"
-        warn(
-            f"{take.name}: motion has {n_motion / layout.fps:.2f} s and audio {n_audio / layout.fps:.2f} s; "
-            f"trimmed the {longer} by {abs(n_motion - n_audio) / layout.fps:.2f} s to {n / layout.fps:.2f} s",
-            stacklevel=2,
-        )
-    if n < 1:
-        raise ConfigError(f"take {take.name!r} has no frame after aligning motion and audio")
-    pos = np.ascontiguousarray(pos[:n], dtype=np.float32)
-    audio = np.asarray(take.audio, dtype=np.float32)[: int(np.ceil(n * layout.sr / layout.fps))]
-    m = audio_frame_features(audio, n_frames=n, layout=layout)
-    return TakeFeatures(
-        name=take.name,
-        positions=pos,
-        m=m,
-        f=stack_audio_features(m, layout=layout),
-        p=pose_features(pos, layout=layout),
-        a=cgan_audio_features(m),
-        valid=valid_starts(n, layout=layout),
-        attributes=frame_attributes(pos, fps=layout.fps),
-        track=pos[:, POSE_FEATURE_INDICES].reshape(n, -1),
-        audio=audio,
-        sources=dict(take.sources),
-    )
 
 
 def normalise_exclusions(
@@ -203,27 +77,6 @@ def normalise_exclusions(
             raise ConfigError(f"exclude range {take}:{a:g}-{b:g} s: need finite times with 0 <= start < end")
         out.append((take, a, b))
     return tuple(str(t) for t in takes), tuple(out)
-
-
-def _windows(n_frames: int, length: int, stride: int) -> np.ndarray:
-    """Start frames of windows of ``length`` frames every ``stride`` frames inside ``n_frames``."""
-    if n_frames < length:
-        return np.zeros(0, dtype=np.int64)
-    return np.arange(0, n_frames - length + 1, stride, dtype=np.int64)
-
-
-def _cut(tf: TakeFeatures, starts: np.ndarray, length: int, track_len: int) -> dict[str, np.ndarray]:
-    idx = starts[:, None] + np.arange(length)[None, :]
-    tidx = np.minimum(starts[:, None] + np.arange(track_len)[None, :], tf.n_frames - 1)
-    return {
-        "F": tf.f[idx],
-        "P": tf.p[idx],
-        "G": tf.positions.reshape(tf.n_frames, -1)[idx],
-        "A": tf.a[idx],
-        "valid": tf.valid[idx],
-        "attributes": tf.attributes[idx],
-        "pose_track": tf.track[tidx],
-    }
 
 
 class _Array(property):
@@ -512,6 +365,12 @@ class MatchingDatabase:
     ) -> MatchingDatabase:
         """Build a database in memory from takes.
 
+        The same two passes as a folder build (each take featurised, cut and
+        staged on disk, then the arrays written take by take; see
+        :mod:`gesturekit._database_build`), in a temporary folder that is read
+        back into memory and removed. The takes are listed in the database by
+        name.
+
         Parameters
         ----------
         takes : iterable of Take
@@ -520,122 +379,8 @@ class MatchingDatabase:
         progress : callable(i, take_name), optional
             Called after each take is processed.
         """
-        config = config or BuildConfig()
-        L = config.clip_frames
-        track_len = L + LAYOUT.pose_lookahead
-        per_take: list[TakeFeatures] = []
-        presence: JointPresence | None = None
-        for i, take in enumerate(takes):
-            # every take of a database holds the same joints: what a clip shows must not depend on its take
-            this = take.motion.presence
-            if presence is None:
-                presence = this
-            elif this != presence:
-                raise ConfigError(
-                    f"take {take.name!r} holds other joints than the takes before it "
-                    f"({this.describe()} against {presence.describe()}); read every take with the same joint map"
-                )
-            tf = take_features(take)
-            if np.isnan(tf.positions).any():
-                raise ConfigError(f"take {take.name!r} has NaN positions")
-            per_take.append(tf)
-            if progress is not None:
-                progress(i + 1, take.name)
-        if not per_take:
-            raise ConfigError("no takes to build a database from")
-        names = [t.name for t in per_take]
-        if len(set(names)) != len(names):
-            dup = sorted({n for n in names if names.count(n) > 1})
-            raise ConfigError(f"take names must be unique; repeated: {', '.join(dup)}")
-
-        # z-scoring statistics over the frames that can start a segment (no padding inside)
-        allv = np.concatenate([t.valid for t in per_take])
-        if not allv.any():
-            raise ConfigError(f"every take is shorter than {LAYOUT.audio_lookahead + 1} frames; nothing can be matched")
-        stats = {}
-        for key, attr in (("F", "f"), ("P", "p"), ("A", "a")):
-            z = ZScore.fit(np.concatenate([getattr(t, attr) for t in per_take])[allv])
-            stats[f"{key}_mean"], stats[f"{key}_std"] = z.mean, z.std
-
-        clip_parts: dict[str, list] = {k: [] for k in CLIP_ARRAYS}
-        overlap_parts: dict[str, list] | None = (
-            {k: [] for k in CLIP_ARRAYS + ("clip_take", "clip_start")} if config.overlap_stride else None
-        )
-        clip_take: list[int] = []
-        clip_start: list[int] = []
-        take_meta: list[dict] = []
-        audio_parts: list[np.ndarray] = []
-        audio_offset = 0
-        for ti, tf in enumerate(per_take):
-            starts = _windows(tf.n_frames, L, L)
-            cut = _cut(tf, starts, L, track_len)
-            for k in CLIP_ARRAYS:
-                clip_parts[k].append(cut[k])
-            first_clip = len(clip_take)
-            clip_take += [ti] * len(starts)
-            clip_start += starts.tolist()
-            if overlap_parts is not None and config.overlap_stride is not None:
-                ostarts = _windows(tf.n_frames, L, config.overlap_stride)
-                ocut = _cut(tf, ostarts, L, track_len)
-                for k in CLIP_ARRAYS:
-                    overlap_parts[k].append(ocut[k])
-                overlap_parts["clip_take"].append(np.full(len(ostarts), ti, np.int32))
-                overlap_parts["clip_start"].append(ostarts.astype(np.int32))
-            n_samples = len(tf.audio) if config.store_audio else 0
-            take_meta.append(
-                {
-                    "name": tf.name,
-                    "sources": {k: str(v) for k, v in tf.sources.items()},
-                    "n_frames": tf.n_frames,
-                    "first_clip": first_clip,
-                    "n_clips": int(len(starts)),
-                    "audio_offset": audio_offset,
-                    "audio_samples": n_samples,
-                }
-            )
-            if config.store_audio:
-                audio_parts.append(np.clip(np.round(tf.audio * 32767), -32768, 32767).astype(np.int16))
-                audio_offset += n_samples
-        if not clip_take:
-            raise ConfigError(f"every take is shorter than one clip ({L} frames = {L / FPS:.1f} s)")
-
-        def finish(parts):
-            out = {k: np.concatenate(parts[k]) for k in CLIP_ARRAYS}
-            out["F"] = ZScore(stats["F_mean"], stats["F_std"]).apply(out["F"])
-            out["P"] = ZScore(stats["P_mean"], stats["P_std"]).apply(out["P"])
-            return out
-
-        arrays = finish(clip_parts)
-        arrays["clip_take"] = np.asarray(clip_take, dtype=np.int32)
-        arrays["clip_start"] = np.asarray(clip_start, dtype=np.int32)
-        overlap = None
-        if overlap_parts is not None:
-            overlap = finish(overlap_parts)
-            overlap["clip_take"] = np.concatenate(overlap_parts["clip_take"])
-            overlap["clip_start"] = np.concatenate(overlap_parts["clip_start"])
-
-        # thresholds over every frame of the clips (the frames the search may use)
-        flat_attrs = arrays["attributes"].reshape(-1, len(ATTRIBUTE_NAMES)).astype(np.float64)
-        lo_q, hi_q = config.percentiles
-        thresholds = {
-            name: [float(np.percentile(flat_attrs[:, i], lo_q)), float(np.percentile(flat_attrs[:, i], hi_q))]
-            for i, name in enumerate(ATTRIBUTE_NAMES)
-        }
-        meta = {
-            "format": FORMAT,
-            "format_version": FORMAT_VERSION,
-            "gesturekit_version": __version__,
-            "layout": LAYOUT.signature(),
-            "joint_names": list(JOINT_NAMES),
-            "build": asdict(config),
-            "attribute_names": list(ATTRIBUTE_NAMES),
-            "thresholds": thresholds,
-            "takes": take_meta,
-        }
-        if presence is not None and not presence.is_full:
-            meta["joints"] = presence.to_list()
-        audio = np.concatenate(audio_parts) if config.store_audio else None
-        return cls(meta=meta, arrays=arrays, stats=stats, audio=audio, overlap=overlap)
+        kwargs = build_in_memory(takes, config=config or BuildConfig(), progress=progress)
+        return cls(**kwargs)
 
     # ---- save / load --------------------------------------------------------------------------
     def save(

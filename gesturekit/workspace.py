@@ -17,16 +17,19 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .database import BuildConfig, MatchingDatabase
-from .datasets.takes import AUDIO_EXTENSIONS, ReadOptions, count_takes, discover_takes, iter_takes
+from .datasets.takes import AUDIO_EXTENSIONS, ReadOptions, discover_takes
 from .errors import InputFileError
 from .paths import default_database_path, home, is_dir
 
 if TYPE_CHECKING:
+    from distributed import Client
+
+    from ._database_build import BuildProgress
     from .datasets.positions import PositionJointMap
     from .datasets.presets import JointMap
 
@@ -111,6 +114,12 @@ def build_database(
     overwrite: bool = False,
     locked: bool = False,
     progress: Callable[[int, int, str], None] | None = None,
+    workers: int | None = 1,
+    scheduler: str | Client | None = None,
+    append: bool = False,
+    keep_stats: bool = False,
+    on_progress: Callable[[BuildProgress], None] | None = None,
+    notes: Callable[[str], None] | None = None,
 ) -> MatchingDatabase:
     """Read the takes of ``folder`` and save their matching database at ``out``.
 
@@ -145,6 +154,29 @@ def build_database(
         The caller holds ``out``'s output lock (:func:`gesturekit.outputs.output_lock`).
     progress : callable(done, total, take_name), optional
         Called after each take is read; ``total`` is the number of takes.
+    workers : int or None
+        Processes that read takes at once (None: all cores). The database is the same, byte for
+        byte, for any number.
+    scheduler : str, distributed.Client or None
+        Read the takes on a Dask cluster instead (``"tcp://host:8786"``); the output's folder
+        must be on a file system the cluster's workers share (the takes are staged beside it).
+    append : bool
+        Add the takes of ``folder`` that the database at ``out`` does not hold (by name); the
+        reading options (``kind``, ``fps``, ``units``, ``up``, ``forward``, ``normalize_bones``)
+        must be those the database was built with, and ``joint_map`` None means the database's.
+    keep_stats : bool
+        With ``append``: keep the database's z-scoring statistics, thresholds and arrays (the new
+        takes are z-scored with them); without it they are recomputed over every take, reading the
+        old takes again from their files.
+    on_progress : callable(BuildProgress), optional
+        Called as takes are read, with takes done and total, hours of data done, takes reused.
+    notes : callable(str), optional
+        Given lines for the summary (takes reused from an interrupted build, what appending did).
+
+    The build is out of core: takes are read one at a time (``workers`` at once), staged beside
+    ``out`` in ``.NAME.staging`` and written into the database take by take, so memory does not
+    grow with the dataset. An interrupted build is resumed by the same call, which reuses the
+    takes staged already (:mod:`gesturekit._database_from_folder`).
 
     Returns
     -------
@@ -157,23 +189,58 @@ def build_database(
         A missing or empty folder, an unreadable joint map or take, an output
         that may not be written; the message names the path.
     """
+    from ._database_from_folder import build_from_sources, recorded_joint_map
+
     folder = Path(folder).expanduser()
     options = ReadOptions(units=units, up=up, forward=forward, normalize_bones=normalize_bones)
+    out = Path(out).expanduser()
     sources = discover_takes(folder, kind=kind)
-    jmap = _read_joint_map(joint_map, {s.kind for s in sources})
-    total = count_takes(sources)
-    config = replace(
-        config or BuildConfig(), source=str(folder.resolve()), joint_map=None if joint_map is None else str(joint_map)
-    )
+    if append and joint_map is None:
+        joint_map = recorded_joint_map(out)
+    _read_joint_map(joint_map, {s.kind for s in sources})  # read here: a bad one fails before any take
+    if config is not None or not append:
+        config = replace(
+            config or BuildConfig(),
+            source=str(folder.resolve()),
+            joint_map=None if joint_map is None else str(joint_map),
+        )
 
-    def on_take(done: int, name: str) -> None:
+    def on_take(p: BuildProgress) -> None:
         if progress is not None:
-            progress(done, total, name)
+            progress(p.done, p.total, p.name)
+        if on_progress is not None:
+            on_progress(p)
 
-    takes = iter_takes(sources, joint_map=jmap, fps_in=fps, options=options)
-    db = MatchingDatabase.build(takes, config=config, progress=on_take)
-    db.save(Path(out).expanduser(), overwrite=overwrite, inputs=[folder], locked=locked)
-    return db
+    build_from_sources(
+        sources,
+        out,
+        config=config,
+        # the joint map as given: worker processes read it again (a read map does not travel between processes)
+        reading={"joint_map": joint_map, "fps_in": fps, "options": options},
+        reading_key={"joint_map": _joint_map_identity(joint_map), "fps": fps, **asdict(options)},
+        inputs=[folder],
+        workers=workers,
+        scheduler=scheduler,
+        overwrite=overwrite,
+        locked=locked,
+        append=append,
+        keep_stats=keep_stats,
+        on_progress=on_take,
+        notes=notes,
+    )
+    return MatchingDatabase.load(out)
+
+
+def _joint_map_identity(joint_map: str | os.PathLike[str] | None) -> list | None:
+    """A joint map as a staging key sees it: the name or path, and a file's size and modification time."""
+    if joint_map is None:
+        return None
+    path = Path(joint_map)
+    try:
+        st = path.stat() if path.is_file() else None
+    except OSError:
+        st = None
+    return [str(joint_map)] if st is None else [os.path.abspath(path), st.st_size, st.st_mtime_ns]
 
 
 def _read_joint_map(

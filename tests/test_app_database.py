@@ -225,3 +225,22 @@ def test_an_unreadable_demo_database_can_be_rebuilt(tmp_path, monkeypatch):
     assert not at.exception and not _error_texts(at)
     assert MatchingDatabase.load(home / "db" / "demo").n_clips > 0
     assert any(DEMO_LABEL in w.value for w in at.main.warning)
+
+
+def test_building_with_worker_processes_gives_the_database_of_one(app_env, tmp_path, zeggs_files):
+    """The sidebar's worker processes read the takes; the database is the one a single process builds
+    (also while the app's own threads run searches, which hold BLAS to one thread)."""
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    for stem in ("a", "b"):
+        for f in zeggs_files:
+            (takes / f"{stem}{f.suffix}").symlink_to(f)
+    at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
+    for workers, out in ((2, tmp_path / "two"), (1, tmp_path / "one")):
+        at.sidebar.text_input(key="_gk.build_folder").input(str(takes))
+        at.sidebar.text_input(key="_gk.build_out").input(str(out))
+        at.sidebar.number_input(key="_gk.build_workers").set_value(workers)
+        at.sidebar.button(key="_gk.build_go").click().run()
+        assert not at.exception and not _error_texts(at)
+    for name in ("F.npy", "P.npy", "G.npy", "A.npy", "stats.npz", "audio.npy"):
+        assert (tmp_path / "two" / name).read_bytes() == (tmp_path / "one" / name).read_bytes(), name

@@ -356,6 +356,7 @@ def test_kill_during_a_database_save_keeps_the_previous_one(tmp_path):
         _BUILD
         + """
     build(1).save(sys.argv[1])
+    second = build(2)  # built before np.save dies: building stages its takes with np.save too
     real, calls = np.save, []
 
     def dying(*a, **k):
@@ -365,7 +366,7 @@ def test_kill_during_a_database_save_keeps_the_previous_one(tmp_path):
         return real(*a, **k)
 
     np.save = dying
-    build(2).save(sys.argv[1], overwrite=True)
+    second.save(sys.argv[1], overwrite=True)
     """,
         out,
     )

@@ -1,0 +1,289 @@
+"""A database built from take files: out of core, in parallel, resumable, and by appending.
+
+:func:`build_from_sources` is what :func:`gesturekit.workspace.build_database`
+(``gesturekit build-db FOLDER``) runs once the folder's takes are found:
+
+1. the takes are staged beside the output (:mod:`gesturekit._database_stage`),
+   by this process, worker processes or a Dask cluster; units an interrupted
+   build staged already are reused;
+2. the database is written from the staged takes in order of take name
+   (:func:`gesturekit._database_build.assemble`) into the output's temporary
+   folder, which is swapped into place (:func:`gesturekit.outputs.write_folder`);
+3. the staging folder is removed.
+
+Appending (``--append``) adds the takes of a folder that the database does not
+hold (by name). By default the statistics and thresholds are recomputed over
+every take, the database's takes being read again from the files they were
+read from (recorded in ``database.json``): the result is the database a build
+of all the takes gives, byte for byte. With ``keep_stats`` (``--keep-stats``)
+the database's statistics and thresholds are kept, the new takes z-scored with
+them and put after the old ones, whose arrays are copied unchanged.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ._database_build import BuildProgress, StagedTake, assemble, reemit, run_jobs
+from ._database_folder import read_database
+from ._database_stage import BuildConfig, StageJob, job_key, open_staging, remove_staging, staged_takes, staging_folder
+from .errors import ConfigError, DatabaseError, InputFileError
+from .motion import AUDIO_SR
+
+if TYPE_CHECKING:
+    from distributed import Client
+
+    from .datasets.takes import TakeSource
+
+__all__ = ["build_from_sources", "recorded_joint_map"]
+
+# build options an appended take must share with the database's: attribute -> the option that sets it
+_SHARED_OPTIONS = {
+    "clip_frames": "clip_frames",
+    "overlap_stride": "--overlap-stride",
+    "percentiles": "--percentiles",
+    "store_audio": "--no-audio",
+    "audio_format": "--audio-format",
+    "audio_rate": "--audio-rate",
+    "joint_map": "--preset/--joint-map",
+}
+
+
+def recorded_joint_map(out: str | os.PathLike[str]) -> str | None:
+    """The joint map the database at ``out`` was read with (None when there is no readable database)."""
+    try:
+        build = read_database(Path(out), mmap=True)["meta"]["build"]
+    except DatabaseError:
+        return None
+    value = build.get("joint_map")
+    return value if isinstance(value, str) else None
+
+
+def _append_config(build: dict[str, Any], given: BuildConfig | None, out: Path) -> BuildConfig:
+    """The database's build options, checked against those given for the new takes."""
+    lo, hi = build.get("percentiles") or (15.0, 85.0)
+    old = BuildConfig(
+        clip_frames=int(build["clip_frames"]),
+        overlap_stride=build.get("overlap_stride"),
+        percentiles=(float(lo), float(hi)),
+        store_audio=bool(build.get("store_audio", True)),
+        label=str(build.get("label", "")),
+        source=str(build.get("source", "")),
+        joint_map=build.get("joint_map"),
+        audio_format=str(build.get("audio_format", "pcm")),
+        audio_rate=int(build.get("audio_rate", AUDIO_SR)),
+    )
+    if given is not None:
+        for attr, option in _SHARED_OPTIONS.items():
+            if getattr(given, attr) != getattr(old, attr):
+                raise ConfigError(
+                    f"--append adds takes built as the database's: {option} is {getattr(given, attr)!r} here and "
+                    f"{getattr(old, attr)!r} in the database at {out}; give the database's (or leave it out)"
+                )
+    return old
+
+
+def _recorded_sources(takes: list[dict], out: Path) -> list[tuple[TakeSource, tuple[str, ...] | None]]:
+    """The files the database's takes were read from (with, for a file of several takes, which of them)."""
+    from .datasets.takes import TakeSource
+
+    units: dict[tuple[str, str], tuple[TakeSource, list[str] | None]] = {}
+    for t in takes:
+        src = t["sources"]
+        if "motion" in src and "audio" in src:
+            motion, audio = Path(src["motion"]), Path(src["audio"])
+            kind = "bvh" if motion.suffix.lower() == ".bvh" else "positions"
+            units[("one", src["motion"])] = (TakeSource(kind, motion, audio), None)
+            files = [motion, audio]
+        elif "file" in src and "sequence" in src:
+            entry = units.setdefault(("file", src["file"]), (TakeSource("habibie2021", Path(src["file"]), None), []))
+            names = entry[1]
+            assert names is not None
+            names.append(t["name"])
+            files = [Path(src["file"])]
+        else:
+            raise ConfigError(
+                f"take {t['name']!r} of the database at {out} was not read from files "
+                f"({', '.join(f'{k}={v}' for k, v in src.items())}), so --append cannot read it again to recompute "
+                "the statistics; add --keep-stats to keep the database's, or rebuild"
+            )
+        for f in files:
+            if not f.is_file():
+                raise InputFileError(
+                    f"the database's take {t['name']!r} was read from this file, which is gone; --append reads the "
+                    "old takes again to recompute the statistics: put it back, or add --keep-stats",
+                    path=f,
+                )
+    return [(s, None if names is None else tuple(names)) for s, names in units.values()]
+
+
+def build_from_sources(
+    sources: Sequence[TakeSource],
+    out: Path,
+    *,
+    config: BuildConfig | None,
+    reading: dict[str, Any],
+    reading_key: dict[str, Any],
+    inputs: Sequence[str | os.PathLike[str]] = (),
+    workers: int | None = 1,
+    scheduler: str | Client | None = None,
+    overwrite: bool = False,
+    locked: bool = False,
+    append: bool = False,
+    keep_stats: bool = False,
+    on_progress: Callable[[BuildProgress], None] | None = None,
+    notes: Callable[[str], None] | None = None,
+) -> None:
+    """Build (or append to) the database folder ``out`` from the takes of ``sources``.
+
+    Parameters
+    ----------
+    sources : sequence of TakeSource
+        The takes' files (:func:`gesturekit.datasets.takes.discover_takes`).
+    out : Path
+        The database folder.
+    config : BuildConfig or None
+        How to build (None: the defaults, or with ``append`` the database's).
+    reading : dict
+        Keyword options of :func:`gesturekit.datasets.takes.iter_takes` (the joint map read already).
+    reading_key : dict
+        The same options as JSON-able values, for the staging keys.
+    inputs : sequence of path
+        Folders the output must not overlap.
+    workers : int or None
+        Worker processes (None: all cores).
+    scheduler : str, distributed.Client or None
+        A Dask scheduler to stage the takes on instead; the staging folder (beside ``out``) must be
+        on a file system every worker reads and writes.
+    overwrite : bool
+        Replace a database at ``out`` (never anything else).
+    locked : bool
+        The caller holds ``out``'s output lock.
+    append : bool
+        Add the takes the database at ``out`` does not hold.
+    keep_stats : bool
+        With ``append``: keep the database's statistics, thresholds and arrays.
+    on_progress : callable(BuildProgress), optional
+        Called as takes are staged.
+    notes : callable(str), optional
+        Given lines for the build's summary: staged takes reused, what appending did.
+
+    Raises
+    ------
+    GestureKitError
+        Options that do not fit the database appended to, an output that may not be written, a take
+        that cannot be read (the message names the file), a recorded source that is gone.
+    """
+    from .datasets.takes import count_takes
+    from .outputs import check_output, output_lock, write_folder
+
+    if keep_stats and not append:
+        raise ConfigError("--keep-stats keeps the statistics of a database appended to; it needs --append")
+    say = notes or (lambda line: None)
+    lock = contextlib.nullcontext() if locked else output_lock(out)
+    with lock:
+        exists = check_output(out, "database", overwrite=overwrite or append, inputs=inputs)
+        base: dict[str, Any] | None = None
+        units: list[tuple[TakeSource, tuple[str, ...] | None, tuple[str, ...]]]
+        if append:
+            if not exists:
+                raise DatabaseError(
+                    "--append adds takes to a database, and there is none here; build it first without --append",
+                    path=out,
+                )
+            base = read_database(out, mmap=True)
+            base["path"] = out
+            config = _append_config(base["meta"]["build"], config, out)
+            old_names = tuple(t["name"] for t in base["meta"]["takes"])
+            units = [(s, None, old_names) for s in sources if s.kind == "habibie2021" or s.motion.stem not in old_names]
+            if not keep_stats:
+                units = [(s, o, ()) for s, o in _recorded_sources(base["meta"]["takes"], out)] + units
+        else:
+            config = config or BuildConfig()
+            units = [(s, None, ()) for s in sources]
+        staging = staging_folder(out)
+        open_staging(staging)
+        jobs = [
+            StageJob(
+                key=job_key(s, reading_key, config, only=only, skip=skip if s.kind == "habibie2021" else ()),
+                staging=str(staging),
+                source=s,
+                reading=reading,
+                config=config,
+                only=only,
+                skip=skip if s.kind == "habibie2021" else (),
+            )
+            for s, only, skip in units
+        ]
+        try:
+            staged = _stage(jobs, count_takes([s for s, _, _ in units]), workers, scheduler, on_progress, say)
+        except BaseException:
+            # kept for the next run to resume from, unless nothing was staged (a first take that fails
+            # leaves nothing behind)
+            if not any(staged_takes(staging, j.key) is not None for j in jobs):
+                remove_staging(staging)
+            raise
+        staged.sort(key=lambda s: s.name)
+        n_new = 0
+        if append and base is not None:
+            n_new = sum(1 for s in staged if s.name not in old_names)
+            if n_new == 0:
+                say(f"nothing to append: the database at {out} holds every take of the folder already")
+                remove_staging(staging)
+                return
+        elif not staged:
+            raise ConfigError("no takes to build a database from")
+        cfg = config
+
+        def fill(tmp: Path) -> None:
+            assemble(tmp, staged, cfg, base=base if keep_stats else None)
+
+        write_folder(out, "database", fill, overwrite=overwrite or append, inputs=inputs, locked=True)
+        remove_staging(staging)
+        if append and base is not None:
+            old = len(old_names)
+            if keep_stats:
+                say(
+                    f"appended {n_new} takes to the database's {old}; statistics and thresholds kept from the "
+                    "database (--keep-stats): the new takes are z-scored with them, the old arrays are unchanged"
+                )
+            else:
+                say(
+                    f"appended {n_new} takes to the database's {old}; statistics and thresholds recomputed over "
+                    f"all {old + n_new} takes (the old takes read again from their files)"
+                )
+
+
+def _stage(
+    jobs: list[StageJob],
+    total: int,
+    workers: int | None,
+    scheduler: str | Client | None,
+    on_progress: Callable[[BuildProgress], None] | None,
+    say: Callable[[str], None],
+) -> list[StagedTake]:
+    """Run the staging jobs; the staged takes, in the order their units finished."""
+    staged: list[StagedTake] = []
+    seconds = 0.0
+    reused = 0
+    folders = {j.key: Path(j.staging) / j.key for j in jobs}
+
+    def on_result(job: StageJob, result: dict) -> None:
+        nonlocal seconds, reused
+        reemit(result["warnings"])
+        for record in result["takes"]:
+            staged.append(StagedTake(folders[job.key], record))
+            seconds += float(record["seconds"])
+            reused += bool(result["reused"])
+        if on_progress is not None and result["takes"]:
+            name = result["takes"][-1]["name"]
+            on_progress(BuildProgress(len(staged), max(total, len(staged)), name, seconds, reused))
+
+    run_jobs(jobs, workers=workers, scheduler=scheduler, on_result=on_result)
+    if reused:
+        say(f"reused {reused} takes staged by an interrupted build")
+    return staged

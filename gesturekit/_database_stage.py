@@ -1,0 +1,484 @@
+"""Building a database, first pass: each take read, featurised, cut and staged on disk.
+
+A build never holds more than a few takes. Each unit of work (one take file, or
+one file of several takes) is read, its per-frame arrays are computed
+(:func:`take_features`), cut into clips (and, on request, the overlapping cut)
+and written to a folder of its own in a *staging folder*, with the take's
+z-scoring moments (count, mean and sum of squared deviations over the frames
+that may start a segment, float64). The second pass
+(:mod:`gesturekit._database_build`) combines the moments and writes the
+database's arrays from the staged ones, one take at a time.
+
+A folder build stages beside its output, in ``.NAME.staging`` (marked by
+``staging.json``, so that nothing else is ever taken for it or removed). Each
+unit's folder is named by a key of its source files (path, size, modification
+time) and of every option that changes what is staged, and is written under a
+temporary name and renamed when complete: a build that was interrupted is
+resumed by the next identical command, which reuses the units already there.
+The staging folder is removed when the database is written.
+
+Staged unit ``KEY/``::
+
+    takes.json            the takes of the unit (name, sources, frame and clip counts, ...), warnings
+    J.F.npy ... J.pose_track.npy   take J's clip arrays, F and P not yet z-scored
+    J.clip_start.npy      the clips' start frames
+    J.overlap.*.npy       the overlapping cut (optional)
+    J.audio.npy           the take's audio as the database keeps it (optional; :mod:`gesturekit._database_audio`)
+    J.moments_F.npy ...   (2, dims) float64: mean and sum of squared deviations of F, P, A
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import shutil
+import threading
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ._database_audio import AudioStorage, encode_take_audio
+from ._database_folder import CLIP_ARRAYS
+from ._version import __version__
+from .control import frame_attributes
+from .errors import ConfigError, OutputError, collect_warnings, warn
+from .features import (
+    LAYOUT,
+    FeatureLayout,
+    audio_frame_features,
+    cgan_audio_features,
+    n_audio_frames,
+    pose_features,
+    stack_audio_features,
+    valid_starts,
+)
+from .motion import AUDIO_SR, Take, resample_positions
+from .skeleton import POSE_FEATURE_INDICES
+
+if TYPE_CHECKING:
+    from .datasets.takes import TakeSource
+
+__all__ = [
+    "BuildConfig",
+    "TakeFeatures",
+    "take_features",
+    "StageJob",
+    "stage_job",
+    "stage_take",
+    "staging_folder",
+    "open_staging",
+    "job_key",
+    "MOMENT_KEYS",
+]
+
+STAGING_FORMAT = "gesturekit-database-staging"
+STAGING_VERSION = 1
+_MARKER = "staging.json"
+#: The z-scored feature arrays whose moments each staged take carries: key -> the TakeFeatures attribute.
+MOMENT_KEYS = {"F": "f", "P": "p", "A": "a"}
+
+
+@dataclass
+class BuildConfig:
+    """How a database is built; stored in ``database.json``.
+
+    Parameters
+    ----------
+    clip_frames : int
+        Frames per clip (the paper's T_match = 64).
+    overlap_stride : int or None
+        If set, also store the overlapping cut with this stride (frames), for the refiner.
+    percentiles : (float, float)
+        Percentiles of each control attribute that define "low" and "high".
+    store_audio : bool
+        Keep the takes' audio (int16) so clips can be listened to.
+    audio_format : {"pcm", "flac"}
+        How the kept audio is stored: raw int16 samples, or FLAC (lossless, smaller).
+    audio_rate : int
+        Sample rate of the kept audio, Hz (4000 to 16000; below 16000 the audio is for
+        browsing only: it is resampled back to 16 kHz when read). See :mod:`gesturekit._database_audio`.
+    label : str
+        A description shown to users (e.g. that the data is generated).
+    source : str
+        Where the takes came from (a folder, ``"demo"``).
+    joint_map : str or None
+        The joint map or preset used to read the takes.
+    """
+
+    clip_frames: int = 64
+    overlap_stride: int | None = None
+    percentiles: tuple[float, float] = (15.0, 85.0)
+    store_audio: bool = True
+    label: str = ""
+    source: str = ""
+    joint_map: str | None = None
+    audio_format: str = "pcm"
+    audio_rate: int = AUDIO_SR
+
+    def __post_init__(self) -> None:
+        if self.clip_frames < 16:
+            raise ConfigError(f"clip_frames must be at least 16, got {self.clip_frames}")
+        if self.overlap_stride is not None and not 1 <= self.overlap_stride <= self.clip_frames:
+            raise ConfigError(f"overlap_stride must be in 1..{self.clip_frames}, got {self.overlap_stride}")
+        lo, hi = self.percentiles
+        if not 0 <= lo < hi <= 100:
+            raise ConfigError(f"percentiles must satisfy 0 <= low < high <= 100, got {self.percentiles}")
+        self.percentiles = (float(lo), float(hi))
+        storage = AudioStorage(format=self.audio_format, rate=self.audio_rate)  # checks both
+        if not self.store_audio and not storage.is_default:
+            raise ConfigError("an audio format or rate was given, but the database keeps no audio (store_audio=False)")
+
+
+@dataclass
+class TakeFeatures:
+    """Per-frame arrays of one take at 15 fps (features not yet z-scored).
+
+    Attributes
+    ----------
+    positions : (T,55,3) metres; m : (T,14); f : (T,112); p : (T,96); a : (T,28);
+    valid : (T,) bool; attributes : (T,9); track : (T,24) feature-joint positions.
+    """
+
+    name: str
+    positions: np.ndarray
+    m: np.ndarray
+    f: np.ndarray
+    p: np.ndarray
+    a: np.ndarray
+    valid: np.ndarray
+    attributes: np.ndarray
+    track: np.ndarray
+    audio: np.ndarray
+    sources: dict = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.positions.shape[0])
+
+
+def take_features(take: Take, *, layout: FeatureLayout = LAYOUT) -> TakeFeatures:
+    """Compute every per-frame array of a take, trimming motion and audio to the shorter.
+
+    Motion at another frame rate is resampled to 15 fps (linear in positions;
+    readers with rotations resample before this). A length mismatch is trimmed
+    with a :class:`GestureKitWarning` that says by how much.
+    """
+    pos = take.motion.positions
+    if take.motion.fps != layout.fps:
+        pos = resample_positions(pos, take.motion.fps, layout.fps)
+    n_motion = pos.shape[0]
+    n_audio = n_audio_frames(len(take.audio), sr=layout.sr, fps=layout.fps)
+    n = min(n_motion, n_audio)
+    if n_motion != n_audio:
+        longer = "motion" if n_motion > n_audio else "audio"
+        warn(
+            f"{take.name}: motion has {n_motion / layout.fps:.2f} s and audio {n_audio / layout.fps:.2f} s; "
+            f"trimmed the {longer} by {abs(n_motion - n_audio) / layout.fps:.2f} s to {n / layout.fps:.2f} s",
+            stacklevel=2,
+        )
+    if n < 1:
+        raise ConfigError(f"take {take.name!r} has no frame after aligning motion and audio")
+    pos = np.ascontiguousarray(pos[:n], dtype=np.float32)
+    audio = np.asarray(take.audio, dtype=np.float32)[: int(np.ceil(n * layout.sr / layout.fps))]
+    m = audio_frame_features(audio, n_frames=n, layout=layout)
+    return TakeFeatures(
+        name=take.name,
+        positions=pos,
+        m=m,
+        f=stack_audio_features(m, layout=layout),
+        p=pose_features(pos, layout=layout),
+        a=cgan_audio_features(m),
+        valid=valid_starts(n, layout=layout),
+        attributes=frame_attributes(pos, fps=layout.fps),
+        track=pos[:, POSE_FEATURE_INDICES].reshape(n, -1),
+        audio=audio,
+        sources=dict(take.sources),
+    )
+
+
+def windows(n_frames: int, length: int, stride: int) -> np.ndarray:
+    """Start frames of windows of ``length`` frames every ``stride`` frames inside ``n_frames``."""
+    if n_frames < length:
+        return np.zeros(0, dtype=np.int64)
+    return np.arange(0, n_frames - length + 1, stride, dtype=np.int64)
+
+
+def cut(tf: TakeFeatures, starts: np.ndarray, length: int, track_len: int) -> dict[str, np.ndarray]:
+    """The clip arrays of the windows starting at ``starts``: each (len(starts), length, ...) and
+    ``pose_track`` (len(starts), track_len, 24), its frames past the take's end held at the last."""
+    idx = starts[:, None] + np.arange(length)[None, :]
+    tidx = np.minimum(starts[:, None] + np.arange(track_len)[None, :], tf.n_frames - 1)
+    return {
+        "F": tf.f[idx],
+        "P": tf.p[idx],
+        "G": tf.positions.reshape(tf.n_frames, -1)[idx],
+        "A": tf.a[idx],
+        "valid": tf.valid[idx],
+        "attributes": tf.attributes[idx],
+        "pose_track": tf.track[tidx],
+    }
+
+
+# ---- one take -----------------------------------------------------------------------------------
+
+
+_FEATURES_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _one_blas_thread() -> Iterator[None]:
+    """numpy's BLAS held to one thread while a take is featurised, then as it was.
+
+    A matrix product's last bits depend on how many threads share it: a database must not
+    depend on the machine's cores, the number of workers or other threads' settings. The
+    limit is process-wide in some BLAS builds, so threads of one process (a Dask worker's)
+    featurise one at a time (reading the files, the longer part, still overlaps).
+    """
+    from threadpoolctl import threadpool_limits
+
+    with _FEATURES_LOCK, threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
+def _moments(x: np.ndarray) -> np.ndarray:
+    """(2, dims) float64: the mean and the sum of squared deviations of the rows of ``x`` (zeros for none)."""
+    if x.shape[0] == 0:
+        return np.zeros((2, x.shape[1]), dtype=np.float64)
+    x64 = x.astype(np.float64)
+    mean = x64.mean(axis=0)
+    return np.stack([mean, ((x64 - mean) ** 2).sum(axis=0)])
+
+
+def _save(path: Path, array: np.ndarray) -> None:
+    np.save(path, np.ascontiguousarray(array), allow_pickle=False)
+
+
+def stage_take(take: Take, folder: Path, index: int, config: BuildConfig) -> dict[str, Any]:
+    """Featurise and cut one take and write its arrays into ``folder`` as ``INDEX.*.npy``.
+
+    Returns
+    -------
+    dict
+        The take's record: ``name``, ``sources``, ``n_frames``, ``n_clips``,
+        ``n_windows`` (of the overlapping cut), ``audio_samples``, ``count``
+        (frames in the moments), ``joints`` (the joint presence, or None when all
+        are recorded), ``seconds`` (duration at 15 fps) and ``index``.
+
+    Raises
+    ------
+    ConfigError
+        The take has NaN positions, non-finite features, or no frame.
+    """
+    with _one_blas_thread():
+        tf = take_features(take)
+    if np.isnan(tf.positions).any():
+        raise ConfigError(f"take {take.name!r} has NaN positions")
+    L = config.clip_frames
+    track_len = L + LAYOUT.pose_lookahead
+    cuts = {"": windows(tf.n_frames, L, L)}
+    if config.overlap_stride:
+        cuts["overlap."] = windows(tf.n_frames, L, config.overlap_stride)
+    for prefix, starts in cuts.items():
+        arrays = cut(tf, starts, L, track_len)
+        for k in CLIP_ARRAYS:
+            a = arrays[k]
+            if np.issubdtype(a.dtype, np.floating) and not np.isfinite(a).all():
+                raise ConfigError(
+                    f"take {take.name!r}: its {k} array holds NaN or infinite values (the motion or audio "
+                    "is not finite); nothing was written"
+                )
+            _save(folder / f"{index}.{prefix}{k}.npy", a)
+        _save(folder / f"{index}.{prefix}clip_start.npy", starts.astype(np.int32))
+    samples, size = 0, 0
+    if config.store_audio:
+        # encoded here, in the first pass: the second only appends each take's stored elements
+        encoded = encode_take_audio(tf.audio, AudioStorage(format=config.audio_format, rate=config.audio_rate))
+        samples, size = int(encoded.samples), int(encoded.data.size)
+        _save(folder / f"{index}.audio.npy", encoded.data)
+    for key, attr in MOMENT_KEYS.items():
+        _save(folder / f"{index}.moments_{key}.npy", _moments(getattr(tf, attr)[tf.valid]))
+    presence = take.motion.presence
+    return {
+        "index": index,
+        "name": tf.name,
+        "sources": {k: str(v) for k, v in tf.sources.items()},
+        "n_frames": tf.n_frames,
+        "n_clips": int(cuts[""].shape[0]),
+        "n_windows": int(cuts["overlap."].shape[0]) if "overlap." in cuts else 0,
+        "audio_samples": samples,
+        "audio_size": size,
+        "count": int(tf.valid.sum()),
+        "joints": None if presence.is_full else presence.to_list(),
+        "seconds": tf.n_frames / LAYOUT.fps,
+    }
+
+
+# ---- units of work ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StageJob:
+    """One unit of per-take work of a folder build: a source's takes, staged as ``staging/key``.
+
+    Attributes
+    ----------
+    key : str
+        The unit's staging key (:func:`job_key`).
+    staging : str
+        The staging folder (a string, so that jobs travel to cluster workers as they are).
+    source : TakeSource
+        The files to read.
+    reading : dict
+        Keyword options of :func:`gesturekit.datasets.takes.iter_takes`.
+    config : BuildConfig
+    only : tuple of str or None
+        Stage only the takes of these names (a file of several takes that the database holds some of).
+    skip : tuple of str
+        Take names not to stage (in the database already).
+    """
+
+    key: str
+    staging: str
+    source: TakeSource
+    reading: dict
+    config: BuildConfig
+    only: tuple[str, ...] | None = None
+    skip: tuple[str, ...] = ()
+
+
+def _file_identity(path: Path | None) -> list[Any]:
+    if path is None:
+        return [None]
+    try:
+        st = os.stat(path)
+    except OSError:
+        return [os.path.abspath(path), None, None]
+    return [os.path.abspath(path), st.st_size, st.st_mtime_ns]
+
+
+def job_key(
+    source: TakeSource,
+    reading_key: dict[str, Any],
+    config: BuildConfig,
+    *,
+    only: tuple[str, ...] | None = None,
+    skip: tuple[str, ...] = (),
+) -> str:
+    """The staging key of a unit: a digest of its files (path, size, modification time), of the
+    reading options ``reading_key`` (JSON-able), of what the build stages (clip frames, overlap
+    stride, audio), the feature layout and gesturekit's version."""
+    record = {
+        "staging": STAGING_VERSION,
+        "gesturekit": __version__,
+        "layout": LAYOUT.signature(),
+        "kind": source.kind,
+        "motion": _file_identity(source.motion),
+        "audio": _file_identity(source.audio),
+        "reading": reading_key,
+        "build": [config.clip_frames, config.overlap_stride, config.store_audio],
+        "only": None if only is None else sorted(only),
+        "skip": sorted(skip),
+    }
+    text = json.dumps(record, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:32]
+
+
+def staged_takes(staging: Path, key: str) -> dict[str, Any] | None:
+    """The record of a complete staged unit (``takes`` and ``warnings``), or None when it is not staged."""
+    try:
+        return json.loads((staging / key / "takes.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def stage_job(job: StageJob) -> dict[str, Any]:
+    """Stage one unit (the function a worker process or a cluster worker runs).
+
+    A unit already staged (by an earlier, interrupted build) is not read again.
+
+    Returns
+    -------
+    dict
+        ``takes`` (the records of :func:`stage_take`), ``warnings`` (the
+        messages reading and featurising issued), ``reused`` (whether the unit
+        was staged already).
+    """
+    from .datasets.takes import iter_takes
+
+    staging = Path(job.staging)
+    done = staged_takes(staging, job.key)
+    if done is not None:
+        return {**done, "reused": True}
+    tmp = staging / f"{job.key}.tmp-{uuid.uuid4().hex[:12]}"
+    tmp.mkdir()
+    try:
+        records: list[dict[str, Any]] = []
+        with collect_warnings() as messages:
+            for take in iter_takes([job.source], **job.reading):
+                if take.name in job.skip or (job.only is not None and take.name not in job.only):
+                    continue
+                records.append(stage_take(take, tmp, len(records), job.config))
+        result = {"takes": records, "warnings": list(messages)}
+        (tmp / "takes.json").write_text(json.dumps(result), encoding="utf-8")
+        os.replace(tmp, staging / job.key)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return {**result, "reused": False}
+
+
+# ---- the staging folder -------------------------------------------------------------------------
+
+
+def staging_folder(out: Path) -> Path:
+    """The staging folder of a build of the database folder ``out``: ``.NAME.staging`` beside it."""
+    return out.parent / f".{out.name}.staging"
+
+
+def is_staging(path: Path) -> bool:
+    """Whether ``path`` is a staging folder gesturekit made (its ``staging.json`` says so)."""
+    try:
+        marker = json.loads((path / _MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(marker, dict) and marker.get("format") == STAGING_FORMAT
+
+
+def open_staging(path: Path) -> None:
+    """Make the staging folder ``path``, or reuse the one an interrupted build left (its unfinished
+    units removed).
+
+    Raises
+    ------
+    OutputError
+        Something that is not a gesturekit staging folder is at ``path``.
+    """
+    from .outputs import write_errors
+
+    with write_errors(path):
+        if path.is_symlink() or (path.exists() and not is_staging(path)):
+            raise OutputError(
+                "is in the way of the build's staging folder and is not one gesturekit made; move it away", path=path
+            )
+        if not path.exists():
+            tmp = path.parent / f"{path.name}.tmp-{uuid.uuid4().hex[:12]}"
+            tmp.mkdir(parents=True)
+            marker = {"format": STAGING_FORMAT, "version": STAGING_VERSION, "gesturekit": __version__}
+            (tmp / _MARKER).write_text(json.dumps(marker), encoding="utf-8")
+            os.replace(tmp, path)
+            return
+        for entry in path.iterdir():
+            if ".tmp-" in entry.name:
+                shutil.rmtree(entry, ignore_errors=True)
+
+
+def remove_staging(path: Path) -> None:
+    """Remove a staging folder gesturekit made (anything else is left alone)."""
+    if is_staging(path) and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
