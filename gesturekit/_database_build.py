@@ -20,7 +20,6 @@ arrays and z-scoring moments on disk. This module
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Sequence
@@ -33,6 +32,7 @@ import numpy as np
 from ._database_audio import AudioStorage
 from ._database_folder import CLIP_ARRAYS, FORMAT, FORMAT_VERSION, read_database, write_meta, write_stats
 from ._database_stage import MOMENT_KEYS, BuildConfig, StageJob, stage_job, stage_take
+from ._jobs import run_jobs as _run
 from ._version import __version__
 from .control import ATTRIBUTE_NAMES
 from .errors import ConfigError, GestureKitError, warn
@@ -100,14 +100,9 @@ def run_jobs(
     scheduler: str | Client | None,
     on_result: Callable[[StageJob, dict], None],
 ) -> None:
-    """Stage every unit: here (one worker), in worker processes, or on a Dask cluster.
-
-    ``on_result(job, result)`` is called in this process as each unit is done
-    (in the order they finish). An error of a unit stops the build: units not
-    started are cancelled, those running are let finish, and the error of the
-    first failing unit in ``jobs``' order is raised here (worker processes start
-    units in that order, so it is the error a serial build gives); units staged
-    before it stay staged.
+    """Stage every unit: here (one worker), in worker processes, or on a Dask cluster
+    (:func:`gesturekit._jobs.run_jobs`: the first failing unit in ``jobs``' order is the error
+    raised, as in a serial build; units staged before it stay staged).
 
     Parameters
     ----------
@@ -116,70 +111,18 @@ def run_jobs(
     scheduler : str, distributed.Client or None
         The address of a Dask scheduler (``tcp://host:8786``) or a client; then ``workers`` is not used.
     """
-    if scheduler is not None:
-        from ._optional import require
-
-        distributed = require("distributed", purpose="building a database on a Dask cluster (--scheduler)")
-        client = _connect(distributed, scheduler) if isinstance(scheduler, str) else scheduler
-        try:
-            futures = client.map(stage_job, list(jobs), key=[f"gesturekit-stage-{j.key}" for j in jobs], pure=False)
-            by_key = {f.key: j for f, j in zip(futures, jobs)}
-            for fut in distributed.as_completed(futures):
-                on_result(by_key[fut.key], fut.result())
-        finally:
-            if client is not scheduler:
-                client.close()
-        return
-    n = (os.cpu_count() or 1) if workers is None else int(workers)
-    if n < 1:
-        raise ConfigError(f"workers must be a positive integer, got {workers!r}")
-    if n == 1 or len(jobs) <= 1:
-        for job in jobs:
-            on_result(job, stage_job(job))
-        return
-    import concurrent.futures as cf
-    import multiprocessing
-
-    # fresh interpreters: nothing of the caller's threads or state is inherited
-    pool = cf.ProcessPoolExecutor(
-        max_workers=min(n, len(jobs)), mp_context=multiprocessing.get_context("spawn"), initializer=_worker_setup
+    _run(
+        stage_job,
+        jobs,
+        keys=[f"gesturekit-stage-{j.key}" for j in jobs],
+        workers=workers,
+        scheduler=scheduler,
+        on_result=on_result,
+        purpose="building a database on a Dask cluster (--scheduler)",
+        died="a build worker process died (out of memory?); rerun the same command to resume, or pass --workers 1. "
+        'From a script, put the call under `if __name__ == "__main__":` (worker processes import the main script)',
+        initializer=_worker_setup,
     )
-    try:
-        pending = {pool.submit(stage_job, job): i for i, job in enumerate(jobs)}
-        failed: list[tuple[int, BaseException]] = []
-        for fut in cf.as_completed(pending):
-            if fut.cancelled():
-                continue
-            exc = fut.exception()
-            if exc is None:
-                on_result(jobs[pending[fut]], fut.result())
-                continue
-            if not failed:
-                for other in pending:
-                    other.cancel()  # only those not started yet
-            failed.append((pending[fut], exc))
-        if failed:
-            raise min(failed, key=lambda f: f[0])[1]
-    except cf.process.BrokenProcessPool:
-        raise GestureKitError(
-            "a build worker process died (out of memory?); rerun the same command to resume, or pass --workers 1. "
-            'From a script, put the call under `if __name__ == "__main__":` (worker processes import the main script)'
-        ) from None
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-
-
-#: How long to try reaching a Dask scheduler before giving up.
-SCHEDULER_TIMEOUT = "30s"
-
-
-def _connect(distributed: Any, address: str) -> Client:
-    """A client of the Dask scheduler at ``address``; a scheduler that cannot be reached is a
-    :class:`~gesturekit.errors.ConfigError` naming the address."""
-    try:
-        return distributed.Client(address, timeout=SCHEDULER_TIMEOUT)
-    except (OSError, ValueError, TypeError) as exc:
-        raise ConfigError(f"--scheduler {address}: cannot reach a Dask scheduler there ({exc})") from None
 
 
 def _worker_setup() -> None:

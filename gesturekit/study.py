@@ -46,8 +46,9 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 import numpy as np
 
 from ._io import atomic_write
+from ._jobs import run_jobs
 from ._optional import require
-from .errors import ConfigError, GestureKitError
+from .errors import ConfigError
 from .export.loudness import measure_loudness, normalise_loudness
 from .motion import AUDIO_SR, Motion
 from .skeleton import JointPresence
@@ -341,48 +342,23 @@ def _run_jobs(
     total = len(jobs)
     done = 0
 
-    def tick():
+    def tick(job: dict, result: str) -> None:
         nonlocal done
         done += 1
         if progress is not None:
             progress(done, total)
 
-    if scheduler is not None:
-        distributed = require("distributed", purpose="rendering on a Dask cluster (a scheduler)")
-        as_completed = distributed.as_completed
-        client = scheduler if isinstance(scheduler, distributed.Client) else distributed.Client(scheduler)
-        try:
-            futures = client.map(_render_stimulus, jobs, key=[f"stimulus-{j['id']}" for j in jobs], pure=False)
-            for fut in as_completed(futures):
-                fut.result()  # raises the worker's error here
-                tick()
-        finally:
-            if client is not scheduler:
-                client.close()
-        return
-    n = (os.cpu_count() or 1) if workers is None else int(workers)
-    if n < 1:
-        raise ConfigError(f"workers must be a positive integer, got {workers!r}")
-    if n == 1 or total == 1:
-        for job in jobs:
-            _render_stimulus(job)
-            tick()
-        return
-    import concurrent.futures as cf
-    import multiprocessing
-
-    # fresh interpreters: no rendering or threading state is inherited from the caller
-    try:
-        with cf.ProcessPoolExecutor(max_workers=min(n, total), mp_context=multiprocessing.get_context("spawn")) as pool:
-            pending = [pool.submit(_render_stimulus, job) for job in jobs]
-            for done_job in cf.as_completed(pending):
-                done_job.result()
-                tick()
-    except cf.process.BrokenProcessPool:
-        raise GestureKitError(
-            "a rendering process died; if make_stimuli is called from a script, put the call under "
-            '`if __name__ == "__main__":` (worker processes import the main script), or pass workers=1'
-        ) from None
+    run_jobs(
+        _render_stimulus,
+        jobs,
+        keys=[f"stimulus-{j['id']}" for j in jobs],
+        workers=workers,
+        scheduler=scheduler,
+        on_result=tick,
+        purpose="rendering on a Dask cluster (a scheduler)",
+        died="a rendering process died; if make_stimuli is called from a script, put the call under "
+        '`if __name__ == "__main__":` (worker processes import the main script), or pass workers=1',
+    )
 
 
 # ---- the study ----------------------------------------------------------------------------------

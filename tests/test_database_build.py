@@ -431,9 +431,9 @@ def test_scale_options_are_refused_with_demo(tmp_path, option):
 
 def test_a_scheduler_that_cannot_be_reached_is_refused(five, joint_map, tmp_path, monkeypatch):
     pytest.importorskip("distributed", reason="dask.distributed is not installed")
-    import gesturekit._database_build as build_module
+    import gesturekit._jobs as jobs_module
 
-    monkeypatch.setattr(build_module, "SCHEDULER_TIMEOUT", "1s")
+    monkeypatch.setattr(jobs_module, "SCHEDULER_TIMEOUT", "1s")
     before = snapshot(five, tmp_path)
     address = "tcp://127.0.0.1:1"
     run = run_cli("build-db", five, "--joint-map", joint_map, "--out", tmp_path / "db", "--scheduler", address)

@@ -2,7 +2,8 @@
 
 From the bottom up (the data's way through the package, issue 17's acceptance)::
 
-    base        errors, _io, _optional, _version, _config, limits, paths, outputs, skeleton, bones, motion, control
+    base        errors, _io, _jobs, _optional, _version, _config, limits, paths, outputs,
+                skeleton, bones, motion, control
     datasets    the readers and the generated demo speaker (gesturekit/datasets/)
     features    audio and pose features, their layout
     database    MatchingDatabase, its folder on disk, the demo database, finding databases
@@ -42,6 +43,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         (
             "gesturekit.errors",
             "gesturekit._io",
+            "gesturekit._jobs",
             "gesturekit._optional",
             "gesturekit._version",
             "gesturekit._config",
