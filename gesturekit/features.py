@@ -224,10 +224,12 @@ class _MelBands:
 
     def apply(self, power: np.ndarray) -> np.ndarray:
         """Mel power of each frame, ``power @ mel.T``: (frames, 1 + n_fft // 2) -> (frames, n_mels), float32."""
-        acc = np.zeros((power.shape[0], self.index.shape[0]))
-        for j in range(self.index.shape[1]):  # band position by position, the same order for every frame
-            acc += power[:, self.index[:, j]] * self.weight[:, j]
-        return acc.astype(np.float32)
+        out = np.empty((power.shape[0], self.index.shape[0]), np.float32)
+        for a in range(0, power.shape[0], 256):  # (frames, n_mels, width) float64 temporaries, 256 frames at a time
+            # each filter's band summed on its own (numpy's pairwise sum of a contiguous row): the
+            # same order for every frame, however many frames share the call
+            out[a : a + 256] = (power[a : a + 256, self.index] * self.weight).sum(axis=2)
+        return out
 
 
 _BANDS: dict[tuple[int, int, int], _MelBands] = {}
