@@ -407,8 +407,10 @@ class LiveSynthesizer:
         n = self._n_final
         assert n is not None
         fps = self._fps
+        if not self._switches:
+            return self._config.control_track
         segs: list[Segment] = []
-        first = self._switches[0][0] if self._switches else n
+        first = self._switches[0][0]
         cut = _boundary_s(first, fps)
         for seg in self._config.control_track.segments:
             if seg.start_s < cut and int(np.ceil(seg.start_s * fps - 1e-9)) < first:
