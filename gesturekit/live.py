@@ -359,7 +359,7 @@ class LiveSynthesizer:
         if self._config.blend == "none":
             return
         out, b_end, F = self._out.data, self._out.n, len(self._fade)
-        if a > 0 and a >= 2:
+        if a >= 2:  # blend_segments skips joins before frame 2
             self._offsets[a] = np.empty(0, np.float32)  # the offset is taken when its turn comes
         for b in sorted(self._offsets):  # joins in order: each sees the frames before it blended
             if b >= a and self._offsets[b].size == 0:

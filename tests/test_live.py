@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from gesturekit.control import parse_control
 from gesturekit.database import MatchingDatabase
 from gesturekit.demo import build_demo_database
-from gesturekit.errors import ConfigError
+from gesturekit.errors import ConfigError, GestureKitWarning
 from gesturekit.export.npz import load_npz
 from gesturekit.export.result import save_result_npz
 from gesturekit.features import LAYOUT, frame_centres
@@ -283,3 +283,11 @@ def test_the_live_refiner_holds_back_its_stated_frames(db, speech):
     # bounded windows: near the offline refiner, not equal to it
     assert np.abs(motion - offline.motion.positions).mean() < 0.05
     assert live.algorithmic_delay_s == pytest.approx(14 / 15 + 1024.5 / SR + 8 / 15)
+
+
+def test_an_impossible_control_relaxes_as_offline(db, speech):
+    switches = [(SR, "both_hands=high+speed=slow+width=narrow+symmetry=asymmetric"), (3 * SR, None)]
+    with pytest.warns(GestureKitWarning, match="relaxed"):
+        live, pieces, _ = stream(db, speech, [640], switches=switches)
+    res, offline = check_equal_to_offline(db, speech, live, pieces)
+    assert res.relaxed_steps and res.relaxed_steps == offline.relaxed_steps
