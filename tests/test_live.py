@@ -291,3 +291,42 @@ def test_an_impossible_control_relaxes_as_offline(db, speech):
         live, pieces, _ = stream(db, speech, [640], switches=switches)
     res, offline = check_equal_to_offline(db, speech, live, pieces)
     assert res.relaxed_steps and res.relaxed_steps == offline.relaxed_steps
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    seed=st.integers(0, 2**16),
+    n_frames=st.integers(1, 40),
+    segment=st.integers(1, 9),
+    k=st.integers(0, 3),
+    rule=st.sampled_from(["ends", "all"]),
+    n_masks=st.integers(0, 3),
+)
+def test_a_search_step_by_step_equals_the_search_of_the_whole_query(seed, n_frames, segment, k, rule, n_masks):
+    from gesturekit.search import SearchConfig, SearchIndex
+    from gesturekit.search.stream import StepSearch
+
+    rng = np.random.default_rng(seed)
+    M, T = 12, 16
+    P = rng.standard_normal((M, T, 96)).astype(np.float32)
+    F = rng.standard_normal((M, T, 112)).astype(np.float32)
+    valid = np.ones((M, T), bool)
+    valid[:, -4:] = False
+    query = rng.standard_normal((n_frames, 112)).astype(np.float32)
+    masks = rng.random((n_masks, M, T)) < 0.6 if n_masks else None
+    n_steps = -(-n_frames // segment)
+    index_of_step = rng.integers(-1, n_masks, n_steps) if n_masks else None
+    exclude = rng.random((M, T)) < 0.05
+    cfg = SearchConfig(k=k, segment=segment, seed=seed % 97, mask_rule=rule)
+    index = SearchIndex(P, F, valid)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        whole = index.search(query, config=cfg, masks=masks, step_mask_index=index_of_step, exclude=exclude)
+        steps = StepSearch(index, cfg, exclude=exclude)
+        ids = [steps.add_mask(m) for m in masks] if masks is not None else []
+        for i in range(n_steps):
+            j = -1 if index_of_step is None or index_of_step[i] < 0 else ids[index_of_step[i]]
+            steps.step(query[i * segment], j, min(segment, n_frames - i * segment))
+        streamed = steps.result()
+    steps.close()
+    assert streamed.equals(whole)
