@@ -122,13 +122,14 @@ assert (LAYOUT.frame_dim, LAYOUT.audio_dim, LAYOUT.pose_dim, LAYOUT.motion_dim, 
 )
 
 
-def frame_centres(n_frames: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> np.ndarray:
+def frame_centres(n_frames: int, *, sr: int = AUDIO_SR, fps: int = FPS, first: int = 0) -> np.ndarray:
     """Sample index of the centre of each frame, shape (n_frames,), int64.
 
     Frame ``t`` is centred at ``t / fps`` seconds, i.e. sample ``t * sr / fps``
-    rounded half up, computed exactly in integers for every ``t``.
+    rounded half up, computed exactly in integers for every ``t``; the frames are
+    ``first .. first + n_frames - 1``.
     """
-    t = np.arange(n_frames, dtype=np.int64)
+    t = np.arange(first, first + n_frames, dtype=np.int64)
     return (2 * t * sr + fps) // (2 * fps)
 
 
@@ -276,7 +277,7 @@ def audio_frame_features(
         n_frames = n_audio_frames(len(audio), sr=layout.sr, fps=layout.fps) - first_frame
     n_fft = layout.n_fft
     half = n_fft // 2
-    centres = frame_centres(first_frame + n_frames, sr=layout.sr, fps=layout.fps)[first_frame:]
+    centres = frame_centres(n_frames, sr=layout.sr, fps=layout.fps, first=first_frame)
     window = np.hanning(n_fft + 1)[:-1].astype(np.float32)  # periodic Hann
     bands = _MelBands.of(layout)
     out = np.empty((n_frames, layout.frame_dim), dtype=np.float32)
