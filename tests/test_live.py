@@ -330,3 +330,41 @@ def test_a_search_step_by_step_equals_the_search_of_the_whole_query(seed, n_fram
         streamed = steps.result()
     steps.close()
     assert streamed.equals(whole)
+
+
+@pytest.mark.parametrize("then", ["right_hand=high", None])
+def test_a_switch_cuts_the_configurations_control_track(db, speech, then):
+    config = SynthesisConfig(control="0.5-4.5:left_hand=low")
+    live, pieces, before = stream(db, speech, [480], config=config, switches=[(int(2.2 * SR), then)])
+    res, _ = check_equal_to_offline(db, speech, live, pieces, config)
+    first = res.control.segments[0]
+    assert (first.start_s, first.label()) == (0.5, "left_hand=low") and round(first.end_s * 15) == before[0]
+    assert [s.label() for s in res.control.segments[1:]] == ([then] if then else [])
+
+
+def test_controls_switched_from_another_thread_are_recorded_as_they_acted(db, speech):
+    import threading
+    import time
+
+    live = LiveSynthesizer(db)
+    stop = threading.Event()
+
+    def clicks():
+        for i in range(200):
+            if stop.is_set():
+                return
+            live.set_control(["left_hand=high", None, "speed=slow"][i % 3])
+            time.sleep(0.002)
+
+    clicker = threading.Thread(target=clicks)
+    clicker.start()
+    pieces = []
+    try:
+        for pos in range(0, len(speech), 320):
+            pieces.append(live.push(speech[pos : pos + 320]))
+            time.sleep(0.0005)
+    finally:
+        stop.set()
+        clicker.join()
+    pieces.append(live.finish())
+    check_equal_to_offline(db, speech, live, pieces)
