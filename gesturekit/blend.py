@@ -7,12 +7,19 @@ import numpy as np
 
 from .errors import ConfigError
 
-__all__ = ["BLEND_MODES", "KEEP_BELOW_HZ", "blend_segments", "keep_slow"]
+__all__ = ["BLEND_MODES", "KEEP_BELOW_HZ", "blend_segments", "fade_weights", "keep_slow"]
 
 BLEND_MODES = ("none", "offset")
 
 #: Default cut-off of :func:`keep_slow` in synthesis, Hz: about the segment rate (15 fps / 8 frames).
 KEEP_BELOW_HZ = 2.0
+
+
+def fade_weights(frames: int) -> np.ndarray:
+    """The weights an ``"offset"`` blend fades a join's offset with, shape (frames,), float64:
+    a cosine from 1 to 0, exclusive at both ends."""
+    j = np.arange(frames)
+    return 0.5 * (1 + np.cos(np.pi * (j + 1) / (frames + 1)))
 
 
 def blend_segments(g: np.ndarray, boundaries: np.ndarray, *, mode: str = "none", frames: int = 4) -> np.ndarray:
@@ -45,8 +52,7 @@ def blend_segments(g: np.ndarray, boundaries: np.ndarray, *, mode: str = "none",
         return out
     if frames < 1:
         raise ConfigError(f"blend frames must be at least 1, got {frames}")
-    j = np.arange(frames)
-    weight = 0.5 * (1 + np.cos(np.pi * (j + 1) / (frames + 1)))  # 1 -> 0, exclusive at both ends
+    weight = fade_weights(frames)
     for b in np.asarray(boundaries, dtype=np.int64):
         if b < 2 or b >= len(out):
             continue

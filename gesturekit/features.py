@@ -122,13 +122,14 @@ assert (LAYOUT.frame_dim, LAYOUT.audio_dim, LAYOUT.pose_dim, LAYOUT.motion_dim, 
 )
 
 
-def frame_centres(n_frames: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> np.ndarray:
+def frame_centres(n_frames: int, *, sr: int = AUDIO_SR, fps: int = FPS, first: int = 0) -> np.ndarray:
     """Sample index of the centre of each frame, shape (n_frames,), int64.
 
     Frame ``t`` is centred at ``t / fps`` seconds, i.e. sample ``t * sr / fps``
-    rounded half up, computed exactly in integers for every ``t``.
+    rounded half up, computed exactly in integers for every ``t``; the frames are
+    ``first .. first + n_frames - 1``.
     """
-    t = np.arange(n_frames, dtype=np.int64)
+    t = np.arange(first, first + n_frames, dtype=np.int64)
     return (2 * t * sr + fps) // (2 * fps)
 
 
@@ -193,8 +194,55 @@ def mel_filterbank(*, sr: int, n_fft: int, n_mels: int, fmin: float = 0.0, fmax:
     return weights
 
 
+@dataclass(frozen=True, eq=False)
+class _MelBands:
+    """The mel filters as bands of consecutive FFT bins, applied frame by frame in a fixed order.
+
+    A matrix product (BLAS) rounds a frame's sums differently depending on how many frames
+    share the call and where the frame sits in it; summing each filter's band in one fixed
+    order instead makes a frame's features depend on its own samples only, so features
+    computed a few frames at a time (a growing signal, pieces of a long file) equal those
+    computed at once, bit for bit.
+    """
+
+    index: np.ndarray  # (n_mels, width) int64: FFT bin of each band position
+    weight: np.ndarray  # (n_mels, width) float64: the filter's weight there (0 past its band)
+
+    @classmethod
+    def of(cls, layout: FeatureLayout) -> _MelBands:
+        key = (layout.sr, layout.n_fft, layout.n_mels)
+        if key not in _BANDS:
+            mel = mel_filterbank(sr=layout.sr, n_fft=layout.n_fft, n_mels=layout.n_mels, fmin=0.0, fmax=layout.sr / 2)
+            nonzero = [np.flatnonzero(row) for row in mel]
+            lo = np.array([nz[0] if nz.size else 0 for nz in nonzero], dtype=np.int64)
+            width = max(int(nz[-1] - nz[0] + 1) if nz.size else 1 for nz in nonzero)
+            index = np.minimum(lo[:, None] + np.arange(width)[None, :], mel.shape[1] - 1)
+            weight = np.where(
+                index - lo[:, None] == np.arange(width)[None, :], mel[np.arange(len(mel))[:, None], index], 0
+            )
+            _BANDS[key] = cls(index=index, weight=weight.astype(np.float64))
+        return _BANDS[key]
+
+    def apply(self, power: np.ndarray) -> np.ndarray:
+        """Mel power of each frame, ``power @ mel.T``: (frames, 1 + n_fft // 2) -> (frames, n_mels), float32."""
+        out = np.empty((power.shape[0], self.index.shape[0]), np.float32)
+        for a in range(0, power.shape[0], 256):  # (frames, n_mels, width) float64 temporaries, 256 frames at a time
+            # each filter's band summed on its own (numpy's pairwise sum of a contiguous row): the
+            # same order for every frame, however many frames share the call
+            out[a : a + 256] = (power[a : a + 256, self.index] * self.weight).sum(axis=2)
+        return out
+
+
+_BANDS: dict[tuple[int, int, int], _MelBands] = {}
+
+
 def audio_frame_features(
-    audio: np.ndarray, *, n_frames: int | None = None, layout: FeatureLayout = LAYOUT, chunk_frames: int = 4096
+    audio: np.ndarray,
+    *,
+    n_frames: int | None = None,
+    first_frame: int = 0,
+    layout: FeatureLayout = LAYOUT,
+    chunk_frames: int = 4096,
 ) -> np.ndarray:
     """Per-frame audio features ``m_t``: 13 MFCCs and the log mean energy.
 
@@ -205,6 +253,10 @@ def audio_frame_features(
     n_frames : int, optional
         Frames to compute; default :func:`n_audio_frames` of the audio.
         Windows reaching past either end of the audio see zeros.
+    first_frame : int
+        The first frame to compute (frames ``first_frame .. first_frame + n_frames - 1``);
+        a frame's features depend on its own window only, so computing a signal's frames
+        in pieces gives the features of computing them at once, bit for bit.
     layout : FeatureLayout
     chunk_frames : int
         Frames per chunk, bounding memory (a chunk holds ``chunk_frames * n_fft`` floats).
@@ -222,12 +274,12 @@ def audio_frame_features(
     if audio.ndim != 1:
         raise ConfigError(f"audio must be mono, shape (samples,), got {audio.shape}")
     if n_frames is None:
-        n_frames = n_audio_frames(len(audio), sr=layout.sr, fps=layout.fps)
+        n_frames = n_audio_frames(len(audio), sr=layout.sr, fps=layout.fps) - first_frame
     n_fft = layout.n_fft
     half = n_fft // 2
-    centres = frame_centres(n_frames, sr=layout.sr, fps=layout.fps)
+    centres = frame_centres(n_frames, sr=layout.sr, fps=layout.fps, first=first_frame)
     window = np.hanning(n_fft + 1)[:-1].astype(np.float32)  # periodic Hann
-    mel = mel_filterbank(sr=layout.sr, n_fft=n_fft, n_mels=layout.n_mels, fmin=0.0, fmax=layout.sr / 2)
+    bands = _MelBands.of(layout)
     out = np.empty((n_frames, layout.frame_dim), dtype=np.float32)
     offsets = np.arange(-half, n_fft - half, dtype=np.int64)
     n = len(audio)
@@ -241,7 +293,7 @@ def audio_frame_features(
         power = spec.real**2 + spec.imag**2
         # power in dB (floor 1e-10, reference 1) and its orthonormal DCT-II: librosa's
         # power_to_db and mfcc with their defaults, operation for operation
-        mel_db = 10.0 * np.log10(np.maximum(1e-10, power @ mel.T))
+        mel_db = 10.0 * np.log10(np.maximum(1e-10, bands.apply(power)))
         out[a:b, : layout.n_mfcc] = scipy.fft.dct(mel_db, type=2, norm="ortho", axis=1)[:, : layout.n_mfcc]
         energy = (frames**2 * window).sum(axis=1, dtype=np.float64) / window.sum(dtype=np.float64)
         out[a:b, layout.n_mfcc] = np.log(energy + 1e-10)

@@ -25,6 +25,9 @@ checks
     Input checks shared by the fast search and the reference.
 index
     :class:`SearchIndex`: the fast exact search.
+stream
+    :class:`~gesturekit.search.stream.StepSearch`: the same search one step at a time, for a
+    query that grows (live synthesis).
 threads
     Thread and BLAS control while a search runs.
 kernels

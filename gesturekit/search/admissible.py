@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import ConfigError
 
-__all__ = ["MASK_RULES", "window_all", "base_starts", "control_starts", "admissible_starts"]
+__all__ = ["MASK_RULES", "window_all", "base_starts", "control_starts", "admissible_starts", "draw_initial_frame"]
 
 #: Where a control mask must hold in a window: its first and last frame, or every frame.
 MASK_RULES = ("ends", "all")
@@ -128,3 +128,30 @@ def admissible_starts(
     if mask is not None:
         adm &= control_starts(mask, n, rule)
     return adm
+
+
+def draw_initial_frame(admissible: np.ndarray, seed: int) -> tuple[int, int]:
+    """The random initial pose's database frame: the k-th admissible frame in clip order,
+    ``k`` drawn with ``seed`` (found per clip, without an index of every frame).
+
+    Parameters
+    ----------
+    admissible : np.ndarray, shape (M, T), bool
+        Admissible window starts of the first step.
+    seed : int
+
+    Returns
+    -------
+    (clip, frame)
+
+    Raises
+    ------
+    ConfigError
+        No frame is admissible.
+    """
+    before = np.cumsum(admissible.sum(axis=1))
+    if before[-1] == 0:
+        raise ConfigError("no admissible database frame to draw the initial pose from")
+    k = int(np.random.default_rng(seed).integers(int(before[-1])))
+    clip = int(np.searchsorted(before, k, side="right"))
+    return clip, int(np.flatnonzero(admissible[clip])[k - (int(before[clip - 1]) if clip else 0)])

@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import ConfigError, warn
-from .admissible import base_starts, control_starts
+from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
 from .exact import TINY, audio_err, compiled, pose_err_factor, reduce_chunk
 from .threads import matrix_product, single_threaded_blas, worker_count
@@ -491,13 +491,7 @@ class SearchIndex:
                 adm, _ = step_key(b, 0)
                 if not adm.any():
                     adm, _ = step_key(b, 0, relaxed=True)
-                # the k-th admissible frame in clip order, found per clip (no index of every frame)
-                before = np.cumsum(adm.sum(axis=1))
-                if before[-1] == 0:
-                    raise ConfigError("no admissible database frame to draw the initial pose from")
-                k = int(np.random.default_rng(cfg.seed).integers(int(before[-1])))
-                clip = int(np.searchsorted(before, k, side="right"))
-                init_frame = (clip, int(np.flatnonzero(adm[clip])[k - (int(before[clip - 1]) if clip else 0)]))
+                init_frame = draw_initial_frame(adm, cfg.seed)
                 init_pose = self.P[init_frame]
             else:
                 init_frame = (-1, -1)
@@ -526,19 +520,21 @@ class SearchIndex:
                         results[b].relaxed[i] = True
                         adm, key = step_key(b, i, relaxed=True)
                     keys[b] = key
-                decided = self._step(active, keys, poses, calls, i, cache, pool)
+                rows = {b: calls[b].query[i * calls[b].config.segment] for b in active}
+                widths = {b: calls[b].config.table_width for b in active}
+                decided = self._step(active, keys, poses, (rows, widths), cache, pool)
                 retry = [b for b in active if decided[b] is None and keys[b][2] >= 0]
                 if retry:  # only the query's own frame was admissible under the control
                     for b in retry:
                         results[b].relaxed[i] = True
                         keys[b] = step_key(b, i, relaxed=True)[1]
-                    decided.update(self._step(retry, keys, poses, calls, i, cache, pool))
+                    decided.update(self._step(retry, keys, poses, (rows, widths), cache, pool))
                 # drop cached masks this step did not use (a long control track has many)
                 used = set(keys.values()) | {(k[0], "-", -1) for k in keys.values()}
                 for key in [key for key in cache if isinstance(key, tuple) and key not in used]:
                     del cache[key]
                 for b in active:
-                    self._record(results[b], calls[b], i, decided[b], poses, b)
+                    self._record(results[b], calls[b].query.shape[0], i, decided[b], poses, b)
 
         for r in results:
             if r.relaxed.any():
@@ -546,30 +542,31 @@ class SearchIndex:
                 warn(f"control relaxed at {where}: no database window satisfies it", stacklevel=3)
         return results
 
-    def _step(self, active, keys, poses, calls, i, cache, pool=None):
+    def _step(self, active, keys, poses, queries, cache, pool=None):
         """One search step for several queries: one scan, then the exact decisions per query.
 
-        ``pool`` (a thread pool) spreads the per-query decisions over the cores; they are
-        independent, so the results do not depend on it.
+        ``queries`` is ``(rows, widths)``: per query, its audio feature at the step's first
+        frame and its table width. ``pool`` (a thread pool) spreads the per-query decisions
+        over the cores; they are independent, so the results do not depend on it.
         """
+        rows, widths = queries
         run = map if pool is None or len(active) < 4 else pool.map
         biases = [self._bias(cache, keys[b]) for b in active]
-        fq = np.stack([calls[b].query[i * calls[b].config.segment] for b in active])
+        fq = np.stack([rows[b] for b in active])
         s0, amin, nq, undecided, (av, inexact) = self._scan(
             poses[active], biases, fq, cache.setdefault("scratch", {}), pool
         )
 
         def decide(j):
             b = active[j]
-            return self._decide(
-                s0[j], amin[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j], calls[b].config.table_width
-            )
+            return self._decide(s0[j], amin[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j], widths[b])
 
         return dict(zip(active, run(decide, range(len(active)))))
 
-    def _record(self, res, call, i, d, poses, b):
-        """Write step ``i``'s table and choice (the k-th, or the pin) into ``res``; advance ``p_{t-1}``."""
-        cfg = call.config
+    def _record(self, res, n_frames, i, d, poses, b):
+        """Write step ``i``'s table and choice (the k-th, or the pin) into ``res`` (a result of
+        ``n_frames`` output frames); advance ``p_{t-1}``."""
+        cfg = res.config
         N = cfg.segment
         if d is None and i not in cfg.pins:
             raise ConfigError(
@@ -594,7 +591,7 @@ class SearchIndex:
             res.position[i] = pos
         res.clip[i], res.start[i] = m, s
         t = i * N
-        L = min(N, call.query.shape[0] - t)
+        L = min(N, n_frames - t)
         res.frames[t : t + L, 0] = m
         res.frames[t : t + L, 1] = s + np.arange(L)
         poses[b] = self.P[m, s + N - 1]

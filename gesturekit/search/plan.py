@@ -25,7 +25,7 @@ if TYPE_CHECKING:  # the synthesis sits above the search; only its type is named
     from ..database import MatchingDatabase
     from ..synthesize import SynthesisConfig
 
-__all__ = ["SearchPlan", "plan_search", "rest_pose_frame"]
+__all__ = ["SearchPlan", "plan_search", "rest_pose_frame", "resolved_search_config", "exclusions"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,16 +135,26 @@ def plan_search(db: MatchingDatabase, speech: np.ndarray, config: SynthesisConfi
     query, _ = db.query_features(samples, n_frames=n)
     track = config.control_track
     masks, index = step_masks(track, np.asarray(db.attributes), db.thresholds, n_frames=n, segment=search.segment)
-    if config.init == "rest":
-        search = replace(search, init_pose=tuple(float(x) for x in db.P[rest_pose_frame(db)]))
-    exclude = None
-    if config.exclude_takes or config.exclude_ranges:
-        exclude = db.exclusion_mask(takes=config.exclude_takes, ranges=config.exclude_ranges)
     return SearchPlan(
         query=np.ascontiguousarray(query, dtype=np.float32),
-        config=search,
+        config=resolved_search_config(db, config),
         control=track,
         masks=masks,
         step_mask_index=np.asarray(index, dtype=np.int64),
-        exclude=exclude,
+        exclude=exclusions(db, config),
     )
+
+
+def resolved_search_config(db: MatchingDatabase, config: SynthesisConfig) -> SearchConfig:
+    """The synthesis's search options with its initial pose resolved: the rest pose's
+    feature (:func:`rest_pose_frame`) when ``config.init`` is ``"rest"``."""
+    if config.init == "rest":
+        return replace(config.search, init_pose=tuple(float(x) for x in db.P[rest_pose_frame(db)]))
+    return config.search
+
+
+def exclusions(db: MatchingDatabase, config: SynthesisConfig) -> np.ndarray | None:
+    """Database frames no window may contain, shape (M, T) bool, or None when nothing is excluded."""
+    if config.exclude_takes or config.exclude_ranges:
+        return db.exclusion_mask(takes=config.exclude_takes, ranges=config.exclude_ranges)
+    return None
