@@ -61,7 +61,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         ("gesturekit", "gesturekit.database", "gesturekit._database_folder", "gesturekit.demo", "gesturekit.workspace"),
     ),
     ("search", ("gesturekit.search", "gesturekit._search_kernels", "gesturekit.search_reference", "gesturekit.blend")),
-    ("synthesize", ("gesturekit.synthesize",)),
+    ("synthesize", ("gesturekit.synthesize", "gesturekit.live")),
     ("refine/export/viz/evaluate", ("gesturekit.refine", "gesturekit.export", "gesturekit.viz", "gesturekit.evaluate")),
     ("study/interactive", ("gesturekit.study", "gesturekit.interactive")),
     ("cli/app", ("gesturekit.cli", "gesturekit._cli_parser", "gesturekit.__main__", "app")),
