@@ -1,0 +1,203 @@
+"""Speak into the microphone and watch the body gesture to it; switch a control while talking; Stop keeps it all."""
+
+from __future__ import annotations
+
+import functools
+import time
+from typing import Any
+
+import display
+import live_session as live
+import nav
+import resources
+import sidebar
+import state
+import streamlit as st
+
+from gesturekit import interactive as gs
+from gesturekit.database import MatchingDatabase
+from gesturekit.errors import GestureKitError, collect_warnings
+from gesturekit.motion import Motion
+from gesturekit.synthesize import SynthesisConfig
+
+STAGE = "live.stage"  # the user's LiveStage (microphone, current performance)
+CONTROL = "live.control"  # the control asked for last (a constraint, or None: free)
+SHOWN = "live.shown_run"  # the run number of the performance this page made last
+_STOPPING = "_live.stopping"  # Stop was pressed: the next run asks the browser to close the stream
+_VIDEO = "_live.video"  # {"run": n, "bytes": mp4}
+#: Seconds between refreshes of the live figure and latency while the microphone is on.
+REFRESH_S = 0.2
+SOURCE = "live microphone"
+
+
+def microphone(stage: live.LiveStage, *, stopping: bool) -> Any:
+    """The browser's microphone, streamed to the server (streamlit-webrtc, audio only, send only).
+
+    Returns its context (``.state.playing``). No STUN/TURN server is named: on 127.0.0.1 none is
+    needed and nothing outside is contacted (README, "Live", for serving to other machines).
+    """
+    from streamlit_webrtc import WebRtcMode, webrtc_streamer
+
+    return webrtc_streamer(
+        key="live.mic",
+        mode=WebRtcMode.SENDONLY,
+        audio_frame_callback=stage.on_frame,
+        media_stream_constraints={"audio": True, "video": False},
+        rtc_configuration=live.NO_ICE_SERVERS,
+        desired_playing_state=False if stopping else None,
+        audio_receiver_size=8,
+        translations={"start": "Start", "stop": "Stop microphone"},
+    )
+
+
+def finish(db: MatchingDatabase, stage: live.LiveStage) -> None:
+    """Stop: the whole performance becomes the user's synthesis (downloads, Retrieval inspector)."""
+    ss = st.session_state
+    with st.spinner("Finishing the performance…"), display.warnings_shown():
+        result = stage.stop()
+    if result is not None:
+        ss[SHOWN] = state.keep_synthesis(db, result, source=SOURCE)["run"]
+
+
+def control_buttons(stage: live.LiveStage) -> None:
+    """Buttons that switch the control while talking; the one held now is shown as pressed."""
+    ss = st.session_state
+
+    def switch(constraint: str | None) -> None:  # before the panel is drawn again, so it shows the switch
+        ss[CONTROL] = constraint
+        session = stage.session
+        if session is not None:
+            session.set_control(constraint)
+
+    cols = st.columns(len(live.CONTROLS))
+    for col, (label, constraint) in zip(cols, live.CONTROLS.items()):
+        held = ss.get(CONTROL) == constraint
+        col.button(
+            label,
+            key=f"live.control.{constraint or 'free'}",
+            type="primary" if held else "secondary",
+            on_click=switch,
+            args=(constraint,),
+        )
+
+
+def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool) -> None:
+    """The body as it is now, the latency, the control buttons and Stop (redrawn every :data:`REFRESH_S`)."""
+    session = stage.session
+    control_buttons(stage)
+    view = session.view() if session is not None else None
+    if session is not None and session.error:
+        st.error(session.error, icon=":material/error:")
+    if view is None:
+        hint = "Listening: the body moves once the first second of speech has arrived…" if playing else ""
+        st.info(hint or "Press **Start** above and allow the microphone; then speak.", icon=":material/mic:")
+    else:
+        title = f"speech {view.speech_s:.1f} s · frame {view.frame} · {view.control or 'free'}"
+        motion = Motion(view.positions[None], db.fps, db.joint_presence)
+        display.show_skeletons(motion, key="live.skeleton", title=title, height=440)
+        c = st.columns(3)
+        c[0].metric(
+            "Microphone to figure",
+            f"{view.latency_s:.2f} s",
+            help="from the moment a frame's speech was heard (its arrival at the server) to its drawing now",
+        )
+        c[1].metric(
+            "Algorithmic delay",
+            f"{view.algorithmic_s:.2f} s",
+            help="speech the synthesis needs beyond a frame before the frame is determined",
+        )
+        c[2].metric("Compute per step", f"{view.compute_s * 1000:.0f} ms", help="resampling and the latest search")
+    if st.button("Stop", type="primary", key="live.stop", disabled=session is None):
+        finish(db, stage)
+        st.session_state[_STOPPING] = True
+        st.rerun()
+
+
+def show_performance(record: dict) -> None:
+    """The last performance: its 3D view with the speech, and the downloads."""
+    ss = st.session_state
+    result = record["result"]
+    st.header("Performance")
+    fps = result.motion.fps
+    parts = [f"{result.n_frames} frames, {result.n_frames / fps:.1f} s"]
+    if result.control:
+        parts.append(f"controls: `{result.control.to_text()}`")
+    st.caption(" · ".join(parts))
+    display.show_skeletons(result.motion, key="live.result", title=SOURCE, audio=result.audio, height=440)
+    nav.link("Retrieval inspector")
+    st.subheader("Downloads")
+    cols = st.columns(5)
+    cols[0].download_button(
+        "Speech (WAV)",
+        data=functools.partial(gs.wav_bytes, result.audio),
+        file_name=gs.export_filename(result, "npz").rsplit(".", 1)[0] + ".wav",
+        mime="audio/wav",
+        key="live.download_wav",
+        on_click="ignore",
+    )
+    for col, kind, label in ((cols[1], "npz", "Motion + search (npz)"), (cols[3], "csv", "Control track (CSV)")):
+        col.download_button(
+            label,
+            data=functools.partial(gs.export_bytes, result, kind),
+            file_name=gs.export_filename(result, kind),
+            mime=gs.EXPORT_KINDS[kind][1],
+            key=f"live.download_{kind}",
+            on_click="ignore",
+        )
+    try:
+        with collect_warnings():
+            bvh, _ = gs.export_bvh_bytes(result, gs.export_filename(result, "bvh"))
+        cols[2].download_button(
+            "Motion (BVH)",
+            data=bvh,
+            file_name=gs.export_filename(result, "bvh"),
+            mime=gs.EXPORT_KINDS["bvh"][1],
+            key="live.download_bvh",
+            on_click="ignore",
+        )
+    except GestureKitError as exc:
+        cols[2].caption(f"No BVH: {exc.problem}")
+    done = ss.get(_VIDEO)
+    if done is not None and done["run"] == record["run"]:
+        cols[4].download_button(
+            "Video (MP4)",
+            data=done["bytes"],
+            file_name=gs.export_filename(result, "mp4"),
+            mime="video/mp4",
+            key="live.download_mp4",
+            on_click="ignore",
+        )
+    elif cols[4].button("Render MP4 with sound", key="live.render"):
+        t0 = time.perf_counter()
+        with st.spinner("Rendering…"), display.user_errors():
+            ss[_VIDEO] = {"run": record["run"], "bytes": gs.render_mp4(result)}
+            st.caption(f"Rendered in {time.perf_counter() - t0:.1f} s.")
+            st.rerun()
+
+
+def main() -> None:
+    st.title("Live")
+    db = sidebar.sidebar_database()
+    resources.warm_up(db)
+    ss = st.session_state
+    st.caption(
+        "Speak into the microphone: the body gestures to your voice as you talk, about a second behind it "
+        "(a step's speech feature looks 0.93 s ahead). Switch the left hand's control while talking; **Stop** "
+        "keeps the whole performance as a result: downloads here, and the Retrieval inspector."
+    )
+    stage: live.LiveStage = ss.setdefault(STAGE, live.LiveStage())
+    control = ss.get(CONTROL)
+    stage.configure(functools.partial(live.LiveSession, db, config=SynthesisConfig(), name=SOURCE, control=control))
+    ctx = microphone(stage, stopping=bool(ss.pop(_STOPPING, False)))
+    playing = bool(ctx.state.playing)
+    if not playing:
+        if stage.session is not None:  # the browser's stream was stopped: that is Stop too
+            finish(db, stage)
+        stage.rearm()
+    st.fragment(run_every=REFRESH_S if playing else None)(live_panel)(db, stage, playing)
+    record = state.current_synthesis(db)
+    if record is not None and record["run"] == ss.get(SHOWN):
+        show_performance(record)
+
+
+main()

@@ -1,0 +1,266 @@
+"""The Live page and its engine, without a browser: microphone frames in (as PyAV frames at 48 kHz
+stereo, as the browser's stream arrives), controls switched while talking, Stop keeps the performance.
+
+The WebRTC transport cannot run under AppTest (it needs a served session); the page's call of
+``streamlit_webrtc.webrtc_streamer`` is replaced by a stand-in reporting the stream on or off,
+and the test feeds the audio callback the page gave it, as the transport would.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import av
+import numpy as np
+import pytest
+import soxr
+import streamlit_webrtc
+from hypothesis import given, settings
+from hypothesis import strategies as hst
+from streamlit.testing.v1 import AppTest
+
+from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.synthetic import generate_demo_take
+from gesturekit.errors import ConfigError, GestureKitError
+from gesturekit.motion import AUDIO_SR
+
+from .conftest import viewer
+
+APP = Path(__file__).resolve().parents[1] / "app"
+HOME = APP / "Home.py"
+PAGE = "views/5_Live.py"
+RATE = 48000
+FRAME = 960  # 20 ms at 48 kHz, as the browser's Opus stream is decoded
+
+
+@pytest.fixture(scope="module")
+def live():
+    """The page's engine (``app/live_session.py``), imported as the app imports it."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.syspath_prepend(str(APP))
+        import live_session
+
+        yield live_session
+
+
+@pytest.fixture(scope="module")
+def db(demo_home) -> MatchingDatabase:
+    return MatchingDatabase.load(demo_home / "db" / "demo")
+
+
+@pytest.fixture(scope="module")
+def speech48() -> np.ndarray:
+    """6 s of the demo speaker (not in the database) at 48 kHz, as the browser sends it."""
+    take, _ = generate_demo_take(seconds=6.0, seed=818, name="speech")
+    return soxr.resample(take.audio, AUDIO_SR, RATE, quality="HQ").astype(np.float32)
+
+
+def stereo_frames(x: np.ndarray, t0: int = 0):
+    """PyAV frames of 20 ms, 16-bit interleaved stereo (both channels ``x``), from sample ``t0``."""
+    for i in range(0, len(x), FRAME):
+        chunk = np.clip(x[i : i + FRAME] * 32767, -32768, 32767).astype(np.int16)
+        frame = av.AudioFrame.from_ndarray(np.repeat(chunk, 2)[None, :], format="s16", layout="stereo")
+        frame.sample_rate = RATE
+        frame.pts = t0 + i
+        yield frame
+
+
+# --- the engine ----------------------------------------------------------------------------------
+@settings(max_examples=25, deadline=None)
+@given(n=hst.integers(1, 50), channels=hst.integers(1, 3), planar=hst.booleans(), fmt=hst.sampled_from(["s16", "flt"]))
+def test_any_frame_layout_becomes_the_mean_of_its_channels(live, n, channels, planar, fmt):
+    rng = np.random.default_rng(n * 7 + channels)
+    x = rng.uniform(-1, 1, (channels, n)).astype(np.float32)
+    raw = (x * 32768).astype(np.int16) if fmt == "s16" else x
+    data = raw if planar else raw.T.reshape(1, -1)
+    got = live.mono_samples(data, fmt=fmt + ("p" if planar else ""), planar=planar, channels=channels)
+    want = (raw.astype(np.float32) / (32768.0 if fmt == "s16" else 1.0)).mean(axis=0)
+    assert got.dtype == np.float32 and got.shape == (n,)
+    np.testing.assert_allclose(got, want, atol=1e-6)
+
+
+def test_an_unknown_sample_format_is_refused_with_its_name(live):
+    with pytest.raises(ConfigError, match="'u8'"):
+        live.mono_samples(np.zeros((1, 4), np.uint8), fmt="u8", planar=False, channels=1)
+
+
+def test_frames_in_20_ms_pieces_give_the_speech_resampled_whole(live, db, speech48):
+    session = live.LiveSession(db, clock=lambda: 100.0)
+    for frame in stereo_frames(speech48):
+        assert session.on_frame(frame) is frame  # the stream goes on untouched
+    result = session.stop()
+    whole = soxr.resample(speech48, RATE, AUDIO_SR, quality="HQ")
+    assert abs(len(result.audio) - len(whole)) <= 1
+    n = min(len(result.audio), len(whole))
+    # 16-bit quantisation of the stream only (a streaming filter equals the whole-file one)
+    assert np.max(np.abs(result.audio[:n] - whole[:n])) < 2e-4
+    assert result.n_frames == len(result.audio) * 15 // AUDIO_SR
+    assert result.motion.positions.shape == (result.n_frames, 55, 3)
+
+
+def test_the_view_plays_frames_out_on_the_microphone_clock(live, db, speech48):
+    now = {"t": 1000.0}
+    session = live.LiveSession(db, clock=lambda: now["t"])
+    for i, frame in enumerate(stereo_frames(speech48[: 4 * RATE])):
+        now["t"] = 1000.0 + (i + 1) * FRAME / RATE  # each frame arrives once spoken
+        session.on_frame(frame)
+    assert session.wait()
+    heard0 = 1000.0  # the first sample was spoken one frame before the first frame arrived
+    view = session.view()
+    assert session.error is None
+    assert view is not None and view.frames > 0 and view.t0 == pytest.approx(heard0)
+    delay = view.algorithmic_s
+    # the frame drawn is the one heard delay + margin ago; its latency says so
+    for later in (0.0, 0.1, 0.3):
+        now["t"] = 1004.0 + later
+        v = session.view()
+        expect = int(np.floor((now["t"] - heard0 - delay - live.PLAYOUT_MARGIN_S) * db.fps))
+        assert v.frame == min(expect, v.frames - 1)
+        assert v.latency_s == pytest.approx(now["t"] - (heard0 + v.frame / db.fps), abs=1e-3)
+    assert v.latency_s <= delay + live.PLAYOUT_MARGIN_S + 1 / db.fps + 1e-6
+    # before anything is due, the first frame is shown, never a negative index
+    now["t"] = 1000.5
+    assert session.view().frame == 0
+    session.stop()
+
+
+def test_a_control_switched_while_talking_holds_from_the_speech_received_on(live, db, speech48):
+    session = live.LiveSession(db)
+    frames = list(stereo_frames(speech48))
+    for f in frames[:150]:  # 3 s
+        session.on_frame(f)
+    assert session.wait()
+    switched_at = session.view().frames / db.fps
+    session.set_control("left_hand=high")
+    for f in frames[150:]:
+        session.on_frame(f)
+    assert session.control == "left_hand=high"
+    result = session.stop()
+    (segment,) = result.control.segments
+    assert segment.constraints == (("left_hand", "high"),)
+    assert segment.start_s == pytest.approx(switched_at, abs=1 / db.fps)
+    assert segment.end_s == pytest.approx(len(result.audio) / AUDIO_SR, abs=0.5)
+
+
+def test_a_bad_control_is_shown_as_the_sessions_error_and_stop_raises_it(live, db, speech48):
+    session = live.LiveSession(db)
+    for f in list(stereo_frames(speech48))[:20]:
+        session.on_frame(f)
+    session.set_control("left_hand=sideways")
+    assert session.wait()
+    assert "left_hand" in session.error and "sideways" in session.error
+    with pytest.raises(GestureKitError, match="sideways"):
+        session.stop()
+
+
+def test_stop_after_a_stop_starts_nothing_until_the_stream_is_off(live, db, speech48):
+    stage = live.LiveStage()
+    stage.configure(lambda: live.LiveSession(db))
+    frames = list(stereo_frames(speech48))
+    for f in frames[:60]:
+        stage.on_frame(f)
+    result = stage.stop()
+    assert result is not None and result.n_frames == 60 * FRAME * 15 // RATE
+    for f in frames[60:70]:  # the microphone takes a moment to close
+        stage.on_frame(f)
+    assert stage.session is None and stage.stop() is None
+    stage.rearm()  # the stream is off: the next frames begin a new performance
+    for f in frames[:10]:
+        stage.on_frame(f)
+    assert stage.session is not None
+    assert stage.stop().n_frames == 10 * FRAME * 15 // RATE
+
+
+# --- the page --------------------------------------------------------------------------------------
+@pytest.fixture
+def mic(monkeypatch):
+    """Replace the WebRTC component: ``mic.playing`` is the stream's state; ``mic.callback`` the
+    audio callback and ``mic.calls`` the arguments of the page's last call."""
+    box = SimpleNamespace(playing=False, callback=None, calls=[])
+
+    def fake(key, **kwargs):
+        box.callback = kwargs["audio_frame_callback"]
+        box.calls.append(dict(kwargs, key=key))
+        return SimpleNamespace(state=SimpleNamespace(playing=box.playing))
+
+    monkeypatch.setattr(streamlit_webrtc, "webrtc_streamer", fake)
+    return box
+
+
+def open_live(mic) -> AppTest:
+    at = AppTest.from_file(str(HOME), default_timeout=90).run()
+    at.switch_page(PAGE).run()
+    assert not at.exception, at.exception
+    return at
+
+
+def button(at: AppTest, key: str):
+    return next(b for b in at.button if b.key == key)
+
+
+def test_the_microphone_asks_for_audio_only_and_names_no_outside_server(app_env, mic):
+    at = open_live(mic)
+    call = mic.calls[-1]
+    assert call["rtc_configuration"] == {"iceServers": []}
+    assert call["media_stream_constraints"] == {"audio": True, "video": False}
+    assert call["mode"] == streamlit_webrtc.WebRtcMode.SENDONLY
+    assert button(at, "live.stop").disabled  # nothing to stop yet
+    assert any("Start" in i.value for i in at.info)
+
+
+def test_talking_switching_controls_and_stop_give_a_whole_result(app_env, mic, speech48):
+    mic.playing = True
+    at = open_live(mic)
+    frames = list(stereo_frames(speech48))
+    for f in frames[:150]:  # 3 s of speech, through the callback the page gave the transport
+        mic.callback(f)
+    stage = at.session_state["live.stage"]
+    assert stage.session.wait()
+    at.run()
+    first = viewer(at, "live.skeleton")
+    assert "free" in first["title"]
+    assert any(m.label == "Microphone to figure" for m in at.metric)
+    assert button(at, "live.control.left_hand=high").proto.type == "secondary"
+    button(at, "live.control.left_hand=high").click().run()
+    assert not at.exception, at.exception
+    assert at.session_state["live.control"] == "left_hand=high"
+    assert button(at, "live.control.left_hand=high").proto.type == "primary"
+    switched_s = stage.session.view().frames / 15
+    for f in frames[150:]:
+        mic.callback(f)
+    assert stage.session.wait()
+    at.run()
+    later = viewer(at, "live.skeleton")
+    assert "left_hand=high" in later["title"]
+    button(at, "live.stop").click().run()
+    assert not at.exception, at.exception
+    record = at.session_state["gk.synthesis"]
+    result = record["result"]
+    assert result.n_frames == len(frames) * FRAME * 15 // RATE  # the whole speech streamed
+    assert result.source == "live microphone"
+    (segment,) = result.control.segments
+    assert segment.label() == "left_hand=high" and segment.start_s == pytest.approx(switched_s, abs=1 / 15)
+    # the performance and its downloads are on the page; the microphone is asked to close
+    assert viewer(at, "live.result")["n_grid"] == result.n_frames
+    keys = {d.key for d in at.get("download_button")}
+    assert {"live.download_wav", "live.download_npz", "live.download_bvh"} <= keys
+    assert mic.calls[-1]["desired_playing_state"] is False
+    assert at.session_state["live.stage"].session is None
+
+
+def test_stopping_the_stream_in_the_browser_is_stop_too_and_the_inspector_opens_it(app_env, mic, speech48):
+    mic.playing = True
+    at = open_live(mic)
+    for f in list(stereo_frames(speech48))[:100]:
+        mic.callback(f)
+    assert at.session_state["live.stage"].session.wait()
+    mic.playing = False  # the component's own stop button
+    at.run()
+    assert not at.exception, at.exception
+    result = at.session_state["gk.synthesis"]["result"]
+    assert result.n_frames == 100 * FRAME * 15 // RATE
+    at.switch_page("views/2_Retrieval_inspector.py").run()
+    assert not at.exception, at.exception
+    assert not any("Synthesize page first" in i.value for i in at.info)
+    assert len(at.get("iframe")) > 0
