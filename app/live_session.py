@@ -11,10 +11,10 @@ records when each frame of motion became available. Control switches travel
 through the same queue, so a switch takes effect after the speech that arrived
 before it.
 
-The page asks :meth:`LiveSession.view` several times a second which frame to draw:
-frames are played out on the microphone's clock, :data:`PLAYOUT_MARGIN_S` behind
-the algorithmic delay (so each step's frames are drawn at an even pace as they
-arrive), or the newest frame when the synthesis runs late.
+The page asks :meth:`LiveSession.view` several times a second what to draw: the
+newest frame determined, and how long ago its speech was heard. A step's frames
+arrive together, once the speech a step's feature looks ahead to has arrived; the
+newest is the step's last, so it is drawn about a step sooner than its first would be.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from gesturekit.live import LiveSynthesizer
 from gesturekit.motion import AUDIO_SR
 from gesturekit.synthesize import SynthesisConfig, SynthesisResult
 
-__all__ = ["CONTROLS", "PLAYOUT_MARGIN_S", "LiveSession", "LiveView", "NO_ICE_SERVERS", "mono_samples"]
+__all__ = ["CONTROLS", "LiveSession", "LiveStage", "LiveView", "NO_ICE_SERVERS", "mono_samples"]
 
 #: The page's control buttons: label -> the constraint held from the next step on (None: free).
 CONTROLS: dict[str, str | None] = {
@@ -42,9 +42,6 @@ CONTROLS: dict[str, str | None] = {
     "Left hand low": "left_hand=low",
     "Left hand free": None,
 }
-#: Seconds beyond the algorithmic delay that frames are drawn behind the microphone: room for
-#: a step's search and the page's refresh, so frames are drawn evenly rather than a step at a time.
-PLAYOUT_MARGIN_S = 0.25
 #: WebRTC configuration with no STUN/TURN server: on one machine (127.0.0.1) the browser and the
 #: server find each other through their local addresses, and nothing outside is contacted.
 NO_ICE_SERVERS: dict[str, Any] = {"iceServers": []}
@@ -87,7 +84,7 @@ class LiveView:
     Attributes
     ----------
     frame : int
-        Index of the frame to draw.
+        Index of the frame to draw: the newest determined.
     positions : np.ndarray, shape (55, 3)
         Its joint positions, metres.
     frames : int
@@ -201,7 +198,7 @@ class LiveSession:
         return done.wait(timeout)
 
     def view(self) -> LiveView | None:
-        """The frame to draw now and the latency; None before the first frame."""
+        """The newest frame and its latency; None before the first frame."""
         with self._lock:
             if not self._frames:
                 return None
@@ -209,8 +206,7 @@ class LiveSession:
             now = self._clock()
             heard0 = arrived[0] - ends[0]
             delay = self._synth.algorithmic_delay_s
-            playout = int(np.floor((now - heard0 - delay - PLAYOUT_MARGIN_S) * self._fps))
-            frame = int(min(max(playout, 0), n - 1))
+            frame = n - 1
             positions = self._frames[frame]
             speech_s = float(ends[-1])
         at = frame / self._fps  # the frame's speech time, seconds

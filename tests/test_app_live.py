@@ -99,29 +99,27 @@ def test_frames_in_20_ms_pieces_give_the_speech_resampled_whole(live, db, speech
     assert result.motion.positions.shape == (result.n_frames, 55, 3)
 
 
-def test_the_view_plays_frames_out_on_the_microphone_clock(live, db, speech48):
+def test_the_view_shows_the_newest_frame_and_how_long_ago_its_speech_was_heard(live, db, speech48):
     now = {"t": 1000.0}
     session = live.LiveSession(db, clock=lambda: now["t"])
+    n_in = 0
     for i, frame in enumerate(stereo_frames(speech48[: 4 * RATE])):
         now["t"] = 1000.0 + (i + 1) * FRAME / RATE  # each frame arrives once spoken
         session.on_frame(frame)
-    assert session.wait()
-    heard0 = 1000.0  # the first sample was spoken one frame before the first frame arrived
-    view = session.view()
-    assert session.error is None
-    assert view is not None and view.frames > 0 and view.t0 == pytest.approx(heard0)
-    delay = view.algorithmic_s
-    # the frame drawn is the one heard delay + margin ago; its latency says so
-    for later in (0.0, 0.1, 0.3):
-        now["t"] = 1004.0 + later
-        v = session.view()
-        expect = int(np.floor((now["t"] - heard0 - delay - live.PLAYOUT_MARGIN_S) * db.fps))
-        assert v.frame == min(expect, v.frames - 1)
-        assert v.latency_s == pytest.approx(now["t"] - (heard0 + v.frame / db.fps), abs=1e-3)
-    assert v.latency_s <= delay + live.PLAYOUT_MARGIN_S + 1 / db.fps + 1e-6
-    # before anything is due, the first frame is shown, never a negative index
-    now["t"] = 1000.5
-    assert session.view().frame == 0
+        n_in += FRAME
+        if i in (80, 199):
+            assert session.wait()
+            view = session.view()
+            # the newest frame determined, drawn now
+            assert view.frame == view.frames - 1 == session._synth.frames_out - 1
+            assert view.t0 == pytest.approx(1000.0)  # the first sample was spoken a frame before it came
+            assert view.speech_s == pytest.approx(n_in / RATE)
+            # its speech was heard at t0 + its time; the latency is the rest of the way to now
+            assert view.latency_s == pytest.approx(now["t"] - (1000.0 + view.frame / db.fps), abs=1e-6)
+            assert view.latency_s <= view.algorithmic_s + 1e-6  # the newest frame waited on nothing else
+    later = 0.37
+    now["t"] += later  # no speech since: the same frame, its latency grows
+    assert session.view().latency_s == pytest.approx(view.latency_s + later)
     session.stop()
 
 
@@ -176,11 +174,11 @@ def test_stop_after_a_stop_starts_nothing_until_the_stream_is_off(live, db, spee
 @pytest.fixture
 def mic(monkeypatch):
     """Replace the WebRTC component: ``mic.playing`` is the stream's state; ``mic.callback`` the
-    audio callback and ``mic.calls`` the arguments of the page's last call."""
+    audio sink's callback and ``mic.calls`` the arguments of the page's last call."""
     box = SimpleNamespace(playing=False, callback=None, calls=[])
 
     def fake(key, **kwargs):
-        box.callback = kwargs["audio_frame_callback"]
+        box.callback = kwargs["sink_audio_track"]._callback  # the transport hands it every frame
         box.calls.append(dict(kwargs, key=key))
         return SimpleNamespace(state=SimpleNamespace(playing=box.playing))
 
@@ -205,6 +203,7 @@ def test_the_microphone_asks_for_audio_only_and_names_no_outside_server(app_env,
     assert call["rtc_configuration"] == {"iceServers": []}
     assert call["media_stream_constraints"] == {"audio": True, "video": False}
     assert call["mode"] == streamlit_webrtc.WebRtcMode.SENDONLY
+    assert isinstance(call["sink_audio_track"], streamlit_webrtc.AudioSinkTrack)  # no frame dropped
     assert button(at, "live.stop").disabled  # nothing to stop yet
     assert any("Start" in i.value for i in at.info)
 

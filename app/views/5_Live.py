@@ -21,12 +21,16 @@ from gesturekit.motion import Motion
 from gesturekit.synthesize import SynthesisConfig
 
 STAGE = "live.stage"  # the user's LiveStage (microphone, current performance)
+SINK = "live.sink"  # the transport's audio sink, feeding the stage
 CONTROL = "live.control"  # the control asked for last (a constraint, or None: free)
 SHOWN = "live.shown_run"  # the run number of the performance this page made last
 _STOPPING = "_live.stopping"  # Stop was pressed: the next run asks the browser to close the stream
 _VIDEO = "_live.video"  # {"run": n, "bytes": mp4}
-#: Seconds between refreshes of the live figure and latency while the microphone is on.
-REFRESH_S = 0.2
+#: Seconds between refreshes of the live figure and latency while the microphone is on. Each refresh
+#: is a run of the panel on the server and a new view in the browser: faster refreshes, on a machine
+#: whose cores are busy, delay the audio stream itself (measured on 2 shared cores: 0.2 s made the
+#: stream arrive in bursts seconds late, 0.4 s kept it within a few hundred ms of real time).
+REFRESH_S = 0.4
 SOURCE = "live microphone"
 
 
@@ -36,16 +40,20 @@ def microphone(stage: live.LiveStage, *, stopping: bool) -> Any:
     Returns its context (``.state.playing``). No STUN/TURN server is named: on 127.0.0.1 none is
     needed and nothing outside is contacted (README, "Live", for serving to other machines).
     """
-    from streamlit_webrtc import WebRtcMode, webrtc_streamer
+    from streamlit_webrtc import AudioSinkTrack, WebRtcMode, webrtc_streamer
 
+    ss = st.session_state
+    if SINK not in ss:
+        # every frame, in order, handed to the stage on the transport's loop (a receiver's
+        # bounded queue, or a frame callback processed apart, would drop frames under load)
+        ss[SINK] = AudioSinkTrack(stage.on_frame)
     return webrtc_streamer(
         key="live.mic",
         mode=WebRtcMode.SENDONLY,
-        audio_frame_callback=stage.on_frame,
+        sink_audio_track=ss[SINK],
         media_stream_constraints={"audio": True, "video": False},
         rtc_configuration=live.NO_ICE_SERVERS,
         desired_playing_state=False if stopping else None,
-        audio_receiver_size=8,
         translations={"start": "Start", "stop": "Stop microphone"},
     )
 
