@@ -19,10 +19,12 @@ newest is the step's last, so it is drawn about a step sooner than its first wou
 
 from __future__ import annotations
 
+import json
+import os
 import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,7 +36,16 @@ from gesturekit.live import LiveSynthesizer
 from gesturekit.motion import AUDIO_SR
 from gesturekit.synthesize import SynthesisConfig, SynthesisResult
 
-__all__ = ["CONTROLS", "LiveSession", "LiveStage", "LiveView", "NO_ICE_SERVERS", "mono_samples"]
+__all__ = [
+    "CONTROLS",
+    "ICE_SERVERS_ENV",
+    "NO_ICE_SERVERS",
+    "LiveSession",
+    "LiveStage",
+    "LiveView",
+    "mono_samples",
+    "rtc_configuration",
+]
 
 #: The page's control buttons: label -> the constraint held from the next step on (None: free).
 CONTROLS: dict[str, str | None] = {
@@ -45,6 +56,34 @@ CONTROLS: dict[str, str | None] = {
 #: WebRTC configuration with no STUN/TURN server: on one machine (127.0.0.1) the browser and the
 #: server find each other through their local addresses, and nothing outside is contacted.
 NO_ICE_SERVERS: dict[str, Any] = {"iceServers": []}
+#: The environment variable naming STUN/TURN servers for serving the Live page to other machines:
+#: a JSON list of RTCIceServer objects, e.g. ``[{"urls": ["stun:stun.example.org:3478"]}]``.
+ICE_SERVERS_ENV = "GESTUREKIT_ICE_SERVERS"
+
+
+def rtc_configuration(environ: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The WebRTC configuration of the Live page: :data:`NO_ICE_SERVERS` unless
+    ``$GESTUREKIT_ICE_SERVERS`` names STUN/TURN servers (a JSON list of ``{"urls": ..., "username":
+    ..., "credential": ...}``), which browser and server then both use.
+
+    Raises
+    ------
+    ConfigError
+        The variable is not such a JSON list.
+    """
+    text = (os.environ if environ is None else environ).get(ICE_SERVERS_ENV, "").strip()
+    if not text:
+        return dict(NO_ICE_SERVERS)
+    try:
+        servers = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"${ICE_SERVERS_ENV} is not JSON ({exc.msg} at character {exc.pos})") from None
+    if not isinstance(servers, list) or not all(isinstance(x, dict) and "urls" in x for x in servers):
+        raise ConfigError(
+            f"${ICE_SERVERS_ENV} must be a JSON list of servers, each with its urls, "
+            'e.g. [{"urls": ["stun:stun.example.org:3478"]}]'
+        )
+    return {"iceServers": servers}
 
 
 def mono_samples(data: np.ndarray, *, fmt: str, planar: bool, channels: int) -> np.ndarray:

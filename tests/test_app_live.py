@@ -8,6 +8,7 @@ and the test feeds the audio callback the page gave it, as the transport would.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -168,6 +169,33 @@ def test_stop_after_a_stop_starts_nothing_until_the_stream_is_off(live, db, spee
         stage.on_frame(f)
     assert stage.session is not None
     assert stage.stop().n_frames == 10 * FRAME * 15 // RATE
+
+
+def test_no_ice_server_unless_the_environment_names_some(live):
+    assert live.rtc_configuration({}) == {"iceServers": []}
+    servers = [{"urls": ["turn:turn.example.org:3478"], "username": "u", "credential": "c"}]
+    assert live.rtc_configuration({live.ICE_SERVERS_ENV: json.dumps(servers)}) == {"iceServers": servers}
+
+
+@pytest.mark.parametrize(
+    "value, problem",
+    [
+        ("stun:stun.example.org", "is not JSON"),
+        ('{"urls": "stun:x"}', "must be a JSON list"),
+        ('[{"url": "stun:x"}]', "each with its urls"),
+    ],
+)
+def test_bad_ice_servers_are_refused_naming_the_variable(live, value, problem):
+    with pytest.raises(ConfigError, match=problem) as err:
+        live.rtc_configuration({live.ICE_SERVERS_ENV: value})
+    assert "$GESTUREKIT_ICE_SERVERS" in str(err.value)
+
+
+def test_the_page_says_what_is_wrong_with_the_ice_servers(app_env, mic, monkeypatch):
+    monkeypatch.setenv("GESTUREKIT_ICE_SERVERS", "not json")
+    at = open_live(mic)
+    assert any("GESTUREKIT_ICE_SERVERS" in e.value and "not JSON" in e.value for e in at.error)
+    assert not at.exception
 
 
 # --- the page --------------------------------------------------------------------------------------

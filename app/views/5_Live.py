@@ -37,8 +37,9 @@ SOURCE = "live microphone"
 def microphone(stage: live.LiveStage, *, stopping: bool) -> Any:
     """The browser's microphone, streamed to the server (streamlit-webrtc, audio only, send only).
 
-    Returns its context (``.state.playing``). No STUN/TURN server is named: on 127.0.0.1 none is
-    needed and nothing outside is contacted (README, "Live", for serving to other machines).
+    Returns its context (``.state.playing``). No STUN/TURN server is named unless
+    ``$GESTUREKIT_ICE_SERVERS`` gives some: on 127.0.0.1 none is needed and nothing outside is
+    contacted (README, "Live", for serving to other machines).
     """
     from streamlit_webrtc import AudioSinkTrack, WebRtcMode, webrtc_streamer
 
@@ -52,7 +53,7 @@ def microphone(stage: live.LiveStage, *, stopping: bool) -> Any:
         mode=WebRtcMode.SENDONLY,
         sink_audio_track=ss[SINK],
         media_stream_constraints={"audio": True, "video": False},
-        rtc_configuration=live.NO_ICE_SERVERS,
+        rtc_configuration=live.rtc_configuration(),
         desired_playing_state=False if stopping else None,
         translations={"start": "Start", "stop": "Stop microphone"},
     )
