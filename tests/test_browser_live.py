@@ -133,7 +133,8 @@ def _offset_s(received: np.ndarray, played: np.ndarray) -> float:
 
 def test_the_body_moves_with_the_streamed_speech(live_run):
     seen = live_run["seen"]
-    assert len(seen) >= 10, f"the live view changed only {len(seen)} times"
+    # a new pose at each step (8 frames, 0.53 s) while the speech came: some may fall between two looks
+    assert len(seen) >= 5, f"the live view changed only {len(seen)} times"
     frames = [s["frame"] for s in seen]
     assert frames == sorted(frames) and frames[-1] - frames[0] >= 3 * FPS  # it went on with the speech
     poses = [read_viewer_data(s["srcdoc"])["motions"][0] for s in seen[:: max(1, len(seen) // 6)]]
@@ -177,3 +178,5 @@ def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run):
     assert result.evaluate("() => gk.frames") == frames
     for label in ("Speech (WAV)", "Motion + search (npz)", "Motion (BVH)"):
         assert page.get_by_role("button", name=label).count() == 1
+    # Stop closed the microphone: the component offers Start again
+    page.frame_locator('iframe[title*="streamlit_webrtc"]').get_by_role("button", name="Start").wait_for()
