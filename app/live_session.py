@@ -178,6 +178,8 @@ class LiveSession:
         control: str | None = None,
         clock: Callable[[], float] = time.time,
     ) -> None:
+        #: The database the performance is synthesised with (the sidebar may change meanwhile).
+        self.db = db
         self._synth = LiveSynthesizer(db, config=config, name=name)
         if control is not None:
             self._synth.set_control(control)
@@ -385,11 +387,12 @@ class LiveStage:
                 self.session = self._make()
             return self.session
 
-    def stop(self) -> SynthesisResult | None:
-        """End the performance: its whole result, or None when none was running."""
+    def stop(self) -> tuple[SynthesisResult, MatchingDatabase] | None:
+        """End the performance: its whole result and the database it was made with, or None when
+        none was running."""
         with self._lock:
             session, self.session, self._armed = self.session, None, False
-        return None if session is None else session.stop()
+        return None if session is None else (session.stop(), session.db)
 
     def rearm(self) -> None:
         """The browser's stream is off: the next frames begin a new performance."""

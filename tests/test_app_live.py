@@ -139,7 +139,7 @@ def test_a_control_switched_while_talking_holds_from_the_speech_received_on(live
     (segment,) = result.control.segments
     assert segment.constraints == (("left_hand", "high"),)
     assert segment.start_s == pytest.approx(switched_at, abs=1 / db.fps)
-    assert segment.end_s == pytest.approx(len(result.audio) / AUDIO_SR, abs=0.5)
+    assert segment.end_s >= (result.n_frames - 1) / db.fps  # held to the end
 
 
 def test_a_bad_control_is_shown_as_the_sessions_error_and_stop_raises_it(live, db, speech48):
@@ -159,8 +159,8 @@ def test_stop_after_a_stop_starts_nothing_until_the_stream_is_off(live, db, spee
     frames = list(stereo_frames(speech48))
     for f in frames[:60]:
         stage.on_frame(f)
-    result = stage.stop()
-    assert result is not None and result.n_frames == 60 * FRAME * 15 // RATE
+    result, made_with = stage.stop()
+    assert made_with is db and result.n_frames == 60 * FRAME * 15 // RATE
     for f in frames[60:70]:  # the microphone takes a moment to close
         stage.on_frame(f)
     assert stage.session is None and stage.stop() is None
@@ -168,7 +168,7 @@ def test_stop_after_a_stop_starts_nothing_until_the_stream_is_off(live, db, spee
     for f in frames[:10]:
         stage.on_frame(f)
     assert stage.session is not None
-    assert stage.stop().n_frames == 10 * FRAME * 15 // RATE
+    assert stage.stop()[0].n_frames == 10 * FRAME * 15 // RATE
 
 
 def test_no_ice_server_unless_the_environment_names_some(live):
@@ -291,3 +291,19 @@ def test_stopping_the_stream_in_the_browser_is_stop_too_and_the_inspector_opens_
     assert not at.exception, at.exception
     assert not any("Synthesize page first" in i.value for i in at.info)
     assert len(at.get("iframe")) > 0
+
+
+def test_stop_after_too_little_speech_says_so_on_the_page(app_env, mic, speech48):
+    mic.playing = True
+    at = open_live(mic)
+    for f in list(stereo_frames(speech48))[:2]:  # 40 ms: less than a frame of motion
+        mic.callback(f)
+    assert at.session_state["live.stage"].session.wait()
+    at.run()
+    button(at, "live.stop").click().run()
+    assert not at.exception, at.exception
+    assert any("could not be kept" in e.value and "shorter than one frame" in e.value for e in at.error)
+    assert "gk.synthesis" not in at.session_state
+    assert mic.calls[-1]["desired_playing_state"] is False  # the microphone is closed all the same
+    at.run()  # the panel's next refresh still says it
+    assert any("shorter than one frame" in e.value for e in at.error)

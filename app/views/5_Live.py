@@ -26,6 +26,7 @@ CONTROL = "live.control"  # the control asked for last (a constraint, or None: f
 SHOWN = "live.shown_run"  # the run number of the performance this page made last
 _STOPPING = "_live.stopping"  # Stop was pressed: the next run asks the browser to close the stream
 _VIDEO = "_live.video"  # {"run": n, "bytes": mp4}
+_FAILED = "_live.failed"  # why the last performance could not be kept (see finish)
 #: Seconds between refreshes of the live figure and latency while the microphone is on. Each refresh
 #: is a run of the panel on the server and a new view in the browser: faster refreshes, on a machine
 #: whose cores are busy, delay the audio stream itself (measured on 2 shared cores: 0.2 s made the
@@ -59,12 +60,22 @@ def microphone(stage: live.LiveStage, *, stopping: bool) -> Any:
     )
 
 
-def finish(db: MatchingDatabase, stage: live.LiveStage) -> None:
-    """Stop: the whole performance becomes the user's synthesis (downloads, Retrieval inspector)."""
+def finish(stage: live.LiveStage) -> None:
+    """Stop: the whole performance becomes the user's synthesis (downloads, Retrieval inspector).
+
+    A performance that cannot be finished (too little speech, a failed search) leaves its
+    message under :data:`_FAILED`, shown until the next performance begins (the live panel is
+    redrawn several times a second, and a message drawn in it alone would vanish at once).
+    """
     ss = st.session_state
-    with st.spinner("Finishing the performance…"), display.warnings_shown():
-        result = stage.stop()
-    if result is not None:
+    try:
+        with st.spinner("Finishing the performance…"), display.warnings_shown():
+            done = stage.stop()
+    except GestureKitError as exc:
+        ss[_FAILED] = f"The performance could not be kept: {display.error_text(exc)}"
+        return
+    if done is not None:
+        result, db = done  # the database it began with, whatever the sidebar shows now
         ss[SHOWN] = state.keep_synthesis(db, result, source=SOURCE)["run"]
 
 
@@ -93,6 +104,10 @@ def control_buttons(stage: live.LiveStage) -> None:
 def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool) -> None:
     """The body as it is now, the latency, the control buttons and Stop (redrawn every :data:`REFRESH_S`)."""
     session = stage.session
+    if session is not None:
+        st.session_state.pop(_FAILED, None)  # a new performance: the last one's failure is old news
+    elif _FAILED in st.session_state:
+        st.error(st.session_state[_FAILED], icon=":material/error:")
     control_buttons(stage)
     view = session.view() if session is not None else None
     if session is not None and session.error:
@@ -117,8 +132,8 @@ def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool) -> No
         )
         c[2].metric("Compute per step", f"{view.compute_s * 1000:.0f} ms", help="resampling and the latest search")
     if st.button("Stop", type="primary", key="live.stop", disabled=session is None):
-        finish(db, stage)
-        st.session_state[_STOPPING] = True
+        finish(stage)
+        st.session_state[_STOPPING] = True  # the next run asks the browser to close the microphone
         st.rerun()
 
 
@@ -201,9 +216,13 @@ def main() -> None:
     playing = bool(ctx.state.playing)
     if not playing:
         if stage.session is not None:  # the browser's stream was stopped: that is Stop too
-            finish(db, stage)
+            finish(stage)
         stage.rearm()
-    st.fragment(run_every=REFRESH_S if playing else None)(live_panel)(db, stage, playing)
+
+    def panel() -> None:  # redrawn on its own: errors shown as on the rest of the page (display.run_page)
+        display.run_page(functools.partial(live_panel, db, stage, playing))
+
+    st.fragment(run_every=REFRESH_S if playing else None)(panel)()
     record = state.current_synthesis(db)
     if record is not None and record["run"] == ss.get(SHOWN):
         show_performance(record)
