@@ -287,6 +287,10 @@ def test_stopping_the_stream_in_the_browser_is_stop_too_and_the_inspector_opens_
     assert not at.exception, at.exception
     result = at.session_state["gk.synthesis"]["result"]
     assert result.n_frames == 100 * FRAME * 15 // RATE
+    button(at, "live.render").click().run()  # the MP4 with sound, then its download in the button's place
+    assert not at.exception, at.exception
+    assert "live.download_mp4" in {d.key for d in at.get("download_button")}
+    assert at.session_state["_live.video"]["bytes"][4:8] == b"ftyp"  # an MP4
     at.switch_page("views/2_Retrieval_inspector.py").run()
     assert not at.exception, at.exception
     assert not any("Synthesize page first" in i.value for i in at.info)

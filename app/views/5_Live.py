@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import time
 from typing import Any
 
 import display
@@ -192,11 +191,9 @@ def show_performance(record: dict) -> None:
             on_click="ignore",
         )
     elif cols[4].button("Render MP4 with sound", key="live.render"):
-        t0 = time.perf_counter()
         with st.spinner("Rendering…"), display.user_errors():
             ss[_VIDEO] = {"run": record["run"], "bytes": gs.render_mp4(result)}
-            st.caption(f"Rendered in {time.perf_counter() - t0:.1f} s.")
-            st.rerun()
+            st.rerun()  # the download button in its place
 
 
 def main() -> None:
