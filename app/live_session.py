@@ -355,7 +355,8 @@ class LiveStage:
     audio frame after Start and ends with Stop.
 
     The transport calls :meth:`on_frame` on its own thread; the page calls :meth:`configure`
-    on every run (what the next performance uses), :meth:`stop` for Stop, and :meth:`rearm`
+    on every run (what the next performance uses), :meth:`set_control` for the control
+    buttons (before or during a performance), :meth:`stop` for Stop, and :meth:`rearm`
     once the browser's stream is off, so that frames still arriving after a Stop (the
     microphone takes a moment to close) do not begin another performance.
     """
@@ -364,11 +365,22 @@ class LiveStage:
         self._lock = threading.Lock()
         self.session: LiveSession | None = None
         self._armed = True
-        self._make: Callable[[], LiveSession] | None = None
+        self._make: Callable[[str | None], LiveSession] | None = None
+        self.control: str | None = None
 
-    def configure(self, make: Callable[[], LiveSession]) -> None:
-        """What begins the next performance (a callable returning a new :class:`LiveSession`)."""
+    def configure(self, make: Callable[[str | None], LiveSession]) -> None:
+        """What begins the next performance: a callable that takes the control held from the
+        start (see :meth:`set_control`) and returns a new :class:`LiveSession`."""
         self._make = make
+
+    def set_control(self, constraint: str | None) -> None:
+        """Hold ``constraint`` (None: free) in the current performance from now on, and from the
+        start of the next."""
+        with self._lock:
+            self.control = constraint
+            session = self.session
+        if session is not None:
+            session.set_control(constraint)
 
     def on_frame(self, frame: Any) -> Any:
         """The audio callback of the transport (see :meth:`LiveSession.on_frame`)."""
@@ -376,7 +388,7 @@ class LiveStage:
             if self.session is None:
                 if not self._armed or self._make is None:
                     return frame
-                self.session = self._make()
+                self.session = self._make(self.control)
             session = self.session
         return session.on_frame(frame)
 
@@ -384,7 +396,7 @@ class LiveStage:
         """The current performance, begun now if there is none (None when a Stop awaits :meth:`rearm`)."""
         with self._lock:
             if self.session is None and self._armed and self._make is not None:
-                self.session = self._make()
+                self.session = self._make(self.control)
             return self.session
 
     def stop(self) -> tuple[SynthesisResult, MatchingDatabase] | None:

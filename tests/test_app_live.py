@@ -155,7 +155,7 @@ def test_a_bad_control_is_shown_as_the_sessions_error_and_stop_raises_it(live, d
 
 def test_stop_after_a_stop_starts_nothing_until_the_stream_is_off(live, db, speech48):
     stage = live.LiveStage()
-    stage.configure(lambda: live.LiveSession(db))
+    stage.configure(lambda control: live.LiveSession(db, control=control))
     frames = list(stereo_frames(speech48))
     for f in frames[:60]:
         stage.on_frame(f)
@@ -169,6 +169,17 @@ def test_stop_after_a_stop_starts_nothing_until_the_stream_is_off(live, db, spee
         stage.on_frame(f)
     assert stage.session is not None
     assert stage.stop()[0].n_frames == 10 * FRAME * 15 // RATE
+
+
+def test_a_control_chosen_before_start_holds_from_the_first_frame(live, db, speech48):
+    stage = live.LiveStage()
+    stage.configure(lambda control: live.LiveSession(db, control=control))
+    stage.set_control("left_hand=low")  # no performance yet: it is kept for the next
+    for f in stereo_frames(speech48[: 3 * RATE]):
+        stage.on_frame(f)
+    result, _ = stage.stop()
+    (segment,) = result.control.segments
+    assert segment.start_s == 0 and segment.label() == "left_hand=low"
 
 
 def test_no_ice_server_unless_the_environment_names_some(live):

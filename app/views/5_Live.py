@@ -84,9 +84,7 @@ def control_buttons(stage: live.LiveStage) -> None:
 
     def switch(constraint: str | None) -> None:  # before the panel is drawn again, so it shows the switch
         ss[CONTROL] = constraint
-        session = stage.session
-        if session is not None:
-            session.set_control(constraint)
+        stage.set_control(constraint)
 
     cols = st.columns(len(live.CONTROLS))
     for col, (label, constraint) in zip(cols, live.CONTROLS.items()):
@@ -116,7 +114,8 @@ def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool) -> No
         st.info(hint or "Press **Start** above and allow the microphone; then speak.", icon=":material/mic:")
     else:
         title = f"speech {view.speech_s:.1f} s · frame {view.frame} · {view.control or 'free'}"
-        motion = Motion(view.positions[None], db.fps, db.joint_presence)
+        made_with = session.db  # the sidebar may have changed since it began
+        motion = Motion(view.positions[None], made_with.fps, made_with.joint_presence)
         display.show_skeletons(motion, key="live.skeleton", title=title, height=440)
         c = st.columns(3)
         c[0].metric(
@@ -207,8 +206,8 @@ def main() -> None:
         "keeps the whole performance as a result: downloads here, and the Retrieval inspector."
     )
     stage: live.LiveStage = ss.setdefault(STAGE, live.LiveStage())
-    control = ss.get(CONTROL)
-    stage.configure(functools.partial(live.LiveSession, db, config=SynthesisConfig(), name=SOURCE, control=control))
+    stage.control = ss.get(CONTROL)
+    stage.configure(lambda control: live.LiveSession(db, config=SynthesisConfig(), name=SOURCE, control=control))
     ctx = microphone(stage, stopping=bool(ss.pop(_STOPPING, False)))
     playing = bool(ctx.state.playing)
     if not playing:
