@@ -188,3 +188,17 @@ def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run):
         assert page.get_by_role("button", name=label).count() == 1
     # Stop closed the microphone: the component offers Start again
     page.frame_locator('iframe[title*="streamlit_webrtc"]').get_by_role("button", name="Start").wait_for()
+
+
+def test_start_again_after_stop_gives_a_second_performance(live_run):
+    page = live_run["page"]
+    first = page.locator("iframe[srcdoc*='data-key=\"live.result\"']").first.get_attribute("srcdoc")
+    _start(page)  # the file plays on as silence: a performance all the same
+    page.locator("iframe[srcdoc*='data-key=\"live.skeleton\"']").first.wait_for(state="attached")
+    page.wait_for_timeout(1000)
+    page.get_by_role("button", name="Stop", exact=True).click()
+    page.get_by_role("heading", name="Performance").wait_for()
+    app_browser.wait_idle(page)
+    second = page.locator("iframe[srcdoc*='data-key=\"live.result\"']").first.get_attribute("srcdoc")
+    assert second != first  # the new performance replaced the first
+    assert app_browser.problems(page) == []
