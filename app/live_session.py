@@ -1,15 +1,15 @@
 """The Live page's engine: microphone audio in, resampled and synthesised in a background thread.
 
 The browser's microphone reaches the server through streamlit-webrtc, whose audio
-callback runs once per received frame (20 ms of 48 kHz stereo from the browser's
-Opus stream) on the transport's own thread. :meth:`LiveSession.on_frame` only turns
-the frame into mono samples and queues them with the moment they arrived, so the
-transport never waits; a worker thread resamples them to 16 kHz with a streaming
-soxr filter (the same filter as :func:`gesturekit.datasets.audio.resample`, one
-chunk at a time), pushes them into a :class:`gesturekit.live.LiveSynthesizer`, and
-records when each frame of motion became available. Control switches travel
-through the same queue, so a switch takes effect after the speech that arrived
-before it.
+sink hands every received frame (20 ms of 48 kHz stereo, decoded from the browser's
+Opus stream), in order, to :meth:`LiveStage.on_frame` on the transport's event loop.
+:meth:`LiveSession.on_frame` only turns the frame into mono samples and queues them
+with the moment they arrived, so the transport never waits; a worker thread
+resamples them to 16 kHz with a streaming soxr filter (the same filter as
+:func:`gesturekit.datasets.audio.resample`, one chunk at a time) and pushes them
+into a :class:`gesturekit.live.LiveSynthesizer`, keeping the frames of motion it
+returns. Control switches travel through the same queue, so a switch takes effect
+after the speech that arrived before it.
 
 The page asks :meth:`LiveSession.view` several times a second what to draw: the
 newest frame determined, and how long ago its speech was heard. A step's frames
@@ -204,9 +204,13 @@ class LiveSession:
     def on_frame(self, frame: Any) -> Any:
         """The audio callback: queue a PyAV ``AudioFrame``'s samples as mono; returns the frame."""
         fmt = frame.format
-        samples = mono_samples(
-            frame.to_ndarray(), fmt=fmt.name, planar=bool(fmt.is_planar), channels=len(frame.layout.channels)
-        )
+        try:
+            samples = mono_samples(
+                frame.to_ndarray(), fmt=fmt.name, planar=bool(fmt.is_planar), channels=len(frame.layout.channels)
+            )
+        except ConfigError as exc:  # said on the page (error); the transport goes on
+            self._error = self._error or str(exc)
+            return frame
         self.feed(samples, int(frame.sample_rate))
         return frame
 

@@ -86,6 +86,16 @@ def test_an_unknown_sample_format_is_refused_with_its_name(live):
         live.mono_samples(np.zeros((1, 4), np.uint8), fmt="u8", planar=False, channels=1)
 
 
+def test_a_frame_in_a_format_it_cannot_read_is_the_sessions_error_not_the_transports(live, db):
+    session = live.LiveSession(db)
+    frame = av.AudioFrame.from_ndarray(np.zeros((1, 960), np.uint8), format="u8", layout="mono")
+    frame.sample_rate = RATE
+    assert session.on_frame(frame) is frame  # the transport is not interrupted
+    assert "'u8'" in session.error
+    with pytest.raises(GestureKitError, match="u8"):
+        session.stop()
+
+
 def test_frames_in_20_ms_pieces_give_the_speech_resampled_whole(live, db, speech48):
     session = live.LiveSession(db, clock=lambda: 100.0)
     for frame in stereo_frames(speech48):
