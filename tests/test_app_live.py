@@ -127,7 +127,8 @@ def test_the_view_shows_the_newest_frame_and_how_long_ago_its_speech_was_heard(l
             assert view.speech_s == pytest.approx(n_in / RATE)
             # its speech was heard at t0 + its time; the latency is the rest of the way to now
             assert view.latency_s == pytest.approx(now["t"] - (1000.0 + view.frame / db.fps), abs=1e-6)
-            assert view.latency_s <= view.algorithmic_s + 1e-6  # the newest frame waited on nothing else
+            # the newest frame waited on nothing but the speech it needs (give or take the packet it came in)
+            assert view.latency_s <= view.algorithmic_s + 2 * FRAME / RATE
     later = 0.37
     now["t"] += later  # no speech since: the same frame, its latency grows
     assert session.view().latency_s == pytest.approx(view.latency_s + later)
