@@ -67,6 +67,12 @@ PAGES: tuple[Page, ...] = (
         ":material/movie:",
         "user-study videos: speeches x systems in one style, opaque ids, balanced order",
     ),
+    Page(
+        "views/5_Live.py",
+        "Live",
+        ":material/record_voice_over:",
+        "speak into the microphone and watch the body gesture as you talk; switch a control; keep the performance",
+    ),
 )
 
 

@@ -27,12 +27,13 @@ if TYPE_CHECKING:
     import numpy as np
 
     from gesturekit.refine.infer import Refiner
-    from gesturekit.synthesize import SynthesisConfig
+    from gesturekit.synthesize import SynthesisConfig, SynthesisResult
 
 __all__ = [
     "PINS_KEY",
     "SYNTHESIS_KEY",
     "current_synthesis",
+    "keep_synthesis",
     "page_setup",
     "persistent_key",
     "picked_key",
@@ -163,9 +164,24 @@ def run_synthesis(
     from gesturekit.refine import open_refiner
     from gesturekit.synthesize import synthesize
 
-    ss = st.session_state
     with st.spinner("Searching the database…"), warnings_shown():
         result = synthesize(audio, db=db, config=config, refiner=open_refiner(refiner))
+    return keep_synthesis(db, result, source=source, refiner=refiner)
+
+
+def keep_synthesis(
+    db: MatchingDatabase,
+    result: SynthesisResult,
+    *,
+    source: str,
+    refiner: Refiner | str | os.PathLike[str] | None = None,
+) -> dict:
+    """Store ``result`` (made with ``db``) as the user's synthesis (:data:`SYNTHESIS_KEY`) and return the record.
+
+    The Synthesize page stores its runs here, the Live page its performances; the Retrieval
+    inspector reads the latest. ``source``: the speech's name; ``refiner``: what was applied.
+    """
+    ss = st.session_state
     ss[_RUN_COUNTER] = ss.get(_RUN_COUNTER, 0) + 1
     record = {
         "result": replace(result, source=source),
@@ -175,7 +191,7 @@ def run_synthesis(
         "refiner": refiner,
     }
     ss[SYNTHESIS_KEY] = record
-    ss[PINS_KEY] = dict(config.pins)
+    ss[PINS_KEY] = dict(result.config.pins)
     return record
 
 

@@ -29,5 +29,6 @@ def test_the_pages_keep_their_titles_and_urls(nav):
         ("Retrieval inspector", "Retrieval_inspector"),
         ("Database", "Database"),
         ("Study stimuli", "Study_stimuli"),
+        ("Live", "Live"),
     ]
     assert all(p.purpose and p.icon for p in nav.PAGES)
