@@ -71,6 +71,7 @@ def test_home_opens_the_demo_database_and_labels_it_generated(app_env):
         "Retrieval inspector",
         "Database",
         "Study stimuli",
+        "Live",
     ]
 
 
