@@ -52,6 +52,11 @@ def _select_database() -> Path:
             ss[_TYPED_WIDGET] = chosen
     if _TYPED_WIDGET not in ss:
         ss[_TYPED_WIDGET] = ""
+    # written on every run (as state.persistent_key does), so that every run sends the choice to the
+    # browser: a page switch removes the widgets from the browser, and one re-created without its
+    # value would show, and on the next run send back, the first option (the demo database)
+    ss[_CHOICE_WIDGET] = ss[_CHOICE_WIDGET]
+    ss[_TYPED_WIDGET] = ss[_TYPED_WIDGET]
     choice = st.sidebar.selectbox(
         "Database",
         keys,

@@ -234,3 +234,24 @@ def test_the_other_pages_keep_their_settings_too(served):
         app_browser.go_to(page, "Study stimuli")
         assert (_number(page, "Seed").input_value(), _number(page, "Participants").input_value()) == ("7", "3")
         assert app_browser.problems(page) == []
+
+
+def test_the_database_chosen_stays_chosen_on_every_page(served):
+    """A database other than the first option, chosen once, is the one every page opens, whichever
+    way the user goes (leaving the Database page once brought the demo database back)."""
+    url, home = served
+    from gesturekit.demo import build_demo_database
+
+    other = home / "db" / "other"
+    if not (other / "database.json").is_file():
+        build_demo_database(other, minutes=1.0)
+    with app_browser.browser() as page:
+        app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
+        _choose_database(page, f"other  ({home / 'db'})")
+        for title in ("Database", "Synthesize", "Live", "Database", "Study stimuli", "Retrieval inspector", "Live"):
+            app_browser.go_to(page, title)
+            page.wait_for_timeout(300)  # a run the page switch may still bring
+            app_browser.wait_idle(page)
+            sidebar = page.locator('[data-testid="stSidebar"]').inner_text()
+            assert str(other) in sidebar, f"on {title}: {sidebar[-300:]}"
+        assert app_browser.problems(page) == []
