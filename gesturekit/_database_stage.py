@@ -381,7 +381,13 @@ def job_key(
         "motion": _file_identity(source.motion),
         "audio": _file_identity(source.audio),
         "reading": reading_key,
-        "build": [config.clip_frames, config.overlap_stride, config.store_audio],
+        "build": [
+            config.clip_frames,
+            config.overlap_stride,
+            config.store_audio,
+            config.audio_format,
+            config.audio_rate,
+        ],
         "only": None if only is None else sorted(only),
         "skip": sorted(skip),
     }

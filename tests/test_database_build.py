@@ -490,3 +490,19 @@ def test_a_parallel_build_reports_the_error_a_serial_build_gives(tmp_path):
                 workers=2,
             )  # fmt: skip
         assert "take_00.npy" in str(info.value) and "pass --up -y" in str(info.value)
+
+
+def test_a_take_staged_with_other_audio_options_is_not_reused(tmp_path):
+    """The staged audio is encoded as the build asks: a rerun with another --audio-rate or
+    --audio-format stages the take again rather than reusing audio of another form."""
+    from gesturekit._database_stage import job_key
+    from gesturekit.database import BuildConfig
+    from gesturekit.datasets.takes import TakeSource
+
+    motion, audio = tmp_path / "t.npy", tmp_path / "t.wav"
+    motion.write_bytes(b"x")
+    audio.write_bytes(b"y")
+    source = TakeSource("positions", motion, audio)
+    forms = ({}, {"audio_rate": 8000}, {"audio_format": "flac"}, {"audio_format": "flac", "audio_rate": 8000})
+    keys = {job_key(source, {"fps": 15}, BuildConfig(**options)) for options in forms}
+    assert len(keys) == 4
