@@ -217,7 +217,8 @@ class LiveSession:
     def feed(self, samples: np.ndarray, rate: int, *, arrived: float | None = None) -> None:
         """Queue mono samples at ``rate`` Hz that arrived at ``arrived`` (wall clock; default now)."""
         if not self._closed:
-            self._queue.put(("audio", (np.asarray(samples, np.float32), int(rate), arrived or self._clock())))
+            when = arrived if arrived is not None else self._clock()
+            self._queue.put(("audio", (np.asarray(samples, np.float32), int(rate), when)))
 
     # --- called by the page --------------------------------------------------------------------
     def set_control(self, constraint: str | None) -> None:
@@ -306,13 +307,13 @@ class LiveSession:
                     try:
                         if self._error is None:
                             self._finish()
+                    except Exception as exc:  # noqa: BLE001  (recorded before stop() is woken, which reads it)
+                        self._error = _failure(exc)
                     finally:
                         item.set()
                     return
-            except GestureKitError as exc:
-                self._error = str(exc)
             except Exception as exc:  # noqa: BLE001  (shown on the page; the thread must not die silently)
-                self._error = f"the live synthesis failed: {type(exc).__name__}: {exc}"
+                self._error = _failure(exc)
 
     def _resample(self, samples: np.ndarray, rate: int, *, last: bool = False) -> np.ndarray:
         import soxr  # a dependency of librosa
@@ -414,3 +415,10 @@ class LiveStage:
         """The browser's stream is off: the next frames begin a new performance."""
         with self._lock:
             self._armed = True
+
+
+def _failure(exc: Exception) -> str:
+    """What the page says of a failed push or Stop: a user error's own message, else what failed."""
+    if isinstance(exc, GestureKitError):
+        return str(exc)
+    return f"the live synthesis failed: {type(exc).__name__}: {exc}"
