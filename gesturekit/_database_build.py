@@ -85,9 +85,12 @@ class StagedTake:
     def name(self) -> str:
         return str(self.record["name"])
 
-    def load(self, what: str) -> np.ndarray:
-        """One staged array (``"F"``, ``"overlap.G"``, ``"audio"``, ``"moments_P"``, ...)."""
-        return np.load(self.folder / f"{self.record['index']}.{what}.npy", allow_pickle=False)
+    def load(self, what: str, *, header: bool = False) -> np.ndarray:
+        """One staged array (``"F"``, ``"overlap.G"``, ``"audio"``, ``"moments_P"``, ...); with
+        ``header``, memory-mapped (for its dtype and shape, nothing read)."""
+        return np.load(
+            self.folder / f"{self.record['index']}.{what}.npy", mmap_mode="r" if header else None, allow_pickle=False
+        )
 
 
 # ---- first pass: running the units ------------------------------------------------------------------
@@ -218,6 +221,15 @@ class _NpyWriter:
         if self.rows != self.shape[0]:
             raise GestureKitError(f"{self.path.name}: wrote {self.rows} rows of {self.shape[0]}")
 
+    def __enter__(self) -> _NpyWriter:
+        return self
+
+    def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
+        if exc_type is None:
+            self.close()
+        else:  # the error that stopped the writing is the one to report, not the rows missing after it
+            self.file.close()
+
 
 def _column_percentiles(path: Path, percentiles: tuple[float, float]) -> dict[str, list[float]]:
     """Low and high percentiles of each attribute over every frame of ``attributes.npy``, read a
@@ -236,7 +248,7 @@ def _column_percentiles(path: Path, percentiles: tuple[float, float]) -> dict[st
             for lo in range(0, frames, step):
                 rows = np.fromfile(f, dtype=dtype, count=min(step, frames - lo) * n_attr)
                 col[lo : lo + rows.shape[0] // n_attr] = rows.reshape(-1, n_attr)[:, i]
-            out[name] = [float(np.percentile(col, percentiles[0])), float(np.percentile(col, percentiles[1]))]
+            out[name] = [float(v) for v in np.percentile(col, list(percentiles))]
     return out
 
 
@@ -301,25 +313,19 @@ def assemble(
         old_n = 0 if base is None else int(base["overlap" if prefix else "arrays"]["clip_take"].shape[0])
         total = old_n + sum(int(s.record[count]) for s in staged)
         for k in CLIP_ARRAYS + ("clip_start",):
-            first = staged[0].load(prefix + k) if staged else None
+            first = staged[0].load(prefix + k, header=True) if staged else None
             dtype, row = (first.dtype, first.shape[1:]) if first is not None else (np.dtype(np.float32), ())
-            w = _NpyWriter(sub / f"{k}.npy", dtype, (total, *row))
-            try:
+            with _NpyWriter(sub / f"{k}.npy", dtype, (total, *row)) as w:
                 if old_path is not None:
                     w.copy_from(old_path / f"{k}.npy")
                 for s in staged:
                     a = s.load(prefix + k)
                     w.write(zscore[k].apply(a) if k in zscore else a)
-            finally:
-                w.close()
-        w = _NpyWriter(sub / "clip_take.npy", np.dtype(np.int32), (total,))
-        try:
+        with _NpyWriter(sub / "clip_take.npy", np.dtype(np.int32), (total,)) as w:
             if old_path is not None:
                 w.copy_from(old_path / "clip_take.npy")
             for ti, s in enumerate(staged):
                 w.write(np.full(int(s.record[count]), len(old_takes) + ti, np.int32))
-        finally:
-            w.close()
     take_meta = list(old_takes)
     first_clip = sum(t["n_clips"] for t in old_takes)
     storage = AudioStorage(format=config.audio_format, rate=config.audio_rate)
@@ -344,14 +350,11 @@ def assemble(
         first_clip += r["n_clips"]
         audio_offset += size
     if config.store_audio:
-        w = _NpyWriter(folder / "audio.npy", storage.dtype, (audio_offset,))
-        try:
+        with _NpyWriter(folder / "audio.npy", storage.dtype, (audio_offset,)) as w:
             if base is not None:
                 w.copy_from(Path(base["path"]) / "audio.npy")
             for s in staged:
                 w.write(s.load("audio"))
-        finally:
-            w.close()
     # thresholds over every frame of the clips (the frames the search may use)
     thresholds = (
         dict(base["meta"]["thresholds"]) if base else _column_percentiles(folder / "attributes.npy", config.percentiles)
