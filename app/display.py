@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     import numpy as np
     import pandas as pd
 
+    from gesturekit.export.bvh import BvhReport
     from gesturekit.motion import Motion
 
 __all__ = [
@@ -201,3 +202,39 @@ def skeleton_note(motions: Motion | Sequence[Motion]) -> str:
             line.append(f"{len(absent)} joints absent from the data, not drawn")
         parts.append("; ".join(line))
     return " | ".join(parts)
+
+
+def result_bvh(record: dict, *, key: str) -> tuple[bytes | None, BvhReport | str]:
+    """A result's BVH download and its report, made once per result: reruns of the page reuse it,
+    and a skeleton no BVH can hold is not tried again.
+
+    Returns the file's bytes and its :class:`~gesturekit.export.bvh.BvhReport`, or None and why no
+    BVH can be written. ``record`` is the page's result record (``"run"``, ``"result"``); ``key`` is
+    the session-state key that keeps it.
+    """
+    from gesturekit import interactive as gs
+
+    ss = st.session_state
+    cached = ss.get(key)
+    if cached is None or cached[0] != record["run"]:
+        result = record["result"]
+        try:
+            with collect_warnings():  # the warning over 1 cm is shown from the report (show_bvh_report)
+                data, report = gs.export_bvh_bytes(result, gs.export_filename(result, "bvh"))
+            cached = (record["run"], data, report)
+        except GestureKitError as exc:
+            cached = (record["run"], None, exc.problem)
+        ss[key] = cached
+    return cached[1], cached[2]
+
+
+def show_bvh_report(data: bytes | None, report: BvhReport | str) -> None:
+    """Under a result's downloads: the BVH's error against the motion, its warning over 1 cm, or why
+    there is no BVH (from :func:`result_bvh`)."""
+    if data is None or isinstance(report, str):
+        st.error(f"No BVH file: {report}", icon=":material/error:")
+        return
+    st.caption(f"BVH {report.summary()}")
+    message = report.warning()
+    if message is not None:
+        st.warning(message[0].upper() + message[1:], icon=":material/warning:")

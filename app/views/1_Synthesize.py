@@ -18,12 +18,12 @@ from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.database import MatchingDatabase
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
-from gesturekit.export.bvh import BvhReport
 from gesturekit.motion import AUDIO_SR
 from gesturekit.search import describe_steps
 from gesturekit.synthesize import SynthesisConfig
 from gesturekit.viz.figures import waveform_figure, wrist_figure
 
+_BVH = "_synth.bvh"  # (run, bytes or None, report or why no BVH) of the current result
 SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}
 SEGMENTS = "synth.segments"  # the control table as the user last left it (DataFrame)
 EDITOR = "synth.segments_editor"  # the data editor's widget key (see state.remount_key)
@@ -384,11 +384,7 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         "json": "Config (JSON)",
     }
     # the BVH is made once per result, for the report of its error shown under the buttons
-    bvh_data: bytes | None = None
-    try:
-        bvh_data, bvh_report = _figure(record, "bvh", lambda: _bvh_export(result))
-    except GestureKitError as exc:  # a skeleton a BVH cannot hold: said under the buttons
-        bvh_problem = exc.problem
+    bvh_data, bvh_report = display.result_bvh(record, key=_BVH)
     for col, kind in zip(cols, ("npz", "bvh", "csv", "json")):
         if kind == "bvh" and bvh_data is None:
             col.caption("BVH: see below")
@@ -414,19 +410,7 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         )
     else:
         cols[4].caption("MP4: render it above")
-    if bvh_data is None:
-        st.error(f"No BVH file: {bvh_problem}", icon=":material/error:")
-        return
-    st.caption(f"BVH {bvh_report.summary()}")
-    message = bvh_report.warning()
-    if message is not None:
-        st.warning(message[0].upper() + message[1:], icon=":material/warning:")
-
-
-def _bvh_export(result) -> tuple[bytes, BvhReport]:
-    """The BVH download and its report; the warning over 1 cm is shown from the report, beside it."""
-    with collect_warnings():
-        return gs.export_bvh_bytes(result, gs.export_filename(result, "bvh"))
+    display.show_bvh_report(bvh_data, bvh_report)
 
 
 def main() -> None:

@@ -15,7 +15,7 @@ import streamlit as st
 
 from gesturekit import interactive as gs
 from gesturekit.database import MatchingDatabase
-from gesturekit.errors import GestureKitError, collect_warnings
+from gesturekit.errors import GestureKitError
 from gesturekit.motion import Motion
 from gesturekit.synthesize import SynthesisConfig
 
@@ -24,6 +24,7 @@ SINK = "live.sink"  # the transport's audio sink, feeding the stage
 CONTROL = "live.control"  # the control asked for last (a constraint, or None: free)
 SHOWN = "live.shown_run"  # the run number of the performance this page made last
 _STOPPING = "_live.stopping"  # Stop was pressed: the next run asks the browser to close the stream
+_BVH = "_live.bvh"  # (run, bytes or None, report or why no BVH) of the performance shown
 _VIDEO = "_live.video"  # {"run": n, "bytes": mp4}
 _FAILED = "_live.failed"  # why the last performance could not be kept (see finish)
 #: Seconds between refreshes of the live figure and latency while the microphone is on. Each refresh
@@ -166,9 +167,8 @@ def show_performance(record: dict) -> None:
             key=f"live.download_{kind}",
             on_click="ignore",
         )
-    try:
-        with collect_warnings():
-            bvh, _ = gs.export_bvh_bytes(result, gs.export_filename(result, "bvh"))
+    bvh, report = display.result_bvh(record, key=_BVH)  # made once per performance, not on every rerun
+    if bvh is not None:
         cols[2].download_button(
             "Motion (BVH)",
             data=bvh,
@@ -177,8 +177,8 @@ def show_performance(record: dict) -> None:
             key="live.download_bvh",
             on_click="ignore",
         )
-    except GestureKitError as exc:
-        cols[2].caption(f"No BVH: {exc.problem}")
+    else:
+        cols[2].caption("BVH: see below")
     done = ss.get(_VIDEO)
     if done is not None and done["run"] == record["run"]:
         cols[4].download_button(
@@ -193,6 +193,7 @@ def show_performance(record: dict) -> None:
         with st.spinner("Rendering…"), display.user_errors():
             ss[_VIDEO] = {"run": record["run"], "bytes": gs.render_mp4(result)}
             st.rerun()  # the download button in its place
+    display.show_bvh_report(bvh, report)
 
 
 def main() -> None:
