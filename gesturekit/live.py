@@ -43,7 +43,7 @@ from .blend import fade_weights, keep_slow
 from .control import ControlTrack, Segment, constraint_mask, parse_control
 from .database import MatchingDatabase
 from .errors import ConfigError
-from .features import LAYOUT, audio_frame_features, cgan_audio_features, n_audio_frames
+from .features import LAYOUT, audio_frame_features, cgan_audio_features, n_audio_frames, stack_audio_features
 from .motion import AUDIO_SR, Motion
 from .search.plan import SearchPlan, exclusions, resolved_search_config
 from .search.stream import StepSearch
@@ -427,11 +427,9 @@ class LiveSynthesizer:
         search = self._search.result(fps=self._fps)
         track = self._track()
         config = self._config.with_control(track)
-        m = self._m.view
-        rows = np.minimum(np.arange(n)[:, None] + np.asarray(LAYOUT.audio_offsets)[None, :], n - 1)
         masks = self._search.masks
         plan = SearchPlan(
-            query=np.ascontiguousarray(self._zscore.apply(m[rows].reshape(n, -1)), dtype=np.float32),
+            query=np.ascontiguousarray(self._zscore.apply(stack_audio_features(self._m.view[:n])), dtype=np.float32),
             config=self._search.config,
             control=track,
             masks=np.stack(masks) if masks else None,

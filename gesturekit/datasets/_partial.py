@@ -18,15 +18,12 @@ joint the source lacks (fingers, say) is ``absent``: it sits on its parent.
 
 from __future__ import annotations
 
-import os
-from collections.abc import Iterable
-
 import numpy as np
 
 from ..errors import MotionFileError
-from ..skeleton import JOINT_NAMES, PARENTS, JointPresence, joint_index, missing_required
+from ..skeleton import JOINT_NAMES, PARENTS, JointPresence, joint_index
 
-__all__ = ["TORSO_BELOW_NECK", "HEAD_ABOVE_NECK", "COLLAR_FRACTION", "check_required", "complete_skeleton"]
+__all__ = ["TORSO_BELOW_NECK", "HEAD_ABOVE_NECK", "COLLAR_FRACTION", "complete_skeleton"]
 
 #: Derived torso joints: distance below the neck, in shoulder widths.
 TORSO_BELOW_NECK: dict[str, float] = {"upper_chest": 0.35, "chest": 0.75, "spine_mid": 1.2}
@@ -37,22 +34,6 @@ COLLAR_FRACTION = 0.4
 
 _NECK = joint_index("neck")
 _LS, _RS = joint_index("left_shoulder"), joint_index("right_shoulder")
-
-
-def check_required(mapped: Iterable[str], *, map_name: str, path: str | os.PathLike[str] | None = None) -> None:
-    """Refuse a joint map that lacks joints the matching needs, listing them per need.
-
-    Raises
-    ------
-    MotionFileError
-        One clause per need, e.g. ``the hand controls needs left_wrist``, naming the map.
-    """
-    lack = missing_required(mapped)
-    if lack:
-        raise MotionFileError(
-            f"the joint map {map_name!r} lacks joints gesturekit needs: {'; '.join(lack)}; map them to source joints",
-            path=path,
-        )
 
 
 def complete_skeleton(positions: np.ndarray, recorded: np.ndarray) -> tuple[np.ndarray, JointPresence]:

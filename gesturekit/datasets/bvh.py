@@ -38,7 +38,7 @@ from .. import limits
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion, output_frame_count
 from ..skeleton import FPS
-from ._axes import check_axes_options
+from ._axes import UNIT_SCALE, check_axes_options
 from ._kinematics import quat_mul, quat_to_matrix, slerp, world_positions
 from ._reading import Reading, convert_and_complete
 from .bvh_file import BvhData, parse_bvh, parse_bvh_text
@@ -64,7 +64,6 @@ _FK_BLOCK = 8192
 #: i.e. a few hundred centimetres; the threshold sits well between the two.
 _AUTO_CM_THRESHOLD = 40.0
 
-_UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
 #: After forward kinematics, a joint farther than this from the origin (metres)
 #: is absurd: far beyond any capture volume, and so large that the offsets of
@@ -205,12 +204,12 @@ def unit_scale(data: BvhData, *, units: str = "auto") -> float:
     _check_units(units)
     if units == "auto":
         total = float(np.linalg.norm(data.offsets[data.parents >= 0], axis=1).sum())
-        return _UNIT_SCALE["cm"] if total > _AUTO_CM_THRESHOLD else _UNIT_SCALE["m"]
-    return _UNIT_SCALE[units]
+        return UNIT_SCALE["cm"] if total > _AUTO_CM_THRESHOLD else UNIT_SCALE["m"]
+    return UNIT_SCALE[units]
 
 
 def _check_units(units) -> None:
-    if not (units == "auto" or (isinstance(units, str) and units in _UNIT_SCALE)):
+    if not (units == "auto" or (isinstance(units, str) and units in UNIT_SCALE)):
         raise ConfigError(f"units must be 'auto', 'cm', 'm' or 'mm', got {units!r}")
 
 
@@ -313,7 +312,7 @@ def read_bvh_take(
     placed, reading = convert_and_complete(
         rel, np.ones(rel.shape[1], dtype=bool), units="m", up=up, forward=forward, path=path
     )
-    found = units if units != "auto" else next((u for u, f in _UNIT_SCALE.items() if f == scale), f"x{scale:g}")
+    found = units if units != "auto" else next((u for u, f in UNIT_SCALE.items() if f == scale), f"x{scale:g}")
     reading = replace(reading, units=found, units_given=units != "auto")
     return Motion(placed.astype(np.float32), float(fps)), reading
 

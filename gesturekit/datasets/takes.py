@@ -173,11 +173,6 @@ class ReadOptions:
         if not isinstance(self.normalize_bones, bool):
             raise ConfigError(f"normalize_bones must be True or False, got {self.normalize_bones!r}")
 
-    def text(self) -> str:
-        """The options as command-line flags, e.g. ``"--units auto --up -y --forward auto"``."""
-        flags = f"--units {self.units}" + (f" --up {self.up}" if self.up else "") + f" --forward {self.forward}"
-        return flags + (" --normalize-bones" if self.normalize_bones else "")
-
 
 def iter_takes(
     sources: list[TakeSource],

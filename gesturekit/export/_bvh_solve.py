@@ -13,7 +13,7 @@ import os
 import numpy as np
 
 from ..errors import ConfigError
-from ..skeleton import DERIVED, FINGERS, JOINT_NAMES, N_JOINTS, PARENTS, JointPresence, joint_index
+from ..skeleton import FINGERS, JOINT_NAMES, N_JOINTS, PARENTS, JointPresence, joint_index
 
 __all__ = [
     "LEFT_OUT",
@@ -124,11 +124,6 @@ def depth_first(parents: np.ndarray) -> tuple[int, ...]:
         order.append(j)
         stack.extend(reversed(children[j]))
     return tuple(order)
-
-
-def derived_root(presence: JointPresence, parents: np.ndarray) -> bool:
-    """Whether the root is a derived joint."""
-    return presence.status[int(np.flatnonzero(parents == -1)[0])] == DERIVED
 
 
 # ----------------------------------------------------------------------------- rest pose
