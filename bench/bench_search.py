@@ -30,6 +30,9 @@ from gesturekit.search.reference import search_reference
 
 M_OLIVER, T, D, A = 9624, 64, 96, 112
 
+#: Seconds for numpy's BLAS threads to stop polling after a product (OpenBLAS: about 0.1 s).
+_BLAS_IDLE = 0.3
+
 
 def make_db(M: int, rng: np.random.Generator):
     P = rng.standard_normal((M, T, D), dtype=np.float32)
@@ -56,7 +59,10 @@ def step_vs_matvec(
 
     Pairs are taken back to back (a search of ``steps`` steps bracketed by products), so
     both members of a pair see the same machine state; ``P2`` may be memory-mapped (the
-    products then read it from the disk cache, as the search does).
+    products then read it from the disk cache, as the search does). The product is numpy's
+    (its BLAS's threads on all cores), whose idle threads keep polling the cores for about
+    0.1 s after it returns: the search starts after they have gone to sleep, as it does in
+    use, where it does not follow such a product.
 
     Returns
     -------
@@ -68,6 +74,7 @@ def step_vs_matvec(
     ratios, t_steps, gemvs = [], [], []
     for _ in range(runs):
         g0 = best_of(lambda: np.dot(P2, q, out=out), 3)
+        time.sleep(_BLAS_IDLE)
         t0 = time.perf_counter()
         r = index.search(part, config=cfg)
         step = (time.perf_counter() - t0) / r.n_steps

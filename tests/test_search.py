@@ -292,6 +292,56 @@ def test_fast_search_equals_reference_on_a_larger_database(seed, grid, k):
     assert_same(*run_both(P, F, valid, query, config=cfg))
 
 
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(problems(), st.sampled_from([1, 2, 3, 1024]), st.sampled_from([0.0, 0.5, 1.0]))
+def test_either_way_of_making_the_products_gives_the_reference_result(problem, sub_clips, dense):
+    # one query's scan multiplies a few clips at a time: by BLAS for all starts where many
+    # are admissible (dense 0: always), by the compiled loop for the admissible alone otherwise (1: always)
+    import gesturekit.search.index as search_module
+
+    P, F, valid, query, kw = problem
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(search_module, "_SUB_CLIPS", sub_clips)
+        mp.setattr(search_module, "_DENSE", dense)
+        assert_same(*run_both(P, F, valid, query, **kw))
+
+
+def test_a_scan_makes_the_products_by_blas_where_many_starts_are_admissible(monkeypatch):
+    import gesturekit.search.index as search_module
+
+    kernels = search_module.compiled()
+    seen = []
+
+    class Recording:
+        def __getattr__(self, name):
+            if name != "scan_one":
+                return getattr(kernels, name)
+
+            def scan_one(est, bias, pose, *rest):
+                seen.append((est.shape[0], int(np.isfinite(bias).sum()), pose[3]))
+                return kernels.scan_one(est, bias, pose, *rest)
+
+            return scan_one
+
+    monkeypatch.setattr(search_module, "compiled", lambda: Recording())
+    monkeypatch.setattr(search_module, "_SUB_CLIPS", 4)
+    rng = np.random.default_rng(3)
+    M, T, D, A = 16, 20, 96, 112
+    P = rng.standard_normal((M, T, D)).astype(np.float32)
+    F = rng.standard_normal((M, T, A)).astype(np.float32)
+    masks = np.ones((1, M, T), bool)
+    masks[0, :8, 1:] = False  # the first 8 clips: one admissible start each
+    query = rng.standard_normal((16, A)).astype(np.float32)
+    cfg = SearchConfig(segment=4, record=3, init_pose=tuple(P[9, 2].tolist()))
+    fast = search(P, F, np.ones((M, T), bool), query, config=cfg, masks=masks, step_mask_index=np.zeros(4, int))
+    ref = search_reference(P, F, np.ones((M, T), bool), query, config=cfg, masks=masks, step_mask_index=np.zeros(4, int))
+    assert fast.equals(ref)
+    assert seen and all(n == 4 for n, _, _ in seen)
+    # per 4 clips: BLAS where more than half of the starts are admissible, else the compiled loop
+    assert all(multiplied == (admitted > 0.5 * 4 * T) for _, admitted, multiplied in seen)
+    assert {m for _, _, m in seen} == {True, False}
+
+
 @settings(max_examples=15, deadline=None)
 @given(st.lists(problems(max_clips=5), min_size=1, max_size=1), st.integers(2, 4), st.integers(0, 2**31 - 1))
 def test_batch_equals_single_runs(problem, n_queries, seed):

@@ -10,8 +10,9 @@ configuration) with one scan of the database per step.
 
 Exactness. The result equals :func:`gesturekit.search.reference.search_reference`
 decision for decision. Each step scans the database once in float32
-(``||p||^2 - 2 p.q``: for one query a compiled pass that reads only the rows of
-admissible starts, for several a matrix product), keeps per clip the starts whose
+(``||p||^2 - 2 p.q``: for one query, a few clips at a time, BLAS's matrix-vector
+product where most starts are admissible and a compiled pass over the admissible
+rows alone where few are; for several queries a matrix product), keeps per clip the starts whose
 float32 value lies within a proven error bound of the clip's minimum, and
 decides among those with the exact float64 definitions of
 :mod:`gesturekit.search.reference`. The same bound-and-re-check is applied to
@@ -55,6 +56,14 @@ __all__ = ["SearchIndex", "search", "search_batch"]
 
 #: Clips scanned per chunk are chosen so that one chunk's float32 result holds this many bytes.
 _CHUNK_BYTES = 16 << 20
+
+#: Clips multiplied and reduced at a time by one query's scan: their estimates stay in the
+#: processor's cache between the product and the reduction.
+_SUB_CLIPS = 1024
+
+#: Above this share of admissible starts, BLAS's product of all rows is faster than the
+#: compiled product of the admissible rows alone (it is compute-bound; BLAS is memory-bound).
+_DENSE = 0.5
 
 #: Survivors sorted first by each ranking in a query's decisions; the rest is only
 #: partitioned off. Enough whenever the top of the combined ranking lies within the
@@ -109,7 +118,7 @@ class SearchIndex:
         self.shape = (M, T, D, self.F.shape[2])
         self._P3 = np.asarray(self.P)  # plain views (np.memmap is a subclass the kernels do not take)
         self._F3 = np.asarray(self.F)
-        self._P2 = self.P.reshape(M * T, D)
+        self._P2 = self._P3.reshape(M * T, D)
         self._F2 = self.F.reshape(M * T, -1)
         self._pose_c = pose_err_factor(D)
         self._audio_e = audio_err(self.shape[3])
@@ -135,20 +144,25 @@ class SearchIndex:
             if j >= 0:
                 adm = adm & control_starts(masks[j], n, rule)
             cache[key] = (adm, None)
-        adm, bias = cache[key]
-        return adm, key
+        return cache[key][0], key
 
     def _bias(self, cache, key):
-        """``|p|^2`` (float32) where a start is admissible under ``key``, +inf elsewhere; (M T,)."""
-        adm, bias = cache[key]
-        if bias is None:
-            bias = np.where(adm.ravel(), self._np32, np.float32(np.inf))
-            cache[key] = (adm, bias)
-        return bias
+        """What the scan needs of the admissible starts under ``key``: ``(bias, admitted)``.
+
+        ``bias`` (M T,) float32 is ``|p|^2`` where a start is admissible, +inf elsewhere;
+        ``admitted`` (M + 1,) int64 counts the admissible starts of the clips before each clip.
+        """
+        adm, scan = cache[key]
+        if scan is None:
+            admitted = np.zeros(adm.shape[0] + 1, np.int64)
+            np.cumsum(np.count_nonzero(adm, axis=1), out=admitted[1:])
+            scan = (np.where(adm.ravel(), self._np32, np.float32(np.inf)), admitted)
+            cache[key] = (adm, scan)
+        return scan
 
     # -- one scan of the database for several queries ------------------------------------------
 
-    def _scan(self, Q, biases, fq, scratch=None, pool=None):
+    def _scan(self, Q, biases, fq, scratch=None, pool=None, admitted=None):
         """Per query and clip: the float32 argmin, min, and the rows needing an exact look.
 
         Parameters
@@ -163,6 +177,10 @@ class SearchIndex:
             Keeps a single query's product buffer between steps (fresh pages cost page faults).
         pool : ThreadPoolExecutor, optional
             Threads to share out each chunk's product and reductions by clips.
+        admitted : np.ndarray, shape (M + 1,), int64, optional
+            With one query: the count of its admissible starts before each clip (see
+            :meth:`_bias`). Where few starts are admissible the products are made for
+            those alone, else for all starts by a matrix product.
 
         Returns
         -------
@@ -223,30 +241,26 @@ class SearchIndex:
             nc = c1 - c0
             r0, r1 = c0 * T, c1 * T
             found = []
-            if B == 1:  # one fused pass: products of admissible rows only, and the reductions
+            if B == 1:  # a few clips at a time, reduced while their estimates are in cache
                 G2 = G.reshape(nc, T)
-                s0c = np.empty(nc, np.int64)
-                amc = np.empty(nc, np.float32)
-                und = np.empty(nc, bool)
                 bias2 = biases[0][r0:r1].reshape(nc, T)
-                compiled().scan_one(
-                    self._P3[c0:c1],
-                    Qp[0],
-                    bias2,
-                    float(nq[0]),
-                    (self._npmax[c0:c1], self._pose_c, TINY),
-                    G2,
-                    (s0c, amc, und),
-                    self._F3[c0:c1],
-                    self._na2[c0:c1],
-                    fqp[0],
-                    float(nbp[0]),
-                    av[c0:c1, 0],
-                    inexact[c0:c1, 0],
-                )
-                s0[c0:c1, 0] = s0c
-                amin[c0:c1, 0] = amc
-                ci = np.flatnonzero(und)
+                scan = (s0[c0:c1, 0], amin[c0:c1, 0], np.empty(nc, bool))
+                for a in range(0, nc, _SUB_CLIPS):
+                    z = min(nc, a + _SUB_CLIPS)
+                    # BLAS's product of all rows, or the compiled one of the admissible rows alone
+                    dense = admitted[c0 + z] - admitted[c0 + a] > _DENSE * (z - a) * T
+                    if dense:
+                        np.dot(self._P2[r0 + a * T : r0 + z * T], W[0], out=G[a * T : z * T, 0])
+                    compiled().scan_one(
+                        G2[a:z],
+                        bias2[a:z],
+                        (self._P3[c0 + a : c0 + z], Qp[0], float(nq[0]), dense),
+                        (self._npmax[c0 + a : c0 + z], self._pose_c, TINY),
+                        tuple(x[a:z] for x in scan),
+                        (self._F3[c0 + a : c0 + z], self._na2[c0 + a : c0 + z], fqp[0], float(nbp[0])),
+                        (av[c0 + a : c0 + z, 0], inexact[c0 + a : c0 + z, 0]),
+                    )
+                ci = np.flatnonzero(scan[2])
                 if ci.size:
                     found.append((ci + c0, np.zeros(ci.size, np.int64), G2[ci]))
                 return found
@@ -551,10 +565,10 @@ class SearchIndex:
         """
         rows, widths = queries
         run = map if pool is None or len(active) < 4 else pool.map
-        biases = [self._bias(cache, keys[b]) for b in active]
+        scans = [self._bias(cache, keys[b]) for b in active]
         fq = np.stack([rows[b] for b in active])
         s0, amin, nq, undecided, (av, inexact) = self._scan(
-            poses[active], biases, fq, cache.setdefault("scratch", {}), pool
+            poses[active], [bias for bias, _ in scans], fq, cache.setdefault("scratch", {}), pool, scans[0][1]
         )
 
         def decide(j):

@@ -4,7 +4,7 @@ Imported by :func:`gesturekit.search.exact.compiled` when a search first runs, n
 package (numba is heavy). The loops are module-level functions so that numba's on-disk
 cache serves them in every later process, including those that call each other.
 
-The scan: :func:`scan_one` (one query, one pass per clip), :func:`reduce_many` and
+The scan: :func:`scan_one` (one query, a few clips at a time), :func:`reduce_many` and
 :func:`audio_at` (several queries after a matrix product), :func:`admissible_ends`,
 :func:`row_stats` (validation and norms). The exact decisions of one query after the
 scan (see :meth:`gesturekit.search.index.SearchIndex._decide`): :func:`survivors` and
@@ -108,83 +108,102 @@ def audio_estimate(
 
 
 @numba.njit(cache=True, nogil=True)
+def clip_minimum(
+    est: np.ndarray, c: int, q_sqnorm: float, pose_bound: tuple[np.ndarray, float, float]
+) -> tuple[int, float, bool]:
+    """The reduction of one clip's row of estimates ``est[c]`` (T,) float32.
+
+    Returns the first start of least estimate, that estimate, and whether it is not
+    decisive: another start within twice the error bound of it, or a possible exact zero.
+    """
+    clip_max_sqnorm, err_factor, tiny = pose_bound
+    T = est.shape[1]
+    inf = np.float32(np.inf)
+    # four running minima: one would make a chain of dependent comparisons (the minimum
+    # is the same in any order: the estimates are never NaN)
+    m0 = m1 = m2 = m3 = inf
+    for s in range(0, T - 3, 4):
+        m0 = min(m0, est[c, s])
+        m1 = min(m1, est[c, s + 1])
+        m2 = min(m2, est[c, s + 2])
+        m3 = min(m3, est[c, s + 3])
+    for s in range(T - T % 4, T):
+        m0 = min(m0, est[c, s])
+    best = min(min(m0, m1), min(m2, m3))
+    err = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
+    t64 = np.float64(best) + 2.0 * err
+    t32 = np.float32(t64)
+    if t32 < t64:  # round the float32 threshold up
+        t32 = np.nextafter(t32, inf)
+    count = 0
+    for s in range(T):
+        count += est[c, s] <= t32
+    arg = 0
+    for s in range(T):  # the first minimum
+        if est[c, s] == best:
+            arg = s
+            break
+    return arg, best, bool(np.isfinite(best) and (count > 1 or np.float64(best) + q_sqnorm <= err))
+
+
+@numba.njit(cache=True, nogil=True)
 def scan_one(
-    poses: np.ndarray,
-    query_pose: np.ndarray,
-    bias: np.ndarray,
-    q_sqnorm: float,
-    pose_bound: tuple[np.ndarray, float, float],
     est: np.ndarray,
+    bias: np.ndarray,
+    pose: tuple[np.ndarray, np.ndarray, float, bool],
+    pose_bound: tuple[np.ndarray, float, float],
     scan_out: tuple[np.ndarray, np.ndarray, np.ndarray],
-    audio: np.ndarray,
-    audio_sqnorms: np.ndarray,
-    query_audio: np.ndarray,
-    query_audio_sqnorm: float,
-    audio_est: np.ndarray,
-    audio_inexact: np.ndarray,
+    audio: tuple[np.ndarray, np.ndarray, np.ndarray, float],
+    audio_out: tuple[np.ndarray, np.ndarray],
 ) -> None:
-    """The scan of one query, one pass per clip: estimates, reductions and the audio estimate.
+    """The scan of one query over a few clips: estimates, reductions and the audio estimate.
 
     Parameters
     ----------
-    poses : (nc, T, D) float32
-        Pose features of the clips scanned.
-    query_pose : (D,) float32
-        ``p_{t-1}``.
+    est : (nc, T) float32
+        Out: ``|p|^2 - 2 p.q`` per start (+inf where not admissible). In: ``-2 p.q``
+        (a matrix product's, any summation order) when ``multiplied``.
     bias : (nc, T) float32
-        ``|p|^2`` where the start is admissible, +inf elsewhere (those rows are never read).
-    q_sqnorm : float
-        ``|p_{t-1}|^2``.
+        ``|p|^2`` where the start is admissible, +inf elsewhere.
+    pose : (poses, query_pose, q_sqnorm, multiplied)
+        The clips' pose features (nc, T, D) float32, ``p_{t-1}`` (D,) float32, its
+        squared norm, and whether ``est`` holds the products already. If not, they are
+        made here for admissible starts only: the rows of the others are never read
+        (the faster way when few starts are admissible; a matrix product is faster
+        for many).
     pose_bound : (clip_max_sqnorm, err_factor, tiny)
         As for :func:`reduce_many`.
-    est : (nc, T) float32
-        Out: ``|p|^2 - 2 p.q`` per start (+inf where not admissible).
     scan_out : (best_start, best_est, undecided), each (nc,)
         Out: as for :func:`reduce_many`.
-    audio : (nc, T, A) float32
-        Audio features of the clips.
-    audio_sqnorms : (nc, T) float64
-        Their squared norms.
-    query_audio : (A,) float32
-        ``f_t``.
-    query_audio_sqnorm : float
-    audio_est, audio_inexact : (nc,) float64, bool
+    audio : (features, sqnorms, query, query_sqnorm)
+        The clips' audio features (nc, T, A) float32 and their squared norms (nc, T)
+        float64, ``f_t`` (A,) float32 and its squared norm.
+    audio_out : (audio_est, audio_inexact), (nc,) float64, bool
         Out: the cosine distance estimate at each clip's ``best_start`` (float32 product,
         float64 norms), and False where that value is exact (a zero norm).
     """
-    clip_max_sqnorm, err_factor, tiny = pose_bound
+    poses, query_pose, q_sqnorm, multiplied = pose
     best_start, best_est, undecided = scan_out
-    nc, T, _ = poses.shape
+    features, sqnorms, query_audio, query_audio_sqnorm = audio
+    audio_est, audio_inexact = audio_out
+    nc, T = est.shape
     inf = np.float32(np.inf)
     for c in range(nc):
-        best = inf
-        for s in range(T):
-            b = bias[c, s]
-            if b == inf:  # not admissible: its row is never read
-                est[c, s] = inf
-                continue
-            a = b + np.float32(-2.0) * dot32(poses[c, s], query_pose)  # exact scaling by -2, then one float32 add
-            est[c, s] = a
-            best = min(best, a)
-        err = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
-        t64 = np.float64(best) + 2.0 * err
-        t32 = np.float32(t64)
-        if t32 < t64:  # round the float32 threshold up
-            t32 = np.nextafter(t32, inf)
-        count = 0
-        arg = 0
-        for s in range(T - 1, -1, -1):  # backwards: arg ends at the first minimum
-            a = est[c, s]
-            count += a <= t32
-            if a == best:
-                arg = s
-        best_start[c] = arg
-        best_est[c] = best
-        undecided[c] = np.isfinite(best) and (count > 1 or np.float64(best) + q_sqnorm <= err)
-        # the audio estimate of that start (while the clip is at hand): float32 product, float64 norms
-        if best < inf:
+        if multiplied:
+            for s in range(T):
+                est[c, s] = bias[c, s] + est[c, s]  # one float32 add, as the error bound assumes
+        else:
+            for s in range(T):
+                b = bias[c, s]
+                # exact scaling by -2, then one float32 add; not admissible: its row is never read
+                est[c, s] = inf if b == inf else b + np.float32(-2.0) * dot32(poses[c, s], query_pose)
+        best_start[c], best_est[c], undecided[c] = clip_minimum(est, c, q_sqnorm, pose_bound)
+    # a loop of its own: the audio rows are scattered, and the processor can fetch several
+    # at once only when little other work lies between their loads
+    for c in range(nc):
+        if best_est[c] < inf:
             audio_est[c], audio_inexact[c] = audio_estimate(
-                audio, audio_sqnorms, c, arg, query_audio, query_audio_sqnorm
+                features, sqnorms, c, best_start[c], query_audio, query_audio_sqnorm
             )
 
 

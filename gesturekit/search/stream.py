@@ -21,6 +21,7 @@ from .admissible import draw_initial_frame
 from .checks import check_segment
 from .exact import MAX_ABS
 from .index import SearchIndex
+from .threads import single_threaded_blas
 from .types import SearchConfig, SearchResult, describe_steps
 
 __all__ = ["StepSearch"]
@@ -168,11 +169,12 @@ class StepSearch:
             relaxed = True
             adm, key = self._key(-1)
         queries = ({0: row}, {0: cfg.table_width})
-        decided = self.index._step([0], {0: key}, self._pose, queries, self._cache, self._pool)
-        if decided[0] is None and key[2] >= 0:  # only the query's own frame was admissible under the control
-            relaxed = True
-            key = self._key(-1)[1]
+        with single_threaded_blas():  # the scan's threads each run a product of their own
             decided = self.index._step([0], {0: key}, self._pose, queries, self._cache, self._pool)
+            if decided[0] is None and key[2] >= 0:  # only the query's own frame was admissible under the control
+                relaxed = True
+                key = self._key(-1)[1]
+                decided = self.index._step([0], {0: key}, self._pose, queries, self._cache, self._pool)
         # drop cached masks this step did not use (the scan's buffer is kept under a name)
         used = {key, (key[0], "-", -1)}
         for stale in [k for k in self._cache if isinstance(k, tuple) and k not in used]:
