@@ -287,7 +287,7 @@ def project(a: dict, b: dict, hours: float = 100.0) -> None:
         t = at(lambda r, w=w: r[f"build{w}"])
         print(
             f"  build, {w} worker{'s' * (w > 1)}: {t / 3600:.2f} h = {hours * 3600 / t:.0f}x real time; "
-            f"peak RSS {_fmt_bytes(at(lambda r, w=w: r[f'rss{w}']))}"
+            f"peak RSS {_fmt_bytes(at(lambda r, w=w: r[f'rss{w}'], clamp=True))}"
         )
     extra = at(lambda r: r["search"]["traced"], clamp=True)
     searched = at(lambda r: r["search"]["searched"])
