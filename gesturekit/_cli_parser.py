@@ -190,7 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="HZ",
         help="sample rate of the kept audio, 4000-16000 Hz (default 16000; lower rates are for listening only)",
     )
-    b.add_argument("--label", help="a description stored with the database")
+    b.add_argument("--label", help="a description stored with the database (with --append: replaces its label)")
     b.add_argument("--force", action="store_true", help="replace an existing database")
     b.add_argument(
         "--workers",

@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import os
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -135,6 +136,7 @@ def build_from_sources(
     locked: bool = False,
     append: bool = False,
     keep_stats: bool = False,
+    label: str | None = None,
     on_progress: Callable[[BuildProgress], None] | None = None,
     notes: Callable[[str], None] | None = None,
 ) -> None:
@@ -167,6 +169,9 @@ def build_from_sources(
         Add the takes the database at ``out`` does not hold.
     keep_stats : bool
         With ``append``: keep the database's statistics, thresholds and arrays.
+    label : str, optional
+        A description stored with the database, instead of ``config``'s (with ``append``:
+        instead of the database's; None keeps it).
     on_progress : callable(BuildProgress), optional
         Called as takes are staged.
     notes : callable(str), optional
@@ -198,6 +203,7 @@ def build_from_sources(
             base = read_database(out, mmap=True)
             base["path"] = out
             config = _append_config(base["meta"]["build"], config, out)
+            old_label = config.label
             old_names = tuple(t["name"] for t in base["meta"]["takes"])
             units = [(s, None, old_names) for s in sources if s.kind == "habibie2021" or s.motion.stem not in old_names]
             if not keep_stats:
@@ -205,6 +211,8 @@ def build_from_sources(
         else:
             config = config or BuildConfig()
             units = [(s, None, ()) for s in sources]
+        if label is not None:
+            config = replace(config, label=label)
         staging = staging_folder(out)
         open_staging(staging)
         jobs = [
@@ -232,7 +240,8 @@ def build_from_sources(
         if append and base is not None:
             n_new = sum(1 for s in staged if s.name not in old_names)
             if n_new == 0:
-                say(f"nothing to append: the database at {out} holds every take of the folder already")
+                unchanged = f"; its label is unchanged ({old_label!r})" if config.label != old_label else ""
+                say(f"nothing to append: the database at {out} holds every take of the folder already{unchanged}")
                 remove_staging(staging)
                 return
         elif not staged:

@@ -112,7 +112,6 @@ def _cmd_build_db(args) -> int:
                 overlap_stride=args.overlap_stride,
                 percentiles=tuple(args.percentiles),
                 store_audio=not args.no_audio,
-                label=args.label or "",
                 **_audio_options(args),
             )
         with output_lock(out), _stage_bars() as bar:  # the bar shows once the first take is read
@@ -133,6 +132,7 @@ def _cmd_build_db(args) -> int:
                 scheduler=args.scheduler,
                 append=args.append,
                 keep_stats=args.keep_stats,
+                label=args.label,
                 on_progress=lambda p: _advance(
                     bar("reading takes", p.total, "take"),
                     p.done,

@@ -118,6 +118,7 @@ def build_database(
     scheduler: str | Client | None = None,
     append: bool = False,
     keep_stats: bool = False,
+    label: str | None = None,
     on_progress: Callable[[BuildProgress], None] | None = None,
     notes: Callable[[str], None] | None = None,
 ) -> MatchingDatabase:
@@ -168,6 +169,9 @@ def build_database(
         With ``append``: keep the database's z-scoring statistics, thresholds and arrays (the new
         takes are z-scored with them); without it they are recomputed over every take, reading the
         old takes again from their files.
+    label : str, optional
+        A description stored with the database, instead of ``config``'s; with ``append`` it
+        replaces the database's (None keeps it).
     on_progress : callable(BuildProgress), optional
         Called as takes are read, with takes done and total, hours of data done, takes reused.
     notes : callable(str), optional
@@ -225,6 +229,7 @@ def build_database(
         locked=locked,
         append=append,
         keep_stats=keep_stats,
+        label=label,
         on_progress=on_take,
         notes=notes,
     )

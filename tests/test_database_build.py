@@ -440,6 +440,26 @@ def test_a_scheduler_that_cannot_be_reached_is_refused(five, joint_map, tmp_path
     assert_refused(run, names=address, problem="cannot reach", before=before)
 
 
+def test_append_keeps_the_label_or_replaces_it_when_one_is_given(five, joint_map, tmp_path):
+    folder = tmp_path / "takes"
+    folder.mkdir()
+    write = lambda *names: [  # noqa: E731
+        shutil.copy2(five / f"{n}{ext}", folder / f"{n}{ext}") for n in names for ext in (".bvh", ".wav")
+    ]
+    label = lambda: json.loads((tmp_path / "db" / "database.json").read_text())["build"]["label"]  # noqa: E731
+    write("t000", "t001")
+    build(folder, tmp_path / "db", joint_map, "--workers", "1", "--label", "speaker A, day 1")
+    write("t002")
+    build(folder, tmp_path / "db", joint_map, "--append", "--workers", "1")
+    assert label() == "speaker A, day 1"
+    write("t003")
+    build(folder, tmp_path / "db", joint_map, "--append", "--workers", "1", "--label", "speaker A, days 1-2")
+    assert label() == "speaker A, days 1-2" and len(MatchingDatabase.load(tmp_path / "db").take_names) == 4
+    out = build(folder, tmp_path / "db", joint_map, "--append", "--workers", "1", "--label", "other")
+    assert "nothing to append" in out and "its label is unchanged ('speaker A, days 1-2')" in out
+    assert label() == "speaker A, days 1-2"
+
+
 def test_append_without_a_database_is_refused(five, joint_map, tmp_path):
     before = snapshot(five, tmp_path)
     run = run_cli("build-db", five, "--joint-map", joint_map, "--out", tmp_path / "db", "--append")
