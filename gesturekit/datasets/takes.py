@@ -206,20 +206,24 @@ def iter_takes(
     from .audio import load_audio
 
     opts = options if options is not None else ReadOptions(units=units)
+    maps: dict[str, Any] = {}  # per kind, the joint map read once (a file is not read again per take)
     for src in sources:
         if src.kind in ("bvh", "positions"):
             speech = _speech_file(src)  # a take without speech is refused before its motion is read
             if src.kind == "bvh":
                 from .bvh import read_bvh_take
                 from .positions import PositionJointMap
+                from .presets import load_joint_map
 
                 if isinstance(joint_map, PositionJointMap):
                     raise ConfigError("BVH takes need a BVH joint map, not a joint-position map")
+                if "bvh" not in maps:
+                    maps["bvh"] = load_joint_map(joint_map or "zeggs")
                 motion, reading = read_bvh_take(
-                    src.motion, joint_map=joint_map or "zeggs", units=opts.units, up=opts.up, forward=opts.forward
+                    src.motion, joint_map=maps["bvh"], units=opts.units, up=opts.up, forward=opts.forward
                 )
             else:
-                from .positions import read_positions_take
+                from .positions import load_position_joint_map, read_positions_take
                 from .presets import JointMap
 
                 if isinstance(joint_map, JointMap):
@@ -228,8 +232,15 @@ def iter_takes(
                     raise ConfigError(
                         "joint-position files need a JSON joint map (--joint-map) and their frame rate (--fps)"
                     )
+                if "positions" not in maps:
+                    maps["positions"] = load_position_joint_map(joint_map)
                 motion, reading = read_positions_take(
-                    src.motion, joint_map=joint_map, fps=fps_in, units=opts.units, up=opts.up, forward=opts.forward
+                    src.motion,
+                    joint_map=maps["positions"],
+                    fps=fps_in,
+                    units=opts.units,
+                    up=opts.up,
+                    forward=opts.forward,
                 )
             if opts.normalize_bones:
                 motion, reading = normalise_motion(motion, reading)
