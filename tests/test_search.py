@@ -333,9 +333,9 @@ def test_a_scan_makes_the_products_by_blas_where_many_starts_are_admissible(monk
     masks[0, :8, 1:] = False  # the first 8 clips: one admissible start each
     query = rng.standard_normal((16, A)).astype(np.float32)
     cfg = SearchConfig(segment=4, record=3, init_pose=tuple(P[9, 2].tolist()))
-    fast = search(P, F, np.ones((M, T), bool), query, config=cfg, masks=masks, step_mask_index=np.zeros(4, int))
-    ref = search_reference(P, F, np.ones((M, T), bool), query, config=cfg, masks=masks, step_mask_index=np.zeros(4, int))
-    assert fast.equals(ref)
+    kw = dict(config=cfg, masks=masks, step_mask_index=np.zeros(4, int))
+    valid = np.ones((M, T), bool)
+    assert search(P, F, valid, query, **kw).equals(search_reference(P, F, valid, query, **kw))
     assert seen and all(n == 4 for n, _, _ in seen)
     # per 4 clips: BLAS where more than half of the starts are admissible, else the compiled loop
     assert all(multiplied == (admitted > 0.5 * 4 * T) for _, admitted, multiplied in seen)
@@ -465,6 +465,29 @@ def test_unsatisfiable_control_is_relaxed_reported_and_warned():
     for i in (0, 3):  # the satisfiable control is obeyed
         m, s = res.clip[i], res.start[i]
         assert masks[1, m, s] and masks[1, m, s + 7]
+
+
+def test_a_control_relaxed_for_many_steps_builds_its_empty_mask_once(monkeypatch):
+    import gesturekit.search.index as search_module
+    from gesturekit.search.stream import StepSearch
+
+    built = []
+    real = search_module.control_starts
+    monkeypatch.setattr(search_module, "control_starts", lambda mask, *a: built.append(mask) or real(mask, *a))
+    P, F, valid, rng = small_db(4)
+    query = rng.standard_normal((64, F.shape[2])).astype(np.float32)  # 8 steps of 8
+    masks = np.zeros((1,) + valid.shape, bool)  # admits nothing: relaxed at every step
+    with pytest.warns(GestureKitWarning, match="relaxed"):
+        res = search(P, F, valid, query, masks=masks, step_mask_index=np.zeros(8, int))
+    assert res.relaxed.all() and len(built) == 1
+    built.clear()
+    live = StepSearch(SearchIndex(P, F, valid), SearchConfig(seed=res.config.seed))
+    j = live.add_mask(masks[0])
+    for i in range(8):
+        live.step(query[8 * i], j, 8)
+    with pytest.warns(GestureKitWarning, match="relaxed"):
+        streamed = live.result()
+    assert len(built) == 1 and np.array_equal(streamed.frames, res.frames)
 
 
 def test_the_query_frame_itself_is_skipped_and_nothing_left_is_an_error():

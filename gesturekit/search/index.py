@@ -527,9 +527,10 @@ class SearchIndex:
                 stack.callback(pool.shutdown)
             for i in range(max(c.n_steps for c in calls)):
                 active = [b for b in range(B) if i < calls[b].n_steps]
-                keys = {}
+                keys, asked = {}, set()
                 for b in active:
                     adm, key = step_key(b, i)
+                    asked.add(key)  # kept even when relaxed: an empty mask is not rebuilt every step
                     if key[2] >= 0 and not adm.any():  # the control admits no window at all
                         results[b].relaxed[i] = True
                         adm, key = step_key(b, i, relaxed=True)
@@ -544,7 +545,7 @@ class SearchIndex:
                         keys[b] = step_key(b, i, relaxed=True)[1]
                     decided.update(self._step(retry, keys, poses, (rows, widths), cache, pool))
                 # drop cached masks this step did not use (a long control track has many)
-                used = set(keys.values()) | {(k[0], "-", -1) for k in keys.values()}
+                used = asked | set(keys.values()) | {(k[0], "-", -1) for k in keys.values()}
                 for key in [key for key in cache if isinstance(key, tuple) and key not in used]:
                     del cache[key]
                 for b in active:

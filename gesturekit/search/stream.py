@@ -164,6 +164,7 @@ class StepSearch:
         res = self._room()
         i = self._steps
         adm, key = self._key(mask)
+        asked = key  # kept in the cache even when relaxed: an empty mask is not rebuilt every step
         relaxed = False
         if key[2] >= 0 and not adm.any():  # the control admits no window at all
             relaxed = True
@@ -176,7 +177,7 @@ class StepSearch:
                 key = self._key(-1)[1]
                 decided = self.index._step([0], {0: key}, self._pose, queries, self._cache, self._pool)
         # drop cached masks this step did not use (the scan's buffer is kept under a name)
-        used = {key, (key[0], "-", -1)}
+        used = {asked, key, (key[0], "-", -1)}
         for stale in [k for k in self._cache if isinstance(k, tuple) and k not in used]:
             del self._cache[stale]
         res.relaxed[i] = relaxed
