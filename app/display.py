@@ -17,6 +17,7 @@ name only.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import secrets
@@ -32,6 +33,7 @@ from gesturekit.paths import PathNotAllowedError, check_allowed, is_allowed
 if TYPE_CHECKING:
     import numpy as np
     import pandas as pd
+    from streamlit.delta_generator import DeltaGenerator
 
     from gesturekit.export.bvh import BvhReport
     from gesturekit.motion import Motion
@@ -40,8 +42,11 @@ __all__ = [
     "LOG",
     "allowed",
     "error_text",
+    "result_bvh",
+    "result_downloads",
     "run_page",
     "selected_row",
+    "show_bvh_report",
     "show_skeletons",
     "skeleton_note",
     "user_errors",
@@ -226,6 +231,64 @@ def result_bvh(record: dict, *, key: str) -> tuple[bytes | None, BvhReport | str
             cached = (record["run"], None, exc.problem)
         ss[key] = cached
     return cached[1], cached[2]
+
+
+_DOWNLOAD_LABELS = {
+    "wav": "Speech (WAV)",
+    "npz": "Motion + search (npz)",
+    "bvh": "Motion (BVH)",
+    "csv": "Control track (CSV)",
+    "json": "Config (JSON)",
+}
+
+
+def result_downloads(
+    record: dict,
+    kinds: Sequence[str],
+    *,
+    prefix: str,
+    keys: tuple[str, str],
+    before_video: Callable[[DeltaGenerator], None],
+) -> None:
+    """A result's downloads in one row, the MP4 last, and the BVH's report under them.
+
+    ``record`` is the page's result record (``"run"``, ``"result"``); ``kinds`` the files
+    before the MP4, of ``"wav"``, ``"npz"``, ``"bvh"``, ``"csv"``, ``"json"``; ``prefix``
+    names the buttons' keys (``PREFIX.download_KIND``). ``keys`` are the session-state
+    keys of the BVH made once per result (:func:`result_bvh`) and of the rendered video
+    (``{"run", "bytes"}``); ``before_video(column)`` fills the MP4's column until there is one.
+    """
+    from gesturekit import interactive as gs
+
+    result = record["result"]
+    cols = st.columns(len(kinds) + 1)
+    bvh, report = result_bvh(record, key=keys[0])  # made once per result, for the report under the buttons
+    for col, kind in zip(cols, kinds):
+        if kind == "bvh" and bvh is None:
+            col.caption("BVH: see below")
+            continue
+        col.download_button(
+            _DOWNLOAD_LABELS[kind],
+            # the others are made when clicked: most results are never downloaded
+            data=bvh if kind == "bvh" else functools.partial(gs.export_bytes, result, kind),
+            file_name=gs.export_filename(result, kind),
+            mime=gs.EXPORT_KINDS[kind][1],
+            key=f"{prefix}.download_{kind}",
+            on_click="ignore",
+        )
+    done = st.session_state.get(keys[1])
+    if done is not None and done["run"] == record["run"]:
+        cols[-1].download_button(
+            "Video (MP4)",
+            data=done["bytes"],
+            file_name=gs.export_filename(result, "mp4"),
+            mime="video/mp4",
+            key=f"{prefix}.download_mp4",
+            on_click="ignore",
+        )
+    else:
+        before_video(cols[-1])
+    show_bvh_report(bvh, report)
 
 
 def show_bvh_report(data: bytes | None, report: BvhReport | str) -> None:

@@ -92,6 +92,7 @@ EXPORT_KINDS: dict[str, tuple[str, str]] = {
     "csv": ("_control.csv", "text/csv"),
     "json": ("_config.json", "application/json"),
     "mp4": (".mp4", "video/mp4"),
+    "wav": (".wav", "audio/wav"),
 }
 
 # a box selection shorter than one output frame is a click, not a range
@@ -404,13 +405,15 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
 
     Parameters
     ----------
-    kind : {"npz", "bvh", "csv", "json"}
+    kind : {"npz", "bvh", "csv", "json", "wav"}
         ``npz``: :func:`~gesturekit.export.result.save_result_npz`; ``bvh``: the final motion;
         ``csv``: the control track (start_s, end_s, constraint); ``json``: how
         the result was made (:meth:`SynthesisResult.metadata`, with the
-        synthesis config under ``"synthesis"``). ``mp4`` is made by
-        :func:`render_mp4`.
+        synthesis config under ``"synthesis"``); ``wav``: the speech (16-bit PCM at
+        16 kHz, :func:`wav_bytes`). ``mp4`` is made by :func:`render_mp4`.
     """
+    if kind == "wav":
+        return wav_bytes(result.audio)
     if kind == "csv":
         return result.control.to_csv().encode("utf-8")
     if kind == "json":
@@ -418,7 +421,7 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
     if kind == "bvh":
         return export_bvh_bytes(result)[0]
     if kind != "npz":
-        raise ConfigError(f"export_bytes makes npz, bvh, csv or json, not {kind!r}")
+        raise ConfigError(f"export_bytes makes npz, bvh, csv, json or wav, not {kind!r}")
     with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
         path = Path(tmp) / "result.npz"
         save_result_npz(result, path)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import time
 
 import display
@@ -333,7 +332,6 @@ def video(record: dict) -> None:
 
 
 def show_result(db: MatchingDatabase, record: dict) -> None:
-    ss = st.session_state
     result = record["result"]
     st.header("Result")
     c = result.config
@@ -376,41 +374,13 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
     st.plotly_chart(wrists, key="synth.wrists", config={"displaylogo": False})
 
     st.subheader("Downloads")
-    cols = st.columns(5)
-    labels = {
-        "npz": "Motion + search (npz)",
-        "bvh": "Motion (BVH)",
-        "csv": "Control track (CSV)",
-        "json": "Config (JSON)",
-    }
-    # the BVH is made once per result, for the report of its error shown under the buttons
-    bvh_data, bvh_report = display.result_bvh(record, key=_BVH)
-    for col, kind in zip(cols, ("npz", "bvh", "csv", "json")):
-        if kind == "bvh" and bvh_data is None:
-            col.caption("BVH: see below")
-            continue
-        # the others are made when clicked: most results are never downloaded
-        col.download_button(
-            labels[kind],
-            data=bvh_data if kind == "bvh" else functools.partial(gs.export_bytes, result, kind),
-            file_name=gs.export_filename(result, kind),
-            mime=gs.EXPORT_KINDS[kind][1],
-            key=f"synth.download_{kind}",
-            on_click="ignore",
-        )
-    done = ss.get(_VIDEO)
-    if done is not None and done["run"] == record["run"]:
-        cols[4].download_button(
-            "Video (MP4)",
-            data=done["bytes"],
-            file_name=gs.export_filename(result, "mp4"),
-            mime="video/mp4",
-            key="synth.download_mp4",
-            on_click="ignore",
-        )
-    else:
-        cols[4].caption("MP4: render it above")
-    display.show_bvh_report(bvh_data, bvh_report)
+    display.result_downloads(
+        record,
+        ("npz", "bvh", "csv", "json"),
+        prefix="synth",
+        keys=(_BVH, _VIDEO),
+        before_video=lambda col: col.caption("MP4: render it above"),
+    )
 
 
 def main() -> None:

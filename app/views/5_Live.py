@@ -149,51 +149,16 @@ def show_performance(record: dict) -> None:
     display.show_skeletons(result.motion, key="live.result", title=SOURCE, audio=result.audio, height=440)
     nav.link("Retrieval inspector")
     st.subheader("Downloads")
-    cols = st.columns(5)
-    cols[0].download_button(
-        "Speech (WAV)",
-        data=functools.partial(gs.wav_bytes, result.audio),
-        file_name=gs.export_filename(result, "npz").rsplit(".", 1)[0] + ".wav",
-        mime="audio/wav",
-        key="live.download_wav",
-        on_click="ignore",
+
+    def render(col) -> None:
+        if col.button("Render MP4 with sound", key="live.render"):
+            with st.spinner("Rendering…"), display.user_errors():
+                ss[_VIDEO] = {"run": record["run"], "bytes": gs.render_mp4(result)}
+                st.rerun()  # the download button in its place
+
+    display.result_downloads(
+        record, ("wav", "npz", "bvh", "csv"), prefix="live", keys=(_BVH, _VIDEO), before_video=render
     )
-    for col, kind, label in ((cols[1], "npz", "Motion + search (npz)"), (cols[3], "csv", "Control track (CSV)")):
-        col.download_button(
-            label,
-            data=functools.partial(gs.export_bytes, result, kind),
-            file_name=gs.export_filename(result, kind),
-            mime=gs.EXPORT_KINDS[kind][1],
-            key=f"live.download_{kind}",
-            on_click="ignore",
-        )
-    bvh, report = display.result_bvh(record, key=_BVH)  # made once per performance, not on every rerun
-    if bvh is not None:
-        cols[2].download_button(
-            "Motion (BVH)",
-            data=bvh,
-            file_name=gs.export_filename(result, "bvh"),
-            mime=gs.EXPORT_KINDS["bvh"][1],
-            key="live.download_bvh",
-            on_click="ignore",
-        )
-    else:
-        cols[2].caption("BVH: see below")
-    done = ss.get(_VIDEO)
-    if done is not None and done["run"] == record["run"]:
-        cols[4].download_button(
-            "Video (MP4)",
-            data=done["bytes"],
-            file_name=gs.export_filename(result, "mp4"),
-            mime="video/mp4",
-            key="live.download_mp4",
-            on_click="ignore",
-        )
-    elif cols[4].button("Render MP4 with sound", key="live.render"):
-        with st.spinner("Rendering…"), display.user_errors():
-            ss[_VIDEO] = {"run": record["run"], "bytes": gs.render_mp4(result)}
-            st.rerun()  # the download button in its place
-    display.show_bvh_report(bvh, report)
 
 
 def main() -> None:
