@@ -368,3 +368,23 @@ def test_controls_switched_from_another_thread_are_recorded_as_they_acted(db, sp
         clicker.join()
     pieces.append(live.finish())
     check_equal_to_offline(db, speech, live, pieces)
+
+
+def test_a_synthesizer_dropped_before_finish_leaves_no_thread_behind(db, speech):
+    import gc
+    import threading
+    import time
+
+    def search_threads():
+        return [t for t in threading.enumerate() if t.name.startswith("ThreadPoolExecutor")]
+
+    before = set(search_threads())
+    live = LiveSynthesizer(db)
+    live.push(speech[: 3 * 16000])
+    assert live.frames_out > 0
+    del live
+    gc.collect()
+    deadline = time.monotonic() + 5.0
+    while set(search_threads()) - before and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not set(search_threads()) - before
