@@ -190,6 +190,12 @@ def test_exports_hold_the_result_and_how_it_was_made(result, tmp_path):
     meta = json.loads(gs.export_bytes(result, "json"))
     assert SynthesisConfig.from_dict(meta["synthesis"]) == result.config
     assert meta["frames"] == result.n_frames
+    import soundfile as sf
+
+    speech, sr = sf.read(io.BytesIO(gs.export_bytes(result, "wav")), dtype="float32")
+    assert sr == AUDIO_SR and speech.shape == result.audio.shape
+    np.testing.assert_allclose(speech, np.clip(result.audio, -1, 1), atol=1 / 2**15)
+    assert gs.export_filename(result, "wav").endswith(".wav")
     with pytest.raises(ConfigError):
         gs.export_bytes(result, "exe")
 
