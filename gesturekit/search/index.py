@@ -68,7 +68,8 @@ _DENSE = 0.5
 #: Survivors sorted first by each ranking in a query's decisions; the rest is only
 #: partitioned off. Enough whenever the top of the combined ranking lies within the
 #: first few hundred of both rankings, as it does unless pose and audio disagree
-#: throughout; otherwise the whole orders are sorted (same result).
+#: throughout (or many clips repeat others); otherwise prefixes 8 times longer, up to the
+#: whole orders (same result).
 _PREFIX = 1024
 
 
@@ -409,7 +410,7 @@ class SearchIndex:
                 break
             if prefix >= n:  # pragma: no cover - whole orders always decide
                 raise RuntimeError("rank_top could not decide with whole orders")
-            prefix = n
+            prefix = min(n, 8 * prefix)  # longer prefixes first: whole orders cost a full sort each
         return {
             "n": n,
             "cand_clip": out_i[0],
