@@ -31,7 +31,7 @@ from gesturekit.search.reference import search_reference
 M_OLIVER, T, D, A = 9624, 64, 96, 112
 
 #: Seconds for numpy's BLAS threads to stop polling after a product (OpenBLAS: about 0.1 s).
-_BLAS_IDLE = 0.3
+BLAS_IDLE = 0.3
 
 
 def make_db(M: int, rng: np.random.Generator):
@@ -74,7 +74,7 @@ def step_vs_matvec(
     ratios, t_steps, gemvs = [], [], []
     for _ in range(runs):
         g0 = best_of(lambda: np.dot(P2, q, out=out), 3)
-        time.sleep(_BLAS_IDLE)
+        time.sleep(BLAS_IDLE)
         t0 = time.perf_counter()
         r = index.search(part, config=cfg)
         step = (time.perf_counter() - t0) / r.n_steps
