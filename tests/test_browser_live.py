@@ -169,7 +169,7 @@ def test_the_page_shows_the_latency_and_it_is_within_1_5_s(live_run):
     assert statistics.median(steady) <= 1.5
 
 
-def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run):
+def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run, tmp_path):
     page = live_run["page"]
     assert app_browser.problems(page) == []
     caption = page.locator('[data-testid="stCaptionContainer"]', has_text="frames,").first.inner_text()
@@ -184,8 +184,10 @@ def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run):
     assert frames / FPS == pytest.approx(streamed_s, abs=0.6), (frames, streamed_s)
     result = app_browser.viewer_frame(page, "live.result")
     assert result.evaluate("() => gk.frames") == frames
-    for label in ("Speech (WAV)", "Motion + search (npz)", "Motion (BVH)"):
+    for label in ("Speech (WAV)", "Motion + search (npz)", "Motion (BVH)", "Control track (CSV)"):
         assert page.get_by_role("button", name=label).count() == 1
+    assert page.get_by_role("button", name="Render MP4 with sound").count() == 1
+    assert app_browser.screenshot(page, tmp_path / "browser_live_performance.png").stat().st_size > 10_000
     # Stop closed the microphone: the component offers Start again
     page.frame_locator('iframe[title*="streamlit_webrtc"]').get_by_role("button", name="Start").wait_for()
 
