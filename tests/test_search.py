@@ -233,25 +233,35 @@ def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k
     assert_same(*_with_prefix(prefix, lambda: run_both(P, F, valid, query, config=cfg)))
 
 
-def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
+def _spy_kernel(monkeypatch, name, note):
+    """Make the search call ``note(args, out)`` after each call of its compiled kernel ``name``."""
     import gesturekit.search.index as search_module
 
     kernels = search_module.compiled()
-    seen = []
 
     class Recording:
-        def __getattr__(self, name):
-            if name != "rank_top":
-                return getattr(kernels, name)
+        def __getattr__(self, attr):
+            if attr != name:
+                return getattr(kernels, attr)
 
-            def rank_top(estimates, porder, lp, aorder, la, *rest):
-                out = kernels.rank_top(estimates, porder, lp, aorder, la, *rest)
-                seen.append("whole" if min(lp, la) >= estimates.shape[1] else "prefix" if out >= 0 else "retry")
+            def spied(*args):
+                out = getattr(kernels, name)(*args)
+                note(args, out)
                 return out
 
-            return rank_top
+            return spied
 
     monkeypatch.setattr(search_module, "compiled", lambda: Recording())
+
+
+def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
+    seen = []
+
+    def note(args, out):
+        estimates, _, lp, _, la = args[:5]
+        seen.append("whole" if min(lp, la) >= estimates.shape[1] else "prefix" if out >= 0 else "retry")
+
+    _spy_kernel(monkeypatch, "rank_top", note)
     P, F, valid, query = _prefix_problem(0, 0.0)
     cfg = SearchConfig(segment=4, record=3)
     results = {}
@@ -311,21 +321,12 @@ def test_either_way_of_making_the_products_gives_the_reference_result(problem, s
 def test_a_scan_makes_the_products_by_blas_where_many_starts_are_admissible(monkeypatch):
     import gesturekit.search.index as search_module
 
-    kernels = search_module.compiled()
     seen = []
-
-    class Recording:
-        def __getattr__(self, name):
-            if name != "scan_one":
-                return getattr(kernels, name)
-
-            def scan_one(est, bias, pose, *rest):
-                seen.append((est.shape[0], int(np.isfinite(bias).sum()), pose[3]))
-                return kernels.scan_one(est, bias, pose, *rest)
-
-            return scan_one
-
-    monkeypatch.setattr(search_module, "compiled", lambda: Recording())
+    _spy_kernel(
+        monkeypatch,
+        "scan_one",
+        lambda args, out: seen.append((args[0].shape[0], int(np.isfinite(args[1]).sum()), args[2][3])),
+    )
     monkeypatch.setattr(search_module, "_SUB_CLIPS", 4)
     rng = np.random.default_rng(3)
     M, T, D, A = 16, 20, 96, 112
