@@ -1,8 +1,10 @@
 """The compiled loops of :mod:`gesturekit.search.index` (numba, a dependency of librosa).
 
 Imported by :func:`gesturekit.search.exact.compiled` when a search first runs, not with the
-package (numba is heavy). The loops are module-level functions so that numba's on-disk
-cache serves them in every later process, including those that call each other.
+package (numba is heavy). The loops are module-level functions compiled by
+:func:`~gesturekit.search.compile_cache.kernel`, so that the on-disk cache serves them in
+every later process, including those that call each other, and stays whole when several
+processes compile at once.
 
 The scan: :func:`scan_one` (one query, a few clips at a time), :func:`reduce_many` and
 :func:`audio_at` (several queries after a matrix product), :func:`admissible_ends`,
@@ -16,11 +18,12 @@ bound, ``q_sqnorm`` ``|p_{t-1}|^2``.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from .compile_cache import kernel
 
-@numba.njit(cache=True, nogil=True)
+
+@kernel()
 def reduce_many(
     products: np.ndarray,
     bias: np.ndarray,
@@ -85,7 +88,7 @@ def reduce_many(
 
 
 # float32 products in any order (reassociation, FMA, SIMD lanes): the pose error bound allows it
-@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+@kernel(fastmath={"reassoc", "contract"})
 def dot32(row: np.ndarray, query: np.ndarray) -> float:
     """``row . query`` in float32, summed in any order (the pose error bound allows it)."""
     acc = np.float32(0.0)
@@ -94,7 +97,7 @@ def dot32(row: np.ndarray, query: np.ndarray) -> float:
     return acc
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def audio_estimate(
     audio: np.ndarray, audio_sqnorms: np.ndarray, clip: int, start: int, query_audio: np.ndarray, query_sqnorm: float
 ) -> tuple[float, bool]:
@@ -107,7 +110,7 @@ def audio_estimate(
     return 1.0 - np.float64(dot32(audio[clip, start], query_audio)) / np.sqrt(d), True
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def clip_minimum(
     est: np.ndarray, c: int, q_sqnorm: float, pose_bound: tuple[np.ndarray, float, float]
 ) -> tuple[int, float, bool]:
@@ -146,7 +149,7 @@ def clip_minimum(
     return arg, best, bool(np.isfinite(best) and (count > 1 or np.float64(best) + q_sqnorm <= err))
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def scan_one(
     est: np.ndarray,
     bias: np.ndarray,
@@ -207,7 +210,7 @@ def scan_one(
             )
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def admissible_ends(bias: np.ndarray) -> np.ndarray:
     """Per clip, one past its last admissible start (0: none); ``bias`` (M, T) is +inf where not admissible."""
     M, T = bias.shape
@@ -220,7 +223,7 @@ def admissible_ends(bias: np.ndarray) -> np.ndarray:
     return ends
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def row_stats(rows: np.ndarray, sqnorms: np.ndarray) -> tuple[bool, float]:
     """Float64 squared norms of ``rows`` (n, d) into ``sqnorms`` (n,).
 
@@ -240,7 +243,7 @@ def row_stats(rows: np.ndarray, sqnorms: np.ndarray) -> tuple[bool, float]:
     return finite, top
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def prefix_groups(
     est: np.ndarray,
     err: np.ndarray,
@@ -295,7 +298,7 @@ def prefix_groups(
     return start
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def audio_at(
     audio: np.ndarray,
     audio_sqnorms: np.ndarray,
@@ -327,7 +330,7 @@ def audio_at(
 # gesturekit.search.reference (float64, left to right).
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def pose_d2(poses: np.ndarray, clip: int, start: int, query_pose: np.ndarray) -> float:
     """Exact squared distance of ``poses[clip, start]`` to ``query_pose`` (float64, left to right)."""
     acc = 0.0
@@ -337,7 +340,7 @@ def pose_d2(poses: np.ndarray, clip: int, start: int, query_pose: np.ndarray) ->
     return acc
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def sq64(x: np.ndarray) -> float:
     """Exact squared norm of ``x`` (float64, left to right)."""
     acc = 0.0
@@ -347,7 +350,7 @@ def sq64(x: np.ndarray) -> float:
     return acc
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def cos_d(audio: np.ndarray, clip: int, start: int, query_audio: np.ndarray, query_sqnorm: float) -> float:
     """Exact cosine distance of ``audio[clip, start]`` to ``query_audio`` (squared norm ``query_sqnorm``)."""
     dot = 0.0
@@ -361,7 +364,7 @@ def cos_d(audio: np.ndarray, clip: int, start: int, query_audio: np.ndarray, que
     return 1.0 - dot / np.sqrt(sqnorm * query_sqnorm)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def resolve_clip(
     row_est: np.ndarray, clip: int, q_sqnorm: float, err: float, poses: np.ndarray, query_pose: np.ndarray
 ) -> tuple[int, float]:
@@ -402,7 +405,7 @@ def resolve_clip(
     return -1, np.nan
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def survivors(
     best_start: np.ndarray,
     best_est: np.ndarray,
@@ -481,7 +484,7 @@ def survivors(
     return n
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def settle(
     ranking: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     candidates: np.ndarray,
@@ -527,7 +530,7 @@ def settle(
             order[a + r] = members[idx[r]]
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def position(order: np.ndarray, lo: np.ndarray, hi: np.ndarray, i: int) -> int:
     """The position of element ``i`` in ``order``: inside its group ``[lo[i], hi[i]]``."""
     for r in range(lo[i], hi[i] + 1):
@@ -536,7 +539,7 @@ def position(order: np.ndarray, lo: np.ndarray, hi: np.ndarray, i: int) -> int:
     return -1
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def kth_smallest(x: np.ndarray, k: int) -> float:
     """The ``k``-th smallest value of ``x`` (``k >= 1``).
 
@@ -563,7 +566,7 @@ def kth_smallest(x: np.ndarray, k: int) -> float:
     return buf[k - 1]
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def rank_top(
     estimates: np.ndarray,
     pose_order: np.ndarray,
