@@ -18,6 +18,7 @@ trials).
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import os
@@ -33,6 +34,7 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, collect_warnings
 from gesturekit.paths import default_database_path
+from gesturekit.synthesize import prepare_search
 
 if TYPE_CHECKING:
     import numpy as np
@@ -118,7 +120,10 @@ def ensure_demo_database() -> Path:
             bar.progress(frac, text=f"{stage}… {100 * frac:.0f}%")
 
         with warnings_shown():
-            build_demo_database(path, minutes=minutes, overwrite=path.exists(), progress=progress)
+            db = build_demo_database(path, minutes=minutes, overwrite=path.exists(), progress=progress)
+            # the first run after an install compiles the search: here, not on the user's first Run
+            bar.progress(1.0, text="preparing the search (once after an install)…")
+            prepare_search(db)
         bar.progress(1.0, text="demo database ready")
         note.success(f"Built the demo database at `{path}` ({minutes:g} minutes of generated speaker).")
     return path
@@ -290,8 +295,12 @@ async def server_lifespan(app: object) -> AsyncIterator[None]:
     """The server's start and stop (``st.App``'s lifespan, see ``Home.py``): at start,
     the default database's search and refiner are prepared in the background.
 
-    Nothing is built here: a missing demo database is built by the first page
-    view, with a progress bar. A failure is left to the server log.
+    The default database's search is made ready before the server answers
+    (:func:`gesturekit.synthesize.prepare_search`: its compiled code loaded from the
+    cache, or compiled on the first start after an install), so that the first result a
+    user asks for comes as fast as the later ones. Nothing is built here: a missing demo
+    database is built by the first page view, with a progress bar, and its search made
+    ready there. A failure is left to the server log.
     """
     # the caches are filled outside any page run here, which streamlit's context lookup
     # would log as a warning for each cached call
@@ -301,7 +310,9 @@ async def server_lifespan(app: object) -> AsyncIterator[None]:
     try:
         path = default_database_path()
         if (path / "database.json").is_file():
-            warm_up(load_database(path))
+            db = load_database(path)
+            await asyncio.to_thread(prepare_search, db)
+            warm_up(db)
     except Exception:  # noqa: BLE001  (the server must start regardless)
         LOG.warning("warm-up at start skipped", exc_info=True)
     finally:

@@ -45,6 +45,7 @@ __all__ = [
     "MotionRefiner",
     "synthesize",
     "synthesize_batch",
+    "prepare_search",
     "rest_pose_frame",
 ]
 
@@ -378,6 +379,28 @@ def _index(db: MatchingDatabase) -> SearchIndex:
         idx = SearchIndex(db.P, db.F, db.valid)
         db.__dict__["_search_index"] = idx
     return idx
+
+
+def prepare_search(db: MatchingDatabase) -> None:
+    """Make the search of ``db`` ready: its index built, its compiled code loaded.
+
+    The search's compiled loops come from the on-disk cache
+    (:mod:`gesturekit.search.compile_cache`) or, on the first run after an install or an
+    update, are compiled into it: tens of seconds, once. A server calls this before it
+    answers, so that a user's first result comes as fast as the later ones. Two seconds
+    of silence are searched as a single query with the inspector's candidates recorded,
+    under a control, and as a batch of two: every path the search takes.
+
+    Parameters
+    ----------
+    db : MatchingDatabase
+        The database whose index is built; any database compiles the same code, one
+        opened from a folder (read-only arrays) the code for every folder.
+    """
+    silence = np.zeros(2 * AUDIO_SR, np.float32)
+    synthesize(silence, db=db, config=SynthesisConfig(record=2, k=1))
+    synthesize(silence, db=db, config=SynthesisConfig(control="0-2:left_hand=high"))
+    synthesize_batch([silence, silence], db=db)
 
 
 def _load_speech(audio: Speech) -> tuple[np.ndarray, str]:
