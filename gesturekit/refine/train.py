@@ -7,9 +7,9 @@ motion (Wasserstein loss plus a gradient penalty of weight 100), and every
 0.1 x the L1 distance to its k-NN input. Everything is z-scored: audio with the
 database's statistics of the 28 cGAN audio channels, motion with statistics of
 the training windows. Adam (betas (0, 0.9)), Xavier initialisation; the
-``paper`` preset has the authors' sizes, batch 100 and lr 1e-4 (``docs/METHOD.md``),
-the ``quick`` preset smaller networks, batch 50 and lr 1e-3 so that it learns in
-minutes on a CPU.
+``paper`` preset has the authors' sizes, batch 100 and lr 1e-4
+(``docs/METHOD.md``, "Resynchronisation cGAN"), the ``quick`` preset smaller networks,
+batch 50 and lr 1e-3 so that it learns in minutes on a CPU.
 
 :func:`train_refiner` does the whole job for a database: training pairs
 (:mod:`gesturekit.refine.data`), training, a checkpoint folder written every

@@ -6,7 +6,7 @@ clips at most) and it is what :func:`gesturekit.search.search` must reproduce
 exactly, decision for decision; the tests compare the two.
 
 The rules (Algorithm 1 of the supplementary material, with the choices of the
-authors' code and ours, see ``docs/METHOD.md``):
+authors' code and ours, see ``docs/METHOD.md``, "Search"):
 
 1. A window start ``s`` of clip ``m`` is admissible for a window of ``N``
    frames iff ``s + N <= T``, ``valid[m, s]``, no frame of ``[s, s + N)`` is
@@ -49,14 +49,11 @@ from the algorithm as written; these rules follow the algorithm:
 * Their random initial frame is any database frame satisfying the active control
   at that frame only; it may be one that cannot start a window (``s > T - N``).
   Here ``p_{-1}`` is drawn from the admissible starts of step 0 (rule 1, with the
-  control held by the mask rule); ``docs/METHOD.md`` credits the control rule to
-  their code without this caveat.
+  control held by the mask rule).
 * Their features are zero-padded inside each 64-frame clip and z-scored over all
   frames, padding included, and every start ``s <= T - N`` is eligible, so a start
   whose look-ahead is padding can be chosen. Here the statistics come from the
-  frames that can start a segment and such starts are never admissible (``valid``);
-  ``docs/METHOD.md``'s "z-scored with statistics of the database [code]" does not
-  say that theirs include the padding.
+  frames that can start a segment and such starts are never admissible (``valid``).
 * Their search stops with an error unless the output's frame count is 0 or 1
   modulo N, and when fewer than ``k + 1`` clips survive; here the last step is cut
   to the query's length (rule 5) and the last survivor is taken (rule 4, ``short``).
