@@ -392,9 +392,7 @@ def _fit_skeleton(
         # one row of every take's samples (memory-mapped), so that only one row is in memory
         return np.concatenate([s.load("bones", header=True)[i] for s in sampled])
 
-    skeleton = fit_skeleton(row, presence=presence, takes=len(sampled))
-    say(f"skeleton: {skeleton.describe()}")
-    return skeleton
+    return fit_skeleton(row, presence=presence, takes=len(sampled))
 
 
 def _stage(
@@ -420,7 +418,7 @@ def _stage(
         reemit(result["warnings"])
         for record in result["takes"]:
             staged.append(StagedTake(folders[job.key], record))
-            seconds += float(record["seconds"]) if "seconds" in record else 0.0
+            seconds += float(record["seconds"])
             reused += bool(result["reused"])
         if on_progress is not None and result["takes"]:
             name = result["takes"][-1]["name"]

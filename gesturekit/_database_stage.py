@@ -439,8 +439,8 @@ def sample_job(job: StageJob) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``takes``: per take ``index``, ``name``, ``frames``, ``joints`` (as :func:`stage_take`'s
-        record) and ``medians`` (the median length of each of the 55 bones, metres);
+        ``takes``: per take ``index``, ``name``, ``frames``, ``seconds``, ``joints`` (as
+        :func:`stage_take`'s record) and ``medians`` (the median length of each of the 55 bones, metres);
         ``warnings`` (empty); ``reused``.
     """
     from .bones import bone_samples
@@ -454,6 +454,7 @@ def sample_job(job: StageJob) -> dict[str, Any]:
             "index": index,
             "name": take.name,
             "frames": int(samples.shape[1]),
+            "seconds": samples.shape[1] / float(take.motion.fps),
             "joints": None if presence.is_full else presence.to_list(),
             "medians": [float(v) for v in np.median(samples[:N_JOINTS].astype(np.float64), axis=1)],
         }
