@@ -274,3 +274,23 @@ def test_parallel_normalised_builds_write_the_same_bytes(three_sizes, tmp_path):
     assert [k for k in got if got[k] != want[k] and k != "database.json"] == []
     meta = json.loads(got["database.json"])
     assert meta["skeleton"] == json.loads(want["database.json"])["skeleton"]
+
+
+def test_an_interrupted_normalised_build_resumes_from_the_takes_read(three_sizes, tmp_path):
+    root, _, _, _ = three_sizes
+    folder = tmp_path / "kp"
+    shutil.copytree(root / "kp", folder)
+    good = (folder / "take_01.npy").read_bytes()
+    (folder / "take_01.npy").write_bytes(b"not an array")  # the second take fails while the skeleton is fitted
+    run = _build_cli(folder, tmp_path / "db", "--normalize-bones", "--workers", "1")
+    assert run.code == 2 and "take_01.npy" in run.stderr, run.stderr
+    assert not (tmp_path / "db").exists() and (tmp_path / ".db.staging").is_dir()
+    (folder / "take_01.npy").write_bytes(good)
+    run = _build_cli(folder, tmp_path / "db", "--normalize-bones", "--workers", "1")
+    assert run.code == 0, run.stderr
+    assert "reused the bone samples of 1 takes read by an interrupted build" in run.stdout
+    assert not (tmp_path / ".db.staging").exists()
+    got, want = (json.loads((p / "database.json").read_text())["skeleton"] for p in (tmp_path / "db", root / "db"))
+    assert got == want
+    for name in ("G.npy", "F.npy", "stats.npz"):
+        assert (tmp_path / "db" / name).read_bytes() == (root / "db" / name).read_bytes(), name
