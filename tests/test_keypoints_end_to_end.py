@@ -294,3 +294,30 @@ def test_an_interrupted_normalised_build_resumes_from_the_takes_read(three_sizes
     assert got == want
     for name in ("G.npy", "F.npy", "stats.npz"):
         assert (tmp_path / "db" / name).read_bytes() == (root / "db" / name).read_bytes(), name
+
+
+def test_the_in_memory_build_gives_the_takes_the_folder_builds_skeleton(three_sizes):
+    from gesturekit.datasets.takes import ReadOptions, discover_takes, fit_takes_skeleton, iter_takes
+
+    root, db, _, _ = three_sizes
+    sources = discover_takes(root / "kp", kind="positions")
+    reading = {"joint_map": root / "kp" / "joint_map.json", "fps_in": 15}
+    skeleton = fit_takes_skeleton(sources, **reading, options=ReadOptions(up="-y"))
+    assert skeleton.to_json() == db.meta["skeleton"]
+    # without a skeleton, iter_takes fits the same one before the first take
+    takes = iter_takes(sources, **reading, options=ReadOptions(up="-y", normalize_bones=True))
+    in_memory = MatchingDatabase.build(takes, skeleton=skeleton)
+    np.testing.assert_array_equal(in_memory.arrays["G"], db.arrays["G"])
+    assert in_memory.meta["skeleton"] == db.meta["skeleton"]
+
+
+def test_a_damaged_skeleton_in_database_json_is_refused(three_sizes, tmp_path):
+    from gesturekit.errors import DatabaseError
+
+    root, _, _, _ = three_sizes
+    shutil.copytree(root / "db", tmp_path / "db")
+    meta = json.loads((tmp_path / "db" / "database.json").read_text())
+    meta["skeleton"]["lengths"]["neck"] = "long"
+    (tmp_path / "db" / "database.json").write_text(json.dumps(meta))
+    with pytest.raises(DatabaseError, match="'skeleton': a skeleton's length of neck must be a number"):
+        MatchingDatabase.load(tmp_path / "db")
