@@ -211,7 +211,8 @@ def _reading_inputs() -> tuple[str, str | None, str, bool]:
     normalize = right.checkbox(
         "normalise bone lengths",
         key="_gk.build_bones",
-        help="one length per bone and take, for keypoints whose bone lengths vary from frame to frame",
+        help="one skeleton for the database: one length per bone over all takes and fixed finger roots, "
+        "for keypoints whose bone lengths vary from frame to frame and take to take",
     )
     return str(units), None if str(up).startswith("y (") else str(up), str(forward), bool(normalize)
 

@@ -42,6 +42,7 @@ from .skeleton import FPS, JOINT_NAMES
 if TYPE_CHECKING:
     from distributed import Client
 
+    from .bones import Skeleton
     from .motion import Take
 
 __all__ = ["BuildProgress", "StagedTake", "run_jobs", "combine_moments", "assemble", "build_in_memory"]
@@ -64,6 +65,9 @@ class BuildProgress:
         Duration of the takes staged so far, seconds at 15 fps.
     reused : int
         Takes among ``done`` that an interrupted build had staged already.
+    phase : {"read", "fit"}
+        ``"read"``: the takes are read and staged; ``"fit"``: they are read first to fit the
+        database's skeleton (``--normalize-bones``).
     """
 
     done: int
@@ -71,6 +75,7 @@ class BuildProgress:
     name: str
     seconds: float
     reused: int
+    phase: str = "read"
 
 
 @dataclass(frozen=True)
@@ -102,6 +107,7 @@ def run_jobs(
     workers: int | None,
     scheduler: str | Client | None,
     on_result: Callable[[StageJob, dict], None],
+    fn: Callable[[StageJob], dict] | None = None,
 ) -> None:
     """Stage every unit: here (one worker), in worker processes, or on a Dask cluster
     (:func:`gesturekit._jobs.run_jobs`: the first failing unit in ``jobs``' order is the error
@@ -109,13 +115,16 @@ def run_jobs(
 
     Parameters
     ----------
+    fn : callable, optional
+        The work of a unit: :func:`~gesturekit._database_stage.stage_job` (the default, looked up
+        when called), or :func:`~gesturekit._database_stage.sample_job` to fit a skeleton.
     workers : int or None
         Worker processes (None: all cores); 1 stages in this process.
     scheduler : str, distributed.Client or None
         The address of a Dask scheduler (``tcp://host:8786``) or a client; then ``workers`` is not used.
     """
     _run(
-        stage_job,
+        stage_job if fn is None else fn,
         jobs,
         keys=[f"gesturekit-stage-{j.key}" for j in jobs],
         workers=workers,
@@ -275,7 +284,12 @@ def _check_takes(staged: Sequence[StagedTake], base: dict | None) -> list | None
 
 
 def assemble(
-    folder: Path, staged: Sequence[StagedTake], config: BuildConfig, *, base: dict | None = None
+    folder: Path,
+    staged: Sequence[StagedTake],
+    config: BuildConfig,
+    *,
+    base: dict | None = None,
+    skeleton: Skeleton | None = None,
 ) -> tuple[dict, dict[str, np.ndarray]]:
     """Write a database folder's files into ``folder`` from staged takes, one take at a time.
 
@@ -291,6 +305,9 @@ def assemble(
         :class:`~gesturekit.database.MatchingDatabase` as :func:`read_database` gives them, with its
         ``path``): its arrays are copied unchanged in front, its statistics and thresholds are
         kept and the staged takes are z-scored with them.
+    skeleton : Skeleton, optional
+        The skeleton the takes were normalised with (``--normalize-bones``), stored as
+        ``database.json``'s ``"skeleton"`` (nothing is stored without one).
 
     Returns
     -------
@@ -372,6 +389,8 @@ def assemble(
     }
     if joints is not None:
         meta["joints"] = list(joints)
+    if skeleton is not None:
+        meta["skeleton"] = skeleton.to_json()
     if config.store_audio and storage.to_meta() is not None:
         meta["audio"] = storage.to_meta()
     write_stats(folder / "stats.npz", stats)
@@ -380,10 +399,14 @@ def assemble(
 
 
 def build_in_memory(
-    takes: Iterable[Take], *, config: BuildConfig, progress: Callable[[int, str], None] | None = None
+    takes: Iterable[Take],
+    *,
+    config: BuildConfig,
+    progress: Callable[[int, str], None] | None = None,
+    skeleton: Skeleton | None = None,
 ) -> dict[str, Any]:
     """Build a database from takes with the two passes of a folder build, in a temporary folder, and
-    read it back into memory.
+    read it back into memory; ``skeleton`` (the one the takes were normalised with) is stored with it.
 
     Returns
     -------
@@ -405,7 +428,7 @@ def build_in_memory(
         staged.sort(key=lambda s: s.name)
         out = Path(tmp) / "database"
         out.mkdir()
-        meta, _stats = assemble(out, staged, config)
+        meta, _stats = assemble(out, staged, config, skeleton=skeleton)
         loaded = read_database(out, mmap=False)
     loaded["meta"] = meta
     return loaded

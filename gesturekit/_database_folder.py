@@ -22,8 +22,9 @@ import numpy as np
 
 from ._database_audio import AudioStorage, encode_take_audio, read_take_audio, take_audio_fields
 from ._io import DATABASE_CLIP_ARRAYS, read_json_marker
+from .bones import Skeleton
 from .control import ATTRIBUTE_NAMES
-from .errors import DatabaseError
+from .errors import ConfigError, DatabaseError
 from .features import LAYOUT
 from .motion import AUDIO_SR
 from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
@@ -288,6 +289,12 @@ def _check_meta(meta: dict, path: Path) -> None:
             JointPresence(tuple(joints))
         except (TypeError, ValueError) as exc:
             raise bad(f"'joints' must list the status of each of the 55 joints ({exc})") from None
+    skeleton = meta.get("skeleton")
+    if skeleton is not None:
+        try:
+            Skeleton.from_json(skeleton)
+        except ConfigError as exc:
+            raise bad(f"'skeleton': {exc.problem}") from None
     counts = meta.get("counts")
     if counts is not None:
         if not (isinstance(counts, dict) and _is_int(counts.get("clips")) and _is_int(counts.get("takes"))):

@@ -18,6 +18,17 @@ read from (recorded in ``database.json``): the result is the database a build
 of all the takes gives, byte for byte. With ``keep_stats`` (``--keep-stats``)
 the database's statistics and thresholds are kept, the new takes z-scored with
 them and put after the old ones, whose arrays are copied unchanged.
+
+With ``--normalize-bones`` the database has one skeleton (:mod:`gesturekit.bones`): the
+takes are read once first to fit it (:func:`~gesturekit._database_stage.sample_job`,
+staged like the takes, so a resumed build reuses it; the fit reads the samples one row
+at a time), then read again and staged normalised with it, and it is stored in
+``database.json``. Appending keeps the database's skeleton: the new takes are read once
+to check that every bone's median length is within
+:data:`~gesturekit.bones.FIT_TOLERANCE` of the skeleton's (else the append is refused,
+naming the take and the bone, before anything is written), and every take staged is
+normalised with the stored skeleton (the result is then not the database a build of
+all the takes gives, whose skeleton would be fitted over them all).
 """
 
 from __future__ import annotations
@@ -29,11 +40,24 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from ._database_build import BuildProgress, StagedTake, assemble, reemit, run_jobs
 from ._database_folder import read_database
-from ._database_stage import BuildConfig, StageJob, job_key, open_staging, remove_staging, staged_takes, staging_folder
+from ._database_stage import (
+    BuildConfig,
+    StageJob,
+    job_key,
+    open_staging,
+    remove_staging,
+    sample_job,
+    staged_takes,
+    staging_folder,
+)
+from .bones import Skeleton, fit_skeleton
 from .errors import ConfigError, DatabaseError, InputFileError
 from .motion import AUDIO_SR
+from .skeleton import JointPresence
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -206,15 +230,35 @@ def build_from_sources(
             old_label = config.label
             old_names = tuple(t["name"] for t in base["meta"]["takes"])
             units = [(s, None, old_names) for s in sources if s.kind == "habibie2021" or s.motion.stem not in old_names]
+            new_units = list(units)
             if not keep_stats:
                 units = [(s, o, ()) for s, o in _recorded_sources(base["meta"]["takes"], out)] + units
         else:
             config = config or BuildConfig()
             units = [(s, None, ()) for s in sources]
+            new_units = units
         if label is not None:
             config = replace(config, label=label)
         staging = staging_folder(out)
+        stored = _stored_skeleton(base, reading, out) if base is not None else None
         open_staging(staging)
+        skeleton: Skeleton | None = None
+        if reading.get("options") is not None and reading["options"].normalize_bones:
+            # appending, only the new takes are read, to check them against the stored skeleton
+            skeleton = _fit_skeleton(
+                units if stored is None else new_units,
+                stored,
+                staging,
+                reading,
+                reading_key,
+                config,
+                workers,
+                scheduler,
+                on_progress,
+                say,
+            )
+            reading = {**reading, "options": replace(reading["options"], skeleton=skeleton)}
+            reading_key = {**reading_key, "skeleton": skeleton.digest()}
         jobs = [
             StageJob(
                 key=job_key(s, reading_key, config, only=only, skip=skip if s.kind == "habibie2021" else ()),
@@ -249,7 +293,7 @@ def build_from_sources(
         cfg = config
 
         def fill(tmp: Path) -> None:
-            assemble(tmp, staged, cfg, base=base if keep_stats else None)
+            assemble(tmp, staged, cfg, base=base if keep_stats else None, skeleton=skeleton)
 
         write_folder(out, "database", fill, overwrite=overwrite or append, inputs=inputs, locked=True)
         remove_staging(staging)
@@ -267,6 +311,90 @@ def build_from_sources(
                 )
 
 
+def _stored_skeleton(base: dict, reading: dict[str, Any], out: Path) -> Skeleton | None:
+    """The skeleton of the database appended to, checked against ``--normalize-bones``."""
+    data = base["meta"].get("skeleton")
+    normalize = reading.get("options") is not None and reading["options"].normalize_bones
+    if data is None and normalize:
+        raise ConfigError(
+            f"--normalize-bones gives a database one skeleton, and the database at {out} has none (it was built "
+            "without --normalize-bones, or by a gesturekit that normalised each take on its own); leave the option "
+            "out, or build the database again with all the takes and --normalize-bones (--force)"
+        )
+    if data is not None and not normalize:
+        raise ConfigError(
+            f"the database at {out} gives every take one skeleton (built with --normalize-bones); give "
+            "--normalize-bones with --append, so that the new takes get it too"
+        )
+    return None if data is None else Skeleton.from_json(data)
+
+
+def _fit_skeleton(
+    units: list[tuple[TakeSource, tuple[str, ...] | None, tuple[str, ...]]],
+    stored: Skeleton | None,
+    staging: Path,
+    reading: dict[str, Any],
+    reading_key: dict[str, Any],
+    config: BuildConfig,
+    workers: int | None,
+    scheduler: str | Client | None,
+    on_progress: Callable[[BuildProgress], None] | None,
+    say: Callable[[str], None],
+) -> Skeleton:
+    """The database's skeleton: fitted over every take of ``units``, or, appending, the ``stored``
+    one, which every take of ``units`` (the new ones) must fit.
+
+    Raises
+    ------
+    ConfigError
+        Appending: a take's median length of a bone is more than
+        :data:`~gesturekit.bones.FIT_TOLERANCE` from the stored skeleton's (naming the take and bone).
+    """
+    from .datasets.takes import count_takes
+
+    plain = {**reading, "options": replace(reading["options"], normalize_bones=False, skeleton=None)}
+    key = {**reading_key, "pass": "bone samples"}
+    jobs = [
+        StageJob(
+            key=job_key(s, key, config, only=only, skip=skip if s.kind == "habibie2021" else ()),
+            staging=str(staging),
+            source=s,
+            reading=plain,
+            config=config,
+            only=only,
+            skip=skip if s.kind == "habibie2021" else (),
+        )
+        for s, only, skip in units
+    ]
+    total = count_takes([s for s, _, _ in units])
+    try:
+        sampled = _stage(jobs, total, workers, scheduler, on_progress, say, fn=sample_job, phase="fit")
+    except BaseException:
+        # kept for the next run to resume from, unless nothing was read
+        if not any(staged_takes(staging, j.key) is not None for j in jobs):
+            remove_staging(staging)
+        raise
+    sampled.sort(key=lambda s: s.name)
+    if stored is not None:
+        try:
+            for s in sampled:
+                stored.check_fits(np.asarray(s.record["medians"]), take=s.name)
+        except ConfigError:
+            remove_staging(staging)  # a take that does not fit will not fit the next time either
+            raise
+        return stored
+    if not sampled:
+        raise ConfigError("no takes to build a database from")
+    joints = sampled[0].record["joints"]
+    presence = JointPresence.full() if joints is None else JointPresence(tuple(joints))
+
+    def row(i: int) -> np.ndarray:
+        # one row of every take's samples (memory-mapped), so that only one row is in memory
+        return np.concatenate([s.load("bones", header=True)[i] for s in sampled])
+
+    return fit_skeleton(row, presence=presence, takes=len(sampled))
+
+
 def _stage(
     jobs: list[StageJob],
     total: int,
@@ -274,8 +402,12 @@ def _stage(
     scheduler: str | Client | None,
     on_progress: Callable[[BuildProgress], None] | None,
     say: Callable[[str], None],
+    *,
+    fn: Callable[[StageJob], dict] | None = None,
+    phase: str = "read",
 ) -> list[StagedTake]:
-    """Run the staging jobs; the staged takes, in the order their units finished."""
+    """Run the staging jobs (or, with ``fn``, other work of the same units); the staged takes, in the
+    order their units finished."""
     staged: list[StagedTake] = []
     seconds = 0.0
     reused = 0
@@ -290,9 +422,14 @@ def _stage(
             reused += bool(result["reused"])
         if on_progress is not None and result["takes"]:
             name = result["takes"][-1]["name"]
-            on_progress(BuildProgress(len(staged), max(total, len(staged)), name, seconds, reused))
+            on_progress(BuildProgress(len(staged), max(total, len(staged)), name, seconds, reused, phase))
 
-    run_jobs(jobs, workers=workers, scheduler=scheduler, on_result=on_result)
-    if reused:
+    if fn is None:
+        run_jobs(jobs, workers=workers, scheduler=scheduler, on_result=on_result)
+    else:
+        run_jobs(jobs, workers=workers, scheduler=scheduler, on_result=on_result, fn=fn)
+    if reused and phase == "fit":
+        say(f"reused the bone samples of {reused} takes read by an interrupted build")
+    elif reused:
         say(f"reused {reused} takes staged by an interrupted build")
     return staged

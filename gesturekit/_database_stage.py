@@ -25,6 +25,11 @@ Staged unit ``KEY/``::
     J.overlap.*.npy       the overlapping cut (optional)
     J.audio.npy           the take's audio as the database keeps it (optional; :mod:`gesturekit._database_audio`)
     J.moments_F.npy ...   (2, dims) float64: mean and sum of squared deviations of F, P, A
+
+A build with ``--normalize-bones`` first reads every take once to fit the database's
+skeleton (:func:`sample_job`), in units of their own (another key), each take's
+``J.bones.npy``: the samples a skeleton is fitted from
+(:func:`gesturekit.bones.bone_samples`), then stages the takes normalised with it.
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ import os
 import shutil
 import threading
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -70,6 +75,7 @@ __all__ = [
     "take_features",
     "StageJob",
     "stage_job",
+    "sample_job",
     "stage_take",
     "staging_folder",
     "open_staging",
@@ -415,6 +421,50 @@ def stage_job(job: StageJob) -> dict[str, Any]:
         messages reading and featurising issued), ``reused`` (whether the unit
         was staged already).
     """
+
+    def stage(take: Take, folder: Path, index: int) -> dict[str, Any]:
+        return stage_take(take, folder, index, job.config)
+
+    return _run_unit(job, stage, keep_warnings=True)
+
+
+def sample_job(job: StageJob) -> dict[str, Any]:
+    """Read one unit's takes for fitting a skeleton (``--normalize-bones``): each take's
+    :func:`gesturekit.bones.bone_samples` as ``INDEX.bones.npy`` (rows, frames) float32.
+
+    ``job.reading`` reads the takes without normalising them. A unit done already (by an
+    interrupted build) is not read again; the warnings of reading are dropped (they are given
+    when the takes are read again to be staged).
+
+    Returns
+    -------
+    dict
+        ``takes``: per take ``index``, ``name``, ``frames``, ``seconds``, ``joints`` (as
+        :func:`stage_take`'s record) and ``medians`` (the median length of each of the 55 bones, metres);
+        ``warnings`` (empty); ``reused``.
+    """
+    from .bones import bone_samples
+    from .skeleton import N_JOINTS
+
+    def sample(take: Take, folder: Path, index: int) -> dict[str, Any]:
+        samples = bone_samples(take.motion.positions)
+        _save(folder / f"{index}.bones.npy", samples)
+        presence = take.motion.presence
+        return {
+            "index": index,
+            "name": take.name,
+            "frames": int(samples.shape[1]),
+            "seconds": samples.shape[1] / float(take.motion.fps),
+            "joints": None if presence.is_full else presence.to_list(),
+            "medians": [float(v) for v in np.median(samples[:N_JOINTS].astype(np.float64), axis=1)],
+        }
+
+    return _run_unit(job, sample, keep_warnings=False)
+
+
+def _run_unit(job: StageJob, per_take: Callable[[Take, Path, int], dict[str, Any]], *, keep_warnings: bool) -> dict:
+    """Read the takes of a unit and write what ``per_take`` makes of each into the unit's folder,
+    complete or not at all (a temporary folder renamed when done)."""
     from .datasets.takes import iter_takes
 
     staging = Path(job.staging)
@@ -429,8 +479,8 @@ def stage_job(job: StageJob) -> dict[str, Any]:
             for take in iter_takes([job.source], **job.reading):
                 if take.name in job.skip or (job.only is not None and take.name not in job.only):
                     continue
-                records.append(stage_take(take, tmp, len(records), job.config))
-        result = {"takes": records, "warnings": list(messages)}
+                records.append(per_take(take, tmp, len(records)))
+        result = {"takes": records, "warnings": list(messages) if keep_warnings else []}
         (tmp / "takes.json").write_text(json.dumps(result), encoding="utf-8")
         os.replace(tmp, staging / job.key)
     except BaseException:

@@ -134,7 +134,7 @@ def _cmd_build_db(args) -> int:
                 keep_stats=args.keep_stats,
                 label=args.label,
                 on_progress=lambda p: _advance(
-                    bar("reading takes", p.total, "take"),
+                    bar("fitting the skeleton" if p.phase == "fit" else "reading takes", p.total, "take"),
                     p.done,
                     note=f"{p.seconds / 3600:.2f} h of data, {p.name[-24:]}",
                 ),

@@ -43,6 +43,7 @@ from ._database_audio import AudioStorage, read_take_audio
 from ._database_build import build_in_memory
 from ._database_folder import FORMAT_VERSION, read_database, write_database
 from ._database_stage import BuildConfig, TakeFeatures, take_features
+from .bones import Skeleton
 from .control import ATTRIBUTE_UNITS
 from .errors import ConfigError, DatabaseError
 from .features import ZScore, audio_frame_features, cgan_audio_features, stack_audio_features
@@ -170,6 +171,13 @@ class MatchingDatabase:
         return JointPresence.full() if joints is None else JointPresence(tuple(joints))
 
     @property
+    def skeleton(self) -> Skeleton | None:
+        """The one skeleton every take was normalised with (``build-db --normalize-bones``), or None
+        when the takes keep their own bone lengths."""
+        data = self.meta.get("skeleton")
+        return None if data is None else Skeleton.from_json(data)
+
+    @property
     def label(self) -> str:
         return self.meta["build"].get("label", "")
 
@@ -277,6 +285,9 @@ class MatchingDatabase:
         ]
         if d["overlap_windows"]:
             lines.append(f"overlap    {d['overlap_windows']} windows for refiner training")
+        skeleton = self.skeleton
+        if skeleton is not None:
+            lines.append(f"skeleton   {skeleton.describe()}")
         lines.append(
             "attributes (min / low threshold / high threshold / max; heights, widths and asymmetry in m, speeds in m/s)"
         )
@@ -362,6 +373,7 @@ class MatchingDatabase:
         *,
         config: BuildConfig | None = None,
         progress: Callable[[int, str], None] | None = None,
+        skeleton: Skeleton | None = None,
     ) -> MatchingDatabase:
         """Build a database in memory from takes.
 
@@ -378,8 +390,12 @@ class MatchingDatabase:
         config : BuildConfig
         progress : callable(i, take_name), optional
             Called after each take is processed.
+        skeleton : Skeleton, optional
+            The skeleton the takes were normalised with
+            (:func:`gesturekit.datasets.takes.fit_takes_skeleton`), stored with the database
+            (:attr:`skeleton`).
         """
-        kwargs = build_in_memory(takes, config=config or BuildConfig(), progress=progress)
+        kwargs = build_in_memory(takes, config=config or BuildConfig(), progress=progress, skeleton=skeleton)
         return cls(**kwargs)
 
     # ---- save / load --------------------------------------------------------------------------

@@ -452,4 +452,5 @@ class LiveSynthesizer:
             refined_motion=refined,
             refiner=self._made_by,
             plan=plan,
+            one_skeleton=db.meta.get("skeleton") is not None,
         )

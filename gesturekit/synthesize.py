@@ -291,6 +291,9 @@ class SynthesisResult(HoldsMotion):
     plan : SearchPlan or None
         What the search was given (query features, control masks, exclusions, search
         options); the retrieval inspector reads it instead of recomputing it.
+    one_skeleton : bool
+        The database gives every take one skeleton (built with ``--normalize-bones``): its
+        clips' bones have one length each, so only blending and refining change them.
     """
 
     motion: Motion
@@ -303,6 +306,7 @@ class SynthesisResult(HoldsMotion):
     refined_motion: Motion | None = None
     refiner: dict | None = None
     plan: SearchPlan | None = None
+    one_skeleton: bool = False
 
     @property
     def control(self) -> ControlTrack:
@@ -435,6 +439,7 @@ def _finish(
         database=str(db.path) if db.path is not None else (db.label or "in-memory database"),
         source=name,
         plan=plan,
+        one_skeleton=db.meta.get("skeleton") is not None,
     )
 
 

@@ -148,7 +148,11 @@ def build_database(
     forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
         The axis the bodies face; ``auto`` finds it from the shoulders.
     normalize_bones : bool
-        Give every bone one length per take (for keypoints with jittery bone lengths).
+        Give the database one skeleton (for keypoints whose bone lengths vary from frame to frame
+        and take to take): one length per bone over all the takes, and one shape for the finger
+        roots on each wrist and the neck and collars on the upper chest
+        (:mod:`gesturekit.bones`); the takes are read twice, once to fit it. With ``append``
+        the database's skeleton is kept, and a new take that does not fit it is refused.
     overwrite : bool
         Replace an earlier database at ``out`` (only a database gesturekit built).
     locked : bool
@@ -173,7 +177,8 @@ def build_database(
         A description stored with the database, instead of ``config``'s; with ``append`` it
         replaces the database's (None keeps it).
     on_progress : callable(BuildProgress), optional
-        Called as takes are read, with takes done and total, hours of data done, takes reused.
+        Called as takes are read, with takes done and total, hours of data done, takes reused (and
+        with ``phase`` ``"fit"`` as they are first read to fit the skeleton).
     notes : callable(str), optional
         Given lines for the summary (takes reused from an interrupted build, what appending did).
 
@@ -210,7 +215,7 @@ def build_database(
         )
 
     def on_take(p: BuildProgress) -> None:
-        if progress is not None:
+        if progress is not None and p.phase == "read":
             progress(p.done, p.total, p.name)
         if on_progress is not None:
             on_progress(p)
@@ -221,7 +226,12 @@ def build_database(
         config=config,
         # the joint map as given: worker processes read it again (a read map does not travel between processes)
         reading={"joint_map": joint_map, "fps_in": fps, "options": options},
-        reading_key={"joint_map": _joint_map_identity(joint_map), "fps": fps, **asdict(options)},
+        # (the skeleton, fitted in the build, joins the key there)
+        reading_key={
+            "joint_map": _joint_map_identity(joint_map),
+            "fps": fps,
+            **{k: v for k, v in asdict(options).items() if k != "skeleton"},
+        },
         inputs=[folder],
         workers=workers,
         scheduler=scheduler,

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..bones import normalise_bone_lengths
+from ..bones import Skeleton, normalise_bone_lengths
 from ..motion import Motion
 from ..skeleton import JointPresence
 from ._axes import UNIT_SCALE, check_upright, detect_units, to_our_frame
@@ -118,10 +118,10 @@ def convert_and_complete(
     return placed, reading
 
 
-def normalise_motion(motion: Motion, reading: Reading) -> tuple[Motion, Reading]:
-    """``motion`` with one length per bone (:func:`gesturekit.bones.normalise_bone_lengths`), and its reading
-    with the report's summary."""
-    positions, report = normalise_bone_lengths(motion.positions, motion.presence)
+def normalise_motion(motion: Motion, reading: Reading, *, skeleton: Skeleton | None = None) -> tuple[Motion, Reading]:
+    """``motion`` with one length per bone (:func:`gesturekit.bones.normalise_bone_lengths`: its own medians,
+    or ``skeleton``'s lengths and rigid shapes), and its reading with the report's summary."""
+    positions, report = normalise_bone_lengths(motion.positions, motion.presence, skeleton=skeleton)
     out = Motion(positions.astype(np.float32), motion.fps, motion.joints)
     return out, replace(reading, bones=report.summary())
 

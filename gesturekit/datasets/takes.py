@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..bones import Skeleton
 from ..errors import ConfigError, InputFileError
 from ..motion import Motion, Take
 from ._axes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES
@@ -39,6 +40,7 @@ __all__ = [
     "TakeSource",
     "discover_takes",
     "iter_takes",
+    "fit_takes_skeleton",
     "count_takes",
 ]
 
@@ -157,14 +159,21 @@ class ReadOptions:
     forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
         The axis the body faces; ``auto`` finds it from the shoulders.
     normalize_bones : bool
-        Give every bone one length per take (:func:`gesturekit.bones.normalise_bone_lengths`),
-        for keypoints whose bone lengths vary from frame to frame.
+        Give every take one skeleton (:func:`gesturekit.bones.normalise_bone_lengths` with a
+        :class:`~gesturekit.bones.Skeleton`): one length per bone and one shape for the finger
+        roots on each wrist and the neck and collars on the upper chest, for keypoints whose
+        bone lengths vary from frame to frame and from take to take.
+    skeleton : Skeleton, optional
+        With ``normalize_bones``: the skeleton to give the takes (a database's, or one
+        :func:`fit_takes_skeleton` fitted). Without one, :func:`iter_takes` fits it over all the
+        takes it is given before it yields the first.
     """
 
     units: str = "auto"
     up: str | None = None
     forward: str = "auto"
     normalize_bones: bool = False
+    skeleton: Skeleton | None = None
 
     def __post_init__(self) -> None:
         from ._axes import check_axes_options
@@ -172,6 +181,10 @@ class ReadOptions:
         check_axes_options(self.up, self.forward, self.units)
         if not isinstance(self.normalize_bones, bool):
             raise ConfigError(f"normalize_bones must be True or False, got {self.normalize_bones!r}")
+        if self.skeleton is not None and not isinstance(self.skeleton, Skeleton):
+            raise ConfigError(f"skeleton must be a gesturekit.bones.Skeleton, got {type(self.skeleton).__name__}")
+        if self.skeleton is not None and not self.normalize_bones:
+            raise ConfigError("a skeleton is given to the takes with normalize_bones=True")
 
 
 def iter_takes(
@@ -200,12 +213,17 @@ def iter_takes(
     units : {"auto", "m", "cm", "mm"}
         Units of the motion files, when ``options`` is not given.
     options : ReadOptions, optional
-        Units, axes and bone normalisation (default: ``ReadOptions(units=units)``).
+        Units, axes and bone normalisation (default: ``ReadOptions(units=units)``). With
+        ``normalize_bones`` and no ``skeleton``, every take is read once first to fit one
+        (:func:`fit_takes_skeleton`).
     """
     from ._reading import READING_KEY, normalise_motion
     from .audio import load_audio
 
     opts = options if options is not None else ReadOptions(units=units)
+    if opts.normalize_bones and opts.skeleton is None:
+        fitted = fit_takes_skeleton(sources, joint_map=joint_map, fps_in=fps_in, options=opts)
+        opts = replace(opts, skeleton=fitted)
     maps: dict[str, Any] = {}  # per kind, the joint map read once (a file is not read again per take)
     for src in sources:
         if src.kind in ("bvh", "positions"):
@@ -243,7 +261,7 @@ def iter_takes(
                     forward=opts.forward,
                 )
             if opts.normalize_bones:
-                motion, reading = normalise_motion(motion, reading)
+                motion, reading = normalise_motion(motion, reading, skeleton=opts.skeleton)
             audio = load_audio(speech, take=True)
             info = {"motion": str(src.motion), "audio": str(src.audio), READING_KEY: reading.text()}
             yield Take(src.motion.stem, motion, audio, info)
@@ -254,7 +272,7 @@ def iter_takes(
                 raise ConfigError("--up and --forward are for BVH and joint-position files, not the habibie2021 kind")
             for take in load_habibie2021(src.motion, units="m" if opts.units == "auto" else opts.units):
                 if opts.normalize_bones:
-                    positions, report = _normalise(take.motion)
+                    positions, report = _normalise(take.motion, opts.skeleton)
                     take = Take(
                         take.name,
                         Motion(positions, take.motion.fps, take.motion.joints),
@@ -264,8 +282,47 @@ def iter_takes(
                 yield take
 
 
-def _normalise(motion: Motion) -> tuple[np.ndarray, str]:
+def _normalise(motion: Motion, skeleton: Skeleton | None) -> tuple[np.ndarray, str]:
     from ..bones import normalise_bone_lengths
 
-    positions, report = normalise_bone_lengths(motion.positions, motion.presence)
+    positions, report = normalise_bone_lengths(motion.positions, motion.presence, skeleton=skeleton)
     return positions.astype(np.float32), report.summary()
+
+
+def fit_takes_skeleton(
+    sources: list[TakeSource],
+    *,
+    joint_map: str | os.PathLike[str] | Mapping[str, Any] | JointMap | PositionJointMap | None = None,
+    fps_in: float | None = None,
+    options: ReadOptions | None = None,
+) -> Skeleton:
+    """One skeleton over every frame of every take of ``sources`` (:func:`gesturekit.bones.fit_skeleton`),
+    each take read as :func:`iter_takes` reads it, before any normalisation.
+
+    The takes' samples (:func:`gesturekit.bones.bone_samples`, 376 bytes a frame) are kept in
+    memory; a database build from a folder keeps them on disk instead.
+
+    Parameters
+    ----------
+    sources, joint_map, fps_in, options
+        As for :func:`iter_takes` (``options``' ``normalize_bones`` and ``skeleton`` are not used).
+
+    Raises
+    ------
+    ConfigError
+        No takes; and what :func:`iter_takes` raises for a take that cannot be read.
+    """
+    from ..bones import bone_samples, fit_skeleton
+    from ..errors import collect_warnings
+
+    opts = replace(options or ReadOptions(), normalize_bones=False, skeleton=None)
+    samples = []
+    presence = None
+    # the takes are read again after the fit: their warnings are given then, once
+    with collect_warnings():
+        for take in iter_takes(sources, joint_map=joint_map, fps_in=fps_in, options=opts):
+            samples.append(bone_samples(take.motion.positions))
+            presence = presence or take.motion.presence
+    if not samples:
+        raise ConfigError("no takes to fit a skeleton over")
+    return fit_skeleton(samples, presence=presence)

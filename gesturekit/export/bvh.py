@@ -68,7 +68,10 @@ Error report
 joint with the motion's positions: a :class:`BvhReport`. Over
 :data:`WARN_ABOVE` (1 cm) it warns (:class:`~gesturekit.errors.GestureKitWarning`):
 the npz keeps the exact positions, and ``build-db --normalize-bones`` gives the
-bones one length before anything is written.
+bones one length before anything is written. For a motion from a database that has
+one skeleton already, the caller names what would help instead (``remedy``;
+:func:`gesturekit.export.result.export_result_bvh` names blending and the refiner,
+which change the bones' lengths after the database).
 
 Local rotations are written as intrinsic Euler angles in degrees, in the order
 given by ``rotation_order`` (the order of the channels: ``"ZXY"`` means
@@ -159,6 +162,10 @@ class BvhReport:
     precision : float
         Half a unit of the last digit written, in metres: the error a motion
         with constant bone lengths stays within (plus rounding of the angles).
+    remedy : str or None
+        What the warning says would bring the file closer to the motion: None for
+        the default (a database built with ``build-db --normalize-bones``), ``""``
+        for nothing beyond the npz (see :func:`export_bvh`).
     """
 
     path: Path
@@ -171,6 +178,7 @@ class BvhReport:
     left_out: tuple[str, ...]
     derived: tuple[str, ...]
     precision: float
+    remedy: str | None = None
 
     @property
     def exceeds(self) -> bool:
@@ -181,12 +189,15 @@ class BvhReport:
         """What the warning over :data:`WARN_ABOVE` says (without the file's path); None below it."""
         if not self.exceeds:
             return None
+        if self.remedy is None:
+            remedy = "; a database built with `build-db --normalize-bones` gives every bone one length"
+        else:
+            remedy = f"; {self.remedy}" if self.remedy else ""
         return (
             f"the BVH file is up to {self.max_error * 100:.1f} cm off the motion "
             f"({self.worst_joint}, frame {self.worst_frame}; mean {self.mean_error * 1000:.1f} mm): "
             "its bones have one length each (and the bones leaving one joint keep one shape), the motion's "
-            "vary. The npz keeps the exact positions; a database built with `build-db --normalize-bones` "
-            "gives every bone one length."
+            f"vary. The npz keeps the exact positions{remedy}."
         )
 
     def summary(self) -> str:
@@ -247,6 +258,7 @@ def export_bvh(
     units: str = "cm",
     rotation_order: str = "ZXY",
     decimals: int = 6,
+    remedy: str | None = None,
 ) -> BvhReport:
     """Write a motion as a BVH file, atomically, and report how well the file reproduces it.
 
@@ -275,6 +287,11 @@ def export_bvh(
         One of :data:`ROTATION_ORDERS`, the order of the rotation channels.
     decimals : int
         Digits after the decimal point of every number, 3 to 10.
+    remedy : str, optional
+        What the warning names as the way to a closer file, when the default (a database built
+        with ``build-db --normalize-bones``) would not help: for a motion from a database that
+        has one skeleton already, what changed its bones after the database (``""``: nothing
+        to name).
 
     Returns
     -------
@@ -328,7 +345,7 @@ def export_bvh(
         parents=parents,
     )
     report = _measure(text, positions, path=Path(path), parents=parents, lengths=lengths, scale=scale)
-    report = replace(report, derived=presence.names(DERIVED), precision=0.5 * 10.0**-decimals / scale)
+    report = replace(report, derived=presence.names(DERIVED), precision=0.5 * 10.0**-decimals / scale, remedy=remedy)
     data = text.encode("ascii")
 
     def write(f: BinaryIO) -> None:

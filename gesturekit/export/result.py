@@ -62,7 +62,9 @@ def export_result_bvh(
     The hierarchy is that of the motion's drawn joints, every bone with one length (the
     median); see :func:`gesturekit.export.bvh.export_bvh`, which also warns when the file
     is more than 1 cm off the positions. ``units`` (``"cm"`` or ``"m"``) are those of the
-    file's offsets and root positions.
+    file's offsets and root positions. The warning names what would help: for a database
+    without one skeleton ``build-db --normalize-bones``; for one with it (whose clips the
+    file holds exactly) what changed the bones afterwards: blending and the refiner.
 
     Returns
     -------
@@ -71,7 +73,26 @@ def export_result_bvh(
         ``report.summary()`` is one line.
     """
     result.check_finite(path)
-    return export_bvh(path, result.motion, overwrite=overwrite, units=units)
+    return export_bvh(path, result.motion, overwrite=overwrite, units=units, remedy=_bvh_remedy(result))
+
+
+def _bvh_remedy(result: SynthesisResult) -> str | None:
+    """What a BVH warning names as the way to a closer file; None: the default (``--normalize-bones``)."""
+    if not result.one_skeleton:
+        return None
+    # the database's clips have one skeleton: only what is done to them afterwards changes their bones
+    causes = []
+    if result.config.blend != "none":
+        causes.append("without blending the joins (`--blend none`)")
+    if result.refined_motion is not None:
+        causes.append("without the refiner (`--refiner none`)")
+    if not causes:
+        return "the database already gives every take one skeleton"
+    return (
+        "the database already gives every take one skeleton, and the k-NN motion keeps it "
+        + " and ".join(causes)
+        + ", which change the bones' lengths"
+    )
 
 
 def save_result_video(
