@@ -46,6 +46,7 @@ def test_build_and_info_from_position_files(tmp_path, capsys):
                 "z",
                 "--units",
                 "m",
+                "--no-plausibility-check",
                 "--out",
                 str(out),
             ]
@@ -88,6 +89,7 @@ def test_existing_database_needs_force(tmp_path, capsys):
         "z",
         "--units",
         "m",
+        "--no-plausibility-check",
         "--out",
         str(out),
     ]

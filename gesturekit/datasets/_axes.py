@@ -33,6 +33,9 @@ __all__ = [
     "body_size",
     "detect_units",
     "check_axes_options",
+    "check_given_units",
+    "check_given_up",
+    "check_skeleton",
 ]
 
 UP_CHOICES: tuple[str, ...] = ("y", "-y", "z", "-z")
@@ -303,3 +306,162 @@ def detect_units(positions: np.ndarray, *, path: str | os.PathLike[str] | None =
             path=path,
         )
     return fits[0].name
+
+
+_OVERRIDE = "--no-plausibility-check reads it as given"
+
+
+def check_given_units(positions: np.ndarray, units: str, *, path: str | os.PathLike[str] | None = None) -> None:
+    """Refuse a given unit in which the body has no human size (as ``units="auto"`` would find none).
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (frames, 55, 3)
+        Positions in the file's units.
+    units : {"m", "cm", "mm"}
+        The unit given.
+
+    Raises
+    ------
+    MotionFileError
+        The message gives the size and names the unit that gives a human size, if one does.
+    """
+    size = body_size(positions)
+    lo, hi = _PLAUSIBLE_SIZE_M
+    if lo <= size * UNIT_SCALE[units] <= hi:
+        return
+    fits = [u for u, s in UNIT_SCALE.items() if lo <= size * s <= hi]
+    hint = f"in {fits[0]} it is a human's: pass --units {fits[0]}" if len(fits) == 1 else "check the joint map"
+    raise MotionFileError(
+        f"--units {units} makes the shoulder width and upper arms {size * UNIT_SCALE[units] * 100:.4g} cm, "
+        f"no human size ({lo * 100:g}-{hi * 100:g} cm); {hint} ({_OVERRIDE})",
+        path=path,
+    )
+
+
+def _stands_along(positions: np.ndarray, recorded: np.ndarray | None, up: str) -> bool:
+    """Whether the body stands upright with ``up`` (source axes) as up: the tests of :func:`check_upright`."""
+    tilt = float(np.degrees(np.arccos(np.clip(body_axis(positions, recorded) @ axis_vector(up), -1.0, 1.0))))
+    return tilt <= _MAX_TILT_DEG and _passes(upright_scores(positions, recorded)[up])
+
+
+def check_given_up(
+    positions: np.ndarray, up: str, *, recorded: np.ndarray | None = None, path: str | os.PathLike[str] | None = None
+) -> None:
+    """Refuse a given up axis with which the body does not stand upright (the tests of :func:`check_upright`).
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (frames, 55, 3)
+        Positions in the file's axes.
+    up : {"y", "-y", "z", "-z"}
+        The up axis given.
+
+    Raises
+    ------
+    MotionFileError
+        The message names the up axis that stands it upright, if one does.
+    """
+    if _stands_along(positions, recorded, up):
+        return
+    fits = [a for a in UP_CHOICES if a != up and _stands_along(positions, recorded, a)]
+    along = _name_of(body_axis(positions, recorded))
+    hint = f"it stands upright with {fits[0]} as up: pass --up {fits[0]}" if fits else "check the joint map"
+    raise MotionFileError(
+        f"--up {up} does not stand the motion upright (its body stands along {along}); {hint} ({_OVERRIDE})", path=path
+    )
+
+
+# check_skeleton: median lengths a human's arm bones and shoulder width have, metres ...
+_ARM_BONE_M = (0.08, 0.7)
+# ... and the torso (pelvis to mid-shoulder point), which may vary this much (std over median)
+_TORSO_M = (0.15, 1.0)
+_TORSO_SPREAD = 0.25
+# ... and along an arm, a child's median distance from the mid-shoulder point is at least this
+# fraction of its parent's (a hand held near the chest brings a wrist about as near as its elbow;
+# swapped joints bring the elbow far nearer than the wrist)
+_CHAIN_MARGIN = 0.85
+
+
+def check_skeleton(
+    positions: np.ndarray,
+    recorded: np.ndarray,
+    *,
+    sources: dict[str, str],
+    pelvis: bool,
+    path: str | os.PathLike[str] | None = None,
+) -> None:
+    """Refuse a joint map whose skeleton is no human's: arm bones and shoulders of no human length,
+    an arm whose joints do not get farther from the shoulders joint by joint (within a margin),
+    a torso (with a
+    mapped pelvis) of no human length or that stretches as the body moves.
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (frames, 55, 3)
+        Metres, our frame, relative to the pelvis when ``pelvis``.
+    recorded : np.ndarray, shape (55,) bool
+    sources : dict
+        Our joint name -> the source column it was read from, named in messages.
+    pelvis : bool
+        The positions are relative to a mapped pelvis (its column is ``sources["pelvis"]``).
+
+    Raises
+    ------
+    MotionFileError
+        The message names the joints, their source columns and what was measured.
+    """
+    pos = np.asarray(positions, dtype=np.float64)
+
+    def name(j: str) -> str:
+        return f"{j} ({sources.get(j, '?')})"
+
+    def length(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(a - b, axis=-1)
+
+    mid = 0.5 * (pos[:, _LS] + pos[:, _RS])
+    lo, hi = _ARM_BONE_M
+    for side in ("left", "right"):
+        s, e, w = (joint_index(f"{side}_{j}") for j in ("shoulder", "elbow", "wrist"))
+        for (pa, ch), (a, b) in ((("shoulder", "elbow"), (s, e)), (("elbow", "wrist"), (e, w))):
+            if not (recorded[a] and recorded[b]):
+                continue
+            bone = float(np.median(length(pos[:, a], pos[:, b])))
+            if not lo <= bone <= hi:
+                raise MotionFileError(
+                    f"the joint map gives the bone {name(f'{side}_{pa}')} to {name(f'{side}_{ch}')} a median length of "
+                    f"{bone * 100:.3g} cm, no human's ({lo * 100:g}-{hi * 100:g} cm); check the joint map "
+                    f"({_OVERRIDE})",
+                    path=path,
+                )
+        chain = [j for j in (s, e, w) if recorded[j]]
+        reach = [float(np.median(length(pos[:, j], mid))) for j in chain]
+        for (parent, ra), (child, rc) in zip(zip(chain, reach), zip(chain[1:], reach[1:])):
+            if rc < _CHAIN_MARGIN * ra:
+                from ..skeleton import JOINT_NAMES
+
+                raise MotionFileError(
+                    f"the joint map's {name(JOINT_NAMES[child])} is nearer the shoulders ({rc * 100:.3g} cm, median) "
+                    f"than its parent {name(JOINT_NAMES[parent])} ({ra * 100:.3g} cm): are they swapped? check the "
+                    f"joint map ({_OVERRIDE})",
+                    path=path,
+                )
+    width = float(np.median(length(pos[:, _LS], pos[:, _RS])))
+    if not lo <= width <= hi:
+        raise MotionFileError(
+            f"the joint map puts {name('left_shoulder')} and {name('right_shoulder')} {width * 100:.3g} cm apart "
+            f"(median), no human's shoulder width ({lo * 100:g}-{hi * 100:g} cm); check the joint map ({_OVERRIDE})",
+            path=path,
+        )
+    if pelvis:
+        torso = np.linalg.norm(mid, axis=-1)
+        median = float(np.median(torso))
+        spread = float(np.std(torso)) / max(median, 1e-9)
+        tlo, thi = _TORSO_M
+        if not tlo <= median <= thi or spread > _TORSO_SPREAD:
+            raise MotionFileError(
+                f"the joint map's pelvis ({sources.get('pelvis', '?')}) is {median * 100:.3g} cm from the mid-shoulder "
+                f"point (median, varying by {spread:.0%}): a torso is {tlo * 100:g}-{thi * 100:g} cm and keeps its "
+                f"length; is the pelvis another joint? check the joint map ({_OVERRIDE})",
+                path=path,
+            )

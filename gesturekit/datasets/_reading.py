@@ -16,7 +16,7 @@ import numpy as np
 from ..bones import Skeleton, normalise_bone_lengths
 from ..motion import Motion
 from ..skeleton import JointPresence
-from ._axes import UNIT_SCALE, check_upright, detect_units, to_our_frame
+from ._axes import UNIT_SCALE, check_given_units, check_given_up, check_upright, detect_units, to_our_frame
 from ._partial import complete_skeleton
 
 __all__ = ["Reading", "convert_and_complete", "normalise_motion", "reading_lines", "READING_KEY"]
@@ -77,6 +77,8 @@ def convert_and_complete(
     up: str | None,
     forward: str,
     path: str | os.PathLike[str] | None = None,
+    check_plausible: bool = True,
+    check_units: bool = True,
 ) -> tuple[np.ndarray, Reading]:
     """Source positions in metres, our axes, with the joints the source lacks placed.
 
@@ -92,6 +94,12 @@ def convert_and_complete(
     forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
     path : path, optional
         The file, named in messages.
+    check_plausible : bool
+        Check given values as ``auto`` ones are: the body's size in the given ``units``
+        (:func:`~gesturekit.datasets._axes.check_given_units`), its uprightness with the given
+        ``up`` (:func:`~gesturekit.datasets._axes.check_given_up`).
+    check_units : bool
+        With ``check_plausible``: check the units too (False when the caller checked them).
 
     Returns
     -------
@@ -101,9 +109,13 @@ def convert_and_complete(
     pos = np.asarray(positions, dtype=np.float64)
     rec = np.asarray(recorded, dtype=bool)
     unit = detect_units(pos, path=path) if units == "auto" else units
+    if units != "auto" and check_plausible and check_units:
+        check_given_units(pos, unit, path=path)
     pos = pos * UNIT_SCALE[unit]
     if up is None:
         check_upright(pos, recorded=rec, path=path, what="the motion")
+    elif check_plausible:
+        check_given_up(pos, up, recorded=rec, path=path)
     turned, fwd = to_our_frame(pos, up=up or "y", forward=forward)
     placed, presence = complete_skeleton(turned, rec)
     reading = Reading(

@@ -38,7 +38,7 @@ from .. import limits
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion, output_frame_count
 from ..skeleton import FPS
-from ._axes import UNIT_SCALE, check_axes_options
+from ._axes import UNIT_SCALE, check_axes_options, check_given_units
 from ._kinematics import quat_mul, quat_to_matrix, slerp, world_positions
 from ._reading import Reading, convert_and_complete
 from .bvh_file import BvhData, parse_bvh, parse_bvh_text
@@ -226,9 +226,12 @@ def load_bvh_motion(
     units: str = "auto",
     up: str | None = None,
     forward: str = "auto",
+    check_plausible: bool = True,
 ) -> Motion:
     """Read a BVH file as a 55-joint motion (see :func:`read_bvh_take`)."""
-    return read_bvh_take(path, joint_map=joint_map, fps=fps, units=units, up=up, forward=forward)[0]
+    return read_bvh_take(
+        path, joint_map=joint_map, fps=fps, units=units, up=up, forward=forward, check_plausible=check_plausible
+    )[0]
 
 
 def read_bvh_take(
@@ -239,6 +242,7 @@ def read_bvh_take(
     units: str = "auto",
     up: str | None = None,
     forward: str = "auto",
+    check_plausible: bool = True,
 ) -> tuple[Motion, Reading]:
     """Read a BVH file as a 55-joint motion, and say how it was read.
 
@@ -262,6 +266,10 @@ def read_bvh_take(
         (:func:`gesturekit.datasets._axes.check_upright`).
     forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
         The axis the body faces; ``auto`` takes it from the shoulders.
+    check_plausible : bool
+        Refuse given ``units`` in which the body has no human size, and a given ``up`` with
+        which it does not stand upright (:func:`gesturekit.datasets._axes.check_given_units`,
+        :func:`~gesturekit.datasets._axes.check_given_up`).
 
     Returns
     -------
@@ -308,9 +316,19 @@ def read_bvh_take(
     idx = np.array([data.index(n) for n in jmap.source_names()], dtype=np.int64)
     pelvis = data.index(jmap.pelvis)
     _check_positions(data, positions, scale, pelvis, fps, path)
-    rel = (positions[:, idx] - positions[:, pelvis : pelvis + 1]) * scale
+    rel = positions[:, idx] - positions[:, pelvis : pelvis + 1]
+    if units != "auto" and check_plausible:
+        check_given_units(rel, units, path=path)
+    rel = rel * scale
     placed, reading = convert_and_complete(
-        rel, np.ones(rel.shape[1], dtype=bool), units="m", up=up, forward=forward, path=path
+        rel,
+        np.ones(rel.shape[1], dtype=bool),
+        units="m",
+        up=up,
+        forward=forward,
+        path=path,
+        check_plausible=check_plausible,
+        check_units=False,
     )
     found = units if units != "auto" else next((u for u, f in UNIT_SCALE.items() if f == scale), f"x{scale:g}")
     reading = replace(reading, units=found, units_given=units != "auto")

@@ -44,7 +44,7 @@ from ..errors import ConfigError, InputFileError, MotionFileError
 from ..motion import Motion, resample_positions
 from ..paths import is_file
 from ..skeleton import FPS, JOINT_NAMES, missing_required
-from ._axes import check_axes_options
+from ._axes import UNIT_SCALE, check_axes_options, check_skeleton
 from ._reading import Reading, convert_and_complete
 from .presets import missing_and_unknown
 from .takes import POSITION_EXTENSIONS as _SUFFIXES  # the files a folder of takes is searched for
@@ -361,9 +361,12 @@ def load_positions_motion(
     units: str = "m",
     up: str | None = None,
     forward: str = "auto",
+    check_plausible: bool = True,
 ) -> Motion:
     """Read a joint-position file as a 55-joint motion at 15 fps (see :func:`read_positions_take`)."""
-    return read_positions_take(path, joint_map=joint_map, fps=fps, units=units, up=up, forward=forward)[0]
+    return read_positions_take(
+        path, joint_map=joint_map, fps=fps, units=units, up=up, forward=forward, check_plausible=check_plausible
+    )[0]
 
 
 def read_positions_take(
@@ -374,6 +377,7 @@ def read_positions_take(
     units: str = "auto",
     up: str | None = None,
     forward: str = "auto",
+    check_plausible: bool = True,
 ) -> tuple[Motion, Reading]:
     """Read a joint-position file as a 55-joint motion at 15 fps, and say how it was read.
 
@@ -394,6 +398,13 @@ def read_positions_take(
         (:func:`gesturekit.datasets._axes.check_upright`).
     forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
         The axis the body faces; ``auto`` takes it from the shoulders.
+    check_plausible : bool
+        Refuse what no human body gives, naming it: a given ``units`` or ``up`` that does not fit
+        the data (:func:`gesturekit.datasets._axes.check_given_units`,
+        :func:`~gesturekit.datasets._axes.check_given_up`); a map that reads two body joints (or
+        the pelvis and a joint) from one column, or whose skeleton is no human's
+        (:func:`~gesturekit.datasets._axes.check_skeleton`); frames with joints far from the body
+        (:func:`check_outlier_frames`). False reads the data as it is.
 
     Returns
     -------
@@ -422,17 +433,99 @@ def read_positions_take(
     jmap = load_position_joint_map(joint_map)
     array = read_position_array(path, fps=float(fps))
     idx, pelvis = jmap.resolve(array.shape[1], path=path)
+    recorded = jmap.recorded
+    columns = {n: _column(jmap, int(i)) for n, i, r in zip(JOINT_NAMES, idx, recorded, strict=True) if r}
+    if pelvis is not None:
+        columns["pelvis"] = _column(jmap, pelvis)
+    if check_plausible:
+        _check_distinct_sources(idx, recorded, pelvis, columns, path)
     positions = array[:, idx]
     if pelvis is not None:
         positions = positions - array[:, pelvis : pelvis + 1]
-    recorded = jmap.recorded
     positions[:, ~recorded] = 0.0
     out = resample_positions(positions, float(fps), float(FPS))
     if out.shape[0] == 0:
         raise MotionFileError(
             f"too short: {array.shape[0]} frames at {fps:g} fps give no frame at {FPS} fps", path=path
         )
-    placed, reading = convert_and_complete(out, recorded, units=units, up=up, forward=forward, path=path)
+    placed, reading = convert_and_complete(
+        out, recorded, units=units, up=up, forward=forward, path=path, check_plausible=check_plausible
+    )
+    if check_plausible:
+        check_outlier_frames(positions * UNIT_SCALE[reading.units], recorded, path=path)
+        check_skeleton(placed, recorded, sources=columns, pelvis=pelvis is not None, path=path)
     return Motion(
         placed.astype(np.float32), float(FPS), None if reading.presence.is_full else reading.presence
     ), reading
+
+
+def _column(jmap: PositionJointMap, index: int) -> str:
+    """A source column as messages name it: ``column 3 'r_wrist'`` (or ``column 3``)."""
+    return f"column {index}" + ("" if jmap.names is None else f" {jmap.names[index]!r}")
+
+
+# the joints of the body (not the fingers) that must come from columns of their own
+_BODY_JOINTS = tuple(n for n in JOINT_NAMES if not any(f in n for f in ("thumb", "index", "middle", "ring", "pinky")))
+#: check_outlier_frames: a joint this far from the mid-shoulder point (metres) ...
+OUTLIER_REACH_M = 2.0
+#: ... or a body this far from where it is in the frames around (metres, the median of 9 frames).
+OUTLIER_JUMP_M = 1.0
+
+
+def _check_distinct_sources(
+    idx: np.ndarray, recorded: np.ndarray, pelvis: int | None, columns: dict[str, str], path
+) -> None:
+    """Refuse a map that reads two body joints, or the pelvis and a joint, from one source column."""
+    taken: dict[int, str] = {} if pelvis is None else {pelvis: "pelvis"}
+    for name, i, r in zip(JOINT_NAMES, idx, recorded, strict=True):
+        if not r or (name not in _BODY_JOINTS and int(i) not in taken):
+            continue
+        other = taken.get(int(i))
+        if other is not None:
+            raise MotionFileError(
+                f"the joint map reads {other} and {name} from one source column ({columns[name]}); each joint "
+                "needs its own column: check the joint map (--no-plausibility-check reads it as given)",
+                path=path,
+            )
+        if name in _BODY_JOINTS:
+            taken[int(i)] = name
+
+
+def check_outlier_frames(
+    positions: np.ndarray, recorded: np.ndarray, *, path: str | os.PathLike[str] | None = None
+) -> None:
+    """Refuse frames of a joint-position file that hold joints far from the body.
+
+    A frame is an outlier when a recorded joint is more than :data:`OUTLIER_REACH_M` from its
+    mid-shoulder point, or its mid-shoulder point is more than :data:`OUTLIER_JUMP_M` from
+    the median of the 9 frames around (no body moves that far in a frame or two).
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (frames, 55, 3)
+        The file's frames, in metres (any axes); only ``recorded`` joints are read.
+    recorded : np.ndarray, shape (55,) bool
+
+    Raises
+    ------
+    MotionFileError
+        Naming the outlier frames (counting from 0).
+    """
+    from ._axes import _LS, _RS
+
+    pos = np.asarray(positions, dtype=np.float64)
+    mid = 0.5 * (pos[:, _LS] + pos[:, _RS])
+    reach = np.linalg.norm(pos[:, recorded] - mid[:, None], axis=-1).max(axis=1)
+    half = 4
+    padded = np.pad(mid, ((half, half), (0, 0)), mode="edge")
+    around = np.median(np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1, axis=0), axis=-1)
+    jump = np.linalg.norm(mid - around, axis=-1)
+    bad = np.flatnonzero((reach > OUTLIER_REACH_M) | (jump > OUTLIER_JUMP_M))
+    if bad.size:
+        shown = ", ".join(str(int(f)) for f in bad[:10]) + (f" and {bad.size - 10} more" if bad.size > 10 else "")
+        raise MotionFileError(
+            f"{bad.size} of {pos.shape[0]} frames hold joints far from the body (more than {OUTLIER_REACH_M:g} m from "
+            f"the shoulders, or the body {OUTLIER_JUMP_M:g} m from where it is in the frames around): frame "
+            f"{shown} (counting from 0); remove or repair them (--no-plausibility-check reads them as they are)",
+            path=path,
+        )
