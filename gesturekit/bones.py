@@ -171,7 +171,8 @@ class BoneLengthReport:
                 f"{self.misfit_bone})"
             )
         return (
-            f"bone lengths normalised{to}: spread before up to {self.spread_before.max() * 1000:.1f} mm "
+            f"bone lengths normalised{to}: spread (standard deviation over the frames) before up to "
+            f"{self.spread_before.max() * 1000:.1f} mm "
             f"({worst_bone}), joints moved by {self.mean_shift * 1000:.1f} mm on average and at most "
             f"{self.max_shift * 1000:.1f} mm ({self.worst_joint})"
         )

@@ -42,8 +42,8 @@ __all__ = [
 
 #: Per-frame attributes, in the order of the database's ``attributes`` array (units in brackets).
 ATTRIBUTE_NAMES: tuple[str, ...] = (
-    "left_hand_height",  # left wrist height above the pelvis [m]
-    "right_hand_height",  # right wrist height above the pelvis [m]
+    "left_hand_height",  # left wrist height above the root: the pelvis, or the neck on neck-rooted data [m]
+    "right_hand_height",  # right wrist height above the root [m]
     "left_hand_speed",  # left wrist speed [m/s]
     "right_hand_speed",  # right wrist speed [m/s]
     "hand_speed",  # mean of both wrist speeds [m/s]

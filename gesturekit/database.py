@@ -291,6 +291,12 @@ class MatchingDatabase:
         lines.append(
             "attributes (min / low threshold / high threshold / max; heights, widths and asymmetry in m, speeds in m/s)"
         )
+        # control.frame_attributes measures heights along Y from the positions' origin: the pelvis
+        # where the joint map names one, else the root the files are relative to
+        lines.append(
+            "           hand heights are above the takes' root: the pelvis, or the neck on neck-rooted data "
+            "(keypoints read with no pelvis)"
+        )
         for name, r in d["attributes"].items():
             unit = ATTRIBUTE_UNITS.get(name, "")
             values = f"{r['min']:8.3f} {r['low']:8.3f} {r['high']:8.3f} {r['max']:8.3f}"
