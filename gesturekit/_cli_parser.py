@@ -143,24 +143,41 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", help="database folder to write (default for --demo: the app's default path)")
     b.add_argument("--preset", choices=["zeggs", "beat"], help="joint naming preset of the BVH files")
     b.add_argument("--joint-map", help="JSON joint map for other skeletons or joint-position files")
-    b.add_argument("--kind", default="auto", choices=["auto", "bvh", "positions", "habibie2021"])
+    b.add_argument(
+        "--kind",
+        choices=["auto", "bvh", "positions", "habibie2021"],
+        help="kind of takes (default auto: from the files; with --append: the database's)",
+    )
     b.add_argument("--fps", type=float, help="frame rate of joint-position files")
     b.add_argument(
         "--units",
-        default="auto",
         choices=["auto", "m", "cm", "mm"],
-        help="units of the motion files (default auto: detected from the body's size)",
+        help="units of the motion files (default auto: detected from the body's size; with --append: the "
+        "database's); a unit given must give the body a human size",
     )
     b.add_argument(
         "--up",
         choices=["y", "-y", "z", "-z"],
-        help="up axis of the motion files (default: y, and each take must look upright)",
+        help="up axis of the motion files (default: y, and each take must look upright; with --append: the "
+        "database's); an axis given must stand the body upright",
     )
     b.add_argument(
         "--forward",
-        default="auto",
         choices=["auto", "x", "-x", "y", "-y", "z", "-z"],
-        help="axis the body faces in the motion files (default auto: from the shoulders)",
+        help="axis the body faces in the motion files (default auto: from the shoulders; with --append: the "
+        "database's)",
+    )
+    b.add_argument(
+        "--no-plausibility-check",
+        action="store_true",
+        help="accept data that fails the checks of what was given (a body of no human size in the given "
+        "--units, not upright with the given --up, a joint map whose skeleton is no human's, frames far from "
+        "the body): for the rare data that is right and fails them",
+    )
+    b.add_argument(
+        "--allow-duration-mismatch",
+        action="store_true",
+        help="accept takes whose motion and speech durations differ by more than 5%% (the longer is trimmed)",
     )
     b.add_argument(
         "--normalize-bones",

@@ -35,7 +35,7 @@ from ._database_stage import MOMENT_KEYS, BuildConfig, StageJob, stage_job, stag
 from ._jobs import run_jobs as _run
 from ._version import __version__
 from .control import ATTRIBUTE_NAMES
-from .errors import ConfigError, GestureKitError, warn
+from .errors import ConfigError, DatabaseError, GestureKitError, warn
 from .features import LAYOUT, ZScore
 from .skeleton import FPS, JOINT_NAMES
 
@@ -337,7 +337,15 @@ def assemble(
                     w.copy_from(old_path / f"{k}.npy")
                 for s in staged:
                     a = s.load(prefix + k)
-                    w.write(zscore[k].apply(a) if k in zscore else a)
+                    a = zscore[k].apply(a) if k in zscore else a
+                    if a.dtype.kind == "f" and not np.isfinite(a).all():
+                        # nothing non-finite is written (a database's zero std, a damaged staged take)
+                        raise DatabaseError(
+                            f"take {s.name!r} gives non-finite values in {prefix}{k}.npy; nothing was written"
+                            + ("" if base is None else " (the database's statistics may be damaged: rebuild it)"),
+                            path=None if base is None else base["path"],
+                        )
+                    w.write(a)
         with _NpyWriter(sub / "clip_take.npy", np.dtype(np.int32), (total,)) as w:
             if old_path is not None:
                 w.copy_from(old_path / "clip_take.npy")
@@ -382,7 +390,8 @@ def assemble(
         "gesturekit_version": __version__,
         "layout": LAYOUT.signature(),
         "joint_names": list(JOINT_NAMES),
-        "build": dict(base["meta"]["build"]) if base else asdict(config),
+        # appending keeps the database's build record, but a label given replaces its label
+        "build": {**base["meta"]["build"], "label": config.label} if base else asdict(config),
         "attribute_names": list(ATTRIBUTE_NAMES),
         "thresholds": thresholds,
         "takes": take_meta,

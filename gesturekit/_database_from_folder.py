@@ -64,7 +64,7 @@ if TYPE_CHECKING:
 
     from .datasets.takes import TakeSource
 
-__all__ = ["build_from_sources", "recorded_joint_map"]
+__all__ = ["build_from_sources", "recorded_build", "recorded_reading"]
 
 # build options an appended take must share with the database's: attribute -> the option that sets it
 _SHARED_OPTIONS = {
@@ -78,14 +78,66 @@ _SHARED_OPTIONS = {
 }
 
 
-def recorded_joint_map(out: str | os.PathLike[str]) -> str | None:
-    """The joint map the database at ``out`` was read with (None when there is no readable database)."""
+def recorded_build(out: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The build options recorded by the database at ``out`` (None when there is no readable database)."""
     try:
         build = read_database(Path(out), mmap=True)["meta"]["build"]
     except DatabaseError:
         return None
-    value = build.get("joint_map")
-    return value if isinstance(value, str) else None
+    return build if isinstance(build, dict) else None
+
+
+#: The reading options --append takes from the database: key -> (the option, its value when not given).
+_READING_OPTIONS = {
+    "kind": ("--kind", "auto"),
+    "fps": ("--fps", None),
+    "units": ("--units", "auto"),
+    "up": ("--up", None),
+    "forward": ("--forward", "auto"),
+}
+
+
+def recorded_reading(build: dict[str, Any], given: dict[str, Any], out: Path) -> dict[str, Any]:
+    """The reading options to append with: the database's recorded ones, which those given must equal.
+
+    Parameters
+    ----------
+    build : dict
+        The database's ``build`` record (:func:`recorded_build`).
+    given : dict
+        ``kind``, ``fps``, ``units``, ``up``, ``forward`` as given, None for those not given.
+    out : Path
+        The database, named in messages.
+
+    Returns
+    -------
+    dict
+        The same keys: the database's values (a database built before they were recorded:
+        those given).
+
+    Raises
+    ------
+    ConfigError
+        A value given differs from the database's; the message names the option and both values.
+    """
+    recorded = build.get("reading")
+    if not isinstance(recorded, dict):
+        return dict(given)  # built before the options were recorded: read as told, as before
+    out_options = {}
+    for key, (option, default) in _READING_OPTIONS.items():
+        theirs = recorded.get(key, default)
+        if key == "kind" and given[key] == "auto":
+            given = {**given, key: None}  # auto finds the database's kind, or says there is none
+        if key == "fps" and given[key] is not None and theirs is not None and float(given[key]) == float(theirs):
+            given = {**given, key: theirs}
+        if given[key] is not None and given[key] != theirs:
+            shown = "not given" if theirs is None else f"{theirs}"
+            raise ConfigError(
+                f"--append reads every take as the database at {out} was read: {option} is {given[key]} here and "
+                f"{shown} in the database; leave {option} out (the database's is used) or build a new database"
+            )
+        out_options[key] = theirs
+    return out_options
 
 
 def _append_config(build: dict[str, Any], given: BuildConfig | None, out: Path) -> BuildConfig:
@@ -101,6 +153,7 @@ def _append_config(build: dict[str, Any], given: BuildConfig | None, out: Path) 
         joint_map=build.get("joint_map"),
         audio_format=str(build.get("audio_format", "pcm")),
         audio_rate=int(build.get("audio_rate", AUDIO_SR)),
+        reading=build.get("reading") if isinstance(build.get("reading"), dict) else None,
     )
     if given is not None:
         for attr, option in _SHARED_OPTIONS.items():
@@ -143,7 +196,47 @@ def _recorded_sources(takes: list[dict], out: Path) -> list[tuple[TakeSource, tu
                     "old takes again to recompute the statistics: put it back, or add --keep-stats",
                     path=f,
                 )
+        _check_unchanged(t, src, out)
     return [(s, None if names is None else tuple(names)) for s, names in units.values()]
+
+
+def _check_kept_stats(stats: dict[str, np.ndarray], out: Path) -> None:
+    """Refuse to z-score new takes with statistics that give non-finite features (a zero or
+    non-finite std, a non-finite mean): the database's ``stats.npz`` is damaged."""
+    for key, value in sorted(stats.items()):
+        a = np.asarray(value, dtype=np.float64)
+        bad = ~np.isfinite(a) | ((a <= 0) if key.endswith("_std") else False)
+        if bad.any():
+            what = "zero, negative or non-finite" if key.endswith("_std") else "non-finite"
+            raise DatabaseError(
+                f"stats.npz: {key} has {int(bad.sum())} {what} values, which would give the new takes non-finite "
+                "features; --keep-stats cannot keep these statistics: leave --keep-stats out to recompute them, "
+                "or rebuild the database",
+                path=out,
+            )
+
+
+def _check_unchanged(take: dict, sources: dict, out: Path) -> None:
+    """Refuse a recorded source file whose size or modification time is not what the build read.
+
+    Databases built before these were recorded (no ``KEY_stat``) are not checked; their paths,
+    relative to the directory the build ran in, are read relative to the current one, as before.
+    """
+    for key in ("motion", "audio", "file"):
+        stat = sources.get(f"{key}_stat")
+        if key not in sources or not isinstance(stat, str):
+            continue
+        path = Path(sources[key])
+        st = path.stat()
+        if stat != f"{st.st_size}:{st.st_mtime_ns}":
+            size = stat.split(":")[0]
+            raise InputFileError(
+                f"the database's take {take['name']!r} was read from this file, which has changed since (then "
+                f"{size} bytes, now {st.st_size}, and modified since); --append reads the old takes again to "
+                "recompute the statistics: put the original back, add --keep-stats to keep the database's "
+                f"arrays, or build the database at {out} again (--force)",
+                path=path,
+            )
 
 
 def build_from_sources(
@@ -226,6 +319,8 @@ def build_from_sources(
                 )
             base = read_database(out, mmap=True)
             base["path"] = out
+            if keep_stats:
+                _check_kept_stats(base["stats"], out)
             config = _append_config(base["meta"]["build"], config, out)
             old_label = config.label
             old_names = tuple(t["name"] for t in base["meta"]["takes"])

@@ -115,6 +115,10 @@ class BuildConfig:
         Where the takes came from (a folder, ``"demo"``).
     joint_map : str or None
         The joint map or preset used to read the takes.
+    reading : dict or None
+        The options the takes were read with (``kind``, ``fps``, ``units``, ``up``, ``forward``,
+        ``normalize_bones``), so that ``--append`` reads every take as the build did (None: not
+        recorded, by a build before they were).
     """
 
     clip_frames: int = 64
@@ -126,6 +130,7 @@ class BuildConfig:
     joint_map: str | None = None
     audio_format: str = "pcm"
     audio_rate: int = AUDIO_SR
+    reading: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         if self.clip_frames < 16:

@@ -126,6 +126,8 @@ def _cmd_build_db(args) -> int:
                 up=args.up,
                 forward=args.forward,
                 normalize_bones=args.normalize_bones,
+                check_plausible=not args.no_plausibility_check,
+                allow_duration_mismatch=args.allow_duration_mismatch,
                 overwrite=args.force,
                 locked=True,
                 workers=args.workers,

@@ -19,7 +19,7 @@ import os
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .database import BuildConfig, MatchingDatabase
 from .datasets.takes import AUDIO_EXTENSIONS, ReadOptions, discover_takes
@@ -105,12 +105,14 @@ def build_database(
     *,
     config: BuildConfig | None = None,
     joint_map: str | os.PathLike[str] | None = None,
-    kind: str = "auto",
+    kind: str | None = None,
     fps: float | None = None,
-    units: str = "auto",
+    units: str | None = None,
     up: str | None = None,
-    forward: str = "auto",
+    forward: str | None = None,
     normalize_bones: bool = False,
+    check_plausible: bool = True,
+    allow_duration_mismatch: bool = False,
     overwrite: bool = False,
     locked: bool = False,
     progress: Callable[[int, int, str], None] | None = None,
@@ -137,22 +139,35 @@ def build_database(
         How to build; its ``source`` (the folder, resolved) and ``joint_map`` are filled in here.
     joint_map : str, path or None
         ``"zeggs"``, ``"beat"``, the path of a JSON joint map, or None (BVH files: ``zeggs``).
-    kind : {"auto", "bvh", "positions", "habibie2021"}
-        The kind of takes (see :func:`~gesturekit.datasets.takes.discover_takes`).
+    kind : {"auto", "bvh", "positions", "habibie2021"} or None
+        The kind of takes (see :func:`~gesturekit.datasets.takes.discover_takes`); None: ``auto``
+        (with ``append``: the database's).
     fps : float, optional
         Frame rate of joint-position files (they do not carry one), frames per second.
-    units : {"auto", "m", "cm", "mm"}
-        Units of the motion files (``auto`` detects them).
+    units : {"auto", "m", "cm", "mm"} or None
+        Units of the motion files (``auto`` detects them); None: ``auto`` (with ``append``: the
+        database's).
     up : {"y", "-y", "z", "-z"} or None
-        Up axis of the motion files; None: Y, and every take must look upright.
-    forward : {"auto", "x", "-x", "y", "-y", "z", "-z"}
-        The axis the bodies face; ``auto`` finds it from the shoulders.
+        Up axis of the motion files; None: Y, and every take must look upright (with ``append``:
+        the database's).
+    forward : {"auto", "x", "-x", "y", "-y", "z", "-z"} or None
+        The axis the bodies face; ``auto`` finds it from the shoulders; None: ``auto`` (with
+        ``append``: the database's).
     normalize_bones : bool
         Give the database one skeleton (for keypoints whose bone lengths vary from frame to frame
         and take to take): one length per bone over all the takes, and one shape for the finger
         roots on each wrist and the neck and collars on the upper chest
         (:mod:`gesturekit.bones`); the takes are read twice, once to fit it. With ``append``
         the database's skeleton is kept, and a new take that does not fit it is refused.
+    check_plausible : bool
+        Check what was given against the data (:class:`~gesturekit.datasets.takes.ReadOptions`):
+        the body's size in the given units, its uprightness with the given up axis, the joint
+        map's skeleton, frames far from the body. False is for the rare data that fails them
+        and is right.
+    allow_duration_mismatch : bool
+        Accept takes whose motion and speech durations differ by more than
+        :data:`~gesturekit.datasets.takes.MAX_DURATION_MISMATCH` (else refused, naming the
+        frame rate that would make them agree).
     overwrite : bool
         Replace an earlier database at ``out`` (only a database gesturekit built).
     locked : bool
@@ -166,9 +181,12 @@ def build_database(
         Read the takes on a Dask cluster instead (``"tcp://host:8786"``); the output's folder
         must be on a file system the cluster's workers share (the takes are staged beside it).
     append : bool
-        Add the takes of ``folder`` that the database at ``out`` does not hold (by name); the
-        reading options (``kind``, ``fps``, ``units``, ``up``, ``forward``, ``normalize_bones``)
-        must be those the database was built with, and ``joint_map`` None means the database's.
+        Add the takes of ``folder`` that the database at ``out`` does not hold (by name). Every
+        take, old and new, is read with the reading options the database recorded (``kind``,
+        ``fps``, ``units``, ``up``, ``forward``): one left as None takes the database's, one given
+        must be the database's (else :class:`~gesturekit.errors.ConfigError`, before anything is
+        read); ``normalize_bones`` must be the database's, and ``joint_map`` None means the
+        database's. A database built before the options were recorded is read with those given.
     keep_stats : bool
         With ``append``: keep the database's z-scoring statistics, thresholds and arrays (the new
         takes are z-scored with them); without it they are recomputed over every take, reading the
@@ -198,20 +216,39 @@ def build_database(
         A missing or empty folder, an unreadable joint map or take, an output
         that may not be written; the message names the path.
     """
-    from ._database_from_folder import build_from_sources, recorded_joint_map
+    from ._database_from_folder import build_from_sources, recorded_build, recorded_reading
 
     folder = Path(folder).expanduser()
-    options = ReadOptions(units=units, up=up, forward=forward, normalize_bones=normalize_bones)
     out = Path(out).expanduser()
+    given: dict[str, Any] = {"kind": kind, "fps": fps, "units": units, "up": up, "forward": forward}
+    recorded = recorded_build(out) if append else None
+    if recorded is not None:
+        given = recorded_reading(recorded, given, out)
+    kind = given["kind"] or "auto"
+    options = ReadOptions(
+        units=given["units"] or "auto",
+        up=given["up"],
+        forward=given["forward"] or "auto",
+        normalize_bones=normalize_bones,
+        check_plausible=check_plausible,
+        allow_duration_mismatch=allow_duration_mismatch,
+    )
     sources = discover_takes(folder, kind=kind)
-    if append and joint_map is None:
-        joint_map = recorded_joint_map(out)
+    if recorded is not None and joint_map is None and isinstance(recorded.get("joint_map"), str):
+        joint_map = recorded["joint_map"]
     _read_joint_map(joint_map, {s.kind for s in sources})  # read here: a bad one fails before any take
+    # what --append reads every take with later
+    reading = {
+        "kind": sources[0].kind,
+        "fps": given["fps"],
+        "units": options.units,
+        "up": options.up,
+        "forward": options.forward,
+        "normalize_bones": normalize_bones,
+    }
     if config is not None or not append:
         config = replace(
-            config or BuildConfig(),
-            source=str(folder.resolve()),
-            joint_map=None if joint_map is None else str(joint_map),
+            config or BuildConfig(), source=str(folder.resolve()), joint_map=_recorded_map(joint_map), reading=reading
         )
 
     def on_take(p: BuildProgress) -> None:
@@ -225,11 +262,11 @@ def build_database(
         out,
         config=config,
         # the joint map as given: worker processes read it again (a read map does not travel between processes)
-        reading={"joint_map": joint_map, "fps_in": fps, "options": options},
+        reading={"joint_map": joint_map, "fps_in": given["fps"], "options": options},
         # (the skeleton, fitted in the build, joins the key there)
         reading_key={
             "joint_map": _joint_map_identity(joint_map),
-            "fps": fps,
+            "fps": given["fps"],
             **{k: v for k, v in asdict(options).items() if k != "skeleton"},
         },
         inputs=[folder],
@@ -244,6 +281,15 @@ def build_database(
         notes=notes,
     )
     return MatchingDatabase.load(out)
+
+
+def _recorded_map(joint_map: str | os.PathLike[str] | None) -> str | None:
+    """The joint map as ``database.json`` records it: a preset's name, or a file's absolute path
+    (so that ``--append`` finds it from any directory)."""
+    if joint_map is None:
+        return None
+    path = Path(joint_map)
+    return os.path.abspath(path) if path.is_file() else str(joint_map)
 
 
 def _joint_map_identity(joint_map: str | os.PathLike[str] | None) -> list | None:

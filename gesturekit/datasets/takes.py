@@ -42,9 +42,16 @@ __all__ = [
     "iter_takes",
     "fit_takes_skeleton",
     "count_takes",
+    "MAX_DURATION_MISMATCH",
+    "check_durations",
 ]
 
 AUDIO_EXTENSIONS = (".wav", ".flac", ".ogg", ".mp3")
+#: A take's motion and speech may differ by this fraction of the longer (and by
+#: :data:`DURATION_SLACK_S`) before it is refused: a wrong ``--fps`` or file frame time.
+MAX_DURATION_MISMATCH = 0.05
+#: Seconds of difference always accepted (silence before or after the speech, a short take).
+DURATION_SLACK_S = 1.0
 POSITION_EXTENSIONS = (".npy", ".npz", ".txt", ".csv")
 KINDS = ("auto", "bvh", "positions", "habibie2021")
 
@@ -167,6 +174,16 @@ class ReadOptions:
         With ``normalize_bones``: the skeleton to give the takes (a database's, or one
         :func:`fit_takes_skeleton` fitted). Without one, :func:`iter_takes` fits it over all the
         takes it is given before it yields the first.
+    check_plausible : bool
+        Check what was given against the data, as ``auto`` values are checked: the body's size in
+        the given ``units``, its uprightness with the given ``up``, the joint map's skeleton
+        (:func:`gesturekit.datasets._axes.check_skeleton`) and, in joint-position files, frames far
+        from the body. False (``--no-plausibility-check``) is for the rare data that fails them
+        and is right.
+    allow_duration_mismatch : bool
+        Accept a take whose motion and speech durations differ by more than
+        :data:`MAX_DURATION_MISMATCH` (``--allow-duration-mismatch``); else it is refused, naming
+        the frame rate that would make them agree.
     """
 
     units: str = "auto"
@@ -174,6 +191,8 @@ class ReadOptions:
     forward: str = "auto"
     normalize_bones: bool = False
     skeleton: Skeleton | None = None
+    check_plausible: bool = True
+    allow_duration_mismatch: bool = False
 
     def __post_init__(self) -> None:
         from ._axes import check_axes_options
@@ -238,7 +257,12 @@ def iter_takes(
                 if "bvh" not in maps:
                     maps["bvh"] = load_joint_map(joint_map or "zeggs")
                 motion, reading = read_bvh_take(
-                    src.motion, joint_map=maps["bvh"], units=opts.units, up=opts.up, forward=opts.forward
+                    src.motion,
+                    joint_map=maps["bvh"],
+                    units=opts.units,
+                    up=opts.up,
+                    forward=opts.forward,
+                    check_plausible=opts.check_plausible,
                 )
             else:
                 from .positions import load_position_joint_map, read_positions_take
@@ -259,18 +283,24 @@ def iter_takes(
                     units=opts.units,
                     up=opts.up,
                     forward=opts.forward,
+                    check_plausible=opts.check_plausible,
                 )
             if opts.normalize_bones:
                 motion, reading = normalise_motion(motion, reading, skeleton=opts.skeleton)
             audio = load_audio(speech, take=True)
-            info = {"motion": str(src.motion), "audio": str(src.audio), READING_KEY: reading.text()}
+            if not opts.allow_duration_mismatch:
+                fps_option = None if src.kind == "bvh" else ("--fps", float(fps_in or 0))
+                check_durations(motion, len(audio), path=src.motion, fps_option=fps_option)
+            info = {**_file_record("motion", src.motion), **_file_record("audio", speech), READING_KEY: reading.text()}
             yield Take(src.motion.stem, motion, audio, info)
         else:
             from .habibie2021 import load_habibie2021
 
             if opts.up is not None or opts.forward != "auto":
                 raise ConfigError("--up and --forward are for BVH and joint-position files, not the habibie2021 kind")
+            record = _file_record("file", src.motion)
             for take in load_habibie2021(src.motion, units="m" if opts.units == "auto" else opts.units):
+                take = Take(take.name, take.motion, take.audio, {**take.sources, **record})
                 if opts.normalize_bones:
                     positions, report = _normalise(take.motion, opts.skeleton)
                     take = Take(
@@ -280,6 +310,58 @@ def iter_takes(
                         {**take.sources, READING_KEY: f"habibie2021 layout; bones: {report}"},
                     )
                 yield take
+
+
+def _file_record(key: str, path: Path) -> dict[str, str]:
+    """A take's source file for ``database.json``: its absolute path, and its size and modification
+    time (``KEY_stat``, ``"SIZE:MTIME_NS"``), so that ``--append`` finds it from anywhere and notices
+    a file changed since."""
+    path = Path(os.path.abspath(path))
+    st = path.stat()
+    return {key: str(path), f"{key}_stat": f"{st.st_size}:{st.st_mtime_ns}"}
+
+
+def check_durations(
+    motion: Motion, n_samples: int, *, path: str | os.PathLike[str], fps_option: tuple[str, float] | None
+) -> None:
+    """Refuse a take whose motion and speech last different times (beyond :data:`MAX_DURATION_MISMATCH`).
+
+    Parameters
+    ----------
+    motion : Motion
+        The take's motion as read.
+    n_samples : int
+        Samples of its speech at :data:`gesturekit.motion.AUDIO_SR`.
+    path : path
+        The motion file, named in the message.
+    fps_option : (str, float) or None
+        The option that set the motion's source frame rate and its value (``("--fps", 30.0)``),
+        or None when the file states its own (BVH).
+
+    Raises
+    ------
+    MotionFileError
+        The message gives both durations and the frame rate that would make them agree.
+    """
+    from ..errors import MotionFileError
+    from ..motion import AUDIO_SR
+
+    motion_s = motion.n_frames / motion.fps
+    speech_s = n_samples / AUDIO_SR
+    longer = max(motion_s, speech_s)
+    if speech_s <= 0 or abs(motion_s - speech_s) <= max(DURATION_SLACK_S, MAX_DURATION_MISMATCH * longer):
+        return
+    if fps_option is not None:
+        option, fps = fps_option
+        agree = fps * motion_s / speech_s
+        hint = f"at {option} {agree:.4g} they would agree; give the files' frame rate"
+    else:
+        hint = "the file's frame time may be wrong, or the speech is of another take"
+    raise MotionFileError(
+        f"the motion lasts {motion_s:.2f} s and its speech {speech_s:.2f} s ({abs(motion_s - speech_s) / longer:.0%} "
+        f"apart); {hint} (--allow-duration-mismatch keeps such a take, trimming the longer)",
+        path=path,
+    )
 
 
 def _normalise(motion: Motion, skeleton: Skeleton | None) -> tuple[np.ndarray, str]:
