@@ -126,7 +126,7 @@ def allowed(path: str | os.PathLike, *, what: str, write: bool = False) -> Path:
     ConfigError
         Empty.
     PathNotAllowedError
-        Outside :func:`gesturekit.paths.allowed_roots` (the message lists them).
+        Outside :func:`gesturekit.paths.allowed_roots` (the message says how to add a folder, not which they are).
     """
     return check_allowed(path, what=what, write=write)
 
