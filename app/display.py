@@ -61,6 +61,7 @@ __all__ = [
     "skeleton_note",
     "user_errors",
     "warnings_shown",
+    "WORD_JOINER",
 ]
 
 #: The server log of the app: unexpected errors (with their tracebacks) and failed background work.
@@ -69,6 +70,10 @@ LOG = logging.getLogger("gesturekit.app")
 
 _PUNCTUATION = frozenset(string.punctuation)
 _LINE_BREAK = re.compile(r"\r\n|\r|\n")
+#: Where GitHub's Markdown finds a bare link (``http://x``, ``www.x``, ``a@b.c``) in the text.
+_AUTOLINK = re.compile(r"https?(?=:)|www(?=\.)|@", re.IGNORECASE)
+#: U+2060 WORD JOINER: invisible, and it breaks no line.
+WORD_JOINER = "\u2060"
 
 
 def escape_markdown(text: object) -> str:
@@ -76,15 +81,21 @@ def escape_markdown(text: object) -> str:
 
     Every ASCII punctuation character gets a backslash, which CommonMark (and GitHub's
     Markdown, which Streamlit renders) defines as that character itself: no link, image,
-    emphasis, code, HTML tag, heading, list, table, autolink, ``$`` formula or Streamlit
-    ``:color[...]`` directive can begin. Line breaks stay line breaks.
+    emphasis, code, HTML tag, heading, list, table, ``$`` formula or Streamlit ``:color[...]``
+    directive can begin. Line breaks stay line breaks. Bare links (``http://...``, ``www.``,
+    an e-mail address) are found by Streamlit's renderer in the text after the escapes are
+    undone: an invisible :data:`WORD_JOINER` after ``http``, ``https``, ``www`` and ``@``
+    keeps them text. That character is the only difference a reader could find (by copying).
 
     Examples
     --------
-    >>> print(escape_markdown("![x](http://127.0.0.1/x.png)"))
-    \!\[x\]\(http\:\/\/127\.0\.0\.1\/x\.png\)
+    >>> print(escape_markdown("![x](pwn.png)"))
+    \!\[x\]\(pwn\.png\)
+    >>> escape_markdown("http://x").replace(WORD_JOINER, "~")
+    'http~\\:\\/\\/x'
     """
-    escaped = "".join("\\" + c if c in _PUNCTUATION else c for c in str(text))
+    joined = _AUTOLINK.sub(lambda m: m.group(0) + WORD_JOINER, str(text))
+    escaped = "".join("\\" + c if c in _PUNCTUATION else c for c in joined)
     return _LINE_BREAK.sub("  \n", escaped)  # a hard break: a lone newline would join the lines
 
 

@@ -27,6 +27,10 @@ TIMEOUT = 90
 #: renderer could make of the text (Streamlit's own renderer does not pass raw HTML).
 _RENDERER = MarkdownIt("commonmark", {"html": True}).enable(["table", "strikethrough"])
 _MARKUP = re.compile(r"<(?!/?(?:p|br|strong|em|h[1-6])\b)[^>]*>")  # any tag but our own bold and breaks
+#: What GitHub's Markdown (remark-gfm, Streamlit's renderer) turns into a link in a text node, after
+#: escapes are undone: a bare URL or ``www.`` address, and an e-mail address.
+_BARE_LINK = re.compile(r"(https?://|www(?=\.))[-.\w]+|[-.\w+]+@[-\w]+(\.[-\w]+)+", re.IGNORECASE)
+WORD_JOINER = "\u2060"
 
 
 def markdown_database(src: Path, dst: Path, *, label: str, take: str, source: str | None = None) -> Path:
@@ -47,9 +51,17 @@ def rendered(markdown: str) -> str:
     return _RENDERER.render(markdown)
 
 
-def visible(markup: str) -> str:
-    """The text a reader sees in rendered HTML (tags dropped, entities decoded)."""
-    return html.unescape(re.sub(r"<[^>]+>", "", markup))
+def visible(markup: str, *, joiners: bool = False) -> str:
+    """The text a reader sees in rendered HTML (tags dropped, entities decoded, and the invisible
+    word joiners that keep bare links text taken out unless ``joiners``)."""
+    text = html.unescape(re.sub(r"<[^>]+>", "", markup))
+    return text if joiners else text.replace(WORD_JOINER, "")
+
+
+def _no_link(out: str) -> None:
+    """No link, image or HTML tag in the rendered ``out``, and no bare link for GitHub's autolinker."""
+    assert "<a " not in out and "<img" not in out and not _MARKUP.search(out), out
+    assert not _BARE_LINK.search(visible(out, joiners=True)), out
 
 
 def _escape():
@@ -73,19 +85,25 @@ PAYLOADS = [
     "<http://127.0.0.1:8599/auto> [ref]\n\n[ref]: http://127.0.0.1:8599/ref",
     "# title\n- item\n1. one\n> quote\n```\ncode\n```\n| a | b |\n|---|---|\n| c | d |",
     "**bold** _it_ ~~gone~~ `code` $x^2$ :red[red] \\*kept\\* &amp; &#60;",
+    "http://127.0.0.1:8599/bare HTTPS://x.y www.example.org me@example.org",
 ]
 
 
 @pytest.mark.parametrize("text", PAYLOADS)
 def test_escaped_payloads_render_as_their_own_text(escape, text):
     out = rendered(escape(text))
-    assert "<a " not in out and "<img" not in out and not _MARKUP.search(out), out
+    _no_link(out)
     lines = [line.strip() for line in text.splitlines() if line.strip()]
     assert [line.strip() for line in visible(out).splitlines() if line.strip()] == lines
 
 
 @settings(max_examples=300, deadline=None)
-@given(text=st.text(st.characters(blacklist_categories=["Cs", "Cc"]), max_size=60))
+@given(
+    text=st.text(st.characters(blacklist_categories=["Cs", "Cc"]), max_size=60)
+    | st.lists(st.sampled_from(["http", "s", "://", "www", ".", "@", "a", "b.c", "![", "](", ")", "<", ">"])).map(
+        "".join
+    )
+)
 def test_any_escaped_line_renders_as_itself_without_links_images_or_html(text):
     """Whatever one line of text holds, its rendering is that text, with no link, image or tag."""
     import sys
@@ -95,10 +113,10 @@ def test_any_escaped_line_renders_as_itself_without_links_images_or_html(text):
         escape = _escape()
     finally:
         sys.path.remove(str(ROOT / "app"))
-    out = rendered(f"a{escape(text)}b")  # letters around it: the renderer trims a paragraph's ends
-    assert "<a " not in out and "<img" not in out and not _MARKUP.search(out), out
-    # the renderer turns NUL into U+FFFD, as browsers do
-    assert visible(out).rstrip("\n").removeprefix("<p>") == f"a{text}b".replace("\0", "\ufffd")
+    out = rendered(f" {escape(text)} ")  # spaces around it: a bare link may begin after one
+    _no_link(out)
+    # the renderer trims a paragraph's ends, and turns NUL into U+FFFD, as browsers do
+    assert visible(out).strip("\n") == text.replace("\0", "\ufffd").replace(WORD_JOINER, "").strip()
 
 
 # ---- the pages ------------------------------------------------------------------------------------
@@ -119,7 +137,7 @@ def _assert_literal(at: AppTest, *payloads: str) -> None:
     shown = []
     for source in _markdown_texts(at):
         out = rendered(source)
-        assert "<a " not in out and "<img" not in out and not _MARKUP.search(out), (source, out)
+        _no_link(out)
         shown.append(visible(out))
     for payload in payloads:
         assert any(payload in text for text in shown), (payload, shown)
