@@ -16,6 +16,7 @@ import nav
 import resources
 import sidebar
 import streamlit as st
+from display import escape_markdown
 
 
 def home() -> None:
@@ -36,9 +37,9 @@ def home() -> None:
     sidebar.show_database_label(db)
     d = db.describe()
     st.markdown(
-        f"`{d['path']}`: {d['takes']} takes, {d['clips']} clips of {d['clip_frames']} frames "
+        f"{escape_markdown(d['path'])}: {d['takes']} takes, {d['clips']} clips of {d['clip_frames']} frames "
         f"({d['minutes_in_clips']:.1f} minutes at {d['fps']} fps), "
-        f"{'with' if d['has_audio'] else 'without'} audio. Source: {d['source'] or 'unknown'}."
+        f"{'with' if d['has_audio'] else 'without'} audio. Source: {escape_markdown(d['source'] or 'unknown')}."
     )
     st.caption("Choose another database, or build one from a folder of takes, in the sidebar.")
 

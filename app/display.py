@@ -12,6 +12,13 @@ is read or written: only folders inside :func:`gesturekit.paths.allowed_roots`
 browser user of a served app cannot open, list or write the server's other
 folders. A file named in a message that lies outside them is shown by its
 name only.
+
+Markup. Text that comes from a user or a file (a database's label, take
+names, paths, control strings, and the messages that quote them) is passed
+through :func:`escape_markdown` before any Streamlit call that renders
+Markdown (``st.markdown``, ``st.caption``, ``st.error`` and its kin, progress
+texts): a label ``![x](http://host/x.png)`` is shown as those characters,
+never as an image the browser fetches or a link.
 """
 
 from __future__ import annotations
@@ -20,7 +27,9 @@ import contextlib
 import functools
 import logging
 import os
+import re
 import secrets
+import string
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -42,6 +51,7 @@ __all__ = [
     "LOG",
     "allowed",
     "error_text",
+    "escape_markdown",
     "result_bvh",
     "result_downloads",
     "run_page",
@@ -51,10 +61,42 @@ __all__ = [
     "skeleton_note",
     "user_errors",
     "warnings_shown",
+    "WORD_JOINER",
 ]
 
 #: The server log of the app: unexpected errors (with their tracebacks) and failed background work.
 LOG = logging.getLogger("gesturekit.app")
+
+
+_PUNCTUATION = frozenset(string.punctuation)
+_LINE_BREAK = re.compile(r"\r\n|\r|\n")
+#: Where GitHub's Markdown finds a bare link (``http://x``, ``www.x``, ``a@b.c``) in the text.
+_AUTOLINK = re.compile(r"https?(?=:)|www(?=\.)|@", re.IGNORECASE)
+#: U+2060 WORD JOINER: invisible, and it breaks no line.
+WORD_JOINER = "\u2060"
+
+
+def escape_markdown(text: object) -> str:
+    r"""``text`` (``str(text)``) made literal for Streamlit's Markdown: shown as it is, never as markup.
+
+    Every ASCII punctuation character gets a backslash, which CommonMark (and GitHub's
+    Markdown, which Streamlit renders) defines as that character itself: no link, image,
+    emphasis, code, HTML tag, heading, list, table, ``$`` formula or Streamlit ``:color[...]``
+    directive can begin. Line breaks stay line breaks. Bare links (``http://...``, ``www.``,
+    an e-mail address) are found by Streamlit's renderer in the text after the escapes are
+    undone: an invisible :data:`WORD_JOINER` after ``http``, ``https``, ``www`` and ``@``
+    keeps them text. That character is the only difference a reader could find (by copying).
+
+    Examples
+    --------
+    >>> print(escape_markdown("![x](pwn.png)"))
+    \!\[x\]\(pwn\.png\)
+    >>> escape_markdown("http://x").replace(WORD_JOINER, "~")
+    'http~\\:\\/\\/x'
+    """
+    joined = _AUTOLINK.sub(lambda m: m.group(0) + WORD_JOINER, str(text))
+    escaped = "".join("\\" + c if c in _PUNCTUATION else c for c in joined)
+    return _LINE_BREAK.sub("  \n", escaped)  # a hard break: a lone newline would join the lines
 
 
 @contextlib.contextmanager
@@ -73,7 +115,7 @@ def user_errors() -> Iterator[None]:
     try:
         yield
     except (GestureKitError, OSError) as exc:
-        st.error(error_text(exc), icon=":material/error:")
+        st.error(escape_markdown(error_text(exc)), icon=":material/error:")
 
 
 def error_text(exc: GestureKitError | OSError) -> str:
@@ -126,7 +168,7 @@ def allowed(path: str | os.PathLike, *, what: str, write: bool = False) -> Path:
     ConfigError
         Empty.
     PathNotAllowedError
-        Outside :func:`gesturekit.paths.allowed_roots` (the message lists them).
+        Outside :func:`gesturekit.paths.allowed_roots` (the message says how to add a folder, not which they are).
     """
     return check_allowed(path, what=what, write=write)
 
@@ -142,7 +184,7 @@ def warnings_shown() -> Iterator[list[str]]:
             yield messages
         finally:
             for message in messages:
-                st.warning(message)
+                st.warning(escape_markdown(message))
 
 
 def selected_row(table: pd.DataFrame, *, key: str, height: int, column_config: dict | None = None) -> int | None:
@@ -295,9 +337,9 @@ def show_bvh_report(data: bytes | None, report: BvhReport | str) -> None:
     """Under a result's downloads: the BVH's error against the motion, its warning over 1 cm, or why
     there is no BVH (from :func:`result_bvh`)."""
     if data is None or isinstance(report, str):
-        st.error(f"No BVH file: {report}", icon=":material/error:")
+        st.error(f"No BVH file: {escape_markdown(report)}", icon=":material/error:")
         return
-    st.caption(f"BVH {report.summary()}")
+    st.caption(f"BVH {escape_markdown(report.summary())}")
     message = report.warning()
     if message is not None:
-        st.warning(message[0].upper() + message[1:], icon=":material/warning:")
+        st.warning(escape_markdown(message[0].upper() + message[1:]), icon=":material/warning:")

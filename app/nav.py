@@ -88,8 +88,7 @@ def run(home: Callable[[], None]) -> None:
     Call once per run, from the entrypoint (``Home.py``).
     """
     page = st.navigation(
-        [st.Page(home, title=HOME_TITLE, icon=":material/waving_hand:", default=True)]
-        + [p.streamlit_page() for p in PAGES]
+        [st.Page(home, title=HOME_TITLE, icon=state.APP_ICON, default=True)] + [p.streamlit_page() for p in PAGES]
     )
     state.page_setup(page.title)
     display.run_page(page.run)

@@ -15,7 +15,7 @@ from typing import Any
 
 import resources
 import streamlit as st
-from display import allowed, user_errors, warnings_shown
+from display import allowed, escape_markdown, user_errors, warnings_shown
 
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.datasets.takes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES, reading_lines
@@ -80,11 +80,13 @@ def _select_database() -> Path:
 
 def show_database_label(db: MatchingDatabase, *, container: Any = st) -> None:
     """Say which database is open and what it holds; generated data is flagged as such."""
-    name = db.path.name if db.path is not None else "(in memory)"
+    # the folder's name and the label are the user's (or a file's): shown as typed, never as markup
+    name = escape_markdown(db.path.name) if db.path is not None else "(in memory)"
+    label = escape_markdown(db.label or "")
     if is_generated(db):
-        container.warning(f"**Generated data** · {name}: {db.label or 'the demo speaker'}", icon=":material/science:")
+        container.warning(f"**Generated data** · {name}: {label or 'the demo speaker'}", icon=":material/science:")
     else:
-        container.info(f"**{name}**" + (f": {db.label}" if db.label else ""), icon=":material/storage:")
+        container.info(f"**{name}**" + (f": {label}" if label else ""), icon=":material/storage:")
 
 
 def sidebar_database() -> MatchingDatabase:
@@ -111,7 +113,7 @@ def sidebar_database() -> MatchingDatabase:
         try:
             db = resources.load_database(path)
         except DatabaseError as exc:  # e.g. built by an older gesturekit: offer to rebuild it
-            st.error(str(exc), icon=":material/error:")
+            st.error(escape_markdown(exc), icon=":material/error:")
             if st.button("Rebuild the demo database", key="_gk.rebuild_demo"):
                 resources.rebuild_demo(path)
                 st.rerun()
@@ -119,7 +121,8 @@ def sidebar_database() -> MatchingDatabase:
     else:
         db = resources.load_database(path)
     show_database_label(db, container=st.sidebar)
-    st.sidebar.caption(f"`{db.path}` · {_count(db.n_clips, 'clip')} · {_count(len(db.take_names), 'take')}")
+    counts = f"{_count(db.n_clips, 'clip')} · {_count(len(db.take_names), 'take')}"
+    st.sidebar.caption(f"{escape_markdown(db.path)} · {counts}")
     return db
 
 
@@ -282,7 +285,7 @@ def _build_expander() -> None:
             bar = st.progress(0.0, text="finding takes…")
 
             def progress(i: int, total: int, name: str) -> None:
-                bar.progress(min(1.0, i / max(total, 1)), text=f"read {i}/{total} takes ({name})")
+                bar.progress(min(1.0, i / max(total, 1)), text=f"read {i}/{total} takes ({escape_markdown(name)})")
 
             with warnings_shown() as warned, resources.build_lock():
                 db = _build_from_folder(
@@ -305,9 +308,12 @@ def _build_expander() -> None:
             st.session_state[_FLASH_KEY] = [
                 (
                     "success",
-                    f"Built {_count(db.n_clips, 'clip')} from {_count(len(db.take_names), 'take')} into {db.path}",
+                    f"Built {_count(db.n_clips, 'clip')} from {_count(len(db.take_names), 'take')} into "
+                    f"{escape_markdown(db.path)}",
                 )
             ]
-            st.session_state[_FLASH_KEY] += [("info", line) for line in reading_lines(db.meta.get("takes", []))]
-            st.session_state[_FLASH_KEY] += [("warning", w) for w in warned]
+            st.session_state[_FLASH_KEY] += [
+                ("info", escape_markdown(line)) for line in reading_lines(db.meta.get("takes", []))
+            ]
+            st.session_state[_FLASH_KEY] += [("warning", escape_markdown(w)) for w in warned]
             st.rerun()

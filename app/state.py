@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from gesturekit.synthesize import SynthesisConfig, SynthesisResult
 
 __all__ = [
+    "APP_ICON",
     "PINS_KEY",
     "SYNTHESIS_KEY",
     "current_synthesis",
@@ -41,6 +42,10 @@ __all__ = [
     "run_synthesis",
 ]
 
+#: The app's icon (the browser tab's and Home's): an emoji, which the browser draws itself. A Material
+#: icon (``:material/...:``) as the page icon makes every browser fetch it from fonts.gstatic.com;
+#: in the page itself, Material icons come from the font Streamlit serves.
+APP_ICON = "👋"
 _RUN_KEY = "_gk.page_run"  # runs of any page in this session (see page_setup)
 #: Session-state key of the user's latest synthesis: a dict with ``result`` (SynthesisResult),
 #: ``run`` (a number that changes with every new result), ``database`` (resolved folder),
@@ -52,7 +57,7 @@ PINS_KEY = "gk.pins"
 _RUN_COUNTER = "gk.run_counter"
 
 
-def page_setup(title: str, *, icon: str = ":material/waving_hand:") -> None:
+def page_setup(title: str, *, icon: str = APP_ICON) -> None:
     """Page title and wide layout; called before every page is drawn (it also counts the
     session's runs, see :func:`remount_key`)."""
     st.set_page_config(page_title=f"{title} · gesturekit", page_icon=icon, layout="wide")

@@ -111,7 +111,8 @@ def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) ->
         ``path`` is empty.
     PathNotAllowedError
         ``path`` lies outside :func:`allowed_roots`; the message names the
-        path as typed and the allowed folders.
+        path as typed and how to allow a folder, not the allowed folders
+        (server paths).
     """
     if not str(path).strip():
         raise ConfigError(f"type the {what}")
@@ -119,10 +120,11 @@ def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) ->
     roots = allowed_roots(write=write)
     if _inside(resolved, roots):
         return resolved
-    listed = ", ".join(str(root) for root in roots)
+    # the roots themselves are not listed: they are the server's paths (its home, where the package
+    # is installed), which a visitor of a served app has no business knowing
     raise PathNotAllowedError(
-        f"the {what} must be inside one of the folders this app may {'write' if write else 'read'}: {listed} "
-        f"(whoever runs the server can add folders with {APP_ROOTS_ENV})",
+        f"the {what} is outside the allowed folders{' for writing' if write else ''}; whoever runs the server "
+        f"can allow a folder by adding it to the {APP_ROOTS_ENV} environment variable",
         path=path,
     )
 

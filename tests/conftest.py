@@ -115,3 +115,15 @@ def make_take(seconds: float, *, seed: int = 0, name: str = "take", fps: float =
     env = 0.5 + 0.5 * np.sin(2 * np.pi * (1.5 + seed % 3) * t)
     audio = (0.3 * env * np.sin(2 * np.pi * (150 + 20 * seed) * t) + 0.01 * rng.normal(size=t.size)).astype(np.float32)
     return Take(name, Motion(pos, fps), audio, {"generator": "tests"})
+
+
+def shown(markdown: str) -> str:
+    """What a reader sees of an element's Markdown source (an AppTest element's ``value``): the text
+    rendered, without markup, escapes or the invisible word joiners (app/display.escape_markdown)."""
+    import html
+    import re
+
+    from markdown_it import MarkdownIt
+
+    text = html.unescape(re.sub(r"<[^>]+>", "", MarkdownIt("commonmark").render(str(markdown))))
+    return text.replace("\u2060", "").strip()

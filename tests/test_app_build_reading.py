@@ -10,6 +10,8 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.keypoint_example import write_keypoint_example
 from gesturekit.skeleton import DERIVED
 
+from .conftest import shown
+
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 TIMEOUT = 60
 
@@ -31,13 +33,13 @@ def test_the_build_form_reads_y_down_keypoints_with_up_and_refuses_them_without(
     out = tmp_path / "built"
     at = _fill(AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run(), folder, out, up="y (checked)")
     assert not at.exception
-    errors = [e.value for e in at.error]
+    errors = [shown(e.value) for e in at.error]
     assert any("pass --up -y" in e and "take_00.csv" in e for e in errors), errors
     assert not (out / "database.json").exists()
 
     at = _fill(at, folder, out, up="-y")
-    assert not at.exception and not [e.value for e in at.error]
+    assert not at.exception and not [shown(e.value) for e in at.error]
     db = MatchingDatabase.load(out)
     assert db.joint_presence.names(DERIVED)[:3] == ("spine_mid", "chest", "upper_chest")
     assert "bone lengths normalised" in db.meta["takes"][1]["sources"]["reading"]
-    assert any("up -y (given)" in i.value for i in at.sidebar.info)
+    assert any("up -y (given)" in shown(i.value) for i in at.sidebar.info)

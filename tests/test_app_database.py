@@ -15,7 +15,7 @@ from gesturekit.demo import build_demo_database
 from gesturekit.skeleton import bones
 
 from .conftest import chart_spec as _chart
-from .conftest import viewer
+from .conftest import shown, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 DATABASE_PAGE = "views/3_Database.py"
@@ -56,16 +56,16 @@ def _clip_bones(db: MatchingDatabase, clip: int) -> np.ndarray:
 
 
 def _error_texts(at: AppTest) -> list[str]:
-    return [e.value for e in at.error]
+    return [shown(e.value) for e in at.error]
 
 
 def test_home_opens_the_demo_database_and_labels_it_generated(app_env):
     at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
     assert not at.exception
     assert not _error_texts(at)
-    assert any(DEMO_LABEL in w.value and "Generated data" in w.value for w in at.main.warning)
-    assert any("Habibie" in m.value for m in at.markdown)
-    assert any(str(app_env / "db" / "demo") in m.value for m in at.markdown)
+    assert any(DEMO_LABEL in shown(w.value) and "Generated data" in shown(w.value) for w in at.main.warning)
+    assert any("Habibie" in shown(m.value) for m in at.markdown)
+    assert any(str(app_env / "db" / "demo") in shown(m.value) for m in at.markdown)
     assert [link.proto.label for link in at.get("page_link")] == [
         "Synthesize",
         "Retrieval inspector",
@@ -83,7 +83,7 @@ def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):
     clips = next(t for t in tables if "start_frame" in t.columns)
     assert list(takes["take"]) == db.take_names
     assert len(clips) == db.n_clips
-    assert [m.value for m in at.metric][:2] == [str(db.n_clips), str(len(db.take_names))]
+    assert [shown(m.value) for m in at.metric][:2] == [str(db.n_clips), str(len(db.take_names))]
 
     hist = _chart(at, "db.histograms")
     assert [t["meta"]["attribute"] for t in hist["data"]] == list(db.attribute_names)
@@ -151,7 +151,7 @@ def test_databases_in_the_working_directory_are_offered(app_env, tmp_path):
     assert options[0].startswith("demo database") and options[1] == f"copy  ({tmp_path / 'db'})"
     at.sidebar.selectbox[0].select_index(1).run()
     assert not at.exception
-    assert any(str((tmp_path / "db" / "copy").resolve()) in c.value for c in at.sidebar.caption)
+    assert any(str((tmp_path / "db" / "copy").resolve()) in shown(c.value) for c in at.sidebar.caption)
 
 
 def test_building_into_an_existing_database_or_from_a_missing_folder_is_an_error(app_env, tmp_path):
@@ -159,12 +159,12 @@ def test_building_into_an_existing_database_or_from_a_missing_folder_is_an_error
     at.sidebar.text_input(key="_gk.build_folder").input(str(tmp_path / "no_takes"))
     at.sidebar.button(key="_gk.build_go").click().run()
     assert not at.exception
-    assert [e.value for e in at.sidebar.error] == [f"{tmp_path / 'no_takes'}: no such folder"]
+    assert [shown(e.value) for e in at.sidebar.error] == [f"{tmp_path / 'no_takes'}: no such folder"]
 
     at.sidebar.text_input(key="_gk.build_out").input(str(app_env / "db" / "demo"))
     at.sidebar.button(key="_gk.build_go").click().run()
     assert not at.exception
-    (err,) = [e.value for e in at.sidebar.error]
+    (err,) = [shown(e.value) for e in at.sidebar.error]
     assert str(app_env / "db" / "demo") in err and "already exists" in err
 
 
@@ -180,9 +180,9 @@ def test_building_from_a_folder_of_takes_selects_the_new_database(app_env, tmp_p
     at.sidebar.button(key="_gk.build_go").click().run()
     assert not at.exception and not _error_texts(at)
     assert (out / "database.json").is_file()
-    assert any(str(out) in s.value for s in at.sidebar.success)
+    assert any(str(out) in shown(s.value) for s in at.sidebar.success)
     assert at.session_state["gk.database"] == str(out.resolve())
-    assert not any(DEMO_LABEL in w.value for w in at.main.warning)  # recorded motion: no "generated" flag
+    assert not any(DEMO_LABEL in shown(w.value) for w in at.main.warning)  # recorded motion: no "generated" flag
     assert any(c.value.endswith("· 1 take") for c in at.sidebar.caption)
 
 
@@ -198,7 +198,7 @@ def test_fresh_machine_builds_the_demo_database(tmp_path, monkeypatch):
     assert bar.proto.value == 100
     db = MatchingDatabase.load(home / "db" / "demo")
     assert db.meta["build"]["source"] == "demo (seed 0, 0.5 min)"
-    assert any(DEMO_LABEL in w.value for w in at.main.warning)
+    assert any(DEMO_LABEL in shown(w.value) for w in at.main.warning)
 
 
 def test_an_invalid_demo_size_is_reported(tmp_path, monkeypatch):
@@ -225,7 +225,7 @@ def test_an_unreadable_demo_database_can_be_rebuilt(tmp_path, monkeypatch):
     at.button(key="_gk.rebuild_demo").click().run()
     assert not at.exception and not _error_texts(at)
     assert MatchingDatabase.load(home / "db" / "demo").n_clips > 0
-    assert any(DEMO_LABEL in w.value for w in at.main.warning)
+    assert any(DEMO_LABEL in shown(w.value) for w in at.main.warning)
 
 
 def test_building_with_worker_processes_gives_the_database_of_one(app_env, tmp_path, zeggs_files):

@@ -17,7 +17,7 @@ from gesturekit.datasets.synthetic import generate_demo_take
 
 from .conftest import chart_spec as chart
 from .conftest import plotly_array as array
-from .conftest import viewer
+from .conftest import shown, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
@@ -50,7 +50,7 @@ def synthesized() -> AppTest:
     at.number_input(key="_w.synth.record").set_value(TOPK).run()
     at.button(key="synth.go").click().run()
     at.switch_page(INSPECT).run()
-    assert not at.exception and not [e.value for e in at.error], at.exception
+    assert not at.exception and not [shown(e.value) for e in at.error], at.exception
     return at
 
 
@@ -77,7 +77,7 @@ def test_without_a_result_the_page_says_where_to_start(app_env):
     at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
     at.switch_page(INSPECT).run()
     assert not at.exception
-    assert any("Synthesize page first" in i.value for i in at.info)
+    assert any("Synthesize page first" in shown(i.value) for i in at.info)
     assert [p.proto.label for p in at.get("page_link")] == ["Synthesize"]
 
 
@@ -113,7 +113,7 @@ def test_a_candidates_speech_comes_with_its_context_marked(app_env, db):
     res = result(at)
     row = table(at, "audio_dist").iloc[0]
     n = res.config.segment
-    (caption,) = [c.value for c in at.caption if "the window is" in c.value]
+    (caption,) = [shown(c.value) for c in at.caption if "the window is" in shown(c.value)]
     spec = chart(at, "inspect.context")
     (band,) = [sh for sh in spec["layout"]["shapes"] if sh["type"] == "rect"]
     take = db.take_audio(int(db.clip_take[row["clip"]]))
@@ -157,7 +157,7 @@ def test_pinning_a_candidate_changes_that_step_and_can_be_undone(app_env):
     assert not row["chosen"]
     at.selectbox(key="_w.inspect.candidate").set_value(3).run()
     at.button(key="inspect.use").click().run()
-    assert not at.exception and not [e.value for e in at.error]
+    assert not at.exception and not [shown(e.value) for e in at.error]
     after = result(at)
     assert (
         (after.search.clip[2], after.search.start[2])
@@ -183,7 +183,7 @@ def test_pinning_a_candidate_changes_that_step_and_can_be_undone(app_env):
 def test_comparing_k_shows_the_results_side_by_side(app_env):
     at = synthesized()
     at.button(key="inspect.compare_go").click().run()
-    assert not at.exception and not [e.value for e in at.error]
+    assert not at.exception and not [shown(e.value) for e in at.error]
     views = viewer(at, "inspect.compare_views")
     assert [m["label"] for m in views["motions"]] == ["k = 0", "k = 1", "k = 2"]
     compared = table(at, "control_met")
@@ -201,5 +201,5 @@ def test_a_result_of_another_database_is_not_inspected_against_this_one(app_env,
     at.run()
     at.sidebar.selectbox[0].select_index(1).run()
     assert not at.exception
-    assert any("Synthesize page first" in i.value for i in at.info)
+    assert any("Synthesize page first" in shown(i.value) for i in at.info)
     assert not at.get("plotly_chart")

@@ -8,6 +8,8 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit.datasets.synthetic import generate_demo_take
 
+from .conftest import shown
+
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 PAGE = "views/4_Study_stimuli.py"
 TIMEOUT = 120
@@ -27,7 +29,7 @@ def test_conditions_table_render_and_preview(app_env, tmp_path):
     take, _ = generate_demo_take(seconds=2.0, seed=3, name="s")
     sf.write(speech / "hello.wav", take.audio[:19200], 16000)  # 1.2 s
     at = _page()
-    assert any("Choose speech" in i.value for i in at.info)
+    assert any("Choose speech" in shown(i.value) for i in at.info)
     at.text_input(key="_w.study.folder").set_value(str(speech)).run()
     at.selectbox(key="_w.study.resolution").set_value("320x240")
     at.number_input(key="_w.study.workers").set_value(1)
@@ -37,7 +39,7 @@ def test_conditions_table_render_and_preview(app_env, tmp_path):
     assert sorted(table["system"]) == ["knn", "random"] and set(table["audio"]) == {"hello.wav"}
     at.button(key="study.go").click().run()
     assert not at.exception, at.exception
-    assert not [e.value for e in at.error]
+    assert not [shown(e.value) for e in at.error]
     manifest = pd.read_csv(tmp_path / "study" / "manifest.csv")
     assert sorted(manifest["id"]) == sorted(table["id"])
     assert len(at.get("video")) == 2  # the preview of participant 1's first stimuli
@@ -48,4 +50,4 @@ def test_a_missing_folder_is_an_error_message(app_env, tmp_path):
     at = _page()
     at.text_input(key="_w.study.folder").set_value(str(tmp_path / "nowhere")).run()
     assert not at.exception
-    assert any("no such folder" in e.value for e in at.error)
+    assert any("no such folder" in shown(e.value) for e in at.error)

@@ -21,7 +21,7 @@ from gesturekit.viz.figures import WRIST_ROWS
 
 from .conftest import chart_spec as chart
 from .conftest import plotly_array as array
-from .conftest import viewer
+from .conftest import shown, viewer
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 PAGE = "views/1_Synthesize.py"
@@ -87,7 +87,7 @@ def bands(spec: dict) -> list[tuple[float, float, str]]:
 
 
 def errors(at: AppTest) -> list[str]:
-    return [e.value for e in at.error]
+    return [shown(e.value) for e in at.error]
 
 
 def result(at: AppTest):
@@ -96,7 +96,7 @@ def result(at: AppTest):
 
 def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     at = upload(open_page(), speech_file(4.0, sr=22050, channels=2))
-    assert any("WAV (PCM_16), 22050 Hz, 2 channels, 4.00 s" in c.value for c in at.caption)
+    assert any("WAV (PCM_16), 22050 Hz, 2 channels, 4.00 s" in shown(c.value) for c in at.caption)
     at = add_rows(at, {"start_s": 1.0, "end_s": 2.5, "constraint": "left_hand=high"})
     assert not at.exception and not errors(at)
     assert bands(chart(at, "synth.waveform")) == [(1.0, 2.5, "left_hand=high")]
@@ -143,22 +143,22 @@ def test_a_first_visit_opens_on_example_speech_until_a_file_is_uploaded(app_env)
     hint = "Until you upload a file, the page works on example speech."
     example = next(iter(gs.SPEECH_EXAMPLES))
     assert at.radio(key="_w.synth.mode").value == "Upload a file"
-    assert [c.value for c in at.caption if c.value == hint] == [hint]
-    assert any(c.value.startswith(f"**{example}**") for c in at.caption)
+    assert [shown(c.value) for c in at.caption if shown(c.value) == hint] == [hint]
+    assert any(shown(c.value).startswith(f"{example} ·") for c in at.caption)
     wave = chart(at, "synth.waveform")
     assert array(wave["data"][0]["x"])[-1] == pytest.approx(gs.SPEECH_EXAMPLES[example][0], abs=0.05)
     assert not at.button(key="synth.go").disabled
 
     at = upload(at, speech_file(3.0), name="mine.wav")
-    assert not [c for c in at.caption if c.value == hint]
-    assert any(c.value.startswith("**mine.wav**") for c in at.caption)
+    assert not [c for c in at.caption if shown(c.value) == hint]
+    assert any(shown(c.value).startswith("mine.wav ·") for c in at.caption)
     assert array(chart(at, "synth.waveform")["data"][0]["x"])[-1] == pytest.approx(3.0, abs=0.05)
     at.button(key="synth.go").click().run()
     assert not at.exception and result(at).source == "mine.wav" and result(at).n_frames == 45
 
     # removing the file keeps the uploaded speech (the uploader also forgets it on a page switch)
     at.file_uploader(key="synth.upload").set_value(None).run()
-    assert any(c.value.startswith("**mine.wav**") for c in at.caption)
+    assert any(shown(c.value).startswith("mine.wav ·") for c in at.caption)
 
 
 def test_box_selecting_on_the_waveform_adds_and_cuts_segments(app_env):
@@ -203,7 +203,7 @@ def test_a_failed_upload_keeps_the_last_result_and_speech_in_view(app_env):
     assert err.startswith("notes.wav: ")
     assert not at.exception
     assert at.session_state["synth.speech"]["name"] == "good.wav"  # the last readable file is still the speech
-    assert any("Still working on **good.wav**" in c.value for c in at.caption)
+    assert any("Still working on good.wav," in shown(c.value) for c in at.caption)
     assert viewer(at, "synth.skeleton") and result(at).source == "good.wav"  # the result stays
     assert not at.button(key="synth.go").disabled
     at.run()  # the failed file is not read again, and still reported above the result
@@ -218,15 +218,15 @@ def test_settings_that_differ_from_the_paper_are_named(app_env):
     assert not [c.value for c in at.caption if "Differs from the paper" in c.value]  # the defaults are the paper's
     at.number_input(key="_w.synth.segment").set_value(6)
     at.selectbox(key="_w.synth.init").set_value("rest").run()
-    (note,) = [c.value for c in at.caption if c.value.startswith("Differs from the paper")]
+    (note,) = [shown(c.value) for c in at.caption if shown(c.value).startswith("Differs from the paper")]
     assert note == "Differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)"
     at.button(key="synth.go").click().run()
     assert not at.exception and not errors(at)
     assert result(at).config.segment == 6
     assert any(
-        "differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)" in c.value
+        "differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)" in shown(c.value)
         for c in at.caption
-        if "seed" in c.value
+        if "seed" in shown(c.value)
     )
 
 
@@ -234,7 +234,7 @@ def test_a_silent_upload_is_accepted_with_a_warning(app_env):
     buf = io.BytesIO()
     sf.write(buf, np.zeros(32000, np.float32), 16000, format="WAV")
     at = upload(open_page(), buf.getvalue(), name="quiet.wav")
-    assert [w.value for w in at.main.warning if "silent" in w.value] == [
+    assert [shown(w.value) for w in at.main.warning if "silent" in shown(w.value)] == [
         "quiet.wav: the audio is silent (peak level at or below -80 dBFS)"
     ]
     assert not errors(at) and not at.button(key="synth.go").disabled
@@ -344,7 +344,7 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
     speeds = {t["meta"]["motion"]: array(t["y"]) for t in wrists["data"] if t["meta"]["attribute"] == "left_hand_speed"}
     np.testing.assert_allclose(speeds[0], frame_attributes(res.knn_motion.positions)[:, 2], atol=1e-5)
     np.testing.assert_allclose(speeds[1], frame_attributes(res.refined_motion.positions)[:, 2], atol=1e-5)
-    assert any("refined" in c.value for c in at.caption)
+    assert any("refined" in shown(c.value) for c in at.caption)
 
     # the refiner on but not loadable: an error, and no run without it
     at.text_input(key="_w.synth.refiner_path").input("").run()

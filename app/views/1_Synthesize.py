@@ -70,7 +70,7 @@ def speech_input() -> dict | None:
             token = ("upload", up.file_id)
             failed = ss.get(_FAILED)
             if failed is not None and failed[0] == token:
-                st.error(failed[1], icon=":material/error:")
+                st.error(display.escape_markdown(failed[1]), icon=":material/error:")
                 return _kept_speech()
             if ss.get(SPEECH, {}).get("token") != token:
                 try:
@@ -79,7 +79,7 @@ def speech_input() -> dict | None:
                 except (GestureKitError, OSError) as exc:
                     # remembered, so the same upload is not decoded again on every rerun
                     ss[_FAILED] = (token, display.error_text(exc))
-                    st.error(ss[_FAILED][1], icon=":material/error:")
+                    st.error(display.escape_markdown(ss[_FAILED][1]), icon=":material/error:")
                     return _kept_speech()
                 _set_speech(token, up.name, audio, info.summary(), notes)
         elif SPEECH not in ss:
@@ -104,7 +104,7 @@ def _kept_speech() -> dict | None:
     error is shown above it); the example speech does not stand in for a file the user chose."""
     speech = st.session_state.get(SPEECH)
     if speech is not None and speech["token"][0] == "upload":
-        st.caption(f"Still working on **{speech['name']}**, the last file that could be read.")
+        st.caption(f"Still working on **{display.escape_markdown(speech['name'])}**, the last file that could be read.")
         return speech
     return None
 
@@ -183,7 +183,7 @@ def controls(speech: dict) -> ControlTrack | None:
         "Low/high compare with the database's percentile thresholds (see the Database page)."
     )
     if problem:
-        st.error(problem, icon=":material/error:")
+        st.error(display.escape_markdown(problem), icon=":material/error:")
     return track
 
 
@@ -317,7 +317,7 @@ def video(record: dict) -> None:
             data = gs.render_mp4(result, progress=progress)
         except GestureKitError as exc:
             bar.empty()
-            st.error(f"Could not render the video: {exc}")
+            st.error(f"Could not render the video: {display.escape_markdown(exc)}")
             return
         seconds = time.perf_counter() - t0
         bar.empty()
@@ -337,12 +337,12 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
     c = result.config
     parts = [f"k = {c.k}", f"N = {c.segment}", f"seed {c.seed}", f"initial pose: {c.init}", f"blend: {c.blend}"]
     if result.control:
-        parts.append(f"controls: `{result.control.to_text()}`")
+        parts.append(f"controls: {display.escape_markdown(result.control.to_text())}")
     if c.pins:
         parts.append(f"{len(c.pins)} pinned step{'s' if len(c.pins) > 1 else ''}")
     if result.refined_motion is not None:
         made_by = getattr(result, "refiner", None)
-        parts.append(f"refined by `{made_by['path']}`" if made_by else "refined")
+        parts.append(f"refined by {display.escape_markdown(made_by['path'])}" if made_by else "refined")
     differs = c.paper_differences(refined=result.refined_motion is not None)
     if differs:
         parts.append("differs from the paper: " + "; ".join(differs))
@@ -397,9 +397,9 @@ def main() -> None:
         if record is not None:  # the last result stays in view
             show_result(db, record)
         return
-    st.caption(f"**{speech['name']}** · {speech['summary']}")
+    st.caption(f"**{display.escape_markdown(speech['name'])}** · {display.escape_markdown(speech['summary'])}")
     for note in speech["notes"]:
-        st.warning(note, icon=":material/warning:")
+        st.warning(display.escape_markdown(note), icon=":material/warning:")
     st.audio(gs.wav_bytes(speech["audio"]), format="audio/wav")
 
     st.subheader("2 · Controls")

@@ -91,7 +91,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
     st.markdown(
         f"**Step {step}** · output frames {a}–{b - 1} ({a / fps:.2f}–{b / fps:.2f} s) · "
         f"chosen: clip {int(s.clip[step])} from frame {int(s.start[step])} "
-        f"(take **{overview['take']}** at {overview['source_s']:.2f} s){flags} · "
+        f"(take **{display.escape_markdown(overview['take'])}** at {overview['source_s']:.2f} s){flags} · "
         f"{int(s.n_candidates[step])} clips survived"
     )
     table = gs.candidates_table(result, db, step)
@@ -170,7 +170,7 @@ def context(db: MatchingDatabase, r: Any, n_frames: int) -> None:
     audio, a, b, t0 = gs.segment_in_context(db, r.clip, r.start, n_frames, context_s=CONTEXT_S)
     st.caption(
         f"…with up to {CONTEXT_S:g} s around it: the window is {a:.2f}–{b:.2f} s of this "
-        f"{len(audio) / AUDIO_SR:.2f} s excerpt ({r.take} at {t0 + a:.2f}–{t0 + b:.2f} s)"
+        f"{len(audio) / AUDIO_SR:.2f} s excerpt ({display.escape_markdown(r.take)} at {t0 + a:.2f}–{t0 + b:.2f} s)"
     )
     st.audio(gs.wav_bytes(audio), format="audio/wav")
     fig = waveform_figure(audio, AUDIO_SR, bands=[(a, b, "window")], height=150)
@@ -189,7 +189,7 @@ def pins_view(db: MatchingDatabase, record: dict) -> None:
         take = db.take_names[int(db.clip_take[clip])]
         c = st.columns([4, 1])
         c[0].markdown(
-            f"step **{i}**: clip {clip} from frame {start} ({take} at "
+            f"step **{i}**: clip {clip} from frame {start} ({display.escape_markdown(take)} at "
             f"{(int(db.clip_start[clip]) + start) / db.fps:.2f} s)"
         )
         if c[1].button("Remove", key=f"inspect.unpin_{i}"):
@@ -244,7 +244,8 @@ def main() -> None:
         return
     result = record["result"]
     st.caption(
-        f"**{result.source}** · {result.search.n_steps} steps of {result.config.segment} frames · "
+        f"**{display.escape_markdown(result.source)}** · "
+        f"{result.search.n_steps} steps of {result.config.segment} frames · "
         f"k = {result.config.k} · candidates in the combined ranking of pose rank + audio rank, best first"
     )
     step = pick_step(db, result)

@@ -30,8 +30,9 @@ def summary(db: MatchingDatabase) -> None:
     cols[3].metric("Frame rate", f"{d['fps']} fps")
     cols[4].metric("Audio", "stored" if d["has_audio"] else "none")
     st.markdown(
-        f"**Label:** {d['label'] or '(none)'}  \n**Source:** {d['source'] or '(unknown)'}  \n"
-        f"**Folder:** `{d['path']}`  \n"
+        f"**Label:** {display.escape_markdown(d['label'] or '(none)')}  \n"
+        f"**Source:** {display.escape_markdown(d['source'] or '(unknown)')}  \n"
+        f"**Folder:** {display.escape_markdown(d['path'])}  \n"
         f"**Clip size:** {d['clip_frames']} frames = {d['clip_frames'] / d['fps']:.2f} s; "
         + ", ".join(f"{k} {v}" for k, v in d["feature_sizes"].items())
         + (f"; {d['overlap_windows']} overlapping windows for the refiner" if d["overlap_windows"] else "")
@@ -106,7 +107,8 @@ def viewer(db: MatchingDatabase, clip: int) -> None:
     row = clips.iloc[clip]
     st.subheader(f"Clip {clip}")
     st.caption(
-        f"take **{row['take']}**, frames {row['start_frame']}–{row['start_frame'] + db.clip_frames - 1} "
+        f"take **{display.escape_markdown(row['take'])}**, "
+        f"frames {row['start_frame']}–{row['start_frame'] + db.clip_frames - 1} "
         f"({row['start_s']:.2f}–{row['end_s']:.2f} s)"
     )
     motion = Motion.from_flat(np.asarray(db.G[clip]), db.fps, db.joint_presence)

@@ -174,8 +174,9 @@ def show_result() -> None:
     folder = Path(result["folder"])
     st.subheader("Study")
     st.success(
-        f"Videos in `{folder / 'videos'}`; manifest (the key) `{folder / 'manifest.csv'}`; "
-        f"presentation order `{folder / 'order.csv'}`."
+        f"Videos in {display.escape_markdown(folder / 'videos')}; "
+        f"manifest (the key) {display.escape_markdown(folder / 'manifest.csv')}; "
+        f"presentation order {display.escape_markdown(folder / 'order.csv')}."
     )
     first = result["order"][result["order"]["participant"] == 1]["id"].tolist()[:PREVIEWS]
     st.markdown(f"**Preview**: the first {len(first)} stimuli participant 1 sees, as they will see them")
@@ -183,7 +184,7 @@ def show_result() -> None:
     for col, sid in zip(cols, first):
         path = folder / "videos" / f"{sid}.mp4"
         col.video(path.read_bytes(), format="video/mp4")
-        col.caption(sid)
+        col.caption(display.escape_markdown(sid))
     with st.expander("Manifest and presentation order"):
         st.dataframe(result["manifest"], hide_index=True, key="study.manifest")
         st.dataframe(result["order"], hide_index=True, key="study.order")

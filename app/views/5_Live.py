@@ -105,11 +105,11 @@ def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool) -> No
     if session is not None:
         st.session_state.pop(_FAILED, None)  # a new performance: the last one's failure is old news
     elif _FAILED in st.session_state:
-        st.error(st.session_state[_FAILED], icon=":material/error:")
+        st.error(display.escape_markdown(st.session_state[_FAILED]), icon=":material/error:")
     control_buttons(stage)
     view = session.view() if session is not None else None
     if session is not None and session.error:
-        st.error(session.error, icon=":material/error:")
+        st.error(display.escape_markdown(session.error), icon=":material/error:")
     if view is None:
         hint = "Listening: the body moves once the first second of speech has arrived…" if playing else ""
         st.info(hint or "Press **Start** above and allow the microphone; then speak.", icon=":material/mic:")
@@ -144,7 +144,7 @@ def show_performance(record: dict) -> None:
     fps = result.motion.fps
     parts = [f"{result.n_frames} frames, {result.n_frames / fps:.1f} s"]
     if result.control:
-        parts.append(f"controls: `{result.control.to_text()}`")
+        parts.append(f"controls: {display.escape_markdown(result.control.to_text())}")
     st.caption(" · ".join(parts))
     display.show_skeletons(result.motion, key="live.result", title=SOURCE, audio=result.audio, height=440)
     nav.link("Retrieval inspector")
