@@ -198,3 +198,20 @@ def test_the_candidates_plot_holds_every_point_and_room_for_its_label(points):
     # above the highest point, room for a label: a fifth of the points' spread (or of their size)
     spread = (max(ys) - min(ys)) or max(abs(max(ys)), 1.0) * 0.1
     assert y1 - max(ys) >= 0.2 * spread - 1e-12
+
+
+def test_take_names_and_labels_reach_plotly_as_text_not_markup():
+    """plotly reads HTML (<a href> makes a link) in names and hover labels, and fills %{...}
+    in hover templates: a take name or label from a file is shown as typed."""
+    payload = "<a href='http://127.0.0.1:9/x'>take</a> %{x}"
+    fig = candidates_figure(_record(position=2), 1, names=[payload, "b", "c", ""])
+    (cands,) = [t for t in fig.data if t.meta["part"] == "candidates"]
+    assert (
+        "<a" not in cands.hovertext[0] and "&lt;a href='http://127.0.0.1:9/x'&gt;take&lt;/a&gt;" in cands.hovertext[0]
+    )
+    assert "%{x}" not in cands.hovertext[0]
+    fig = wrist_figure([_lifting(30, 15.0, speed=0.2), _lifting(30, 15.0, speed=0.1)], labels=[payload, "plain"])
+    names = {t.name for t in fig.data if t.name}
+    assert not any("<a" in n or "%{x}" in n for n in names)
+    assert any(n.startswith("&lt;a href=") for n in names) and "plain" in names
+    assert not any("<a" in (t.hovertemplate or "") for t in fig.data)

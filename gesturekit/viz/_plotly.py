@@ -9,6 +9,7 @@ any form back. Used by :mod:`gesturekit.viz.skeleton_figure`,
 from __future__ import annotations
 
 import base64
+import html
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -58,6 +59,15 @@ def data_array(value: dict | Sequence[Any] | np.ndarray) -> np.ndarray:
         return out.astype(np.float64)
     cells = np.asarray(value, dtype=object)
     return np.array([np.nan if v is None else v for v in cells.ravel()], dtype=np.float64).reshape(cells.shape)
+
+
+def plotly_safe(text: str) -> str:
+    """``text`` as plotly shows it literally in a trace name, legend, annotation or hover label.
+
+    plotly reads a subset of HTML there (``<a href>`` makes a link) and fills ``%{...}`` in
+    hover templates: labels and take names come from users and files.
+    """
+    return html.escape(str(text), quote=False).replace("%{", "%\u2060{")
 
 
 def _motions_and_labels(

@@ -24,7 +24,7 @@ from plotly.subplots import make_subplots
 from ..errors import ConfigError
 from ..evaluate.metrics import KINEMATIC_JOINTS, audio_onsets, kinetic_velocity, motion_beats
 from ..motion import AUDIO_SR, Motion
-from ._plotly import MOTION_COLORS, _motions_and_labels
+from ._plotly import MOTION_COLORS, _motions_and_labels, plotly_safe
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -195,6 +195,7 @@ def join_profile_figure(
         from the join, y the mean joint speed (m/s); a vertical line shape named ``"join"`` at 0.
     """
     motions, labels = _motions_and_labels(motions, labels, who="join_profile_figure", empty_ok=True, label_one=True)
+    labels = [plotly_safe(label) for label in labels]
     fig = go.Figure()
     for i, (m, label) in enumerate(zip(motions, labels)):
         off, v = join_profile(m.positions, boundaries, fps=m.fps, radius=radius)
@@ -253,6 +254,7 @@ def beats_figure(
         (``{"part": "onsets"}``) at the bottom, with vertical line shapes named ``"onset"``.
     """
     motions, labels = _motions_and_labels(motions, labels, who="beats_figure", empty_ok=True, label_one=True)
+    labels = [plotly_safe(label) for label in labels]
     end = max(m.duration for m in motions) if end_s is None else float(end_s)
     if not end > start_s >= 0:
         raise ConfigError(f"need 0 <= start_s < end_s, got {start_s}-{end}")

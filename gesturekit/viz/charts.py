@@ -17,7 +17,7 @@ from plotly.subplots import make_subplots
 from ..control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, ControlTrack, frame_attributes
 from ..errors import ConfigError
 from ..motion import Motion
-from ._plotly import _BAND_COLORS, MOTION_COLORS, _motions_and_labels
+from ._plotly import _BAND_COLORS, MOTION_COLORS, _motions_and_labels, plotly_safe
 
 if TYPE_CHECKING:
     from ..database import MatchingDatabase
@@ -365,6 +365,7 @@ def wrist_figure(
         of a row.
     """
     motions, labels = _motions_and_labels(motions, labels, who="wrist_figure")
+    labels = [plotly_safe(label) for label in labels]
     bands = _as_bands(bands)
     if thresholds is not None:
         missing = [a for a, _ in WRIST_ROWS if a not in thresholds]
@@ -506,7 +507,7 @@ def candidates_figure(
             text=[str(p) for p in keep],
             textposition="top center",
             customdata=custom,
-            hovertext=None if names is None else [str(names[int(p)]) for p in keep],
+            hovertext=None if names is None else [plotly_safe(names[int(p)]) for p in keep],
             hovertemplate=hover + "<extra></extra>",
             marker=dict(size=9, color="#6b7f99"),
             name="candidates",

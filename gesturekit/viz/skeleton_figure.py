@@ -15,7 +15,7 @@ import plotly.graph_objects as go
 
 from ..motion import Motion
 from ..skeleton import BODY_JOINTS, N_JOINTS, JointPresence, joint_index
-from ._plotly import _frames_at, _motions_and_labels, _time_grid, _xyz
+from ._plotly import _frames_at, _motions_and_labels, _time_grid, _xyz, plotly_safe
 from .appearance import APPEARANCE, DERIVED_PART
 
 #: Most animation frames a skeleton figure holds (20 s at 15 fps). Longer motions are
@@ -226,6 +226,7 @@ def skeleton_figure(
         the wrong length, or a non-positive ``fps``/``max_frames``.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_figure", drawn=True)
+    labels = [plotly_safe(label) for label in labels]
     # per motion: (body, finger, derived polylines), each (frames, points, 3); markers at the
     # points draw every joint that exists (on a bone, or a lone point)
     grid_fps, step, times, offsets, parts, lo, hi = _skeleton_paths(
