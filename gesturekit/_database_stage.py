@@ -494,7 +494,9 @@ def _run_unit(job: StageJob, per_take: Callable[[Take, Path, int], dict[str, Any
 
 def staging_folder(out: Path) -> Path:
     """The staging folder of a build of the database folder ``out``: ``.NAME.staging`` beside it."""
-    return out.parent / f".{out.name}.staging"
+    from .outputs import beside_name
+
+    return out.parent / beside_name(out, ".staging")
 
 
 def is_staging(path: Path) -> bool:
