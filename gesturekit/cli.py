@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import os
 import sys
 import time
 import warnings
@@ -428,6 +429,8 @@ def _control_from_arg(text: str | None) -> str | None:
     if text.strip().lower().endswith((".csv", ".json")):
         from .errors import InputFileError
 
+        if os.path.exists(text):  # a FIFO or a device: refused by name, never read
+            return load_control_file(text).to_text()
         raise InputFileError("control file not found", path=text)
     try:
         return parse_control(text).to_text()

@@ -7,13 +7,18 @@ the file named, the problem said, no traceback) that left every file as it was.
 from __future__ import annotations
 
 import os
+import shutil
+import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 import soundfile as sf
 
 from gesturekit.database import BuildConfig, MatchingDatabase
+from gesturekit.paths import assets
 
+from . import hostile as h
 from .badinput import assert_refused, run_cli, snapshot
 from .conftest import make_take
 
@@ -102,3 +107,121 @@ def test_a_250_character_output_name_is_written(world, tmp_path, command):
     assert run.code == 0, run.stderr
     assert target.exists()
     assert not [p.name for p in target.parent.iterdir() if p.name.startswith(".")]
+
+
+# ----------------------------------------------------------------------------- what a file is
+
+DEMO_REFINER = assets() / "demo-refiner"
+DEEP = "[" * 100_000 + "]" * 100_000
+
+
+@pytest.fixture
+def work(world, tmp_path) -> Path:
+    """A per-test copy of the database, a refiner and the speech, free to break."""
+    shutil.copytree(world / "db", tmp_path / "db")
+    shutil.copytree(DEMO_REFINER, tmp_path / "refiner")
+    shutil.copy(world / "speech.wav", tmp_path / "speech.wav")
+    return tmp_path
+
+
+def _synth(work: Path, *extra) -> list:
+    return ["synthesize", work / "speech.wav", "--db", work / "db", "--out", work / "out", "--refiner", "none", *extra]
+
+
+def _fifo(path: Path) -> Path:
+    if path.exists():
+        path.unlink()
+    os.mkfifo(path)
+    return path
+
+
+def _deep(path: Path) -> Path:
+    path.write_text(DEEP)
+    return path
+
+
+def _bomb(path: Path, megabytes: int = 64) -> Path:
+    """An npz whose one member inflates to ``megabytes`` of zeros from a few kilobytes."""
+    path.unlink(missing_ok=True)
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        with z.open("F_mean.npy", "w", force_zip64=True) as f:
+            n = megabytes * 2**20 // 4
+            np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": (n,)})
+            zeros = bytes(2**20)
+            for _ in range(megabytes):
+                f.write(zeros)
+    return path
+
+
+# name: (make the case in the work folder -> (its arguments, what the message names), words of the problem)
+FILE_CASES = {
+    "deep database.json": (
+        lambda w: (_synth(w), _deep(w / "db" / "database.json").parent),
+        "database.json nests 100000 levels deep",
+    ),
+    "deep refiner config.json": (
+        lambda w: (_synth(w)[:-2] + ["--refiner", w / "refiner"], _deep(w / "refiner" / "config.json").parent),
+        "config.json nests 100000 levels deep",
+    ),
+    "deep control file": (
+        lambda w: (_synth(w, "--control", _deep(w / "c.json")), w / "c.json"),
+        "nests 100000 levels deep",
+    ),
+    "deep joint map": (
+        lambda w: (
+            ["build-db", h.position_take(w / "takes").parent, "--joint-map", _deep(w / "map.json"), "--out", f"{w}-db"],
+            w / "map.json",
+        ),
+        "joint map nests 100000 levels deep",
+    ),
+    "deep config.json in --out": (
+        lambda w: (
+            ["train-refiner", "--db", w / "db", "--out", _deep(w / "refiner" / "config.json").parent],
+            w / "refiner",
+        ),
+        "already",
+    ),
+    "FIFO speech": (lambda w: (_synth(w)[:1] + [_fifo(w / "s.wav")] + _synth(w)[2:], w / "s.wav"), "is a FIFO"),
+    "/dev/zero speech": (
+        lambda w: (_synth(w)[:1] + ["/dev/zero"] + _synth(w)[2:], "/dev/zero"),
+        "is a character device, not a regular file",
+    ),
+    "FIFO database array": (lambda w: (_synth(w), _fifo(w / "db" / "F.npy").parent), "F.npy is a FIFO"),
+    "FIFO database.json": (lambda w: (_synth(w), _fifo(w / "db" / "database.json").parent), "database.json is a FIFO"),
+    "FIFO database.json in --out": (
+        lambda w: (
+            ["build-db", "--demo", "--minutes", "0.5", "--out", _fifo(w / "db" / "database.json").parent, "--force"],
+            w / "db",
+        ),
+        "gesturekit did not write",
+    ),
+    "FIFO control file": (lambda w: (_synth(w, "--control", _fifo(w / "c.csv")), w / "c.csv"), "is a FIFO"),
+    "zip bomb database stats.npz": (
+        lambda w: (_synth(w), _bomb(w / "db" / "stats.npz").parent),
+        "stats.npz declares 67.1 MB",
+    ),
+    "database stats.npz claiming a terabyte": (
+        lambda w: (_synth(w), h.npz_claiming(w / "db" / "stats.npz", {"F_mean": (2**38,)}).parent),
+        "stats.npz F_mean declares shape",
+    ),
+    "zip bomb refiner stats.npz": (
+        lambda w: (_synth(w)[:-2] + ["--refiner", w / "refiner"], _bomb(w / "refiner" / "stats.npz").parent),
+        "stats.npz declares 67.1 MB",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(FILE_CASES))
+def test_hostile_file_refused(work, case):
+    make, problem = FILE_CASES[case]
+    args, names = make(work)
+    before = snapshot(work)
+    assert_refused(run_cli(*args), names=names, problem=problem, before=before)
+
+
+def test_database_json_beyond_the_json_limit_is_refused_before_reading(work, monkeypatch):
+    monkeypatch.setenv("GESTUREKIT_MAX_JSON_MB", "0.001")
+    before = snapshot(work)
+    run = run_cli(*_synth(work))
+    assert_refused(run, names=work / "db", problem="beyond the limit of 1 KB for a JSON file", before=before)
+    assert "GESTUREKIT_MAX_JSON_MB" in run.stderr
