@@ -225,3 +225,27 @@ def test_database_json_beyond_the_json_limit_is_refused_before_reading(work, mon
     run = run_cli(*_synth(work))
     assert_refused(run, names=work / "db", problem="beyond the limit of 1 KB for a JSON file", before=before)
     assert "GESTUREKIT_MAX_JSON_MB" in run.stderr
+
+
+# ----------------------------------------------------------------------------- live speech
+
+
+@pytest.mark.parametrize(
+    "scale, problem",
+    [
+        (1e30, r"must lie in \[-1, 1\], found .*e\+29 at sample .*the chunk was not used"),
+        (32767.0, "divide them by 32768"),
+    ],
+)
+def test_live_push_of_absurd_samples_is_refused_and_the_stream_goes_on(world, scale, problem):
+    from gesturekit.errors import ConfigError
+    from gesturekit.live import LiveSynthesizer
+
+    speech = make_take(3.0, seed=5).audio
+    live = LiveSynthesizer(MatchingDatabase.load(world / "db"))
+    live.push(speech[:16000])
+    with pytest.raises(ConfigError, match=problem):
+        live.push(speech[16000:24000] / np.abs(speech).max() * scale)
+    assert live.samples_in == 16000
+    live.push(speech[16000:])
+    assert live.finish().shape[1:] == (55, 3) and np.isfinite(live.result().motion.positions).all()
