@@ -318,7 +318,7 @@ def _cmd_synthesize(args) -> int:
         check_output(p, "file", overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
     refiner = open_refiner(_refiner_choice(args.refiner, db))
-    results = synthesize_batch(audios, db=db, config=config, refiner=refiner)
+    results = synthesize_batch(audios, db=db, config=config, refiner=refiner, names=[str(f) for f in files])
     with write_errors(out):
         out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     with contextlib.ExitStack() as held:

@@ -249,3 +249,18 @@ def test_live_push_of_absurd_samples_is_refused_and_the_stream_goes_on(world, sc
     assert live.samples_in == 16000
     live.push(speech[16000:])
     assert live.finish().shape[1:] == (55, 3) and np.isfinite(live.result().motion.positions).all()
+
+
+# ----------------------------------------------------------------------------- controls past the speech
+
+
+def test_a_control_past_the_end_of_the_speech_is_named_in_a_warning(work):
+    from gesturekit.errors import GestureKitWarning
+
+    with pytest.warns(GestureKitWarning) as record:
+        run = run_cli(*_synth(work, "--control", "1-2:left_hand=high,100-200:left_hand=low"))
+    assert run.code == 0, run.stderr
+    said = [str(w.message) for w in record if "control segment" in str(w.message)]
+    assert said == [
+        f"{work / 'speech.wav'}: control segment 100-200 s starts after the speech ends (3.0 s); it is ignored"
+    ]
