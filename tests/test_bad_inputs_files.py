@@ -264,3 +264,29 @@ def test_a_control_past_the_end_of_the_speech_is_named_in_a_warning(work):
     assert said == [
         f"{work / 'speech.wav'}: control segment 100-200 s starts after the speech ends (3.0 s); it is ignored"
     ]
+
+
+# ----------------------------------------------------------------------------- names that drive a terminal
+
+ESC = "\x1b[2J\x1b]0;owned\x07"
+
+
+def test_names_with_escape_sequences_are_printed_escaped(world, tmp_path):
+    speech = tmp_path / f"talk{ESC}.wav"
+    shutil.copy(world / "speech.wav", speech)
+    synth = run_cli("synthesize", speech, "--db", world / "db", "--out", tmp_path / "out", "--refiner", "none")
+    assert synth.code == 0, synth.stderr
+    db = tmp_path / "db"
+    MatchingDatabase.build([make_take(5.0, seed=1, name=f"take{ESC}")], config=BuildConfig(store_audio=False)).save(db)
+    info = run_cli("info", db, "--takes")
+    takes = tmp_path / f"takes{ESC}"
+    takes.mkdir()
+    (takes / f"a{ESC}.bvh").write_text("HIERARCHY\n")
+    sf.write(takes / f"a{ESC}.wav", make_take(3.0, seed=3).audio, 16000, subtype="PCM_16")
+    build = run_cli("build-db", takes, "--preset", "zeggs", "--out", tmp_path / "db2")
+    assert build.code == 2
+    for run in (synth, info, build):
+        assert "\x1b" not in run.stdout + run.stderr and "\x07" not in run.stdout + run.stderr
+    assert "talk\\x1b[2J\\x1b]0;owned\\x07" in synth.stdout
+    assert "take\\x1b[2J" in info.stdout
+    assert "a\\x1b[2J\\x1b]0;owned\\x07.bvh: no MOTION section" in build.stderr
