@@ -290,3 +290,19 @@ def test_names_with_escape_sequences_are_printed_escaped(world, tmp_path):
     assert "talk\\x1b[2J\\x1b]0;owned\\x07" in synth.stdout
     assert "take\\x1b[2J" in info.stdout
     assert "a\\x1b[2J\\x1b]0;owned\\x07.bvh: no MOTION section" in build.stderr
+
+
+# ----------------------------------------------------------------------------- worker processes
+
+
+def test_workers_beyond_the_cores_are_capped_with_a_warning(monkeypatch):
+    from gesturekit import _jobs
+    from gesturekit.errors import GestureKitWarning
+
+    monkeypatch.setattr(_jobs, "usable_cores", lambda: 2)
+    monkeypatch.delenv(_jobs.OVER_CORES_ENV, raising=False)
+    with pytest.warns(GestureKitWarning, match=r"--workers 64: .* 2 cores, so 2 worker processes run"):
+        assert _jobs.worker_count(64) == 2
+    assert _jobs.worker_count(2) == 2 and _jobs.worker_count(None) == 2
+    monkeypatch.setenv(_jobs.OVER_CORES_ENV, "1")
+    assert _jobs.worker_count(64) == 64
