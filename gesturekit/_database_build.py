@@ -29,6 +29,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from . import limits
 from ._database_audio import AudioStorage
 from ._database_folder import CLIP_ARRAYS, FORMAT, FORMAT_VERSION, read_database, write_meta, write_stats
 from ._database_stage import MOMENT_KEYS, BuildConfig, StageJob, stage_job, stage_take
@@ -93,9 +94,9 @@ class StagedTake:
     def load(self, what: str, *, header: bool = False) -> np.ndarray:
         """One staged array (``"F"``, ``"overlap.G"``, ``"audio"``, ``"moments_P"``, ...); with
         ``header``, memory-mapped (for its dtype and shape, nothing read)."""
-        return np.load(
-            self.folder / f"{self.record['index']}.{what}.npy", mmap_mode="r" if header else None, allow_pickle=False
-        )
+        path = self.folder / f"{self.record['index']}.{what}.npy"
+        limits.check_regular(path, what="a staged array ", error=ConfigError)
+        return np.load(path, mmap_mode="r" if header else None, allow_pickle=False)
 
 
 # ---- first pass: running the units ------------------------------------------------------------------

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from . import limits
 from ._database_audio import AudioStorage, encode_take_audio, read_take_audio, take_audio_fields
 from ._io import DATABASE_CLIP_ARRAYS, read_json_marker
 from .bones import Skeleton
@@ -187,6 +188,8 @@ def read_database(path: Path, *, mmap: bool) -> dict:
     mode: Literal["r"] | None = "r" if mmap else None
 
     def read(p: Path):
+        if os.path.lexists(p):
+            limits.check_regular(p, what=f"{p.name} ", error=DatabaseError, owner=path)
         try:
             return np.load(p, mmap_mode=mode, allow_pickle=False)
         except FileNotFoundError:
@@ -303,9 +306,15 @@ def _check_meta(meta: dict, path: Path) -> None:
             raise bad(f"counts.takes is {counts['takes']} but {len(takes)} takes are listed")
 
 
+# stats.npz holds six vectors of a few hundred numbers: far below this, and a zip bomb far above
+_STATS_MAX_BYTES = 1 << 20
+
+
 def _read_stats(path: Path) -> dict[str, np.ndarray]:
     """``stats.npz``: the six z-scoring vectors, finite, of the layout's sizes (never unpickled)."""
     f = path / "stats.npz"
+    if os.path.lexists(f):
+        limits.check_npz(f, max_bytes=_STATS_MAX_BYTES, what="stats.npz ", error=DatabaseError, owner=path)
     try:
         with np.load(f, allow_pickle=False) as z:
             stats = {k: np.asarray(z[k]) for k in z.files}

@@ -52,7 +52,7 @@ from ._database_audio import AudioStorage, encode_take_audio
 from ._database_folder import CLIP_ARRAYS
 from ._version import __version__
 from .control import frame_attributes
-from .errors import ConfigError, OutputError, collect_warnings, warn
+from .errors import ConfigError, GestureKitError, OutputError, collect_warnings, warn
 from .features import (
     LAYOUT,
     FeatureLayout,
@@ -63,6 +63,7 @@ from .features import (
     stack_audio_features,
     valid_starts,
 )
+from .limits import read_json
 from .motion import AUDIO_SR, Take, resample_positions
 from .skeleton import POSE_FEATURE_INDICES
 
@@ -409,9 +410,10 @@ def job_key(
 def staged_takes(staging: Path, key: str) -> dict[str, Any] | None:
     """The record of a complete staged unit (``takes`` and ``warnings``), or None when it is not staged."""
     try:
-        return json.loads((staging / key / "takes.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        record = read_json(staging / key / "takes.json")
+    except GestureKitError:  # missing, or damaged: the unit is staged again
         return None
+    return record if isinstance(record, dict) else None
 
 
 def stage_job(job: StageJob) -> dict[str, Any]:
@@ -499,14 +501,16 @@ def _run_unit(job: StageJob, per_take: Callable[[Take, Path, int], dict[str, Any
 
 def staging_folder(out: Path) -> Path:
     """The staging folder of a build of the database folder ``out``: ``.NAME.staging`` beside it."""
-    return out.parent / f".{out.name}.staging"
+    from .outputs import beside_name
+
+    return out.parent / beside_name(out, ".staging")
 
 
 def is_staging(path: Path) -> bool:
     """Whether ``path`` is a staging folder gesturekit made (its ``staging.json`` says so)."""
     try:
-        marker = json.loads((path / _MARKER).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        marker = read_json(path / _MARKER)
+    except GestureKitError:
         return False
     return isinstance(marker, dict) and marker.get("format") == STAGING_FORMAT
 

@@ -13,7 +13,6 @@ writing (disk full, permission denied) is raised as an
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import re
 import unicodedata
@@ -23,6 +22,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from .errors import ConfigError, GestureKitError
+from .limits import read_json
 from .paths import is_dir
 
 __all__ = ["atomic_write", "safe_filename", "read_json_marker", "FOLDER_KINDS", "DATABASE_CLIP_ARRAYS", "folder_kind"]
@@ -270,14 +270,9 @@ def read_json_marker(
     marker = folder / name
     if not is_dir(folder):
         raise error(messages["no_folder"], path=folder)
-    if not marker.is_file():
+    if not os.path.lexists(marker):
         raise error(messages["no_file"], path=folder)
-    try:
-        content = json.loads(marker.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise error(f"{name} is not valid JSON ({exc})", path=folder) from None
-    except OSError as exc:
-        raise error(f"{name} cannot be read ({exc.strerror})", path=folder) from None
+    content = read_json(marker, what=f"{name} ", error=error, owner=folder)
     if not isinstance(content, dict) or content.get("format") != marker_format:
         raise error(messages["other_format"], path=folder)
     if content.get("format_version") != version:
@@ -307,11 +302,13 @@ def folder_kind(path: str | os.PathLike[str]) -> str | None:
     path = Path(path)
     names = None
     for kind, (marker, fmt, _) in FOLDER_KINDS.items():
-        try:
-            meta = json.loads((path / marker).read_text(encoding="utf-8"))
-        except FileNotFoundError:
+        if not os.path.lexists(path / marker):
             continue
-        except (OSError, ValueError):
+        if not os.path.isfile(path / marker):
+            continue  # a FIFO or a device in a marker's place: nothing gesturekit wrote, never read
+        try:
+            meta = read_json(path / marker)
+        except GestureKitError:  # not a regular file, too large, not JSON: a damaged marker
             meta = None
         if isinstance(meta, dict):
             if meta.get("format") == fmt:

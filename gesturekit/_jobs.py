@@ -11,7 +11,7 @@ import os
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from .errors import ConfigError, GestureKitError
+from .errors import ConfigError, GestureKitError, warn
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -39,6 +39,45 @@ def connect_scheduler(address: str, *, purpose: str) -> Client:
         return distributed.Client(address, timeout=SCHEDULER_TIMEOUT)
     except (OSError, ValueError, TypeError) as exc:
         raise ConfigError(f"--scheduler {address}: cannot reach a Dask scheduler there ({exc})") from None
+
+
+#: Set to 1 to run more worker processes than the machine has cores (each costs ~100 MB).
+OVER_CORES_ENV = "GESTUREKIT_WORKERS_OVER_CORES"
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells it)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def worker_count(workers: int | None) -> int:
+    """How many worker processes to start: ``workers``, at most the usable cores unless
+    :data:`OVER_CORES_ENV` is set to 1 (a warning names the cap); all cores when None.
+
+    Raises
+    ------
+    ConfigError
+        ``workers`` is not a positive integer.
+    """
+    cores = usable_cores()
+    if workers is None:
+        return cores
+    try:
+        n = int(workers)
+    except (TypeError, ValueError):
+        n = 0
+    if n < 1:
+        raise ConfigError(f"workers must be a positive integer, got {workers!r}")
+    if n > cores and os.environ.get(OVER_CORES_ENV, "").strip() != "1":
+        warn(
+            f"--workers {n}: this machine lets gesturekit use {cores} cores, so {cores} worker processes "
+            f"run (more would only add memory; set {OVER_CORES_ENV}=1 to start {n})"
+        )
+        return cores
+    return n
 
 
 def run_jobs(
@@ -101,9 +140,7 @@ def run_jobs(
             if client is not scheduler:
                 client.close()
         return
-    n = (os.cpu_count() or 1) if workers is None else int(workers)
-    if n < 1:
-        raise ConfigError(f"workers must be a positive integer, got {workers!r}")
+    n = worker_count(workers)
     if n == 1 or len(jobs) <= 1:
         for job in jobs:
             on_result(job, fn(job))

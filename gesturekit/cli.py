@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import os
+import re
 import sys
 import time
 import warnings
@@ -26,10 +28,27 @@ if TYPE_CHECKING:
 __all__ = ["main", "build_parser"]
 
 
+# control characters (an escape sequence in a file name would drive the terminal), shown escaped
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def shown(text: object) -> str:
+    """``text`` as the terminal should see it: control characters escaped (``\\x1b``), newlines kept.
+
+    Every line the command line prints goes through it, so a file or take name holding an
+    escape sequence is shown, never obeyed.
+    """
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", str(text))
+
+
+def _print(*values: object, **options) -> None:
+    print(*(shown(v) for v in values), **options)
+
+
 def _progress_bar(total, unit, desc):
     from tqdm import tqdm
 
-    return tqdm(total=total, unit=unit, desc=desc, file=sys.stderr, dynamic_ncols=True, leave=False)
+    return tqdm(total=total, unit=unit, desc=shown(desc), file=sys.stderr, dynamic_ncols=True, leave=False)
 
 
 def _advance(bar, done, total=None, note: str | None = None) -> None:
@@ -38,7 +57,7 @@ def _advance(bar, done, total=None, note: str | None = None) -> None:
         bar.total = total
     bar.n = done
     if note is not None:
-        bar.set_postfix_str(note, refresh=False)
+        bar.set_postfix_str(shown(note), refresh=False)
     bar.refresh()
 
 
@@ -142,10 +161,10 @@ def _cmd_build_db(args) -> int:
                 ),
                 notes=notes.append,
             )
-    print(db.summary_text())
+    _print(db.summary_text())
     _print_readings(db)
     for line in notes:  # staged takes reused, what --append did
-        print(line)
+        _print(line)
     return _done(args, "built")
 
 
@@ -179,7 +198,7 @@ def _print_readings(db: MatchingDatabase) -> None:
     from .datasets.takes import reading_lines
 
     for line in reading_lines(db.meta.get("takes", [])):
-        print(line)
+        _print(line)
 
 
 def _audio_options(args) -> dict:
@@ -202,11 +221,11 @@ def _cmd_info(args) -> int:
     from .paths import default_database_path
 
     db = MatchingDatabase.load(args.database or default_database_path())
-    print(db.summary_text())
+    _print(db.summary_text())
     _print_readings(db)
     if args.takes:
-        print()
-        print(db.takes_table().to_string(index=False))
+        _print()
+        _print(db.takes_table().to_string(index=False))
     return 0
 
 
@@ -254,7 +273,7 @@ def _refiner_choice(given: str | None, db):
 
     found = refiner_for(db)
     if found is not None:
-        print(f"refining with {found}, trained on this database (--refiner none: the k-NN motion alone)")
+        _print(f"refining with {found}, trained on this database (--refiner none: the k-NN motion alone)")
     return found
 
 
@@ -319,7 +338,7 @@ def _cmd_synthesize(args) -> int:
         check_output(p, "file", overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
     refiner = open_refiner(_refiner_choice(args.refiner, db))
-    results = synthesize_batch(audios, db=db, config=config, refiner=refiner)
+    results = synthesize_batch(audios, db=db, config=config, refiner=refiner, names=[str(f) for f in files])
     with write_errors(out):
         out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     with contextlib.ExitStack() as held:
@@ -348,11 +367,11 @@ def _cmd_synthesize(args) -> int:
                 if relaxed
                 else ""
             )
-            print(
+            _print(
                 f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
                 f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}"
             )
-            print(f"  BVH {bvh_report.summary()}")
+            _print(f"  BVH {bvh_report.summary()}")
     return _done(args)
 
 
@@ -412,10 +431,10 @@ def _cmd_train_refiner(args) -> int:
     from .refine.folder import read_refiner_config
 
     cfg = read_refiner_config(out)
-    print(f"refiner    {out}")
-    print(f"preset     {cfg['preset']}  ({cfg['iteration']} iterations on {cfg['device']})")
-    print(f"windows    {cfg['pairs']['windows']} training windows (k-NN search {cfg['time']['search_s']:.1f} s)")
-    print(f"training   {cfg['time']['train_s']:.1f} s; losses in {out / 'loss_log.csv'}")
+    _print(f"refiner    {out}")
+    _print(f"preset     {cfg['preset']}  ({cfg['iteration']} iterations on {cfg['device']})")
+    _print(f"windows    {cfg['pairs']['windows']} training windows (k-NN search {cfg['time']['search_s']:.1f} s)")
+    _print(f"training   {cfg['time']['train_s']:.1f} s; losses in {out / 'loss_log.csv'}")
     return _done(args)
 
 
@@ -430,6 +449,8 @@ def _control_from_arg(text: str | None) -> str | None:
     if text.strip().lower().endswith((".csv", ".json")):
         from .errors import InputFileError
 
+        if os.path.exists(text):  # a FIFO or a device: refused by name, never read
+            return load_control_file(text).to_text()
         raise InputFileError("control file not found", path=text)
     try:
         return parse_control(text).to_text()
@@ -469,9 +490,9 @@ def _cmd_evaluate(args) -> int:
             sigma=args.beat_sigma,
             progress=lambda done, total, what: _advance(bar, done, total, what[-30:]),
         )
-    print(ev.to_markdown())
+    _print(ev.to_markdown())
     written = ev.save(out, overwrite=args.force)
-    print(f"wrote {', '.join(str(p) for p in written)}")
+    _print(f"wrote {', '.join(str(p) for p in written)}")
     return _done(args)
 
 
@@ -504,7 +525,7 @@ def _cmd_train_fgd(args) -> int:
         )
     model.info["held_out"] = list(args.holdout or ())
     model.save(out, overwrite=args.force)
-    print(
+    _print(
         f"FGD autoencoder: {model.info['clips_used']} clips used, {model.info['clips_held_out']} held out, "
         f"final reconstruction loss {model.info['final_loss']:.4f}"
     )
@@ -545,23 +566,23 @@ def _cmd_stimuli(args) -> int:
             overwrite=args.force,
             progress=lambda stage, done, total: _advance(bar(stage, total, "stimulus"), done),
         )
-    print(
+    _print(
         f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "
         f"systems) in {res.folder / 'videos'}"
     )
-    print(f"manifest (the key; keep it from raters): {res.folder / 'manifest.csv'}")
-    print(f"presentation order for {res.settings['participants']} participants: {res.folder / 'order.csv'}")
+    _print(f"manifest (the key; keep it from raters): {res.folder / 'manifest.csv'}")
+    _print(f"presentation order for {res.settings['participants']} participants: {res.folder / 'order.csv'}")
     return _done(args)
 
 
 def _done(args, what: str = "done") -> int:
     """Say that the command is done and how long it took (since :func:`main` began it); exit status 0."""
-    print(f"{what} in {time.perf_counter() - args.started:.1f} s")
+    _print(f"{what} in {time.perf_counter() - args.started:.1f} s")
     return 0
 
 
 def _format_warning(message, category, filename, lineno, line=None):
-    return f"warning: {message}\n"
+    return f"warning: {shown(message)}\n"
 
 
 def _limits_of(args):
@@ -594,16 +615,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             with _limits_of(args):
                 return command(args)
         except GestureKitError as exc:
-            print(f"gesturekit: error: {exc}", file=sys.stderr)
+            _print(f"gesturekit: error: {exc}", file=sys.stderr)
             return 2
         except OSError as exc:
             # the last net for a user's file that could not be read (a folder where a file was
             # expected, a name too long, an I/O error): one line naming it; other exceptions are
             # bugs and keep their traceback
-            print(f"gesturekit: error: {_os_error_text(exc)}", file=sys.stderr)
+            _print(f"gesturekit: error: {_os_error_text(exc)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
-            print("gesturekit: interrupted", file=sys.stderr)
+            _print("gesturekit: interrupted", file=sys.stderr)
             return 130
         finally:
             warnings.formatwarning = old

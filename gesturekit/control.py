@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from . import limits
 from .errors import ConfigError, InputFileError
 from .skeleton import FPS, joint_index
 
@@ -314,16 +315,22 @@ def load_control_file(path: str | os.PathLike) -> ControlTrack:
         without the three columns, or a row that is not a valid segment.
     """
     p = os.fspath(path)
+    is_json = p.lower().endswith(".json")
     try:
-        with open(p, encoding="utf-8") as fh:
-            text = fh.read()
+        if is_json:
+            text = ""
+        elif limits.check_regular(p, what="control file ") > limits.JSON_MB.value() * 1e6:
+            raise InputFileError(f"larger than a control file can be ({limits.JSON_MB.how_to_raise()})", path=p)
+        else:
+            with open(p, encoding="utf-8") as fh:
+                text = fh.read()
     except UnicodeDecodeError as exc:
         raise InputFileError(f"not UTF-8 text (byte {exc.start}); save the control file as UTF-8", path=p) from None
     except OSError as exc:
         raise InputFileError(f"cannot read control file ({exc.strerror})", path=p) from None
     try:
-        if p.lower().endswith(".json"):
-            data = json.loads(text)
+        if is_json:
+            data = limits.read_json(p)
             if isinstance(data, dict):
                 data = data.get("segments", [])
             if not isinstance(data, list):

@@ -18,7 +18,13 @@ audio sample rate                      4-384 kHz    ``GESTUREKIT_MIN_SAMPLE_RATE
                                                     ``GESTUREKIT_MAX_SAMPLE_RATE`` (Hz)
 motion frame rate (BVH, positions)     1-1000 fps   ``GESTUREKIT_MIN_FPS``, ``GESTUREKIT_MAX_FPS``
 one input once decoded in memory       4 GB         ``GESTUREKIT_MAX_INPUT_GB``
+one JSON file (database.json, a map)   64 MB        ``GESTUREKIT_MAX_JSON_MB``
 =====================================  ===========  ================================
+
+Every file is read only if it is a regular file (:func:`check_regular`): a FIFO
+would block the reader forever and a device never ends. JSON is read by
+:func:`read_json`, which refuses a file beyond its size limit before reading it
+and one nested deeper than :data:`JSON_DEPTH` before parsing it.
 
 The values are read from the environment at each check, so a test or a
 long-running server sees a change at once; :func:`override` sets one for a
@@ -36,7 +42,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import IO, TYPE_CHECKING
 
-from .errors import ConfigError, InputFileError, MotionFileError
+from .errors import ConfigError, GestureKitError, InputFileError, MotionFileError
 
 if TYPE_CHECKING:
     import numpy as np
@@ -63,6 +69,12 @@ __all__ = [
     "npy_header",
     "npz_headers",
     "array_bytes",
+    "JSON_MB",
+    "JSON_DEPTH",
+    "file_kind",
+    "check_regular",
+    "read_json",
+    "check_npz",
 ]
 
 
@@ -160,6 +172,10 @@ MAX_SAMPLE_RATE = Limit("GESTUREKIT_MAX_SAMPLE_RATE", 384000.0, "Hz")
 MIN_FPS = Limit("GESTUREKIT_MIN_FPS", 1.0, "frames per second")
 MAX_FPS = Limit("GESTUREKIT_MAX_FPS", 1000.0, "frames per second")
 INPUT_GB = Limit("GESTUREKIT_MAX_INPUT_GB", 4.0, "GB")
+JSON_MB = Limit("GESTUREKIT_MAX_JSON_MB", 64.0, "MB")
+
+#: How deeply the JSON files gesturekit reads may nest arrays and objects (they need 4 levels).
+JSON_DEPTH = 32
 
 
 def max_speech_seconds() -> float:
@@ -415,3 +431,197 @@ def array_bytes(shape: tuple[int, ...], itemsize: int) -> float:
     for d in shape:
         n *= d
     return n
+
+
+# ---- files: regular ones only, JSON bounded, npz archives checked -------------------------------------
+
+
+def file_kind(mode: int) -> str:
+    """What a file of ``st_mode`` ``mode`` is, in words (``"a FIFO"``, ``"a character device"``, ...)."""
+    import stat
+
+    for test, what in (
+        (stat.S_ISREG, "a regular file"),
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISLNK, "a symbolic link"),
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+    ):
+        if test(mode):
+            return what
+    return "not a regular file"
+
+
+def check_regular(
+    path: str | os.PathLike[str],
+    *,
+    what: str = "",
+    error: type[GestureKitError] = InputFileError,
+    owner: str | os.PathLike[str] | None = None,
+) -> int:
+    """Refuse anything but a regular file before it is opened; a FIFO would block its reader for ever.
+
+    Parameters
+    ----------
+    path : path
+    what : str
+        What the file is, in front of the problem (``"database.json "``); empty to name ``path`` alone.
+    error : type
+        The :class:`~gesturekit.errors.GestureKitError` subclass to raise.
+    owner : path, optional
+        What the message names instead of ``path`` (the folder holding it).
+
+    Returns
+    -------
+    int
+        The file's size in bytes.
+
+    Raises
+    ------
+    GestureKitError
+        Of type ``error``: missing, unreadable, or not a regular file (a folder, a FIFO, a device).
+    """
+    import stat
+
+    where = path if owner is None else owner
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise error(f"{what}not found", path=where) from None
+    except OSError as exc:
+        raise error(f"{what}cannot be read ({exc.strerror or exc})", path=where) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise error(f"{what}is {file_kind(st.st_mode)}, not a regular file", path=where)
+    return st.st_size
+
+
+def read_json(
+    path: str | os.PathLike[str],
+    *,
+    what: str = "",
+    error: type[GestureKitError] = InputFileError,
+    owner: str | os.PathLike[str] | None = None,
+    encoding: str = "utf-8",
+) -> object:
+    """A JSON file, refused if it is not a regular file, beyond :data:`JSON_MB` or nested too deeply.
+
+    The size is checked before anything is read (a 400 MB file would cost three
+    times that once parsed), the nesting before parsing (Python's parser
+    recurses, and raises ``RecursionError`` on deep input).
+
+    Parameters
+    ----------
+    path : path
+    what : str
+        What the file is, in front of the problem (``"database.json "``, ``"joint map "``).
+    error : type
+        The :class:`~gesturekit.errors.GestureKitError` subclass to raise.
+    owner : path, optional
+        What the message names instead of ``path`` (the folder holding it).
+    encoding : str
+        ``"utf-8"``, or ``"utf-8-sig"`` to accept a byte-order mark.
+
+    Returns
+    -------
+    object
+        The parsed content.
+
+    Raises
+    ------
+    GestureKitError
+        Of type ``error``: not a regular file, too large, too deep, not UTF-8 or not JSON.
+    """
+    import json
+
+    where = path if owner is None else owner
+    size = check_regular(path, what=what, error=error, owner=owner)
+    cap = JSON_MB.value() * 1e6
+    if size > cap:
+        raise error(
+            f"{what}is {describe_bytes(size)}, beyond the limit of {describe_bytes(cap)} for a JSON file "
+            f"({JSON_MB.how_to_raise()})",
+            path=where,
+        )
+    try:
+        with open(path, "rb") as f:
+            raw = f.read(int(cap) + 1)
+        text = raw.decode(encoding)
+    except UnicodeDecodeError as exc:
+        raise error(f"{what}is not UTF-8 text (byte {exc.start})", path=where) from None
+    except OSError as exc:
+        raise error(f"{what}cannot be read ({exc.strerror or exc})", path=where) from None
+    depth = _json_depth(text)
+    if depth > JSON_DEPTH:
+        raise error(f"{what}nests {depth} levels deep, beyond the {JSON_DEPTH} a gesturekit file uses", path=where)
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise error(f"{what}{'is ' if what else ''}not valid JSON ({exc})", path=where) from None
+
+
+def _json_depth(text: str) -> int:
+    """How deeply arrays and objects nest in JSON text (brackets inside strings do not count)."""
+    import re
+
+    import numpy as np
+
+    bare = re.sub(r'"(?:[^"\\]|\\.)*"', "", text).encode("utf-8", "replace")
+    b = np.frombuffer(bare, dtype=np.uint8)
+    steps = np.isin(b, (ord("["), ord("{"))).astype(np.int64) - np.isin(b, (ord("]"), ord("}")))
+    return int(np.cumsum(steps).max(initial=0))
+
+
+def check_npz(
+    path: str | os.PathLike[str],
+    *,
+    max_bytes: float,
+    what: str = "",
+    error: type[GestureKitError] = InputFileError,
+    owner: str | os.PathLike[str] | None = None,
+) -> None:
+    """Refuse an ``.npz`` whose members would decompress (or declare arrays) beyond ``max_bytes`` in all.
+
+    Only the archive's directory and each member's npy header are read: a zip
+    bomb is refused before it is inflated.
+
+    Parameters
+    ----------
+    path : path
+    max_bytes : float
+        The most the arrays may take together.
+    what, error, owner
+        As :func:`read_json`.
+
+    Raises
+    ------
+    GestureKitError
+        Of type ``error``: not a regular file, not an npz archive, or larger than ``max_bytes``.
+    """
+    import zipfile
+
+    where = path if owner is None else owner
+    check_regular(path, what=what, error=error, owner=owner)
+    try:
+        with zipfile.ZipFile(path) as z:
+            declared = sum(float(i.file_size) for i in z.infolist())
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
+        raise error(f"{what}cannot be read ({exc})", path=where) from None
+    if declared > max_bytes:
+        raise error(
+            f"{what}declares {describe_bytes(declared)} of arrays, beyond the {describe_bytes(max_bytes)} it can hold",
+            path=where,
+        )
+    try:
+        headers = npz_headers(path)
+    except MotionFileError as exc:
+        raise error(f"{what}cannot be read ({exc.problem})", path=where) from None
+    for key, (shape, dtype) in headers.items():
+        n = array_bytes(shape, dtype.itemsize)
+        if n > max_bytes:
+            raise error(
+                f"{what}{key} declares shape {shape}: {describe_bytes(n)}, beyond the {describe_bytes(max_bytes)} "
+                "it can hold",
+                path=where,
+            )

@@ -84,6 +84,10 @@ class _Growing:
         return self.data[: self.n]
 
 
+# the largest sample magnitude push() accepts (full scale is 1)
+_MAX_PEAK = 16.0
+
+
 class LiveSynthesizer:
     """Gesture motion for speech that arrives in chunks, equal to :func:`synthesize` on the whole.
 
@@ -199,7 +203,8 @@ class LiveSynthesizer:
         Raises
         ------
         ConfigError
-            Not a 1-D float array, values that are NaN or infinite, or the speech has finished.
+            Not a 1-D float array, values that are NaN, infinite or far outside [-1, 1]
+            (the chunk is not used; the stream goes on), or the speech has finished.
         """
         with self._lock:
             self._check_open("push")
@@ -295,6 +300,17 @@ class LiveSynthesizer:
             raise ConfigError(
                 f"speech samples contain NaN or infinite values (at sample {int(np.argmin(np.isfinite(x)))})"
             )
+        # a little past full scale happens (resampling, mixing); far past it, every later feature
+        # frame overflows, so the chunk is refused and the stream stays usable
+        peak = float(np.max(np.abs(x), initial=0.0))
+        if peak > _MAX_PEAK:
+            at = int(np.argmax(np.abs(x)))
+            hint = (
+                "; these look like 16-bit samples: divide them by 32768"
+                if peak <= 32768 * 1.01
+                else "; the chunk was not used"
+            )
+            raise ConfigError(f"speech samples must lie in [-1, 1], found {x[at]:.6g} at sample {at}{hint}")
         return x
 
     def _features(self, *, final: bool) -> None:

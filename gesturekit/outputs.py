@@ -40,6 +40,7 @@ import errno
 import os
 import re
 import shutil
+import stat
 import threading
 import zipfile
 from collections.abc import Callable, Iterable, Iterator
@@ -55,6 +56,7 @@ __all__ = [
     "check_output",
     "check_not_input",
     "output_lock",
+    "beside_name",
     "clean_stale",
     "write_folder",
     "swap_folder",
@@ -226,28 +228,123 @@ def check_output(
 _held = threading.local()
 
 
+# the longest file name most file systems take (NAME_MAX), in bytes
+_NAME_MAX = 255
+
+
+def beside_name(path: str | os.PathLike, suffix: str) -> str:
+    """The name of a hidden file beside ``path``: ``.NAME`` + ``suffix``, shortened to fit a file name.
+
+    A name that would pass the file system's 255-byte limit keeps its start and
+    ends with a hash of the whole name, so different long outputs get different names.
+
+    Parameters
+    ----------
+    path : path
+        The output.
+    suffix : str
+        What follows the name (``".lock"``, ``".tmp-PID"``).
+
+    Returns
+    -------
+    str
+    """
+    name = Path(path).name
+    full = f".{name}{suffix}"
+    if len(os.fsencode(full)) <= _NAME_MAX:
+        return full
+    return _short_prefix(name) + suffix
+
+
+def _short_prefix(name: str) -> str:
+    # the start of the name, a hash of all of it, and room for any suffix we use (32 bytes)
+    import hashlib
+
+    digest = hashlib.sha1(os.fsencode(name)).hexdigest()[:16]
+    stem = os.fsencode(name)[: _NAME_MAX - 32 - len(digest) - 2].decode("utf-8", "ignore")
+    return f".{stem}~{digest}"
+
+
+def _lock_fd(lock: Path) -> int:
+    """Open (or create) a lock file without following links; refuse anything we did not make.
+
+    A lock file gesturekit made is a regular file with one name that holds nothing
+    but a process id. A symbolic link, a hard link to another file, a folder or a
+    FIFO planted under the lock's name is refused before anything is written to it.
+    """
+    flags = os.O_RDWR | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    refuse = "is not a lock file gesturekit made ({}); remove it if no gesturekit process is writing this output"
+    try:
+        return os.open(lock, flags | os.O_CREAT | os.O_EXCL, 0o666)
+    except FileExistsError:
+        pass
+    try:
+        fd = os.open(lock, flags)
+    except FileNotFoundError:
+        return _lock_fd(lock)  # removed meanwhile by a holder that finished
+    except OSError as exc:
+        if exc.errno in (errno.ELOOP, errno.EMLINK, errno.EISDIR, errno.ENXIO):
+            raise OutputError(refuse.format(_what_is(lock)), path=lock) from None
+        raise
+    st = os.fstat(fd)
+    problem = None
+    if not stat.S_ISREG(st.st_mode):
+        problem = _what_is(lock)
+    elif st.st_nlink != 1:
+        problem = f"a file with {st.st_nlink} names"
+    elif st.st_size > 32 or (st.st_size and not os.pread(fd, 33, 0).strip().isdigit()):
+        problem = f"a file of {st.st_size} bytes that holds no process id"
+    if problem is not None:
+        os.close(fd)
+        raise OutputError(refuse.format(problem), path=lock)
+    return fd
+
+
+def _what_is(path: Path) -> str:
+    """``"a symbolic link"``, ``"a folder"``, ...: what is at ``path``, not followed."""
+    try:
+        mode = os.lstat(path).st_mode
+    except OSError:
+        return "not readable"
+    for test, what in (
+        (stat.S_ISLNK, "a symbolic link"),
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+    ):
+        if test(mode):
+            return what
+    return "a regular file" if stat.S_ISREG(mode) else "not a regular file"
+
+
 @contextlib.contextmanager
 def output_lock(path: str | os.PathLike) -> Iterator[None]:
     """Hold the exclusive lock of one output path for the block.
 
     The lock is an ``flock`` on ``.NAME.lock`` beside ``path`` (its folder is
-    created). It is released, and the lock file removed, when the block ends or
-    the process dies; a lock file left by a dead process is no obstacle.
+    created; a long name is shortened by :func:`beside_name`). It is released,
+    and the lock file removed, when the block ends or the process dies; a lock
+    file left by a dead process is no obstacle. The lock file is opened without
+    following links, and only a regular file holding a process id is taken for
+    one: a link or anything else planted under its name is refused untouched.
 
     Raises
     ------
     OutputError
-        Another process, or another thread of this one, holds the lock.
+        Another process, or another thread of this one, holds the lock, or
+        something other than a lock file is in its place.
     """
     import fcntl
 
     path = Path(path)
     with write_errors(path.parent):
         path.parent.mkdir(parents=True, exist_ok=True)
-    lock = path.parent / f".{path.name}.lock"
+    lock = path.parent / beside_name(path, ".lock")
     while True:
         with write_errors(lock):
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+            fd = _lock_fd(lock)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
@@ -265,7 +362,7 @@ def output_lock(path: str | os.PathLike) -> Iterator[None]:
             ) from None
         # the file may have been removed by a holder that finished between our open and flock
         try:
-            same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+            same = os.fstat(fd).st_ino == os.lstat(lock).st_ino
         except FileNotFoundError:
             same = False
         if same:
@@ -277,7 +374,9 @@ def output_lock(path: str | os.PathLike) -> Iterator[None]:
         yield
     finally:
         try:
-            os.unlink(lock)
+            # only our own file: something put in its place meanwhile is left alone
+            if os.fstat(fd).st_ino == os.lstat(lock).st_ino:
+                os.unlink(lock)
         except OSError:
             pass
         os.close(fd)
@@ -319,8 +418,8 @@ def clean_stale(path: str | os.PathLike, *, own: bool = False) -> list[Path]:
     folder = path.parent
     if not folder.is_dir():
         return []
-    name = re.escape(path.name)
-    pattern = re.compile(rf"^(?:\.{name}\.(?:tmp|old)-(\d+)|\.{re.escape(path.name[:64])}\.(\d+)-[0-9a-f]+\.tmp)$")
+    name = rf"(?:\.{re.escape(path.name)}|{re.escape(_short_prefix(path.name))})"
+    pattern = re.compile(rf"^(?:{name}\.(?:tmp|old)-(\d+)|\.{re.escape(path.name[:64])}\.(\d+)-[0-9a-f]+\.tmp)$")
     stale = []
     for entry in folder.iterdir():
         m = pattern.match(entry.name)
@@ -379,7 +478,7 @@ def swap_folder(tmp: Path, path: Path) -> None:
         return
     old = None
     if path.exists():
-        old = path.parent / f".{path.name}.old-{os.getpid()}"
+        old = path.parent / beside_name(path, f".old-{os.getpid()}")
         if old.exists():
             shutil.rmtree(old)
         os.replace(path, old)
@@ -431,7 +530,7 @@ def write_folder(
         clean_stale(path, own=True)
         # checked again under the lock: another writer may have finished meanwhile
         check_output(path, kind, overwrite=overwrite, inputs=inputs)
-        tmp = path.parent / f".{path.name}.tmp-{os.getpid()}"
+        tmp = path.parent / beside_name(path, f".tmp-{os.getpid()}")
         try:
             with write_errors(path):
                 tmp.mkdir()

@@ -25,7 +25,7 @@ from ._version import __version__
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control
 from .database import MatchingDatabase, normalise_exclusions
-from .errors import ConfigError, GestureKitError
+from .errors import ConfigError, GestureKitError, warn
 from .motion import AUDIO_SR, HoldsMotion, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 from .search.plan import SearchPlan, plan_search, rest_pose_frame
@@ -482,6 +482,7 @@ def synthesize_batch(
     config: SynthesisConfig | Sequence[SynthesisConfig] | None = None,
     controls: Sequence[ControlTrack | str | None] | None = None,
     refiner: MotionRefiner | None = None,
+    names: Sequence[str] | None = None,
 ) -> list[SynthesisResult]:
     """Synthesise several speeches together: one scan of the database per step serves all.
 
@@ -494,6 +495,8 @@ def synthesize_batch(
         Per speech, replaces its config's ``control``; the result's config records it.
     refiner : MotionRefiner, optional
         As in :func:`synthesize`, applied to every speech.
+    names : sequence of str, optional
+        What warnings call each speech (default: its file name; nothing for an array).
 
     Returns
     -------
@@ -517,6 +520,13 @@ def synthesize_batch(
     # a given control replaces the config's: the config a result records is the one searched
     configs = [c if ctl is None else c.with_control(ctl) for c, ctl in zip(configs, controls)]
     speeches = [_load_speech(a) for a in audios]
+    shown = (
+        list(names)
+        if names is not None
+        else [Path(a).name if isinstance(a, (str, os.PathLike)) else None for a in audios]
+    )
+    for (samples, _), c, name in zip(speeches, configs, shown):
+        _warn_controls_past_the_end(c.control_track, len(samples) / AUDIO_SR, name)
     plans = [plan_search(db, samples, c) for (samples, _), c in zip(speeches, configs)]
     # masks differ per speech; the search shares one mask stack, so stack them with offsets
     stack: list[np.ndarray] = []
@@ -543,6 +553,17 @@ def synthesize_batch(
             _refine(db, res, refiner)
             res.refiner = made_by
     return out
+
+
+def _warn_controls_past_the_end(track: ControlTrack, seconds: float, name: str | None) -> None:
+    """Warn of control segments that begin after the speech ends: the search never reaches them."""
+    for seg in track.segments:
+        if seg.start_s >= seconds:
+            speech = f"{name}: " if name else ""
+            warn(
+                f"{speech}control segment {seg.start_s:g}-{seg.end_s:g} s starts after the speech ends "
+                f"({seconds:.1f} s); it is ignored"
+            )
 
 
 def _check_refiner(refiner: object, db: MatchingDatabase) -> dict | None:

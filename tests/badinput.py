@@ -60,6 +60,8 @@ def snapshot(*roots: str | os.PathLike) -> dict[str, tuple]:
                 state[str(p)] = ("link", os.readlink(p))
             elif p.is_dir():
                 state[str(p)] = ("dir",)
+            elif not p.is_file():  # a FIFO or a device: reading it would block or never end
+                state[str(p)] = ("special", p.stat().st_mode)
             else:
                 st = p.stat()
                 state[str(p)] = ("file", st.st_size, st.st_mtime_ns, hashlib.sha1(p.read_bytes()).hexdigest())

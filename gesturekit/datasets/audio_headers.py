@@ -93,6 +93,7 @@ def check_file(path: Path, budget: Budget) -> str | None:
         raise AudioFileError("file not found", path=path)
     if path.is_dir():
         raise AudioFileError("is a folder, not an audio file", path=path)
+    limits.check_regular(path, error=AudioFileError)  # a FIFO would never end, a device never be empty
     try:
         size = path.stat().st_size
         with open(path, "rb") as f:

@@ -26,7 +26,6 @@ of 15.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
@@ -166,12 +165,7 @@ def load_position_joint_map(spec: str | os.PathLike[str] | Mapping | PositionJoi
     path = Path(spec)
     if not is_file(path):
         raise InputFileError("joint map file not found", path=path)
-    try:
-        content = json.loads(path.read_text(encoding="utf-8-sig"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"cannot read joint map: {exc}", path=path) from None
-    except json.JSONDecodeError as exc:
-        raise InputFileError(f"joint map is not valid JSON: {exc}", path=path) from None
+    content = limits.read_json(path, what="joint map ", encoding="utf-8-sig")
     return _validate(content, name=os.fspath(path), path=path)
 
 

@@ -39,7 +39,6 @@ joints; see :func:`load_joint_map`.
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
@@ -48,6 +47,7 @@ from types import MappingProxyType
 
 from .._config import config_to_dict
 from ..errors import ConfigError, InputFileError
+from ..limits import read_json
 from ..paths import is_file
 from ..skeleton import FINGERS, JOINT_NAMES
 
@@ -195,13 +195,7 @@ def load_joint_map(spec: str | os.PathLike | Mapping | JointMap) -> JointMap:
         if path.suffix.lower() == ".json" or os.sep in str(spec):
             raise InputFileError("joint map file not found", path=path)
         raise ConfigError(f"unknown joint map {str(spec)!r}: not a preset ({', '.join(PRESETS)}) nor a JSON file")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-        content = json.loads(text)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"cannot read joint map: {exc}", path=path) from None
-    except json.JSONDecodeError as exc:
-        raise InputFileError(f"joint map is not valid JSON: {exc}", path=path) from None
+    content = read_json(path, what="joint map ", encoding="utf-8-sig")
     return _validate(content, name=os.fspath(path), path=path)
 
 

@@ -32,6 +32,7 @@ import numpy as np
 from .._optional import require
 from ..errors import ConfigError, InputFileError
 from ..features import LAYOUT
+from ..limits import read_json
 from .metrics import frechet_distance, gaussian_statistics
 
 if TYPE_CHECKING:
@@ -283,10 +284,9 @@ def load_fgd_model(path: str | os.PathLike) -> FGDModel:
             "not an FGD model folder (fgd.json and weights.pt expected; train one with `gesturekit train-fgd`)",
             path=path,
         )
-    try:
-        meta = json.loads(meta_file.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"fgd.json is not valid JSON ({exc})", path=path) from None
+    meta = read_json(meta_file, what="fgd.json ", owner=path)
+    if not isinstance(meta, dict):
+        raise InputFileError("fgd.json must hold an object", path=path)
     if meta.get("format") != _FORMAT or meta.get("format_version") != _FORMAT_VERSION:
         raise InputFileError("not a gesturekit FGD model of a supported version", path=path)
     if meta.get("fps") != LAYOUT.fps or meta.get("motion_dim") != LAYOUT.motion_dim:

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
+from .. import limits
 from ..blend import keep_slow
 from ..errors import ConfigError, DatabaseError, InputFileError
 from ..features import LAYOUT
@@ -93,6 +94,9 @@ def read_stats(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """The z-scoring statistics of a refiner folder (``stats.npz``, no pickles)."""
     path = Path(path)
     f = path / "stats.npz"
+    if os.path.lexists(f):
+        # four vectors of a few hundred numbers: a zip bomb is refused before it is inflated
+        limits.check_npz(f, max_bytes=1 << 20, what="stats.npz ", owner=path)
     try:
         with np.load(f, allow_pickle=False) as z:
             stats = {k: np.asarray(z[k], dtype=np.float32) for k in z.files}

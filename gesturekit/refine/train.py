@@ -422,9 +422,9 @@ def _save_checkpoint(
     leaves the previous checkpoint complete, and the next run removes the
     temporary folder. The caller holds the output lock of ``out``.
     """
-    from ..outputs import swap_folder, write_errors
+    from ..outputs import beside_name, swap_folder, write_errors
 
-    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    tmp = out.parent / beside_name(out, f".tmp-{os.getpid()}")
     try:
         with write_errors(out):
             if tmp.exists():
