@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -25,6 +26,7 @@ import sys
 import tempfile
 import time
 import urllib.request
+import weakref
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -46,8 +48,51 @@ CHROMIUM_FLAGS = (
     "--disable-sync",
 )
 
-#: Seconds to wait for the server, a page, or a result.
+#: Seconds to wait for the server, a page, or a result (generous: the machine may be busy).
 TIMEOUT_S = 120
+
+#: The page shows no script run: the app's script state, and Streamlit's status widget gone (while a
+#: run lasts, the header shows it: "Running…" and a Stop button of Streamlit's own).
+_IDLE = """() => { const app = document.querySelector('[data-testid="stApp"]');
+  return !!app && app.dataset.testScriptState === "notRunning"
+    && !document.querySelector('[data-testid="stStatusWidget"]'); }"""
+
+#: Resolves once the page has painted twice more: what it had to draw is on screen.
+_PAINTED = "() => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)))"
+
+
+class _Runs:
+    """The app's script runs, as its server tells the page: the messages on the page's websocket.
+
+    The page's own script state cannot count runs: a busy browser may take a run's first and last
+    messages in one go and never show it running; and a widget's change reaches the server before
+    the page shows any run, so "not running" may still be the state from before the change.
+    """
+
+    def __init__(self) -> None:
+        self.started = 0
+        self.running = False
+
+    def watch(self, ws) -> None:
+        if ws.url.endswith("/_stcore/stream"):
+            ws.on("framereceived", self._message)
+
+    def _message(self, payload) -> None:
+        from streamlit.proto.ForwardMsg_pb2 import ForwardMsg
+
+        if isinstance(payload, str):
+            return
+        msg = ForwardMsg.FromString(payload)
+        kind = msg.WhichOneof("type")
+        if kind == "new_session":  # a run (or a fragment's) begins
+            self.started += 1
+            self.running = True
+        elif kind == "script_finished" and msg.script_finished != ForwardMsg.FINISHED_EARLY_FOR_RERUN:
+            self.running = False  # (a run ended early by st.rerun is followed by the next at once)
+
+
+#: The runs of each page made by :func:`browser`.
+_RUNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def find_chromium() -> str | None:
@@ -156,18 +201,23 @@ def stop(proc: subprocess.Popen) -> None:
 
 
 @contextlib.contextmanager
-def browser(*, width: int = 1440, height: int = 1000):
-    """A Playwright page in a fresh headless Chromium; yields the page."""
+def browser(*, width: int = 1440, height: int = 1000, flags: tuple[str, ...] = ()):
+    """A Playwright page in a fresh headless Chromium (with ``flags`` added to its own); yields the page.
+
+    The app's script runs are followed as they come (see :func:`run_after`).
+    """
     from playwright.sync_api import sync_playwright
 
     exe = find_chromium()
     if exe is None:
         raise RuntimeError(unavailable())
     with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=exe, args=list(CHROMIUM_FLAGS))
+        b = pw.chromium.launch(executable_path=exe, args=list(CHROMIUM_FLAGS) + list(flags))
         try:
             page = b.new_page(viewport={"width": width, "height": height})
             page.set_default_timeout(TIMEOUT_S * 1000)
+            runs = _RUNS[page] = _Runs()
+            page.on("websocket", runs.watch)
             yield page
         finally:
             b.close()
@@ -184,28 +234,105 @@ def write_speech(path: Path, *, seconds: float, seed: int = 4242) -> Path:
     return path
 
 
-def wait_idle(page) -> None:
-    """Wait until the app has finished its current script run.
+def main_area(page):
+    """The app's page itself (``stMain``): not the sidebar, nor Streamlit's header, whose toolbar
+    shows buttons of Streamlit's own (a Stop while a run lasts)."""
+    return page.locator('[data-testid="stMain"]')
 
-    Streamlit marks its root element with the script state; a run started
-    by the last action may take a moment to begin, hence the short pause first.
+
+def sidebar(page):
+    """The app's sidebar (the database chooser, the page navigation)."""
+    return page.locator('[data-testid="stSidebar"]')
+
+
+def key_class(key: str) -> str:
+    """The class Streamlit gives the element of widget key ``key``: ``st-key-`` and the key, each
+    character other than a letter, digit, ``_`` or ``-`` written as ``-`` (as its frontend does)."""
+    return "st-key-" + re.sub(r"[^a-zA-Z0-9_-]", "-", key.strip())
+
+
+def keyed(page, key: str):
+    """The element of widget key ``key`` (its container, with the widget inside)."""
+    return page.locator(f".{key_class(key)}")
+
+
+def remounted(page, key: str):
+    """The element of a widget whose key ``app/state.remount_key`` numbers: ``key``, then ``key.1``,
+    ``key.2`` ... each time the page draws the widget anew (the Synthesize page's control table)."""
+    cls = key_class(key)
+    return page.locator(f'.{cls}, [class*="{cls}-"]')
+
+
+def button(page, key: str):
+    """The button of widget key ``key``."""
+    return keyed(page, key).locator("button")
+
+
+def heading(page, name: str):
+    """The page's heading ``name`` (in the main area)."""
+    return main_area(page).get_by_role("heading", name=name, exact=True).first
+
+
+def _until(page, done, what: str, timeout_s: float = TIMEOUT_S) -> None:
+    """Wait until ``done()`` holds, letting the page's events come in meanwhile."""
+    deadline = time.monotonic() + timeout_s
+    while not done():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{what}: not within {timeout_s:g} s")
+        page.wait_for_timeout(50)  # Playwright delivers the websocket's messages while it waits
+
+
+def _caught_up(page) -> None:
+    """The page has drawn what the server sent: it shows no run, and has painted since."""
+    page.wait_for_function(_IDLE)
+    page.evaluate(_PAINTED)
+
+
+def wait_idle(page) -> None:
+    """Wait until the app has no script run going, and the page has drawn the last one's end.
+
+    After an action that starts a run, use :func:`run_after` instead: the server begins the
+    action's run a moment later, and the app is "idle" until then.
     """
-    page.wait_for_timeout(300)
-    page.wait_for_selector('[data-testid="stApp"][data-test-script-state="notRunning"]', state="attached")
+    runs = _RUNS[page]
+    _until(page, lambda: not runs.running, "the app's script run did not end")
+    _caught_up(page)
+
+
+def runs_seen(page) -> int:
+    """How many script runs the app has begun for the page so far."""
+    return _RUNS[page].started
+
+
+def wait_run(page, since: int) -> None:
+    """Wait until a run begun after the count ``since`` (:func:`runs_seen`) has ended, and the page has drawn it."""
+    runs = _RUNS[page]
+    _until(page, lambda: runs.started > since and not runs.running, "no script run began and ended")
+    _caught_up(page)
+
+
+@contextlib.contextmanager
+def run_after(page):
+    """Around an action that starts a script run: waits for the app to be idle before it (so the
+    action's run is a new one), then for a run begun after it to end."""
+    wait_idle(page)
+    since = runs_seen(page)
+    yield
+    wait_run(page, since)
 
 
 def open_app(page, url: str, path: str = "", *, heading: str) -> None:
     """Open a page of the app and wait for its title (the demo database may be built first)."""
     page.goto(f"{url}/{path}")
-    page.get_by_role("heading", name=heading, exact=True).first.wait_for()
-    wait_idle(page)
+    main_area(page).get_by_role("heading", name=heading, exact=True).first.wait_for()
+    wait_idle(page)  # the title is drawn by the page's first run: what is idle now is that run's end
 
 
 def go_to(page, title: str) -> None:
     """Switch page within the session through the sidebar navigation (keeps the user's state)."""
-    page.locator('[data-testid="stSidebarNav"] a', has_text=title).first.click()
-    page.get_by_role("heading", name=title, exact=True).first.wait_for()
-    wait_idle(page)
+    sidebar(page).locator('[data-testid="stSidebarNav"] a', has_text=title).first.click()
+    heading(page, title).wait_for()
+    wait_idle(page)  # the title is drawn by the new page's run
 
 
 def upload(page, wav: Path) -> None:
@@ -216,30 +343,31 @@ def upload(page, wav: Path) -> None:
     The run may still be drawing the rest of the page (the new waveform):
     :func:`box_select` waits for its end.
     """
-    page.locator('[data-testid="stFileUploader"] input[type="file"]').set_input_files(str(wav))
-    page.locator('[data-testid="stCaptionContainer"] strong', has_text=wav.name).first.wait_for()
-    page.get_by_role("button", name="Run", exact=True).wait_for()
+    keyed(page, "synth.upload").locator('input[type="file"]').set_input_files(str(wav))
+    main_area(page).locator('[data-testid="stCaptionContainer"] strong', has_text=wav.name).first.wait_for()
+    button(page, "synth.go").wait_for()
 
 
 def synthesize_ready(page) -> None:
     """Wait until the Synthesize page is drawn whole: its waveform chart, the segment table and Run."""
-    page.locator('[data-testid="stPlotlyChart"] .main-svg').first.wait_for(state="visible")
-    page.locator('[data-testid="stDataFrame"] canvas').first.wait_for(state="attached")
-    page.get_by_role("button", name="Run", exact=True).wait_for()
+    keyed(page, "synth.waveform").locator(".main-svg").first.wait_for(state="visible")
+    remounted(page, "synth.segments_editor").locator("canvas").first.wait_for(state="attached")
+    button(page, "synth.go").wait_for()
 
 
 def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_hands=high", tries: int = 3) -> None:
-    """Drag across the waveform chart (the first chart of the Synthesize page) between two fractions
-    of its plot area's width, and wait until the band ``label`` of the new segment is drawn on it.
+    """Drag across the waveform chart of the Synthesize page between two fractions of its plot
+    area's width, and wait until the band ``label`` of the new segment is drawn on it.
 
     A drag on a chart that a run is about to replace (the page still drawing, say, the waveform of
     speech just uploaded) is lost with that chart: the drag starts only once the page is idle, and
-    is made again when no band appears. The band must not be on the chart before.
+    is made again when no run follows it. The band must not be on the chart before.
     """
-    chart = page.locator('[data-testid="stPlotlyChart"]').first
+    chart = keyed(page, "synth.waveform")
     band = chart.locator("text", has_text=label).first
     for _ in range(tries):
         wait_idle(page)
+        since = runs_seen(page)
         drag = chart.locator("rect.nsewdrag").first  # the plot area (not the legend, nor the toolbar)
         drag.wait_for(state="visible")
         drag.scroll_into_view_if_needed()
@@ -251,27 +379,49 @@ def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_h
         page.mouse.move(box["x"] + box["width"] * end_frac, y, steps=5)
         page.mouse.up()
         try:
-            band.wait_for(state="visible", timeout=30_000)
-        except Exception:  # noqa: BLE001  (a playwright timeout: the selection was lost, drag again)
+            # the selection reaches the server at once, even on a busy machine: a run that has not
+            # begun in 30 s was never asked for (the selection was lost): drag again
+            _until(page, lambda since=since: runs_seen(page) > since, "no run after the drag", timeout_s=30)
+        except TimeoutError:
             continue
-        wait_idle(page)
+        wait_run(page, since)
+        band.wait_for(state="visible")
         return
     raise RuntimeError(f"no band {label!r} on the waveform after {tries} drags across it")
 
 
 def run_and_wait(page) -> None:
-    """Click Run and wait for the first result: the 3D view drawn and the wrist plot."""
-    page.get_by_role("button", name="Run", exact=True).click()
+    """Click Run and wait for the result: the 3D view drawn and the wrist plot, the run ended."""
+    with run_after(page):
+        button(page, "synth.go").click()
     wait_result(page)
+
+
+def viewer(page, key: str):
+    """The frame element of the skeleton viewer with key ``key`` (gesturekit.viz.viewer): its page
+    names the key, the element holding it has none of Streamlit's."""
+    return main_area(page).locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
 
 
 def skeleton_canvas(page, key: str):
     """The canvas of the skeleton viewer with key ``key`` (gesturekit.viz.viewer), once it has drawn."""
-    frame = page.frame_locator(f"iframe[srcdoc*='data-key=\"{key}\"']")
+    frame = main_area(page).frame_locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
     frame.locator('body[data-drawn="1"]').wait_for(state="attached")
     canvas = frame.locator("canvas#c")
     canvas.wait_for(state="visible")
     return canvas
+
+
+def _viewer_frames(page) -> list:
+    """The frames of the page's skeleton viewers (their body names their key)."""
+    out = []
+    for frame in page.frames:
+        try:
+            if frame.evaluate("() => !!(document.body && document.body.dataset.key)"):
+                out.append(frame)
+        except Exception:  # noqa: BLE001 (a frame navigating away; look at the next)
+            continue
+    return out
 
 
 def viewer_frame(page, key: str):
@@ -281,18 +431,16 @@ def viewer_frame(page, key: str):
     clock ``time``, the speech's ``audioTime``, ``playing``, ``drawn`` and ``drawMs``.
     """
     skeleton_canvas(page, key)
-    for frame in page.frames:
-        try:
-            if frame.evaluate("() => document.body && document.body.dataset.key") == key:
-                return frame
-        except Exception:  # noqa: BLE001 (a frame navigating away; look at the next)
-            continue
+    for frame in _viewer_frames(page):
+        if frame.evaluate("() => document.body.dataset.key") == key:
+            return frame
     raise RuntimeError(f"no skeleton viewer frame with key {key!r}")
 
 
 def wait_result(page) -> None:
+    """Wait until the Synthesize page shows a result: its 3D view drawn and its wrist plot."""
     skeleton_canvas(page, "synth.skeleton")
-    page.locator('[data-testid="stPlotlyChart"] text', has_text="left wrist height").first.wait_for(state="visible")
+    keyed(page, "synth.wrists").locator("text", has_text="left wrist height").first.wait_for(state="visible")
 
 
 def problems(page) -> list[str]:
@@ -322,7 +470,12 @@ def _fit_viewport(page, *, width: int = 1440, most: int = 6000) -> None:
 def screenshot(page, path: Path) -> Path:
     """Save a PNG of the whole page (the window is made as tall as the content first)."""
     _fit_viewport(page)
-    page.wait_for_timeout(1000)  # let the WebGL views draw at the new size
+    # every 3D view has drawn (each draws again on its own when resized), and the page has
+    # painted at the new size
+    for view in _viewer_frames(page):
+        view.wait_for_function("() => document.body.dataset.drawn === '1'")
+        view.evaluate(_PAINTED)
+    page.evaluate(_PAINTED)
     part = path.with_name(f".{path.name}.part")
     page.screenshot(path=str(part), type="png")
     os.replace(part, path)  # a screenshot appears whole or not at all
@@ -333,14 +486,17 @@ def screenshot(page, path: Path) -> Path:
 def viewer_screenshot(page, key: str, path: Path, *, at: float = 0.4) -> Path:
     """Save a PNG of the 3D view with key ``key`` alone, showing the frame ``at`` of the way through."""
     view = viewer_frame(page, key)
-    view.evaluate(
+    shown = view.evaluate(
         """(at) => { const s = document.getElementById("s");
-        s.value = String(Math.round(at * Number(s.max))); s.dispatchEvent(new Event("input")); }""",
+        s.value = String(Math.round(at * Number(s.max))); s.dispatchEvent(new Event("input"));
+        return Number(s.value); }""",
         at,
     )
-    element = page.locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
+    element = viewer(page, key)
     element.scroll_into_view_if_needed()
-    page.wait_for_timeout(300)
+    # the slider's input draws the frame; the view's own clock must not have moved it on since
+    view.wait_for_function("(k) => gk.frame === k", arg=shown)
+    view.evaluate(_PAINTED)
     part = path.with_name(f".{path.name}.part")
     element.screenshot(path=str(part), type="png")
     os.replace(part, path)
