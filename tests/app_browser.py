@@ -26,7 +26,6 @@ import sys
 import tempfile
 import time
 import urllib.request
-import weakref
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -61,38 +60,47 @@ _IDLE = """() => { const app = document.querySelector('[data-testid="stApp"]');
 _PAINTED = "() => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)))"
 
 
-class _Runs:
-    """The app's script runs, as its server tells the page: the messages on the page's websocket.
-
-    The page's own script state cannot count runs: a busy browser may take a run's first and last
-    messages in one go and never show it running; and a widget's change reaches the server before
-    the page shows any run, so "not running" may still be the state from before the change.
-    """
-
-    def __init__(self) -> None:
-        self.started = 0
-        self.running = False
-
-    def watch(self, ws) -> None:
-        if ws.url.endswith("/_stcore/stream"):
-            ws.on("framereceived", self._message)
-
-    def _message(self, payload) -> None:
-        from streamlit.proto.ForwardMsg_pb2 import ForwardMsg
-
-        if isinstance(payload, str):
-            return
-        msg = ForwardMsg.FromString(payload)
-        kind = msg.WhichOneof("type")
-        if kind == "new_session":  # a run (or a fragment's) begins
-            self.started += 1
-            self.running = True
-        elif kind == "script_finished" and msg.script_finished != ForwardMsg.FINISHED_EARLY_FOR_RERUN:
-            self.running = False  # (a run ended early by st.rerun is followed by the next at once)
-
-
-#: The runs of each page made by :func:`browser`.
-_RUNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: Follows the app's script runs as its server tells the page, in ``window.__gkRuns``: ``started``
+#: counts the runs begun (a ForwardMsg ``new_session``), ``running`` is false once one has ended
+#: (``script_finished``, unless ended early by ``st.rerun``: the next one follows at once). Read from
+#: the top-level fields of each message on the app's websocket, before the app handles it.
+#: The page's own script state cannot count runs: a busy browser may take a run's first and last
+#: messages in one go and never show it running; and a widget's change reaches the server before
+#: the page shows any run, so "not running" may still be the state from before the change.
+_RUN_LOG = """(() => {
+  const runs = window.__gkRuns = {started: 0, running: false};
+  const NEW_SESSION = 4, SCRIPT_FINISHED = 6, FINISHED_EARLY_FOR_RERUN = 2;  // ForwardMsg.proto
+  const varint = (b, i) => {
+    let v = 0, s = 1, x;
+    do { x = b[i++]; v += (x & 0x7f) * s; s *= 128; } while (x & 0x80 && i < b.length);
+    return [v, i];
+  };
+  const look = (buffer) => {
+    const b = new Uint8Array(buffer);
+    let i = 0, tag, n;
+    while (i < b.length) {
+      [tag, i] = varint(b, i);
+      const field = Math.floor(tag / 8), wire = tag % 8;
+      if (field === NEW_SESSION) { runs.started += 1; runs.running = true; return; }
+      if (field === SCRIPT_FINISHED) {
+        if (varint(b, i)[0] !== FINISHED_EARLY_FOR_RERUN) runs.running = false;
+        return;
+      }
+      if (wire === 2) { [n, i] = varint(b, i); i += n; }
+      else if (wire === 0) { i = varint(b, i)[1]; }
+      else return;
+    }
+  };
+  const Native = window.WebSocket;
+  window.WebSocket = class extends Native {
+    constructor(url, protocols) {
+      super(url, protocols);
+      if (String(url).endsWith("/_stcore/stream")) {
+        this.addEventListener("message", (e) => { if (e.data instanceof ArrayBuffer) look(e.data); });
+      }
+    }
+  };
+})();"""
 
 
 def find_chromium() -> str | None:
@@ -216,8 +224,7 @@ def browser(*, width: int = 1440, height: int = 1000, flags: tuple[str, ...] = (
         try:
             page = b.new_page(viewport={"width": width, "height": height})
             page.set_default_timeout(TIMEOUT_S * 1000)
-            runs = _RUNS[page] = _Runs()
-            page.on("websocket", runs.watch)
+            page.add_init_script(_RUN_LOG)
             yield page
         finally:
             b.close()
@@ -273,15 +280,6 @@ def heading(page, name: str):
     return main_area(page).get_by_role("heading", name=name, exact=True).first
 
 
-def _until(page, done, what: str, timeout_s: float = TIMEOUT_S) -> None:
-    """Wait until ``done()`` holds, letting the page's events come in meanwhile."""
-    deadline = time.monotonic() + timeout_s
-    while not done():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"{what}: not within {timeout_s:g} s")
-        page.wait_for_timeout(50)  # Playwright delivers the websocket's messages while it waits
-
-
 def _caught_up(page) -> None:
     """The page has drawn what the server sent: it shows no run, and has painted since."""
     page.wait_for_function(_IDLE)
@@ -294,21 +292,26 @@ def wait_idle(page) -> None:
     After an action that starts a run, use :func:`run_after` instead: the server begins the
     action's run a moment later, and the app is "idle" until then.
     """
-    runs = _RUNS[page]
-    _until(page, lambda: not runs.running, "the app's script run did not end")
+    page.wait_for_function("() => !window.__gkRuns.running")
     _caught_up(page)
 
 
 def runs_seen(page) -> int:
     """How many script runs the app has begun for the page so far."""
-    return _RUNS[page].started
+    return int(page.evaluate("() => window.__gkRuns.started"))
 
 
-def wait_run(page, since: int) -> None:
+def wait_run(page, since: int, *, timeout_s: float = TIMEOUT_S) -> None:
     """Wait until a run begun after the count ``since`` (:func:`runs_seen`) has ended, and the page has drawn it."""
-    runs = _RUNS[page]
-    _until(page, lambda: runs.started > since and not runs.running, "no script run began and ended")
+    page.wait_for_function(
+        "(since) => window.__gkRuns.started > since && !window.__gkRuns.running", arg=since, timeout=timeout_s * 1000
+    )
     _caught_up(page)
+
+
+def wait_run_begun(page, since: int, *, timeout_s: float = TIMEOUT_S) -> None:
+    """Wait until a run begun after the count ``since`` (:func:`runs_seen`)."""
+    page.wait_for_function("(since) => window.__gkRuns.started > since", arg=since, timeout=timeout_s * 1000)
 
 
 @contextlib.contextmanager
@@ -328,11 +331,25 @@ def open_app(page, url: str, path: str = "", *, heading: str) -> None:
     wait_idle(page)  # the title is drawn by the page's first run: what is idle now is that run's end
 
 
-def go_to(page, title: str) -> None:
-    """Switch page within the session through the sidebar navigation (keeps the user's state)."""
-    sidebar(page).locator('[data-testid="stSidebarNav"] a', has_text=title).first.click()
-    heading(page, title).wait_for()
-    wait_idle(page)  # the title is drawn by the new page's run
+def go_to(page, title: str, *, tries: int = 3) -> None:
+    """Switch page within the session through the sidebar navigation (keeps the user's state).
+
+    The page switch is a run of the new page; a click that starts none (the link redrawn under
+    it) is made again.
+    """
+    link = sidebar(page).locator('[data-testid="stSidebarNav"] a', has_text=title).first
+    for _ in range(tries):
+        wait_idle(page)
+        since = runs_seen(page)
+        link.click()
+        try:  # the click reaches the server at once, even on a busy machine
+            wait_run_begun(page, since, timeout_s=30)
+        except Exception:  # noqa: BLE001  (a playwright timeout: click again)
+            continue
+        heading(page, title).wait_for()
+        wait_idle(page)  # the title is drawn by the new page's run
+        return
+    raise RuntimeError(f"no page switch to {title!r} after {tries} clicks on its link")
 
 
 def upload(page, wav: Path) -> None:
@@ -381,8 +398,8 @@ def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_h
         try:
             # the selection reaches the server at once, even on a busy machine: a run that has not
             # begun in 30 s was never asked for (the selection was lost): drag again
-            _until(page, lambda since=since: runs_seen(page) > since, "no run after the drag", timeout_s=30)
-        except TimeoutError:
+            wait_run_begun(page, since, timeout_s=30)
+        except Exception:  # noqa: BLE001  (a playwright timeout)
             continue
         wait_run(page, since)
         band.wait_for(state="visible")
