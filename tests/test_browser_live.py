@@ -45,16 +45,17 @@ class RealTime:
     updates: int  # times the live view changed (a new pose each step, 0.53 s)
     span_s: float  # speech between the first and the last pose seen
     latency_s: float | None  # mic-to-figure, the page's figure and the median measured in the browser
-    in_flight_s: float | None  # speech streamed but not yet at the server when Stop was clicked
+    streamed_s: float | None  # the result's length against the speech streamed until Stop
 
 
 #: On a quiet machine, the page keeps up as the README says. With every core kept busy, the busy
 #: loops, the browser and the server share the cores: the page still works (the body moves, the
 #: page shows its latency, Stop keeps what the server had), but falls behind the speech by as much
-#: as the machine's other work takes (seconds): no bound (None) on that.
+#: as the machine's other work takes (seconds), and the browser's clocks (when the microphone
+#: opened, when Stop was clicked) run late too: no bound (None) on either.
 REAL_TIME = {
-    "quiet": RealTime(updates=5, span_s=3.0, latency_s=1.5, in_flight_s=0.6),
-    "busy": RealTime(updates=2, span_s=0.5, latency_s=None, in_flight_s=None),
+    "quiet": RealTime(updates=5, span_s=3.0, latency_s=1.5, streamed_s=0.6),
+    "busy": RealTime(updates=2, span_s=0.5, latency_s=None, streamed_s=None),
 }
 #: Records when the page's microphone opened (browser clock, ms), in whichever frame asks for it.
 _MIC_CLOCK = """(() => {
@@ -215,10 +216,9 @@ def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run, tmp_path):
     print(f"\nstreamed {streamed_s:.2f} s of speech; the result holds {frames} frames ({frames / FPS:.2f} s)")
     # the result is the speech the server had at Stop: what was streamed, less what was still in
     # flight (the transport's buffering), within a step; and at least what the live view had shown
-    in_flight = live_run["real_time"].in_flight_s
-    assert frames / FPS <= streamed_s + 0.6, (frames, streamed_s)
-    if in_flight is not None:
-        assert frames / FPS >= streamed_s - in_flight, (frames, streamed_s)
+    within = live_run["real_time"].streamed_s
+    if within is not None:
+        assert frames / FPS == pytest.approx(streamed_s, abs=within), (frames, streamed_s)
     assert frames > live_run["seen"][-1]["frame"]
     result = app_browser.viewer_frame(page, "live.result")
     assert result.evaluate("() => gk.frames") == frames
