@@ -96,7 +96,7 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             drv.upload(page, wav)
             t1 = time.perf_counter()
-            page.get_by_role("button", name="Run", exact=True).click()
+            drv.button(page, "synth.go").click()
             drv.skeleton_canvas(page, "synth.skeleton")
             t_view = time.perf_counter()
             drv.wait_result(page)
@@ -171,7 +171,7 @@ def playback(drv, page, url: str, home: Path, seconds: float) -> bool:
     drv.synthesize_ready(page)
     drv.upload(page, wav)
     t0 = time.perf_counter()
-    page.get_by_role("button", name="Run", exact=True).click()
+    drv.button(page, "synth.go").click()
     view = drv.viewer_frame(page, "synth.skeleton")
     t_view = time.perf_counter() - t0
     drv.wait_result(page)

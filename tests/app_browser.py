@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -46,8 +47,60 @@ CHROMIUM_FLAGS = (
     "--disable-sync",
 )
 
-#: Seconds to wait for the server, a page, or a result.
+#: Seconds to wait for the server, a page, or a result (generous: the machine may be busy).
 TIMEOUT_S = 120
+
+#: The page shows no script run: the app's script state, and Streamlit's status widget gone (while a
+#: run lasts, the header shows it: "Running…" and a Stop button of Streamlit's own).
+_IDLE = """() => { const app = document.querySelector('[data-testid="stApp"]');
+  return !!app && app.dataset.testScriptState === "notRunning"
+    && !document.querySelector('[data-testid="stStatusWidget"]'); }"""
+
+#: Resolves once the page has painted twice more: what it had to draw is on screen.
+_PAINTED = "() => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)))"
+
+
+#: Follows the app's script runs as its server tells the page, in ``window.__gkRuns``: ``started``
+#: counts the runs begun (a ForwardMsg ``new_session``), ``running`` is false once one has ended
+#: (``script_finished``, unless ended early by ``st.rerun``: the next one follows at once). Read from
+#: the top-level fields of each message on the app's websocket, before the app handles it.
+#: The page's own script state cannot count runs: a busy browser may take a run's first and last
+#: messages in one go and never show it running; and a widget's change reaches the server before
+#: the page shows any run, so "not running" may still be the state from before the change.
+_RUN_LOG = """(() => {
+  const runs = window.__gkRuns = {started: 0, running: false};
+  const NEW_SESSION = 4, SCRIPT_FINISHED = 6, FINISHED_EARLY_FOR_RERUN = 2;  // ForwardMsg.proto
+  const varint = (b, i) => {
+    let v = 0, s = 1, x;
+    do { x = b[i++]; v += (x & 0x7f) * s; s *= 128; } while (x & 0x80 && i < b.length);
+    return [v, i];
+  };
+  const look = (buffer) => {
+    const b = new Uint8Array(buffer);
+    let i = 0, tag, n;
+    while (i < b.length) {
+      [tag, i] = varint(b, i);
+      const field = Math.floor(tag / 8), wire = tag % 8;
+      if (field === NEW_SESSION) { runs.started += 1; runs.running = true; return; }
+      if (field === SCRIPT_FINISHED) {
+        if (varint(b, i)[0] !== FINISHED_EARLY_FOR_RERUN) runs.running = false;
+        return;
+      }
+      if (wire === 2) { [n, i] = varint(b, i); i += n; }
+      else if (wire === 0) { i = varint(b, i)[1]; }
+      else return;
+    }
+  };
+  const Native = window.WebSocket;
+  window.WebSocket = class extends Native {
+    constructor(url, protocols) {
+      super(url, protocols);
+      if (String(url).endsWith("/_stcore/stream")) {
+        this.addEventListener("message", (e) => { if (e.data instanceof ArrayBuffer) look(e.data); });
+      }
+    }
+  };
+})();"""
 
 
 def find_chromium() -> str | None:
@@ -156,18 +209,22 @@ def stop(proc: subprocess.Popen) -> None:
 
 
 @contextlib.contextmanager
-def browser(*, width: int = 1440, height: int = 1000):
-    """A Playwright page in a fresh headless Chromium; yields the page."""
+def browser(*, width: int = 1440, height: int = 1000, flags: tuple[str, ...] = ()):
+    """A Playwright page in a fresh headless Chromium (with ``flags`` added to its own); yields the page.
+
+    The app's script runs are followed as they come (see :func:`run_after`).
+    """
     from playwright.sync_api import sync_playwright
 
     exe = find_chromium()
     if exe is None:
         raise RuntimeError(unavailable())
     with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=exe, args=list(CHROMIUM_FLAGS))
+        b = pw.chromium.launch(executable_path=exe, args=list(CHROMIUM_FLAGS) + list(flags))
         try:
             page = b.new_page(viewport={"width": width, "height": height})
             page.set_default_timeout(TIMEOUT_S * 1000)
+            page.add_init_script(_RUN_LOG)
             yield page
         finally:
             b.close()
@@ -184,28 +241,115 @@ def write_speech(path: Path, *, seconds: float, seed: int = 4242) -> Path:
     return path
 
 
-def wait_idle(page) -> None:
-    """Wait until the app has finished its current script run.
+def main_area(page):
+    """The app's page itself (``stMain``): not the sidebar, nor Streamlit's header, whose toolbar
+    shows buttons of Streamlit's own (a Stop while a run lasts)."""
+    return page.locator('[data-testid="stMain"]')
 
-    Streamlit marks its root element with the script state; a run started
-    by the last action may take a moment to begin, hence the short pause first.
+
+def sidebar(page):
+    """The app's sidebar (the database chooser, the page navigation)."""
+    return page.locator('[data-testid="stSidebar"]')
+
+
+def key_class(key: str) -> str:
+    """The class Streamlit gives the element of widget key ``key``: ``st-key-`` and the key, each
+    character other than a letter, digit, ``_`` or ``-`` written as ``-`` (as its frontend does)."""
+    return "st-key-" + re.sub(r"[^a-zA-Z0-9_-]", "-", key.strip())
+
+
+def keyed(page, key: str):
+    """The element of widget key ``key`` (its container, with the widget inside)."""
+    return page.locator(f".{key_class(key)}")
+
+
+def remounted(page, key: str):
+    """The element of a widget whose key ``app/state.remount_key`` numbers: ``key``, then ``key.1``,
+    ``key.2`` ... each time the page draws the widget anew (the Synthesize page's control table)."""
+    cls = key_class(key)
+    return page.locator(f'.{cls}, [class*="{cls}-"]')
+
+
+def button(page, key: str):
+    """The button of widget key ``key``."""
+    return keyed(page, key).locator("button")
+
+
+def heading(page, name: str):
+    """The page's heading ``name`` (in the main area)."""
+    return main_area(page).get_by_role("heading", name=name, exact=True).first
+
+
+def _caught_up(page) -> None:
+    """The page has drawn what the server sent: it shows no run, and has painted since."""
+    page.wait_for_function(_IDLE)
+    page.evaluate(_PAINTED)
+
+
+def wait_idle(page) -> None:
+    """Wait until the app has no script run going, and the page has drawn the last one's end.
+
+    After an action that starts a run, use :func:`run_after` instead: the server begins the
+    action's run a moment later, and the app is "idle" until then.
     """
-    page.wait_for_timeout(300)
-    page.wait_for_selector('[data-testid="stApp"][data-test-script-state="notRunning"]', state="attached")
+    page.wait_for_function("() => !window.__gkRuns.running")
+    _caught_up(page)
+
+
+def runs_seen(page) -> int:
+    """How many script runs the app has begun for the page so far."""
+    return int(page.evaluate("() => window.__gkRuns.started"))
+
+
+def wait_run(page, since: int, *, timeout_s: float = TIMEOUT_S) -> None:
+    """Wait until a run begun after the count ``since`` (:func:`runs_seen`) has ended, and the page has drawn it."""
+    page.wait_for_function(
+        "(since) => window.__gkRuns.started > since && !window.__gkRuns.running", arg=since, timeout=timeout_s * 1000
+    )
+    _caught_up(page)
+
+
+def wait_run_begun(page, since: int, *, timeout_s: float = TIMEOUT_S) -> None:
+    """Wait until a run begun after the count ``since`` (:func:`runs_seen`)."""
+    page.wait_for_function("(since) => window.__gkRuns.started > since", arg=since, timeout=timeout_s * 1000)
+
+
+@contextlib.contextmanager
+def run_after(page):
+    """Around an action that starts a script run: waits for the app to be idle before it (so the
+    action's run is a new one), then for a run begun after it to end."""
+    wait_idle(page)
+    since = runs_seen(page)
+    yield
+    wait_run(page, since)
 
 
 def open_app(page, url: str, path: str = "", *, heading: str) -> None:
     """Open a page of the app and wait for its title (the demo database may be built first)."""
     page.goto(f"{url}/{path}")
-    page.get_by_role("heading", name=heading, exact=True).first.wait_for()
-    wait_idle(page)
+    main_area(page).get_by_role("heading", name=heading, exact=True).first.wait_for()
+    wait_idle(page)  # the title is drawn by the page's first run: what is idle now is that run's end
 
 
-def go_to(page, title: str) -> None:
-    """Switch page within the session through the sidebar navigation (keeps the user's state)."""
-    page.locator('[data-testid="stSidebarNav"] a', has_text=title).first.click()
-    page.get_by_role("heading", name=title, exact=True).first.wait_for()
-    wait_idle(page)
+def go_to(page, title: str, *, tries: int = 3) -> None:
+    """Switch page within the session through the sidebar navigation (keeps the user's state).
+
+    The page switch is a run of the new page; a click that starts none (the link redrawn under
+    it) is made again.
+    """
+    link = sidebar(page).locator('[data-testid="stSidebarNav"] a', has_text=title).first
+    for _ in range(tries):
+        wait_idle(page)
+        since = runs_seen(page)
+        link.click()
+        try:  # the click reaches the server at once, even on a busy machine
+            wait_run_begun(page, since, timeout_s=30)
+        except Exception:  # noqa: BLE001  (a playwright timeout: click again)
+            continue
+        heading(page, title).wait_for()
+        wait_idle(page)  # the title is drawn by the new page's run
+        return
+    raise RuntimeError(f"no page switch to {title!r} after {tries} clicks on its link")
 
 
 def upload(page, wav: Path) -> None:
@@ -216,30 +360,31 @@ def upload(page, wav: Path) -> None:
     The run may still be drawing the rest of the page (the new waveform):
     :func:`box_select` waits for its end.
     """
-    page.locator('[data-testid="stFileUploader"] input[type="file"]').set_input_files(str(wav))
-    page.locator('[data-testid="stCaptionContainer"] strong', has_text=wav.name).first.wait_for()
-    page.get_by_role("button", name="Run", exact=True).wait_for()
+    keyed(page, "synth.upload").locator('input[type="file"]').set_input_files(str(wav))
+    main_area(page).locator('[data-testid="stCaptionContainer"] strong', has_text=wav.name).first.wait_for()
+    button(page, "synth.go").wait_for()
 
 
 def synthesize_ready(page) -> None:
     """Wait until the Synthesize page is drawn whole: its waveform chart, the segment table and Run."""
-    page.locator('[data-testid="stPlotlyChart"] .main-svg').first.wait_for(state="visible")
-    page.locator('[data-testid="stDataFrame"] canvas').first.wait_for(state="attached")
-    page.get_by_role("button", name="Run", exact=True).wait_for()
+    keyed(page, "synth.waveform").locator(".main-svg").first.wait_for(state="visible")
+    remounted(page, "synth.segments_editor").locator("canvas").first.wait_for(state="attached")
+    button(page, "synth.go").wait_for()
 
 
 def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_hands=high", tries: int = 3) -> None:
-    """Drag across the waveform chart (the first chart of the Synthesize page) between two fractions
-    of its plot area's width, and wait until the band ``label`` of the new segment is drawn on it.
+    """Drag across the waveform chart of the Synthesize page between two fractions of its plot
+    area's width, and wait until the band ``label`` of the new segment is drawn on it.
 
     A drag on a chart that a run is about to replace (the page still drawing, say, the waveform of
     speech just uploaded) is lost with that chart: the drag starts only once the page is idle, and
-    is made again when no band appears. The band must not be on the chart before.
+    is made again when no run follows it. The band must not be on the chart before.
     """
-    chart = page.locator('[data-testid="stPlotlyChart"]').first
+    chart = keyed(page, "synth.waveform")
     band = chart.locator("text", has_text=label).first
     for _ in range(tries):
         wait_idle(page)
+        since = runs_seen(page)
         drag = chart.locator("rect.nsewdrag").first  # the plot area (not the legend, nor the toolbar)
         drag.wait_for(state="visible")
         drag.scroll_into_view_if_needed()
@@ -251,27 +396,49 @@ def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_h
         page.mouse.move(box["x"] + box["width"] * end_frac, y, steps=5)
         page.mouse.up()
         try:
-            band.wait_for(state="visible", timeout=30_000)
-        except Exception:  # noqa: BLE001  (a playwright timeout: the selection was lost, drag again)
+            # the selection reaches the server at once, even on a busy machine: a run that has not
+            # begun in 30 s was never asked for (the selection was lost): drag again
+            wait_run_begun(page, since, timeout_s=30)
+        except Exception:  # noqa: BLE001  (a playwright timeout)
             continue
-        wait_idle(page)
+        wait_run(page, since)
+        band.wait_for(state="visible")
         return
     raise RuntimeError(f"no band {label!r} on the waveform after {tries} drags across it")
 
 
 def run_and_wait(page) -> None:
-    """Click Run and wait for the first result: the 3D view drawn and the wrist plot."""
-    page.get_by_role("button", name="Run", exact=True).click()
+    """Click Run and wait for the result: the 3D view drawn and the wrist plot, the run ended."""
+    with run_after(page):
+        button(page, "synth.go").click()
     wait_result(page)
+
+
+def viewer(page, key: str):
+    """The frame element of the skeleton viewer with key ``key`` (gesturekit.viz.viewer): its page
+    names the key, the element holding it has none of Streamlit's."""
+    return main_area(page).locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
 
 
 def skeleton_canvas(page, key: str):
     """The canvas of the skeleton viewer with key ``key`` (gesturekit.viz.viewer), once it has drawn."""
-    frame = page.frame_locator(f"iframe[srcdoc*='data-key=\"{key}\"']")
+    frame = main_area(page).frame_locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
     frame.locator('body[data-drawn="1"]').wait_for(state="attached")
     canvas = frame.locator("canvas#c")
     canvas.wait_for(state="visible")
     return canvas
+
+
+def _viewer_frames(page) -> list:
+    """The frames of the page's skeleton viewers (their body names their key)."""
+    out = []
+    for frame in page.frames:
+        try:
+            if frame.evaluate("() => !!(document.body && document.body.dataset.key)"):
+                out.append(frame)
+        except Exception:  # noqa: BLE001 (a frame navigating away; look at the next)
+            continue
+    return out
 
 
 def viewer_frame(page, key: str):
@@ -281,18 +448,16 @@ def viewer_frame(page, key: str):
     clock ``time``, the speech's ``audioTime``, ``playing``, ``drawn`` and ``drawMs``.
     """
     skeleton_canvas(page, key)
-    for frame in page.frames:
-        try:
-            if frame.evaluate("() => document.body && document.body.dataset.key") == key:
-                return frame
-        except Exception:  # noqa: BLE001 (a frame navigating away; look at the next)
-            continue
+    for frame in _viewer_frames(page):
+        if frame.evaluate("() => document.body.dataset.key") == key:
+            return frame
     raise RuntimeError(f"no skeleton viewer frame with key {key!r}")
 
 
 def wait_result(page) -> None:
+    """Wait until the Synthesize page shows a result: its 3D view drawn and its wrist plot."""
     skeleton_canvas(page, "synth.skeleton")
-    page.locator('[data-testid="stPlotlyChart"] text', has_text="left wrist height").first.wait_for(state="visible")
+    keyed(page, "synth.wrists").locator("text", has_text="left wrist height").first.wait_for(state="visible")
 
 
 def problems(page) -> list[str]:
@@ -322,7 +487,12 @@ def _fit_viewport(page, *, width: int = 1440, most: int = 6000) -> None:
 def screenshot(page, path: Path) -> Path:
     """Save a PNG of the whole page (the window is made as tall as the content first)."""
     _fit_viewport(page)
-    page.wait_for_timeout(1000)  # let the WebGL views draw at the new size
+    # every 3D view has drawn (each draws again on its own when resized), and the page has
+    # painted at the new size
+    for view in _viewer_frames(page):
+        view.wait_for_function("() => document.body.dataset.drawn === '1'")
+        view.evaluate(_PAINTED)
+    page.evaluate(_PAINTED)
     part = path.with_name(f".{path.name}.part")
     page.screenshot(path=str(part), type="png")
     os.replace(part, path)  # a screenshot appears whole or not at all
@@ -333,14 +503,17 @@ def screenshot(page, path: Path) -> Path:
 def viewer_screenshot(page, key: str, path: Path, *, at: float = 0.4) -> Path:
     """Save a PNG of the 3D view with key ``key`` alone, showing the frame ``at`` of the way through."""
     view = viewer_frame(page, key)
-    view.evaluate(
+    shown = view.evaluate(
         """(at) => { const s = document.getElementById("s");
-        s.value = String(Math.round(at * Number(s.max))); s.dispatchEvent(new Event("input")); }""",
+        s.value = String(Math.round(at * Number(s.max))); s.dispatchEvent(new Event("input"));
+        return Number(s.value); }""",
         at,
     )
-    element = page.locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
+    element = viewer(page, key)
     element.scroll_into_view_if_needed()
-    page.wait_for_timeout(300)
+    # the slider's input draws the frame; the view's own clock must not have moved it on since
+    view.wait_for_function("(k) => gk.frame === k", arg=shown)
+    view.evaluate(_PAINTED)
     part = path.with_name(f".{path.name}.part")
     element.screenshot(path=str(part), type="png")
     os.replace(part, path)

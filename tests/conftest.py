@@ -23,6 +23,18 @@ ZEGGS_BVH = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
 ZEGGS_WAV = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.wav"
 
 
+def pytest_collection_modifyitems(config, items):
+    """The ``load`` tests keep every core busy (``tests/load.py``): in a parallel run they would slow
+    the tests of the other workers, some of which time things. They run alone: ``pytest -m load``
+    (``.ci/run`` runs them after the others); a parallel run that does not ask for them skips them."""
+    if not os.environ.get("PYTEST_XDIST_WORKER") or "load" in (config.getoption("markexpr") or ""):
+        return
+    skip = pytest.mark.skip(reason="keeps every core busy: runs alone, with `pytest -m load` (.ci/run does)")
+    for item in items:
+        if item.get_closest_marker("load") is not None:
+            item.add_marker(skip)
+
+
 @pytest.fixture(autouse=True)
 def _restore_main_module():
     """Streamlit's AppTest runs pages as ``__main__`` and leaves them there; processes spawned
@@ -31,6 +43,19 @@ def _restore_main_module():
     yield
     if main is not None:
         sys.modules["__main__"] = main
+
+
+@pytest.fixture(params=["quiet", pytest.param("busy", marks=pytest.mark.load)])
+def machine(request):
+    """The test runs twice: on the machine as it is ("quiet"; None), and with every core kept busy
+    throughout ("busy", a ``load`` test; the running :class:`tests.load.Busy`)."""
+    if request.param == "quiet":
+        yield None
+        return
+    from tests import load
+
+    with load.busy_cores() as busy:
+        yield busy
 
 
 @pytest.fixture(scope="module")

@@ -66,7 +66,7 @@ def _assert_what_a_user_sees(page, url: str) -> None:
         page.keyboard.press("Escape")
 
 
-def test_upload_box_select_run_then_inspect(served, tmp_path):
+def test_upload_box_select_run_then_inspect(served, tmp_path, machine):
     url, home = served
     wav = app_browser.write_speech(tmp_path / "my speech.wav", seconds=6.0)
     out = _shots(tmp_path)
@@ -76,38 +76,47 @@ def test_upload_box_select_run_then_inspect(served, tmp_path):
         assert (home / "db" / "demo" / "database.json").is_file()  # built by the app on the first view
         _assert_what_a_user_sees(page, url)
         app_browser.upload(page, wav)
-        assert page.get_by_text("WAV (PCM_16), 16000 Hz, 1 channel, 6.00 s").count() == 1
+        main = app_browser.main_area(page)
+        assert main.get_by_text("WAV (PCM_16), 16000 Hz, 1 channel, 6.00 s").count() == 1
 
         # a control segment by dragging across the waveform: its band appears, labelled
         app_browser.box_select(page, 0.25, 0.6)
-        waveform = page.locator('[data-testid="stPlotlyChart"]').first
+        waveform = app_browser.keyed(page, "synth.waveform")
         assert waveform.locator("text", has_text="both_hands=high").count() == 1
 
         app_browser.run_and_wait(page)
-        app_browser.wait_idle(page)
         # the 3D view has drawn on a canvas of real size, and plays; the wrist plot has its four rows
         canvas = app_browser.skeleton_canvas(page, "synth.skeleton")
         box = canvas.bounding_box()
         assert box["width"] > 200 and box["height"] > 200
         assert canvas.get_attribute("data-frame") == "0"
-        page.frame_locator("iframe[srcdoc*='data-key=\"synth.skeleton\"']").locator("#play").click()
-        page.wait_for_timeout(1200)
-        assert int(canvas.get_attribute("data-frame")) > 0
+        view = app_browser.main_area(page).frame_locator("iframe[srcdoc*='data-key=\"synth.skeleton\"']")
+        view.locator("#play").click()
+        # playing: the view draws later frames (times out, and fails, if it stays on frame 0)
+        view.locator('canvas#c:not([data-frame="0"])').wait_for(state="attached", timeout=30_000)
+        wrists = app_browser.keyed(page, "synth.wrists")
         for row in ("left wrist height", "right wrist height", "left wrist speed", "right wrist speed"):
-            assert page.locator('[data-testid="stPlotlyChart"] text', has_text=row).count() >= 1
-        assert page.get_by_text("controls:").count() >= 1
-        for label in ("Motion + search (npz)", "Motion (BVH)", "Control track (CSV)", "Config (JSON)"):
-            assert page.get_by_role("button", name=label).count() == 1
+            assert wrists.locator("text", has_text=row).count() >= 1
+        assert main.get_by_text("controls:").count() >= 1
+        for kind, label in (
+            ("npz", "Motion + search (npz)"),
+            ("bvh", "Motion (BVH)"),
+            ("csv", "Control track (CSV)"),
+            ("json", "Config (JSON)"),
+        ):
+            assert app_browser.keyed(page, f"synth.download_{kind}").get_by_role("button", name=label).count() == 1
         assert app_browser.problems(page) == []
         app_browser.screenshot(page, out / "browser_synthesize.png")
 
         # the inspector sees this session's result (state kept across pages)
         app_browser.go_to(page, "Retrieval inspector")
-        page.get_by_text("Step 0").first.wait_for()
+        main.get_by_text("Step 0").first.wait_for()
         app_browser.skeleton_canvas(page, "inspect.views")
         assert app_browser.problems(page) == []
         app_browser.screenshot(page, out / "browser_inspector.png")
     assert (out / "browser_synthesize.png").stat().st_size > 10_000
+    if machine is not None:  # it ran on a busy machine: the busy loops took their part throughout
+        assert machine.share() > 0.1, machine.share()
 
 
 def test_a_file_that_is_not_audio_is_an_error_message(served, tmp_path):
@@ -116,9 +125,9 @@ def test_a_file_that_is_not_audio_is_an_error_message(served, tmp_path):
     bad.write_bytes(b"these are notes, not sound" * 40)
     with app_browser.browser() as page:
         app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
-        page.locator('[data-testid="stFileUploader"] input[type="file"]').set_input_files(str(bad))
-        alert = page.locator('[data-testid="stAlert"]', has_text="notes.wav")
-        alert.first.wait_for()
-        app_browser.wait_idle(page)  # the run that drew the message may still show the last run's Run button
+        with app_browser.run_after(page):
+            app_browser.keyed(page, "synth.upload").locator('input[type="file"]').set_input_files(str(bad))
+        alert = app_browser.main_area(page).locator('[data-testid="stAlert"]', has_text="notes.wav")
+        assert alert.count() >= 1
         assert app_browser.problems(page) == []
-        assert page.get_by_role("button", name="Run", exact=True).count() == 0
+        assert app_browser.button(page, "synth.go").count() == 0

@@ -16,6 +16,7 @@ result's view after Stop) against the file.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import re
 import statistics
 import time
@@ -27,7 +28,7 @@ from scipy.signal import correlate
 
 from gesturekit.motion import AUDIO_SR
 from gesturekit.viz.viewer import read_viewer_data
-from tests import app_browser
+from tests import app_browser, load
 
 pytestmark = pytest.mark.skipif(
     app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
@@ -35,6 +36,27 @@ pytestmark = pytest.mark.skipif(
 
 SPEECH_S = 9.0
 FPS = 15
+
+
+@dataclasses.dataclass(frozen=True)
+class RealTime:
+    """What the Live page keeps up with while the speech comes."""
+
+    updates: int  # times the live view changed (a new pose each step, 0.53 s)
+    span_s: float  # speech between the first and the last pose seen
+    latency_s: float | None  # mic-to-figure, the page's figure and the median measured in the browser
+    streamed_s: float | None  # the result's length against the speech streamed until Stop
+
+
+#: On a quiet machine, the page keeps up as the README says. With every core kept busy, the busy
+#: loops, the browser and the server share the cores: the page still works (the body moves, the
+#: page shows its latency, Stop keeps what the server had), but falls behind the speech by as much
+#: as the machine's other work takes (seconds), and the browser's clocks (when the microphone
+#: opened, when Stop was clicked) run late too: no bound (None) on either.
+REAL_TIME = {
+    "quiet": RealTime(updates=5, span_s=3.0, latency_s=1.5, streamed_s=0.6),
+    "busy": RealTime(updates=2, span_s=0.5, latency_s=None, streamed_s=None),
+}
 #: Records when the page's microphone opened (browser clock, ms), in whichever frame asks for it.
 _MIC_CLOCK = """(() => {
   const md = navigator.mediaDevices;
@@ -50,7 +72,7 @@ _MIC_CLOCK = """(() => {
 #: and drew (the browser's clock, ms), and the browser's clock now, in one look; the view's page
 #: itself only when its frame differs from ``last``.
 _LIVE_VIEW = """(last) => {
-  const f = document.querySelector('iframe[srcdoc*=\\'data-key="live.skeleton"\\']');
+  const f = document.querySelector('[data-testid="stMain"] iframe[srcdoc*=\\'data-key="live.skeleton"\\']');
   const m = f ? /frame (\\d+)/.exec(f.srcdoc) : null;
   const frame = m ? Number(m[1]) : null;
   let shown = null;
@@ -63,31 +85,31 @@ _LIVE_VIEW = """(last) => {
 }"""
 
 
-@contextlib.contextmanager
-def _browser(*flags: str):
-    """A Playwright page in a fresh headless Chromium with ``flags`` added (as app_browser.browser)."""
-    from playwright.sync_api import sync_playwright
+#: The frame element of the last performance's 3D view.
+_LIVE_RESULT = "[data-testid='stMain'] iframe[srcdoc*='data-key=\"live.result\"']"
 
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(
-            executable_path=app_browser.find_chromium(), args=list(app_browser.CHROMIUM_FLAGS) + list(flags)
-        )
-        try:
-            page = b.new_page(viewport={"width": 1440, "height": 1000})
-            page.set_default_timeout(app_browser.TIMEOUT_S * 1000)
-            yield page
-        finally:
-            b.close()
+
+def _component_button(page, name: str):
+    """A button of the microphone component (streamlit-webrtc draws its own, in its frame)."""
+    component = app_browser.main_area(page).frame_locator('iframe[title*="streamlit_webrtc"]')
+    return component.get_by_role("button", name=name)
 
 
 def _start(page) -> None:
-    component = page.frame_locator('iframe[title*="streamlit_webrtc"]')
-    component.get_by_role("button", name="Start").click()
+    _component_button(page, "Start").click()
 
 
-@pytest.fixture(scope="module")
-def live_run(tmp_path_factory):
-    """Stream SPEECH_S s of speech through the Live page; yields what was seen and the page after Stop."""
+def _stop(page) -> None:
+    """The page's Stop (enabled while a performance runs); Streamlit's header shows a Stop of its own."""
+    app_browser.keyed(page, "live.stop").locator("button:enabled").click()
+
+
+@pytest.fixture(scope="module", params=["quiet", pytest.param("busy", marks=pytest.mark.load)])
+def live_run(request, tmp_path_factory):
+    """Stream SPEECH_S s of speech through the Live page; yields what was seen and the page after Stop.
+
+    "busy": with every core kept busy from before the browser opens to the module's last test.
+    """
     home = tmp_path_factory.mktemp("live_home")
     wav = app_browser.write_speech(home / "speech.wav", seconds=SPEECH_S, seed=5151)
     flags = (
@@ -95,7 +117,8 @@ def live_run(tmp_path_factory):
         "--use-fake-device-for-media-stream",
         f"--use-file-for-fake-audio-capture={wav}%noloop",  # played once, then silence
     )
-    with app_browser.app_server(home, demo_minutes=1.0) as url, _browser(*flags) as page:
+    busy = load.busy_cores() if request.param == "busy" else contextlib.nullcontext()
+    with app_browser.app_server(home, demo_minutes=1.0) as url, busy as cores, app_browser.browser(flags=flags) as page:
         page.add_init_script(_MIC_CLOCK)
         # one synthesis first: the server compiles its search code once, before the microphone opens
         app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
@@ -104,29 +127,37 @@ def live_run(tmp_path_factory):
         _start(page)
         seen = []
         deadline = time.monotonic() + SPEECH_S + 60
+        updates = REAL_TIME[request.param].updates
         while time.monotonic() < deadline:
             look = page.evaluate(_LIVE_VIEW, seen[-1]["frame"] if seen else None)
             if look["frame"] is not None:
                 if not seen or look["frame"] != seen[-1]["frame"]:
                     seen.append(look)
-                if look["mic"] is not None and look["now"] - look["mic"] > SPEECH_S * 1000 - 500:
+                # the speech has been played; a page behind it (busy machine) is given the time
+                # to show as many poses as it must (the file plays on as silence)
+                played = look["mic"] is not None and look["now"] - look["mic"] > SPEECH_S * 1000 - 500
+                if played and len(seen) >= updates:
                     break
-            page.wait_for_timeout(40)
-        latency_text = page.get_by_test_id("stMetric").filter(has_text="Microphone to figure").first.inner_text()
+            page.wait_for_timeout(40)  # the pace of the looks: each new pose is timed by its own look
+        latency = app_browser.main_area(page).get_by_test_id("stMetric").filter(has_text="Microphone to figure")
+        latency_text = latency.first.inner_text()
         stopped_at = page.evaluate("() => Date.now()")
-        page.get_by_role("button", name="Stop", exact=True).click()
-        page.get_by_role("heading", name="Performance").wait_for()
+        _stop(page)
+        app_browser.heading(page, "Performance").wait_for()
+        app_browser.viewer(page, "live.result").wait_for(state="attached")
         app_browser.wait_idle(page)
-        result_page = page.locator("iframe[srcdoc*='data-key=\"live.result\"']").first.get_attribute("srcdoc")
+        result_page = app_browser.viewer(page, "live.result").get_attribute("srcdoc")
         result_audio = read_viewer_data(result_page)["audio"]
         played = sf.read(str(wav), dtype="float32")[0]
         yield {
+            "real_time": REAL_TIME[request.param],
             "seen": seen,
             "latency_text": latency_text,
             "stopped_at": stopped_at,
             "page": page,
             "played": played,
             "result_audio": result_audio,
+            "busy_share": cores.share() if cores is not None else None,
         }
 
 
@@ -138,19 +169,20 @@ def _offset_s(received: np.ndarray, played: np.ndarray) -> float:
 
 
 def test_the_body_moves_with_the_streamed_speech(live_run):
-    seen = live_run["seen"]
+    seen, limits = live_run["seen"], live_run["real_time"]
     # a new pose at each step (8 frames, 0.53 s) while the speech came: some may fall between two looks
-    assert len(seen) >= 5, f"the live view changed only {len(seen)} times"
+    assert len(seen) >= limits.updates, f"the live view changed only {len(seen)} times"
     frames = [s["frame"] for s in seen]
-    assert frames == sorted(frames) and frames[-1] - frames[0] >= 3 * FPS  # it went on with the speech
+    assert frames == sorted(frames) and frames[-1] - frames[0] >= limits.span_s * FPS  # it went on with the speech
     poses = [read_viewer_data(s["srcdoc"])["motions"][0] for s in seen[:: max(1, len(seen) // 6)]]
     coords = [np.asarray(p["points"], dtype=float) for p in poses]  # (1, 61, 3): the pose drawn
     moved = [float(np.abs(a - b).max()) for a, b in zip(coords, coords[1:])]
     assert max(moved) > 0.01, moved  # the drawn joints moved (metres)
 
 
-def test_the_page_shows_the_latency_and_it_is_within_1_5_s(live_run):
-    text = live_run["latency_text"]
+def test_the_page_shows_the_latency_and_it_is_within_its_limit(live_run):
+    """Within 1.5 s on a quiet machine (REAL_TIME)."""
+    text, limits = live_run["latency_text"], live_run["real_time"]
     shown = float(re.search(r"([0-9.]+)\s*s", text.split("\n", 1)[1]).group(1))
     received = live_run["result_audio"]
     offset = _offset_s(received, live_run["played"])
@@ -165,14 +197,17 @@ def test_the_page_shows_the_latency_and_it_is_within_1_5_s(live_run):
         f"of {len(seen)} timed at their view's load (the stream began {offset:.2f} s into "
         f"the speech); the page showed {shown:.2f} s"
     )
-    assert 0 < shown <= 1.5
-    assert statistics.median(steady) <= 1.5
+    assert 0 < shown < 60
+    if limits.latency_s is not None:
+        assert shown <= limits.latency_s
+        assert statistics.median(steady) <= limits.latency_s
 
 
 def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run, tmp_path):
     page = live_run["page"]
     assert app_browser.problems(page) == []
-    caption = page.locator('[data-testid="stCaptionContainer"]', has_text="frames,").first.inner_text()
+    main = app_browser.main_area(page)
+    caption = main.locator('[data-testid="stCaptionContainer"]', has_text="frames,").first.inner_text()
     frames = int(re.search(r"(\d+) frames", caption).group(1))
     mic = live_run["seen"][-1]["mic"]
     offset = _offset_s(live_run["result_audio"], live_run["played"])
@@ -180,33 +215,48 @@ def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run, tmp_path):
     streamed_s = (live_run["stopped_at"] - mic) / 1000 - offset
     print(f"\nstreamed {streamed_s:.2f} s of speech; the result holds {frames} frames ({frames / FPS:.2f} s)")
     # the result is the speech the server had at Stop: what was streamed, less what was still in
-    # flight (the transport's buffering), within a step
-    assert frames / FPS == pytest.approx(streamed_s, abs=0.6), (frames, streamed_s)
+    # flight (the transport's buffering), within a step; and at least what the live view had shown
+    within = live_run["real_time"].streamed_s
+    if within is not None:
+        assert frames / FPS == pytest.approx(streamed_s, abs=within), (frames, streamed_s)
+    assert frames > live_run["seen"][-1]["frame"]
     result = app_browser.viewer_frame(page, "live.result")
     assert result.evaluate("() => gk.frames") == frames
-    for label in ("Speech (WAV)", "Motion + search (npz)", "Motion (BVH)", "Control track (CSV)"):
-        assert page.get_by_role("button", name=label).count() == 1
-    assert page.get_by_role("button", name="Render MP4 with sound").count() == 1
+    for kind, label in (
+        ("wav", "Speech (WAV)"),
+        ("npz", "Motion + search (npz)"),
+        ("bvh", "Motion (BVH)"),
+        ("csv", "Control track (CSV)"),
+    ):
+        assert app_browser.keyed(page, f"live.download_{kind}").get_by_role("button", name=label).count() == 1
+    assert app_browser.keyed(page, "live.render").get_by_role("button", name="Render MP4 with sound").count() == 1
     assert app_browser.screenshot(page, tmp_path / "browser_live_performance.png").stat().st_size > 10_000
     # Stop closed the microphone: the component offers Start again
-    page.frame_locator('iframe[title*="streamlit_webrtc"]').get_by_role("button", name="Start").wait_for()
+    _component_button(page, "Start").wait_for()
 
 
 def test_start_again_after_stop_gives_a_second_performance(live_run):
     page = live_run["page"]
-    first = page.locator("iframe[srcdoc*='data-key=\"live.result\"']").first.get_attribute("srcdoc")
+    # the first performance's view, kept in the page: its heading stays, the new result replaces the view
+    page.evaluate("(view) => { window.__gkFirst = document.querySelector(view).srcdoc; }", _LIVE_RESULT)
     _start(page)  # the file plays on as silence: a performance all the same
-    page.locator("iframe[srcdoc*='data-key=\"live.skeleton\"']").first.wait_for(state="attached")
-    page.wait_for_timeout(1000)
-    page.get_by_role("button", name="Stop", exact=True).click()
-    page.get_by_role("heading", name="Performance").wait_for()
-    # the first performance's heading is there already: wait for the new result to be drawn
-    second = first
-    for _ in range(40):
-        app_browser.wait_idle(page)
-        second = page.locator("iframe[srcdoc*='data-key=\"live.result\"']").first.get_attribute("srcdoc")
-        if second != first:
-            break
-        page.wait_for_timeout(500)
-    assert second != first  # the new performance replaced the first
+    # the new performance's body is drawn, and the page's Stop is enabled (it is, while one runs)
+    app_browser.viewer(page, "live.skeleton").wait_for(state="attached")
+    _stop(page)
+    page.wait_for_function(
+        "(view) => { const f = document.querySelector(view); return !!f && f.srcdoc !== window.__gkFirst; }",
+        arg=_LIVE_RESULT,
+    )
+    app_browser.wait_idle(page)
+    second = app_browser.viewer(page, "live.result").get_attribute("srcdoc")
+    assert second != page.evaluate("() => window.__gkFirst")  # the new performance replaced the first
     assert app_browser.problems(page) == []
+
+
+@pytest.mark.load
+@pytest.mark.parametrize("live_run", ["busy"], indirect=True)
+def test_the_busy_performance_had_every_core_kept_busy(live_run):
+    """The "busy" performance ran on a busy machine: the busy loops took their part throughout."""
+    # a loop has 1.0 on a machine with nothing else to do; the app, the browser and any other work
+    # on the machine take their part (a loop that ended early makes it 0)
+    assert live_run["busy_share"] > 0.1, live_run["busy_share"]

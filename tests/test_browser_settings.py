@@ -14,6 +14,11 @@ import pytest
 
 from tests import app_browser
 
+try:
+    from playwright.sync_api import expect
+except ImportError:  # the tests skip, with the reason (app_browser.unavailable)
+    expect = None
+
 pytestmark = pytest.mark.skipif(
     app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
 )
@@ -36,14 +41,18 @@ def served(tmp_path_factory):
 
 
 def _number(page, label: str):
-    return page.locator('[data-testid="stNumberInput"]', has_text=label).locator("input").first
+    main = app_browser.main_area(page)
+    return main.locator('[data-testid="stNumberInput"]', has_text=label).locator("input").first
 
 
 def _set_number(page, label: str, value: str) -> None:
+    """Type ``value`` into a number input and wait for the run that takes it (it must be a change:
+    Streamlit starts no run for the value a widget already has)."""
     box = _number(page, label)
-    box.fill(value)
-    box.press("Enter")
-    app_browser.wait_idle(page)
+    assert box.input_value() != value, f"{label} is {value} already"
+    with app_browser.run_after(page):
+        box.fill(value)
+        box.press("Enter")
 
 
 def _numbers(page) -> dict[str, str]:
@@ -51,22 +60,27 @@ def _numbers(page) -> dict[str, str]:
 
 
 def _choose_database(page, option: str) -> None:
-    sidebar = page.locator('[data-testid="stSidebar"]')
-    sidebar.locator('[data-testid="stSelectbox"]').first.click()
-    page.get_by_role("option", name=option).first.click()
-    app_browser.wait_idle(page)
+    """Choose another database in the sidebar (``option``: not the one chosen now)."""
+    with app_browser.run_after(page):
+        app_browser.keyed(page, "_gk.database_choice").locator('[data-testid="stSelectbox"]').click()
+        # the options open in a list of their own, outside the sidebar
+        dropdown = page.locator('[data-testid="stSelectboxVirtualDropdown"]')
+        dropdown.get_by_role("option", name=option, exact=True).click()
+
+
+def _grid(page):
+    """The control table (the data editor of the Synthesize page)."""
+    return app_browser.remounted(page, "synth.segments_editor").locator('[data-testid="stDataFrame"]')
 
 
 def _table(page, *, expect: int = 0) -> list[str]:
     """The control table's cells, row by row, read from the data editor's accessible grid.
 
-    A newly drawn editor fills its grid a moment later: waits up to 10 s for ``expect`` cells.
+    A newly drawn editor fills its grid a moment later: waits for ``expect`` cells.
     """
-    cells = page.locator('[data-testid="stDataFrame"]').first.locator('[role="gridcell"]')
-    for _ in range(50):
-        if cells.count() >= expect:
-            break
-        page.wait_for_timeout(200)
+    cells = _grid(page).locator('[role="gridcell"]')
+    if expect:
+        cells.nth(expect - 1).wait_for(state="attached", timeout=30_000)
     return [c.inner_text() for c in cells.all()]
 
 
@@ -91,8 +105,13 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
     table says which one, and the arrow keys move the selection to the wanted cell before Enter
     opens its editor. Tries three times; raises AssertionError when the cell never shows ``text``.
     """
-    grid = page.locator('[data-testid="stDataFrame"]').first
+    grid = _grid(page)
     canvas = grid.locator('canvas[data-testid="data-grid-canvas"]')
+    selected = grid.locator('td[role="gridcell"][aria-selected="true"]')
+    cell = grid.locator(f'td[role="gridcell"]#glide-cell-{column + 1}-{row}')  # see _selected_cell
+    # the accessible table is filled a moment after the grid is drawn; without its rows, the click
+    # below would aim at the whole body and may land on the editor's empty row (adding a row)
+    canvas.locator('tbody tr[role="row"]').nth(row).wait_for(state="attached", timeout=30_000)
     for _ in range(3):  # a busy machine may open the cell's editor late: try again
         canvas.scroll_into_view_if_needed()
         box = canvas.bounding_box()
@@ -100,12 +119,11 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
         rows = canvas.locator('tbody tr[role="row"]').count()
         row_height = (box["height"] - header) / (rows + 1)  # the data rows and the editor's empty row
         page.mouse.click(box["x"] + box["width"] / 2, box["y"] + header + row_height / 2)
-        at = None
-        for _ in range(25):  # the selection shows in the table a moment after the click
-            at = _selected_cell(grid)
-            if at is not None:
-                break
-            page.wait_for_timeout(200)
+        try:  # the selection shows in the table a moment after the click
+            selected.first.wait_for(state="attached", timeout=5000)
+        except Exception:  # noqa: BLE001  (a playwright timeout: the click selected nothing, click again)
+            continue
+        at = _selected_cell(grid)
         if at is None:
             continue
         for key, steps in (
@@ -127,22 +145,28 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
             page.keyboard.press("Escape")
             continue
         page.keyboard.press("Control+a")
-        # keys at a person's pace, and a pause before Enter: on a busy machine the cell's editor
-        # took the keys into its box but committed the value it held before them (nothing was sent)
+        # keys at a person's pace, and Enter only once the editor's box holds them all: on a busy
+        # machine the cell's editor took the keys into its box but committed the value it held
+        # before them (nothing was sent)
         page.keyboard.type(text, delay=50)
-        page.wait_for_timeout(300)
+        try:
+            expect(editor).to_have_value(text, timeout=10_000)
+        except AssertionError:
+            page.keyboard.press("Escape")
+            continue
+        since = app_browser.runs_seen(page)
         page.keyboard.press("Enter")
-        app_browser.wait_idle(page)
-        for _ in range(25):  # the grid shows the committed value a moment later
-            cells = _table(page)
-            if len(cells) > row * 3 + column and cells[row * 3 + column] == text:
-                return
-            page.wait_for_timeout(200)
+        try:  # the grid shows the committed value a moment later
+            expect(cell).to_have_text(text, timeout=10_000)
+        except AssertionError:
+            continue
+        app_browser.wait_run(page, since)  # the edit reached the server, which ran the page with it
+        return
     raise AssertionError(f"could not type {text!r} into the table's row {row}, column {column}")
 
 
 def _bands(page) -> int:
-    return page.locator('[data-testid="stPlotlyChart"]').first.locator("text", has_text="both_hands=high").count()
+    return app_browser.keyed(page, "synth.waveform").locator("text", has_text="both_hands=high").count()
 
 
 def _expect_kept(page, cells: list[str]) -> None:
@@ -169,11 +193,12 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
 
         # "another folder…" with nothing typed stops the page before its settings are drawn
         _choose_database(page, "another folder…")
-        page.get_by_text("Type the folder of a database").first.wait_for()
-        typed = page.locator('[data-testid="stSidebar"] input[placeholder="/path/to/database"]')
-        typed.fill(str(home / "db" / "demo"))
-        typed.press("Enter")
-        app_browser.wait_idle(page)
+        # the page says where to type (in its main area): the sidebar has a box for it
+        app_browser.main_area(page).get_by_text("Type the folder of a database").first.wait_for()
+        typed = app_browser.keyed(page, "_gk.database_typed").locator('input[placeholder="/path/to/database"]')
+        with app_browser.run_after(page):
+            typed.fill(str(home / "db" / "demo"))
+            typed.press("Enter")
         _expect_kept(page, cells)
 
         _choose_database(page, "demo database (generated speaker)")
@@ -189,13 +214,13 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
         _expect_kept(page, cells)
 
         app_browser.run_and_wait(page)
-        app_browser.wait_idle(page)
-        caption = page.locator('[data-testid="stCaptionContainer"]', has_text="seed 5").first.inner_text()
+        main = app_browser.main_area(page)
+        caption = main.locator('[data-testid="stCaptionContainer"]', has_text="seed 5").first.inner_text()
         assert "k = 2" in caption and "seed 5" in caption and f"{float(cells[0]):g}-4.25:both_hands=high" in caption
         assert "differs from the paper" in caption and "N = 6 (paper 8)" in caption
         # the saved config is the one the run used
         with page.expect_download() as info:
-            page.get_by_role("button", name="Config (JSON)").click()
+            app_browser.keyed(page, "synth.download_json").get_by_role("button", name="Config (JSON)").click()
         config = json.loads(open(info.value.path(), encoding="utf-8").read())
         settings = config["synthesis"]
         assert (settings["k"], settings["segment"], settings["seed"], settings["record"]) == (2, 6, 5, 7)
@@ -206,7 +231,7 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
 
 def _switch_database_and_back(page) -> None:
     _choose_database(page, "another folder…")
-    page.get_by_text("Type the folder of a database").first.wait_for()
+    app_browser.main_area(page).get_by_text("Type the folder of a database").first.wait_for()
     _choose_database(page, "demo database (generated speaker)")
 
 
@@ -218,17 +243,19 @@ def test_the_other_pages_keep_their_settings_too(served):
         _set_number(page, "Seed", "7")
         _set_number(page, "Participants", "3")
         _switch_database_and_back(page)
-        page.get_by_role("heading", name="Study stimuli", exact=True).first.wait_for()
+        app_browser.heading(page, "Study stimuli").wait_for()
         assert (_number(page, "Seed").input_value(), _number(page, "Participants").input_value()) == ("7", "3")
-        _set_number(page, "Parallel renders", "2")  # a later change sends the kept values along, unchanged
+        # a later change sends the kept values along, unchanged (the default is the machine's core count)
+        workers = int(_number(page, "Parallel renders").input_value())
+        _set_number(page, "Parallel renders", str(workers + 1))
         assert (_number(page, "Seed").input_value(), _number(page, "Participants").input_value()) == ("7", "3")
 
         # Database: the clip viewed
         app_browser.go_to(page, "Database")
         _set_number(page, "Clip to view", "3")
-        page.get_by_role("heading", name="Clip 3").first.wait_for()
+        app_browser.heading(page, "Clip 3").wait_for()
         _switch_database_and_back(page)
-        page.get_by_role("heading", name="Clip 3").first.wait_for()
+        app_browser.heading(page, "Clip 3").wait_for()
         assert _number(page, "Clip to view").input_value() == "3"
 
         app_browser.go_to(page, "Study stimuli")
@@ -249,9 +276,7 @@ def test_the_database_chosen_stays_chosen_on_every_page(served):
         app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
         _choose_database(page, f"other  ({home / 'db'})")
         for title in ("Database", "Synthesize", "Live", "Database", "Study stimuli", "Retrieval inspector", "Live"):
-            app_browser.go_to(page, title)
-            page.wait_for_timeout(300)  # a run the page switch may still bring
-            app_browser.wait_idle(page)
-            sidebar = page.locator('[data-testid="stSidebar"]').inner_text()
+            app_browser.go_to(page, title)  # the new page drawn, and the app idle
+            sidebar = app_browser.sidebar(page).inner_text()
             assert str(other) in sidebar, f"on {title}: {sidebar[-300:]}"
         assert app_browser.problems(page) == []
