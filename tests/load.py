@@ -68,3 +68,62 @@ def busy_cores(n: int | None = None, *, most_s: float = 600.0) -> Iterator[Busy]
             p.kill()
         for p in procs:
             p.wait()
+
+
+def _busy_s() -> float:
+    """CPU seconds every core of the machine has spent busy since boot (``/proc/stat``)."""
+    with open("/proc/stat") as f:
+        fields = [int(v) for v in f.readline().split()[1:]]
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle and waiting for I/O
+    return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
+
+
+def _tree_cpu_s(root: int) -> float:
+    """CPU seconds of process ``root`` and all its descendants, the ended ones it waited for included."""
+    parent: dict[int, int] = {}
+    total: dict[int, float] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        pid = int(entry)
+        parent[pid] = int(fields[1])
+        total[pid] = sum(int(v) for v in fields[11:15]) / os.sysconf("SC_CLK_TCK")
+    mine = 0.0
+    for pid in total:
+        p = pid
+        while p > 1 and p != root:
+            p = parent.get(p, 0)
+        if p == root:
+            mine += total[pid]
+    return mine
+
+
+class OtherWork:
+    """How busy the rest of the machine was while a block ran: the CPU that processes other than
+    this one and its descendants (the app's server, the browser) used, as a part of all the cores.
+
+    A timed bound that holds on a quiet machine is checked only where the machine was quiet;
+    a test on a busy machine checks what still holds there (CI shares its machine).
+    """
+
+    #: Above this part of the machine used by other work, the machine counts as busy.
+    BUSY = 0.25
+
+    def __enter__(self) -> OtherWork:
+        self._start = (time.monotonic(), _busy_s(), _tree_cpu_s(os.getpid()))
+        self.share = 0.0
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        wall, busy, mine = (a - b for a, b in zip((time.monotonic(), _busy_s(), _tree_cpu_s(os.getpid())), self._start))
+        self.share = max(0.0, busy - mine) / (wall * cores()) if wall > 0 else 0.0
+
+    @property
+    def busy(self) -> bool:
+        """Whether other work took more than :attr:`BUSY` of the machine."""
+        return self.share > self.BUSY

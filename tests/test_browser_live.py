@@ -48,7 +48,8 @@ class RealTime:
     streamed_s: float | None  # the result's length against the speech streamed until Stop
 
 
-#: On a quiet machine, the page keeps up as the README says. With every core kept busy, the busy
+#: On a quiet machine, the page keeps up as the README says. With every core kept busy (the
+#: "busy" run, or other work on a shared machine: :class:`tests.load.OtherWork`), the busy
 #: loops, the browser and the server share the cores: the page still works (the body moves, the
 #: page shows its latency, Stop keeps what the server had), but falls behind the speech by as much
 #: as the machine's other work takes (seconds), and the browser's clocks (when the microphone
@@ -124,25 +125,30 @@ def live_run(request, tmp_path_factory):
         app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
         app_browser.run_and_wait(page)
         app_browser.go_to(page, "Live")
-        _start(page)
-        seen = []
-        deadline = time.monotonic() + SPEECH_S + 60
-        updates = REAL_TIME[request.param].updates
-        while time.monotonic() < deadline:
-            look = page.evaluate(_LIVE_VIEW, seen[-1]["frame"] if seen else None)
-            if look["frame"] is not None:
-                if not seen or look["frame"] != seen[-1]["frame"]:
-                    seen.append(look)
-                # the speech has been played; a page behind it (busy machine) is given the time
-                # to show as many poses as it must (the file plays on as silence)
-                played = look["mic"] is not None and look["now"] - look["mic"] > SPEECH_S * 1000 - 500
-                if played and len(seen) >= updates:
-                    break
-            page.wait_for_timeout(40)  # the pace of the looks: each new pose is timed by its own look
-        latency = app_browser.main_area(page).get_by_test_id("stMetric").filter(has_text="Microphone to figure")
-        latency_text = latency.first.inner_text()
-        stopped_at = page.evaluate("() => Date.now()")
-        _stop(page)
+        with load.OtherWork() as other:
+            _start(page)
+            seen = []
+            deadline = time.monotonic() + SPEECH_S + 60
+            updates = REAL_TIME[request.param].updates
+            while time.monotonic() < deadline:
+                look = page.evaluate(_LIVE_VIEW, seen[-1]["frame"] if seen else None)
+                if look["frame"] is not None:
+                    if not seen or look["frame"] != seen[-1]["frame"]:
+                        seen.append(look)
+                    # the speech has been played; a page behind it (busy machine) is given the time
+                    # to show as many poses as it must (the file plays on as silence)
+                    played = look["mic"] is not None and look["now"] - look["mic"] > SPEECH_S * 1000 - 500
+                    if played and len(seen) >= updates:
+                        break
+                page.wait_for_timeout(40)  # the pace of the looks: each new pose is timed by its own look
+            latency = app_browser.main_area(page).get_by_test_id("stMetric").filter(has_text="Microphone to figure")
+            latency_text = latency.first.inner_text()
+            stopped_at = page.evaluate("() => Date.now()")
+            _stop(page)
+        # the quiet bounds hold where the machine was quiet: other work on a shared machine (CI)
+        # slows the page as the busy loops do
+        machine = "busy" if request.param == "busy" or other.busy else "quiet"
+        print(f"\nother work took {other.share:.0%} of the machine during the performance: {machine} limits")
         app_browser.heading(page, "Performance").wait_for()
         app_browser.viewer(page, "live.result").wait_for(state="attached")
         app_browser.wait_idle(page)
@@ -150,7 +156,7 @@ def live_run(request, tmp_path_factory):
         result_audio = read_viewer_data(result_page)["audio"]
         played = sf.read(str(wav), dtype="float32")[0]
         yield {
-            "real_time": REAL_TIME[request.param],
+            "real_time": REAL_TIME[machine],
             "seen": seen,
             "latency_text": latency_text,
             "stopped_at": stopped_at,
