@@ -268,7 +268,12 @@ def _moments(x: np.ndarray) -> np.ndarray:
 
 
 def _save(path: Path, array: np.ndarray) -> None:
-    np.save(path, np.ascontiguousarray(array), allow_pickle=False)
+    """Write a staged array; a failed write (a full disk) is an :class:`OutputError` naming the file,
+    whose unit's temporary folder is then removed (:func:`_run_unit`)."""
+    from .outputs import write_errors
+
+    with write_errors(path):
+        np.save(path, np.ascontiguousarray(array), allow_pickle=False)
 
 
 def stage_take(take: Take, folder: Path, index: int, config: BuildConfig) -> dict[str, Any]:
@@ -663,6 +668,7 @@ def _run_unit(
     complete or not at all (a temporary folder renamed when done). A unit staged already is reused
     when ``check`` finds it whole, else removed and staged again (``damaged`` says why)."""
     from .datasets.takes import iter_takes
+    from .outputs import write_errors
 
     staging = Path(job.staging)
     done, damaged = _reusable(staging, job, check)
@@ -678,7 +684,8 @@ def _run_unit(
                     continue
                 records.append(per_take(take, tmp, len(records)))
         result = {"takes": records, "warnings": list(messages) if keep_warnings else []}
-        (tmp / "takes.json").write_text(json.dumps(result), encoding="utf-8")
+        with write_errors(tmp / "takes.json"):
+            (tmp / "takes.json").write_text(json.dumps(result), encoding="utf-8")
         os.replace(tmp, staging / job.key)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

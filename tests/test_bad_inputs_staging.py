@@ -1,4 +1,4 @@
-"""Bad-input suite, a build's staging folder: damaged staged takes.
+"""Bad-input suite, a build's staging folder: damaged staged takes and a disk that fills up while staging.
 
 A build that is interrupted leaves its staged takes for the next identical command to reuse. Each
 case interrupts a build (a take that cannot be read), damages what it staged as a crash, a full
@@ -8,6 +8,7 @@ damaged one again and says so, and gives the database an uninterrupted build giv
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
@@ -19,7 +20,7 @@ import pytest
 
 from gesturekit.datasets.keypoint_example import write_keypoint_example
 
-from .badinput import run_cli
+from .badinput import assert_refused, run_cli
 
 OPTIONS = ("--fps", "15", "--up", "-y", "--workers", "1", "--overlap-stride", "16")
 
@@ -149,3 +150,77 @@ def test_nothing_non_finite_is_written_from_a_staged_take(kp, tmp_path):
     _resave(units[0] / "0.moments_F.npy", lambda a: np.full_like(a, np.nan))
     with pytest.raises(DatabaseError, match=r"0\.moments_F\.npy: .*take 'take_00'.*non-finite"):
         assemble(tmp_path / "out", staged, config)
+
+
+# ---- a full disk while staging ---------------------------------------------------------------------
+
+
+def _full_disk(monkeypatch, how: str) -> list[str]:
+    """np.save fails on the second staged take's F.npy, having written part of it, as a full disk
+    does: numpy's short write (no errno) or ENOSPC. The names it failed on."""
+    real = np.save
+    failed: list[str] = []
+
+    def save(file, arr, *args, **kwargs):
+        name = os.fspath(file)
+        if ".staging" in name and name.endswith("0.F.npy") and "take_01" in failed_take[0]:
+            with open(name, "wb") as f:
+                f.write(b"\x93NUMPY partial")
+            failed.append(name)
+            if how == "short write":
+                raise OSError("168960 requested and 166880 written")
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(file, arr, *args, **kwargs)
+
+    # which take is being staged: the staging of each take starts with its features
+    import gesturekit._database_stage as stage
+
+    failed_take = [""]
+    real_features = stage.take_features
+
+    def features(take, **kwargs):
+        failed_take[0] = take.name
+        return real_features(take, **kwargs)
+
+    monkeypatch.setattr(stage, "take_features", features)
+    monkeypatch.setattr(np, "save", save)
+    return failed
+
+
+@pytest.mark.parametrize("how", ["short write", "ENOSPC"])
+def test_a_full_disk_while_staging_names_the_file_and_the_build_resumes(kp, tmp_path, monkeypatch, how):
+    failed = _full_disk(monkeypatch, how)
+    run = _build(kp, tmp_path / "db")
+    monkeypatch.undo()
+    assert len(failed) == 1
+    assert_refused(run, names="0.F.npy", problem="cannot write: the disk is full")
+    assert ".db.staging" in run.stderr and "requested and" not in run.stderr.split("(ENOSPC")[0]
+    staging = tmp_path / ".db.staging"
+    # the partial file went with its unit's temporary folder: only take_00's unit is left
+    assert not os.path.exists(failed[0]) and not any(".tmp-" in p.name for p in staging.iterdir())
+    assert not (tmp_path / "db").exists()
+    run = _build(kp, tmp_path / "db")  # space again
+    assert run.code == 0, run.stderr
+    assert "reused 1 takes staged by an interrupted build" in run.stdout and "damaged" not in run.stdout
+    clean = _build(kp, tmp_path / "clean")
+    assert clean.code == 0, clean.stderr
+    assert _files(tmp_path / "db") == _files(tmp_path / "clean")
+
+
+def test_synthesis_output_on_a_full_disk_names_the_file_and_leaves_nothing(kp, tmp_path, monkeypatch):
+    assert _build(kp, tmp_path / "db").code == 0
+    real = os.fsync
+
+    def fsync(fd):  # a full disk shows when the written data reaches it; the output is speech.*
+        if "speech" in os.path.basename(os.readlink(f"/proc/self/fd/{fd}")):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    speech = shutil.copy2(kp / "take_00.wav", tmp_path / "speech.wav")
+    out = tmp_path / "out"
+    out.mkdir()
+    run = run_cli("synthesize", speech, "--db", tmp_path / "db", "--out", out, "--refiner", "none")
+    monkeypatch.undo()
+    assert_refused(run, names=out / "speech", problem="cannot write: the disk is full")
+    assert [p.name for p in out.iterdir()] == []  # no partial output, no temporary file
