@@ -91,10 +91,14 @@ class StagedTake:
     def name(self) -> str:
         return str(self.record["name"])
 
+    def path(self, what: str) -> Path:
+        """The file of one staged array (``"F"``, ``"overlap.G"``, ...)."""
+        return self.folder / f"{self.record['index']}.{what}.npy"
+
     def load(self, what: str, *, header: bool = False) -> np.ndarray:
         """One staged array (``"F"``, ``"overlap.G"``, ``"audio"``, ``"moments_P"``, ...); with
         ``header``, memory-mapped (for its dtype and shape, nothing read)."""
-        path = self.folder / f"{self.record['index']}.{what}.npy"
+        path = self.path(what)
         limits.check_regular(path, what="a staged array ", error=ConfigError)
         return np.load(path, mmap_mode="r" if header else None, allow_pickle=False)
 
@@ -165,6 +169,8 @@ def combine_moments(staged: Sequence[StagedTake]) -> dict[str, np.ndarray]:
     ------
     ConfigError
         No take has a frame that can start a segment.
+    DatabaseError
+        A take's moments are not finite (naming its staged file).
     """
     stats: dict[str, np.ndarray] = {}
     for key in MOMENT_KEYS:
@@ -176,6 +182,11 @@ def combine_moments(staged: Sequence[StagedTake]) -> dict[str, np.ndarray]:
             if nb == 0:
                 continue
             mb, m2b = s.load(f"moments_{key}")
+            if not (np.isfinite(mb).all() and np.isfinite(m2b).all()):
+                raise DatabaseError(
+                    f"take {s.name!r} has non-finite moments of {key}; nothing was written",
+                    path=s.path(f"moments_{key}"),
+                )
             if mean is None or m2 is None:
                 n, mean, m2 = nb, mb.copy(), m2b.copy()
                 continue
@@ -342,9 +353,10 @@ def assemble(
                     if a.dtype.kind == "f" and not np.isfinite(a).all():
                         # nothing non-finite is written (a database's zero std, a damaged staged take)
                         raise DatabaseError(
-                            f"take {s.name!r} gives non-finite values in {prefix}{k}.npy; nothing was written"
+                            f"take {s.name!r} gives non-finite values in {prefix.replace('.', '/')}{k}.npy; "
+                            "nothing was written"
                             + ("" if base is None else " (the database's statistics may be damaged: rebuild it)"),
-                            path=None if base is None else base["path"],
+                            path=s.path(prefix + k) if base is None else base["path"],
                         )
                     w.write(a)
         with _NpyWriter(sub / "clip_take.npy", np.dtype(np.int32), (total,)) as w:

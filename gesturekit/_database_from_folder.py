@@ -511,6 +511,8 @@ def _stage(
     def on_result(job: StageJob, result: dict) -> None:
         nonlocal seconds, reused
         reemit(result["warnings"])
+        if result.get("damaged"):
+            say(result["damaged"])
         for record in result["takes"]:
             staged.append(StagedTake(folders[job.key], record))
             seconds += float(record["seconds"])

@@ -63,7 +63,7 @@ from .features import (
     stack_audio_features,
     valid_starts,
 )
-from .limits import read_json
+from .limits import check_regular, npy_header, read_json
 from .motion import AUDIO_SR, Take, resample_positions
 from .skeleton import POSE_FEATURE_INDICES
 
@@ -268,7 +268,12 @@ def _moments(x: np.ndarray) -> np.ndarray:
 
 
 def _save(path: Path, array: np.ndarray) -> None:
-    np.save(path, np.ascontiguousarray(array), allow_pickle=False)
+    """Write a staged array; a failed write (a full disk) is an :class:`OutputError` naming the file,
+    whose unit's temporary folder is then removed (:func:`_run_unit`)."""
+    from .outputs import write_errors
+
+    with write_errors(path):
+        np.save(path, np.ascontiguousarray(array), allow_pickle=False)
 
 
 def stage_take(take: Take, folder: Path, index: int, config: BuildConfig) -> dict[str, Any]:
@@ -416,6 +421,188 @@ def staged_takes(staging: Path, key: str) -> dict[str, Any] | None:
     return record if isinstance(record, dict) else None
 
 
+# ---- checking a staged unit before it is reused ------------------------------------------------------
+
+#: Fields of a staged take's record (:func:`stage_take`) and of a sampled take's (:func:`sample_job`).
+_STAGE_FIELDS = {
+    "index": int,
+    "name": str,
+    "sources": dict,
+    "n_frames": int,
+    "n_clips": int,
+    "n_windows": int,
+    "audio_samples": int,
+    "audio_size": int,
+    "count": int,
+    "seconds": (int, float),
+}
+_SAMPLE_FIELDS = {"index": int, "name": str, "frames": int, "seconds": (int, float), "medians": list}
+
+
+class _Damaged(Exception):
+    """A staged unit that cannot be reused; the message says why."""
+
+
+def _staged_array(folder: Path, name: str, dtype: np.dtype, shape: tuple[int, ...], *, finite: bool) -> np.ndarray:
+    """The staged array ``folder/name`` when it is a regular ``.npy`` file of ``dtype`` and ``shape``,
+    complete, and (with ``finite``, for floats) without NaN or infinite values.
+
+    Raises
+    ------
+    _Damaged
+        Saying which file and what is wrong with it.
+    """
+    path = folder / name
+    try:
+        size = check_regular(path, error=ConfigError)
+        with open(path, "rb") as f:
+            got_shape, got_dtype, offset = npy_header(f, path=path)
+    except (GestureKitError, OSError) as exc:
+        problem = exc.problem if isinstance(exc, GestureKitError) else (exc.strerror or str(exc))
+        raise _Damaged(f"{name}: {problem}") from None
+    if got_dtype != dtype or got_shape != shape:
+        raise _Damaged(f"{name}: holds {got_dtype} {got_shape}, expected {np.dtype(dtype)} {shape}")
+    expected = offset + int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+    if size != expected:
+        raise _Damaged(f"{name}: has {size} bytes, expected {expected} (truncated or appended to)")
+    try:
+        array = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise _Damaged(f"{name}: cannot be read ({exc})") from None
+    if finite and array.dtype.kind == "f" and not np.isfinite(array).all():
+        raise _Damaged(f"{name}: holds NaN or infinite values")
+    return array
+
+
+def _checked_records(folder: Path, fields: dict[str, Any]) -> list[dict[str, Any]]:
+    """The take records of the staged unit ``folder`` (its ``takes.json``), each with ``fields``."""
+    try:
+        record = read_json(folder / "takes.json")
+    except GestureKitError as exc:
+        raise _Damaged(f"takes.json: {exc.problem}") from None
+    if not isinstance(record, dict):
+        raise _Damaged("takes.json: not a staged unit's record (no list of takes and warnings)")
+    takes, messages = record.get("takes"), record.get("warnings")
+    if not isinstance(takes, list) or not isinstance(messages, list):
+        raise _Damaged("takes.json: not a staged unit's record (no list of takes and warnings)")
+    for i, take in enumerate(takes):
+        if not isinstance(take, dict) or take.get("index") != i:
+            raise _Damaged(f"takes.json: take {i} is not a take's record")
+        for key, kind in fields.items():
+            value = take.get(key)
+            if not isinstance(value, kind) or isinstance(value, bool) or (kind is int and value < 0):
+                raise _Damaged(f"takes.json: take {i} has no valid {key!r}")
+    if not all(isinstance(w, str) for w in messages):
+        raise _Damaged("takes.json: its warnings are not text")
+    return takes
+
+
+def check_staged_unit(folder: Path, config: BuildConfig) -> None:
+    """Check a unit :func:`stage_job` staged before it is reused: its record, and every array of each
+    take present, a regular file, complete, of the dtype and shape the take's frame count gives, the
+    clips' starts where the take's cut puts them, and no NaN or infinite value.
+
+    Raises
+    ------
+    _Damaged
+        Saying what is wrong (the unit is then staged again).
+    """
+    from .control import ATTRIBUTE_NAMES
+
+    L = config.clip_frames
+    track = L + LAYOUT.pose_lookahead
+    f32, f64 = np.dtype(np.float32), np.dtype(np.float64)
+    rows = {
+        "F": (f32, (L, LAYOUT.audio_dim)),
+        "P": (f32, (L, LAYOUT.pose_dim)),
+        "G": (f32, (L, LAYOUT.motion_dim)),
+        "A": (f32, (L, LAYOUT.cgan_audio_dim)),
+        "valid": (np.dtype(bool), (L,)),
+        "attributes": (f32, (L, len(ATTRIBUTE_NAMES))),
+        "pose_track": (f32, (track, len(POSE_FEATURE_INDICES) * 3)),
+    }
+    dims = {"F": LAYOUT.audio_dim, "P": LAYOUT.pose_dim, "A": LAYOUT.cgan_audio_dim}
+    for take in _checked_records(folder, _STAGE_FIELDS):
+        i, n = take["index"], take["n_frames"]
+        cuts = {"": (windows(n, L, L), "n_clips")}
+        if config.overlap_stride:
+            cuts["overlap."] = (windows(n, L, config.overlap_stride), "n_windows")
+        if n < 1 or take["count"] > n:
+            raise _Damaged(f"takes.json: take {i} has {n} frames and {take['count']} that start a segment")
+        for prefix, (starts, count) in cuts.items():
+            if take[count] != starts.shape[0]:
+                raise _Damaged(f"takes.json: take {i} has {take[count]} {count[2:]}, its {n} frames give {len(starts)}")
+            for k in CLIP_ARRAYS:
+                dtype, row = rows[k]
+                _staged_array(folder, f"{i}.{prefix}{k}.npy", dtype, (starts.shape[0], *row), finite=True)
+            got = _staged_array(folder, f"{i}.{prefix}clip_start.npy", np.dtype(np.int32), starts.shape, finite=True)
+            if not np.array_equal(got, starts):
+                raise _Damaged(f"{i}.{prefix}clip_start.npy: does not hold the clips' start frames")
+        if config.store_audio:
+            storage = AudioStorage(format=config.audio_format, rate=config.audio_rate)
+            _staged_array(folder, f"{i}.audio.npy", storage.dtype, (take["audio_size"],), finite=True)
+        for key in MOMENT_KEYS:
+            _staged_array(folder, f"{i}.moments_{key}.npy", f64, (2, dims[key]), finite=True)
+
+
+def check_sampled_unit(folder: Path, config: BuildConfig) -> None:
+    """Check a unit :func:`sample_job` wrote before it is reused: its record and each take's
+    ``bones.npy`` (float32, a row per sample and a column per frame, finite bone lengths).
+
+    Raises
+    ------
+    _Damaged
+        Saying what is wrong (the unit is then read again).
+    """
+    from .bones import sample_rows
+    from .skeleton import N_JOINTS
+
+    for take in _checked_records(folder, _SAMPLE_FIELDS):
+        i = take["index"]
+        medians = take["medians"]
+        if len(medians) != N_JOINTS or not all(isinstance(v, (int, float)) and np.isfinite(v) for v in medians):
+            raise _Damaged(f"takes.json: take {i} has no valid bone medians")
+        shape = (len(sample_rows()), take["frames"])
+        samples = _staged_array(folder, f"{i}.bones.npy", np.dtype(np.float32), shape, finite=False)
+        if np.isinf(samples).any() or not np.isfinite(samples[:N_JOINTS]).all():
+            raise _Damaged(f"{i}.bones.npy: holds NaN or infinite bone lengths")
+
+
+def _reusable(
+    staging: Path, job: StageJob, check: Callable[[Path, BuildConfig], None]
+) -> tuple[dict[str, Any] | None, str | None]:
+    """The record of the unit ``job`` staged already and fit to reuse (or None), and why the one
+    there is not (None when there is none); a damaged unit is removed."""
+    folder = staging / job.key
+    if not folder.exists() and not folder.is_symlink():
+        return None, None
+    try:
+        if folder.is_symlink() or not folder.is_dir():
+            raise _Damaged(f"{job.key}: not a folder")
+        check(folder, job.config)
+        done = staged_takes(staging, job.key)
+        if done is None:  # read and checked just now: gone since
+            raise _Damaged("takes.json: gone")
+        return done, None
+    except _Damaged as exc:
+        reason = str(exc)
+    record = staged_takes(staging, job.key)
+    try:
+        names = [t["name"] for t in record["takes"]] if record is not None else []
+        what = ", ".join(f"take {n}" for n in names) if all(isinstance(n, str) for n in names) else ""
+    except (TypeError, KeyError):  # a record of another shape: the unit is named by its file
+        what = ""
+    what = what or f"the takes of {job.source.motion.name}"
+    # moved aside first, so that a removal cut short leaves a name open_staging clears
+    aside = staging / f"{job.key}.tmp-damaged-{uuid.uuid4().hex[:12]}"
+    os.replace(folder, aside)
+    if aside.is_dir() and not aside.is_symlink():
+        shutil.rmtree(aside, ignore_errors=True)
+    else:
+        aside.unlink()
+    return None, f"{what}: staged copy damaged ({reason}), staged again"
+
+
 def stage_job(job: StageJob) -> dict[str, Any]:
     """Stage one unit (the function a worker process or a cluster worker runs).
 
@@ -426,13 +613,14 @@ def stage_job(job: StageJob) -> dict[str, Any]:
     dict
         ``takes`` (the records of :func:`stage_take`), ``warnings`` (the
         messages reading and featurising issued), ``reused`` (whether the unit
-        was staged already).
+        was staged already), ``damaged`` (a line saying that a staged copy was
+        damaged and why, when it was staged again; else None).
     """
 
     def stage(take: Take, folder: Path, index: int) -> dict[str, Any]:
         return stage_take(take, folder, index, job.config)
 
-    return _run_unit(job, stage, keep_warnings=True)
+    return _run_unit(job, stage, check_staged_unit, keep_warnings=True)
 
 
 def sample_job(job: StageJob) -> dict[str, Any]:
@@ -466,18 +654,26 @@ def sample_job(job: StageJob) -> dict[str, Any]:
             "medians": [float(v) for v in np.median(samples[:N_JOINTS].astype(np.float64), axis=1)],
         }
 
-    return _run_unit(job, sample, keep_warnings=False)
+    return _run_unit(job, sample, check_sampled_unit, keep_warnings=False)
 
 
-def _run_unit(job: StageJob, per_take: Callable[[Take, Path, int], dict[str, Any]], *, keep_warnings: bool) -> dict:
+def _run_unit(
+    job: StageJob,
+    per_take: Callable[[Take, Path, int], dict[str, Any]],
+    check: Callable[[Path, BuildConfig], None],
+    *,
+    keep_warnings: bool,
+) -> dict:
     """Read the takes of a unit and write what ``per_take`` makes of each into the unit's folder,
-    complete or not at all (a temporary folder renamed when done)."""
+    complete or not at all (a temporary folder renamed when done). A unit staged already is reused
+    when ``check`` finds it whole, else removed and staged again (``damaged`` says why)."""
     from .datasets.takes import iter_takes
+    from .outputs import write_errors
 
     staging = Path(job.staging)
-    done = staged_takes(staging, job.key)
+    done, damaged = _reusable(staging, job, check)
     if done is not None:
-        return {**done, "reused": True}
+        return {**done, "reused": True, "damaged": None}
     tmp = staging / f"{job.key}.tmp-{uuid.uuid4().hex[:12]}"
     tmp.mkdir()
     try:
@@ -488,12 +684,13 @@ def _run_unit(job: StageJob, per_take: Callable[[Take, Path, int], dict[str, Any
                     continue
                 records.append(per_take(take, tmp, len(records)))
         result = {"takes": records, "warnings": list(messages) if keep_warnings else []}
-        (tmp / "takes.json").write_text(json.dumps(result), encoding="utf-8")
+        with write_errors(tmp / "takes.json"):
+            (tmp / "takes.json").write_text(json.dumps(result), encoding="utf-8")
         os.replace(tmp, staging / job.key)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return {**result, "reused": False}
+    return {**result, "reused": False, "damaged": damaged}
 
 
 # ---- the staging folder -------------------------------------------------------------------------

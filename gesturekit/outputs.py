@@ -561,5 +561,8 @@ def write_errors(path: str | os.PathLike) -> Iterator[None]:
             errno.ENOTDIR: "a part of the path is a file, not a folder",
             errno.EEXIST: "something is in the way",
         }.get(exc.errno or 0, exc.strerror or str(exc))  # no errno: the message
+        if exc.errno is None and re.fullmatch(r"\d+ requested and \d+ written", str(exc)):
+            # numpy's short write (ndarray.tofile) carries no errno: the disk filled up under it
+            reason = f"the disk is full (ENOSPC: {exc})"
         where = f" ({exc.filename})" if exc.filename and os.fspath(exc.filename) != os.fspath(path) else ""
         raise OutputError(f"cannot write: {reason}{where}", path=path) from None
