@@ -337,7 +337,7 @@ def test_overlap_cut_is_checked_too(db, tmp_path):
         ),
         (lambda p: (p / "audio.npy").write_bytes(b"not an array"), "audio.npy cannot be read"),
         (lambda p: np.save(p / "audio.npy", np.zeros(10, np.int16)), "audio.npy must be int16 samples"),
-        (lambda p: ((p / "F.npy").unlink(), (p / "F.npy").mkdir()), "F.npy cannot be read"),
+        (lambda p: ((p / "F.npy").unlink(), (p / "F.npy").mkdir()), "F.npy is a folder, not a regular file"),
         (
             lambda p: (p / "database.json").write_text(
                 '{"format": "gesturekit-matching-database", "format_version": 1}'
