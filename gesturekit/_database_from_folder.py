@@ -354,18 +354,7 @@ def build_from_sources(
             )
             reading = {**reading, "options": replace(reading["options"], skeleton=skeleton)}
             reading_key = {**reading_key, "skeleton": skeleton.digest()}
-        jobs = [
-            StageJob(
-                key=job_key(s, reading_key, config, only=only, skip=skip if s.kind == "habibie2021" else ()),
-                staging=str(staging),
-                source=s,
-                reading=reading,
-                config=config,
-                only=only,
-                skip=skip if s.kind == "habibie2021" else (),
-            )
-            for s, only, skip in units
-        ]
+        jobs = _stage_jobs(units, reading, reading_key, config, staging)
         try:
             staged = _stage(jobs, count_takes([s for s, _, _ in units]), workers, scheduler, on_progress, say)
         except BaseException:
@@ -449,18 +438,7 @@ def _fit_skeleton(
 
     plain = {**reading, "options": replace(reading["options"], normalize_bones=False, skeleton=None)}
     key = {**reading_key, "pass": "bone samples"}
-    jobs = [
-        StageJob(
-            key=job_key(s, key, config, only=only, skip=skip if s.kind == "habibie2021" else ()),
-            staging=str(staging),
-            source=s,
-            reading=plain,
-            config=config,
-            only=only,
-            skip=skip if s.kind == "habibie2021" else (),
-        )
-        for s, only, skip in units
-    ]
+    jobs = _stage_jobs(units, plain, key, config, staging)
     total = count_takes([s for s, _, _ in units])
     try:
         sampled = _stage(jobs, total, workers, scheduler, on_progress, say, fn=sample_job, phase="fit")
@@ -488,6 +466,28 @@ def _fit_skeleton(
         return np.concatenate([s.load("bones", header=True)[i] for s in sampled])
 
     return fit_skeleton(row, presence=presence, takes=len(sampled))
+
+
+def _stage_jobs(
+    units: Sequence, reading: dict[str, Any], key: dict[str, Any], config: BuildConfig, staging: Path
+) -> list[StageJob]:
+    """One :class:`StageJob` per unit ``(source, only, skip)``, keyed by ``key`` (skips are for
+    habibie2021 takes alone)."""
+    jobs = []
+    for s, only, skip in units:
+        skip = skip if s.kind == "habibie2021" else ()
+        jobs.append(
+            StageJob(
+                key=job_key(s, key, config, only=only, skip=skip),
+                staging=str(staging),
+                source=s,
+                reading=reading,
+                config=config,
+                only=only,
+                skip=skip,
+            )
+        )
+    return jobs
 
 
 def _stage(

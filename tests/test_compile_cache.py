@@ -91,25 +91,31 @@ def _expected(spec, factor: float = 1.0) -> float:
     return float(factor * (x * (3 if wt == "int" else 0.5)).sum() + x.shape[0])
 
 
-def _run_at_once(tmp_path: Path, groups: list[list], env: dict) -> list[list[float]]:
-    """Start one process per group of specialisations, all compiling at the same moment; their results."""
-    go = time.time() + 2.0  # after every interpreter has started and imported numba
+def _together(script: str, args: list[list[str]], env: dict, *, delay_s: float, timeout_s: float) -> list:
+    """Run ``script`` once per argument list, every process starting its work ``delay_s`` from
+    now (after every interpreter has started and imported numba); their printed JSON results."""
+    go = time.time() + delay_s
     procs = [
         subprocess.Popen(
-            [sys.executable, "-c", CHILD, str(tmp_path), json.dumps(g), repr(go)],
+            [sys.executable, "-c", script, *a, repr(go)],
             env=env,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
         )
-        for g in groups
+        for a in args
     ]
     results = []
     for p in procs:
-        out, err = p.communicate(timeout=300)
+        out, err = p.communicate(timeout=timeout_s)
         assert p.returncode == 0, f"a process failed (exit {p.returncode}):\n{err[-3000:]}"
         results.append(json.loads(out))
     return results
+
+
+def _run_at_once(tmp_path: Path, groups: list[list], env: dict) -> list[list[float]]:
+    """Start one process per group of specialisations, all compiling at the same moment; their results."""
+    return _together(CHILD, [[str(tmp_path), json.dumps(g)] for g in groups], env, delay_s=2.0, timeout_s=300)
 
 
 @pytest.fixture
@@ -247,23 +253,7 @@ def test_searches_started_together_on_a_fresh_cache_agree(tmp_path):
     kinds = ["folder", "memory", "batch", "control"]
 
     def run(groups):
-        go = time.time() + 4.0
-        procs = [
-            subprocess.Popen(
-                [sys.executable, "-c", SEARCHER, str(folder), json.dumps(g), repr(go)],
-                env=env,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
-            for g in groups
-        ]
-        outs = []
-        for p in procs:
-            out, err = p.communicate(timeout=600)
-            assert p.returncode == 0, f"a search process failed (exit {p.returncode}):\n{err[-3000:]}"
-            outs.append(json.loads(out))
-        return outs
+        return _together(SEARCHER, [[str(folder), json.dumps(g)] for g in groups], env, delay_s=4.0, timeout_s=600)
 
     first = {k: v for out in run([[k] for k in kinds]) for k, v in out.items()}
     assert first["memory"] == first["folder"]  # the same database in memory or mapped: the same motion
