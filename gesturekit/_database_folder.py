@@ -1,4 +1,5 @@
-"""A matching database's folder on disk: writing it, and reading it back with every check.
+"""A matching database's folder on disk: writing it, and reading it back with every check; and the
+staging folder an out-of-core build keeps beside it until the database is written.
 
 The layout of the folder is described in :mod:`gesturekit.database`;
 :meth:`~gesturekit.database.MatchingDatabase.save` and
@@ -13,6 +14,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import uuid
 import zipfile
 from collections.abc import Iterable
 from pathlib import Path
@@ -23,9 +26,10 @@ import numpy as np
 from . import limits
 from ._database_audio import AudioStorage, encode_take_audio, read_take_audio, take_audio_fields
 from ._io import DATABASE_CLIP_ARRAYS, read_json_marker
+from ._version import __version__
 from .bones import Skeleton
 from .control import ATTRIBUTE_NAMES
-from .errors import ConfigError, DatabaseError
+from .errors import ConfigError, DatabaseError, GestureKitError, OutputError
 from .features import LAYOUT
 from .motion import AUDIO_SR
 from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
@@ -33,10 +37,28 @@ from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
 if TYPE_CHECKING:
     from .database import MatchingDatabase
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "CLIP_ARRAYS", "write_database", "write_stats", "write_meta", "read_database"]
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "CLIP_ARRAYS",
+    "STAGING_VERSION",
+    "write_database",
+    "write_stats",
+    "write_meta",
+    "read_database",
+    "staging_folder",
+    "is_staging",
+    "open_staging",
+    "remove_staging",
+]
 
 FORMAT = "gesturekit-matching-database"
 FORMAT_VERSION = 1
+#: The staging folder of an out-of-core build (``.NAME.staging`` beside the database): its marker file
+#: and format; a staged unit records the version, and one of another version is staged again.
+STAGING_FORMAT = "gesturekit-database-staging"
+STAGING_VERSION = 1
+_MARKER = "staging.json"
 # the per-clip arrays of a cut, each with M clips first (declared in _io); clip_take and clip_start index them
 CLIP_ARRAYS = DATABASE_CLIP_ARRAYS
 _INDEX_ARRAYS = ("clip_take", "clip_start")
@@ -401,3 +423,56 @@ def _check_clip_order(meta: dict, clip_take: np.ndarray, path: Path) -> None:
         )
     if not np.array_equal(np.asarray(clip_take), np.repeat(np.arange(len(takes)), n)):
         raise DatabaseError("clip_take.npy does not match the takes' first_clip/n_clips in database.json", path=path)
+
+
+# ---- the staging folder -------------------------------------------------------------------------
+
+
+def staging_folder(out: Path) -> Path:
+    """The staging folder of a build of the database folder ``out``: ``.NAME.staging`` beside it."""
+    from .outputs import beside_name
+
+    return out.parent / beside_name(out, ".staging")
+
+
+def is_staging(path: Path) -> bool:
+    """Whether ``path`` is a staging folder gesturekit made (its ``staging.json`` says so)."""
+    try:
+        marker = limits.read_json(path / _MARKER)
+    except GestureKitError:
+        return False
+    return isinstance(marker, dict) and marker.get("format") == STAGING_FORMAT
+
+
+def open_staging(path: Path) -> None:
+    """Make the staging folder ``path``, or reuse the one an interrupted build left (its unfinished
+    units removed).
+
+    Raises
+    ------
+    OutputError
+        Something that is not a gesturekit staging folder is at ``path``.
+    """
+    from .outputs import write_errors
+
+    with write_errors(path):
+        if path.is_symlink() or (path.exists() and not is_staging(path)):
+            raise OutputError(
+                "is in the way of the build's staging folder and is not one gesturekit made; move it away", path=path
+            )
+        if not path.exists():
+            tmp = path.parent / f"{path.name}.tmp-{uuid.uuid4().hex[:12]}"
+            tmp.mkdir(parents=True)
+            marker = {"format": STAGING_FORMAT, "version": STAGING_VERSION, "gesturekit": __version__}
+            (tmp / _MARKER).write_text(json.dumps(marker), encoding="utf-8")
+            os.replace(tmp, path)
+            return
+        for entry in path.iterdir():
+            if ".tmp-" in entry.name:
+                shutil.rmtree(entry, ignore_errors=True)
+
+
+def remove_staging(path: Path) -> None:
+    """Remove a staging folder gesturekit made (anything else is left alone)."""
+    if is_staging(path) and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)

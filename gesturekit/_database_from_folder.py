@@ -43,17 +43,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._database_build import BuildProgress, StagedTake, assemble, reemit, run_jobs
-from ._database_folder import read_database
-from ._database_stage import (
-    BuildConfig,
-    StageJob,
-    job_key,
-    open_staging,
-    remove_staging,
-    sample_job,
-    staged_takes,
-    staging_folder,
-)
+from ._database_folder import open_staging, read_database, remove_staging, staging_folder
+from ._database_stage import BuildConfig, StageJob, job_key, sample_job, staged_takes
 from .bones import Skeleton, fit_skeleton
 from .errors import ConfigError, DatabaseError, InputFileError
 from .motion import AUDIO_SR

@@ -49,10 +49,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._database_audio import AudioStorage, encode_take_audio
-from ._database_folder import CLIP_ARRAYS
+from ._database_folder import CLIP_ARRAYS, STAGING_VERSION
 from ._version import __version__
 from .control import frame_attributes
-from .errors import ConfigError, GestureKitError, OutputError, collect_warnings, warn
+from .errors import ConfigError, GestureKitError, collect_warnings, warn
 from .features import (
     LAYOUT,
     FeatureLayout,
@@ -78,15 +78,10 @@ __all__ = [
     "stage_job",
     "sample_job",
     "stage_take",
-    "staging_folder",
-    "open_staging",
     "job_key",
     "MOMENT_KEYS",
 ]
 
-STAGING_FORMAT = "gesturekit-database-staging"
-STAGING_VERSION = 1
-_MARKER = "staging.json"
 #: The z-scored feature arrays whose moments each staged take carries: key -> the TakeFeatures attribute.
 MOMENT_KEYS = {"F": "f", "P": "p", "A": "a"}
 
@@ -691,56 +686,3 @@ def _run_unit(
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return {**result, "reused": False, "damaged": damaged}
-
-
-# ---- the staging folder -------------------------------------------------------------------------
-
-
-def staging_folder(out: Path) -> Path:
-    """The staging folder of a build of the database folder ``out``: ``.NAME.staging`` beside it."""
-    from .outputs import beside_name
-
-    return out.parent / beside_name(out, ".staging")
-
-
-def is_staging(path: Path) -> bool:
-    """Whether ``path`` is a staging folder gesturekit made (its ``staging.json`` says so)."""
-    try:
-        marker = read_json(path / _MARKER)
-    except GestureKitError:
-        return False
-    return isinstance(marker, dict) and marker.get("format") == STAGING_FORMAT
-
-
-def open_staging(path: Path) -> None:
-    """Make the staging folder ``path``, or reuse the one an interrupted build left (its unfinished
-    units removed).
-
-    Raises
-    ------
-    OutputError
-        Something that is not a gesturekit staging folder is at ``path``.
-    """
-    from .outputs import write_errors
-
-    with write_errors(path):
-        if path.is_symlink() or (path.exists() and not is_staging(path)):
-            raise OutputError(
-                "is in the way of the build's staging folder and is not one gesturekit made; move it away", path=path
-            )
-        if not path.exists():
-            tmp = path.parent / f"{path.name}.tmp-{uuid.uuid4().hex[:12]}"
-            tmp.mkdir(parents=True)
-            marker = {"format": STAGING_FORMAT, "version": STAGING_VERSION, "gesturekit": __version__}
-            (tmp / _MARKER).write_text(json.dumps(marker), encoding="utf-8")
-            os.replace(tmp, path)
-            return
-        for entry in path.iterdir():
-            if ".tmp-" in entry.name:
-                shutil.rmtree(entry, ignore_errors=True)
-
-
-def remove_staging(path: Path) -> None:
-    """Remove a staging folder gesturekit made (anything else is left alone)."""
-    if is_staging(path) and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
