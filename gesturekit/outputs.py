@@ -302,21 +302,12 @@ def _lock_fd(lock: Path) -> int:
 
 def _what_is(path: Path) -> str:
     """``"a symbolic link"``, ``"a folder"``, ...: what is at ``path``, not followed."""
+    from .limits import file_kind
+
     try:
-        mode = os.lstat(path).st_mode
+        return file_kind(os.lstat(path).st_mode)
     except OSError:
         return "not readable"
-    for test, what in (
-        (stat.S_ISLNK, "a symbolic link"),
-        (stat.S_ISDIR, "a folder"),
-        (stat.S_ISFIFO, "a FIFO"),
-        (stat.S_ISSOCK, "a socket"),
-        (stat.S_ISCHR, "a character device"),
-        (stat.S_ISBLK, "a block device"),
-    ):
-        if test(mode):
-            return what
-    return "a regular file" if stat.S_ISREG(mode) else "not a regular file"
 
 
 @contextlib.contextmanager
