@@ -1,0 +1,114 @@
+"""How the character looks, wherever it is drawn: colours, light and camera shared by the page and the MP4.
+
+The page (three.js) and the MP4 (VTK) draw the same mesh with the same
+Lambert shading: ``colour = albedo * (AMBIENT + KEY * max(0, n . l))``, with
+``l`` the direction towards :data:`LIGHT_DIRECTION`, computed in linear light
+and shown in sRGB; the same perspective camera (:func:`camera_for`, vertical
+field of view :data:`FIELD_OF_VIEW`) and the same background.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import ConfigError
+from .mesh import PARTS
+
+__all__ = [
+    "SCHEMES",
+    "SIDE_BY_SIDE",
+    "NEUTRAL",
+    "BACKGROUND",
+    "LIGHT_DIRECTION",
+    "AMBIENT",
+    "KEY",
+    "FIELD_OF_VIEW",
+    "VIEW_DIRECTION",
+    "scheme_for",
+    "part_colors",
+    "camera_for",
+]
+
+#: Colour schemes: each part of :data:`gesturekit.character.mesh.PARTS` as sRGB hex.
+SCHEMES: dict[str, dict[str, str]] = {
+    "blue": {"skin": "#d9b59b", "shirt": "#3c6db0", "face": "#3b2b22"},
+    "orange": {"skin": "#d9b59b", "shirt": "#d0782a", "face": "#3b2b22"},
+    "green": {"skin": "#d9b59b", "shirt": "#3f8f5a", "face": "#3b2b22"},
+    "purple": {"skin": "#d9b59b", "shirt": "#7a55a8", "face": "#3b2b22"},
+    # for studies: no colour tells the systems apart, and no skin tone is chosen
+    "grey": {"skin": "#b4b4b4", "shirt": "#8c8c8c", "face": "#4a4a4a"},
+}
+
+#: Schemes of side-by-side motions, in order (the k-th motion takes the k-th, cycling).
+SIDE_BY_SIDE = ("blue", "orange", "green", "purple")
+
+#: The scheme of study stimuli.
+NEUTRAL = "grey"
+
+#: Background, sRGB hex.
+BACKGROUND = "#f3f3f1"
+
+#: Towards the key light from the character, in the world (Y up, the character faces +Z): above, front, left.
+LIGHT_DIRECTION = (0.35, 0.75, 0.56)
+
+#: Ambient and key light strengths (linear light; their sum is the brightest a surface gets).
+AMBIENT, KEY = 0.42, 0.70
+
+#: The camera's vertical field of view, degrees.
+FIELD_OF_VIEW = 30.0
+
+#: From the framed box's centre towards the camera: in front, a little above.
+VIEW_DIRECTION = (0.0, 0.12, 1.0)
+
+
+def scheme_for(index: int, *, neutral: bool = False) -> str:
+    """The scheme of the ``index``-th of side-by-side motions (:data:`NEUTRAL` for all when ``neutral``)."""
+    return NEUTRAL if neutral else SIDE_BY_SIDE[int(index) % len(SIDE_BY_SIDE)]
+
+
+def part_colors(scheme: str) -> np.ndarray:
+    """Shape (len(PARTS), 3), float: each part's sRGB colour in [0, 1], in the order of :data:`PARTS`.
+
+    Raises
+    ------
+    ConfigError
+        An unknown scheme.
+    """
+    if scheme not in SCHEMES:
+        raise ConfigError(f"unknown colour scheme {scheme!r}; choose one of {', '.join(SCHEMES)}")
+    return np.array([[int(SCHEMES[scheme][p][i : i + 2], 16) / 255 for i in (1, 3, 5)] for p in PARTS])
+
+
+def camera_for(lo: npt.ArrayLike, hi: npt.ArrayLike, aspect: float, *, fov: float = FIELD_OF_VIEW) -> dict:
+    """A perspective camera that shows the box ``lo``..``hi`` whole, from :data:`VIEW_DIRECTION`.
+
+    Parameters
+    ----------
+    lo, hi : array_like, shape (3,)
+        Corners of the box to frame, metres.
+    aspect : float
+        Width over height of the picture.
+    fov : float
+        Vertical field of view, degrees.
+
+    Returns
+    -------
+    dict
+        ``position``, ``target`` (the box's centre) and ``up`` (3 floats each, metres), ``fov`` (degrees).
+    """
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    if not (aspect > 0 and np.isfinite(lo).all() and np.isfinite(hi).all()):
+        raise ConfigError(f"a camera needs a finite box and a positive aspect ratio, got {lo}, {hi}, {aspect}")
+    centre = (lo + hi) / 2
+    half = np.maximum((hi - lo) / 2, 1e-3)
+    d = np.asarray(VIEW_DIRECTION) / np.linalg.norm(VIEW_DIRECTION)
+    tan_v = np.tan(np.radians(fov) / 2)
+    # far enough that the box's front face fits both ways (the box's depth moves its front closer)
+    dist = max(half[1] / tan_v, half[0] / (tan_v * aspect)) + half[2]
+    return {
+        "position": [float(x) for x in centre + dist * d],
+        "target": [float(x) for x in centre],
+        "up": [0.0, 1.0, 0.0],
+        "fov": float(fov),
+    }
