@@ -58,6 +58,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ),
     ("datasets", ("gesturekit.datasets",)),
     ("features", ("gesturekit.features",)),
+    ("character", ("gesturekit.character",)),
     (
         "database",
         ("gesturekit", "gesturekit.database", "gesturekit._database_folder", "gesturekit.demo", "gesturekit.workspace"),

@@ -61,11 +61,11 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     a, b, c = v[..., faces[:, 0], :], v[..., faces[:, 1], :], v[..., faces[:, 2], :]
     fn = np.cross(b - a, c - a)
     flat = fn.reshape(-1, fn.shape[-2], 3)
-    n = np.zeros((flat.shape[0], v.shape[-2], 3))
+    acc = np.zeros((flat.shape[0], v.shape[-2], 3))
     for k in range(3):
         for i in range(flat.shape[0]):
-            np.add.at(n[i], faces[:, k], flat[i])
-    n = n.reshape(v.shape)
+            np.add.at(acc[i], faces[:, k], flat[i])
+    n = acc.reshape(v.shape)
     norm = np.linalg.norm(n, axis=-1, keepdims=True)
     return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
 
@@ -99,7 +99,10 @@ def build_mesh(rig: Rig, *, segments: int = 12) -> CharacterMesh:
     -------
     CharacterMesh
     """
-    verts, faces, joints, parts = [], [], [], []
+    verts: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
+    joints: list[np.ndarray] = []
+    parts: list[np.ndarray] = []
     ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
     for c in range(N_JOINTS):
         p = int(rig.parents[c])
@@ -116,15 +119,21 @@ def build_mesh(rig: Rig, *, segments: int = 12) -> CharacterMesh:
         w = np.cross(axis, u)
         r = _radius(int(PARENTS[c]) if PARENTS[c] >= 0 else c)
         ring = np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * w
-        base = sum(len(x) for x in verts)
+        base = int(sum(len(x) for x in verts))
         verts.append(np.concatenate([a + r * ring, b + r * ring, [a, b]]))
         k = np.arange(segments)
         k1 = (k + 1) % segments
-        faces.append(np.concatenate([
-            np.stack([k, k1, segments + k1], -1), np.stack([k, segments + k1, segments + k], -1),
-            np.stack([np.full(segments, 2 * segments), k1, k], -1),
-            np.stack([np.full(segments, 2 * segments + 1), segments + k, segments + k1], -1),
-        ]) + base)
+        faces.append(
+            np.concatenate(
+                [
+                    np.stack([k, k1, segments + k1], -1),
+                    np.stack([k, segments + k1, segments + k], -1),
+                    np.stack([np.full(segments, 2 * segments), k1, k], -1),
+                    np.stack([np.full(segments, 2 * segments + 1), segments + k, segments + k1], -1),
+                ]
+            )
+            + base
+        )
         joints.append(np.full(2 * segments + 2, p))
         parts.append(np.full(2 * segments + 2, 0 if "wrist" in JOINT_NAMES[p] or "head" in JOINT_NAMES[p] else 1))
     v = np.concatenate(verts).astype(np.float32)
@@ -134,6 +143,10 @@ def build_mesh(rig: Rig, *, segments: int = 12) -> CharacterMesh:
     w4 = np.zeros((len(v), 4), np.float32)
     w4[:, 0] = 1.0
     return CharacterMesh(
-        vertices=v, normals=vertex_normals(v, f).astype(np.float32), faces=f, joints=j4, weights=w4,
+        vertices=v,
+        normals=vertex_normals(v, f).astype(np.float32),
+        faces=f,
+        joints=j4,
+        weights=w4,
         parts=np.concatenate(parts).astype(np.uint8),
     )

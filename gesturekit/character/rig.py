@@ -1,11 +1,11 @@
 """From joint positions to the rotations that drive a character: the one solve every consumer shares.
 
 A :class:`Rig` is the hierarchy of a motion's drawn joints
-(:func:`gesturekit.export._bvh_solve.bvh_parents`), its bone lengths
+(:func:`gesturekit.character.solve.bvh_parents`), its bone lengths
 (medians over the motion) and a rest pose: a T-pose facing +Z, arms along
 X, spine and head up (Y), fingers straight. A :class:`Pose` is every joint's
 rotation relative to its parent and the root's position, per frame, found by
-:func:`gesturekit.export._bvh_solve.solve_rotations`: each bone is swung from
+:func:`gesturekit.character.solve.solve_rotations`: each bone is swung from
 its rest direction onto the motion's, a joint with several children takes
 the rotation that best fits them all, and the twist of the spine and the
 forearms follows the collars and the knuckles. Forward kinematics of the rig
@@ -146,15 +146,15 @@ def rig_for(motion: Motion, *, rest: np.ndarray | None = None) -> Rig:
     ConfigError
         No frame, positions not finite, or drawn joints that do not form one tree.
     """
-    from ..export._bvh_solve import bvh_parents, rest_offsets
+    from .solve import bvh_parents, rest_offsets
 
     positions = _checked(motion)
     parents = bvh_parents(motion.presence)
     lengths = fit_bone_lengths(positions, motion.presence)
     # a joint hanging from an ancestor other than its skeleton parent (absent joints between): its bone is
     # the distance to that ancestor
-    for j in np.flatnonzero((parents >= 0) & (parents != PARENTS)):
-        lengths[j] = float(np.median(np.linalg.norm(positions[:, j] - positions[:, parents[j]], axis=-1)))
+    for b in np.flatnonzero((parents >= 0) & (parents != PARENTS)):
+        lengths[b] = float(np.median(np.linalg.norm(positions[:, b] - positions[:, parents[b]], axis=-1)))
     offsets, _ = rest_offsets(positions, lengths=lengths, parents=parents, rest=rest)
     rest_pos = np.zeros((N_JOINTS, 3))
     for j in range(N_JOINTS):
@@ -181,7 +181,7 @@ def solve_pose(motion: Motion, rig: Rig | None = None) -> Pose:
     -------
     Pose
     """
-    from ..export._bvh_solve import solve_rotations
+    from .solve import solve_rotations
 
     positions = _checked(motion)
     rig = rig_for(motion) if rig is None else rig

@@ -92,10 +92,7 @@ import numpy as np
 
 from .._io import atomic_write
 from ..bones import fit_bone_lengths
-from ..errors import ConfigError, warn
-from ..motion import Motion
-from ..skeleton import DERIVED, FINGERS, JOINT_NAMES, N_JOINTS, PARENTS
-from ._bvh_solve import (
+from ..character.solve import (
     LEFT_OUT,
     ROTATION_ORDERS,
     TWIST_REFERENCES,
@@ -107,6 +104,9 @@ from ._bvh_solve import (
     rest_offsets,
     solve_rotations,
 )
+from ..errors import ConfigError, warn
+from ..motion import Motion
+from ..skeleton import DERIVED, FINGERS, JOINT_NAMES, N_JOINTS, PARENTS
 
 __all__ = [
     "ROTATION_ORDERS",

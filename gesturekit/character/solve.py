@@ -1,4 +1,4 @@
-"""The hierarchy, rest pose and rotations of a BVH export (see :mod:`gesturekit.export.bvh`).
+"""The rotation solve shared by the character, the BVH and the glTF: hierarchy, rest pose, joint rotations.
 
 A hierarchy is given as ``parents``, shape (55,), int: each written joint's
 parent in the file, ``-1`` for the root and :data:`LEFT_OUT` for a joint that is
