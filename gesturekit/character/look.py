@@ -9,6 +9,8 @@ field of view :data:`FIELD_OF_VIEW`) and the same background.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import numpy.typing as npt
 
@@ -28,6 +30,8 @@ __all__ = [
     "scheme_for",
     "part_colors",
     "camera_for",
+    "BODY_MARGIN",
+    "stage_layout",
 ]
 
 #: Colour schemes: each part of :data:`gesturekit.character.mesh.PARTS` as sRGB hex.
@@ -112,3 +116,39 @@ def camera_for(lo: npt.ArrayLike, hi: npt.ArrayLike, aspect: float, *, fov: floa
         "up": [0.0, 1.0, 0.0],
         "fov": float(fov),
     }
+
+
+#: Metres added around the joints to frame the body: the widest half-thickness of the mesh (the chest).
+BODY_MARGIN = 0.14
+
+
+def stage_layout(points: Sequence[np.ndarray], *, spacing: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Where side-by-side characters stand and the box the camera frames, the same for the page and the MP4.
+
+    Parameters
+    ----------
+    points : sequence of np.ndarray, each shape (frames, joints, 3)
+        Each character's joint positions over the shown frames, metres (only drawn joints).
+    spacing : float, optional
+        Metres between neighbouring characters along X; default the widest character plus
+        :data:`BODY_MARGIN` on each side and 0.1 m between them, at least 0.8 m.
+
+    Returns
+    -------
+    offsets : np.ndarray, shape (characters,)
+        Each character's shift along X, metres, centred on 0.
+    box : np.ndarray, shape (2, 3)
+        The framed box's lower and upper corners, metres: every shifted joint over every frame plus
+        :data:`BODY_MARGIN`, and 5 % of the box on each side.
+    """
+    if not points or any(np.asarray(p).size == 0 for p in points):
+        raise ConfigError("a stage needs at least one character with at least one joint position")
+    pts = [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in points]
+    if spacing is None:
+        widest = max(float(np.ptp(p[:, 0])) for p in pts) + 2 * BODY_MARGIN
+        spacing = max(0.8, widest + 0.1)
+    offsets = (np.arange(len(pts)) - (len(pts) - 1) / 2) * float(spacing)
+    every = np.concatenate([p + [dx, 0.0, 0.0] for p, dx in zip(pts, offsets)])
+    lo, hi = every.min(axis=0) - BODY_MARGIN, every.max(axis=0) + BODY_MARGIN
+    pad = 0.05 * (hi - lo)
+    return offsets, np.stack([lo - pad, hi + pad])
