@@ -34,7 +34,7 @@ Error report
 ------------
 :func:`export_gltf` reads the written bytes back by another path than the one
 that wrote them (:func:`read_glb`, :func:`accessor_array`, and forward
-kinematics of the nodes' transforms and animation, :func:`node_positions`)
+kinematics of the nodes' transforms and animation, :func:`node_matrices`)
 and compares every joint with the motion: a :class:`GltfReport`. The file
 holds the rig's bones, each of one length (the median over the motion), in
 32-bit floats: a motion whose bones keep their lengths is reproduced to a few
@@ -76,7 +76,7 @@ __all__ = [
     "wav_bytes",
     "read_glb",
     "accessor_array",
-    "node_positions",
+    "node_matrices",
 ]
 
 #: Largest position error of a written file (metres) that passes without a warning.
@@ -567,10 +567,10 @@ def _quaternion_matrix(q: np.ndarray) -> np.ndarray:
     )
 
 
-def node_positions(
+def node_matrices(
     nodes: Sequence[Mapping[str, Any]], tracks: Mapping[tuple[int, str], np.ndarray], n_frames: int
 ) -> np.ndarray:
-    """Forward kinematics of glTF nodes: every node's world position at every key.
+    """Forward kinematics of glTF nodes: every node's world transform at every key.
 
     Parameters
     ----------
@@ -584,8 +584,8 @@ def node_positions(
 
     Returns
     -------
-    np.ndarray, shape (n_frames, len(nodes), 3)
-        In the units of the file.
+    np.ndarray, shape (n_frames, len(nodes), 4, 4)
+        ``world[t, i] @ [p; 1]`` takes a point ``p`` of node ``i``'s frame to the world (the file's units).
     """
     parent = [-1] * len(nodes)
     for i, node in enumerate(nodes):
@@ -598,7 +598,7 @@ def node_positions(
         node = nodes[i]
         m = np.tile(np.eye(4), (n_frames, 1, 1))
         if "matrix" in node:
-            m[:] = np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T
+            m[:] = np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major
             return m
         t = tracks.get((i, "translation"), np.asarray(node.get("translation", (0, 0, 0)), dtype=np.float64))
         r = tracks.get((i, "rotation"), np.asarray(node.get("rotation", (0, 0, 0, 1)), dtype=np.float64))
@@ -619,7 +619,7 @@ def node_positions(
 
     for i in range(len(nodes)):
         place(i)
-    return world[:, :, :3, 3]
+    return world
 
 
 @dataclass(frozen=True)
@@ -647,7 +647,7 @@ def _measure(data: bytes, positions: np.ndarray, *, path: Path, written: list[in
     fps = float(doc["asset"]["extras"]["fps"])
     if len(times) != len(positions) or not np.allclose(times, np.arange(len(positions)) / fps, rtol=1e-6, atol=1e-6):
         raise ConfigError(f"the written animation's keys are not the motion's {len(positions)} frames", path=path)
-    world = node_positions(doc["nodes"], tracks, len(times))
+    world = node_matrices(doc["nodes"], tracks, len(times))[..., :3, 3]
     by_name = {node.get("name"): i for i, node in enumerate(doc["nodes"])}
     names = tuple(JOINT_NAMES[j] for j in written)
     err = np.linalg.norm(world[:, [by_name[n] for n in names]] - positions[:, written], axis=-1)
