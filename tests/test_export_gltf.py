@@ -372,3 +372,110 @@ def test_our_reader_agrees_with_pygltflib(tmp_path, partial_motion):
         np.testing.assert_array_equal(accessor_array(doc, binary, i), array(gltf, blob, i))
     with pytest.raises(ConfigError, match="not a binary glTF"):
         read_glb(b"BVH " * 8)
+
+
+# ----------------------------------------------------------------------------- the command line
+
+
+@pytest.fixture(scope="module")
+def cli_world(tmp_path_factory):
+    from .test_export_bvh_report import _cli_world
+
+    return _cli_world(tmp_path_factory.mktemp("world"), demo=True)
+
+
+def test_cli_format_writes_the_listed_files_and_prints_the_report(tmp_path, cli_world, validator):
+    from gesturekit.export.npz import load_npz
+
+    from .badinput import run_cli
+
+    db, speech_path = cli_world
+    out = tmp_path / "out"
+    run = run_cli("synthesize", speech_path, "--db", db, "--out", out, "--refiner", "none", "--format", "glb, npz")
+    assert run.code == 0, run.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["speech.glb", "speech.npz", "speech.wav"]
+    assert f"-> {out / 'speech.npz'}, {out / 'speech.glb'}, {out / 'speech.wav'}" in run.stdout
+    lines = [line.strip() for line in run.stdout.splitlines() if line.strip().startswith(("glTF ", "BVH "))]
+    assert len(lines) == 1 and lines[0].startswith("glTF speech.glb: position error max "), run.stdout
+    # the numbers printed are those of the file against the npz's exact positions
+    motion = load_npz(out / "speech.npz")[0]
+    err = joint_errors(out / "speech.glb", motion)
+    assert f"max {err.max() * 1000:.2f} mm" in lines[0] and f"mean {err.mean() * 1000:.2f} mm" in lines[0]
+    assert f"{motion.n_frames} frames at 15 fps" in lines[0] and lines[0].endswith("; speech in speech.wav")
+    assert validate(validator, out / "speech.glb")["issues"]["numErrors"] == 0
+    gltf, _ = load(out / "speech.glb")
+    assert gltf.asset.extras["audio"] == "speech.wav"
+    np.testing.assert_allclose(sf.read(out / "speech.wav")[0], sf.read(speech_path)[0], atol=1.5 / 32767)
+
+    # again: refused without --force, naming a file; replaced with it
+    again = run_cli("synthesize", speech_path, "--db", db, "--out", out, "--refiner", "none", "--format", "glb")
+    assert again.code == 2 and "exists already" in again.stderr and "--force" in again.stderr
+    forced = ["--format", "glb", "--force"]
+    assert run_cli("synthesize", speech_path, "--db", db, "--out", out, "--refiner", "none", *forced).code == 0
+
+
+def test_cli_default_formats_are_npz_and_bvh(tmp_path, cli_world):
+    from .badinput import run_cli
+
+    db, speech_path = cli_world
+    run = run_cli("synthesize", speech_path, "--db", db, "--out", tmp_path / "out", "--refiner", "none")
+    assert run.code == 0, run.stderr
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["speech.bvh", "speech.npz"]
+    assert "glTF" not in run.stdout
+
+
+@pytest.mark.parametrize(
+    "value,bad",
+    [("npz,gltf", "'gltf' is not an output"), ("npz,,bvh", "an empty entry is not an output"), ("mp4", "'mp4'")],
+)
+def test_cli_refuses_an_unknown_format_naming_it_and_the_choices(tmp_path, cli_world, value, bad):
+    from .badinput import run_cli
+
+    db, speech_path = cli_world
+    run = run_cli("synthesize", speech_path, "--db", db, "--out", tmp_path / "out", "--format", value)
+    assert run.code == 2 and bad in run.stderr and "npz, bvh, glb" in run.stderr, run.stderr
+    assert "Traceback" not in run.stderr and not (tmp_path / "out").exists()
+
+
+def test_cli_never_writes_the_speech_over_its_input(tmp_path, cli_world):
+    from .badinput import run_cli
+
+    db, speech_path = cli_world
+    before = speech_path.read_bytes()
+    run = run_cli("synthesize", speech_path, "--db", db, "--out", speech_path.parent, "--format", "glb", "--force")
+    assert run.code == 2 and "is an input of this command" in run.stderr, run.stderr
+    assert speech_path.read_bytes() == before and not (speech_path.parent / "speech.glb").exists()
+
+
+# ----------------------------------------------------------------------------- the app
+
+
+def test_app_offers_the_glb_beside_the_bvh_with_its_speech(app_env, validator, tmp_path):
+    from gesturekit import interactive as gs
+
+    from .conftest import shown
+    from .test_app_synthesize import open_page, result, speech_file, upload
+
+    at = upload(open_page(), speech_file(3.0))
+    if at.toggle(key="_w.synth.refine").value:
+        at.toggle(key="_w.synth.refine").set_value(False).run()
+    at.button(key="synth.go").click().run()
+    # (the page's background warm-up of the refiner may report a failed torch import of its own: not this test's)
+    assert not at.exception and not [e.value for e in at.error if "file" in e.value.lower()]
+    buttons = {d.proto.label: d for d in at.get("download_button")}
+    labels = list(buttons)
+    assert labels.index("Character (glTF)") == labels.index("Motion (BVH)") + 1 and "Speech (WAV)" in buttons
+    run, data, report = at.session_state["_synth.glb"]
+    res = result(at)
+    assert data.startswith(b"glTF") and report.frames == res.n_frames
+    path = tmp_path / gs.export_filename(res, "glb")
+    path.write_bytes(data)
+    assert validate(validator, path)["issues"]["numErrors"] == 0
+    gltf, _ = load(path)
+    assert gltf.asset.extras["audio"] == gs.export_filename(res, "wav")  # the WAV download's name
+    assert joint_errors(path, res.motion).max() < 1e-3
+    captions = [shown(c.value) for c in at.caption]
+    assert [c for c in captions if c.startswith("glTF ")] == [f"glTF {report.summary()}"]
+    # made once per result: a rerun of the page keeps the same bytes
+    at.run()
+    assert at.session_state["_synth.glb"][1] is data
