@@ -229,6 +229,8 @@ def test_partial_skeleton_writes_only_the_drawn_joints(tmp_path, partial_motion,
     drawn = [JOINT_NAMES[j] for j in range(N_JOINTS) if rig.parents[j] >= -1]
     assert names[:-1] == drawn and not set(THUMBS) & set(names)
     assert set(report.left_out) == set(THUMBS) and report.root == "spine_mid" and "spine_mid" in report.derived
+    assert " fps, root at the derived spine_mid; body of " in report.summary()
+    assert "; 8 finger joints left out: left_thumb1, " in report.summary()
     assert joint_errors(path, partial_motion).max() < 1e-3
     gltf, _ = load(path)
     assert "audio" not in gltf.asset.extras and report.audio is None and "speech in" not in report.summary()
@@ -334,6 +336,7 @@ def test_existing_files_are_replaced_only_when_asked_and_only_ours(tmp_path, par
         ({"audio": np.full(10, np.nan)}, "one channel of finite samples"),
         ({"audio": np.zeros(10), "sr": 0}, "sample rate must be a positive integer"),
         ({"motion": "not a motion"}, "must be a gesturekit Motion"),
+        ({"rest": np.zeros((3, 3))}, "rest"),
         ({"motion": Motion(np.full((3, N_JOINTS, 3), np.nan, np.float32), 15.0)}, "not finite"),
     ],
 )

@@ -37,8 +37,9 @@ that wrote them (:func:`read_glb`, :func:`accessor_array`, and forward
 kinematics of the nodes' transforms and animation, :func:`node_matrices`)
 and compares every joint with the motion: a :class:`GltfReport`. The file
 holds the rig's bones, each of one length (the median over the motion), in
-32-bit floats: a motion whose bones keep their lengths is reproduced to a few
-micrometres. Over :data:`WARN_ABOVE` (1 mm) it warns.
+32-bit floats: a motion whose bones keep their lengths is reproduced to well
+under a micrometre (0.09 um on 82 s of the demo database). Over
+:data:`WARN_ABOVE` (1 mm) it warns.
 """
 
 from __future__ import annotations
@@ -63,6 +64,7 @@ from ..errors import ConfigError, OutputError, warn
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG, check_output
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS, PARENTS
+from .bvh import _FINGER_JOINTS, _names
 
 __all__ = [
     "WARN_ABOVE",
@@ -185,8 +187,9 @@ class GltfReport:
             f"body of {self.vertices} vertices; {self.size / 1e6:.1f} MB",
         ]
         if self.left_out:
+            kind = "finger joint" if set(self.left_out) <= _FINGER_JOINTS else "joint"
             n = len(self.left_out)
-            parts.append(f"{n} joint{'s' if n > 1 else ''} left out")
+            parts.append(f"{n} {kind}{'s' if n > 1 else ''} left out: {_names(self.left_out)}")
         if self.audio is not None:
             parts.append(f"speech in {self.audio.name}")
         return "; ".join(parts)
@@ -281,7 +284,10 @@ def export_gltf(
         if overwrite:
             check_output(p, "file", overwrite=True)  # only a file gesturekit wrote is replaced
 
-    rig = rig_for(motion, rest=rest)
+    try:
+        rig = rig_for(motion, rest=rest)
+    except ConfigError as exc:
+        raise ConfigError(exc.problem, path=exc.path or path) from None
     written = [j for j in range(N_JOINTS) if rig.parents[j] >= -1]
     extras: dict[str, Any] = {"fps": float(motion.fps), "frames": int(motion.n_frames), "units": "m"}
     if wav_path is not None:
