@@ -477,6 +477,7 @@ def test_app_offers_the_glb_beside_the_bvh_with_its_speech(app_env, validator, t
     assert joint_errors(path, res.motion).max() < 1e-3
     captions = [shown(c.value) for c in at.caption]
     assert [c for c in captions if c.startswith("glTF ")] == [f"glTF {report.summary()}"]
+    assert len([w for w in at.warning if "glTF file is up to" in w.value]) == int(report.exceeds)
     # made once per result: a rerun of the page keeps the same bytes
     at.run()
     assert at.session_state["_synth.glb"][1] is data
