@@ -81,8 +81,9 @@ __all__ = [
     "node_matrices",
 ]
 
-#: Largest position error of a written file (metres) that passes without a warning.
-WARN_ABOVE = 0.001
+#: Largest position error of a written file (metres) that passes without a warning: the BVH's, since both files
+#: hold the same solve and miss the motion for the same reason (bones whose length changes over the motion).
+WARN_ABOVE = 0.01
 
 #: Roughness of every material (a matte body).
 ROUGHNESS = 0.9
