@@ -1,0 +1,313 @@
+"""The pieces of the default body, each a closed surface around the rig's rest pose (the T-pose).
+
+Sizes follow the rig: the torso and arms scale with the shoulder width ``W``, the head with its
+bone (head to head top), the palm and fingers with the hand's width (index to little-finger
+root). Each piece needs its joints in the rig and is left out otherwise (no hands for a layout
+without hands, no torso for a rig rooted at the neck).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..skeleton import FINGERS, N_JOINTS, joint_index
+from ._loft import Chain, Piece, cap_stations, ellipsoid, loft, s_grid, smoothstep
+from .rig import Rig
+
+__all__ = ["SKIN", "SHIRT", "FACE", "body_pieces"]
+
+SKIN, SHIRT, FACE = 0, 1, 2
+_SPINE, _CHEST, _UPPER, _NECK = (joint_index(n) for n in ("spine_mid", "chest", "upper_chest", "neck"))
+_NECK_UP, _HEAD, _HEAD_TOP = (joint_index(n) for n in ("neck_upper", "head", "head_top"))
+_X, _Y, _Z = np.eye(3)
+
+# torso: height along the spine (0 spine_mid, 1 neck) -> half-width, half-depth (shoulder widths)
+_TORSO = np.array(
+    [
+        (-0.20, 0.36, 0.24),
+        (0.00, 0.37, 0.255),
+        (0.30, 0.39, 0.27),
+        (0.55, 0.43, 0.28),
+        (0.74, 0.46, 0.27),
+        (0.86, 0.445, 0.24),
+        (0.93, 0.40, 0.20),
+    ]
+)
+#: finger radius at its root, in hand widths (thumb, index, middle, ring, little finger)
+_FINGER_RADIUS = dict(zip(FINGERS, (0.19, 0.15, 0.155, 0.145, 0.125), strict=True))
+
+
+def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-9 else fallback
+
+
+class _Frame:
+    """What every piece reads of the rig: which joints exist, the rest pose, the body's sizes."""
+
+    def __init__(self, rig: Rig, detail: float) -> None:
+        self.rig = rig
+        self.rest = np.asarray(rig.rest, dtype=np.float64)
+        self.have = np.asarray(rig.parents) >= -1
+        self.detail = detail
+        ls, rs = joint_index("left_shoulder"), joint_index("right_shoulder")
+        if self.have[ls] and self.have[rs]:
+            self.width = float(np.linalg.norm(self.rest[ls] - self.rest[rs]))
+            self.lateral = _unit(self.rest[ls] - self.rest[rs], _X)
+        else:  # no pair of shoulders: a width from the torso, or an adult's
+            torso = self._dist(_SPINE, _NECK)
+            self.width = 0.95 * torso if torso > 0 else 0.36
+            self.lateral = _X
+        self.up = _unit(self._vec(_SPINE, _NECK), _Y) if self._dist(_SPINE, _NECK) > 0 else _Y
+        self.front = _unit(np.cross(self.lateral, self.up), _Z)
+
+    def _vec(self, a: int, b: int) -> np.ndarray:
+        return self.rest[b] - self.rest[a]
+
+    def _dist(self, a: int, b: int) -> float:
+        return float(np.linalg.norm(self._vec(a, b))) if self.have[a] and self.have[b] else 0.0
+
+    def n(self, count: float, least: int = 3) -> int:
+        return max(least, int(round(count * self.detail)))
+
+
+def _tube(
+    f: _Frame,
+    chain: Chain,
+    knots: np.ndarray,
+    ref: np.ndarray,
+    n_around: int,
+    step: float,
+    caps: tuple[float, float],
+    part_of: object,
+    power: np.ndarray | None = None,
+) -> Piece:
+    """A closed tube along ``chain``: ``knots`` rows (s, a, b) give the half-axes along it (metres);
+    rounded caps of the given lengths close it before the first knot and after the last."""
+    s0, s1 = float(knots[0, 0]), float(knots[-1, 0])
+    inner = chain.stations[1:-1]
+    extra = np.concatenate([inner - chain.blend, inner - 0.5 * chain.blend, inner, inner + 0.5 * chain.blend])
+    extra = np.concatenate([extra, inner + chain.blend])
+    body = s_grid([*knots[:, 0], *extra[(extra > s0) & (extra < s1)]], step)
+    a, b = np.interp(body, knots[:, 0], knots[:, 1]), np.interp(body, knots[:, 0], knots[:, 2])
+    n_cap = f.n(4, 2)
+    off0, rad0 = cap_stations(n_cap, start=True)
+    off1, rad1 = cap_stations(n_cap, start=False)
+    s = np.concatenate([s0 + caps[0] * off0, body, s1 + caps[1] * off1])
+    a = np.concatenate([a[0] * rad0, a, a[-1] * rad1])
+    b = np.concatenate([b[0] * rad0, b, b[-1] * rad1])
+    pw = np.full(len(s), 2.0) if power is None else np.interp(s, power[:, 0], power[:, 1])
+    centers, tangents = chain.frame(s)
+    ends = np.array([s0 - caps[0], s1 + caps[1]])
+    poles, _ = chain.frame(ends)
+    verts, faces = loft(centers, tangents, ref, a, b, n_around, poles[0], poles[1], power=pw)
+    s_vert = np.concatenate([np.repeat(s, n_around), ends])
+    part = part_of(s_vert) if callable(part_of) else np.full(len(s_vert), part_of)
+    return Piece(verts, faces, chain.weights(s_vert, N_JOINTS), np.asarray(part, dtype=np.int64))
+
+
+def _rigid(verts: np.ndarray, faces: np.ndarray, joint: int, part: int) -> Piece:
+    w = np.zeros((len(verts), N_JOINTS))
+    w[:, joint] = 1.0
+    return Piece(verts, faces, w, np.full(len(verts), part, dtype=np.int64))
+
+
+def _torso(f: _Frame) -> list[Piece]:
+    if not (f.have[_SPINE] and f.have[_NECK]):
+        return []
+    joints = [j for j in (_SPINE, _CHEST, _UPPER, _NECK) if f.have[j]]
+    lengths = [f._dist(a, b) for a, b in zip(joints[:-1], joints[1:], strict=True)]
+    if min(lengths) <= 0:
+        return []
+    chain = Chain(f.rest[joints], joints[:-1], [0.35 * min(a, b) for a, b in zip(lengths[:-1], lengths[1:])])
+    height, w = chain.length, f.width
+    knots = np.column_stack([_TORSO[:, 0] * height, _TORSO[:, 1] * w, _TORSO[:, 2] * w])
+    piece = _tube(f, chain, knots, f.lateral, f.n(32, 8), height / f.n(16, 4), (0.05 * height, 0.1 * height), SHIRT)
+    # the shoulders' tops follow the collars (a shrug), the rest the spine
+    rel = piece.vertices - f.rest[_SPINE]
+    side = rel @ f.lateral
+    t = (rel @ f.up) / height
+    c = smoothstep((np.abs(side) - 0.2 * w) / (0.2 * w)) * smoothstep((t - 0.55) / 0.25)
+    for name, sign in (("left_collar", 1.0), ("right_collar", -1.0)):
+        j = joint_index(name)
+        if not f.have[j]:
+            continue
+        ci = np.where(side * sign > 0, c, 0.0)
+        piece.weights *= (1.0 - ci)[:, None]
+        piece.weights[:, j] += ci
+    return [piece]
+
+
+def _neck(f: _Frame) -> list[Piece]:
+    if not f.have[_NECK]:
+        return []
+    joints = [j for j in (_UPPER, _NECK, _NECK_UP, _HEAD) if f.have[j]]
+    if joints[-1] == _NECK:
+        return []
+    lengths = [f._dist(a, b) for a, b in zip(joints[:-1], joints[1:], strict=True)]
+    if min(lengths) <= 0:
+        return []
+    r = 0.16 * f.width
+    blends = [0.5 * r if b == _NECK else 0.3 * min(lengths) for b in joints[1:-1]]
+    chain = Chain(f.rest[joints], joints[:-1], blends)
+    s_neck = float(chain.stations[joints.index(_NECK)])
+    s0, s1 = s_neck - 0.12 * f.width, chain.length
+    knots = np.array([(s0, r, 0.94 * r), (s1, 0.9 * r, 0.85 * r)])
+    return [_tube(f, chain, knots, f.lateral, f.n(16, 6), (s1 - s0) / f.n(7, 3), (0.5 * r, 0.5 * r), SKIN)]
+
+
+def _head(f: _Frame) -> list[Piece]:
+    if not f.have[_HEAD]:
+        return []
+    h0 = f.rest[_HEAD]
+    below = next((j for j in (_NECK_UP, _NECK) if f.have[j] and f._dist(j, _HEAD) > 0), None)
+    if f.have[_HEAD_TOP] and f._dist(_HEAD, _HEAD_TOP) > 0:
+        size = f._dist(_HEAD, _HEAD_TOP)
+        up = _unit(f._vec(_HEAD, _HEAD_TOP), f.up)
+    else:
+        size = 0.39 * f.width
+        up = _unit(f._vec(below, _HEAD), f.up) if below is not None else f.up
+    front = _unit(f.front - (f.front @ up) * up, _Z)
+    side = np.cross(up, front)
+    center = h0 + 0.38 * size * up + 0.05 * size * front
+    top, bottom, depth, width = 0.66 * size, 0.92 * size, 0.68 * size, 0.54 * size
+
+    def shape(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Height above the centre, half-depth and half-width of the head's ring at latitude ``phi``."""
+        sin, cos = np.sin(phi), np.cos(phi)
+        jaw = np.maximum(0.0, -sin)
+        return np.where(sin > 0, top, bottom) * sin, depth * cos, width * cos * (1.0 - 0.25 * jaw)
+
+    n_rings = f.n(18, 6)
+    phi = np.linspace(-0.5 * np.pi, 0.5 * np.pi, n_rings + 2)[1:-1]
+    height, a, b = shape(phi)
+    centers = center + height[:, None] * up
+    verts, faces = loft(
+        centers,
+        np.broadcast_to(up, centers.shape),
+        front,
+        a,
+        b,
+        f.n(24, 8),
+        center - bottom * up,
+        center + top * up,
+        power=2.0,
+    )
+    pieces = [_rigid(verts, faces, _HEAD, SKIN)]
+
+    def surface(x: float, y: float) -> np.ndarray:
+        """The point of the face at ``x`` to the side and ``y`` above the head joint (in head sizes)."""
+        rel = (y * size - 0.38 * size) / (top if y * size > 0.38 * size else bottom)
+        p = np.arcsin(np.clip(rel, -1.0, 1.0))
+        _, a1, b1 = shape(np.array([p]))
+        z = float(a1[0]) * np.sqrt(max(0.0, 1.0 - (x * size / float(b1[0])) ** 2))
+        return h0 + y * size * up + x * size * side + (0.05 * size + z) * front
+
+    axes = np.stack([up, side, front])
+    n_a, n_r = f.n(10, 6), f.n(6, 3)
+    for x in (-0.2, 0.2):  # eyes and brows
+        eye = surface(x, 0.25) - 0.03 * size * front
+        pieces.append(_rigid(*ellipsoid(eye, axes, np.array([0.075, 0.085, 0.06]) * size, n_a, n_r), _HEAD, FACE))
+        brow = surface(1.15 * x, 0.42) - 0.01 * size * front
+        pieces.append(_rigid(*ellipsoid(brow, axes, np.array([0.028, 0.14, 0.04]) * size, n_a, n_r), _HEAD, FACE))
+    mouth = surface(0.0, -0.2) - 0.015 * size * front
+    pieces.append(_rigid(*ellipsoid(mouth, axes, np.array([0.025, 0.14, 0.04]) * size, n_a, n_r), _HEAD, FACE))
+    nose_axis = _unit(up - 0.35 * front, up)
+    nose_axes = np.stack([nose_axis, side, np.cross(nose_axis, side)])
+    nose = surface(0.0, 0.1) - 0.02 * size * front
+    pieces.append(_rigid(*ellipsoid(nose, nose_axes, np.array([0.17, 0.085, 0.12]) * size, n_a, n_r), _HEAD, SKIN))
+    return pieces
+
+
+def _hand_frame(f: _Frame, side: str, wrist: int, forearm: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """The knuckle line's centre, the hand's width and the palm's normal (sign free) in the rest pose."""
+    roots = {fi: joint_index(f"{side}_{fi}1") for fi in FINGERS}
+    have = {fi: j for fi, j in roots.items() if f.have[j] and fi != "thumb"}
+    along = _unit(forearm, f.lateral)
+    if "index" in have and "pinky" in have:
+        across = f.rest[have["index"]] - f.rest[have["pinky"]]
+        width = float(np.linalg.norm(across))
+        normal = _unit(np.cross(along, across), f.up)
+    else:
+        width, normal = 0.17 * f.width, _unit(f.up - (f.up @ along) * along, _Y)
+    if have:
+        knuckles = np.mean([f.rest[j] for j in have.values()], axis=0)
+        length = max(float((knuckles - f.rest[wrist]) @ along), 0.5 * width)
+    else:
+        length = 1.4 * width
+    return f.rest[wrist] + length * along, max(width, 1e-3), normal
+
+
+def _arm(f: _Frame, side: str) -> list[Piece]:
+    sh, el, wr = (joint_index(f"{side}_{n}") for n in ("shoulder", "elbow", "wrist"))
+    if not f.have[sh]:
+        return []
+    joints = [j for j in (sh, el, wr) if f.have[j]]
+    if len(joints) < 2 or min(f._dist(a, b) for a, b in zip(joints[:-1], joints[1:], strict=True)) <= 0:
+        return []
+    w = f.width
+    points = list(f.rest[joints])
+    hand = joints[-1] == wr
+    width, normal = 0.17 * w, f.up
+    if hand:
+        knuckles, width, normal = _hand_frame(f, side, wr, f.rest[wr] - points[-2])
+        points.append(knuckles)
+    drivers = joints if hand else joints[:-1]
+    stations = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=-1))])
+    s_el = float(stations[1]) if el in joints else 0.53 * float(stations[joints.index(wr)])
+    upper = s_el
+    blends = [1.0 * 0.105 * w if j == el else 0.07 * w for j in joints[1:]]
+    chain = Chain(np.array(points), drivers, blends[: len(points) - 2])
+    rows = [(0.0, 0.145 * w, 0.145 * w), (0.25 * upper, 0.135 * w, 0.13 * w), (0.55 * upper, 0.125 * w, 0.12 * w)]
+    rows.append((s_el, 0.10 * w, 0.105 * w))
+    if wr in joints:
+        s_wr = float(stations[joints.index(wr)])
+        fore = s_wr - s_el
+        rows += [(s_el + 0.3 * fore, 0.105 * w, 0.12 * w), (s_wr - 0.1 * fore, 0.065 * w, 0.09 * w)]
+        rows.append((s_wr, 0.058 * w, 0.085 * w))
+        palm = chain.length - s_wr
+        rows += [(s_wr + 0.45 * palm, 0.28 * width, 0.62 * width), (chain.length, 0.24 * width, 0.6 * width)]
+        power = np.array([(s_wr, 2.0), (s_wr + 0.4 * palm, 2.8), (chain.length, 2.8)])
+        end_cap = 0.2 * width
+    else:
+        power, end_cap = None, 0.1 * w
+    knots = np.array(rows)
+
+    def part(s: np.ndarray) -> np.ndarray:
+        return np.where(s < 0.5 * upper, SHIRT, SKIN)
+
+    n_around = f.n(20, 6)
+    piece = _tube(f, chain, knots, normal, n_around, chain.length / f.n(24, 6), (0.145 * w, end_cap), part, power)
+    pieces = [piece]
+    if hand:
+        pieces += _fingers(f, side, width, normal)
+    return pieces
+
+
+def _fingers(f: _Frame, side: str, width: float, normal: np.ndarray) -> list[Piece]:
+    pieces = []
+    for finger in FINGERS:
+        joints = []
+        for i in range(1, 5):
+            j = joint_index(f"{side}_{finger}{i}")
+            if not f.have[j] or (joints and f._dist(joints[-1], j) <= 0):
+                break
+            joints.append(j)
+        if len(joints) < 2:
+            continue
+        r = _FINGER_RADIUS[finger] * width
+        chain = Chain(f.rest[joints], joints[:-1], [0.9 * r] * (len(joints) - 2))
+        taper = np.array([1.0, 0.93, 0.85, 0.75])[: len(joints)]
+        if finger == "thumb":
+            taper[0] = 1.4  # the ball of the thumb
+        rad = r * taper
+        knots = np.column_stack([chain.stations, 0.88 * rad, rad])
+        n_around = f.n(8, 5)
+        pieces.append(_tube(f, chain, knots, normal, n_around, r * 0.9 / f.detail, (rad[0], 0.7 * rad[-1]), SKIN))
+    return pieces
+
+
+def body_pieces(rig: Rig, detail: float = 1.0) -> list[Piece]:
+    """Every piece of the body that the rig's joints can place (see the module docstring)."""
+    f = _Frame(rig, detail)
+    return _torso(f) + _neck(f) + _head(f) + _arm(f, "left") + _arm(f, "right")
