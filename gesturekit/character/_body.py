@@ -29,8 +29,9 @@ _TORSO = np.array(
         (0.30, 0.39, 0.27),
         (0.55, 0.43, 0.28),
         (0.74, 0.46, 0.27),
-        (0.86, 0.445, 0.24),
-        (0.93, 0.40, 0.20),
+        (0.86, 0.46, 0.245),
+        (0.93, 0.44, 0.215),
+        (0.98, 0.37, 0.17),
     ]
 )
 #: finger radius at its root, in hand widths (thumb, index, middle, ring, little finger)
@@ -81,13 +82,14 @@ def _tube(
     caps: tuple[float, float],
     part_of: object,
     power: np.ndarray | None = None,
+    blend_rings: bool = True,
 ) -> Piece:
     """A closed tube along ``chain``: ``knots`` rows (s, a, b) give the half-axes along it (metres);
-    rounded caps of the given lengths close it before the first knot and after the last."""
+    rounded caps of the given lengths close it before the first knot and after the last; with
+    ``blend_rings``, rings also sit across each joint's blend (where the tube bends)."""
     s0, s1 = float(knots[0, 0]), float(knots[-1, 0])
-    inner = chain.stations[1:-1]
-    extra = np.concatenate([inner - chain.blend, inner - 0.5 * chain.blend, inner, inner + 0.5 * chain.blend])
-    extra = np.concatenate([extra, inner + chain.blend])
+    inner, h = chain.stations[1:-1], chain.blend
+    extra = np.concatenate([inner - h, inner - 0.5 * h, inner, inner + 0.5 * h, inner + h]) if blend_rings else inner
     body = s_grid([*knots[:, 0], *extra[(extra > s0) & (extra < s1)]], step)
     a, b = np.interp(body, knots[:, 0], knots[:, 1]), np.interp(body, knots[:, 0], knots[:, 2])
     n_cap = f.n(4, 2)
@@ -122,7 +124,8 @@ def _torso(f: _Frame) -> list[Piece]:
     chain = Chain(f.rest[joints], joints[:-1], [0.35 * min(a, b) for a, b in zip(lengths[:-1], lengths[1:])])
     height, w = chain.length, f.width
     knots = np.column_stack([_TORSO[:, 0] * height, _TORSO[:, 1] * w, _TORSO[:, 2] * w])
-    piece = _tube(f, chain, knots, f.lateral, f.n(32, 8), height / f.n(16, 4), (0.05 * height, 0.1 * height), SHIRT)
+    step, caps = height / f.n(16, 4), (0.05 * height, 0.07 * height)
+    piece = _tube(f, chain, knots, f.lateral, f.n(30, 8), step, caps, SHIRT, blend_rings=False)
     # the shoulders' tops follow the collars (a shrug), the rest the spine
     rel = piece.vertices - f.rest[_SPINE]
     side = rel @ f.lateral
@@ -239,49 +242,58 @@ def _hand_frame(f: _Frame, side: str, wrist: int, forearm: np.ndarray) -> tuple[
 
 
 def _arm(f: _Frame, side: str) -> list[Piece]:
+    """The upper arm, and the forearm running into the palm, with the fingers.
+
+    The elbow bends up to about 160 degrees in speech, past what any blend of two joints' transforms
+    keeps from folding, so the upper arm and the forearm are two capsules whose round ends share the
+    elbow's centre: each turns rigidly about it and the pair never opens. The wrist, which mostly
+    swings (the forearm's twist is on the elbow), is blended into the palm.
+    """
     sh, el, wr = (joint_index(f"{side}_{n}") for n in ("shoulder", "elbow", "wrist"))
-    if not f.have[sh]:
-        return []
     joints = [j for j in (sh, el, wr) if f.have[j]]
-    if len(joints) < 2 or min(f._dist(a, b) for a, b in zip(joints[:-1], joints[1:], strict=True)) <= 0:
+    if not f.have[sh] or len(joints) < 2:
+        return []
+    if min(f._dist(a, b) for a, b in zip(joints[:-1], joints[1:], strict=True)) <= 0:
         return []
     w = f.width
-    points = list(f.rest[joints])
-    hand = joints[-1] == wr
-    width, normal = 0.17 * w, f.up
-    if hand:
-        knuckles, width, normal = _hand_frame(f, side, wr, f.rest[wr] - points[-2])
-        points.append(knuckles)
-    drivers = joints if hand else joints[:-1]
-    stations = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=-1))])
-    s_el = float(stations[1]) if el in joints else 0.53 * float(stations[joints.index(wr)])
-    upper = s_el
-    blends = [1.0 * 0.105 * w if j == el else 0.07 * w for j in joints[1:]]
-    chain = Chain(np.array(points), drivers, blends[: len(points) - 2])
-    rows = [(0.0, 0.145 * w, 0.145 * w), (0.25 * upper, 0.135 * w, 0.13 * w), (0.55 * upper, 0.125 * w, 0.12 * w)]
-    rows.append((s_el, 0.10 * w, 0.105 * w))
-    if wr in joints:
-        s_wr = float(stations[joints.index(wr)])
-        fore = s_wr - s_el
-        rows += [(s_el + 0.3 * fore, 0.105 * w, 0.12 * w), (s_wr - 0.1 * fore, 0.065 * w, 0.09 * w)]
-        rows.append((s_wr, 0.058 * w, 0.085 * w))
-        palm = chain.length - s_wr
-        rows += [(s_wr + 0.45 * palm, 0.28 * width, 0.62 * width), (chain.length, 0.24 * width, 0.6 * width)]
-        power = np.array([(s_wr, 2.0), (s_wr + 0.4 * palm, 2.8), (chain.length, 2.8)])
-        end_cap = 0.2 * width
-    else:
-        power, end_cap = None, 0.1 * w
-    knots = np.array(rows)
+    r_sh, r_el = 0.125 * w, 0.10 * w
+    pieces = []
+    mid = joints[1]  # the elbow, or the wrist when the rig has no elbow
+    upper = f._dist(sh, mid) if mid == el else 0.53 * f._dist(sh, mid)
+    if mid == el:
+        chain = Chain(f.rest[[sh, el]], [sh], [])
+        knots = np.array(
+            [(0.0, r_sh, r_sh), (0.3 * upper, 0.125 * w, 0.12 * w), (0.6 * upper, 0.118 * w, 0.112 * w)]
+            + [(upper, r_el, r_el)]
+        )
 
-    def part(s: np.ndarray) -> np.ndarray:
-        return np.where(s < 0.5 * upper, SHIRT, SKIN)
+        def sleeve(s: np.ndarray) -> np.ndarray:
+            return np.where(s < 0.5 * upper, SHIRT, SKIN)
 
-    n_around = f.n(20, 6)
-    piece = _tube(f, chain, knots, normal, n_around, chain.length / f.n(24, 6), (0.145 * w, end_cap), part, power)
-    pieces = [piece]
-    if hand:
-        pieces += _fingers(f, side, width, normal)
-    return pieces
+        step = upper / f.n(12, 4)
+        pieces.append(_tube(f, chain, knots, f.up, f.n(20, 6), step, (r_sh, r_el), sleeve))
+    if wr not in joints:
+        return pieces
+    base = el if mid == el else sh
+    fore = f._dist(base, wr)
+    knuckles, width, normal = _hand_frame(f, side, wr, f.rest[wr] - f.rest[base])
+    palm = float(np.linalg.norm(knuckles - f.rest[wr]))
+    chain = Chain(np.array([f.rest[base], f.rest[wr], knuckles]), [base, wr], [0.07 * w])
+    s_wr = fore
+    rows = [] if mid == el else [(0.0, r_sh, r_sh), (0.3 * upper, 0.125 * w, 0.12 * w)]
+    start = 0.0 if mid == el else upper
+    rows += [(start, 0.97 * r_el, 0.97 * r_el), (start + 0.3 * (fore - start), 0.1 * w, 0.115 * w)]
+    rows += [(s_wr - 0.1 * (fore - start), 0.065 * w, 0.09 * w), (s_wr, 0.058 * w, 0.085 * w)]
+    rows += [(s_wr + 0.45 * palm, 0.28 * width, 0.62 * width), (s_wr + palm, 0.24 * width, 0.6 * width)]
+    power = np.array([(s_wr, 2.0), (s_wr + 0.4 * palm, 2.8), (s_wr + palm, 2.8)])
+
+    def sleeve_or_skin(s: np.ndarray) -> np.ndarray:
+        return np.where(s < 0.5 * upper, SHIRT, SKIN) if mid != el else np.full(len(s), SKIN)
+
+    ends = (r_sh if mid != el else 0.97 * r_el, 0.2 * width)
+    step = (s_wr + palm) / f.n(13, 5)
+    pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, ends, sleeve_or_skin, power))
+    return pieces + _fingers(f, side, width, normal)
 
 
 def _fingers(f: _Frame, side: str, width: float, normal: np.ndarray) -> list[Piece]:
@@ -296,14 +308,14 @@ def _fingers(f: _Frame, side: str, width: float, normal: np.ndarray) -> list[Pie
         if len(joints) < 2:
             continue
         r = _FINGER_RADIUS[finger] * width
-        chain = Chain(f.rest[joints], joints[:-1], [0.9 * r] * (len(joints) - 2))
+        chain = Chain(f.rest[joints], joints[:-1], [1.8 * r] * (len(joints) - 2), reach=0.5)
         taper = np.array([1.0, 0.93, 0.85, 0.75])[: len(joints)]
         if finger == "thumb":
             taper[0] = 1.4  # the ball of the thumb
         rad = r * taper
-        knots = np.column_stack([chain.stations, 0.88 * rad, rad])
+        knots = np.column_stack([chain.stations, 0.82 * rad, rad])
         n_around = f.n(8, 5)
-        pieces.append(_tube(f, chain, knots, normal, n_around, r * 0.9 / f.detail, (rad[0], 0.7 * rad[-1]), SKIN))
+        pieces.append(_tube(f, chain, knots, normal, n_around, r * 1.15 / f.detail, (rad[0], 0.7 * rad[-1]), SKIN))
     return pieces
 
 

@@ -55,9 +55,11 @@ class Chain:
         The joint that drives each bone (its upper joint).
     blend : sequence of float, length m - 1
         Half-width ``h_k`` of the blend across each inner station, metres.
+    reach : float
+        A blend reaches at most this share (at most 0.5) of either bone beside it.
     """
 
-    def __init__(self, points: np.ndarray, drivers: list[int], blend: list[float]) -> None:
+    def __init__(self, points: np.ndarray, drivers: list[int], blend: list[float], reach: float = 0.45) -> None:
         self.points = np.asarray(points, dtype=np.float64)
         seg = np.diff(self.points, axis=0)
         self.lengths = np.linalg.norm(seg, axis=-1)
@@ -66,8 +68,8 @@ class Chain:
         self.dirs = seg / self.lengths[:, None]
         self.stations = np.concatenate([[0.0], np.cumsum(self.lengths)])
         self.drivers = list(drivers)
-        # two blends never overlap: each stays within 45 % of its neighbouring bones
-        lim = 0.45 * np.minimum(self.lengths[:-1], self.lengths[1:])
+        # two blends never overlap: each reaches at most this share of its neighbouring bones
+        lim = reach * np.minimum(self.lengths[:-1], self.lengths[1:])
         self.blend = np.minimum(np.asarray(blend, dtype=np.float64), lim)
 
     @property
