@@ -8,6 +8,8 @@ without hands, no torso for a rig rooted at the neck).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ..skeleton import FINGERS, N_JOINTS, joint_index
@@ -80,7 +82,7 @@ def _tube(
     n_around: int,
     step: float,
     caps: tuple[float, float],
-    part_of: object,
+    part_of: int | Callable[[np.ndarray], np.ndarray],
     power: np.ndarray | None = None,
     blend_rings: bool = True,
 ) -> Piece:
@@ -299,7 +301,7 @@ def _arm(f: _Frame, side: str) -> list[Piece]:
 def _fingers(f: _Frame, side: str, width: float, normal: np.ndarray) -> list[Piece]:
     pieces = []
     for finger in FINGERS:
-        joints = []
+        joints: list[int] = []
         for i in range(1, 5):
             j = joint_index(f"{side}_{finger}{i}")
             if not f.have[j] or (joints and f._dist(joints[-1], j) <= 0):

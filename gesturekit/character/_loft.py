@@ -105,10 +105,20 @@ class Chain:
 
 
 def s_grid(knots: list[float], step: float) -> np.ndarray:
-    """Increasing arc positions through every knot, at most ``step`` apart (knots sorted, duplicates dropped)."""
+    """Increasing arc positions through the knots, at most ``step`` apart.
+
+    Knots closer than a quarter step to the previous one are dropped (the last one is kept), so that no
+    two rings nearly coincide.
+    """
     k = np.unique(np.asarray(knots, dtype=np.float64))
-    out = [k[:1]]
-    for a, b in zip(k[:-1], k[1:], strict=True):
+    keep = [float(k[0])]
+    for x in k[1:]:
+        if x - keep[-1] > 0.25 * step:
+            keep.append(float(x))
+        elif len(keep) > 1 and x == k[-1]:
+            keep[-1] = float(x)
+    out = [np.array(keep[:1])]
+    for a, b in zip(keep[:-1], keep[1:], strict=True):
         n = max(1, int(np.ceil((b - a) / step - 1e-9)))
         out.append(np.linspace(a, b, n + 1)[1:])
     return np.concatenate(out)
@@ -175,9 +185,11 @@ def loft(
     theta = 2.0 * np.pi * np.arange(n_around) / n_around
     e = 2.0 / np.broadcast_to(np.asarray(power, dtype=np.float64), (len(t),))[:, None]
     ca, sa = _sgnpow(np.cos(theta)[None], e), _sgnpow(np.sin(theta)[None], e)
-    rings = centers[:, None] + (np.asarray(a)[:, None] * ca)[..., None] * u[:, None] + (
-        np.asarray(b)[:, None] * sa
-    )[..., None] * w[:, None]
+    rings = (
+        centers[:, None]
+        + (np.asarray(a)[:, None] * ca)[..., None] * u[:, None]
+        + (np.asarray(b)[:, None] * sa)[..., None] * w[:, None]
+    )
     n_rings = len(t)
     verts = np.concatenate([rings.reshape(-1, 3), [start_pole, end_pole]])
     i = np.arange(n_rings - 1)[:, None] * n_around

@@ -139,7 +139,7 @@ def _top4(weights: np.ndarray, rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     w = np.where(np.asarray(rig.parents)[None] >= -1, np.clip(weights, 0.0, None), 0.0)
     order = np.argsort(-w, axis=1, kind="stable")[:, :4]
     top = np.take_along_axis(w, order, axis=1)
-    top[top < 1e-6] = 0.0
+    top[top < 1e-3] = 0.0  # a trace of a joint moves nothing visibly
     top /= top.sum(axis=1, keepdims=True)
     # unused slots point at the root, weight 0
     joints = np.where(top > 0, order, rig.root)
