@@ -31,9 +31,9 @@ _TORSO = np.array(
         (0.30, 0.39, 0.27),
         (0.55, 0.43, 0.28),
         (0.74, 0.46, 0.27),
-        (0.86, 0.46, 0.245),
-        (0.93, 0.44, 0.215),
-        (0.98, 0.37, 0.17),
+        (0.86, 0.47, 0.245),
+        (0.94, 0.46, 0.215),
+        (1.00, 0.40, 0.17),
     ]
 )
 #: finger radius at its root, in hand widths (thumb, index, middle, ring, little finger)
@@ -126,7 +126,7 @@ def _torso(f: _Frame) -> list[Piece]:
     chain = Chain(f.rest[joints], joints[:-1], [0.35 * min(a, b) for a, b in zip(lengths[:-1], lengths[1:])])
     height, w = chain.length, f.width
     knots = np.column_stack([_TORSO[:, 0] * height, _TORSO[:, 1] * w, _TORSO[:, 2] * w])
-    step, caps = height / f.n(16, 4), (0.05 * height, 0.07 * height)
+    step, caps = height / f.n(16, 4), (0.05 * height, 0.06 * height)
     piece = _tube(f, chain, knots, f.lateral, f.n(30, 8), step, caps, SHIRT, blend_rings=False)
     # the shoulders' tops follow the collars (a shrug), the rest the spine
     rel = piece.vertices - f.rest[_SPINE]
