@@ -42,7 +42,7 @@ from gesturekit.skeleton import (
 
 #: The worst stretch allowed, metres: blended vertices (the wrist, the finger joints, the spine, the
 #: neck) move a little towards the joint they blend with.
-STRETCH_TOLERANCE = 0.02
+STRETCH_TOLERANCE = 0.015
 
 
 @functools.cache
@@ -243,6 +243,14 @@ def test_the_body_is_a_half_body_presenter_facing_forward():
         for finger in FINGERS:
             tip = rig.rest[joint_index(f"{side}_{finger}4")]
             assert np.linalg.norm(v - tip, axis=1).min() < 0.012, (side, finger)
+
+
+def test_detail_sets_the_vertex_count_and_keeps_the_mesh_well_formed():
+    rig, mesh, _ = _demo()
+    meshes = [build_mesh(rig, detail=d) for d in (0.5, 1.5)]
+    for m in meshes:
+        assert_well_formed(m, rig)
+    assert meshes[0].n_vertices < mesh.n_vertices < meshes[1].n_vertices
 
 
 def test_detail_must_be_positive():

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 
 from ..skeleton import FINGERS, N_JOINTS, joint_index
 from ._loft import Chain, Piece, cap_stations, ellipsoid, loft, s_grid, smoothstep
@@ -93,7 +94,8 @@ def _tube(
     inner, h = chain.stations[1:-1], chain.blend
     extra = np.concatenate([inner - h, inner - 0.5 * h, inner, inner + 0.5 * h, inner + h]) if blend_rings else inner
     body = s_grid([*knots[:, 0], *extra[(extra > s0) & (extra < s1)]], step)
-    a, b = np.interp(body, knots[:, 0], knots[:, 1]), np.interp(body, knots[:, 0], knots[:, 2])
+    # a monotone cubic through the knots: smooth outlines without overshoot
+    a, b = (PchipInterpolator(knots[:, 0], knots[:, k])(body) for k in (1, 2))
     n_cap = f.n(4, 2)
     off0, rad0 = cap_stations(n_cap, start=True)
     off1, rad1 = cap_stations(n_cap, start=False)
