@@ -40,9 +40,10 @@ from gesturekit.skeleton import (
     joint_index,
 )
 
-#: The worst stretch allowed, metres: blended vertices (the wrist, the finger joints, the spine, the
-#: neck) move a little towards the joint they blend with.
-STRETCH_TOLERANCE = 0.015
+#: The stretch allowed, as a share of the vertex's rest distance to its dominant joint plus metres:
+#: blended vertices (the wrist, the finger joints, the spine, the neck) move a little towards the joint
+#: they blend with (a twist between two spine joints draws the torso's blend in by a centimetre or two).
+STRETCH_SHARE, STRETCH_SLACK = 0.1, 0.005
 
 
 @functools.cache
@@ -102,7 +103,8 @@ def _face_normals(v: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def deformation(mesh: CharacterMesh, rig: Rig, pose: Pose, chunk: int = 256) -> dict:
-    """The worst inversion (smallest dot product) and stretch (metres) over every frame of ``pose``."""
+    """The worst inversion (smallest dot product), stretch (metres) and stretch beyond the allowance
+    (metres; within it when negative) over every frame of ``pose``."""
     vdom, fdom = dominant(mesh)
     rigid_v = (mesh.weights[:, 0] >= 1.0 - 1e-6) | (mesh.weights[:, 1:] == 0).all(axis=1)
     rigid_f = rigid_v[mesh.faces].all(axis=1) & (vdom[mesh.faces] == fdom[:, None]).all(axis=1)
@@ -114,7 +116,8 @@ def deformation(mesh: CharacterMesh, rig: Rig, pose: Pose, chunk: int = 256) -> 
     rest_d = np.linalg.norm(mesh.vertices[verts] - rig.rest[vdom[verts]], axis=-1)
     bounds = np.searchsorted(fdom[faces], np.arange(N_JOINTS + 1))
     groups = [(j, slice(bounds[j], bounds[j + 1])) for j in range(N_JOINTS) if bounds[j + 1] > bounds[j]]
-    worst = {"dot": 1.0, "dot_at": None, "stretch": 0.0, "stretch_at": None}
+    worst = {"dot": 1.0, "dot_at": None, "stretch": 0.0, "stretch_at": None, "excess": -1.0}
+    allowed = STRETCH_SHARE * rest_d + STRETCH_SLACK
     for a in range(0, pose.n_frames, chunk):
         rot, pos = Pose(pose.local[a : a + chunk], pose.root[a : a + chunk]).world(rig)
         posed = skin_grouped(mesh, matrices(rot, pos, rig), verts).astype(np.float32)  # (t, 3, n)
@@ -128,6 +131,8 @@ def deformation(mesh: CharacterMesh, rig: Rig, pose: Pose, chunk: int = 256) -> 
             worst.update(dot=float(dots.min()), dot_at=(a + int(t), int(faces[f]), JOINT_NAMES[fdom[faces[f]]]))
         d = np.sqrt(np.sum((posed - pos[:, vdom[verts]].transpose(0, 2, 1)) ** 2, axis=1))
         s = np.abs(d - rest_d)
+        if s.size:
+            worst["excess"] = max(worst["excess"], float((s - allowed).max()))
         if s.size and s.max() > worst["stretch"]:
             t, v = np.unravel_index(s.argmax(), s.shape)
             worst.update(stretch=float(s.max()), stretch_at=(a + int(t), int(verts[v]), JOINT_NAMES[vdom[verts[v]]]))
@@ -152,9 +157,14 @@ def test_no_triangle_inverts_and_no_vertex_stretches_over_the_whole_demo_databas
     rig, mesh, pose = _demo()
     assert pose.n_frames == _db().poses.shape[0] * _db().poses.shape[1]
     worst = deformation(mesh, rig, pose)
-    print(f"\nworst inversion dot {worst['dot']:.3f} at {worst['dot_at']}, stretch {worst['stretch'] * 1000:.1f} mm")
+    print(
+        f"\nworst inversion dot {worst['dot']:.3f} at {worst['dot_at']}, stretch {worst['stretch'] * 1000:.1f} mm "
+        f"at {worst['stretch_at']}, {-worst['excess'] * 1000:.1f} mm within the allowance"
+    )
     assert worst["dot"] > 0.0, f"a triangle inverts: {worst}"
-    assert worst["stretch"] <= STRETCH_TOLERANCE, f"a vertex stretches beyond {STRETCH_TOLERANCE} m: {worst}"
+    assert worst["excess"] <= 0.0, (
+        f"a vertex stretches beyond {STRETCH_SHARE} x its distance + {STRETCH_SLACK} m: {worst}"
+    )
 
 
 def test_the_deformation_check_finds_the_fold_of_a_blended_elbow():
@@ -366,7 +376,7 @@ def test_a_partial_skeleton_gets_a_well_formed_body_that_follows_its_motion(name
     bound[mesh.joints[mesh.weights > 0]] = True
     assert not (bound & (rig.parents == -2)).any(), "a vertex is bound to an absent joint"
     worst = deformation(mesh, rig, solve_pose(motion, rig))
-    assert worst["dot"] > 0.0 and worst["stretch"] <= STRETCH_TOLERANCE, (name, worst)
+    assert worst["dot"] > 0.0 and worst["excess"] <= 0.0, (name, worst)
 
 
 def _reach(mesh: CharacterMesh) -> float:
