@@ -255,6 +255,25 @@ def test_the_body_is_a_half_body_presenter_facing_forward():
             assert np.linalg.norm(v - tip, axis=1).min() < 0.012, (side, finger)
 
 
+def plain_vertex_normals(v: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals of one frame, face by face."""
+    acc = np.zeros_like(v, dtype=np.float64)
+    for f in faces:
+        a, b, c = v[f].astype(np.float64)
+        acc[f] += np.cross(b - a, c - a)
+    return acc / np.linalg.norm(acc, axis=1, keepdims=True)
+
+
+def test_vertex_normals_of_many_frames_equal_the_plain_sum_frame_by_frame():
+    rig, mesh, pose = _demo()
+    posed = skin_vertices(mesh, rig, pose, frames=np.array([0, 500, 9000]))
+    fast = vertex_normals(posed, mesh.faces)
+    assert fast.shape == posed.shape
+    for k in range(len(posed)):
+        np.testing.assert_allclose(fast[k], plain_vertex_normals(posed[k], mesh.faces), atol=1e-9)
+    np.testing.assert_allclose(vertex_normals(posed[1], mesh.faces), fast[1], atol=1e-12)
+
+
 def test_detail_sets_the_vertex_count_and_keeps_the_mesh_well_formed():
     rig, mesh, _ = _demo()
     meshes = [build_mesh(rig, detail=d) for d in (0.5, 1.5)]
