@@ -333,7 +333,10 @@ def test_the_mesh_follows_each_bones_length(factors):
         ab = b - a
         t = np.clip((v[vdom == j] - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
         dist = np.linalg.norm(v[vdom == j] - (a + t[:, None] * ab), axis=1)
-        limit = 0.55 * width if j < 13 else 0.2 * width
+        side = "left" if JOINT_NAMES[j].startswith("left") else "right"
+        hand = np.linalg.norm(rig.rest[joint_index(f"{side}_index1")] - rig.rest[joint_index(f"{side}_pinky1")])
+        # the torso is as wide as the shoulders; forearms go with the shoulders, palms with the hand's width
+        limit = 0.55 * width if j < 13 else 0.2 * width + 0.6 * hand
         if j == joint_index("head"):
             limit = 1.2 * rig.lengths[joint_index("head_top")]
         assert dist.max() <= limit, (JOINT_NAMES[j], dist.max(), limit)
