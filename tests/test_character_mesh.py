@@ -369,6 +369,7 @@ LAYOUTS = {
     "no fingers": (_names(_TORSO, ("neck",), _HEAD, _COLLARS, _ARMS, _WRISTS), False),
     "neck root": (_names(("neck",), _HEAD, _COLLARS, _ARMS, _WRISTS, _FINGER_JOINTS), False),
     "arms only from the neck": (_names(("neck",), _ARMS, _WRISTS, _FINGER_JOINTS), False),
+    "no elbows": (_names(_TORSO, ("neck",), _HEAD, _COLLARS, _ARMS[::2], _WRISTS, _FINGER_JOINTS), False),
 }
 
 

@@ -135,9 +135,9 @@ def _torso(f: _Frame) -> list[Piece]:
     side = rel @ f.lateral
     t = (rel @ f.up) / height
     c = smoothstep((np.abs(side) - 0.2 * w) / (0.2 * w)) * smoothstep((t - 0.55) / 0.25)
-    for name, sign in (("left_collar", 1.0), ("right_collar", -1.0)):
-        j = joint_index(name)
-        if not f.have[j]:
+    for side_name, sign in (("left", 1.0), ("right", -1.0)):
+        j, shoulder = joint_index(f"{side_name}_collar"), joint_index(f"{side_name}_shoulder")
+        if not f.have[j] or f.rig.parents[shoulder] != j:  # a collar turns with its shoulder, else not at all
             continue
         ci = np.where(side * sign > 0, c, 0.0)
         piece.weights *= (1.0 - ci)[:, None]
@@ -278,25 +278,34 @@ def _arm(f: _Frame, side: str) -> list[Piece]:
         pieces.append(_tube(f, chain, knots, f.up, f.n(20, 6), step, (r_sh, r_el), sleeve))
     if wr not in joints:
         return pieces
-    base = el if mid == el else sh
-    fore = f._dist(base, wr)
-    knuckles, width, normal = _hand_frame(f, side, wr, f.rest[wr] - f.rest[base])
+    knuckles, width, normal = _hand_frame(f, side, wr, f.rest[wr] - f.rest[mid if mid != wr else sh])
     palm = float(np.linalg.norm(knuckles - f.rest[wr]))
-    chain = Chain(np.array([f.rest[base], f.rest[wr], knuckles]), [base, wr], [0.07 * w])
-    s_wr = fore
-    rows = [] if mid == el else [(0.0, r_sh, r_sh), (0.3 * upper, 0.125 * w, 0.12 * w)]
-    start = 0.0 if mid == el else upper
-    rows += [(start, 0.97 * r_el, 0.97 * r_el), (start + 0.3 * (fore - start), 0.1 * w, 0.115 * w)]
-    rows += [(s_wr - 0.1 * (fore - start), 0.065 * w, 0.09 * w), (s_wr, 0.058 * w, 0.085 * w)]
-    rows += [(s_wr + 0.45 * palm, 0.28 * width, 0.62 * width), (s_wr + palm, 0.24 * width, 0.6 * width)]
-    power = np.array([(s_wr, 2.0), (s_wr + 0.4 * palm, 2.8), (s_wr + palm, 2.8)])
+    palm_rows = [(0.45 * palm, 0.28 * width, 0.62 * width), (palm, 0.24 * width, 0.6 * width)]
+    if mid == el:
+        fore = f._dist(el, wr)
+        chain = Chain(np.array([f.rest[el], f.rest[wr], knuckles]), [el, wr], [0.07 * w])
+        rows = [(0.0, 0.97 * r_el, 0.97 * r_el), (0.3 * fore, 0.1 * w, 0.115 * w), (0.9 * fore, 0.065 * w, 0.09 * w)]
+        rows += [(fore, 0.058 * w, 0.085 * w)] + [(fore + s, a, b) for s, a, b in palm_rows]
+        power = np.array([(fore, 2.0), (fore + 0.4 * palm, 2.8), (fore + palm, 2.8)])
+        step = (fore + palm) / f.n(13, 5)
+        ends = (0.97 * r_el, 0.2 * width)
+        pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, ends, SKIN, power))
+    else:  # no elbow: the whole arm turns with the shoulder, the hand about the wrist (a ball each)
+        arm = f._dist(sh, wr)
+        chain = Chain(f.rest[[sh, wr]], [sh], [])
+        rows = [(0.0, r_sh, r_sh), (0.3 * upper, 0.125 * w, 0.12 * w), (upper, r_el, r_el)]
+        rows += [(0.8 * arm, 0.065 * w, 0.09 * w), (arm, 0.07 * w, 0.07 * w)]
 
-    def sleeve_or_skin(s: np.ndarray) -> np.ndarray:
-        return np.where(s < 0.5 * upper, SHIRT, SKIN) if mid != el else np.full(len(s), SKIN)
+        def sleeve(s: np.ndarray) -> np.ndarray:
+            return np.where(s < 0.5 * upper, SHIRT, SKIN)
 
-    ends = (r_sh if mid != el else 0.97 * r_el, 0.2 * width)
-    step = (s_wr + palm) / f.n(13, 5)
-    pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, ends, sleeve_or_skin, power))
+        step = arm / f.n(16, 5)
+        pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, (r_sh, 0.07 * w), sleeve))
+        chain = Chain(np.array([f.rest[wr], knuckles]), [wr], [])
+        rows = [(0.0, 0.058 * w, 0.085 * w)] + palm_rows
+        power = np.array([(0.0, 2.0), (0.4 * palm, 2.8), (palm, 2.8)])
+        ends = (0.07 * w, 0.2 * width)
+        pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), palm / f.n(5, 3), ends, SKIN, power))
     return pieces + _fingers(f, side, width, normal)
 
 
