@@ -15,7 +15,7 @@ import functools
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -400,6 +400,41 @@ def test_a_partial_skeleton_gets_a_well_formed_body_that_follows_its_motion(name
     assert not (bound & (rig.parents == -2)).any(), "a vertex is bound to an absent joint"
     worst = deformation(mesh, rig, solve_pose(motion, rig))
     assert worst["dot"] > 0.0 and worst["excess"] <= 0.0, (name, worst)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.booleans(), min_size=N_JOINTS, max_size=N_JOINTS))
+def test_any_layout_with_both_shoulders_gets_a_body_that_neither_folds_nor_stretches(present):
+    """Both shoulders are what every view needs (REQUIRED_JOINTS); any other joint may be absent."""
+    status = [RECORDED if keep else ABSENT for keep in present]
+    for name in ("left_shoulder", "right_shoulder"):
+        status[joint_index(name)] = RECORDED
+    presence = JointPresence(tuple(status))
+    positions = _db().poses[1].reshape(-1, N_JOINTS, 3).astype(np.float32)
+    for j in np.flatnonzero(presence.absent):
+        if PARENTS[j] >= 0:
+            positions[:, j] = positions[:, PARENTS[j]]
+    motion = Motion(positions, 15.0, presence)
+    try:
+        rig = rig_for(motion)
+    except ConfigError:  # no spine_mid and no neck: no hierarchy to build a body on
+        assume(False)
+    have = {n for n in JOINT_NAMES if rig.parents[joint_index(n)] >= -1}
+    placeable = (
+        {"spine_mid", "neck"} <= have
+        or "head" in have
+        or {"neck", "neck_upper"} <= have
+        or any(f"{s}_elbow" in have or f"{s}_wrist" in have for s in ("left", "right"))
+    )
+    if not placeable:
+        with pytest.raises(ConfigError, match="no piece"):
+            build_mesh(rig)
+        return
+    mesh = build_mesh(rig)
+    assert_well_formed(mesh, rig)
+    assert not (rig.parents[mesh.joints[mesh.weights > 0]] == -2).any()
+    worst = deformation(mesh, rig, solve_pose(motion, rig))
+    assert worst["dot"] > 0.0 and worst["excess"] <= 0.0, (presence.describe(), worst)
 
 
 def _reach(mesh: CharacterMesh) -> float:

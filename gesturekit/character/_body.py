@@ -13,7 +13,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from ..skeleton import FINGERS, N_JOINTS, joint_index
+from ..skeleton import FINGERS, N_JOINTS, PARENTS, joint_index
 from ._loft import Chain, Piece, cap_stations, ellipsoid, loft, s_grid, smoothstep
 from .rig import Rig
 
@@ -281,7 +281,11 @@ def _arm(f: _Frame, side: str) -> list[Piece]:
     knuckles, width, normal = _hand_frame(f, side, wr, f.rest[wr] - f.rest[mid if mid != wr else sh])
     palm = float(np.linalg.norm(knuckles - f.rest[wr]))
     palm_rows = [(0.45 * palm, 0.28 * width, 0.62 * width), (palm, 0.24 * width, 0.6 * width)]
-    if mid == el:
+    # the wrist blends into the palm only when it carries the finger roots (else its rotation may twist
+    # freely about the forearm, from a lone finger joint hanging from it)
+    kids = np.flatnonzero(f.rig.parents == wr)
+    natural = bool(np.all(PARENTS[kids] == wr))
+    if mid == el and natural:
         fore = f._dist(el, wr)
         chain = Chain(np.array([f.rest[el], f.rest[wr], knuckles]), [el, wr], [0.07 * w])
         rows = [(0.0, 0.97 * r_el, 0.97 * r_el), (0.3 * fore, 0.1 * w, 0.115 * w), (0.9 * fore, 0.065 * w, 0.09 * w)]
@@ -290,22 +294,28 @@ def _arm(f: _Frame, side: str) -> list[Piece]:
         step = (fore + palm) / f.n(13, 5)
         ends = (0.97 * r_el, 0.2 * width)
         pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, ends, SKIN, power))
-    else:  # no elbow: the whole arm turns with the shoulder, the hand about the wrist (a ball each)
-        arm = f._dist(sh, wr)
-        chain = Chain(f.rest[[sh, wr]], [sh], [])
+        return pieces + _fingers(f, side, width, normal)
+    # else the forearm (the whole arm without an elbow) and the hand turn each about its own joint
+    base = el if mid == el else sh
+    arm = f._dist(base, wr)
+    chain = Chain(f.rest[[base, wr]], [base], [])
+    if mid == el:
+        rows = [(0.0, 0.97 * r_el, 0.97 * r_el), (0.3 * arm, 0.1 * w, 0.115 * w)]
+    else:
         rows = [(0.0, r_sh, r_sh), (0.3 * upper, 0.125 * w, 0.12 * w), (upper, r_el, r_el)]
-        rows += [(0.8 * arm, 0.065 * w, 0.09 * w), (arm, 0.07 * w, 0.07 * w)]
+    rows += [(0.8 * arm, 0.065 * w, 0.09 * w), (arm, 0.07 * w, 0.07 * w)]
 
-        def sleeve(s: np.ndarray) -> np.ndarray:
-            return np.where(s < 0.5 * upper, SHIRT, SKIN)
+    def sleeve(s: np.ndarray) -> np.ndarray:
+        return np.where((s < 0.5 * upper) & (mid != el), SHIRT, SKIN)
 
-        step = arm / f.n(16, 5)
-        pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, (r_sh, 0.07 * w), sleeve))
-        chain = Chain(np.array([f.rest[wr], knuckles]), [wr], [])
-        rows = [(0.0, 0.058 * w, 0.085 * w)] + palm_rows
-        power = np.array([(0.0, 2.0), (0.4 * palm, 2.8), (palm, 2.8)])
-        ends = (0.07 * w, 0.2 * width)
-        pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), palm / f.n(5, 3), ends, SKIN, power))
+    step = arm / f.n(14, 5)
+    ends = (rows[0][1], 0.07 * w)
+    pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, ends, sleeve))
+    chain = Chain(np.array([f.rest[wr], knuckles]), [wr], [])
+    rows = [(0.0, 0.058 * w, 0.085 * w)] + palm_rows
+    power = np.array([(0.0, 2.0), (0.4 * palm, 2.8), (palm, 2.8)])
+    ends = (0.07 * w, 0.2 * width)
+    pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), palm / f.n(5, 3), ends, SKIN, power))
     return pieces + _fingers(f, side, width, normal)
 
 
