@@ -264,16 +264,16 @@ def _arm(f: _Frame, side: str) -> list[Piece]:
     pieces = []
     mid = joints[1]  # the elbow, or the wrist when the rig has no elbow
     upper = f._dist(sh, mid) if mid == el else 0.53 * f._dist(sh, mid)
+
+    def sleeve(s: np.ndarray) -> np.ndarray:
+        return np.where(s < 0.5 * upper, SHIRT, SKIN)
+
     if mid == el:
         chain = Chain(f.rest[[sh, el]], [sh], [])
         knots = np.array(
             [(0.0, r_sh, r_sh), (0.3 * upper, 0.125 * w, 0.12 * w), (0.6 * upper, 0.118 * w, 0.112 * w)]
             + [(upper, r_el, r_el)]
         )
-
-        def sleeve(s: np.ndarray) -> np.ndarray:
-            return np.where(s < 0.5 * upper, SHIRT, SKIN)
-
         step = upper / f.n(12, 4)
         pieces.append(_tube(f, chain, knots, f.up, f.n(20, 6), step, (r_sh, r_el), sleeve))
     if wr not in joints:
@@ -304,13 +304,9 @@ def _arm(f: _Frame, side: str) -> list[Piece]:
     else:
         rows = [(0.0, r_sh, r_sh), (0.3 * upper, 0.125 * w, 0.12 * w), (upper, r_el, r_el)]
     rows += [(0.8 * arm, 0.065 * w, 0.09 * w), (arm, 0.07 * w, 0.07 * w)]
-
-    def sleeve(s: np.ndarray) -> np.ndarray:
-        return np.where((s < 0.5 * upper) & (mid != el), SHIRT, SKIN)
-
     step = arm / f.n(14, 5)
     ends = (rows[0][1], 0.07 * w)
-    pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, ends, sleeve))
+    pieces.append(_tube(f, chain, np.array(rows), normal, f.n(20, 6), step, ends, SKIN if mid == el else sleeve))
     chain = Chain(np.array([f.rest[wr], knuckles]), [wr], [])
     rows = [(0.0, 0.058 * w, 0.085 * w)] + palm_rows
     power = np.array([(0.0, 2.0), (0.4 * palm, 2.8), (palm, 2.8)])
