@@ -280,7 +280,8 @@ def speech_sources(
 
 
 def stimulus_style(view_box: Sequence[Sequence[float]] | None = None) -> RenderStyle:
-    """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion).
+    """The one look of every stimulus: the page's character in the neutral grey scheme, with a fixed
+    camera (never fitted to a motion), so that neither colour nor framing tells the systems apart.
 
     Parameters
     ----------
@@ -293,8 +294,8 @@ def stimulus_style(view_box: Sequence[Sequence[float]] | None = None) -> RenderS
     from .viz.render import RenderStyle
 
     if view_box is None:
-        return RenderStyle(fit_motion=False)
-    return RenderStyle(fit_motion=False, view_box=tuple(tuple(float(v) for v in row) for row in view_box))
+        return RenderStyle(fit_motion=False, neutral=True)
+    return RenderStyle(fit_motion=False, neutral=True, view_box=tuple(tuple(float(v) for v in row) for row in view_box))
 
 
 def _study_view_box(motions: Sequence[Motion]) -> list[list[float]] | None:
