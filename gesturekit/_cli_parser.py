@@ -271,7 +271,13 @@ def build_parser() -> argparse.ArgumentParser:
         "controls) and take the faster content from the refiner (default 2); 0: the refiner's "
         "output as it is (the paper)",
     )
-    y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
+    y.add_argument("--video", action="store_true", help="also render an MP4 of the character with the speech")
+    y.add_argument(
+        "--video-style",
+        choices=("character", "capsules"),
+        default="character",
+        help="the MP4's look: the page's character (default) or the earlier capsule figure",
+    )
     y.add_argument("--force", action="store_true", help="replace existing output files")
     _add_max_speech(y)
 

@@ -264,3 +264,24 @@ def test_the_capsule_look_is_still_there():
     assert not np.array_equal(image, render_image(demo_motion(0, 1), resolution=(96, 72)))
     with pytest.raises(Exception, match="unknown look"):
         RenderStyle(look="stick")
+
+
+def test_the_command_line_and_the_result_video_choose_the_look(tmp_path, monkeypatch):
+    from gesturekit._cli_parser import build_parser
+    from gesturekit.demo import open_default_database
+    from gesturekit.export import result as result_module
+    from gesturekit.synthesize import synthesize
+
+    parse = build_parser().parse_args
+    assert parse(["synthesize", "a.wav", "--db", "db", "--video"]).video_style == "character"
+    assert (
+        parse(["synthesize", "a.wav", "--db", "db", "--video", "--video-style", "capsules"]).video_style == "capsules"
+    )
+    take, _ = generate_demo_take(seconds=2.0, seed=5, name="look")
+    res = synthesize(take.audio, db=open_default_database())
+    seen = []
+    monkeypatch.setattr(result_module, "render_video", lambda path, motion, **kw: seen.append(kw["style"]) or path)
+    for look in ("character", "capsules"):
+        result_module.save_result_video(res, tmp_path / f"{look}.mp4", look=look)
+    assert [s.look for s in seen] == ["character", "capsules"]
+    assert not any(s.neutral for s in seen)  # the app and the command line show the side-by-side schemes

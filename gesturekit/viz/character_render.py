@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import pyvista as pv
-from vtkmodules.util.numpy_support import numpy_to_vtk
+from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
 
 from ..character.look import (
     AMBIENT,
@@ -183,6 +183,9 @@ class CharacterDrawing:
         self.stage = stage
         self._meshes: list[pv.PolyData] = []
         self._colors = []
+        # numpy views of the VTK arrays: a frame is written into them in place
+        self._point_views: list[np.ndarray] = []
+        self._color_views: list[np.ndarray] = []
         for i, faces in enumerate(stage.faces):
             v = stage.vertices(i, 0)
             cells = np.hstack([np.full((len(faces), 1), 3, dtype=np.int64), faces.astype(np.int64)])
@@ -194,6 +197,8 @@ class CharacterDrawing:
             actor.prop.interpolation = "gouraud"  # colours blend across each triangle, as on the page
             self._meshes.append(mesh)
             self._colors.append(rgb)
+            self._point_views.append(vtk_to_numpy(mesh.GetPoints().GetData()))
+            self._color_views.append(vtk_to_numpy(rgb))
         w, h = resolution
         camera = stage.camera(w / h)
         cam = plotter.renderer.GetActiveCamera()
@@ -231,9 +236,8 @@ class CharacterDrawing:
             return
         for i, (mesh, rgb) in enumerate(zip(self._meshes, self._colors)):
             v = self.stage.vertices(i, frame)
-            mesh.points[:] = v
+            self._point_views[i][:] = v
             mesh.GetPoints().Modified()
-            rgb_view = pv.convert_array(rgb)
-            rgb_view[:] = self.stage.colors(i, v)
+            self._color_views[i][:] = self.stage.colors(i, v)
             rgb.Modified()
         self._frame = frame
