@@ -162,19 +162,25 @@ def test_a_complete_skeleton_keeps_its_shapes():
     assert body.drawn.all() and body.drawn_points().shape == body.points.shape
 
 
-def test_the_viewer_gets_each_motions_own_shapes_and_frames_what_exists():
+def test_the_viewer_gets_each_motions_own_character_and_frames_what_exists():
     partial, full = upper_body(3), Motion(_demo()[:3], 15.0)
     data = viewer_data([partial, full])
     mine, other = data["motions"]
-    absent = {joint_index(n) for n in THUMBS}
-    assert not any(c[0] in absent or c[1] in absent for c in mine["capsules"])
-    assert any(c[3] == DERIVED_PART for c in mine["capsules"]) and mine["colors"][DERIVED_PART] == "#a2a8af"
-    assert mine["derived"] == list(DERIVED_TORSO) and not mine["shadow"]
-    assert len(other["capsules"]) == len(APPEARANCE.shapes()[0]) and other["shadow"] and other["derived"] == []
+    absent = [joint_index(n) for n in THUMBS]
+    assert not any(mine["rig"]["in_rig"][j] for j in absent) and all(other["rig"]["in_rig"])
+    # no body around an absent joint: no vertex is bound to one
+    joints, weights = (data_array(mine["mesh"][k]) for k in ("joints", "weights"))
+    assert not np.isin(joints.reshape(-1), absent)[weights.reshape(-1) > 0].any()
+    # vertices led by a derived joint are drawn in the derived colour, the last of the motion's colours
+    parts = data_array(mine["mesh"]["parts"])
+    derived_colour = [int(APPEARANCE.derived_color[i : i + 2], 16) / 255 for i in (1, 3, 5)]
+    assert (parts == len(mine["colors"]) - 1).any() and mine["colors"][-1] == pytest.approx(derived_colour)
+    assert not (data_array(other["mesh"]["parts"]) == len(other["colors"]) - 1).any()
+    assert mine["derived"] == list(DERIVED_TORSO) and other["derived"] == []
     # alone, a neck-relative body is framed on itself: the box top is near its head, not a pelvis-based guess
     alone = viewer_data(partial)
     top = partial.positions[:, joint_index("head_top"), 1].max()
-    assert top < alone["hi"][1] < top + 0.3
+    assert top < alone["box"][1][1] < top + 0.3
 
 
 # ----------------------------------------------------------------------------- renders and video
