@@ -29,13 +29,23 @@ from ..character.look import (
     scheme_for,
     stage_layout,
 )
-from ..character.mesh import CharacterMesh, build_mesh, vertex_normals
+from ..character.mesh import PARTS, CharacterMesh, build_mesh, vertex_normals
 from ..character.rig import Pose, Rig, rig_for, solve_pose
 from ..character.skin import skin_vertices
 from ..errors import ConfigError
 from ..motion import Motion
+from ..skeleton import DERIVED
+from .appearance import APPEARANCE, hex_to_rgb
 
-__all__ = ["srgb_to_linear", "linear_to_srgb", "shade", "visible_faces", "CharacterStage", "CharacterDrawing"]
+__all__ = [
+    "srgb_to_linear",
+    "linear_to_srgb",
+    "shade",
+    "visible_faces",
+    "vertex_colors",
+    "CharacterStage",
+    "CharacterDrawing",
+]
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -82,6 +92,16 @@ def visible_faces(mesh: CharacterMesh, rig: Rig) -> np.ndarray:
     return mesh.faces[~on_absent[mesh.faces].any(axis=1)]
 
 
+def vertex_colors(mesh: CharacterMesh, motion: Motion, scheme: str) -> np.ndarray:
+    """Each vertex's unlit colour, shape (V, 3), sRGB in [0, 1], as the page gives it: its part's in the
+    scheme, or the derived grey (:attr:`~gesturekit.viz.appearance.Appearance.derived_color`) where the
+    joint with its largest weight is derived (placed from others, not recorded)."""
+    derived = np.array([s == DERIVED for s in motion.presence.status])
+    lead = mesh.joints[np.arange(mesh.n_vertices), np.argmax(mesh.weights, axis=1)]
+    colors = np.vstack([part_colors(scheme), hex_to_rgb(APPEARANCE.derived_color)])
+    return colors[np.where(derived[lead], len(colors) - 1, mesh.parts)]
+
+
 class CharacterStage:
     """Side-by-side characters on one stage: their bodies frame by frame and the camera's box.
 
@@ -120,7 +140,7 @@ class CharacterStage:
             self.box = np.asarray(view_box, dtype=np.float64).T.copy()
         self.schemes = [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
         self._albedo = [
-            srgb_to_linear(part_colors(s))[mesh.parts] for s, mesh in zip(self.schemes, self.meshes)
+            srgb_to_linear(vertex_colors(mesh, m, s)) for mesh, m, s in zip(self.meshes, self.motions, self.schemes)
         ]  # (V, 3) each, linear light
 
     @property
@@ -149,11 +169,15 @@ class CharacterStage:
         return shade(vertex_normals(vertices, self.meshes[index].faces), self._albedo[index])
 
     def label_anchor(self, index: int) -> np.ndarray:
-        """Where character ``index``'s label stands, shape (3,), metres: above its highest drawn
-        joint over the clip, at its place across."""
-        m = self.motions[index]
-        top = float(m.positions[:, m.presence.drawn, 1].max())
-        return np.array([self.offsets[index], top + 0.12, 0.0])
+        """Where character ``index``'s label stands, shape (3,), metres: as on the page, at the top of
+        the framed box, at the character's place across, halfway in depth (the label's foot is
+        :data:`LABEL_RAISE` pixels above it)."""
+        centre = (self.box[0] + self.box[1]) / 2
+        return np.array([centre[0] + self.offsets[index], self.box[1, 1], centre[2]])
+
+
+#: Pixels from a label's anchor (:meth:`CharacterStage.label_anchor`) up to the label's top, as on the page.
+LABEL_RAISE = 16
 
 
 class CharacterDrawing:
@@ -222,11 +246,11 @@ class CharacterDrawing:
                 continue
             renderer.SetWorldPoint(*self.stage.label_anchor(i), 1.0)
             renderer.WorldToDisplay()
-            x, y, _ = renderer.GetDisplayPoint()
-            colour = part_colors(self.stage.schemes[i])[1]  # the shirt's
-            actor = plotter.add_text(
-                str(text), position=(float(np.clip(x, 0, w)), float(np.clip(y, 0, h - size - 4))), font_size=size
-            )
+            x, y, _ = renderer.GetDisplayPoint()  # pixels from the bottom left
+            # the label's top LABEL_RAISE pixels above the anchor, within the picture (VTK places its foot)
+            foot = min(y + LABEL_RAISE - size, h - size - 2)
+            colour = part_colors(self.stage.schemes[i])[PARTS.index("shirt")]
+            actor = plotter.add_text(str(text), position=(float(np.clip(x, 0, w)), float(foot)), font_size=size)
             actor.GetTextProperty().SetColor(*colour)
             actor.GetTextProperty().SetJustificationToCentered()
 
