@@ -7,6 +7,7 @@ colours with the Lambert rule written out per channel with scalar maths.
 
 from __future__ import annotations
 
+import base64
 import functools
 import math
 
@@ -285,3 +286,26 @@ def test_the_command_line_and_the_result_video_choose_the_look(tmp_path, monkeyp
         result_module.save_result_video(res, tmp_path / f"{look}.mp4", look=look)
     assert [s.look for s in seen] == ["character", "capsules"]
     assert not any(s.neutral for s in seen)  # the app and the command line show the side-by-side schemes
+
+
+def test_vertices_led_by_derived_joints_are_derived_grey_as_on_the_page():
+    from gesturekit.skeleton import DERIVABLE_JOINTS
+    from gesturekit.viz.appearance import APPEARANCE, hex_to_rgb
+    from gesturekit.viz.character_render import vertex_colors
+    from gesturekit.viz.viewer import viewer_data
+
+    torso = tuple(n for n in DERIVABLE_JOINTS if n != "neck")
+    presence = JointPresence.from_names(recorded=[n for n in JOINT_NAMES if n not in torso], derived=torso)
+    motion = demo_motion(0, 2, presence)
+    mesh = build_mesh(rig_for(motion))
+    colours = vertex_colors(mesh, motion, "blue")
+    derived = {joint_index(n) for n in torso}
+    for v in range(mesh.n_vertices):
+        lead = int(mesh.joints[v, int(np.argmax(mesh.weights[v]))])
+        want = hex_to_rgb(APPEARANCE.derived_color) if lead in derived else part_colors("blue")[mesh.parts[v]]
+        np.testing.assert_array_equal(colours[v], want)
+    assert (colours == hex_to_rgb(APPEARANCE.derived_color)).all(axis=1).any()
+    # the page's colours for the same motion, vertex by vertex
+    page = viewer_data([motion])["motions"][0]
+    parts = np.frombuffer(base64.b64decode(page["mesh"]["parts"]["bdata"]), np.uint8)
+    np.testing.assert_allclose(np.asarray(page["colors"])[parts], colours, atol=1e-6)

@@ -270,9 +270,12 @@ class SkeletonScene:
     """An offscreen window showing one or two motions as bodies, updated frame by frame.
 
     Build it once per clip, call :meth:`render_frame` for every frame, then
-    :meth:`close` it (or use it as a context manager). Two motions are shown
-    in two panels side by side, each in its colour with its label above in the
-    same colour, framed by the same camera.
+    :meth:`close` it (or use it as a context manager). The character look
+    shows two motions side by side on one stage, as the page does
+    (:func:`gesturekit.character.look.stage_layout`), each in its colour scheme
+    with its label above in its shirt's colour; the capsule look shows them in
+    two panels framed by the same camera. :meth:`project` maps world points
+    (the character look's stage coordinates) to pixels.
 
     Parameters
     ----------
@@ -281,7 +284,7 @@ class SkeletonScene:
         holds its last pose. Each is drawn as its ``presence`` says: absent
         joints not at all (nor framed), derived ones in the derived grey.
     labels : sequence of str, optional
-        One label per motion, drawn at the top of its panel.
+        One label per motion, drawn above it (the capsules: at the top of its panel).
     resolution : (int, int)
         Width and height of the whole picture, pixels.
     style : RenderStyle, optional
