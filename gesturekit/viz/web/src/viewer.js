@@ -16,6 +16,7 @@ export function cameraFor(lo, hi, aspect, fov, dir) {
 }
 
 function main() {
+  const begun = performance.now();
   const D = JSON.parse(document.getElementById("gk-data").textContent);
   const N = D.times.length, shownFps = D.fps / D.frame_step;
   const canvas = document.getElementById("c"), stage = document.getElementById("stage");
@@ -37,6 +38,7 @@ function main() {
     return el;
   });
 
+  const decoded = performance.now();
   let renderer = null;
   try {
     // no antialiasing and no shadows: a browser without a GPU draws WebGL in software
@@ -54,6 +56,7 @@ function main() {
   const key = new DirectionalLight(0xffffff, Math.PI * D.look.key);
   key.position.set(D.look.light[0], D.look.light[1], D.look.light[2]);
   scene.add(key);  // its target stays at the origin: the light comes from the direction of its position
+  const glReady = performance.now();
   const characters = buildCharacters(D);
   for (const c of characters) scene.add(c.group);
   const camera = new PerspectiveCamera(D.look.fov, 1, 0.01, 100);
@@ -151,6 +154,8 @@ function main() {
   window.addEventListener("resize", () => { size(); draw(); });
   if (N < 2) { play.disabled = true; slider.disabled = true; }
   size(); home(); draw();
+  // where the first frame's time went (milliseconds since the page began to load)
+  gk.startup = { script: begun, data: decoded, webgl: glReady, drawn: performance.now() };
 }
 
 main();
