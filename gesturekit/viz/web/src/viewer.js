@@ -62,7 +62,7 @@ function main() {
   const camera = new PerspectiveCamera(D.look.fov, 1, 0.01, 100);
   const controls = renderer ? new OrbitControls(camera, canvas) : null;
   const lo = D.box[0], hi = D.box[1];
-  let frame = 0, playing = false, t0 = 0, clock0 = 0;
+  let frame = 0, playing = false, t0 = 0, clock0 = 0, moved = false;
 
   function home() {
     const c = cameraFor(lo, hi, camera.aspect, D.look.fov, D.look.view);
@@ -149,9 +149,11 @@ function main() {
   });
   if (controls) {
     controls.addEventListener("change", draw);  // drawn on demand: orbit and zoom
-    canvas.addEventListener("dblclick", () => { home(); draw(); });
+    controls.addEventListener("start", () => { moved = true; });
+    canvas.addEventListener("dblclick", () => { moved = false; home(); draw(); });
   }
-  window.addEventListener("resize", () => { size(); draw(); });
+  // a new size frames the box again at the new aspect ratio, unless the user has moved the view
+  window.addEventListener("resize", () => { size(); if (!moved) home(); draw(); });
   if (N < 2) { play.disabled = true; slider.disabled = true; }
   size(); home(); draw();
   // where the first frame's time went (milliseconds since the page began to load)
