@@ -214,3 +214,12 @@ def test_the_npm_packages_are_pinned_and_locked():
         assert re.fullmatch(r"\d+\.\d+\.\d+", version), (name, version)  # exact: no range
         assert lock["packages"][f"node_modules/{name}"]["version"] == version
         assert lock["packages"][f"node_modules/{name}"]["integrity"].startswith("sha512-")  # npm ci checks it
+
+
+def test_a_motion_with_every_joint_at_one_point_has_no_body_but_still_plays():
+    still = Motion(np.zeros((4, N_JOINTS, 3), np.float32), 15.0)
+    data = read_viewer_data(skeleton_viewer([still, _motion(4)]))
+    nobody, body = data["motions"]
+    assert nobody["mesh"]["vertices"].shape == (0, 3) and nobody["mesh"]["faces"].shape == (0, 3)
+    assert body["mesh"]["vertices"].shape[0] > 0 and len(data["times"]) == 4
+    assert np.isfinite(nobody["rotations"]).all() and np.isfinite(nobody["points"]).all()

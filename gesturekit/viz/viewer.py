@@ -40,7 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..character import look
-from ..character.mesh import PARTS, build_mesh
+from ..character.mesh import PARTS, CharacterMesh, build_mesh
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
@@ -167,11 +167,22 @@ def _page_parents(rig: Rig) -> list[int]:
     return out
 
 
+_NO_BODY = CharacterMesh(
+    vertices=np.zeros((0, 3), np.float32),
+    normals=np.zeros((0, 3), np.float32),
+    faces=np.zeros((0, 3), np.int32),
+    joints=np.zeros((0, 4), np.uint8),
+    weights=np.zeros((0, 4), np.float32),
+    parts=np.zeros(0, np.uint8),
+)
+
+
 def _character(motion: Motion, scheme: str) -> dict:
     """One motion's rig, mesh and animation (over all its frames), as typed-array specs."""
     rig = rig_for(motion)
     pose = solve_pose(motion, rig)
-    mesh = build_mesh(rig)
+    # a motion without a bone of any length (every joint at one point) has no body to build around
+    mesh = build_mesh(rig) if (rig.lengths[rig.parents >= 0] > 1e-6).any() else _NO_BODY
     quats = np.round(rotation_to_quaternion(pose.local) * QUATERNION_SCALE).astype(np.int16)
     # a vertex led by a derived joint (placed from others, not recorded) takes the derived colour
     derived = np.array([s == DERIVED for s in motion.presence.status])

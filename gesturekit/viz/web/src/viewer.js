@@ -16,6 +16,7 @@ export function cameraFor(lo, hi, aspect, fov, dir) {
 }
 
 function main() {
+  const begun = performance.now();
   const D = JSON.parse(document.getElementById("gk-data").textContent);
   const N = D.times.length, shownFps = D.fps / D.frame_step;
   const canvas = document.getElementById("c"), stage = document.getElementById("stage");
@@ -37,6 +38,7 @@ function main() {
     return el;
   });
 
+  const decoded = performance.now();
   let renderer = null;
   try {
     // no antialiasing and no shadows: a browser without a GPU draws WebGL in software
@@ -54,12 +56,13 @@ function main() {
   const key = new DirectionalLight(0xffffff, Math.PI * D.look.key);
   key.position.set(D.look.light[0], D.look.light[1], D.look.light[2]);
   scene.add(key);  // its target stays at the origin: the light comes from the direction of its position
+  const glReady = performance.now();
   const characters = buildCharacters(D);
   for (const c of characters) scene.add(c.group);
   const camera = new PerspectiveCamera(D.look.fov, 1, 0.01, 100);
   const controls = renderer ? new OrbitControls(camera, canvas) : null;
   const lo = D.box[0], hi = D.box[1];
-  let frame = 0, playing = false, t0 = 0, clock0 = 0;
+  let frame = 0, playing = false, t0 = 0, clock0 = 0, moved = false;
 
   function home() {
     const c = cameraFor(lo, hi, camera.aspect, D.look.fov, D.look.view);
@@ -146,11 +149,15 @@ function main() {
   });
   if (controls) {
     controls.addEventListener("change", draw);  // drawn on demand: orbit and zoom
-    canvas.addEventListener("dblclick", () => { home(); draw(); });
+    controls.addEventListener("start", () => { moved = true; });
+    canvas.addEventListener("dblclick", () => { moved = false; home(); draw(); });
   }
-  window.addEventListener("resize", () => { size(); draw(); });
+  // a new size frames the box again at the new aspect ratio, unless the user has moved the view
+  window.addEventListener("resize", () => { size(); if (!moved) home(); draw(); });
   if (N < 2) { play.disabled = true; slider.disabled = true; }
   size(); home(); draw();
+  // where the first frame's time went (milliseconds since the page began to load)
+  gk.startup = { script: begun, data: decoded, webgl: glReady, drawn: performance.now() };
 }
 
 main();
