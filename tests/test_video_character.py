@@ -309,3 +309,12 @@ def test_vertices_led_by_derived_joints_are_derived_grey_as_on_the_page():
     page = viewer_data([motion])["motions"][0]
     parts = np.frombuffer(base64.b64decode(page["mesh"]["parts"]["bdata"]), np.uint8)
     np.testing.assert_allclose(np.asarray(page["colors"])[parts], colours, atol=1e-6)
+
+
+def test_a_motion_without_bone_lengths_has_no_body_and_its_neighbour_is_drawn():
+    point = Motion(np.zeros((3, N_JOINTS, 3), np.float32), FPS)  # every joint at one point
+    alone = render_image(point, frame=2, resolution=(64, 48))
+    assert not drawn(alone).any()
+    pair = render_image(point, side_by_side=demo_motion(0, 3), frame=2, resolution=(160, 120))
+    cols = np.nonzero(drawn(pair))[1]
+    assert len(cols) > 200 and cols.min() >= 80  # only the right-hand character

@@ -102,6 +102,20 @@ def vertex_colors(mesh: CharacterMesh, motion: Motion, scheme: str) -> np.ndarra
     return colors[np.where(derived[lead], len(colors) - 1, mesh.parts)]
 
 
+def _body(rig: Rig) -> CharacterMesh:
+    """The rig's body; none (no vertex) when no bone has a length (every joint at one point), as on the page."""
+    if (rig.lengths[rig.parents >= 0] > 1e-6).any():
+        return build_mesh(rig)
+    return CharacterMesh(
+        vertices=np.zeros((0, 3), np.float32),
+        normals=np.zeros((0, 3), np.float32),
+        faces=np.zeros((0, 3), np.int32),
+        joints=np.zeros((0, 4), np.uint8),
+        weights=np.zeros((0, 4), np.float32),
+        parts=np.zeros(0, np.uint8),
+    )
+
+
 class CharacterStage:
     """Side-by-side characters on one stage: their bodies frame by frame and the camera's box.
 
@@ -132,7 +146,7 @@ class CharacterStage:
             raise ConfigError("a stage needs at least one motion")
         self.rigs = [rig_for(m) for m in self.motions]
         self.poses = [solve_pose(m, r) for m, r in zip(self.motions, self.rigs)]
-        self.meshes = [build_mesh(r) for r in self.rigs]
+        self.meshes = [_body(r) for r in self.rigs]
         self.faces = [visible_faces(mesh, r) for mesh, r in zip(self.meshes, self.rigs)]
         # the page's layout rule on the page's input: every drawn joint over the clip
         self.offsets, self.box = stage_layout([m.positions[:, m.presence.drawn] for m in self.motions])
@@ -166,6 +180,8 @@ class CharacterStage:
 
     def colors(self, index: int, vertices: np.ndarray) -> np.ndarray:
         """Shaded sRGB colours, shape (V, 3), uint8, of character ``index`` with these vertices."""
+        if not len(vertices):  # no body
+            return np.zeros((0, 3), np.uint8)
         return shade(vertex_normals(vertices, self.meshes[index].faces), self._albedo[index])
 
     def label_anchor(self, index: int) -> np.ndarray:
@@ -210,7 +226,11 @@ class CharacterDrawing:
         # numpy views of the VTK arrays: a frame is written into them in place
         self._point_views: list[np.ndarray] = []
         self._color_views: list[np.ndarray] = []
+        self._shown: list[int] = []  # the characters that have a body
         for i, faces in enumerate(stage.faces):
+            if not len(faces):
+                continue
+            self._shown.append(i)
             v = stage.vertices(i, 0)
             cells = np.hstack([np.full((len(faces), 1), 3, dtype=np.int64), faces.astype(np.int64)])
             mesh = pv.PolyData(v.astype(np.float64), cells.ravel())
@@ -258,10 +278,10 @@ class CharacterDrawing:
         """Pose every character at ``frame``."""
         if frame == self._frame:
             return
-        for i, (mesh, rgb) in enumerate(zip(self._meshes, self._colors)):
+        for k, (i, mesh, rgb) in enumerate(zip(self._shown, self._meshes, self._colors)):
             v = self.stage.vertices(i, frame)
-            self._point_views[i][:] = v
+            self._point_views[k][:] = v
             mesh.GetPoints().Modified()
-            self._color_views[i][:] = self.stage.colors(i, v)
+            self._color_views[k][:] = self.stage.colors(i, v)
             rgb.Modified()
         self._frame = frame
