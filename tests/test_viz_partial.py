@@ -350,7 +350,10 @@ def test_stimuli_of_a_partial_skeleton_share_one_box_fitted_to_what_they_draw():
     assert _job_motion({**job, "joints": None}).joints is None
     assert _study_view_box([Motion(_demo()[:3], 15.0)]) is None  # complete skeletons keep the default box
     box = _study_view_box([motion, upper_body(2)])
-    assert np.allclose(box, view_bounds([motion, upper_body(2)]))
+    # every stimulus where it stands alone (not side by side): the union of their own boxes
+    own = np.stack([view_bounds([motion]), view_bounds([upper_body(2)])])
+    assert np.allclose(box, np.stack([own[:, :, 0].min(axis=0), own[:, :, 1].max(axis=0)], axis=1))
+    assert np.ptp(np.asarray(box)[0]) < np.ptp(view_bounds([motion, upper_body(2)])[0])
     style = stimulus_style(box)
     assert not style.fit_motion
     h = 72
