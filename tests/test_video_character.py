@@ -125,7 +125,7 @@ def test_the_mp4_frame_keeps_the_silhouette(tmp_path):
     offsets=hnp.arrays(np.float64, (2, N_JOINTS, 3), elements=st.floats(-0.5, 0.5)),
     width=st.sampled_from([64, 160, 320]),
 )
-def test_every_joint_and_the_whole_body_stay_in_frame(offsets, width):
+def test_every_joint_of_every_character_stays_in_frame(offsets, width):
     motion = Motion((_demo()[:1] + offsets[:1]).astype(np.float32), FPS)
     other = Motion((_demo()[:1] + offsets[1:]).astype(np.float32), FPS)
     stage = CharacterStage([motion, other])
