@@ -118,3 +118,16 @@ def test_without_webgl_the_page_says_so_and_its_clock_still_plays(page_file):
         page.locator("#play").click()
         page.wait_for_function("() => gk.frame >= 10")
         assert page.evaluate("() => gk.playing") is True
+
+
+def test_a_new_size_frames_both_characters_again(page_file):
+    with app_browser.browser(width=900, height=600) as page:
+        _open(page, page_file)
+        drawn = page.evaluate("() => gk.drawn")
+        page.set_viewport_size({"width": 360, "height": 600})  # narrower: side by side, X decides the distance
+        page.wait_for_function("(n) => gk.drawn > n", arg=drawn)
+        px = _pixels(page).astype(np.float64) / 255.0
+    body = ~np.all(np.abs(px - _hex(look.BACKGROUND)) <= 1 / 255, axis=2)
+    cols = np.flatnonzero(body.any(axis=0))
+    assert len(cols) and cols.min() > 0 and cols.max() < body.shape[1] - 1  # nothing cut off at the sides
+    assert cols.max() - cols.min() > 0.5 * body.shape[1]  # and the pair still fills the width
