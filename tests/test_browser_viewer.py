@@ -17,7 +17,7 @@ from gesturekit.character import look
 from gesturekit.demo import open_default_database
 from gesturekit.motion import Motion
 from gesturekit.viz.appearance import APPEARANCE
-from gesturekit.viz.viewer import skeleton_viewer
+from gesturekit.viz.viewer import read_viewer_data, skeleton_viewer
 from tests import app_browser
 
 pytestmark = pytest.mark.skipif(
@@ -118,3 +118,28 @@ def test_without_webgl_the_page_says_so_and_its_clock_still_plays(page_file):
         page.locator("#play").click()
         page.wait_for_function("() => gk.frame >= 10")
         assert page.evaluate("() => gk.playing") is True
+
+
+def test_a_new_size_frames_both_characters_again(page_file):
+    with app_browser.browser(width=900, height=600) as page:
+        _open(page, page_file)
+        drawn = page.evaluate("() => gk.drawn")
+        page.set_viewport_size({"width": 360, "height": 600})  # narrower: side by side, X decides the distance
+        page.wait_for_function("(n) => gk.drawn > n", arg=drawn)
+        px = _pixels(page).astype(np.float64) / 255.0
+    body = ~np.all(np.abs(px - _hex(look.BACKGROUND)) <= 1 / 255, axis=2)
+    cols = np.flatnonzero(body.any(axis=0))
+    assert len(cols) and cols.min() > 0 and cols.max() < body.shape[1] - 1  # nothing cut off at the sides
+    assert cols.max() - cols.min() > 0.5 * body.shape[1]  # and the pair still fills the width
+
+
+def test_the_camera_is_the_looks_camera_for_the_box_at_the_pages_aspect(page_file):
+    data = read_viewer_data(page_file.read_text(encoding="utf-8"))
+    with app_browser.browser(width=700, height=600) as page:
+        _open(page, page_file)
+        cam = page.evaluate("() => gk.camera")
+    expected = look.camera_for(data["box"][0], data["box"][1], cam["aspect"])
+    assert cam["aspect"] == pytest.approx(700 / 520, rel=0.02)  # the drawing's own width over its height
+    np.testing.assert_allclose(cam["position"], expected["position"], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(cam["target"], expected["target"], rtol=1e-9, atol=1e-9)
+    assert cam["fov"] == expected["fov"]

@@ -68,6 +68,7 @@ function main() {
     const c = cameraFor(lo, hi, camera.aspect, D.look.fov, D.look.view);
     camera.position.set(c.position[0], c.position[1], c.position[2]);
     camera.up.set(0, 1, 0);
+    gk.camera = { position: c.position, target: c.target, fov: camera.fov, aspect: camera.aspect };
     if (controls) { controls.target.set(c.target[0], c.target[1], c.target[2]); controls.update(); }
     else camera.lookAt(c.target[0], c.target[1], c.target[2]);
   }
