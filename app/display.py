@@ -216,8 +216,8 @@ def show_skeletons(
 ) -> None:
     """Show motions side by side in gesturekit's 3D viewer (:func:`gesturekit.viz.viewer.skeleton_viewer`).
 
-    The viewer draws on a 2D canvas: a browser without a GPU shows it at once, where
-    a WebGL scene would take it seconds to set up. ``height``: of the drawing, in
+    The viewer draws the skinned character with three.js (WebGL, in software where the
+    browser has no GPU: no antialiasing, no shadows). ``height``: of the drawing, in
     pixels (its controls come below); ``key`` names the viewer (pages and tests find it by it).
     ``audio``: the speech of the motions (mono float32 at 16 kHz, from their first frame);
     the viewer's play button then plays it and the shown frame follows it, so no separate

@@ -278,7 +278,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="the files to write per speech, a comma list of npz (motion + search), bvh (the motion), glb "
         "(glTF: the character, skinned and animated, with the speech as a WAV beside it) (default npz,bvh)",
     )
-    y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
+    y.add_argument("--video", action="store_true", help="also render an MP4 of the character with the speech")
+    y.add_argument(
+        "--video-style",
+        choices=("character", "capsules"),
+        default="character",
+        help="the MP4's look: the page's character (default) or the earlier capsule figure",
+    )
     y.add_argument("--force", action="store_true", help="replace existing output files")
     _add_max_speech(y)
 

@@ -391,6 +391,7 @@ def _cmd_synthesize(args) -> int:
                         targets[(stem, "mp4")],
                         overwrite=args.force,
                         progress=lambda done, total: _advance(bar, done),
+                        look=args.video_style,
                     )
                 written.append(targets[(stem, "mp4")])
             relaxed = res.relaxed_steps

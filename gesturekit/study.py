@@ -280,7 +280,8 @@ def speech_sources(
 
 
 def stimulus_style(view_box: Sequence[Sequence[float]] | None = None) -> RenderStyle:
-    """The one look of every stimulus: the house style with a fixed camera (never fitted to a motion).
+    """The one look of every stimulus: the page's character in the neutral grey scheme, with a fixed
+    camera (never fitted to a motion), so that neither colour nor framing tells the systems apart.
 
     Parameters
     ----------
@@ -293,19 +294,22 @@ def stimulus_style(view_box: Sequence[Sequence[float]] | None = None) -> RenderS
     from .viz.render import RenderStyle
 
     if view_box is None:
-        return RenderStyle(fit_motion=False)
-    return RenderStyle(fit_motion=False, view_box=tuple(tuple(float(v) for v in row) for row in view_box))
+        return RenderStyle(fit_motion=False, neutral=True)
+    return RenderStyle(fit_motion=False, neutral=True, view_box=tuple(tuple(float(v) for v in row) for row in view_box))
 
 
 def _study_view_box(motions: Sequence[Motion]) -> list[list[float]] | None:
     """One fixed box for all stimuli of a partial skeleton: the fitted bounds of what every one of
-    them draws, shape (3, 2) as lists, metres; None for complete skeletons (the default box)."""
+    them draws, each where it stands alone, shape (3, 2) as lists, metres; None for complete
+    skeletons (the default box)."""
     if all(m.presence.is_full for m in motions):
         return None
     require("pyvista", purpose="rendering stimuli")
     from .viz.render import RenderStyle, view_bounds
 
-    return view_bounds(motions, style=RenderStyle()).tolist()
+    # one at a time: given together, the stage would stand them side by side
+    boxes = np.stack([view_bounds([m], style=RenderStyle()) for m in motions])
+    return np.stack([boxes[:, :, 0].min(axis=0), boxes[:, :, 1].max(axis=0)], axis=1).tolist()
 
 
 def _job_motion(job: dict) -> Motion:

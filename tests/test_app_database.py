@@ -39,20 +39,18 @@ def _run_database_page() -> AppTest:
 
 
 def _first_pose_bones(data: dict) -> np.ndarray:
-    """The segments of frame 0 of a skeleton viewer's data, sorted, shape (54, 6)."""
+    """The segments of frame 0 of a skeleton viewer's data, in the order of bones(), shape (54, 6)."""
     segs = []
     for m in data["motions"]:
-        pts = m["points"][0]  # the joints, then the appearance's derived points
+        pts = m["points"][0]  # the joints where the page poses them
         segs.append(np.concatenate([pts[bones()[:, 0]], pts[bones()[:, 1]]], axis=1))  # (child, parent)
-    segs = np.concatenate(segs)
-    return segs[np.lexsort(segs.T[::-1])]
+    return np.concatenate(segs)
 
 
 def _clip_bones(db: MatchingDatabase, clip: int) -> np.ndarray:
     pos = np.asarray(db.G[clip, 0], dtype=np.float64).reshape(-1, 3)
     b = bones()
-    segs = np.concatenate([pos[b[:, 0]], pos[b[:, 1]]], axis=1)
-    return segs[np.lexsort(segs.T[::-1])]
+    return np.concatenate([pos[b[:, 0]], pos[b[:, 1]]], axis=1)
 
 
 def _error_texts(at: AppTest) -> list[str]:
@@ -94,7 +92,8 @@ def test_database_page_shows_tables_histograms_skeleton_and_audio(app_env):
     skel = viewer(at, "db.skeleton")
     assert len(skel["times"]) == db.clip_frames
     assert skel["up"] == [0, 1, 0]
-    np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 0), atol=1e-6)
+    # posed by the rig's rotations, sent as int16 quaternions: their rounding moves a fingertip by under 2 mm
+    np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 0), atol=2e-3)
     # the clip's speech plays in the viewer, on its clock: no separate player
     np.testing.assert_allclose(
         skel["audio"][: db.clip_frames * 16000 // 15],
@@ -116,7 +115,7 @@ def test_choosing_another_clip_changes_the_viewer(app_env):
     assert not at.exception
     skel = viewer(at, "db.skeleton")
     assert skel["title"].startswith("clip 3:")
-    np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 3), atol=1e-6)
+    np.testing.assert_allclose(_first_pose_bones(skel), _clip_bones(db, 3), atol=2e-3)
 
     # selecting a row of the clips table picks that clip too
     at.session_state["db.clips_table"] = {"selection": {"rows": [7], "columns": []}}

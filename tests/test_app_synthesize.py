@@ -115,9 +115,9 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     skel = viewer(at, "synth.skeleton")
     assert len(skel["motions"]) == 1 and len(skel["times"]) == res.n_frames
     m = skel["motions"][0]
-    points = np.unique(np.round(m["points"][0][:N_JOINTS], 5), axis=0)
-    np.testing.assert_allclose(points, np.unique(np.round(res.motion.positions[0], 5), axis=0), atol=2e-5)
-    assert skel["up"] == [0, 1, 0] and skel["eye"][2] > 0  # in front of the character, Y up
+    # posed by the rig's rotations, sent as int16 quaternions: their rounding moves a fingertip by under 2 mm
+    np.testing.assert_allclose(m["points"][0][:N_JOINTS], res.motion.positions[0], atol=2e-3)
+    assert skel["up"] == [0, 1, 0] and skel["look"]["view"][2] > 0  # in front of the character, Y up
 
     # the wrist plot: the result's own wrist heights and speeds, the control band, the thresholds
     wrists = chart(at, "synth.wrists")

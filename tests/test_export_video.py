@@ -28,6 +28,8 @@ from gesturekit.viz.render_pool import CHUNK_FRAMES, render_frames
 
 FPS = 15.0
 SR = 16000
+#: The earlier figure, kept as a look: the tests of its capsules, head, floor and panels use it.
+CAPSULES = RenderStyle(look="capsules")
 
 
 # ----------------------------------------------------------------------------- fixtures
@@ -191,7 +193,9 @@ def test_side_by_side_has_both_figures_and_labels(tmp_path):
 
 
 def test_two_motions_have_their_own_colours_in_their_own_halves():
-    image = render_image(still_motion(1), side_by_side=swinging_motion(3), frame=2, resolution=(200, 120))
+    image = render_image(
+        still_motion(1), side_by_side=swinging_motion(3), frame=2, resolution=(200, 120), style=CAPSULES
+    )
     left, right = image[:, :100], image[:, 100:]
     assert blue(left).sum() > 400 and orange(right).sum() > 400
     assert orange(left).sum() == 0 and blue(right).sum() == 0
@@ -209,7 +213,7 @@ def test_a_closed_scene_refuses_to_draw_and_closes_twice():
 
 def test_the_body_has_a_head_above_its_neck_and_fills_the_view():
     motion = still_motion(1)
-    with SkeletonScene([motion], resolution=(160, 120)) as scene:
+    with SkeletonScene([motion], resolution=(160, 120), style=CAPSULES) as scene:
         image = scene.render_frame(0)
         body = APPEARANCE.body(motion.positions).points[0]
         head = scene.project(body[[N_JOINTS + DERIVED_POINTS.index("head_centre")]])[0]
@@ -365,7 +369,7 @@ def test_stimuli_are_framed_identically_and_previews_fit_the_motion():
     np.testing.assert_array_equal(view_bounds([a], style=fixed), np.asarray(fixed.view_box))
     np.testing.assert_array_equal(view_bounds([a], style=fixed), view_bounds([b], style=fixed))
     # fitted: every drawn surface of every frame inside, the swinging arm's reach included
-    fitted_a, fitted_b = view_bounds([a]), view_bounds([b])
+    fitted_a, fitted_b = view_bounds([a], style=CAPSULES), view_bounds([b], style=CAPSULES)
     points = APPEARANCE.body(b.positions).points.reshape(-1, 3)
     assert np.all(points >= fitted_b[:, 0]) and np.all(points <= fitted_b[:, 1])
     assert np.ptp(fitted_b[0]) > np.ptp(fitted_a[0]) + 0.1  # the arm, raised sideways, widens the view
@@ -378,7 +382,7 @@ def test_stimuli_are_framed_identically_and_previews_fit_the_motion():
 )
 def test_every_joint_is_in_frame(offsets, width):
     motion = Motion((rest_pose()[None] + offsets).astype(np.float32), FPS)
-    with SkeletonScene([motion, motion], resolution=(width, 120)) as scene:
+    with SkeletonScene([motion, motion], resolution=(width, 120), style=CAPSULES) as scene:
         for panel in (0, 1):
             px = scene.project(motion.positions.reshape(-1, 3), panel=panel)
             lo = panel * width / 2

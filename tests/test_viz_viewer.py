@@ -1,7 +1,9 @@
-"""The canvas viewer: its page carries every bone of every frame as a body, side by side, with the speech, offline."""
+"""The three.js viewer: its page carries every motion as a skinned character posed on every shown frame, side by
+side, with the speech, offline; and its bundle is the build of the sources from the npm registry's packages."""
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
@@ -9,12 +11,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
+from gesturekit.character import look
+from gesturekit.character.mesh import PARTS, build_mesh
+from gesturekit.character.rig import rig_for, rotation_to_quaternion, solve_pose
 from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
-from gesturekit.skeleton import N_JOINTS, bones
-from gesturekit.viz.appearance import APPEARANCE, DERIVED_POINTS
+from gesturekit.skeleton import N_JOINTS
 from gesturekit.viz.figures import skeleton_figure
-from gesturekit.viz.viewer import VIEWER_MAX_FRAMES, read_viewer_data, skeleton_viewer, viewer_data
+from gesturekit.viz.viewer import QUATERNION_SCALE, VIEWER_MAX_FRAMES, read_viewer_data, skeleton_viewer, viewer_data
+from gesturekit.viz.web import build as web
 
 
 def _motion(n_frames: int, *, seed: int = 0, fps: float = 15.0) -> Motion:
@@ -23,15 +28,9 @@ def _motion(n_frames: int, *, seed: int = 0, fps: float = 15.0) -> Motion:
     return Motion(pos.astype(np.float32), fps)
 
 
-def _drawn_bones(data: dict) -> set:
-    """The bones (child, parent) the page draws: its capsules' and the head sphere's, either way round."""
-    out = {frozenset((a, b)) for a, b, _, _ in data["capsules"]}
-    return out | {frozenset(bone) for s in APPEARANCE.shapes()[1] for bone in s.covers}
-
-
-@settings(max_examples=20, deadline=None)
-@given(hst.integers(1, 120), hst.integers(1, 60), hst.integers(0, 10**6))
-def test_every_bone_of_every_shown_frame_is_drawn_side_by_side(n, max_frames, seed):
+@settings(max_examples=15, deadline=None)
+@given(hst.integers(1, 60), hst.integers(1, 40), hst.integers(0, 10**6))
+def test_every_shown_frame_poses_each_character_as_the_rig_solve_does_side_by_side(n, max_frames, seed):
     a, b = _motion(n, seed=seed), _motion(max(1, n // 2), seed=seed + 1)
     data = read_viewer_data(skeleton_viewer([a, b], labels=["A", "B"], max_frames=max_frames))
     fig = skeleton_figure([a, b], labels=["A", "B"], max_frames=max_frames)
@@ -39,23 +38,43 @@ def test_every_bone_of_every_shown_frame_is_drawn_side_by_side(n, max_frames, se
     step = data["frame_step"]
     assert len(data["times"]) <= max_frames and (step == 1) == (n <= max_frames)
     assert (data["note"] != "") == (step > 1)
-    # every bone is drawn, between the points that hold the joints of every shown frame
-    assert {frozenset((int(c), int(q))) for c, q in bones()} <= _drawn_bones(data)
-    for motion, m in zip((a, b), data["motions"]):
+    for i, (motion, m) in enumerate(zip((a, b), data["motions"])):
         src = np.minimum(np.arange(len(data["times"])) * step, motion.n_frames - 1)  # shorter: holds its last pose
-        assert m["points"].shape == (len(data["times"]), N_JOINTS + len(DERIVED_POINTS), 3)
-        shifted = motion.positions[src] + np.array([m["offset"], 0, 0], dtype=np.float32)  # offset in float32
-        np.testing.assert_array_equal(m["points"][:, :N_JOINTS], shifted)
+        shown = Motion(motion.positions[src], motion.fps)
+        rig = rig_for(shown)
+        pose = solve_pose(shown, rig)
+        # the rotations are the solve's, rounded to int16 (sign of a quaternion: w >= 0 on both sides)
+        np.testing.assert_allclose(m["rotations"], rotation_to_quaternion(pose.local), atol=0.51 / QUATERNION_SCALE)
+        np.testing.assert_allclose(m["root"], pose.root, atol=1e-6)
+        # forward kinematics of the page's bones lands where the rig's does
+        expected = pose.world(rig)[1] + [m["offset"], 0.0, 0.0]
+        np.testing.assert_allclose(m["points"], expected, atol=2e-3)
+        # the mesh is the character's, bound to this rig, in the k-th scheme's colours
+        mesh = build_mesh(rig)
+        np.testing.assert_array_equal(m["mesh"]["vertices"], mesh.vertices)
+        np.testing.assert_array_equal(m["mesh"]["faces"], mesh.faces)
+        np.testing.assert_array_equal(m["mesh"]["joints"], mesh.joints)
+        np.testing.assert_array_equal(m["mesh"]["weights"], mesh.weights)
+        np.testing.assert_array_equal(m["mesh"]["parts"], mesh.parts)  # no derived joint in these motions
+        np.testing.assert_allclose(m["rig"]["offsets"], rig.offsets, atol=1e-6)
+        assert m["scheme"] == look.scheme_for(i)
+        np.testing.assert_allclose(np.asarray(m["colors"])[: len(PARTS)], look.part_colors(m["scheme"]), atol=1e-6)
     assert data["motions"][1]["offset"] - data["motions"][0]["offset"] >= 0.8  # B on the viewer's right
-    assert [m["color"] for m in data["motions"]] == [APPEARANCE.color(0), APPEARANCE.color(1)]
+
+
+def test_neutral_draws_every_motion_grey():
+    data = viewer_data([_motion(3), _motion(3, seed=1)], neutral=True)
+    assert [m["scheme"] for m in data["motions"]] == [look.NEUTRAL, look.NEUTRAL]
 
 
 def test_every_frame_is_kept_up_to_ten_minutes_at_15_fps_and_beyond_the_page_says_so():
     assert VIEWER_MAX_FRAMES >= 10 * 60 * 15
-    pos = np.zeros((VIEWER_MAX_FRAMES, N_JOINTS, 3), np.float32)
-    pos[:, :, 1] = np.arange(VIEWER_MAX_FRAMES)[:, None] * 1e-4  # each frame its own height
+    base = _motion(1).positions
+    pos = np.repeat(base, VIEWER_MAX_FRAMES, axis=0)
+    pos[:, :, 1] += np.arange(VIEWER_MAX_FRAMES)[:, None] * 1e-4  # each frame its own height
     data = viewer_data(Motion(pos, 15.0))
     assert data["frame_step"] == 1 and len(data["times"]) == VIEWER_MAX_FRAMES and data["note"] == ""
+    assert data["motions"][0]["rotations"]["shape"] == f"{VIEWER_MAX_FRAMES},{N_JOINTS},4"
     longer = viewer_data(Motion(np.concatenate([pos, pos[:1]]), 15.0))
     assert longer["frame_step"] == 2 and len(longer["times"]) == (VIEWER_MAX_FRAMES + 2) // 2
     assert "every 2nd frame shown" in longer["note"] and str(VIEWER_MAX_FRAMES + 1) in longer["note"]
@@ -83,36 +102,48 @@ def test_without_speech_there_is_no_audio_element():
     assert "<audio" in skeleton_viewer(_motion(5), audio=np.zeros(100, np.float32))
 
 
-def test_page_is_offline_and_names_survive_any_text():
+def _bundle_script(page: str) -> tuple[str, str]:
+    """The page's module script (the bundle) and the page without it."""
+    start = page.index('<script type="module">') + len('<script type="module">')
+    end = page.index("</script>", start)
+    return page[start:end], page[:start] + page[end:]
+
+
+def test_page_is_offline_inlines_the_built_bundle_and_names_survive_any_text():
     label = 'k-NN </script><b>"&'
     page = skeleton_viewer(
         _motion(10),
         labels=[label],
-        title="t </script> __AUDIO__",
+        title="t </script> __AUDIO__ __BUNDLE__",
         key='a"b<c __DATA__',
         audio=np.zeros(1000, np.float32),
     )
-    # nothing fetched: the only source is the speech's data URI
-    assert not re.search(r"(src|href)\s*=\s*\"(?!data:audio/wav;base64,)|https?://|@import", page)
+    script, rest = _bundle_script(page)
+    assert script == web.bundle().replace("</script", "<\\/script")  # the built bundle, whole
+    # nothing fetched: the only source is the speech's data URI; the bundle imports nothing
+    assert not re.search(r"(src|href)\s*=\s*\"(?!data:audio/wav;base64,)|https?://|@import", rest)
+    assert not re.search(r"\bimport\s*\(|\bimport\s*[\w{*][^;]*\bfrom\s*[\"']|^import\s*[\"']", script)
     data = read_viewer_data(page)
-    assert data["motions"][0]["label"] == label and data["title"] == "t </script> __AUDIO__"
+    assert data["motions"][0]["label"] == label and data["title"] == "t </script> __AUDIO__ __BUNDLE__"
     assert data["key"] == 'a"b<c __DATA__'
     assert page.count("</script>") == 2  # only the page's own two script elements end
 
 
-def test_default_camera_faces_the_character_and_the_framing_holds_every_surface_and_the_floor():
+def test_the_framing_holds_every_joint_and_the_look_is_the_characters():
     m = _motion(40, seed=3)
     data = read_viewer_data(skeleton_viewer(m))
-    assert data["up"] == [0, 1, 0] and data["eye"][2] > 0 and abs(data["eye"][0]) < 1e-9
-    pts = data["motions"][0]["points"].reshape(-1, 3)
-    lo, hi = np.asarray(data["lo"]), np.asarray(data["hi"])
-    assert np.all(lo <= pts.min(axis=0) - APPEARANCE.head_radius) and np.all(
-        hi >= pts.max(axis=0) + APPEARANCE.head_radius
-    )
-    assert data["ground"] < pts[:, 1].min() and lo[1] <= data["ground"]
-    # framed to fill: the margin is a small fraction of the box on each axis
-    inner_lo, inner_hi = pts.min(axis=0) - APPEARANCE.head_radius, pts.max(axis=0) + APPEARANCE.head_radius
-    assert np.all((inner_lo - lo) <= 0.2 * (hi - lo)) and np.all((hi - inner_hi) <= 0.2 * (hi - lo))
+    assert data["up"] == [0, 1, 0] and data["look"]["view"] == list(look.VIEW_DIRECTION)
+    pts = m.positions.reshape(-1, 3)
+    lo, hi = np.asarray(data["box"])
+    assert np.all(lo <= pts.min(axis=0) - look.BODY_MARGIN) and np.all(hi >= pts.max(axis=0) + look.BODY_MARGIN)
+    assert data["look"] == {
+        "background": look.BACKGROUND,
+        "ambient": look.AMBIENT,
+        "key": look.KEY,
+        "light": list(look.LIGHT_DIRECTION),
+        "fov": look.FIELD_OF_VIEW,
+        "view": list(look.VIEW_DIRECTION),
+    }
 
 
 @pytest.mark.parametrize(
@@ -130,3 +161,65 @@ def test_bad_input_is_refused(kwargs, problem):
     motions = kwargs.pop("motions", _motion(5))
     with pytest.raises(ConfigError, match=problem):
         skeleton_viewer(motions, **kwargs)
+
+
+# ----------------------------------------------------------------------------- the web module and its build
+
+
+def test_the_static_bundle_is_the_build_of_the_current_sources():
+    """pip install builds it (setup.py); a change to src/, package.json or the lock without a build fails here."""
+    assert web.is_current(), (
+        "static/ is not the build of gesturekit/viz/web's sources: python -m gesturekit.viz.web.build"
+    )
+    assert (web.STATIC / "index.html").is_file() and len(web.bundle()) > 100_000  # three.js is in it
+
+
+def test_the_source_hash_changes_with_any_source(tmp_path):
+    for name in (*web.SOURCES, "src/a.js"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("x")
+    before = web.source_hash(tmp_path)
+    for name in (*web.SOURCES, "src/a.js"):
+        (tmp_path / name).write_text("y")
+        assert web.source_hash(tmp_path) != before
+        (tmp_path / name).write_text("x")
+    (tmp_path / "src" / "b.js").write_text("")
+    assert web.source_hash(tmp_path) != before
+    assert not web.is_current(tmp_path)  # nothing built there
+
+
+def test_no_library_is_copied_into_the_web_module():
+    """Outside node_modules/ and static/ (both made by the build, ignored by git) are only the project's own
+    files: the npm manifest and lock, the build, and small ES modules that import three by its package name."""
+    own = {"package.json", "package-lock.json", "build.mjs", "build.py", "__init__.py"}
+    for path in web.HERE.rglob("*"):
+        rel = path.relative_to(web.HERE)
+        if path.is_dir() or rel.parts[0] in ("node_modules", "static", "__pycache__"):
+            continue
+        if rel.parts[0] == "src":
+            text = path.read_text(encoding="utf-8")
+            assert path.suffix == ".js" and len(text) < 20_000, rel
+            assert not re.search(r"@license|Copyright|three\.module", text), rel
+            for spec in re.findall(r"from\s+\"([^\"]+)\"", text):
+                assert spec.startswith(("three", "./")), (rel, spec)
+        else:
+            assert str(rel) in own, rel
+
+
+def test_the_npm_packages_are_pinned_and_locked():
+    package = json.loads((web.HERE / "package.json").read_text())
+    lock = json.loads((web.HERE / "package-lock.json").read_text())
+    assert set(package["dependencies"]) == {"three"} and set(package["devDependencies"]) == {"esbuild"}
+    for name, version in {**package["dependencies"], **package["devDependencies"]}.items():
+        assert re.fullmatch(r"\d+\.\d+\.\d+", version), (name, version)  # exact: no range
+        assert lock["packages"][f"node_modules/{name}"]["version"] == version
+        assert lock["packages"][f"node_modules/{name}"]["integrity"].startswith("sha512-")  # npm ci checks it
+
+
+def test_a_motion_with_every_joint_at_one_point_has_no_body_but_still_plays():
+    still = Motion(np.zeros((4, N_JOINTS, 3), np.float32), 15.0)
+    data = read_viewer_data(skeleton_viewer([still, _motion(4)]))
+    nobody, body = data["motions"]
+    assert nobody["mesh"]["vertices"].shape == (0, 3) and nobody["mesh"]["faces"].shape == (0, 3)
+    assert body["mesh"]["vertices"].shape[0] > 0 and len(data["times"]) == 4
+    assert np.isfinite(nobody["rotations"]).all() and np.isfinite(nobody["points"]).all()

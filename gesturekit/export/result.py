@@ -128,9 +128,11 @@ def save_result_video(
     progress: Callable[[int, int], None] | None = None,
     side_by_side: bool = False,
     resolution: tuple[int, int] = (640, 480),
+    look: str = "character",
 ) -> Path:
-    """An MP4 of the skeleton with the speech (H.264 + AAC); the k-NN and the refined motion side by
-    side when ``side_by_side`` and the result was refined. ``resolution`` is (width, height) in pixels.
+    """An MP4 of the character with the speech (H.264 + AAC); the k-NN and the refined motion side by
+    side when ``side_by_side`` and the result was refined. ``resolution`` is (width, height) in pixels;
+    ``look`` one of :data:`gesturekit.viz.render.LOOKS` (the page's character, or the capsule figure).
 
     Raises
     ------
@@ -138,6 +140,12 @@ def save_result_video(
         The rendering libraries (the ``render`` extra) are not installed.
     """
     result.check_finite(path)
+    from .._optional import require
+
+    require("pyvista", purpose="rendering a video")  # the rendering libraries load only when rendering
+    from ..viz.render import RenderStyle
+
+    style = RenderStyle(look=look)
     if side_by_side and result.refined_motion is not None:
         return render_video(
             path,
@@ -148,7 +156,14 @@ def save_result_video(
             overwrite=overwrite,
             progress=progress,
             resolution=resolution,
+            style=style,
         )
     return render_video(
-        path, result.motion, audio=result.audio, overwrite=overwrite, progress=progress, resolution=resolution
+        path,
+        result.motion,
+        audio=result.audio,
+        overwrite=overwrite,
+        progress=progress,
+        resolution=resolution,
+        style=style,
     )

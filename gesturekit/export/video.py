@@ -1,4 +1,4 @@
-"""MP4 videos of a rendered skeleton with the speech as soundtrack, and a reader of media facts.
+"""MP4 videos of the rendered character with the speech as soundtrack, and a reader of media facts.
 
 :func:`render_video` renders a motion (or two side by side) offscreen with
 :class:`gesturekit.viz.render.SkeletonScene` and pipes the frames to the ffmpeg
@@ -82,7 +82,9 @@ def render_video(
     motion : Motion
         The motion to show, positions (frames, 55, 3) in metres. Only the joints its
         :attr:`~gesturekit.motion.Motion.presence` says exist are drawn and framed;
-        derived ones in grey (:attr:`~gesturekit.viz.appearance.Appearance.derived_color`).
+        derived ones in grey (:attr:`~gesturekit.viz.appearance.Appearance.derived_color`). The picture is
+        the page's (:class:`gesturekit.viz.render.RenderStyle`'s default look): the same character,
+        shading, colours, camera and background.
     audio : np.ndarray, shape (samples,), float, optional
         Mono speech in [-1, 1] starting with the motion's first frame. Without
         it the video is silent and lasts as long as the motion.

@@ -1,4 +1,5 @@
-"""How a motion looks: one appearance shared by the page viewer, the notebooks' figure and the MP4.
+"""How a motion looks as capsules: the appearance of the notebooks' figure and the MP4 (the page's viewer draws
+the skinned character of :mod:`gesturekit.character`, taking only :attr:`Appearance.derived_color` from here).
 
 A motion is drawn as a person, not as sticks: every bone of the 55-joint
 skeleton becomes a capsule (a segment with a radius and round ends), the torso
@@ -10,8 +11,8 @@ one framing rule (the body's bounds over the whole motion, with a margin, fill
 the view). The colours follow the app's: the first motion (k-NN) blue, the
 second (refined) orange.
 
-Everything here is plain numpy: each drawing backend (the page's 2D canvas, a
-plotly figure, a pyvista render) reads the same numbers and draws them its own way.
+Everything here is plain numpy: each drawing backend (a plotly figure, a pyvista
+render) reads the same numbers and draws them its own way.
 """
 
 from __future__ import annotations

@@ -1,7 +1,11 @@
 """Offscreen 3D renders of motions as bodies, with PyVista: the frames of the MP4 videos.
 
 A :class:`SkeletonScene` draws one motion, or two side by side (for example the
-k-NN result next to the refined one), in the one appearance of every view
+k-NN result next to the refined one). By default (``RenderStyle(look="character")``)
+it draws the page's picture: the skinned character of :mod:`gesturekit.character`,
+side-by-side characters on one stage, with the page's shading, colours, camera
+and background (:mod:`gesturekit.viz.character_render`). ``look="capsules"``
+keeps the earlier figure, in the one appearance of the notebooks' figure
 (:mod:`gesturekit.viz.appearance`): capsules with round ends for the limbs,
 fingers and torso, a head ball, each motion in its colour (first blue, second
 orange), lit by the appearance's light fixed to the camera, standing over a
@@ -40,28 +44,44 @@ import pyvista as pv
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
+from ..character.look import BACKGROUND, stage_layout
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
 from ..skeleton import N_JOINTS, JointPresence
 from .appearance import APPEARANCE, DERIVED_POINTS, Appearance, BodyShapes, hex_to_rgb
 from .body_meshes import BodyMeshes
+from .character_render import CharacterDrawing, CharacterStage
 
-__all__ = ["RenderStyle", "SkeletonScene", "render_image", "view_bounds"]
+__all__ = ["LOOKS", "RenderStyle", "SkeletonScene", "render_image", "view_bounds"]
+
+#: What a scene draws: the page's skinned character, or the earlier capsule figure.
+LOOKS = ("character", "capsules")
 
 _WINDOW_ENV = "VTK_DEFAULT_OPENGL_WINDOW"
 
 
 @dataclass(frozen=True)
 class RenderStyle:
-    """How a rendered scene looks and is framed; the body itself is an :class:`Appearance`.
+    """How a rendered scene looks and is framed.
 
-    The figure is the one of the page's viewer and the notebooks' figure: the
-    appearance's capsules, head sphere, colours (first motion blue, second
-    orange), light (fixed to the camera), floor and contact shadow. This style
-    adds what only a render has: the camera, tessellation, labels.
+    With ``look="character"`` (the default) the picture is the page's: the
+    skinned character, the colour schemes, light, camera (vertical field of
+    view :data:`gesturekit.character.look.FIELD_OF_VIEW`) and background of
+    :mod:`gesturekit.character.look`, side-by-side characters on one stage, no
+    floor (the body is cut at the waist); ``appearance``, ``view_angle``,
+    ``elevation``, the tessellation and ``text_color`` do not apply. With
+    ``look="capsules"`` the figure is the notebooks' one: the appearance's
+    capsules, head sphere, colours (first motion blue, second orange), light
+    (fixed to the camera), floor and contact shadow, one panel per motion.
 
     Parameters
     ----------
+    look : str
+        One of :data:`LOOKS`.
+    neutral : bool
+        The character in the neutral colour scheme
+        (:data:`gesturekit.character.look.NEUTRAL`), whatever its place: the
+        look of study stimuli.
     appearance : Appearance
         The look of the body (:data:`gesturekit.viz.appearance.APPEARANCE` by default).
     text_color : colour
@@ -70,8 +90,10 @@ class RenderStyle:
         Pelvis-relative region, metres, framed when ``fit_motion`` is off: a
         standing speaker's upper body and reach. Its bottom is the floor.
     fit_motion : bool
-        Frame the appearance's bounds of every motion over the whole clip, so
-        that the figure fills the view (the page's framing rule). Off, every
+        Frame every motion over the whole clip, so that the figure fills the
+        view (the page's framing rule: the character's
+        :func:`gesturekit.character.look.stage_layout`, the capsules'
+        appearance bounds). Off, every
         clip is framed by ``view_box``, so that clips of different systems
         look alike (user-study stimuli).
     view_angle : float
@@ -89,6 +111,8 @@ class RenderStyle:
         Size of the panel labels, points.
     """
 
+    look: str = "character"
+    neutral: bool = False
     appearance: Appearance = APPEARANCE
     text_color: object = "#202020"
     view_box: tuple = ((-0.6, 0.6), (-0.35, 0.85), (-0.3, 0.45))
@@ -102,6 +126,8 @@ class RenderStyle:
     font_size: int = 14
 
     def __post_init__(self) -> None:
+        if self.look not in LOOKS:
+            raise ConfigError(f"unknown look {self.look!r}; choose one of {', '.join(LOOKS)}")
         if not isinstance(self.appearance, Appearance):
             raise ConfigError(f"appearance must be an Appearance, got {type(self.appearance).__name__}")
         box = np.asarray(self.view_box, dtype=np.float64)
@@ -192,6 +218,9 @@ def view_bounds(motions: Sequence[Motion], *, style: RenderStyle | None = None) 
     style = style or RenderStyle()
     if not style.fit_motion:
         return np.asarray(style.view_box, dtype=np.float64).copy()
+    if style.look == "character":
+        # the page's stage: every drawn joint of every character in its place, and the body's margin
+        return stage_layout([m.positions[:, m.presence.drawn] for m in motions])[1].T.copy()
     a = style.appearance
     # only what is drawn: absent joints sit on their parents and would only shift the box
     every = np.concatenate([a.body(m.positions, m.presence).drawn_points().reshape(-1, 3) for m in motions])
@@ -241,9 +270,12 @@ class SkeletonScene:
     """An offscreen window showing one or two motions as bodies, updated frame by frame.
 
     Build it once per clip, call :meth:`render_frame` for every frame, then
-    :meth:`close` it (or use it as a context manager). Two motions are shown
-    in two panels side by side, each in its colour with its label above in the
-    same colour, framed by the same camera.
+    :meth:`close` it (or use it as a context manager). The character look
+    shows two motions side by side on one stage, as the page does
+    (:func:`gesturekit.character.look.stage_layout`), each in its colour scheme
+    with its label above in its shirt's colour; the capsule look shows them in
+    two panels framed by the same camera. :meth:`project` maps world points
+    (the character look's stage coordinates) to pixels.
 
     Parameters
     ----------
@@ -252,7 +284,7 @@ class SkeletonScene:
         holds its last pose. Each is drawn as its ``presence`` says: absent
         joints not at all (nor framed), derived ones in the derived grey.
     labels : sequence of str, optional
-        One label per motion, drawn at the top of its panel.
+        One label per motion, drawn above it (the capsules: at the top of its panel).
     resolution : (int, int)
         Width and height of the whole picture, pixels.
     style : RenderStyle, optional
@@ -283,20 +315,32 @@ class SkeletonScene:
         self.resolution = (int(resolution[0]), int(resolution[1]))
         s = self.style
         theme = pv.themes.Theme()  # a fresh theme: the user's global theme must not change the look
-        theme.background = s.appearance.background
+        character = s.look == "character"
+        theme.background = BACKGROUND if character else s.appearance.background
         theme.multi_samples = int(s.multi_samples)
         theme.anti_aliasing = "msaa" if s.multi_samples > 0 else None
         with _opengl_window_choice():
             self._plotter: pv.Plotter | None = pv.Plotter(
                 off_screen=True,
-                shape=(1, len(motions)),
+                shape=(1, 1) if character else (1, len(motions)),
                 border=False,
                 window_size=list(self.resolution),
                 theme=theme,
                 lighting="none",  # the appearance's one light, added with the meshes
             )
+        self._character: CharacterDrawing | None = None
+        self._bodies: list[BodyMeshes] = []
+        self._points: list[np.ndarray] = []
         try:
-            self._build(labels)
+            if character:
+                stage = CharacterStage(
+                    motions, neutral=s.neutral, view_box=None if s.fit_motion else np.asarray(s.view_box)
+                )
+                self._character = CharacterDrawing(
+                    stage, self._live(), self.resolution, labels=labels, font_size=s.font_size
+                )
+            else:
+                self._build(labels)
         except BaseException:
             self.close()
             raise
@@ -307,7 +351,6 @@ class SkeletonScene:
         """Add every body's meshes, the floor, the shadows, the labels, the light and the camera."""
         pl, s, motions = self._live(), self.style, self.motions
         a = s.appearance
-        self._bodies = []
         shapes = [a.body(m.positions, m.presence) for m in motions]
         self._points = [b.points for b in shapes]  # (frames, 61, 3) each
         box = view_bounds(motions, style=s)
@@ -395,6 +438,8 @@ class SkeletonScene:
         frame = int(frame)
         if frame == self._frame:
             return
+        if self._character is not None:
+            self._character.update(frame)
         for body, points in zip(self._bodies, self._points):
             body.update(points[min(frame, len(points) - 1)])
         self._frame = frame

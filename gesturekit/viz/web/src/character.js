@@ -1,0 +1,87 @@
+// The skinned characters of a viewer's data (gesturekit.viz.viewer.viewer_data): one SkinnedMesh per motion,
+// its bones posed frame by frame from the data's joint rotations and root positions.
+import {
+  Bone,
+  BufferAttribute,
+  BufferGeometry,
+  Color,
+  Group,
+  Matrix4,
+  MeshLambertMaterial,
+  Skeleton,
+  SkinnedMesh,
+  SRGBColorSpace,
+} from "three";
+
+const TYPES = {
+  f4: Float32Array,
+  i2: Int16Array,
+  u1: Uint8Array,
+  u2: Uint16Array,
+  u4: Uint32Array,
+};
+
+/** A typed array of the data's {dtype, bdata} spec (little-endian, base64). */
+export function decode(spec) {
+  const b = atob(spec.bdata), n = b.length, u = new Uint8Array(n);
+  for (let i = 0; i < n; i++) u[i] = b.charCodeAt(i);
+  return new TYPES[spec.dtype](u.buffer);
+}
+
+/** The characters of the data's motions, each in its own group shifted along X. */
+export function buildCharacters(data) {
+  return data.motions.map((m) => character(m));
+}
+
+function character(m) {
+  const rig = m.rig, n = rig.parents.length;
+  const offsets = decode(rig.offsets), rest = decode(rig.rest);
+  const bones = [], inverses = [];
+  for (let j = 0; j < n; j++) {
+    const bone = new Bone();
+    bone.name = rig.names[j];
+    if (rig.parents[j] >= 0) bone.position.set(offsets[3 * j], offsets[3 * j + 1], offsets[3 * j + 2]);
+    bones.push(bone);
+    // the rest pose has no rotation: the bind matrix of joint j is a translation to its rest position
+    inverses.push(new Matrix4().makeTranslation(-rest[3 * j], -rest[3 * j + 1], -rest[3 * j + 2]));
+  }
+  let root = null;
+  for (let j = 0; j < n; j++) {
+    if (rig.parents[j] >= 0) bones[rig.parents[j]].add(bones[j]);
+    else root = bones[j];
+  }
+  const mesh = m.mesh, geometry = new BufferGeometry();
+  const parts = decode(mesh.parts), nv = parts.length;
+  const colors = new Float32Array(3 * nv), linear = m.colors.map((c) => new Color().setRGB(c[0], c[1], c[2], SRGBColorSpace));
+  for (let v = 0; v < nv; v++) {
+    const c = linear[parts[v]];  // linear light: three.js blends and lights in it
+    colors[3 * v] = c.r; colors[3 * v + 1] = c.g; colors[3 * v + 2] = c.b;
+  }
+  geometry.setAttribute("position", new BufferAttribute(decode(mesh.vertices), 3));
+  geometry.setAttribute("normal", new BufferAttribute(decode(mesh.normals), 3));
+  geometry.setAttribute("skinIndex", new BufferAttribute(decode(mesh.joints), 4));
+  geometry.setAttribute("skinWeight", new BufferAttribute(decode(mesh.weights), 4));
+  geometry.setAttribute("color", new BufferAttribute(colors, 3));
+  geometry.setIndex(new BufferAttribute(decode(mesh.faces), 1));
+  const skinned = new SkinnedMesh(geometry, new MeshLambertMaterial({ vertexColors: true }));
+  skinned.frustumCulled = false;  // its bounds move with the pose
+  skinned.add(root);
+  // bind with the identity: the rest pose is in the mesh's own frame, whatever group holds it
+  skinned.bind(new Skeleton(bones, inverses), new Matrix4());
+  const group = new Group();
+  group.position.x = m.offset;
+  group.add(skinned);
+  const quats = decode(m.rotations), roots = decode(m.root);
+  return {
+    group,
+    /** Pose the bones at shown frame k: the joints' rotations (int16, scaled by 32767) and the root's position. */
+    pose(k) {
+      const q = k * n * 4;
+      for (let j = 0; j < n; j++) {
+        const o = q + 4 * j;
+        bones[j].quaternion.set(quats[o], quats[o + 1], quats[o + 2], quats[o + 3]).normalize();
+      }
+      root.position.set(roots[3 * k], roots[3 * k + 1], roots[3 * k + 2]);
+    },
+  };
+}

@@ -1,0 +1,164 @@
+// gesturekit's 3D viewer: the skinned characters of the page's data (the "gk-data" JSON element) drawn with
+// three.js, on one clock: the speech's time when the page has speech (frame = floor(currentTime * shown fps)),
+// else a plain one. Drag to orbit, scroll to zoom, double-click to reset the view; space toggles play.
+import { AmbientLight, Color, DirectionalLight, PerspectiveCamera, Scene, Vector3, WebGLRenderer } from "three";
+import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
+
+import { buildCharacters } from "./character.js";
+
+/** The camera of gesturekit.character.look.camera_for: the box lo..hi whole, seen from the direction dir. */
+export function cameraFor(lo, hi, aspect, fov, dir) {
+  const centre = [0, 1, 2].map((i) => (lo[i] + hi[i]) / 2);
+  const half = [0, 1, 2].map((i) => Math.max((hi[i] - lo[i]) / 2, 1e-3));
+  const norm = Math.hypot(dir[0], dir[1], dir[2]), tanV = Math.tan((fov * Math.PI) / 360);
+  const dist = Math.max(half[1] / tanV, half[0] / (tanV * aspect)) + half[2];
+  return { position: centre.map((c, i) => c + (dist * dir[i]) / norm), target: centre };
+}
+
+function main() {
+  const begun = performance.now();
+  const D = JSON.parse(document.getElementById("gk-data").textContent);
+  const N = D.times.length, shownFps = D.fps / D.frame_step;
+  const canvas = document.getElementById("c"), stage = document.getElementById("stage");
+  const slider = document.getElementById("s"), tlabel = document.getElementById("t"), play = document.getElementById("play");
+  const noteEl = document.getElementById("note"), audio = document.getElementById("gk-audio");
+  const gk = (window.gk = { frame: 0, frames: N, time: 0, audioTime: audio ? 0 : null, playing: false, drawn: 0, drawMs: 0 });
+  noteEl.title = D.note;
+  slider.max = String(N - 1);
+  document.getElementById("title").textContent = D.title;
+  document.getElementById("dropped").textContent = D.note;
+  if (D.motions.some((m) => m.derived.length)) {
+    document.getElementById("derived").textContent = "grey: derived (placed from neck and shoulders)";
+  }
+  const labels = D.motions.map((m) => {
+    const el = document.createElement("div");
+    el.className = "label";
+    el.textContent = D.motions.length > 1 ? m.label : "";
+    stage.appendChild(el);
+    return el;
+  });
+
+  const decoded = performance.now();
+  let renderer = null;
+  try {
+    // no antialiasing and no shadows: a browser without a GPU draws WebGL in software
+    renderer = new WebGLRenderer({ canvas, antialias: false, powerPreference: "high-performance" });
+  } catch (e) {
+    const msg = document.getElementById("nogl");
+    msg.textContent = "The 3D view needs WebGL, which this browser does not offer (" + e.message + "); the controls and the speech still work.";
+    msg.style.display = "flex";
+  }
+  const scene = new Scene();
+  scene.background = new Color(D.look.background);
+  // three.js's Lambert surface sends albedo / pi of the light it gets: intensities of pi * strength give
+  // colour = albedo * (ambient + key * max(0, n . l)), in linear light (the output is sRGB)
+  scene.add(new AmbientLight(0xffffff, Math.PI * D.look.ambient));
+  const key = new DirectionalLight(0xffffff, Math.PI * D.look.key);
+  key.position.set(D.look.light[0], D.look.light[1], D.look.light[2]);
+  scene.add(key);  // its target stays at the origin: the light comes from the direction of its position
+  const glReady = performance.now();
+  const characters = buildCharacters(D);
+  for (const c of characters) scene.add(c.group);
+  const camera = new PerspectiveCamera(D.look.fov, 1, 0.01, 100);
+  const controls = renderer ? new OrbitControls(camera, canvas) : null;
+  const lo = D.box[0], hi = D.box[1];
+  let frame = 0, playing = false, t0 = 0, clock0 = 0, moved = false;
+
+  function home() {
+    const c = cameraFor(lo, hi, camera.aspect, D.look.fov, D.look.view);
+    camera.position.set(c.position[0], c.position[1], c.position[2]);
+    camera.up.set(0, 1, 0);
+    gk.camera = { position: c.position, target: c.target, fov: camera.fov, aspect: camera.aspect };
+    if (controls) { controls.target.set(c.target[0], c.target[1], c.target[2]); controls.update(); }
+    else camera.lookAt(c.target[0], c.target[1], c.target[2]);
+  }
+  function size() {
+    const w = Math.max(1, canvas.clientWidth), h = Math.max(1, canvas.clientHeight);
+    if (renderer) { renderer.setPixelRatio(window.devicePixelRatio || 1); renderer.setSize(w, h, false); }
+    camera.aspect = w / h;
+    camera.updateProjectionMatrix();
+  }
+  const above = new Vector3();
+  function place() {
+    // each label above its character, at the framed box's top
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    D.motions.forEach((m, i) => {
+      above.set((lo[0] + hi[0]) / 2 + m.offset, hi[1], (lo[2] + hi[2]) / 2).project(camera);
+      labels[i].style.left = ((above.x + 1) / 2) * w + "px";
+      labels[i].style.top = Math.max(2, ((1 - above.y) / 2) * h - 16) + "px";
+    });
+  }
+  function draw() {
+    const started = performance.now();
+    for (const c of characters) c.pose(frame);
+    if (renderer) renderer.render(scene, camera);
+    place();
+    slider.value = String(frame);
+    tlabel.textContent = D.times[frame].toFixed(2) + " / " + (D.n_grid / D.fps).toFixed(2) + " s";
+    canvas.dataset.frame = String(frame);
+    document.body.dataset.drawn = "1";
+    gk.frame = frame; gk.drawn += 1; gk.drawMs = performance.now() - started;
+  }
+  const frameAt = (t) => Math.min(N - 1, Math.max(0, Math.floor(t * shownFps + 1e-6)));
+  function now() {
+    if (audio) return audio.currentTime;
+    return playing ? clock0 + (performance.now() - t0) / 1000 : clock0;
+  }
+  function show(t) {
+    gk.time = t; gk.audioTime = audio ? audio.currentTime : null;
+    const k = frameAt(t);
+    if (k !== frame || !document.body.dataset.drawn) { frame = k; draw(); }
+  }
+  function stopped() { playing = false; gk.playing = false; play.innerHTML = "&#9654; Play"; }
+  function tick() {
+    if (!playing) return;
+    const t = now();
+    show(t);
+    if (!audio && frameAt(t) >= N - 1 && t * shownFps >= N) { stopped(); return; }
+    requestAnimationFrame(tick);
+  }
+  function start() {
+    playing = true; gk.playing = true; play.innerHTML = "&#10074;&#10074; Pause";
+    requestAnimationFrame(tick);
+  }
+  function toggle() {
+    if (N < 2) return;
+    if (playing) {
+      if (audio) audio.pause(); else clock0 = now();
+      stopped(); show(now()); return;
+    }
+    const atEnd = frame >= N - 1;
+    if (audio) {
+      if (atEnd || audio.ended) audio.currentTime = 0;
+      audio.play().then(start, (e) => { noteEl.textContent = "the speech cannot play: " + e.message; });
+    } else {
+      clock0 = atEnd ? 0 : D.times[frame];
+      t0 = performance.now(); start();
+    }
+  }
+  if (audio) {
+    audio.addEventListener("ended", () => { stopped(); show(audio.currentTime); });
+    audio.addEventListener("pause", () => { if (playing) { stopped(); show(audio.currentTime); } });
+    audio.addEventListener("seeked", () => { if (!playing) show(audio.currentTime); });
+  }
+  play.addEventListener("click", toggle);
+  document.addEventListener("keydown", (e) => { if (e.code === "Space") { e.preventDefault(); toggle(); } });
+  slider.addEventListener("input", () => {
+    const k = Number(slider.value), t = D.times[k] + 0.25 / D.fps;  // inside frame k's interval
+    if (audio) audio.currentTime = t; else { clock0 = t; t0 = performance.now(); }
+    frame = k; gk.time = t; draw();
+  });
+  if (controls) {
+    controls.addEventListener("change", draw);  // drawn on demand: orbit and zoom
+    controls.addEventListener("start", () => { moved = true; });
+    canvas.addEventListener("dblclick", () => { moved = false; home(); draw(); });
+  }
+  // a new size frames the box again at the new aspect ratio, unless the user has moved the view
+  window.addEventListener("resize", () => { size(); if (!moved) home(); draw(); });
+  if (N < 2) { play.disabled = true; slider.disabled = true; }
+  size(); home(); draw();
+  // where the first frame's time went (milliseconds since the page began to load)
+  gk.startup = { script: begun, data: decoded, webgl: glReady, drawn: performance.now() };
+}
+
+main();
