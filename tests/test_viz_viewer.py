@@ -206,6 +206,28 @@ def test_no_library_is_copied_into_the_web_module():
             assert str(rel) in own, rel
 
 
+def test_a_module_outside_the_folder_is_bundled_with_the_locked_three(tmp_path):
+    """bundle_module: a module anywhere (a test's page) imports three and its examples' loaders by package name,
+    and gets the version of the lock (three.js's REVISION is in the bundle)."""
+    try:
+        web._node()
+    except RuntimeError as exc:
+        pytest.skip(str(exc))
+    entry = tmp_path / "page.js"
+    entry.write_text(
+        'import { REVISION } from "three";\n'
+        'import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";\n'
+        "window.made = [REVISION, new GLTFLoader()];\n",
+        encoding="utf-8",
+    )
+    out = web.bundle_module(entry, tmp_path / "page.bundle.js")
+    text = out.read_text(encoding="utf-8")
+    version = json.loads((web.HERE / "package.json").read_text())["dependencies"]["three"]
+    assert f'"{version.split(".")[1]}"' in text  # REVISION, the minor version, as a string
+    assert "KHR_materials_emissive_strength" in text and "glTF" in text  # the loader and its extensions
+    assert 'from"three"' not in text.replace(" ", "") and "import " not in text  # nothing left to resolve
+
+
 def test_the_npm_packages_are_pinned_and_locked():
     package = json.loads((web.HERE / "package.json").read_text())
     lock = json.loads((web.HERE / "package-lock.json").read_text())

