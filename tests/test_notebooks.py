@@ -8,12 +8,14 @@ notebook's own cells assert what it shows (03 checks the control figures).
 from __future__ import annotations
 
 import ast
+import html
 import time
 from pathlib import Path
 
 import pytest
 
 from gesturekit.demo import open_default_database
+from gesturekit.viz.viewer import read_viewer_data
 
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 NAMES = (
@@ -25,6 +27,13 @@ NAMES = (
 )
 #: Minutes of the demo speaker the notebooks run on here (the default demo has 20).
 DEMO_MINUTES = 3.0
+#: Notebooks that show motions on the app's character (gesturekit.viz.notebook.character_view): how many
+#: motions side by side, and whether with their speech.
+CHARACTER_VIEWS = {
+    "01_database.ipynb": (1, True),
+    "02_retrieval_walkthrough.ipynb": (3, False),
+    "04_refiner.ipynb": (2, True),
+}
 #: Modules a notebook may import besides gesturekit (standard library only).
 ALLOWED_IMPORTS = {"os", "pathlib"}
 
@@ -94,5 +103,19 @@ def test_notebook_runs_top_to_bottom(name, demo_home, monkeypatch, capsys, tmp_p
     assert not errors
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
     assert f"demo (seed 0, {DEMO_MINUTES:g} min)" in text  # it ran on this home's database
+    # the character viewer's page, whole, in each cell that shows one: three.js inlined, the motions and speech in it
+    views = [
+        html.unescape(o["data"]["text/html"].split('srcdoc="', 1)[1].split('" style=', 1)[0])
+        for c in nb.cells
+        if c.cell_type == "code"
+        for o in c.outputs
+        if "gesturekit character viewer" in o.get("data", {}).get("text/html", "")
+    ]
+    assert len(views) == (name in CHARACTER_VIEWS)
+    for page in views:
+        data = read_viewer_data(page)
+        motions, speech = CHARACTER_VIEWS[name]
+        assert len(data["motions"]) == motions and (data["audio"] is not None) == speech
+        assert '<script type="module">' in page and 'src="http' not in page  # nothing fetched: the bundle is inlined
     with capsys.disabled():
         print(f"\n{name}: {seconds:.1f} s")

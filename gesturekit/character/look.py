@@ -31,6 +31,7 @@ __all__ = [
     "part_colors",
     "camera_for",
     "BODY_MARGIN",
+    "FRAME_MARGIN",
     "stage_layout",
 ]
 
@@ -118,8 +119,13 @@ def camera_for(lo: npt.ArrayLike, hi: npt.ArrayLike, aspect: float, *, fov: floa
     }
 
 
-#: Metres added around the joints to frame the body: the widest half-thickness of the mesh (the chest).
+#: Metres between the joints and the body's surface, at most: the chest's half-depth, the torso's reach below
+#: spine_mid (the waist cut). Side-by-side characters keep this much to either side of their joints.
 BODY_MARGIN = 0.14
+
+#: Metres the framed box keeps around every joint: the arms' and the head's thickness; the box then reaches
+#: down to the waist cut (:data:`BODY_MARGIN` below the lowest joint of the spine is more than the cut needs).
+FRAME_MARGIN = 0.07
 
 
 def stage_layout(points: Sequence[np.ndarray], *, spacing: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -139,7 +145,7 @@ def stage_layout(points: Sequence[np.ndarray], *, spacing: float | None = None) 
         Each character's shift along X, metres, centred on 0.
     box : np.ndarray, shape (2, 3)
         The framed box's lower and upper corners, metres: every shifted joint over every frame plus
-        :data:`BODY_MARGIN`, and 5 % of the box on each side.
+        :data:`FRAME_MARGIN`, and 3 % of the box on each side: the half body, framed like a presenter.
     """
     if not points or any(np.asarray(p).size == 0 for p in points):
         raise ConfigError("a stage needs at least one character with at least one joint position")
@@ -149,6 +155,6 @@ def stage_layout(points: Sequence[np.ndarray], *, spacing: float | None = None) 
         spacing = max(0.8, widest + 0.1)
     offsets = (np.arange(len(pts)) - (len(pts) - 1) / 2) * float(spacing)
     every = np.concatenate([p + [dx, 0.0, 0.0] for p, dx in zip(pts, offsets)])
-    lo, hi = every.min(axis=0) - BODY_MARGIN, every.max(axis=0) + BODY_MARGIN
-    pad = 0.05 * (hi - lo)
+    lo, hi = every.min(axis=0) - FRAME_MARGIN, every.max(axis=0) + FRAME_MARGIN
+    pad = 0.03 * (hi - lo)
     return offsets, np.stack([lo - pad, hi + pad])
