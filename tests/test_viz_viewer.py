@@ -135,7 +135,7 @@ def test_the_framing_holds_every_joint_and_the_look_is_the_characters():
     assert data["up"] == [0, 1, 0] and data["look"]["view"] == list(look.VIEW_DIRECTION)
     pts = m.positions.reshape(-1, 3)
     lo, hi = np.asarray(data["box"])
-    assert np.all(lo <= pts.min(axis=0) - look.BODY_MARGIN) and np.all(hi >= pts.max(axis=0) + look.BODY_MARGIN)
+    assert np.all(lo <= pts.min(axis=0) - look.FRAME_MARGIN) and np.all(hi >= pts.max(axis=0) + look.FRAME_MARGIN)
     assert data["look"] == {
         "background": look.BACKGROUND,
         "ambient": look.AMBIENT,
