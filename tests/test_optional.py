@@ -323,3 +323,33 @@ def test_a_search_while_another_thread_imports_torch_leaves_the_half_imported_to
         )
         assert run.returncode == 0, run.stderr[-3000:]
         assert int(run.stdout.split()[-1]) > 0  # the search did run while torch was half-imported
+
+
+# the process ends while a daemon thread (the app's refiner warm-up) is importing torch: weakref's exit
+# function unregisters torch's operators, which broke the import still running ("operator prims::... does
+# not exist"); the import in flight must end first
+_EXIT_DURING_TORCH_IMPORT = """
+import sys, threading, time, weakref
+from gesturekit._optional import require
+def imported():
+    torch = sys.modules.get("torch")
+    return torch is not None and not torch.__spec__._initializing
+class Marker:
+    pass
+marker = Marker()
+# runs in weakref's exit function, where torch's own operator libraries are unregistered
+weakref.finalize(marker, lambda: print("torch imported when finalizers ran:", imported(), flush=True))
+threading.Thread(target=require, args=("torch",), kwargs={"purpose": "a refiner"}, daemon=True).start()
+while "torch._prims" not in sys.modules:  # well inside torch's import
+    time.sleep(0.001)
+"""
+
+
+def test_the_process_ends_after_an_optional_import_in_flight():
+    pytest.importorskip("torch")
+    for _ in range(2):
+        run = subprocess.run(
+            [sys.executable, "-c", _EXIT_DURING_TORCH_IMPORT], capture_output=True, text=True, timeout=120, cwd=ROOT
+        )
+        assert run.returncode == 0, run.stderr[-3000:]
+        assert run.stdout.strip() == "torch imported when finalizers ran: True", run.stdout + run.stderr[-3000:]
