@@ -16,13 +16,17 @@ A gesturekit module that imports an optional package at its top (``refine.model`
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import importlib.util
+import sys
+import threading
+import weakref
 from types import ModuleType
 
 from .errors import MissingDependencyError
 
-__all__ = ["EXTRAS", "require", "optional", "installed", "install_hint"]
+__all__ = ["EXTRAS", "require", "optional", "loaded", "installed", "install_hint"]
 
 #: Optional top-level module -> (the package that provides it, the extra of gesturekit that installs it).
 EXTRAS: dict[str, tuple[str, str]] = {
@@ -34,6 +38,37 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "dask": ("dask[distributed]", "scale"),
     "plotly": ("plotly", "app"),
 }
+
+
+#: Held while an optional module is imported: the app imports torch in a background thread, and
+#: other threads must not see it half-imported (see :func:`loaded`) nor the process end under it.
+_IMPORTING = threading.RLock()
+
+
+def _finish_imports() -> None:
+    # at exit, weakref's finalizers unregister torch's operator libraries; a torch import still
+    # running in a daemon thread then fails ("operator prims::... does not exist") or aborts the process
+    _IMPORTING.acquire(timeout=120)
+
+
+# atexit runs its functions last registered first: weakref's own exit function (registered by its
+# first finalizer) must come before ours, so that ours waits before the finalizers run
+weakref.finalize(_finish_imports, lambda: None)
+atexit.register(_finish_imports)
+
+
+def _import(name: str) -> ModuleType:
+    with _IMPORTING:
+        return importlib.import_module(name)
+
+
+def loaded(name: str) -> ModuleType | None:
+    """The module ``name`` if it is imported completely, else None (not imported, or being imported
+    by another thread: its attributes are not all there yet). Imports nothing."""
+    module = sys.modules.get(name)
+    if module is None or getattr(getattr(module, "__spec__", None), "_initializing", False):
+        return None
+    return module
 
 
 def install_hint(name: str) -> str:
@@ -88,7 +123,7 @@ def require(name: str, *, purpose: str) -> ModuleType:
     """
     install_hint(name)
     try:
-        return importlib.import_module(name)
+        return _import(name)
     except ImportError as exc:
         missing = _missing(name, exc)
         if missing is None:
@@ -103,7 +138,7 @@ def optional(name: str) -> ModuleType | None:
     """The optional module ``name`` (a key of :data:`EXTRAS`), or None when it is not installed."""
     install_hint(name)  # only the modules of the table: each one stays declared in an extra
     try:
-        return importlib.import_module(name)
+        return _import(name)
     except ImportError as exc:
         if _missing(name, exc) is None:
             raise

@@ -461,7 +461,6 @@ def test_app_offers_the_glb_beside_the_bvh_with_its_speech(app_env, validator, t
     if at.toggle(key="_w.synth.refine").value:
         at.toggle(key="_w.synth.refine").set_value(False).run()
     at.button(key="synth.go").click().run()
-    # (the page's background warm-up of the refiner may report a failed torch import of its own: not this test's)
     assert not at.exception and not [e.value for e in at.error if "file" in e.value.lower()]
     buttons = {d.proto.label: d for d in at.get("download_button")}
     labels = list(buttons)

@@ -284,3 +284,72 @@ def test_optional_packages_are_imported_only_through_the_helper():
             if needs - _required(func):
                 bad.append(f"{me}.{func.name} imports {sorted(needs - _required(func))} without require()")
     assert not bad, "\n".join(bad)
+
+
+def test_loaded_is_none_for_a_module_another_thread_is_still_importing(monkeypatch):
+    half = types.ModuleType("half_imported")
+    half.__spec__ = importlib.machinery.ModuleSpec("half_imported", None)
+    half.__spec__._initializing = True  # as importlib marks a module while its body runs
+    monkeypatch.setitem(sys.modules, "half_imported", half)
+    assert _optional.loaded("half_imported") is None and _optional.loaded("not_imported_anywhere") is None
+    half.__spec__._initializing = False
+    assert _optional.loaded("half_imported") is half
+
+
+# a thread imports torch (the app's refiner warm-up) while a search starts in another (the page's run)
+_WHILE_TORCH_IMPORTS = """
+import sys, threading
+from gesturekit._optional import loaded, require
+from gesturekit.search.threads import single_threaded_blas
+assert "torch" not in sys.modules
+warm = threading.Thread(target=require, args=("torch",), kwargs={"purpose": "a refiner"}, daemon=True)
+warm.start()
+seen = 0
+while warm.is_alive():
+    with single_threaded_blas():  # looked at torch half-imported: AttributeError (no get_num_threads yet)
+        pass
+    seen += "torch" in sys.modules and loaded("torch") is None
+warm.join()
+assert loaded("torch") is sys.modules["torch"] and loaded("torch").get_num_threads() >= 1
+print("half-imported seen", seen)
+"""
+
+
+def test_a_search_while_another_thread_imports_torch_leaves_the_half_imported_torch_alone():
+    pytest.importorskip("torch")
+    for _ in range(2):  # a fresh interpreter each time: torch is imported once per process
+        run = subprocess.run(
+            [sys.executable, "-c", _WHILE_TORCH_IMPORTS], capture_output=True, text=True, timeout=120, cwd=ROOT
+        )
+        assert run.returncode == 0, run.stderr[-3000:]
+        assert int(run.stdout.split()[-1]) > 0  # the search did run while torch was half-imported
+
+
+# the process ends while a daemon thread (the app's refiner warm-up) is importing torch: weakref's exit
+# function unregisters torch's operators, which broke the import still running ("operator prims::... does
+# not exist"); the import in flight must end first
+_EXIT_DURING_TORCH_IMPORT = """
+import sys, threading, time, weakref
+from gesturekit._optional import require
+def imported():
+    torch = sys.modules.get("torch")
+    return torch is not None and not torch.__spec__._initializing
+class Marker:
+    pass
+marker = Marker()
+# runs in weakref's exit function, where torch's own operator libraries are unregistered
+weakref.finalize(marker, lambda: print("torch imported when finalizers ran:", imported(), flush=True))
+threading.Thread(target=require, args=("torch",), kwargs={"purpose": "a refiner"}, daemon=True).start()
+while "torch._prims" not in sys.modules:  # well inside torch's import
+    time.sleep(0.001)
+"""
+
+
+def test_the_process_ends_after_an_optional_import_in_flight():
+    pytest.importorskip("torch")
+    for _ in range(2):
+        run = subprocess.run(
+            [sys.executable, "-c", _EXIT_DURING_TORCH_IMPORT], capture_output=True, text=True, timeout=120, cwd=ROOT
+        )
+        assert run.returncode == 0, run.stderr[-3000:]
+        assert run.stdout.strip() == "torch imported when finalizers ran: True", run.stdout + run.stderr[-3000:]

@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
-import sys
 import threading
 import warnings
 from collections.abc import Callable, Iterator
@@ -19,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .._optional import optional
+from .._optional import loaded, optional
 
 __all__ = ["matrix_product", "single_threaded_blas", "worker_count"]
 
@@ -92,7 +91,8 @@ def single_threaded_blas() -> Iterator[None]:
     runs (the search runs its own threads); restored afterwards."""
     ctl = _blas_controller()
     limiter = None if ctl is None else ctl.limit(limits=1, user_api="blas")
-    torch = sys.modules.get("torch")
+    # not a torch that another thread (the app's refiner warm-up) is still importing
+    torch = loaded("torch")
     threads = None if torch is None else torch.get_num_threads()
     if torch is not None:
         torch.set_num_threads(1)
