@@ -678,7 +678,9 @@ def test_thread_settings_are_restored_after_a_search():
     search_batch(P, F, valid, queries)
     search(P, F, valid, queries[0])
     after = [(d["filepath"], d["num_threads"]) for d in threadpoolctl.threadpool_info()]
-    assert after == before and torch.get_num_threads() == torch_threads
+    # a library the search loads on its way (scipy's BLAS, when no earlier test loaded it) is not one it changed
+    known = {path for path, _ in before}
+    assert [a for a in after if a[0] in known] == before and torch.get_num_threads() == torch_threads
 
 
 @settings(max_examples=80, deadline=None)
