@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from streamlit.delta_generator import DeltaGenerator
 
     from gesturekit.export.bvh import BvhReport
+    from gesturekit.export.gltf import GltfReport
     from gesturekit.motion import Motion
 
 __all__ = [
@@ -54,9 +55,11 @@ __all__ = [
     "escape_markdown",
     "result_bvh",
     "result_downloads",
+    "result_glb",
     "run_page",
     "selected_row",
     "show_bvh_report",
+    "show_glb_report",
     "show_skeletons",
     "skeleton_note",
     "user_errors",
@@ -275,10 +278,40 @@ def result_bvh(record: dict, *, key: str) -> tuple[bytes | None, BvhReport | str
     return cached[1], cached[2]
 
 
+def result_glb(record: dict, *, key: str) -> tuple[bytes | None, GltfReport | str]:
+    """A result's glTF download (the character, skinned and animated) and its report, made once per
+    result as :func:`result_bvh` makes the BVH.
+
+    The file names its speech as the WAV download's name (``export_filename(result, "wav")``).
+    Returns the file's bytes and its :class:`~gesturekit.export.gltf.GltfReport`, or None and why
+    no glTF can be written.
+    """
+    import tempfile
+
+    from gesturekit import interactive as gs
+    from gesturekit.export.result import export_result_glb
+
+    ss = st.session_state
+    cached = ss.get(key)
+    if cached is None or cached[0] != record["run"]:
+        result = record["result"]
+        try:
+            with collect_warnings(), tempfile.TemporaryDirectory(prefix="gesturekit-glb-") as tmp:
+                # the warning over 1 mm is shown from the report (show_glb_report)
+                path = Path(tmp) / gs.export_filename(result, "glb")
+                report = export_result_glb(result, path)
+                cached = (record["run"], path.read_bytes(), report)
+        except GestureKitError as exc:
+            cached = (record["run"], None, exc.problem)
+        ss[key] = cached
+    return cached[1], cached[2]
+
+
 _DOWNLOAD_LABELS = {
     "wav": "Speech (WAV)",
     "npz": "Motion + search (npz)",
     "bvh": "Motion (BVH)",
+    "glb": "Character (glTF)",
     "csv": "Control track (CSV)",
     "json": "Config (JSON)",
 }
@@ -291,28 +324,37 @@ def result_downloads(
     prefix: str,
     keys: tuple[str, str],
     before_video: Callable[[DeltaGenerator], None],
+    glb_key: str | None = None,
 ) -> None:
-    """A result's downloads in one row, the MP4 last, and the BVH's report under them.
+    """A result's downloads in one row, the MP4 last, and the BVH's (and glTF's) report under them.
 
     ``record`` is the page's result record (``"run"``, ``"result"``); ``kinds`` the files
-    before the MP4, of ``"wav"``, ``"npz"``, ``"bvh"``, ``"csv"``, ``"json"``; ``prefix``
+    before the MP4, of ``"wav"``, ``"npz"``, ``"bvh"``, ``"glb"``, ``"csv"``, ``"json"``; ``prefix``
     names the buttons' keys (``PREFIX.download_KIND``). ``keys`` are the session-state
     keys of the BVH made once per result (:func:`result_bvh`) and of the rendered video
-    (``{"run", "bytes"}``); ``before_video(column)`` fills the MP4's column until there is one.
+    (``{"run", "bytes"}``); ``glb_key`` that of the glTF (:func:`result_glb`), needed with
+    ``"glb"``; ``before_video(column)`` fills the MP4's column until there is one.
     """
     from gesturekit import interactive as gs
 
     result = record["result"]
     cols = st.columns(len(kinds) + 1)
     bvh, report = result_bvh(record, key=keys[0])  # made once per result, for the report under the buttons
+    made: dict[str, bytes | None] = {"bvh": bvh}
+    glb_report: GltfReport | str | None = None
+    if "glb" in kinds:
+        if glb_key is None:
+            raise ValueError("a glTF download needs glb_key, the session-state key that keeps it")
+        made["glb"], glb_report = result_glb(record, key=glb_key)
     for col, kind in zip(cols, kinds):
-        if kind == "bvh" and bvh is None:
-            col.caption("BVH: see below")
+        ready = made.get(kind)
+        if kind in made and ready is None:
+            col.caption(f"{'BVH' if kind == 'bvh' else 'glTF'}: see below")
             continue
         col.download_button(
             _DOWNLOAD_LABELS[kind],
             # the others are made when clicked: most results are never downloaded
-            data=bvh if kind == "bvh" else functools.partial(gs.export_bytes, result, kind),
+            data=ready if ready is not None else functools.partial(gs.export_bytes, result, kind),
             file_name=gs.export_filename(result, kind),
             mime=gs.EXPORT_KINDS[kind][1],
             key=f"{prefix}.download_{kind}",
@@ -331,6 +373,8 @@ def result_downloads(
     else:
         before_video(cols[-1])
     show_bvh_report(bvh, report)
+    if glb_report is not None:
+        show_glb_report(made["glb"], glb_report)
 
 
 def show_bvh_report(data: bytes | None, report: BvhReport | str) -> None:
@@ -340,6 +384,18 @@ def show_bvh_report(data: bytes | None, report: BvhReport | str) -> None:
         st.error(f"No BVH file: {escape_markdown(report)}", icon=":material/error:")
         return
     st.caption(f"BVH {escape_markdown(report.summary())}")
+    message = report.warning()
+    if message is not None:
+        st.warning(escape_markdown(message[0].upper() + message[1:]), icon=":material/warning:")
+
+
+def show_glb_report(data: bytes | None, report: GltfReport | str) -> None:
+    """Under a result's downloads: the glTF file's error against the motion, its warning over 1 mm, or
+    why there is no glTF file (from :func:`result_glb`)."""
+    if data is None or isinstance(report, str):
+        st.error(f"No glTF file: {escape_markdown(report)}", icon=":material/error:")
+        return
+    st.caption(f"glTF {escape_markdown(report.summary())}")
     message = report.warning()
     if message is not None:
         st.warning(escape_markdown(message[0].upper() + message[1:]), icon=":material/warning:")

@@ -31,7 +31,7 @@ _ABOUT = {
     ),
     "info": ("describe a matching database", None),
     "synthesize": (
-        "gesture motion for speech: npz + BVH (+ MP4 with --video)",
+        "gesture motion for speech: npz + BVH (--format: also or instead glTF; + MP4 with --video)",
         "Synthesise gesture motion for one or more speech files (or folders of them) by motion matching. "
         "Several files are searched together, scanning the database once per step.",
     ),
@@ -270,6 +270,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
         "controls) and take the faster content from the refiner (default 2); 0: the refiner's "
         "output as it is (the paper)",
+    )
+    y.add_argument(
+        "--format",
+        default="npz,bvh",
+        metavar="LIST",
+        help="the files to write per speech, a comma list of npz (motion + search), bvh (the motion), glb "
+        "(glTF: the character, skinned and animated, with the speech as a WAV beside it) (default npz,bvh)",
     )
     y.add_argument("--video", action="store_true", help="also render an MP4 of the skeleton with the speech")
     y.add_argument("--force", action="store_true", help="replace existing output files")

@@ -247,6 +247,23 @@ def _parse_range(text: str) -> tuple[str, float, float]:
     return take.strip(), start, end
 
 
+#: What ``synthesize --format`` may list, in the order they are written.
+SYNTHESIS_FORMATS = ("npz", "bvh", "glb")
+
+
+def _parse_formats(text: str) -> list[str]:
+    """``synthesize --format``: ``"npz,bvh,glb"`` -> the formats, each once, in :data:`SYNTHESIS_FORMATS`' order."""
+    given = [f.strip().lower() for f in str(text).split(",")]
+    for f in given:
+        if f not in SYNTHESIS_FORMATS:
+            shown = f"{f!r}" if f else "an empty entry"
+            raise ConfigError(
+                f"--format {text!r}: {shown} is not an output; list some of {', '.join(SYNTHESIS_FORMATS)}, "
+                "separated by commas (e.g. npz,bvh,glb)"
+            )
+    return [f for f in SYNTHESIS_FORMATS if f in given]
+
+
 def _parse_holdouts(texts) -> list:
     """Check ``--holdout`` values before any work starts; each as :class:`~gesturekit.evaluate.run.Holdout`."""
     from .evaluate.run import parse_holdout
@@ -281,13 +298,15 @@ def _cmd_synthesize(args) -> int:
     from ._io import safe_filename
     from .datasets.audio import load_audio
     from .export.bvh import bvh_parents
-    from .export.result import export_result_bvh, save_result_npz, save_result_video
+    from .export.gltf import audio_path_for
+    from .export.result import export_result_bvh, export_result_glb, save_result_npz, save_result_video
     from .outputs import check_output, output_lock, write_errors
     from .refine import open_refiner
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
     from .workspace import expand_speech, open_database
 
+    formats = _parse_formats(args.format)
     files = expand_speech(args.speech)
     control = _control_from_arg(args.control) or ""
     exclude_ranges = tuple(_parse_range(r) for r in (args.exclude_range or ()))
@@ -307,10 +326,13 @@ def _cmd_synthesize(args) -> int:
         require("pyvista", purpose="--video")
         require("imageio_ffmpeg", purpose="--video")
     db = open_database(args.db)
-    try:  # a skeleton no BVH can hold is refused before the search
-        bvh_parents(db.joint_presence)
+    tree = [f for f in formats if f in ("bvh", "glb")]
+    try:  # a skeleton no BVH or glTF can hold is refused before the search
+        if tree:
+            bvh_parents(db.joint_presence)
     except ConfigError as exc:
-        raise ConfigError(f"synthesize writes a BVH of every result, and {exc.problem}", path=args.db) from None
+        names = " and ".join(f.upper() if f == "bvh" else "glTF" for f in tree)
+        raise ConfigError(f"synthesize writes a {names} of every result, and {exc.problem}", path=args.db) from None
     config = SynthesisConfig(
         k=args.k,
         segment=args.segment,
@@ -326,8 +348,10 @@ def _cmd_synthesize(args) -> int:
     )
     if out.exists() and not out.is_dir():
         raise GestureKitError(f"{out}: is a file, not a folder; give --out a folder for the results")
-    kinds = ["npz", "bvh"] + (["mp4"] if args.video else [])
+    kinds = formats + (["wav"] if "glb" in formats else []) + (["mp4"] if args.video else [])
     targets = {(stem, kind): out / f"{stem}.{kind}" for stem in stems for kind in kinds}
+    if "glb" in formats:  # the speech beside each glTF file, where it names it
+        targets.update({(stem, "wav"): audio_path_for(targets[(stem, "glb")]) for stem in stems})
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not args.force:
         raise GestureKitError(
@@ -349,9 +373,17 @@ def _cmd_synthesize(args) -> int:
             check_output(p, "file", overwrite=args.force, inputs=files)
         for f, stem, res in zip(files, stems, results):
             res.source = f.name
-            save_result_npz(res, targets[(stem, "npz")], overwrite=args.force)
-            bvh_report = export_result_bvh(res, targets[(stem, "bvh")], overwrite=args.force)
-            written = [targets[(stem, "npz")], targets[(stem, "bvh")]]
+            reports = []
+            if "npz" in formats:
+                save_result_npz(res, targets[(stem, "npz")], overwrite=args.force)
+            if "bvh" in formats:
+                reports.append(
+                    f"  BVH {export_result_bvh(res, targets[(stem, 'bvh')], overwrite=args.force).summary()}"
+                )
+            if "glb" in formats:
+                glb = export_result_glb(res, targets[(stem, "glb")], overwrite=args.force)
+                reports.append(f"  glTF {glb.summary()}")
+            written = [targets[(stem, kind)] for kind in kinds if kind != "mp4"]
             if args.video:
                 with _progress_bar(res.n_frames, "frame", f"rendering {stem}") as bar:
                     save_result_video(
@@ -371,7 +403,8 @@ def _cmd_synthesize(args) -> int:
                 f"{f.name}: {res.n_frames} frames ({res.n_frames / res.motion.fps:.2f} s), "
                 f"{res.search.n_steps} steps{note} -> {', '.join(str(w) for w in written)}"
             )
-            _print(f"  BVH {bvh_report.summary()}")
+            for line in reports:
+                _print(line)
     return _done(args)
 
 

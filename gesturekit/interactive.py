@@ -89,6 +89,7 @@ SPEECH_EXAMPLES: dict[str, tuple[float, int]] = {
 EXPORT_KINDS: dict[str, tuple[str, str]] = {
     "npz": (".npz", "application/octet-stream"),
     "bvh": (".bvh", "text/plain"),
+    "glb": (".glb", "model/gltf-binary"),
     "csv": ("_control.csv", "text/csv"),
     "json": ("_config.json", "application/json"),
     "mp4": (".mp4", "video/mp4"),

@@ -13,9 +13,10 @@ same rules hold everywhere:
   ``gesturekit-evaluation``), an ``.npz`` archive with
   gesturekit's ``config`` and ``format_version`` entries, a BVH file whose
   joints are gesturekit's 55 in its order, an MP4 carrying gesturekit's
-  metadata tag. Anything else (a folder of other files, a file where a folder
-  goes, a folder where a file goes) is refused, saying what is there. An empty
-  folder is used as it is.
+  metadata tag, a glTF binary whose ``asset.generator`` is gesturekit, a WAV
+  carrying gesturekit's tag (the speech beside a glTF file). Anything else
+  (a folder of other files, a file where a folder goes, a folder where a file
+  goes) is refused, saying what is there. An empty folder is used as it is.
 * **Outputs never overlap inputs.** An output folder that is, lies inside or
   contains an input folder (the takes, the database trained on, the speech of
   a study) is refused.
@@ -65,7 +66,13 @@ __all__ = [
 ]
 
 #: File kinds gesturekit can recognise as its own, by suffix.
-FILE_KINDS = {".npz": "an npz archive", ".bvh": "a BVH file", ".mp4": "an MP4 video"}
+FILE_KINDS = {
+    ".npz": "an npz archive",
+    ".bvh": "a BVH file",
+    ".mp4": "an MP4 video",
+    ".glb": "a glTF file",
+    ".wav": "a WAV file",
+}
 
 #: The MP4 metadata comment gesturekit's videos carry (``-metadata comment=...``).
 MP4_TAG = "written by gesturekit"
@@ -110,6 +117,10 @@ def _file_is_owned(path: Path) -> bool:
                 return False
             joints = re.findall(r"^\s*(?:ROOT|JOINT)\s+(\S+)", text.split("MOTION")[0], re.M)
             return sorted(joints) == sorted(JOINT_NAMES)
+        if suffix == ".glb":
+            return head[:4] == b"glTF" and b'"generator":"gesturekit ' in head
+        if suffix == ".wav":
+            return head[:4] == b"RIFF" and head[8:12] == b"WAVE" and MP4_TAG.encode() in head
         if suffix == ".mp4":
             if MP4_TAG.encode() in head:
                 return True

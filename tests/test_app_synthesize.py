@@ -134,7 +134,14 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     assert len(at.get("audio")) == 1
     np.testing.assert_allclose(skel["audio"][: len(res.audio)], res.audio, atol=1e-4)
     labels = [d.proto.label for d in at.get("download_button")]
-    assert labels == ["Motion + search (npz)", "Motion (BVH)", "Control track (CSV)", "Config (JSON)"]
+    assert labels == [
+        "Motion + search (npz)",
+        "Motion (BVH)",
+        "Character (glTF)",
+        "Speech (WAV)",
+        "Control track (CSV)",
+        "Config (JSON)",
+    ]
     assert any(c.value == "MP4: render it above" for c in at.caption)
 
 

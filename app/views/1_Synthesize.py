@@ -23,6 +23,7 @@ from gesturekit.synthesize import SynthesisConfig
 from gesturekit.viz.figures import waveform_figure, wrist_figure
 
 _BVH = "_synth.bvh"  # (run, bytes or None, report or why no BVH) of the current result
+_GLB = "_synth.glb"  # (run, bytes or None, report or why no glTF) of the current result
 SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "notes", "token"}
 SEGMENTS = "synth.segments"  # the control table as the user last left it (DataFrame)
 EDITOR = "synth.segments_editor"  # the data editor's widget key (see state.remount_key)
@@ -376,10 +377,11 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
     st.subheader("Downloads")
     display.result_downloads(
         record,
-        ("npz", "bvh", "csv", "json"),
+        ("npz", "bvh", "glb", "wav", "csv", "json"),
         prefix="synth",
         keys=(_BVH, _VIDEO),
         before_video=lambda col: col.caption("MP4: render it above"),
+        glb_key=_GLB,
     )
 
 

@@ -13,8 +13,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import csr_matrix
 
-from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
+from ..errors import ConfigError
+from ._body import body_pieces
+from ._loft import signed_volume
 from .rig import Rig
 
 __all__ = ["PARTS", "CharacterMesh", "build_mesh", "vertex_normals"]
@@ -60,93 +63,86 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     v = np.asarray(vertices, dtype=np.float64)
     a, b, c = v[..., faces[:, 0], :], v[..., faces[:, 1], :], v[..., faces[:, 2], :]
     fn = np.cross(b - a, c - a)
-    flat = fn.reshape(-1, fn.shape[-2], 3)
-    acc = np.zeros((flat.shape[0], v.shape[-2], 3))
-    for k in range(3):
-        for i in range(flat.shape[0]):
-            np.add.at(acc[i], faces[:, k], flat[i])
+    flat = np.moveaxis(fn.reshape(-1, fn.shape[-2], 3), 1, 0).reshape(fn.shape[-2], -1)  # (F, frames * 3)
+    # each face's normal added to its three corners: one sparse product for every frame at once
+    corners = np.asarray(faces, dtype=np.int64).T.ravel()
+    rows = np.tile(np.arange(len(faces)), 3)
+    incidence = csr_matrix((np.ones(len(corners)), (corners, rows)), shape=(v.shape[-2], len(faces)))
+    acc = np.moveaxis((incidence @ flat).reshape(v.shape[-2], -1, 3), 1, 0)
     n = acc.reshape(v.shape)
     norm = np.linalg.norm(n, axis=-1, keepdims=True)
     return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
 
 
-def _radius(j: int) -> float:
-    name = JOINT_NAMES[j]
-    if name.endswith(("1", "2", "3", "4")):
-        return 0.008
-    if "elbow" in name or "wrist" in name:
-        return 0.035
-    if "shoulder" in name:
-        return 0.045
-    if "collar" in name:
-        return 0.05
-    if "neck" in name:
-        return 0.05
-    return 0.12
-
-
-def build_mesh(rig: Rig, *, segments: int = 12) -> CharacterMesh:
+def build_mesh(rig: Rig, *, detail: float = 1.0) -> CharacterMesh:
     """The character's body around a rig's rest pose.
+
+    A neutral, half-body presenter cut at the waist: torso (closed below
+    ``spine_mid``), neck, a head with eyes, brows, nose and mouth (it shows
+    which way it faces), arms whose forearms run into the palms, and five
+    fingers per hand whose segments follow the finger joints (the thumb from
+    its CMC). Every piece is one closed surface; pieces overlap where they
+    meet (the fingers' roots in the palm, the shoulders' balls in the torso,
+    the neck in the torso and head). Each limb's rings blend the two joints
+    on either side of a joint across about a limb's radius, so elbows, wrists
+    and finger joints bend without cracks; the shoulders and knuckles are
+    balls that turn about their joint.
 
     Parameters
     ----------
     rig : Rig
-        Its rest pose and bone lengths; joints not in the rig get no body.
-    segments : int
-        Vertices around each limb's cross-section.
+        Its rest pose (T-pose) and bone lengths: the body scales with the
+        shoulder width, the head's and the hand's sizes. Joints not in the rig
+        (``parents == -2``) get no body: their pieces are left out.
+    detail : float
+        Scales the number of rings and of vertices around them (1: about
+        5,500 vertices for a full skeleton).
 
     Returns
     -------
     CharacterMesh
+
+    Raises
+    ------
+    ConfigError
+        ``detail`` not positive, or a rig that places no piece at all.
     """
-    verts: list[np.ndarray] = []
-    faces: list[np.ndarray] = []
-    joints: list[np.ndarray] = []
-    parts: list[np.ndarray] = []
-    ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
-    for c in range(N_JOINTS):
-        p = int(rig.parents[c])
-        if p < 0:
-            continue
-        a, b = rig.rest[p], rig.rest[c]
-        axis = b - a
-        length = float(np.linalg.norm(axis))
-        if length < 1e-6:
-            continue
-        axis = axis / length
-        u = np.cross(axis, [0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0])
-        u /= np.linalg.norm(u)
-        w = np.cross(axis, u)
-        r = _radius(int(PARENTS[c]) if PARENTS[c] >= 0 else c)
-        ring = np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * w
-        base = int(sum(len(x) for x in verts))
-        verts.append(np.concatenate([a + r * ring, b + r * ring, [a, b]]))
-        k = np.arange(segments)
-        k1 = (k + 1) % segments
-        faces.append(
-            np.concatenate(
-                [
-                    np.stack([k, k1, segments + k1], -1),
-                    np.stack([k, segments + k1, segments + k], -1),
-                    np.stack([np.full(segments, 2 * segments), k1, k], -1),
-                    np.stack([np.full(segments, 2 * segments + 1), segments + k, segments + k1], -1),
-                ]
-            )
-            + base
-        )
-        joints.append(np.full(2 * segments + 2, p))
-        parts.append(np.full(2 * segments + 2, 0 if "wrist" in JOINT_NAMES[p] or "head" in JOINT_NAMES[p] else 1))
-    v = np.concatenate(verts).astype(np.float32)
+    if not detail > 0:
+        raise ConfigError(f"a character mesh needs a positive detail, got {detail}")
+    pieces = body_pieces(rig, float(detail))
+    if not pieces:
+        raise ConfigError("the rig's joints place no piece of the character's body (no torso, head or arm)")
+    verts, faces, weights, parts = [], [], [], []
+    base = 0
+    for p in pieces:
+        f = p.faces
+        if signed_volume(p.vertices, f) < 0:
+            f = f[:, ::-1]
+        verts.append(p.vertices)
+        faces.append(f + base)
+        weights.append(p.weights)
+        parts.append(p.part)
+        base += len(p.vertices)
+    v = np.concatenate(verts)
     f = np.concatenate(faces).astype(np.int32)
-    j4 = np.zeros((len(v), 4), np.uint8)
-    j4[:, 0] = np.concatenate(joints)
-    w4 = np.zeros((len(v), 4), np.float32)
-    w4[:, 0] = 1.0
+    joints, w = _top4(np.concatenate(weights), rig)
     return CharacterMesh(
-        vertices=v,
+        vertices=v.astype(np.float32),
         normals=vertex_normals(v, f).astype(np.float32),
         faces=f,
-        joints=j4,
-        weights=w4,
+        joints=joints,
+        weights=w,
         parts=np.concatenate(parts).astype(np.uint8),
     )
+
+
+def _top4(weights: np.ndarray, rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """The four heaviest joints per vertex (ties: the lower index) and their weights, renormalised."""
+    w = np.where(np.asarray(rig.parents)[None] >= -1, np.clip(weights, 0.0, None), 0.0)
+    order = np.argsort(-w, axis=1, kind="stable")[:, :4]
+    top = np.take_along_axis(w, order, axis=1)
+    top[top < 1e-3] = 0.0  # a trace of a joint moves nothing visibly
+    top /= top.sum(axis=1, keepdims=True)
+    # unused slots point at the root, weight 0
+    joints = np.where(top > 0, order, rig.root)
+    return joints.astype(np.uint8), top.astype(np.float32)

@@ -1,0 +1,670 @@
+"""Motion as a binary glTF file (``.glb``): the character, its skeleton, skin and animation, with the speech beside it.
+
+One file that 3D tools and the web (Blender, three.js, model viewers) open as
+an animated, skinned character:
+
+* **Skeleton.** One node per joint of the rig (:func:`gesturekit.character.rig.rig_for`),
+  named by :data:`gesturekit.skeleton.JOINT_NAMES` as in the BVH, in the
+  motion's coordinates (metres, Y up, the character faces +Z). A node's rest
+  translation is its bone's offset in the rig's T-pose; the root rests at the
+  origin. Of a partial skeleton only the drawn joints become nodes, each under
+  its nearest drawn ancestor, as in the BVH.
+* **Animation.** The rotations of the shared solve
+  (:func:`gesturekit.character.rig.solve_pose`, the BVH's) as quaternions,
+  one key per frame at the motion's frame rate (key ``i`` at ``i / fps``
+  seconds), interpolated linearly; each joint's quaternions keep one sign
+  from frame to frame, so the interpolation takes the short way. The root
+  also carries its position.
+* **Skin and body.** The body of :func:`gesturekit.character.mesh.build_mesh`
+  bound to the skeleton: inverse bind matrices (a translation by minus the
+  joint's rest position; rest rotations are the identity), ``JOINTS_0`` and
+  ``WEIGHTS_0`` per vertex, one primitive per part (:data:`~gesturekit.character.mesh.PARTS`)
+  with a plain PBR material (metallic 0, roughness :data:`ROUGHNESS`) of the
+  part's colour in the chosen scheme (:func:`gesturekit.character.look.part_colors`,
+  converted to linear light as glTF's ``baseColorFactor`` is).
+* **Speech.** glTF has no audio; the speech is written as a 16-bit WAV beside
+  the file (the same name with ``.wav``) and named in the extras of the
+  ``asset`` and of the scene: ``{"audio": "take.wav", "fps": 15.0, "frames": ..}``.
+
+The file is written by gesturekit itself (numpy, ``struct``, ``json``): the
+GLB container, one binary buffer, every buffer view starting at a multiple of
+4 bytes.
+
+Error report
+------------
+:func:`export_gltf` reads the written bytes back by another path than the one
+that wrote them (:func:`read_glb`, :func:`accessor_array`, and forward
+kinematics of the nodes' transforms and animation, :func:`node_matrices`)
+and compares every joint with the motion: a :class:`GltfReport`. The file
+holds the rig's bones, each of one length (the median over the motion), in
+32-bit floats: a motion whose bones keep their lengths is reproduced to well
+under a micrometre (0.09 um on 82 s of the demo database). Over
+:data:`WARN_ABOVE` (1 mm) it warns.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from .._io import atomic_write
+from .._version import __version__
+from ..character.look import part_colors
+from ..character.mesh import PARTS, build_mesh
+from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
+from ..character.solve import bvh_parents
+from ..errors import ConfigError, OutputError, warn
+from ..motion import AUDIO_SR, Motion
+from ..outputs import MP4_TAG, check_output
+from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS, PARENTS
+from .bvh import _FINGER_JOINTS, _names
+
+__all__ = [
+    "WARN_ABOVE",
+    "ROUGHNESS",
+    "GENERATOR",
+    "WAV_TAG",
+    "GltfReport",
+    "export_gltf",
+    "audio_path_for",
+    "glb_bytes",
+    "wav_bytes",
+    "read_glb",
+    "accessor_array",
+    "node_matrices",
+]
+
+#: Largest position error of a written file (metres) that passes without a warning: the BVH's, since both files
+#: hold the same solve and miss the motion for the same reason (bones whose length changes over the motion).
+WARN_ABOVE = 0.01
+
+#: Roughness of every material (a matte body).
+ROUGHNESS = 0.9
+
+#: The ``asset.generator`` of every file written.
+GENERATOR = f"gesturekit {__version__}"
+
+#: Marker in the WAV files gesturekit writes (a RIFF ``LIST/INFO`` ``ISFT`` entry), by which
+#: :func:`gesturekit.outputs.check_output` recognises them.
+WAV_TAG = MP4_TAG.encode("ascii")
+
+_FLOAT, _UBYTE, _USHORT, _UINT = 5126, 5121, 5123, 5125
+_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_DTYPE = {_FLOAT: "<f4", _UBYTE: "u1", _USHORT: "<u2", _UINT: "<u4", 5120: "i1", 5122: "<i2"}
+
+
+@dataclass(frozen=True, eq=False)
+class GltfReport:
+    """What a written glTF file holds, and how well it reproduces the motion.
+
+    The errors are measured on the bytes as written: parsed again, forward
+    kinematics of their nodes and animation, every joint of every frame
+    against the motion's positions.
+
+    Attributes
+    ----------
+    path : Path
+        The ``.glb`` file written.
+    audio : Path or None
+        The speech's WAV beside it (None without speech).
+    frames : int
+        Animation keys, one per frame of the motion.
+    fps : float
+        Keys per second.
+    joints : tuple of str
+        The joints written (the skeleton's nodes), in the skin's order.
+    max_error, mean_error : float
+        Largest and mean distance of a joint from its position in the motion, metres.
+    worst_joint : str
+        The joint of the largest error.
+    worst_frame : int
+        Its frame.
+    root : str
+        The root joint.
+    left_out : tuple of str
+        Joints not written (absent from the motion).
+    derived : tuple of str
+        Joints written that the data does not hold (placed from others).
+    vertices, triangles : int
+        Size of the body.
+    size : int
+        Bytes of the file.
+    remedy : str or None
+        What the warning says would bring the file closer to the motion, as
+        :attr:`gesturekit.export.bvh.BvhReport.remedy`.
+    """
+
+    path: Path
+    audio: Path | None
+    frames: int
+    fps: float
+    joints: tuple[str, ...]
+    max_error: float
+    mean_error: float
+    worst_joint: str
+    worst_frame: int
+    root: str
+    left_out: tuple[str, ...]
+    derived: tuple[str, ...]
+    vertices: int
+    triangles: int
+    size: int
+    remedy: str | None = None
+
+    @property
+    def exceeds(self) -> bool:
+        """The largest error is over :data:`WARN_ABOVE`."""
+        return self.max_error > WARN_ABOVE
+
+    def warning(self) -> str | None:
+        """What the warning over :data:`WARN_ABOVE` says (without the file's path); None below it."""
+        if not self.exceeds:
+            return None
+        if self.remedy is None:
+            remedy = "; a database built with `build-db --normalize-bones` gives every bone one length"
+        else:
+            remedy = f"; {self.remedy}" if self.remedy else ""
+        return (
+            f"the glTF file is up to {self.max_error * 1000:.1f} mm off the motion "
+            f"({self.worst_joint}, frame {self.worst_frame}; mean {self.mean_error * 1000:.1f} mm): "
+            f"its bones have one length each, the motion's vary. The npz keeps the exact positions{remedy}."
+        )
+
+    def summary(self) -> str:
+        """One line, e.g. ``"take.glb: position error max 0.00 mm ..., 55 joints, 200 frames at 15 fps; ..."``."""
+        root = f"the derived {self.root}" if self.root in self.derived else self.root
+        parts = [
+            f"{self.path.name}: position error max {self.max_error * 1000:.2f} mm "
+            f"({self.worst_joint}, frame {self.worst_frame}), mean {self.mean_error * 1000:.2f} mm",
+            f"{len(self.joints)} joints, {self.frames} frames at {self.fps:g} fps, root at {root}",
+            f"body of {self.vertices} vertices; {self.size / 1e6:.1f} MB",
+        ]
+        if self.left_out:
+            kind = "finger joint" if set(self.left_out) <= _FINGER_JOINTS else "joint"
+            n = len(self.left_out)
+            parts.append(f"{n} {kind}{'s' if n > 1 else ''} left out: {_names(self.left_out)}")
+        if self.audio is not None:
+            parts.append(f"speech in {self.audio.name}")
+        return "; ".join(parts)
+
+
+def audio_path_for(path: str | os.PathLike[str]) -> Path:
+    """Where :func:`export_gltf` writes the speech of ``path``: the same name with ``.wav``."""
+    return Path(path).with_suffix(".wav")
+
+
+def export_gltf(
+    path: str | os.PathLike[str],
+    motion: Motion,
+    *,
+    audio: np.ndarray | None = None,
+    sr: int = AUDIO_SR,
+    scheme: str = "blue",
+    overwrite: bool = False,
+    rest: np.ndarray | None = None,
+    remedy: str | None = None,
+) -> GltfReport:
+    """Write a motion as a binary glTF file (and its speech as a WAV beside it), atomically, and report
+    how well the file reproduces the motion.
+
+    Warns (:class:`~gesturekit.errors.GestureKitWarning`) when a joint of the
+    file is more than :data:`WARN_ABOVE` from its position in the motion.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to create (written exactly there; ``.glb`` is the usual suffix).
+    motion : Motion
+        Positions (frames, 55, 3) in metres and fps. At least one frame; every
+        value finite. Only its drawn joints are written.
+    audio : np.ndarray, shape (samples,), optional
+        The speech, float samples in [-1, 1] (clipped beyond), written as 16-bit
+        PCM to :func:`audio_path_for` ``(path)`` and named in the file.
+    sr : int
+        Its sample rate, Hz.
+    scheme : str
+        Colour scheme of the body, a key of :data:`gesturekit.character.look.SCHEMES`.
+    overwrite : bool
+        Replace an existing file (and WAV) that gesturekit wrote.
+    rest : np.ndarray, shape (55, 3), optional
+        Joint positions whose bone directions make the rest pose, as for
+        :func:`gesturekit.character.rig.rig_for`; default the T-pose.
+    remedy : str, optional
+        What the warning names as the way to a closer file, as for
+        :func:`gesturekit.export.bvh.export_bvh`.
+
+    Returns
+    -------
+    GltfReport
+
+    Raises
+    ------
+    ConfigError
+        Invalid motion, speech, scheme or rest pose, drawn joints that do not
+        form one tree, or a file to write exists and ``overwrite`` is False
+        (:class:`~gesturekit.errors.OutputError`).
+    """
+    path = Path(path)
+    if not isinstance(motion, Motion):
+        raise ConfigError(f"motion must be a gesturekit Motion, got {type(motion).__name__}", path=path)
+    try:
+        colors = part_colors(scheme)
+    except ConfigError as exc:
+        raise ConfigError(exc.problem, path=path) from None
+    if motion.n_frames == 0:
+        raise ConfigError("cannot write a motion without frames", path=path)
+    positions = motion.positions.astype(np.float64)
+    bad = ~np.isfinite(positions).all(axis=(1, 2))
+    if bad.any():
+        raise ConfigError(f"positions are not finite (NaN or infinite) from frame {int(np.argmax(bad))} on", path=path)
+    wav_path = None
+    samples = None
+    if audio is not None:
+        samples = np.asarray(audio, dtype=np.float64)
+        if samples.ndim != 1 or samples.size == 0 or not np.isfinite(samples).all():
+            raise ConfigError("the speech must be one channel of finite samples", path=path)
+        if not isinstance(sr, (int, np.integer)) or sr <= 0:
+            raise ConfigError(f"the speech's sample rate must be a positive integer, got {sr!r}", path=path)
+        wav_path = audio_path_for(path)
+        if wav_path == path:
+            raise ConfigError("the glTF file cannot have the suffix .wav of its speech; name it .glb", path=path)
+    bvh_parents(motion.presence, path=path)  # a skeleton no tree can hold, named with the file
+    for p in (path, wav_path):
+        if p is None:
+            continue
+        if not overwrite and (p.exists() or p.is_symlink()):
+            raise OutputError("already exists; pass overwrite=True (--force on the command line) to replace it", path=p)
+        if overwrite:
+            check_output(p, "file", overwrite=True)  # only a file gesturekit wrote is replaced
+
+    try:
+        rig = rig_for(motion, rest=rest)
+    except ConfigError as exc:
+        raise ConfigError(exc.problem, path=exc.path or path) from None
+    written = [j for j in range(N_JOINTS) if rig.parents[j] >= -1]
+    extras: dict[str, Any] = {"fps": float(motion.fps), "frames": int(motion.n_frames), "units": "m"}
+    if wav_path is not None:
+        extras["audio"] = wav_path.name
+    doc, binary, n_vertices, n_triangles = _document(motion, rig, written, colors, extras)
+    data = glb_bytes(doc, binary)
+    measured = _measure(data, positions, path=path, written=written)
+    derived = motion.presence.names(DERIVED)
+    report = GltfReport(
+        path=path,
+        audio=wav_path,
+        frames=measured.frames,
+        fps=measured.fps,
+        joints=measured.joints,
+        max_error=measured.max_error,
+        mean_error=measured.mean_error,
+        worst_joint=measured.worst_joint,
+        worst_frame=measured.worst_frame,
+        root=JOINT_NAMES[rig.root],
+        left_out=tuple(JOINT_NAMES[j] for j in range(N_JOINTS) if rig.parents[j] < -1),
+        derived=tuple(n for n in derived if n in measured.joints),
+        vertices=n_vertices,
+        triangles=n_triangles,
+        size=len(data),
+        remedy=remedy,
+    )
+    if wav_path is not None and samples is not None:
+        wav = wav_bytes(samples, int(sr))
+        atomic_write(wav_path, lambda f: f.write(wav), overwrite=overwrite)
+
+    def write(f: BinaryIO) -> None:
+        f.write(data)
+
+    atomic_write(path, write, overwrite=overwrite)
+    message = report.warning()
+    if message is not None:
+        warn(f"{report.path}: {message}", stacklevel=2)
+    return report
+
+
+# ----------------------------------------------------------------------------- the document
+
+
+class _Buffer:
+    """The binary chunk, its buffer views and accessors, grown one array at a time."""
+
+    def __init__(self) -> None:
+        self.data = bytearray()
+        self.views: list[dict[str, Any]] = []
+        self.accessors: list[dict[str, Any]] = []
+
+    def add(
+        self, array: np.ndarray, kind: str, component: int, *, target: int | None = None, bounds: bool = False
+    ) -> int:
+        """Append ``array`` (rows of ``kind``) as one buffer view and accessor; its index."""
+        a = np.ascontiguousarray(array, dtype=_DTYPE[component])
+        self.data.extend(b"\0" * (-len(self.data) % 4))  # every view starts on a 4-byte boundary
+        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self.data), "byteLength": a.nbytes}
+        if target is not None:
+            view["target"] = target
+        self.data.extend(a.tobytes())
+        self.views.append(view)
+        accessor: dict[str, Any] = {
+            "bufferView": len(self.views) - 1,
+            "componentType": component,
+            "count": int(a.shape[0]),
+            "type": kind,
+        }
+        if bounds:
+            rows = a.reshape(a.shape[0], -1)
+            cast = float if component == _FLOAT else int
+            accessor["min"] = [cast(x) for x in rows.min(axis=0)]
+            accessor["max"] = [cast(x) for x in rows.max(axis=0)]
+        self.accessors.append(accessor)
+        return len(self.accessors) - 1
+
+
+def _linear(srgb: np.ndarray) -> np.ndarray:
+    """sRGB colour components in [0, 1] in linear light (the sRGB transfer function)."""
+    c = np.asarray(srgb, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """Quaternions (frames, ..., 4) with each one's sign chosen to be nearest the previous frame's."""
+    q = q.copy()
+    for t in range(1, len(q)):
+        flip = np.sum(q[t] * q[t - 1], axis=-1) < 0
+        q[t][flip] *= -1
+    return q
+
+
+def _document(
+    motion: Motion, rig: Rig, written: list[int], colors: np.ndarray, extras: dict[str, Any]
+) -> tuple[dict[str, Any], bytes, int, int]:
+    """The glTF JSON and its binary chunk; the body's vertex and triangle counts."""
+    pose = solve_pose(motion, rig)
+    mesh = build_mesh(rig)
+    buf = _Buffer()
+    node_of = {j: k for k, j in enumerate(written)}
+    nodes: list[dict[str, Any]] = []
+    for j in written:
+        node: dict[str, Any] = {"name": JOINT_NAMES[j]}
+        if rig.parents[j] >= 0:
+            node["translation"] = [float(x) for x in np.float32(rig.offsets[j])]
+        children = [node_of[c] for c in written if rig.parents[c] == j]
+        if children:
+            node["children"] = children
+        nodes.append(node)
+    root = node_of[rig.root]
+
+    # skin: the rest pose has identity rotations, so B_j is a translation to the joint's rest position
+    ibm = np.tile(np.eye(4), (len(written), 1, 1))
+    ibm[:, :3, 3] = -rig.rest[written]
+    ibm_acc = buf.add(ibm.transpose(0, 2, 1).reshape(len(written), 16), "MAT4", _FLOAT)  # column-major
+    skin = {"name": "skeleton", "inverseBindMatrices": ibm_acc, "joints": list(range(len(written))), "skeleton": root}
+
+    # a vertex bound to a joint outside the rig moves with its nearest ancestor in it, as Pose.world places it
+    slot = np.zeros(N_JOINTS, np.int64)
+    for j in range(N_JOINTS):
+        a = j
+        while rig.parents[a] < -1:
+            a = int(PARENTS[a]) if PARENTS[a] >= 0 else rig.root
+        slot[j] = node_of[a]
+    weights = mesh.weights.astype(np.float64)
+    weights /= weights.sum(axis=1, keepdims=True)
+    joints = np.where(weights > 0, slot[mesh.joints.astype(np.int64)], 0)
+    normals = mesh.normals.astype(np.float64)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-12), [0.0, 1.0, 0.0])
+    attributes = {
+        "POSITION": buf.add(mesh.vertices, "VEC3", _FLOAT, target=_ARRAY_BUFFER, bounds=True),
+        "NORMAL": buf.add(normals, "VEC3", _FLOAT, target=_ARRAY_BUFFER),
+        "JOINTS_0": buf.add(joints, "VEC4", _UBYTE if len(written) <= 256 else _USHORT, target=_ARRAY_BUFFER),
+        "WEIGHTS_0": buf.add(weights, "VEC4", _FLOAT, target=_ARRAY_BUFFER),
+    }
+    face_part = mesh.parts[mesh.faces[:, 0]]
+    index_type = _USHORT if mesh.n_vertices <= 65535 else _UINT
+    primitives: list[dict[str, Any]] = []
+    materials: list[dict[str, Any]] = []
+    for p, name in enumerate(PARTS):
+        faces = mesh.faces[face_part == p]
+        if not len(faces):
+            continue
+        indices = buf.add(faces.reshape(-1), "SCALAR", index_type, target=_ELEMENT_ARRAY_BUFFER)
+        primitives.append({"attributes": attributes, "indices": indices, "material": len(materials), "mode": 4})
+        materials.append(
+            {
+                "name": name,
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [*(float(c) for c in _linear(colors[p])), 1.0],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": ROUGHNESS,
+                },
+            }
+        )
+    nodes.append({"name": "character", "mesh": 0, "skin": 0})
+
+    n = pose.n_frames
+    times = buf.add(np.arange(n) / float(motion.fps), "SCALAR", _FLOAT, bounds=True)
+    quats = _continuous(rotation_to_quaternion(pose.local[:, written]))
+    samplers = [{"input": times, "output": buf.add(pose.root, "VEC3", _FLOAT), "interpolation": "LINEAR"}]
+    channels = [{"sampler": 0, "target": {"node": root, "path": "translation"}}]
+    for k in range(len(written)):
+        samplers.append({"input": times, "output": buf.add(quats[:, k], "VEC4", _FLOAT), "interpolation": "LINEAR"})
+        channels.append({"sampler": len(samplers) - 1, "target": {"node": k, "path": "rotation"}})
+
+    doc = {
+        "asset": {"version": "2.0", "generator": GENERATOR, "extras": extras},
+        "scene": 0,
+        "scenes": [{"name": "gesturekit", "nodes": [root, len(nodes) - 1], "extras": extras}],
+        "nodes": nodes,
+        "meshes": [{"name": "body", "primitives": primitives}],
+        "materials": materials,
+        "skins": [skin],
+        "animations": [{"name": "motion", "samplers": samplers, "channels": channels}],
+        "accessors": buf.accessors,
+        "bufferViews": buf.views,
+        "buffers": [{"byteLength": len(buf.data) + (-len(buf.data) % 4)}],
+    }
+    return doc, bytes(buf.data), mesh.n_vertices, int(len(mesh.faces))
+
+
+def glb_bytes(doc: Mapping[str, Any], binary: bytes) -> bytes:
+    """A GLB container: 12-byte header, the JSON chunk (padded with spaces) and the binary chunk
+    (padded with zeros), each a multiple of 4 bytes."""
+    text = json.dumps(doc, separators=(",", ":"), ensure_ascii=True).encode("ascii")
+    text += b" " * (-len(text) % 4)
+    binary = binary + b"\0" * (-len(binary) % 4)
+    total = 12 + 8 + len(text) + 8 + len(binary)
+    return b"".join(
+        [
+            struct.pack("<4sII", b"glTF", 2, total),
+            struct.pack("<I4s", len(text), b"JSON"),
+            text,
+            struct.pack("<I4s", len(binary), b"BIN\0"),
+            binary,
+        ]
+    )
+
+
+def wav_bytes(samples: np.ndarray, sr: int) -> bytes:
+    """Mono speech as a 16-bit PCM WAV file's bytes, marked as gesturekit's (:data:`WAV_TAG`).
+
+    Parameters
+    ----------
+    samples : np.ndarray, shape (n,)
+        Float samples in [-1, 1] (clipped beyond), written as ``round(32767 * x)``.
+    sr : int
+        Sample rate, Hz.
+    """
+    pcm = np.round(np.clip(np.asarray(samples, dtype=np.float64), -1.0, 1.0) * 32767).astype("<i2").tobytes()
+    tag = WAV_TAG + b"\0" * (2 - len(WAV_TAG) % 2)  # a zero-terminated string, of even length
+    info = b"INFO" + b"ISFT" + struct.pack("<I", len(tag)) + tag
+    chunks = [
+        b"fmt " + struct.pack("<IHHIIHH", 16, 1, 1, int(sr), 2 * int(sr), 2, 16),
+        b"LIST" + struct.pack("<I", len(info)) + info,
+        b"data" + struct.pack("<I", len(pcm)) + pcm + b"\0" * (len(pcm) % 2),
+    ]
+    body = b"WAVE" + b"".join(chunks)
+    return b"RIFF" + struct.pack("<I", len(body)) + body
+
+
+# ----------------------------------------------------------------------------- reading back
+
+
+def read_glb(data: bytes) -> tuple[dict[str, Any], bytes]:
+    """The JSON and the binary chunk of a GLB file's bytes.
+
+    Raises
+    ------
+    ConfigError
+        Not a GLB 2.0 container, or a chunk that does not fit in it.
+    """
+    if len(data) < 20 or data[:4] != b"glTF":
+        raise ConfigError("not a binary glTF file (no glTF header)")
+    _magic, version, total = struct.unpack_from("<4sII", data, 0)
+    if version != 2 or total != len(data):
+        raise ConfigError(f"not a GLB 2.0 file of its length (version {version}, {total} of {len(data)} bytes)")
+    doc: dict[str, Any] | None = None
+    binary = b""
+    at = 12
+    while at + 8 <= total:
+        length, kind = struct.unpack_from("<I4s", data, at)
+        chunk = data[at + 8 : at + 8 + length]
+        if len(chunk) != length:
+            raise ConfigError(f"a GLB chunk of {length} bytes runs past the end of the file")
+        if kind == b"JSON":
+            doc = json.loads(chunk.decode("utf-8"))
+        elif kind == b"BIN\0":
+            binary = chunk
+        at += 8 + length
+    if doc is None:
+        raise ConfigError("a GLB file without its JSON chunk")
+    return doc, binary
+
+
+def accessor_array(doc: Mapping[str, Any], binary: bytes, index: int) -> np.ndarray:
+    """Accessor ``index`` of a glTF document as an array (count, components) (``(count,)`` for scalars)."""
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    dtype = np.dtype(_DTYPE[acc["componentType"]])
+    width = _WIDTH[acc["type"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    stride = view.get("byteStride", width * dtype.itemsize)
+    rows = np.ndarray(
+        (acc["count"], width), dtype=dtype, buffer=binary, offset=start, strides=(stride, dtype.itemsize)
+    ).copy()
+    return rows[:, 0] if acc["type"] == "SCALAR" else rows
+
+
+def _quaternion_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) ``(x, y, z, w)``, normalised first."""
+    q = np.asarray(q, dtype=np.float64)
+    x, y, z, w = np.moveaxis(q / np.linalg.norm(q, axis=-1, keepdims=True), -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def node_matrices(
+    nodes: Sequence[Mapping[str, Any]], tracks: Mapping[tuple[int, str], np.ndarray], n_frames: int
+) -> np.ndarray:
+    """Forward kinematics of glTF nodes: every node's world transform at every key.
+
+    Parameters
+    ----------
+    nodes : sequence of mapping
+        glTF nodes (``children``, ``translation``, ``rotation``, ``scale`` or ``matrix``).
+    tracks : mapping
+        ``(node, path) -> values`` of the animation, ``path`` one of ``"translation"`` (n_frames, 3),
+        ``"rotation"`` (n_frames, 4) ``(x, y, z, w)`` and ``"scale"`` (n_frames, 3), one row per key;
+        a node's own value holds where there is no track.
+    n_frames : int
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, len(nodes), 4, 4)
+        ``world[t, i] @ [p; 1]`` takes a point ``p`` of node ``i``'s frame to the world (the file's units).
+    """
+    parent = [-1] * len(nodes)
+    for i, node in enumerate(nodes):
+        for c in node.get("children", ()):
+            parent[c] = i
+    world = np.zeros((n_frames, len(nodes), 4, 4))
+    done = [False] * len(nodes)
+
+    def local(i: int) -> np.ndarray:
+        node = nodes[i]
+        m = np.tile(np.eye(4), (n_frames, 1, 1))
+        if "matrix" in node:
+            m[:] = np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major
+            return m
+        t = tracks.get((i, "translation"), np.asarray(node.get("translation", (0, 0, 0)), dtype=np.float64))
+        r = tracks.get((i, "rotation"), np.asarray(node.get("rotation", (0, 0, 0, 1)), dtype=np.float64))
+        s = tracks.get((i, "scale"), np.asarray(node.get("scale", (1, 1, 1)), dtype=np.float64))
+        m[:, :3, :3] = _quaternion_matrix(r) * np.asarray(s, dtype=np.float64)[..., None, :]
+        m[:, :3, 3] = t
+        return m
+
+    def place(i: int) -> None:
+        if done[i]:
+            return
+        if parent[i] >= 0:
+            place(parent[i])
+            world[:, i] = world[:, parent[i]] @ local(i)
+        else:
+            world[:, i] = local(i)
+        done[i] = True
+
+    for i in range(len(nodes)):
+        place(i)
+    return world
+
+
+@dataclass(frozen=True)
+class _Measured:
+    frames: int
+    fps: float
+    joints: tuple[str, ...]
+    max_error: float
+    mean_error: float
+    worst_joint: str
+    worst_frame: int
+
+
+def _measure(data: bytes, positions: np.ndarray, *, path: Path, written: list[int]) -> _Measured:
+    """The errors of the GLB ``data`` against ``positions``, read back from its bytes."""
+    doc, binary = read_glb(data)
+    animation = doc["animations"][0]
+    tracks: dict[tuple[int, str], np.ndarray] = {}
+    times = None
+    for channel in animation["channels"]:
+        sampler = animation["samplers"][channel["sampler"]]
+        times = accessor_array(doc, binary, sampler["input"])
+        tracks[(channel["target"]["node"], channel["target"]["path"])] = accessor_array(doc, binary, sampler["output"])
+    assert times is not None
+    fps = float(doc["asset"]["extras"]["fps"])
+    if len(times) != len(positions) or not np.allclose(times, np.arange(len(positions)) / fps, rtol=1e-6, atol=1e-6):
+        raise ConfigError(f"the written animation's keys are not the motion's {len(positions)} frames", path=path)
+    world = node_matrices(doc["nodes"], tracks, len(times))[..., :3, 3]
+    by_name = {node.get("name"): i for i, node in enumerate(doc["nodes"])}
+    names = tuple(JOINT_NAMES[j] for j in written)
+    err = np.linalg.norm(world[:, [by_name[n] for n in names]] - positions[:, written], axis=-1)
+    frame, k = np.unravel_index(int(np.argmax(err)), err.shape)
+    return _Measured(
+        frames=len(times),
+        fps=fps,
+        joints=names,
+        max_error=float(err.max()),
+        mean_error=float(err.mean()),
+        worst_joint=names[int(k)],
+        worst_frame=int(frame),
+    )
