@@ -12,13 +12,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as hst
 
 from gesturekit.character import look
-from gesturekit.character.mesh import PARTS, build_mesh
+from gesturekit.character.mesh import PARTS, CharacterMesh, build_mesh
 from gesturekit.character.rig import rig_for, rotation_to_quaternion, solve_pose
 from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS
 from gesturekit.viz.figures import skeleton_figure
-from gesturekit.viz.viewer import QUATERNION_SCALE, VIEWER_MAX_FRAMES, read_viewer_data, skeleton_viewer, viewer_data
+from gesturekit.viz.viewer import (
+    QUATERNION_SCALE,
+    VIEWER_MAX_FRAMES,
+    _split_at_part_seams,
+    read_viewer_data,
+    skeleton_viewer,
+    viewer_data,
+)
 from gesturekit.viz.web import build as web
 
 
@@ -50,12 +57,10 @@ def test_every_shown_frame_poses_each_character_as_the_rig_solve_does_side_by_si
         expected = pose.world(rig)[1] + [m["offset"], 0.0, 0.0]
         np.testing.assert_allclose(m["points"], expected, atol=2e-3)
         # the mesh is the character's, bound to this rig, in the k-th scheme's colours
-        mesh = build_mesh(rig)
-        np.testing.assert_array_equal(m["mesh"]["vertices"], mesh.vertices)
-        np.testing.assert_array_equal(m["mesh"]["faces"], mesh.faces)
-        np.testing.assert_array_equal(m["mesh"]["joints"], mesh.joints)
-        np.testing.assert_array_equal(m["mesh"]["weights"], mesh.weights)
-        np.testing.assert_array_equal(m["mesh"]["parts"], mesh.parts)  # no derived joint in these motions
+        mesh, page = build_mesh(rig), m["mesh"]
+        for name in ("vertices", "normals", "joints", "weights"):  # every triangle's corners as the mesh has them
+            np.testing.assert_array_equal(page[name][page["faces"]], getattr(mesh, name)[mesh.faces])
+        np.testing.assert_array_equal(page["parts"][: mesh.n_vertices], mesh.parts)  # no derived joint here
         np.testing.assert_allclose(m["rig"]["offsets"], rig.offsets, atol=1e-6)
         assert m["scheme"] == look.scheme_for(i)
         np.testing.assert_allclose(np.asarray(m["colors"])[: len(PARTS)], look.part_colors(m["scheme"]), atol=1e-6)
@@ -245,3 +250,32 @@ def test_a_motion_with_every_joint_at_one_point_has_no_body_but_still_plays():
     assert nobody["mesh"]["vertices"].shape == (0, 3) and nobody["mesh"]["faces"].shape == (0, 3)
     assert body["mesh"]["vertices"].shape[0] > 0 and len(data["times"]) == 4
     assert np.isfinite(nobody["rotations"]).all() and np.isfinite(nobody["points"]).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(hst.integers(3, 30), hst.integers(1, 40), hst.integers(1, 4), hst.integers(0, 10**6))
+def test_splitting_at_part_seams_keeps_every_corner_and_gives_each_triangle_one_part(
+    n_vertices, n_faces, n_parts, seed
+):
+    rng = np.random.default_rng(seed)
+    mesh = CharacterMesh(
+        vertices=rng.normal(size=(n_vertices, 3)).astype(np.float32),
+        normals=rng.normal(size=(n_vertices, 3)).astype(np.float32),
+        faces=rng.integers(0, n_vertices, (n_faces, 3)).astype(np.int32),
+        joints=rng.integers(0, N_JOINTS, (n_vertices, 4)).astype(np.uint8),
+        weights=rng.dirichlet(np.ones(4), n_vertices).astype(np.float32),
+        parts=np.zeros(n_vertices, np.uint8),
+    )
+    parts = rng.integers(0, n_parts, n_vertices).astype(np.uint8)
+    out = _split_at_part_seams(mesh, parts)
+    for name in ("vertices", "normals", "joints", "weights"):
+        np.testing.assert_array_equal(getattr(out, name)[out.faces], getattr(mesh, name)[mesh.faces])
+    corner = out.parts[out.faces]
+    assert (corner == corner[:, :1]).all()  # one part per triangle
+    np.testing.assert_array_equal(out.parts[:n_vertices], parts)  # the original vertices keep theirs
+    # a triangle takes the part that two of its corners share, and one whose corners agree keeps it
+    had = parts[mesh.faces]
+    agree = (had[:, 1] == had[:, 2]) | (had[:, 0] == had[:, 1]) | (had[:, 0] == had[:, 2])
+    majority = np.where(had[:, 1] == had[:, 2], had[:, 1], had[:, 0])
+    np.testing.assert_array_equal(corner[agree, 0], majority[agree])
+    assert out.n_vertices <= n_vertices + 2 * n_faces  # copies only where a seam needs them

@@ -27,6 +27,7 @@ plotly figure's (:func:`gesturekit.viz.figures.data_array` reads them).
 from __future__ import annotations
 
 import base64
+import dataclasses
 import html
 import io
 import json
@@ -45,7 +46,7 @@ from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS
-from ._plotly import _frames_at, _motions_and_labels, _time_grid, data_array
+from ._plotly import _frames_at, _motions_and_labels, _time_grid
 from .appearance import APPEARANCE
 from .web.build import bundle
 
@@ -147,7 +148,9 @@ def _typed(values: np.ndarray, dtype: str) -> dict:
 
 
 def _array(spec: dict) -> np.ndarray:
-    return data_array(spec).reshape(tuple(int(n) for n in spec["shape"].split(",")))
+    """A typed-array spec's values, in its own dtype (native byte order) and shape."""
+    out = np.frombuffer(base64.b64decode(spec["bdata"]), dtype=np.dtype(spec["dtype"]).newbyteorder("<"))
+    return out.astype(out.dtype.newbyteorder("=")).reshape(tuple(int(n) for n in spec["shape"].split(",")))
 
 
 def _page_parents(rig: Rig) -> list[int]:
@@ -177,6 +180,36 @@ _NO_BODY = CharacterMesh(
 )
 
 
+def _split_at_part_seams(mesh: CharacterMesh, parts: np.ndarray) -> CharacterMesh:
+    """The mesh with ``parts`` (V,), each triangle in one part: a triangle takes the part of two of its corners
+    (else its first's), and a corner of another part is replaced by a copy of its vertex in the triangle's part.
+
+    The page colours vertices, and a colour interpolated across a seam would blend two parts; copies keep
+    each part's colour up to the seam, as one material per part would. Positions, normals and skinning of
+    every triangle's corners are unchanged.
+    """
+    f = mesh.faces
+    fp = parts[f]  # (F, 3)
+    face_part = np.where(fp[:, 1] == fp[:, 2], fp[:, 1], fp[:, 0])
+    off = fp != face_part[:, None]
+    if not off.any():
+        return dataclasses.replace(mesh, parts=parts)
+    # one copy per (vertex, part) that some triangle needs
+    wanted = f[off].astype(np.int64) * 256 + np.broadcast_to(face_part[:, None], f.shape)[off]
+    keys, slot = np.unique(wanted, return_inverse=True)
+    src = keys // 256
+    faces = f.copy()
+    faces[off] = mesh.n_vertices + slot.reshape(-1)
+    return CharacterMesh(
+        vertices=np.concatenate([mesh.vertices, mesh.vertices[src]]),
+        normals=np.concatenate([mesh.normals, mesh.normals[src]]),
+        faces=faces.astype(np.int32),
+        joints=np.concatenate([mesh.joints, mesh.joints[src]]),
+        weights=np.concatenate([mesh.weights, mesh.weights[src]]),
+        parts=np.concatenate([parts, (keys % 256).astype(np.uint8)]),
+    )
+
+
 def _character(motion: Motion, scheme: str) -> dict:
     """One motion's rig, mesh and animation (over all its frames), as typed-array specs."""
     rig = rig_for(motion)
@@ -187,7 +220,7 @@ def _character(motion: Motion, scheme: str) -> dict:
     # a vertex led by a derived joint (placed from others, not recorded) takes the derived colour
     derived = np.array([s == DERIVED for s in motion.presence.status])
     lead = mesh.joints[np.arange(mesh.n_vertices), np.argmax(mesh.weights, axis=1)]
-    parts = np.where(derived[lead], len(PARTS), mesh.parts).astype(np.uint8)
+    mesh = _split_at_part_seams(mesh, np.where(derived[lead], len(PARTS), mesh.parts).astype(np.uint8))
     colors = np.vstack(
         [look.part_colors(scheme), [[int(APPEARANCE.derived_color[i : i + 2], 16) / 255 for i in (1, 3, 5)]]]
     )
@@ -207,7 +240,7 @@ def _character(motion: Motion, scheme: str) -> dict:
             "faces": _typed(mesh.faces, "u2" if mesh.n_vertices < 2**16 else "u4"),
             "joints": _typed(mesh.joints, "u1"),
             "weights": _typed(mesh.weights, "f4"),
-            "parts": _typed(parts, "u1"),
+            "parts": _typed(mesh.parts, "u1"),
         },
         "rotations": _typed(quats, "i2"),
         "root": _typed(pose.root, "f4"),
