@@ -62,6 +62,12 @@ def _demo() -> tuple[Rig, CharacterMesh, Pose]:
     return rig, build_mesh(rig), pose
 
 
+def _clip_motion(clip: int) -> Motion:
+    """One clip of the demo database as a motion (64 frames at 15 fps)."""
+    db = _db()
+    return Motion(np.asarray(db.poses[clip]).reshape(-1, N_JOINTS, 3).astype(np.float32), 15.0, db.joint_presence)
+
+
 def skin_grouped(mesh: CharacterMesh, matrices: np.ndarray, vertices: np.ndarray) -> np.ndarray:
     """Linear blend skinning of some vertices, joint by joint: shape (frames, 3, n), float64.
 
@@ -489,3 +495,27 @@ def test_a_layout_without_any_body_is_refused():
     rig = rig_for(Motion(positions, 15.0, JointPresence(tuple(status))))
     with pytest.raises(ConfigError, match="no piece"):
         build_mesh(rig)
+
+
+def test_skinned_normals_are_the_rest_normals_turned_as_the_skinned_surface_turns():
+    """skin_normals (the page's and the MP4's shading normals) against the normals of the skinned surface itself."""
+    from gesturekit.character.mesh import vertex_normals
+    from gesturekit.character.skin import skin_normals
+
+    motion = _clip_motion(5)
+    rig = rig_for(motion)
+    mesh = build_mesh(rig)
+    pose = solve_pose(motion, rig)
+    frames = np.array([0, 31, 63])
+    n = skin_normals(mesh, rig, pose, frames)
+    assert n.shape == (3, mesh.n_vertices, 3)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-5)
+    # a vertex bound to one joint: exactly its rest normal turned by that joint's world rotation
+    rot, _ = pose.world(rig)
+    rigid = np.flatnonzero(mesh.weights[:, 0] == 1.0)
+    want = np.einsum("tvab,vb->tva", rot[frames][:, mesh.joints[rigid, 0]], mesh.normals[rigid])
+    np.testing.assert_allclose(n[:, rigid], want, atol=1e-5)
+    # everywhere, close to the normal of the skinned surface (which a blend bends a little at joints)
+    surface = vertex_normals(skin_vertices(mesh, rig, pose, frames), mesh.faces)
+    cos = np.sum(n * surface, axis=-1)
+    assert np.median(cos) > 0.999 and np.percentile(cos, 99) > 0.9, (np.median(cos), np.percentile(cos, 99))

@@ -188,7 +188,7 @@ def test_stimuli_are_the_neutral_grey_character():
     assert (body.max(axis=1) - body.min(axis=1)).max() <= 1  # no hue anywhere
     # every pixel between the darkest and the brightest shaded vertex (Gouraud blends vertex colours)
     stage = CharacterStage([motion], neutral=True)
-    colours = stage.colors(0, stage.vertices(0, 0))[:, 0].astype(int)
+    colours = stage.colors(0, 0)[:, 0].astype(int)
     assert colours.min() - 1 <= body.min() and body.max() <= colours.max() + 1
     # the side-by-side look instead: a blue shirt
     coloured = render_image(motion, resolution=(160, 120)).astype(int)
@@ -288,27 +288,33 @@ def test_the_command_line_and_the_result_video_choose_the_look(tmp_path, monkeyp
     assert not any(s.neutral for s in seen)  # the app and the command line show the side-by-side schemes
 
 
-def test_vertices_led_by_derived_joints_are_derived_grey_as_on_the_page():
+def test_vertices_led_by_derived_joints_are_derived_grey_and_the_page_and_the_mp4_paint_alike():
+    from gesturekit.character.paint import DERIVED_COLOR, paint
     from gesturekit.skeleton import DERIVABLE_JOINTS
-    from gesturekit.viz.appearance import APPEARANCE, hex_to_rgb
-    from gesturekit.viz.character_render import vertex_colors
+    from gesturekit.viz.appearance import hex_to_rgb
     from gesturekit.viz.viewer import viewer_data
 
     torso = tuple(n for n in DERIVABLE_JOINTS if n != "neck")
     presence = JointPresence.from_names(recorded=[n for n in JOINT_NAMES if n not in torso], derived=torso)
     motion = demo_motion(0, 2, presence)
-    mesh = build_mesh(rig_for(motion))
-    colours = vertex_colors(mesh, motion, "blue")
+    body = build_mesh(rig_for(motion))
+    mesh, palette = paint(body, presence, "blue")
+    colours = palette[mesh.parts]
     derived = {joint_index(n) for n in torso}
-    for v in range(mesh.n_vertices):
+    for v in range(body.n_vertices):  # the body's own vertices (copies at seams take their triangle's colour)
         lead = int(mesh.joints[v, int(np.argmax(mesh.weights[v]))])
-        want = hex_to_rgb(APPEARANCE.derived_color) if lead in derived else part_colors("blue")[mesh.parts[v]]
+        want = hex_to_rgb(DERIVED_COLOR) if lead in derived else part_colors("blue")[body.parts[v]]
         np.testing.assert_array_equal(colours[v], want)
-    assert (colours == hex_to_rgb(APPEARANCE.derived_color)).all(axis=1).any()
-    # the page's colours for the same motion, vertex by vertex
+    assert (colours == hex_to_rgb(DERIVED_COLOR)).all(axis=1).any()
+    # every triangle in one colour: no colour is blended across a seam
+    assert (mesh.parts[mesh.faces] == mesh.parts[mesh.faces][:, :1]).all()
+    # the page's mesh and colours for the same motion are the MP4's, vertex by vertex
     page = viewer_data([motion])["motions"][0]
     parts = np.frombuffer(base64.b64decode(page["mesh"]["parts"]["bdata"]), np.uint8)
+    np.testing.assert_array_equal(parts, mesh.parts)
     np.testing.assert_allclose(np.asarray(page["colors"])[parts], colours, atol=1e-6)
+    stage = CharacterStage([motion])
+    np.testing.assert_array_equal(stage.meshes[0].parts, mesh.parts)
 
 
 def test_a_motion_without_bone_lengths_has_no_body_and_its_neighbour_is_drawn():

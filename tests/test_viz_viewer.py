@@ -13,19 +13,13 @@ from hypothesis import strategies as hst
 
 from gesturekit.character import look
 from gesturekit.character.mesh import PARTS, CharacterMesh, build_mesh
+from gesturekit.character.paint import split_at_part_seams
 from gesturekit.character.rig import rig_for, rotation_to_quaternion, solve_pose
 from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS
 from gesturekit.viz.figures import skeleton_figure
-from gesturekit.viz.viewer import (
-    QUATERNION_SCALE,
-    VIEWER_MAX_FRAMES,
-    _split_at_part_seams,
-    read_viewer_data,
-    skeleton_viewer,
-    viewer_data,
-)
+from gesturekit.viz.viewer import QUATERNION_SCALE, VIEWER_MAX_FRAMES, read_viewer_data, skeleton_viewer, viewer_data
 from gesturekit.viz.web import build as web
 
 
@@ -267,7 +261,7 @@ def test_splitting_at_part_seams_keeps_every_corner_and_gives_each_triangle_one_
         parts=np.zeros(n_vertices, np.uint8),
     )
     parts = rng.integers(0, n_parts, n_vertices).astype(np.uint8)
-    out = _split_at_part_seams(mesh, parts)
+    out = split_at_part_seams(mesh, parts)
     for name in ("vertices", "normals", "joints", "weights"):
         np.testing.assert_array_equal(getattr(out, name)[out.faces], getattr(mesh, name)[mesh.faces])
     corner = out.parts[out.faces]

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from ..character.paint import DERIVED_COLOR
 from ..errors import ConfigError
 from ..skeleton import ABSENT, DERIVED, JOINT_NAMES, N_JOINTS, PARENTS, RECORDED, JointPresence, joint_index
 
@@ -266,7 +267,7 @@ class Appearance:
     ambient: float = 0.5
     diffuse: float = 0.62
     # the scene: a background, the floor the figure stands on and its contact shadow
-    derived_color: str = "#a2a8af"
+    derived_color: str = DERIVED_COLOR
     background: str = "#f4f5f7"
     ground_color: str = "#e3e6ea"
     shadow_color: str = "#000000"

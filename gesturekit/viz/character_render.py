@@ -29,23 +29,14 @@ from ..character.look import (
     scheme_for,
     stage_layout,
 )
-from ..character.mesh import PARTS, CharacterMesh, build_mesh, vertex_normals
+from ..character.mesh import PARTS, CharacterMesh, build_mesh
+from ..character.paint import EMPTY_BODY, paint
 from ..character.rig import Pose, Rig, rig_for, solve_pose
-from ..character.skin import skin_vertices
+from ..character.skin import skin_normals, skin_vertices
 from ..errors import ConfigError
 from ..motion import Motion
-from ..skeleton import DERIVED
-from .appearance import APPEARANCE, hex_to_rgb
 
-__all__ = [
-    "srgb_to_linear",
-    "linear_to_srgb",
-    "shade",
-    "visible_faces",
-    "vertex_colors",
-    "CharacterStage",
-    "CharacterDrawing",
-]
+__all__ = ["srgb_to_linear", "linear_to_srgb", "shade", "visible_faces", "CharacterStage", "CharacterDrawing"]
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -92,28 +83,9 @@ def visible_faces(mesh: CharacterMesh, rig: Rig) -> np.ndarray:
     return mesh.faces[~on_absent[mesh.faces].any(axis=1)]
 
 
-def vertex_colors(mesh: CharacterMesh, motion: Motion, scheme: str) -> np.ndarray:
-    """Each vertex's unlit colour, shape (V, 3), sRGB in [0, 1], as the page gives it: its part's in the
-    scheme, or the derived grey (:attr:`~gesturekit.viz.appearance.Appearance.derived_color`) where the
-    joint with its largest weight is derived (placed from others, not recorded)."""
-    derived = np.array([s == DERIVED for s in motion.presence.status])
-    lead = mesh.joints[np.arange(mesh.n_vertices), np.argmax(mesh.weights, axis=1)]
-    colors = np.vstack([part_colors(scheme), hex_to_rgb(APPEARANCE.derived_color)])
-    return colors[np.where(derived[lead], len(colors) - 1, mesh.parts)]
-
-
 def _body(rig: Rig) -> CharacterMesh:
     """The rig's body; none (no vertex) when no bone has a length (every joint at one point), as on the page."""
-    if (rig.lengths[rig.parents >= 0] > 1e-6).any():
-        return build_mesh(rig)
-    return CharacterMesh(
-        vertices=np.zeros((0, 3), np.float32),
-        normals=np.zeros((0, 3), np.float32),
-        faces=np.zeros((0, 3), np.int32),
-        joints=np.zeros((0, 4), np.uint8),
-        weights=np.zeros((0, 4), np.float32),
-        parts=np.zeros(0, np.uint8),
-    )
+    return build_mesh(rig) if (rig.lengths[rig.parents >= 0] > 1e-6).any() else EMPTY_BODY
 
 
 class CharacterStage:
@@ -146,16 +118,16 @@ class CharacterStage:
             raise ConfigError("a stage needs at least one motion")
         self.rigs = [rig_for(m) for m in self.motions]
         self.poses = [solve_pose(m, r) for m, r in zip(self.motions, self.rigs)]
-        self.meshes = [_body(r) for r in self.rigs]
+        self.schemes = [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
+        # the page's colours on the page's mesh: split where colours meet, each vertex one palette entry
+        painted = [paint(_body(r), m.presence, s) for r, m, s in zip(self.rigs, self.motions, self.schemes)]
+        self.meshes = [mesh for mesh, _ in painted]
         self.faces = [visible_faces(mesh, r) for mesh, r in zip(self.meshes, self.rigs)]
         # the page's layout rule on the page's input: every drawn joint over the clip
         self.offsets, self.box = stage_layout([m.positions[:, m.presence.drawn] for m in self.motions])
         if view_box is not None:
             self.box = np.asarray(view_box, dtype=np.float64).T.copy()
-        self.schemes = [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
-        self._albedo = [
-            srgb_to_linear(vertex_colors(mesh, m, s)) for mesh, m, s in zip(self.meshes, self.motions, self.schemes)
-        ]  # (V, 3) each, linear light
+        self._albedo = [srgb_to_linear(palette[mesh.parts]) for mesh, palette in painted]  # (V, 3), linear light
 
     @property
     def n_frames(self) -> int:
@@ -178,11 +150,18 @@ class CharacterStage:
         v[:, 0] += np.float32(self.offsets[index])
         return v
 
-    def colors(self, index: int, vertices: np.ndarray) -> np.ndarray:
-        """Shaded sRGB colours, shape (V, 3), uint8, of character ``index`` with these vertices."""
-        if not len(vertices):  # no body
+    def colors(self, index: int, frame: int) -> np.ndarray:
+        """Shaded sRGB colours, shape (V, 3), uint8, of character ``index`` at ``frame`` (its last past its end).
+
+        The normals are the rest normals skinned as three.js skins them
+        (:func:`~gesturekit.character.skin.skin_normals`), so the MP4 shades each vertex as the page does.
+        """
+        if not self.meshes[index].n_vertices:  # no body
             return np.zeros((0, 3), np.uint8)
-        return shade(vertex_normals(vertices, self.meshes[index].faces), self._albedo[index])
+        pose = self.poses[index]
+        f = min(int(frame), pose.n_frames - 1)
+        one = Pose(local=pose.local[f : f + 1], root=pose.root[f : f + 1])
+        return shade(skin_normals(self.meshes[index], self.rigs[index], one)[0], self._albedo[index])
 
     def label_anchor(self, index: int) -> np.ndarray:
         """Where character ``index``'s label stands, shape (3,), metres: as on the page, at the top of
@@ -234,7 +213,7 @@ class CharacterDrawing:
             v = stage.vertices(i, 0)
             cells = np.hstack([np.full((len(faces), 1), 3, dtype=np.int64), faces.astype(np.int64)])
             mesh = pv.PolyData(v.astype(np.float64), cells.ravel())
-            rgb = numpy_to_vtk(stage.colors(i, v), deep=True)
+            rgb = numpy_to_vtk(stage.colors(i, 0), deep=True)
             rgb.SetName("rgb")
             mesh.GetPointData().SetScalars(rgb)
             actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
@@ -282,6 +261,6 @@ class CharacterDrawing:
             v = self.stage.vertices(i, frame)
             self._point_views[k][:] = v
             mesh.GetPoints().Modified()
-            self._color_views[k][:] = self.stage.colors(i, v)
+            self._color_views[k][:] = self.stage.colors(i, frame)
             rgb.Modified()
         self._frame = frame

@@ -27,7 +27,6 @@ plotly figure's (:func:`gesturekit.viz.figures.data_array` reads them).
 from __future__ import annotations
 
 import base64
-import dataclasses
 import html
 import io
 import json
@@ -41,13 +40,13 @@ import numpy as np
 import numpy.typing as npt
 
 from ..character import look
-from ..character.mesh import PARTS, CharacterMesh, build_mesh
+from ..character.mesh import build_mesh
+from ..character.paint import EMPTY_BODY, paint
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS
 from ._plotly import _frames_at, _motions_and_labels, _time_grid
-from .appearance import APPEARANCE
 from .web.build import bundle
 
 if TYPE_CHECKING:
@@ -170,60 +169,14 @@ def _page_parents(rig: Rig) -> list[int]:
     return out
 
 
-_NO_BODY = CharacterMesh(
-    vertices=np.zeros((0, 3), np.float32),
-    normals=np.zeros((0, 3), np.float32),
-    faces=np.zeros((0, 3), np.int32),
-    joints=np.zeros((0, 4), np.uint8),
-    weights=np.zeros((0, 4), np.float32),
-    parts=np.zeros(0, np.uint8),
-)
-
-
-def _split_at_part_seams(mesh: CharacterMesh, parts: np.ndarray) -> CharacterMesh:
-    """The mesh with ``parts`` (V,), each triangle in one part: a triangle takes the part of two of its corners
-    (else its first's), and a corner of another part is replaced by a copy of its vertex in the triangle's part.
-
-    The page colours vertices, and a colour interpolated across a seam would blend two parts; copies keep
-    each part's colour up to the seam, as one material per part would. Positions, normals and skinning of
-    every triangle's corners are unchanged.
-    """
-    f = mesh.faces
-    fp = parts[f]  # (F, 3)
-    face_part = np.where(fp[:, 1] == fp[:, 2], fp[:, 1], fp[:, 0])
-    off = fp != face_part[:, None]
-    if not off.any():
-        return dataclasses.replace(mesh, parts=parts)
-    # one copy per (vertex, part) that some triangle needs
-    wanted = f[off].astype(np.int64) * 256 + np.broadcast_to(face_part[:, None], f.shape)[off]
-    keys, slot = np.unique(wanted, return_inverse=True)
-    src = keys // 256
-    faces = f.copy()
-    faces[off] = mesh.n_vertices + slot.reshape(-1)
-    return CharacterMesh(
-        vertices=np.concatenate([mesh.vertices, mesh.vertices[src]]),
-        normals=np.concatenate([mesh.normals, mesh.normals[src]]),
-        faces=faces.astype(np.int32),
-        joints=np.concatenate([mesh.joints, mesh.joints[src]]),
-        weights=np.concatenate([mesh.weights, mesh.weights[src]]),
-        parts=np.concatenate([parts, (keys % 256).astype(np.uint8)]),
-    )
-
-
 def _character(motion: Motion, scheme: str) -> dict:
     """One motion's rig, mesh and animation (over all its frames), as typed-array specs."""
     rig = rig_for(motion)
     pose = solve_pose(motion, rig)
     # a motion without a bone of any length (every joint at one point) has no body to build around
-    mesh = build_mesh(rig) if (rig.lengths[rig.parents >= 0] > 1e-6).any() else _NO_BODY
+    mesh = build_mesh(rig) if (rig.lengths[rig.parents >= 0] > 1e-6).any() else EMPTY_BODY
     quats = np.round(rotation_to_quaternion(pose.local) * QUATERNION_SCALE).astype(np.int16)
-    # a vertex led by a derived joint (placed from others, not recorded) takes the derived colour
-    derived = np.array([s == DERIVED for s in motion.presence.status])
-    lead = mesh.joints[np.arange(mesh.n_vertices), np.argmax(mesh.weights, axis=1)]
-    mesh = _split_at_part_seams(mesh, np.where(derived[lead], len(PARTS), mesh.parts).astype(np.uint8))
-    colors = np.vstack(
-        [look.part_colors(scheme), [[int(APPEARANCE.derived_color[i : i + 2], 16) / 255 for i in (1, 3, 5)]]]
-    )
+    mesh, colors = paint(mesh, motion.presence, scheme)
     return {
         "scheme": scheme,
         "colors": [[round(float(c), 6) for c in row] for row in colors],
