@@ -17,7 +17,8 @@ built from the data: spine and head straight up (+Y), collars, arms and
 forearms sideways (the character's left is +X), palms down with the fingers
 straight. The shapes that one rotation must carry rigidly (the neck and both
 collars on ``upper_chest``, the five finger roots on a wrist) are the data's
-own average shapes, turned into that pose.
+own average shapes (over at most :data:`MEAN_SHAPE_FRAMES` frames spread
+evenly over the motion), turned into that pose.
 
 Rotations
 ---------
@@ -64,6 +65,7 @@ from ..skeleton import FINGERS, JOINT_NAMES, N_JOINTS, PARENTS, JointPresence, j
 
 __all__ = [
     "LEFT_OUT",
+    "MEAN_SHAPE_FRAMES",
     "ROTATION_ORDERS",
     "TWIST_REFERENCES",
     "bvh_parents",
@@ -74,6 +76,9 @@ __all__ = [
     "euler_from_matrices",
     "continuous_angles",
 ]
+
+#: Most frames a rigidly carried shape (neck and collars, finger roots) is averaged over for the rest pose.
+MEAN_SHAPE_FRAMES = 2048
 
 #: ``parents`` entry of a joint that is not written.
 LEFT_OUT = -2
@@ -320,7 +325,11 @@ def _mean_shape(positions: np.ndarray, joint: int, children: tuple[int, ...], *,
 
     Generalised Procrustes: every frame's bones are turned onto the current
     mean (Kabsch), then averaged; the orientation of the result is arbitrary.
+    A motion longer than :data:`MEAN_SHAPE_FRAMES` is averaged over that many
+    frames spread evenly over it.
     """
+    if len(positions) > MEAN_SHAPE_FRAMES:  # a rigid shape's average settles long before; SVDs cost per frame
+        positions = positions[np.linspace(0, len(positions) - 1, MEAN_SHAPE_FRAMES).round().astype(np.int64)]
     bones = positions[:, list(children)] - positions[:, joint, None]
     mean = bones[0]
     for _ in range(iterations):
