@@ -6,7 +6,8 @@ with its largest weight is derived (placed from other joints, not recorded). Col
 given per vertex (the page and the MP4 both interpolate them across a triangle), so
 :func:`paint` first gives every triangle one colour: a corner whose colour differs from
 its triangle's is replaced by a copy of its vertex, and each part keeps its colour up to
-the seam, as one material per part would.
+the seam, as one material per part would. The order of the palette decides which colour a
+triangle between two takes: skin, then the shirt, then the face's marks, then the derived grey.
 """
 
 from __future__ import annotations
@@ -38,8 +39,10 @@ EMPTY_BODY = CharacterMesh(
 def split_at_part_seams(mesh: CharacterMesh, parts: np.ndarray) -> CharacterMesh:
     """The mesh with ``parts`` (V,), each triangle in one part.
 
-    A triangle takes the part of two of its corners (else its first's), and a corner of another
-    part is replaced by a copy of its vertex in the triangle's part. Positions, normals and
+    A triangle takes the lowest part among its corners, and a corner of another part is replaced
+    by a copy of its vertex in the triangle's part. Between two rings of a limb in different parts,
+    every triangle so takes the same part, and the seam runs along a ring (a majority rule would
+    alternate triangle by triangle and draw a saw-tooth). Positions, normals and
     skinning of every triangle's corners are unchanged; the copies follow the original vertices
     (shape (V + copies, ...)).
 
@@ -56,7 +59,7 @@ def split_at_part_seams(mesh: CharacterMesh, parts: np.ndarray) -> CharacterMesh
     """
     f = mesh.faces
     fp = parts[f]  # (F, 3)
-    face_part = np.where(fp[:, 1] == fp[:, 2], fp[:, 1], fp[:, 0])
+    face_part = fp.min(axis=1)
     off = fp != face_part[:, None]
     if not off.any():
         return dataclasses.replace(mesh, parts=parts)
