@@ -50,7 +50,7 @@ import io
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
@@ -71,6 +71,9 @@ from ..character.solve import (
 from ..errors import ConfigError, warn
 from ..motion import Motion
 from ..skeleton import DERIVED, FINGERS, JOINT_NAMES, N_JOINTS, PARENTS
+
+if TYPE_CHECKING:
+    from .gltf import GltfReport
 
 __all__ = [
     "ROTATION_ORDERS",
@@ -153,15 +156,10 @@ class BvhReport:
         """What the warning over :data:`WARN_ABOVE` says (without the file's path); None below it."""
         if not self.exceeds:
             return None
-        if self.remedy is None:
-            remedy = "; a database built with `build-db --normalize-bones` gives every bone one length"
-        else:
-            remedy = f"; {self.remedy}" if self.remedy else ""
-        return (
-            f"the BVH file is up to {self.max_error * 100:.1f} cm off the motion "
-            f"({self.worst_joint}, frame {self.worst_frame}; mean {self.mean_error * 1000:.1f} mm): "
-            "its bones have one length each (and the bones leaving one joint keep one shape), the motion's "
-            f"vary. The npz keeps the exact positions{remedy}."
+        return error_warning(
+            f"the BVH file is up to {self.max_error * 100:.1f} cm off the motion",
+            self,
+            shapes=" (and the bones leaving one joint keep one shape)",
         )
 
     def summary(self) -> str:
@@ -180,6 +178,29 @@ class BvhReport:
         if others:
             parts.append(f"derived joints written: {_names(others)}")
         return "; ".join(parts)
+
+
+def error_warning(headline: str, report: BvhReport | GltfReport, *, shapes: str = "") -> str:
+    """The warning of a file that misses its motion: ``headline``, the worst joint and frame, why, and the remedy.
+
+    Parameters
+    ----------
+    headline : str
+        What is off and by how much, e.g. "the BVH file is up to 1.2 cm off the motion".
+    report : BvhReport or GltfReport
+        Its ``worst_joint``, ``worst_frame``, ``mean_error`` (metres) and ``remedy`` (None: the default,
+        ``build-db --normalize-bones``; "": nothing to name).
+    shapes : str
+        What else the file holds fixed, said after "its bones have one length each".
+    """
+    if report.remedy is None:
+        remedy = "; a database built with `build-db --normalize-bones` gives every bone one length"
+    else:
+        remedy = f"; {report.remedy}" if report.remedy else ""
+    return (
+        f"{headline} ({report.worst_joint}, frame {report.worst_frame}; mean {report.mean_error * 1000:.1f} mm): "
+        f"its bones have one length each{shapes}, the motion's vary. The npz keeps the exact positions{remedy}."
+    )
 
 
 def _names(names: tuple[str, ...] | list[str], most: int = 12) -> str:

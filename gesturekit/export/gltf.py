@@ -64,7 +64,7 @@ from ..errors import ConfigError, OutputError, warn
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG, check_output
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS, PARENTS
-from .bvh import _FINGER_JOINTS, _names
+from .bvh import _FINGER_JOINTS, _names, error_warning
 
 __all__ = [
     "WARN_ABOVE",
@@ -168,15 +168,7 @@ class GltfReport:
         """What the warning over :data:`WARN_ABOVE` says (without the file's path); None below it."""
         if not self.exceeds:
             return None
-        if self.remedy is None:
-            remedy = "; a database built with `build-db --normalize-bones` gives every bone one length"
-        else:
-            remedy = f"; {self.remedy}" if self.remedy else ""
-        return (
-            f"the glTF file is up to {self.max_error * 1000:.1f} mm off the motion "
-            f"({self.worst_joint}, frame {self.worst_frame}; mean {self.mean_error * 1000:.1f} mm): "
-            f"its bones have one length each, the motion's vary. The npz keeps the exact positions{remedy}."
-        )
+        return error_warning(f"the glTF file is up to {self.max_error * 1000:.1f} mm off the motion", self)
 
     def summary(self) -> str:
         """One line, e.g. ``"take.glb: position error max 0.00 mm ..., 55 joints, 200 frames at 15 fps; ..."``."""
