@@ -380,22 +380,20 @@ def result_downloads(
 def show_bvh_report(data: bytes | None, report: BvhReport | str) -> None:
     """Under a result's downloads: the BVH's error against the motion, its warning over 1 cm, or why
     there is no BVH (from :func:`result_bvh`)."""
-    if data is None or isinstance(report, str):
-        st.error(f"No BVH file: {escape_markdown(report)}", icon=":material/error:")
-        return
-    st.caption(f"BVH {escape_markdown(report.summary())}")
-    message = report.warning()
-    if message is not None:
-        st.warning(escape_markdown(message[0].upper() + message[1:]), icon=":material/warning:")
+    _show_file_report("BVH", "BVH", data, report)
 
 
 def show_glb_report(data: bytes | None, report: GltfReport | str) -> None:
-    """Under a result's downloads: the glTF file's error against the motion, its warning over 1 mm, or
+    """Under a result's downloads: the glTF file's error against the motion, its warning over 1 cm, or
     why there is no glTF file (from :func:`result_glb`)."""
+    _show_file_report("glTF", "glTF file", data, report)
+
+
+def _show_file_report(kind: str, name: str, data: bytes | None, report: BvhReport | GltfReport | str) -> None:
     if data is None or isinstance(report, str):
-        st.error(f"No glTF file: {escape_markdown(report)}", icon=":material/error:")
+        st.error(f"No {name}: {escape_markdown(report)}", icon=":material/error:")
         return
-    st.caption(f"glTF {escape_markdown(report.summary())}")
+    st.caption(f"{kind} {escape_markdown(report.summary())}")
     message = report.warning()
     if message is not None:
         st.warning(escape_markdown(message[0].upper() + message[1:]), icon=":material/warning:")
