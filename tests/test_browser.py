@@ -90,7 +90,7 @@ def test_upload_box_select_run_then_inspect(served, tmp_path, machine):
         box = canvas.bounding_box()
         assert box["width"] > 200 and box["height"] > 200
         assert canvas.get_attribute("data-frame") == "0"
-        view = app_browser.main_area(page).frame_locator("iframe[srcdoc*='data-key=\"synth.skeleton\"']")
+        view = app_browser.viewer_locator(page, "synth.skeleton")
         view.locator("#play").click()
         # playing: the view draws later frames (times out, and fails, if it stays on frame 0)
         view.locator('canvas#c:not([data-frame="0"])').wait_for(state="attached", timeout=30_000)
