@@ -22,6 +22,12 @@ The page loads nothing from the network. Its data are one JSON object in a
 ``<script type="application/json" id="gk-data">`` element (see
 :func:`viewer_data`), the arrays as base64 little-endian typed arrays like a
 plotly figure's (:func:`gesturekit.viz.figures.data_array` reads them).
+
+The same bundle also serves a page of its own, the build's ``static/index.html``,
+which takes :func:`viewer_args` (the data as JSON text, the speech as WAV bytes)
+from Streamlit's component protocol: the app shows the viewer as a component, so
+the browser fetches the bundle once and caches it, and a rerun that sends the
+same args keeps the drawn view.
 """
 
 from __future__ import annotations
