@@ -179,7 +179,7 @@ def playback(drv, page, url: str, home: Path, seconds: float) -> bool:
     if drv.problems(page):
         print(f"the page shows an error: {drv.problems(page)[0][:400]}")
         return False
-    n_motions = view.evaluate("() => JSON.parse(document.getElementById('gk-data').textContent).motions.length")
+    n_motions = view.evaluate("() => JSON.parse(gkArgs.data).motions.length")
     frames = view.evaluate("() => gk.frames")
     draw_ms = view.evaluate(_DRAW_MS, 60)
     view.evaluate(
