@@ -32,7 +32,7 @@ import secrets
 import string
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import streamlit as st
 
@@ -61,6 +61,7 @@ __all__ = [
     "show_bvh_report",
     "show_glb_report",
     "show_skeletons",
+    "viewer_component",
     "skeleton_note",
     "user_errors",
     "warnings_shown",
@@ -205,6 +206,22 @@ def selected_row(table: pd.DataFrame, *, key: str, height: int, column_config: d
     return int(rows[0]) if rows and rows[0] < len(table) else None
 
 
+@functools.cache
+def viewer_component() -> Any:
+    """The viewer as a Streamlit component: its page and bundle are the package's static folder
+    (:mod:`gesturekit.viz.web.build`), so the browser fetches the bundle once and caches it.
+
+    Its args are :func:`gesturekit.viz.viewer.viewer_args` (the data as JSON text, the speech as
+    WAV bytes, their hash), ``height`` (pixels of the drawing) and ``key``; it returns nothing.
+    """
+    from streamlit.components.v1 import declare_component
+
+    from gesturekit.viz.web.build import STATIC, bundle
+
+    bundle()  # a missing build says how to make it, here rather than as a blank frame
+    return declare_component("skeleton_viewer", path=str(STATIC))
+
+
 def show_skeletons(
     motions: Motion | Sequence[Motion],
     *,
@@ -214,19 +231,19 @@ def show_skeletons(
     height: int = 520,
     audio: np.ndarray | None = None,
 ) -> None:
-    """Show motions side by side in gesturekit's 3D viewer (:func:`gesturekit.viz.viewer.skeleton_viewer`).
+    """Show motions side by side in gesturekit's 3D viewer, a Streamlit component (:func:`viewer_component`).
 
     The viewer draws the skinned character with three.js (WebGL, in software where the
     browser has no GPU: no antialiasing, no shadows). ``height``: of the drawing, in
     pixels (its controls come below); ``key`` names the viewer (pages and tests find it by it).
     ``audio``: the speech of the motions (mono float32 at 16 kHz, from their first frame);
     the viewer's play button then plays it and the shown frame follows it, so no separate
-    player is needed.
+    player is needed. A rerun that shows the same motions keeps the drawn view as it is.
     """
-    from gesturekit.viz.viewer import CONTROLS_HEIGHT, skeleton_viewer
+    from gesturekit.viz.viewer import viewer_args
 
-    page = skeleton_viewer(motions, labels=labels, title=title, height=height, key=key, audio=audio)
-    st.iframe(page, height=int(height) + CONTROLS_HEIGHT)
+    args = viewer_args(motions, labels=labels, title=title, audio=audio)
+    viewer_component()(**args, height=int(height), key=key, default=None)
     note = skeleton_note(motions)
     if note:
         st.caption(note)

@@ -179,7 +179,7 @@ def playback(drv, page, url: str, home: Path, seconds: float) -> bool:
     if drv.problems(page):
         print(f"the page shows an error: {drv.problems(page)[0][:400]}")
         return False
-    n_motions = view.evaluate("() => JSON.parse(document.getElementById('gk-data').textContent).motions.length")
+    n_motions = view.evaluate("() => JSON.parse(gkArgs.data).motions.length")
     frames = view.evaluate("() => gk.frames")
     draw_ms = view.evaluate(_DRAW_MS, 60)
     view.evaluate(
@@ -208,19 +208,22 @@ def long_view(drv) -> None:
 
     from gesturekit.motion import AUDIO_SR, Motion
     from gesturekit.skeleton import N_JOINTS
-    from gesturekit.viz.viewer import VIEWER_MAX_FRAMES, skeleton_viewer
+    from gesturekit.viz.viewer import VIEWER_MAX_FRAMES, skeleton_viewer, viewer_args
+    from gesturekit.viz.web.build import STATIC
 
     rng = np.random.default_rng(0)
     pos = (
         rng.normal(0, 0.3, (1, N_JOINTS, 3)) + np.cumsum(rng.normal(0, 0.004, (VIEWER_MAX_FRAMES, N_JOINTS, 3)), 0)
     ).astype(np.float32)
     t = time.perf_counter()
-    page_html = skeleton_viewer(
-        [Motion(pos, 15.0), Motion(pos[::-1].copy(), 15.0)],
-        labels=["k-NN", "refined"],
-        audio=rng.uniform(-0.1, 0.1, VIEWER_MAX_FRAMES * AUDIO_SR // 15).astype(np.float32),
-    )
+    motions = [Motion(pos, 15.0), Motion(pos[::-1].copy(), 15.0)]
+    speech = rng.uniform(-0.1, 0.1, VIEWER_MAX_FRAMES * AUDIO_SR // 15).astype(np.float32)
+    page_html = skeleton_viewer(motions, labels=["k-NN", "refined"], audio=speech)
     t_make = time.perf_counter() - t
+    # the app's component: per viewer its args; the page and bundle once, then from the browser's cache
+    args = viewer_args(motions, labels=["k-NN", "refined"], audio=speech)
+    data_b, audio_b = len(args["data"].encode()), len(args["audio"] or b"")
+    once = sum((STATIC / name).stat().st_size for name in ("index.html", "viewer.js"))
     with tempfile.TemporaryDirectory(prefix="gesturekit-bench-view-") as tmp, drv.browser() as page:
         path = Path(tmp) / "view.html"
         path.write_text(page_html, encoding="utf-8")
@@ -230,7 +233,9 @@ def long_view(drv) -> None:
         t_draw = time.perf_counter() - t
     print(
         f"ten minutes side by side with speech ({VIEWER_MAX_FRAMES} frames): page {len(page_html) / 1e6:.1f} MB, "
-        f"made in {t_make:.2f} s, first frame drawn {t_draw:.2f} s after a new browser opened it"
+        f"made in {t_make:.2f} s, first frame drawn {t_draw:.2f} s after a new browser opened it; in the app "
+        f"(component) the browser receives {(data_b + audio_b) / 1e6:.1f} MB of args (data {data_b / 1e6:.1f} MB, "
+        f"speech {audio_b / 1e6:.1f} MB) + the page and bundle {once / 1e6:.2f} MB once (cached)"
     )
 
 

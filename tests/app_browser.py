@@ -415,15 +415,39 @@ def run_and_wait(page) -> None:
 
 
 def viewer(page, key: str):
-    """The frame element of the skeleton viewer with key ``key`` (gesturekit.viz.viewer): its page
-    names the key, the element holding it has none of Streamlit's."""
-    return main_area(page).locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
+    """The frame element of the skeleton viewer with key ``key``: the iframe of the Streamlit component
+    (app/display.viewer_component) whose widget key is ``key``."""
+    return main_area(page).locator(f".{key_class(key)} iframe").first
+
+
+def viewer_locator(page, key: str):
+    """A frame locator of the skeleton viewer with key ``key`` (its page's body names the key too)."""
+    return main_area(page).frame_locator(f".{key_class(key)} iframe").first
+
+
+def viewer_args(page, key: str) -> dict:
+    """What the skeleton viewer with key ``key`` was given, decoded (:func:`gesturekit.viz.viewer.read_viewer_args`):
+    the args of its last render, as its page keeps them (``window.gkArgs``), once it has drawn."""
+    import base64
+
+    from gesturekit.viz.viewer import read_viewer_args
+
+    got = viewer_frame(page, key).evaluate(
+        """() => { const a = window.gkArgs; let b64 = null;
+        if (a.audio) { let s = ""; for (let i = 0; i < a.audio.length; i += 32768)
+          s += String.fromCharCode.apply(null, a.audio.subarray(i, i + 32768)); b64 = btoa(s); }
+        return {data: a.data, audio: b64, hash: a.hash}; }"""
+    )
+    audio = None if got["audio"] is None else base64.b64decode(got["audio"])
+    out = read_viewer_args(got["data"], audio, key)
+    out["hash"] = got["hash"]
+    return out
 
 
 def skeleton_canvas(page, key: str):
     """The canvas of the skeleton viewer with key ``key`` (gesturekit.viz.viewer), once it has drawn."""
-    frame = main_area(page).frame_locator(f"iframe[srcdoc*='data-key=\"{key}\"']").first
-    frame.locator('body[data-drawn="1"]').wait_for(state="attached")
+    frame = viewer_locator(page, key)
+    frame.locator(f'body[data-key="{key}"][data-drawn="1"]').wait_for(state="attached")
     canvas = frame.locator("canvas#c")
     canvas.wait_for(state="visible")
     return canvas

@@ -91,14 +91,17 @@ def chart_spec(at, key: str) -> dict:
 
 
 def viewer(at, key: str) -> dict:
-    """The data of the skeleton viewer with key ``key`` on an AppTest page (coordinates decoded,
-    see :func:`gesturekit.viz.viewer.read_viewer_data`)."""
-    from gesturekit.viz.viewer import read_viewer_data
+    """The data of the skeleton viewer with key ``key`` on an AppTest page (coordinates decoded, see
+    :func:`gesturekit.viz.viewer.read_viewer_args`): the args of its component (app/display.viewer_component)."""
+    import json
 
-    for el in at.get("iframe"):
-        page = el.proto.srcdoc
-        if f'data-key="{key}"' in page:
-            return read_viewer_data(page)
+    from gesturekit.viz.viewer import read_viewer_args
+
+    for el in at.get("component_instance"):
+        args = json.loads(el.proto.json_args)
+        if el.proto.component_name.endswith("skeleton_viewer") and args.get("key") == key:
+            audio = next((a.bytes for a in el.proto.special_args if a.key == "audio"), None)
+            return read_viewer_args(args["data"], audio, key)
     raise AssertionError(f"no skeleton viewer with key {key!r}")
 
 

@@ -140,7 +140,7 @@ def test_a_bad_database_path_shows_an_error_not_a_traceback(app_env, tmp_path, k
     errors = _error_texts(at)
     assert len(errors) == 1 and str(target) in errors[0]
     assert ("no database folder" if kind == "missing" else "database.json is missing") in errors[0]
-    assert not at.get("plotly_chart") and not at.get("iframe")
+    assert not at.get("plotly_chart") and not at.get("component_instance")
 
 
 def test_databases_in_the_working_directory_are_offered(app_env, tmp_path):

@@ -316,7 +316,7 @@ def test_stopping_the_stream_in_the_browser_is_stop_too_and_the_inspector_opens_
     at.switch_page("views/2_Retrieval_inspector.py").run()
     assert not at.exception, at.exception
     assert not any("Synthesize page first" in shown(i.value) for i in at.info)
-    assert len(at.get("iframe")) > 0
+    assert len(at.get("component_instance")) > 0  # the inspector's 3D views
 
 
 def test_stop_after_too_little_speech_says_so_on_the_page(app_env, mic, speech48):

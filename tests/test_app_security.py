@@ -192,7 +192,7 @@ def test_a_database_outside_the_allowed_folders_is_refused_alike(app_env, tmp_pa
         check_allowed(outside / "nowhere", what="database folder")
     assert said == str(missing.value)[len(str(outside / "nowhere")) :]
     # nothing of the database is shown
-    assert not at.get("dataframe") and not at.get("iframe") and not at.get("plotly_chart")
+    assert not at.get("dataframe") and not at.get("component_instance") and not at.get("plotly_chart")
     assert "clip" not in " ".join(c.value for c in at.sidebar.caption)
 
 

@@ -282,7 +282,7 @@ def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
     assert viewer(at, "synth.skeleton")  # the result is still there
 
     other = open_page()  # another user sees none of it: a first visit, on the example speech
-    assert "gk.synthesis" not in other.session_state and not other.get("iframe")
+    assert "gk.synthesis" not in other.session_state and not other.get("component_instance")
     assert other.number_input(key="_w.synth.k").value == 0 and other.data_editor[0].value.empty
     assert other.session_state["synth.speech"]["token"] == ("example", "demo speaker, 8 s (generated)")
 

@@ -90,10 +90,17 @@ def test_upload_box_select_run_then_inspect(served, tmp_path, machine):
         box = canvas.bounding_box()
         assert box["width"] > 200 and box["height"] > 200
         assert canvas.get_attribute("data-frame") == "0"
-        view = app_browser.main_area(page).frame_locator("iframe[srcdoc*='data-key=\"synth.skeleton\"']")
+        view = app_browser.viewer_locator(page, "synth.skeleton")
         view.locator("#play").click()
         # playing: the view draws later frames (times out, and fails, if it stays on frame 0)
         view.locator('canvas#c:not([data-frame="0"])').wait_for(state="attached", timeout=30_000)
+        # a rerun that shows the same result keeps the drawn view: the same scene, not built again
+        shown = app_browser.viewer_frame(page, "synth.skeleton")
+        shown.evaluate("() => { window.__kept = window.gk; }")
+        main.get_by_role("heading", name="Synthesize", exact=True).first.click()  # the keys go to the app
+        with app_browser.run_after(page):
+            page.keyboard.press("r")  # Streamlit's rerun key
+        assert shown.evaluate("() => window.gk === window.__kept && document.body.dataset.drawn === '1'")
         wrists = app_browser.keyed(page, "synth.wrists")
         for row in ("left wrist height", "right wrist height", "left wrist speed", "right wrist speed"):
             assert wrists.locator("text", has_text=row).count() >= 1

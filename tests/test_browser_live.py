@@ -27,7 +27,7 @@ import soundfile as sf
 from scipy.signal import correlate
 
 from gesturekit.motion import AUDIO_SR
-from gesturekit.viz.viewer import read_viewer_data
+from gesturekit.viz.viewer import read_viewer_args
 from tests import app_browser, load
 
 pytestmark = pytest.mark.skipif(
@@ -69,25 +69,21 @@ _MIC_CLOCK = """(() => {
     return s;
   };
 })();"""
-#: The live view's frame (its index is in the view's title), when the view holding it was loaded
-#: and drew (the browser's clock, ms), and the browser's clock now, in one look; the view's page
-#: itself only when its frame differs from ``last``.
+#: The live view's frame (its index is in the view's title), when the view drew it (the browser's
+#: clock, ms), and the browser's clock now, in one look; the view's data (JSON text) only when its
+#: frame differs from ``last``.
 _LIVE_VIEW = """(last) => {
-  const f = document.querySelector('[data-testid="stMain"] iframe[srcdoc*=\\'data-key="live.skeleton"\\']');
-  const m = f ? /frame (\\d+)/.exec(f.srcdoc) : null;
-  const frame = m ? Number(m[1]) : null;
-  let shown = null;
+  const f = document.querySelector('[data-testid="stMain"] .st-key-live-skeleton iframe');
+  let frame = null, shown = null, data = null;
   try {
     const w = f.contentWindow;
-    if (w.document.body.dataset.drawn === "1") shown = w.performance.timeOrigin;
+    const m = /frame (\\d+)/.exec(w.document.getElementById("title").textContent);
+    frame = m ? Number(m[1]) : null;
+    if (w.document.body.dataset.drawn === "1" && w.gk) shown = w.performance.timeOrigin + w.gk.startup.drawn;
+    if (frame !== null && frame !== last) data = w.gkArgs.data;
   } catch (e) {}
-  return {now: Date.now(), shown: shown, mic: window.__gkMicOpened || null, frame: frame,
-          srcdoc: f && frame !== last ? f.srcdoc : null};
+  return {now: Date.now(), shown: shown, mic: window.__gkMicOpened || null, frame: frame, data: data};
 }"""
-
-
-#: The frame element of the last performance's 3D view.
-_LIVE_RESULT = "[data-testid='stMain'] iframe[srcdoc*='data-key=\"live.result\"']"
 
 
 def _component_button(page, name: str):
@@ -152,8 +148,7 @@ def live_run(request, tmp_path_factory):
         app_browser.heading(page, "Performance").wait_for()
         app_browser.viewer(page, "live.result").wait_for(state="attached")
         app_browser.wait_idle(page)
-        result_page = app_browser.viewer(page, "live.result").get_attribute("srcdoc")
-        result_audio = read_viewer_data(result_page)["audio"]
+        result_audio = app_browser.viewer_args(page, "live.result")["audio"]
         played = sf.read(str(wav), dtype="float32")[0]
         yield {
             "real_time": REAL_TIME[machine],
@@ -180,7 +175,7 @@ def test_the_body_moves_with_the_streamed_speech(live_run):
     assert len(seen) >= limits.updates, f"the live view changed only {len(seen)} times"
     frames = [s["frame"] for s in seen]
     assert frames == sorted(frames) and frames[-1] - frames[0] >= limits.span_s * FPS  # it went on with the speech
-    poses = [read_viewer_data(s["srcdoc"])["motions"][0] for s in seen[:: max(1, len(seen) // 6)]]
+    poses = [read_viewer_args(s["data"], None, "live.skeleton")["motions"][0] for s in seen[:: max(1, len(seen) // 6)]]
     coords = [np.asarray(p["points"], dtype=float) for p in poses]  # (1, 61, 3): the pose drawn
     moved = [float(np.abs(a - b).max()) for a, b in zip(coords, coords[1:])]
     assert max(moved) > 0.01, moved  # the drawn joints moved (metres)
@@ -244,18 +239,16 @@ def test_stop_gives_a_result_as_long_as_the_streamed_speech(live_run, tmp_path):
 def test_start_again_after_stop_gives_a_second_performance(live_run):
     page = live_run["page"]
     # the first performance's view, kept in the page: its heading stays, the new result replaces the view
-    page.evaluate("(view) => { window.__gkFirst = document.querySelector(view).srcdoc; }", _LIVE_RESULT)
+    first = app_browser.viewer_args(page, "live.result")["hash"]
     _start(page)  # the file plays on as silence: a performance all the same
     # the new performance's body is drawn, and the page's Stop is enabled (it is, while one runs)
     app_browser.viewer(page, "live.skeleton").wait_for(state="attached")
     _stop(page)
-    page.wait_for_function(
-        "(view) => { const f = document.querySelector(view); return !!f && f.srcdoc !== window.__gkFirst; }",
-        arg=_LIVE_RESULT,
-    )
+    app_browser.viewer_locator(page, "live.result").locator("body[data-key]").wait_for(state="attached")
+    app_browser.viewer_frame(page, "live.result").wait_for_function("(first) => gkArgs.hash !== first", arg=first)
     app_browser.wait_idle(page)
-    second = app_browser.viewer(page, "live.result").get_attribute("srcdoc")
-    assert second != page.evaluate("() => window.__gkFirst")  # the new performance replaced the first
+    second = app_browser.viewer_args(page, "live.result")["hash"]
+    assert second != first  # the new performance replaced the first
     assert app_browser.problems(page) == []
 
 

@@ -19,7 +19,15 @@ from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
 from gesturekit.skeleton import N_JOINTS
 from gesturekit.viz.figures import skeleton_figure
-from gesturekit.viz.viewer import QUATERNION_SCALE, VIEWER_MAX_FRAMES, read_viewer_data, skeleton_viewer, viewer_data
+from gesturekit.viz.viewer import (
+    QUATERNION_SCALE,
+    VIEWER_MAX_FRAMES,
+    read_viewer_args,
+    read_viewer_data,
+    skeleton_viewer,
+    viewer_args,
+    viewer_data,
+)
 from gesturekit.viz.web import build as web
 
 
@@ -160,6 +168,32 @@ def test_bad_input_is_refused(kwargs, problem):
     motions = kwargs.pop("motions", _motion(5))
     with pytest.raises(ConfigError, match=problem):
         skeleton_viewer(motions, **kwargs)
+
+
+@settings(max_examples=5, deadline=None)
+@given(hst.integers(1, 20), hst.integers(0, 10**6), hst.booleans())
+def test_the_component_args_carry_what_the_standalone_page_carries(n, seed, with_speech):
+    """The app's component gets the page's data and speech as args; their hash tells viewers apart."""
+    motions = [_motion(n, seed=seed), _motion(n + 3, seed=seed + 1)]
+    rng = np.random.default_rng(seed)
+    audio = rng.uniform(-1, 1, 1000 * n).astype(np.float32) if with_speech else None
+    view = {"labels": ["a", "b"], "title": "t"}
+    args = viewer_args(motions, audio=audio, **view)
+    got = read_viewer_args(args["data"], args["audio"], "k")
+    want = read_viewer_data(skeleton_viewer(motions, audio=audio, key="k", **view))
+    assert json.loads(args["data"]) == viewer_data(motions, **view)
+    assert got["key"] == want["key"] == "k" and got["audio_sr"] == want["audio_sr"]
+    if with_speech:
+        np.testing.assert_array_equal(got["audio"], want["audio"])
+    else:
+        assert got["audio"] is None and args["audio"] is None
+    for g, w in zip(got["motions"], want["motions"]):
+        np.testing.assert_array_equal(g["points"], w["points"])
+    # the same viewer has the same hash (a rerun keeps the drawn view); other speech or motions another
+    assert viewer_args(motions, audio=audio, **view)["hash"] == args["hash"]
+    other_audio = np.zeros(10, np.float32) if audio is None else audio * 0.5
+    assert viewer_args(motions, audio=other_audio, **view)["hash"] != args["hash"]
+    assert viewer_args(motions[::-1], audio=audio, **view)["hash"] != args["hash"]
 
 
 # ----------------------------------------------------------------------------- the web module and its build

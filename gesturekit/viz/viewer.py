@@ -22,11 +22,18 @@ The page loads nothing from the network. Its data are one JSON object in a
 ``<script type="application/json" id="gk-data">`` element (see
 :func:`viewer_data`), the arrays as base64 little-endian typed arrays like a
 plotly figure's (:func:`gesturekit.viz.figures.data_array` reads them).
+
+The same bundle also serves a page of its own, the build's ``static/index.html``,
+which takes :func:`viewer_args` (the data as JSON text, the speech as WAV bytes)
+from Streamlit's component protocol: the app shows the viewer as a component, so
+the browser fetches the bundle once and caches it, and a rerun that sends the
+same args keeps the drawn view.
 """
 
 from __future__ import annotations
 
 import base64
+import hashlib
 import html
 import io
 import json
@@ -47,7 +54,7 @@ from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS
 from ._plotly import _frames_at, _motions_and_labels, _time_grid
-from .web.build import bundle
+from .web.build import SHELL, bundle
 
 if TYPE_CHECKING:
     from typing_extensions import Unpack  # typing.Unpack is Python 3.11+; only the type checker reads it
@@ -61,6 +68,10 @@ __all__ = [
     "viewer_data",
     "read_viewer_data",
     "wav_data_uri",
+    "wav_bytes",
+    "ViewerArgs",
+    "viewer_args",
+    "read_viewer_args",
 ]
 
 #: Pixels the controls (play button, slider, time, note) take below the drawing.
@@ -77,8 +88,8 @@ _DATA_ID = "gk-data"
 _AUDIO_PREFIX = "data:audio/wav;base64,"
 
 
-def wav_data_uri(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> str:
-    """Mono audio as a ``data:audio/wav;base64,...`` URI: 16-bit PCM at ``sr``.
+def wav_bytes(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> bytes:
+    """Mono audio as a WAV file's bytes: 16-bit PCM at ``sr``.
 
     Parameters
     ----------
@@ -89,8 +100,8 @@ def wav_data_uri(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> str:
 
     Returns
     -------
-    str
-        The URI; a sample ``x`` is stored as ``round(x * 32767)``.
+    bytes
+        The file; a sample ``x`` is stored as ``round(x * 32767)``.
     """
     a = np.clip(np.nan_to_num(np.asarray(audio, dtype=np.float64).ravel()), -1.0, 1.0)
     pcm = np.round(a * 32767.0).astype("<i2")
@@ -100,14 +111,23 @@ def wav_data_uri(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> str:
         w.setsampwidth(2)
         w.setframerate(int(sr))
         w.writeframes(pcm.tobytes())
-    return _AUDIO_PREFIX + base64.b64encode(buf.getvalue()).decode("ascii")
+    return buf.getvalue()
 
 
-def _read_wav_uri(uri: str) -> tuple[np.ndarray, int]:
-    with wave.open(io.BytesIO(base64.b64decode(uri[len(_AUDIO_PREFIX) :])), "rb") as w:
+def wav_data_uri(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> str:
+    """Mono audio as a ``data:audio/wav;base64,...`` URI of :func:`wav_bytes` (same parameters)."""
+    return _AUDIO_PREFIX + base64.b64encode(wav_bytes(audio, sr=sr)).decode("ascii")
+
+
+def _read_wav(data: bytes) -> tuple[np.ndarray, int]:
+    with wave.open(io.BytesIO(data), "rb") as w:
         sr, n = w.getframerate(), w.getnframes()
         pcm = np.frombuffer(w.readframes(n), dtype="<i2")
     return pcm.astype(np.float64) / 32767.0, sr
+
+
+def _read_wav_uri(uri: str) -> tuple[np.ndarray, int]:
+    return _read_wav(base64.b64decode(uri[len(_AUDIO_PREFIX) :]))
 
 
 def _ordinal(n: int) -> str:
@@ -134,6 +154,24 @@ class ViewOptions(TypedDict, total=False):
     max_frames: int
     spacing: float | None
     neutral: bool
+
+
+class ViewerArgs(TypedDict):
+    """:func:`viewer_args`' result: the component's args.
+
+    Attributes
+    ----------
+    data : str
+        :func:`viewer_data`'s dict as JSON text.
+    audio : bytes or None
+        The speech as a WAV file.
+    hash : str
+        SHA-256 (hex) of both.
+    """
+
+    data: str
+    audio: bytes | None
+    hash: str
 
 
 def _typed(values: np.ndarray, dtype: str) -> dict:
@@ -345,7 +383,18 @@ def read_viewer_data(page: str) -> dict:
         (float64 samples in [-1, 1], shape (samples,)) or None; ``audio_sr`` its rate (Hz) or None.
     """
     start = page.index(f'id="{_DATA_ID}">') + len(f'id="{_DATA_ID}">')
-    data = json.loads(page[start : page.index("</script>", start)])
+    data = _decoded(json.loads(page[start : page.index("</script>", start)]))
+    data["key"] = html.unescape(page[page.index('data-key="') + 10 :].split('"', 1)[0])
+    data["audio"] = data["audio_sr"] = None
+    at = page.find(f'src="{_AUDIO_PREFIX}')
+    if at >= 0:
+        uri = page[at + 5 : page.index('"', at + 5)]
+        data["audio"], data["audio_sr"] = _read_wav_uri(uri)
+    return data
+
+
+def _decoded(data: dict) -> dict:
+    """:func:`viewer_data`'s dict with its arrays decoded and each motion's ``points`` (see :func:`read_viewer_data`)."""
     for m in data["motions"]:
         for group in ("rig", "mesh"):
             for name, value in m[group].items():
@@ -354,13 +403,79 @@ def read_viewer_data(page: str) -> dict:
         m["rotations"] = _array(m["rotations"]).astype(np.float64) / QUATERNION_SCALE
         m["root"] = _array(m["root"]).astype(np.float64)
         m["points"] = _joint_positions(m)
-    data["key"] = html.unescape(page[page.index('data-key="') + 10 :].split('"', 1)[0])
-    data["audio"] = data["audio_sr"] = None
-    at = page.find(f'src="{_AUDIO_PREFIX}')
-    if at >= 0:
-        uri = page[at + 5 : page.index('"', at + 5)]
-        data["audio"], data["audio_sr"] = _read_wav_uri(uri)
     return data
+
+
+def _speech(audio: npt.ArrayLike, sr: int, data: dict) -> np.ndarray:
+    """``audio`` checked and padded with silence up to the last frame of ``data`` (:func:`viewer_data`'s)."""
+    a = np.asarray(audio, dtype=np.float32)
+    if a.ndim != 1:
+        raise ConfigError(f"the viewer's speech must be mono samples (one dimension), got shape {a.shape}")
+    if not (isinstance(sr, (int, np.integer)) and sr > 0):
+        raise ConfigError(f"the speech's sample rate must be a positive integer, got {sr!r}")
+    need = int(math.ceil(data["n_grid"] / data["fps"] * sr))
+    if len(a) < need:  # silence after the speech, so its clock reaches the last frame
+        a = np.concatenate([a, np.zeros(need - len(a), np.float32)])
+    return a
+
+
+def viewer_args(
+    motions: Motion | Sequence[Motion],
+    *,
+    audio: npt.ArrayLike | None = None,
+    sr: int = AUDIO_SR,
+    **view: Unpack[ViewOptions],
+) -> ViewerArgs:
+    """What the viewer's bundle draws when it is served as a component: :func:`skeleton_viewer`'s page without the page.
+
+    Parameters
+    ----------
+    motions, audio, sr, **view
+        As for :func:`skeleton_viewer`.
+
+    Returns
+    -------
+    ViewerArgs
+        ``data``: :func:`viewer_data`'s dict as JSON text; ``audio``: the speech (padded as
+        :func:`skeleton_viewer` pads it) as a 16-bit WAV file's bytes, or None; ``hash``: SHA-256
+        (hex) of both, by which the page knows a viewer it already shows.
+
+    Raises
+    ------
+    ConfigError
+        As :func:`skeleton_viewer`.
+    """
+    data = viewer_data(motions, **view)
+    wav = None if audio is None else wav_bytes(_speech(audio, sr, data), sr=int(sr))
+    text = json.dumps(data, separators=(",", ":"))
+    digest = hashlib.sha256(text.encode())
+    digest.update(b"\0" + (wav if wav is not None else b"no speech"))
+    return {"data": text, "audio": wav, "hash": digest.hexdigest()}
+
+
+def read_viewer_args(data: str, audio: bytes | None, key: str) -> dict:
+    """:func:`viewer_args`' data and speech decoded, as :func:`read_viewer_data` decodes a page.
+
+    Parameters
+    ----------
+    data : str
+        The JSON text (``viewer_args(...)["data"]``).
+    audio : bytes or None
+        The WAV bytes.
+    key : str
+        The viewer's key.
+
+    Returns
+    -------
+    dict
+        As :func:`read_viewer_data`.
+    """
+    out = _decoded(json.loads(data))
+    out["key"] = key
+    out["audio"] = out["audio_sr"] = None
+    if audio is not None:
+        out["audio"], out["audio_sr"] = _read_wav(bytes(audio))
+    return out
 
 
 def skeleton_viewer(
@@ -413,14 +528,7 @@ def skeleton_viewer(
     data = viewer_data(motions, **view)
     audio_tag = ""
     if audio is not None:
-        a = np.asarray(audio, dtype=np.float32)
-        if a.ndim != 1:
-            raise ConfigError(f"the viewer's speech must be mono samples (one dimension), got shape {a.shape}")
-        if not (isinstance(sr, (int, np.integer)) and sr > 0):
-            raise ConfigError(f"the speech's sample rate must be a positive integer, got {sr!r}")
-        need = int(math.ceil(data["n_grid"] / data["fps"] * sr))
-        if len(a) < need:  # silence after the speech, so its clock reaches the last frame
-            a = np.concatenate([a, np.zeros(need - len(a), np.float32)])
+        a = _speech(audio, sr, data)
         audio_tag = f'<audio id="gk-audio" preload="auto" src="{wav_data_uri(a, sr=int(sr))}"></audio>'
     # "</" cannot end the data element early: JSON escapes are valid inside a string
     payload = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
@@ -443,27 +551,10 @@ def _inline_bundle() -> str:
     return text.replace("</script", "<\\/script")
 
 
-_PAGE = """<!DOCTYPE html>
-<html><head><meta charset="utf-8"><style>
-body{margin:0;font-family:"Source Sans Pro",system-ui,sans-serif;font-size:14px;color:#31333f;background:#fff}
-#stage{position:relative;overflow:hidden;background:__BG__}
-#bar{display:flex;align-items:center;gap:10px;height:40px;padding:2px 4px}
-button{font:inherit;padding:3px 12px;border:1px solid #ccc;border-radius:6px;background:#fff;cursor:pointer}
-input[type=range]{flex:1}
-#t{min-width:120px;text-align:right;font-variant-numeric:tabular-nums}
-#note{color:#9a6700;font-size:12px}
-canvas{display:block;width:100%;height:100%;cursor:grab;touch-action:none}
-.label{position:absolute;transform:translateX(-50%);font-size:13px;pointer-events:none;white-space:nowrap}
-#title{position:absolute;left:8px;top:4px;font-size:15px;pointer-events:none}
-#dropped{position:absolute;left:8px;bottom:6px;font-size:12px;color:#9a6700;pointer-events:none}
-#derived{position:absolute;right:8px;bottom:6px;font-size:12px;color:#6b7280;pointer-events:none}
-#nogl{position:absolute;inset:0;display:none;align-items:center;justify-content:center;padding:24px;text-align:center;color:#6b7280}
-</style></head>
-<body data-key="__KEY__">
-<div id="stage" style="height:__HEIGHT__px"><canvas id="c" title="drag: orbit, scroll: zoom, double-click: reset"></canvas>
-<div id="title"></div><div id="dropped"></div><div id="derived"></div><div id="nogl"></div></div>
-<div id="bar"><button id="play">&#9654; Play</button><input id="s" type="range" min="0" value="0" step="1"><span id="t"></span><span id="note"></span></div>
-__AUDIO__
+_PAGE = (
+    SHELL
+    + """__AUDIO__
 <script type="application/json" id="gk-data">__DATA__</script>
 <script type="module">__BUNDLE__</script></body></html>
 """
+)

@@ -23,22 +23,58 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["HERE", "STATIC", "SOURCES", "source_hash", "is_current", "bundle", "build", "bundle_module", "main"]
+__all__ = [
+    "HERE",
+    "STATIC",
+    "SOURCES",
+    "SHELL",
+    "source_hash",
+    "is_current",
+    "bundle",
+    "build",
+    "bundle_module",
+    "main",
+]
 
 #: This folder: package.json, package-lock.json, build.mjs and src/.
 HERE = Path(__file__).resolve().parent
 #: Where the build writes.
 STATIC = HERE / "static"
-#: The files the bundle is made from (with every file under src/).
-SOURCES = ("package.json", "package-lock.json", "build.mjs")
+#: The files the bundle and its page are made from (with every file under src/).
+SOURCES = ("package.json", "package-lock.json", "build.mjs", "build.py")
 
 _HASH_FILE = "source.sha256"
 
-#: The component's page: it loads the bundle, which reads its data from the element "gk-data".
-_INDEX = """<!DOCTYPE html>
-<html><head><meta charset="utf-8"></head>
-<body><script type="module" src="./viewer.js"></script></body></html>
+#: The viewer's page up to its data: style, drawing and controls, with the placeholders __HEIGHT__ (pixels of
+#: the drawing), __KEY__ (the body's data-key) and __BG__ (the drawing's background colour).
+SHELL = """<!DOCTYPE html>
+<html><head><meta charset="utf-8"><style>
+body{margin:0;font-family:"Source Sans Pro",system-ui,sans-serif;font-size:14px;color:#31333f;background:#fff}
+#stage{position:relative;overflow:hidden;background:__BG__}
+#bar{display:flex;align-items:center;gap:10px;height:40px;padding:2px 4px}
+button{font:inherit;padding:3px 12px;border:1px solid #ccc;border-radius:6px;background:#fff;cursor:pointer}
+input[type=range]{flex:1}
+#t{min-width:120px;text-align:right;font-variant-numeric:tabular-nums}
+#note{color:#9a6700;font-size:12px}
+canvas{display:block;width:100%;height:100%;cursor:grab;touch-action:none}
+.label{position:absolute;transform:translateX(-50%);font-size:13px;pointer-events:none;white-space:nowrap}
+#title{position:absolute;left:8px;top:4px;font-size:15px;pointer-events:none}
+#dropped{position:absolute;left:8px;bottom:6px;font-size:12px;color:#9a6700;pointer-events:none}
+#derived{position:absolute;right:8px;bottom:6px;font-size:12px;color:#6b7280;pointer-events:none}
+#nogl{position:absolute;inset:0;display:none;align-items:center;justify-content:center;padding:24px;text-align:center;color:#6b7280}
+</style></head>
+<body data-key="__KEY__">
+<div id="stage" style="height:__HEIGHT__px"><canvas id="c" title="drag: orbit, scroll: zoom, double-click: reset"></canvas>
+<div id="title"></div><div id="dropped"></div><div id="derived"></div><div id="nogl"></div></div>
+<div id="bar"><button id="play">&#9654; Play</button><input id="s" type="range" min="0" value="0" step="1"><span id="t"></span><span id="note"></span></div>
 """
+
+#: The component's page: the shell, then the bundle as a module of its own (the browser caches it); the
+#: bundle takes its data from Streamlit's render messages.
+_INDEX = (
+    SHELL.replace("__HEIGHT__", "0").replace("__KEY__", "").replace("__BG__", "#ffffff")
+    + """<script type="module" src="./viewer.js"></script></body></html>\n"""
+)
 
 
 def source_hash(root: Path = HERE) -> str:

@@ -1,10 +1,12 @@
-// gesturekit's 3D viewer: the skinned characters of the page's data (the "gk-data" JSON element) drawn with
-// three.js, on one clock: the speech's time when the page has speech (frame = floor(currentTime * shown fps)),
+// gesturekit's 3D viewer: the skinned characters of the page's data drawn with three.js, on one clock: the speech's time when the page has speech (frame = floor(currentTime * shown fps)),
 // else a plain one. Drag to orbit, scroll to zoom, double-click to reset the view; space toggles play.
+// A standalone page holds its data in the "gk-data" JSON element and its speech in the "gk-audio" element;
+// in the app the page is a Streamlit component and its data come with each render message (component.js).
 import { AmbientLight, Color, DirectionalLight, PerspectiveCamera, Scene, Vector3, WebGLRenderer } from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 
 import { buildCharacters } from "./character.js";
+import { component } from "./component.js";
 
 /** The camera of gesturekit.character.look.camera_for: the box lo..hi whole, seen from the direction dir. */
 export function cameraFor(lo, hi, aspect, fov, dir) {
@@ -15,21 +17,21 @@ export function cameraFor(lo, hi, aspect, fov, dir) {
   return { position: centre.map((c, i) => c + (dist * dir[i]) / norm), target: centre };
 }
 
-function main() {
+/** Draw the data D with the speech element audio (or null); returns a function that takes the view down. */
+function main(D, audio) {
   const begun = performance.now();
-  const D = JSON.parse(document.getElementById("gk-data").textContent);
+  const gone = new AbortController(), signal = gone.signal;
   const N = D.times.length, shownFps = D.fps / D.frame_step;
   const canvas = document.getElementById("c"), stage = document.getElementById("stage");
   const slider = document.getElementById("s"), tlabel = document.getElementById("t"), play = document.getElementById("play");
-  const noteEl = document.getElementById("note"), audio = document.getElementById("gk-audio");
+  const noteEl = document.getElementById("note");
   const gk = (window.gk = { frame: 0, frames: N, time: 0, audioTime: audio ? 0 : null, playing: false, drawn: 0, drawMs: 0 });
   noteEl.title = D.note;
   slider.max = String(N - 1);
   document.getElementById("title").textContent = D.title;
   document.getElementById("dropped").textContent = D.note;
-  if (D.motions.some((m) => m.derived.length)) {
-    document.getElementById("derived").textContent = "grey: derived (placed from neck and shoulders)";
-  }
+  document.getElementById("derived").textContent = D.motions.some((m) => m.derived.length)
+    ? "grey: derived (placed from neck and shoulders)" : "";
   const labels = D.motions.map((m) => {
     const el = document.createElement("div");
     el.className = "label";
@@ -137,28 +139,41 @@ function main() {
     }
   }
   if (audio) {
-    audio.addEventListener("ended", () => { stopped(); show(audio.currentTime); });
-    audio.addEventListener("pause", () => { if (playing) { stopped(); show(audio.currentTime); } });
-    audio.addEventListener("seeked", () => { if (!playing) show(audio.currentTime); });
+    audio.addEventListener("ended", () => { stopped(); show(audio.currentTime); }, { signal });
+    audio.addEventListener("pause", () => { if (playing) { stopped(); show(audio.currentTime); } }, { signal });
+    audio.addEventListener("seeked", () => { if (!playing) show(audio.currentTime); }, { signal });
   }
-  play.addEventListener("click", toggle);
-  document.addEventListener("keydown", (e) => { if (e.code === "Space") { e.preventDefault(); toggle(); } });
+  play.addEventListener("click", toggle, { signal });
+  document.addEventListener("keydown", (e) => { if (e.code === "Space") { e.preventDefault(); toggle(); } }, { signal });
   slider.addEventListener("input", () => {
     const k = Number(slider.value), t = D.times[k] + 0.25 / D.fps;  // inside frame k's interval
     if (audio) audio.currentTime = t; else { clock0 = t; t0 = performance.now(); }
     frame = k; gk.time = t; draw();
-  });
+  }, { signal });
   if (controls) {
     controls.addEventListener("change", draw);  // drawn on demand: orbit and zoom
     controls.addEventListener("start", () => { moved = true; });
     canvas.addEventListener("dblclick", () => { moved = false; home(); draw(); });
   }
   // a new size frames the box again at the new aspect ratio, unless the user has moved the view
-  window.addEventListener("resize", () => { size(); if (!moved) home(); draw(); });
-  if (N < 2) { play.disabled = true; slider.disabled = true; }
+  window.addEventListener("resize", () => { size(); if (!moved) home(); draw(); }, { signal });
+  play.disabled = slider.disabled = N < 2;
   size(); home(); draw();
   // where the first frame's time went (milliseconds since the page began to load)
   gk.startup = { script: begun, data: decoded, webgl: glReady, drawn: performance.now() };
+  return () => {
+    stopped();
+    gone.abort();
+    if (audio) audio.pause();
+    if (controls) controls.dispose();
+    if (renderer) renderer.dispose();
+    for (const el of labels) el.remove();
+    // a fresh canvas for the next view: the old one keeps its context and listeners
+    canvas.replaceWith(canvas.cloneNode(false));
+    delete document.body.dataset.drawn;
+  };
 }
 
-main();
+const standalone = document.getElementById("gk-data");
+if (standalone) main(JSON.parse(standalone.textContent), document.getElementById("gk-audio"));
+else component(main);
