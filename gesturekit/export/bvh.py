@@ -164,16 +164,8 @@ class BvhReport:
 
     def summary(self) -> str:
         """One line, e.g. ``"take.bvh: position error max 0.00 mm ..., root at the derived spine_mid; ..."``."""
-        root = f"the derived {self.root}" if self.root in self.derived else self.root
-        parts = [
-            f"{self.path.name}: position error max {self.max_error * 1000:.2f} mm "
-            f"({self.worst_joint}, frame {self.worst_frame}), mean {self.mean_error * 1000:.2f} mm",
-            f"root at {root}",
-        ]
-        if self.left_out:
-            kind = "finger joint" if set(self.left_out) <= _FINGER_JOINTS else "joint"
-            n = len(self.left_out)
-            parts.append(f"{n} {kind}{'s' if n > 1 else ''} left out: {_names(self.left_out)}")
+        error, root, left_out = summary_parts(self)
+        parts = [error, f"root at {root}", *left_out]
         others = [d for d in self.derived if d != self.root]
         if others:
             parts.append(f"derived joints written: {_names(others)}")
@@ -201,6 +193,31 @@ def error_warning(headline: str, report: BvhReport | GltfReport, *, shapes: str 
         f"{headline} ({report.worst_joint}, frame {report.worst_frame}; mean {report.mean_error * 1000:.1f} mm): "
         f"its bones have one length each{shapes}, the motion's vary. The npz keeps the exact positions{remedy}."
     )
+
+
+def summary_parts(report: BvhReport | GltfReport) -> tuple[str, str, list[str]]:
+    """What a BVH's and a glTF file's one-line summaries share.
+
+    Returns
+    -------
+    error : str
+        The file's name and its position error (max, worst joint and frame, mean), in mm.
+    root : str
+        The root joint's name, "the derived ..." when it is derived.
+    left_out : list of str
+        The joints left out, as one phrase (empty when none).
+    """
+    root = f"the derived {report.root}" if report.root in report.derived else report.root
+    error = (
+        f"{report.path.name}: position error max {report.max_error * 1000:.2f} mm "
+        f"({report.worst_joint}, frame {report.worst_frame}), mean {report.mean_error * 1000:.2f} mm"
+    )
+    left_out = []
+    if report.left_out:
+        kind = "finger joint" if set(report.left_out) <= _FINGER_JOINTS else "joint"
+        n = len(report.left_out)
+        left_out.append(f"{n} {kind}{'s' if n > 1 else ''} left out: {_names(report.left_out)}")
+    return error, root, left_out
 
 
 def _names(names: tuple[str, ...] | list[str], most: int = 12) -> str:

@@ -64,7 +64,7 @@ from ..errors import ConfigError, OutputError, warn
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG, check_output
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS, PARENTS
-from .bvh import _FINGER_JOINTS, _names, error_warning
+from .bvh import error_warning, summary_parts
 
 __all__ = [
     "WARN_ABOVE",
@@ -172,17 +172,13 @@ class GltfReport:
 
     def summary(self) -> str:
         """One line, e.g. ``"take.glb: position error max 0.00 mm ..., 55 joints, 200 frames at 15 fps; ..."``."""
-        root = f"the derived {self.root}" if self.root in self.derived else self.root
+        error, root, left_out = summary_parts(self)
         parts = [
-            f"{self.path.name}: position error max {self.max_error * 1000:.2f} mm "
-            f"({self.worst_joint}, frame {self.worst_frame}), mean {self.mean_error * 1000:.2f} mm",
+            error,
             f"{len(self.joints)} joints, {self.frames} frames at {self.fps:g} fps, root at {root}",
             f"body of {self.vertices} vertices; {self.size / 1e6:.1f} MB",
+            *left_out,
         ]
-        if self.left_out:
-            kind = "finger joint" if set(self.left_out) <= _FINGER_JOINTS else "joint"
-            n = len(self.left_out)
-            parts.append(f"{n} {kind}{'s' if n > 1 else ''} left out: {_names(self.left_out)}")
         if self.audio is not None:
             parts.append(f"speech in {self.audio.name}")
         return "; ".join(parts)
