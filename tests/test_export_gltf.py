@@ -25,6 +25,7 @@ import soundfile as sf
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from gesturekit.character.glb import quaternion_matrix
 from gesturekit.character.look import part_colors
 from gesturekit.character.mesh import PARTS, build_mesh
 from gesturekit.character.rig import rig_for, rotation_to_quaternion, solve_pose
@@ -34,7 +35,6 @@ from gesturekit.export.gltf import (
     ROUGHNESS,
     WARN_ABOVE,
     _continuous,
-    _quaternion_matrix,
     accessor_array,
     export_gltf,
     node_matrices,
@@ -290,7 +290,7 @@ def test_quaternions_keep_one_sign_and_their_rotations(seed, frames):
     mats = np.stack([x.as_matrix() for x in r])
     q = _continuous(rotation_to_quaternion(mats))
     assert (np.sum(q[1:] * q[:-1], axis=-1) >= 0).all()
-    np.testing.assert_allclose(_quaternion_matrix(q), mats, atol=1e-9)
+    np.testing.assert_allclose(quaternion_matrix(q), mats, atol=1e-9)
 
 
 def test_same_inputs_give_the_same_bytes(tmp_path, partial_motion):
