@@ -1,0 +1,551 @@
+"""Our motion on a user's character: their bone lengths and rest pose, our bone directions, our hands' reach.
+
+:func:`retarget` poses a :class:`~gesturekit.character.target.Character` frame
+by frame from a motion of our 55 joints, in our frame (metres, Y up, facing
++Z). Their bones are visited parents first; each bone's world rotation at rest
+is ``Q`` (:attr:`Character.rest_rotation`) and ``W(t)`` in the pose:
+
+* **The pelvis** (their hips) stays where it rests, as our motions are
+  relative to the pelvis; so do the legs and every bone not below the pelvis.
+* **A bone at one of our joints with one matched child bone** takes our joint's
+  rotation (:func:`gesturekit.character.rig.solve_pose`) through a fixed
+  alignment ``A`` of its rest pose onto ours (the smallest turn of its rest
+  direction onto our rest direction: a T-pose, an A-pose and any roll of the
+  bone read alike), then the smallest turn that points it exactly along our
+  bone: ``W = swing(W0 -> ours) W0`` with ``W0 = R_ours A Q``. So its direction
+  is ours, and its twist (a forearm's roll) is ours.
+* **A bone with several matched children** (the chest with the neck and the
+  collars, a hand with its fingers) takes the rotation that best points all of
+  them along ours (weighted Kabsch on unit directions), held to ``R_ours A`` by a
+  small weight so that nearly parallel children do not leave its twist free.
+* **A bone with no matched child** (a hand without fingers, the head) takes
+  ``R_ours A Q``, ``A`` inherited from its nearest matched ancestor.
+* **A bone that is none of ours** (a twist or extra spine bone, a leg, a finger
+  the motion lacks) keeps its rest rotation relative to its parent.
+
+**The arms** then reach as ours do, scaled to their arm: the wrist's target is
+``shoulder + s (ours_wrist - ours_shoulder)`` with ``s`` their arm length (upper
+arm plus forearm) over ours. Where their upper arm and forearm have the
+proportions of ours, our directions put the wrist there; where they differ,
+the wrist goes where our directions put it but no further than
+:data:`WRIST_SLACK` of the arm's length from the target, and the upper arm and
+forearm are solved for that point with two bones (law of cosines), the elbow
+bent towards where ours points (off the line from shoulder to wrist): the
+bones turn away from ours only as much as the reach needs.
+
+**The torso proxy**: a capsule around their spine from the pelvis up, of radius
+:data:`TORSO_RADIUS` times their shoulder width, and the same around ours. A
+wrist target inside their capsule while our wrist is outside ours is moved out
+to its surface (radially, from the nearest point of the spine); the frames are
+counted in the report, as are those where our own hand is inside ours (left as
+they are: the motion has it so).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..motion import Motion
+from ..skeleton import JOINT_NAMES, joint_index
+from .rig import Rig, rig_for, solve_pose
+from .target import Character
+
+__all__ = ["TORSO_RADIUS", "WRIST_SLACK", "RetargetReport", "Retargeted", "retarget", "swing", "kabsch"]
+
+#: Radius of the torso capsule as a fraction of the shoulder width (the distance between the upper-arm joints).
+TORSO_RADIUS = 0.3
+
+#: How far a wrist may stay from our reach scaled to their arm, as a fraction of their arm's length, so that
+#: their upper arm and forearm keep our directions where their proportions differ a little from ours.
+WRIST_SLACK = 0.015
+
+#: Weight of ``R_ours A``'s axes in the fit of a bone with several children (the children weigh 1 each).
+_HOLD = 0.05
+
+_SPINE = ("spine_mid", "chest", "upper_chest")
+
+
+@dataclass(frozen=True)
+class RetargetReport:
+    """How closely the character follows the motion, and what it could not follow.
+
+    Attributes
+    ----------
+    segments : tuple of str
+        The measured bones, ``"Parent->Child"`` (their names), from each matched bone to each matched child.
+    direction_error : np.ndarray, shape (len(segments),), float64
+        Largest angle over the frames between each segment and ours, degrees.
+    wrist_error : float
+        Largest distance of a wrist from its scaled target over the frames (both sides; frames whose target was
+        moved out of the torso left out), as a fraction of that arm's length.
+    reach_scale : tuple of float
+        Left and right: their arm length over ours.
+    torso_radius : float
+        Radius of their torso capsule, metres.
+    moved_out : tuple of int
+        Left and right: frames whose wrist target was moved out of their torso (ours clear of our torso).
+    inside : tuple of int
+        Left and right: frames whose wrist is still inside their torso while ours is clear (the target was out of
+        reach once moved out).
+    ours_inside : tuple of int
+        Left and right: frames whose wrist is inside our own torso capsule (left as the motion has it).
+    missing : tuple of str
+        Our joints the motion has but the character lacks a bone for (e.g. its fingers): they are not shown.
+    still : tuple of str
+        Their bones that keep their rest rotation relative to their parent (not below the pelvis, or none of ours).
+    frames : int
+    """
+
+    segments: tuple[str, ...]
+    direction_error: np.ndarray
+    wrist_error: float
+    reach_scale: tuple[float, float]
+    torso_radius: float
+    moved_out: tuple[int, int]
+    inside: tuple[int, int]
+    ours_inside: tuple[int, int]
+    missing: tuple[str, ...]
+    still: tuple[str, ...]
+    frames: int
+
+    @property
+    def max_direction_error(self) -> float:
+        """Largest direction error of any segment, degrees (0 without segments)."""
+        return float(self.direction_error.max()) if len(self.direction_error) else 0.0
+
+    @property
+    def worst_segment(self) -> str:
+        """The segment of :attr:`max_direction_error`."""
+        return self.segments[int(np.argmax(self.direction_error))] if self.segments else ""
+
+    def summary(self) -> str:
+        """One paragraph for a person: directions, wrists, torso, what is missing."""
+        lines = [
+            f"{len(self.segments)} bones follow ours within {self.max_direction_error:.2f} degrees"
+            + (f" (worst {self.worst_segment})" if self.segments else ""),
+            f"wrists within {100 * self.wrist_error:.2f} % of the arm's length of our reach scaled by "
+            f"{self.reach_scale[0]:.3f} (left) and {self.reach_scale[1]:.3f} (right)",
+            f"hands kept out of the torso in {sum(self.moved_out)} frames "
+            f"(capsule radius {100 * self.torso_radius:.1f} cm); still inside in {sum(self.inside)}; "
+            f"inside ours in {sum(self.ours_inside)} of {self.frames}",
+        ]
+        if self.missing:
+            lines.append(
+                f"not on the character (no bone): {', '.join(self.missing[:10])}"
+                + (" ..." if len(self.missing) > 10 else "")
+            )
+        return "; ".join(lines)
+
+
+@dataclass(frozen=True)
+class Retargeted:
+    """A character posed by a motion: every bone's world rotation and position per frame, in our frame.
+
+    Attributes
+    ----------
+    character : Character
+    fps : float
+        Frames per second.
+    rotation : np.ndarray, shape (frames, M, 3, 3), float64
+        Each bone's rotation in the world (at rest: :attr:`Character.rest_rotation`).
+    position : np.ndarray, shape (frames, M, 3), float64
+        Each bone's position, metres.
+    scale : float
+        Their size over ours: the mean of :attr:`RetargetReport.reach_scale`.
+    report : RetargetReport
+    source : Motion
+        The motion the character follows.
+    """
+
+    character: Character
+    fps: float
+    rotation: np.ndarray
+    position: np.ndarray
+    scale: float
+    report: RetargetReport
+    source: Motion
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.rotation.shape[0])
+
+    def turns(self) -> np.ndarray:
+        """Each bone's rotation from its rest orientation, in the world: ``W Q^T``, shape (frames, M, 3, 3)."""
+        return np.einsum("tmab,mcb->tmac", self.rotation, self.character.rest_rotation)
+
+    def skinning(self) -> np.ndarray:
+        """Skinning matrices of the character's rest-pose mesh, shape (frames, M, 3, 4): ``[N | P - N p]`` with
+        ``N`` :meth:`turns` and ``p`` the rest positions; a rest point ``v`` of bone ``m`` goes to
+        ``M[..., :3] @ v + M[..., 3]``."""
+        n = self.turns()
+        out = np.empty(n.shape[:2] + (3, 4))
+        out[..., :3] = n
+        out[..., 3] = self.position - np.einsum("tmab,mb->tma", n, self.character.rest_position)
+        return out
+
+    def local_turns(self) -> np.ndarray:
+        """Each bone's :meth:`turns` relative to its parent's (a root's: the world), shape (frames, M, 3, 3): the
+        rotations of a skeleton whose rest pose has no rotation (a BVH's, the page's)."""
+        n = self.turns()
+        out = n.copy()
+        parents = self.character.parents
+        has = parents >= 0
+        out[:, has] = np.einsum("tmba,tmbc->tmac", n[:, parents[has]], n[:, has])
+        return out
+
+    def our_motion(self) -> Motion:
+        """The character's pose as our 55 joints at our size (their positions relative to their pelvis, divided by
+        :attr:`scale`), for measuring the controls on it; joints they lack keep the motion's."""
+        ch = self.character
+        out = self.source.positions.astype(np.float64).copy()
+        have = np.flatnonzero(ch.bone_of >= 0)
+        rel = self.position[:, ch.bone_of[have]] - self.position[:, ch.pelvis][:, None]
+        out[:, have] = rel / self.scale
+        return Motion(out.astype(np.float32), self.fps, self.source.presence)
+
+
+def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors of ``v`` (..., 3) and where they are defined (length above 1e-9)."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    ok = n[..., 0] > 1e-9
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-9), ok
+
+
+def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotations taking unit vectors ``a`` onto unit vectors ``b``.
+
+    Parameters
+    ----------
+    a, b : np.ndarray, shape (..., 3)
+        Unit vectors.
+
+    Returns
+    -------
+    np.ndarray, shape (..., 3, 3)
+        ``R @ a = b``; for opposite vectors, a half turn about an axis perpendicular to ``a``.
+    """
+    a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+    v = np.cross(a, b)
+    c = np.einsum("...i,...i->...", a, b)
+    k = np.zeros(a.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    near = c < -1 + 1e-9
+    denom = np.where(near, 1.0, 1.0 + c)
+    r = np.eye(3) + k + (k @ k) / denom[..., None, None]
+    if near.any():
+        an = a[near]
+        axis = np.cross(an, np.where(np.abs(an[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+        r[near] = 2 * axis[:, :, None] * axis[:, None, :] - np.eye(3)
+    return r
+
+
+def kabsch(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The rotations that best turn vectors ``u`` onto ``v`` (least squares, weights ``w``).
+
+    Parameters
+    ----------
+    u, v : np.ndarray, shape (..., k, 3)
+    w : np.ndarray, shape (..., k) or (k,)
+
+    Returns
+    -------
+    np.ndarray, shape (..., 3, 3)
+        ``R`` minimising ``sum w |R u - v|^2``, a proper rotation.
+    """
+    u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
+    h = np.einsum("...k,...ki,...kj->...ij", np.broadcast_to(w, u.shape[:-1]), v, u)
+    s_u, _, s_vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(s_u @ s_vt))
+    d = np.where(d == 0, 1.0, d)
+    fix = np.ones(h.shape[:-1])
+    fix[..., -1] = d
+    return (s_u * fix[..., None, :]) @ s_vt
+
+
+def _kids(ch: Character, mapped: np.ndarray) -> list[list[int]]:
+    """For each bone, its nearest matched descendants (not through another matched bone)."""
+    children: list[list[int]] = [[] for _ in range(ch.n_bones)]
+    for b, p in enumerate(ch.parents):
+        if p >= 0:
+            children[p].append(b)
+    out: list[list[int]] = []
+    for b in range(ch.n_bones):
+        found: list[int] = []
+        stack = list(reversed(children[b]))
+        while stack:
+            c = stack.pop()
+            if mapped[c]:
+                found.append(c)
+            else:
+                stack.extend(reversed(children[c]))
+        out.append(found)
+    return out
+
+
+def _below(ch: Character, top: int) -> np.ndarray:
+    """Shape (M,), bool: the bones at or below ``top``."""
+    out = np.zeros(ch.n_bones, dtype=bool)
+    for b in range(ch.n_bones):  # parents before children
+        out[b] = b == top or (ch.parents[b] >= 0 and out[ch.parents[b]])
+    return out
+
+
+def _distance_to_chain(x: np.ndarray, chain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance of points ``x`` (T, 3) to polylines ``chain`` (T, n, 3), and the nearest points (T, 3)."""
+    best = np.full(len(x), np.inf)
+    near = np.zeros_like(x)
+    for i in range(chain.shape[1] - 1):
+        a, b = chain[:, i], chain[:, i + 1]
+        ab = b - a
+        t = np.clip(np.einsum("ti,ti->t", x - a, ab) / np.maximum(np.einsum("ti,ti->t", ab, ab), 1e-18), 0, 1)
+        q = a + t[:, None] * ab
+        d = np.linalg.norm(x - q, axis=1)
+        closer = d < best
+        best[closer], near[closer] = d[closer], q[closer]
+    return best, near
+
+
+def retarget(motion: Motion, character: Character) -> Retargeted:
+    """Pose ``character`` by ``motion``, frame by frame (see the module's text).
+
+    Parameters
+    ----------
+    motion : Motion
+        Joint positions (frames, 55, 3), metres, relative to the pelvis.
+    character : Character
+        From :func:`gesturekit.character.user.read_character`.
+
+    Returns
+    -------
+    Retargeted
+
+    Raises
+    ------
+    ConfigError
+        A motion without frames or with positions that are not finite.
+    """
+    rig = rig_for(motion)
+    pose = solve_pose(motion, rig)
+    r_ours, _ = pose.world(rig)
+    x = motion.positions.astype(np.float64)
+    ch = character
+    n, m = x.shape[0], ch.n_bones
+    q, p = ch.rest_rotation, ch.rest_position
+    usable = rig.in_rig & (ch.bone_of >= 0)
+    joint_at = np.full(m, -1, dtype=np.int64)
+    joint_at[ch.bone_of[usable]] = np.flatnonzero(usable)
+    mapped = joint_at >= 0
+    kids = _kids(ch, mapped)
+    body = _below(ch, ch.pelvis)
+    align = _alignment(ch, rig.rest, joint_at, kids)
+
+    rot = np.empty((n, m, 3, 3))
+    pos = np.empty((n, m, 3))
+    wants: dict[int, np.ndarray] = {}
+    arms = _Arms(ch, rig, x, joint_at)
+    for b in range(m):
+        pa = int(ch.parents[b])
+        if not body[b] or b == ch.pelvis or pa < 0:
+            rot[:, b], pos[:, b] = q[b], p[b]
+            continue
+        carry = rot[:, pa] @ q[pa].T
+        pos[:, b] = pos[:, pa] + carry @ (p[b] - p[pa])
+        j = int(joint_at[b])
+        if j < 0:
+            rot[:, b] = carry @ q[b]
+            continue
+        if b in arms.shoulders:
+            wants.update(arms.reach(b, pos))
+        held = r_ours[:, j] @ align[b]
+        if len(kids[b]) >= 2:
+            rot[:, b] = _fit(held, p, b, kids[b], joint_at, x) @ q[b]
+            continue
+        w0 = held @ q[b]
+        if kids[b]:
+            c = kids[b][0]
+            cur, _ = _unit(w0 @ (q[b].T @ (p[c] - p[b])))
+            want, ok = _unit(x[:, joint_at[c]] - x[:, j])
+            if b in wants:
+                want, ok = _unit(wants[b])
+            want = np.where(ok[:, None], want, cur)
+            w0 = swing(cur, want) @ w0
+        rot[:, b] = w0
+    report = _report(ch, rig, x, joint_at, kids, rot, pos, arms, body)
+    scale = float(np.mean(arms.scale))
+    return Retargeted(
+        character=ch, fps=float(motion.fps), rotation=rot, position=pos, scale=scale, report=report, source=motion
+    )
+
+
+def _alignment(ch: Character, ours_rest: np.ndarray, joint_at: np.ndarray, kids: list[list[int]]) -> np.ndarray:
+    """``A`` per bone: the fixed turn of their rest pose onto ours (the identity for bones none of ours)."""
+    p = ch.rest_position
+    out = np.tile(np.eye(3), (ch.n_bones, 1, 1))
+    for b in range(ch.n_bones):
+        j = int(joint_at[b])
+        if j < 0:
+            pa = int(ch.parents[b])
+            out[b] = out[pa] if pa >= 0 else np.eye(3)
+            continue
+        theirs, ok_t = _unit(np.array([p[c] - p[b] for c in kids[b]]).reshape(-1, 3))
+        ours, ok_o = _unit(np.array([ours_rest[joint_at[c]] - ours_rest[j] for c in kids[b]]).reshape(-1, 3))
+        ok = ok_t & ok_o
+        if ok.sum() >= 2:
+            out[b] = kabsch(theirs[ok], ours[ok], np.ones(int(ok.sum())))
+        elif ok.sum() == 1:
+            out[b] = swing(theirs[ok][0], ours[ok][0])
+        else:
+            pa = int(ch.parents[b])
+            out[b] = out[pa] if pa >= 0 else np.eye(3)
+    return out
+
+
+def _fit(held: np.ndarray, p: np.ndarray, b: int, kids: list[int], joint_at: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The turn (frames, 3, 3) that best points the children of ``b`` along ours, held to ``held`` a little."""
+    j = int(joint_at[b])
+    u, _ = _unit(np.array([p[c] - p[b] for c in kids]))
+    v, ok = _unit(np.stack([x[:, joint_at[c]] - x[:, j] for c in kids], axis=1))
+    n = x.shape[0]
+    axes = np.tile(np.eye(3), (n, 1, 1))
+    uu = np.concatenate([np.broadcast_to(u, (n,) + u.shape), axes], axis=1)
+    vv = np.concatenate([v, np.swapaxes(held, 1, 2)], axis=1)  # held's columns: where it sends each axis
+    w = np.concatenate([ok.astype(float), np.full((n, 3), _HOLD)], axis=1)
+    return kabsch(uu, vv, w)
+
+
+class _Arms:
+    """Each arm's reach: the scaled wrist target, kept out of the torso, and the two-bone solve for it."""
+
+    def __init__(self, ch: Character, rig: Rig, x: np.ndarray, joint_at: np.ndarray):
+        self.ch, self.x = ch, x
+        p = ch.rest_position
+        self.sides: dict[int, tuple[str, int, int, int]] = {}
+        self.scale = [1.0, 1.0]
+        self.targets: dict[str, np.ndarray] = {}
+        self.moved: dict[str, np.ndarray] = {}
+        self.ours_in: dict[str, np.ndarray] = {}
+        ls, rs = ch.bone("left_shoulder"), ch.bone("right_shoulder")
+        self.radius = TORSO_RADIUS * float(np.linalg.norm(p[ls] - p[rs]))
+        ours_width = float(
+            np.linalg.norm(rig.rest[joint_index("left_shoulder")] - rig.rest[joint_index("right_shoulder")])
+        )
+        self.ours_radius = TORSO_RADIUS * ours_width
+        self.spine = [k for k in _SPINE if rig.in_rig[joint_index(k)] and ch.bone(k) >= 0]
+        for i, side in enumerate(("left", "right")):
+            s, e, w = (ch.bone(f"{side}_{k}") for k in ("shoulder", "elbow", "wrist"))
+            js, je, jw = (joint_index(f"{side}_{k}") for k in ("shoulder", "elbow", "wrist"))
+            if min(joint_at[s], joint_at[e], joint_at[w]) < 0:
+                continue
+            theirs = float(np.linalg.norm(p[e] - p[s]) + np.linalg.norm(p[w] - p[e]))
+            ours = float(rig.lengths[je] + rig.lengths[jw])
+            self.scale[i] = theirs / ours if ours > 1e-9 else 1.0
+            self.sides[s] = (side, e, w, i)
+            del js
+        self.shoulders = set(self.sides)
+
+    def torso(self, pos: np.ndarray) -> np.ndarray:
+        """Their spine (frames, n, 3): the pelvis, then each matched spine bone."""
+        ch = self.ch
+        return np.stack([pos[:, ch.pelvis]] + [pos[:, ch.bone(k)] for k in self.spine], axis=1)
+
+    def our_torso(self) -> np.ndarray:
+        x = self.x
+        return np.stack([np.zeros((len(x), 3))] + [x[:, joint_index(k)] for k in self.spine], axis=1)
+
+    def reach(self, s: int, pos: np.ndarray) -> dict[int, np.ndarray]:
+        """The wanted directions of the upper arm (bone ``s``) and the forearm, frames x 3 each."""
+        side, e, w, i = self.sides[s]
+        ch, x = self.ch, self.x
+        p = ch.rest_position
+        xs, xe, xw = (x[:, joint_index(f"{side}_{k}")] for k in ("shoulder", "elbow", "wrist"))
+        shoulder = pos[:, s]
+        a = float(np.linalg.norm(p[e] - p[s]))
+        c = float(np.linalg.norm(p[w] - p[e]))
+        target = shoulder + self.scale[i] * (xw - xs)
+        self.targets[side] = target.copy()
+        # where our directions alone put their wrist; the hand goes there unless that is further than the slack
+        # from the scaled reach, so that the arm's bones turn away from ours only as much as the reach needs
+        straight = shoulder + a * _unit(xe - xs)[0] + c * _unit(xw - xe)[0]
+        off = straight - target
+        far = np.linalg.norm(off, axis=1, keepdims=True)
+        slack = WRIST_SLACK * (a + c)
+        target = target + off * np.minimum(1.0, slack / np.maximum(far, 1e-12))
+        d_ours, _ = _distance_to_chain(xw, self.our_torso())
+        ours_in = d_ours < self.ours_radius
+        d, near = _distance_to_chain(target, self.torso(pos))
+        moved = (d < self.radius) & ~ours_in
+        if moved.any():
+            out, ok = _unit(target[moved] - near[moved])
+            out[~ok] = [0.0, 0.0, 1.0]  # on the spine itself: forward
+            target[moved] = near[moved] + out * (self.radius * 1.001)
+        self.moved[side], self.ours_in[side] = moved, ours_in
+        axis = target - shoulder
+        dist = np.clip(np.linalg.norm(axis, axis=1), abs(a - c) + 1e-9, (a + c) * (1 - 1e-12))
+        u, ok = _unit(axis)
+        u[~ok] = [0.0, -1.0, 0.0]
+        target = shoulder + u * dist[:, None]
+        bend = (xe - xs) - np.einsum("ti,ti->t", xe - xs, u)[:, None] * u
+        bend, ok = _unit(bend)
+        if not ok.all():  # a straight arm: bend towards where our elbow is, else down
+            alt = np.array([0.0, -1.0, 0.0]) - u[~ok, 1:2] * u[~ok]
+            bend[~ok] = _unit(alt)[0]
+        along = (a * a - c * c + dist * dist) / (2 * dist)
+        up = np.sqrt(np.clip(a * a - along * along, 0.0, None))
+        elbow = shoulder + along[:, None] * u + up[:, None] * bend
+        return {s: elbow - shoulder, e: target - elbow}
+
+
+def _report(
+    ch: Character,
+    rig: Rig,
+    x: np.ndarray,
+    joint_at: np.ndarray,
+    kids: list[list[int]],
+    rot: np.ndarray,
+    pos: np.ndarray,
+    arms: _Arms,
+    body: np.ndarray,
+) -> RetargetReport:
+    del rot
+    segments, errors = [], []
+    for b in range(ch.n_bones):
+        if joint_at[b] < 0 or b == ch.pelvis:
+            continue
+        for c in kids[b]:
+            theirs, ok_t = _unit(pos[:, c] - pos[:, b])
+            ours, ok_o = _unit(x[:, joint_at[c]] - x[:, joint_at[b]])
+            cos = np.clip(np.einsum("ti,ti->t", theirs, ours), -1.0, 1.0)
+            ok = ok_t & ok_o
+            segments.append(f"{ch.names[b]}->{ch.names[c]}")
+            errors.append(float(np.degrees(np.arccos(cos[ok])).max()) if ok.any() else 0.0)
+    wrist, moved_out, inside, ours_inside = 0.0, [0, 0], [0, 0], [0, 0]
+    for s, (side, e, w, i) in arms.sides.items():
+        length = float(np.linalg.norm(ch.rest_position[e] - ch.rest_position[s]))
+        length += float(np.linalg.norm(ch.rest_position[w] - ch.rest_position[e]))
+        keep = ~arms.moved[side]
+        if keep.any():
+            miss = np.linalg.norm(pos[keep, w] - arms.targets[side][keep], axis=1).max()
+            wrist = max(wrist, float(miss) / length)
+        d, _ = _distance_to_chain(pos[:, w], arms.torso(pos))
+        moved_out[i] = int(arms.moved[side].sum())
+        inside[i] = int(((d < arms.radius) & ~arms.ours_in[side]).sum())
+        ours_inside[i] = int(arms.ours_in[side].sum())
+    missing = tuple(JOINT_NAMES[j] for j in np.flatnonzero(rig.in_rig & (ch.bone_of < 0)))
+    still = tuple(ch.names[b] for b in range(ch.n_bones) if joint_at[b] < 0 or not body[b])
+    return RetargetReport(
+        segments=tuple(segments),
+        direction_error=np.asarray(errors, dtype=np.float64),
+        wrist_error=wrist,
+        reach_scale=(float(arms.scale[0]), float(arms.scale[1])),
+        torso_radius=arms.radius,
+        moved_out=(moved_out[0], moved_out[1]),
+        inside=(inside[0], inside[1]),
+        ours_inside=(ours_inside[0], ours_inside[1]),
+        missing=missing,
+        still=still,
+        frames=int(x.shape[0]),
+    )

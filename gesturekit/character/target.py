@@ -1,0 +1,324 @@
+"""A user's character in our frame: its bones, rest pose, matched joints and body (what :mod:`.user` reads).
+
+Every array is in *our* frame: metres, Y up, the character facing +Z with its
+left at +X, as our motions are. The file's own frame is found from its rest
+pose (up: from the pelvis to the head; left: from the right upper arm to the
+left one) and :attr:`Character.to_file` takes points back to it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..skeleton import JOINT_NAMES, PARENTS, joint_index
+from .humanoid import PELVIS
+
+__all__ = [
+    "CharacterSkin",
+    "GltfSource",
+    "Character",
+    "FileSkeleton",
+    "facing_frame",
+    "topological",
+    "reorder",
+    "empty_skin",
+]
+
+
+@dataclass(frozen=True)
+class CharacterSkin:
+    """A character's skinned mesh in its rest pose, in our frame.
+
+    Attributes
+    ----------
+    vertices : np.ndarray, shape (V, 3), float32
+        Rest-pose positions, metres.
+    normals : np.ndarray, shape (V, 3), float32
+        Unit normals in the rest pose.
+    faces : np.ndarray, shape (F, 3), int64
+        Vertex indices of the triangles.
+    joints : np.ndarray, shape (V, 4), int64
+        The bones (indices into :attr:`Character.names`) each vertex follows.
+    weights : np.ndarray, shape (V, 4), float32
+        Their weights, non-negative, each row summing to 1.
+    colors : np.ndarray, shape (V, 3), float32
+        sRGB in [0, 1]: the material's base colour times its texture at the vertex (and the vertex colour).
+    """
+
+    vertices: np.ndarray
+    normals: np.ndarray
+    faces: np.ndarray
+    joints: np.ndarray
+    weights: np.ndarray
+    colors: np.ndarray
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+
+@dataclass(frozen=True)
+class GltfSource:
+    """What writing the character back as a GLB needs: the file's document and binary chunk.
+
+    Attributes
+    ----------
+    document : dict
+        The glTF JSON.
+    binary : bytes
+        The binary chunk (GLB) or the one buffer (glTF).
+    nodes : np.ndarray, shape (M,), int64
+        The node of each bone.
+    """
+
+    document: dict[str, Any]
+    binary: bytes
+    nodes: np.ndarray
+
+
+@dataclass(frozen=True)
+class Character:
+    """A user's humanoid: its bones, their rest pose, which of our joints each is, and its body.
+
+    Attributes
+    ----------
+    path : Path
+        The file read.
+    kind : str
+        ``"gltf"`` (a glTF or GLB), ``"vrm0"``, ``"vrm1"`` or ``"bvh"``.
+    names : tuple of str, length M
+        Bone names, parents before children.
+    parents : np.ndarray, shape (M,), int64
+        Each bone's parent, ``-1`` for a root.
+    rest_rotation : np.ndarray, shape (M, 3, 3), float64
+        Each bone's rotation in the world at rest, our frame (the identity for a BVH's joints turned into our frame).
+    rest_position : np.ndarray, shape (M, 3), float64
+        Each bone's position at rest, our frame, metres.
+    bone_of : np.ndarray, shape (55,), int64
+        The bone at each of our joints, ``-1`` where the rig has none.
+    pelvis : int
+        The bone at the pelvis (their hips).
+    matched_by : str
+        How the bones were matched: ``"VRM 0.x humanoid"``, ``"VRM 1.0 humanoid"``, ``"mixamo names"``,
+        ``"zeggs names"``, ``"JSON map NAME"``.
+    to_file : np.ndarray, shape (4, 4), float64
+        Takes a point of our frame to the file's world frame and units: a rotation times a uniform scale.
+    skin : CharacterSkin or None
+        The body of a glTF or VRM; ``None`` for a BVH or a glTF without a skinned mesh.
+    gltf : GltfSource or None
+        For a glTF or VRM.
+    bvh_units : float
+        Metres per unit of a BVH file (1 for glTF).
+    """
+
+    path: Path
+    kind: str
+    names: tuple[str, ...]
+    parents: np.ndarray
+    rest_rotation: np.ndarray
+    rest_position: np.ndarray
+    bone_of: np.ndarray
+    pelvis: int
+    matched_by: str
+    to_file: np.ndarray
+    skin: CharacterSkin | None = None
+    gltf: GltfSource | None = field(default=None, repr=False)
+    bvh_units: float = 1.0
+
+    @property
+    def n_bones(self) -> int:
+        return len(self.names)
+
+    def bone(self, joint: str) -> int:
+        """The bone at our joint ``joint`` (or ``"pelvis"``), ``-1`` where there is none."""
+        from ..skeleton import joint_index
+
+        return self.pelvis if joint == PELVIS else int(self.bone_of[joint_index(joint)])
+
+    def matched(self) -> dict[str, str]:
+        """Our joint (and ``"pelvis"``) -> their bone name, for every joint matched."""
+        from ..skeleton import JOINT_NAMES
+
+        out = {PELVIS: self.names[self.pelvis]}
+        out |= {JOINT_NAMES[j]: self.names[b] for j, b in enumerate(self.bone_of) if b >= 0}
+        return out
+
+
+def facing_frame(pelvis: np.ndarray, head: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """The rotation from a file's world frame to ours, from its rest pose.
+
+    Parameters
+    ----------
+    pelvis, head, left, right : np.ndarray, shape (3,)
+        Rest positions of the pelvis, the head and the left and right upper-arm joints, in the file's frame.
+
+    Returns
+    -------
+    np.ndarray, shape (3, 3)
+        ``R`` with ``R @ left_dir = +X``, ``R @ up = +Y``, ``R @ forward = +Z``.
+
+    Raises
+    ------
+    ConfigError
+        The head is not away from the pelvis, or the arms are not side by side across it.
+    """
+    up = np.asarray(head, float) - np.asarray(pelvis, float)
+    side = np.asarray(left, float) - np.asarray(right, float)
+    if np.linalg.norm(up) < 1e-9 or np.linalg.norm(side) < 1e-9:
+        raise ConfigError("the rest pose has the head on the pelvis or both arms at one point")
+    up = up / np.linalg.norm(up)
+    side = side - up * (side @ up)
+    if np.linalg.norm(side) < 1e-6 * np.linalg.norm(up):
+        raise ConfigError("the rest pose has the arms on the line from the pelvis to the head")
+    side = side / np.linalg.norm(side)
+    forward = np.cross(side, up)
+    return np.stack([side, up, forward])
+
+
+@dataclass
+class FileSkeleton:
+    """Bones in the file's frame and units: parents before children; ``world`` (M, 4, 4) at rest.
+
+    ``humanoid`` is ``(label, our joint -> bone, our joint -> name looked for)`` where the file declares one (VRM).
+    ``skin`` holds the mesh in the file's world frame: vertices, normals, faces, joints, weights, colors.
+    """
+
+    path: Path
+    kind: str
+    names: tuple[str, ...]
+    parents: np.ndarray
+    world: np.ndarray
+    units: float = 1.0
+    humanoid: tuple[str, dict[str, int], dict[str, str]] | None = None
+    skin: dict[str, np.ndarray] | None = None
+    gltf: GltfSource | None = field(default=None, repr=False)
+
+    def character(self, found: Mapping[str, int], matched_by: str, expected: Mapping[str, str] | None) -> Character:
+        """The character in our frame, its bones matched by ``found`` (our joint or ``"pelvis"`` -> bone)."""
+        del expected
+        _check_tree(self, found)
+        pos = self.world[:, :3, 3] * self.units
+        rot = _rotations(self.world[:, :3, :3])
+        try:
+            turn = facing_frame(
+                pos[found[PELVIS]], pos[found["head"]], pos[found["left_shoulder"]], pos[found["right_shoulder"]]
+            )
+        except ConfigError as e:
+            why = "a character's rest pose must stand upright, arms apart"
+            raise ConfigError(f"{self.path}: {e.problem}; {why}") from None
+        bone_of = np.full(len(JOINT_NAMES), -1, dtype=np.int64)
+        for k, b in found.items():
+            if k != PELVIS:
+                bone_of[joint_index(k)] = b
+        to_file = np.eye(4)
+        to_file[:3, :3] = turn.T / self.units
+        skin = None
+        if self.skin is not None and len(self.skin["faces"]):
+            s = self.skin
+            skin = CharacterSkin(
+                vertices=(s["vertices"] * self.units @ turn.T).astype(np.float32),
+                normals=(s["normals"] @ turn.T).astype(np.float32),
+                faces=s["faces"].astype(np.int64),
+                joints=s["joints"].astype(np.int64),
+                weights=s["weights"].astype(np.float32),
+                colors=s["colors"].astype(np.float32),
+            )
+        return Character(
+            path=self.path,
+            kind=self.kind,
+            names=self.names,
+            parents=self.parents.astype(np.int64),
+            rest_rotation=np.einsum("ab,mbc->mac", turn, rot),
+            rest_position=pos @ turn.T,
+            bone_of=bone_of,
+            pelvis=int(found[PELVIS]),
+            matched_by=matched_by,
+            to_file=to_file,
+            skin=skin,
+            gltf=self.gltf,
+            bvh_units=self.units,
+        )
+
+
+def _rotations(m: np.ndarray) -> np.ndarray:
+    """The rotation part of each 3x3 (the nearest rotation: scale and shear taken out)."""
+    u, _, vt = np.linalg.svd(m)
+    r = u @ vt
+    flip = np.linalg.det(r) < 0
+    if flip.any():
+        u[flip, :, -1] *= -1
+        r[flip] = u[flip] @ vt[flip]
+    return r
+
+
+def _ancestors(parents: np.ndarray, b: int) -> list[int]:
+    out = []
+    while b >= 0:
+        out.append(b)
+        b = int(parents[b])
+    return out
+
+
+def _check_tree(sk: FileSkeleton, found: Mapping[str, int]) -> None:
+    """Refuse a match that two of our joints share a bone in, or where a joint's bone is not below its parent's."""
+    names = sk.names
+    seen: dict[int, str] = {}
+    for k, b in found.items():
+        if b in seen:
+            raise ConfigError(f"{sk.path}: {seen[b]} and {k} are matched to one bone, {names[b]!r}")
+        seen[b] = k
+    for k, b in found.items():
+        if k == PELVIS:
+            continue
+        j = joint_index(k)
+        p = int(PARENTS[j])
+        while p >= 0 and JOINT_NAMES[p] not in found:
+            p = int(PARENTS[p])
+        above = found[JOINT_NAMES[p]] if p >= 0 else found[PELVIS]
+        if above not in _ancestors(sk.parents, b)[1:]:
+            what = JOINT_NAMES[p] if p >= 0 else PELVIS
+            raise ConfigError(
+                f"{sk.path}: the bone of {k} ({names[b]!r}) is not below the bone of {what} ({names[above]!r})"
+            )
+
+
+def topological(parents: list[int]) -> list[int]:
+    """An order of the bones in which every parent comes before its children (depth first, file order kept)."""
+    children: dict[int, list[int]] = {}
+    for i, p in enumerate(parents):
+        children.setdefault(p, []).append(i)
+    order: list[int] = []
+    stack = list(reversed(children.get(-1, [])))
+    while stack:
+        b = stack.pop()
+        order.append(b)
+        stack.extend(reversed(children.get(b, [])))
+    if len(order) != len(parents):
+        raise ConfigError("the bones do not form a tree (a bone is its own ancestor)")
+    return order
+
+
+def reorder(names: list[str], parents: list[int], order: list[int]) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """Names and parents in ``order``; also the inverse (old index -> new)."""
+    new = np.empty(len(order), dtype=np.int64)
+    new[np.asarray(order, dtype=np.int64)] = np.arange(len(order))
+    out_parents = np.array([-1 if parents[o] < 0 else int(new[parents[o]]) for o in order], dtype=np.int64)
+    return tuple(names[o] for o in order), out_parents, new
+
+
+def empty_skin() -> dict[str, Any]:
+    """A skin without triangles."""
+    return {
+        "vertices": np.zeros((0, 3)),
+        "normals": np.zeros((0, 3)),
+        "faces": np.zeros((0, 3), dtype=np.int64),
+        "joints": np.zeros((0, 4), dtype=np.int64),
+        "weights": np.zeros((0, 4)),
+        "colors": np.zeros((0, 3)),
+    }

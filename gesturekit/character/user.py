@@ -1,0 +1,114 @@
+"""A user's own humanoid character: a glTF/GLB or VRM file with a skinned body, or a BVH skeleton.
+
+:func:`read_character` reads the file, finds which of its bones is which of
+our joints (:mod:`gesturekit.character.humanoid`) and returns a
+:class:`Character`: its skeleton in its rest pose (whatever that pose is: a
+T-pose, an A-pose, bones with any roll) and, from a glTF or VRM, its skinned
+mesh with the colour of its materials.
+
+The character's frame
+---------------------
+Every array of a :class:`Character` is in *our* frame: metres, Y up, the
+character facing +Z with its left at +X, as our motions are. The file's own
+frame is found from its rest pose (up: from the pelvis to the head; left:
+from the right upper arm to the left one) and :attr:`Character.to_file` takes
+points back to it, so a VRM 0.x (facing -Z), a glTF whose armature is turned
+and scaled by 0.01 (as exports from FBX are) or a BVH in centimetres all read
+the same way.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..errors import ConfigError, InputFileError
+from ..limits import read_json
+from ..paths import is_file
+from ._user_bvh import read_bvh_skeleton
+from ._user_gltf import read_gltf_skeleton
+from .humanoid import REQUIRED, check_bone_map, match_names, missing_message, name_maps
+from .target import Character, FileSkeleton
+
+__all__ = ["CHARACTER_SUFFIXES", "read_character"]
+
+#: File name suffixes :func:`read_character` reads.
+CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".bvh")
+
+
+def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dict | None = None) -> Character:
+    """Read a user's humanoid character and match its bones to our joints.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A ``.glb``, ``.gltf`` or ``.vrm`` with a skinned humanoid, or a ``.bvh`` skeleton.
+    bone_map : str, path-like or dict, optional
+        A JSON bone map (a file, or its content) of the form
+        ``{"pelvis": "Hips", "joints": {"spine_mid": "Spine", ...}}``; default: the VRM humanoid of a VRM,
+        else bone names (Mixamo's, our BVH presets').
+
+    Returns
+    -------
+    Character
+
+    Raises
+    ------
+    InputFileError
+        The file is missing, of another kind, or not readable as its kind.
+    ConfigError
+        A bone needed (:data:`~gesturekit.character.humanoid.REQUIRED`) is not found (the message names it), the
+        map names a bone the file lacks, or the rest pose is not a humanoid's.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in CHARACTER_SUFFIXES:
+        kinds = ", ".join(CHARACTER_SUFFIXES)
+        raise InputFileError(f"a character is a {kinds} file, not {suffix or 'a file without suffix'}", path=p)
+    if not is_file(p):
+        raise InputFileError("no such character file", path=p)
+    user_map = _bone_map(bone_map)
+    if suffix == ".bvh":
+        skeleton = read_bvh_skeleton(p)
+    else:
+        skeleton = read_gltf_skeleton(p)
+    found, matched_by, expected = _match(skeleton, user_map, p)
+    return skeleton.character(found, matched_by, expected)
+
+
+def _bone_map(spec: str | os.PathLike | dict | None) -> tuple[str, dict[str, str]] | None:
+    if spec is None:
+        return None
+    if isinstance(spec, dict):
+        return "JSON map", check_bone_map(spec, source="the bone map")
+    p = Path(spec)
+    if not is_file(p):
+        raise InputFileError("no such bone map file", path=p)
+    return f"JSON map {p.name}", check_bone_map(read_json(p), source=str(p))
+
+
+def _match(
+    skeleton: FileSkeleton, user_map: tuple[str, dict[str, str]] | None, path: Path
+) -> tuple[dict[str, int], str, dict[str, str] | None]:
+    """Our joint -> bone of the skeleton, how they were matched, and the names looked for."""
+    names: tuple[str, ...] = skeleton.names
+    if user_map is not None:
+        label, wanted = user_map
+        index = {n: i for i, n in enumerate(names)}
+        absent = sorted(f"{k} -> {v!r}" for k, v in wanted.items() if v not in index)
+        if absent:
+            raise ConfigError(f"{path}: the bone map names bones the file lacks: {', '.join(absent[:8])}")
+        found = {k: index[v] for k, v in wanted.items()}
+        if any(k not in found for k in REQUIRED):
+            raise ConfigError(missing_message(found, label, wanted, path=str(path)))
+        return found, label, wanted
+    if skeleton.humanoid is not None:
+        label, found, expected = skeleton.humanoid
+        if any(k not in found for k in REQUIRED):
+            raise ConfigError(missing_message(found, label, expected, path=str(path)))
+        return found, label, expected
+    scheme, found = match_names(names)
+    expected = name_maps()[scheme]
+    if any(k not in found for k in REQUIRED):
+        raise ConfigError(missing_message(found, f"{scheme} names", expected, path=str(path)))
+    return found, f"{scheme} names", expected
