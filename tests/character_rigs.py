@@ -571,6 +571,8 @@ def _bvh(spec: RigSpec) -> bytes:
         lines.append(pad + "}")
 
     write(0, 0)
+    joints = [line.split()[1] for line in lines if line.split()[0] in ("ROOT", "JOINT")]
+    assert joints == [b[0] for b in bones], "the bones' order is the hierarchy's depth-first order"
     n_channels = 6 + 3 * (len(bones) - 1)
     frame = " ".join(["0.000000"] * n_channels)
     lines += ["MOTION", "Frames: 2", "Frame Time: 0.0333333", frame, frame, ""]
