@@ -14,7 +14,6 @@ VRM 0.x character is the template turned 180 degrees about Y: it faces -Z, its l
 
 from __future__ import annotations
 
-import dataclasses
 import struct
 import zlib
 from dataclasses import dataclass
@@ -60,7 +59,46 @@ _FINGER_LENGTHS = {
 
 @dataclass(frozen=True)
 class RigSpec:
-    """What character to generate (see the module docstring); lengths in metres, factors on the default body."""
+    """What character to generate; lengths in metres, factors on the default body.
+
+    Attributes
+    ----------
+    naming : str
+        ``"mixamo"`` (``prefix`` + Hips, Spine.., LeftArm, LeftHandIndex1..4, HeadTop_End), ``"zeggs"`` (our
+        BVH preset's names: Spine, Spine1..Spine3, Neck, Neck1, HeadEnd), ``"vrm0"`` / ``"vrm1"`` (VRoid-like
+        node names, matched through the humanoid map) or ``"custom"`` (``bone_00``.., see :func:`custom_map`).
+    prefix : str
+        Mixamo's name prefix (``""`` allowed).
+    rest : str
+        ``"T"`` arms along +-X; ``"A"`` each arm turned 40 degrees down about its upper-arm joint.
+    height : float
+        Head top above the floor; the whole body scales with it.
+    shoulder_width, arm, forearm : float
+        Factors on the distance between the upper-arm joints, the upper-arm and the forearm lengths.
+    spine_bones : int
+        2..4 bones between hips and neck; the last up to three are our spine_mid, chest, upper_chest (the
+        first of four is unmapped). ZEGGS names write one more, unmapped, ``Spine`` below them.
+    fingers : bool
+        Five fingers a hand, three bones and a tip node each (our finger joints 1..4).
+    twist_bones : bool
+        An unmapped bone in the middle of each forearm (between elbow and hand) and one in the spine
+        (below the upper_chest bone).
+    roll_seed : int or None
+        None: rest local rotations identity; else a random rest rotation on every bone, children's
+        translations in the rolled frame, so rest world positions do not change (glTF only).
+    armature : bool
+        glTF only: the bones inside an ``Armature`` node turned +90 degrees about X and scaled 0.01, in
+        centimetres, Z up; the composed world is metres, Y up.
+    drop : tuple of str
+        Our joints whose bone is left out; its children hang from its parent, in place.
+    mesh, texture : bool
+        glTF: a skinned 8-sided tube around every bone segment (two materials); a generated 8 x 8 PNG
+        base colour with TEXCOORD_0.
+    seed : int
+        The texture's colours.
+    fmt : str
+        ``"glb"`` or ``"bvh"`` (VRM is always ``.vrm``, a glTF binary).
+    """
 
     naming: str = "mixamo"
     prefix: str = "mixamorig:"
@@ -597,20 +635,16 @@ def write_rig(folder: Path, spec: RigSpec, name: str | None = None) -> Path:
     return path
 
 
-def _case(**kw: Any) -> RigSpec:
-    return dataclasses.replace(RigSpec(), **kw)
-
-
 #: The named characters of the acceptance tests.
 CASES: dict[str, RigSpec] = {
-    "mixamo_t": _case(),
-    "mixamo_a_rolled": _case(rest="A", roll_seed=1, armature=True, arm=1.1, forearm=0.9),
-    "vrm0_a": _case(naming="vrm0", rest="A", roll_seed=2, shoulder_width=1.15, spine_bones=2),
-    "vrm1_t": _case(naming="vrm1", roll_seed=4, height=1.55, texture=True),
-    "bvh_zeggs_a": _case(naming="zeggs", fmt="bvh", rest="A", height=1.85),
-    "no_fingers": _case(fingers=False),
-    "twist": _case(twist_bones=True, roll_seed=3),
-    "missing_elbow": _case(drop=("left_elbow",)),
-    "custom_names": _case(naming="custom", roll_seed=5),
-    "zeggs_glb": _case(naming="zeggs", texture=True, mesh=True),
+    "mixamo_t": RigSpec(),
+    "mixamo_a_rolled": RigSpec(rest="A", roll_seed=1, armature=True, arm=1.1, forearm=0.9),
+    "vrm0_a": RigSpec(naming="vrm0", rest="A", roll_seed=2, shoulder_width=1.15, spine_bones=2),
+    "vrm1_t": RigSpec(naming="vrm1", roll_seed=4, height=1.55, texture=True),
+    "bvh_zeggs_a": RigSpec(naming="zeggs", fmt="bvh", rest="A", height=1.85),
+    "no_fingers": RigSpec(fingers=False),
+    "twist": RigSpec(twist_bones=True, roll_seed=3),
+    "missing_elbow": RigSpec(drop=("left_elbow",)),
+    "custom_names": RigSpec(naming="custom", roll_seed=5),
+    "zeggs_glb": RigSpec(naming="zeggs", texture=True, mesh=True),
 }
