@@ -28,6 +28,7 @@ import numpy.typing as npt
 from ..character.bone_body import bone_body
 from ..character.rig import rotation_to_quaternion
 from ..character.target import Character, CharacterSkin
+from ..errors import ConfigError
 
 if TYPE_CHECKING:
     from ..character.retarget import Retargeted
@@ -59,7 +60,7 @@ def palette(colors: npt.ArrayLike, *, max_colors: int = MAX_COLORS) -> tuple[np.
     colors : array_like, shape (V, 3)
         sRGB in [0, 1] (clipped).
     max_colors : int
-        Most palette entries (at least 1).
+        Most palette entries, at least 216 (the fallback grid's cells).
 
     Returns
     -------
@@ -68,7 +69,14 @@ def palette(colors: npt.ArrayLike, *, max_colors: int = MAX_COLORS) -> tuple[np.
     parts : np.ndarray, shape (V,), int64
         Each vertex's entry. ``|palette[parts] - colors|`` is at most ``0.5 / 255`` per channel where the colours
         (rounded to 8 bits) are ``max_colors`` or fewer, else at most :data:`PALETTE_ERROR` plus that.
+
+    Raises
+    ------
+    ConfigError
+        ``max_colors`` below 216.
     """
+    if max_colors < 216:
+        raise ConfigError(f"a palette holds at least 216 colours (a 6 x 6 x 6 grid), got {max_colors}")
     c = np.clip(np.nan_to_num(np.asarray(colors, dtype=np.float64).reshape(-1, 3)), 0.0, 1.0)
     if len(c) == 0:
         return np.zeros((1, 3)), np.zeros(0, dtype=np.int64)
