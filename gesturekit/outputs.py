@@ -71,6 +71,7 @@ FILE_KINDS = {
     ".bvh": "a BVH file",
     ".mp4": "an MP4 video",
     ".glb": "a glTF file",
+    ".vrm": "a VRM file",
     ".wav": "a WAV file",
 }
 
@@ -117,7 +118,7 @@ def _file_is_owned(path: Path) -> bool:
                 return False
             joints = re.findall(r"^\s*(?:ROOT|JOINT)\s+(\S+)", text.split("MOTION")[0], re.M)
             return sorted(joints) == sorted(JOINT_NAMES)
-        if suffix == ".glb":
+        if suffix in (".glb", ".vrm"):  # a VRM is a GLB
             return head[:4] == b"glTF" and b'"generator":"gesturekit ' in head
         if suffix == ".wav":
             return head[:4] == b"RIFF" and head[8:12] == b"WAVE" and MP4_TAG.encode() in head

@@ -79,6 +79,7 @@ __all__ = [
     "GltfReport",
     "export_gltf",
     "audio_path_for",
+    "speech_targets",
     "glb_bytes",
     "wav_bytes",
     "read_glb",
@@ -189,6 +190,56 @@ def audio_path_for(path: str | os.PathLike[str]) -> Path:
     return Path(path).with_suffix(".wav")
 
 
+def speech_targets(
+    path: Path, audio: np.ndarray | None, sr: int, *, overwrite: bool
+) -> tuple[Path | None, np.ndarray | None]:
+    """Check the speech of a glTF file about to be written and whether it and its WAV may be written.
+
+    Parameters
+    ----------
+    path : Path
+        The glTF file.
+    audio : np.ndarray, shape (samples,), or None
+        The speech, float samples.
+    sr : int
+        Its sample rate, Hz.
+    overwrite : bool
+        Whether existing files (that gesturekit wrote) may be replaced.
+
+    Returns
+    -------
+    wav_path : Path or None
+        :func:`audio_path_for` ``(path)``; None without speech.
+    samples : np.ndarray or None
+        The speech as float64.
+
+    Raises
+    ------
+    ConfigError
+        Speech that is not one channel of finite samples, a bad sample rate, a glTF named ``.wav``, or a file
+        that exists and may not be replaced (:class:`~gesturekit.errors.OutputError`).
+    """
+    wav_path = None
+    samples = None
+    if audio is not None:
+        samples = np.asarray(audio, dtype=np.float64)
+        if samples.ndim != 1 or samples.size == 0 or not np.isfinite(samples).all():
+            raise ConfigError("the speech must be one channel of finite samples", path=path)
+        if not isinstance(sr, (int, np.integer)) or sr <= 0:
+            raise ConfigError(f"the speech's sample rate must be a positive integer, got {sr!r}", path=path)
+        wav_path = audio_path_for(path)
+        if wav_path == path:
+            raise ConfigError("the glTF file cannot have the suffix .wav of its speech; name it .glb", path=path)
+    for p in (path, wav_path):
+        if p is None:
+            continue
+        if not overwrite and (p.exists() or p.is_symlink()):
+            raise OutputError("already exists; pass overwrite=True (--force on the command line) to replace it", path=p)
+        if overwrite:
+            check_output(p, "file", overwrite=True)  # only a file gesturekit wrote is replaced
+    return wav_path, samples
+
+
 def export_gltf(
     path: str | os.PathLike[str],
     motion: Motion,
@@ -253,25 +304,8 @@ def export_gltf(
     bad = ~np.isfinite(positions).all(axis=(1, 2))
     if bad.any():
         raise ConfigError(f"positions are not finite (NaN or infinite) from frame {int(np.argmax(bad))} on", path=path)
-    wav_path = None
-    samples = None
-    if audio is not None:
-        samples = np.asarray(audio, dtype=np.float64)
-        if samples.ndim != 1 or samples.size == 0 or not np.isfinite(samples).all():
-            raise ConfigError("the speech must be one channel of finite samples", path=path)
-        if not isinstance(sr, (int, np.integer)) or sr <= 0:
-            raise ConfigError(f"the speech's sample rate must be a positive integer, got {sr!r}", path=path)
-        wav_path = audio_path_for(path)
-        if wav_path == path:
-            raise ConfigError("the glTF file cannot have the suffix .wav of its speech; name it .glb", path=path)
     bvh_parents(motion.presence, path=path)  # a skeleton no tree can hold, named with the file
-    for p in (path, wav_path):
-        if p is None:
-            continue
-        if not overwrite and (p.exists() or p.is_symlink()):
-            raise OutputError("already exists; pass overwrite=True (--force on the command line) to replace it", path=p)
-        if overwrite:
-            check_output(p, "file", overwrite=True)  # only a file gesturekit wrote is replaced
+    wav_path, samples = speech_targets(path, audio, sr, overwrite=overwrite)
 
     try:
         rig = rig_for(motion, rest=rest)
