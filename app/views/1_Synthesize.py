@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+import characters
 import display
 import numpy as np
 import pandas as pd
@@ -360,7 +361,14 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
     with left:
         title = f"{result.source}: {result.n_frames} frames, {result.n_frames / result.motion.fps:.1f} s"
         # sent before the wrist plot is made, so the browser draws the 3D view meanwhile
-        display.show_skeletons(motions, labels=labels, title=title, key="synth.skeleton", audio=result.audio)
+        display.show_skeletons(
+            motions,
+            labels=labels,
+            title=title,
+            key="synth.skeleton",
+            audio=result.audio,
+            character=characters.current_character(),
+        )
     with right:
         st.markdown("**Speech**")
         st.caption(
@@ -383,6 +391,8 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         before_video=lambda col: col.caption("MP4: render it above"),
         glb_key=_GLB,
     )
+    final = result.refined_motion if result.refined_motion is not None else result.motion
+    characters.character_downloads(record, final, prefix="synth")
 
 
 def main() -> None:
