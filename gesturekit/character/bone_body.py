@@ -4,8 +4,9 @@
 in the character's rest pose (our frame), so that every character is drawn
 with a surface: each bone from a parent to a child becomes a capsule (a
 tapered tube closed by two half spheres) that follows the parent bone alone,
-and each bone without children (the head, a finger tip) gets a short capsule
-of its own along its parent's direction. Bones above the pelvis in the
+and each bone without children (a finger tip, a head without a bone above
+it) gets a short capsule of its own along its parent's direction. The bones
+from the pelvis up to the neck are a thicker torso, the head's a round head. Bones above the pelvis in the
 hierarchy (an armature's root at the floor) get none. The colours are one
 scheme of :func:`gesturekit.character.look.part_colors`: the head, the neck
 and the hands in its skin colour, the rest in its shirt colour.
@@ -19,7 +20,7 @@ from .look import NEUTRAL, part_colors
 from .mesh import PARTS, vertex_normals
 from .target import Character, CharacterSkin
 
-__all__ = ["RADIUS", "bone_body"]
+__all__ = ["RADIUS", "TAPER", "TORSO", "HEAD", "bone_body"]
 
 #: Radius of a bone's capsule at its parent's end: this fraction of the bone's length, within
 #: (lower, upper) fractions of the character's height; the child's end is :data:`TAPER` of it.
@@ -27,6 +28,9 @@ RADIUS = (0.2, 0.012, 0.04)
 
 #: The radius at a capsule's far end over the radius at its near end.
 TAPER = 0.7
+
+#: Radii of the torso's capsules (from the pelvis up to the neck) and of the head's, as fractions of the height.
+TORSO, HEAD = 0.075, 0.055
 
 _AROUND, _ALONG, _CAP = 12, 2, 3  # vertices around a ring, rings along the tube, rings in each half sphere
 
@@ -110,6 +114,12 @@ def bone_body(character: Character, *, scheme: str = NEUTRAL) -> CharacterSkin:
             skin_tone |= _below(parents, b)
     has_child = np.zeros(ch.n_bones, dtype=bool)
     has_child[parents[parents >= 0]] = True
+    spine = np.zeros(ch.n_bones, dtype=bool)  # from the pelvis up to (not including) the neck
+    top = ch.bone("neck") if ch.bone("neck") >= 0 else head
+    b = int(parents[top]) if top >= 0 else -1
+    while b >= 0 and body[b]:
+        spine[b] = True
+        b = int(parents[b])
     pieces: list[tuple[np.ndarray, np.ndarray, int]] = []
     for b in range(ch.n_bones):
         p = int(parents[b])
@@ -119,9 +129,16 @@ def bone_body(character: Character, *, scheme: str = NEUTRAL) -> CharacterSkin:
         if length < 1e-6 * height:
             continue
         r = float(np.clip(frac * length, lo * height, hi * height))
-        pieces.append((*_capsule(rest[p], rest[b], r, TAPER * r), p))
-        if not has_child[b]:  # a tip: a capsule of its own, along its parent's direction
-            grow, rb = (0.12 * height, 0.055 * height) if b == head else (0.5 * length, TAPER * r)
+        rc = TAPER * r
+        if spine[p] and (spine[b] or b == top):
+            r, rc = TORSO * height, 0.9 * TORSO * height
+        elif p == head:
+            r = rc = HEAD * height
+        elif p >= 0 and parents[p] >= 0 and int(parents[p]) == head and not has_child[b]:
+            continue  # the head's own capsule holds its tip
+        pieces.append((*_capsule(rest[p], rest[b], r, rc), p))
+        if not has_child[b] and p != head:  # a tip: a capsule of its own, along its parent's direction
+            grow, rb = (0.12 * height, HEAD * height) if b == head else (0.5 * length, TAPER * rc)
             tip = rest[b] + (rest[b] - rest[p]) / length * grow
             pieces.append((*_capsule(rest[b], tip, rb, TAPER * rb if b != head else rb), b))
     colours = part_colors(scheme)
