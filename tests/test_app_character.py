@@ -17,7 +17,7 @@ from .conftest import shown, viewer
 from .test_app_synthesize import speech_file
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
-SYNTH = "views/1_Synthesize.py"
+SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
 TIMEOUT = 120
 FILE, MAP = "_gk.character_file.0", "_gk.character_map.0"
 
@@ -82,6 +82,17 @@ def test_a_character_is_matched_drawn_and_written_until_the_default_is_chosen(ap
     assert "VRM" in doc.get("extensions", {})  # a VRM stays a VRM
     bvh = next(v for k, v in made.items() if k[2] == "bvh")
     assert bvh["data"].startswith(b"HIERARCHY") and f"MOTION\nFrames: {res.n_frames}" in bvh["data"].decode()
+
+    # the inspector's side-by-side views draw it too, every candidate
+    at.number_input(key="_w.synth.record").set_value(3).run()
+    at.button(key="synth.go").click().run()
+    at.switch_page(INSPECT).run()
+    assert not at.exception and not errors(at), (at.exception, errors(at))
+    views = viewer(at, "inspect.views")
+    assert len(views["motions"]) >= 2
+    assert all(m["rig"]["names"] == list(mine.names) for m in views["motions"])
+    assert sum("bones follow ours within" in c for c in captions(at)) >= len(views["motions"])
+    at.switch_page(SYNTH).run()
 
     at.button(key="_gk.character_default").click().run()
     assert not at.exception and "gk.character" not in at.session_state

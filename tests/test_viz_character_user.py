@@ -166,6 +166,16 @@ def test_the_standalone_page_holds_the_character(motion, rigs):
     np.testing.assert_allclose(m["points"], posed.position, atol=1e-4)
 
 
+def test_a_notebook_view_draws_the_character(motion, rigs):
+    from gesturekit.viz.notebook import character_view
+
+    ch = rigs("vrm1_t")
+    view = character_view([motion, motion], character=ch, labels=["a", "b"], height=300)
+    data = read_viewer_data(view.page)
+    assert [m["rig"]["names"] for m in data["motions"]] == [list(ch.names)] * 2
+    assert all(m["scheme"] == "character" for m in data["motions"])
+
+
 def test_palette_of_few_colours_is_exact_and_of_many_is_bounded():
     rng = np.random.default_rng(0)
     few = rng.random((40, 3))[rng.integers(0, 40, 5000)]
