@@ -13,12 +13,13 @@ it, posed by the result, as a GLB (a glTF or VRM character) and a BVH.
 
 from __future__ import annotations
 
+import secrets
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import streamlit as st
-from display import error_text, escape_markdown
+from display import LOG, error_text, escape_markdown
 
 from gesturekit.character.user import read_character_upload
 from gesturekit.errors import GestureKitError, collect_warnings
@@ -97,6 +98,11 @@ def sidebar_character() -> Character | None:
                     ss.pop(_FAILED, None)
                 except (GestureKitError, OSError) as exc:
                     ss[_FAILED] = (token, error_text(exc))
+                except Exception:  # noqa: BLE001  (a file no reader foresaw: said once, not read again)
+                    reference = secrets.token_hex(4)
+                    LOG.exception("a character upload could not be read (reference %s)", reference)
+                    why = f"could not be read as a character (details in the server log, reference {reference})"
+                    ss[_FAILED] = (token, f"{Path(up.name).name}: {why}")
         failed = ss.get(_FAILED)
         if failed is not None:
             st.error(escape_markdown(failed[1]), icon=":material/error:")

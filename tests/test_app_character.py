@@ -132,6 +132,24 @@ def test_a_bvh_character_and_a_bone_map(app_env):
     bone_map = json.dumps(custom_map(CASES["custom_names"])).encode()
     at = upload_character(at, "bones.json", bone_map, key=MAP)
     assert not errors(at) and at.session_state["gk.character"]["name"] == name
-    assert "matched by JSON map" in " ".join(captions(at))
+    assert "matched by JSON map bones.json" in " ".join(captions(at))
     ch = at.session_state["gk.character"]["character"]
     assert ch.matched() == truth(CASES["custom_names"]).joint_map
+
+
+def test_a_file_no_reader_foresaw_is_a_message_with_a_reference(app_env, monkeypatch):
+    import sys
+
+    at = open_page()
+
+    def unforeseen(name, data, *, bone_map=None):
+        raise IndexError("deep inside a reader")
+
+    monkeypatch.setattr(sys.modules["characters"], "read_character_upload", unforeseen)
+    name, data = rig("mixamo_t")
+    at = upload_character(at, "odd.glb", data)
+    (said,) = errors(at)
+    assert said.startswith("odd.glb: could not be read as a character") and "reference" in said
+    assert "deep inside" not in said and "Traceback" not in said
+    assert "gk.character" not in at.session_state
+    at.file_uploader(key="synth.upload")  # the page is drawn on below the sidebar

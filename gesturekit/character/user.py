@@ -107,7 +107,8 @@ def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes]
         path.write_bytes(bytes(data))
         map_path = None
         if bone_map is not None:
-            map_path = Path(tmp) / ("map-" + safe_filename(Path(str(bone_map[0])).name, default="bones"))
+            (Path(tmp) / "map").mkdir()
+            map_path = Path(tmp) / "map" / safe_filename(Path(str(bone_map[0])).name, default="bones")
             map_path.write_bytes(bytes(bone_map[1]))
         try:
             character = read_character(path, bone_map=map_path)
