@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import ConfigError, InputFileError
 from ..limits import check_bytes, read_json
+from ..skeleton import FINGERS
 from .glb import accessor_array, node_matrices, read_glb
 from .humanoid import VRM_BONES
 from .mesh import vertex_normals
@@ -113,13 +114,9 @@ def _skeleton(path: Path, doc: dict[str, Any], binary: bytes) -> FileSkeleton:
     candidates = sorted({int(j) for s in skins for j in s["joints"]}) if skins else list(range(len(nodes)))
     kind, humanoid = _humanoid(doc)
     chosen = set(candidates) | set(humanoid.values())
-    if humanoid:
-        for key in list(humanoid):
-            if key.endswith("3") and "_" in key:  # a distal finger bone: its first child is the tip
-                kids = nodes[humanoid[key]].get("children", [])
-                if kids:
-                    humanoid[key[:-1] + "4"] = int(kids[0])
-                    chosen.add(int(kids[0]))
+    for key, tip in _tips(nodes, humanoid).items():
+        humanoid[key] = tip
+        chosen.add(tip)
     bone_nodes = sorted(chosen)
     in_set = set(bone_nodes)
 
@@ -152,6 +149,22 @@ def _skeleton(path: Path, doc: dict[str, Any], binary: bytes) -> FileSkeleton:
         skin=skin,
         gltf=GltfSource(document=doc, binary=binary, nodes=node_of),
     )
+
+
+def _tips(nodes: list[dict[str, Any]], humanoid: dict[str, int]) -> dict[str, int]:
+    """The nodes that stand for the finger tips and the head top, which a VRM humanoid does not name: of a distal
+    finger bone, the child named like an end (``..._end``), else its only child; of the head, the child named so."""
+    out = {}
+    for key, node in humanoid.items():
+        kids = [int(c) for c in nodes[node].get("children", [])]
+        ends = [c for c in kids if str(nodes[c].get("name", "")).lower().endswith("end")]
+        if key.endswith("3") and key[:-1].split("_")[-1] in FINGERS:
+            pick = ends[0] if ends else kids[0] if len(kids) == 1 else -1
+            if pick >= 0:
+                out[key[:-1] + "4"] = pick
+        elif key == "head" and len(ends) == 1:
+            out["head_top"] = ends[0]
+    return out
 
 
 def _humanoid(doc: dict[str, Any]) -> tuple[str, dict[str, int]]:
