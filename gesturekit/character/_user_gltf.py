@@ -46,7 +46,7 @@ def read_gltf_skeleton(path: Path) -> FileSkeleton:
         check_bytes(path.stat().st_size, what="a character file", path=path)
         doc, binary = _load(path)
         return _skeleton(path, doc, binary)
-    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as e:
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, OSError, RecursionError) as e:
         raise InputFileError(f"not a readable glTF character ({type(e).__name__}: {e})", path=path) from None
     except ConfigError as e:
         if e.path is not None:
@@ -110,6 +110,12 @@ def _skeleton(path: Path, doc: dict[str, Any], binary: bytes) -> FileSkeleton:
             if parent[c] != -1 or c == i:
                 raise InputFileError(f"node {c} has two parents", path=path)
             parent[c] = i
+    for i in range(len(nodes)):  # a cycle of nodes would send forward kinematics round for ever
+        a, steps = parent[i], 0
+        while a >= 0:
+            a, steps = parent[a], steps + 1
+            if steps > len(nodes):
+                raise InputFileError(f"node {i}'s ancestors form a cycle", path=path)
     skins = doc.get("skins", [])
     candidates = sorted({int(j) for s in skins for j in s["joints"]}) if skins else list(range(len(nodes)))
     kind, humanoid = _humanoid(doc)
@@ -335,7 +341,12 @@ def _image(doc: dict[str, Any], binary: bytes, index: int) -> np.ndarray:
     view = doc["bufferViews"][img["bufferView"]]
     start = view.get("byteOffset", 0)
     data = binary[start : start + view["byteLength"]]
-    with Image.open(io.BytesIO(data)) as im:
-        if im.width * im.height > 8192 * 8192:
-            raise ValueError("a texture larger than 8192 x 8192")
-        return np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            if im.width * im.height > 8192 * 8192:
+                raise ValueError("a texture larger than 8192 x 8192")
+            return np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+    except ValueError:
+        raise
+    except Exception as e:  # Pillow's own errors (an unknown format, a decompression bomb)
+        raise ValueError(f"texture {index} is not a readable image ({type(e).__name__})") from None
