@@ -344,3 +344,53 @@ def test_required_joints_and_name_tables_are_consistent():
     assert VRM_BONES[0]["left_thumb1"] == "leftThumbProximal"
     scheme, found = match_names(["mixamorig5:" + MIXAMO[k] for k in REQUIRED])
     assert scheme == "mixamo" and set(found) == set(REQUIRED)
+
+
+def _edited(tmp_path, name, edit):
+    """A generated textured rig's GLB with its document (and binary) changed by ``edit(doc, binary) -> binary``."""
+    from gesturekit.character.glb import glb_bytes, read_glb
+
+    path = write_rig(tmp_path, CASES["zeggs_glb"], "base")
+    doc, binary = read_glb(path.read_bytes())
+    binary = edit(doc, bytes(binary))
+    out = tmp_path / name
+    out.write_bytes(glb_bytes(doc, binary))
+    return out
+
+
+def test_hostile_gltf_characters_are_refused_naming_the_file(tmp_path):
+    def cycle(doc, binary):
+        top = next(i for i, n in enumerate(doc["nodes"]) if n.get("name") == "Hips")
+        leaf = next(i for i, n in enumerate(doc["nodes"]) if n.get("name") == "HeadEnd")
+        doc["nodes"][leaf]["children"] = [top]
+        return binary
+
+    def past_the_end(doc, binary):
+        doc["accessors"][0]["count"] = 10**9
+        return binary
+
+    def bad_texture(doc, binary):
+        view = doc["bufferViews"][doc["images"][0]["bufferView"]]
+        start = view.get("byteOffset", 0)
+        return (
+            binary[:start]
+            + b"\x89PNG garbage"
+            + b"\0" * (view["byteLength"] - 12)
+            + binary[start + view["byteLength"] :]
+        )
+
+    def skin_joint_out_of_range(doc, binary):
+        doc["skins"][0]["joints"][0] = len(doc["nodes"]) + 5
+        return binary
+
+    for name, edit in [
+        ("cycle.glb", cycle),
+        ("past.glb", past_the_end),
+        ("texture.glb", bad_texture),
+        ("skin.glb", skin_joint_out_of_range),
+    ]:
+        path = _edited(tmp_path, name, edit)
+        with pytest.raises(GestureKitError) as e:
+            read_character(path)
+        assert name in str(e.value), str(e.value)
+        print(f"{name}: {e.value}")
