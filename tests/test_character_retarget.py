@@ -26,7 +26,7 @@ from gesturekit.control import parse_control
 from gesturekit.errors import ConfigError, GestureKitError, InputFileError, MotionFileError
 from gesturekit.interactive import control_adherence
 from gesturekit.motion import Motion
-from gesturekit.skeleton import JOINT_NAMES, N_JOINTS, joint_index
+from gesturekit.skeleton import FINGERS, JOINT_NAMES, N_JOINTS, joint_index
 from tests.character_rigs import CASES, RigSpec, custom_map, truth, write_rig
 
 #: Every bone a matched bone points at, against ours (degrees).
@@ -394,3 +394,25 @@ def test_hostile_gltf_characters_are_refused_naming_the_file(tmp_path):
             read_character(path)
         assert name in str(e.value), str(e.value)
         print(f"{name}: {e.value}")
+
+
+def test_a_motion_without_fingers_or_torso_leaves_those_bones_at_rest(tmp_path, db):
+    """A partial skeleton (no fingers recorded, the torso derived): the character's finger bones keep their rest
+    rotation relative to the hand, and the derived torso still drives its spine."""
+    from gesturekit.skeleton import DERIVABLE_JOINTS, JointPresence
+
+    ch, _ = _read(tmp_path, "mixamo_t")
+    body = [n for n in JOINT_NAMES if not any(f in n for f in FINGERS) and n not in DERIVABLE_JOINTS]
+    presence = JointPresence.from_names(recorded=body, derived=DERIVABLE_JOINTS)
+    motion = Motion(db.poses[:2].reshape(-1, N_JOINTS, 3), 15.0, presence)
+    out = retarget(motion, ch)
+    finger_bones = [ch.bone(f"left_{f}{k}") for f in FINGERS for k in range(1, 4)]
+    hand = ch.bone("left_wrist")
+    q = ch.rest_rotation
+    for b in finger_bones:
+        pa = ch.parents[b]
+        local = np.swapaxes(out.rotation[:, pa], 1, 2) @ out.rotation[:, b]
+        np.testing.assert_allclose(local, np.broadcast_to(q[pa].T @ q[b], local.shape), atol=1e-9)
+    assert hand in ch.parents[finger_bones]
+    assert not any(any(f in n for f in FINGERS) for n in out.report.missing)
+    assert out.report.max_direction_error < DIRECTION_DEGREES
