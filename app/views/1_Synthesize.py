@@ -391,8 +391,7 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         before_video=lambda col: col.caption("MP4: render it above"),
         glb_key=_GLB,
     )
-    final = result.refined_motion if result.refined_motion is not None else result.motion
-    characters.character_downloads(record, final, prefix="synth")
+    characters.character_downloads(record, result.motion, prefix="synth")  # the final (refined) motion
 
 
 def main() -> None:
