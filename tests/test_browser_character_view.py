@@ -30,7 +30,8 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def pages(tmp_path_factory):
-    """Pages of one motion on the VRM 0.x character: as read, and with 260 more root bones (props at the floor)."""
+    """Pages of a motion twice on the VRM 0.x character: as read, and with 260 more root bones (props at the
+    floor)."""
     db = open_default_database()
     motion = Motion(db.poses[:4].reshape(-1, 55, 3).astype(np.float32), 15.0, db.joint_presence)
     folder = tmp_path_factory.mktemp("character")
@@ -46,7 +47,9 @@ def pages(tmp_path_factory):
     out = {}
     for name, who in (("one", ch), ("many", many)):
         path = folder / f"{name}.html"
-        path.write_text(skeleton_viewer(motion, character=who, key=name), encoding="utf-8")
+        # side by side: the second shares the first's mesh
+        page = skeleton_viewer([motion, motion], character=who, key=name, labels=["a", "b"])
+        path.write_text(page, encoding="utf-8")
         out[name] = path
     return out
 
@@ -58,6 +61,7 @@ def _open(page, path) -> None:
 
 def test_the_character_is_drawn_in_its_own_colours_and_plays(pages):
     data = read_viewer_data(pages["one"].read_text(encoding="utf-8"))
+    assert data["motions"][1]["mesh"]["vertices"] is data["motions"][0]["mesh"]["vertices"]
     albedos = np.asarray(data["motions"][0]["colors"])
     with app_browser.browser(width=800, height=600) as page:
         _open(page, pages["one"])

@@ -81,7 +81,9 @@ def retarget_skinned(retargeted, skin) -> np.ndarray:
 @pytest.mark.parametrize("case", ["mixamo_t", "vrm0_a", "vrm1_t", "twist", "mixamo_a_rolled"])
 def test_the_page_skins_the_character_as_the_retargeting_does(motion, rigs, case):
     ch = rigs(case)
-    data = decoded(viewer_data([motion, motion], character=ch, labels=["a", "b"]))
+    raw = viewer_data([motion, motion], character=ch, labels=["a", "b"])
+    assert raw["motions"][1]["mesh"] == {"shared": 0}  # one mesh sent for both
+    data = decoded(raw)
     posed = retarget(motion, ch)
     want = retarget_skinned(posed, ch.skin)
     for m in data["motions"]:
@@ -106,7 +108,10 @@ def test_the_page_skins_the_character_as_the_retargeting_does(motion, rigs, case
 def test_a_bvh_character_gets_a_body_of_capsules(motion, rigs):
     ch = rigs("bvh_zeggs_a")
     assert ch.skin is None
-    data = decoded(viewer_data([motion, motion], character=ch))
+    raw = viewer_data([motion, motion], character=ch)
+    assert raw["motions"][1]["mesh"] == {"shared": 0}  # the schemes differ in colours only
+    assert raw["motions"][0]["colors"] != raw["motions"][1]["colors"]
+    data = decoded(raw)
     posed = retarget(motion, ch)
     for i, m in enumerate(data["motions"]):
         scheme = scheme_for(i)

@@ -174,7 +174,13 @@ def page_character(retargeted: Retargeted, *, scheme: str, skin: CharacterSkin |
         local = np.concatenate([np.broadcast_to(np.eye(3), (len(local), 1, 3, 3)), local], axis=1)
         root = np.zeros((len(local), 3))
     quats = np.round(rotation_to_quaternion(local) * QUATERNION_SCALE).astype(np.int16)
-    pal, parts = palette(body.colors)
+    if skin is None and body is not ch.skin:
+        # a generated body: its parts are those of the neutral scheme's, so side-by-side schemes share a mesh
+        pal, parts = palette(bone_body(ch).colors)
+        first = np.searchsorted(np.sort(parts), np.arange(len(pal)))
+        pal = body.colors[np.argsort(parts, kind="stable")[first]].astype(np.float64)
+    else:
+        pal, parts = palette(body.colors)
     joints = body.joints + (1 if added else 0)
     n_bones = len(names)
     return {

@@ -301,7 +301,9 @@ def viewer_data(
         :data:`QUATERNION_SCALE` as int16) and ``root`` (the root's position per shown frame,
         shape (shown frames, 3), metres). Arrays are typed-array specs (``dtype``, ``bdata``,
         ``shape``). With ``character``, ``rig`` holds its bones instead of our 55 joints
-        (:func:`gesturekit.viz.user_character.page_character`), ``colors`` its palette and ``derived`` is empty.
+        (:func:`gesturekit.viz.user_character.page_character`), ``colors`` its palette and ``derived`` is empty;
+        a motion whose mesh is the first motion's has ``mesh`` ``{"shared": 0}`` (the page, and
+        :func:`read_viewer_data`, take the first's).
 
     Raises
     ------
@@ -325,6 +327,8 @@ def viewer_data(
         if character is not None:
             spec = {"label": label or "", "offset": float(dx), "derived": []}
             spec.update(page_character(posed[i], scheme=scheme))
+            if i and spec["mesh"] == out[0]["mesh"]:  # one character side by side: its mesh sent once
+                spec["mesh"] = {"shared": 0}
         else:
             spec = {"label": label or "", "offset": float(dx), "derived": list(m.presence.names(DERIVED))}
             spec.update(_character(m, scheme))
@@ -418,6 +422,8 @@ def read_viewer_data(page: str) -> dict:
 def _decoded(data: dict) -> dict:
     """:func:`viewer_data`'s dict with its arrays decoded and each motion's ``points`` (see :func:`read_viewer_data`)."""
     for m in data["motions"]:
+        if "shared" in m["mesh"]:
+            m["mesh"] = data["motions"][m["mesh"]["shared"]]["mesh"]
         for group in ("rig", "mesh"):
             for name, value in m[group].items():
                 if isinstance(value, dict):
