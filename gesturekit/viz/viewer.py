@@ -321,7 +321,7 @@ def viewer_data(
         # framed on what is drawn: joints not in the data have no body
         drawn = [s.positions[:, np.array([st != "absent" for st in s.presence.status])] for s in shown]
     offsets, box = look.stage_layout(drawn, spacing=spacing)
-    out = []
+    out: list[dict] = []
     for i, (label, m, dx) in enumerate(zip(labels, shown, offsets)):
         scheme = look.scheme_for(i, neutral=neutral)
         if character is not None:
