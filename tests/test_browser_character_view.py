@@ -100,3 +100,40 @@ def test_a_character_of_many_bones_and_roots_is_drawn_the_same(pages):
         assert page.evaluate("() => gk.frames") > 1
         many = _pixels(page)
     np.testing.assert_array_equal(many, one)
+
+
+def test_the_app_draws_an_uploaded_character(tmp_path_factory):
+    """In the served app: a character uploaded in the sidebar is named there, and the result's 3D view draws it
+    (its bones in the view's data, its colours in the view's pixels)."""
+    import io
+
+    from PIL import Image
+
+    folder = tmp_path_factory.mktemp("app_character")
+    (folder / "home").mkdir()
+    rig = write_rig(folder, CASES["vrm0_a"], name="avatar")
+    ch = read_character(rig)
+    wav = app_browser.write_speech(folder / "talk.wav", seconds=3.0)
+    with app_browser.app_server(folder / "home", demo_minutes=1.0) as url, app_browser.browser() as page:
+        app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
+        side = app_browser.sidebar(page)
+        side.get_by_text("Your character", exact=True).first.click()
+        with app_browser.run_after(page):
+            app_browser.keyed(page, "_gk.character_file.0").locator('input[type="file"]').set_input_files(str(rig))
+        side.locator('[data-testid="stAlert"]', has_text=f"{rig.name} is shown").first.wait_for()
+        assert "matched by VRM 0.x humanoid" in side.inner_text()
+        app_browser.upload(page, wav)
+        app_browser.run_and_wait(page)
+        data = app_browser.viewer_args(page, "synth.skeleton")
+        assert data["motions"][0]["rig"]["names"] == list(ch.names)
+        canvas = app_browser.skeleton_canvas(page, "synth.skeleton")
+        shot = np.asarray(Image.open(io.BytesIO(canvas.screenshot())).convert("RGB")).reshape(-1, 3) / 255.0
+        assert app_browser.problems(page) == []
+    body = shot[~np.all(np.abs(shot - _hex(look.BACKGROUND)) <= 2 / 255, axis=1)]
+    assert len(body) > 0.02 * len(shot)
+    # the character's colours, lit: most drawn pixels are a multiple of one of its albedos
+    alb = _linear(np.asarray(data["motions"][0]["colors"]))
+    lin = _linear(body)
+    shade = (lin @ alb.T) / np.sum(alb * alb, axis=1)
+    error = np.abs(_srgb(np.clip(shade[:, :, None] * alb[None], 0, 1)) - body[:, None]).max(axis=2).min(axis=1)
+    assert (error <= 3 / 255).mean() > 0.9
