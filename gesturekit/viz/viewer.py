@@ -405,7 +405,8 @@ def read_viewer_data(page: str) -> dict:
         shape (frames, 55, 4), the int16 divided by :data:`QUATERNION_SCALE`), each motion
         with ``points``: its joints where the page puts them (forward kinematics of the rig
         with the rotations and root positions, shifted by the offset), float64, shape
-        (frames, 55, 3), metres; ``key``, the page's key; ``audio``, the embedded speech
+        (frames, 55, 3), metres (a user's character: (frames, B, 3), its bones); a mesh shared with
+        the first motion is that motion's mesh; ``key``, the page's key; ``audio``, the embedded speech
         (float64 samples in [-1, 1], shape (samples,)) or None; ``audio_sr`` its rate (Hz) or None.
     """
     start = page.index(f'id="{_DATA_ID}">') + len(f'id="{_DATA_ID}">')
