@@ -12,10 +12,14 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .character.target import Character
 from .errors import ConfigError
 from .outputs import check_output
+
+if TYPE_CHECKING:
+    from .synthesize import SynthesisResult
 
 __all__ = ["read_character_option", "check_target", "write_character_files"]
 
@@ -60,7 +64,7 @@ def check_target(
 
 
 def write_character_files(
-    result: object,
+    result: SynthesisResult,
     character: Character,
     targets: Mapping[str, Path],
     *,
@@ -84,9 +88,7 @@ def write_character_files(
     """
     from .export.result import export_result_character_bvh, export_result_character_glb, retarget_result
     from .interactive import control_adherence
-    from .synthesize import SynthesisResult
 
-    assert isinstance(result, SynthesisResult)
     retargeted = retarget_result(result, character)
     show(f"  on {character.path.name} ({character.matched_by}): {retargeted.report.summary()}")
     if "glb" in targets:

@@ -135,6 +135,12 @@ def test_glb_of_each_rig_is_valid_and_read_back_to_its_report(case, rigs, tmp_pa
     assert report.mean_error == pytest.approx(err.mean(), abs=1e-7)
     assert report.frames == r.n_frames and report.audio == path.with_suffix(".wav") and report.audio.is_file()
     assert report.summary().startswith(f"{path.name}: position error max ")
+    # each bone's quaternions keep one sign from key to key: linear interpolation takes the short way
+    doc, binary = read_glb(path.read_bytes())
+    for sampler in doc["animations"][-1]["samplers"]:
+        q = accessor_array(doc, binary, sampler["output"])
+        if q.shape[1] == 4:
+            assert (np.sum(q[1:] * q[:-1], axis=1) >= 0).all()
 
 
 @pytest.mark.parametrize("case", GLTF_CASES)
@@ -164,6 +170,39 @@ def test_glb_keeps_their_document_and_binary(case, rigs, tmp_path):
         ext = "VRM" if r.character.kind == "vrm0" else "VRMC_vrm"
         assert doc["extensions"][ext] == theirs["extensions"][ext] and ext in doc["extensionsUsed"]
         assert read_character(path).kind == r.character.kind  # still a VRM, read as one
+
+
+def test_the_same_motion_and_character_give_the_same_bytes(rigs, tmp_path):
+    r = rigs["vrm0_a"]
+    one, two = tmp_path / "one.vrm", tmp_path / "two.vrm"
+    export_character_glb(one, r)
+    export_character_glb(two, retarget(r.source, read_character(r.character.path)))
+    assert one.read_bytes() == two.read_bytes()
+    export_character_bvh(one.with_suffix(".bvh"), r)
+    export_character_bvh(two.with_suffix(".bvh"), r)
+    assert one.with_suffix(".bvh").read_bytes() == two.with_suffix(".bvh").read_bytes()
+
+
+def test_a_gltf_with_its_buffer_and_texture_beside_it_is_written_as_one_glb(rigs, tmp_path, validator):  # noqa: F811
+    ((_, data),) = rig_files(CASES["vrm1_t"]).items()
+    doc, binary = read_glb(data)
+    (image,) = doc["images"]
+    view = doc["bufferViews"][image.pop("bufferView")]
+    (tmp_path / "skin.png").write_bytes(binary[view["byteOffset"] : view["byteOffset"] + view["byteLength"]])
+    image["uri"] = "skin.png"
+    (tmp_path / "avatar.bin").write_bytes(binary)
+    doc["buffers"] = [{"uri": "avatar.bin", "byteLength": len(binary)}]
+    src = tmp_path / "avatar.gltf"
+    src.write_text(json.dumps(doc))
+    r = retarget(rigs["vrm1_t"].source, read_character(src))
+    path = tmp_path / "out.vrm"
+    report = export_character_glb(path, r)
+    err = np.linalg.norm(glb_positions(path, r) - r.position, axis=-1)
+    issues = validator(path)["issues"]
+    print(f"from a .gltf: read back max {err.max() * 1e6:.3f} um, validator {issues['numErrors']} errors")
+    assert err.max() < MM and report.max_error < MM and issues["numErrors"] == 0
+    out, _ = read_glb(path.read_bytes())
+    assert all("uri" not in b for b in out["buffers"]) and "bufferView" in out["images"][0]
 
 
 def _with(data: bytes, change) -> bytes:

@@ -1,8 +1,9 @@
 """A user's character's skeleton, moved by our motion, as a BVH file in the file's own frame and units.
 
-The joints are the character's bones under its root (names with whitespace
-turned into ``_``), each leaf ending in an End Site; a BVH character's End
-Sites (read as ``NAME_End`` bones) are End Sites again. With ``R_F`` the
+The joints are the character's bones in the tree of its hips (names with
+whitespace turned into ``_``), each leaf ending in an End Site; a BVH
+character's End Sites (read as ``NAME_End`` bones) are End Sites again, where
+they were; another leaf's End Site goes on along its bone by half its length. With ``R_F`` the
 rotation of :attr:`~gesturekit.character.target.Character.to_file` and ``u``
 the file's units per metre:
 
