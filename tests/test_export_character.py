@@ -340,6 +340,8 @@ def test_overwrite_rules_suffixes_and_a_skeleton_without_body(rigs, tmp_path):
     theirs.write_bytes(_with(r.character.path.read_bytes(), lambda doc, _: doc["asset"].update(generator="Blender")))
     with pytest.raises(OutputError, match="did not write"):
         export_character_glb(theirs, r, overwrite=True)
+    with pytest.raises(OutputError, match="input"):
+        export_character_glb(r.character.path, r, overwrite=True)  # its generator is gesturekit's test rigs'
     with pytest.raises(ConfigError, match="named .glb or .vrm"):
         export_character_glb(tmp_path / "take.gltf", r)
     with pytest.raises(ConfigError, match="skeleton without a body"):
