@@ -599,6 +599,8 @@ def _cmd_stimuli(args) -> int:
             scheduler=args.scheduler,
             overwrite=args.force,
             progress=lambda stage, done, total: _advance(bar(stage, total, "stimulus"), done),
+            character=args.character,
+            character_map=args.character_map,
         )
     _print(
         f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +20,9 @@ from .bvh import BvhReport, export_bvh
 from .gltf import GltfReport, export_gltf
 from .npz import save_npz
 from .video import render_video
+
+if TYPE_CHECKING:
+    from ..character.target import Character
 
 __all__ = ["save_result_npz", "save_result_bvh", "export_result_bvh", "export_result_glb", "save_result_video"]
 
@@ -129,10 +133,13 @@ def save_result_video(
     side_by_side: bool = False,
     resolution: tuple[int, int] = (640, 480),
     look: str = "character",
+    character: Character | None = None,
 ) -> Path:
     """An MP4 of the character with the speech (H.264 + AAC); the k-NN and the refined motion side by
     side when ``side_by_side`` and the result was refined. ``resolution`` is (width, height) in pixels;
-    ``look`` one of :data:`gesturekit.viz.render.LOOKS` (the page's character, or the capsule figure).
+    ``look`` one of :data:`gesturekit.viz.render.LOOKS` (the page's character, or the capsule figure);
+    ``character`` a user's character the motion is retargeted onto (see
+    :func:`gesturekit.export.video.render_video`).
 
     Raises
     ------
@@ -157,6 +164,7 @@ def save_result_video(
             progress=progress,
             resolution=resolution,
             style=style,
+            character=character,
         )
     return render_video(
         path,
@@ -166,4 +174,5 @@ def save_result_video(
         progress=progress,
         resolution=resolution,
         style=style,
+        character=character,
     )
