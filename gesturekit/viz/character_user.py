@@ -208,8 +208,8 @@ def _ball(c: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     s = TUBE_SIDES
     lat = np.pi * np.arange(1, _RING + 1) / (_RING + 1) - np.pi / 2  # rings from the bottom up, poles apart
     lon = 2 * np.pi * np.arange(s) / s
-    c, y = np.cos(lat)[:, None], np.repeat(np.sin(lat)[:, None], s, 1)
-    ring = np.stack([c * np.cos(lon), y, -c * np.sin(lon)], -1).reshape(-1, 3)
+    across, y = np.cos(lat)[:, None], np.repeat(np.sin(lat)[:, None], s, 1)
+    ring = np.stack([across * np.cos(lon), y, -across * np.sin(lon)], -1).reshape(-1, 3)
     normals = np.concatenate([ring, [[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]]])
     bottom, top = len(ring), len(ring) + 1
     k = np.arange(s)
