@@ -8,7 +8,9 @@ vertices and their colours. The colours carry the shading: the page's
 Lambert rule ``albedo * (AMBIENT + KEY * max(0, n . l))`` is evaluated here in
 linear light, per vertex, and converted to sRGB (:func:`shade`), so VTK draws
 them unlit (:class:`CharacterDrawing`) and its own light model cannot make the
-MP4 differ from the page.
+MP4 differ from the page. With a user's character (``character=``), each motion
+is retargeted onto it and its own skin and colours are drawn by the same rules
+(:mod:`gesturekit.viz.character_user`).
 """
 
 from __future__ import annotations
@@ -116,6 +118,9 @@ class CharacterStage:
         Lower and upper corner of the framed box, metres.
     schemes : list of str
         Each character's colour scheme.
+    users : list of UserBody or None
+        With a ``character``: each motion on it (:class:`~gesturekit.viz.character_user.UserBody`); then
+        the attributes of our body (``rigs``, ``poses``, ``meshes``) are not set.
     """
 
     def __init__(

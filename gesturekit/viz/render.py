@@ -89,7 +89,9 @@ class RenderStyle:
         Colour of the panel labels (anything PyVista accepts).
     view_box : ((xmin, xmax), (ymin, ymax), (zmin, zmax))
         Pelvis-relative region, metres, framed when ``fit_motion`` is off: a
-        standing speaker's upper body and reach. Its bottom is the floor.
+        standing speaker's upper body and reach. Its bottom is the floor. On a
+        user's character (``character=`` of :class:`SkeletonScene`), relative
+        to its pelvis at rest.
     fit_motion : bool
         Frame every motion over the whole clip, so that the figure fills the
         view (the page's framing rule: the character's
