@@ -137,8 +137,7 @@ class CharacterStage:
         self.schemes = [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
         self.users: list[UserBody] | None = None
         if character is not None:
-            shirt = PARTS.index("shirt")
-            self.users = [UserBody(m, character, part_colors(s)[shirt]) for m, s in zip(self.motions, self.schemes)]
+            self.users = [UserBody(m, character, s) for m, s in zip(self.motions, self.schemes)]
             self.faces = [u.faces for u in self.users]
             self.offsets, self.box = stage_layout([u.framing_points() for u in self.users])
             if view_box is not None:

@@ -7,7 +7,8 @@ posed frame by frame by :meth:`~gesturekit.character.retarget.Retargeted.skinnin
 with the one linear blend of :mod:`gesturekit.character.skin`, and its own
 colours (:attr:`CharacterSkin.colors`) shaded by the shared Lambert rule
 (:func:`gesturekit.viz.character_render.shade`). A character without a body (a
-BVH skeleton) is drawn as tubes around its bones in the scheme's shirt colour.
+BVH skeleton) is drawn as tubes around its bones in the scheme's shirt colour
+(:func:`_bone_tubes`, which takes the arguments of the character layer's bone body to come).
 
 The camera frames the bones that follow the motion (:meth:`UserBody.framing_points`):
 the pelvis, the bones at the motion's drawn joints and every bone below them,
@@ -22,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from ..character.look import part_colors
+from ..character.mesh import PARTS
 from ..character.retarget import Retargeted, retarget
 from ..character.skin import pose_skin
 from ..character.target import Character, CharacterSkin
@@ -71,8 +74,9 @@ class UserBody:
     ----------
     motion : Motion
     character : Character
-    tube_color : array_like, shape (3,)
-        sRGB in [0, 1] of the tubes drawn around the bones of a character without a body.
+    scheme : str
+        Colour scheme (:data:`gesturekit.character.look.SCHEMES`) of the tubes drawn around the bones of a
+        character without a body; the character's own colours otherwise.
 
     Attributes
     ----------
@@ -82,11 +86,11 @@ class UserBody:
         The character's own body, or tubes around its bones (:func:`_bone_tubes`).
     """
 
-    def __init__(self, motion: Motion, character: Character, tube_color: Any):
+    def __init__(self, motion: Motion, character: Character, scheme: str):
         self.motion = motion
         self.retargeted: Retargeted = retarget(motion, character)
         has_body = character.skin is not None and len(character.skin.faces) > 0
-        self.skin: CharacterSkin = character.skin if has_body else _bone_tubes(character, tube_color)  # type: ignore[assignment]
+        self.skin: CharacterSkin = character.skin if has_body else _bone_tubes(character, scheme=scheme)  # type: ignore[assignment]
         self._matrices = self.retargeted.skinning()
         from .character_render import srgb_to_linear
 
@@ -137,9 +141,10 @@ class UserBody:
         return np.concatenate([grown.reshape(len(pos), -1, 3), pos[:, [ch.pelvis]]], axis=1)
 
 
-def _bone_tubes(character: Character, color: Any) -> CharacterSkin:
+def _bone_tubes(character: Character, *, scheme: str) -> CharacterSkin:
     """Tubes around a bodiless character's bones (parent to child) and a ball at every joint, each bound to
-    one bone (a tube to its parent bone), in one colour: a stand-in body for a BVH skeleton."""
+    one bone (a tube to its parent bone), in the scheme's shirt colour: a stand-in body for a BVH skeleton."""
+    color = part_colors(scheme)[PARTS.index("shirt")]
     pos = np.asarray(character.rest_position, dtype=np.float64)
     height = max(float(np.ptp(pos[:, 1])), 1e-3)
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []  # vertices, normals, faces, bone
