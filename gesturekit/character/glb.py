@@ -128,6 +128,10 @@ def accessor_array(doc: Mapping[str, Any], binary: bytes, index: int) -> np.ndar
     width = _WIDTH[acc["type"]]
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
     stride = view.get("byteStride", width * dtype.itemsize)
+    count = int(acc["count"])
+    end = start + (stride * (count - 1) + width * dtype.itemsize if count > 0 else 0)
+    if count < 0 or end > view.get("byteOffset", 0) + view["byteLength"] or end > len(binary):
+        raise ConfigError(f"accessor {index} ({count} x {acc['type']}) reads past the end of its data")
     rows = np.ndarray(
         (acc["count"], width), dtype=dtype, buffer=binary, offset=start, strides=(stride, dtype.itemsize)
     ).copy()
