@@ -261,3 +261,19 @@ def test_a_character_is_refused_where_it_cannot_be_drawn(tmp_path):
     with pytest.raises(ConfigError, match="must be a Character"):
         render_video(tmp_path / "x.mp4", m, resolution=SIZE, character=str(ch.path))  # type: ignore[arg-type]
     assert not (tmp_path / "x.mp4").exists()
+
+
+def test_the_result_video_passes_the_character_on(tmp_path, monkeypatch):
+    from gesturekit.datasets.synthetic import generate_demo_take
+    from gesturekit.demo import open_default_database
+    from gesturekit.export import result as result_module
+    from gesturekit.synthesize import synthesize
+
+    take, _ = generate_demo_take(seconds=2.0, seed=5, name="look")
+    res = synthesize(take.audio, db=open_default_database())
+    ch = character("vrm0_a")
+    seen = []
+    monkeypatch.setattr(result_module, "render_video", lambda path, motion, **kw: seen.append(kw["character"]) or path)
+    result_module.save_result_video(res, tmp_path / "theirs.mp4", character=ch)
+    result_module.save_result_video(res, tmp_path / "ours.mp4")
+    assert seen[0] is ch and seen[1] is None
