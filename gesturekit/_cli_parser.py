@@ -389,6 +389,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--loudness", type=float, default=-23.0, help="loudness of every soundtrack, LUFS (default -23)")
     s.add_argument("--workers", type=int, help="rendering processes (default: all cores)")
     s.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask distributed cluster (tcp://host:8786)")
+    s.add_argument(
+        "--character",
+        metavar="FILE",
+        help="a humanoid (.glb, .gltf, .vrm or .bvh) every stimulus shows, in its own colours (default: ours, grey)",
+    )
+    s.add_argument("--character-map", metavar="JSON", help="bone map of --character (our joint -> its bone)")
     s.add_argument("--force", action="store_true", help="replace an existing study")
     _add_max_speech(s)
     return p

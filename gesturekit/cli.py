@@ -399,6 +399,7 @@ def _cmd_synthesize(args) -> int:
                         overwrite=args.force,
                         progress=lambda done, total: _advance(bar, done),
                         look=args.video_style,
+                        character=character,  # their character, as in the glTF and BVH
                     )
                 written.append(targets[(stem, "mp4")])
             relaxed = res.relaxed_steps
@@ -606,6 +607,8 @@ def _cmd_stimuli(args) -> int:
             scheduler=args.scheduler,
             overwrite=args.force,
             progress=lambda stage, done, total: _advance(bar(stage, total, "stimulus"), done),
+            character=args.character,
+            character_map=args.character_map,
         )
     _print(
         f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "

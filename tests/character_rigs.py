@@ -194,7 +194,7 @@ def _template(spec: RigSpec) -> list[tuple[str, str | None, np.ndarray, str | No
     add("head", head_parent, (0, 1.58 * s, 0), "head")
     add("head_top", "head", (0, spec.height, 0), "head_top")
     shoulder_x = 0.18 * s * spec.shoulder_width
-    upper, fore = 0.30 * s * spec.arm, 0.27 * s * spec.forearm
+    upper, fore = 0.30 * s * spec.arm, 0.26 * s * spec.forearm
     arm_y = 1.42 * s
     for key, side, _, sign in _SIDES:
         first = len(bones)
@@ -638,7 +638,7 @@ def write_rig(folder: Path, spec: RigSpec, name: str | None = None) -> Path:
 #: The named characters of the acceptance tests.
 CASES: dict[str, RigSpec] = {
     "mixamo_t": RigSpec(),
-    "mixamo_a_rolled": RigSpec(rest="A", roll_seed=1, armature=True, arm=1.1, forearm=0.9),
+    "mixamo_a_rolled": RigSpec(rest="A", roll_seed=1, armature=True, arm=1.08, forearm=1.08),
     "vrm0_a": RigSpec(naming="vrm0", rest="A", roll_seed=2, shoulder_width=1.15, spine_bones=2),
     "vrm1_t": RigSpec(naming="vrm1", roll_seed=4, height=1.55, texture=True),
     "bvh_zeggs_a": RigSpec(naming="zeggs", fmt="bvh", rest="A", height=1.85),

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import ConfigError, InputFileError
 from ..limits import check_bytes, read_json
+from ..skeleton import FINGERS
 from .glb import accessor_array, node_matrices, read_glb
 from .humanoid import VRM_BONES
 from .mesh import vertex_normals
@@ -45,7 +46,7 @@ def read_gltf_skeleton(path: Path) -> FileSkeleton:
         check_bytes(path.stat().st_size, what="a character file", path=path)
         doc, binary = _load(path)
         return _skeleton(path, doc, binary)
-    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as e:
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, OSError, RecursionError) as e:
         raise InputFileError(f"not a readable glTF character ({type(e).__name__}: {e})", path=path) from None
     except ConfigError as e:
         if e.path is not None:
@@ -109,17 +110,19 @@ def _skeleton(path: Path, doc: dict[str, Any], binary: bytes) -> FileSkeleton:
             if parent[c] != -1 or c == i:
                 raise InputFileError(f"node {c} has two parents", path=path)
             parent[c] = i
+    for i in range(len(nodes)):  # a cycle of nodes would send forward kinematics round for ever
+        a, steps = parent[i], 0
+        while a >= 0:
+            a, steps = parent[a], steps + 1
+            if steps > len(nodes):
+                raise InputFileError(f"node {i}'s ancestors form a cycle", path=path)
     skins = doc.get("skins", [])
     candidates = sorted({int(j) for s in skins for j in s["joints"]}) if skins else list(range(len(nodes)))
     kind, humanoid = _humanoid(doc)
     chosen = set(candidates) | set(humanoid.values())
-    if humanoid:
-        for key in list(humanoid):
-            if key.endswith("3") and "_" in key:  # a distal finger bone: its first child is the tip
-                kids = nodes[humanoid[key]].get("children", [])
-                if kids:
-                    humanoid[key[:-1] + "4"] = int(kids[0])
-                    chosen.add(int(kids[0]))
+    for key, tip in _tips(nodes, humanoid).items():
+        humanoid[key] = tip
+        chosen.add(tip)
     bone_nodes = sorted(chosen)
     in_set = set(bone_nodes)
 
@@ -152,6 +155,22 @@ def _skeleton(path: Path, doc: dict[str, Any], binary: bytes) -> FileSkeleton:
         skin=skin,
         gltf=GltfSource(document=doc, binary=binary, nodes=node_of),
     )
+
+
+def _tips(nodes: list[dict[str, Any]], humanoid: dict[str, int]) -> dict[str, int]:
+    """The nodes that stand for the finger tips and the head top, which a VRM humanoid does not name: of a distal
+    finger bone, the child named like an end (``..._end``), else its only child; of the head, the child named so."""
+    out = {}
+    for key, node in humanoid.items():
+        kids = [int(c) for c in nodes[node].get("children", [])]
+        ends = [c for c in kids if str(nodes[c].get("name", "")).lower().endswith("end")]
+        if key.endswith("3") and key[:-1].split("_")[-1] in FINGERS:
+            pick = ends[0] if ends else kids[0] if len(kids) == 1 else -1
+            if pick >= 0:
+                out[key[:-1] + "4"] = pick
+        elif key == "head" and len(ends) == 1:
+            out["head_top"] = ends[0]
+    return out
 
 
 def _humanoid(doc: dict[str, Any]) -> tuple[str, dict[str, int]]:
@@ -329,5 +348,7 @@ def _image(doc: dict[str, Any], binary: bytes, index: int) -> np.ndarray:
             if im.width * im.height > 8192 * 8192:
                 raise ValueError("a texture larger than 8192 x 8192")
             return np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
-    except (OSError, Image.DecompressionBombError) as e:  # PIL's errors for bytes that are no image it reads
+    except ValueError:
+        raise
+    except Exception as e:  # Pillow's own errors (an unknown format, a truncated file, a decompression bomb)
         raise ValueError(f"image {index} is not a readable PNG or JPEG ({type(e).__name__})") from None

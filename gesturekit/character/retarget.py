@@ -26,12 +26,14 @@ is ``Q`` (:attr:`Character.rest_rotation`) and ``W(t)`` in the pose:
 **The arms** then reach as ours do, scaled to their arm: the wrist's target is
 ``shoulder + s (ours_wrist - ours_shoulder)`` with ``s`` their arm length (upper
 arm plus forearm) over ours. Where their upper arm and forearm have the
-proportions of ours, our directions put the wrist there; where they differ,
-the wrist goes where our directions put it but no further than
-:data:`WRIST_SLACK` of the arm's length from the target, and the upper arm and
-forearm are solved for that point with two bones (law of cosines), the elbow
-bent towards where ours points (off the line from shoulder to wrist): the
-bones turn away from ours only as much as the reach needs.
+proportions of ours, our directions put the wrist there. Where they differ, the
+upper arm and forearm are solved for the target with two bones (law of
+cosines), the elbow bent towards where ours points (off the line from shoulder
+to wrist): the hands do exactly what ours do, and the two bones turn away from
+ours by about a degree per percent that their upper-arm-to-forearm ratio differs
+from ours. A ``wrist_slack`` lets the wrist stay up to that fraction of the arm's
+length from the target where our directions put it elsewhere, trading reach for
+direction.
 
 **The torso proxy**: a capsule around their spine from the pelvis up, of radius
 :data:`TORSO_RADIUS` times their shoulder width, and the same around ours. A
@@ -47,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..motion import Motion
 from ..skeleton import JOINT_NAMES, joint_index
 from .rig import Rig, rig_for, solve_pose
@@ -57,14 +60,18 @@ __all__ = ["TORSO_RADIUS", "WRIST_SLACK", "RetargetReport", "Retargeted", "retar
 #: Radius of the torso capsule as a fraction of the shoulder width (the distance between the upper-arm joints).
 TORSO_RADIUS = 0.3
 
-#: How far a wrist may stay from our reach scaled to their arm, as a fraction of their arm's length, so that
-#: their upper arm and forearm keep our directions where their proportions differ a little from ours.
-WRIST_SLACK = 0.015
+#: How far a wrist may stay from our reach scaled to their arm by default, as a fraction of their arm's length:
+#: none, so the hands do exactly what ours do (and the controls hold as on ours); a larger slack lets the upper
+#: arm and forearm keep more of our directions where their proportions differ from ours.
+WRIST_SLACK = 0.0
 
 #: Weight of ``R_ours A``'s axes in the fit of a bone with several children (the children weigh 1 each).
 _HOLD = 0.05
 
 _SPINE = ("spine_mid", "chest", "upper_chest")
+
+#: The child a bone with several children points at exactly (the others are fitted together with it).
+_MIDLINE = frozenset(("chest", "upper_chest", "neck", "neck_upper", "head", "left_middle1", "right_middle1"))
 
 
 @dataclass(frozen=True)
@@ -74,9 +81,15 @@ class RetargetReport:
     Attributes
     ----------
     segments : tuple of str
-        The measured bones, ``"Parent->Child"`` (their names), from each matched bone to each matched child.
+        The bones, ``"Parent->Child"`` (their names): from each matched bone to the matched child it points at (its
+        only one, or the one on the midline or the middle finger).
     direction_error : np.ndarray, shape (len(segments),), float64
         Largest angle over the frames between each segment and ours, degrees.
+    side_segments : tuple of str
+        From a bone with several matched children to the others (the collars on the chest, the other fingers on the
+        hand): their angles to one another are the character's own, so they are fitted together, not each exactly.
+    side_error : np.ndarray, shape (len(side_segments),), float64
+        Largest angle over the frames between each of those and ours, degrees.
     wrist_error : float
         Largest distance of a wrist from its scaled target over the frames (both sides; frames whose target was
         moved out of the torso left out), as a fraction of that arm's length.
@@ -100,6 +113,8 @@ class RetargetReport:
 
     segments: tuple[str, ...]
     direction_error: np.ndarray
+    side_segments: tuple[str, ...]
+    side_error: np.ndarray
     wrist_error: float
     reach_scale: tuple[float, float]
     torso_radius: float
@@ -124,7 +139,12 @@ class RetargetReport:
         """One paragraph for a person: directions, wrists, torso, what is missing."""
         lines = [
             f"{len(self.segments)} bones follow ours within {self.max_direction_error:.2f} degrees"
-            + (f" (worst {self.worst_segment})" if self.segments else ""),
+            + (f" (worst {self.worst_segment})" if self.segments else "")
+            + (
+                f", the {len(self.side_segments)} they carry beside those within {self.side_error.max():.2f}"
+                if len(self.side_segments)
+                else ""
+            ),
             f"wrists within {100 * self.wrist_error:.2f} % of the arm's length of our reach scaled by "
             f"{self.reach_scale[0]:.3f} (left) and {self.reach_scale[1]:.3f} (right)",
             f"hands kept out of the torso in {sum(self.moved_out)} frames "
@@ -157,6 +177,8 @@ class Retargeted:
     report : RetargetReport
     source : Motion
         The motion the character follows.
+    alignment : np.ndarray, shape (M, 3, 3), float64
+        Each bone's fixed turn ``A`` of its rest pose onto ours.
     """
 
     character: Character
@@ -166,6 +188,7 @@ class Retargeted:
     scale: float
     report: RetargetReport
     source: Motion
+    alignment: np.ndarray
 
     @property
     def n_frames(self) -> int:
@@ -196,13 +219,49 @@ class Retargeted:
         return out
 
     def our_motion(self) -> Motion:
-        """The character's pose as our 55 joints at our size (their positions relative to their pelvis, divided by
-        :attr:`scale`), for measuring the controls on it; joints they lack keep the motion's."""
+        """The character's pose on our skeleton, for measuring the controls on it: our bones turned as the
+        character's, at the motion's own lengths.
+
+        A bone of ours whose two joints the character has points along the character's bone between them; where
+        that bone is one a joint carries beside the one it points at (a collar on the chest, a finger on the hand),
+        whose angle to the others is the character's own shape, it is our shape turned by the character's joint. A
+        wrist is where the character's reach puts it from its shoulder, divided by :attr:`RetargetReport.reach_scale`.
+        So it says where the character's hands are relative to its body in our units: "left hand high" holds on it
+        exactly when it holds here. Joints it lacks, and bones it lacks an end of, keep the motion's directions.
+        """
+        from ..skeleton import PARENTS
+
         ch = self.character
-        out = self.source.positions.astype(np.float64).copy()
-        have = np.flatnonzero(ch.bone_of >= 0)
-        rel = self.position[:, ch.bone_of[have]] - self.position[:, ch.pelvis][:, None]
-        out[:, have] = rel / self.scale
+        x = self.source.positions.astype(np.float64)
+        rest = rig_for(self.source).rest
+        joint_at = np.full(ch.n_bones, -1, dtype=np.int64)
+        joint_at[ch.bone_of[ch.bone_of >= 0]] = np.flatnonzero(ch.bone_of >= 0)
+        kids = _kids(ch, joint_at >= 0)
+        turns = self.turns()
+        out = x.copy()
+        for j in range(len(JOINT_NAMES)):
+            pa = int(PARENTS[j])
+            if pa < 0:
+                continue
+            length = np.linalg.norm(x[:, j] - x[:, pa], axis=1, keepdims=True)
+            ours, _ = _unit(x[:, j] - x[:, pa])
+            b, bp = int(ch.bone_of[j]), int(ch.bone_of[pa])
+            d = ours
+            if b >= 0 and bp >= 0 and b in kids[bp] and b != _primary(kids[bp], joint_at):
+                shape, _ = _unit(self.alignment[bp].T @ (rest[j] - rest[pa]))
+                d = turns[:, bp] @ shape
+            elif b >= 0 and bp >= 0:
+                d, ok = _unit(self.position[:, b] - self.position[:, bp])
+                d = np.where(ok[:, None], d, ours)
+            out[:, j] = out[:, pa] + length * d
+            side = JOINT_NAMES[j].removesuffix("_wrist")
+            if side in ("left", "right") and b >= 0 and ch.bone(f"{side}_shoulder") >= 0:
+                # the hand where the character's reach puts it, at our arm's length
+                s = ch.bone(f"{side}_shoulder")
+                scale = self.report.reach_scale[0 if side == "left" else 1]
+                out[:, j] = (
+                    out[:, joint_index(f"{side}_shoulder")] + (self.position[:, b] - self.position[:, s]) / scale
+                )
         return Motion(out.astype(np.float32), self.fps, self.source.presence)
 
 
@@ -309,7 +368,7 @@ def _distance_to_chain(x: np.ndarray, chain: np.ndarray) -> tuple[np.ndarray, np
     return best, near
 
 
-def retarget(motion: Motion, character: Character) -> Retargeted:
+def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST_SLACK) -> Retargeted:
     """Pose ``character`` by ``motion``, frame by frame (see the module's text).
 
     Parameters
@@ -318,6 +377,9 @@ def retarget(motion: Motion, character: Character) -> Retargeted:
         Joint positions (frames, 55, 3), metres, relative to the pelvis.
     character : Character
         From :func:`gesturekit.character.user.read_character`.
+    wrist_slack : float
+        How far a wrist may stay from our reach scaled to their arm, as a fraction of the arm's length, in
+        [0, 0.2]: 0 puts the hands exactly where ours reach; more keeps more of our arm directions.
 
     Returns
     -------
@@ -326,8 +388,10 @@ def retarget(motion: Motion, character: Character) -> Retargeted:
     Raises
     ------
     ConfigError
-        A motion without frames or with positions that are not finite.
+        A motion without frames or with positions that are not finite, or a slack out of range.
     """
+    if not (isinstance(wrist_slack, (int, float)) and 0.0 <= wrist_slack <= 0.2):
+        raise ConfigError(f"wrist_slack must be a number in [0, 0.2], got {wrist_slack!r}")
     rig = rig_for(motion)
     pose = solve_pose(motion, rig)
     r_ours, _ = pose.world(rig)
@@ -346,7 +410,7 @@ def retarget(motion: Motion, character: Character) -> Retargeted:
     rot = np.empty((n, m, 3, 3))
     pos = np.empty((n, m, 3))
     wants: dict[int, np.ndarray] = {}
-    arms = _Arms(ch, rig, x, joint_at)
+    arms = _Arms(ch, rig, x, joint_at, float(wrist_slack))
     for b in range(m):
         pa = int(ch.parents[b])
         if not body[b] or b == ch.pelvis or pa < 0:
@@ -362,11 +426,11 @@ def retarget(motion: Motion, character: Character) -> Retargeted:
             wants.update(arms.reach(b, pos))
         held = r_ours[:, j] @ align[b]
         if len(kids[b]) >= 2:
-            rot[:, b] = _fit(held, p, b, kids[b], joint_at, x) @ q[b]
-            continue
-        w0 = held @ q[b]
-        if kids[b]:
-            c = kids[b][0]
+            w0 = _fit(held, p, b, kids[b], joint_at, x) @ q[b]
+        else:
+            w0 = held @ q[b]
+        c = _primary(kids[b], joint_at)
+        if c >= 0:
             cur, _ = _unit(w0 @ (q[b].T @ (p[c] - p[b])))
             want, ok = _unit(x[:, joint_at[c]] - x[:, j])
             if b in wants:
@@ -377,8 +441,26 @@ def retarget(motion: Motion, character: Character) -> Retargeted:
     report = _report(ch, rig, x, joint_at, kids, rot, pos, arms, body)
     scale = float(np.mean(arms.scale))
     return Retargeted(
-        character=ch, fps=float(motion.fps), rotation=rot, position=pos, scale=scale, report=report, source=motion
+        character=ch,
+        fps=float(motion.fps),
+        rotation=rot,
+        position=pos,
+        scale=scale,
+        report=report,
+        source=motion,
+        alignment=align,
     )
+
+
+def _primary(kids: list[int], joint_at: np.ndarray) -> int:
+    """The child a bone points at exactly: its only one, or of several the one on the body's midline (the neck of
+    the chest) or the middle finger (of a hand); ``-1`` for none."""
+    if len(kids) == 1:
+        return kids[0]
+    for c in kids:
+        if JOINT_NAMES[joint_at[c]] in _MIDLINE:
+            return c
+    return -1
 
 
 def _alignment(ch: Character, ours_rest: np.ndarray, joint_at: np.ndarray, kids: list[list[int]]) -> np.ndarray:
@@ -420,7 +502,8 @@ def _fit(held: np.ndarray, p: np.ndarray, b: int, kids: list[int], joint_at: np.
 class _Arms:
     """Each arm's reach: the scaled wrist target, kept out of the torso, and the two-bone solve for it."""
 
-    def __init__(self, ch: Character, rig: Rig, x: np.ndarray, joint_at: np.ndarray):
+    def __init__(self, ch: Character, rig: Rig, x: np.ndarray, joint_at: np.ndarray, slack: float):
+        self.slack = slack
         self.ch, self.x = ch, x
         p = ch.rest_position
         self.sides: dict[int, tuple[str, int, int, int]] = {}
@@ -472,7 +555,7 @@ class _Arms:
         straight = shoulder + a * _unit(xe - xs)[0] + c * _unit(xw - xe)[0]
         off = straight - target
         far = np.linalg.norm(off, axis=1, keepdims=True)
-        slack = WRIST_SLACK * (a + c)
+        slack = self.slack * (a + c)
         target = target + off * np.minimum(1.0, slack / np.maximum(far, 1e-12))
         d_ours, _ = _distance_to_chain(xw, self.our_torso())
         ours_in = d_ours < self.ours_radius
@@ -511,16 +594,18 @@ def _report(
     body: np.ndarray,
 ) -> RetargetReport:
     del rot
-    segments, errors = [], []
+    found: dict[bool, tuple[list[str], list[float]]] = {True: ([], []), False: ([], [])}
     for b in range(ch.n_bones):
         if joint_at[b] < 0 or b == ch.pelvis:
             continue
+        primary = _primary(kids[b], joint_at)
         for c in kids[b]:
             theirs, ok_t = _unit(pos[:, c] - pos[:, b])
             ours, ok_o = _unit(x[:, joint_at[c]] - x[:, joint_at[b]])
             cos = np.clip(np.einsum("ti,ti->t", theirs, ours), -1.0, 1.0)
             ok = ok_t & ok_o
-            segments.append(f"{ch.names[b]}->{ch.names[c]}")
+            names, errors = found[c == primary]
+            names.append(f"{ch.names[b]}->{ch.names[c]}")
             errors.append(float(np.degrees(np.arccos(cos[ok])).max()) if ok.any() else 0.0)
     wrist, moved_out, inside, ours_inside = 0.0, [0, 0], [0, 0], [0, 0]
     for s, (side, e, w, i) in arms.sides.items():
@@ -537,8 +622,10 @@ def _report(
     missing = tuple(JOINT_NAMES[j] for j in np.flatnonzero(rig.in_rig & (ch.bone_of < 0)))
     still = tuple(ch.names[b] for b in range(ch.n_bones) if joint_at[b] < 0 or not body[b])
     return RetargetReport(
-        segments=tuple(segments),
-        direction_error=np.asarray(errors, dtype=np.float64),
+        segments=tuple(found[True][0]),
+        direction_error=np.asarray(found[True][1], dtype=np.float64),
+        side_segments=tuple(found[False][0]),
+        side_error=np.asarray(found[False][1], dtype=np.float64),
         wrist_error=wrist,
         reach_scale=(float(arms.scale[0]), float(arms.scale[1])),
         torso_radius=arms.radius,

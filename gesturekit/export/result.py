@@ -216,10 +216,13 @@ def save_result_video(
     side_by_side: bool = False,
     resolution: tuple[int, int] = (640, 480),
     look: str = "character",
+    character: Character | None = None,
 ) -> Path:
     """An MP4 of the character with the speech (H.264 + AAC); the k-NN and the refined motion side by
     side when ``side_by_side`` and the result was refined. ``resolution`` is (width, height) in pixels;
-    ``look`` one of :data:`gesturekit.viz.render.LOOKS` (the page's character, or the capsule figure).
+    ``look`` one of :data:`gesturekit.viz.render.LOOKS` (the page's character, or the capsule figure);
+    ``character`` a user's character the motion is retargeted onto (see
+    :func:`gesturekit.export.video.render_video`).
 
     Raises
     ------
@@ -244,6 +247,7 @@ def save_result_video(
             progress=progress,
             resolution=resolution,
             style=style,
+            character=character,
         )
     return render_video(
         path,
@@ -253,4 +257,5 @@ def save_result_video(
         progress=progress,
         resolution=resolution,
         style=style,
+        character=character,
     )
