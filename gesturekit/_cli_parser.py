@@ -278,6 +278,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="the files to write per speech, a comma list of npz (motion + search), bvh (the motion), glb "
         "(glTF: the character, skinned and animated, with the speech as a WAV beside it) (default npz,bvh)",
     )
+    y.add_argument(
+        "--character",
+        metavar="FILE",
+        help="your own humanoid (.glb, .gltf or .vrm with a skinned body, or a .bvh skeleton): glb then writes "
+        "it animated by the motion (its meshes, materials and extensions kept, one animation 'gesturekit' "
+        "added) and bvh its skeleton moved by the motion, in the file's own frame and units; the npz keeps "
+        "our joints. Bones are matched by the VRM humanoid, Mixamo or ZEGGS names, or --character-map",
+    )
+    y.add_argument(
+        "--character-map",
+        metavar="JSON",
+        help='bone map of --character: {"pelvis": "Hips", "joints": {"spine_mid": "Spine", ...}}',
+    )
     y.add_argument("--video", action="store_true", help="also render an MP4 of the character with the speech")
     y.add_argument(
         "--video-style",
@@ -376,6 +389,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--loudness", type=float, default=-23.0, help="loudness of every soundtrack, LUFS (default -23)")
     s.add_argument("--workers", type=int, help="rendering processes (default: all cores)")
     s.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask distributed cluster (tcp://host:8786)")
+    s.add_argument(
+        "--character",
+        metavar="FILE",
+        help="a humanoid (.glb, .gltf, .vrm or .bvh) every stimulus shows, in its own colours (default: ours, grey)",
+    )
+    s.add_argument("--character-map", metavar="JSON", help="bone map of --character (our joint -> its bone)")
     s.add_argument("--force", action="store_true", help="replace an existing study")
     _add_max_speech(s)
     return p

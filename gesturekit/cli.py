@@ -295,18 +295,20 @@ def _refiner_choice(given: str | None, db):
 
 
 def _cmd_synthesize(args) -> int:
+    from ._cli_character import check_target, read_character_option, write_character_files
     from ._io import safe_filename
     from .datasets.audio import load_audio
     from .export.bvh import bvh_parents
     from .export.gltf import audio_path_for
     from .export.result import export_result_bvh, export_result_glb, save_result_npz, save_result_video
-    from .outputs import check_output, output_lock, write_errors
+    from .outputs import output_lock, write_errors
     from .refine import open_refiner
     from .search import describe_steps
     from .synthesize import SynthesisConfig, synthesize_batch
     from .workspace import expand_speech, open_database
 
     formats = _parse_formats(args.format)
+    character = read_character_option(args, formats)  # None without --character; read before the search
     files = expand_speech(args.speech)
     control = _control_from_arg(args.control) or ""
     exclude_ranges = tuple(_parse_range(r) for r in (args.exclude_range or ()))
@@ -357,30 +359,35 @@ def _cmd_synthesize(args) -> int:
         raise GestureKitError(
             f"{existing[0]}: exists already ({len(existing)} output file(s) would be replaced); add --force"
         )
-    for p in targets.values():
+    for (_, kind), p in targets.items():
         # with --force too: only files gesturekit wrote are replaced, and never a folder
-        check_output(p, "file", overwrite=args.force, inputs=files)
+        check_target(p, kind, character, overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
     refiner = open_refiner(_refiner_choice(args.refiner, db))
     results = synthesize_batch(audios, db=db, config=config, refiner=refiner, names=[str(f) for f in files])
     with write_errors(out):
         out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     with contextlib.ExitStack() as held:
-        for p in targets.values():
+        for (_, kind), p in targets.items():
             # a second synthesize writing the same files fails here and says so; checked again
             # under the lock, since another run may have written them while this one searched
             held.enter_context(output_lock(p))
-            check_output(p, "file", overwrite=args.force, inputs=files)
+            check_target(p, kind, character, overwrite=args.force, inputs=files)
         for f, stem, res in zip(files, stems, results):
             res.source = f.name
-            reports = []
+            reports: list[str] = []
             if "npz" in formats:
                 save_result_npz(res, targets[(stem, "npz")], overwrite=args.force)
-            if "bvh" in formats:
+            if character is not None:  # their character in place of ours
+                theirs = {k: targets[(stem, k)] for k in tree}
+                write_character_files(
+                    res, character, theirs, overwrite=args.force, thresholds=db.thresholds, show=reports.append
+                )
+            if "bvh" in formats and character is None:
                 reports.append(
                     f"  BVH {export_result_bvh(res, targets[(stem, 'bvh')], overwrite=args.force).summary()}"
                 )
-            if "glb" in formats:
+            if "glb" in formats and character is None:
                 glb = export_result_glb(res, targets[(stem, "glb")], overwrite=args.force)
                 reports.append(f"  glTF {glb.summary()}")
             written = [targets[(stem, kind)] for kind in kinds if kind != "mp4"]
@@ -392,6 +399,7 @@ def _cmd_synthesize(args) -> int:
                         overwrite=args.force,
                         progress=lambda done, total: _advance(bar, done),
                         look=args.video_style,
+                        character=character,  # their character, as in the glTF and BVH
                     )
                 written.append(targets[(stem, "mp4")])
             relaxed = res.relaxed_steps
@@ -599,6 +607,8 @@ def _cmd_stimuli(args) -> int:
             scheduler=args.scheduler,
             overwrite=args.force,
             progress=lambda stage, done, total: _advance(bar(stage, total, "stimulus"), done),
+            character=args.character,
+            character_map=args.character_map,
         )
     _print(
         f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "

@@ -6,7 +6,10 @@ one camera fixed on the same region for every clip (the house render style
 without fitting the view to the motion), one character, one resolution and
 frame rate, and the speech normalised to one loudness (EBU R 128 integrated
 loudness, measured by ffmpeg's ``ebur128`` filter), so that nothing but the
-motion tells the stimuli apart. No label is drawn on the videos.
+motion tells the stimuli apart. No label is drawn on the videos. The character
+is ours in the neutral grey, or the user's own (``character=``: every motion
+retargeted onto it, in its own colours), the same in every stimulus; the study
+records its file's name and SHA-256.
 
 A study folder::
 
@@ -31,6 +34,7 @@ Dask distributed cluster given its scheduler address (or a
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import hmac
 import json
@@ -57,6 +61,7 @@ if TYPE_CHECKING:
     import pandas as pd
     from distributed import Client
 
+    from .character.target import Character
     from .database import MatchingDatabase
     from .synthesize import MotionRefiner, SynthesisConfig
     from .viz.render import RenderStyle
@@ -298,18 +303,40 @@ def stimulus_style(view_box: Sequence[Sequence[float]] | None = None) -> RenderS
     return RenderStyle(fit_motion=False, neutral=True, view_box=tuple(tuple(float(v) for v in row) for row in view_box))
 
 
-def _study_view_box(motions: Sequence[Motion]) -> list[list[float]] | None:
-    """One fixed box for all stimuli of a partial skeleton: the fitted bounds of what every one of
-    them draws, each where it stands alone, shape (3, 2) as lists, metres; None for complete
-    skeletons (the default box)."""
-    if all(m.presence.is_full for m in motions):
+def _study_view_box(motions: Sequence[Motion], character: Character | None = None) -> list[list[float]] | None:
+    """One fixed box for all stimuli of a partial skeleton or a user's character: the fitted bounds of what
+    every one of them draws, each where it stands alone, shape (3, 2) as lists, metres (a character's:
+    from its pelvis at rest); None for complete skeletons on our character (the default box)."""
+    if character is None and all(m.presence.is_full for m in motions):
         return None
     require("pyvista", purpose="rendering stimuli")
     from .viz.render import RenderStyle, view_bounds
 
     # one at a time: given together, the stage would stand them side by side
-    boxes = np.stack([view_bounds([m], style=RenderStyle()) for m in motions])
+    boxes = np.stack([view_bounds([m], style=RenderStyle(), character=character) for m in motions])
+    if character is not None:
+        boxes -= np.asarray(character.rest_position[character.pelvis], dtype=np.float64)[:, None]
     return np.stack([boxes[:, :, 0].min(axis=0), boxes[:, :, 1].max(axis=0)], axis=1).tolist()
+
+
+def _study_character(character: Any, bone_map: Any) -> tuple[Character | None, dict | None]:
+    """The character every stimulus shows (read from its file) and what study.json records of it: the
+    names and SHA-256 of its file and bone map, how its bones were matched."""
+    from .character.target import Character
+    from .character.user import character_record, read_character
+
+    if character is None:
+        if bone_map is not None:
+            raise ConfigError("a bone map (--character-map) needs a character (--character)")
+        return None, None
+    if isinstance(character, Character):
+        if bone_map is not None:
+            raise ConfigError("a Character is already matched: give the bone map to read_character instead")
+    else:
+        character = read_character(character, bone_map=bone_map)
+    record = character_record(character, bone_map=bone_map)
+    # the glTF document stays here: the rendering needs the bones and the skin only
+    return dataclasses.replace(character, gltf=None), record
 
 
 def _job_motion(job: dict) -> Motion:
@@ -332,6 +359,7 @@ def _render_stimulus(job: dict) -> str:
         workers=1,
         overwrite=True,
         style=stimulus_style(job.get("view_box")),
+        character=job.get("character"),
     )
     return job["id"]
 
@@ -417,6 +445,8 @@ def make_stimuli(
     scheduler: str | Client | None = None,
     overwrite: bool = False,
     progress: Callable[[str, int, int], None] | None = None,
+    character: str | os.PathLike[str] | Character | None = None,
+    character_map: str | os.PathLike[str] | dict | None = None,
 ) -> StudyResult:
     """Prepare a user study: every speech x system as an MP4, a manifest and the presentation order.
 
@@ -456,6 +486,13 @@ def make_stimuli(
         Replace an existing study in ``out`` (its videos not in the new plan are removed).
     progress : callable(stage, done, total), optional
         ``stage`` is ``"synthesis"`` or ``"rendering"``.
+    character : path or Character, optional
+        A user's humanoid (``.glb``, ``.gltf``, ``.vrm`` or ``.bvh``, or one read by
+        :func:`gesturekit.character.user.read_character`) every stimulus shows instead of ours: its own
+        colours kept, the background, light and fixed camera (one box for every stimulus) as ever.
+        ``study.json`` records its file's name and SHA-256 (``character``).
+    character_map : path or dict, optional
+        Its JSON bone map (see :func:`~gesturekit.character.user.read_character`), with a character file.
 
     Returns
     -------
@@ -476,6 +513,7 @@ def make_stimuli(
         # a NaN target would scale every soundtrack to NaN samples
         raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {loudness_lufs!r}")
     track = parse_control(control)
+    user_character, character_record = _study_character(character, character_map)
     refiner_name = None if refiner is None else str(getattr(refiner, "path", None) or refiner)
     if "knn+cgan" in systems:
         reason = refiner_unavailable_reason(refiner)
@@ -508,6 +546,8 @@ def make_stimuli(
             scheduler=scheduler,
             progress=progress,
             t0=t0,
+            character=user_character,
+            character_record=character_record,
         )
 
 
@@ -531,6 +571,8 @@ def _make_stimuli_locked(
     scheduler,
     progress,
     t0,
+    character=None,
+    character_record=None,
 ):
     """:func:`make_stimuli` once the study folder is checked and locked."""
     from .evaluate.baselines import SystemUnavailable, run_system
@@ -589,6 +631,7 @@ def _make_stimuli_locked(
                     "joints": None if res.motion.joints is None else res.motion.joints.to_list(),
                     "audio": sound,
                     "resolution": (width, height),
+                    "character": character,
                 }
             )
             n_done += 1
@@ -605,7 +648,7 @@ def _make_stimuli_locked(
             if isinstance(f, str) and f not in keep and re.fullmatch(r"videos/[0-9a-f]+\.mp4", f):
                 (out / f).unlink(missing_ok=True)
 
-    box = _study_view_box([_job_motion(j) for j in jobs])
+    box = _study_view_box([_job_motion(j) for j in jobs], character)
     for j in jobs:
         j["view_box"] = box
     _run_jobs(
@@ -634,6 +677,9 @@ def _make_stimuli_locked(
         "render_style": "gesturekit house style, fixed camera (fit_motion=False), no labels",
         "refiner": refiner_name,
     }
+    if character_record is not None:
+        settings["render_style"] += "; the user's character in its own colours"
+        settings["character"] = character_record
     if box is not None:
         settings["view_box"] = box  # a partial skeleton's stimuli share this fitted, fixed frame
     _write_text(study_path, json.dumps(settings, indent=1) + "\n")

@@ -339,8 +339,10 @@ def _image(doc: dict[str, Any], binary: bytes, index: int) -> np.ndarray:
 
     img = doc["images"][index]
     view = doc["bufferViews"][img["bufferView"]]
-    start = view.get("byteOffset", 0)
-    data = binary[start : start + view["byteLength"]]
+    start, length = int(view.get("byteOffset", 0)), int(view["byteLength"])
+    if start < 0 or length < 0 or start + length > len(binary):
+        raise ValueError(f"image {index}'s buffer view runs past the {len(binary)} bytes of data")
+    data = binary[start : start + length]
     try:
         with Image.open(io.BytesIO(data)) as im:
             if im.width * im.height > 8192 * 8192:
@@ -348,5 +350,5 @@ def _image(doc: dict[str, Any], binary: bytes, index: int) -> np.ndarray:
             return np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
     except ValueError:
         raise
-    except Exception as e:  # Pillow's own errors (an unknown format, a decompression bomb)
-        raise ValueError(f"texture {index} is not a readable image ({type(e).__name__})") from None
+    except Exception as e:  # Pillow's own errors (an unknown format, a truncated file, a decompression bomb)
+        raise ValueError(f"image {index} is not a readable PNG or JPEG ({type(e).__name__})") from None

@@ -121,17 +121,31 @@ def read_glb(data: bytes) -> tuple[dict[str, Any], bytes]:
 
 
 def accessor_array(doc: Mapping[str, Any], binary: bytes, index: int) -> np.ndarray:
-    """Accessor ``index`` of a glTF document as an array (count, components) (``(count,)`` for scalars)."""
+    """Accessor ``index`` of a glTF document as an array (count, components) (``(count,)`` for scalars).
+
+    Raises
+    ------
+    ConfigError
+        The accessor runs past its buffer view, or the view past the binary data.
+    """
     acc = doc["accessors"][index]
     view = doc["bufferViews"][acc["bufferView"]]
     dtype = np.dtype(_DTYPE[acc["componentType"]])
     width = _WIDTH[acc["type"]]
-    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    stride = view.get("byteStride", width * dtype.itemsize)
-    count = int(acc["count"])
-    end = start + (stride * (count - 1) + width * dtype.itemsize if count > 0 else 0)
-    if count < 0 or end > view.get("byteOffset", 0) + view["byteLength"] or end > len(binary):
-        raise ConfigError(f"accessor {index} ({count} x {acc['type']}) reads past the end of its data")
+    at, length = int(view.get("byteOffset", 0)), int(view["byteLength"])
+    if at < 0 or length < 0 or at + length > len(binary):
+        raise ConfigError(
+            f"buffer view {acc['bufferView']} (bytes {at} to {at + length}) runs past the {len(binary)} bytes of data"
+        )
+    offset, count = int(acc.get("byteOffset", 0)), int(acc["count"])
+    stride = int(view.get("byteStride", width * dtype.itemsize))
+    end = offset + (count - 1) * stride + width * dtype.itemsize if count > 0 else offset
+    if offset < 0 or count < 0 or stride < width * dtype.itemsize or end > length:
+        raise ConfigError(
+            f"accessor {index} ({count} x {acc['type']} from byte {offset}, stride {stride}) runs past its buffer "
+            f"view of {length} bytes"
+        )
+    start = at + offset
     rows = np.ndarray(
         (acc["count"], width), dtype=dtype, buffer=binary, offset=start, strides=(stride, dtype.itemsize)
     ).copy()

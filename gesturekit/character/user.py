@@ -19,8 +19,10 @@ the same way.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
+from typing import Any
 
 from .._io import safe_filename
 from ..errors import ConfigError, GestureKitError, InputFileError
@@ -31,7 +33,7 @@ from ._user_gltf import read_gltf_skeleton
 from .humanoid import REQUIRED, check_bone_map, match_names, missing_message, name_maps
 from .target import Character, FileSkeleton
 
-__all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload"]
+__all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record"]
 
 #: File name suffixes :func:`read_character` reads.
 CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".bvh")
@@ -120,6 +122,32 @@ def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes]
             shown = None if exc.path is None else bone_map[0] if bone_map and exc.path == str(map_path) else name
             raise type(exc)(problem, path=shown) from None
     return dataclasses.replace(character, path=Path(str(name)))
+
+
+def character_record(character: Character, *, bone_map: str | os.PathLike | dict | None = None) -> dict[str, Any]:
+    """What names a character's files, for a record of what made an output (a study's ``study.json``).
+
+    Returns
+    -------
+    dict
+        ``file`` (the file's name, no folder), ``sha256`` (hex, None where the file is gone), ``matched_by``;
+        with a bone map file also ``bone_map``: its ``file`` and ``sha256``.
+    """
+    out: dict[str, Any] = {"file": character.path.name, "sha256": _sha256(character.path)}
+    out["matched_by"] = character.matched_by
+    if isinstance(bone_map, (str, os.PathLike)):
+        out["bone_map"] = {"file": Path(bone_map).name, "sha256": _sha256(Path(bone_map))}
+    return out
+
+
+def _sha256(path: Path) -> str | None:
+    if not path.is_file():
+        return None
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def _bone_map(spec: str | os.PathLike | dict | None) -> tuple[str, dict[str, str]] | None:

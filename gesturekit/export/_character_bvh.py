@@ -1,8 +1,9 @@
 """A user's character's skeleton, moved by our motion, as a BVH file in the file's own frame and units.
 
-The joints are the character's bones under its root (names with whitespace
-turned into ``_``), each leaf ending in an End Site; a BVH character's End
-Sites (read as ``NAME_End`` bones) are End Sites again. With ``R_F`` the
+The joints are the character's bones in the tree of its hips (names with
+whitespace turned into ``_``), each leaf ending in an End Site; a BVH
+character's End Sites (read as ``NAME_End`` bones) are End Sites again, where
+they were; another leaf's End Site goes on along its bone by half its length. With ``R_F`` the
 rotation of :attr:`~gesturekit.character.target.Character.to_file` and ``u``
 the file's units per metre:
 
@@ -32,7 +33,15 @@ from ..errors import ConfigError, GestureKitError, OutputError, warn
 from ..outputs import check_output
 from .bvh import UNITS, WARN_ABOVE
 
-__all__ = ["CharacterBvhReport", "export_character_bvh", "bvh_joint_names", "rotation_of", "worst"]
+__all__ = [
+    "CharacterBvhReport",
+    "export_character_bvh",
+    "check_character_bvh",
+    "character_bvh_joints",
+    "bvh_joint_names",
+    "rotation_of",
+    "worst",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,13 +159,10 @@ def export_character_bvh(
     if units is not None and units not in UNITS:
         raise ConfigError(f"units must be one of {', '.join(UNITS)}, got {units!r}", path=path)
     per_metre = UNITS[units] if units is not None else (1.0 / ch.bvh_units if ch.kind == "bvh" else UNITS["cm"])
-    root = ch.pelvis
-    while ch.parents[root] >= 0:
-        root = int(ch.parents[root])
-    written = [b for b in range(ch.n_bones) if _root_of(ch.parents, b) == root]
+    written, ends = _layout(ch)
+    root = written[0]
     safe = bvh_joint_names(ch.names)
-    ends = _end_sites(ch.names, ch.parents, written) if ch.kind == "bvh" else set()
-    check_character_bvh(path, [safe[b] for b in written if b not in ends], overwrite=overwrite, inputs=[ch.path])
+    check_character_bvh(path, character_bvh_joints(ch), overwrite=overwrite, inputs=[ch.path])
 
     r_f = rotation_of(ch.to_file[:3, :3])
     offsets = (ch.rest_position - ch.rest_position[np.maximum(ch.parents, 0)]) @ r_f.T * per_metre
@@ -234,7 +240,21 @@ def _same_skeleton(path: Path, joints: list[str]) -> bool:
     if not head.startswith("HIERARCHY"):
         return False
     found = re.findall(r"^\s*(?:ROOT|JOINT)\s+(\S+)", head.split("MOTION")[0], re.M)
-    return found == list(joints)
+    return sorted(found) == sorted(joints)
+
+
+def _layout(ch: Character) -> tuple[list[int], set[int]]:
+    """The bones written (the tree of the hips, root first) and those of them written as End Sites."""
+    root = _root_of(ch.parents, ch.pelvis)
+    written = [b for b in range(ch.n_bones) if _root_of(ch.parents, b) == root]
+    return written, (_end_sites(ch.names, ch.parents, written) if ch.kind == "bvh" else set())
+
+
+def character_bvh_joints(ch: Character) -> list[str]:
+    """The JOINT and ROOT names of the character's BVH, in bone order (End Sites left out)."""
+    written, ends = _layout(ch)
+    safe = bvh_joint_names(ch.names)
+    return [safe[b] for b in written if b not in ends]
 
 
 def _root_of(parents: np.ndarray, b: int) -> int:

@@ -45,6 +45,7 @@ from ..character.retarget import Retargeted
 from ..character.rig import rotation_to_quaternion
 from ..errors import ConfigError, warn
 from ..motion import AUDIO_SR
+from ..outputs import check_not_input
 from ._character_bvh import CharacterBvhReport, export_character_bvh, rotation_of, worst
 from .gltf import GENERATOR, WARN_ABOVE, _continuous, speech_targets, wav_bytes
 
@@ -144,7 +145,7 @@ def export_character_glb(
     sr : int
         Its sample rate, Hz.
     overwrite : bool
-        Replace existing files that gesturekit wrote.
+        Replace existing files that gesturekit wrote (never the character's own file).
 
     Returns
     -------
@@ -163,6 +164,7 @@ def export_character_glb(
         raise ConfigError(f"{ch.path.name} is a skeleton without a body; write its motion as a BVH", path=path)
     if path.suffix.lower() not in CHARACTER_GLB_SUFFIXES:
         raise ConfigError(f"a character's GLB is named .glb or .vrm, not {path.suffix or 'without suffix'}", path=path)
+    check_not_input(path, [ch.path])  # never over the character's own file
     wav_path, samples = speech_targets(path, audio, sr, overwrite=overwrite)
     extras: dict[str, Any] = {"fps": float(retargeted.fps), "frames": int(retargeted.n_frames), "units": "m"}
     if wav_path is not None:

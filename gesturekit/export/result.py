@@ -1,5 +1,6 @@
 """A synthesis result written as files: npz (everything), BVH (the motion), glTF (the character, with its
-speech as a WAV beside it), MP4 (the motion with its speech).
+speech as a WAV beside it), MP4 (the motion with its speech); and on a user's character (a glTF, VRM or BVH read
+by :func:`gesturekit.character.user.read_character`): their GLB or VRM animated, and a BVH of their skeleton.
 
 Each writer refuses a result whose motion is not finite
 (:meth:`~gesturekit.synthesize.SynthesisResult.check_finite`), writes atomically and
@@ -14,13 +15,26 @@ from pathlib import Path
 
 import numpy as np
 
+from ..character.retarget import Retargeted, retarget
+from ..character.target import Character
+from ..errors import ConfigError
 from ..synthesize import SynthesisResult
 from .bvh import BvhReport, export_bvh
+from .character import CharacterBvhReport, CharacterGltfReport, export_character_bvh, export_character_glb
 from .gltf import GltfReport, export_gltf
 from .npz import save_npz
 from .video import render_video
 
-__all__ = ["save_result_npz", "save_result_bvh", "export_result_bvh", "export_result_glb", "save_result_video"]
+__all__ = [
+    "save_result_npz",
+    "save_result_bvh",
+    "export_result_bvh",
+    "export_result_glb",
+    "retarget_result",
+    "export_result_character_glb",
+    "export_result_character_bvh",
+    "save_result_video",
+]
 
 
 def save_result_npz(result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
@@ -101,6 +115,79 @@ def export_result_glb(
     )
 
 
+def retarget_result(result: SynthesisResult, character: Character | Retargeted) -> Retargeted:
+    """The final motion of ``result`` on a user's character (:func:`gesturekit.character.retarget.retarget`).
+
+    Parameters
+    ----------
+    result : SynthesisResult
+    character : Character or Retargeted
+        The character (read with :func:`gesturekit.character.user.read_character`), or the result's motion already
+        retargeted onto it (returned as it is, after checking that it is this result's motion).
+
+    Raises
+    ------
+    ConfigError
+        A ``Retargeted`` of another motion.
+    """
+    if isinstance(character, Retargeted):
+        source = character.source
+        if source.n_frames != result.motion.n_frames or not np.array_equal(source.positions, result.motion.positions):
+            raise ConfigError(f"the motion retargeted onto {character.character.path.name} is not this result's")
+        return character
+    return retarget(result.motion, character)
+
+
+def export_result_character_glb(
+    result: SynthesisResult, character: Character | Retargeted, path: str | os.PathLike[str], *, overwrite: bool = False
+) -> CharacterGltfReport:
+    """The user's glTF or VRM character with the final motion as its animation ``"gesturekit"``, its speech as a
+    WAV beside it (:func:`gesturekit.export.gltf.audio_path_for`), and how well the file reproduces the
+    retargeted motion.
+
+    See :func:`gesturekit.export.character.export_character_glb`; ``path`` ends in ``.glb`` or ``.vrm``.
+
+    Parameters
+    ----------
+    result : SynthesisResult
+    character : Character or Retargeted
+        As for :func:`retarget_result` (pass the ``Retargeted`` to retarget once for several files).
+    path : str or os.PathLike
+    overwrite : bool
+        Replace files gesturekit wrote.
+
+    Returns
+    -------
+    CharacterGltfReport
+        ``report.summary()`` is one line.
+    """
+    result.check_finite(path)
+    return export_character_glb(path, retarget_result(result, character), audio=result.audio, overwrite=overwrite)
+
+
+def export_result_character_bvh(
+    result: SynthesisResult,
+    character: Character | Retargeted,
+    path: str | os.PathLike[str],
+    *,
+    overwrite: bool = False,
+    units: str | None = None,
+) -> CharacterBvhReport:
+    """A BVH of the user's character's skeleton moved by the final motion, in its file's frame, and how well it
+    reproduces the retargeted motion.
+
+    See :func:`gesturekit.export.character.export_character_bvh`: a BVH character keeps its offsets, units and
+    channel orders; ``units`` (``"cm"`` or ``"m"``) overrides its units (default centimetres for a glTF or VRM).
+
+    Returns
+    -------
+    CharacterBvhReport
+        ``report.summary()`` is one line.
+    """
+    result.check_finite(path)
+    return export_character_bvh(path, retarget_result(result, character), units=units, overwrite=overwrite)
+
+
 def _bvh_remedy(result: SynthesisResult) -> str | None:
     """What a BVH warning names as the way to a closer file; None: the default (``--normalize-bones``)."""
     if not result.one_skeleton:
@@ -129,10 +216,13 @@ def save_result_video(
     side_by_side: bool = False,
     resolution: tuple[int, int] = (640, 480),
     look: str = "character",
+    character: Character | None = None,
 ) -> Path:
     """An MP4 of the character with the speech (H.264 + AAC); the k-NN and the refined motion side by
     side when ``side_by_side`` and the result was refined. ``resolution`` is (width, height) in pixels;
-    ``look`` one of :data:`gesturekit.viz.render.LOOKS` (the page's character, or the capsule figure).
+    ``look`` one of :data:`gesturekit.viz.render.LOOKS` (the page's character, or the capsule figure);
+    ``character`` a user's character the motion is retargeted onto (see
+    :func:`gesturekit.export.video.render_video`).
 
     Raises
     ------
@@ -157,6 +247,7 @@ def save_result_video(
             progress=progress,
             resolution=resolution,
             style=style,
+            character=character,
         )
     return render_video(
         path,
@@ -166,4 +257,5 @@ def save_result_video(
         progress=progress,
         resolution=resolution,
         style=style,
+        character=character,
     )

@@ -35,6 +35,7 @@ from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG
 
 if TYPE_CHECKING:
+    from ..character.target import Character
     from ..viz.render import RenderStyle
 
 __all__ = ["render_video", "probe_media", "AUDIO_OUT_SR"]
@@ -66,6 +67,7 @@ def render_video(
     labels: Sequence[str] | None = None,
     style: RenderStyle | None = None,
     workers: int | None = None,
+    character: Character | None = None,
 ) -> Path:
     """Render a motion to an MP4 file (H.264 + AAC) that plays in a browser.
 
@@ -110,6 +112,12 @@ def render_video(
         core for clips of at least
         :data:`gesturekit.viz.render_pool.PARALLEL_MIN_FRAMES` frames. The file is
         the same, byte for byte, whatever the number.
+    character : Character, optional
+        A user's character (:func:`gesturekit.character.user.read_character`) shown instead of ours: every
+        motion retargeted onto it (:func:`gesturekit.character.retarget.retarget`), its own skin posed by
+        linear blend skinning in its own colours, shaded and lit as ours, framed on its bones that follow
+        the motion (:class:`gesturekit.viz.character_render.CharacterStage`); a skeleton without a body (BVH)
+        as tubes around its bones. The character look only.
 
     Returns
     -------
@@ -149,7 +157,9 @@ def render_video(
     from ..viz.render_pool import render_frames
 
     # checks the motions, labels and workers before anything starts
-    frames = render_frames(motions, labels=labels, resolution=(width, height), style=style, workers=workers)
+    frames = render_frames(
+        motions, labels=labels, resolution=(width, height), style=style, workers=workers, character=character
+    )
     with contextlib.closing(frames), tempfile.TemporaryDirectory(prefix="gesturekit-video-") as tmp:
         encoded = Path(tmp) / "video.mp4"
         fps = float(motions[0].fps)

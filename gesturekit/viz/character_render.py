@@ -8,7 +8,9 @@ vertices and their colours. The colours carry the shading: the page's
 Lambert rule ``albedo * (AMBIENT + KEY * max(0, n . l))`` is evaluated here in
 linear light, per vertex, and converted to sRGB (:func:`shade`), so VTK draws
 them unlit (:class:`CharacterDrawing`) and its own light model cannot make the
-MP4 differ from the page.
+MP4 differ from the page. With a user's character (``character=``), each motion
+is retargeted onto it and its own skin and colours are drawn by the same rules
+(:mod:`gesturekit.viz.character_user`).
 """
 
 from __future__ import annotations
@@ -33,8 +35,10 @@ from ..character.mesh import PARTS, CharacterMesh, build_mesh
 from ..character.paint import EMPTY_BODY, paint
 from ..character.rig import Pose, Rig, rig_for, solve_pose
 from ..character.skin import skin_normals, skin_vertices
+from ..character.target import Character
 from ..errors import ConfigError
 from ..motion import Motion
+from .character_user import UserBody
 
 __all__ = ["srgb_to_linear", "linear_to_srgb", "shade", "visible_faces", "CharacterStage", "CharacterDrawing"]
 
@@ -100,7 +104,11 @@ class CharacterStage:
     view_box : array_like, shape (3, 2), optional
         ``(min, max)`` of x, y, z, metres: a fixed box for the camera instead of the stage's
         (:func:`~gesturekit.character.look.stage_layout`), so that clips of different systems are
-        framed alike.
+        framed alike. With a ``character``, the box is relative to its pelvis's rest position.
+    character : Character, optional
+        A user's character (:func:`gesturekit.character.user.read_character`) that every motion is retargeted
+        onto (:class:`~gesturekit.viz.character_user.UserBody`): its own skin and colours instead of our
+        character, framed on its bones that follow the motion.
 
     Attributes
     ----------
@@ -110,15 +118,34 @@ class CharacterStage:
         Lower and upper corner of the framed box, metres.
     schemes : list of str
         Each character's colour scheme.
+    users : list of UserBody or None
+        With a ``character``: each motion on it (:class:`~gesturekit.viz.character_user.UserBody`); then
+        the attributes of our body (``rigs``, ``poses``, ``meshes``) are not set.
     """
 
-    def __init__(self, motions: Sequence[Motion], *, neutral: bool = False, view_box: object = None):
+    def __init__(
+        self,
+        motions: Sequence[Motion],
+        *,
+        neutral: bool = False,
+        view_box: object = None,
+        character: Character | None = None,
+    ):
         self.motions = list(motions)
         if not self.motions:
             raise ConfigError("a stage needs at least one motion")
+        self.schemes = [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
+        self.users: list[UserBody] | None = None
+        if character is not None:
+            self.users = [UserBody(m, character, s) for m, s in zip(self.motions, self.schemes)]
+            self.faces = [u.faces for u in self.users]
+            self.offsets, self.box = stage_layout([u.framing_points() for u in self.users])
+            if view_box is not None:
+                pelvis = np.asarray(character.rest_position[character.pelvis], dtype=np.float64)
+                self.box = np.asarray(view_box, dtype=np.float64).T + pelvis
+            return
         self.rigs = [rig_for(m) for m in self.motions]
         self.poses = [solve_pose(m, r) for m, r in zip(self.motions, self.rigs)]
-        self.schemes = [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
         # the page's colours on the page's mesh: split where colours meet, each vertex one palette entry
         painted = [paint(_body(r), m.presence, s) for r, m, s in zip(self.rigs, self.motions, self.schemes)]
         self.meshes = [mesh for mesh, _ in painted]
@@ -142,6 +169,10 @@ class CharacterStage:
     def vertices(self, index: int, frame: int) -> np.ndarray:
         """Character ``index``'s skinned vertices at ``frame`` (its last past its end), shifted to its
         place, shape (V, 3), float32, metres."""
+        if self.users is not None:
+            v = self.users[index].vertices(frame)
+            v[:, 0] += np.float32(self.offsets[index])
+            return v
         pose = self.poses[index]
         f = min(int(frame), pose.n_frames - 1)
         # one frame's pose at a time: a frame's vertices do not depend on which others are skinned with it
@@ -155,7 +186,10 @@ class CharacterStage:
 
         The normals are the rest normals skinned as three.js skins them
         (:func:`~gesturekit.character.skin.skin_normals`), so the MP4 shades each vertex as the page does.
+        A user's character: its own colours, shaded by its skinned normals.
         """
+        if self.users is not None:
+            return self.users[index].colors(frame)
         if not self.meshes[index].n_vertices:  # no body
             return np.zeros((0, 3), np.uint8)
         pose = self.poses[index]

@@ -45,6 +45,7 @@ from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
 from ..character.look import BACKGROUND, stage_layout
+from ..character.target import Character
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
 from ..skeleton import N_JOINTS, JointPresence
@@ -88,7 +89,9 @@ class RenderStyle:
         Colour of the panel labels (anything PyVista accepts).
     view_box : ((xmin, xmax), (ymin, ymax), (zmin, zmax))
         Pelvis-relative region, metres, framed when ``fit_motion`` is off: a
-        standing speaker's upper body and reach. Its bottom is the floor.
+        standing speaker's upper body and reach. Its bottom is the floor. On a
+        user's character (``character=`` of :class:`SkeletonScene`), relative
+        to its pelvis at rest.
     fit_motion : bool
         Frame every motion over the whole clip, so that the figure fills the
         view (the page's framing rule: the character's
@@ -205,8 +208,15 @@ def _shadow_centre(*bodies: BodyShapes) -> np.ndarray:
     return np.concatenate([b.drawn_points().reshape(-1, 3) for b in bodies]).mean(axis=0)
 
 
-def view_bounds(motions: Sequence[Motion], *, style: RenderStyle | None = None) -> np.ndarray:
+def view_bounds(
+    motions: Sequence[Motion], *, style: RenderStyle | None = None, character: Character | None = None
+) -> np.ndarray:
     """The region a scene frames, shape (3, 2): (min, max) of x, y, z in metres.
+
+    With a ``character`` (the character look only), that of its stage
+    (:class:`~gesturekit.viz.character_render.CharacterStage`): fitted, the
+    character's bones that follow the motions; fixed, ``view_box`` from the
+    character's pelvis at rest.
 
     With ``style.fit_motion`` (the default), the appearance's framing rule:
     the bounds of every drawn surface of every motion over the whole clip
@@ -216,6 +226,10 @@ def view_bounds(motions: Sequence[Motion], *, style: RenderStyle | None = None) 
     of the region.
     """
     style = style or RenderStyle()
+    _check_character(character, style)
+    if character is not None:
+        box = None if style.fit_motion else np.asarray(style.view_box)
+        return CharacterStage(motions, view_box=box, character=character).box.T.copy()
     if not style.fit_motion:
         return np.asarray(style.view_box, dtype=np.float64).copy()
     if style.look == "character":
@@ -289,6 +303,9 @@ class SkeletonScene:
         Width and height of the whole picture, pixels.
     style : RenderStyle, optional
         Look of the scene; :class:`RenderStyle()` by default.
+    character : Character, optional
+        A user's character every motion is retargeted onto (the character look only): its own skin and
+        colours (:class:`~gesturekit.viz.character_render.CharacterStage`).
 
     Attributes
     ----------
@@ -305,24 +322,26 @@ class SkeletonScene:
         labels: Sequence[str] | None = None,
         resolution: tuple[int, int] = (640, 480),
         style: RenderStyle | None = None,
+        character: Character | None = None,
     ):
         motions = list(motions)
         self.style = style or RenderStyle()
         _check_scene(motions, labels, resolution)
+        _check_character(character, self.style)
         self.motions = motions
         self.fps = float(motions[0].fps)
         self.n_frames = max(m.n_frames for m in motions)
         self.resolution = (int(resolution[0]), int(resolution[1]))
         s = self.style
         theme = pv.themes.Theme()  # a fresh theme: the user's global theme must not change the look
-        character = s.look == "character"
-        theme.background = BACKGROUND if character else s.appearance.background
+        staged = s.look == "character"
+        theme.background = BACKGROUND if staged else s.appearance.background
         theme.multi_samples = int(s.multi_samples)
         theme.anti_aliasing = "msaa" if s.multi_samples > 0 else None
         with _opengl_window_choice():
             self._plotter: pv.Plotter | None = pv.Plotter(
                 off_screen=True,
-                shape=(1, 1) if character else (1, len(motions)),
+                shape=(1, 1) if staged else (1, len(motions)),
                 border=False,
                 window_size=list(self.resolution),
                 theme=theme,
@@ -332,9 +351,12 @@ class SkeletonScene:
         self._bodies: list[BodyMeshes] = []
         self._points: list[np.ndarray] = []
         try:
-            if character:
+            if staged:
                 stage = CharacterStage(
-                    motions, neutral=s.neutral, view_box=None if s.fit_motion else np.asarray(s.view_box)
+                    motions,
+                    neutral=s.neutral,
+                    view_box=None if s.fit_motion else np.asarray(s.view_box),
+                    character=character,
                 )
                 self._character = CharacterDrawing(
                     stage, self._live(), self.resolution, labels=labels, font_size=s.font_size
@@ -545,6 +567,15 @@ def _check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution
         )
 
 
+def _check_character(character: object, style: RenderStyle) -> None:
+    if character is None:
+        return
+    if not isinstance(character, Character):
+        raise ConfigError(f"character must be a Character (read_character), got {type(character).__name__}")
+    if style.look != "character":
+        raise ConfigError(f"a user's character is drawn in the character look, not {style.look!r}")
+
+
 def render_image(
     motion: Motion,
     *,
@@ -553,6 +584,7 @@ def render_image(
     labels: Sequence[str] | None = None,
     resolution: tuple[int, int] = (640, 480),
     style: RenderStyle | None = None,
+    character: Character | None = None,
 ) -> np.ndarray:
     """One frame as a picture, framed as in a whole-clip render of the same motion(s).
 
@@ -570,6 +602,8 @@ def render_image(
         Width and height, pixels.
     style : RenderStyle, optional
         Look of the scene.
+    character : Character, optional
+        A user's character the motions are retargeted onto (see :class:`SkeletonScene`).
 
     Returns
     -------
@@ -577,7 +611,7 @@ def render_image(
         RGB picture, top row first.
     """
     motions = [motion] if side_by_side is None else [motion, side_by_side]
-    with SkeletonScene(motions, labels=labels, resolution=resolution, style=style) as scene:
+    with SkeletonScene(motions, labels=labels, resolution=resolution, style=style, character=character) as scene:
         return scene.render_frame(frame)
 
 

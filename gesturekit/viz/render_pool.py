@@ -24,10 +24,12 @@ from typing import IO
 
 import numpy as np
 
+from ..character.target import Character
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
 from ..skeleton import JointPresence
-from .render import RenderStyle, SkeletonScene, _check_scene
+from .character_user import character_arrays, character_from_arrays
+from .render import RenderStyle, SkeletonScene, _check_character, _check_scene
 
 __all__ = ["CHUNK_FRAMES", "PARALLEL_MIN_FRAMES", "default_workers", "render_frames"]
 
@@ -57,6 +59,7 @@ def render_frames(
     resolution: tuple[int, int] = (640, 480),
     style: RenderStyle | None = None,
     workers: int | None = None,
+    character: Character | None = None,
 ) -> Generator[np.ndarray, None, None]:
     """Every frame of a scene's clip, in order, rendered on several cores.
 
@@ -82,6 +85,9 @@ def render_frames(
         Rendering processes; 1 renders in this process. By default one per
         core (:func:`default_workers`), or this process alone for clips
         shorter than :data:`PARALLEL_MIN_FRAMES` frames.
+    character : Character, optional
+        A user's character every motion is retargeted onto (see :class:`SkeletonScene`); the rendering
+        processes receive it through the job file and retarget alike.
 
     Returns
     -------
@@ -101,6 +107,7 @@ def render_frames(
     motions = list(motions)
     style = style or RenderStyle()
     _check_scene(motions, labels, resolution)
+    _check_character(character, style)
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ConfigError(f"workers must be a positive whole number, got {workers!r}")
     n_frames = max(m.n_frames for m in motions)
@@ -110,20 +117,29 @@ def render_frames(
     workers = min(int(workers), chunks)
     resolution = (int(resolution[0]), int(resolution[1]))
     if workers == 1:
-        return _serial_frames(motions, labels, resolution, style)
-    return _parallel_frames(motions, labels, resolution, style, workers)
+        return _serial_frames(motions, labels, resolution, style, character)
+    return _parallel_frames(motions, labels, resolution, style, workers, character)
 
 
 def _serial_frames(
-    motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int], style: RenderStyle
+    motions: list[Motion],
+    labels: Sequence[str] | None,
+    resolution: tuple[int, int],
+    style: RenderStyle,
+    character: Character | None,
 ) -> Generator[np.ndarray, None, None]:
-    with SkeletonScene(motions, labels=labels, resolution=resolution, style=style) as scene:
+    with SkeletonScene(motions, labels=labels, resolution=resolution, style=style, character=character) as scene:
         for frame in range(scene.n_frames):
             yield scene.render_frame(frame)
 
 
 def _write_job(
-    path: Path, motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int], style: RenderStyle
+    path: Path,
+    motions: list[Motion],
+    labels: Sequence[str] | None,
+    resolution: tuple[int, int],
+    style: RenderStyle,
+    character: Character | None = None,
 ) -> None:
     spec = {
         "fps": float(motions[0].fps),
@@ -135,6 +151,8 @@ def _write_job(
     }
     arrays = {f"motion{i}": np.asarray(m.positions) for i, m in enumerate(motions)}
     arrays["spec"] = np.array(json.dumps(spec))
+    if character is not None:
+        arrays.update(character_arrays(character))
     np.savez(path, allow_pickle=False, **arrays)
 
 
@@ -143,16 +161,24 @@ def _scene_from_job(path: str) -> SkeletonScene:
     with np.load(path, allow_pickle=False) as data:
         spec = json.loads(str(data["spec"]))
         positions = [data[f"motion{i}"] for i in range(2) if f"motion{i}" in data.files]
+        character = character_from_arrays(data)
     style = RenderStyle.from_json(spec["style"])
     joints = spec.get("joints") or [None] * len(positions)
     motions = [
         Motion(p, spec["fps"], None if j is None else JointPresence(tuple(j))) for p, j in zip(positions, joints)
     ]
-    return SkeletonScene(motions, labels=spec["labels"], resolution=tuple(spec["resolution"]), style=style)
+    return SkeletonScene(
+        motions, labels=spec["labels"], resolution=tuple(spec["resolution"]), style=style, character=character
+    )
 
 
 def _parallel_frames(
-    motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int], style: RenderStyle, workers: int
+    motions: list[Motion],
+    labels: Sequence[str] | None,
+    resolution: tuple[int, int],
+    style: RenderStyle,
+    workers: int,
+    character: Character | None = None,
 ) -> Generator[np.ndarray, None, None]:
     width, height = resolution
     size = width * height * 3
@@ -188,7 +214,7 @@ def _parallel_frames(
     env.setdefault("LP_NUM_THREADS", "1")
     with tempfile.TemporaryDirectory(prefix="gesturekit-render-") as tmp:
         job = Path(tmp) / "job.npz"
-        _write_job(job, motions, labels, resolution, style)
+        _write_job(job, motions, labels, resolution, style, character)
         procs: list[subprocess.Popen[bytes]] = []
         streams: list[IO[bytes]] = []
         queues: list[queue.Queue[bytes | None]] = []
