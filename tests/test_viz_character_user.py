@@ -171,6 +171,21 @@ def test_the_standalone_page_holds_the_character(motion, rigs):
     np.testing.assert_allclose(m["points"], posed.position, atol=1e-4)
 
 
+@pytest.mark.parametrize("case", ["vrm0_a", "bvh_zeggs_a"])
+def test_the_page_frames_and_draws_the_character_as_the_mp4_does(motion, rigs, case):
+    from gesturekit.viz.character_render import CharacterStage
+
+    ch = rigs(case)
+    other = Motion(motion.positions[::-1].copy(), motion.fps, motion.presence)
+    data = decoded(viewer_data([motion, other], character=ch))
+    stage = CharacterStage([motion, other], character=ch)
+    np.testing.assert_allclose(np.asarray(data["box"]), stage.box, atol=1e-9)
+    np.testing.assert_allclose([m["offset"] for m in data["motions"]], stage.offsets, atol=1e-9)
+    for i, m in enumerate(data["motions"]):  # one body: the page's vertices are the MP4's (bar the offset)
+        np.testing.assert_allclose(m["mesh"]["vertices"], stage.users[i].skin.vertices)
+        np.testing.assert_allclose(page_skinned(m)[3] + [m["offset"], 0, 0], stage.vertices(i, 3), atol=1e-4)
+
+
 def test_a_notebook_view_draws_the_character(motion, rigs):
     from gesturekit.viz.notebook import character_view
 

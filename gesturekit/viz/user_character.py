@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..character.bone_body import bone_body
+from ..character.look import NEUTRAL
 from ..character.rig import rotation_to_quaternion
 from ..character.target import Character, CharacterSkin
 from ..errors import ConfigError
@@ -207,15 +208,12 @@ def page_character(retargeted: Retargeted, *, scheme: str, skin: CharacterSkin |
 
 
 def framed_points(retargeted: Retargeted, skin: CharacterSkin | None = None) -> np.ndarray:
-    """What the camera frames of a retargeted character: its pelvis and matched bones over the frames, and a
-    point above its head bone as high as its body reaches above it at rest; shape (frames, n, 3), metres."""
+    """What the camera frames of a retargeted character, as the MP4 frames it
+    (:func:`gesturekit.viz.character_user.framing_points`: each bone that follows the motion with the box of
+    the skin it leads, and the pelvis); shape (frames, n, 3), metres. ``skin``: the body drawn (default the
+    character's own, or its bone body)."""
+    from .character_user import framing_points
+
     ch = retargeted.character
-    bones = np.unique(np.concatenate([[ch.pelvis], ch.bone_of[ch.bone_of >= 0]]))
-    points = retargeted.position[:, bones]
-    head = ch.bone("head")
-    body = skin if skin is not None else _skin(ch, "grey")
-    if head >= 0 and body.n_vertices:
-        above = max(float(body.vertices[:, 1].max()) - float(ch.rest_position[head, 1]), 0.0)
-        top = retargeted.position[:, head] + np.array([0.0, above, 0.0])
-        points = np.concatenate([points, top[:, None]], axis=1)
-    return points
+    body = skin if skin is not None else _skin(ch, NEUTRAL)
+    return framing_points(retargeted, body, retargeted.source.presence)
