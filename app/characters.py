@@ -7,14 +7,16 @@ app is (``server.maxUploadSize``). What was matched, or why the file cannot be
 used, is shown in the sidebar; the character is kept in ``st.session_state``
 under :data:`CHARACTER_KEY` until "Default character" is pressed. The
 Synthesize page's viewer and the Retrieval inspector's side-by-side viewers
-then draw it (:func:`display.show_skeletons`) and the Synthesize page offers
-it, posed by the result, as a GLB (a glTF or VRM character) and a BVH.
+then draw it (:func:`display.show_skeletons`); the Synthesize page renders
+its MP4 on it (:func:`render_mp4`) and offers it, posed by the result, as a GLB
+(a glTF or VRM character) and a BVH.
 """
 
 from __future__ import annotations
 
 import secrets
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,9 +29,17 @@ from gesturekit.skeleton import FINGERS, JOINT_NAMES
 
 if TYPE_CHECKING:
     from gesturekit.character.target import Character
-    from gesturekit.motion import Motion
+    from gesturekit.synthesize import SynthesisResult
 
-__all__ = ["CHARACTER_KEY", "CHARACTER_TYPES", "current_character", "sidebar_character", "character_downloads"]
+__all__ = [
+    "CHARACTER_KEY",
+    "CHARACTER_TYPES",
+    "character_downloads",
+    "character_token",
+    "current_character",
+    "render_mp4",
+    "sidebar_character",
+]
 
 #: Session-state key of the user's character: ``{"character", "name", "token"}``.
 CHARACTER_KEY = "gk.character"
@@ -44,6 +54,27 @@ def current_character() -> Character | None:
     """The user's character, or None for the default body."""
     kept = st.session_state.get(CHARACTER_KEY)
     return None if kept is None else kept["character"]
+
+
+def character_token() -> tuple | None:
+    """What tells the user's character apart from the one before (its upload's and bone map's ids), or None."""
+    kept = st.session_state.get(CHARACTER_KEY)
+    return None if kept is None else kept["token"]
+
+
+def render_mp4(result: SynthesisResult, *, progress: Callable[[int, int], None] | None = None) -> bytes:
+    """:func:`gesturekit.interactive.render_mp4` of the result, drawn on the user's character when there is one."""
+    from gesturekit import interactive as gs
+    from gesturekit.export.result import save_result_video
+
+    ch = current_character()
+    if ch is None:
+        return gs.render_mp4(result, progress=progress)
+    with tempfile.TemporaryDirectory(prefix="gesturekit-video-") as tmp:
+        path = Path(tmp) / "result.mp4"
+        side = result.refined_motion is not None
+        save_result_video(result, path, progress=progress, side_by_side=side, character=ch)
+        return path.read_bytes()
 
 
 def _matched_lines(ch: Character) -> list[str]:
@@ -128,12 +159,12 @@ def _file_name(record: dict, ch: Character, kind: str) -> str:
     return Path(gs.export_filename(record["result"], "bvh")).stem + "_character" + suffix
 
 
-def _character_file(record: dict, motion: Motion, kind: str) -> dict:
-    """The result on the user's character as a GLB or BVH, made once per result and character: ``data`` (the
-    file's bytes, or None), ``summary`` (its report's, or why there is none), ``warned`` (the warnings of
-    writing it) and ``speech`` (a GLB's WAV beside it, which it names, or None)."""
+def _character_file(record: dict, kind: str) -> dict:
+    """The result's final motion on the user's character as a GLB or BVH, made once per result and character:
+    ``data`` (the file's bytes, or None), ``summary`` (its report's, or why there is none), ``warned`` (the
+    warnings of writing it) and ``speech`` (a GLB's WAV beside it, which it names, or None)."""
     from gesturekit.character.retarget import retarget
-    from gesturekit.export.character import export_character_bvh, export_character_glb
+    from gesturekit.export.result import export_result_character_bvh, export_result_character_glb
 
     ss = st.session_state
     kept = ss[CHARACTER_KEY]
@@ -145,14 +176,14 @@ def _character_file(record: dict, motion: Motion, kind: str) -> dict:
         out: dict = {"data": None, "summary": "", "warned": [], "speech": None}
         try:
             with collect_warnings() as warned, tempfile.TemporaryDirectory(prefix="gesturekit-character-") as tmp:
-                posed = retarget(motion, ch)
+                posed = retarget(result.motion, ch)
                 path = Path(tmp) / _file_name(record, ch, kind)
-                if kind == "glb":
-                    glb = export_character_glb(path, posed, audio=result.audio)
+                if kind == "glb":  # its speech beside it, as the WAV it names
+                    glb = export_result_character_glb(result, posed, path)
                     out["speech"] = None if glb.audio is None else glb.audio.read_bytes()
                     out["summary"] = glb.summary()
                 else:
-                    out["summary"] = export_character_bvh(path, posed).summary()
+                    out["summary"] = export_result_character_bvh(result, posed, path).summary()
                 out["data"] = path.read_bytes()
             out["warned"] = list(warned)
         except GestureKitError as exc:
@@ -163,7 +194,7 @@ def _character_file(record: dict, motion: Motion, kind: str) -> dict:
     return made[key]
 
 
-def character_downloads(record: dict, motion: Motion, *, prefix: str) -> None:
+def character_downloads(record: dict, *, prefix: str) -> None:
     """The result on the user's character: "Character GLB" (a glTF or VRM character, with the WAV it names)
     and "Character BVH" downloads, with their reports; nothing without a character."""
     kept = st.session_state.get(CHARACTER_KEY)
@@ -174,7 +205,7 @@ def character_downloads(record: dict, motion: Motion, *, prefix: str) -> None:
     st.markdown(f"**On your character** ({escape_markdown(kept['name'])})")
     cols = st.columns(3)
     for col, kind in zip(cols, kinds):
-        made = _character_file(record, motion, kind)
+        made = _character_file(record, kind)
         label = "Character GLB" if kind == "glb" else "Character BVH"
         if made["data"] is None:
             col.error(f"No {label}: {escape_markdown(made['summary'])}", icon=":material/error:")

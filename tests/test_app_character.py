@@ -83,6 +83,14 @@ def test_a_character_is_matched_drawn_and_written_until_the_default_is_chosen(ap
     bvh = next(v for k, v in made.items() if k[2] == "bvh")
     assert bvh["data"].startswith(b"HIERARCHY") and f"MOTION\nFrames: {res.n_frames}" in bvh["data"].decode()
 
+    # the MP4 is rendered on it, and again on another character
+    at.button(key="synth.render").click().run()
+    assert not at.exception and not errors(at), (at.exception, errors(at))
+    made_video = at.session_state["_synth.video"]
+    assert made_video["character"] == at.session_state["gk.character"]["token"]
+    assert made_video["bytes"][4:8] == b"ftyp"
+    assert any(d.proto.label == "Video (MP4)" for d in at.get("download_button"))
+
     # the inspector's side-by-side views draw it too, every candidate
     at.number_input(key="_w.synth.record").set_value(3).run()
     at.button(key="synth.go").click().run()
@@ -98,6 +106,7 @@ def test_a_character_is_matched_drawn_and_written_until_the_default_is_chosen(ap
     assert not at.exception and "gk.character" not in at.session_state
     m = viewer(at, "synth.skeleton")["motions"][0]
     assert m["rig"]["names"] == list(JOINT_NAMES)
+    assert "_synth.video" not in at.session_state  # the video of their character is not offered for ours
     assert "Character GLB" not in {d.proto.label for d in at.get("download_button")}
 
 
