@@ -18,7 +18,7 @@ from .test_app_synthesize import speech_file
 
 HOME = Path(__file__).resolve().parents[1] / "app" / "Home.py"
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
-TIMEOUT = 120
+TIMEOUT = 240  # a busy machine: a run here synthesizes, renders an MP4 and writes two files
 FILE, MAP = "_gk.character_file.0", "_gk.character_map.0"
 
 
