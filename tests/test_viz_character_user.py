@@ -16,7 +16,7 @@ from gesturekit.character.retarget import retarget
 from gesturekit.demo import open_default_database
 from gesturekit.errors import ConfigError
 from gesturekit.motion import Motion
-from gesturekit.viz.user_character import MAX_COLORS, PALETTE_ERROR, ROOT_NAME, palette
+from gesturekit.viz.character_page import MAX_COLORS, PALETTE_ERROR, ROOT_NAME, palette
 from gesturekit.viz.viewer import _decoded, _quaternion_matrices, read_viewer_data, skeleton_viewer, viewer_data
 
 from .character_rigs import CASES, write_rig

@@ -56,7 +56,7 @@ from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS
 from ._plotly import _frames_at, _motions_and_labels, _time_grid
-from .user_character import framed_points, page_character
+from .character_page import framed_points, page_character
 from .web.build import SHELL, bundle
 
 if TYPE_CHECKING:
@@ -278,7 +278,7 @@ def viewer_data(
         retargeted onto it (:func:`gesturekit.character.retarget.retarget`) and drawn as that
         character, its mesh and colours (a character without a mesh as
         :func:`gesturekit.character.bone_body.bone_body` in the motion's scheme), framed on its
-        pelvis, matched bones and head (see :mod:`gesturekit.viz.user_character`).
+        pelvis, matched bones and head (see :mod:`gesturekit.viz.character_page`).
 
     Returns
     -------
@@ -301,7 +301,7 @@ def viewer_data(
         :data:`QUATERNION_SCALE` as int16) and ``root`` (the root's position per shown frame,
         shape (shown frames, 3), metres). Arrays are typed-array specs (``dtype``, ``bdata``,
         ``shape``). With ``character``, ``rig`` holds its bones instead of our 55 joints
-        (:func:`gesturekit.viz.user_character.page_character`), ``colors`` its palette and ``derived`` is empty;
+        (:func:`gesturekit.viz.character_page.page_character`), ``colors`` its palette and ``derived`` is empty;
         a motion whose mesh is the first motion's has ``mesh`` ``{"shared": 0}`` (the page, and
         :func:`read_viewer_data`, take the first's).
 

@@ -1,4 +1,4 @@
-"""A user's character in the page viewer: their skeleton, their mesh and colours, posed by our motion.
+"""A user's character on the page viewer: their skeleton, their mesh and colours, posed by our motion.
 
 The page's script (``web/src/character.js``) draws a skeleton whose rest pose
 has no rotation: each bone sits at its rest position, offset from its parent,
