@@ -18,6 +18,9 @@ import threading
 import numpy as np
 import pytest
 
+from gesturekit.motion import AUDIO_SR, Motion, Take
+from gesturekit.skeleton import N_JOINTS
+
 # CPython 3.11 builds an AST with state shared between threads (python/cpython#106905): an app test's
 # script thread parsing (Streamlit's magic) while another thread parses (an import's assertion
 # rewriting) can fail with "SystemError: AST constructor recursion depth mismatch". One parse at a time.
@@ -32,8 +35,6 @@ def _parse_one_at_a_time(*args, **kwargs):
 
 ast.parse = _parse_one_at_a_time
 
-from gesturekit.motion import AUDIO_SR, Motion, Take
-from gesturekit.skeleton import N_JOINTS
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 ZEGGS_BVH = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
