@@ -28,6 +28,9 @@ __all__ = [
     "FIELD_OF_VIEW",
     "VIEW_DIRECTION",
     "scheme_for",
+    "srgb_to_linear",
+    "linear_to_srgb",
+    "shade",
     "part_colors",
     "camera_for",
     "BODY_MARGIN",
@@ -158,3 +161,38 @@ def stage_layout(points: Sequence[np.ndarray], *, spacing: float | None = None) 
     lo, hi = every.min(axis=0) - FRAME_MARGIN, every.max(axis=0) + FRAME_MARGIN
     pad = 0.03 * (hi - lo)
     return offsets, np.stack([lo - pad, hi + pad])
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """sRGB values in [0, 1] to linear light, same shape (the sRGB transfer function's inverse)."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c: np.ndarray) -> np.ndarray:
+    """Linear light in [0, 1] (clipped) to sRGB values in [0, 1], same shape."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def shade(normals: np.ndarray, albedo: np.ndarray) -> np.ndarray:
+    """The shared Lambert shading of each vertex, in 8-bit sRGB.
+
+    Parameters
+    ----------
+    normals : np.ndarray, shape (V, 3)
+        Unit vertex normals in the world (zero for a vertex without area around it).
+    albedo : np.ndarray, shape (V, 3)
+        Each vertex's colour in linear light, in [0, 1].
+
+    Returns
+    -------
+    np.ndarray, shape (V, 3), uint8
+        ``albedo * (AMBIENT + KEY * max(0, n . l))`` with ``l`` the unit
+        :data:`LIGHT_DIRECTION`, clipped to 1 and
+        converted to sRGB, rounded to the nearest of 0..255.
+    """
+    light = np.asarray(LIGHT_DIRECTION, dtype=np.float64)
+    light = light / np.linalg.norm(light)
+    lit = AMBIENT + KEY * np.maximum(0.0, np.asarray(normals, dtype=np.float64) @ light)
+    return np.rint(255 * linear_to_srgb(np.asarray(albedo) * lit[:, None])).astype(np.uint8)

@@ -22,13 +22,13 @@ import pyvista as pv
 from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
 
 from ..character.look import (
-    AMBIENT,
     FIELD_OF_VIEW,
-    KEY,
-    LIGHT_DIRECTION,
     camera_for,
+    linear_to_srgb,
     part_colors,
     scheme_for,
+    shade,
+    srgb_to_linear,
     stage_layout,
 )
 from ..character.mesh import PARTS, CharacterMesh, build_mesh
@@ -41,41 +41,6 @@ from ..motion import Motion
 from .character_user import UserBody
 
 __all__ = ["srgb_to_linear", "linear_to_srgb", "shade", "visible_faces", "CharacterStage", "CharacterDrawing"]
-
-
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    """sRGB values in [0, 1] to linear light, same shape (the sRGB transfer function's inverse)."""
-    c = np.asarray(c, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(c: np.ndarray) -> np.ndarray:
-    """Linear light in [0, 1] (clipped) to sRGB values in [0, 1], same shape."""
-    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
-
-
-def shade(normals: np.ndarray, albedo: np.ndarray) -> np.ndarray:
-    """The shared Lambert shading of each vertex, in 8-bit sRGB.
-
-    Parameters
-    ----------
-    normals : np.ndarray, shape (V, 3)
-        Unit vertex normals in the world (zero for a vertex without area around it).
-    albedo : np.ndarray, shape (V, 3)
-        Each vertex's colour in linear light, in [0, 1].
-
-    Returns
-    -------
-    np.ndarray, shape (V, 3), uint8
-        ``albedo * (AMBIENT + KEY * max(0, n . l))`` with ``l`` the unit
-        :data:`~gesturekit.character.look.LIGHT_DIRECTION`, clipped to 1 and
-        converted to sRGB, rounded to the nearest of 0..255.
-    """
-    light = np.asarray(LIGHT_DIRECTION, dtype=np.float64)
-    light = light / np.linalg.norm(light)
-    lit = AMBIENT + KEY * np.maximum(0.0, np.asarray(normals, dtype=np.float64) @ light)
-    return np.rint(255 * linear_to_srgb(np.asarray(albedo) * lit[:, None])).astype(np.uint8)
 
 
 def visible_faces(mesh: CharacterMesh, rig: Rig) -> np.ndarray:

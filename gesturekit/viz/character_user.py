@@ -86,7 +86,7 @@ class UserBody:
         has_body = character.skin is not None and len(character.skin.faces) > 0
         self.skin: CharacterSkin = character.skin if has_body else bone_body(character, scheme=scheme)  # type: ignore[assignment]
         self._matrices = self.retargeted.skinning()
-        from .character_render import srgb_to_linear
+        from ..character.look import srgb_to_linear
 
         self._albedo = srgb_to_linear(self.skin.colors)
         self._posed: tuple[int, np.ndarray, np.ndarray] | None = None
@@ -114,7 +114,7 @@ class UserBody:
 
     def colors(self, frame: int) -> np.ndarray:
         """The skin's own colours at ``frame``, shaded by its skinned normals, shape (V, 3), uint8 sRGB."""
-        from .character_render import shade
+        from ..character.look import shade
 
         return shade(self._pose(frame)[1], self._albedo)
 
