@@ -343,7 +343,7 @@ def test_check_media_look_like_the_stimuli(study):
     reference = probe_media(some_stimulus)
     ref_meta = _metadata(_ffmpeg_header(some_stimulus))
     assert len(study.checks) == 4
-    for (speech, kind), media in study.checks.items():
+    for (speech, _kind), media in study.checks.items():
         assert re.fullmatch(r"[0-9a-f]{10}\.mp4", media.path.name)  # named like a stimulus
         assert len(media.id) == len(manifest["id"][0])
         info = probe_media(media.path)
