@@ -235,6 +235,10 @@ def test_init_command(tiny_study, tmp_path, capsys):  # noqa: F811
     assert main(args) == 2  # exists
     assert "--force" in capsys.readouterr().err
     assert main(["study", "init", str(folder), "--no-rating", "--force"]) == 2
+    # replaced by a design without checks: the earlier check media go
+    assert main(["study", "init", str(folder), "--attention", "0", "--no-audio-check", "--force"]) == 0
+    assert not list((folder / "checks").iterdir())
+    assert participant_pages(load_design(folder), 1)[1].kind == "rating"
 
 
 def test_password_hash():

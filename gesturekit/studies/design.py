@@ -636,6 +636,11 @@ def init_study(
     audio = {"enabled": False}
     if audio_check:
         audio = {"enabled": True, **make_audio_check(folder, seed=seed)}
+    # check media of an earlier design that this one does not use (another seed, kinds, or none)
+    keep = {c["file"] for c in checks} | ({audio["file"]} if audio_check else set())
+    for f in sorted((folder / "checks").glob("*")) if (folder / "checks").is_dir() else ():
+        if re.fullmatch(r"[0-9a-f]{8,64}\.(mp4|wav)", f.name) and f"checks/{f.name}" not in keep:
+            f.unlink()
     animations = max(len(ids) for turns in order.values() for _, ids in turns)
     design = {
         "format": FORMAT,
