@@ -22,7 +22,7 @@ import os
 import subprocess
 import tempfile
 import wave
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -87,17 +87,19 @@ def draw_overlay(frame: np.ndarray, text: str) -> np.ndarray:
     return out
 
 
-def _frames(path: Path) -> Iterator[np.ndarray]:
+def _frames(path: Path) -> Generator[np.ndarray, None, None]:
     """The video's frames (H, W, 3) uint8, from the start again when they run out."""
     imageio_ffmpeg = require("imageio_ffmpeg", purpose="making check videos")
     while True:
         reader = imageio_ffmpeg.read_frames(f"file:{path}")
-        meta = next(reader)
-        w, h = meta["size"]
-        got = False
-        for raw in reader:
-            got = True
-            yield np.frombuffer(raw, np.uint8).reshape(h, w, 3)
+        try:
+            w, h = next(reader)["size"]
+            got = False
+            for raw in reader:
+                got = True
+                yield np.frombuffer(raw, np.uint8).reshape(h, w, 3)
+        finally:
+            reader.close()  # ends its ffmpeg when we stop early
         if not got:
             raise GestureKitError("has no video frames", path=path)
 
@@ -120,8 +122,8 @@ def _write_check(
         with open(Path(tmp) / "ffmpeg.log", "wb") as log:
             proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
             assert proc.stdin is not None
+            frames = _frames(source)
             try:
-                frames = _frames(source)
                 for _ in range(v["frames"]):
                     frame = next(frames)
                     if frame.shape[:2] != (v["height"], v["width"]):
@@ -129,6 +131,7 @@ def _write_check(
                     proc.stdin.write((frame if text is None else draw_overlay(frame, text)).tobytes())
                     tick()
             finally:
+                frames.close()
                 proc.stdin.close()
                 code = proc.wait()
         if code != 0:
