@@ -343,7 +343,7 @@ class StudyServer:
             "researcher.html",
             request,
             people=people.to_dict("records"),
-            status=status,
+            counts=status,
             stimulus=sorted(stimulus.items()),
             per_page=sorted(per_page.items()),
         )
