@@ -9,6 +9,7 @@ import hmac
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -87,11 +88,27 @@ def make_folder(folder: Path, rows: int = 4, max_failures: int = 0, video_bytes:
     return folder
 
 
-def load_design(folder: Path) -> dict:
-    return json.loads((Path(folder) / "design.json").read_text())
+def load_design(folder: Path) -> SimpleNamespace:
+    """The design with the attributes of gesturekit.studies.design.StudyDesign that the server reads."""
+    raw = json.loads((Path(folder) / "design.json").read_text())
+    return SimpleNamespace(
+        raw=raw,
+        title=raw["title"],
+        instructions=raw["instructions"],
+        scale=raw["rating"]["scale"],
+        prompts=tuple((p["id"], p["text"]) for p in raw["rating"]["prompts"]),
+        pairwise_prompt=raw["pairwise"]["prompt"],
+        max_failures=raw["attention"]["max_failures"],
+        questionnaire=tuple(raw["questionnaire"]),
+        participants=len(raw["participants"]),
+        completion_code=raw["completion"]["code"],
+        redirect=raw["completion"]["redirect"],
+        password_hash=raw["researcher"]["password_sha256"],
+    )
 
 
-def media_index(design: dict) -> dict:
+def media_index(design: SimpleNamespace) -> dict:
+    design = design.raw
     folder = Path(design["_folder"])
     out = {m["id"]: Media(m["id"], folder / "videos" / f"{m['id']}.mp4", "stimulus") for m in design["_manifest"]}
     out[design["_check"]] = Media(design["_check"], folder / "checks" / f"{design['_check']}.mp4", "check")
@@ -99,8 +116,9 @@ def media_index(design: dict) -> dict:
     return out
 
 
-def participant_pages(design: dict, row: int) -> list:
+def participant_pages(design: SimpleNamespace, row: int) -> list:
     media = media_index(design)
+    design = design.raw
     by_speech = {s: [media[m["id"]] for m in design["_manifest"] if m["speech"] == s] for s in SPEECHES}
     order = SPEECHES if row % 2 else SPEECHES[::-1]
     kinds: list = [("instructions", (), None, None)]

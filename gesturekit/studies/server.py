@@ -34,7 +34,7 @@ import math
 import os
 import re
 from collections import Counter
-from collections.abc import AsyncIterator, Iterator, Mapping
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -54,23 +54,6 @@ _PARAM = re.compile(r"^[A-Za-z0-9_.-]{1,128}$")
 _MEDIA_TYPES = {".mp4": "video/mp4", ".wav": "audio/wav", ".webm": "video/webm", ".m4a": "audio/mp4"}
 _CHUNK = 256 * 1024
 TEMPLATES = Path(__file__).parent / "templates"
-
-
-def _get(obj: Any, key: str, default: Any = None) -> Any:
-    """``obj[key]`` or ``obj.key``: the design's parts may be mappings or dataclasses."""
-    if obj is None:
-        return default
-    if isinstance(obj, Mapping):
-        return obj.get(key, default)
-    return getattr(obj, key, default)
-
-
-def _row_count(design: Any) -> int:
-    rows = _get(design, "participants")
-    if isinstance(rows, int):
-        return rows
-    values = {int(_get(r, "participant")) for r in rows}
-    return max(values) if values else 0
 
 
 class _Refused(Exception):
@@ -114,9 +97,8 @@ def validate_submission(page: Any, body: Any, design: Any) -> tuple[dict, list, 
     if page.kind in ("rating", "pairwise", "audio_check") and set(media_ids) - ended:
         raise _Refused(422, "every video of the page must be played to its end first")
     if page.kind == "rating":
-        rating = _get(design, "rating", {})
-        prompts = [_get(p, "id") for p in _get(rating, "prompts", [])]
-        lo, hi = (0, 100) if _get(rating, "scale") == "slider100" else (1, 7)
+        prompts = [pid for pid, _ in design.prompts]
+        lo, hi = (0, 100) if design.scale == "slider100" else (1, 7)
         if set(answers) != set(media_ids):
             raise _Refused(422, "a rating page is answered for each of its videos")
         for value in answers.values():
@@ -131,17 +113,20 @@ def validate_submission(page: Any, body: Any, design: Any) -> tuple[dict, list, 
         if set(answers) != {"count"} or not _integer(answers["count"], 0, 100):
             raise _Refused(422, "the audio check is answered by a count")
     elif page.kind == "questionnaire":
-        questions = {_get(q, "id"): q for q in _get(design, "questionnaire", [])}
+        questions = {q["id"]: q for q in design.questionnaire}
         if set(answers) - set(questions):
             raise _Refused(422, "an answer to no question of the questionnaire")
         for qid, q in questions.items():
             value = answers.get(qid)
             if value is None or value == "":
-                if not _get(q, "optional", False):
+                if not q.get("optional", False):
                     raise _Refused(422, f"the question {qid!r} needs an answer")
-            elif _get(q, "type") == "number":
-                if not _number(value) or not _get(q, "min", -math.inf) <= value <= _get(q, "max", math.inf):
+            elif q["type"] == "number":
+                if not _number(value) or not q.get("min", -math.inf) <= value <= q.get("max", math.inf):
                     raise _Refused(422, f"the answer to {qid!r} is a number in its range")
+            elif q["type"] == "choice":
+                if value not in q["options"]:
+                    raise _Refused(422, f"the answer to {qid!r} is one of its options")
             elif not isinstance(value, str) or len(value) > 4000:
                 raise _Refused(422, f"the answer to {qid!r} is a text of at most 4000 characters")
     elif answers:
@@ -159,7 +144,7 @@ class StudyServer:
         self.api = api
         self.design = api.load_design(self.folder)
         self.store = store
-        self.rows = _row_count(self.design)
+        self.rows = int(self.design.participants)
         self.media = api.media_index(self.design)
         self._pages: dict[int, list] = {}
         import jinja2
@@ -178,7 +163,7 @@ class StudyServer:
 
     def render(self, name: str, request: Request, status: int = 200, **context: Any) -> HTMLResponse:
         base = request.scope.get("root_path", "").rstrip("/")
-        text = self.env.get_template(name).render(base=base, title=_get(self.design, "title", "Study"), **context)
+        text = self.env.get_template(name).render(base=base, title=self.design.title, **context)
         return HTMLResponse(text, status_code=status, headers=_NO_STORE)
 
     # ------------------------------------------------------------ participants
@@ -223,18 +208,14 @@ class StudyServer:
         pages = self.to_answer(person.row)
         if person.answered >= len(pages):
             await run_in_threadpool(self.store.finish, token)
-            completion = _get(self.design, "completion", {})
-            return self.render(
-                "done.html", request, code=_get(completion, "code"), redirect=_get(completion, "redirect")
-            )
+            return self.render("done.html", request, code=self.design.completion_code, redirect=self.design.redirect)
         page = pages[person.answered]
-        rating = _get(self.design, "rating", {})
         config = {
             "submit": f"{request.scope.get('root_path', '').rstrip('/')}/p/{token}/pages/{page.id}",
             "kind": page.kind,
             "media": [m.id for m in page.media],
-            "scale": _get(rating, "scale", "likert7"),
-            "prompts": [_get(p, "id") for p in _get(rating, "prompts", [])],
+            "scale": self.design.scale,
+            "prompts": [pid for pid, _ in self.design.prompts],
         }
         return self.render(
             "page.html",
@@ -243,12 +224,8 @@ class StudyServer:
             token=token,
             number=person.answered + 1,
             total=len(pages),
-            rating=rating,
-            pairwise=_get(self.design, "pairwise", {}),
-            questionnaire=_get(self.design, "questionnaire", []),
-            instructions=_get(self.design, "instructions", ""),
+            design=self.design,
             config=config,
-            get=_get,
         )
 
     async def submit(self, request: Request) -> Response:
@@ -275,7 +252,7 @@ class StudyServer:
             raise _Refused(404, "no such page")
         answers, events, elapsed = validate_submission(page, body, self.design)
         failed = self.api.check_answer(page, answers) is False
-        max_failures = int(_get(_get(self.design, "attention", {}), "max_failures", 1))
+        max_failures = int(self.design.max_failures)
         result = await run_in_threadpool(
             lambda: self.store.submit(
                 token,
@@ -312,7 +289,7 @@ class StudyServer:
     # ------------------------------------------------------------ researcher
 
     def _researcher(self, request: Request) -> None:
-        stored = _get(_get(self.design, "researcher", {}), "password_sha256")
+        stored = self.design.password_hash
         if not stored:
             raise _Refused(403, "the study has no researcher password: set one with gesturekit study init --password")
         header = request.headers.get("authorization", "")
