@@ -118,6 +118,7 @@ class Store:
     # ------------------------------------------------------------ connections
 
     def _connect(self) -> Any:
+        conn: Any
         if self._postgres:
             import psycopg
 
