@@ -6,8 +6,9 @@ participant (the page sequence of the tests' stand-in design; the videos are ran
 ``--video-kb`` each, so no rendering is timed). ``--participants`` simulated participants
 (httpx AsyncClient, one event loop) go through the study at once: entry URL, each page, every
 video of a page fetched whole (a range request from byte 0), each page's answers POSTed.
-Printed: page and submit latency p50/p95 (target p95 < 300 ms), the video bytes per second
-served, and the responses lost (acknowledged but not in the store: target 0).
+Printed: entry (all participants arrive in the same instant), page and submit latency p50/p95
+(target p95 < 300 ms), the video bytes per second served, and the responses lost (acknowledged
+but not in the store: target 0).
 
 Then a second run on a fresh store is killed with SIGKILL once half of its submissions were
 acknowledged; the server is restarted and every acknowledged response must be in the store.
@@ -103,7 +104,9 @@ def run_backend(name: str, url_for, args: argparse.Namespace, work: Path) -> Non
     finally:
         kill9(proc)
     missing, stored = lost(folder, url, acked)
-    print(f"{name}: {args.participants} participants at once, {len(timings['page'])} pages, {len(acked)} submissions")
+    pages = len(timings["page"]) + len(timings["entry"])
+    print(f"{name}: {args.participants} participants at once, {pages} pages, {len(acked)} submissions")
+    print(f"  entry  {ms(timings['entry'])}  (a new participant: its row handed out, its first page)")
     print(f"  page   {ms(timings['page'])}")
     print(f"  submit {ms(timings['submit'])}")
     print(f"  video  {timings['bytes'] / wall / 2**20:.1f} MiB/s ({timings['bytes'] / 2**20:.0f} MiB in {wall:.1f} s)")

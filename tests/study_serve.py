@@ -91,7 +91,7 @@ async def run_participant(
     timings = timings if timings is not None else {"page": [], "submit": [], "bytes": 0}
     t0 = time.perf_counter()
     r = await client.get(f"{base}/?PROLIFIC_PID={pid}&STUDY_ID=s1&SESSION_ID=x{pid}", follow_redirects=True)
-    timings["page"].append(time.perf_counter() - t0)
+    timings.setdefault("entry", []).append(time.perf_counter() - t0)
     while True:
         if stop is not None and stop.is_set():
             return ""

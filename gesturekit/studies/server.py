@@ -52,7 +52,7 @@ COOKIE = "gk_study"
 EVENT_KINDS = ("play", "pause", "seeked", "ended")
 _PARAM = re.compile(r"^[A-Za-z0-9_.-]{1,128}$")
 _MEDIA_TYPES = {".mp4": "video/mp4", ".wav": "audio/wav", ".webm": "video/webm", ".m4a": "audio/mp4"}
-_CHUNK = 256 * 1024
+_CHUNK = 1024 * 1024
 TEMPLATES = Path(__file__).parent / "templates"
 
 
