@@ -144,7 +144,8 @@ def main() -> int:
     p.add_argument("--video-kb", type=int, default=500, help="size of each video (default 500 KB)")
     p.add_argument("--backend", default="sqlite,postgresql")
     args = p.parse_args()
-    print(f"machine: {machine()}; Python {platform.python_version()}")
+    load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    print(f"machine: {machine()}; load average {load} (1, 5, 15 min) at the start; Python {platform.python_version()}")
     with tempfile.TemporaryDirectory(prefix="gk-bench-study-") as tmp:
         work = Path(tmp)
         for name in args.backend.split(","):

@@ -39,8 +39,9 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+import anyio
+import anyio.to_thread
 from starlette.applications import Starlette
-from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 from starlette.responses import HTMLResponse, JSONResponse, RedirectResponse, Response, StreamingResponse
 from starlette.routing import Route
@@ -48,6 +49,7 @@ from starlette.routing import Route
 from .store import Store, open_store
 
 MAX_BODY = 64 * 1024
+DB_THREADS = 8
 COOKIE = "gk_study"
 EVENT_KINDS = ("play", "pause", "seeked", "ended")
 _PARAM = re.compile(r"^[A-Za-z0-9_.-]{1,128}$")
@@ -147,11 +149,17 @@ class StudyServer:
         self.rows = int(self.design.participants)
         self.media = api.media_index(self.design)
         self._pages: dict[int, list] = {}
+        self._limiter = anyio.CapacityLimiter(DB_THREADS)
         import jinja2
 
         self.env = jinja2.Environment(
             loader=jinja2.FileSystemLoader(str(TEMPLATES)), autoescape=True, trim_blocks=True, lstrip_blocks=True
         )
+
+    async def _db(self, call: Any, *args: Any) -> Any:
+        """Run a store call in one of a few worker threads: each keeps its database connection, and a few
+        connections serve many participants better than one per request on a small machine."""
+        return await anyio.to_thread.run_sync(call, *args, limiter=self._limiter)
 
     def pages(self, row: int) -> list:
         if row not in self._pages:
@@ -177,7 +185,7 @@ class StudyServer:
     async def entry(self, request: Request) -> Response:
         base = request.scope.get("root_path", "").rstrip("/")
         cookie = request.cookies.get(COOKIE)
-        if cookie and await run_in_threadpool(self.store.participant, cookie) is not None:
+        if cookie and await self._db(self.store.participant, cookie) is not None:
             return RedirectResponse(f"{base}/p/{cookie}/", status_code=303)
         params = {}
         for key, name in (("PROLIFIC_PID", "prolific_pid"), ("STUDY_ID", "study_id"), ("SESSION_ID", "session_id")):
@@ -185,7 +193,7 @@ class StudyServer:
             if value is not None and not _PARAM.match(value):
                 return self.render("message.html", request, 400, heading="Invalid link", text="Please check the link.")
             params[name] = value
-        person, _ = await run_in_threadpool(lambda: self.store.start(self.rows, **params))
+        person, _ = await self._db(lambda: self.store.start(self.rows, **params))
         response = RedirectResponse(f"{base}/p/{person.token}/", status_code=303)
         response.set_cookie(
             COOKIE,
@@ -200,14 +208,14 @@ class StudyServer:
 
     async def page(self, request: Request) -> Response:
         token = self._token(request)
-        person = await run_in_threadpool(self.store.participant, token)
+        person = await self._db(self.store.participant, token)
         if person is None:
             raise _Refused(404, "no such participant")
         if person.status == "failed_checks":
             return self.render("ended.html", request)
         pages = self.to_answer(person.row)
         if person.answered >= len(pages):
-            await run_in_threadpool(self.store.finish, token)
+            await self._db(self.store.finish, token)
             return self.render("done.html", request, code=self.design.completion_code, redirect=self.design.redirect)
         page = pages[person.answered]
         config = {
@@ -243,7 +251,7 @@ class StudyServer:
             body = json.loads(b"".join(chunks))
         except (ValueError, UnicodeDecodeError) as exc:
             raise _Refused(400, "the body is not JSON") from exc
-        person = await run_in_threadpool(self.store.participant, token)
+        person = await self._db(self.store.participant, token)
         if person is None:
             raise _Refused(404, "no such participant")
         pages = self.to_answer(person.row)
@@ -253,7 +261,7 @@ class StudyServer:
         answers, events, elapsed = validate_submission(page, body, self.design)
         failed = self.api.check_answer(page, answers) is False
         max_failures = int(self.design.max_failures)
-        result = await run_in_threadpool(
+        result = await self._db(
             lambda: self.store.submit(
                 token,
                 page.id,
@@ -282,7 +290,7 @@ class StudyServer:
     async def media_file(self, request: Request) -> Response:
         token = self._token(request)
         media = self.media.get(request.path_params["media_id"])
-        if media is None or await run_in_threadpool(self.store.participant, token) is None:
+        if media is None or await self._db(self.store.participant, token) is None:
             raise _Refused(404, "no such media")
         return ranged_file(Path(media.path), request.headers.get("range"))
 
@@ -304,8 +312,8 @@ class StudyServer:
 
     async def researcher(self, request: Request) -> Response:
         self._researcher(request)
-        people = await run_in_threadpool(self.store.participants_frame)
-        responses = await run_in_threadpool(self.store.responses_frame)
+        people = await self._db(self.store.participants_frame)
+        responses = await self._db(self.store.responses_frame)
         status = Counter(people["status"]) if len(people) else Counter()
         stimulus: Counter = Counter()
         per_page: Counter = Counter()
@@ -327,7 +335,7 @@ class StudyServer:
 
     async def researcher_csv(self, request: Request) -> Response:
         self._researcher(request)
-        frame = await run_in_threadpool(self.store.responses_frame)
+        frame = await self._db(self.store.responses_frame)
         frame = frame.assign(answers=frame["answers"].map(json.dumps), events=frame["events"].map(json.dumps))
         out = io.StringIO()
         frame.to_csv(out, index=False)
