@@ -29,15 +29,17 @@ from gesturekit.studies import (
     participant_pages,
     verify_password,
 )
-from gesturekit.studies.media import OVERLAY_TEXT, beep_samples, overlay_box
+from gesturekit.studies.media import OVERLAY_TEXT, beep_samples, draw_overlay, overlay_box
 from tests.study_helpers import STUDY_SYSTEMS, tiny_study  # noqa: F401
+
+SECRET = "5ec7e7" * 8
 
 
 @pytest.fixture(scope="module")
 def study(tiny_study, tmp_path_factory):  # noqa: F811
     folder = tmp_path_factory.mktemp("design") / "study"
     shutil.copytree(tiny_study, folder)
-    design = init_study(folder, pairwise=True)
+    design = init_study(folder, pairwise=True, secret=SECRET)
     return design
 
 
@@ -58,6 +60,9 @@ MUTATIONS = [
     ("seed", -1, "seed"),
     ("seed", 1.5, "seed"),
     ("seed", "0", "seed"),
+    ("secret", "0", "secret"),
+    ("secret", "XYZ" * 20, "secret"),
+    ("secret", None, "secret"),
     ("title", "", "title"),
     ("title", "x" * 300, "title"),
     ("title", 5, "title"),
@@ -200,8 +205,16 @@ def test_init_refuses_to_overwrite_and_is_deterministic(study, tiny_study, tmp_p
         init_study(study.folder)
     other = tmp_path / "study"
     shutil.copytree(tiny_study, other)
-    init_study(other, pairwise=True)
+    init_study(other, pairwise=True, secret=SECRET)
     assert (other / "design.json").read_bytes() == (study.folder / "design.json").read_bytes()
+    # by default a random secret: page ids and the completion code nobody can work out from the seed
+    third = tmp_path / "third"
+    shutil.copytree(tiny_study, third)
+    fresh = init_study(third, pairwise=True)
+    assert fresh.secret != SECRET and fresh.completion_code != study.completion_code
+    assert {p.id for p in participant_pages(fresh, 1)}.isdisjoint(p.id for p in participant_pages(study, 1))
+    layout = [[(m.id, m.kind) for m in p.media] for p in participant_pages(study, 1)]
+    assert [[(m.id, m.kind) for m in p.media] for p in participant_pages(fresh, 1)] == layout
     for f in sorted((study.folder / "checks").iterdir()):
         assert (
             hashlib.sha256(f.read_bytes()).digest() == hashlib.sha256((other / "checks" / f.name).read_bytes()).digest()
@@ -222,6 +235,10 @@ def test_init_command(tiny_study, tmp_path, capsys):  # noqa: F811
     assert main(args) == 2  # exists
     assert "--force" in capsys.readouterr().err
     assert main(["study", "init", str(folder), "--no-rating", "--force"]) == 2
+    # replaced by a design without checks: the earlier check media go
+    assert main(["study", "init", str(folder), "--attention", "0", "--no-audio-check", "--force"]) == 0
+    assert not list((folder / "checks").iterdir())
+    assert participant_pages(load_design(folder), 1)[1].kind == "rating"
 
 
 def test_password_hash():
@@ -455,3 +472,16 @@ def test_check_answers(study):
             assert check_answer(page, {cid: "1"}) is False
     fake = Page(id="0" * 12, index=3, kind="rating", media=(), check=None)
     assert check_answer(fake, {"x": {"natural": 1}}) is None
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(40, 960), st.integers(40, 720), st.sampled_from(sorted(OVERLAY_TEXT.values())))
+def test_overlay_text_stays_in_its_box_at_any_size(width, height, text):
+    frame = np.full((height, width, 3), 120, np.uint8)
+    out = draw_overlay(frame, text)
+    x0, y0, x1, y1 = overlay_box(width, height)
+    changed = (out != frame).any(axis=-1)
+    inside = np.zeros_like(changed)
+    inside[y0:y1, x0:x1] = True
+    assert not changed[~inside].any()  # the rest of the frame as it was
+    assert (out[y0:y1, x0:x1] > 150).all(axis=-1).any()  # light letters on the dark band
