@@ -645,6 +645,12 @@ def _os_error_text(exc: OSError) -> str:
     return f"{names}: {problem}"
 
 
+def _cmd_study(args) -> int:
+    from ._cli_study import run_study
+
+    return run_study(args)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = build_parser().parse_args(join_axis_values(sys.argv[1:] if argv is None else argv))

@@ -269,9 +269,7 @@ def bootstrap_mean_median(
     return float(x.mean()), float(m_lo), float(m_hi), float(np.median(x)), float(d_lo), float(d_hi)
 
 
-def system_summary(
-    ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0, level: float = 0.95
-) -> pd.DataFrame:
+def system_summary(ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0, level: float = 0.95) -> pd.DataFrame:
     """Per prompt and system: participants, mean and median of the participants' means, bootstrap intervals.
 
     Returns
@@ -296,8 +294,10 @@ def system_summary(
     table = pd.DataFrame(out, columns=cols)
     order = {p: i for i, p in enumerate(prompts)}
     table["_p"] = table["prompt"].map(order)
-    return table.sort_values(["_p", "mean", "system"], ascending=[True, False, True]).drop(columns="_p").reset_index(
-        drop=True
+    return (
+        table.sort_values(["_p", "mean", "system"], ascending=[True, False, True])
+        .drop(columns="_p")
+        .reset_index(drop=True)
     )
 
 
@@ -387,11 +387,13 @@ def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFram
     systems = sorted(set(ratings["system"]))
     out = []
     for prompt in _prompts(ratings):
-        block = wide.loc[prompt] if prompt in wide.index.get_level_values(0) else None
+        if prompt not in wide.index.get_level_values(0):
+            continue
+        block = wide.loc[prompt]
         family = []
         for a, b in combinations(systems, 2):
-            both = block[[a, b]].dropna() if block is not None else None
-            n = 0 if both is None else len(both)
+            both = block[[a, b]].dropna()
+            n = len(both)
             if n == 0:
                 continue
             x, y = both[a].to_numpy(), both[b].to_numpy()
