@@ -60,8 +60,8 @@ _ABOUT = {
         "the videos and a balanced presentation order per participant (Latin squares).",
     ),
     "study": (
-        "run a user study on a stimuli folder: analyse its answers",
-        "A user study on a folder written by `gesturekit stimuli`: `study analyse STUDY`.",
+        "run a user study on a stimuli folder: design, hosting, analysis, HEMVIP interop",
+        "Subcommands that turn a stimuli folder into a running study (see `gesturekit study SUBCOMMAND -h`).",
     ),
 }
 

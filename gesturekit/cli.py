@@ -619,6 +619,12 @@ def _cmd_stimuli(args) -> int:
     return _done(args)
 
 
+def _cmd_study(args) -> int:
+    from ._cli_study import run
+
+    return run(args)
+
+
 def _done(args, what: str = "done") -> int:
     """Say that the command is done and how long it took (since :func:`main` began it); exit status 0."""
     _print(f"{what} in {time.perf_counter() - args.started:.1f} s")
@@ -643,12 +649,6 @@ def _os_error_text(exc: OSError) -> str:
         return problem
     names = str(exc.filename) if exc.filename2 is None else f"{exc.filename} -> {exc.filename2}"
     return f"{names}: {problem}"
-
-
-def _cmd_study(args) -> int:
-    from ._cli_study import run_study
-
-    return run_study(args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

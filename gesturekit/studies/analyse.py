@@ -42,6 +42,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ELO_SCALE",
+    "read_responses_csv",
     "ratings_table",
     "pairwise_table",
     "exclusions",
@@ -94,6 +95,30 @@ def _manifest(design: Any, manifest: pd.DataFrame | None) -> dict[str, tuple[str
         if missing:
             raise ConfigError(f"the manifest lacks the columns {sorted(missing)}", path=path)
     return {str(i): (str(a), str(s)) for i, a, s in zip(manifest["id"], manifest["audio"], manifest["system"])}
+
+
+def read_responses_csv(path: str | Path) -> pd.DataFrame:
+    """Responses written as CSV (``answers`` as JSON text, e.g. by ``study import-hemvip``) as a frame.
+
+    Returns
+    -------
+    DataFrame
+        The columns of ``Store.responses_frame()``, ``answers`` as dicts.
+    """
+    import json
+
+    import pandas as pd
+
+    path = Path(path)
+    try:
+        frame = pd.read_csv(path, dtype={"token": str, "page_id": str, "kind": str}, keep_default_na=False)
+        missing = {"token", "row", "page_id", "kind", "answers"} - set(frame.columns)
+        if missing:
+            raise ConfigError(f"not a responses file: it lacks the columns {sorted(missing)}", path=path)
+        frame["answers"] = [json.loads(a) if a else {} for a in frame["answers"]]
+    except (OSError, ValueError) as e:
+        raise ConfigError(f"cannot read the responses: {e}", path=path) from e
+    return frame
 
 
 class _Pages:
@@ -172,7 +197,7 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
     """Each participant's failed checks and whether they are excluded.
 
     A participant is excluded who failed more than ``max_failures`` attention
-    checks (the design's ``attention.max_failures`` by default) or the audio check.
+    checks (the design's ``max_failures`` by default) or the audio check.
 
     Returns
     -------
@@ -186,7 +211,7 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
 
     responses, participants = _frames(store_or_frames)
     if max_failures is None:
-        max_failures = int(design.attention.max_failures)
+        max_failures = int(design.max_failures)
     pages = _Pages(design)
     failed: dict[str, int] = {}
     audio: dict[str, bool] = {}

@@ -36,6 +36,7 @@ from .analyse import (
     pairwise_tests,
     participant_means,
     ratings_table,
+    read_responses_csv,
     system_summary,
 )
 
@@ -407,6 +408,7 @@ def analyse_study(
     seed: int = 0,
     force: bool = False,
     store_url: str | None = None,
+    responses: str | Path | None = None,
 ) -> AnalysisReport:
     """Analyse a study folder's answers and write the report (default into ``folder/analysis``).
 
@@ -422,6 +424,8 @@ def analyse_study(
         Replace an earlier analysis.
     store_url : str, optional
         The store's database URL (PostgreSQL); default the folder's SQLite file.
+    responses : path, optional
+        A CSV of responses (``study import-hemvip``'s, answers as JSON text) analysed instead of the store.
 
     Returns
     -------
@@ -433,8 +437,11 @@ def analyse_study(
 
     folder = Path(folder)
     design = load_design(folder)
-    store = open_store(store_url, folder)
-    frames = (store.responses_frame(), store.participants_frame())
+    if responses is not None:
+        frames: tuple[pd.DataFrame, pd.DataFrame | None] = (read_responses_csv(responses), None)
+    else:
+        store = open_store(store_url, folder)
+        frames = (store.responses_frame(), store.participants_frame())
     report = analyse(
         ratings_table(design, frames),
         pairwise_table(design, frames),
