@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -23,6 +25,8 @@ from gesturekit.errors import ConfigError, OutputError
 from gesturekit.studies import analyse as A
 from gesturekit.studies.report import REPORT_FILES, analyse, write_report
 from gesturekit.studies.simulate import simulate_study
+
+from .study_helpers import tiny_study  # noqa: F401 (a fixture)
 
 choix = pytest.importorskip("choix")
 
@@ -212,3 +216,98 @@ def test_an_empty_or_too_small_study_is_a_clear_error():
     everyone_out = sim.exclusions.assign(excluded=True)
     with pytest.raises(ConfigError, match="6 excluded"):
         analyse(sim.ratings, sim.pairwise, everyone_out)
+
+
+# ---- a real study folder: design, store, the command ------------------------------------------------
+
+QUALITY = {"knn": 6, "audio-only": 4, "random": 2}  # the systems of study_helpers.STUDY_SYSTEMS, true ratings
+
+
+def _answer(page, key: dict, person: int, careless: bool) -> dict:
+    """What a participant posts on a page: ratings by the system's quality, checks passed unless careless."""
+    expect = page.check["expect"] if page.check else {}
+    if page.kind == "audio_check":
+        return {"count": expect["count"]["min"]}
+    if page.kind == "questionnaire":
+        return {"age": 30 + person}
+    if page.kind == "rating":
+        answers = {}
+        for i, m in enumerate(page.media):
+            if page.check and m.id == page.check["media"]:
+                answers[m.id] = {p: (7 if careless else span["min"]) for p, span in expect.items()}
+                answers[m.id] |= {p: answers[m.id].get(p, 4) for p in ("natural", "sync")}
+            else:
+                # the quality, give or take one by participant and position
+                value = QUALITY[key[m.id][1]] + (person + i) % 3 - 1
+                answers[m.id] = {"natural": value, "sync": value}
+        return answers
+    if page.kind == "pairwise":
+        if page.check:
+            return {"choice": 2 if careless else -2}
+        left, right = (QUALITY[key[m.id][1]] for m in page.media)
+        return {"choice": -2 if left > right else 2}
+    return {}
+
+
+def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_study, tmp_path, capsys):  # noqa: F811
+    from gesturekit.cli import main
+    from gesturekit.studies.analyse import _manifest
+    from gesturekit.studies.design import check_answer, init_study, participant_pages
+    from gesturekit.studies.store import open_store
+
+    folder = tmp_path / "study"
+    shutil.copytree(tiny_study, folder)
+    design = init_study(folder, pairwise=True, attention=2)
+    key = _manifest(design, None)
+    store = open_store(None, folder)
+    tokens = []
+    for person in range(7):
+        careless = person == 6
+        participant, _ = store.start(design.participants)
+        tokens.append(participant.token)
+        pages = [p for p in participant_pages(design, participant.row) if p.kind != "done"]
+        for page in pages:
+            answers = _answer(page, key, person, careless)
+            ok = check_answer(page, answers)
+            # the careless fail each attention check (they count the beeps right), the others pass
+            assert ok is None or ok is not (careless and page.kind != "audio_check")
+            got = store.submit(
+                participant.token,
+                page.id,
+                page.index,
+                page.kind,
+                answers,
+                [],
+                1.0,
+                failed_check=ok is False,
+                max_failures=design.max_failures,
+                last=page is pages[-1],
+            )
+            if got.status != "active":
+                break
+    store.close()
+    frames = (open_store(None, folder).responses_frame(), open_store(None, folder).participants_frame())
+    table = A.exclusions(design, frames)
+    assert table.set_index("participant").loc[tokens[6], "excluded"]
+    assert table.set_index("participant").loc[tokens[6], "failed_checks"] == 2
+    assert not table.set_index("participant").loc[tokens[:6], "excluded"].any()
+    ratings = A.ratings_table(design, frames)
+    assert set(ratings["system"]) == set(QUALITY) and set(ratings["prompt"]) == {"natural", "sync"}
+    assert set(A.pairwise_table(design, frames)["system_left"]) <= set(QUALITY)
+
+    assert main(["study", "analyse", str(folder), "--rounds", "200"]) == 0
+    printed = capsys.readouterr().out
+    assert "7 participants, 1 excluded by the checks, 6 analysed" in printed
+    out = folder / "analysis"
+    report = (out / "report.md").read_text()
+    assert all(s in report for s in QUALITY)
+    summary = pd.read_csv(out / "summary.csv")
+    assert list(summary.loc[summary["prompt"] == "all", "system"]) == ["knn", "audio-only", "random"]
+    bt = pd.read_csv(out / "bradley_terry.csv")
+    assert list(bt["system"]) == ["knn", "audio-only", "random"]
+    excluded = pd.read_csv(out / "participants.csv")
+    assert excluded["excluded"].sum() == 1
+    # not replaced without --force: the command says so and leaves the report
+    assert main(["study", "analyse", str(folder), "--rounds", "200"]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert (out / "report.md").read_text() == report
