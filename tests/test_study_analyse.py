@@ -260,6 +260,8 @@ def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_st
     design = init_study(folder, pairwise=True, attention=2)
     key = _manifest(design, None)
     store = open_store(None, folder)
+    assert main(["study", "analyse", str(folder), "--rounds", "10"]) == 2  # nobody has answered yet
+    assert "nothing to analyse" in capsys.readouterr().err
     tokens = []
     for person in range(7):
         careless = person == 6

@@ -555,7 +555,9 @@ def bradley_terry(
     for start in range(0, int(rounds), block):
         m = min(block, int(rounds) - start)
         pick = rng.integers(0, len(participants), size=(m, len(participants)))
-        weights = np.stack([np.bincount(row, minlength=len(participants)) for row in pick]).astype(np.float64)
+        # how often each round drew each participant, all rounds in one bincount
+        offsets = pick + len(participants) * np.arange(m)[:, None]
+        weights = np.bincount(offsets.ravel(), minlength=m * len(participants)).reshape(m, -1).astype(np.float64)
         boot.append(bt_fit((weights @ flat).reshape(m, len(systems), len(systems)), prior=prior))
     q = [50 * (1 - level), 50 * (1 + level)]
     lo, hi = np.percentile(np.concatenate(boot) * ELO_SCALE, q, axis=0)
