@@ -313,3 +313,26 @@ def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_st
     assert main(["study", "analyse", str(folder), "--rounds", "200"]) == 2
     assert "--force" in capsys.readouterr().err
     assert (out / "report.md").read_text() == report
+    # the same responses as a CSV (as study import-hemvip writes them) give the same analysis
+    from gesturekit.studies.hemvip import write_responses_csv
+
+    write_responses_csv(frames[0], tmp_path / "responses.csv")
+    again = tmp_path / "again"
+    assert (
+        main(
+            [
+                "study",
+                "analyse",
+                str(folder),
+                "--responses",
+                str(tmp_path / "responses.csv"),
+                "--out",
+                str(again),
+                "--rounds",
+                "200",
+            ]
+        )
+        == 0
+    )
+    pd.testing.assert_frame_equal(pd.read_csv(again / "summary.csv"), summary)
+    pd.testing.assert_frame_equal(pd.read_csv(again / "tests.csv"), pd.read_csv(out / "tests.csv"))
