@@ -31,6 +31,13 @@ _ABOUT = {
         "Write one HEMVIP (webMUSHRA) experiment config per participant row into OUT, pages of type video "
         "(rating) and videopc (pairwise), the media referred to as URL/<id>.mp4.",
     ),
+    "analyse": (
+        "the study's answers: exclusions, per system statistics, tests, Bradley-Terry, a report",
+        "Exclude participants by their attention and audio checks, then per system (and prompt) the mean and "
+        "median rating with bootstrap 95 %% intervals over participants, Wilcoxon signed-rank tests of every pair "
+        "of systems with Holm-Bonferroni and rank-biserial effect sizes, Bradley-Terry scores (Elo scale) for "
+        "pairwise pages; CSVs, figures and a markdown and HTML report into STUDY/analysis/.",
+    ),
     "import-hemvip": (
         "read HEMVIP result JSON into a CSV of responses the analysis reads",
         "Read HEMVIP result files (one session object or a list of them per file, as HEMVIP's export writes) "
@@ -52,6 +59,7 @@ def add_study_parser(parser: argparse.ArgumentParser) -> None:
     add_serve(_sub(sub, "serve"))
     add_export_hemvip(_sub(sub, "export-hemvip"))
     add_import_hemvip(_sub(sub, "import-hemvip"))
+    add_analyse(_sub(sub, "analyse"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -181,4 +189,58 @@ def _study_import_hemvip(args: argparse.Namespace) -> int:
     frame = import_hemvip(load_design(args.study), args.results)
     write_responses_csv(frame, args.out, overwrite=args.force)
     print(f"{len(frame)} responses of {frame['token'].nunique()} participants in {args.out}")
+    return 0
+
+
+# ---- analyse ------------------------------------------------------------------------------------
+
+
+def add_analyse(p: argparse.ArgumentParser) -> None:
+    """Options of ``study analyse``."""
+    p.add_argument("study", metavar="STUDY", help="study folder with design.json")
+    p.add_argument("--out", help="folder for the report (default STUDY/analysis)")
+    p.add_argument("--rounds", type=int, default=10_000, help="bootstrap rounds over participants (default 10000)")
+    p.add_argument("--alpha", type=float, default=0.05, help="family-wise error rate per prompt (default 0.05)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the bootstraps (default 0)")
+    p.add_argument("--store", metavar="URL", help="the store's PostgreSQL URL (default: the study's SQLite file)")
+    p.add_argument(
+        "--responses", metavar="CSV", help="analyse these responses (study import-hemvip --out) instead of the store"
+    )
+    p.add_argument("--force", action="store_true", help="replace an earlier analysis")
+
+
+def _study_analyse(args: argparse.Namespace) -> int:
+    from .studies.report import analyse_study
+
+    report = analyse_study(
+        args.study,
+        out=args.out,
+        rounds=args.rounds,
+        alpha=args.alpha,
+        seed=args.seed,
+        force=args.force,
+        store_url=args.store,
+        responses=args.responses,
+    )
+    print(
+        f"{len(report.participants)} participants, {report.excluded} excluded by the checks, "
+        f"{report.included} analysed; systems: {', '.join(report.systems)}"
+    )
+    if report.summary is not None:
+        every = report.summary[report.summary["prompt"] == "all"]
+        cells = [f"{r.system} {r.mean:.2f} [{r.mean_lo:.2f}, {r.mean_hi:.2f}]" for r in every.itertuples()]
+        print("mean rating, all prompts (95 % CI): " + "; ".join(cells))
+    if report.tests is not None:
+        every = report.tests[report.tests["prompt"] == "all"]
+        print(
+            f"significantly different pairs (all prompts, Holm, alpha={report.alpha}): "
+            f"{int(every['significant'].sum())} of {len(every)}"
+        )
+    if report.bradley_terry is not None:
+        cells = [
+            f"{r.system} {r.elo:+.0f} [{r.elo_lo:+.0f}, {r.elo_hi:+.0f}]" for r in report.bradley_terry.itertuples()
+        ]
+        print("Bradley-Terry (Elo, mean 0): " + "; ".join(cells))
+    for f in report.files:
+        print(f)
     return 0
