@@ -151,13 +151,18 @@ def test_a_server_killed_with_minus_9_loses_no_acknowledged_response(store_url, 
     acked: list = []
 
     async def crowd():
-        async with httpx.AsyncClient(timeout=60) as client:
-            tasks = [asyncio.create_task(run_participant(client, base, f"P{i}", acked)) for i in range(12)]
+        # one client (one cookie jar: one browser) per participant
+        clients = [httpx.AsyncClient(timeout=60) for _ in range(12)]
+        try:
+            tasks = [asyncio.create_task(run_participant(c, base, f"P{i}", acked)) for i, c in enumerate(clients)]
             deadline = time.monotonic() + 120  # a busy machine may answer slowly; never wait for ever
             while len(acked) < 20 and not all(t.done() for t in tasks) and time.monotonic() < deadline:
                 await asyncio.sleep(0.01)
             kill9(proc)
             await asyncio.gather(*tasks, return_exceptions=True)
+        finally:
+            for c in clients:
+                await c.aclose()
 
     try:
         asyncio.run(crowd())
