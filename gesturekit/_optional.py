@@ -37,6 +37,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "distributed": ("dask[distributed]", "scale"),
     "dask": ("dask[distributed]", "scale"),
     "plotly": ("plotly", "app"),
+    "choix": ("choix", "study"),
 }
 
 

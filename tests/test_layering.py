@@ -67,7 +67,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("search", ("gesturekit.search", "gesturekit._search_kernels", "gesturekit.search_reference", "gesturekit.blend")),
     ("synthesize", ("gesturekit.synthesize", "gesturekit.live")),
     ("refine/export/viz/evaluate", ("gesturekit.refine", "gesturekit.export", "gesturekit.viz", "gesturekit.evaluate")),
-    ("study/interactive", ("gesturekit.study", "gesturekit.interactive")),
+    ("study/interactive", ("gesturekit.study", "gesturekit.studies", "gesturekit.interactive")),
     (
         "cli/app",
         ("gesturekit.cli", "gesturekit._cli_parser", "gesturekit._cli_character", "gesturekit.__main__", "app"),
