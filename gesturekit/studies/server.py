@@ -158,6 +158,8 @@ class StudyServer:
         self.folder = Path(folder)
         self.api = api
         self.design = api.load_design(self.folder)
+        # the design's parts as design.json holds them (a StudyDesign keeps the file's JSON as ``raw``)
+        self.spec = _get(self.design, "raw", self.design)
         self.store = store
         self.rows = _row_count(self.design)
         self.media = api.media_index(self.design)
@@ -178,7 +180,7 @@ class StudyServer:
 
     def render(self, name: str, request: Request, status: int = 200, **context: Any) -> HTMLResponse:
         base = request.scope.get("root_path", "").rstrip("/")
-        text = self.env.get_template(name).render(base=base, title=_get(self.design, "title", "Study"), **context)
+        text = self.env.get_template(name).render(base=base, title=_get(self.spec, "title", "Study"), **context)
         return HTMLResponse(text, status_code=status, headers=_NO_STORE)
 
     # ------------------------------------------------------------ participants
@@ -223,12 +225,12 @@ class StudyServer:
         pages = self.to_answer(person.row)
         if person.answered >= len(pages):
             await run_in_threadpool(self.store.finish, token)
-            completion = _get(self.design, "completion", {})
+            completion = _get(self.spec, "completion", {})
             return self.render(
                 "done.html", request, code=_get(completion, "code"), redirect=_get(completion, "redirect")
             )
         page = pages[person.answered]
-        rating = _get(self.design, "rating", {})
+        rating = _get(self.spec, "rating", {})
         config = {
             "submit": f"{request.scope.get('root_path', '').rstrip('/')}/p/{token}/pages/{page.id}",
             "kind": page.kind,
@@ -244,9 +246,9 @@ class StudyServer:
             number=person.answered + 1,
             total=len(pages),
             rating=rating,
-            pairwise=_get(self.design, "pairwise", {}),
-            questionnaire=_get(self.design, "questionnaire", []),
-            instructions=_get(self.design, "instructions", ""),
+            pairwise=_get(self.spec, "pairwise", {}),
+            questionnaire=_get(self.spec, "questionnaire", []),
+            instructions=_get(self.spec, "instructions", ""),
             config=config,
             get=_get,
         )
@@ -273,9 +275,9 @@ class StudyServer:
         page = next((p for p in pages if p.id == request.path_params["page_id"]), None)
         if page is None:
             raise _Refused(404, "no such page")
-        answers, events, elapsed = validate_submission(page, body, self.design)
+        answers, events, elapsed = validate_submission(page, body, self.spec)
         failed = self.api.check_answer(page, answers) is False
-        max_failures = int(_get(_get(self.design, "attention", {}), "max_failures", 1))
+        max_failures = int(_get(_get(self.spec, "attention", {}), "max_failures", 1))
         result = await run_in_threadpool(
             lambda: self.store.submit(
                 token,
@@ -312,7 +314,9 @@ class StudyServer:
     # ------------------------------------------------------------ researcher
 
     def _researcher(self, request: Request) -> None:
-        stored = _get(_get(self.design, "researcher", {}), "password_sha256")
+        stored = _get(_get(self.spec, "researcher", {}), "password_sha256") or _get(
+            _get(self.spec, "researcher", {}), "password_hash"
+        )
         if not stored:
             raise _Refused(403, "the study has no researcher password: set one with gesturekit study init --password")
         header = request.headers.get("authorization", "")
