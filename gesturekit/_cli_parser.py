@@ -59,6 +59,10 @@ _ABOUT = {
         "frame rate, loudness-normalised speech), named by opaque ids, with a manifest CSV kept apart from "
         "the videos and a balanced presentation order per participant (Latin squares).",
     ),
+    "study": (
+        "run a user study on a stimuli folder: design, hosting, analysis, HEMVIP interop",
+        "Subcommands that turn a stimuli folder into a running study (see `gesturekit study SUBCOMMAND -h`).",
+    ),
 }
 
 
@@ -397,4 +401,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--character-map", metavar="JSON", help="bone map of --character (our joint -> its bone)")
     s.add_argument("--force", action="store_true", help="replace an existing study")
     _add_max_speech(s)
+
+    from ._cli_study import add_study_parser
+
+    add_study_parser(_command(sub, "study"))
     return p

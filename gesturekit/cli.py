@@ -619,6 +619,12 @@ def _cmd_stimuli(args) -> int:
     return _done(args)
 
 
+def _cmd_study(args) -> int:
+    from ._cli_study import run
+
+    return run(args)
+
+
 def _done(args, what: str = "done") -> int:
     """Say that the command is done and how long it took (since :func:`main` began it); exit status 0."""
     _print(f"{what} in {time.perf_counter() - args.started:.1f} s")

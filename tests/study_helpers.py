@@ -1,11 +1,4 @@
-"""A tiny study folder for the tests of ``gesturekit.studies``: 2 speeches x 3 systems.
-
-``study_stimuli`` (session scope) is what ``gesturekit stimuli`` writes (videos, manifest.csv,
-order.csv, study.json) for two short speeches (1.2 and 1.6 s) rendered at 160x120 by the systems
-knn, random and audio-only on a 2-minute demo database; a test that writes into a study (``study
-init``, responses) takes its own copy with :func:`copy_study` (or the ``study_folder`` fixture).
-Import the fixtures into a test module: ``from tests.study_helpers import study_folder, study_stimuli``.
-"""
+"""A tiny study folder shared by the study tests: 2 speeches x 3 systems, 160x120, 2 s each."""
 
 from __future__ import annotations
 
@@ -15,38 +8,38 @@ from pathlib import Path
 import pytest
 import soundfile as sf
 
-#: The systems of the test study (none needs held-out parts or a refiner).
-SYSTEMS = ("knn", "random", "audio-only")
-#: The speeches' lengths in seconds (whole frames at 15 fps): short videos, quick to watch to the end.
-SPEECH_S = (1.2, 1.6)
-RESOLUTION = (160, 120)
-SEED = 7
+from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.synthetic import generate_demo_take
+from gesturekit.demo import build_demo_database
+from gesturekit.study import make_stimuli
+
+STUDY_SYSTEMS = ("knn", "random", "audio-only")
 
 
-def make_study(folder: Path, home: Path) -> Path:
-    """Write the test study into ``folder`` (a demo database is built in ``home`` first); returns ``folder``."""
-    from gesturekit.database import MatchingDatabase
-    from gesturekit.datasets.synthetic import generate_demo_take
-    from gesturekit.demo import build_demo_database
-    from gesturekit.study import make_stimuli
-
-    db_path = home / "db"
-    build_demo_database(db_path, minutes=2.0)
-    speech = home / "speech"
-    speech.mkdir(parents=True, exist_ok=True)
-    for i, seconds in enumerate(SPEECH_S):
-        take, _ = generate_demo_take(seconds=2.0, seed=60 + i, name=f"s{i}")
-        sf.write(speech / f"speech_{i}.wav", take.audio[: int(seconds * 16000)], 16000)
+def make_tiny_study(root: Path, *, seed: int = 5) -> Path:
+    """Write a stimuli folder under ``root`` (``root/study``) and return its path."""
+    db_path, speech = root / "db", root / "speech"
+    build_demo_database(db_path, minutes=1.0)
+    speech.mkdir()
+    for i in range(2):
+        take, _ = generate_demo_take(seconds=2.0, seed=70 + i, name=f"s{i}")
+        sf.write(speech / f"speech_{i}.wav", take.audio[:32000], 16000)
     make_stimuli(
         MatchingDatabase.load(db_path),
-        out=folder,
+        out=root / "study",
         audio=[speech],
-        systems=list(SYSTEMS),
-        seed=SEED,
-        resolution=RESOLUTION,
+        systems=",".join(STUDY_SYSTEMS),
+        resolution=(160, 120),
+        seed=seed,
         workers=1,
     )
-    return folder
+    return root / "study"
+
+
+@pytest.fixture(scope="session")
+def tiny_study(tmp_path_factory) -> Path:
+    """A read-only stimuli folder (copy it before writing into it)."""
+    return make_tiny_study(tmp_path_factory.mktemp("tiny-study"))
 
 
 def copy_study(source: Path, target: Path) -> Path:
@@ -55,14 +48,7 @@ def copy_study(source: Path, target: Path) -> Path:
     return target
 
 
-@pytest.fixture(scope="session")
-def study_stimuli(tmp_path_factory) -> Path:
-    """The test study as ``gesturekit stimuli`` left it (shared by the session's tests: do not write into it)."""
-    root = tmp_path_factory.mktemp("study-stimuli")
-    return make_study(root / "study", root / "home")
-
-
 @pytest.fixture
-def study_folder(study_stimuli, tmp_path) -> Path:
-    """The test's own copy of :func:`study_stimuli`, free to write into."""
-    return copy_study(study_stimuli, tmp_path / "study")
+def study_folder(tiny_study, tmp_path) -> Path:
+    """The test's own copy of :func:`tiny_study`, free to write into (import both fixtures)."""
+    return copy_study(tiny_study, tmp_path / "study")

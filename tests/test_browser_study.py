@@ -35,9 +35,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from gesturekit.cli import main as cli_main
 from tests import app_browser
-from tests.study_helpers import study_folder, study_stimuli  # noqa: F401  (fixtures)
+from tests.study_helpers import study_folder, tiny_study  # noqa: F401  (fixtures)
 
 pytestmark = pytest.mark.skipif(
     app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
@@ -190,10 +189,8 @@ class Participant:
 def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(study_folder, tmp_path):  # noqa: F811
     from playwright.sync_api import sync_playwright
 
-    from gesturekit.studies.design import load_design
+    from gesturekit.studies.design import init_study, load_design
     from gesturekit.studies.store import open_store
-
-    from gesturekit.studies.design import init_study
 
     init_study(study_folder, pairwise=True, attention=2, password=PASSWORD)
     design = load_design(study_folder)

@@ -13,9 +13,10 @@ From the bottom up (the data's way through the package, issue 17's acceptance)::
     refine/export/viz/evaluate
                 what is done with a synthesis (peers: they may import each other)
     study/interactive
-                study.py (user-study stimuli), interactive.py (the app's logic without streamlit)
-    cli/app     cli.py (its options: _cli_parser.py; synthesize --character: _cli_character.py), __main__.py,
-                and the Streamlit app (app/)
+                study.py (user-study stimuli), studies/ (running the study), interactive.py (the app's
+                logic without streamlit)
+    cli/app     cli.py (its options: _cli_parser.py; synthesize --character: _cli_character.py;
+                study: _cli_study.py), __main__.py, and the Streamlit app (app/)
 
 Every import counts, also those inside functions and ``try`` blocks (a lazy import is still a
 dependency); only imports under ``if TYPE_CHECKING:`` do not, as they never run. The map is by
@@ -70,7 +71,14 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("study/interactive", ("gesturekit.study", "gesturekit.studies", "gesturekit.interactive")),
     (
         "cli/app",
-        ("gesturekit.cli", "gesturekit._cli_parser", "gesturekit._cli_character", "gesturekit.__main__", "app"),
+        (
+            "gesturekit.cli",
+            "gesturekit._cli_parser",
+            "gesturekit._cli_character",
+            "gesturekit._cli_study",
+            "gesturekit.__main__",
+            "app",
+        ),
     ),
 ]
 RANK = {name: i for i, (name, _) in enumerate(LAYERS)}

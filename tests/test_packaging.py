@@ -114,7 +114,7 @@ def distributions_of(module: str) -> set[str]:
 
 def test_extras_are_the_documented_ones():
     extras = PYPROJECT["project"]["optional-dependencies"]
-    assert set(extras) == {"app", "refiner", "render", "scale", "all"}
+    assert set(extras) == {"app", "refiner", "render", "scale", "study", "all"}
     assert set(declared(("all",))) == set(declared(tuple(extras)))
     assert "torch" in declared(("refiner",)) and "torch" not in declared()
     assert "streamlit" in declared(("app",)) and "streamlit" not in declared(("refiner", "render", "scale"))

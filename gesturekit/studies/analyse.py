@@ -42,6 +42,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ELO_SCALE",
+    "read_responses_csv",
     "ratings_table",
     "pairwise_table",
     "exclusions",
@@ -94,6 +95,30 @@ def _manifest(design: Any, manifest: pd.DataFrame | None) -> dict[str, tuple[str
         if missing:
             raise ConfigError(f"the manifest lacks the columns {sorted(missing)}", path=path)
     return {str(i): (str(a), str(s)) for i, a, s in zip(manifest["id"], manifest["audio"], manifest["system"])}
+
+
+def read_responses_csv(path: str | Path) -> pd.DataFrame:
+    """Responses written as CSV (``answers`` as JSON text, e.g. by ``study import-hemvip``) as a frame.
+
+    Returns
+    -------
+    DataFrame
+        The columns of ``Store.responses_frame()``, ``answers`` as dicts.
+    """
+    import json
+
+    import pandas as pd
+
+    path = Path(path)
+    try:
+        frame = pd.read_csv(path, dtype={"token": str, "page_id": str, "kind": str}, keep_default_na=False)
+        missing = {"token", "row", "page_id", "kind", "answers"} - set(frame.columns)
+        if missing:
+            raise ConfigError(f"not a responses file: it lacks the columns {sorted(missing)}", path=path)
+        frame["answers"] = [json.loads(a) if a else {} for a in frame["answers"]]
+    except (OSError, ValueError) as e:
+        raise ConfigError(f"cannot read the responses: {e}", path=path) from e
+    return frame
 
 
 class _Pages:
@@ -172,7 +197,7 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
     """Each participant's failed checks and whether they are excluded.
 
     A participant is excluded who failed more than ``max_failures`` attention
-    checks (the design's ``attention.max_failures`` by default) or the audio check.
+    checks (the design's ``max_failures`` by default) or the audio check.
 
     Returns
     -------
@@ -186,7 +211,7 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
 
     responses, participants = _frames(store_or_frames)
     if max_failures is None:
-        max_failures = int(design.attention.max_failures)
+        max_failures = int(design.max_failures)
     pages = _Pages(design)
     failed: dict[str, int] = {}
     audio: dict[str, bool] = {}
@@ -269,9 +294,7 @@ def bootstrap_mean_median(
     return float(x.mean()), float(m_lo), float(m_hi), float(np.median(x)), float(d_lo), float(d_hi)
 
 
-def system_summary(
-    ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0, level: float = 0.95
-) -> pd.DataFrame:
+def system_summary(ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0, level: float = 0.95) -> pd.DataFrame:
     """Per prompt and system: participants, mean and median of the participants' means, bootstrap intervals.
 
     Returns
@@ -296,8 +319,10 @@ def system_summary(
     table = pd.DataFrame(out, columns=cols)
     order = {p: i for i, p in enumerate(prompts)}
     table["_p"] = table["prompt"].map(order)
-    return table.sort_values(["_p", "mean", "system"], ascending=[True, False, True]).drop(columns="_p").reset_index(
-        drop=True
+    return (
+        table.sort_values(["_p", "mean", "system"], ascending=[True, False, True])
+        .drop(columns="_p")
+        .reset_index(drop=True)
     )
 
 
@@ -387,11 +412,13 @@ def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFram
     systems = sorted(set(ratings["system"]))
     out = []
     for prompt in _prompts(ratings):
-        block = wide.loc[prompt] if prompt in wide.index.get_level_values(0) else None
+        if prompt not in wide.index.get_level_values(0):
+            continue
+        block = wide.loc[prompt]
         family = []
         for a, b in combinations(systems, 2):
-            both = block[[a, b]].dropna() if block is not None else None
-            n = 0 if both is None else len(both)
+            both = block[[a, b]].dropna()
+            n = len(both)
             if n == 0:
                 continue
             x, y = both[a].to_numpy(), both[b].to_numpy()
@@ -528,7 +555,9 @@ def bradley_terry(
     for start in range(0, int(rounds), block):
         m = min(block, int(rounds) - start)
         pick = rng.integers(0, len(participants), size=(m, len(participants)))
-        weights = np.stack([np.bincount(row, minlength=len(participants)) for row in pick]).astype(np.float64)
+        # how often each round drew each participant, all rounds in one bincount
+        offsets = pick + len(participants) * np.arange(m)[:, None]
+        weights = np.bincount(offsets.ravel(), minlength=m * len(participants)).reshape(m, -1).astype(np.float64)
         boot.append(bt_fit((weights @ flat).reshape(m, len(systems), len(systems)), prior=prior))
     q = [50 * (1 - level), 50 * (1 + level)]
     lo, hi = np.percentile(np.concatenate(boot) * ELO_SCALE, q, axis=0)
