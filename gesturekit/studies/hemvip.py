@@ -129,9 +129,12 @@ def export_hemvip(
         raise OutputError("exists; pass --force (overwrite=True) to replace the configs", path=existing[0])
     out.mkdir(parents=True, exist_ok=True)
     for row, path in enumerate(files, start=1):
-        data = (json.dumps(hemvip_config(design, row, media_url=media_url), indent=1) + "\n").encode()
-        atomic_write(path, lambda f, data=data: f.write(data), overwrite=True)
+        _write_bytes(path, (json.dumps(hemvip_config(design, row, media_url=media_url), indent=1) + "\n").encode())
     return files
+
+
+def _write_bytes(path: Path, data: bytes) -> Path:
+    return atomic_write(path, lambda f: f.write(data), overwrite=True)
 
 
 def _score(value: Any, path: Path, where: str) -> float:
@@ -284,5 +287,4 @@ def write_responses_csv(frame: pd.DataFrame, out: str | os.PathLike, *, overwrit
     if out.suffix.lower() != ".csv":
         raise ConfigError(f"the responses file must end in .csv, got {out.name}")
     table = frame.assign(answers=[json.dumps(a, sort_keys=True) for a in frame["answers"]])
-    data = table.to_csv(index=False, lineterminator="\n").encode()
-    return atomic_write(out, lambda f: f.write(data), overwrite=True)
+    return _write_bytes(out, table.to_csv(index=False, lineterminator="\n").encode())
