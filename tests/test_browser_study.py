@@ -35,6 +35,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from gesturekit.cli import main as cli_main
 from tests import app_browser
 from tests.study_helpers import study_folder, tiny_study  # noqa: F401  (fixtures)
 
@@ -186,13 +187,14 @@ class Participant:
         self.page.locator("[data-question=comments]").fill("Clear videos.")
 
 
-def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(study_folder, tmp_path):  # noqa: F811
+def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(study_folder, tmp_path, capsys):  # noqa: F811
     from playwright.sync_api import sync_playwright
 
-    from gesturekit.studies.design import init_study, load_design
+    from gesturekit.studies.design import load_design
     from gesturekit.studies.store import open_store
 
-    init_study(study_folder, pairwise=True, attention=2, password=PASSWORD)
+    init = ["study", "init", str(study_folder), "--pairwise", "--attention", "2", "--password", PASSWORD]
+    assert cli_main(init) == 0
     design = load_design(study_folder)
     assert design.rating and design.pairwise and design.attention == 2 and design.audio_check is not None
 
@@ -229,9 +231,12 @@ def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(stu
     tokens = {pid: people.loc[pid, "token"] for pid in people.index}
 
     out = tmp_path / "analysis"
+    assert cli_main(["study", "analyse", str(study_folder), "--out", str(out), "--rounds", "200"]) == 0
+    printed = capsys.readouterr().out
+    assert "3 participants, 1 excluded by the checks, 2 analysed" in printed
     from gesturekit.studies.report import analyse_study
 
-    report = analyse_study(study_folder, out=out, rounds=200)
+    report = analyse_study(study_folder, out=tmp_path / "again", rounds=200)
     table = report.participants.set_index("participant")
     assert not table.loc[tokens["pid-attentive"], "excluded"]
     assert table.loc[tokens["pid-inattentive"], "excluded"]
