@@ -20,9 +20,13 @@ import streamlit as st
 
 from gesturekit.errors import ConfigError
 from gesturekit.paths import home
-from gesturekit.studies.analyse import analyse, exclusions, pairwise_table, ratings_table
-from gesturekit.studies.design import load_design, verify_password
-from gesturekit.studies.store import open_store
+from gesturekit.studies.analyse import exclusions, pairwise_table, ratings_table
+from gesturekit.studies.design import StudyDesign, load_design, verify_password
+from gesturekit.studies.report import analyse
+from gesturekit.studies.store import SQLITE_NAME, open_store
+
+#: Bootstrap rounds of the page's analysis: a quick look at every run (``gesturekit study analyse`` for the report).
+ROUNDS = 1000
 
 #: Request headers a reverse proxy adds: a request that carries one came from another machine.
 FORWARDED_HEADERS = ("forwarded", "x-forwarded-for", "x-real-ip", "x-forwarded-host")
@@ -60,12 +64,12 @@ def choose_folder() -> Path | None:
     return path
 
 
-def unlocked(design: object) -> bool:
+def unlocked(design: StudyDesign) -> bool:
     """Whether the page may show the study: always on the researcher's own machine; when served,
     only after the design's researcher password is typed (a study without one is not shown)."""
     if not served_to_others():
         return True
-    if not getattr(design, "has_password", False):
+    if design.password_hash is None:
         st.error(
             "The app is served to others and this study has no researcher password: set one with "
             "`gesturekit study init STUDY --password P --force` to see its responses here."
@@ -75,7 +79,7 @@ def unlocked(design: object) -> bool:
     if not typed:
         st.info("The app is served to others: type the study's researcher password.")
         return False
-    if not verify_password(design, typed):
+    if not verify_password(typed, design.password_hash):
         st.error("Wrong password.")
         return False
     return True
@@ -122,12 +126,32 @@ def counts(folder: Path, ratings: pd.DataFrame, pairwise: pd.DataFrame, excluded
         right.dataframe(pairs, hide_index=True, key="studyrun.per_pair")
 
 
-def analysis(design: object, store: object) -> dict[str, pd.DataFrame]:
-    """The analysis summary (per system, with exclusions applied); returns the tables to download."""
+def analysis(ratings: pd.DataFrame, pairwise: pd.DataFrame, excl: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """The analysis so far (exclusions applied); returns its tables to download (none while too small)."""
     st.subheader("Analysis")
-    result = analyse(design, store)
-    st.dataframe(result.summary, hide_index=True, key="studyrun.summary")
-    return {"summary": result.summary}
+    try:
+        report = analyse(ratings, pairwise, excl, rounds=ROUNDS)
+    except ConfigError as exc:  # too few answers yet: the study's state, not a fault
+        st.info(display.escape_markdown(exc.problem))
+        return {}
+    st.caption(
+        f"{report.included} participants analysed, {report.excluded} excluded by the checks; bootstrap "
+        f"{ROUNDS} rounds (`gesturekit study analyse` writes the full report)."
+    )
+    tables = {}
+    if report.summary is not None:
+        st.markdown("**Ratings per system** (participants' means; 95 % bootstrap intervals)")
+        st.dataframe(report.summary, hide_index=True, key="studyrun.summary")
+        tables["summary"] = report.summary
+    if report.tests is not None:
+        st.markdown("**Pairwise differences** (Wilcoxon signed-rank, Holm-Bonferroni)")
+        st.dataframe(report.tests, hide_index=True, key="studyrun.tests")
+        tables["tests"] = report.tests
+    if report.bradley_terry is not None:
+        st.markdown("**Pairwise preferences** (Bradley-Terry, Elo scale)")
+        st.dataframe(report.bradley_terry, hide_index=True, key="studyrun.bradley_terry")
+        tables["bradley_terry"] = report.bradley_terry
+    return tables
 
 
 def downloads(tables: dict[str, pd.DataFrame]) -> None:
@@ -148,21 +172,28 @@ def show(folder: Path) -> None:
     design = load_design(folder)
     if not unlocked(design):
         return
-    store = open_store(None, folder)
-    people = store.participants_frame()
-    responses = store.responses_frame()
+    url = st.text_input(
+        "Responses database",
+        key="studyrun.store",
+        type="password",  # a PostgreSQL URL may hold its password
+        placeholder="postgresql://user:password@host/db (empty: the study folder's SQLite file)",
+    )
+    if not url.strip() and not (folder / SQLITE_NAME).is_file():
+        st.info("No participant has started yet: start the participants' server with `gesturekit study serve`.")
+        return
+    store = open_store(url.strip() or None, folder)
+    try:
+        people, responses = store.participants_frame(), store.responses_frame()
+    finally:
+        store.close()
+    frames = (responses, people)
     participants(people)
-    ratings = ratings_table(design, store)
-    pairwise = pairwise_table(design, store)
-    excl = exclusions(design, store)
-    excluded = set(excl.loc[excl["excluded"], "participant"])
-    counts(folder, ratings, pairwise, excluded)
-    tables = {"participants": people, "responses": responses.assign(answers=responses["answers"].map(json.dumps))}
+    ratings, pairwise, excl = ratings_table(design, frames), pairwise_table(design, frames), exclusions(design, frames)
+    counts(folder, ratings, pairwise, set(excl.loc[excl["excluded"], "participant"]))
+    as_text = {c: responses[c].map(json.dumps) for c in ("answers", "events")}  # dicts and lists as JSON cells
+    tables = {"participants": people, "responses": responses.assign(**as_text)}
     tables |= {"ratings": ratings, "pairwise": pairwise, "exclusions": excl}
-    if len(responses):
-        tables |= analysis(design, store)
-    else:
-        st.info("No responses yet.")
+    tables |= analysis(ratings, pairwise, excl)
     downloads(tables)
 
 
