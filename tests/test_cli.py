@@ -200,7 +200,16 @@ def test_every_command_of_the_parser_runs_its_own_function():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     names = sorted(sub.choices)
-    assert names == sorted(["build-db", "info", "synthesize", "train-refiner", "evaluate", "train-fgd", "stimuli"])
+    assert names == sorted(
+        ["build-db", "info", "synthesize", "train-refiner", "evaluate", "train-fgd", "stimuli", "study"]
+    )
     for name in names:
         assert callable(getattr(cli, "_cmd_" + name.replace("-", "_"))), name
     assert parser.parse_args(["info"]).command == "info"
+    # study's subcommands: each its own function in _cli_study.py
+    import gesturekit._cli_study as study
+
+    group = next(a for a in sub.choices["study"]._actions if isinstance(a, argparse._SubParsersAction))
+    assert {"init", "export-hemvip", "import-hemvip"} <= set(group.choices)
+    for name in group.choices:
+        assert callable(getattr(study, "_study_" + name.replace("-", "_"))), name

@@ -32,12 +32,14 @@ from gesturekit.studies import (
 from gesturekit.studies.media import OVERLAY_TEXT, beep_samples, overlay_box
 from tests.study_helpers import STUDY_SYSTEMS, tiny_study  # noqa: F401
 
+SECRET = "5ec7e7" * 8
+
 
 @pytest.fixture(scope="module")
 def study(tiny_study, tmp_path_factory):  # noqa: F811
     folder = tmp_path_factory.mktemp("design") / "study"
     shutil.copytree(tiny_study, folder)
-    design = init_study(folder, pairwise=True)
+    design = init_study(folder, pairwise=True, secret=SECRET)
     return design
 
 
@@ -58,6 +60,9 @@ MUTATIONS = [
     ("seed", -1, "seed"),
     ("seed", 1.5, "seed"),
     ("seed", "0", "seed"),
+    ("secret", "0", "secret"),
+    ("secret", "XYZ" * 20, "secret"),
+    ("secret", None, "secret"),
     ("title", "", "title"),
     ("title", "x" * 300, "title"),
     ("title", 5, "title"),
@@ -200,8 +205,16 @@ def test_init_refuses_to_overwrite_and_is_deterministic(study, tiny_study, tmp_p
         init_study(study.folder)
     other = tmp_path / "study"
     shutil.copytree(tiny_study, other)
-    init_study(other, pairwise=True)
+    init_study(other, pairwise=True, secret=SECRET)
     assert (other / "design.json").read_bytes() == (study.folder / "design.json").read_bytes()
+    # by default a random secret: page ids and the completion code nobody can work out from the seed
+    third = tmp_path / "third"
+    shutil.copytree(tiny_study, third)
+    fresh = init_study(third, pairwise=True)
+    assert fresh.secret != SECRET and fresh.completion_code != study.completion_code
+    assert {p.id for p in participant_pages(fresh, 1)}.isdisjoint(p.id for p in participant_pages(study, 1))
+    layout = [[(m.id, m.kind) for m in p.media] for p in participant_pages(study, 1)]
+    assert [[(m.id, m.kind) for m in p.media] for p in participant_pages(fresh, 1)] == layout
     for f in sorted((study.folder / "checks").iterdir()):
         assert (
             hashlib.sha256(f.read_bytes()).digest() == hashlib.sha256((other / "checks" / f.name).read_bytes()).digest()
@@ -222,6 +235,10 @@ def test_init_command(tiny_study, tmp_path, capsys):  # noqa: F811
     assert main(args) == 2  # exists
     assert "--force" in capsys.readouterr().err
     assert main(["study", "init", str(folder), "--no-rating", "--force"]) == 2
+    # replaced by a design without checks: the earlier check media go
+    assert main(["study", "init", str(folder), "--attention", "0", "--no-audio-check", "--force"]) == 0
+    assert not list((folder / "checks").iterdir())
+    assert participant_pages(load_design(folder), 1)[1].kind == "rating"
 
 
 def test_password_hash():

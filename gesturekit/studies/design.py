@@ -4,7 +4,9 @@
 ``order.csv`` and ``study.json``; like them it is kept from participants. Its fields::
 
     format, version      "gesturekit-study-design", 1
-    seed                 the study's seed (from study.json): page and check ids are HMACs keyed by it
+    seed                 the study's seed (from study.json): the check media and the layout follow from it
+    secret               64 random hex digits: page ids are HMACs keyed by it (so that a participant
+                         who knows the seed still cannot forge one), and the completion code
     title, instructions  shown on the first page (the paper's instructions by default)
     rating               enabled, scale ("likert7" 1..7 or "slider100" 0..100), prompts [{id, text}]
     pairwise             enabled, prompt, pairs ("all" or pairs per speech); answers -2 (clearly
@@ -123,7 +125,7 @@ class Page:
     Attributes
     ----------
     id : str
-        Opaque: HMAC(seed, ``"row:index"``), 12 hex digits.
+        Opaque: HMAC(design.json's ``secret``, ``"row:index"``), 12 hex digits.
     index : int
         0-based position in the sequence.
     kind : str
@@ -157,6 +159,7 @@ class StudyDesign:
     folder: Path
     raw: Mapping[str, Any]
     seed: int
+    secret: str
     title: str
     instructions: str
     rating: bool
@@ -244,7 +247,7 @@ def load_design(folder: str | os.PathLike) -> StudyDesign:
         raise ConfigError(f"is not valid JSON ({exc})", path=path) from None
     r = Reader(path)
     top = (
-        "format version seed title instructions rating pairwise attention audio_check checks questionnaire "
+        "format version seed secret title instructions rating pairwise attention audio_check checks questionnaire "
         "participants completion researcher"
     ).split()
     if not isinstance(raw, dict):
@@ -255,6 +258,9 @@ def load_design(folder: str | os.PathLike) -> StudyDesign:
     if raw["version"] != VERSION or isinstance(raw["version"], bool):
         raise r.fail("version", f"must be {VERSION}, got {shown(raw['version'])}")
     seed = r.integer(raw, "seed", "seed", 0)
+    secret = raw["secret"]
+    if not isinstance(secret, str) or not re.fullmatch(r"[0-9a-f]{32,128}", secret):
+        raise r.fail("secret", "must be 32..128 random lowercase hex digits (`gesturekit study init` makes it)")
     title = r.text(raw, "title", "title", limit=200)
     instructions = r.text(raw, "instructions", "instructions")
 
@@ -345,6 +351,7 @@ def load_design(folder: str | os.PathLike) -> StudyDesign:
         folder=folder,
         raw=raw,
         seed=seed,
+        secret=secret,
         title=title,
         instructions=instructions,
         rating=rating_on,
@@ -372,8 +379,8 @@ def load_design(folder: str | os.PathLike) -> StudyDesign:
 # ---- the pages ----------------------------------------------------------------------------------
 
 
-def _page_id(seed: int, row: int, index: int) -> str:
-    key = f"gesturekit-pages:{seed}".encode()
+def _page_id(secret: str, row: int, index: int) -> str:
+    key = f"gesturekit-pages:{secret}".encode()
     return hmac.new(key, f"{row}:{index}".encode(), hashlib.sha256).hexdigest()[:12]
 
 
@@ -457,7 +464,7 @@ def participant_pages(design: StudyDesign, row: int) -> list[Page]:
     specs.append({"kind": "done"})
     return [
         Page(
-            id=_page_id(design.seed, row, i),
+            id=_page_id(design.secret, row, i),
             index=i,
             kind=s["kind"],
             media=s.get("media", ()),
@@ -555,6 +562,7 @@ def init_study(
     redirect: str | None = None,
     overwrite: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    secret: str | None = None,
 ) -> StudyDesign:
     """Add a design to a stimuli folder: ``design.json`` and the check media in ``checks/``.
 
@@ -580,12 +588,14 @@ def init_study(
         Replace an existing design.json (and its check media).
     progress : callable(done, total), optional
         Frames of check video written.
+    secret : str, optional
+        The key of the page ids and the completion code (hex); 32 random bytes by default.
 
     Returns
     -------
     StudyDesign
-        As :func:`load_design` reads it back. The same folder and options give the same file (but for
-        the password's random salt).
+        As :func:`load_design` reads it back. The same folder, options and secret give the same file
+        and check media (but for the password's random salt).
     """
     from .media import make_audio_check, make_check_videos
 
@@ -612,7 +622,10 @@ def init_study(
         raise ConfigError("a mismatched_audio check needs two speeches; use --attention 0 or more speeches")
     if not 0 <= attention <= len(speeches):
         raise ConfigError(f"attention checks per participant must be 0..{len(speeches)} (one per speech at most)")
-    code = hmac.new(f"gesturekit-completion:{seed}".encode(), b"code", hashlib.sha256).hexdigest()[:10].upper()
+    secret = secrets.token_hex(32) if secret is None else secret
+    if not isinstance(secret, str) or not re.fullmatch(r"[0-9a-f]{32,128}", secret):
+        raise ConfigError("the secret must be 32..128 lowercase hex digits")
+    code = hmac.new(f"gesturekit-completion:{secret}".encode(), b"code", hashlib.sha256).hexdigest()[:10].upper()
     if redirect is not None:
         redirect = redirect.replace("{code}", code)
     checks = []
@@ -623,11 +636,17 @@ def init_study(
     audio = {"enabled": False}
     if audio_check:
         audio = {"enabled": True, **make_audio_check(folder, seed=seed)}
+    # check media of an earlier design that this one does not use (another seed, kinds, or none)
+    keep = {c["file"] for c in checks} | ({audio["file"]} if audio_check else set())
+    for f in sorted((folder / "checks").glob("*")) if (folder / "checks").is_dir() else ():
+        if re.fullmatch(r"[0-9a-f]{8,64}\.(mp4|wav)", f.name) and f"checks/{f.name}" not in keep:
+            f.unlink()
     animations = max(len(ids) for turns in order.values() for _, ids in turns)
     design = {
         "format": FORMAT,
         "version": VERSION,
         "seed": seed,
+        "secret": secret,
         "title": "Rating virtual character gestures",
         "instructions": default_instructions(animations, scale),
         "rating": {"enabled": bool(rating), "scale": scale, "prompts": [dict(p) for p in DEFAULT_PROMPTS]},
