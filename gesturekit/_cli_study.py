@@ -20,6 +20,12 @@ _ABOUT = {
         "check, a questionnaire, the completion code) and make the check media from the stimuli into "
         "STUDY/checks/. Edit design.json afterwards; it is validated whenever it is read.",
     ),
+    "serve": (
+        "serve the study to participants: pages, videos, the researcher's view",
+        "Start the participant web server (uvicorn): the entry URL takes Prolific's PROLIFIC_PID, STUDY_ID and "
+        "SESSION_ID; responses go to STUDY/responses.sqlite3 or the PostgreSQL database of --db; /researcher "
+        "(the design's password) shows progress and the responses as CSV. Binds 127.0.0.1 unless told.",
+    ),
     "export-hemvip": (
         "write the study as HEMVIP configs: one JSON per participant",
         "Write one HEMVIP (webMUSHRA) experiment config per participant row into OUT, pages of type video "
@@ -50,6 +56,7 @@ def add_study_parser(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="study_command", metavar="SUBCOMMAND")
     sub.required = True
     add_init(_sub(sub, "init"))
+    add_serve(_sub(sub, "serve"))
     add_export_hemvip(_sub(sub, "export-hemvip"))
     add_import_hemvip(_sub(sub, "import-hemvip"))
     add_analyse(_sub(sub, "analyse"))
@@ -112,6 +119,38 @@ def _study_init(args: argparse.Namespace) -> int:
     print(f"design: {design.folder / 'design.json'} ({design.participants} participants, {len(pages)} pages each)")
     print(f"check media: {len(design.checks)} videos" + (", the audio check" if design.audio_check else ""))
     print(f"completion code: {design.completion_code}")
+    return 0
+
+
+# ---- serve ---------------------------------------------------------------------------------------
+
+
+def add_serve(p: argparse.ArgumentParser) -> None:
+    """Options of ``study serve``."""
+    p.add_argument("study", metavar="STUDY", help="study folder with design.json (gesturekit study init)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
+    p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    p.add_argument("--db", metavar="URL", help="postgresql://user:pass@host/db (default: STUDY/responses.sqlite3)")
+    p.add_argument("--root-path", default="", help="URL prefix a reverse proxy serves the study under, e.g. /study")
+    p.add_argument("--forwarded-allow-ips", default="127.0.0.1", help="proxies whose X-Forwarded-* headers are trusted")
+
+
+def _study_serve(args: argparse.Namespace) -> int:
+    from .studies.design import load_design
+    from .studies.server import serve
+
+    design = load_design(args.study)  # errors in design.json before anything listens
+    url = f"http://{args.host}:{args.port}{args.root_path.rstrip('/')}/"
+    print(f"serving {design.title!r} ({design.participants} order rows) at {url}", flush=True)
+    print(f"participants: {url}?PROLIFIC_PID=...&STUDY_ID=...&SESSION_ID=...; researcher: {url}researcher", flush=True)
+    serve(
+        args.study,
+        host=args.host,
+        port=args.port,
+        db=args.db,
+        root_path=args.root_path.rstrip("/"),
+        forwarded_allow_ips=args.forwarded_allow_ips,
+    )
     return 0
 
 

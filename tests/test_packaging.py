@@ -118,6 +118,7 @@ def test_extras_are_the_documented_ones():
     assert set(declared(("all",))) == set(declared(tuple(extras)))
     assert "torch" in declared(("refiner",)) and "torch" not in declared()
     assert "streamlit" in declared(("app",)) and "streamlit" not in declared(("refiner", "render", "scale"))
+    assert {"starlette", "uvicorn", "jinja2", "psycopg", "httpx"} <= set(declared(("study",)))
     # the app refines and renders by default
     assert set(declared(("refiner", "render"))) <= set(declared(("app",)))
 

@@ -34,13 +34,14 @@ import math
 import os
 import re
 from collections import Counter
-from collections.abc import AsyncIterator, Iterator, Mapping
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+import anyio
+import anyio.to_thread
 from starlette.applications import Starlette
-from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 from starlette.responses import HTMLResponse, JSONResponse, RedirectResponse, Response, StreamingResponse
 from starlette.routing import Route
@@ -48,29 +49,13 @@ from starlette.routing import Route
 from .store import Store, open_store
 
 MAX_BODY = 64 * 1024
+DB_THREADS = 8
 COOKIE = "gk_study"
 EVENT_KINDS = ("play", "pause", "seeked", "ended")
 _PARAM = re.compile(r"^[A-Za-z0-9_.-]{1,128}$")
 _MEDIA_TYPES = {".mp4": "video/mp4", ".wav": "audio/wav", ".webm": "video/webm", ".m4a": "audio/mp4"}
-_CHUNK = 256 * 1024
+_CHUNK = 1024 * 1024
 TEMPLATES = Path(__file__).parent / "templates"
-
-
-def _get(obj: Any, key: str, default: Any = None) -> Any:
-    """``obj[key]`` or ``obj.key``: the design's parts may be mappings or dataclasses."""
-    if obj is None:
-        return default
-    if isinstance(obj, Mapping):
-        return obj.get(key, default)
-    return getattr(obj, key, default)
-
-
-def _row_count(design: Any) -> int:
-    rows = _get(design, "participants")
-    if isinstance(rows, int):
-        return rows
-    values = {int(_get(r, "participant")) for r in rows}
-    return max(values) if values else 0
 
 
 class _Refused(Exception):
@@ -114,9 +99,8 @@ def validate_submission(page: Any, body: Any, design: Any) -> tuple[dict, list, 
     if page.kind in ("rating", "pairwise", "audio_check") and set(media_ids) - ended:
         raise _Refused(422, "every video of the page must be played to its end first")
     if page.kind == "rating":
-        rating = _get(design, "rating", {})
-        prompts = [_get(p, "id") for p in _get(rating, "prompts", [])]
-        lo, hi = (0, 100) if _get(rating, "scale") == "slider100" else (1, 7)
+        prompts = [pid for pid, _ in design.prompts]
+        lo, hi = (0, 100) if design.scale == "slider100" else (1, 7)
         if set(answers) != set(media_ids):
             raise _Refused(422, "a rating page is answered for each of its videos")
         for value in answers.values():
@@ -131,17 +115,20 @@ def validate_submission(page: Any, body: Any, design: Any) -> tuple[dict, list, 
         if set(answers) != {"count"} or not _integer(answers["count"], 0, 100):
             raise _Refused(422, "the audio check is answered by a count")
     elif page.kind == "questionnaire":
-        questions = {_get(q, "id"): q for q in _get(design, "questionnaire", [])}
+        questions = {q["id"]: q for q in design.questionnaire}
         if set(answers) - set(questions):
             raise _Refused(422, "an answer to no question of the questionnaire")
         for qid, q in questions.items():
             value = answers.get(qid)
             if value is None or value == "":
-                if not _get(q, "optional", False):
+                if not q.get("optional", False):
                     raise _Refused(422, f"the question {qid!r} needs an answer")
-            elif _get(q, "type") == "number":
-                if not _number(value) or not _get(q, "min", -math.inf) <= value <= _get(q, "max", math.inf):
+            elif q["type"] == "number":
+                if not _number(value) or not q.get("min", -math.inf) <= value <= q.get("max", math.inf):
                     raise _Refused(422, f"the answer to {qid!r} is a number in its range")
+            elif q["type"] == "choice":
+                if value not in q["options"]:
+                    raise _Refused(422, f"the answer to {qid!r} is one of its options")
             elif not isinstance(value, str) or len(value) > 4000:
                 raise _Refused(422, f"the answer to {qid!r} is a text of at most 4000 characters")
     elif answers:
@@ -158,17 +145,21 @@ class StudyServer:
         self.folder = Path(folder)
         self.api = api
         self.design = api.load_design(self.folder)
-        # the design's parts as design.json holds them (a StudyDesign keeps the file's JSON as ``raw``)
-        self.spec = _get(self.design, "raw", self.design)
         self.store = store
-        self.rows = _row_count(self.design)
+        self.rows = int(self.design.participants)
         self.media = api.media_index(self.design)
         self._pages: dict[int, list] = {}
+        self._limiter = anyio.CapacityLimiter(DB_THREADS)
         import jinja2
 
         self.env = jinja2.Environment(
             loader=jinja2.FileSystemLoader(str(TEMPLATES)), autoescape=True, trim_blocks=True, lstrip_blocks=True
         )
+
+    async def _db(self, call: Any, *args: Any) -> Any:
+        """Run a store call in one of a few worker threads: each keeps its database connection, and a few
+        connections serve many participants better than one per request on a small machine."""
+        return await anyio.to_thread.run_sync(call, *args, limiter=self._limiter)
 
     def pages(self, row: int) -> list:
         if row not in self._pages:
@@ -180,7 +171,7 @@ class StudyServer:
 
     def render(self, name: str, request: Request, status: int = 200, **context: Any) -> HTMLResponse:
         base = request.scope.get("root_path", "").rstrip("/")
-        text = self.env.get_template(name).render(base=base, title=_get(self.spec, "title", "Study"), **context)
+        text = self.env.get_template(name).render(base=base, title=self.design.title, **context)
         return HTMLResponse(text, status_code=status, headers=_NO_STORE)
 
     # ------------------------------------------------------------ participants
@@ -194,7 +185,7 @@ class StudyServer:
     async def entry(self, request: Request) -> Response:
         base = request.scope.get("root_path", "").rstrip("/")
         cookie = request.cookies.get(COOKIE)
-        if cookie and await run_in_threadpool(self.store.participant, cookie) is not None:
+        if cookie and await self._db(self.store.participant, cookie) is not None:
             return RedirectResponse(f"{base}/p/{cookie}/", status_code=303)
         params = {}
         for key, name in (("PROLIFIC_PID", "prolific_pid"), ("STUDY_ID", "study_id"), ("SESSION_ID", "session_id")):
@@ -202,7 +193,7 @@ class StudyServer:
             if value is not None and not _PARAM.match(value):
                 return self.render("message.html", request, 400, heading="Invalid link", text="Please check the link.")
             params[name] = value
-        person, _ = await run_in_threadpool(lambda: self.store.start(self.rows, **params))
+        person, _ = await self._db(lambda: self.store.start(self.rows, **params))
         response = RedirectResponse(f"{base}/p/{person.token}/", status_code=303)
         response.set_cookie(
             COOKIE,
@@ -217,26 +208,22 @@ class StudyServer:
 
     async def page(self, request: Request) -> Response:
         token = self._token(request)
-        person = await run_in_threadpool(self.store.participant, token)
+        person = await self._db(self.store.participant, token)
         if person is None:
             raise _Refused(404, "no such participant")
         if person.status == "failed_checks":
             return self.render("ended.html", request)
         pages = self.to_answer(person.row)
         if person.answered >= len(pages):
-            await run_in_threadpool(self.store.finish, token)
-            completion = _get(self.spec, "completion", {})
-            return self.render(
-                "done.html", request, code=_get(completion, "code"), redirect=_get(completion, "redirect")
-            )
+            await self._db(self.store.finish, token)
+            return self.render("done.html", request, code=self.design.completion_code, redirect=self.design.redirect)
         page = pages[person.answered]
-        rating = _get(self.spec, "rating", {})
         config = {
             "submit": f"{request.scope.get('root_path', '').rstrip('/')}/p/{token}/pages/{page.id}",
             "kind": page.kind,
             "media": [m.id for m in page.media],
-            "scale": _get(rating, "scale", "likert7"),
-            "prompts": [_get(p, "id") for p in _get(rating, "prompts", [])],
+            "scale": self.design.scale,
+            "prompts": [pid for pid, _ in self.design.prompts],
         }
         return self.render(
             "page.html",
@@ -245,12 +232,8 @@ class StudyServer:
             token=token,
             number=person.answered + 1,
             total=len(pages),
-            rating=rating,
-            pairwise=_get(self.spec, "pairwise", {}),
-            questionnaire=_get(self.spec, "questionnaire", []),
-            instructions=_get(self.spec, "instructions", ""),
+            design=self.design,
             config=config,
-            get=_get,
         )
 
     async def submit(self, request: Request) -> Response:
@@ -268,17 +251,17 @@ class StudyServer:
             body = json.loads(b"".join(chunks))
         except (ValueError, UnicodeDecodeError) as exc:
             raise _Refused(400, "the body is not JSON") from exc
-        person = await run_in_threadpool(self.store.participant, token)
+        person = await self._db(self.store.participant, token)
         if person is None:
             raise _Refused(404, "no such participant")
         pages = self.to_answer(person.row)
         page = next((p for p in pages if p.id == request.path_params["page_id"]), None)
         if page is None:
             raise _Refused(404, "no such page")
-        answers, events, elapsed = validate_submission(page, body, self.spec)
+        answers, events, elapsed = validate_submission(page, body, self.design)
         failed = self.api.check_answer(page, answers) is False
-        max_failures = int(_get(_get(self.spec, "attention", {}), "max_failures", 1))
-        result = await run_in_threadpool(
+        max_failures = int(self.design.max_failures)
+        result = await self._db(
             lambda: self.store.submit(
                 token,
                 page.id,
@@ -307,16 +290,14 @@ class StudyServer:
     async def media_file(self, request: Request) -> Response:
         token = self._token(request)
         media = self.media.get(request.path_params["media_id"])
-        if media is None or await run_in_threadpool(self.store.participant, token) is None:
+        if media is None or await self._db(self.store.participant, token) is None:
             raise _Refused(404, "no such media")
         return ranged_file(Path(media.path), request.headers.get("range"))
 
     # ------------------------------------------------------------ researcher
 
     def _researcher(self, request: Request) -> None:
-        stored = _get(_get(self.spec, "researcher", {}), "password_sha256") or _get(
-            _get(self.spec, "researcher", {}), "password_hash"
-        )
+        stored = self.design.password_hash
         if not stored:
             raise _Refused(403, "the study has no researcher password: set one with gesturekit study init --password")
         header = request.headers.get("authorization", "")
@@ -331,8 +312,8 @@ class StudyServer:
 
     async def researcher(self, request: Request) -> Response:
         self._researcher(request)
-        people = await run_in_threadpool(self.store.participants_frame)
-        responses = await run_in_threadpool(self.store.responses_frame)
+        people = await self._db(self.store.participants_frame)
+        responses = await self._db(self.store.responses_frame)
         status = Counter(people["status"]) if len(people) else Counter()
         stimulus: Counter = Counter()
         per_page: Counter = Counter()
@@ -347,14 +328,14 @@ class StudyServer:
             "researcher.html",
             request,
             people=people.to_dict("records"),
-            status=status,
+            counts=status,
             stimulus=sorted(stimulus.items()),
             per_page=sorted(per_page.items()),
         )
 
     async def researcher_csv(self, request: Request) -> Response:
         self._researcher(request)
-        frame = await run_in_threadpool(self.store.responses_frame)
+        frame = await self._db(self.store.responses_frame)
         frame = frame.assign(answers=frame["answers"].map(json.dumps), events=frame["events"].map(json.dumps))
         out = io.StringIO()
         frame.to_csv(out, index=False)

@@ -23,6 +23,7 @@ failed attention checks do not count), the lowest on a tie.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -30,7 +31,6 @@ import secrets
 import sqlite3
 import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -110,6 +110,7 @@ class Store:
         self._postgres = url.startswith(("postgresql://", "postgres://"))
         self._local = threading.local()
         self._lock = threading.Lock()
+        self._write_lock = threading.Lock()
         self._connections: list[Any] = []
         with self._transaction(write=True) as cur:
             for statement in _SCHEMA:
@@ -118,6 +119,7 @@ class Store:
     # ------------------------------------------------------------ connections
 
     def _connect(self) -> Any:
+        conn: Any
         if self._postgres:
             import psycopg
 
@@ -138,7 +140,7 @@ class Store:
             conn = self._local.conn = self._connect()
         return conn
 
-    @contextmanager
+    @contextlib.contextmanager
     def _transaction(self, write: bool = False) -> Iterator[Any]:
         """A cursor inside one transaction, committed on leaving (rolled back on an error).
 
@@ -150,14 +152,17 @@ class Store:
                 with conn.cursor() as cur:
                     yield _Cursor(cur, postgres=True)
             return
-        cur = conn.cursor()
-        cur.execute("BEGIN IMMEDIATE" if write else "BEGIN")
-        try:
-            yield _Cursor(cur, postgres=False)
-        except BaseException:
-            conn.execute("ROLLBACK")
-            raise
-        conn.execute("COMMIT")
+        # this process's writers queue on a lock rather than in SQLite's busy handler, which polls
+        # with sleeps of up to 100 ms; other processes still wait through busy_timeout
+        with self._write_lock if write else contextlib.nullcontext():
+            cur = conn.cursor()
+            cur.execute("BEGIN IMMEDIATE" if write else "BEGIN")
+            try:
+                yield _Cursor(cur, postgres=False)
+            except BaseException:
+                conn.execute("ROLLBACK")
+                raise
+            conn.execute("COMMIT")
 
     def close(self) -> None:
         """Close every connection this store opened."""
