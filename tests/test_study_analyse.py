@@ -8,6 +8,9 @@
   the vectorised bootstrap equals a loop, and its intervals cover the true mean about 95 % of the time.
 - Excluded participants are left out; the report's files are written atomically, name every system,
   and are not replaced without force; an empty or too small study is a clear error.
+- On a real study folder (design, store): a participant failing both attention checks is excluded,
+  `gesturekit study analyse` writes the report with the right order, and the same responses read
+  from a CSV (as import-hemvip writes them) give the same numbers.
 """
 
 from __future__ import annotations
@@ -110,6 +113,11 @@ def test_bootstrap_is_a_vectorised_loop_and_covers_the_true_mean():
     assert (mean, median) == (pytest.approx(x.mean()), pytest.approx(np.median(x)))
     assert (lo, hi) == tuple(pytest.approx(v) for v in np.percentile(loop_means, [2.5, 97.5]))
     assert (dlo, dhi) == tuple(pytest.approx(v) for v in np.percentile(loop_medians, [2.5, 97.5]))
+    # drawn in blocks of 4 M values (here 4000 rounds, then 1000): the same as one draw of them all
+    big = np.random.default_rng(0).normal(size=1000)
+    _, lo, hi, *_ = A.bootstrap_mean_median(big, rounds=5000, seed=3)
+    one_draw = big[np.random.default_rng(3).integers(0, 1000, size=(5000, 1000))].mean(axis=1)
+    assert (lo, hi) == tuple(pytest.approx(v, abs=1e-12) for v in np.percentile(one_draw, [2.5, 97.5]))
     # coverage of the true mean (0) by the 95 % interval over 300 samples of 30 participants
     rng = np.random.default_rng(2)
     covered = 0
@@ -193,6 +201,18 @@ def test_the_report_names_every_system_and_is_not_replaced_without_force(tmp_pat
     assert (out / "report.md").read_bytes() == before
     write_report(analyse(sim.ratings, sim.pairwise, sim.exclusions, rounds=50), out, force=True)
     assert "50 rounds" in (out / "report.md").read_text()
+
+
+def test_simulated_answers_lie_on_the_scale():
+    sim = simulate_study((80, 50, 20), scale="slider100", noise_sd=15, participant_sd=10, careless=0.2, seed=8)
+    assert sim.ratings["value"].between(0, 100).all() and (sim.ratings["value"] % 1 == 0).all()
+    assert sim.pairwise["value"].isin([-2, -1, 0, 1, 2]).all()
+    assert len(sim.ratings) == 24 * 4 * 3 * 2 and len(sim.pairwise) == 24 * 4 * 3
+    # every pair is shown both ways round, about equally often
+    left_first = (sim.pairwise["system_left"] < sim.pairwise["system_right"]).mean()
+    assert 0.35 < left_first < 0.65
+    with pytest.raises(ConfigError, match="scale"):
+        simulate_study(scale="likert5")
 
 
 def test_the_analysis_is_deterministic():
@@ -313,3 +333,26 @@ def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_st
     assert main(["study", "analyse", str(folder), "--rounds", "200"]) == 2
     assert "--force" in capsys.readouterr().err
     assert (out / "report.md").read_text() == report
+    # the same responses as a CSV (as study import-hemvip writes them) give the same analysis
+    from gesturekit.studies.hemvip import write_responses_csv
+
+    write_responses_csv(frames[0], tmp_path / "responses.csv")
+    again = tmp_path / "again"
+    assert (
+        main(
+            [
+                "study",
+                "analyse",
+                str(folder),
+                "--responses",
+                str(tmp_path / "responses.csv"),
+                "--out",
+                str(again),
+                "--rounds",
+                "200",
+            ]
+        )
+        == 0
+    )
+    pd.testing.assert_frame_equal(pd.read_csv(again / "summary.csv"), summary)
+    pd.testing.assert_frame_equal(pd.read_csv(again / "tests.csv"), pd.read_csv(out / "tests.csv"))
