@@ -2,7 +2,7 @@
 
 A 2-speech x 3-system study (``tests/study_helpers.py``) gets a design with rating and pairwise pages,
 two attention checks per participant and the audio check (``gesturekit study init``). Its participant
-server (:func:`gesturekit.studies.server.create_app`, uvicorn on 127.0.0.1 on a free port, in a thread)
+server (``gesturekit study serve``, on 127.0.0.1 on a free port)
 is then used by headless Debian Chromium driven by Playwright (see ``tests/app_browser.py``; skipped,
 with the reason, where either is missing), each participant in a fresh browser context with its own
 Prolific id:
@@ -27,7 +27,10 @@ from __future__ import annotations
 
 import contextlib
 import json
-import threading
+import os
+import socket
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -60,27 +63,24 @@ _PLAY_TO_END = """async (id) => {
 
 
 @contextlib.contextmanager
-def study_server(folder: Path) -> Iterator[str]:
-    """The study's participant server on 127.0.0.1 (a free port) until the block ends; yields its URL."""
-    import uvicorn
-
-    from gesturekit.studies.server import create_app
-
+def study_server(folder: Path, log: Path) -> Iterator[str]:
+    """``gesturekit study serve`` on the study (127.0.0.1, a free port) until the block ends; yields its URL."""
     port = app_browser._free_port()
-    config = uvicorn.Config(create_app(folder), host="127.0.0.1", port=port, log_level="warning", lifespan="on")
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, name="study-server", daemon=True)
-    thread.start()
-    deadline = time.monotonic() + app_browser.TIMEOUT_S
-    while not server.started:
-        if not thread.is_alive() or time.monotonic() > deadline:
-            raise RuntimeError("the study server did not start")
-        time.sleep(0.05)
+    cmd = [sys.executable, "-m", "gesturekit", "study", "serve", str(folder), "--port", str(port)]
+    env = dict(os.environ, PYTHONPATH=str(app_browser.REPO))
+    with open(log, "wb") as out:
+        proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     try:
+        deadline = time.monotonic() + app_browser.TIMEOUT_S
+        while True:  # up once it accepts a connection (a request to / would start a participant)
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"the study server did not start:\n{log.read_text(errors='replace')[-3000:]}")
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
+                break
+            time.sleep(0.1)
         yield f"http://127.0.0.1:{port}"
     finally:
-        server.should_exit = True
-        thread.join(timeout=30)
+        app_browser.stop(proc)
 
 
 class Participant:
@@ -198,14 +198,16 @@ def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(stu
     design = load_design(study_folder)
     assert design.rating and design.pairwise and design.attention == 2 and design.audio_check is not None
 
-    with study_server(study_folder) as url, sync_playwright() as pw:
+    with study_server(study_folder, tmp_path / "serve.log") as url, sync_playwright() as pw:
         browser = pw.chromium.launch(
             executable_path=app_browser.find_chromium(),
             args=[*app_browser.CHROMIUM_FLAGS, "--autoplay-policy=no-user-gesture-required"],
         )
         try:
             first = Participant(browser, url, "pid-attentive", study_folder, attentive=True)
+            started = time.monotonic()
             assert first.run() == "done"
+            took = time.monotonic() - started
             code = first.page.locator("#completion-code").inner_text()
             second = Participant(browser, url, "pid-inattentive", study_folder, attentive=False)
             assert second.run() == "ended"
@@ -218,6 +220,8 @@ def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(stu
     kinds = ["instructions", "audio_check", "rating", "rating"] + ["pairwise"] * 6 + ["questionnaire"]
     assert first.seen == kinds and third.seen == kinds
     assert code == design.completion_code
+    with capsys.disabled():
+        print(f"\nparticipant 1: {len(first.seen)} pages answered in {took:.1f} s")
     assert len(first.locked) == 8  # 2 rating + 6 pairwise pages waited for their videos
     # ended at the second failed check (max_failures 1), the second rating page: no pairwise page reached
     assert second.seen == kinds[:4]
