@@ -44,6 +44,7 @@ if TYPE_CHECKING:
     import pandas as pd
     from streamlit.delta_generator import DeltaGenerator
 
+    from gesturekit.character.target import Character
     from gesturekit.export.bvh import BvhReport
     from gesturekit.export.gltf import GltfReport
     from gesturekit.motion import Motion
@@ -230,6 +231,7 @@ def show_skeletons(
     title: str | None = None,
     height: int = 520,
     audio: np.ndarray | None = None,
+    character: Character | None = None,
 ) -> None:
     """Show motions side by side in gesturekit's 3D viewer, a Streamlit component (:func:`viewer_component`).
 
@@ -239,14 +241,31 @@ def show_skeletons(
     ``audio``: the speech of the motions (mono float32 at 16 kHz, from their first frame);
     the viewer's play button then plays it and the shown frame follows it, so no separate
     player is needed. A rerun that shows the same motions keeps the drawn view as it is.
+    ``character``: the user's character (app/characters.py), drawn instead of the default body, with
+    the retargeting's report of each motion under the view.
     """
     from gesturekit.viz.viewer import viewer_args
 
-    args = viewer_args(motions, labels=labels, title=title, audio=audio)
+    args = viewer_args(motions, labels=labels, title=title, audio=audio, character=character)
     viewer_component()(**args, height=int(height), key=key, default=None)
+    if character is not None:
+        _retarget_summary(motions, labels, character)
+        return
     note = skeleton_note(motions)
     if note:
         st.caption(note)
+
+
+def _retarget_summary(motions: Motion | Sequence[Motion], labels: Sequence[str] | None, character: Character) -> None:
+    """Under a view of the user's character: how closely it follows each motion (the retargeting's report)."""
+    from gesturekit.character.retarget import retarget
+    from gesturekit.motion import Motion
+
+    shown = [motions] if isinstance(motions, Motion) else list(motions)
+    names = list(labels) if labels is not None and len(labels) == len(shown) else [""] * len(shown)
+    for name, m in zip(names, shown):
+        report = retarget(m, character).report
+        st.caption(escape_markdown(f"{name or 'Your character'}: {report.summary()}"))
 
 
 def skeleton_note(motions: Motion | Sequence[Motion]) -> str:

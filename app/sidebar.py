@@ -13,6 +13,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+import characters
 import resources
 import streamlit as st
 from display import allowed, escape_markdown, user_errors, warnings_shown
@@ -92,7 +93,8 @@ def show_database_label(db: MatchingDatabase, *, container: Any = st) -> None:
 def sidebar_database() -> MatchingDatabase:
     """The sidebar of every page; returns the user's database, opened.
 
-    Shows the database selector and the "build from a folder" expander. If
+    Shows the database selector, the "build from a folder" expander and the user's
+    character (:func:`characters.sidebar_character`). If
     the choice is the default demo database and it does not exist yet, it is
     built first (with a progress bar in the page).
 
@@ -105,6 +107,7 @@ def sidebar_database() -> MatchingDatabase:
     ss = st.session_state
     path = _select_database()
     _build_expander()
+    characters.sidebar_character()
     for kind, text in ss.pop(_FLASH_KEY, []):
         getattr(st.sidebar, kind)(text)
     allowed(path, what="database folder")  # before anything looks at the folder

@@ -12,11 +12,29 @@ from pathlib import Path
 # Each test process gets its own cache folder (set before anything imports numba).
 os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(tempfile.gettempdir(), f"gesturekit-tests-numba-{os.getpid()}"))
 
+import ast
+import threading
+
 import numpy as np
 import pytest
 
 from gesturekit.motion import AUDIO_SR, Motion, Take
 from gesturekit.skeleton import N_JOINTS
+
+# CPython 3.11 builds an AST with state shared between threads (python/cpython#106905): an app test's
+# script thread parsing (Streamlit's magic) while another thread parses (an import's assertion
+# rewriting) can fail with "SystemError: AST constructor recursion depth mismatch". One parse at a time.
+_AST_LOCK = threading.RLock()
+_ast_parse = ast.parse
+
+
+def _parse_one_at_a_time(*args, **kwargs):
+    with _AST_LOCK:
+        return _ast_parse(*args, **kwargs)
+
+
+ast.parse = _parse_one_at_a_time
+
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 ZEGGS_BVH = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"

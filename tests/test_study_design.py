@@ -29,7 +29,7 @@ from gesturekit.studies import (
     participant_pages,
     verify_password,
 )
-from gesturekit.studies.media import OVERLAY_TEXT, beep_samples, overlay_box
+from gesturekit.studies.media import OVERLAY_TEXT, beep_samples, draw_overlay, overlay_box
 from tests.study_helpers import STUDY_SYSTEMS, tiny_study  # noqa: F401
 
 SECRET = "5ec7e7" * 8
@@ -472,3 +472,16 @@ def test_check_answers(study):
             assert check_answer(page, {cid: "1"}) is False
     fake = Page(id="0" * 12, index=3, kind="rating", media=(), check=None)
     assert check_answer(fake, {"x": {"natural": 1}}) is None
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(40, 960), st.integers(40, 720), st.sampled_from(sorted(OVERLAY_TEXT.values())))
+def test_overlay_text_stays_in_its_box_at_any_size(width, height, text):
+    frame = np.full((height, width, 3), 120, np.uint8)
+    out = draw_overlay(frame, text)
+    x0, y0, x1, y1 = overlay_box(width, height)
+    changed = (out != frame).any(axis=-1)
+    inside = np.zeros_like(changed)
+    inside[y0:y1, x0:x1] = True
+    assert not changed[~inside].any()  # the rest of the frame as it was
+    assert (out[y0:y1, x0:x1] > 150).all(axis=-1).any()  # light letters on the dark band

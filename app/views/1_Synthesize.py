@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+import characters
 import display
 import numpy as np
 import pandas as pd
@@ -31,7 +32,7 @@ _BASE = "_synth.segments_base"  # the table the editor shows before the user's e
 _LAST_BOX = "_synth.last_box"  # the box selection already turned into a segment
 _FAILED = "_synth.failed_upload"  # (token, message) of an upload that could not be read
 _DERIVED = "_synth.figures"  # figures of the current result: {"run": n, name: figure}
-_VIDEO = "_synth.video"  # {"run": n, "bytes": mp4, "note": how long it took}
+_VIDEO = "_synth.video"  # {"run": n, "bytes": mp4, "note": how long it took, "character": its token or None}
 
 UPLOAD, EXAMPLE = "Upload a file", "Example speech"
 _INIT_LABELS = {"random": "random database frame (paper)", "rest": "rest pose"}
@@ -294,6 +295,10 @@ def video(record: dict) -> None:
     ss = st.session_state
     result = record["result"]
     done = ss.get(_VIDEO)
+    token = characters.character_token()
+    if done is not None and done.get("character") != token:  # made on another character: made again
+        ss.pop(_VIDEO)
+        done = None
     if done is not None and done["run"] == record["run"]:
         st.video(done["bytes"], format="video/mp4")
         st.caption(done["note"])
@@ -315,7 +320,7 @@ def video(record: dict) -> None:
 
         t0 = time.perf_counter()
         try:
-            data = gs.render_mp4(result, progress=progress)
+            data = characters.render_mp4(result, progress=progress)  # on the user's character, if any
         except GestureKitError as exc:
             bar.empty()
             st.error(f"Could not render the video: {display.escape_markdown(exc)}")
@@ -327,7 +332,7 @@ def video(record: dict) -> None:
             f"Rendered {frames} frames in {seconds:.1f} s ({frames / max(seconds, 1e-9):.0f} frames/s); "
             "download it below."
         )
-        ss[_VIDEO] = {"run": record["run"], "bytes": data, "note": note}
+        ss[_VIDEO] = {"run": record["run"], "bytes": data, "note": note, "character": token}
         st.video(data, format="video/mp4")
         st.caption(note)
 
@@ -360,7 +365,14 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
     with left:
         title = f"{result.source}: {result.n_frames} frames, {result.n_frames / result.motion.fps:.1f} s"
         # sent before the wrist plot is made, so the browser draws the 3D view meanwhile
-        display.show_skeletons(motions, labels=labels, title=title, key="synth.skeleton", audio=result.audio)
+        display.show_skeletons(
+            motions,
+            labels=labels,
+            title=title,
+            key="synth.skeleton",
+            audio=result.audio,
+            character=characters.current_character(),
+        )
     with right:
         st.markdown("**Speech**")
         st.caption(
@@ -383,6 +395,7 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         before_video=lambda col: col.caption("MP4: render it above"),
         glb_key=_GLB,
     )
+    characters.character_downloads(record, prefix="synth")
 
 
 def main() -> None:

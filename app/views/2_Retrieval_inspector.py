@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import characters
 import display
 import nav
 import sidebar
@@ -122,7 +123,12 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
             labels.append(f"#{r.position}")
         # the step's input speech is the clock: it is what every candidate was matched against
         display.show_skeletons(
-            motions, labels=labels, height=360, key="inspect.views", audio=gs.step_speech(result, step)
+            motions,
+            labels=labels,
+            height=360,
+            key="inspect.views",
+            audio=gs.step_speech(result, step),
+            character=characters.current_character(),
         )
 
     st.markdown("**Listen and choose**")
@@ -223,7 +229,14 @@ def compare_view(db: MatchingDatabase, record: dict) -> None:
         return
     motions = [r.refined_motion if r.refined_motion is not None else r.motion for r in done["results"]]
     labels = [f"k = {k}" for k in done["ks"]]
-    display.show_skeletons(motions, labels=labels, height=420, key="inspect.compare_views", audio=result.audio)
+    display.show_skeletons(
+        motions,
+        labels=labels,
+        height=420,
+        key="inspect.compare_views",
+        audio=result.audio,
+        character=characters.current_character(),
+    )
     table = gs.comparison_table(done["results"], db.thresholds)
     table["control_met"] = (100 * table["control_met"]).round()  # whole percent, one format for every row
     st.dataframe(table, hide_index=True, key="inspect.compare_table", column_config=COMPARE_COLUMNS)

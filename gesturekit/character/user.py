@@ -24,7 +24,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError, InputFileError
+from .._io import safe_filename
+from ..errors import ConfigError, GestureKitError, InputFileError
 from ..limits import read_json
 from ..paths import is_file
 from ._user_bvh import read_bvh_skeleton
@@ -32,7 +33,7 @@ from ._user_gltf import read_gltf_skeleton
 from .humanoid import REQUIRED, check_bone_map, match_names, missing_message, name_maps
 from .target import Character, FileSkeleton
 
-__all__ = ["CHARACTER_SUFFIXES", "read_character", "character_record"]
+__all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record"]
 
 #: File name suffixes :func:`read_character` reads.
 CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".bvh")
@@ -76,6 +77,51 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         skeleton = read_gltf_skeleton(p)
     found, matched_by, expected = _match(skeleton, user_map, p)
     return skeleton.character(found, matched_by, expected)
+
+
+def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes] | None = None) -> Character:
+    """Read an uploaded character file (and bone map) via a temporary folder, as :func:`read_character` reads one.
+
+    Parameters
+    ----------
+    name : str
+        The file name the user gave (only its sanitised form is used on disk; the suffix tells the kind).
+    data : bytes
+        The file's content.
+    bone_map : (str, bytes), optional
+        An uploaded JSON bone map: its name and content.
+
+    Returns
+    -------
+    Character
+        With :attr:`Character.path` the upload's name (the temporary copy is gone).
+
+    Raises
+    ------
+    GestureKitError
+        As :func:`read_character`; the message names the uploads, not their temporary copies.
+    """
+    import dataclasses
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="gesturekit-character-") as tmp:
+        path = Path(tmp) / safe_filename(Path(str(name)).name, default="character")
+        path.write_bytes(bytes(data))
+        map_path = None
+        if bone_map is not None:
+            (Path(tmp) / "map").mkdir()
+            map_path = Path(tmp) / "map" / safe_filename(Path(str(bone_map[0])).name, default="bones")
+            map_path.write_bytes(bytes(bone_map[1]))
+        try:
+            character = read_character(path, bone_map=map_path)
+        except GestureKitError as exc:
+            problem = exc.problem.replace(str(path), str(name))
+            if map_path is not None:
+                problem = problem.replace(str(map_path), str(bone_map[0] if bone_map else ""))
+            problem = problem.replace(tmp + os.sep, "")
+            shown = None if exc.path is None else bone_map[0] if bone_map and exc.path == str(map_path) else name
+            raise type(exc)(problem, path=shown) from None
+    return dataclasses.replace(character, path=Path(str(name)))
 
 
 def character_record(character: Character, *, bone_map: str | os.PathLike | dict | None = None) -> dict[str, Any]:

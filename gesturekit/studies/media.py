@@ -22,7 +22,7 @@ import os
 import subprocess
 import tempfile
 import wave
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -52,40 +52,54 @@ def overlay_box(width: int, height: int) -> tuple[int, int, int, int]:
 
 
 def draw_overlay(frame: np.ndarray, text: str) -> np.ndarray:
-    """``frame`` (H, W, 3) uint8 RGB with ``text`` in white on a dark band (:func:`overlay_box`)."""
+    """``frame`` (H, W, 3) uint8 RGB with ``text`` in white on a dark band (:func:`overlay_box`), on one
+    line or two, as large as fits."""
     from PIL import Image, ImageDraw, ImageFont
 
     h, w = frame.shape[:2]
     x0, y0, x1, y1 = overlay_box(w, h)
-    img = Image.fromarray(np.ascontiguousarray(frame))
-    draw = ImageDraw.Draw(img)
-    draw.rectangle((x0, y0, x1 - 1, y1 - 1), fill=(24, 24, 24))
-    size = max(8, (y1 - y0) // 3)
-    while True:
+    # drawn on the band alone: a text too long for a tiny frame is cut, never drawn outside
+    band = Image.new("RGB", (x1 - x0, y1 - y0), (24, 24, 24))
+    draw = ImageDraw.Draw(band)
+    words = text.split()
+    half = max(1, len(words) // 2)
+    layouts = [text, " ".join(words[:half]) + "\n" + " ".join(words[half:])] if len(words) > 1 else [text]
+    best = None
+    for size in range(max(8, (y1 - y0) // 2), 7, -1):
         try:
             font = ImageFont.load_default(size=size)
         except TypeError:  # Pillow before 10.1: one small bitmap font
             font = ImageFont.load_default()
-        left, top, right, bottom = draw.textbbox((0, 0), text, font=font)
-        if right - left <= (x1 - x0) * 0.94 or size <= 8:
+        for layout in layouts:
+            box = draw.multiline_textbbox((0, 0), layout, font=font, align="center")
+            if box[2] - box[0] <= (x1 - x0) * 0.94 and box[3] - box[1] <= (y1 - y0) * 0.9:
+                best = (layout, font, box)
+                break
+        if best is not None:
             break
-        size -= 1
-    at = ((x0 + x1 - (right - left)) / 2 - left, (y0 + y1 - (bottom - top)) / 2 - top)
-    draw.text(at, text, fill=(255, 255, 255), font=font)
-    return np.asarray(img)
+    if best is None:  # nothing fits: the smallest, on two lines
+        best = (layouts[-1], font, draw.multiline_textbbox((0, 0), layouts[-1], font=font, align="center"))
+    layout, font, (left, top, right, bottom) = best
+    at = ((x1 - x0 - (right - left)) / 2 - left, (y1 - y0 - (bottom - top)) / 2 - top)
+    draw.multiline_text(at, layout, fill=(255, 255, 255), font=font, align="center")
+    out = frame.copy()
+    out[y0:y1, x0:x1] = np.asarray(band)
+    return out
 
 
-def _frames(path: Path) -> Iterator[np.ndarray]:
+def _frames(path: Path) -> Generator[np.ndarray, None, None]:
     """The video's frames (H, W, 3) uint8, from the start again when they run out."""
     imageio_ffmpeg = require("imageio_ffmpeg", purpose="making check videos")
     while True:
         reader = imageio_ffmpeg.read_frames(f"file:{path}")
-        meta = next(reader)
-        w, h = meta["size"]
-        got = False
-        for raw in reader:
-            got = True
-            yield np.frombuffer(raw, np.uint8).reshape(h, w, 3)
+        try:
+            w, h = next(reader)["size"]
+            got = False
+            for raw in reader:
+                got = True
+                yield np.frombuffer(raw, np.uint8).reshape(h, w, 3)
+        finally:
+            reader.close()  # ends its ffmpeg when we stop early
         if not got:
             raise GestureKitError("has no video frames", path=path)
 
@@ -108,8 +122,8 @@ def _write_check(
         with open(Path(tmp) / "ffmpeg.log", "wb") as log:
             proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
             assert proc.stdin is not None
+            frames = _frames(source)
             try:
-                frames = _frames(source)
                 for _ in range(v["frames"]):
                     frame = next(frames)
                     if frame.shape[:2] != (v["height"], v["width"]):
@@ -117,6 +131,7 @@ def _write_check(
                     proc.stdin.write((frame if text is None else draw_overlay(frame, text)).tobytes())
                     tick()
             finally:
+                frames.close()
                 proc.stdin.close()
                 code = proc.wait()
         if code != 0:

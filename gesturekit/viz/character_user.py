@@ -7,8 +7,8 @@ posed frame by frame by :meth:`~gesturekit.character.retarget.Retargeted.skinnin
 with the one linear blend of :mod:`gesturekit.character.skin`, and its own
 colours (:attr:`CharacterSkin.colors`) shaded by the shared Lambert rule
 (:func:`gesturekit.viz.character_render.shade`). A character without a body (a
-BVH skeleton) is drawn as tubes around its bones in the scheme's shirt colour
-(:func:`_bone_tubes`, which takes the arguments of the character layer's bone body to come).
+BVH skeleton) is drawn as :func:`gesturekit.character.bone_body.bone_body` in the
+scheme's colours, as the page draws it.
 
 The camera frames the bones that follow the motion (:meth:`UserBody.framing_points`):
 the pelvis, the bones at the motion's drawn joints and every bone below them,
@@ -23,20 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from ..character.look import part_colors
-from ..character.mesh import PARTS
+from ..character.bone_body import bone_body
 from ..character.retarget import Retargeted, retarget
 from ..character.skin import pose_skin
 from ..character.target import Character, CharacterSkin
 from ..motion import Motion
 from ..skeleton import JointPresence
 
-__all__ = ["TUBE_SIDES", "UserBody", "framed_bones", "skin_extent", "character_arrays", "character_from_arrays"]
-
-#: Sides of the tubes drawn around a bodiless character's bones.
-TUBE_SIDES = 10
-
-_RING = 5  # latitude rings of a joint's ball
+__all__ = ["UserBody", "framed_bones", "framing_points", "skin_extent", "character_arrays", "character_from_arrays"]
 
 
 def framed_bones(character: Character, presence: JointPresence) -> np.ndarray:
@@ -83,14 +77,14 @@ class UserBody:
     retargeted : Retargeted
         The character posed by the motion.
     skin : CharacterSkin
-        The character's own body, or tubes around its bones (:func:`_bone_tubes`).
+        The character's own body, or capsules around its bones (:func:`~gesturekit.character.bone_body.bone_body`).
     """
 
     def __init__(self, motion: Motion, character: Character, scheme: str):
         self.motion = motion
         self.retargeted: Retargeted = retarget(motion, character)
         has_body = character.skin is not None and len(character.skin.faces) > 0
-        self.skin: CharacterSkin = character.skin if has_body else _bone_tubes(character, scheme=scheme)  # type: ignore[assignment]
+        self.skin: CharacterSkin = character.skin if has_body else bone_body(character, scheme=scheme)  # type: ignore[assignment]
         self._matrices = self.retargeted.skinning()
         from .character_render import srgb_to_linear
 
@@ -125,106 +119,40 @@ class UserBody:
         return shade(self._pose(frame)[1], self._albedo)
 
     def framing_points(self) -> np.ndarray:
-        """What the camera frames, shape (frames, 8 n + 1, 3), metres: the corners of each framed bone's box
-        of skin (:func:`framed_bones` but the pelvis, :func:`skin_extent`) carried by the bone's turn
-        (:meth:`Retargeted.turns`), and the pelvis itself (the frame's foot, as the waist is our character's)."""
-        ch = self.retargeted.character
-        framed = framed_bones(ch, self.motion.presence)
-        framed[ch.pelvis] = False
-        bones = np.flatnonzero(framed)
-        lo, hi = skin_extent(self.skin, ch.rest_position)
-        pick = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], dtype=bool)  # (8 corners, 3 axes)
-        corners = np.where(pick[None], hi[bones, None], lo[bones, None])  # (n, 8, 3)
-        pos = self.retargeted.position
-        turned = np.einsum("tnab,nkb->tnka", self.retargeted.turns()[:, bones], corners)
-        grown = pos[:, bones, None, :] + turned
-        return np.concatenate([grown.reshape(len(pos), -1, 3), pos[:, [ch.pelvis]]], axis=1)
+        """What the camera frames: :func:`framing_points` of this motion on the character."""
+        return framing_points(self.retargeted, self.skin, self.motion.presence)
 
 
-def _bone_tubes(character: Character, *, scheme: str) -> CharacterSkin:
-    """Tubes around a bodiless character's bones (parent to child) and a ball at every joint, each bound to
-    one bone (a tube to its parent bone), in the scheme's shirt colour: a stand-in body for a BVH skeleton."""
-    color = part_colors(scheme)[PARTS.index("shirt")]
-    pos = np.asarray(character.rest_position, dtype=np.float64)
-    height = max(float(np.ptp(pos[:, 1])), 1e-3)
-    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []  # vertices, normals, faces, bone
-    radius = np.zeros(character.n_bones)
-    for b, p in enumerate(character.parents):
-        if p < 0:
-            continue
-        axis = pos[b] - pos[p]
-        length = float(np.linalg.norm(axis))
-        if length < 1e-4 * height:
-            continue
-        r = float(np.clip(0.15 * length, 0.006 * height, 0.025 * height))
-        radius[p], radius[b] = max(radius[p], r), max(radius[b], r)
-        parts.append((*_tube(pos[p], pos[b], r), int(p)))
-    for j in np.flatnonzero(radius > 0):
-        parts.append((*_ball(pos[j], 1.1 * radius[j]), int(j)))
-    vertices, normals, faces, joints, start = [], [], [], [], 0
-    for v, n, f, bone in parts:
-        vertices.append(v)
-        normals.append(n)
-        faces.append(f + start)
-        joints.append(np.full(len(v), bone))
-        start += len(v)
-    n_v = start
-    bone_of_vertex = np.concatenate(joints) if joints else np.zeros(0, np.int64)
-    joint4 = np.zeros((n_v, 4), dtype=np.int64)
-    joint4[:, 0] = bone_of_vertex
-    weights = np.zeros((n_v, 4), dtype=np.float32)
-    weights[:, 0] = 1.0
-    return CharacterSkin(
-        vertices=np.concatenate(vertices).astype(np.float32) if parts else np.zeros((0, 3), np.float32),
-        normals=np.concatenate(normals).astype(np.float32) if parts else np.zeros((0, 3), np.float32),
-        faces=np.concatenate(faces).astype(np.int64) if parts else np.zeros((0, 3), np.int64),
-        joints=joint4,
-        weights=weights,
-        colors=np.tile(np.asarray(color, dtype=np.float32), (n_v, 1)),
-    )
+def framing_points(retargeted: Retargeted, skin: CharacterSkin, presence: JointPresence) -> np.ndarray:
+    """What the camera frames of a retargeted character, the same for the MP4 and the page.
 
+    Parameters
+    ----------
+    retargeted : Retargeted
+        The character posed by a motion.
+    skin : CharacterSkin
+        The body drawn (the character's own, or its bone body).
+    presence : JointPresence
+        The motion's joints (which are drawn).
 
-def _frame(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors across the unit direction ``d``."""
-    helper = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    u = np.cross(helper, d)
-    u /= np.linalg.norm(u)
-    return u, np.cross(d, u)
-
-
-def _tube(a: np.ndarray, b: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """An open tube of :data:`TUBE_SIDES` sides from ``a`` to ``b``: vertices, normals (V, 3), faces (F, 3),
-    counter-clockwise seen from outside."""
-    d = (b - a) / np.linalg.norm(b - a)
-    u, v = _frame(d)
-    theta = 2 * np.pi * np.arange(TUBE_SIDES) / TUBE_SIDES
-    ring = np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * v  # (S, 3)
-    vertices = np.concatenate([a + r * ring, b + r * ring])
-    k = np.arange(TUBE_SIDES)
-    k1 = (k + 1) % TUBE_SIDES
-    s = TUBE_SIDES
-    faces = np.concatenate([np.stack([k, k1, s + k1], 1), np.stack([k, s + k1, s + k], 1)])
-    return vertices, np.concatenate([ring, ring]), faces
-
-
-def _ball(c: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A ball of :data:`TUBE_SIDES` meridians and :data:`_RING` rings around ``c``: vertices, normals, faces
-    (counter-clockwise seen from outside)."""
-    s = TUBE_SIDES
-    lat = np.pi * np.arange(1, _RING + 1) / (_RING + 1) - np.pi / 2  # rings from the bottom up, poles apart
-    lon = 2 * np.pi * np.arange(s) / s
-    across, y = np.cos(lat)[:, None], np.repeat(np.sin(lat)[:, None], s, 1)
-    ring = np.stack([across * np.cos(lon), y, -across * np.sin(lon)], -1).reshape(-1, 3)
-    normals = np.concatenate([ring, [[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]]])
-    bottom, top = len(ring), len(ring) + 1
-    k = np.arange(s)
-    k1 = (k + 1) % s
-    last = (_RING - 1) * s
-    faces = [np.stack([np.full(s, bottom), k1, k], 1), np.stack([np.full(s, top), last + k, last + k1], 1)]
-    for i in range(_RING - 1):
-        lo, hi = i * s, (i + 1) * s
-        faces += [np.stack([lo + k, lo + k1, hi + k1], 1), np.stack([lo + k, hi + k1, hi + k], 1)]
-    return c + r * normals, normals, np.concatenate(faces)
+    Returns
+    -------
+    np.ndarray, shape (frames, 8 n + 1, 3)
+        Metres: the corners of each framed bone's box of skin (:func:`framed_bones` but the pelvis,
+        :func:`skin_extent`) carried by the bone's turn (:meth:`Retargeted.turns`), and the pelvis itself
+        (the frame's foot, as the waist is our character's).
+    """
+    ch = retargeted.character
+    framed = framed_bones(ch, presence)
+    framed[ch.pelvis] = False
+    bones = np.flatnonzero(framed)
+    lo, hi = skin_extent(skin, ch.rest_position)
+    pick = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], dtype=bool)  # (8 corners, 3 axes)
+    corners = np.where(pick[None], hi[bones, None], lo[bones, None])  # (n, 8, 3)
+    pos = retargeted.position
+    turned = np.einsum("tnab,nkb->tnka", retargeted.turns()[:, bones], corners)
+    grown = pos[:, bones, None, :] + turned
+    return np.concatenate([grown.reshape(len(pos), -1, 3), pos[:, [ch.pelvis]]], axis=1)
 
 
 # ---- a character through a job file ------------------------------------------------------------

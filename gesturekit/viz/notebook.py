@@ -98,8 +98,9 @@ def character_view(
     height : int
         Height of the drawing, pixels.
     **view
-        ``labels``, ``fps``, ``title``, ``max_frames``, ``spacing``, ``neutral``: as for
-        :func:`gesturekit.viz.viewer.viewer_data`.
+        ``labels``, ``fps``, ``title``, ``max_frames``, ``spacing``, ``neutral``, ``character``
+        (a user's character, :func:`gesturekit.character.user.read_character`, that every motion is
+        retargeted onto and drawn as): as for :func:`gesturekit.viz.viewer.viewer_data`.
 
     Returns
     -------

@@ -49,11 +49,14 @@ import numpy.typing as npt
 from ..character import look
 from ..character.mesh import build_mesh
 from ..character.paint import EMPTY_BODY, paint
+from ..character.retarget import retarget
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
+from ..character.target import Character
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS
 from ._plotly import _frames_at, _motions_and_labels, _time_grid
+from .character_page import framed_points, page_character
 from .web.build import SHELL, bundle
 
 if TYPE_CHECKING:
@@ -145,6 +148,7 @@ class ViewOptions(TypedDict, total=False):
     max_frames : int
     spacing : float or None
     neutral : bool
+    character : Character or None
         As for :func:`viewer_data` (which names them, with their defaults).
     """
 
@@ -154,6 +158,7 @@ class ViewOptions(TypedDict, total=False):
     max_frames: int
     spacing: float | None
     neutral: bool
+    character: Character | None
 
 
 class ViewerArgs(TypedDict):
@@ -247,6 +252,7 @@ def viewer_data(
     max_frames: int = VIEWER_MAX_FRAMES,
     spacing: float | None = None,
     neutral: bool = False,
+    character: Character | None = None,
 ) -> dict:
     """What :func:`skeleton_viewer` draws, as a JSON-ready dict.
 
@@ -267,6 +273,12 @@ def viewer_data(
     neutral : bool
         Every motion in :data:`gesturekit.character.look.NEUTRAL`'s colours (else the k-th takes
         :func:`~gesturekit.character.look.scheme_for` ``(k)``).
+    character : Character, optional
+        A user's character (:func:`gesturekit.character.user.read_character`): every motion is
+        retargeted onto it (:func:`gesturekit.character.retarget.retarget`) and drawn as that
+        character, its mesh and colours (a character without a mesh as
+        :func:`gesturekit.character.bone_body.bone_body` in the motion's scheme), framed on its
+        pelvis, matched bones and head (see :mod:`gesturekit.viz.character_page`).
 
     Returns
     -------
@@ -288,7 +300,10 @@ def viewer_data(
         shown frame, shape (shown frames, 55, 4), xyzw quaternions times
         :data:`QUATERNION_SCALE` as int16) and ``root`` (the root's position per shown frame,
         shape (shown frames, 3), metres). Arrays are typed-array specs (``dtype``, ``bdata``,
-        ``shape``).
+        ``shape``). With ``character``, ``rig`` holds its bones instead of our 55 joints
+        (:func:`gesturekit.viz.character_page.page_character`), ``colors`` its palette and ``derived`` is empty;
+        a motion whose mesh is the first motion's has ``mesh`` ``{"shared": 0}`` (the page, and
+        :func:`read_viewer_data`, take the first's).
 
     Raises
     ------
@@ -299,13 +314,24 @@ def viewer_data(
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer", drawn=True)
     grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
     shown = [Motion(m.positions[_frames_at(m, times)], m.fps, m.presence) for m in motions]
-    # framed on what is drawn: joints not in the data have no body
-    drawn = [s.positions[:, np.array([st != "absent" for st in s.presence.status])] for s in shown]
+    if character is not None:
+        posed = [retarget(s, character) for s in shown]
+        drawn = [framed_points(r) for r in posed]
+    else:
+        # framed on what is drawn: joints not in the data have no body
+        drawn = [s.positions[:, np.array([st != "absent" for st in s.presence.status])] for s in shown]
     offsets, box = look.stage_layout(drawn, spacing=spacing)
-    out = []
+    out: list[dict] = []
     for i, (label, m, dx) in enumerate(zip(labels, shown, offsets)):
-        spec = {"label": label or "", "offset": float(dx), "derived": list(m.presence.names(DERIVED))}
-        spec.update(_character(m, look.scheme_for(i, neutral=neutral)))
+        scheme = look.scheme_for(i, neutral=neutral)
+        if character is not None:
+            spec = {"label": label or "", "offset": float(dx), "derived": []}
+            spec.update(page_character(posed[i], scheme=scheme))
+            if i and spec["mesh"] == out[0]["mesh"]:  # one character side by side: its mesh sent once
+                spec["mesh"] = {"shared": 0}
+        else:
+            spec = {"label": label or "", "offset": float(dx), "derived": list(m.presence.names(DERIVED))}
+            spec.update(_character(m, scheme))
         out.append(spec)
     note = ""
     if step > 1:
@@ -379,7 +405,8 @@ def read_viewer_data(page: str) -> dict:
         shape (frames, 55, 4), the int16 divided by :data:`QUATERNION_SCALE`), each motion
         with ``points``: its joints where the page puts them (forward kinematics of the rig
         with the rotations and root positions, shifted by the offset), float64, shape
-        (frames, 55, 3), metres; ``key``, the page's key; ``audio``, the embedded speech
+        (frames, 55, 3), metres (a user's character: (frames, B, 3), its bones); a mesh shared with
+        the first motion is that motion's mesh; ``key``, the page's key; ``audio``, the embedded speech
         (float64 samples in [-1, 1], shape (samples,)) or None; ``audio_sr`` its rate (Hz) or None.
     """
     start = page.index(f'id="{_DATA_ID}">') + len(f'id="{_DATA_ID}">')
@@ -396,6 +423,8 @@ def read_viewer_data(page: str) -> dict:
 def _decoded(data: dict) -> dict:
     """:func:`viewer_data`'s dict with its arrays decoded and each motion's ``points`` (see :func:`read_viewer_data`)."""
     for m in data["motions"]:
+        if "shared" in m["mesh"]:
+            m["mesh"] = data["motions"][m["mesh"]["shared"]]["mesh"]
         for group in ("rig", "mesh"):
             for name, value in m[group].items():
                 if isinstance(value, dict):
@@ -506,7 +535,7 @@ def skeleton_viewer(
         A name for the page (``data-key`` of its body), by which pages and tests find it.
     **view
         :class:`ViewOptions` (``labels``, ``fps``, ``title``, ``max_frames``, ``spacing``,
-        ``neutral``), passed on to :func:`viewer_data`.
+        ``neutral``, ``character``), passed on to :func:`viewer_data`.
 
     Returns
     -------

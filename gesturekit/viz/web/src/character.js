@@ -30,10 +30,10 @@ export function decode(spec) {
 
 /** The characters of the data's motions, each in its own group shifted along X. */
 export function buildCharacters(data) {
-  return data.motions.map((m) => character(m));
+  return data.motions.map((m) => character(m, data.motions));
 }
 
-function character(m) {
+function character(m, motions) {
   const rig = m.rig, n = rig.parents.length;
   const offsets = decode(rig.offsets), rest = decode(rig.rest);
   const bones = [], inverses = [];
@@ -50,7 +50,8 @@ function character(m) {
     if (rig.parents[j] >= 0) bones[rig.parents[j]].add(bones[j]);
     else root = bones[j];
   }
-  const mesh = m.mesh, geometry = new BufferGeometry();
+  // a mesh {shared: k} is the k-th motion's (one user's character side by side)
+  const mesh = m.mesh.shared !== undefined ? motions[m.mesh.shared].mesh : m.mesh, geometry = new BufferGeometry();
   const parts = decode(mesh.parts), nv = parts.length;
   const colors = new Float32Array(3 * nv), linear = m.colors.map((c) => new Color().setRGB(c[0], c[1], c[2], SRGBColorSpace));
   for (let v = 0; v < nv; v++) {
