@@ -73,6 +73,12 @@ PAGES: tuple[Page, ...] = (
         ":material/record_voice_over:",
         "speak into the microphone and watch the body gesture as you talk; switch a control; keep the performance",
     ),
+    Page(
+        "views/6_Study.py",
+        "Study",
+        ":material/groups:",
+        "a running study: who took part, ratings per stimulus and condition, the analysis, CSV downloads",
+    ),
 )
 
 

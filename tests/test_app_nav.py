@@ -30,5 +30,6 @@ def test_the_pages_keep_their_titles_and_urls(nav):
         ("Database", "Database"),
         ("Study stimuli", "Study_stimuli"),
         ("Live", "Live"),
+        ("Study", "Study"),
     ]
     assert all(p.purpose and p.icon for p in nav.PAGES)
