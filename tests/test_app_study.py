@@ -149,8 +149,10 @@ def test_errors_are_messages(app_env, study_folder, tmp_path):  # noqa: F811
     with listening_on("127.0.0.1"):
         at = _page(tmp_path.parent / "elsewhere")
         assert any("outside the allowed folders" in e for e in _errors(at))
-        at = _page(study_folder)  # stimuli without a design yet
-        assert any("design.json" in e and "study init" in e for e in _errors(at))
+        at = _page(study_folder)  # stimuli without a design yet: the page offers to make it
+        assert not _errors(at) and any(b.label == "Write the design" for b in at.button)
+        at = _page(study_folder.parent)  # not a stimuli folder
+        assert any("manifest.csv" in e for e in _errors(at))
         init_study(study_folder, attention=0)
         at = _page(study_folder)  # a design, no participant yet
         assert not _errors(at) and any("No participant has started" in shown(i.value) for i in at.info)
@@ -160,3 +162,22 @@ def test_errors_are_messages(app_env, study_folder, tmp_path):  # noqa: F811
         at = _page(study_folder)
         assert not at.exception
         assert any(str(study_folder / "design.json") in e and "scale" in e for e in _errors(at))
+
+
+def test_the_design_is_made_on_the_page(app_env, study_folder):  # noqa: F811
+    """A stimuli folder without a design: the page's form writes it as ``gesturekit study init`` does."""
+    from gesturekit.studies.design import load_design, verify_password
+
+    with listening_on("127.0.0.1"):
+        at = _page(study_folder)
+        at.radio[0].set_value("slider100")
+        next(c for c in at.checkbox if c.label.startswith("Pairwise")).check()
+        next(n for n in at.number_input if n.label.startswith("Attention")).set_value(1)
+        next(t for t in at.text_input if t.label == "Researcher password").set_value("pw-12345678")
+        next(b for b in at.button if b.label == "Write the design").click().run()
+        assert not at.exception and not _errors(at), _errors(at)
+    design = load_design(study_folder)
+    assert design.scale == "slider100" and design.pairwise and design.rating
+    assert len(design.checks) >= 1
+    assert verify_password("pw-12345678", design.password_hash) and not verify_password("other", design.password_hash)
+    assert any("No participant has started" in shown(i.value) for i in at.info)

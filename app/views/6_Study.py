@@ -1,4 +1,4 @@
-"""The researcher's view of a running study: who took part, live counts, the analysis, CSV downloads.
+"""The researcher's view of a study: its design, who took part, live counts, the analysis, CSV downloads.
 
 Everything comes from the study folder (``design.json``, ``manifest.csv``) and its responses
 (the study folder's SQLite, or a PostgreSQL database by URL), read afresh on every run, so the
@@ -21,7 +21,7 @@ import streamlit as st
 from gesturekit.errors import ConfigError
 from gesturekit.paths import home
 from gesturekit.studies.analyse import exclusions, pairwise_table, ratings_table
-from gesturekit.studies.design import StudyDesign, load_design, verify_password
+from gesturekit.studies.design import StudyDesign, init_study, load_design, verify_password
 from gesturekit.studies.report import analyse
 from gesturekit.studies.store import SQLITE_NAME, open_store
 
@@ -59,9 +59,53 @@ def choose_folder() -> Path | None:
         st.info("Type the folder of a study.")
         return None
     path = display.allowed(Path(folder.strip()).expanduser(), what="study folder")
-    if not (path / "design.json").is_file():
-        raise ConfigError("no design.json here: make the study's design first with `gesturekit study init`", path=path)
+    if not (path / "manifest.csv").is_file():
+        raise ConfigError(
+            "not a study folder (no manifest.csv): make the stimuli first (Study stimuli page)", path=path
+        )
     return path
+
+
+def design_form(folder: Path, *, replace: bool) -> None:
+    """The study's design, made here as ``gesturekit study init`` makes it: the pages, the checks, the
+    researcher's password and where participants go when done."""
+    with st.form("studyrun.design"):
+        left, right = st.columns(2)
+        scale = left.radio(
+            "Rating scale",
+            ["likert7", "slider100"],
+            format_func={"likert7": "7 points (the paper's)", "slider100": "0-100 slider (HEMVIP's)"}.get,
+        )
+        rating = left.checkbox("Rating pages (every animation of a speech on one page)", value=True)
+        pairwise = left.checkbox("Pairwise pages (which of two fits the speech better)", value=False)
+        attention = right.number_input("Attention checks per participant", min_value=0, max_value=20, value=2)
+        audio_check = right.checkbox("Audio check first (count the beeps)", value=True)
+        password = right.text_input("Researcher password", type="password")
+        redirect = right.text_input("Redirect when done (optional)", placeholder="https://app.prolific.com/...{code}")
+        confirm = True
+        if replace:
+            confirm = st.checkbox("Replace the existing design (its page ids and completion code change)")
+        submitted = st.form_submit_button("Write the design")
+    if not submitted:
+        return
+    if not confirm:
+        st.warning("Tick 'Replace the existing design' to replace it.")
+        return
+    bar = st.progress(0.0, text="Making the attention checks")
+    init_study(
+        folder,
+        scale=scale,
+        rating=rating,
+        pairwise=pairwise,
+        attention=int(attention),
+        audio_check=audio_check,
+        password=password or None,
+        redirect=redirect.strip() or None,
+        overwrite=replace,
+        progress=lambda done, total: bar.progress(done / max(total, 1), text="Making the attention checks"),
+    )
+    bar.empty()
+    st.success("Design written: start the participants' server with `gesturekit study serve STUDY`.")
 
 
 def unlocked(design: StudyDesign) -> bool:
@@ -206,8 +250,18 @@ def main() -> None:
     )
     with display.user_errors():
         folder = choose_folder()
-        if folder is not None:
-            show(folder)
+        if folder is None:
+            return
+        if not (folder / "design.json").is_file():
+            st.subheader("Design")
+            st.caption("This stimuli folder has no design yet: choose its pages and checks.")
+            design_form(folder, replace=False)
+            if not (folder / "design.json").is_file():
+                return
+        elif not served_to_others():
+            with st.expander("Design"):
+                design_form(folder, replace=True)
+        show(folder)
 
 
 main()
