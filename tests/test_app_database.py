@@ -70,6 +70,7 @@ def test_home_opens_the_demo_database_and_labels_it_generated(app_env):
         "Database",
         "Study stimuli",
         "Live",
+        "Study",
     ]
 
 
