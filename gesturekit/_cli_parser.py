@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
+from ._cli_options import add_options
+
 __all__ = ["build_parser", "join_axis_values"]
 
 
@@ -77,28 +79,28 @@ def _add_choice(parser, flag: str, choices: list[str], help: str) -> None:
     parser.add_argument(flag, choices=choices, default=choices[0], help=help)
 
 
+#: The search's options that ``synthesize`` and ``evaluate`` share, by the class that declares them.
+SEARCH_OPTIONS = ("k", "segment", "seed")
+SYNTHESIS_OPTIONS = ("init", "mask_rule", "blend")  # mask_rule: SearchConfig's, passed on by SynthesisConfig
+
+
+def search_options() -> list[tuple[type, tuple[str, ...]]]:
+    """(configuration class, its fields) of the options :func:`_add_search` adds, in order."""
+    from .search import SearchConfig
+    from .synthesize import SynthesisConfig
+
+    return [
+        (SearchConfig, SEARCH_OPTIONS),
+        (SynthesisConfig, ("init",)),
+        (SearchConfig, ("mask_rule",)),
+        (SynthesisConfig, ("blend",)),
+    ]
+
+
 def _add_search(parser, *, seed: str) -> None:
     """The options of the search that ``synthesize`` and ``evaluate`` share; ``seed``: what the seed seeds."""
-    parser.add_argument("--k", type=int, default=0, help="take the k-th best candidate of each step (default 0)")
-    parser.add_argument(  # --step: the option's earlier name
-        "--segment", "--step", dest="segment", type=int, default=8, help="frames per search step, N (default 8)"
-    )
-    parser.add_argument("--seed", type=int, default=0, help=f"seed of {seed} (default 0)")
-    _add_choice(
-        parser,
-        "--init-pose",
-        ["random", "rest"],
-        "initial pose: a random admissible database frame (the paper) or the rest pose",
-    )
-    _add_choice(
-        parser,
-        "--mask-rule",
-        ["ends", "all"],
-        "a control must hold at a window's first and last frame (ends: the paper) or every frame",
-    )
-    _add_choice(
-        parser, "--blend", ["none", "offset"], "none: the paper's hard joins; offset: a short fade at each join (ours)"
-    )
+    for cls, names in search_options():
+        add_options(parser, cls, names, helps={"seed": f"seed of {seed}"})
 
 
 def _add_exclusions(parser, *, out_of: str) -> None:
@@ -249,9 +251,10 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--db", help="matching database folder (default: the demo database)")
     y.add_argument("--out", default="out", help="output folder (default: out)")
     _add_search(y, seed="the random initial pose")
-    y.add_argument(  # --topk: the option's earlier name
-        "--record", "--topk", dest="record", type=int, default=10, help="candidates per step to record (default 10)"
-    )
+    from .search import SearchConfig
+    from .synthesize import SynthesisConfig
+
+    add_options(y, SearchConfig, ["record"])
     y.add_argument(
         "--control",
         help='control track: "0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric" '
@@ -266,15 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
         "default: a refiner trained on the database if there is one (DB/refiner, or the shipped "
         "one for the demo database), else none. The npz keeps both motions",
     )
-    y.add_argument(
-        "--refiner-keep-hz",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the "
-        "controls) and take the faster content from the refiner (default 2); 0: the refiner's "
-        "output as it is (the paper)",
-    )
+    add_options(y, SynthesisConfig, ["refiner_keep_hz"])
     y.add_argument(
         "--format",
         default="npz,bvh",
@@ -322,7 +317,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
     r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
-    r.add_argument("--seed", type=int, default=0, help="seed of the weights, batches and k draws (default 0)")
+    from .refine.train import TrainConfig
+
+    add_options(r, TrainConfig, ["seed"])
     _add_exclusions(r, out_of="training")
     r.add_argument(
         "--no-train-state",
@@ -330,27 +327,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="leave out the optimiser state at the end (a smaller folder that cannot be resumed)",
     )
     r.add_argument("--force", action="store_true", help="replace an existing refiner folder")
-    from .evaluate.baselines import SYSTEMS
-
     e = _command(sub, "evaluate")
     e.add_argument("--db", help="matching database folder (default: the demo database)")
-    e.add_argument(
-        "--holdout",
-        required=True,
-        metavar="TAKE[:START-END]",
-        help="held-out take, or time range of one in seconds (e.g. 067_Speech_2_x_1_0:50-68.8)",
-    )
-    e.add_argument(
-        "--systems", default=",".join(SYSTEMS), help=f"comma-separated systems (default: all of {','.join(SYSTEMS)})"
-    )
-    e.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
-    e.add_argument("--fgd-model", help="FGD autoencoder from `gesturekit train-fgd` (default: train one now)")
-    e.add_argument(
-        "--control",
-        help="control track of the controlled runs (seconds of the held-out speech); "
-        "default: six equal stretches asking for left hand low/high, slow/fast, symmetric/asymmetric",
-    )
-    e.add_argument("--beat-sigma", type=float, default=0.1, help="beat-consistency tolerance, seconds (default 0.1)")
+    from .evaluate.run import EvaluationConfig
+
+    add_options(e, EvaluationConfig, ["holdout", "systems", "refiner", "fgd_model", "control", "sigma"])
     _add_search(e, seed="the initial pose and the random baseline")
     e.add_argument("--out", default="evaluation", help="folder for the tables (default: evaluation)")
     e.add_argument("--force", action="store_true", help="replace existing tables")

@@ -1,4 +1,15 @@
-"""JSON forms of the configuration dataclasses: one way to write them and to read them back.
+"""Configuration dataclasses: their options' metadata, and their JSON forms.
+
+Every option a user sets is a field of a frozen configuration dataclass declared with
+:func:`option`, whose metadata (help, bounds, choices, unit) is the one source the
+command line's options (:mod:`gesturekit._cli_options`) and the app's widget limits
+(:func:`widget_limits`) are made from::
+
+    @dataclass(frozen=True)
+    class Example:
+        k: int = option(0, help="take the k-th best candidate", low=0)
+
+    options_of(Example)["k"].low  # 0
 
 Every configuration of gesturekit is a frozen dataclass saved as JSON with what
 it made (a synthesis, a refiner, a study). :func:`config_to_dict` writes one from
@@ -10,12 +21,26 @@ hold. The classes' own ``__post_init__`` does the rest of the checking.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable, Mapping
+import math
+import numbers
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
 from .errors import ConfigError
 
-__all__ = ["JsonConfig", "config_to_dict", "config_from_dict"]
+__all__ = [
+    "JsonConfig",
+    "config_to_dict",
+    "config_from_dict",
+    "Option",
+    "option",
+    "options_of",
+    "option_of",
+    "default_of",
+    "check_option",
+    "widget_limits",
+    "options_config",
+]
 
 C = TypeVar("C")
 J = TypeVar("J", bound="JsonConfig")
@@ -118,3 +143,254 @@ class JsonConfig:
     def from_dict(cls: type[J], d: Mapping) -> J:
         """Inverse of :meth:`to_dict`; unknown options raise :class:`~gesturekit.errors.ConfigError`."""
         return config_from_dict(cls, d, what=cls.OPTIONS_NAME)
+
+
+_KEY = "gesturekit.option"
+
+
+@dataclasses.dataclass(frozen=True)
+class Option:
+    """What a user is told about one option of a configuration, and what it may be.
+
+    Parameters
+    ----------
+    help : str
+        One line, as the command line's ``--help`` says it (without the default).
+    low, high : float, optional
+        Inclusive bounds of a number (None: unbounded on that side).
+    choices : tuple, optional
+        The values a choice may take.
+    unit : str, optional
+        The number's unit, e.g. ``"Hz"``, ``"s"``, ``"frames"``.
+    kind : type, optional
+        ``int``, ``float`` or ``str``: how the command line reads the value (default: the default's type).
+    flag : str, optional
+        The command-line flag (default ``--`` and the field's name with dashes).
+    aliases : tuple of str
+        Earlier names of the flag, still read.
+    metavar : str, optional
+        The value's name in ``--help``.
+    step : float, optional
+        The app's widget step (default 1 for integers).
+    limit : callable(context) -> float, optional
+        A tighter upper bound that depends on the data (e.g. a database's clip length),
+        applied by :func:`widget_limits` when it is given a context.
+    low_open : bool
+        ``low`` itself is refused (a positive number: ``low=0, low_open=True``).
+    default_help : str, optional
+        How ``--help`` says the default where its value does not (``"all cores"`` for None).
+    """
+
+    help: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple | None = None
+    unit: str | None = None
+    kind: type | None = None
+    flag: str | None = None
+    aliases: tuple[str, ...] = ()
+    metavar: str | None = None
+    step: float | None = None
+    limit: Callable[[Any], float] | None = None
+    low_open: bool = False
+    default_help: str | None = None
+
+    def bounds_text(self, integer: bool) -> str:
+        """``"an integer >= 0"``, ``"a number from 0 to 7.5"``: what a value must be, for messages."""
+        what = "an integer" if integer else "a number"
+        if self.low is not None and self.high is not None:
+            return f"{what} from {self.low:g} to {self.high:g}"
+        if self.low == 0 and self.low_open:
+            return f"a positive {what.split()[-1]}"
+        if self.low is not None:
+            return f"{what} {'>' if self.low_open else '>='} {self.low:g}"
+        if self.high is not None:
+            return f"{what} <= {self.high:g}"
+        return f"a finite {what.split()[-1]}"
+
+
+def option(
+    default: Any = dataclasses.MISSING,
+    *,
+    help: str,
+    default_factory: Callable[[], Any] | Any = dataclasses.MISSING,
+    compare: bool = True,
+    hash: bool | None = None,
+    **metadata: Any,
+) -> Any:
+    """A dataclass field that is a user's option, with its :class:`Option` metadata.
+
+    Parameters
+    ----------
+    default, default_factory
+        As :func:`dataclasses.field`'s.
+    help : str
+    compare, hash
+        As :func:`dataclasses.field`'s.
+    **metadata
+        The other fields of :class:`Option` (``low``, ``high``, ``choices``, ``unit``, ...).
+
+    Returns
+    -------
+    dataclasses.Field
+    """
+    meta = {_KEY: Option(help=help, **metadata)}
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory, compare=compare, hash=hash, metadata=meta)
+    return dataclasses.field(default=default, compare=compare, hash=hash, metadata=meta)
+
+
+def options_of(cls: type) -> dict[str, Option]:
+    """The options of a configuration class, field name -> :class:`Option`, in field order.
+
+    Parameters
+    ----------
+    cls : dataclass type
+
+    Returns
+    -------
+    dict of str -> Option
+        Fields declared without :func:`option` are left out.
+    """
+    return {f.name: f.metadata[_KEY] for f in dataclasses.fields(cls) if _KEY in f.metadata}
+
+
+def option_of(cls: type, name: str) -> Option:
+    """The :class:`Option` of the field ``name`` of ``cls``; KeyError if it is no option."""
+    return options_of(cls)[name]
+
+
+def default_of(cls: type, name: str) -> Any:
+    """The default value of the field ``name`` of ``cls`` (its factory's value where it has one)."""
+    for f in dataclasses.fields(cls):
+        if f.name == name:
+            if f.default_factory is not dataclasses.MISSING:
+                return f.default_factory()
+            if f.default is dataclasses.MISSING:
+                raise KeyError(f"{cls.__name__}.{name} has no default")
+            return f.default
+    raise KeyError(f"{cls.__name__} has no field {name!r}")
+
+
+def _integer(cls: type, name: str, opt: Option) -> bool:
+    kind = opt.kind
+    if kind is None:
+        default = default_of(cls, name)
+        kind = type(default) if default is not None else float
+    return kind is int
+
+
+def check_option(cls: type, name: str, value: Any, *, what: str | None = None) -> Any:
+    """``value`` checked against the option's metadata: its choices, or its type and bounds.
+
+    Parameters
+    ----------
+    cls : dataclass type
+    name : str
+        A field declared with :func:`option`.
+    value
+        None passes (an option not given).
+    what : str, optional
+        How the message names the option (default ``"Class.name"``; the command line: its flag).
+
+    Returns
+    -------
+    The value, integers as ``int`` and numbers as ``float``.
+
+    Raises
+    ------
+    ConfigError
+        ``"--k must be an integer >= 0, got -1"``.
+    """
+    opt = option_of(cls, name)
+    label = what or f"{cls.__name__}.{name}"
+    if value is None:
+        return value
+    if opt.choices is not None:
+        if value not in opt.choices:
+            raise ConfigError(f"{label} must be one of {', '.join(map(str, opt.choices))}, got {value!r}")
+        return value
+    integer = _integer(cls, name, opt)
+    if opt.kind is str or isinstance(default_of(cls, name), (str, tuple)):
+        return value  # text and tuples are checked by the class itself
+    ok = not isinstance(value, bool) and isinstance(value, numbers.Integral if integer else numbers.Real)
+    if ok:
+        above = opt.low is None or value > opt.low or (value == opt.low and not opt.low_open)
+        ok = math.isfinite(value) and above and (opt.high is None or value <= opt.high)
+    if not ok:
+        raise ConfigError(f"{label} must be {opt.bounds_text(integer)}, got {value!r}")
+    return int(value) if integer else float(value)
+
+
+def widget_limits(cls: type, name: str, *, context: Any = None) -> dict[str, Any]:
+    """What an input widget for the option ``name`` of ``cls`` allows, as plain values.
+
+    Parameters
+    ----------
+    cls : dataclass type
+    name : str
+    context : optional
+        What the option's data-dependent ``limit`` reads (e.g. the database searched); without
+        it that limit is not applied.
+
+    Returns
+    -------
+    dict
+        ``min``, ``max`` (None: unbounded), ``step`` (None for choices), ``default``, ``choices``
+        (a list, or None), ``help`` and ``unit``.
+    """
+    opt = option_of(cls, name)
+    high = opt.high
+    if context is not None and opt.limit is not None:
+        tighter = opt.limit(context)
+        high = tighter if high is None else min(high, tighter)
+    integer = opt.choices is None and _integer(cls, name, opt)
+    step = None if opt.choices is not None else (opt.step if opt.step is not None else (1 if integer else 0.1))
+
+    def number(x: float | None) -> float | int | None:
+        if x is None:
+            return None
+        return int(x) if integer else float(x)
+
+    return {
+        "min": number(opt.low),
+        "max": number(high),
+        "step": step,
+        "default": default_of(cls, name),
+        "choices": None if opt.choices is None else list(opt.choices),
+        "help": opt.help,
+        "unit": opt.unit,
+    }
+
+
+def options_config(cls: type[C], config: C | None, options: Mapping[str, Any]) -> C:
+    """``config`` (or the defaults of ``cls``) with the fields ``options`` replaced.
+
+    For functions that take a configuration and, for convenience, its fields as keywords.
+
+    Parameters
+    ----------
+    cls : dataclass type
+    config : cls instance, optional
+    options : mapping of str -> value
+        Fields of ``cls``.
+
+    Returns
+    -------
+    cls instance
+
+    Raises
+    ------
+    ConfigError
+        An option that is no field of ``cls``, or a field without default that is not given.
+    """
+    names = {f.name for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
+    unknown = set(options) - names
+    if unknown:
+        raise ConfigError(f"unknown {cls.__name__} options: {', '.join(sorted(unknown))}")
+    if config is not None:
+        return dataclasses.replace(config, **options)  # type: ignore[type-var]
+    try:
+        return cls(**options)
+    except TypeError as exc:  # a field without default, not given
+        raise ConfigError(f"{cls.__name__}: {exc}") from None

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ._cli_options import options_given
 from ._cli_parser import build_parser, join_axis_values
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
 from .paths import is_file
@@ -294,6 +295,16 @@ def _refiner_choice(given: str | None, db):
     return found
 
 
+def _search_options(args: argparse.Namespace) -> dict:
+    """The command's options of the search and the synthesis, as :class:`SynthesisConfig` keywords
+    (it passes the search's on), checked against the fields' bounds."""
+    from .search import SearchConfig
+    from .synthesize import SynthesisConfig
+
+    given = options_given(args)
+    return {**given[SearchConfig], **given[SynthesisConfig]}
+
+
 def _cmd_synthesize(args) -> int:
     from ._cli_character import check_target, read_character_option, write_character_files
     from ._io import safe_filename
@@ -336,17 +347,10 @@ def _cmd_synthesize(args) -> int:
         names = " and ".join(f.upper() if f == "bvh" else "glTF" for f in tree)
         raise ConfigError(f"synthesize writes a {names} of every result, and {exc.problem}", path=args.db) from None
     config = SynthesisConfig(
-        k=args.k,
-        segment=args.segment,
-        record=args.record,
-        seed=args.seed,
-        init=args.init_pose,
-        mask_rule=args.mask_rule,
-        blend=args.blend,
+        **_search_options(args),
         control=control,
         exclude_takes=tuple(args.exclude_take or ()),
         exclude_ranges=exclude_ranges,
-        **({} if args.refiner_keep_hz is None else {"refiner_keep_hz": args.refiner_keep_hz}),
     )
     if out.exists() and not out.is_dir():
         raise GestureKitError(f"{out}: is a file, not a folder; give --out a folder for the results")
@@ -424,7 +428,7 @@ def _cmd_train_refiner(args) -> int:
 
     require("torch", purpose="train-refiner")
     from .refine.data import PairsConfig
-    from .refine.train import preset, train_refiner
+    from .refine.train import TrainConfig, preset, train_refiner
     from .workspace import open_database
 
     if args.demo == bool(args.db):
@@ -445,7 +449,7 @@ def _cmd_train_refiner(args) -> int:
     data = None
     if not args.resume or args.exclude_take or args.exclude_range:
         data = PairsConfig(seed=args.seed, exclude_takes=tuple(args.exclude_take or ()), exclude_ranges=exclude_ranges)
-    train = replace(preset(args.preset).train, seed=args.seed)
+    train = replace(preset(args.preset).train, **options_given(args)[TrainConfig])
     with _stage_bars() as bar:
 
         def on_step(it, total, losses):
@@ -501,7 +505,7 @@ def _control_from_arg(text: str | None) -> str | None:
 
 
 def _cmd_evaluate(args) -> int:
-    from .evaluate.run import run_evaluation
+    from .evaluate.run import EvaluationConfig, run_evaluation
     from .synthesize import SynthesisConfig
     from .workspace import open_database
 
@@ -511,27 +515,15 @@ def _cmd_evaluate(args) -> int:
     if existing and not args.force:
         raise GestureKitError(f"{existing[0]}: exists already; add --force to replace the evaluation in {out}")
     _parse_holdouts([args.holdout])
-    _check_positive("--beat-sigma", args.beat_sigma, "time in seconds")
+    given = options_given(args)[EvaluationConfig]  # --beat-sigma checked before the database is read
     control = _control_from_arg(args.control)
     db = open_database(args.db)
     from .outputs import check_output
 
     check_output(out, "evaluation", overwrite=args.force, inputs=[db.path])  # before the long part
-    config = SynthesisConfig(
-        k=args.k, segment=args.segment, seed=args.seed, init=args.init_pose, mask_rule=args.mask_rule, blend=args.blend
-    )
+    config = EvaluationConfig(**{**given, "control": control, "synthesis": SynthesisConfig(**_search_options(args))})
     with _progress_bar(None, "step", "evaluating") as bar:
-        ev = run_evaluation(
-            db,
-            holdout=args.holdout,
-            systems=args.systems,
-            config=config,
-            control=control,
-            fgd_model=args.fgd_model,
-            refiner=args.refiner,
-            sigma=args.beat_sigma,
-            progress=lambda done, total, what: _advance(bar, done, total, what[-30:]),
-        )
+        ev = run_evaluation(db, config, progress=lambda done, total, what: _advance(bar, done, total, what[-30:]))
     _print(ev.to_markdown())
     written = ev.save(out, overwrite=args.force)
     _print(f"wrote {', '.join(str(p) for p in written)}")

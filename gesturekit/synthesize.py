@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, runtime_checkable
 
 import numpy as np
 
-from ._config import config_from_dict, config_to_dict
+from ._config import config_from_dict, config_to_dict, option, option_of
 from ._version import __version__
 from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
 from .control import ControlTrack, parse_control
@@ -104,13 +104,29 @@ class SynthesisConfig:
     """
 
     search: SearchConfig = field(default_factory=SearchConfig)
-    init: str = "random"
-    blend: str = "none"
-    blend_frames: int = 4
+    init: str = option(
+        "random",
+        help="initial pose: a random admissible database frame (the paper) or the rest pose",
+        choices=("random", "rest"),
+        flag="--init-pose",
+    )
+    blend: str = option(
+        "none", help="none: the paper's hard joins; offset: a short fade at each join (ours)", choices=BLEND_MODES
+    )
+    blend_frames: int = option(4, help="frames of the fade at each join (blend offset)", low=1, unit="frames")
     control: str = ""
     exclude_takes: tuple = ()
     exclude_ranges: tuple = ()
-    refiner_keep_hz: float = KEEP_BELOW_HZ
+    refiner_keep_hz: float = option(
+        KEEP_BELOW_HZ,
+        help="keep the k-NN motion's content slower than HZ (hand height, width, symmetry: the controls) and "
+        "take the faster content from the refiner; 0: the refiner's output as it is (the paper)",
+        low=0.0,
+        unit="Hz",
+        metavar="HZ",
+        step=0.5,
+        limit=lambda db: db.fps / 2,  # above the Nyquist frequency the k-NN motion is kept whole
+    )
     if TYPE_CHECKING:  # set by __init__: the control parsed once (not an option of its own)
         _track: ControlTrack = field(init=False, repr=False, compare=False)
 
@@ -140,13 +156,17 @@ class SynthesisConfig:
                 "the initial pose of a synthesis is chosen by init ('random' or 'rest'), not by search.init_pose"
             )
         hz = refiner_keep_hz
-        if isinstance(hz, bool) or not isinstance(hz, numbers.Real) or not (np.isfinite(hz) and hz >= 0):
+        if (
+            isinstance(hz, bool)
+            or not isinstance(hz, numbers.Real)
+            or not (np.isfinite(hz) and hz >= option_of(SynthesisConfig, "refiner_keep_hz").low)
+        ):
             raise ConfigError(f"refiner_keep_hz must be a frequency >= 0 (0: off), got {hz!r}")
-        if init not in ("random", "rest"):
+        if init not in option_of(SynthesisConfig, "init").choices:
             raise ConfigError(f"init must be 'random' or 'rest', got {init!r}")
-        if blend not in BLEND_MODES:
+        if blend not in option_of(SynthesisConfig, "blend").choices:
             raise ConfigError(f"blend must be one of {', '.join(BLEND_MODES)}, got {blend!r}")
-        if not isinstance(blend_frames, int) or blend_frames < 1:
+        if not isinstance(blend_frames, int) or blend_frames < option_of(SynthesisConfig, "blend_frames").low:
             raise ConfigError(f"blend_frames must be a positive integer, got {blend_frames!r}")
         track = control if isinstance(control, ControlTrack) else parse_control(control)  # validates
         takes, ranges = normalise_exclusions(exclude_takes, exclude_ranges)

@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._config import check_option, option, options_config
 from ..control import ControlTrack, Segment, parse_control, parse_time_range
 from ..errors import ConfigError, warn
 from ..features import LAYOUT
@@ -66,6 +67,7 @@ __all__ = [
     "held_out",
     "default_control_track",
     "Evaluation",
+    "EvaluationConfig",
     "run_evaluation",
     "evaluate",
     "markdown_table",
@@ -392,32 +394,19 @@ def _measure(out: SystemOutput, ref: HeldOut, onsets: np.ndarray, fgd_model: FGD
     return row
 
 
-def run_evaluation(
-    db: MatchingDatabase,
-    *,
-    holdout: Holdout | str,
-    systems: str | Sequence[str] = DEFAULT_SYSTEMS,
-    config: SynthesisConfig | None = None,
-    control: ControlTrack | str | None = None,
-    fgd_model: FGDModel | str | os.PathLike[str] | None = None,
-    refiner: MotionRefiner | str | os.PathLike[str] | None = None,
-    sigma: float = 0.1,
-    margin_s: float | None = None,
-    progress: Callable[[int, int, str], None] | None = None,
-) -> Evaluation:
-    """Synthesise a held-out part of a database with each system and measure every output.
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """Every option of an evaluation (:func:`run_evaluation`); ``evaluation.json`` records them.
 
     Parameters
     ----------
-    db : MatchingDatabase
-        With its takes' audio stored.
     holdout : Holdout or str
         ``"TAKE"`` or ``"TAKE:START-END"`` (seconds).
     systems : str or sequence of str
         Of :data:`gesturekit.evaluate.baselines.SYSTEMS`. A system that cannot run (``knn+cgan``
         without a refiner) is left out of the table with a :class:`GestureKitWarning` and a note.
-    config : SynthesisConfig, optional
-        k, step, seed, initial pose, mask rule, blending; its control and exclusions are replaced
+    synthesis : SynthesisConfig, optional
+        k, N, seed, initial pose, mask rule, blending; its control and exclusions are replaced
         by the evaluation's.
     control : ControlTrack or str, optional
         Control track of the controlled runs (seconds of the held-out speech); default
@@ -427,23 +416,76 @@ def run_evaluation(
     refiner : optional
         For ``knn+cgan``.
     sigma : float
-        Beat-consistency tolerance, seconds.
+        Beat-consistency tolerance, seconds (> 0).
     margin_s : float, optional
         See :func:`held_out`.
+    """
+
+    holdout: Holdout | str = option(
+        help="held-out take, or time range of one in seconds (e.g. 067_Speech_2_x_1_0:50-68.8)",
+        kind=str,
+        metavar="TAKE[:START-END]",
+    )
+    systems: str | Sequence[str] = option(DEFAULT_SYSTEMS, help="comma-separated systems", kind=str)
+    synthesis: SynthesisConfig | None = None
+    control: ControlTrack | str | None = option(
+        None,
+        help="control track of the controlled runs (seconds of the held-out speech)",
+        kind=str,
+        default_help="six equal stretches asking for left hand low/high, slow/fast, symmetric/asymmetric",
+    )
+    fgd_model: FGDModel | str | os.PathLike[str] | None = option(
+        None, help="FGD autoencoder from `gesturekit train-fgd`", kind=str, default_help="train one now"
+    )
+    refiner: MotionRefiner | str | os.PathLike[str] | None = option(
+        None, help="trained refiner folder, for knn+cgan", kind=str, default_help="none"
+    )
+    sigma: float = option(
+        0.1, help="beat-consistency tolerance, seconds", low=0.0, low_open=True, unit="s", flag="--beat-sigma"
+    )
+    margin_s: float | None = None
+
+    def __post_init__(self) -> None:
+        check_option(EvaluationConfig, "sigma", self.sigma)
+
+
+def run_evaluation(
+    db: MatchingDatabase,
+    config: EvaluationConfig | None = None,
+    *,
+    progress: Callable[[int, int, str], None] | None = None,
+    **options: Any,
+) -> Evaluation:
+    """Synthesise a held-out part of a database with each system and measure every output.
+
+    Parameters
+    ----------
+    db : MatchingDatabase
+        With its takes' audio stored.
+    config : EvaluationConfig, optional
+        What is held out, the systems, their synthesis options and the measures'.
     progress : callable(done, total, what), optional
+    **options
+        Fields of :class:`EvaluationConfig`, replacing those of ``config``
+        (``run_evaluation(db, holdout="take", systems="knn")``).
 
     Returns
     -------
     Evaluation
         Same inputs and seeds give the same numbers.
     """
+    if config is not None and not isinstance(config, EvaluationConfig):  # earlier versions': the synthesis's
+        config, options = None, {"synthesis": config, **options}
+    config = options_config(EvaluationConfig, config, options)
+    holdout, systems, control, sigma = config.holdout, config.systems, config.control, config.sigma
+    fgd_model, refiner = config.fgd_model, config.refiner
     import pandas as pd
 
     from ..synthesize import SynthesisConfig
 
     systems = parse_systems(systems)
-    ref = held_out(db, holdout, margin_s=margin_s)
-    base = config or SynthesisConfig()
+    ref = held_out(db, holdout, margin_s=config.margin_s)
+    base = config.synthesis or SynthesisConfig()
     base = replace(
         base,
         search=replace(base.search, pins={}),
@@ -526,11 +568,9 @@ def run_evaluation(
     return Evaluation(table, controls, ref, outputs, notes, settings)
 
 
-def evaluate(
-    db: MatchingDatabase, *, holdout: Holdout | str, systems: str | Sequence[str] = DEFAULT_SYSTEMS, **options: Any
-) -> pd.DataFrame:
+def evaluate(db: MatchingDatabase, config: EvaluationConfig | None = None, **options: Any) -> pd.DataFrame:
     """:func:`run_evaluation`'s table: one row per system, one column per measure."""
-    return run_evaluation(db, holdout=holdout, systems=systems, **options).table
+    return run_evaluation(db, config, **options).table
 
 
 # ---- writers ------------------------------------------------------------------------------------

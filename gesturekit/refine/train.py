@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .._config import JsonConfig
+from .._config import JsonConfig, option, option_of
 from .._io import atomic_write
 from .._version import __version__
 from ..database import MatchingDatabase
@@ -111,29 +111,29 @@ class TrainConfig(JsonConfig):
 
     OPTIONS_NAME = "training options"
 
-    iterations: int = 2000
-    batch_size: int = 100
-    lr: float = 1e-4
+    iterations: int = option(2000, help="critic iterations in total", low=1)
+    batch_size: int = option(100, help="windows per iteration", low=1)
+    lr: float = option(1e-4, help="Adam learning rate of both networks", low=0.0)
     betas: tuple = (0.0, 0.9)
-    gp_weight: float = 100.0
-    l1_weight: float = 0.1
-    l1_reduction: str = "window_sum"
-    generator_every: int = 5
-    checkpoint_every: int = 250
-    log_every: int = 10
-    seed: int = 0
+    gp_weight: float = option(100.0, help="weight of the gradient penalty", low=0.0)
+    l1_weight: float = option(0.1, help="weight of the L1 distance to the k-NN motion", low=0.0)
+    l1_reduction: str = option("window_sum", help="how the L1 distance is reduced", choices=("window_sum", "mean"))
+    generator_every: int = option(5, help="iterations per generator update", low=1)
+    checkpoint_every: int = option(250, help="iterations between checkpoints", low=1)
+    log_every: int = option(10, help="iterations per row of the loss log", low=1)
+    seed: int = option(0, help="seed of the weights, batches and k draws", low=0)
 
     def __post_init__(self):
         object.__setattr__(self, "betas", tuple(float(b) for b in self.betas))
         for name in ("iterations", "batch_size", "generator_every", "checkpoint_every", "log_every"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < option_of(TrainConfig, name).low:
                 raise ConfigError(f"{name} must be a positive integer, got {v!r}")
         if not self.lr > 0:
             raise ConfigError(f"lr must be positive, got {self.lr}")
         if len(self.betas) != 2 or not all(0 <= b < 1 for b in self.betas):
             raise ConfigError(f"betas must be two numbers in [0, 1), got {self.betas}")
-        if self.l1_reduction not in ("window_sum", "mean"):
+        if self.l1_reduction not in option_of(TrainConfig, "l1_reduction").choices:
             raise ConfigError(f"l1_reduction must be 'window_sum' or 'mean', got {self.l1_reduction!r}")
         if self.gp_weight < 0 or self.l1_weight < 0:
             raise ConfigError("gp_weight and l1_weight must not be negative")

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .._config import config_from_dict, config_to_dict
+from .._config import config_from_dict, config_to_dict, option, option_of
 from ..errors import ConfigError
 
 if TYPE_CHECKING:  # imported where the candidate table is made
@@ -54,21 +54,32 @@ class SearchConfig:
         continue from the pinned segment.
     """
 
-    k: int = 0
-    segment: int = 8
-    record: int = 10
-    seed: int = 0
+    k: int = option(0, help="take the k-th best candidate of each step", low=0)
+    segment: int = option(
+        8,
+        help="frames per search step, N",
+        low=1,
+        unit="frames",
+        aliases=("--step",),
+        limit=lambda db: db.clip_frames,  # a step copies a window of one clip
+    )
+    record: int = option(10, help="candidates per step to record", low=1, aliases=("--topk",))
+    seed: int = option(0, help="seed of the random initial pose", low=0)
     init_pose: str | tuple[float, ...] = "random"
-    mask_rule: str = "ends"
+    mask_rule: str = option(
+        "ends",
+        help="a control must hold at a window's first and last frame (ends: the paper) or every frame",
+        choices=("ends", "all"),
+    )
     pins: dict = field(default_factory=dict, hash=False)
 
     def __post_init__(self) -> None:
-        for name, low in (("k", 0), ("segment", 1), ("record", 1), ("seed", 0)):
-            value = getattr(self, name)
+        for name in ("k", "segment", "record", "seed"):
+            value, low = getattr(self, name), option_of(SearchConfig, name).low
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
                 raise ConfigError(f"SearchConfig.{name} must be an integer >= {low}, got {value!r}")
             object.__setattr__(self, name, int(value))
-        if self.mask_rule not in ("ends", "all"):
+        if self.mask_rule not in option_of(SearchConfig, "mask_rule").choices:
             raise ConfigError(f"SearchConfig.mask_rule must be 'ends' or 'all', got {self.mask_rule!r}")
         init = self.init_pose
         if isinstance(init, str):
