@@ -67,16 +67,21 @@ def add_options(
         text = (helps or {}).get(name, opt.help)
         if opt.choices is not None:
             kwargs: dict[str, Any] = {"choices": list(opt.choices)}
+        elif opt.nargs or opt.append:  # a list of values: None when not given
+            kwargs = {"nargs": opt.nargs} if opt.nargs else {"action": "append"}
+            default = None
         elif isinstance(default, tuple):  # written as text (640x480, a,b,c); the command reads it
             kwargs = {"type": str}
             default = _shown(default)
         else:
             kwargs = {"type": opt.kind or (type(default) if default is not None else str)}
+        if opt.nargs or opt.append:
+            kwargs["type"] = opt.kind or str
         if opt.metavar:
             kwargs["metavar"] = opt.metavar
         if required:
             kwargs["required"] = True
-        else:
+        elif opt.default_help or default not in (None, ""):
             shown = opt.default_help or _shown(default)
             text = f"{text} (default{':' if opt.default_help else ''} {shown})"
         action = parser.add_argument(flag_of(cls, name), *opt.aliases, dest=name, default=default, help=text, **kwargs)

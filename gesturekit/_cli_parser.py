@@ -353,33 +353,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = _command(sub, "stimuli")
     s.add_argument("--db", help="matching database folder (default: the demo database)")
-    s.add_argument("--audio", nargs="+", help="speech files or folders of them")
-    s.add_argument(
-        "--holdout",
-        action="append",
-        metavar="TAKE[:START-END]",
-        help="a held-out part of the database as a speech with recorded motion, for gt (repeatable)",
-    )
-    s.add_argument("--systems", default="gt,knn,knn+cgan", help="comma-separated systems (default gt,knn,knn+cgan)")
+    from .study_config import StudyConfig
+
+    add_options(s, StudyConfig, ["audio", "holdouts", "systems"])
     s.add_argument("--out", required=True, help="study folder to write")
-    s.add_argument("--seed", type=int, default=0, help="seed of the ids, the order and the synthesis (default 0)")
-    s.add_argument(
-        "--participants",
-        type=int,
-        help="participants to plan the order for (default: the rows of the balanced Latin square)",
+    add_options(
+        s,
+        StudyConfig,
+        ["seed", "participants", "control", "refiner", "resolution", "loudness_lufs", "workers", "scheduler"],
     )
-    s.add_argument("--control", help="control track for every synthesised stimulus")
-    s.add_argument("--refiner", help="trained refiner folder, for knn+cgan")
-    s.add_argument("--resolution", default="640x480", help="video size WIDTHxHEIGHT (default 640x480)")
-    s.add_argument("--loudness", type=float, default=-23.0, help="loudness of every soundtrack, LUFS (default -23)")
-    s.add_argument("--workers", type=int, help="rendering processes (default: all cores)")
-    s.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask distributed cluster (tcp://host:8786)")
-    s.add_argument(
-        "--character",
-        metavar="FILE",
-        help="a humanoid (.glb, .gltf, .vrm or .bvh) every stimulus shows, in its own colours (default: ours, grey)",
-    )
-    s.add_argument("--character-map", metavar="JSON", help="bone map of --character (our joint -> its bone)")
+    add_options(s, StudyConfig, ["character", "character_map"])
     s.add_argument("--force", action="store_true", help="replace an existing study")
     _add_max_speech(s)
 

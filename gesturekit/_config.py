@@ -179,6 +179,10 @@ class Option:
         ``low`` itself is refused (a positive number: ``low=0, low_open=True``).
     default_help : str, optional
         How ``--help`` says the default where its value does not (``"all cores"`` for None).
+    nargs : str, optional
+        The command line takes several values after the flag (``"+"``).
+    append : bool
+        The command line's flag may be given again, each time adding a value.
     """
 
     help: str
@@ -194,6 +198,8 @@ class Option:
     limit: Callable[[Any], float] | None = None
     low_open: bool = False
     default_help: str | None = None
+    nargs: str | None = None
+    append: bool = False
 
     def bounds_text(self, integer: bool) -> str:
         """``"an integer >= 0"``, ``"a number from 0 to 7.5"``: what a value must be, for messages."""

@@ -569,38 +569,28 @@ def _cmd_train_fgd(args) -> int:
 def _cmd_stimuli(args) -> int:
     import re
 
-    from .study import make_stimuli
+    from .study import StudyConfig, make_stimuli
     from .workspace import open_database
 
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", args.resolution)
     if not m:
         raise ConfigError(f"--resolution must look like 640x480, got {args.resolution!r}")
-    if not args.audio and not args.holdout:
+    if not args.audio and not args.holdouts:
         raise ConfigError("give speech with --audio (files or folders) and/or --holdout TAKE:START-END")
-    _parse_holdouts(args.holdout)
-    if not math.isfinite(args.loudness):
-        raise ConfigError(f"--loudness must be a finite number of LUFS (e.g. -23), got {args.loudness:g}")
+    _parse_holdouts(args.holdouts)
+    if not math.isfinite(args.loudness_lufs):
+        raise ConfigError(f"--loudness must be a finite number of LUFS (e.g. -23), got {args.loudness_lufs:g}")
+    given = options_given(args)[StudyConfig]
+    given.update(audio=tuple(args.audio or ()), holdouts=tuple(args.holdouts or ()))
     control = _control_from_arg(args.control) or ""
     db = open_database(args.db)
     with _stage_bars() as bar:
         res = make_stimuli(
             db,
+            StudyConfig(**{**given, "control": control, "resolution": (int(m.group(1)), int(m.group(2)))}),
             out=args.out,
-            audio=args.audio or (),
-            holdouts=args.holdout or (),
-            systems=args.systems,
-            seed=args.seed,
-            participants=args.participants,
-            control=control,
-            refiner=args.refiner,
-            resolution=(int(m.group(1)), int(m.group(2))),
-            loudness_lufs=args.loudness,
-            workers=args.workers,
-            scheduler=args.scheduler,
             overwrite=args.force,
             progress=lambda stage, done, total: _advance(bar(stage, total, "stimulus"), done),
-            character=args.character,
-            character_map=args.character_map,
         )
     _print(
         f"{len(res.videos)} stimuli ({len(res.settings['speeches'])} speeches x {len(res.settings['systems'])} "

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
+from ._config import options_config
 from ._io import atomic_write
 from ._jobs import run_jobs
 from ._optional import require
@@ -56,6 +57,7 @@ from .errors import ConfigError
 from .export.loudness import measure_loudness, normalise_loudness
 from .motion import AUDIO_SR, Motion
 from .skeleton import JointPresence
+from .study_config import StudyConfig
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -63,7 +65,6 @@ if TYPE_CHECKING:
 
     from .character.target import Character
     from .database import MatchingDatabase
-    from .synthesize import MotionRefiner, SynthesisConfig
     from .viz.render import RenderStyle
 
 __all__ = [
@@ -76,6 +77,7 @@ __all__ = [
     "normalise_loudness",
     "speech_sources",
     "stimulus_style",
+    "StudyConfig",
     "make_stimuli",
 ]
 
@@ -429,76 +431,47 @@ def _write_text(path: Path, text: str) -> None:
 
 def make_stimuli(
     db: MatchingDatabase,
+    config: StudyConfig | None = None,
     *,
     out: str | os.PathLike,
-    audio: Sequence[str | os.PathLike[str]] = (),
-    holdouts: Sequence[Any] = (),
-    systems: str | Sequence[str] = ("gt", "knn", "knn+cgan"),
-    seed: int = 0,
-    participants: int | None = None,
-    control: str = "",
-    config: SynthesisConfig | None = None,
-    refiner: MotionRefiner | str | os.PathLike[str] | None = None,
-    resolution: tuple[int, int] = (640, 480),
-    loudness_lufs: float = -23.0,
-    workers: int | None = None,
-    scheduler: str | Client | None = None,
     overwrite: bool = False,
     progress: Callable[[str, int, int], None] | None = None,
-    character: str | os.PathLike[str] | Character | None = None,
-    character_map: str | os.PathLike[str] | dict | None = None,
+    **options: Any,
 ) -> StudyResult:
     """Prepare a user study: every speech x system as an MP4, a manifest and the presentation order.
 
     Parameters
     ----------
     db : MatchingDatabase
+    config : StudyConfig, optional
+        The speeches, systems, design, synthesis and rendering options (see :class:`StudyConfig`).
     out : path
         The study folder (see the module documentation).
-    audio : sequence of path
-        Speech files or folders of them.
-    holdouts : sequence of str
-        Held-out parts of the database (``TAKE`` or ``TAKE:START-END``), the speeches with a
-        recorded motion for ``gt``.
-    systems : str or sequence of str
-        Of :data:`gesturekit.evaluate.baselines.SYSTEMS`; ``gt`` needs held-out parts only,
-        ``knn+cgan`` a refiner.
-    seed : int
-        Seed of the ids, the order and (unless ``config`` says otherwise) the synthesis.
-    participants : int, optional
-        See :func:`plan_stimuli`.
-    control : str
-        Control track for every synthesised stimulus (``"0-3:left_hand=high"``), empty for none.
-    config : SynthesisConfig, optional
-        k, step, seed, initial pose, blending of the synthesis.
-    refiner : optional
-        A trained refiner or its path, for ``knn+cgan``.
-    resolution : (int, int)
-        Width and height of every video, pixels (even).
-    loudness_lufs : float
-        Integrated loudness every soundtrack is scaled to.
-    workers : int, optional
-        Processes rendering in parallel (default: all cores).
-    scheduler : str or distributed.Client, optional
-        Render on a Dask distributed cluster instead (e.g. ``"tcp://10.0.0.5:8786"``); its workers
-        need gesturekit installed.
     overwrite : bool
         Replace an existing study in ``out`` (its videos not in the new plan are removed).
     progress : callable(stage, done, total), optional
         ``stage`` is ``"synthesis"`` or ``"rendering"``.
-    character : path or Character, optional
-        A user's humanoid (``.glb``, ``.gltf``, ``.vrm`` or ``.bvh``, or one read by
-        :func:`gesturekit.character.user.read_character`) every stimulus shows instead of ours: its own
-        colours kept, the background, light and fixed camera (one box for every stimulus) as ever.
-        ``study.json`` records its file's name and SHA-256 (``character``).
-    character_map : path or dict, optional
-        Its JSON bone map (see :func:`~gesturekit.character.user.read_character`), with a character file.
+    **options
+        Fields of :class:`StudyConfig`, replacing those of ``config``
+        (``make_stimuli(db, out=..., audio=[folder], systems="knn")``).
 
     Returns
     -------
     StudyResult
         The same inputs and seed give the same ids, order and videos.
     """
+    if config is not None and not isinstance(config, StudyConfig):  # earlier versions': the synthesis's
+        config, options = None, {"synthesis": config, **options}
+    study = options_config(StudyConfig, config, options)
+    audio, holdouts, systems, seed = study.audio, study.holdouts, study.systems, study.seed
+    participants, control, synthesis, refiner = study.participants, study.control, study.synthesis, study.refiner
+    resolution, loudness_lufs, workers, scheduler = (
+        study.resolution,
+        study.loudness_lufs,
+        study.workers,
+        study.scheduler,
+    )
+    character, character_map = study.character, study.character_map
     from .control import parse_control
     from .evaluate.baselines import SystemUnavailable, parse_systems, refiner_unavailable_reason
     from .export.video import _check_resolution
@@ -536,7 +509,7 @@ def make_stimuli(
             seed=seed,
             participants=participants,
             track=track,
-            config=config,
+            config=synthesis,
             refiner=refiner,
             refiner_name=refiner_name,
             width=width,

@@ -162,9 +162,9 @@ class SynthesisConfig:
             or not (np.isfinite(hz) and hz >= option_of(SynthesisConfig, "refiner_keep_hz").low)
         ):
             raise ConfigError(f"refiner_keep_hz must be a frequency >= 0 (0: off), got {hz!r}")
-        if init not in option_of(SynthesisConfig, "init").choices:
+        if init not in (option_of(SynthesisConfig, "init").choices or ()):
             raise ConfigError(f"init must be 'random' or 'rest', got {init!r}")
-        if blend not in option_of(SynthesisConfig, "blend").choices:
+        if blend not in (option_of(SynthesisConfig, "blend").choices or ()):
             raise ConfigError(f"blend must be one of {', '.join(BLEND_MODES)}, got {blend!r}")
         if not isinstance(blend_frames, int) or blend_frames < option_of(SynthesisConfig, "blend_frames").low:
             raise ConfigError(f"blend_frames must be a positive integer, got {blend_frames!r}")

@@ -13,9 +13,10 @@ From the bottom up (the data's way through the package, issue 17's acceptance)::
     refine/export/viz/evaluate
                 what is done with a synthesis (peers: they may import each other)
     study/interactive
-                study.py (user-study stimuli), studies/ (running the study), interactive.py (the app's
-                logic without streamlit)
-    cli/app     cli.py (its options: _cli_parser.py; synthesize --character: _cli_character.py;
+                study.py (user-study stimuli; their options: study_config.py), studies/ (running the study),
+                interactive.py (the app's logic without streamlit)
+    cli/app     cli.py (its options: _cli_parser.py, made by _cli_options.py from the configurations'
+                field metadata; synthesize --character: _cli_character.py;
                 study: _cli_study.py), __main__.py, and the Streamlit app (app/)
 
 Every import counts, also those inside functions and ``try`` blocks (a lazy import is still a
@@ -68,12 +69,16 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("search", ("gesturekit.search", "gesturekit._search_kernels", "gesturekit.search_reference", "gesturekit.blend")),
     ("synthesize", ("gesturekit.synthesize", "gesturekit.live")),
     ("refine/export/viz/evaluate", ("gesturekit.refine", "gesturekit.export", "gesturekit.viz", "gesturekit.evaluate")),
-    ("study/interactive", ("gesturekit.study", "gesturekit.studies", "gesturekit.interactive")),
+    (
+        "study/interactive",
+        ("gesturekit.study", "gesturekit.study_config", "gesturekit.studies", "gesturekit.interactive"),
+    ),
     (
         "cli/app",
         (
             "gesturekit.cli",
             "gesturekit._cli_parser",
+            "gesturekit._cli_options",
             "gesturekit._cli_character",
             "gesturekit._cli_study",
             "gesturekit.__main__",

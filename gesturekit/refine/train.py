@@ -133,7 +133,7 @@ class TrainConfig(JsonConfig):
             raise ConfigError(f"lr must be positive, got {self.lr}")
         if len(self.betas) != 2 or not all(0 <= b < 1 for b in self.betas):
             raise ConfigError(f"betas must be two numbers in [0, 1), got {self.betas}")
-        if self.l1_reduction not in option_of(TrainConfig, "l1_reduction").choices:
+        if self.l1_reduction not in (option_of(TrainConfig, "l1_reduction").choices or ()):
             raise ConfigError(f"l1_reduction must be 'window_sum' or 'mean', got {self.l1_reduction!r}")
         if self.gp_weight < 0 or self.l1_weight < 0:
             raise ConfigError("gp_weight and l1_weight must not be negative")

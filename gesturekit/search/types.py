@@ -79,7 +79,7 @@ class SearchConfig:
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
                 raise ConfigError(f"SearchConfig.{name} must be an integer >= {low}, got {value!r}")
             object.__setattr__(self, name, int(value))
-        if self.mask_rule not in option_of(SearchConfig, "mask_rule").choices:
+        if self.mask_rule not in (option_of(SearchConfig, "mask_rule").choices or ()):
             raise ConfigError(f"SearchConfig.mask_rule must be 'ends' or 'all', got {self.mask_rule!r}")
         init = self.init_pose
         if isinstance(init, str):
