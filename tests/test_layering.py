@@ -2,7 +2,7 @@
 
 From the bottom up (the data's way through the package, issue 17's acceptance)::
 
-    base        errors, _io, _jobs, _optional, _version, _config, limits, paths, outputs,
+    base        errors, _io, _jobs, _optional, _version, _config, options, limits, paths, outputs,
                 skeleton, bones, motion, control
     datasets    the readers and the generated demo speaker (gesturekit/datasets/)
     features    audio and pose features, their layout
@@ -50,6 +50,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit._optional",
             "gesturekit._version",
             "gesturekit._config",
+            "gesturekit.options",
             "gesturekit.limits",
             "gesturekit.paths",
             "gesturekit.outputs",

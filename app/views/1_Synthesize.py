@@ -14,12 +14,12 @@ import state
 import streamlit as st
 
 from gesturekit import interactive as gs
-from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.database import MatchingDatabase
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
-from gesturekit.search import describe_steps
+from gesturekit.options import widget_limits
+from gesturekit.search import SearchConfig, describe_steps
 from gesturekit.synthesize import SynthesisConfig
 from gesturekit.viz.figures import waveform_figure, wrist_figure
 
@@ -189,9 +189,38 @@ def controls(speech: dict) -> ControlTrack | None:
     return track
 
 
-def _whole(col, label: str, key: str, lo: int, hi: int, help: str) -> int:
-    """A whole-number input from ``lo`` to ``hi`` in the column ``col``."""
-    return col.number_input(label, min_value=lo, max_value=hi, step=1, key=key, help=help)
+#: The configuration class that declares each option the page sets (its field metadata: bounds, default, help).
+OPTION_CLASS = {
+    "k": SearchConfig,
+    "segment": SearchConfig,
+    "seed": SearchConfig,
+    "record": SearchConfig,
+    "mask_rule": SearchConfig,
+    "init": SynthesisConfig,
+    "blend": SynthesisConfig,
+    "refiner_keep_hz": SynthesisConfig,
+}
+
+
+def _limits(name: str, db: MatchingDatabase) -> dict:
+    """The widget limits of the option ``name`` (``db``: bounds that depend on the database)."""
+    return widget_limits(OPTION_CLASS[name], name, context=db)
+
+
+def _number(col, label: str, name: str, db: MatchingDatabase, **options):
+    """A number input of the option ``name``, its bounds, step, default and help from its field."""
+    lim = _limits(name, db)
+    key = state.persistent_key(f"synth.{name}", lim["default"])
+    return col.number_input(
+        label, min_value=lim["min"], max_value=lim["max"], step=lim["step"], key=key, help=lim["help"], **options
+    )
+
+
+def _choice(col, label: str, name: str, db: MatchingDatabase, labels: dict):
+    """A select box of the option ``name``, its choices and default from its field."""
+    lim = _limits(name, db)
+    key = state.persistent_key(f"synth.{name}", lim["default"])
+    return col.selectbox(label, lim["choices"], format_func=lambda m: labels.get(m, m), key=key, help=lim["help"])
 
 
 def settings(db: MatchingDatabase) -> dict:
@@ -199,7 +228,7 @@ def settings(db: MatchingDatabase) -> dict:
     run."""
     ss = st.session_state
     pk = state.persistent_key
-    segment_key = pk("synth.segment", 8)
+    segment_key = pk("synth.segment", _limits("segment", db)["default"])
     if ss[segment_key] > db.clip_frames:  # a database of shorter clips: say so, never change it unseen
         st.warning(
             f"N was {ss[segment_key]}, more than this database's clips hold ({db.clip_frames} frames): "
@@ -209,32 +238,15 @@ def settings(db: MatchingDatabase) -> dict:
         ss[segment_key] = ss["synth.segment"] = db.clip_frames
     c = st.columns(4)
     out = {
-        "k": _whole(
-            c[0],
-            "k (0 = best match)",
-            pk("synth.k", 0),
-            0,
-            100,
-            "take the k-th best window of the combined ranking at every step",
-        ),
-        "segment": _whole(
-            c[1], "N (frames per step)", segment_key, 1, db.clip_frames, "8 in the paper: a new search every 0.53 s"
-        ),
-        "seed": _whole(c[2], "Seed", pk("synth.seed", 0), 0, 2**31 - 1, "of the random initial pose"),
-        "record": _whole(
-            c[3], "Candidates recorded per step", pk("synth.record", 10), 1, 50, "shown in the Retrieval inspector"
-        ),
+        "k": _number(c[0], "k (0 = best match)", "k", db),
+        "segment": _number(c[1], "N (frames per step)", "segment", db),
+        "seed": _number(c[2], "Seed", "seed", db),
+        "record": _number(c[3], "Candidates recorded per step", "record", db),
     }
     c = st.columns(4)
-    out["init"] = c[0].selectbox(
-        "Initial pose", list(_INIT_LABELS), format_func=_INIT_LABELS.get, key=pk("synth.init", "random")
-    )
-    out["blend"] = c[1].selectbox(
-        "Blending", list(BLEND_MODES), format_func=lambda m: _BLEND_LABELS.get(m, m), key=pk("synth.blend", "none")
-    )
-    out["mask_rule"] = c[2].selectbox(
-        "A control must hold at", list(_MASK_LABELS), format_func=_MASK_LABELS.get, key=pk("synth.mask_rule", "ends")
-    )
+    out["init"] = _choice(c[0], "Initial pose", "init", db, _INIT_LABELS)
+    out["blend"] = _choice(c[1], "Blending", "blend", db, _BLEND_LABELS)
+    out["mask_rule"] = _choice(c[2], "A control must hold at", "mask_rule", db, _MASK_LABELS)
     for name, value in out.items():
         ss[f"synth.{name}"] = value
     refiner, ok = None, True
@@ -250,15 +262,8 @@ def settings(db: MatchingDatabase) -> dict:
         disabled=not on,
         placeholder="folder written by gesturekit train-refiner",
     )
-    out["refiner_keep_hz"] = ss["synth.refiner_keep_hz"] = c[3].number_input(
-        "Keep k-NN motion below (Hz)",
-        min_value=0.0,
-        max_value=7.5,
-        step=0.5,
-        disabled=not on,
-        key=pk("synth.refiner_keep_hz", KEEP_BELOW_HZ),
-        help="the k-NN motion's slow content (hand height, width, symmetry: what controls set) is kept, "
-        "the refiner supplies the faster content (joins, timing); 0: the refiner's output as it is (the paper)",
+    out["refiner_keep_hz"] = ss["synth.refiner_keep_hz"] = _number(
+        c[3], "Keep k-NN motion below (Hz)", "refiner_keep_hz", db, disabled=not on
     )
     if on:
         ok = False  # until the refiner is checked: a run must not silently go without it

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import tempfile
 from pathlib import Path
 
@@ -15,8 +14,9 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.takes import AUDIO_EXTENSIONS
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SYSTEM_DESCRIPTIONS, SYSTEMS
+from gesturekit.options import option_of, widget_limits
 from gesturekit.paths import home
-from gesturekit.study import make_stimuli, plan_stimuli
+from gesturekit.study import StudyConfig, make_stimuli, plan_stimuli
 from gesturekit.workspace import speech_files
 
 RESULT = "study.result"  # the user's last study: folder, manifest, order (per session)
@@ -30,6 +30,21 @@ def _speech_files(folder: str) -> list[Path]:
     p = Path(folder.strip()).expanduser()
     display.allowed(p, what="folder of speech files")  # before looking: no listing of other folders
     return speech_files(p)
+
+
+def _limits(name: str) -> dict:
+    """The widget limits of :class:`StudyConfig`'s option ``name``, and how its default is said."""
+    return {**widget_limits(StudyConfig, name), "default_help": option_of(StudyConfig, name).default_help}
+
+
+def _number(col, label: str, name: str, **options):
+    """A whole-number input of :class:`StudyConfig`'s option ``name``: its bounds, default and help from the field
+    (an empty box: None, the field's default where it is None)."""
+    lim = _limits(name)
+    key = state.persistent_key(f"study.{name}", lim["default"])
+    return col.number_input(
+        label, min_value=lim["min"], max_value=lim["max"], step=lim["step"], key=key, help=lim["help"], **options
+    )
 
 
 def settings(db: MatchingDatabase) -> dict:
@@ -64,17 +79,15 @@ def settings(db: MatchingDatabase) -> dict:
             format_func=lambda s: f"{s}: {SYSTEM_DESCRIPTIONS[s]}",
         )
         c = st.columns(3)
-        seed = ss["study.seed"] = int(c[0].number_input("Seed", min_value=0, step=1, key=pk("study.seed", 0)))
-        participants = ss["study.participants"] = int(
-            c[1].number_input(
-                "Participants (0: one per row of the Latin square)",
-                min_value=0,
-                step=1,
-                key=pk("study.participants", 0),
-            )
+        seed = ss["study.seed"] = _number(c[0], "Seed", "seed")
+        participants = ss["study.participants"] = _number(
+            c[1], "Participants", "participants", placeholder=_limits("participants")["default_help"]
         )
         resolution = ss["study.resolution"] = c[2].selectbox(
-            "Resolution", RESOLUTIONS, key=pk("study.resolution", "640x480")
+            "Resolution",
+            RESOLUTIONS,
+            key=pk("study.resolution", "x".join(map(str, _limits("resolution")["default"]))),
+            help=_limits("resolution")["help"],
         )
         control = ss["study.control"] = st.text_input(
             "Control track (optional)", key=pk("study.control", ""), placeholder="0-3:left_hand=high"
@@ -84,8 +97,8 @@ def settings(db: MatchingDatabase) -> dict:
             refiner = ss["study.refiner"] = st.text_input("Refiner folder (for knn+cgan)", key=pk("study.refiner", ""))
         c = st.columns([3, 1])
         out = ss["study.out"] = c[0].text_input("Study folder to write", key=pk("study.out", str(home() / "study")))
-        workers = ss["study.workers"] = int(
-            c[1].number_input("Parallel renders", min_value=1, step=1, key=pk("study.workers", os.cpu_count() or 1))
+        workers = ss["study.workers"] = _number(
+            c[1], "Parallel renders", "workers", placeholder=_limits("workers")["default_help"]
         )
         overwrite = st.checkbox(
             "replace an existing study there",
@@ -100,7 +113,7 @@ def settings(db: MatchingDatabase) -> dict:
         "holdouts": holdout_list,
         "systems": systems,
         "seed": seed,
-        "participants": participants or None,
+        "participants": participants,
         "resolution": tuple(int(v) for v in resolution.split("x")),
         "control": control.strip(),
         "refiner": refiner.strip() or None,
@@ -148,21 +161,18 @@ def run(db: MatchingDatabase, opts: dict) -> None:
             target = Path(tmp) / Path(up.name).name
             target.write_bytes(up.getvalue())
             files.append(target)
-        res = make_stimuli(
-            db,
-            out=opts["out"],
-            audio=files,
-            holdouts=opts["holdouts"],
-            systems=opts["systems"],
+        config = StudyConfig(
+            audio=tuple(files),
+            holdouts=tuple(opts["holdouts"]),
+            systems=tuple(opts["systems"]),
             seed=opts["seed"],
             participants=opts["participants"],
             control=opts["control"],
             refiner=opts["refiner"],
             resolution=opts["resolution"],
             workers=opts["workers"],
-            overwrite=opts["overwrite"],
-            progress=progress,
         )
+        res = make_stimuli(db, config, out=opts["out"], overwrite=opts["overwrite"], progress=progress)
     bar.progress(1.0, text=f"{len(res.videos)} stimuli written")
     st.session_state[RESULT] = {"folder": str(res.folder), "manifest": res.manifest, "order": res.order}
 

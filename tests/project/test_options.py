@@ -1,0 +1,256 @@
+"""One source for every option: the CLI's flags and the app's widgets are the configurations' fields.
+
+Every option of the commands that run a configuration, and every widget of the app that sets
+one, names exactly one field declared with :func:`gesturekit.options.option`, and says its
+default, bounds and choices; an option or widget with no field, or with its own default or
+range, fails here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from streamlit.testing.v1 import AppTest
+
+from gesturekit._cli_options import FIELD_OF, OPTIONS_DEST, options_given
+from gesturekit._cli_parser import build_parser
+from gesturekit.database import MatchingDatabase
+from gesturekit.errors import ConfigError
+from gesturekit.evaluate.run import EvaluationConfig
+from gesturekit.options import check_option, default_of, option_of, options_of, widget_limits
+from gesturekit.refine.train import TrainConfig
+from gesturekit.search import SearchConfig
+from gesturekit.study import StudyConfig
+from gesturekit.synthesize import SynthesisConfig
+
+HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
+TIMEOUT = 120
+
+#: The options of each command that are no configuration's: what to read and write, and how to run.
+RUN_ARGUMENTS = {
+    "synthesize": {
+        "speech",
+        "db",
+        "out",
+        "control",  # a track's text or a file, read into SynthesisConfig.control
+        "exclude_take",
+        "exclude_range",
+        "refiner",
+        "format",
+        "character",
+        "character_map",
+        "video",
+        "video_style",
+        "force",
+        "max_speech_minutes",
+    },
+    "evaluate": {"db", "out", "force"},
+    "stimuli": {"db", "out", "force", "max_speech_minutes"},
+    "train-refiner": {
+        "db",
+        "demo",
+        "out",
+        "preset",
+        "iterations",
+        "resume",
+        "device",
+        "exclude_take",
+        "exclude_range",
+        "no_train_state",
+        "force",
+    },
+}
+
+#: Commands whose options are not yet fields of a configuration, and why.
+NOT_YET = {
+    "build-db": "BuildConfig becomes a frozen configuration in gesturekit/database/ first",
+    "info": "reads a database; no options",
+    "train-fgd": "--steps says 2000, FGDConfig.steps 600: one of them must change first",
+    "study": "its subcommands run a study folder; no configuration",
+}
+
+CONFIGS = (SearchConfig, SynthesisConfig, TrainConfig, StudyConfig, EvaluationConfig)
+
+
+def _commands() -> dict[str, argparse.ArgumentParser]:
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(sub.choices)
+
+
+def _cli_default(cls: type, name: str):
+    """The field's default as the command line holds it before parsing."""
+    opt = option_of(cls, name)
+    default = default_of(cls, name)
+    if opt.nargs or opt.append:
+        return None  # not given: the field's empty default
+    if isinstance(default, tuple):
+        return ("x" if all(isinstance(v, int) for v in default) else ",").join(map(str, default))
+    return default
+
+
+def test_every_command_is_covered_or_says_why_not():
+    assert set(_commands()) == set(RUN_ARGUMENTS) | set(NOT_YET)
+
+
+@pytest.mark.parametrize("command", sorted(RUN_ARGUMENTS))
+def test_every_cli_option_is_one_field_with_its_default_bounds_and_choices(command):
+    parser = _commands()[command]
+    seen: dict[tuple[type, str], str] = {}
+    for action in parser._actions:
+        if isinstance(action, argparse._HelpAction):
+            continue
+        field = getattr(action, FIELD_OF, None)
+        if field is None:
+            assert action.dest in RUN_ARGUMENTS[command], f"{command} {action.option_strings}: no field"
+            continue
+        assert action.dest not in RUN_ARGUMENTS[command]
+        cls, name = field
+        assert field not in seen, f"{command}: {action.option_strings} and {seen[field]} set {cls.__name__}.{name}"
+        seen[field] = action.option_strings[0]
+        opt = option_of(cls, name)
+        assert action.dest == name
+        if action.required:  # a field without default (EvaluationConfig.holdout)
+            with pytest.raises(KeyError):
+                default_of(cls, name)
+        else:
+            assert action.default == _cli_default(cls, name), f"{command} {action.option_strings}: another default"
+        assert list(action.choices or []) == list(opt.choices or []), f"{command} {action.option_strings}"
+        assert opt.help in action.help or command == "evaluate" and name == "seed"
+        if opt.kind is not None:
+            assert action.type is opt.kind
+        elif opt.choices is None and not isinstance(default_of(cls, name), tuple):
+            assert action.type is type(default_of(cls, name))
+    assert parser.get_default(OPTIONS_DEST) == list(seen)
+
+
+def _parse(command: str, flag: str, value: str) -> argparse.Namespace:
+    required = {"synthesize": ["s.wav"], "evaluate": ["--holdout", "t"], "stimuli": ["--out", "o"]}
+    required["train-refiner"] = ["--out", "o"]
+    return build_parser().parse_args([command, *required[command], f"{flag}={value}"])
+
+
+@pytest.mark.parametrize("command", sorted(RUN_ARGUMENTS))
+def test_every_bounded_cli_option_refuses_a_value_out_of_its_fields_bounds(command):
+    checked = 0
+    for action in _commands()[command]._actions:
+        field = getattr(action, FIELD_OF, None)
+        if field is None or option_of(*field).choices is not None:
+            continue
+        opt = option_of(*field)
+        flag = action.option_strings[0]
+        if opt.low is not None:
+            below = opt.low - (0 if opt.low_open else 1)
+            args = _parse(command, flag, f"{below:g}")
+            with pytest.raises(ConfigError, match=f"^{flag} must be "):
+                options_given(args)
+            checked += 1
+            at_low = opt.low + (0.5 if action.type is float else 1) * opt.low_open  # the lowest value taken
+            assert options_given(_parse(command, flag, f"{at_low:g}"))[field[0]][field[1]] == at_low
+        if action.type is float:
+            with pytest.raises(ConfigError, match=f"^{flag} must be "):
+                options_given(_parse(command, flag, "nan"))
+    assert checked
+
+
+@given(st.data())
+def test_check_option_takes_exactly_the_values_within_the_bounds(data):
+    cls = data.draw(st.sampled_from(CONFIGS))
+    numeric = [n for n, o in options_of(cls).items() if o.choices is None and (o.low is not None or o.high is not None)]
+    if not numeric:
+        return
+    name = data.draw(st.sampled_from(numeric))
+    opt = option_of(cls, name)
+    integer = (opt.kind or type(default_of(cls, name))) is int
+    value = data.draw(st.integers(-1000, 1000) if integer else st.floats(allow_nan=True, allow_infinity=True))
+    inside = (
+        math.isfinite(value)
+        and (opt.low is None or value > opt.low or (value == opt.low and not opt.low_open))
+        and (opt.high is None or value <= opt.high)
+    )
+    if inside:
+        assert check_option(cls, name, value) == value
+    else:
+        with pytest.raises(ConfigError, match=f"{cls.__name__}.{name} must be"):
+            check_option(cls, name, value)
+
+
+def test_every_field_default_is_within_its_own_bounds_and_choices():
+    for cls in CONFIGS:
+        for name, opt in options_of(cls).items():
+            try:
+                default = default_of(cls, name)
+            except KeyError:  # a required option (EvaluationConfig.holdout)
+                continue
+            if opt.choices is not None:
+                assert default in opt.choices
+            else:
+                assert check_option(cls, name, default) == default
+
+
+# ---- the app ------------------------------------------------------------------------------------
+
+#: Widgets of the pages (their key after ``_w.``) that set no configuration option, and what they set.
+NOT_OPTIONS = {
+    "synth.mode": "where the speech comes from",
+    "synth.example": "which example speech",
+    "synth.new_constraint": "the control table's next row",
+    "synth.refine": "whether a refiner is used",
+    "study.resolution": "a choice of sizes of StudyConfig.resolution (its default checked below)",
+}
+#: Widgets that set an option but start elsewhere than the field's default, and why.
+OWN_DEFAULT = {"study.systems": "the page starts with systems that need no held-out part or refiner (knn, random)"}
+
+
+def _fields_of(page_key: str) -> tuple[type, str]:
+    page, name = page_key.split(".", 1)
+    classes = (SearchConfig, SynthesisConfig) if page == "synth" else (StudyConfig,)
+    owners = [cls for cls in classes if name in options_of(cls)]
+    assert len(owners) == 1, f"widget {page_key}: {len(owners)} fields named {name}"
+    return owners[0], name
+
+
+def _open(page: str) -> AppTest:
+    at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
+    at.switch_page(page).run()
+    assert not at.exception, at.exception
+    return at
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page, prefix", [("views/1_Synthesize.py", "synth."), ("views/4_Study_stimuli.py", "study.")])
+def test_every_app_widget_that_sets_an_option_has_its_fields_limits_and_default(app_env, page, prefix):
+    db = MatchingDatabase.load(app_env / "db" / "demo")
+    at = _open(page)
+    checked = set()
+    for kind in ("number_input", "selectbox", "multiselect", "slider", "toggle", "checkbox"):
+        for widget in at.get(kind):
+            key = widget.key
+            if not key or not key.startswith("_w." + prefix):
+                continue
+            page_key = key.removeprefix("_w.")
+            if page_key in NOT_OPTIONS or page_key in OWN_DEFAULT:
+                continue
+            cls, name = _fields_of(page_key)
+            lim = widget_limits(cls, name, context=db)
+            if kind == "number_input":
+                assert (widget.min, widget.max) == (lim["min"], lim["max"]), page_key
+                assert widget.step == lim["step"], page_key
+            if kind == "selectbox":
+                assert len(widget.options) == len(lim["choices"]), page_key
+            assert widget.value == lim["default"], page_key
+            assert widget.help == lim["help"], page_key
+            checked.add(page_key)
+    expected = {
+        "synth.": {f"synth.{n}" for n in ("k", "segment", "seed", "record", "init", "blend", "mask_rule")}
+        | {"synth.refiner_keep_hz"},
+        "study.": {"study.seed", "study.participants", "study.workers"},
+    }[prefix]
+    assert checked == expected
+    if prefix == "study.":
+        default = "x".join(map(str, default_of(StudyConfig, "resolution")))
+        assert at.selectbox(key="_w.study.resolution").value == default
