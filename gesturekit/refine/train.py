@@ -113,7 +113,7 @@ class TrainConfig(JsonConfig):
 
     iterations: int = option(2000, help="critic iterations in total", low=1)
     batch_size: int = option(100, help="windows per iteration", low=1)
-    lr: float = option(1e-4, help="Adam learning rate of both networks", low=0.0)
+    lr: float = option(1e-4, help="Adam learning rate of both networks", low=0.0, low_open=True)
     betas: tuple = (0.0, 0.9)
     gp_weight: float = option(100.0, help="weight of the gradient penalty", low=0.0)
     l1_weight: float = option(0.1, help="weight of the L1 distance to the k-NN motion", low=0.0)
