@@ -345,10 +345,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="TAKE[:START-END]",
         help="leave a take or a time range out of training (repeatable)",
     )
+    # more steps than FGDConfig's 600: the command trains the model the evaluations use
     f.add_argument("--steps", type=int, default=2000, help="training steps (default 2000)")
-    f.add_argument("--window", type=int, default=32, help="frames per window, a multiple of 8 (default 32)")
-    f.add_argument("--latent", type=int, default=32, help="size of the latent feature (default 32)")
-    f.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    from .evaluate.fgd import FGDConfig
+
+    add_options(f, FGDConfig, ["window", "latent", "seed"])
     f.add_argument("--force", action="store_true", help="replace an existing model")
 
     s = _command(sub, "stimuli")

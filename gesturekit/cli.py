@@ -549,7 +549,7 @@ def _cmd_train_fgd(args) -> int:
         takes += list(ref.exclude_takes)
         ranges += list(ref.exclude_ranges)
     exclude = db.exclusion_mask(takes=takes, ranges=ranges) if (takes or ranges) else None
-    config = FGDConfig(steps=args.steps, seed=args.seed, window=args.window, latent=args.latent)
+    config = FGDConfig(steps=args.steps, **options_given(args)[FGDConfig])
     with _progress_bar(config.steps, "step", "training the FGD autoencoder") as bar:
         model = train_fgd_model(
             db,

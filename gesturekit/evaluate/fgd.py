@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._config import option, option_of
 from .._optional import require
 from ..errors import ConfigError, InputFileError
 from ..features import LAYOUT
@@ -71,19 +72,19 @@ class FGDConfig:
         Hop between windows when a motion is embedded (frames).
     """
 
-    window: int = 32
-    latent: int = 32
-    channels: int = 32
-    steps: int = 600
-    batch: int = 32
-    lr: float = 1e-3
-    seed: int = 0
-    stride: int = 1
+    window: int = option(32, help="frames per window, a multiple of 8", low=16, step=8, unit="frames")
+    latent: int = option(32, help="size of the latent feature", low=1)
+    channels: int = option(32, help="channels of the convolutions", low=1)
+    steps: int = option(600, help="training steps", low=1)
+    batch: int = option(32, help="windows per step", low=1)
+    lr: float = option(1e-3, help="learning rate", low=0.0, low_open=True)
+    seed: int = option(0, help="seed", low=0)
+    stride: int = option(1, help="hop between windows when a motion is embedded", low=1, unit="frames")
 
     def __post_init__(self):
         for name in ("window", "latent", "channels", "steps", "batch", "stride"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < option_of(FGDConfig, name).low:
                 raise ConfigError(f"FGDConfig.{name} must be a positive integer, got {v!r}")
         if self.window < 16 or self.window % 8:
             raise ConfigError(f"FGDConfig.window must be a multiple of 8 of at least 16 frames, got {self.window}")
