@@ -214,6 +214,9 @@ NOT_OPTIONS = {
     "synth.example": "which example speech",
     "synth.new_constraint": "the control table's next row",
     "synth.refine": "whether a refiner is used",
+    "synth.refiner_path": "the refiner's folder, opened by the page (the synthesis takes the refiner itself)",
+    "study.folder": "a folder of speech files, listed into StudyConfig.audio with the uploads",
+    "study.out": "the study folder to write (make_stimuli's out, no option)",
     "study.resolution": "a choice of sizes of StudyConfig.resolution (its default checked below)",
 }
 #: Widgets that set an option but start elsewhere than the field's default, and why.
@@ -241,7 +244,7 @@ def test_every_app_widget_that_sets_an_option_has_its_fields_limits_and_default(
     db = MatchingDatabase.load(app_env / "db" / "demo")
     at = _open(page)
     checked = set()
-    for kind in ("number_input", "selectbox", "multiselect", "slider", "toggle", "checkbox"):
+    for kind in ("number_input", "selectbox", "multiselect", "slider", "toggle", "checkbox", "text_input"):
         for widget in at.get(kind):
             key = widget.key
             if not key or not key.startswith("_w." + prefix):
@@ -256,13 +259,16 @@ def test_every_app_widget_that_sets_an_option_has_its_fields_limits_and_default(
                 assert widget.step == lim["step"], page_key
             if kind == "selectbox":
                 assert len(widget.options) == len(lim["choices"]), page_key
-            assert widget.value == lim["default"], page_key
-            assert widget.help == lim["help"], page_key
+            if kind == "text_input":  # an empty box: the field's empty default (None, "" or ()); free text
+                assert widget.value == "" and lim["default"] in (None, "", ()), page_key
+            else:
+                assert widget.value == lim["default"], page_key
+                assert widget.help == lim["help"], page_key
             checked.add(page_key)
     expected = {
         "synth.": {f"synth.{n}" for n in ("k", "segment", "seed", "record", "init", "blend", "mask_rule")}
         | {"synth.refiner_keep_hz"},
-        "study.": {"study.seed", "study.participants", "study.workers"},
+        "study.": {"study.seed", "study.participants", "study.workers", "study.holdouts", "study.control"},
     }[prefix]
     assert checked == expected
     if prefix == "study.":
