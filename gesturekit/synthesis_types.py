@@ -4,7 +4,7 @@
 k-NN search's query and the refiner's cGAN audio features. :class:`SynthesisResult`
 is what the last stages assemble and refine. :class:`MotionRefiner` is what the
 synthesis needs of a refiner (:class:`gesturekit.refine.infer.Refiner` is one).
-The stages themselves are :class:`gesturekit.synthesize.Synthesizer`'s methods;
+The stages themselves are :class:`gesturekit.synthesizer.Synthesizer`'s methods;
 every name here is also importable from :mod:`gesturekit.synthesize`.
 """
 
@@ -41,7 +41,7 @@ Speech: TypeAlias = "str | os.PathLike[str] | np.ndarray"
 @dataclass(frozen=True, eq=False)
 class QueryFeatures:
     """A speech and its features, computed once (:meth:`Synthesizer.features
-    <gesturekit.synthesize.Synthesizer.features>`).
+    <gesturekit.synthesizer.Synthesizer.features>`).
 
     Attributes
     ----------

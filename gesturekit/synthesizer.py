@@ -40,7 +40,7 @@ from .synthesis_types import MotionRefiner, QueryFeatures, Speech, SynthesisResu
 if TYPE_CHECKING:
     from .features import ZScore
 
-    # the configuration module runs the stages (synthesize); only its type is named here
+    # SynthesisConfig lives in synthesize.py, which runs these stages; only its type is named here
     from .synthesize import SynthesisConfig
 
 __all__ = ["Synthesizer", "synthesizer_for", "search_request", "check_refiner"]
@@ -57,7 +57,14 @@ def search_request(config: SynthesisConfig) -> SearchRequest:
     -------
     SearchRequest
         Its search options, initial pose, control track and exclusions.
+
+    Raises
+    ------
+    ConfigError
+        ``config`` is not a synthesis configuration.
     """
+    if not all(hasattr(config, name) for name in ("search", "init", "control_track", "exclude_takes")):
+        raise ConfigError(f"config must be a SynthesisConfig, got {type(config).__name__}")
     return SearchRequest(
         search=config.search,
         init=config.init,

@@ -83,7 +83,7 @@ class SearchPlan:
         z-scored audio features of the speech, one row per output frame (15 fps).
     config : SearchConfig
         The search's options; ``init_pose`` is the rest pose's feature when the
-        synthesis asked for it, else ``"random"``.
+        request asked for it (``init="rest"``), else ``"random"``.
     control : ControlTrack
         The control track the masks were made from (seconds of the output).
     masks : np.ndarray, shape (n_masks, M, T), bool, or None
@@ -161,7 +161,7 @@ def plan_search(db: MatchingDatabase, query: np.ndarray, request: SearchRequest)
         The database to search.
     query : np.ndarray, shape (T_out, 112), float32
         The speech's audio features z-scored with ``db``'s statistics, one row per output
-        frame at 15 fps (:meth:`gesturekit.synthesize.Synthesizer.features` computes them).
+        frame at 15 fps (:meth:`gesturekit.synthesizer.Synthesizer.features` computes them).
     request : SearchRequest
         The search's options, initial pose, control track and exclusions.
 
