@@ -204,3 +204,20 @@ def test_planning_takes_search_values_not_a_synthesis_config(db, speech):
         plan_search(db, speech, request)  # samples, not features
     with pytest.raises(ConfigError, match="init must be"):
         SearchRequest(search=SearchConfig(), init="seated")
+
+
+def test_the_modules_that_drive_the_search_import_no_private_names():
+    """Synthesis, live, the search and the baselines use each other's public names only."""
+    import ast
+    from pathlib import Path
+
+    root = Path(gesturekit.__file__).resolve().parent
+    files = [root / f for f in ("synthesize.py", "synthesizer.py", "synthesis_types.py", "live.py")]
+    files += sorted((root / "search").glob("*.py")) + [root / "evaluate" / "baselines.py"]
+    private = []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("gesturekit")):
+                names = [a.name for a in node.names if a.name.startswith("_") and not a.name.endswith("__")]
+                private += [f"{path.name}: {name}" for name in names]
+    assert private == []
