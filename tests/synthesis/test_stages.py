@@ -83,7 +83,6 @@ def test_the_query_holds_the_refiners_features_as_the_refiner_would_compute_them
     assert feats.query.dtype == feats.audio.dtype == np.float32 and feats.audio.shape == (feats.n_frames, 28)
 
 
-@pytest.mark.slow
 def test_the_refine_stage_gives_what_synthesize_with_the_refiner_gives(db, speech):
     pytest.importorskip("torch")
     from gesturekit.refine import open_refiner
