@@ -106,6 +106,26 @@ class LiveSynthesizer:
     -----
     The methods may be called from different threads (e.g. audio and user interface); each
     call runs alone.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> import numpy as np
+    >>> from gesturekit.demo import build_demo_database
+    >>> from gesturekit.datasets.synthetic import generate_demo_take
+    >>> from gesturekit.live import LiveSynthesizer
+    >>> from gesturekit.synthesize import synthesize
+    >>> db = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5)
+    >>> speech = generate_demo_take(seconds=3.0, seed=1, name="speech")[0].audio
+    >>> live = LiveSynthesizer(db)
+    >>> frames = [live.push(chunk) for chunk in np.array_split(speech, 30)]  # 0.1 s at a time
+    >>> frames.append(live.finish())
+    >>> np.concatenate(frames).shape
+    (45, 55, 3)
+    >>> res = live.result()
+    >>> offline = synthesize(res.audio, db=db, config=res.config)
+    >>> bool((offline.motion.positions == res.motion.positions).all())
+    True
     """
 
     #: Frames of k-NN motion the live refiner refines at a time.
