@@ -17,6 +17,7 @@ from .errors import (
     MotionFileError,
 )
 from .motion import AUDIO_SR, Motion, Take
+from .synthesizer import Synthesizer
 
 __all__ = [
     "AUDIO_SR",
@@ -31,6 +32,7 @@ __all__ = [
     "MatchingDatabase",
     "Motion",
     "MotionFileError",
+    "Synthesizer",
     "Take",
     "parse_control",
     "__version__",

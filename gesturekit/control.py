@@ -285,6 +285,15 @@ def parse_control(text: str) -> ControlTrack:
     ConfigError
         A segment that is not ``START-END:name=value[+name=value...]``, an unknown
         control or value, or overlapping segments.
+
+    Examples
+    --------
+    >>> from gesturekit import parse_control
+    >>> track = parse_control("0-3:left_hand=low,6-9:speed=fast+symmetry=symmetric")
+    >>> [(s.start_s, s.end_s, s.constraints) for s in track.segments]
+    [(0.0, 3.0, (('left_hand', 'low'),)), (6.0, 9.0, (('speed', 'fast'), ('symmetry', 'symmetric')))]
+    >>> parse_control("").segments  # no control: every database frame may be used
+    ()
     """
     if text is None or not text.strip():
         return ControlTrack(())

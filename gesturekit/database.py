@@ -400,6 +400,15 @@ class MatchingDatabase:
             The skeleton the takes were normalised with
             (:func:`gesturekit.datasets.takes.fit_takes_skeleton`), stored with the database
             (:attr:`skeleton`).
+
+        Examples
+        --------
+        >>> from gesturekit import BuildConfig, MatchingDatabase
+        >>> from gesturekit.datasets.synthetic import generate_demo_takes
+        >>> takes = generate_demo_takes(minutes=0.5, take_seconds=15.0, seed=0)
+        >>> db = MatchingDatabase.build(takes, config=BuildConfig(label="two generated takes"))
+        >>> len(db.takes_table()), db.F.shape, db.P.shape  # audio features 112, pose features 96
+        (2, (6, 64, 112), (6, 64, 96))
         """
         kwargs = build_in_memory(takes, config=config or BuildConfig(), progress=progress, skeleton=skeleton)
         return cls(**kwargs)
@@ -451,6 +460,19 @@ class MatchingDatabase:
         DatabaseError
             Missing folder or files, another format or format version, another
             feature layout, or files that are damaged or disagree with each other.
+
+        Examples
+        --------
+        >>> import tempfile
+        >>> from gesturekit import MatchingDatabase
+        >>> from gesturekit.demo import build_demo_database
+        >>> folder = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5).path
+        >>> db = MatchingDatabase.load(folder)
+        >>> db.G.shape, db.fps  # the paper's G: joint positions of every clip frame, metres
+        ((7, 64, 165), 15)
+        >>> low, high = db.thresholds["left_hand_height"]  # the 15th and 85th percentiles, metres
+        >>> bool(low < high)
+        True
         """
         path = Path(path)
         return cls(**read_database(path, mmap=mmap), path=path)

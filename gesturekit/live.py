@@ -39,7 +39,7 @@ import threading
 
 import numpy as np
 
-from .blend import fade_weights, keep_slow
+from .blend import fade_weights
 from .control import ControlTrack, Segment, constraint_mask, parse_control
 from .database import MatchingDatabase
 from .errors import ConfigError
@@ -47,7 +47,7 @@ from .features import LAYOUT, audio_frame_features, cgan_audio_features, n_audio
 from .motion import AUDIO_SR, Motion
 from .search.plan import SearchPlan, exclusions, resolved_search_config
 from .search.stream import StepSearch
-from .synthesize import MotionRefiner, SynthesisConfig, SynthesisResult, _check_refiner, _index
+from .synthesize import MotionRefiner, SynthesisConfig, SynthesisResult, search_request, synthesizer_for
 
 __all__ = ["LiveSynthesizer"]
 
@@ -106,6 +106,26 @@ class LiveSynthesizer:
     -----
     The methods may be called from different threads (e.g. audio and user interface); each
     call runs alone.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> import numpy as np
+    >>> from gesturekit.demo import build_demo_database
+    >>> from gesturekit.datasets.synthetic import generate_demo_take
+    >>> from gesturekit.live import LiveSynthesizer
+    >>> from gesturekit.synthesize import synthesize
+    >>> db = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5)
+    >>> speech = generate_demo_take(seconds=3.0, seed=1, name="speech")[0].audio
+    >>> live = LiveSynthesizer(db)
+    >>> frames = [live.push(chunk) for chunk in np.array_split(speech, 30)]  # 0.1 s at a time
+    >>> frames.append(live.finish())
+    >>> np.concatenate(frames).shape
+    (45, 55, 3)
+    >>> res = live.result()
+    >>> offline = synthesize(res.audio, db=db, config=res.config)
+    >>> bool((offline.motion.positions == res.motion.positions).all())
+    True
     """
 
     #: Frames of k-NN motion the live refiner refines at a time.
@@ -126,12 +146,17 @@ class LiveSynthesizer:
             raise ConfigError(f"config must be a SynthesisConfig, got {type(config).__name__}")
         if not isinstance(db, MatchingDatabase):
             raise ConfigError(f"db must be a MatchingDatabase, got {type(db).__name__}")
-        self._made_by = None if refiner is None else _check_refiner(refiner, db)
+        # the stages of the offline synthesis, on the database's shared index; the search is
+        # planned as it goes (a step at a time), the refiner applied to a window at a time
+        self._stages = synthesizer_for(db, refiner=refiner)
         self._db, self._config, self._refiner, self._name = db, config, refiner, str(name)
         self._fps = float(db.fps)
         self._N = config.segment
-        self._search = StepSearch(_index(db), resolved_search_config(db, config), exclude=exclusions(db, config))
-        self._zscore = db.zscore("F")
+        request = search_request(config)
+        self._search = StepSearch(
+            self._stages.index, resolved_search_config(db, request), exclude=exclusions(db, request)
+        )
+        self._zscore = self._stages.zscore
         self._G = db.G
         self._attributes = np.asarray(db.attributes)
         self._mask_of: dict[Constraints, int] = {}
@@ -411,10 +436,7 @@ class LiveSynthesizer:
         s = max(0, min(self._refined.n, T - self.REFINE_WINDOW))
         a = cgan_audio_features(self._m.view[s:T])
         knn = Motion.from_flat(self._knn.view[s:T], self._fps, self._db.joint_presence)
-        refined = self._refiner.refine_motion(knn, a).flat()
-        hz = self._config.refiner_keep_hz
-        if hz > 0:
-            refined = keep_slow(refined, knn.flat(), hz, fps=self._fps)
+        refined = self._stages.refine_motion(knn, a, keep_hz=self._config.refiner_keep_hz).flat()
         self._refined.append(np.asarray(refined[self._refined.n - s : ready - s], dtype=np.float32))
         return ready
 
@@ -463,10 +485,10 @@ class LiveSynthesizer:
             search=search,
             audio=self._audio.view.copy(),
             config=config,
-            database=str(db.path) if db.path is not None else (db.label or "in-memory database"),
+            database=self._stages.database_label,
             source=self._name,
             refined_motion=refined,
-            refiner=self._made_by,
+            refiner=self._stages.refiner_record,
             plan=plan,
-            one_skeleton=db.meta.get("skeleton") is not None,
+            one_skeleton=self._stages.one_skeleton,
         )

@@ -1,48 +1,51 @@
-"""The whole pipeline in one place: speech -> features -> search (controls) -> blend -> motion.
+"""Speech to gesture motion: the options of a synthesis and the functions that run it.
 
 :func:`synthesize` takes speech (a file or samples) and a matching database and
 returns a :class:`SynthesisResult`: the motion, the raw k-NN motion, the search
 record (every step's chosen clip and top-K candidates) and the configuration
-that made it; :mod:`gesturekit.export.result` writes it as npz, BVH and MP4.
-:func:`synthesize_batch` searches several speeches together, scanning the
-database once per step. A refiner is given as an object (:class:`MotionRefiner`);
-the layers above open one from its folder (:func:`gesturekit.refine.open_refiner`).
+that made it (:class:`SynthesisConfig`); :mod:`gesturekit.export.result` writes it
+as npz, BVH and MP4. :func:`synthesize_batch` searches several speeches together,
+scanning the database once per step.
+
+Both run the stages of a :class:`~gesturekit.synthesizer.Synthesizer` (features, plan,
+search, assemble, refine; :mod:`gesturekit.synthesizer`) on the database's shared
+search index (:func:`~gesturekit.synthesizer.synthesizer_for`). A refiner is given as an
+object (:class:`MotionRefiner`); the layers above open one from its folder
+(:func:`gesturekit.refine.open_refiner`).
 """
 
 from __future__ import annotations
 
 import numbers
-import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, runtime_checkable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._config import config_from_dict, config_to_dict, option, option_of
-from ._version import __version__
-from .blend import BLEND_MODES, KEEP_BELOW_HZ, blend_segments, keep_slow
+from .blend import BLEND_MODES, KEEP_BELOW_HZ
 from .control import ControlTrack, parse_control
 from .database import MatchingDatabase, normalise_exclusions
-from .errors import ConfigError, GestureKitError, warn
-from .motion import AUDIO_SR, HoldsMotion, Motion
-from .search import SearchConfig, SearchIndex, SearchResult
-from .search.plan import SearchPlan, plan_search, rest_pose_frame
+from .errors import ConfigError
+from .motion import AUDIO_SR
+from .search import SearchConfig
+from .search.plan import rest_pose_frame
 from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
-
-if TYPE_CHECKING:  # named in annotations only: the refiner sits above the synthesis
-    import pandas as pd
-
-
-#: Speech: a file in any format the readers take, or mono float32 samples at 16 kHz.
-Speech: TypeAlias = "str | os.PathLike[str] | np.ndarray"
+from .synthesis_types import MotionRefiner, QueryFeatures, Speech, SynthesisResult
+from .synthesizer import Synthesizer, check_refiner, search_request, synthesizer_for
 
 __all__ = [
     "PAPER_SETTINGS",
     "SynthesisConfig",
     "SynthesisResult",
     "MotionRefiner",
+    "QueryFeatures",
+    "Speech",
+    "Synthesizer",
+    "synthesizer_for",
+    "search_request",
+    "check_refiner",
     "synthesize",
     "synthesize_batch",
     "prepare_search",
@@ -267,144 +270,6 @@ class SynthesisConfig:
         return replace(self, search=replace(self.search, pins=pins))
 
 
-@runtime_checkable
-class MotionRefiner(Protocol):
-    """What synthesis needs of a refiner; :class:`gesturekit.refine.infer.Refiner` is one.
-
-    A refiner may also have ``provenance(db) -> dict | None``: what the result records of it
-    (:attr:`SynthesisResult.refiner`).
-    """
-
-    def check_database(self, db: MatchingDatabase, /) -> None:
-        """Raise a :class:`~gesturekit.errors.GestureKitError` when ``db``'s features do not suit it."""
-
-    def refine_motion(self, motion: Motion, audio_features: np.ndarray, /) -> Motion:
-        """The refined ``motion`` (T, 55, 3), given the speech's cGAN audio features (T, 28)."""
-
-
-@dataclass
-class SynthesisResult(HoldsMotion):
-    """A synthesised motion and everything that made it.
-
-    Attributes
-    ----------
-    motion : Motion
-        The output (k-NN segments, blended if asked), (T, 55, 3) metres at 15 fps.
-    knn_motion : Motion
-        The concatenated k-NN segments before any blending.
-    search : SearchResult
-        Per step: chosen clip and start, relaxations, and the top-K candidate table.
-    audio : np.ndarray, shape (samples,), float32
-        The speech at 16 kHz.
-    config : SynthesisConfig
-        The options it was made with, its control track included (:attr:`control`).
-    database : str
-        Path of the database (or its label when it was not saved).
-    source : str
-        Name of the speech (file name, or "audio").
-    refined_motion : Motion or None
-        The refiner's output, when a refiner was applied.
-    refiner : dict or None
-        Which refiner was applied (:func:`gesturekit.refine.provenance`: its folder, its
-        training database, the sha256 of its weights); None without one, or for a refiner
-        not loaded from a folder.
-    plan : SearchPlan or None
-        What the search was given (query features, control masks, exclusions, search
-        options); the retrieval inspector reads it instead of recomputing it.
-    one_skeleton : bool
-        The database gives every take one skeleton (built with ``--normalize-bones``): its
-        clips' bones have one length each, so only blending and refining change them.
-    """
-
-    motion: Motion
-    knn_motion: Motion
-    search: SearchResult
-    audio: np.ndarray
-    config: SynthesisConfig
-    database: str
-    source: str
-    refined_motion: Motion | None = None
-    refiner: dict | None = None
-    plan: SearchPlan | None = None
-    one_skeleton: bool = False
-
-    @property
-    def control(self) -> ControlTrack:
-        """The control track the search used (``config.control``, parsed)."""
-        return self.config.control_track
-
-    @property
-    def relaxed_steps(self) -> list[int]:
-        """Steps whose control admitted no window and was dropped for that step."""
-        return np.flatnonzero(self.search.relaxed).tolist()
-
-    def steps_table(self) -> pd.DataFrame:
-        """One row per step: frames, chosen clip and start, position in the ranking, relaxed, pinned."""
-        import pandas as pd
-
-        s = self.search
-        n = s.n_steps
-        N = self.config.segment
-        return pd.DataFrame(
-            {
-                "step": np.arange(n),
-                "first_frame": np.arange(n) * N,
-                "start_s": np.arange(n) * N / self.motion.fps,
-                "clip": s.clip,
-                "start": s.start,
-                "position": s.position,
-                "candidates": s.n_candidates,
-                "relaxed": s.relaxed,
-                "pinned": s.pinned,
-            }
-        )
-
-    def metadata(self) -> dict:
-        """The JSON saved with every export: how this result was made."""
-        return {
-            "gesturekit_version": __version__,
-            "database": self.database,
-            "source": self.source,
-            "fps": self.motion.fps,
-            "frames": self.n_frames,
-            "duration_s": self.n_frames / self.motion.fps,
-            "synthesis": self.config.to_dict(),
-            "control_segments": self.control.to_records(),
-            "relaxed_steps": self.relaxed_steps,
-            "init_frame": list(self.search.init_frame),
-            "refined": self.refined_motion is not None,
-            "refiner": self.refiner,
-        }
-
-    def check_finite(self, path: str | os.PathLike[str] | None = None) -> None:
-        """Refuse to write a result with NaN or infinite positions, naming where they came from.
-
-        Raises
-        ------
-        GestureKitError
-            The k-NN motion (read from the database) or the refiner's output is not finite.
-        """
-        parts = [("the k-NN motion (poses read from the database; the database may be damaged)", self.knn_motion)]
-        if self.refined_motion is not None:
-            parts.append(("the refiner", self.refined_motion))
-        for who, motion in parts:
-            bad = ~np.isfinite(motion.positions).all(axis=(1, 2))
-            if bad.any():
-                verb = "produced" if who == "the refiner" else "holds"
-                raise GestureKitError(
-                    f"not written: {who} {verb} NaN or infinite positions (from frame {int(np.argmax(bad))} on)",
-                    path=path,
-                )
-
-
-def _index(db: MatchingDatabase) -> SearchIndex:
-    idx = db.__dict__.get("_search_index")
-    if idx is None:
-        idx = SearchIndex(db.P, db.F, db.valid)
-        db.__dict__["_search_index"] = idx
-    return idx
-
-
 def prepare_search(db: MatchingDatabase) -> None:
     """Make the search of ``db`` ready: its index built, its compiled code loaded.
 
@@ -418,49 +283,15 @@ def prepare_search(db: MatchingDatabase) -> None:
     Parameters
     ----------
     db : MatchingDatabase
-        The database whose index is built; any database compiles the same code, one
-        opened from a folder (read-only arrays) the code for every folder.
+        The database whose index is built (the shared one, :func:`synthesizer_for`); any
+        database compiles the same code, one opened from a folder (read-only arrays) the
+        code for every folder.
     """
+    syn = synthesizer_for(db)
     silence = np.zeros(2 * AUDIO_SR, np.float32)
-    synthesize(silence, db=db, config=SynthesisConfig(record=2, k=1))
-    synthesize(silence, db=db, config=SynthesisConfig(control="0-2:left_hand=high"))
-    synthesize_batch([silence, silence], db=db)
-
-
-def _load_speech(audio: Speech) -> tuple[np.ndarray, str]:
-    if isinstance(audio, (str, os.PathLike)):
-        from .datasets.audio import load_audio
-
-        return load_audio(audio), Path(audio).name
-    a = np.asarray(audio, dtype=np.float32)
-    if a.ndim != 1:
-        raise ConfigError(f"speech samples must be mono, shape (samples,), got {a.shape}")
-    if len(a) < AUDIO_SR // 15:
-        raise ConfigError("speech is shorter than one frame (1/15 s)")
-    return a, "audio"
-
-
-def _finish(
-    db: MatchingDatabase, res: SearchResult, plan: SearchPlan, samples: np.ndarray, name: str, config: SynthesisConfig
-) -> SynthesisResult:
-    G = db.G
-    g = np.asarray(G[res.frames[:, 0], res.frames[:, 1]], dtype=np.float32)  # (T, 165)
-    knn = Motion.from_flat(g, db.fps, db.joint_presence)
-    boundaries = np.arange(1, res.n_steps) * config.segment
-    out = Motion.from_flat(
-        blend_segments(g, boundaries, mode=config.blend, frames=config.blend_frames), db.fps, db.joint_presence
-    )
-    return SynthesisResult(
-        motion=out,
-        knn_motion=knn,
-        search=res,
-        audio=samples,
-        config=config,
-        database=str(db.path) if db.path is not None else (db.label or "in-memory database"),
-        source=name,
-        plan=plan,
-        one_skeleton=db.meta.get("skeleton") is not None,
-    )
+    syn.run([silence], [SynthesisConfig(record=2, k=1)])
+    syn.run([silence], [SynthesisConfig(control="0-2:left_hand=high")])
+    syn.run([silence, silence], [SynthesisConfig()] * 2)
 
 
 def synthesize(
@@ -491,6 +322,23 @@ def synthesize(
     -------
     SynthesisResult
         The output has exactly ``floor(samples * 15 / 16000)`` frames.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from gesturekit.demo import build_demo_database
+    >>> from gesturekit.datasets.synthetic import generate_demo_take
+    >>> from gesturekit.synthesize import SynthesisConfig, synthesize
+    >>> db = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5)
+    >>> speech = generate_demo_take(seconds=4.0, seed=1, name="speech")[0].audio  # 16 kHz mono
+    >>> res = synthesize(speech, db=db, config=SynthesisConfig(seed=0, control="1-3:left_hand=high"))
+    >>> res.motion.positions.shape  # 15 frames per second of speech, 55 joints, metres
+    (60, 55, 3)
+    >>> len(res.steps_table())  # one row per 8-frame search step
+    8
+    >>> again = synthesize(speech, db=db, config=res.config)  # the same inputs give the same motion
+    >>> bool((again.motion.positions == res.motion.positions).all())
+    True
     """
     return synthesize_batch([audio], db=db, config=config, controls=[control], refiner=refiner)[0]
 
@@ -521,6 +369,21 @@ def synthesize_batch(
     Returns
     -------
     list of SynthesisResult, identical to calling :func:`synthesize` on each.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from gesturekit.demo import build_demo_database
+    >>> from gesturekit.datasets.synthetic import generate_demo_take
+    >>> from gesturekit.synthesize import synthesize, synthesize_batch
+    >>> db = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5)
+    >>> speeches = [generate_demo_take(seconds=s, seed=s, name="speech")[0].audio for s in (2, 3)]
+    >>> results = synthesize_batch(speeches, db=db, controls=[None, "0-2:speed=slow"])
+    >>> [r.motion.positions.shape for r in results]
+    [(30, 55, 3), (45, 55, 3)]
+    >>> one = synthesize(speeches[1], db=db, control="0-2:speed=slow")
+    >>> bool((one.motion.positions == results[1].motion.positions).all())
+    True
     """
     audios = list(audios)
     if not audios:
@@ -533,80 +396,9 @@ def synthesize_batch(
     controls = list(controls) if controls is not None else [None] * len(audios)
     if len(configs) != len(audios) or len(controls) != len(audios):
         raise ConfigError("give one config and one control per speech (or one config for all)")
-    excl = {(c.exclude_takes, c.exclude_ranges) for c in configs}
-    if len(excl) > 1:
+    if len({(c.exclude_takes, c.exclude_ranges) for c in configs}) > 1:
         raise ConfigError("all speeches of one batch must exclude the same database takes and ranges")
-    made_by = None if refiner is None else _check_refiner(refiner, db)
+    syn = synthesizer_for(db, refiner=refiner)
     # a given control replaces the config's: the config a result records is the one searched
     configs = [c if ctl is None else c.with_control(ctl) for c, ctl in zip(configs, controls)]
-    speeches = [_load_speech(a) for a in audios]
-    shown = (
-        list(names)
-        if names is not None
-        else [Path(a).name if isinstance(a, (str, os.PathLike)) else None for a in audios]
-    )
-    for (samples, _), c, name in zip(speeches, configs, shown):
-        _warn_controls_past_the_end(c.control_track, len(samples) / AUDIO_SR, name)
-    plans = [plan_search(db, samples, c) for (samples, _), c in zip(speeches, configs)]
-    # masks differ per speech; the search shares one mask stack, so stack them with offsets
-    stack: list[np.ndarray] = []
-    step_idx: list[np.ndarray] = []
-    for plan in plans:
-        index = plan.step_mask_index.copy()
-        if plan.masks is not None:
-            index[index >= 0] += len(stack)
-            stack.extend(list(plan.masks))
-        step_idx.append(index)
-    results = _index(db).search_batch(
-        [plan.query for plan in plans],
-        configs=[plan.config for plan in plans],
-        masks=np.stack(stack) if stack else None,
-        step_mask_indices=step_idx,
-        exclude=plans[0].exclude,
-        fps=db.fps,
-    )
-    out = [
-        _finish(db, r, plan, samples, name, c) for r, plan, (samples, name), c in zip(results, plans, speeches, configs)
-    ]
-    if refiner is not None:
-        for res in out:
-            _refine(db, res, refiner)
-            res.refiner = made_by
-    return out
-
-
-def _warn_controls_past_the_end(track: ControlTrack, seconds: float, name: str | None) -> None:
-    """Warn of control segments that begin after the speech ends: the search never reaches them."""
-    for seg in track.segments:
-        if seg.start_s >= seconds:
-            speech = f"{name}: " if name else ""
-            warn(
-                f"{speech}control segment {seg.start_s:g}-{seg.end_s:g} s starts after the speech ends "
-                f"({seconds:.1f} s); it is ignored"
-            )
-
-
-def _check_refiner(refiner: object, db: MatchingDatabase) -> dict | None:
-    """Refuse what is no refiner or one of another feature layout than ``db``; what the result
-    records of it (its ``provenance(db)``, when it has one)."""
-    if not isinstance(refiner, MotionRefiner):
-        raise ConfigError(
-            f"refiner must be a loaded refiner, got {type(refiner).__name__} (open a refiner folder with "
-            "gesturekit.refine.open_refiner)"
-        )
-    refiner.check_database(db)
-    describe = getattr(refiner, "provenance", None)
-    return describe(db) if callable(describe) else None
-
-
-def _refine(db: MatchingDatabase, res: SynthesisResult, refiner: MotionRefiner) -> None:
-    """Refine the k-NN motion with the speech's cGAN audio features (keeping its content below
-    ``refiner_keep_hz``); it becomes the output."""
-    _, a = db.query_features(res.audio, n_frames=res.n_frames)
-    refined = refiner.refine_motion(res.knn_motion, a)
-    hz = res.config.refiner_keep_hz
-    if hz > 0:
-        kept = keep_slow(refined.flat(), res.knn_motion.flat(), hz, fps=res.knn_motion.fps)
-        refined = Motion.from_flat(kept, refined.fps, res.knn_motion.joints)
-    res.refined_motion = refined
-    res.motion = res.refined_motion
+    return syn.run(audios, configs, names=names)

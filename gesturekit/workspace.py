@@ -200,6 +200,8 @@ def build_database(
     notes : callable(str), optional
         Given lines for the summary (takes reused from an interrupted build, what appending did).
 
+    Notes
+    -----
     The build is out of core: takes are read one at a time (``workers`` at once), staged beside
     ``out`` in ``.NAME.staging`` and written into the database take by take, so memory does not
     grow with the dataset. An interrupted build is resumed by the same call, which reuses the

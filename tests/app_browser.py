@@ -1,9 +1,10 @@
 """Drive the app in a real browser: start ``streamlit run app/Home.py``, open it in Chromium, upload, run.
 
 Shared by ``tests/browser/test_browser.py`` and ``bench/bench_app.py``, and the maker
-of the README's screenshots::
+of the docs' screenshots::
 
     python -m tests.app_browser --out docs/screenshots
+    python -m tests.app_browser --front docs/images/app.jpg     # the README's picture
 
 Chromium is Debian's (``apt-get install chromium``), driven through the
 ``playwright`` Python package; Playwright's own browser downloads are not
@@ -597,14 +598,39 @@ def _result_page(out: Path, *, seconds: float, demo_minutes: float, box: tuple[f
             yield page
 
 
+def make_front_picture(path: Path, *, seconds: float = 12.0, demo_minutes: float = 2.0) -> Path:
+    """The README's and the docs' front picture: the Synthesize page's result (k-NN and refined on
+    the character) with a hand-height control, 960 pixels wide, as a JPEG (tens of kilobytes)."""
+    from PIL import Image
+
+    with _result_page(path.parent, seconds=seconds, demo_minutes=demo_minutes, box=(0.3, 0.6)) as page:
+        page.set_viewport_size({"width": 1280, "height": 860})
+        page.get_by_role("heading", name="Result").first.evaluate("el => el.scrollIntoView({block: 'start'})")
+        page.mouse.wheel(0, 130)
+        time.sleep(4)  # the 3D view draws its first frame
+        png = path.with_suffix(".part.png")
+        page.screenshot(path=str(png), type="png")
+    with Image.open(png) as im:
+        small = im.convert("RGB").resize((960, 645), Image.LANCZOS)
+    part = path.with_suffix(".part" + path.suffix)
+    small.save(part, format="JPEG", quality=80, optimize=True, progressive=True)
+    png.unlink()
+    os.replace(part, path)
+    return path
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description="Screenshots of the app's pages for the README.")
+    parser = argparse.ArgumentParser(description="Screenshots of the app's pages for the docs.")
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "screenshots")
+    parser.add_argument("--front", type=Path, help="only the front picture, to this file (docs/images/app.jpg)")
     args = parser.parse_args(argv)
     reason = unavailable()
     if reason:
         print(f"cannot make screenshots: {reason}", file=sys.stderr)
         return 1
+    if args.front:
+        print(make_front_picture(args.front))
+        return 0
     for p in make_screenshots(args.out) + make_viewer_screenshots(args.out):
         print(p)
     return 0

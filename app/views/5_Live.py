@@ -40,7 +40,7 @@ def microphone(stage: live.LiveStage, *, stopping: bool) -> Any:
 
     Returns its context (``.state.playing``). No STUN/TURN server is named unless
     ``$GESTUREKIT_ICE_SERVERS`` gives some: on 127.0.0.1 none is needed and nothing outside is
-    contacted (README, "Live", for serving to other machines).
+    contacted (``docs/guides/live.md``, "Live in the app", for serving to other machines).
     """
     from streamlit_webrtc import AudioSinkTrack, WebRtcMode, webrtc_streamer
 

@@ -37,7 +37,7 @@ def served_to_others() -> bool:
 
     True when Streamlit listens on an address other than the loopback (unset means every
     interface), or when the request came through a reverse proxy (it carries a forwarding
-    header): the README's two ways of serving the app to others.
+    header): the two ways of serving the app to others (``docs/guides/app.md``, "Serving the app to others").
     """
     address = str(st.get_option("server.address") or "")
     try:

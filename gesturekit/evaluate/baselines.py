@@ -35,7 +35,6 @@ from ..errors import ConfigError
 from ..motion import Motion
 from ..search.admissible import admissible_starts
 from ..search.checks import check_segment
-from ..search.plan import plan_search
 from ..search.types import SearchConfig
 
 if TYPE_CHECKING:
@@ -444,7 +443,7 @@ def run_system(
     SystemUnavailable
         ``gt`` without a recording, ``knn+cgan`` without a usable refiner.
     """
-    from ..synthesize import SynthesisConfig, synthesize
+    from ..synthesize import SynthesisConfig, synthesize, synthesizer_for
 
     if system not in SYSTEMS:
         raise ConfigError(f"unknown system {system!r}; known systems: {', '.join(SYSTEMS)}")
@@ -471,7 +470,8 @@ def run_system(
         res = synthesize(audio, db=db, config=config, refiner=opened)
         motion = res.motion
         return SystemOutput(system, motion, np.arange(N, motion.n_frames, N, dtype=np.int64), len(res.relaxed_steps))
-    plan = plan_search(db, audio, config)
+    stages = synthesizer_for(db)  # the synthesis's own stages: the search the k-NN is given
+    plan = stages.plan(stages.features(audio), config)
     n, options = plan.n_frames, plan.config
     valid = np.asarray(db.valid)
     common = WindowRules(

@@ -48,6 +48,29 @@ def save_result_npz(result: SynthesisResult, path: str | os.PathLike[str], *, ov
     -------
     Path
         ``path``, complete.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from gesturekit.demo import build_demo_database
+    >>> from gesturekit.datasets.synthetic import generate_demo_take
+    >>> from gesturekit.export.npz import load_npz
+    >>> from gesturekit.export.result import save_result_npz
+    >>> from gesturekit.synthesize import synthesize
+    >>> out = Path(tempfile.mkdtemp())
+    >>> db = build_demo_database(out / "demo", minutes=0.5)
+    >>> res = synthesize(generate_demo_take(seconds=2.0, seed=1, name="speech")[0].audio, db=db)
+    >>> path = save_result_npz(res, out / "speech.npz")
+    >>> motion, arrays, config = load_npz(path)
+    >>> motion.positions.shape, arrays["knn_positions"].shape, config["synthesis"]["k"]
+    ((30, 55, 3), (30, 55, 3), 0)
+    >>> save_result_npz(res, path)  # an existing output is kept unless overwrite=True
+    Traceback (most recent call last):
+    ...
+    gesturekit.errors.ConfigError: ...speech.npz: already exists; pass overwrite=True ...
+    >>> path == save_result_npz(res, path, overwrite=True)
+    True
     """
     result.check_finite(path)
     arrays = {"knn_positions": result.knn_motion.positions}
@@ -87,6 +110,21 @@ def export_result_bvh(
     BvhReport
         The file, its largest and mean position error (metres), root and joints left out;
         ``report.summary()`` is one line.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from gesturekit.demo import build_demo_database
+    >>> from gesturekit.datasets.synthetic import generate_demo_take
+    >>> from gesturekit.export.result import export_result_bvh
+    >>> from gesturekit.synthesize import synthesize
+    >>> out = Path(tempfile.mkdtemp())
+    >>> db = build_demo_database(out / "demo", minutes=0.5)
+    >>> res = synthesize(generate_demo_take(seconds=2.0, seed=1, name="speech")[0].audio, db=db)
+    >>> report = export_result_bvh(res, out / "speech.bvh")
+    >>> report.root, report.max_error < 1e-4  # metres: the file holds the motion
+    ('spine_mid', True)
     """
     result.check_finite(path)
     return export_bvh(path, result.motion, overwrite=overwrite, units=units, remedy=_bvh_remedy(result))

@@ -69,6 +69,23 @@ def open_refiner(refiner: MotionRefiner | str | os.PathLike[str] | None) -> Moti
         A folder given, and torch (the ``refiner`` extra) is not installed.
     InputFileError
         No refiner folder there, or a damaged one.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from gesturekit.demo import build_demo_database
+    >>> from gesturekit.datasets.synthetic import generate_demo_take
+    >>> from gesturekit.refine import open_refiner
+    >>> from gesturekit.synthesize import synthesize
+    >>> refiner = open_refiner("demo")  # the one shipped, trained on the demo speaker
+    >>> open_refiner(refiner) is refiner and open_refiner(None) is None
+    True
+    >>> db = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5)
+    >>> res = synthesize(generate_demo_take(seconds=2.0, seed=1, name="speech")[0].audio, db=db, refiner=refiner)
+    >>> res.refined_motion is not None and res.motion is res.refined_motion
+    True
+    >>> res.knn_motion.positions.shape == res.motion.positions.shape
+    True
     """
     if refiner is None or not isinstance(refiner, (str, os.PathLike)):
         return refiner

@@ -12,7 +12,8 @@ Modules
 types
     :class:`SearchConfig`, :class:`SearchResult`, :func:`describe_steps`.
 plan
-    :func:`plan_search`: a synthesis's search inputs, built once (:class:`SearchPlan`).
+    :func:`plan_search`: a search's inputs, built once (:class:`SearchPlan`) from what it is
+    asked for (:class:`SearchRequest`); :meth:`SearchIndex.search_plans` searches plans.
 reference
     Algorithm 1 loop for loop: the definition the fast search reproduces.
 explain
@@ -39,7 +40,7 @@ from __future__ import annotations
 from .admissible import admissible_starts
 from .exact import exact_cosine_distance, exact_pose_sqdist
 from .index import SearchIndex, search, search_batch
-from .plan import SearchPlan, plan_search
+from .plan import SearchPlan, SearchRequest, plan_search
 from .types import SearchConfig, SearchResult, describe_steps
 
 __all__ = [
@@ -47,6 +48,7 @@ __all__ = [
     "SearchResult",
     "SearchIndex",
     "SearchPlan",
+    "SearchRequest",
     "plan_search",
     "search",
     "search_batch",

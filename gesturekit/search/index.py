@@ -46,6 +46,7 @@ from ..errors import ConfigError, warn
 from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
 from .exact import TINY, audio_err, compiled, pose_err_factor, reduce_chunk
+from .plan import SearchPlan, stack_plans
 from .threads import matrix_product, single_threaded_blas, worker_count
 from .types import CANDIDATE_FIELDS, SearchConfig, SearchResult, describe_steps
 
@@ -430,6 +431,18 @@ class SearchIndex:
         return self.search_batch(
             [c.query], configs=[c.config], masks=c.masks, step_mask_indices=[c.step_mask_index], exclude=c.exclude
         )[0]
+
+    def search_plans(self, plans: Sequence[SearchPlan], *, fps: float | None = None) -> list[SearchResult]:
+        """Search each plan (:func:`~gesturekit.search.plan.plan_search`) with one scan per step for all.
+
+        Plans of one batch must exclude the same frames; ``fps`` is as in :meth:`search_batch`.
+        Returns one :class:`SearchResult` per plan, identical to searching each plan alone.
+        """
+        b = stack_plans(plans)
+        indices, exclude = b.step_mask_indices, b.exclude
+        return self.search_batch(
+            b.queries, configs=b.configs, masks=b.masks, step_mask_indices=indices, exclude=exclude, fps=fps
+        )
 
     def search_batch(
         self,

@@ -1,31 +1,76 @@
-"""A search planned once: everything a synthesis searches with, built in one place.
+"""A search planned once: everything a search is given, built in one place.
 
-:func:`plan_search` turns a database, the speech and a synthesis configuration into
-a :class:`SearchPlan`: the query's audio features, the control masks and each
-step's index into them, the exclusions, the search configuration (its initial
-pose resolved) and the control track. The synthesis searches with it and keeps it
-in its result; the baselines and the step explanations read the same plan, so
-what they show is what the search was given.
+:func:`plan_search` turns a database, a speech's query features and a
+:class:`SearchRequest` (the search's options, the initial pose, the control track
+and the exclusions) into a :class:`SearchPlan`: the query, the control masks and
+each step's index into them, the exclusions and the search configuration (its
+initial pose resolved). :meth:`SearchIndex.search_plans
+<gesturekit.search.index.SearchIndex.search_plans>` searches plans; the synthesis
+keeps each plan in its result, and the baselines and the step explanations read
+the same plan, so what they show is what the search was given.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..control import ControlTrack, step_masks
 from ..errors import ConfigError
-from ..features import n_audio_frames
 from .checks import check_segment
 from .types import SearchConfig
 
-if TYPE_CHECKING:  # the synthesis sits above the search; only its type is named here
+if TYPE_CHECKING:  # the database sits below the search; only its type is named here
     from ..database import MatchingDatabase
-    from ..synthesize import SynthesisConfig
 
-__all__ = ["SearchPlan", "plan_search", "rest_pose_frame", "resolved_search_config", "exclusions"]
+__all__ = [
+    "SearchRequest",
+    "SearchPlan",
+    "PlanBatch",
+    "plan_search",
+    "stack_plans",
+    "rest_pose_frame",
+    "resolved_search_config",
+    "exclusions",
+]
+
+
+@dataclass(frozen=True)
+class SearchRequest:
+    """What a search is asked for, besides the speech: what :func:`plan_search` needs.
+
+    Attributes
+    ----------
+    search : SearchConfig
+        k, N, recorded candidates, seed, mask rule and pins; its ``init_pose`` is
+        ``"random"`` (the initial pose is chosen by ``init``).
+    init : {"random", "rest"}
+        ``random``: a random database frame that satisfies the first step's control;
+        ``rest``: the database's rest pose (:func:`rest_pose_frame`).
+    control : ControlTrack
+        The control track (seconds of the output); empty: no control.
+    exclude_takes : tuple of str
+        Database takes no window may use.
+    exclude_ranges : tuple of (str, float, float)
+        (take, start_s, end_s) stretches no window may use.
+    """
+
+    search: SearchConfig = field(default_factory=SearchConfig)
+    init: str = "random"
+    control: ControlTrack = field(default_factory=ControlTrack)
+    exclude_takes: tuple[str, ...] = ()
+    exclude_ranges: tuple[tuple[str, float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.search, SearchConfig):
+            raise ConfigError(f"search must be a SearchConfig, got {type(self.search).__name__}")
+        if self.init not in ("random", "rest"):
+            raise ConfigError(f"init must be 'random' or 'rest', got {self.init!r}")
+        if not isinstance(self.control, ControlTrack):
+            raise ConfigError(f"control must be a ControlTrack, got {type(self.control).__name__}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,7 +83,7 @@ class SearchPlan:
         z-scored audio features of the speech, one row per output frame (15 fps).
     config : SearchConfig
         The search's options; ``init_pose`` is the rest pose's feature when the
-        synthesis asked for it, else ``"random"``.
+        request asked for it (``init="rest"``), else ``"random"``.
     control : ControlTrack
         The control track the masks were made from (seconds of the output).
     masks : np.ndarray, shape (n_masks, M, T), bool, or None
@@ -107,17 +152,18 @@ def rest_pose_frame(db: MatchingDatabase) -> tuple[int, int]:
     return int(clip), int(frame)
 
 
-def plan_search(db: MatchingDatabase, speech: np.ndarray, config: SynthesisConfig) -> SearchPlan:
+def plan_search(db: MatchingDatabase, query: np.ndarray, request: SearchRequest) -> SearchPlan:
     """Everything the search of one speech needs, computed once.
 
     Parameters
     ----------
     db : MatchingDatabase
         The database to search.
-    speech : np.ndarray, shape (samples,), float32
-        Mono speech at 16 kHz; the output has ``floor(samples * 15 / 16000)`` frames.
-    config : SynthesisConfig
-        Its search options, initial pose (``"random"`` or ``"rest"``), control track and exclusions.
+    query : np.ndarray, shape (T_out, 112), float32
+        The speech's audio features z-scored with ``db``'s statistics, one row per output
+        frame at 15 fps (:meth:`gesturekit.synthesizer.Synthesizer.features` computes them).
+    request : SearchRequest
+        The search's options, initial pose, control track and exclusions.
 
     Returns
     -------
@@ -126,35 +172,104 @@ def plan_search(db: MatchingDatabase, speech: np.ndarray, config: SynthesisConfi
     Raises
     ------
     ConfigError
-        N longer than a database clip, or exclusions naming takes the database lacks.
+        A query that is not (T_out, 112) features, N longer than a database clip, or
+        exclusions naming takes the database lacks.
     """
-    samples = np.asarray(speech, dtype=np.float32)
-    n = n_audio_frames(len(samples))
-    search = config.search
+    if not isinstance(request, SearchRequest):
+        raise ConfigError(f"request must be a SearchRequest, got {type(request).__name__}")
+    query = np.asarray(query)
+    width = np.shape(db.F)[-1]
+    if query.ndim != 2 or query.shape[1] != width or query.shape[0] < 1:
+        raise ConfigError(
+            f"query must be the speech's features, shape (frames, {width}), got {query.shape} "
+            "(speech samples are turned into them by Synthesizer.features)"
+        )
+    n = int(query.shape[0])
+    search = request.search
     check_segment(search.segment, np.shape(db.valid)[1])
-    query, _ = db.query_features(samples, n_frames=n)
-    track = config.control_track
-    masks, index = step_masks(track, np.asarray(db.attributes), db.thresholds, n_frames=n, segment=search.segment)
+    masks, index = step_masks(
+        request.control, np.asarray(db.attributes), db.thresholds, n_frames=n, segment=search.segment
+    )
     return SearchPlan(
         query=np.ascontiguousarray(query, dtype=np.float32),
-        config=resolved_search_config(db, config),
-        control=track,
+        config=resolved_search_config(db, request),
+        control=request.control,
         masks=masks,
         step_mask_index=np.asarray(index, dtype=np.int64),
-        exclude=exclusions(db, config),
+        exclude=exclusions(db, request),
     )
 
 
-def resolved_search_config(db: MatchingDatabase, config: SynthesisConfig) -> SearchConfig:
-    """The synthesis's search options with its initial pose resolved: the rest pose's
-    feature (:func:`rest_pose_frame`) when ``config.init`` is ``"rest"``."""
-    if config.init == "rest":
-        return replace(config.search, init_pose=tuple(float(x) for x in db.P[rest_pose_frame(db)]))
-    return config.search
+def resolved_search_config(db: MatchingDatabase, request: SearchRequest) -> SearchConfig:
+    """The request's search options with its initial pose resolved: the rest pose's
+    feature (:func:`rest_pose_frame`) when ``request.init`` is ``"rest"``."""
+    if request.init == "rest":
+        return replace(request.search, init_pose=tuple(float(x) for x in db.P[rest_pose_frame(db)]))
+    return request.search
 
 
-def exclusions(db: MatchingDatabase, config: SynthesisConfig) -> np.ndarray | None:
+def exclusions(db: MatchingDatabase, request: SearchRequest) -> np.ndarray | None:
     """Database frames no window may contain, shape (M, T) bool, or None when nothing is excluded."""
-    if config.exclude_takes or config.exclude_ranges:
-        return db.exclusion_mask(takes=config.exclude_takes, ranges=config.exclude_ranges)
+    if request.exclude_takes or request.exclude_ranges:
+        return db.exclusion_mask(takes=request.exclude_takes, ranges=request.exclude_ranges)
     return None
+
+
+@dataclass(frozen=True, eq=False)
+class PlanBatch:
+    """Several plans as one batched search takes them (:func:`stack_plans`).
+
+    Attributes
+    ----------
+    queries : list of np.ndarray, each shape (T_out_b, 112), float32
+    configs : list of SearchConfig
+    masks : np.ndarray, shape (n_masks, M, T), bool, or None
+        Every plan's masks, one stack.
+    step_mask_indices : list of np.ndarray, each shape (n_steps_b,), int64
+        Per plan, each step's index into ``masks`` (-1: unconstrained).
+    exclude : np.ndarray, shape (M, T), bool, or None
+        The plans' common exclusions.
+    """
+
+    queries: list[np.ndarray]
+    configs: list[SearchConfig]
+    masks: np.ndarray | None
+    step_mask_indices: list[np.ndarray]
+    exclude: np.ndarray | None
+
+
+def stack_plans(plans: Sequence[SearchPlan]) -> PlanBatch:
+    """The plans' inputs as one batch: their masks in one stack, each step's index moved along.
+
+    Raises
+    ------
+    ConfigError
+        Plans that exclude different database frames (a batch shares its exclusions).
+    """
+    plans = list(plans)
+    if not all(isinstance(plan, SearchPlan) for plan in plans):
+        raise ConfigError("plans must be SearchPlans (made by plan_search)")
+    exclude = plans[0].exclude if plans else None
+    for plan in plans[1:]:
+        same = (
+            plan.exclude is exclude
+            if plan.exclude is None or exclude is None
+            else np.array_equal(plan.exclude, exclude)
+        )
+        if not same:
+            raise ConfigError("all plans of one batch must exclude the same database frames")
+    stack: list[np.ndarray] = []
+    indices: list[np.ndarray] = []
+    for plan in plans:
+        index = plan.step_mask_index.copy()
+        if plan.masks is not None:
+            index[index >= 0] += len(stack)
+            stack.extend(list(plan.masks))
+        indices.append(index)
+    return PlanBatch(
+        queries=[plan.query for plan in plans],
+        configs=[plan.config for plan in plans],
+        masks=np.stack(stack) if stack else None,
+        step_mask_indices=indices,
+        exclude=exclude,
+    )

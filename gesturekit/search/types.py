@@ -52,6 +52,15 @@ class SearchConfig:
     pins : dict of int -> (int, int)
         Step -> (clip, start): forces the choice at that step; later steps
         continue from the pinned segment.
+
+    Examples
+    --------
+    >>> from gesturekit.search import SearchConfig
+    >>> config = SearchConfig(k=1, segment=8, mask_rule="all")
+    >>> config.to_dict()
+    {'k': 1, 'segment': 8, 'record': 10, 'seed': 0, 'init_pose': 'random', 'mask_rule': 'all', 'pins': {}}
+    >>> SearchConfig.from_dict(config.to_dict()) == config
+    True
     """
 
     k: int = option(0, help="take the k-th best candidate of each step", low=0)

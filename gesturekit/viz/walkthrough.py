@@ -58,9 +58,10 @@ def _plan(result: SynthesisResult, db: MatchingDatabase) -> SearchPlan:
     """The plan a synthesis searched with (made again only for a result that does not keep one)."""
     if result.plan is not None:
         return result.plan
-    from ..search.plan import plan_search
+    from ..synthesize import synthesizer_for
 
-    return plan_search(db, result.audio, result.config)
+    stages = synthesizer_for(db)
+    return stages.plan(stages.features(result.audio), result.config)
 
 
 def step_inputs(result: SynthesisResult, db: MatchingDatabase, step: int) -> dict:

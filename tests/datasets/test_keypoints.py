@@ -294,16 +294,16 @@ def test_negative_axes_are_read_as_values_on_the_command_line():
     assert (args.up, args.forward, args.units, args.normalize_bones) == ("-z", "-x", None, False)
 
 
-def test_the_readme_keypoint_example_runs_as_written(tmp_path, monkeypatch):
+def test_the_guide_keypoint_example_runs_as_written(tmp_path, monkeypatch):
     import re
     import shlex
 
     from gesturekit.datasets import keypoint_example
 
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
-    section = readme[readme.index("### Joint-position files") : readme.index("### Habibie et al. 2021")]
+    guide = (Path(__file__).resolve().parents[2] / "docs" / "guides" / "databases.md").read_text(encoding="utf-8")
+    section = guide[guide.index("## Joint-position files") : guide.index("## Habibie et al. 2021")]
     block = re.search(r"```bash\n(python -m gesturekit\.datasets\.keypoint_example.*?)```", section, re.S)
-    assert block, "the README shows no keypoint example"
+    assert block, "the databases guide shows no keypoint example"
     monkeypatch.chdir(tmp_path)
     printed = []
     for line in block.group(1).splitlines():

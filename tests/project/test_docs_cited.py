@@ -50,9 +50,30 @@ def test_every_cited_document_and_section_exists(path, doc, section):
         )
 
 
+def test_the_code_cites_the_guides():
+    cited = {(doc, section) for _, doc, section in _citations()}
+    assert ("docs/guides/app.md", "Serving the app to others") in cited  # the Study page's check
+
+
+def _slug(heading: str) -> str:
+    """A heading's anchor as Markdown's table of contents makes it (MkDocs and GitHub alike here)."""
+    return re.sub(r"[\s]+", "-", re.sub(r"[^\w\s-]", "", heading.lower()).strip())
+
+
 def test_every_file_the_readme_links_exists():
     text = (REPO / "README.md").read_text(encoding="utf-8")
-    links = re.findall(r"\]\(((?:docs|bench|tools|notebooks|app|gesturekit)/[^)#\s]+)", text)
+    links = re.findall(r"\]\(((?:docs|bench|tools|notebooks|app|gesturekit)/[^)\s]+)", text)
     assert links, "the README links files of the repository"
-    missing = sorted({link for link in links if not (REPO / link).exists()})
+    missing = sorted({link for link in links if not (REPO / link.split("#")[0]).exists()})
     assert not missing, f"the README links files the repository does not have: {missing}"
+    for link in links:
+        if "#" in link:
+            page, anchor = link.split("#")
+            assert anchor in {_slug(h) for h in _headings(REPO / page)}, f"{page} has no section #{anchor}"
+
+
+def test_every_docs_page_is_in_the_site():
+    """A page written into docs/ but left out of mkdocs.yml's navigation is a page nobody finds."""
+    nav = (REPO / "mkdocs.yml").read_text(encoding="utf-8")
+    pages = sorted(p.relative_to(REPO / "docs").as_posix() for p in (REPO / "docs").rglob("*.md"))
+    assert pages and not [p for p in pages if f": {p}" not in nav]

@@ -7,9 +7,10 @@ From the bottom up (the data's way through the package, issue 17's acceptance)::
     datasets    the readers and the generated demo speaker (gesturekit/datasets/)
     features    audio and pose features, their layout
     database    MatchingDatabase, its folder on disk, the demo database, finding databases
-                (also the package's ``__init__``, which re-exports the database)
     search      Algorithm 1 (gesturekit/search/ or search.py, its kernels and reference), blending
-    synthesize  speech -> motion, the whole pipeline
+    synthesize  speech -> motion: the options and entry points (synthesize), the stages
+                (synthesizer), what passes between them (synthesis_types), the live synthesis;
+                also the package's ``__init__``, which re-exports the database and the Synthesizer
     refine/export/viz/evaluate
                 what is done with a synthesis (peers: they may import each other)
     study/interactive
@@ -68,7 +69,10 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         ("gesturekit", "gesturekit.database", "gesturekit._database_folder", "gesturekit.demo", "gesturekit.workspace"),
     ),
     ("search", ("gesturekit.search", "gesturekit._search_kernels", "gesturekit.search_reference", "gesturekit.blend")),
-    ("synthesize", ("gesturekit.synthesize", "gesturekit.live")),
+    (
+        "synthesize",
+        ("gesturekit.synthesize", "gesturekit.synthesizer", "gesturekit.synthesis_types", "gesturekit.live"),
+    ),
     ("refine/export/viz/evaluate", ("gesturekit.refine", "gesturekit.export", "gesturekit.viz", "gesturekit.evaluate")),
     (
         "study/interactive",
@@ -89,8 +93,14 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
 ]
 RANK = {name: i for i, (name, _) in enumerate(LAYERS)}
 
+# modules placed by their exact name, not as a prefix of others: the package's __init__ sits above
+# what it re-exports, while the prefix "gesturekit" above places the package's other modules
+EXACT = {"gesturekit": "synthesize"}
+
 
 def layer_of(module: str) -> str | None:
+    if module in EXACT:
+        return EXACT[module]
     best = None
     for name, prefixes in LAYERS:
         for prefix in prefixes:

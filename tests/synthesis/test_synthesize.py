@@ -367,11 +367,13 @@ def test_a_given_control_is_the_one_searched_and_recorded(demo_db, speech):
 
 def test_the_result_keeps_the_plan_it_searched_with(demo_db, speech):
     from gesturekit.search import plan_search
+    from gesturekit.synthesize import search_request
 
     cfg = SynthesisConfig(k=1, segment=6, init="rest", control="1-5:speed=slow", exclude_takes=(demo_db.take_names[0],))
     res = synthesize(speech, db=demo_db, config=cfg)
     plan = res.plan
-    again = plan_search(demo_db, speech, cfg)
+    # planned again from the database's own query features (the plain reference)
+    again = plan_search(demo_db, demo_db.query_features(speech)[0], search_request(cfg))
     np.testing.assert_array_equal(plan.query, again.query)
     np.testing.assert_array_equal(plan.masks, again.masks)
     np.testing.assert_array_equal(plan.step_mask_index, again.step_mask_index)
