@@ -344,6 +344,19 @@ def widget_limits(cls: type, name: str, *, context: Any = None) -> dict[str, Any
     dict
         ``min``, ``max`` (None: unbounded), ``step`` (None for choices), ``default``, ``choices``
         (a list, or None), ``help`` and ``unit``.
+
+    Examples
+    --------
+    What the app's input of N allows, and the same for a database of 32-frame clips:
+
+    >>> from gesturekit.options import widget_limits
+    >>> from gesturekit.search import SearchConfig
+    >>> limits = widget_limits(SearchConfig, "segment")
+    >>> limits["min"], limits["max"], limits["default"], limits["help"]
+    (1, None, 8, 'frames per search step, N')
+    >>> from types import SimpleNamespace
+    >>> widget_limits(SearchConfig, "segment", context=SimpleNamespace(clip_frames=32))["max"]
+    32
     """
     opt = option_of(cls, name)
     high = opt.high

@@ -1,13 +1,7 @@
 """Every option's one source: the metadata of the configuration dataclasses' fields.
 
 An option is a field declared with :func:`option` (its help, bounds, choices and unit);
-the command line's flags and the app's widgets read it from there::
-
-    >>> from gesturekit.options import widget_limits
-    >>> from gesturekit.search import SearchConfig
-    >>> limits = widget_limits(SearchConfig, "k")
-    >>> limits["min"], limits["max"], limits["default"]
-    (0, None, 0)
+the command line's flags and the app's widgets read it from there (see :func:`widget_limits`).
 
 The configurations so declared: :class:`~gesturekit.search.SearchConfig`,
 :class:`~gesturekit.synthesize.SynthesisConfig`, :class:`~gesturekit.refine.train.TrainConfig`,

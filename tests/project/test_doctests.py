@@ -20,6 +20,7 @@ DOCUMENTED = (
     "gesturekit.MatchingDatabase.load",
     "gesturekit.parse_control",
     "gesturekit.search.SearchConfig",
+    "gesturekit.options.widget_limits",
     "gesturekit.synthesize.synthesize",
     "gesturekit.synthesize.synthesize_batch",
     "gesturekit.export.result.save_result_npz",
