@@ -79,18 +79,14 @@ def _add_choice(parser, flag: str, choices: list[str], help: str) -> None:
     parser.add_argument(flag, choices=choices, default=choices[0], help=help)
 
 
-#: The search's options that ``synthesize`` and ``evaluate`` share, by the class that declares them.
-SEARCH_OPTIONS = ("k", "segment", "seed")
-SYNTHESIS_OPTIONS = ("init", "mask_rule", "blend")  # mask_rule: SearchConfig's, passed on by SynthesisConfig
-
-
 def search_options() -> list[tuple[type, tuple[str, ...]]]:
-    """(configuration class, its fields) of the options :func:`_add_search` adds, in order."""
+    """(configuration class, its fields) of the search options ``synthesize`` and ``evaluate`` share, in
+    the order ``--help`` lists them (``mask_rule`` is SearchConfig's; SynthesisConfig passes it on)."""
     from .search import SearchConfig
     from .synthesize import SynthesisConfig
 
     return [
-        (SearchConfig, SEARCH_OPTIONS),
+        (SearchConfig, ("k", "segment", "seed")),
         (SynthesisConfig, ("init",)),
         (SearchConfig, ("mask_rule",)),
         (SynthesisConfig, ("blend",)),
