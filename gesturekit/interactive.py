@@ -15,7 +15,6 @@ Times are in seconds, motions are :class:`~gesturekit.motion.Motion` objects
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 import math
 import os
@@ -30,6 +29,7 @@ import pandas as pd
 from ._io import safe_filename
 from .control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_attributes
 from .database import MatchingDatabase
+from .datasets.audio import wav_bytes
 from .errors import ConfigError, GestureKitError, collect_warnings, warn
 from .export.bvh import BvhReport
 from .export.result import export_result_bvh, save_result_npz, save_result_video
@@ -53,7 +53,6 @@ __all__ = [
     "selected_time_range",
     "example_speech",
     "read_speech_upload",
-    "wav_bytes",
     "display_motions",
     "export_filename",
     "export_bytes",
@@ -360,24 +359,6 @@ def read_speech_upload(name: str, data: bytes) -> tuple[np.ndarray, AudioInfo]:
     return audio, dataclasses.replace(info, path=str(name))
 
 
-def wav_bytes(audio: np.ndarray, *, sr: int = AUDIO_SR) -> bytes:
-    """Mono audio as a 16-bit PCM WAV file's bytes, at its own level (for an audio player).
-
-    Parameters
-    ----------
-    audio : np.ndarray, shape (samples,)
-        Float samples in [-1, 1] (clipped beyond).
-    sr : int
-        Sample rate, Hz.
-    """
-    import soundfile as sf
-
-    a = np.clip(np.nan_to_num(np.asarray(audio, dtype=np.float32).ravel()), -1.0, 1.0)
-    buf = io.BytesIO()
-    sf.write(buf, a, int(sr), format="WAV", subtype="PCM_16")
-    return buf.getvalue()
-
-
 # ---- what to show ------------------------------------------------------------------------------
 
 
@@ -411,7 +392,7 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
         ``csv``: the control track (start_s, end_s, constraint); ``json``: how
         the result was made (:meth:`SynthesisResult.metadata`, with the
         synthesis config under ``"synthesis"``); ``wav``: the speech (16-bit PCM at
-        16 kHz, :func:`wav_bytes`). ``mp4`` is made by :func:`render_mp4`.
+        16 kHz, :func:`gesturekit.datasets.audio.wav_bytes`). ``mp4`` is made by :func:`render_mp4`.
     """
     if kind == "wav":
         return wav_bytes(result.audio)

@@ -17,6 +17,7 @@ from gesturekit import interactive as gs
 from gesturekit.blend import BLEND_MODES, KEEP_BELOW_HZ
 from gesturekit.control import ControlTrack
 from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.audio import wav_bytes
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
 from gesturekit.search import describe_steps
@@ -415,7 +416,7 @@ def main() -> None:
     st.caption(f"**{display.escape_markdown(speech['name'])}** · {display.escape_markdown(speech['summary'])}")
     for note in speech["notes"]:
         st.warning(display.escape_markdown(note), icon=":material/warning:")
-    st.audio(gs.wav_bytes(speech["audio"]), format="audio/wav")
+    st.audio(wav_bytes(speech["audio"]), format="audio/wav")
 
     st.subheader("2 · Controls")
     track = controls(speech)

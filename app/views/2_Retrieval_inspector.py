@@ -13,6 +13,7 @@ import streamlit as st
 
 from gesturekit import interactive as gs
 from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.audio import wav_bytes
 from gesturekit.motion import AUDIO_SR
 from gesturekit.synthesize import SynthesisResult
 from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
@@ -153,7 +154,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
     with c[1]:
         st.caption(f"candidate #{pick}'s own speech in the database")
         if db.audio is not None:
-            st.audio(gs.wav_bytes(db.segment_audio(r.clip, r.start, b - a)), format="audio/wav")
+            st.audio(wav_bytes(db.segment_audio(r.clip, r.start, b - a)), format="audio/wav")
             context(db, r, b - a)
         else:
             st.caption("(this database was built without audio)")
@@ -178,7 +179,7 @@ def context(db: MatchingDatabase, r: Any, n_frames: int) -> None:
         f"…with up to {CONTEXT_S:g} s around it: the window is {a:.2f}–{b:.2f} s of this "
         f"{len(audio) / AUDIO_SR:.2f} s excerpt ({display.escape_markdown(r.take)} at {t0 + a:.2f}–{t0 + b:.2f} s)"
     )
-    st.audio(gs.wav_bytes(audio), format="audio/wav")
+    st.audio(wav_bytes(audio), format="audio/wav")
     fig = waveform_figure(audio, AUDIO_SR, bands=[(a, b, "window")], height=150)
     fig.update_layout(showlegend=False, margin=dict(l=10, r=10, t=25, b=10), yaxis_title=None)
     st.plotly_chart(fig, key="inspect.context", config={"displaylogo": False})

@@ -30,6 +30,7 @@ import numpy as np
 
 from .._io import atomic_write
 from .._optional import require
+from ..datasets.audio import write_wav
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG
@@ -170,7 +171,8 @@ def render_video(
             # the whole frames nearest to the audio's duration; at least one
             n_frames = max(1, int(math.floor(seconds * fps + 0.5)))
             wav = Path(tmp) / "audio.wav"
-            _write_wav(wav, audio, sr)
+            # float samples: nothing is requantised before the AAC encoder
+            write_wav(wav, audio, sr=int(sr), encoding="float32", overwrite=True)
         cmd = _encode_command(encoded, width, height, fps, wav, seconds)
         _encode(cmd, frames, rendered, n_frames, progress, Path(tmp) / "ffmpeg.log", path)
 
@@ -207,13 +209,6 @@ def _check_audio(audio: Any, sr: Any) -> np.ndarray:
     if not np.all(np.isfinite(audio)):
         raise ConfigError("audio holds NaN or infinite samples")
     return audio.astype(np.float32, copy=False)
-
-
-def _write_wav(path: Path, audio: np.ndarray, sr: int) -> None:
-    import soundfile
-
-    # float samples: nothing is clipped or requantised before the AAC encoder
-    soundfile.write(path, audio, int(sr), subtype="FLOAT")
 
 
 def _encode_command(

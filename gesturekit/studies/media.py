@@ -21,14 +21,13 @@ from __future__ import annotations
 import os
 import subprocess
 import tempfile
-import wave
 from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from .._io import atomic_write
 from .._optional import require
+from ..datasets.audio import write_wav
 from ..errors import GestureKitError
 from ..export.video import _encode_command, _ffmpeg, probe_media
 from ..study import stimulus_id
@@ -232,15 +231,6 @@ def make_audio_check(folder: str | os.PathLike, *, seed: int) -> dict:
     folder = Path(folder)
     beeps = 3 + int(np.random.default_rng([int(seed), 0xBEE9]).integers(5))
     cid = check_media_id(seed, "", "audio")
-    pcm = np.round(beep_samples(beeps) * 32767).astype("<i2").tobytes()
     (folder / "checks").mkdir(exist_ok=True)
-
-    def write(f) -> None:
-        with wave.open(f, "wb") as w:
-            w.setnchannels(1)
-            w.setsampwidth(2)
-            w.setframerate(BEEP_SR)
-            w.writeframes(pcm)
-
-    atomic_write(folder / "checks" / f"{cid}.wav", write, overwrite=True)
+    write_wav(folder / "checks" / f"{cid}.wav", beep_samples(beeps), sr=BEEP_SR, overwrite=True)
     return {"id": cid, "file": f"checks/{cid}.wav", "beeps": beeps}

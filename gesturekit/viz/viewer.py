@@ -52,6 +52,7 @@ from ..character.paint import EMPTY_BODY, paint
 from ..character.retarget import retarget
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
 from ..character.target import Character
+from ..datasets.audio import wav_bytes
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS
@@ -71,7 +72,6 @@ __all__ = [
     "viewer_data",
     "read_viewer_data",
     "wav_data_uri",
-    "wav_bytes",
     "ViewerArgs",
     "viewer_args",
     "read_viewer_args",
@@ -89,32 +89,6 @@ QUATERNION_SCALE = 32767
 
 _DATA_ID = "gk-data"
 _AUDIO_PREFIX = "data:audio/wav;base64,"
-
-
-def wav_bytes(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> bytes:
-    """Mono audio as a WAV file's bytes: 16-bit PCM at ``sr``.
-
-    Parameters
-    ----------
-    audio : array_like
-        Shape (samples,), float in [-1, 1] (clipped beyond; NaN as 0).
-    sr : int
-        Sample rate, Hz.
-
-    Returns
-    -------
-    bytes
-        The file; a sample ``x`` is stored as ``round(x * 32767)``.
-    """
-    a = np.clip(np.nan_to_num(np.asarray(audio, dtype=np.float64).ravel()), -1.0, 1.0)
-    pcm = np.round(a * 32767.0).astype("<i2")
-    buf = io.BytesIO()
-    with wave.open(buf, "wb") as w:
-        w.setnchannels(1)
-        w.setsampwidth(2)
-        w.setframerate(int(sr))
-        w.writeframes(pcm.tobytes())
-    return buf.getvalue()
 
 
 def wav_data_uri(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> str:
