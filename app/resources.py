@@ -216,6 +216,7 @@ def _first_use(noise) -> None:
     import plotly.io as pio
 
     from gesturekit import interactive as gs
+    from gesturekit.control import empty_segments, segments_frame, track_from_segments
     from gesturekit.datasets.audio import wav_bytes
     from gesturekit.motion import AUDIO_SR, N_JOINTS, Motion
     from gesturekit.viz.figures import waveform_figure, wrist_figure
@@ -226,7 +227,7 @@ def _first_use(noise) -> None:
     wav_bytes(audio)
     import pyarrow as pa  # what streamlit's tables are sent as: its first import takes most of a second
 
-    pa.Table.from_pandas(gs.segments_frame(gs.track_from_segments(gs.empty_segments())))
+    pa.Table.from_pandas(segments_frame(track_from_segments(empty_segments())))
     motion = Motion(np.zeros((4, N_JOINTS, 3), np.float32), 15.0)
     skeleton_viewer([motion, motion], labels=["a", "b"])
     for fig in (waveform_figure(audio, AUDIO_SR), wrist_figure([motion, motion], labels=["a", "b"])):

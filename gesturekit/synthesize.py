@@ -29,7 +29,7 @@ from .errors import ConfigError, GestureKitError, warn
 from .motion import AUDIO_SR, HoldsMotion, Motion
 from .search import SearchConfig, SearchIndex, SearchResult
 from .search.plan import SearchPlan, plan_search, rest_pose_frame
-from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
+from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys, window_source
 
 if TYPE_CHECKING:  # named in annotations only: the refiner sits above the synthesis
     import pandas as pd
@@ -338,6 +338,20 @@ class SynthesisResult(HoldsMotion):
                 "pinned": s.pinned,
             }
         )
+
+    def steps_overview(self, db: MatchingDatabase) -> pd.DataFrame:
+        """:meth:`steps_table` with each chosen window's source take and time (``take``, ``source_s``).
+
+        Parameters
+        ----------
+        db : MatchingDatabase
+            The database the result was searched in.
+        """
+        table = self.steps_table()
+        src = [window_source(db, c, s) for c, s in zip(self.search.clip, self.search.start)]
+        table.insert(5, "take", [t for t, _ in src])
+        table.insert(6, "source_s", [s for _, s in src])
+        return table
 
     def metadata(self) -> dict:
         """The JSON saved with every export: how this result was made."""

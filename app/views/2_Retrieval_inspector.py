@@ -72,7 +72,7 @@ def _rerun_with(db, record, config) -> None:
 def pick_step(db: MatchingDatabase, result: SynthesisResult) -> int:
     """The steps table (a selected row picks the step) and the step number input."""
     ss = st.session_state
-    table = gs.steps_overview(result, db)
+    table = result.steps_overview(db)
     with st.expander(f"All {len(table)} steps", expanded=False):
         selected = display.selected_row(table, key="inspect.steps_table", height=240, column_config=STEPS_COLUMNS)
     key = state.picked_key(STEP, selected, last=_LAST_ROW, n=len(table))  # a new result may have fewer steps
@@ -88,7 +88,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
     result = record["result"]
     s, N, fps = result.search, result.config.segment, result.motion.fps
     a, b = step * N, min((step + 1) * N, result.n_frames)
-    overview = gs.steps_overview(result, db).iloc[step]
+    overview = result.steps_overview(db).iloc[step]
     flags = (" · **pinned**" if s.pinned[step] else "") + (" · control relaxed" if s.relaxed[step] else "")
     st.markdown(
         f"**Step {step}** · output frames {a}–{b - 1} ({a / fps:.2f}–{b / fps:.2f} s) · "
@@ -96,7 +96,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
         f"(take **{display.escape_markdown(overview['take'])}** at {overview['source_s']:.2f} s){flags} · "
         f"{int(s.n_candidates[step])} clips survived"
     )
-    table = gs.candidates_table(result, db, step)
+    table = result.search.candidates_table(step, db)
     st.dataframe(table, hide_index=True, key="inspect.candidates", column_config=CANDIDATE_COLUMNS)
 
     views, plot = st.columns([3, 2])
