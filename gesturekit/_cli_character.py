@@ -57,7 +57,7 @@ def check_target(
     if character is None or kind != "bvh":
         check_output(path, "file", overwrite=overwrite, inputs=[*inputs, *([character.path] if character else [])])
         return
-    from .export._character_bvh import character_bvh_joints, check_character_bvh
+    from .export.character import character_bvh_joints, check_character_bvh
 
     joints = character_bvh_joints(character)
     check_character_bvh(path, joints, overwrite=overwrite, inputs=[*inputs, character.path])

@@ -11,8 +11,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._demo_body import _CURL, _DEV, _FLEX, _POSE_DIM, _ROLL, _SPREAD, _SWIVEL, _WRIST, _reachable, _unit
-from ._demo_speech import _draw, _Speech
+from ..skeleton import FPS, N_JOINTS, joint_index
+from ._demo_body import (
+    _BODY_OFFSETS,
+    _CURL,
+    _DEV,
+    _FLEX,
+    _MIRROR,
+    _POSE_DIM,
+    _ROLL,
+    _SPREAD,
+    _SWIVEL,
+    _WRIST,
+    _arm_rotations,
+    _axis_angle,
+    _bumps,
+    _forward_kinematics,
+    _min_jerk_track,
+    _reachable,
+    _unit,
+)
+from ._demo_speech import _draw, _smooth_noise, _Speech
 
 # ---------------------------------------------------------------------------------------------
 # gesture plan: keyposes per arm
@@ -293,3 +312,40 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
         gesture_phrases=np.array(g_phrases, dtype=np.float64).reshape(-1, 2),
         gesture_modes=tuple(g_modes),
     )
+
+
+def _render_motion(plan: _GesturePlan, speech: _Speech, rng: np.random.Generator, n_frames: int) -> np.ndarray:
+    """Positions of the take, shape (n_frames, 55, 3), float32."""
+    t = np.arange(n_frames) / FPS
+    identity = np.broadcast_to(np.eye(3), (n_frames, 3, 3))
+    local = [identity] * N_JOINTS
+    # torso: slow sway, a slight forward lean and a head nod on every stressed syllable
+    stress_frames = speech.syl_nucleus[speech.syl_stressed] * FPS
+    lean = _bumps(stress_frames, rng.uniform(0.01, 0.025, len(stress_frames)), n_frames, 2.5)
+    nod = _bumps(stress_frames + 0.03 * FPS, rng.uniform(0.04, 0.09, len(stress_frames)), n_frames, 1.8)
+    sway = _smooth_noise(rng, n_frames, 12.0, 3) * np.array([0.025, 0.03, 0.02])  # lean, side, twist
+    head = _smooth_noise(rng, n_frames, 10.0, 3) * np.array([0.04, 0.07, 0.025])  # pitch, yaw, roll
+    shares = {"spine_mid": 0.4, "chest": 0.3, "upper_chest": 0.3}
+    for name, share in shares.items():
+        local[joint_index(name)] = (
+            _axis_angle((1, 0, 0), share * (sway[:, 0] + lean))
+            @ _axis_angle((0, 0, 1), share * sway[:, 1])
+            @ _axis_angle((0, 1, 0), share * sway[:, 2])
+        )
+    local[joint_index("neck")] = _axis_angle((1, 0, 0), 0.3 * (head[:, 0] + nod))
+    local[joint_index("head")] = (
+        _axis_angle((1, 0, 0), 0.7 * (head[:, 0] + nod))
+        @ _axis_angle((0, 1, 0), head[:, 1])
+        @ _axis_angle((0, 0, 1), head[:, 2])
+    )
+    root = local[joint_index("spine_mid")] @ np.asarray(_BODY_OFFSETS["spine_mid"])
+    for side, arm in zip(("left", "right"), plan.arms):
+        pose = _min_jerk_track(np.asarray(arm.times), np.stack(arm.poses), t)
+        # a living hold: the wrist and hand drift a little, never quite still
+        pose[:, _WRIST] += _smooth_noise(rng, n_frames, 6.0, 3) * 0.008
+        pose[:, _ROLL] += _smooth_noise(rng, n_frames, 8.0, 1)[:, 0] * 0.05
+        pose[:, _CURL] = np.clip(pose[:, _CURL] + _smooth_noise(rng, n_frames, 8.0, 5) * 0.03, 0.0, 1.0)
+        for suffix, rot in _arm_rotations(pose).items():
+            # the right arm is the mirror image of a left arm with the same keyposes
+            local[joint_index(f"{side}_{suffix}")] = rot if side == "left" else _MIRROR @ rot @ _MIRROR
+    return _forward_kinematics(root, local).astype(np.float32)

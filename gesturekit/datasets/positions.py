@@ -46,15 +46,18 @@ from ..skeleton import FPS, JOINT_NAMES, missing_required
 from ._axes import UNIT_SCALE, check_axes_options, check_skeleton
 from ._reading import Reading, convert_and_complete
 from .presets import missing_and_unknown
-from .takes import POSITION_EXTENSIONS as _SUFFIXES  # the files a folder of takes is searched for
 
 __all__ = [
+    "POSITION_EXTENSIONS",
     "PositionJointMap",
     "load_position_joint_map",
     "read_position_array",
     "load_positions_motion",
     "read_positions_take",
 ]
+
+#: Suffixes of the position files read (and that a folder of takes is searched for).
+POSITION_EXTENSIONS = (".npy", ".npz", ".txt", ".csv")
 
 
 @dataclass(frozen=True)
@@ -247,8 +250,10 @@ def read_position_array(path: str | os.PathLike, *, fps: float | None = None) ->
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in _SUFFIXES:
-        raise MotionFileError(f"unsupported position file type {suffix!r} (expected {', '.join(_SUFFIXES)})", path=path)
+    if suffix not in POSITION_EXTENSIONS:
+        raise MotionFileError(
+            f"unsupported position file type {suffix!r} (expected {', '.join(POSITION_EXTENSIONS)})", path=path
+        )
     if not path.is_file():
         raise MotionFileError("file not found", path=path)
     size = path.stat().st_size

@@ -57,8 +57,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion, Take, n_audio_frames
 from ..skeleton import FPS
-from ._demo_body import _render_motion
-from ._demo_gestures import _plan_gestures
+from ._demo_gestures import _plan_gestures, _render_motion
 from ._demo_speech import _plan_speech, _render_audio
 
 __all__ = ["DEMO_LABEL", "GENERATOR", "DemoEvents", "generate_demo_take", "generate_demo_takes"]

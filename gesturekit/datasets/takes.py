@@ -24,6 +24,7 @@ from ..errors import ConfigError, InputFileError
 from ..motion import Motion, Take
 from ._axes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES
 from ._reading import reading_lines
+from .positions import POSITION_EXTENSIONS
 
 if TYPE_CHECKING:
     from .positions import PositionJointMap
@@ -52,7 +53,6 @@ AUDIO_EXTENSIONS = (".wav", ".flac", ".ogg", ".mp3")
 MAX_DURATION_MISMATCH = 0.05
 #: Seconds of difference always accepted (silence before or after the speech, a short take).
 DURATION_SLACK_S = 1.0
-POSITION_EXTENSIONS = (".npy", ".npz", ".txt", ".csv")
 KINDS = ("auto", "bvh", "positions", "habibie2021")
 
 

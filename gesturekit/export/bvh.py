@@ -50,7 +50,7 @@ import io
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, BinaryIO
+from typing import BinaryIO, Protocol
 
 import numpy as np
 
@@ -71,9 +71,6 @@ from ..character.solve import (
 from ..errors import ConfigError, warn
 from ..motion import Motion
 from ..skeleton import DERIVED, FINGERS, JOINT_NAMES, N_JOINTS, PARENTS
-
-if TYPE_CHECKING:
-    from .gltf import GltfReport
 
 __all__ = [
     "ROTATION_ORDERS",
@@ -172,7 +169,21 @@ class BvhReport:
         return "; ".join(parts)
 
 
-def error_warning(headline: str, report: BvhReport | GltfReport, *, shapes: str = "") -> str:
+class MeasuredFile(Protocol):
+    """A written file's report of its accuracy (:class:`BvhReport`, :class:`~gesturekit.export.gltf.GltfReport`)."""
+
+    path: Path
+    root: str
+    derived: tuple[str, ...]
+    left_out: tuple[str, ...]
+    max_error: float
+    mean_error: float
+    worst_joint: str
+    worst_frame: int
+    remedy: str | None
+
+
+def error_warning(headline: str, report: MeasuredFile, *, shapes: str = "") -> str:
     """The warning of a file that misses its motion: ``headline``, the worst joint and frame, why, and the remedy.
 
     Parameters
@@ -195,7 +206,7 @@ def error_warning(headline: str, report: BvhReport | GltfReport, *, shapes: str 
     )
 
 
-def summary_parts(report: BvhReport | GltfReport) -> tuple[str, str, list[str]]:
+def summary_parts(report: MeasuredFile) -> tuple[str, str, list[str]]:
     """What a BVH's and a glTF file's one-line summaries share.
 
     Returns

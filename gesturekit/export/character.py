@@ -45,7 +45,14 @@ from ..character.rig import rotation_to_quaternion
 from ..errors import ConfigError
 from ..motion import AUDIO_SR
 from ..outputs import check_not_input
-from ._character_bvh import CharacterBvhReport, export_character_bvh, rotation_of, worst
+from ._character_bvh import (
+    CharacterBvhReport,
+    character_bvh_joints,
+    check_character_bvh,
+    export_character_bvh,
+    rotation_of,
+    worst,
+)
 from ._files import write_export
 from .gltf import GENERATOR, WARN_ABOVE, continuous_quaternions, speech_targets
 
@@ -56,6 +63,8 @@ __all__ = [
     "CharacterBvhReport",
     "export_character_glb",
     "export_character_bvh",
+    "character_bvh_joints",
+    "check_character_bvh",
 ]
 
 #: The name of the animation :func:`export_character_glb` adds.

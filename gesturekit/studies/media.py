@@ -29,7 +29,7 @@ import numpy as np
 from .._optional import require
 from ..datasets.audio import write_wav
 from ..errors import GestureKitError
-from ..export.video import _encode_command, _ffmpeg, probe_media
+from ..export.video import encode_command, ffmpeg_executable, probe_media
 from ..study import stimulus_id
 
 __all__ = ["OVERLAY_TEXT", "check_media_id", "overlay_box", "draw_overlay", "make_check_videos", "make_audio_check"]
@@ -112,12 +112,12 @@ def _write_check(
     with tempfile.TemporaryDirectory(dir=out.parent, prefix=".check-") as tmp:
         wav, encoded = Path(tmp) / "speech.wav", Path(tmp) / "check.mp4"
         subprocess.run(
-            [_ffmpeg(), "-hide_banner", "-nostdin", "-loglevel", "error", "-i", f"file:{host}", "-vn", "-c:a"]
+            [ffmpeg_executable(), "-hide_banner", "-nostdin", "-loglevel", "error", "-i", f"file:{host}", "-vn", "-c:a"]
             + ["pcm_f32le", f"file:{wav}"],
             check=True,
             capture_output=True,
         )
-        cmd = _encode_command(encoded, v["width"], v["height"], v["fps"], wav, seconds)
+        cmd = encode_command(encoded, v["width"], v["height"], v["fps"], wav, seconds)
         with open(Path(tmp) / "ffmpeg.log", "wb") as log:
             proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
             assert proc.stdin is not None

@@ -5,7 +5,7 @@
 in the calling process; a long one in several rendering processes
 (:mod:`gesturekit.viz.render_worker`), each with its own offscreen window,
 taking turns by chunks of :data:`CHUNK_FRAMES` frames. The scene reaches them
-as a job file (:func:`_write_job`, read back by :func:`_scene_from_job`), the
+as a job file (:func:`_write_job`, read back by :func:`scene_from_job`), the
 frames come back as raw RGB through pipes.
 """
 
@@ -156,7 +156,7 @@ def _write_job(
     np.savez(path, allow_pickle=False, **arrays)
 
 
-def _scene_from_job(path: str) -> SkeletonScene:
+def scene_from_job(path: str) -> SkeletonScene:
     """The scene a job file written by :func:`_write_job` describes (in a rendering process)."""
     with np.load(path, allow_pickle=False) as data:
         spec = json.loads(str(data["spec"]))

@@ -57,7 +57,7 @@ from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS
 from ._plotly import _frames_at, _motions_and_labels, _time_grid
-from .character_page import framed_points, page_character
+from .character_page import QUATERNION_SCALE, framed_points, page_character, typed_array
 from .web.build import SHELL, bundle
 
 if TYPE_CHECKING:
@@ -83,9 +83,6 @@ CONTROLS_HEIGHT = 48
 #: Frames a viewer keeps: every frame of ten minutes at 15 fps. A side-by-side pair of that
 #: length embeds about 8 MB of joint rotations and 19 MB of speech (base64 adds a third).
 VIEWER_MAX_FRAMES = 9000
-
-#: Joint rotations travel as int16 quaternions: ``round(q * QUATERNION_SCALE)`` (the page normalises them again).
-QUATERNION_SCALE = 32767
 
 _DATA_ID = "gk-data"
 _AUDIO_PREFIX = "data:audio/wav;base64,"
@@ -153,16 +150,6 @@ class ViewerArgs(TypedDict):
     hash: str
 
 
-def _typed(values: np.ndarray, dtype: str) -> dict:
-    """A typed-array spec ``{"dtype", "bdata", "shape"}`` of ``values`` as little-endian ``dtype``."""
-    a = np.ascontiguousarray(values, dtype=np.dtype(dtype).newbyteorder("<"))
-    return {
-        "dtype": dtype,
-        "bdata": base64.b64encode(a.tobytes()).decode("ascii"),
-        "shape": ",".join(map(str, a.shape)),
-    }
-
-
 def _array(spec: dict) -> np.ndarray:
     """A typed-array spec's values, in its own dtype (native byte order) and shape."""
     out = np.frombuffer(base64.b64decode(spec["bdata"]), dtype=np.dtype(spec["dtype"]).newbyteorder("<"))
@@ -201,19 +188,19 @@ def _character(motion: Motion, scheme: str) -> dict:
             "names": list(JOINT_NAMES),
             "parents": _page_parents(rig),
             "in_rig": [bool(x) for x in rig.in_rig],
-            "offsets": _typed(rig.offsets, "f4"),
-            "rest": _typed(rig.rest, "f4"),
+            "offsets": typed_array(rig.offsets, "f4"),
+            "rest": typed_array(rig.rest, "f4"),
         },
         "mesh": {
-            "vertices": _typed(mesh.vertices, "f4"),
-            "normals": _typed(mesh.normals, "f4"),
-            "faces": _typed(mesh.faces, "u2" if mesh.n_vertices < 2**16 else "u4"),
-            "joints": _typed(mesh.joints, "u1"),
-            "weights": _typed(mesh.weights, "f4"),
-            "parts": _typed(mesh.parts, "u1"),
+            "vertices": typed_array(mesh.vertices, "f4"),
+            "normals": typed_array(mesh.normals, "f4"),
+            "faces": typed_array(mesh.faces, "u2" if mesh.n_vertices < 2**16 else "u4"),
+            "joints": typed_array(mesh.joints, "u1"),
+            "weights": typed_array(mesh.weights, "f4"),
+            "parts": typed_array(mesh.parts, "u1"),
         },
-        "rotations": _typed(quats, "i2"),
-        "root": _typed(pose.root, "f4"),
+        "rotations": typed_array(quats, "i2"),
+        "root": typed_array(pose.root, "f4"),
     }
 
 
