@@ -136,6 +136,15 @@ def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], object]
 Target = str | os.PathLike | BinaryIO
 
 
+def target_path(target: Target, default: str) -> Path:
+    """The path a writer names in its messages and reports: ``target`` itself, or a file object's
+    ``name`` (an open file's), else ``default`` (an ``io.BytesIO``)."""
+    if isinstance(target, (str, os.PathLike)):
+        return Path(target)
+    name = getattr(target, "name", None)
+    return Path(name) if isinstance(name, str) and name else Path(default)
+
+
 def write_to(target: Target, write_fn: Callable[[BinaryIO], object], *, overwrite: bool = False) -> Path | None:
     """Write to a path atomically (:func:`atomic_write`) or into an open binary file object.
 

@@ -15,6 +15,7 @@ Times are in seconds, motions are :class:`~gesturekit.motion.Motion` objects
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import math
 import os
@@ -226,10 +227,9 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
         return export_bvh_bytes(result)[0]
     if kind != "npz":
         raise ConfigError(f"export_bytes makes npz, bvh, csv, json or wav, not {kind!r}")
-    with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
-        path = Path(tmp) / "result.npz"
-        save_result_npz(result, path)
-        return path.read_bytes()
+    buf = io.BytesIO()
+    save_result_npz(result, buf)
+    return buf.getvalue()
 
 
 def export_bvh_bytes(result: SynthesisResult, name: str = "result.bvh") -> tuple[bytes, BvhReport]:
@@ -247,10 +247,10 @@ def export_bvh_bytes(result: SynthesisResult, name: str = "result.bvh") -> tuple
     BvhReport
         Its position error against the motion (metres), root, joints left out and derived.
     """
-    with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
-        path = Path(tmp) / name
-        report = export_result_bvh(result, path)
-        return path.read_bytes(), report
+    buf = io.BytesIO()
+    buf.name = name  # the name the report and its warning speak of
+    report = export_result_bvh(result, buf)
+    return buf.getvalue(), report
 
 
 def render_mp4(

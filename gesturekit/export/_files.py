@@ -6,12 +6,11 @@ is touched; this puts the result on disk the same way for each.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import Target, target_path, write_to
 from ..datasets.audio import write_wav
 from ..errors import warn
 
@@ -19,7 +18,7 @@ __all__ = ["write_export"]
 
 
 def write_export(
-    path: Path,
+    path: Target,
     data: bytes,
     *,
     overwrite: bool,
@@ -29,12 +28,13 @@ def write_export(
     warning: str | None = None,
     stacklevel: int = 1,
 ) -> None:
-    """Write ``data`` to ``path`` atomically, after the speech WAV beside it, then warn.
+    """Write ``data`` to ``path`` atomically (or into a binary file object), after the speech WAV
+    beside it, then warn.
 
     Parameters
     ----------
-    path : Path
-        The export file.
+    path : Path or binary file object
+        The export file, or where to write its bytes.
     data : bytes
         Its whole content.
     overwrite : bool
@@ -53,6 +53,6 @@ def write_export(
     if wav_path is not None and samples is not None:
         # the speech first: a GLB naming its audio never exists without it
         write_wav(wav_path, samples, sr=int(sr), mark=True, overwrite=overwrite)
-    atomic_write(path, lambda f: f.write(data), overwrite=overwrite)
+    write_to(path, lambda f: f.write(data), overwrite=overwrite)
     if warning is not None:
-        warn(f"{os.fspath(path)}: {warning}", stacklevel=stacklevel + 1)
+        warn(f"{target_path(path, 'the file')}: {warning}", stacklevel=stacklevel + 1)

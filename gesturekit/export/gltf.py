@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from .._io import Target, target_path
 from .._version import __version__
 from ..character.glb import ARRAY_BUFFER as _ARRAY_BUFFER
 from ..character.glb import ELEMENT_ARRAY_BUFFER as _ELEMENT_ARRAY_BUFFER
@@ -240,7 +241,7 @@ def speech_targets(
 
 
 def export_gltf(
-    path: str | os.PathLike[str],
+    path: Target,
     motion: Motion,
     *,
     audio: np.ndarray | None = None,
@@ -258,8 +259,10 @@ def export_gltf(
 
     Parameters
     ----------
-    path : str or os.PathLike
-        The file to create (written exactly there; ``.glb`` is the usual suffix).
+    path : str, os.PathLike or binary file object
+        The file to create (written exactly there, atomically; ``.glb`` is the usual suffix), or a
+        binary file object to write it into (then without ``audio``, which has no place beside it:
+        write that with :func:`gesturekit.datasets.audio.write_wav`).
     motion : Motion
         Positions (frames, 55, 3) in metres and fps. At least one frame; every
         value finite. Only its drawn joints are written.
@@ -290,7 +293,7 @@ def export_gltf(
         form one tree, or a file to write exists and ``overwrite`` is False
         (:class:`~gesturekit.errors.OutputError`).
     """
-    path = Path(path)
+    target, path = path, target_path(path, "motion.glb")
     if not isinstance(motion, Motion):
         raise ConfigError(f"motion must be a gesturekit Motion, got {type(motion).__name__}", path=path)
     try:
@@ -304,7 +307,12 @@ def export_gltf(
     if bad.any():
         raise ConfigError(f"positions are not finite (NaN or infinite) from frame {int(np.argmax(bad))} on", path=path)
     bvh_parents(motion.presence, path=path)  # a skeleton no tree can hold, named with the file
-    wav_path, samples = speech_targets(path, audio, sr, overwrite=overwrite)
+    if isinstance(target, (str, os.PathLike)):
+        wav_path, samples = speech_targets(path, audio, sr, overwrite=overwrite)
+    elif audio is not None:
+        raise ConfigError("a glTF written into a file object has no folder for its speech's WAV; pass no audio")
+    else:
+        wav_path, samples = None, None
 
     try:
         rig = rig_for(motion, rest=rest)
@@ -337,7 +345,7 @@ def export_gltf(
         remedy=remedy,
     )
     write_export(
-        path,
+        target,
         data,
         overwrite=overwrite,
         wav_path=wav_path,
