@@ -172,15 +172,24 @@ class BvhReport:
 class MeasuredFile(Protocol):
     """A written file's report of its accuracy (:class:`BvhReport`, :class:`~gesturekit.export.gltf.GltfReport`)."""
 
-    path: Path
-    root: str
-    derived: tuple[str, ...]
-    left_out: tuple[str, ...]
-    max_error: float
-    mean_error: float
-    worst_joint: str
-    worst_frame: int
-    remedy: str | None
+    @property
+    def path(self) -> Path: ...
+    @property
+    def root(self) -> str: ...
+    @property
+    def derived(self) -> tuple[str, ...]: ...
+    @property
+    def left_out(self) -> tuple[str, ...]: ...
+    @property
+    def max_error(self) -> float: ...
+    @property
+    def mean_error(self) -> float: ...
+    @property
+    def worst_joint(self) -> str: ...
+    @property
+    def worst_frame(self) -> int: ...
+    @property
+    def remedy(self) -> str | None: ...
 
 
 def error_warning(headline: str, report: MeasuredFile, *, shapes: str = "") -> str:
