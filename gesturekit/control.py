@@ -495,7 +495,7 @@ def segments_frame(track: ControlTrack) -> pd.DataFrame:
     )
 
 
-def _is_blank(value) -> bool:
+def _is_blank(value: object) -> bool:
     import pandas as pd  # kept local: only the table needs pandas
 
     if value is None:
