@@ -8,6 +8,10 @@ threshold of the database (the authors used the 15th and 85th percentiles: "low"
 is below the 15th, "high" above the 85th). A :class:`ControlTrack` says which
 constraints hold over which stretches of the output, e.g.
 ``"0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric"``.
+
+The *control table* (:func:`segments_frame`, :func:`track_from_segments`,
+:func:`add_segment`) is a track as the app's editor and the inspector show it:
+one row per constraint with its start and end in seconds.
 """
 
 from __future__ import annotations
