@@ -25,7 +25,16 @@ from .errors import ConfigError, GestureKitError
 from .limits import read_json
 from .paths import is_dir
 
-__all__ = ["atomic_write", "safe_filename", "read_json_marker", "FOLDER_KINDS", "DATABASE_CLIP_ARRAYS", "folder_kind"]
+__all__ = [
+    "atomic_write",
+    "write_to",
+    "Target",
+    "safe_filename",
+    "read_json_marker",
+    "FOLDER_KINDS",
+    "DATABASE_CLIP_ARRAYS",
+    "folder_kind",
+]
 
 #: Folder kinds gesturekit writes: kind -> (marker file, its ``format`` value, what it is called in messages).
 FOLDER_KINDS = {
@@ -121,6 +130,44 @@ def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], object]
         raise
     _sync_folder(folder)
     return path
+
+
+#: Where a writer puts its bytes: a path (written atomically) or a binary file object opened for writing.
+Target = str | os.PathLike | BinaryIO
+
+
+def target_path(target: Target, default: str) -> Path:
+    """The path a writer names in its messages and reports: ``target`` itself, or a file object's
+    ``name`` (an open file's), else ``default`` (an ``io.BytesIO``)."""
+    if isinstance(target, (str, os.PathLike)):
+        return Path(target)
+    name = getattr(target, "name", None)
+    return Path(name) if isinstance(name, str) and name else Path(default)
+
+
+def write_to(target: Target, write_fn: Callable[[BinaryIO], object], *, overwrite: bool = False) -> Path | None:
+    """Write to a path atomically (:func:`atomic_write`) or into an open binary file object.
+
+    Parameters
+    ----------
+    target : str, os.PathLike or binary file object
+        A path, or an object with a ``write(bytes)`` method (``io.BytesIO``, an open file, a
+        response stream): then ``write_fn`` writes into it at its current position and the
+        caller owns it (nothing is flushed or closed).
+    write_fn : callable
+        ``write_fn(fileobj)``; writes the whole content.
+    overwrite : bool
+        For a path: replace it if it exists (see :func:`atomic_write`).
+
+    Returns
+    -------
+    pathlib.Path or None
+        The path written, None for a file object.
+    """
+    if isinstance(target, (str, os.PathLike)):
+        return atomic_write(target, write_fn, overwrite=overwrite)
+    write_fn(target)
+    return None
 
 
 def _exists_error(path: Path) -> ConfigError:
