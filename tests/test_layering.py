@@ -61,10 +61,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("datasets", ("gesturekit.datasets",)),
     ("features", ("gesturekit.features",)),
     ("character", ("gesturekit.character",)),
-    (
-        "database",
-        ("gesturekit", "gesturekit.database", "gesturekit._database_folder", "gesturekit.demo", "gesturekit.workspace"),
-    ),
+    ("database", ("gesturekit", "gesturekit.database", "gesturekit.demo", "gesturekit.workspace")),
     ("search", ("gesturekit.search", "gesturekit._search_kernels", "gesturekit.search_reference", "gesturekit.blend")),
     ("synthesize", ("gesturekit.synthesize", "gesturekit.live")),
     ("refine/export/viz/evaluate", ("gesturekit.refine", "gesturekit.export", "gesturekit.viz", "gesturekit.evaluate")),
