@@ -30,7 +30,7 @@ import numpy as np
 
 from .._version import __version__
 from ..control import ATTRIBUTE_NAMES
-from ..errors import ConfigError, DatabaseError
+from ..errors import ConfigError, DatabaseError, GestureKitError
 from ..features import LAYOUT, ZScore
 from ..skeleton import FPS, JOINT_NAMES
 from .audio import AudioStorage
@@ -119,7 +119,7 @@ class _Rows:
 
     def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
         if exc_type is None and self.rows != self.array.shape[0]:
-            raise ConfigError(f"wrote {self.rows} rows of {self.array.shape[0]}")
+            raise GestureKitError(f"wrote {self.rows} rows of {self.array.shape[0]}")
 
 
 class MemoryOut:
@@ -154,7 +154,7 @@ class MemoryOut:
         """``meta``, ``arrays``, ``stats``, ``audio`` (or None) and ``overlap`` (or None), the arrays
         in the order a loaded database holds them."""
         if self.meta is None or self.stats is None:
-            raise ConfigError("the database is not assembled yet")
+            raise GestureKitError("the database is not assembled yet (assemble() has not finished)")
         main = {k: r.array for k, r in self.cuts[""].items()}
         order = CLIP_ARRAYS + INDEX_ARRAYS
         overlap = self.cuts.get("overlap")
