@@ -1,6 +1,6 @@
 """Drive the app in a real browser: start ``streamlit run app/Home.py``, open it in Chromium, upload, run.
 
-Shared by ``tests/test_browser.py`` and ``bench/bench_app.py``, and the maker
+Shared by ``tests/browser/test_browser.py`` and ``bench/bench_app.py``, and the maker
 of the README's screenshots::
 
     python -m tests.app_browser --out docs/screenshots

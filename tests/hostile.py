@@ -17,8 +17,7 @@ import numpy as np
 import soundfile as sf
 
 from gesturekit.skeleton import JOINT_NAMES, N_JOINTS
-
-from .test_bvh import bvh_text, random_values, zeggs_like_skeleton
+from tests.datasets.test_bvh import bvh_text, random_values, zeggs_like_skeleton
 
 SR = 16000
 

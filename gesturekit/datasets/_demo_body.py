@@ -1,6 +1,6 @@
 """The generated demo speaker's body: a fixed rest skeleton, arm inverse kinematics, and the motion.
 
-Keyposes of each arm (:data:`_POSE_DIM` numbers, laid out below) are joined
+Keyposes of each arm (:data:`POSE_DIM` numbers, laid out below) are joined
 by minimum-jerk interpolation, given a little drift, turned into joint
 rotations by two-bone inverse kinematics and posed by forward kinematics
 (:func:`gesturekit.datasets._kinematics.world_positions`, the BVH reader's) on
@@ -12,17 +12,15 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from ..skeleton import FINGERS, FPS, N_JOINTS, PARENTS, joint_index
-from ._demo_speech import _smooth_noise, _Speech
+from ._demo_speech import Speech, smooth_noise
 from ._kinematics import world_positions
-
-if TYPE_CHECKING:
-    from ._demo_gestures import _GesturePlan
 
 # frames per block of forward kinematics, to bound memory on long takes
 _FK_BLOCK = 8192
@@ -82,7 +80,7 @@ _SPREAD_ANGLES = {"thumb": 0.3, "index": 0.17, "middle": 0.03, "ring": -0.1, "pi
 _MIRROR = np.diag([-1.0, 1.0, 1.0])
 
 
-def _unit(v) -> np.ndarray:
+def unit(v) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
@@ -98,7 +96,7 @@ def _rest_offsets() -> np.ndarray:
     off[joint_index("left_wrist")] = (_FOREARM, 0.0, 0.0)
     off[joint_index("right_wrist")] = (-_FOREARM, 0.0, 0.0)
     for finger in FINGERS:
-        d = _unit(_FINGER_DIRS[finger])
+        d = unit(_FINGER_DIRS[finger])
         chain = [np.asarray(_FINGER_ROOTS[finger])] + [length * d for length in _PHALANGES[finger]]
         for i, link in enumerate(chain, start=1):
             off[joint_index(f"left_{finger}{i}")] = link
@@ -109,7 +107,7 @@ def _rest_offsets() -> np.ndarray:
 
 def _axis_angle(axis, angle: np.ndarray) -> np.ndarray:
     """Rotations about fixed unit ``axis`` (3,) by ``angle`` (T,) radians, shape (T, 3, 3)."""
-    x, y, z = _unit(axis)
+    x, y, z = unit(axis)
     k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
     a = np.asarray(angle, dtype=np.float64)[:, None, None]
     return np.eye(3) + np.sin(a) * k + (1.0 - np.cos(a)) * (k @ k)
@@ -150,20 +148,20 @@ def _forward_kinematics(root_pos: np.ndarray, local: list[np.ndarray]) -> np.nda
 # wrist target x, y, z (m, pelvis frame of an upright torso), elbow swivel, forearm roll
 # (+ turns the palm down, - up), wrist flexion, wrist deviation (rad), 5 finger curls (0 open .. 1
 # fist, thumb first), finger spread (0..1)
-_WRIST = slice(0, 3)
-_SWIVEL, _ROLL, _FLEX, _DEV = 3, 4, 5, 6
-_CURL = slice(7, 12)
-_SPREAD = 12
-_POSE_DIM = 13
+WRIST = slice(0, 3)
+SWIVEL, ROLL, FLEX, DEV = 3, 4, 5, 6
+CURL = slice(7, 12)
+SPREAD = 12
+POSE_DIM = 13
 
 
-def _reachable(pose: np.ndarray) -> np.ndarray:
+def reachable(pose: np.ndarray) -> np.ndarray:
     """A copy of ``pose`` with the wrist target pulled within comfortable reach of the shoulder."""
     pose = pose.copy()
-    rel = pose[_WRIST] - _SHOULDER
+    rel = pose[WRIST] - _SHOULDER
     dist = float(np.linalg.norm(rel))
     if dist > _COMFORT * _REACH:
-        pose[_WRIST] = _SHOULDER + rel * (_COMFORT * _REACH / dist)
+        pose[WRIST] = _SHOULDER + rel * (_COMFORT * _REACH / dist)
     return pose
 
 
@@ -227,7 +225,7 @@ def _arm_rotations(pose: np.ndarray) -> dict[str, np.ndarray]:
     protract = 0.12 * np.clip(pose[:, 2] / 0.4, -0.5, 1.0)
     collar = _axis_angle((0, 0, 1), shrug) @ _axis_angle((0, -1, 0), protract)
     shoulder = off[joint_index("left_collar")] + collar @ off[joint_index("left_shoulder")]
-    target = pose[:, _WRIST] - _UPPER_CHEST
+    target = pose[:, WRIST] - _UPPER_CHEST
     d_vec = target - shoulder
     dist = np.linalg.norm(d_vec, axis=1)
     n = d_vec / dist[:, None]
@@ -238,19 +236,19 @@ def _arm_rotations(pose: np.ndarray) -> dict[str, np.ndarray]:
     d = np.maximum(d, 0.12)
     a = (l1**2 - l2**2 + d**2) / (2.0 * d)
     r = np.sqrt(np.maximum(l1**2 - a**2, 0.0))
-    pole = _unit([0.45, -0.8, -0.35])  # elbow down, out and a little back
+    pole = unit([0.45, -0.8, -0.35])  # elbow down, out and a little back
     u0 = pole - (n @ pole)[:, None] * n
     u0 = u0 / np.linalg.norm(u0, axis=1, keepdims=True)
-    sw = pose[:, _SWIVEL][:, None]
+    sw = pose[:, SWIVEL][:, None]
     u = u0 * np.cos(sw) + np.cross(n, u0) * np.sin(sw)
     elbow = shoulder + a[:, None] * n + r[:, None] * u
     wrist = shoulder + d[:, None] * n
-    x_u = _unit(elbow - shoulder)
-    x_f = _unit(wrist - elbow)
-    y_u = -_unit(np.cross(x_u, x_f))  # elbow hinge axis
+    x_u = unit(elbow - shoulder)
+    x_f = unit(wrist - elbow)
+    y_u = -unit(np.cross(x_u, x_f))  # elbow hinge axis
     upper = np.stack([x_u, y_u, np.cross(x_u, y_u)], axis=2)
-    fore = np.stack([x_f, y_u, np.cross(x_f, y_u)], axis=2) @ _axis_angle((1, 0, 0), pose[:, _ROLL])
-    hand = _axis_angle((0, 0, -1), pose[:, _FLEX]) @ _axis_angle((0, -1, 0), pose[:, _DEV])
+    fore = np.stack([x_f, y_u, np.cross(x_f, y_u)], axis=2) @ _axis_angle((1, 0, 0), pose[:, ROLL])
+    hand = _axis_angle((0, 0, -1), pose[:, FLEX]) @ _axis_angle((0, -1, 0), pose[:, DEV])
     rots = {
         "collar": collar,
         "shoulder": np.swapaxes(collar, 1, 2) @ upper,
@@ -259,20 +257,27 @@ def _arm_rotations(pose: np.ndarray) -> dict[str, np.ndarray]:
     }
     palm = np.array([0.0, -1.0, 0.0])
     for fi, finger in enumerate(FINGERS):
-        curl = pose[:, _CURL][:, fi]
-        direction = _unit(_FINGER_DIRS[finger])
-        toward = _unit([0.0, -0.6, -0.8]) if finger == "thumb" else palm
-        axis = _unit(np.cross(direction, toward))
+        curl = pose[:, CURL][:, fi]
+        direction = unit(_FINGER_DIRS[finger])
+        toward = unit([0.0, -0.6, -0.8]) if finger == "thumb" else palm
+        axis = unit(np.cross(direction, toward))
         angles = _CURL_ANGLES["thumb" if finger == "thumb" else "other"]
-        spread = _axis_angle((0, -1, 0), _SPREAD_ANGLES[finger] * (pose[:, _SPREAD] - 0.3))
+        spread = _axis_angle((0, -1, 0), _SPREAD_ANGLES[finger] * (pose[:, SPREAD] - 0.3))
         rots[f"{finger}1"] = spread @ _axis_angle(axis, angles[0] * curl)
         rots[f"{finger}2"] = _axis_angle(axis, angles[1] * curl)
         rots[f"{finger}3"] = _axis_angle(axis, angles[2] * curl)
     return rots
 
 
-def _render_motion(plan: _GesturePlan, speech: _Speech, rng: np.random.Generator, n_frames: int) -> np.ndarray:
-    """Positions of the take, shape (n_frames, 55, 3), float32."""
+class KeyposeTrack(Protocol):
+    """One arm's keyposes: ``poses[i]`` (:data:`POSE_DIM` numbers, laid out above) at ``times[i]`` seconds."""
+
+    times: list[float]
+    poses: list[np.ndarray]
+
+
+def render_motion(arms: Sequence[KeyposeTrack], speech: Speech, rng: np.random.Generator, n_frames: int) -> np.ndarray:
+    """Positions of the take, shape (n_frames, 55, 3), float32, from the (left, right) arms' keypose tracks."""
     t = np.arange(n_frames) / FPS
     identity = np.broadcast_to(np.eye(3), (n_frames, 3, 3))
     local = [identity] * N_JOINTS
@@ -280,8 +285,8 @@ def _render_motion(plan: _GesturePlan, speech: _Speech, rng: np.random.Generator
     stress_frames = speech.syl_nucleus[speech.syl_stressed] * FPS
     lean = _bumps(stress_frames, rng.uniform(0.01, 0.025, len(stress_frames)), n_frames, 2.5)
     nod = _bumps(stress_frames + 0.03 * FPS, rng.uniform(0.04, 0.09, len(stress_frames)), n_frames, 1.8)
-    sway = _smooth_noise(rng, n_frames, 12.0, 3) * np.array([0.025, 0.03, 0.02])  # lean, side, twist
-    head = _smooth_noise(rng, n_frames, 10.0, 3) * np.array([0.04, 0.07, 0.025])  # pitch, yaw, roll
+    sway = smooth_noise(rng, n_frames, 12.0, 3) * np.array([0.025, 0.03, 0.02])  # lean, side, twist
+    head = smooth_noise(rng, n_frames, 10.0, 3) * np.array([0.04, 0.07, 0.025])  # pitch, yaw, roll
     shares = {"spine_mid": 0.4, "chest": 0.3, "upper_chest": 0.3}
     for name, share in shares.items():
         local[joint_index(name)] = (
@@ -296,12 +301,12 @@ def _render_motion(plan: _GesturePlan, speech: _Speech, rng: np.random.Generator
         @ _axis_angle((0, 0, 1), head[:, 2])
     )
     root = local[joint_index("spine_mid")] @ np.asarray(_BODY_OFFSETS["spine_mid"])
-    for side, arm in zip(("left", "right"), plan.arms):
+    for side, arm in zip(("left", "right"), arms):
         pose = _min_jerk_track(np.asarray(arm.times), np.stack(arm.poses), t)
         # a living hold: the wrist and hand drift a little, never quite still
-        pose[:, _WRIST] += _smooth_noise(rng, n_frames, 6.0, 3) * 0.008
-        pose[:, _ROLL] += _smooth_noise(rng, n_frames, 8.0, 1)[:, 0] * 0.05
-        pose[:, _CURL] = np.clip(pose[:, _CURL] + _smooth_noise(rng, n_frames, 8.0, 5) * 0.03, 0.0, 1.0)
+        pose[:, WRIST] += smooth_noise(rng, n_frames, 6.0, 3) * 0.008
+        pose[:, ROLL] += smooth_noise(rng, n_frames, 8.0, 1)[:, 0] * 0.05
+        pose[:, CURL] = np.clip(pose[:, CURL] + smooth_noise(rng, n_frames, 8.0, 5) * 0.03, 0.0, 1.0)
         for suffix, rot in _arm_rotations(pose).items():
             # the right arm is the mirror image of a left arm with the same keyposes
             local[joint_index(f"{side}_{suffix}")] = rot if side == "left" else _MIRROR @ rot @ _MIRROR

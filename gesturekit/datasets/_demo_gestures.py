@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._demo_body import _CURL, _DEV, _FLEX, _POSE_DIM, _ROLL, _SPREAD, _SWIVEL, _WRIST, _reachable, _unit
-from ._demo_speech import _draw, _Speech
+from ._demo_body import CURL, DEV, FLEX, POSE_DIM, ROLL, SPREAD, SWIVEL, WRIST, reachable, unit
+from ._demo_speech import Speech, draw
 
 # ---------------------------------------------------------------------------------------------
 # gesture plan: keyposes per arm
@@ -41,13 +41,13 @@ _PALM_ROLLS = (-1.1, -0.5, 0.0, 0.6)  # forearm roll of a gesture: palm up, up-i
 
 def _rest_pose(rng: np.random.Generator) -> np.ndarray:
     """Hands low beside the hips, palms inward, fingers relaxed (with a little variation)."""
-    p = np.zeros(_POSE_DIM)
-    p[_WRIST] = (0.21, -0.08, 0.05) + rng.normal(0.0, 0.012, 3)
-    p[_SWIVEL] = 0.1
-    p[_ROLL] = rng.normal(-0.1, 0.1)
-    p[_FLEX] = 0.1
-    p[_CURL] = (0.3, 0.3, 0.38, 0.45, 0.5)
-    p[_SPREAD] = 0.3
+    p = np.zeros(POSE_DIM)
+    p[WRIST] = (0.21, -0.08, 0.05) + rng.normal(0.0, 0.012, 3)
+    p[SWIVEL] = 0.1
+    p[ROLL] = rng.normal(-0.1, 0.1)
+    p[FLEX] = 0.1
+    p[CURL] = (0.3, 0.3, 0.38, 0.45, 0.5)
+    p[SPREAD] = 0.3
     return p
 
 
@@ -55,12 +55,12 @@ _MAX_SPEED = 2.3  # fastest wrist movement of a keypose move, m/s (peak)
 _MIN_JERK_PEAK = 1.875  # peak speed of a minimum-jerk move over its mean speed
 
 
-class _ArmTrack:
+class ArmTrack:
     """Keyposes of one arm; consecutive keyposes are joined by minimum-jerk moves."""
 
     def __init__(self, rest: np.ndarray):
         self.times = [0.0]
-        self.poses = [_reachable(rest)]
+        self.poses = [reachable(rest)]
         self.pending_retraction: float | None = None  # earliest start of an owed retraction
 
     @property
@@ -80,11 +80,11 @@ class _ArmTrack:
         """
         t0 = max(t0, self.times[-1])
         t1 = max(t1, t0 + 0.05)
-        pose = _reachable(pose)
-        step = pose[_WRIST] - self.poses[-1][_WRIST]
+        pose = reachable(pose)
+        step = pose[WRIST] - self.poses[-1][WRIST]
         longest = _MAX_SPEED * (t1 - t0) / _MIN_JERK_PEAK
         if np.linalg.norm(step) > longest:
-            pose[_WRIST] = self.poses[-1][_WRIST] + step * (longest / np.linalg.norm(step))
+            pose[WRIST] = self.poses[-1][WRIST] + step * (longest / np.linalg.norm(step))
         if t0 > self.times[-1] + 1e-6:
             self.times.append(t0)
             self.poses.append(self.poses[-1])
@@ -93,8 +93,8 @@ class _ArmTrack:
 
 
 @dataclass
-class _GesturePlan:
-    arms: tuple[_ArmTrack, _ArmTrack]  # left, right (both in the left arm's convention)
+class GesturePlan:
+    arms: tuple[ArmTrack, ArmTrack]  # left, right (both in the left arm's convention)
     stroke_times: np.ndarray
     stroke_stress: np.ndarray
     stroke_hands: tuple[str, ...]
@@ -108,28 +108,28 @@ def _home_pose(rng, height_class: int, width_class: int, shape: int, rest: np.nd
     y = rng.uniform(*_HEIGHTS[height_class])
     x = rng.uniform(*_WIDTHS[width_class])
     z = rng.uniform(0.2, 0.36) - 0.12 * (width_class == 2) - 0.05 * (height_class == 0)
-    p[_WRIST] = (x, y, z)
-    p[_SWIVEL] = rng.uniform(-0.2, 0.5) + 0.3 * (width_class == 2)
-    p[_ROLL] = _PALM_ROLLS[rng.integers(len(_PALM_ROLLS))] + rng.normal(0.0, 0.15)
-    p[_FLEX] = rng.uniform(-0.3, 0.3)
-    p[_DEV] = rng.uniform(-0.15, 0.15)
+    p[WRIST] = (x, y, z)
+    p[SWIVEL] = rng.uniform(-0.2, 0.5) + 0.3 * (width_class == 2)
+    p[ROLL] = _PALM_ROLLS[rng.integers(len(_PALM_ROLLS))] + rng.normal(0.0, 0.15)
+    p[FLEX] = rng.uniform(-0.3, 0.3)
+    p[DEV] = rng.uniform(-0.15, 0.15)
     hs = _HANDSHAPES[shape]
-    p[_CURL] = np.clip(hs[:5] + rng.normal(0.0, 0.06, 5), 0.0, 1.0)
-    p[_SPREAD] = np.clip(hs[5] + rng.normal(0.0, 0.1), 0.0, 1.0)
+    p[CURL] = np.clip(hs[:5] + rng.normal(0.0, 0.06, 5), 0.0, 1.0)
+    p[SPREAD] = np.clip(hs[5] + rng.normal(0.0, 0.1), 0.0, 1.0)
     return p
 
 
 def _stroke_direction(rng) -> np.ndarray:
     """Unit direction of a stroke (left-arm convention): mostly down, also out, forward, across."""
-    kind = _draw(rng, _STROKE_KIND_P)
+    kind = draw(rng, _STROKE_KIND_P)
     base = np.array([(0.0, -1.0, 0.35), (1.0, -0.3, 0.2), (0.1, -0.3, 1.0), (-1.0, -0.2, 0.3)][kind])
-    return _unit(base + rng.normal(0.0, 0.25, 3))
+    return unit(base + rng.normal(0.0, 0.25, 3))
 
 
-def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -> _GesturePlan:
+def plan_gestures(speech: Speech, rng: np.random.Generator, duration: float) -> GesturePlan:
     """Gesture phrases over the speech phrases: preparation, strokes on stresses, retraction."""
     rests = (_rest_pose(rng), _rest_pose(rng))
-    arms = (_ArmTrack(rests[0]), _ArmTrack(rests[1]))
+    arms = (ArmTrack(rests[0]), ArmTrack(rests[1]))
     stroke_times, stroke_stress, stroke_hands = [], [], []
     g_phrases, g_modes = [], []
 
@@ -154,7 +154,7 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
             settle(0, np.inf)
             settle(1, np.inf)
             continue
-        mode = _MODES[_draw(rng, _MODE_P)]
+        mode = _MODES[draw(rng, _MODE_P)]
         used = {"symmetric": (0, 1), "asymmetric": (0, 1), "left": (0,), "right": (1,)}[mode]
         for i in (0, 1):
             if i not in used:
@@ -188,15 +188,15 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
             if ends[k] - last_end >= shortest and ends[k] < duration - 0.1:
                 chosen.append(k)
                 last_end = ends[k]
-        height, width = _draw(rng, _HEIGHT_P), _draw(rng, _WIDTH_P)
-        home = {used[0]: _home_pose(rng, height, width, _draw(rng, _HANDSHAPE_P), rests[used[0]])}
+        height, width = draw(rng, _HEIGHT_P), draw(rng, _WIDTH_P)
+        home = {used[0]: _home_pose(rng, height, width, draw(rng, _HANDSHAPE_P), rests[used[0]])}
         if mode == "symmetric":
             home[1] = home[0].copy()
-            home[1][_WRIST] += rng.normal(0.0, 0.01, 3)
+            home[1][WRIST] += rng.normal(0.0, 0.01, 3)
         elif mode == "asymmetric":
             # the other hand at another height and width, doing less
             h2, w2 = (height + rng.integers(1, 3)) % 3, (width + rng.integers(1, 3)) % 3
-            home[1] = _home_pose(rng, h2, w2, _draw(rng, _HANDSHAPE_P), rests[1])
+            home[1] = _home_pose(rng, h2, w2, draw(rng, _HANDSHAPE_P), rests[1])
         # hands start moving at the earliest a little before the speech does, and after what
         # they did before; drop strokes until a preparation fits
         earliest = max([arms[i].last_time + 0.05 for i in used] + [speech.phrases[p, 0] - 0.3, 0.0])
@@ -215,7 +215,7 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
                 settle(i, first_start - 0.8)
             arms[i].pending_retraction = None
         # the preparation takes longer the further the hand travels
-        travel = max(float(np.linalg.norm(home[i][_WRIST] - arms[i].last_pose[_WRIST])) for i in used)
+        travel = max(float(np.linalg.norm(home[i][WRIST] - arms[i].last_pose[WRIST])) for i in used)
         prep_dur = float(np.clip(travel / (rng.uniform(0.7, 1.0) * (1.3 if fast else 1.0)), 0.3, 0.8))
         earliest = max([earliest] + [arms[i].last_time + 0.05 for i in used])
         prep_start = max(earliest, first_start - prep_dur)
@@ -231,7 +231,7 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
         at_stroke_end = {i: False for i in used}  # the hand has just ended a stroke and not yet rebounded
         for n, k in enumerate(chosen):
             s1 = ends[k]
-            direction = _unit(phrase_dir[dominant] + rng.normal(0.0, 0.25, 3))
+            direction = unit(phrase_dir[dominant] + rng.normal(0.0, 0.25, 3))
             amp = scale * emphasis[k] ** 2 * rng.uniform(0.85, 1.15)  # louder syllable, bigger stroke
             hands = []
             for i in used:
@@ -242,19 +242,19 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
                         if n == 0:  # the secondary hand still takes its position
                             arm.move(prep_start, s1, home[i])
                         continue
-                    d_i, amp_i = _unit(phrase_dir[i] + rng.normal(0.0, 0.25, 3)), 0.5 * amp
+                    d_i, amp_i = unit(phrase_dir[i] + rng.normal(0.0, 0.25, 3)), 0.5 * amp
                 else:
                     d_i, amp_i = direction, amp
                 beat_back = at_stroke_end[i] and s0 - arm.last_time < shortest
                 if beat_back:
-                    d_i = _unit(-prev_dir[i] + rng.normal(0.0, 0.2, 3))
+                    d_i = unit(-prev_dir[i] + rng.normal(0.0, 0.2, 3))
                 start_pose = home[i].copy()
-                start_pose[_WRIST] -= 0.5 * amp_i * d_i
-                start_pose[_FLEX] -= 0.15
+                start_pose[WRIST] -= 0.5 * amp_i * d_i
+                start_pose[FLEX] -= 0.15
                 end_pose = home[i].copy()
-                end_pose[_WRIST] += 0.5 * amp_i * d_i
-                end_pose[_FLEX] += 0.2  # the hand flicks with the beat
-                end_pose[_CURL] = np.clip(end_pose[_CURL] - 0.08, 0.0, 1.0)
+                end_pose[WRIST] += 0.5 * amp_i * d_i
+                end_pose[FLEX] += 0.2  # the hand flicks with the beat
+                end_pose[CURL] = np.clip(end_pose[CURL] - 0.08, 0.0, 1.0)
                 if arm.last_time <= prep_start:  # preparation from wherever the hand rests
                     arm.move(prep_start, s0, start_pose)
                 elif beat_back:  # no room for a rebound: straight back from the last stroke's end
@@ -285,7 +285,7 @@ def _plan_gestures(speech: _Speech, rng: np.random.Generator, duration: float) -
             arm.pending_retraction = max(arm.last_time + rng.uniform(0.1, 0.3), phrase_end + rng.uniform(0.05, 0.2))
     settle(0, np.inf)
     settle(1, np.inf)
-    return _GesturePlan(
+    return GesturePlan(
         arms=arms,
         stroke_times=np.array(stroke_times, dtype=np.float64),
         stroke_stress=np.array(stroke_stress, dtype=np.float64),

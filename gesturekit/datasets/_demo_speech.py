@@ -64,7 +64,7 @@ _CODA_SECONDS = ((0.045, 0.08), (0.035, 0.06), (0.0, 0.0))
 
 
 @dataclass
-class _Speech:
+class Speech:
     """Syllables, their acoustic segments and phrases of one take (times in seconds)."""
 
     phrases: np.ndarray  # (P, 2)
@@ -80,7 +80,7 @@ class _Speech:
     f0_base: float
 
 
-def _plan_speech(rng: np.random.Generator, duration: float) -> _Speech:
+def plan_speech(rng: np.random.Generator, duration: float) -> Speech:
     """Phrases, syllables and their segments; a plain loop over syllables (a few per second)."""
     phrases: list[tuple[float, float]] = []
     arousal: list[float] = []
@@ -124,7 +124,7 @@ def _plan_speech(rng: np.random.Generator, duration: float) -> _Speech:
         arousal.append(a)
         t += rng.uniform(0.2, 1.2)
     syl_arr = np.array(syl, dtype=np.float64).reshape(-1, 6)
-    return _Speech(
+    return Speech(
         phrases=np.array(phrases, dtype=np.float64).reshape(-1, 2),
         arousal=np.array(arousal, dtype=np.float64),
         syl_start=syl_arr[:, 0].copy(),
@@ -143,8 +143,8 @@ def _plan_syllable(rng, t, d, stressed, level, voiced, noise) -> tuple[float, fl
     """Append one syllable's segments; return the vowel onset time and the syllable's emphasis."""
     emphasis = math.exp(rng.normal(0.0, 0.15))
     amp = level * (1.8 if stressed else 1.0) * emphasis
-    onset = _draw(rng, _ONSET_P)  # fricative, plosive, nasal, none
-    coda = _draw(rng, _CODA_P)  # fricative, nasal, none
+    onset = draw(rng, _ONSET_P)  # fricative, plosive, nasal, none
+    coda = draw(rng, _CODA_P)  # fricative, nasal, none
     c1 = rng.uniform(*_ONSET_SECONDS[onset])
     c2 = rng.uniform(*_CODA_SECONDS[coda])
     min_vowel = 0.07
@@ -268,7 +268,7 @@ def _render_segments(segs: np.ndarray, sos_by_class, n: int, sr: int, source):
     return out_idx, out_val
 
 
-def _render_audio(speech: _Speech, rng: np.random.Generator, n_samples: int) -> np.ndarray:
+def render_audio(speech: Speech, rng: np.random.Generator, n_samples: int) -> np.ndarray:
     """Synthesise the take's audio, shape (n_samples,), float32 at 16 kHz."""
     sr = AUDIO_SR
     voiced_sos, noise_sos = _filters(sr)
@@ -292,7 +292,7 @@ def _render_audio(speech: _Speech, rng: np.random.Generator, n_samples: int) -> 
             for nb in (j - 1, j):  # accents are far apart: the two nearest suffice
                 nb = np.clip(nb, 0, len(acc_t) - 1)
                 log_f0 += acc_h[nb] * np.exp(-0.5 * ((tc - acc_t[nb]) / 0.07) ** 2)
-    log_f0 += _smooth_noise(rng, n_ctrl, 8.0)[:, 0] * 0.015  # slow pitch wobble
+    log_f0 += smooth_noise(rng, n_ctrl, 8.0)[:, 0] * 0.015  # slow pitch wobble
     # phase of the glottal cycle, accumulated at the control rate and interpolated: exact
     # integration of the piecewise-linear pitch, without a per-sample cumulative sum
     f0 = np.exp(log_f0)
@@ -324,12 +324,12 @@ def _render_audio(speech: _Speech, rng: np.random.Generator, n_samples: int) -> 
 # ---------------------------------------------------------------------------------------------
 
 
-def _draw(rng: np.random.Generator, p: np.ndarray) -> int:
+def draw(rng: np.random.Generator, p: np.ndarray) -> int:
     """An index drawn with probabilities ``p`` (cheaper than ``Generator.choice`` for one draw)."""
     return int(min(np.searchsorted(np.cumsum(p), rng.random() * p.sum(), side="right"), len(p) - 1))
 
 
-def _smooth_noise(rng, n: int, sigma_frames: float, dims: int = 1) -> np.ndarray:
+def smooth_noise(rng, n: int, sigma_frames: float, dims: int = 1) -> np.ndarray:
     """Gaussian-smoothed white noise with unit standard deviation, shape (n, dims)."""
     x = gaussian_filter1d(rng.standard_normal((n, dims)), sigma_frames, axis=0, mode="reflect")
     return x * math.sqrt(2.0 * math.sqrt(math.pi) * sigma_frames)

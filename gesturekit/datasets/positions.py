@@ -42,19 +42,22 @@ from .. import limits
 from ..errors import ConfigError, InputFileError, MotionFileError
 from ..motion import Motion, resample_positions
 from ..paths import is_file
-from ..skeleton import FPS, JOINT_NAMES, missing_required
+from ..skeleton import FPS, JOINT_NAMES, joint_index, missing_required
 from ._axes import UNIT_SCALE, check_axes_options, check_skeleton
 from ._reading import Reading, convert_and_complete
 from .presets import missing_and_unknown
-from .takes import POSITION_EXTENSIONS as _SUFFIXES  # the files a folder of takes is searched for
 
 __all__ = [
+    "POSITION_EXTENSIONS",
     "PositionJointMap",
     "load_position_joint_map",
     "read_position_array",
     "load_positions_motion",
     "read_positions_take",
 ]
+
+#: The files a folder of takes is searched for as joint-position takes.
+POSITION_EXTENSIONS = (".npy", ".npz", ".txt", ".csv")
 
 
 @dataclass(frozen=True)
@@ -247,8 +250,10 @@ def read_position_array(path: str | os.PathLike, *, fps: float | None = None) ->
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in _SUFFIXES:
-        raise MotionFileError(f"unsupported position file type {suffix!r} (expected {', '.join(_SUFFIXES)})", path=path)
+    if suffix not in POSITION_EXTENSIONS:
+        raise MotionFileError(
+            f"unsupported position file type {suffix!r} (expected {', '.join(POSITION_EXTENSIONS)})", path=path
+        )
     if not path.is_file():
         raise MotionFileError("file not found", path=path)
     size = path.stat().st_size
@@ -505,10 +510,9 @@ def check_outlier_frames(
     MotionFileError
         Naming the outlier frames (counting from 0).
     """
-    from ._axes import _LS, _RS
-
+    left, right = joint_index("left_shoulder"), joint_index("right_shoulder")
     pos = np.asarray(positions, dtype=np.float64)
-    mid = 0.5 * (pos[:, _LS] + pos[:, _RS])
+    mid = 0.5 * (pos[:, left] + pos[:, right])
     reach = np.linalg.norm(pos[:, recorded] - mid[:, None], axis=-1).max(axis=1)
     half = 4
     padded = np.pad(mid, ((half, half), (0, 0)), mode="edge")

@@ -57,9 +57,9 @@ import numpy as np
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion, Take, n_audio_frames
 from ..skeleton import FPS
-from ._demo_body import _render_motion
-from ._demo_gestures import _plan_gestures
-from ._demo_speech import _plan_speech, _render_audio
+from ._demo_body import render_motion
+from ._demo_gestures import plan_gestures
+from ._demo_speech import plan_speech, render_audio
 
 __all__ = ["DEMO_LABEL", "GENERATOR", "DemoEvents", "generate_demo_take", "generate_demo_takes"]
 
@@ -239,10 +239,10 @@ def generate_demo_take(*, seconds: float, seed: int, name: str) -> tuple[Take, D
     speech_rng, audio_rng, gesture_rng, motion_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
     )
-    speech = _plan_speech(speech_rng, duration)
-    audio = _render_audio(speech, audio_rng, n_samples)
-    plan = _plan_gestures(speech, gesture_rng, duration)
-    positions = _render_motion(plan, speech, motion_rng, n_frames)
+    speech = plan_speech(speech_rng, duration)
+    audio = render_audio(speech, audio_rng, n_samples)
+    plan = plan_gestures(speech, gesture_rng, duration)
+    positions = render_motion(plan.arms, speech, motion_rng, n_frames)
     events = DemoEvents(
         duration=duration,
         syllable_onsets=speech.syl_start,

@@ -24,9 +24,9 @@ from ..errors import ConfigError, InputFileError
 from ..motion import Motion, Take
 from ._axes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES
 from ._reading import reading_lines
+from .positions import POSITION_EXTENSIONS, PositionJointMap, load_position_joint_map, read_positions_take
 
 if TYPE_CHECKING:
-    from .positions import PositionJointMap
     from .presets import JointMap
 
 __all__ = [
@@ -52,7 +52,6 @@ AUDIO_EXTENSIONS = (".wav", ".flac", ".ogg", ".mp3")
 MAX_DURATION_MISMATCH = 0.05
 #: Seconds of difference always accepted (silence before or after the speech, a short take).
 DURATION_SLACK_S = 1.0
-POSITION_EXTENSIONS = (".npy", ".npz", ".txt", ".csv")
 KINDS = ("auto", "bvh", "positions", "habibie2021")
 
 
@@ -249,7 +248,6 @@ def iter_takes(
             speech = _speech_file(src)  # a take without speech is refused before its motion is read
             if src.kind == "bvh":
                 from .bvh import read_bvh_take
-                from .positions import PositionJointMap
                 from .presets import load_joint_map
 
                 if isinstance(joint_map, PositionJointMap):
@@ -265,7 +263,6 @@ def iter_takes(
                     check_plausible=opts.check_plausible,
                 )
             else:
-                from .positions import load_position_joint_map, read_positions_take
                 from .presets import JointMap
 
                 if isinstance(joint_map, JointMap):

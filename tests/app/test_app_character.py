@@ -1,0 +1,163 @@
+"""The user's character in the app, run headless with Streamlit's AppTest: upload, what matched, errors, views,
+downloads."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from streamlit.testing.v1 import AppTest
+
+from gesturekit.character.glb import read_glb
+from gesturekit.character.user import read_character_upload
+from gesturekit.skeleton import JOINT_NAMES
+from tests.app.test_app_synthesize import speech_file
+from tests.character_rigs import CASES, custom_map, rig_files, truth
+from tests.conftest import shown, viewer
+
+HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
+SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
+TIMEOUT = 240  # a busy machine: a run here synthesizes, renders an MP4 and writes two files
+FILE, MAP = "_gk.character_file.0", "_gk.character_map.0"
+
+
+def rig(case: str) -> tuple[str, bytes]:
+    ((name, data),) = rig_files(CASES[case]).items()
+    return name, data
+
+
+def open_page() -> AppTest:
+    at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
+    at.switch_page(SYNTH).run()
+    assert not at.exception, at.exception
+    return at
+
+
+def upload_character(at: AppTest, name: str, data: bytes, key: str = FILE) -> AppTest:
+    at.file_uploader(key=key).set_value((name, data, "application/octet-stream")).run()
+    assert not at.exception, at.exception
+    return at
+
+
+def errors(at: AppTest) -> list[str]:
+    return [shown(e.value) for e in at.error]
+
+
+def captions(at: AppTest) -> list[str]:
+    return [shown(c.value) for c in at.caption]
+
+
+def run_synthesis(at: AppTest) -> AppTest:
+    at.file_uploader(key="synth.upload").set_value(("speech.wav", speech_file(3.0), "audio/wav")).run()
+    if at.toggle(key="_w.synth.refine").value:
+        at.toggle(key="_w.synth.refine").set_value(False).run()
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at), (at.exception, errors(at))
+    return at
+
+
+def test_a_character_is_matched_drawn_and_written_until_the_default_is_chosen(app_env):
+    name, data = rig("vrm0_a")
+    at = upload_character(open_page(), "my avatar.vrm", data)
+    assert not errors(at)
+    assert any("my avatar.vrm is shown" in shown(s.value) for s in at.success)
+    mine = read_character_upload(name, data)
+    said = " ".join(captions(at))
+    assert "matched by VRM 0.x humanoid" in said and f"{mine.n_bones} bones" in said
+    at = run_synthesis(at)
+    res = at.session_state["gk.synthesis"]["result"]
+    skel = viewer(at, "synth.skeleton")
+    m = skel["motions"][0]
+    # their bones and mesh, not our 55 joints
+    assert m["rig"]["names"] == list(mine.names) and m["scheme"] == "character"
+    assert len(skel["times"]) == res.n_frames
+    assert any(c.startswith("Your character: ") and "bones follow ours within" in c for c in captions(at))
+    downloads = {d.proto.label: d for d in at.get("download_button")}
+    assert {"Character GLB", "Its speech (WAV)", "Character BVH"} <= set(downloads)
+    made = at.session_state["_gk.character_files"]
+    glb = next(v for k, v in made.items() if k[2] == "glb")
+    doc, _ = read_glb(glb["data"])
+    assert [a["name"] for a in doc["animations"]][-1] == "gesturekit"
+    assert "VRM" in doc.get("extensions", {})  # a VRM stays a VRM
+    bvh = next(v for k, v in made.items() if k[2] == "bvh")
+    assert bvh["data"].startswith(b"HIERARCHY") and f"MOTION\nFrames: {res.n_frames}" in bvh["data"].decode()
+
+    # the MP4 is rendered on it, and again on another character
+    at.button(key="synth.render").click().run()
+    assert not at.exception and not errors(at), (at.exception, errors(at))
+    made_video = at.session_state["_synth.video"]
+    assert made_video["character"] == at.session_state["gk.character"]["token"]
+    assert made_video["bytes"][4:8] == b"ftyp"
+    assert any(d.proto.label == "Video (MP4)" for d in at.get("download_button"))
+
+    # the inspector's side-by-side views draw it too, every candidate
+    at.number_input(key="_w.synth.record").set_value(3).run()
+    at.button(key="synth.go").click().run()
+    at.switch_page(INSPECT).run()
+    assert not at.exception and not errors(at), (at.exception, errors(at))
+    views = viewer(at, "inspect.views")
+    assert len(views["motions"]) >= 2
+    assert all(m["rig"]["names"] == list(mine.names) for m in views["motions"])
+    assert sum("bones follow ours within" in c for c in captions(at)) >= len(views["motions"])
+    at.switch_page(SYNTH).run()
+
+    at.button(key="_gk.character_default").click().run()
+    assert not at.exception and "gk.character" not in at.session_state
+    m = viewer(at, "synth.skeleton")["motions"][0]
+    assert m["rig"]["names"] == list(JOINT_NAMES)
+    assert "_synth.video" not in at.session_state  # the video of their character is not offered for ours
+    assert "Character GLB" not in {d.proto.label for d in at.get("download_button")}
+
+
+def test_a_broken_character_file_is_an_error_message_not_a_traceback(app_env):
+    at = upload_character(open_page(), "broken.glb", b"these are my notes, not a character" * 30)
+    said = errors(at)
+    assert len(said) == 1 and said[0].startswith("broken.glb: ") and "glTF" in said[0]
+    assert "gk.character" not in at.session_state
+    assert any("The default body is shown." in c for c in captions(at))
+    at.run()  # the same upload is not read again, and still reported
+    assert errors(at) == said and not at.exception
+
+
+def test_a_rig_missing_a_bone_is_named(app_env):
+    name, data = rig("missing_elbow")
+    at = upload_character(open_page(), name, data)
+    said = errors(at)
+    assert len(said) == 1 and "left_elbow" in said[0] and "bone map" in said[0]
+    assert "gk.character" not in at.session_state
+
+
+def test_a_bvh_character_and_a_bone_map(app_env):
+    name, data = rig("bvh_zeggs_a")
+    at = upload_character(open_page(), name, data)
+    assert not errors(at)
+    said = " ".join(captions(at))
+    assert "matched by zeggs names" in said and "capsules around its bones" in said
+    # custom names need the user's map: without it the file is refused, with it the character is read
+    name, data = rig("custom_names")
+    at = upload_character(at, name, data)
+    assert errors(at) and at.session_state["gk.character"]["name"] == "zeggs.bvh"  # the last good one stays
+    bone_map = json.dumps(custom_map(CASES["custom_names"])).encode()
+    at = upload_character(at, "bones.json", bone_map, key=MAP)
+    assert not errors(at) and at.session_state["gk.character"]["name"] == name
+    assert "matched by JSON map bones.json" in " ".join(captions(at))
+    ch = at.session_state["gk.character"]["character"]
+    assert ch.matched() == truth(CASES["custom_names"]).joint_map
+
+
+def test_a_file_no_reader_foresaw_is_a_message_with_a_reference(app_env, monkeypatch):
+    import sys
+
+    at = open_page()
+
+    def unforeseen(name, data, *, bone_map=None):
+        raise IndexError("deep inside a reader")
+
+    monkeypatch.setattr(sys.modules["characters"], "read_character_upload", unforeseen)
+    name, data = rig("mixamo_t")
+    at = upload_character(at, "odd.glb", data)
+    (said,) = errors(at)
+    assert said.startswith("odd.glb: could not be read as a character") and "reference" in said
+    assert "deep inside" not in said and "Traceback" not in said
+    assert "gk.character" not in at.session_state
+    at.file_uploader(key="synth.upload")  # the page is drawn on below the sidebar

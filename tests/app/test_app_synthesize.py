@@ -1,0 +1,358 @@
+"""The Synthesize page, run headless with Streamlit's AppTest: upload, controls, settings, run, result, exports."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+from scipy.signal import resample_poly
+from streamlit.testing.v1 import AppTest
+
+from gesturekit import interactive as gs
+from gesturekit.control import frame_attributes
+from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.synthetic import generate_demo_take
+from gesturekit.export.video import probe_media
+from gesturekit.skeleton import N_JOINTS
+from gesturekit.viz.figures import WRIST_ROWS
+from tests.conftest import chart_spec as chart
+from tests.conftest import plotly_array as array
+from tests.conftest import shown, viewer
+
+HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
+PAGE = "views/1_Synthesize.py"
+TIMEOUT = 90
+EDITOR = "synth.segments_editor"
+
+
+@pytest.fixture(scope="module")
+def db(demo_home) -> MatchingDatabase:
+    return MatchingDatabase.load(demo_home / "db" / "demo")
+
+
+def speech_file(seconds: float = 4.0, *, sr: int = 16000, channels: int = 1, fmt: str = "WAV") -> bytes:
+    """Generated speech of the demo speaker (not in the database) as an audio file's bytes."""
+    take, _ = generate_demo_take(seconds=seconds, seed=777, name="speech")
+    audio = take.audio if sr == 16000 else resample_poly(take.audio, sr // 50, 320).astype(np.float32)
+    data = np.stack([audio] * channels, axis=1) if channels > 1 else audio
+    buf = io.BytesIO()
+    sf.write(buf, data, sr, format=fmt)
+    return buf.getvalue()
+
+
+def open_page() -> AppTest:
+    at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
+    at.switch_page(PAGE).run()
+    assert not at.exception, at.exception
+    return at
+
+
+def upload(at: AppTest, data: bytes, name: str = "speech.wav") -> AppTest:
+    at.file_uploader(key="synth.upload").set_value((name, data, "audio/wav")).run()
+    assert not at.exception, at.exception
+    return at
+
+
+def add_rows(at: AppTest, *rows: dict) -> AppTest:
+    """Type rows into the control table, as the data editor would report them."""
+    at.session_state[EDITOR] = {"edited_rows": {}, "added_rows": list(rows), "deleted_rows": []}
+    return at.run()
+
+
+def box(at: AppTest, x0: float, x1: float) -> AppTest:
+    """Box-select a time range on the waveform, as the browser would report it."""
+    at.session_state["synth.waveform"] = {
+        "selection": {
+            "points": [],
+            "point_indices": [],
+            "lasso": [],
+            "box": [{"xref": "x", "yref": "y", "x": [x0, x1], "y": [-1, 1]}],
+        }
+    }
+    return at.run()
+
+
+def bands(spec: dict) -> list[tuple[float, float, str]]:
+    return sorted(
+        {
+            (round(s["x0"], 6), round(s["x1"], 6), s["name"])
+            for s in spec["layout"].get("shapes", [])
+            if s["type"] == "rect"
+        }
+    )
+
+
+def errors(at: AppTest) -> list[str]:
+    return [shown(e.value) for e in at.error]
+
+
+def result(at: AppTest):
+    return at.session_state["gk.synthesis"]["result"]
+
+
+def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
+    at = upload(open_page(), speech_file(4.0, sr=22050, channels=2))
+    assert any("WAV (PCM_16), 22050 Hz, 2 channels, 4.00 s" in shown(c.value) for c in at.caption)
+    at = add_rows(at, {"start_s": 1.0, "end_s": 2.5, "constraint": "left_hand=high"})
+    assert not at.exception and not errors(at)
+    assert bands(chart(at, "synth.waveform")) == [(1.0, 2.5, "left_hand=high")]
+    # the demo database offers its shipped refiner; this test looks at the k-NN motion alone
+    if at.toggle(key="_w.synth.refine").value:
+        at.toggle(key="_w.synth.refine").set_value(False).run()
+
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    res = result(at)
+    assert res.refined_motion is None
+    assert res.config.control == "1-2.5:left_hand=high" and res.source == "speech.wav"
+    assert res.n_frames == 60
+
+    # the 3D view: every joint of the first frame at the result's positions, one animation frame per frame
+    skel = viewer(at, "synth.skeleton")
+    assert len(skel["motions"]) == 1 and len(skel["times"]) == res.n_frames
+    m = skel["motions"][0]
+    # posed by the rig's rotations, sent as int16 quaternions: their rounding moves a fingertip by under 2 mm
+    np.testing.assert_allclose(m["points"][0][:N_JOINTS], res.motion.positions[0], atol=2e-3)
+    assert skel["up"] == [0, 1, 0] and skel["look"]["view"][2] > 0  # in front of the character, Y up
+
+    # the wrist plot: the result's own wrist heights and speeds, the control band, the thresholds
+    wrists = chart(at, "synth.wrists")
+    attrs = frame_attributes(res.motion.positions, fps=res.motion.fps)
+    for trace in wrists["data"]:
+        col = db.attribute_names.index(trace["meta"]["attribute"])
+        np.testing.assert_allclose(array(trace["y"]), attrs[:, col], atol=1e-5)
+    assert sorted(t["meta"]["attribute"] for t in wrists["data"]) == sorted(a for a, _ in WRIST_ROWS)
+    assert set(bands(wrists)) == {(1.0, 2.5, "left_hand=high")}
+    lines = {s["name"]: s["y0"] for s in wrists["layout"]["shapes"] if s["type"] == "line"}
+    assert lines["left_hand_height high"] == pytest.approx(db.thresholds["left_hand_height"][1])
+
+    # the uploaded speech's player; the result's speech plays in the 3D view, on its clock
+    assert len(at.get("audio")) == 1
+    np.testing.assert_allclose(skel["audio"][: len(res.audio)], res.audio, atol=1e-4)
+    labels = [d.proto.label for d in at.get("download_button")]
+    assert labels == [
+        "Motion + search (npz)",
+        "Motion (BVH)",
+        "Character (glTF)",
+        "Speech (WAV)",
+        "Control track (CSV)",
+        "Config (JSON)",
+    ]
+    assert any(c.value == "MP4: render it above" for c in at.caption)
+
+
+def test_a_first_visit_opens_on_example_speech_until_a_file_is_uploaded(app_env):
+    at = open_page()
+    hint = "Until you upload a file, the page works on example speech."
+    example = next(iter(gs.SPEECH_EXAMPLES))
+    assert at.radio(key="_w.synth.mode").value == "Upload a file"
+    assert [shown(c.value) for c in at.caption if shown(c.value) == hint] == [hint]
+    assert any(shown(c.value).startswith(f"{example} ·") for c in at.caption)
+    wave = chart(at, "synth.waveform")
+    assert array(wave["data"][0]["x"])[-1] == pytest.approx(gs.SPEECH_EXAMPLES[example][0], abs=0.05)
+    assert not at.button(key="synth.go").disabled
+
+    at = upload(at, speech_file(3.0), name="mine.wav")
+    assert not [c for c in at.caption if shown(c.value) == hint]
+    assert any(shown(c.value).startswith("mine.wav ·") for c in at.caption)
+    assert array(chart(at, "synth.waveform")["data"][0]["x"])[-1] == pytest.approx(3.0, abs=0.05)
+    at.button(key="synth.go").click().run()
+    assert not at.exception and result(at).source == "mine.wav" and result(at).n_frames == 45
+
+    # removing the file keeps the uploaded speech (the uploader also forgets it on a page switch)
+    at.file_uploader(key="synth.upload").set_value(None).run()
+    assert any(shown(c.value).startswith("mine.wav ·") for c in at.caption)
+
+
+def test_box_selecting_on_the_waveform_adds_and_cuts_segments(app_env):
+    at = upload(open_page(), speech_file(4.0))
+    at.selectbox(key="_w.synth.new_constraint").set_value("speed=fast").run()
+    at = box(at, 2.3456, 0.5)  # dragged right to left
+    assert not at.exception and not errors(at)
+    assert at.data_editor[0].value.to_dict("records") == [{"start_s": 0.5, "end_s": 2.35, "constraint": "speed=fast"}]
+    assert bands(chart(at, "synth.waveform")) == [(0.5, 2.35, "speed=fast")]
+
+    at.selectbox(key="_w.synth.new_constraint").set_value("width=wide").run()
+    at = box(at, 2.0, 3.0)
+    assert bands(chart(at, "synth.waveform")) == [(0.5, 2.0, "speed=fast"), (2.0, 3.0, "width=wide")]
+    at.run()  # the same selection again adds nothing
+    assert len(at.data_editor[0].value) == 2
+
+    at.button(key="synth.clear_segments").click().run()
+    assert at.data_editor[0].value.empty and bands(chart(at, "synth.waveform")) == []
+
+
+def test_a_bad_upload_is_an_error_message_not_a_traceback(app_env):
+    at = upload(open_page(), b"these are my notes, not sound" * 20, name="notes.wav")
+    (err,) = errors(at)
+    assert err.startswith("notes.wav: ")
+    assert not at.exception and not at.get("plotly_chart")
+    assert "synth.go" not in [b.key for b in at.button]
+    at.run()  # the same upload is not read again, and still reported
+    assert errors(at) == [err]
+    # an example instead: back to work
+    at.radio(key="_w.synth.mode").set_value("Example speech").run()
+    assert not errors(at) and at.button(key="synth.go")
+
+
+def test_a_failed_upload_keeps_the_last_result_and_speech_in_view(app_env):
+    at = upload(open_page(), speech_file(3.0), name="good.wav")
+    if at.toggle(key="_w.synth.refine").value:
+        at.toggle(key="_w.synth.refine").set_value(False).run()
+    at.button(key="synth.go").click().run()
+    assert not errors(at) and viewer(at, "synth.skeleton")
+    at = upload(at, b"these are my notes, not sound" * 20, name="notes.wav")
+    (err,) = errors(at)
+    assert err.startswith("notes.wav: ")
+    assert not at.exception
+    assert at.session_state["synth.speech"]["name"] == "good.wav"  # the last readable file is still the speech
+    assert any("Still working on good.wav," in shown(c.value) for c in at.caption)
+    assert viewer(at, "synth.skeleton") and result(at).source == "good.wav"  # the result stays
+    assert not at.button(key="synth.go").disabled
+    at.run()  # the failed file is not read again, and still reported above the result
+    assert errors(at) == [err] and viewer(at, "synth.skeleton")
+
+
+def test_settings_that_differ_from_the_paper_are_named(app_env):
+    at = open_page()
+    at.radio(key="_w.synth.mode").set_value("Example speech").run()
+    if at.toggle(key="_w.synth.refine").value:
+        at.toggle(key="_w.synth.refine").set_value(False).run()
+    assert not [c.value for c in at.caption if "Differs from the paper" in c.value]  # the defaults are the paper's
+    at.number_input(key="_w.synth.segment").set_value(6)
+    at.selectbox(key="_w.synth.init").set_value("rest").run()
+    (note,) = [shown(c.value) for c in at.caption if shown(c.value).startswith("Differs from the paper")]
+    assert note == "Differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)"
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    assert result(at).config.segment == 6
+    assert any(
+        "differs from the paper: N = 6 (paper 8); initial pose: rest (paper random)" in shown(c.value)
+        for c in at.caption
+        if "seed" in shown(c.value)
+    )
+
+
+def test_a_silent_upload_is_accepted_with_a_warning(app_env):
+    buf = io.BytesIO()
+    sf.write(buf, np.zeros(32000, np.float32), 16000, format="WAV")
+    at = upload(open_page(), buf.getvalue(), name="quiet.wav")
+    assert [shown(w.value) for w in at.main.warning if "silent" in shown(w.value)] == [
+        "quiet.wav: the audio is silent (peak level at or below -80 dBFS)"
+    ]
+    assert not errors(at) and not at.button(key="synth.go").disabled
+
+
+def test_an_invalid_control_row_blocks_the_run(app_env):
+    at = add_rows(upload(open_page(), speech_file(3.0)), {"start_s": 2.0, "end_s": 1.0, "constraint": "speed=slow"})
+    (err,) = errors(at)
+    assert err.startswith("control row 1:") and "end must be after start" in err
+    assert at.button(key="synth.go").disabled
+    assert not at.exception
+
+
+def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
+    at = open_page()
+    at.radio(key="_w.synth.mode").set_value("Example speech").run()
+    at.number_input(key="_w.synth.k").set_value(2)
+    at.number_input(key="_w.synth.seed").set_value(3)
+    at.number_input(key="_w.synth.record").set_value(4)
+    at.selectbox(key="_w.synth.init").set_value("rest")
+    at.selectbox(key="_w.synth.blend").set_value("offset")
+    at.selectbox(key="_w.synth.mask_rule").set_value("all").run()
+    at = add_rows(at, {"start_s": 0.0, "end_s": 2.0, "constraint": "both_hands=low"})
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    c = result(at).config
+    assert (c.k, c.seed, c.record, c.init, c.blend, c.mask_rule) == (2, 3, 4, "rest", "offset", "all")
+    assert c.control == "0-2:both_hands=low"
+    assert result(at).n_frames == 8 * 15  # the 8 s example
+
+    at.switch_page("views/3_Database.py").run()
+    at.switch_page(PAGE).run()
+    assert not at.exception
+    assert at.number_input(key="_w.synth.k").value == 2 and at.selectbox(key="_w.synth.blend").value == "offset"
+    assert at.data_editor[0].value.to_dict("records") == [
+        {"start_s": 0.0, "end_s": 2.0, "constraint": "both_hands=low"}
+    ]
+    assert viewer(at, "synth.skeleton")  # the result is still there
+
+    other = open_page()  # another user sees none of it: a first visit, on the example speech
+    assert "gk.synthesis" not in other.session_state and not other.get("component_instance")
+    assert other.number_input(key="_w.synth.k").value == 0 and other.data_editor[0].value.empty
+    assert other.session_state["synth.speech"]["token"] == ("example", "demo speaker, 8 s (generated)")
+
+
+def test_rendering_the_video_gives_an_mp4_with_the_speech(app_env, tmp_path):
+    at = upload(open_page(), speech_file(2.0))
+    at.button(key="synth.go").click().run()
+    at.button(key="synth.render").click().run()
+    assert not at.exception and not errors(at)
+    assert len(at.get("video")) == 1
+    assert [d.proto.label for d in at.get("download_button")][-1] == "Video (MP4)"
+    mp4 = tmp_path / "result.mp4"
+    mp4.write_bytes(at.session_state["_synth.video"]["bytes"])
+    info = probe_media(mp4)
+    assert info["video"]["codec"] == "h264" and info["audio"]["codec"] == "aac"
+    assert info["video"]["frames"] == result(at).n_frames == 30
+    assert info["audio"]["duration"] == pytest.approx(2.0, abs=0.03)
+
+
+def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_path, monkeypatch):
+    """The page's side of the refiner: a stand-in refiner that smooths the k-NN motion over 5 frames."""
+    import dataclasses
+
+    from scipy.ndimage import uniform_filter1d
+
+    import gesturekit.synthesize as synthesis
+    from gesturekit.motion import Motion
+
+    real = synthesis.synthesize
+    seen = []
+
+    def synthesize(audio, *, db, config=None, control=None, refiner=None):
+        res = real(audio, db=db, config=config, control=control)
+        if refiner is None:
+            return res
+        seen.append(refiner)
+        smooth = Motion(uniform_filter1d(res.knn_motion.positions, 5, axis=0), res.motion.fps)
+        return dataclasses.replace(res, motion=smooth, refined_motion=smooth)
+
+    class StandIn:
+        def check_database(self, db):
+            pass
+
+        def refine(self, motion, audio):  # the page's background warm-up runs one pass
+            return motion
+
+    folder = tmp_path / "my-refiner"
+    folder.mkdir()
+    (folder / "config.json").write_text("{}", encoding="utf-8")
+    monkeypatch.setattr("gesturekit.synthesize.synthesize", synthesize)
+    monkeypatch.setattr("gesturekit.refine.load_refiner", lambda path: StandIn())
+    checked = []
+    monkeypatch.setattr("gesturekit.refine.check_refiner", lambda path, db: checked.append(path) or Path(path))
+
+    at = upload(open_page(), speech_file(3.0))
+    at.toggle(key="_w.synth.refine").set_value(True).run()
+    at.text_input(key="_w.synth.refiner_path").input(str(folder)).run()
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    assert len(seen) == 1 and isinstance(seen[0], StandIn)
+    assert checked and Path(checked[-1]) == folder  # checked when chosen, loaded when run
+    skel = viewer(at, "synth.skeleton")
+    assert [m["label"] for m in skel["motions"]] == ["k-NN", "k-NN + refiner"]
+    wrists = chart(at, "synth.wrists")
+    res = result(at)
+    speeds = {t["meta"]["motion"]: array(t["y"]) for t in wrists["data"] if t["meta"]["attribute"] == "left_hand_speed"}
+    np.testing.assert_allclose(speeds[0], frame_attributes(res.knn_motion.positions)[:, 2], atol=1e-5)
+    np.testing.assert_allclose(speeds[1], frame_attributes(res.refined_motion.positions)[:, 2], atol=1e-5)
+    assert any("refined" in shown(c.value) for c in at.caption)
+
+    # the refiner on but not loadable: an error, and no run without it
+    at.text_input(key="_w.synth.refiner_path").input("").run()
+    assert any("folder of a trained refiner" in e for e in errors(at))
+    assert at.button(key="synth.go").disabled
