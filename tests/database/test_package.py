@@ -26,8 +26,7 @@ from gesturekit.database.folder import CLIP_ARRAYS, FolderOut
 from gesturekit.database.stage import StagedTake, stage_take
 from gesturekit.errors import ConfigError
 from gesturekit.features import LAYOUT
-
-from ..conftest import make_take
+from tests.conftest import make_take
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "gesturekit"
