@@ -25,16 +25,7 @@ from .errors import ConfigError, GestureKitError
 from .limits import read_json
 from .paths import is_dir
 
-__all__ = [
-    "atomic_write",
-    "write_to",
-    "Target",
-    "safe_filename",
-    "read_json_marker",
-    "FOLDER_KINDS",
-    "DATABASE_CLIP_ARRAYS",
-    "folder_kind",
-]
+__all__ = ["atomic_write", "write_to", "Target", "safe_filename", "read_json_marker", "FOLDER_KINDS", "folder_kind"]
 
 #: Folder kinds gesturekit writes: kind -> (marker file, its ``format`` value, what it is called in messages).
 FOLDER_KINDS = {
@@ -45,15 +36,13 @@ FOLDER_KINDS = {
     "evaluation": ("evaluation.json", "gesturekit-evaluation", "an evaluation folder"),
 }
 
-#: The per-clip arrays of a database folder (``NAME.npy``), each with M clips first; declared
-#: here, below the database, so that a database folder is recognised without loading one.
-DATABASE_CLIP_ARRAYS = ("F", "P", "G", "A", "valid", "attributes", "pose_track")
-
-# every name a folder of each kind can hold, its marker included
+# every name a folder of each kind can hold, its marker included (a database's are
+# gesturekit.database.folder.FOLDER_FILES, listed here too so that a folder is recognised below
+# the database; tests/test_outputs.py checks that the two agree)
 _FOLDER_NAMES = {
     "database": frozenset(
-        [f"{a}.npy" for a in (*DATABASE_CLIP_ARRAYS, "clip_take", "clip_start", "audio")]
-        + ["stats.npz", "overlap", "database.json"]
+        [f"{a}.npy" for a in ("F", "P", "G", "A", "valid", "attributes", "pose_track", "clip_take", "clip_start")]
+        + ["audio.npy", "stats.npz", "overlap", "database.json"]
     ),
     "refiner": frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"]),
     "study": frozenset(["study.json", "manifest.csv", "order.csv", "videos"]),
