@@ -44,11 +44,11 @@ from typing import IO, Any, Literal
 import numpy as np
 
 from .. import limits
-from .._io import read_json_marker
 from ..bones import Skeleton
 from ..control import ATTRIBUTE_NAMES
 from ..errors import ConfigError, DatabaseError, GestureKitError
 from ..features import LAYOUT
+from ..folders import read_json_marker
 from ..motion import AUDIO_SR
 from ..skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
 from .audio import AudioStorage, encode_take_audio, read_take_audio, take_audio_fields

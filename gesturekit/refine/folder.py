@@ -8,8 +8,8 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .._io import read_json_marker
 from ..errors import DatabaseError, InputFileError
+from ..folders import read_json_marker
 
 if TYPE_CHECKING:
     from ..database import MatchingDatabase

@@ -518,9 +518,9 @@ def test_a_dataset_bvh_is_not_taken_for_gesturekit_output(zeggs_files, tmp_path)
 
 def test_the_folder_markers_are_those_the_writers_write():
     """outputs recognises folders by the markers declared in _io: the writers' own formats and files."""
-    from gesturekit._io import FOLDER_KINDS
     from gesturekit.database import folder as database_folder
     from gesturekit.evaluate import fgd
+    from gesturekit.folders import FOLDER_KINDS
     from gesturekit.refine import folder
 
     assert FOLDER_KINDS["database"][:2] == ("database.json", database_folder.FORMAT)
@@ -530,8 +530,8 @@ def test_the_folder_markers_are_those_the_writers_write():
 
 def test_a_folder_of_every_database_file_with_a_damaged_marker_is_recognised(tmp_path):
     """The names outputs recognises a database folder by include every name the folder format writes."""
-    from gesturekit._io import folder_kind
     from gesturekit.database.folder import FOLDER_FILES
+    from gesturekit.folders import folder_kind
 
     for name in FOLDER_FILES:
         if name == "overlap":

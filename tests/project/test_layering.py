@@ -53,6 +53,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.bones",
             "gesturekit.control",
             "gesturekit.errors",
+            "gesturekit.folders",
             "gesturekit.limits",
             "gesturekit.motion",
             "gesturekit.outputs",
@@ -428,10 +429,6 @@ def test_no_stale_entries():
 KNOWN_CIRCLES: dict[frozenset[str], str] = {
     frozenset({"gesturekit.synthesis_types", "gesturekit.synthesize", "gesturekit.synthesizer"}): (
         "SynthesisConfig moves below the stages"
-    ),
-    frozenset({"gesturekit._io", "gesturekit.outputs"}): (
-        "dbpkg: atomic_write reports through outputs.write_errors/clean_stale and outputs reads _io's folder "
-        "kinds; goes with the folder format leaving _io"
     ),
 }
 KNOWN_PRIVATE: dict[str, str] = {}
