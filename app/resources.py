@@ -211,25 +211,23 @@ def _first_use(noise) -> None:
 
     ``noise``: a few seconds of mono float32 audio at 16 kHz.
     """
-    import io
 
     import numpy as np
     import plotly.io as pio
-    import soundfile as sf
 
     from gesturekit import interactive as gs
+    from gesturekit.control import empty_segments, segments_frame, track_from_segments
+    from gesturekit.datasets.audio import wav_bytes
     from gesturekit.motion import AUDIO_SR, N_JOINTS, Motion
     from gesturekit.viz.figures import waveform_figure, wrist_figure
     from gesturekit.viz.viewer import skeleton_viewer
 
     example_audio(next(iter(gs.SPEECH_EXAMPLES)))  # what a first visit to Synthesize shows
-    buf = io.BytesIO()
-    sf.write(buf, noise, AUDIO_SR, format="WAV", subtype="PCM_16")
-    audio, _ = gs.read_speech_upload("warm-up.wav", buf.getvalue())
-    gs.wav_bytes(audio)
+    audio, _ = gs.read_speech_upload("warm-up.wav", wav_bytes(noise))
+    wav_bytes(audio)
     import pyarrow as pa  # what streamlit's tables are sent as: its first import takes most of a second
 
-    pa.Table.from_pandas(gs.segments_frame(gs.track_from_segments(gs.empty_segments())))
+    pa.Table.from_pandas(segments_frame(track_from_segments(empty_segments())))
     motion = Motion(np.zeros((4, N_JOINTS, 3), np.float32), 15.0)
     skeleton_viewer([motion, motion], labels=["a", "b"])
     for fig in (waveform_figure(audio, AUDIO_SR), wrist_figure([motion, motion], labels=["a", "b"])):

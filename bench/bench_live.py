@@ -23,7 +23,6 @@ Usage: python bench/bench_live.py [SPEECH.wav] [--seconds 30] [--no-pace] [--sca
 from __future__ import annotations
 
 import argparse
-import os
 import platform
 import sys
 import time
@@ -33,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_search import M_OLIVER, make_db  # noqa: E402
+from machine import describe_machine  # noqa: E402
 
 from gesturekit.database import MatchingDatabase  # noqa: E402
 from gesturekit.live import LiveSynthesizer  # noqa: E402
@@ -40,19 +40,6 @@ from gesturekit.motion import AUDIO_SR  # noqa: E402
 from gesturekit.synthesize import SynthesisConfig  # noqa: E402
 
 CHUNK_MS = 20
-
-
-def machine() -> str:
-    """Cores, memory and accelerator of this machine, in words."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    mem = "?"
-    try:
-        with open("/proc/meminfo") as f:
-            kb = int(next(line for line in f if line.startswith("MemTotal")).split()[1])
-        mem = f"{kb / 2**20:.0f} GiB"
-    except (OSError, StopIteration, ValueError):
-        pass
-    return f"{platform.processor() or platform.machine()}, {cores} cores, {mem} memory, no GPU used (CPU only)"
 
 
 def paper_scale(demo: MatchingDatabase, seed: int = 0) -> MatchingDatabase:
@@ -148,7 +135,8 @@ def main(argv: list[str] | None = None) -> None:
         take, _ = generate_demo_take(seconds=args.seconds, seed=2022, name="bench")
         audio, source = take.audio, f"demo speaker, {args.seconds:g} s generated"
     pace = not args.no_pace
-    print(f"machine: {machine()}; numpy {np.__version__}, Python {platform.python_version()}")
+    where = describe_machine(accelerator="no GPU used (CPU only)")
+    print(f"machine: {where}; numpy {np.__version__}, Python {platform.python_version()}")
     print(
         f"speech: {source} ({len(audio) / AUDIO_SR:.1f} s), {CHUNK_MS} ms chunks, N = {args.segment}, "
         + ("paced by a real-time clock" if pace else "not paced (compute only)")

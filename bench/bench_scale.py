@@ -164,8 +164,8 @@ class AnonPeak:
 
 def audio_options(path: Path) -> str:
     """What FLAC and 8 kHz storage would make of the stored audio, encoded take by take."""
-    from gesturekit._database_audio import AudioStorage, encode_take_audio
     from gesturekit.database import MatchingDatabase
+    from gesturekit.database.audio import AudioStorage, encode_take_audio
 
     db = MatchingDatabase.load(path)
     if db.audio is None:
@@ -241,7 +241,7 @@ def search_figures(path: Path, runs: int) -> dict:
 
 def tile(src: Path, dst: Path, hours: float) -> Path:
     """``src`` (without its audio and overlapping cut) repeated to at least ``hours`` of clips at ``dst``."""
-    from gesturekit._database_folder import CLIP_ARRAYS
+    from gesturekit.database.folder import CLIP_ARRAYS
 
     meta = json.loads((src / "database.json").read_text())
     ct = np.load(src / "clip_take.npy", allow_pickle=False)

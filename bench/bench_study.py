@@ -36,23 +36,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from machine import describe_machine  # noqa: E402  (bench/ is the script's folder)
+
 from gesturekit.studies.store import open_store  # noqa: E402
 from tests import study_pg  # noqa: E402
 from tests._study_standin import make_folder  # noqa: E402
 from tests.study_serve import kill9, run_participant, start_server  # noqa: E402
-
-
-def machine() -> str:
-    """Cores, memory and processor of this machine, in words."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    mem = "?"
-    try:
-        with open("/proc/meminfo") as f:
-            kb = int(next(line for line in f if line.startswith("MemTotal")).split()[1])
-        mem = f"{kb / 2**20:.0f} GiB"
-    except (OSError, StopIteration, ValueError):
-        pass
-    return f"{platform.processor() or platform.machine()}, {cores} cores, {mem} memory"
 
 
 async def crowd(base: str, n: int, acked: list, timings: dict, kill_at: int | None = None, proc=None) -> float:
@@ -145,7 +134,8 @@ def main() -> int:
     p.add_argument("--backend", default="sqlite,postgresql")
     args = p.parse_args()
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
-    print(f"machine: {machine()}; load average {load} (1, 5, 15 min) at the start; Python {platform.python_version()}")
+    python = platform.python_version()
+    print(f"machine: {describe_machine()}; load average {load} (1, 5, 15 min) at the start; Python {python}")
     with tempfile.TemporaryDirectory(prefix="gk-bench-study-") as tmp:
         work = Path(tmp)
         for name in args.backend.split(","):

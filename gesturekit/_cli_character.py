@@ -57,7 +57,7 @@ def check_target(
     if character is None or kind != "bvh":
         check_output(path, "file", overwrite=overwrite, inputs=[*inputs, *([character.path] if character else [])])
         return
-    from .export._character_bvh import character_bvh_joints, check_character_bvh
+    from .export.character import character_bvh_joints, check_character_bvh
 
     joints = character_bvh_joints(character)
     check_character_bvh(path, joints, overwrite=overwrite, inputs=[*inputs, character.path])
@@ -86,8 +86,8 @@ def write_character_files(
     show : callable
         Prints one line.
     """
+    from .evaluate.metrics import control_adherence, overall_adherence
     from .export.result import export_result_character_bvh, export_result_character_glb, retarget_result
-    from .interactive import control_adherence
 
     retargeted = retarget_result(result, character)
     show(f"  on {character.path.name} ({character.matched_by}): {retargeted.report.summary()}")
@@ -98,8 +98,10 @@ def write_character_files(
         bvh = export_result_character_bvh(result, retargeted, targets["bvh"], overwrite=overwrite)
         show(f"  BVH {bvh.summary()}")
     if result.control.segments:
-        ours = control_adherence(result.motion, result.control, thresholds)
-        theirs = control_adherence(retargeted.our_motion(), result.control, thresholds)
+        ours, theirs = (
+            overall_adherence(control_adherence(m.positions, result.control, thresholds=dict(thresholds), fps=m.fps))
+            for m in (result.motion, retargeted.our_motion())
+        )
         show(
             f"  control met on {ours:.0%} of the constrained frames by our motion, "
             f"{theirs:.0%} by {character.path.name}'s"

@@ -21,36 +21,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
-from .errors import ConfigError, GestureKitError
-from .limits import read_json
-from .paths import is_dir
+from .errors import ConfigError
 
-__all__ = ["atomic_write", "safe_filename", "read_json_marker", "FOLDER_KINDS", "DATABASE_CLIP_ARRAYS", "folder_kind"]
-
-#: Folder kinds gesturekit writes: kind -> (marker file, its ``format`` value, what it is called in messages).
-FOLDER_KINDS = {
-    "database": ("database.json", "gesturekit-matching-database", "a matching database"),
-    "refiner": ("config.json", "gesturekit-refiner", "a refiner folder"),
-    "study": ("study.json", "gesturekit-study", "a study folder"),
-    "fgd": ("fgd.json", "gesturekit-fgd-autoencoder", "an FGD model folder"),
-    "evaluation": ("evaluation.json", "gesturekit-evaluation", "an evaluation folder"),
-}
-
-#: The per-clip arrays of a database folder (``NAME.npy``), each with M clips first; declared
-#: here, below the database, so that a database folder is recognised without loading one.
-DATABASE_CLIP_ARRAYS = ("F", "P", "G", "A", "valid", "attributes", "pose_track")
-
-# every name a folder of each kind can hold, its marker included
-_FOLDER_NAMES = {
-    "database": frozenset(
-        [f"{a}.npy" for a in (*DATABASE_CLIP_ARRAYS, "clip_take", "clip_start", "audio")]
-        + ["stats.npz", "overlap", "database.json"]
-    ),
-    "refiner": frozenset(["config.json", "generator.pt", "critic.pt", "train_state.pt", "stats.npz", "loss_log.csv"]),
-    "study": frozenset(["study.json", "manifest.csv", "order.csv", "videos"]),
-    "fgd": frozenset(["fgd.json", "weights.pt"]),
-    "evaluation": frozenset(["evaluation.json", "results.csv", "results.md", "controls.csv", "controls.md"]),
-}
+__all__ = ["atomic_write", "write_to", "Target", "safe_filename"]
 
 # names Windows refuses whatever the extension, compared case-insensitively
 _RESERVED_NAMES = frozenset(
@@ -121,6 +94,44 @@ def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], object]
         raise
     _sync_folder(folder)
     return path
+
+
+#: Where a writer puts its bytes: a path (written atomically) or a binary file object opened for writing.
+Target = str | os.PathLike | BinaryIO
+
+
+def target_path(target: Target, default: str) -> Path:
+    """The path a writer names in its messages and reports: ``target`` itself, or a file object's
+    ``name`` (an open file's), else ``default`` (an ``io.BytesIO``)."""
+    if isinstance(target, (str, os.PathLike)):
+        return Path(target)
+    name = getattr(target, "name", None)
+    return Path(name) if isinstance(name, str) and name else Path(default)
+
+
+def write_to(target: Target, write_fn: Callable[[BinaryIO], object], *, overwrite: bool = False) -> Path | None:
+    """Write to a path atomically (:func:`atomic_write`) or into an open binary file object.
+
+    Parameters
+    ----------
+    target : str, os.PathLike or binary file object
+        A path, or an object with a ``write(bytes)`` method (``io.BytesIO``, an open file, a
+        response stream): then ``write_fn`` writes into it at its current position and the
+        caller owns it (nothing is flushed or closed).
+    write_fn : callable
+        ``write_fn(fileobj)``; writes the whole content.
+    overwrite : bool
+        For a path: replace it if it exists (see :func:`atomic_write`).
+
+    Returns
+    -------
+    pathlib.Path or None
+        The path written, None for a file object.
+    """
+    if isinstance(target, (str, os.PathLike)):
+        return atomic_write(target, write_fn, overwrite=overwrite)
+    write_fn(target)
+    return None
 
 
 def _exists_error(path: Path) -> ConfigError:
@@ -221,102 +232,3 @@ def safe_filename(name: str, *, max_length: int = 100, default: str = "unnamed")
 def _clean_default(default: str) -> str:
     clean = re.sub(r"[^A-Za-z0-9_-]", "_", default).strip("_")
     return clean or "unnamed"
-
-
-def read_json_marker(
-    folder: str | os.PathLike,
-    name: str,
-    *,
-    marker_format: str,
-    version: int,
-    error: type[GestureKitError],
-    messages: dict[str, str],
-) -> dict:
-    """The JSON marker file ``name`` of an output folder (a database, a refiner), of the right format.
-
-    Only the marker's ``format`` and ``format_version`` are checked; the caller
-    checks the rest of its structure.
-
-    Parameters
-    ----------
-    folder : str or os.PathLike
-        The folder that should hold the marker.
-    name : str
-        The marker's file name, such as ``"database.json"``.
-    marker_format : str
-        The marker's expected ``format`` entry.
-    version : int
-        The ``format_version`` this gesturekit reads.
-    error : type
-        The :class:`~gesturekit.errors.GestureKitError` subclass to raise, naming ``folder``.
-    messages : dict of str
-        What to say when ``folder`` is no folder (``"no_folder"``), lacks the
-        marker (``"no_file"``), holds another format (``"other_format"``) or
-        another version (``"other_version"``, formatted with ``found`` and
-        ``supported``); each says how to make the right folder.
-
-    Returns
-    -------
-    dict
-        The marker's content.
-
-    Raises
-    ------
-    GestureKitError
-        Of type ``error``: no folder, no marker file, a marker that is not
-        readable UTF-8 JSON, or one of another format or version.
-    """
-    folder = Path(folder)
-    marker = folder / name
-    if not is_dir(folder):
-        raise error(messages["no_folder"], path=folder)
-    if not os.path.lexists(marker):
-        raise error(messages["no_file"], path=folder)
-    content = read_json(marker, what=f"{name} ", error=error, owner=folder)
-    if not isinstance(content, dict) or content.get("format") != marker_format:
-        raise error(messages["other_format"], path=folder)
-    if content.get("format_version") != version:
-        raise error(
-            messages["other_version"].format(found=content.get("format_version"), supported=version), path=folder
-        )
-    return content
-
-
-def folder_kind(path: str | os.PathLike[str]) -> str | None:
-    """Which of gesturekit's folders (a key of :data:`FOLDER_KINDS`) ``path`` is, from its marker file.
-
-    A marker that cannot be read (damaged, not JSON) or has no ``format`` (written by an
-    earlier gesturekit) still counts when every name in the folder is one that kind of
-    folder holds: a database whose ``database.json`` was cut short can be rebuilt in place.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        An existing folder.
-
-    Returns
-    -------
-    str or None
-        The kind, or None when the folder is none of gesturekit's.
-    """
-    path = Path(path)
-    names = None
-    for kind, (marker, fmt, _) in FOLDER_KINDS.items():
-        if not os.path.lexists(path / marker):
-            continue
-        if not os.path.isfile(path / marker):
-            continue  # a FIFO or a device in a marker's place: nothing gesturekit wrote, never read
-        try:
-            meta = read_json(path / marker)
-        except GestureKitError:  # not a regular file, too large, not JSON: a damaged marker
-            meta = None
-        if isinstance(meta, dict):
-            if meta.get("format") == fmt:
-                return kind
-            if "format" in meta:
-                continue
-        if names is None:
-            names = {p.name for p in path.iterdir()}
-        if names and names <= _FOLDER_NAMES[kind]:
-            return kind
-    return None

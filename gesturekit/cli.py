@@ -204,7 +204,7 @@ def _print_readings(db: MatchingDatabase) -> None:
 
 def _audio_options(args) -> dict:
     """``--audio-format`` and ``--audio-rate`` as BuildConfig fields, checked against each other and ``--no-audio``."""
-    from ._database_audio import MIN_AUDIO_RATE, AudioStorage
+    from .database.audio import MIN_AUDIO_RATE, AudioStorage
     from .motion import AUDIO_SR
 
     given = {k: v for k, v in (("audio_format", args.audio_format), ("audio_rate", args.audio_rate)) if v is not None}

@@ -8,6 +8,10 @@ threshold of the database (the authors used the 15th and 85th percentiles: "low"
 is below the 15th, "high" above the 85th). A :class:`ControlTrack` says which
 constraints hold over which stretches of the output, e.g.
 ``"0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric"``.
+
+The *control table* (:func:`segments_frame`, :func:`track_from_segments`,
+:func:`add_segment`) is a track as the app's editor and the inspector show it:
+one row per constraint with its start and end in seconds.
 """
 
 from __future__ import annotations
@@ -17,15 +21,18 @@ import io
 import json
 import os
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import limits
 from .errors import ConfigError, InputFileError
 from .skeleton import FPS, joint_index
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "ATTRIBUTE_NAMES",
@@ -39,6 +46,12 @@ __all__ = [
     "load_control_file",
     "constraint_mask",
     "step_masks",
+    "SEGMENT_COLUMNS",
+    "CONSTRAINT_CHOICES",
+    "empty_segments",
+    "segments_frame",
+    "track_from_segments",
+    "add_segment",
 ]
 
 #: Per-frame attributes, in the order of the database's ``attributes`` array (units in brackets).
@@ -444,3 +457,182 @@ def step_masks(
         return None, idx
     masks = np.stack([constraint_mask(attributes, k, thresholds) for k in keys])
     return masks, idx
+
+
+# ---- the control table: a track as the app's editor and the inspector show it ----------------------
+
+#: Columns of the control segment table, in order.
+SEGMENT_COLUMNS: tuple[str, ...] = ("start_s", "end_s", "constraint")
+
+#: Every single constraint a table row can hold, as ``"name=value"`` (see :data:`CONSTRAINTS`).
+CONSTRAINT_CHOICES: tuple[str, ...] = tuple(
+    f"{name}={value}" for name, (_, values) in CONSTRAINTS.items() for value in values
+)
+
+
+def empty_segments() -> pd.DataFrame:
+    """A control table without rows, with the column types the editor needs."""
+    import pandas as pd  # kept local: only the table needs pandas
+
+    return pd.DataFrame(
+        {
+            "start_s": pd.Series([], dtype="float64"),
+            "end_s": pd.Series([], dtype="float64"),
+            "constraint": pd.Series([], dtype="object"),
+        }
+    )
+
+
+def segments_frame(track: ControlTrack) -> pd.DataFrame:
+    """A control track as a table: one row per constraint, sorted by time.
+
+    A segment with several constraints gives several rows with the same
+    times; :func:`track_from_segments` joins them again.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`SEGMENT_COLUMNS`; ``start_s`` and ``end_s`` in seconds.
+    """
+    import pandas as pd  # kept local: only the table needs pandas
+
+    rows = [
+        {"start_s": float(s.start_s), "end_s": float(s.end_s), "constraint": f"{n}={v}"}
+        for s in track.segments
+        for n, v in s.constraints
+    ]
+    return (
+        pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS)).astype({"start_s": "float64", "end_s": "float64"})
+        if rows
+        else empty_segments()
+    )
+
+
+def _is_blank(value: object) -> bool:
+    import pandas as pd  # kept local: only the table needs pandas
+
+    if value is None:
+        return True
+    if isinstance(value, str):
+        return not value.strip()
+    try:
+        return bool(pd.isna(value))
+    except (TypeError, ValueError):
+        return False
+
+
+def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack:
+    """The control track a segment table describes.
+
+    Rows whose cells are all empty (a row just added in the editor) are
+    ignored. Rows with the same start and end form one segment whose
+    constraints must all hold.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame or sequence of mappings
+        Columns ``start_s``, ``end_s`` (seconds) and ``constraint``
+        (``"name=value"``, one of :data:`CONSTRAINT_CHOICES`).
+
+    Returns
+    -------
+    ControlTrack
+
+    Raises
+    ------
+    ConfigError
+        A row with a missing or invalid value, end not after start, one
+        control set twice for the same time range, or segments that overlap;
+        the message names the row (counted from 1).
+    """
+    import pandas as pd  # kept local: only the table needs pandas
+
+    records = table.to_dict("records") if isinstance(table, pd.DataFrame) else [dict(r) for r in table]
+    groups: dict[tuple[float, float], list[tuple[str, str]]] = {}
+    first_row: dict[tuple[float, float], int] = {}
+    for i, r in enumerate(records, start=1):
+        cells = [r.get(c) for c in SEGMENT_COLUMNS]
+        if all(_is_blank(v) for v in cells):
+            continue
+        missing = [c for c, v in zip(SEGMENT_COLUMNS, cells) if _is_blank(v)]
+        if missing:
+            raise ConfigError(f"control row {i}: fill in {', '.join(missing)}")
+        try:
+            start, end = float(r["start_s"]), float(r["end_s"])
+        except (TypeError, ValueError):
+            raise ConfigError(f"control row {i}: start_s and end_s must be numbers of seconds") from None
+        text = str(r["constraint"]).strip()
+        if text not in CONSTRAINT_CHOICES:
+            raise ConfigError(
+                f"control row {i}: unknown constraint {text!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}"
+            )
+        try:
+            Segment(start, end, (_constraint_pair(text),))
+        except ConfigError as exc:
+            raise ConfigError(f"control row {i}: {exc.problem}") from None
+        key = (round(start, 6), round(end, 6))
+        name = text.split("=", 1)[0]
+        if any(n == name for n, _ in groups.get(key, [])):
+            raise ConfigError(
+                f"control row {i}: {name} is set twice for {start:g}-{end:g} s (also in row {first_row[key]})"
+            )
+        groups.setdefault(key, []).append(_constraint_pair(text))
+        first_row.setdefault(key, i)
+    return ControlTrack(tuple(Segment(a, b, tuple(c)) for (a, b), c in groups.items()))
+
+
+def _constraint_pair(text: str) -> tuple[str, str]:
+    """``"name=value"`` (one of :data:`CONSTRAINT_CHOICES`) -> ``(name, value)``."""
+    name, _, value = text.partition("=")
+    return name, value
+
+
+def add_segment(table: pd.DataFrame, start_s: float, end_s: float, constraint: str) -> pd.DataFrame:
+    """The table with a new constraint over a time range, replacing what it overlaps.
+
+    Rows overlapping ``[start_s, end_s)`` are cut back to the parts outside
+    it (a row covering the whole range is split in two), so the table stays
+    free of overlaps; blank rows are dropped.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Columns :data:`SEGMENT_COLUMNS`.
+    start_s, end_s : float
+        The range, seconds, ``0 <= start_s < end_s``.
+    constraint : str
+        One of :data:`CONSTRAINT_CHOICES`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        A new table sorted by start time with a fresh 0..n-1 index.
+
+    Raises
+    ------
+    ConfigError
+        An invalid range or constraint.
+    """
+    import pandas as pd  # kept local: only the table needs pandas
+
+    if constraint not in CONSTRAINT_CHOICES:
+        raise ConfigError(f"unknown constraint {constraint!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}")
+    new = Segment(float(start_s), float(end_s), (_constraint_pair(constraint),))
+    rows = []
+    for r in table.to_dict("records"):
+        if all(_is_blank(r.get(c)) for c in SEGMENT_COLUMNS):
+            continue
+        try:
+            a, b = float(r["start_s"]), float(r["end_s"])
+        except (TypeError, ValueError):
+            rows.append(r)  # an unfinished row: the user's to fix, not ours to drop
+            continue
+        if not (a < new.end_s and b > new.start_s):
+            rows.append(r)
+            continue
+        for lo, hi in ((a, min(b, new.start_s)), (max(a, new.end_s), b)):
+            if hi - lo > 1e-6:
+                rows.append({**r, "start_s": lo, "end_s": hi})
+    rows.append({"start_s": new.start_s, "end_s": new.end_s, "constraint": constraint})
+    out = pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS)).astype({"start_s": "float64", "end_s": "float64"})
+    return out.sort_values(["start_s", "end_s"], kind="stable").reset_index(drop=True)

@@ -28,9 +28,10 @@ import numpy as np
 import pandas as pd
 
 from ._io import safe_filename
-from .control import CONSTRAINTS, ControlTrack, Segment, constraint_mask, frame_attributes
 from .database import MatchingDatabase
+from .datasets.audio import wav_bytes
 from .errors import ConfigError, GestureKitError, collect_warnings, warn
+from .evaluate.metrics import control_adherence, overall_adherence
 from .export.bvh import BvhReport
 from .export.result import export_result_bvh, save_result_npz, save_result_video
 from .motion import AUDIO_SR, Motion
@@ -42,40 +43,22 @@ if TYPE_CHECKING:
     from .refine.infer import Refiner
 
 __all__ = [
-    "SEGMENT_COLUMNS",
-    "CONSTRAINT_CHOICES",
     "SPEECH_EXAMPLES",
     "EXPORT_KINDS",
-    "empty_segments",
-    "segments_frame",
-    "track_from_segments",
-    "add_segment",
     "selected_time_range",
     "example_speech",
     "read_speech_upload",
-    "wav_bytes",
     "display_motions",
     "export_filename",
     "export_bytes",
     "export_bvh_bytes",
     "render_mp4",
-    "steps_overview",
-    "candidates_table",
     "candidate_motion",
     "segment_in_context",
     "step_speech",
     "compare_k",
-    "control_adherence",
     "comparison_table",
 ]
-
-#: Columns of the control segment table, in order.
-SEGMENT_COLUMNS: tuple[str, ...] = ("start_s", "end_s", "constraint")
-
-#: Every single constraint a table row can hold, as ``"name=value"`` (see :data:`gesturekit.control.CONSTRAINTS`).
-CONSTRAINT_CHOICES: tuple[str, ...] = tuple(
-    f"{name}={value}" for name, (_, values) in CONSTRAINTS.items() for value in values
-)
 
 #: Example speech the app offers: label -> (seconds, seed) of a take of the generated demo speaker.
 #: The seeds are not among those of the demo database's takes, so the examples are unseen speech.
@@ -99,167 +82,6 @@ EXPORT_KINDS: dict[str, tuple[str, str]] = {
 # a box selection shorter than one output frame is a click, not a range
 _MIN_RANGE_S = 1.0 / 15.0
 _TIME_DECIMALS = 2  # box-selected times are rounded to 10 ms
-
-
-# ---- the control segment table ------------------------------------------------------------------
-
-
-def empty_segments() -> pd.DataFrame:
-    """A control table without rows, with the column types the editor needs."""
-    return pd.DataFrame(
-        {
-            "start_s": pd.Series([], dtype="float64"),
-            "end_s": pd.Series([], dtype="float64"),
-            "constraint": pd.Series([], dtype="object"),
-        }
-    )
-
-
-def segments_frame(track: ControlTrack) -> pd.DataFrame:
-    """A control track as a table: one row per constraint, sorted by time.
-
-    A segment with several constraints gives several rows with the same
-    times; :func:`track_from_segments` joins them again.
-
-    Returns
-    -------
-    pandas.DataFrame
-        Columns :data:`SEGMENT_COLUMNS`; ``start_s`` and ``end_s`` in seconds.
-    """
-    rows = [
-        {"start_s": float(s.start_s), "end_s": float(s.end_s), "constraint": f"{n}={v}"}
-        for s in track.segments
-        for n, v in s.constraints
-    ]
-    return (
-        pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS)).astype({"start_s": "float64", "end_s": "float64"})
-        if rows
-        else empty_segments()
-    )
-
-
-def _is_blank(value) -> bool:
-    if value is None:
-        return True
-    if isinstance(value, str):
-        return not value.strip()
-    try:
-        return bool(pd.isna(value))
-    except (TypeError, ValueError):
-        return False
-
-
-def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack:
-    """The control track a segment table describes.
-
-    Rows whose cells are all empty (a row just added in the editor) are
-    ignored. Rows with the same start and end form one segment whose
-    constraints must all hold.
-
-    Parameters
-    ----------
-    table : pandas.DataFrame or sequence of mappings
-        Columns ``start_s``, ``end_s`` (seconds) and ``constraint``
-        (``"name=value"``, one of :data:`CONSTRAINT_CHOICES`).
-
-    Returns
-    -------
-    ControlTrack
-
-    Raises
-    ------
-    ConfigError
-        A row with a missing or invalid value, end not after start, one
-        control set twice for the same time range, or segments that overlap;
-        the message names the row (counted from 1).
-    """
-    records = table.to_dict("records") if isinstance(table, pd.DataFrame) else [dict(r) for r in table]
-    groups: dict[tuple[float, float], list[tuple[str, str]]] = {}
-    first_row: dict[tuple[float, float], int] = {}
-    for i, r in enumerate(records, start=1):
-        cells = [r.get(c) for c in SEGMENT_COLUMNS]
-        if all(_is_blank(v) for v in cells):
-            continue
-        missing = [c for c, v in zip(SEGMENT_COLUMNS, cells) if _is_blank(v)]
-        if missing:
-            raise ConfigError(f"control row {i}: fill in {', '.join(missing)}")
-        try:
-            start, end = float(r["start_s"]), float(r["end_s"])
-        except (TypeError, ValueError):
-            raise ConfigError(f"control row {i}: start_s and end_s must be numbers of seconds") from None
-        text = str(r["constraint"]).strip()
-        if text not in CONSTRAINT_CHOICES:
-            raise ConfigError(
-                f"control row {i}: unknown constraint {text!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}"
-            )
-        try:
-            Segment(start, end, (_constraint_pair(text),))
-        except ConfigError as exc:
-            raise ConfigError(f"control row {i}: {exc.problem}") from None
-        key = (round(start, 6), round(end, 6))
-        name = text.split("=", 1)[0]
-        if any(n == name for n, _ in groups.get(key, [])):
-            raise ConfigError(
-                f"control row {i}: {name} is set twice for {start:g}-{end:g} s (also in row {first_row[key]})"
-            )
-        groups.setdefault(key, []).append(_constraint_pair(text))
-        first_row.setdefault(key, i)
-    return ControlTrack(tuple(Segment(a, b, tuple(c)) for (a, b), c in groups.items()))
-
-
-def _constraint_pair(text: str) -> tuple[str, str]:
-    """``"name=value"`` (one of :data:`CONSTRAINT_CHOICES`) -> ``(name, value)``."""
-    name, _, value = text.partition("=")
-    return name, value
-
-
-def add_segment(table: pd.DataFrame, start_s: float, end_s: float, constraint: str) -> pd.DataFrame:
-    """The table with a new constraint over a time range, replacing what it overlaps.
-
-    Rows overlapping ``[start_s, end_s)`` are cut back to the parts outside
-    it (a row covering the whole range is split in two), so the table stays
-    free of overlaps; blank rows are dropped.
-
-    Parameters
-    ----------
-    table : pandas.DataFrame
-        Columns :data:`SEGMENT_COLUMNS`.
-    start_s, end_s : float
-        The range, seconds, ``0 <= start_s < end_s``.
-    constraint : str
-        One of :data:`CONSTRAINT_CHOICES`.
-
-    Returns
-    -------
-    pandas.DataFrame
-        A new table sorted by start time with a fresh 0..n-1 index.
-
-    Raises
-    ------
-    ConfigError
-        An invalid range or constraint.
-    """
-    if constraint not in CONSTRAINT_CHOICES:
-        raise ConfigError(f"unknown constraint {constraint!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}")
-    new = Segment(float(start_s), float(end_s), (_constraint_pair(constraint),))
-    rows = []
-    for r in table.to_dict("records"):
-        if all(_is_blank(r.get(c)) for c in SEGMENT_COLUMNS):
-            continue
-        try:
-            a, b = float(r["start_s"]), float(r["end_s"])
-        except (TypeError, ValueError):
-            rows.append(r)  # an unfinished row: the user's to fix, not ours to drop
-            continue
-        if not (a < new.end_s and b > new.start_s):
-            rows.append(r)
-            continue
-        for lo, hi in ((a, min(b, new.start_s)), (max(a, new.end_s), b)):
-            if hi - lo > 1e-6:
-                rows.append({**r, "start_s": lo, "end_s": hi})
-    rows.append({"start_s": new.start_s, "end_s": new.end_s, "constraint": constraint})
-    out = pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS)).astype({"start_s": "float64", "end_s": "float64"})
-    return out.sort_values(["start_s", "end_s"], kind="stable").reset_index(drop=True)
 
 
 def selected_time_range(selection: Mapping | None, *, duration: float) -> tuple[float, float] | None:
@@ -360,24 +182,6 @@ def read_speech_upload(name: str, data: bytes) -> tuple[np.ndarray, AudioInfo]:
     return audio, dataclasses.replace(info, path=str(name))
 
 
-def wav_bytes(audio: np.ndarray, *, sr: int = AUDIO_SR) -> bytes:
-    """Mono audio as a 16-bit PCM WAV file's bytes, at its own level (for an audio player).
-
-    Parameters
-    ----------
-    audio : np.ndarray, shape (samples,)
-        Float samples in [-1, 1] (clipped beyond).
-    sr : int
-        Sample rate, Hz.
-    """
-    import soundfile as sf
-
-    a = np.clip(np.nan_to_num(np.asarray(audio, dtype=np.float32).ravel()), -1.0, 1.0)
-    buf = io.BytesIO()
-    sf.write(buf, a, int(sr), format="WAV", subtype="PCM_16")
-    return buf.getvalue()
-
-
 # ---- what to show ------------------------------------------------------------------------------
 
 
@@ -411,7 +215,7 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
         ``csv``: the control track (start_s, end_s, constraint); ``json``: how
         the result was made (:meth:`SynthesisResult.metadata`, with the
         synthesis config under ``"synthesis"``); ``wav``: the speech (16-bit PCM at
-        16 kHz, :func:`wav_bytes`). ``mp4`` is made by :func:`render_mp4`.
+        16 kHz, :func:`gesturekit.datasets.audio.wav_bytes`). ``mp4`` is made by :func:`render_mp4`.
     """
     if kind == "wav":
         return wav_bytes(result.audio)
@@ -423,10 +227,9 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
         return export_bvh_bytes(result)[0]
     if kind != "npz":
         raise ConfigError(f"export_bytes makes npz, bvh, csv, json or wav, not {kind!r}")
-    with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
-        path = Path(tmp) / "result.npz"
-        save_result_npz(result, path)
-        return path.read_bytes()
+    buf = io.BytesIO()
+    save_result_npz(result, buf)
+    return buf.getvalue()
 
 
 def export_bvh_bytes(result: SynthesisResult, name: str = "result.bvh") -> tuple[bytes, BvhReport]:
@@ -444,10 +247,10 @@ def export_bvh_bytes(result: SynthesisResult, name: str = "result.bvh") -> tuple
     BvhReport
         Its position error against the motion (metres), root, joints left out and derived.
     """
-    with tempfile.TemporaryDirectory(prefix="gesturekit-export-") as tmp:
-        path = Path(tmp) / name
-        report = export_result_bvh(result, path)
-        return path.read_bytes(), report
+    buf = io.BytesIO()
+    buf.name = name  # the name the report and its warning speak of
+    report = export_result_bvh(result, buf)
+    return buf.getvalue(), report
 
 
 def render_mp4(
@@ -474,83 +277,6 @@ def render_mp4(
 
 
 # ---- the search record --------------------------------------------------------------------------
-
-
-def _source(db: MatchingDatabase, clip: int, start: int) -> tuple[str, float]:
-    """Take name and time (seconds into the take) of frame ``start`` of ``clip``."""
-    take = db.take_names[int(db.clip_take[clip])]
-    return take, (int(db.clip_start[clip]) + int(start)) / db.fps
-
-
-def steps_overview(result: SynthesisResult, db: MatchingDatabase) -> pd.DataFrame:
-    """:meth:`SynthesisResult.steps_table` with each chosen window's source take and time (``source_s``)."""
-    table = result.steps_table()
-    src = [_source(db, c, s) for c, s in zip(result.search.clip, result.search.start)]
-    table.insert(5, "take", [t for t, _ in src])
-    table.insert(6, "source_s", [s for _, s in src])
-    return table
-
-
-def candidates_table(result: SynthesisResult, db: MatchingDatabase, step: int) -> pd.DataFrame:
-    """The recorded candidates of one step, best first, with their source take and time.
-
-    Parameters
-    ----------
-    result : SynthesisResult
-    db : MatchingDatabase
-        The database the result was searched in.
-    step : int
-        ``0 <= step < result.search.n_steps``.
-
-    Returns
-    -------
-    pandas.DataFrame
-        One row per recorded candidate (at most ``config.record``, at least
-        ``k + 1``): ``position`` (in the combined ranking, 0 = best),
-        ``clip``, ``start`` (frame in the clip), ``take``, ``source_s``
-        (seconds into the take), ``pose_dist`` (z-scored units),
-        ``audio_dist`` (cosine, 0..2), ``pose_rank``, ``audio_rank``,
-        ``combined`` (their sum) and ``chosen``.
-    """
-    s = result.search
-    if not 0 <= int(step) < s.n_steps:
-        raise ConfigError(f"step must be in 0..{s.n_steps - 1}, got {step}")
-    step = int(step)
-    rows = []
-    for p in np.flatnonzero(s.cand_clip[step] >= 0):
-        clip, start = int(s.cand_clip[step, p]), int(s.cand_start[step, p])
-        take, t = _source(db, clip, start)
-        rows.append(
-            {
-                "position": int(p),
-                "clip": clip,
-                "start": start,
-                "take": take,
-                "source_s": t,
-                "pose_dist": float(s.cand_pose_dist[step, p]),
-                "audio_dist": float(s.cand_audio_dist[step, p]),
-                "pose_rank": int(s.cand_pose_rank[step, p]),
-                "audio_rank": int(s.cand_audio_rank[step, p]),
-                "combined": int(s.cand_combined[step, p]),
-                "chosen": bool(p == s.position[step]),
-            }
-        )
-    return pd.DataFrame(
-        rows,
-        columns=[
-            "position",
-            "clip",
-            "start",
-            "take",
-            "source_s",
-            "pose_dist",
-            "audio_dist",
-            "pose_rank",
-            "audio_rank",
-            "combined",
-            "chosen",
-        ],
-    )
 
 
 def candidate_motion(db: MatchingDatabase, clip: int, start: int, n_frames: int) -> Motion:
@@ -653,22 +379,6 @@ def compare_k(
     return results
 
 
-def control_adherence(motion: Motion, control: ControlTrack, thresholds: Mapping[str, tuple[float, float]]) -> float:
-    """Fraction of the constrained output frames whose pose meets their constraints (NaN without controls).
-
-    The attributes are computed on the output motion itself
-    (:func:`gesturekit.control.frame_attributes`), so this measures the
-    result, not the database windows it was made from.
-    """
-    labels = control.frame_labels(motion.n_frames, fps=motion.fps)
-    constrained = [t for t, c in enumerate(labels) if c]
-    if not constrained:
-        return float("nan")
-    attrs = frame_attributes(motion.positions, fps=motion.fps)
-    ok = [bool(constraint_mask(attrs[t], labels[t], dict(thresholds))) for t in constrained]
-    return float(np.mean(ok))
-
-
 def comparison_table(results: Sequence[SynthesisResult], thresholds: Mapping[str, tuple[float, float]]) -> pd.DataFrame:
     """One row per result: k, the chosen windows' mean pose and audio distance, relaxed steps, control adherence.
 
@@ -677,21 +387,24 @@ def comparison_table(results: Sequence[SynthesisResult], thresholds: Mapping[str
     pandas.DataFrame
         Columns ``k``, ``pose_dist`` and ``audio_dist`` (means over steps of the
         chosen window's distances; pinned windows outside the table are
-        left out), ``relaxed_steps``, ``pinned_steps``, ``control_met`` (fraction
-        of constrained frames, NaN without controls).
+        left out; :meth:`SearchResult.chosen_distances`), ``relaxed_steps``, ``pinned_steps``,
+        ``control_met`` (fraction of constrained frames meeting their constraint, NaN without controls:
+        :func:`~gesturekit.evaluate.metrics.overall_adherence` of
+        :func:`~gesturekit.evaluate.metrics.control_adherence`).
     """
     rows = []
     for r in results:
-        s = r.search
-        idx = np.flatnonzero(s.position >= 0)
+        pose_dist, audio_dist = r.search.chosen_distances()
         rows.append(
             {
                 "k": r.config.k,
-                "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
-                "audio_dist": float(np.mean(s.cand_audio_dist[idx, s.position[idx]])) if idx.size else float("nan"),
+                "pose_dist": pose_dist,
+                "audio_dist": audio_dist,
                 "relaxed_steps": len(r.relaxed_steps),
-                "pinned_steps": int(np.count_nonzero(s.pinned)),
-                "control_met": control_adherence(r.motion, r.control, thresholds),
+                "pinned_steps": int(np.count_nonzero(r.search.pinned)),
+                "control_met": overall_adherence(
+                    control_adherence(r.motion.positions, r.control, thresholds=dict(thresholds), fps=r.motion.fps)
+                ),
             }
         )
     return pd.DataFrame(rows)

@@ -47,8 +47,8 @@ import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from ._io import FOLDER_KINDS, folder_kind
 from .errors import OutputError
+from .folders import FOLDER_KINDS, folder_kind
 
 __all__ = [
     "FOLDER_KINDS",

@@ -474,12 +474,12 @@ def make_stimuli(
     character, character_map = study.character, study.character_map
     from .control import parse_control
     from .evaluate.baselines import SystemUnavailable, parse_systems, refiner_unavailable_reason
-    from .export.video import _check_resolution
+    from .export.video import check_resolution
     from .refine import open_refiner
 
     t0 = time.perf_counter()
     systems = parse_systems(systems)
-    width, height = _check_resolution(resolution)
+    width, height = check_resolution(resolution)
     for needed in ("pyvista", "imageio_ffmpeg") + (("distributed",) if isinstance(scheduler, str) else ()):
         require(needed, purpose="rendering stimuli")  # before the long part (the workers import them again)
     if not math.isfinite(loudness_lufs):

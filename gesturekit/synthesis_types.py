@@ -23,6 +23,7 @@ from .errors import ConfigError, GestureKitError
 from .motion import AUDIO_SR, HoldsMotion, Motion
 from .search import SearchResult
 from .search.plan import SearchPlan
+from .search.types import window_source
 
 if TYPE_CHECKING:  # named in annotations only
     import pandas as pd
@@ -197,6 +198,20 @@ class SynthesisResult(HoldsMotion):
                 "pinned": s.pinned,
             }
         )
+
+    def steps_overview(self, db: MatchingDatabase) -> pd.DataFrame:
+        """:meth:`steps_table` with each chosen window's source take and time (``take``, ``source_s``).
+
+        Parameters
+        ----------
+        db : MatchingDatabase
+            The database the result was searched in.
+        """
+        table = self.steps_table()
+        src = [window_source(db, c, s) for c, s in zip(self.search.clip, self.search.start)]
+        table.insert(5, "take", [t for t, _ in src])
+        table.insert(6, "source_s", [s for _, s in src])
+        return table
 
     def metadata(self) -> dict:
         """The JSON saved with every export: how this result was made."""

@@ -29,7 +29,7 @@ from .paths import default_database_path, home, is_dir
 if TYPE_CHECKING:
     from distributed import Client
 
-    from ._database_build import BuildProgress
+    from .database import BuildProgress
     from .datasets.positions import PositionJointMap
     from .datasets.presets import JointMap
 
@@ -205,7 +205,7 @@ def build_database(
     The build is out of core: takes are read one at a time (``workers`` at once), staged beside
     ``out`` in ``.NAME.staging`` and written into the database take by take, so memory does not
     grow with the dataset. An interrupted build is resumed by the same call, which reuses the
-    takes staged already (:mod:`gesturekit._database_from_folder`).
+    takes staged already (:mod:`gesturekit.database.sources`).
 
     Returns
     -------
@@ -218,7 +218,7 @@ def build_database(
         A missing or empty folder, an unreadable joint map or take, an output
         that may not be written; the message names the path.
     """
-    from ._database_from_folder import build_from_sources, recorded_build, recorded_reading
+    from .database.sources import build_from_sources, recorded_build, recorded_reading
 
     folder = Path(folder).expanduser()
     out = Path(out).expanduser()

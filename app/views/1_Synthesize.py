@@ -14,8 +14,9 @@ import state
 import streamlit as st
 
 from gesturekit import interactive as gs
-from gesturekit.control import ControlTrack
+from gesturekit.control import CONSTRAINT_CHOICES, ControlTrack, add_segment, empty_segments, track_from_segments
 from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.audio import wav_bytes
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
 from gesturekit.options import widget_limits
@@ -116,7 +117,7 @@ def _editor_base(key: str) -> pd.DataFrame:
     if key not in ss or _BASE not in ss:
         # a new editor (first visit, or not drawn in the last run: another page, or the page
         # stopped in the sidebar): it starts again from the table as the user left it
-        ss[_BASE] = ss.get(SEGMENTS, gs.empty_segments())
+        ss[_BASE] = ss.get(SEGMENTS, empty_segments())
     return ss[_BASE]
 
 
@@ -134,7 +135,7 @@ def controls(speech: dict) -> ControlTrack | None:
     new_key = state.persistent_key("synth.new_constraint", "both_hands=high")
     new_constraint = ss["synth.new_constraint"] = st.selectbox(
         "Constraint for a box-selected range",
-        gs.CONSTRAINT_CHOICES,
+        CONSTRAINT_CHOICES,
         key=new_key,
         help="Drag across the waveform to select a time range: a segment with this constraint is added "
         "(replacing what it overlaps). Edit, add or delete rows in the table below.",
@@ -153,14 +154,14 @@ def controls(speech: dict) -> ControlTrack | None:
             ),
             "end_s": st.column_config.NumberColumn("end [s]", min_value=0.0, step=0.01, format="%.2f", required=True),
             "constraint": st.column_config.SelectboxColumn(
-                "constraint", options=list(gs.CONSTRAINT_CHOICES), required=True
+                "constraint", options=list(CONSTRAINT_CHOICES), required=True
             ),
         },
     )
     ss[SEGMENTS] = table
     track, problem = None, None
     try:
-        track = gs.track_from_segments(table)
+        track = track_from_segments(table)
     except ConfigError as exc:
         problem = str(exc)
     with chart_slot:
@@ -176,10 +177,10 @@ def controls(speech: dict) -> ControlTrack | None:
         ss[_LAST_BOX] = None
     elif box != ss.get(_LAST_BOX):
         ss[_LAST_BOX] = box
-        _replace_table(gs.add_segment(table, box[0], box[1], new_constraint))
+        _replace_table(add_segment(table, box[0], box[1], new_constraint))
     cols = st.columns([1, 4])
     if cols[0].button("Clear segments", key="synth.clear_segments", disabled=table.empty):
-        _replace_table(gs.empty_segments())
+        _replace_table(empty_segments())
     cols[1].caption(
         "Rows with the same start and end form one segment whose constraints must all hold. "
         "Low/high compare with the database's percentile thresholds (see the Database page)."
@@ -420,7 +421,7 @@ def main() -> None:
     st.caption(f"**{display.escape_markdown(speech['name'])}** · {display.escape_markdown(speech['summary'])}")
     for note in speech["notes"]:
         st.warning(display.escape_markdown(note), icon=":material/warning:")
-    st.audio(gs.wav_bytes(speech["audio"]), format="audio/wav")
+    st.audio(wav_bytes(speech["audio"]), format="audio/wav")
 
     st.subheader("2 · Controls")
     track = controls(speech)

@@ -13,6 +13,7 @@ import streamlit as st
 
 from gesturekit import interactive as gs
 from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.audio import wav_bytes
 from gesturekit.motion import AUDIO_SR
 from gesturekit.synthesize import SynthesisResult
 from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
@@ -71,7 +72,7 @@ def _rerun_with(db, record, config) -> None:
 def pick_step(db: MatchingDatabase, result: SynthesisResult) -> int:
     """The steps table (a selected row picks the step) and the step number input."""
     ss = st.session_state
-    table = gs.steps_overview(result, db)
+    table = result.steps_overview(db)
     with st.expander(f"All {len(table)} steps", expanded=False):
         selected = display.selected_row(table, key="inspect.steps_table", height=240, column_config=STEPS_COLUMNS)
     key = state.picked_key(STEP, selected, last=_LAST_ROW, n=len(table))  # a new result may have fewer steps
@@ -87,7 +88,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
     result = record["result"]
     s, N, fps = result.search, result.config.segment, result.motion.fps
     a, b = step * N, min((step + 1) * N, result.n_frames)
-    overview = gs.steps_overview(result, db).iloc[step]
+    overview = result.steps_overview(db).iloc[step]
     flags = (" · **pinned**" if s.pinned[step] else "") + (" · control relaxed" if s.relaxed[step] else "")
     st.markdown(
         f"**Step {step}** · output frames {a}–{b - 1} ({a / fps:.2f}–{b / fps:.2f} s) · "
@@ -95,7 +96,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
         f"(take **{display.escape_markdown(overview['take'])}** at {overview['source_s']:.2f} s){flags} · "
         f"{int(s.n_candidates[step])} clips survived"
     )
-    table = gs.candidates_table(result, db, step)
+    table = result.search.candidates_table(step, db)
     st.dataframe(table, hide_index=True, key="inspect.candidates", column_config=CANDIDATE_COLUMNS)
 
     views, plot = st.columns([3, 2])
@@ -153,7 +154,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
     with c[1]:
         st.caption(f"candidate #{pick}'s own speech in the database")
         if db.audio is not None:
-            st.audio(gs.wav_bytes(db.segment_audio(r.clip, r.start, b - a)), format="audio/wav")
+            st.audio(wav_bytes(db.segment_audio(r.clip, r.start, b - a)), format="audio/wav")
             context(db, r, b - a)
         else:
             st.caption("(this database was built without audio)")
@@ -178,7 +179,7 @@ def context(db: MatchingDatabase, r: Any, n_frames: int) -> None:
         f"…with up to {CONTEXT_S:g} s around it: the window is {a:.2f}–{b:.2f} s of this "
         f"{len(audio) / AUDIO_SR:.2f} s excerpt ({display.escape_markdown(r.take)} at {t0 + a:.2f}–{t0 + b:.2f} s)"
     )
-    st.audio(gs.wav_bytes(audio), format="audio/wav")
+    st.audio(wav_bytes(audio), format="audio/wav")
     fig = waveform_figure(audio, AUDIO_SR, bands=[(a, b, "window")], height=150)
     fig.update_layout(showlegend=False, margin=dict(l=10, r=10, t=25, b=10), yaxis_title=None)
     st.plotly_chart(fig, key="inspect.context", config={"displaylogo": False})

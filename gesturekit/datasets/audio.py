@@ -30,24 +30,38 @@ from __future__ import annotations
 import io
 import os
 import re
+import struct
 import subprocess
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, TypedDict
+from typing import TYPE_CHECKING, Literal, TypedDict
 
 import numpy as np
+import numpy.typing as npt
 
 from .. import limits
+from .._io import Target, write_to
 from .._optional import optional
 from ..errors import AudioFileError, ConfigError, InputFileError, warn
 from ..motion import AUDIO_SR
+from ..outputs import MP4_TAG
 from .audio_headers import Budget, check_file
 
 if TYPE_CHECKING:
     from typing_extensions import Unpack  # typing.Unpack is Python 3.11+; only the type checker reads it
 
-__all__ = ["AudioInfo", "LoadOptions", "load_audio", "load_audio_with_info", "resample", "SILENCE_PEAK"]
+__all__ = [
+    "AudioInfo",
+    "LoadOptions",
+    "load_audio",
+    "load_audio_with_info",
+    "resample",
+    "SILENCE_PEAK",
+    "WAV_ENCODINGS",
+    "wav_bytes",
+    "write_wav",
+]
 
 #: Peak amplitude (full scale = 1) at or below which audio counts as silent: -80 dBFS.
 SILENCE_PEAK = 1e-4
@@ -94,6 +108,90 @@ class AudioInfo:
         kind = self.format if self.subtype is None else f"{self.format} ({self.subtype})"
         ch = "1 channel" if self.channels == 1 else f"{self.channels} channels"
         return f"{kind}, {self.sample_rate} Hz, {ch}, {self.duration:.2f} s"
+
+
+# ---- writing ------------------------------------------------------------------------------------
+
+#: Sample encodings :func:`wav_bytes` writes: 16-bit integer PCM (``round(32767 x)``) or 32-bit float.
+WAV_ENCODINGS = ("pcm16", "float32")
+
+
+def wav_bytes(
+    samples: npt.ArrayLike, *, sr: int = AUDIO_SR, encoding: Literal["pcm16", "float32"] = "pcm16", mark: bool = False
+) -> bytes:
+    """Mono audio as a WAV file's bytes (the one WAV encoder of the package).
+
+    Parameters
+    ----------
+    samples : array_like, shape (samples,)
+        Float samples in [-1, 1]; beyond that range clipped, NaN written as 0.
+    sr : int
+        Sample rate, Hz (positive).
+    encoding : {"pcm16", "float32"}
+        ``"pcm16"``: 16-bit integer PCM, ``x`` stored as ``round(32767 x)`` (what players and
+        downloads get); ``"float32"``: IEEE float, nothing requantised (what an encoder is fed).
+    mark : bool
+        Add a RIFF ``LIST/INFO`` ``ISFT`` entry naming gesturekit (:data:`gesturekit.outputs.MP4_TAG`),
+        by which :func:`gesturekit.outputs.check_output` knows the file may be replaced.
+
+    Returns
+    -------
+    bytes
+        The whole file: ``RIFF``/``WAVE`` with ``fmt `` (and ``fact`` for float), the optional
+        ``LIST`` and ``data`` chunks.
+
+    Raises
+    ------
+    ConfigError
+        An unknown encoding or a sample rate that is not a positive integer.
+    """
+    if encoding not in WAV_ENCODINGS:
+        raise ConfigError(f"encoding must be one of {', '.join(WAV_ENCODINGS)}, got {encoding!r}")
+    if isinstance(sr, bool) or not isinstance(sr, (int, np.integer)) or sr <= 0:
+        raise ConfigError(f"the sample rate must be a positive integer, got {sr!r}")
+    rate = int(sr)
+    x = np.clip(np.nan_to_num(np.asarray(samples, dtype=np.float64).ravel()), -1.0, 1.0)
+    if encoding == "pcm16":
+        data = np.round(x * 32767.0).astype("<i2").tobytes()
+        fmt = b"fmt " + struct.pack("<IHHIIHH", 16, 1, 1, rate, 2 * rate, 2, 16)
+    else:
+        data = x.astype("<f4").tobytes()
+        # a non-PCM format carries cbSize and a fact chunk (the sample count)
+        fmt = b"fmt " + struct.pack("<IHHIIHHH", 18, 3, 1, rate, 4 * rate, 4, 32, 0)
+        fmt += b"fact" + struct.pack("<II", 4, x.size)
+    chunks = [fmt]
+    if mark:
+        tag = MP4_TAG.encode("ascii")
+        tag += b"\0" * (2 - len(tag) % 2)  # a zero-terminated string, of even length
+        info = b"INFO" + b"ISFT" + struct.pack("<I", len(tag)) + tag
+        chunks.append(b"LIST" + struct.pack("<I", len(info)) + info)
+    chunks.append(b"data" + struct.pack("<I", len(data)) + data + b"\0" * (len(data) % 2))
+    body = b"WAVE" + b"".join(chunks)
+    return b"RIFF" + struct.pack("<I", len(body)) + body
+
+
+def write_wav(
+    target: Target,
+    samples: npt.ArrayLike,
+    *,
+    sr: int = AUDIO_SR,
+    encoding: Literal["pcm16", "float32"] = "pcm16",
+    mark: bool = False,
+    overwrite: bool = False,
+) -> None:
+    """Write :func:`wav_bytes` to a path (atomically) or into a binary file object.
+
+    Parameters
+    ----------
+    target : str, os.PathLike or binary file object
+        See :func:`gesturekit._io.write_to`.
+    samples, sr, encoding, mark
+        As for :func:`wav_bytes`.
+    overwrite : bool
+        For a path: replace an existing file.
+    """
+    data = wav_bytes(samples, sr=sr, encoding=encoding, mark=mark)
+    write_to(target, lambda f: f.write(data), overwrite=overwrite)
 
 
 class _Unreadable(Exception):

@@ -29,7 +29,6 @@ import io
 import json
 import os
 import sys
-import wave
 from collections.abc import Sequence
 from pathlib import Path
 from typing import BinaryIO
@@ -40,6 +39,7 @@ from .._io import atomic_write
 from ..errors import ConfigError, GestureKitError
 from ..motion import AUDIO_SR
 from ..skeleton import FINGERS, FPS, HAND_JOINT_SUFFIXES, N_JOINTS, PARENTS, joint_index
+from .audio import wav_bytes
 from .synthetic import generate_demo_take
 
 __all__ = ["KEYPOINT_NAMES", "FORMATS", "keypoint_joint_map", "keypoint_positions", "write_keypoint_example", "main"]
@@ -149,16 +149,6 @@ def _rotate(v: np.ndarray, rng: np.random.Generator, sigma: float) -> np.ndarray
     return v * cos + np.cross(axis, v) * sin + axis * dot * (1.0 - cos)
 
 
-def _wav_bytes(audio: np.ndarray) -> bytes:
-    buf = io.BytesIO()
-    with wave.open(buf, "wb") as w:
-        w.setnchannels(1)
-        w.setsampwidth(2)
-        w.setframerate(AUDIO_SR)
-        w.writeframes(np.clip(np.round(audio * 32767), -32768, 32767).astype("<i2").tobytes())
-    return buf.getvalue()
-
-
 def _array_bytes(array: np.ndarray, fmt: str) -> bytes:
     buf = io.BytesIO()
     flat = array.reshape(array.shape[0], -1)
@@ -233,7 +223,7 @@ def write_keypoint_example(
         array = keypoint_positions(
             take.motion.positions, seed=int(seeds[k]) + 1, noise=float(noise), scale=sizes[k], fan_jitter=fan_jitter
         )
-        data, sound = _array_bytes(array, fmt), _wav_bytes(take.audio)
+        data, sound = _array_bytes(array, fmt), wav_bytes(take.audio, sr=AUDIO_SR)
         written.append(_write(folder / f"{name}.{fmt}", data))
         written.append(_write(folder / f"{name}.wav", sound))
     return written

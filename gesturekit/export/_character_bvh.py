@@ -21,16 +21,15 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
 
 import numpy as np
 
-from .._io import atomic_write
 from ..character.retarget import Retargeted
 from ..character.solve import ROTATION_ORDERS, continuous_angles, euler_from_matrices
 from ..character.target import Character
-from ..errors import ConfigError, GestureKitError, OutputError, warn
+from ..errors import ConfigError, GestureKitError, OutputError
 from ..outputs import check_output
+from ._files import write_export
 from .bvh import UNITS, WARN_ABOVE
 
 __all__ = [
@@ -195,17 +194,13 @@ def export_character_bvh(
         left_out=tuple(ch.names[b] for b in range(ch.n_bones) if b not in set(written)),
         size=len(data),
     )
-
-    def write(f: BinaryIO) -> None:
-        f.write(data)
-
-    atomic_write(path, write, overwrite=overwrite)
+    warning = None
     if report.max_error > WARN_ABOVE:
-        warn(
-            f"{path}: the character's BVH is up to {report.max_error * 1000:.1f} mm off the retargeted motion "
-            f"({report.worst_bone}, frame {report.worst_frame})",
-            stacklevel=2,
+        warning = (
+            f"the character's BVH is up to {report.max_error * 1000:.1f} mm off the retargeted motion "
+            f"({report.worst_bone}, frame {report.worst_frame})"
         )
+    write_export(path, data, overwrite=overwrite, warning=warning, stacklevel=2)
     return report
 
 

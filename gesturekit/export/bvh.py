@@ -50,11 +50,11 @@ import io
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, BinaryIO
+from typing import Protocol
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import Target, target_path, write_to
 from ..bones import fit_bone_lengths
 from ..character.solve import (
     LEFT_OUT,
@@ -71,9 +71,6 @@ from ..character.solve import (
 from ..errors import ConfigError, warn
 from ..motion import Motion
 from ..skeleton import DERIVED, FINGERS, JOINT_NAMES, N_JOINTS, PARENTS
-
-if TYPE_CHECKING:
-    from .gltf import GltfReport
 
 __all__ = [
     "ROTATION_ORDERS",
@@ -172,7 +169,30 @@ class BvhReport:
         return "; ".join(parts)
 
 
-def error_warning(headline: str, report: BvhReport | GltfReport, *, shapes: str = "") -> str:
+class MeasuredFile(Protocol):
+    """A written file's report of its accuracy (:class:`BvhReport`, :class:`~gesturekit.export.gltf.GltfReport`)."""
+
+    @property
+    def path(self) -> Path: ...
+    @property
+    def root(self) -> str: ...
+    @property
+    def derived(self) -> tuple[str, ...]: ...
+    @property
+    def left_out(self) -> tuple[str, ...]: ...
+    @property
+    def max_error(self) -> float: ...
+    @property
+    def mean_error(self) -> float: ...
+    @property
+    def worst_joint(self) -> str: ...
+    @property
+    def worst_frame(self) -> int: ...
+    @property
+    def remedy(self) -> str | None: ...
+
+
+def error_warning(headline: str, report: MeasuredFile, *, shapes: str = "") -> str:
     """The warning of a file that misses its motion: ``headline``, the worst joint and frame, why, and the remedy.
 
     Parameters
@@ -195,7 +215,7 @@ def error_warning(headline: str, report: BvhReport | GltfReport, *, shapes: str 
     )
 
 
-def summary_parts(report: BvhReport | GltfReport) -> tuple[str, str, list[str]]:
+def summary_parts(report: MeasuredFile) -> tuple[str, str, list[str]]:
     """What a BVH's and a glTF file's one-line summaries share.
 
     Returns
@@ -226,7 +246,7 @@ def _names(names: tuple[str, ...] | list[str], most: int = 12) -> str:
 
 
 def write_bvh(
-    path: str | os.PathLike[str],
+    path: Target,
     motion: Motion,
     *,
     overwrite: bool = False,
@@ -234,25 +254,26 @@ def write_bvh(
     units: str = "cm",
     rotation_order: str = "ZXY",
     decimals: int = 6,
-) -> Path:
-    """Write a motion as a BVH file, atomically; :func:`export_bvh` without its report.
+) -> Path | None:
+    """Write a motion as a BVH file, atomically (or into a binary file object); :func:`export_bvh` without
+    its report.
 
     The parameters, the warning over :data:`WARN_ABOVE` and the errors raised are those of
     :func:`export_bvh`.
 
     Returns
     -------
-    pathlib.Path
-        ``path``, the BVH file written.
+    pathlib.Path or None
+        ``path``, the BVH file written; None for a file object.
     """
     report = export_bvh(
         path, motion, overwrite=overwrite, rest=rest, units=units, rotation_order=rotation_order, decimals=decimals
     )
-    return report.path
+    return report.path if isinstance(path, (str, os.PathLike)) else None
 
 
 def export_bvh(
-    path: str | os.PathLike[str],
+    path: Target,
     motion: Motion,
     *,
     overwrite: bool = False,
@@ -269,8 +290,10 @@ def export_bvh(
 
     Parameters
     ----------
-    path : str or os.PathLike
-        The file to create (written exactly there; no suffix is added).
+    path : str, os.PathLike or binary file object
+        The file to create (written exactly there, atomically; no suffix is added), or where to write
+        it (``io.BytesIO``, an open file: the same bytes at its position; the report names its
+        ``name``, else ``motion.bvh``).
     motion : Motion
         Positions (frames, 55, 3) in metres, pelvis-relative, and fps. At least
         one frame; every value finite. Only its drawn joints are written (see
@@ -307,6 +330,7 @@ def export_bvh(
         Invalid motion, rest pose or option, drawn joints that do not form one
         tree, or ``path`` exists and ``overwrite`` is False.
     """
+    target, path = path, target_path(path, "motion.bvh")
     if not isinstance(motion, Motion):
         raise ConfigError(f"motion must be a gesturekit Motion, got {type(motion).__name__}", path=path)
     if units not in UNITS:
@@ -325,7 +349,7 @@ def export_bvh(
         raise ConfigError(f"positions are not finite (NaN or infinite) from frame {int(np.argmax(bad))} on", path=path)
     presence = motion.presence
     parents = bvh_parents(presence, path=path)
-    if overwrite:
+    if overwrite and isinstance(target, (str, os.PathLike)):
         from ..outputs import check_output
 
         check_output(path, "file", overwrite=True)  # only a BVH of gesturekit's skeleton is replaced
@@ -346,14 +370,11 @@ def export_bvh(
         decimals=int(decimals),
         parents=parents,
     )
-    report = _measure(text, positions, path=Path(path), parents=parents, lengths=lengths, scale=scale)
+    report = _measure(text, positions, path=path, parents=parents, lengths=lengths, scale=scale)
     report = replace(report, derived=presence.names(DERIVED), precision=0.5 * 10.0**-decimals / scale, remedy=remedy)
     data = text.encode("ascii")
 
-    def write(f: BinaryIO) -> None:
-        f.write(data)
-
-    atomic_write(path, write, overwrite=overwrite)
+    write_to(target, lambda f: f.write(data), overwrite=overwrite)
     message = report.warning()
     if message is not None:
         warn(f"{report.path}: {message}", stacklevel=2)

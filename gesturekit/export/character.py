@@ -35,19 +35,26 @@ import copy
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
 
-from .._io import atomic_write
 from ..character.glb import FLOAT, GlbBuffer, accessor_array, glb_bytes, node_matrices, read_glb
 from ..character.retarget import Retargeted
 from ..character.rig import rotation_to_quaternion
-from ..errors import ConfigError, warn
+from ..errors import ConfigError
 from ..motion import AUDIO_SR
 from ..outputs import check_not_input
-from ._character_bvh import CharacterBvhReport, export_character_bvh, rotation_of, worst
-from .gltf import GENERATOR, WARN_ABOVE, _continuous, speech_targets, wav_bytes
+from ._character_bvh import (
+    CharacterBvhReport,
+    character_bvh_joints,
+    check_character_bvh,
+    export_character_bvh,
+    rotation_of,
+    worst,
+)
+from ._files import write_export
+from .gltf import GENERATOR, WARN_ABOVE, continuous_quaternions, speech_targets
 
 __all__ = [
     "ANIMATION",
@@ -56,6 +63,8 @@ __all__ = [
     "CharacterBvhReport",
     "export_character_glb",
     "export_character_bvh",
+    "character_bvh_joints",
+    "check_character_bvh",
 ]
 
 #: The name of the animation :func:`export_character_glb` adds.
@@ -186,20 +195,15 @@ def export_character_glb(
         worst_frame=frame,
         size=len(data),
     )
-    if wav_path is not None and samples is not None:
-        wav = wav_bytes(samples, int(sr))
-        atomic_write(wav_path, lambda f: f.write(wav), overwrite=overwrite)
-
-    def write(f: BinaryIO) -> None:
-        f.write(data)
-
-    atomic_write(path, write, overwrite=overwrite)
+    warning = None
     if report.max_error > WARN_ABOVE:
-        warn(
-            f"{path}: the character's GLB is up to {report.max_error * 1000:.1f} mm off the retargeted motion "
-            f"({report.worst_bone}, frame {report.worst_frame})",
-            stacklevel=2,
+        warning = (
+            f"the character's GLB is up to {report.max_error * 1000:.1f} mm off the retargeted motion "
+            f"({report.worst_bone}, frame {report.worst_frame})"
         )
+    write_export(
+        path, data, overwrite=overwrite, wav_path=wav_path, samples=samples, sr=sr, warning=warning, stacklevel=2
+    )
     return report
 
 
@@ -268,7 +272,7 @@ def _document(r: Retargeted, extras: dict[str, Any]) -> tuple[dict[str, Any], by
         if np.abs(local - at_rest).max() <= _STILL:
             continue
         _trs(nodes[n], ch.names[b], ch.path)
-        quats = _continuous(rotation_to_quaternion(local))
+        quats = continuous_quaternions(rotation_to_quaternion(local))
         tracks[(n, "rotation")] = quats
         animated.append(b)
         samplers.append({"input": times, "output": buf.add(quats, "VEC4", FLOAT), "interpolation": "LINEAR"})

@@ -45,14 +45,13 @@ under a micrometre (0.09 um on 82 s of the demo database). Over
 from __future__ import annotations
 
 import os
-import struct
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import Target, target_path
 from .._version import __version__
 from ..character.glb import ARRAY_BUFFER as _ARRAY_BUFFER
 from ..character.glb import ELEMENT_ARRAY_BUFFER as _ELEMENT_ARRAY_BUFFER
@@ -65,10 +64,11 @@ from ..character.look import part_colors
 from ..character.mesh import PARTS, build_mesh
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
 from ..character.solve import bvh_parents
-from ..errors import ConfigError, OutputError, warn
+from ..errors import ConfigError, OutputError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG, check_output
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS, PARENTS
+from ._files import write_export
 from .bvh import error_warning, summary_parts
 
 __all__ = [
@@ -80,8 +80,8 @@ __all__ = [
     "export_gltf",
     "audio_path_for",
     "speech_targets",
+    "continuous_quaternions",
     "glb_bytes",
-    "wav_bytes",
     "read_glb",
     "accessor_array",
     "node_matrices",
@@ -241,7 +241,7 @@ def speech_targets(
 
 
 def export_gltf(
-    path: str | os.PathLike[str],
+    path: Target,
     motion: Motion,
     *,
     audio: np.ndarray | None = None,
@@ -259,8 +259,10 @@ def export_gltf(
 
     Parameters
     ----------
-    path : str or os.PathLike
-        The file to create (written exactly there; ``.glb`` is the usual suffix).
+    path : str, os.PathLike or binary file object
+        The file to create (written exactly there, atomically; ``.glb`` is the usual suffix), or a
+        binary file object to write it into (then without ``audio``, which has no place beside it:
+        write that with :func:`gesturekit.datasets.audio.write_wav`).
     motion : Motion
         Positions (frames, 55, 3) in metres and fps. At least one frame; every
         value finite. Only its drawn joints are written.
@@ -291,7 +293,7 @@ def export_gltf(
         form one tree, or a file to write exists and ``overwrite`` is False
         (:class:`~gesturekit.errors.OutputError`).
     """
-    path = Path(path)
+    target, path = path, target_path(path, "motion.glb")
     if not isinstance(motion, Motion):
         raise ConfigError(f"motion must be a gesturekit Motion, got {type(motion).__name__}", path=path)
     try:
@@ -305,7 +307,12 @@ def export_gltf(
     if bad.any():
         raise ConfigError(f"positions are not finite (NaN or infinite) from frame {int(np.argmax(bad))} on", path=path)
     bvh_parents(motion.presence, path=path)  # a skeleton no tree can hold, named with the file
-    wav_path, samples = speech_targets(path, audio, sr, overwrite=overwrite)
+    if isinstance(target, (str, os.PathLike)):
+        wav_path, samples = speech_targets(path, audio, sr, overwrite=overwrite)
+    elif audio is not None:
+        raise ConfigError("a glTF written into a file object has no folder for its speech's WAV; pass no audio")
+    else:
+        wav_path, samples = None, None
 
     try:
         rig = rig_for(motion, rest=rest)
@@ -337,17 +344,16 @@ def export_gltf(
         size=len(data),
         remedy=remedy,
     )
-    if wav_path is not None and samples is not None:
-        wav = wav_bytes(samples, int(sr))
-        atomic_write(wav_path, lambda f: f.write(wav), overwrite=overwrite)
-
-    def write(f: BinaryIO) -> None:
-        f.write(data)
-
-    atomic_write(path, write, overwrite=overwrite)
-    message = report.warning()
-    if message is not None:
-        warn(f"{report.path}: {message}", stacklevel=2)
+    write_export(
+        target,
+        data,
+        overwrite=overwrite,
+        wav_path=wav_path,
+        samples=samples,
+        sr=sr,
+        warning=report.warning(),
+        stacklevel=2,
+    )
     return report
 
 
@@ -360,7 +366,7 @@ def _linear(srgb: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def _continuous(q: np.ndarray) -> np.ndarray:
+def continuous_quaternions(q: np.ndarray) -> np.ndarray:
     """Quaternions (frames, ..., 4) with each one's sign chosen to be nearest the previous frame's."""
     q = q.copy()
     for t in range(1, len(q)):
@@ -437,7 +443,7 @@ def _document(
 
     n = pose.n_frames
     times = buf.add(np.arange(n) / float(motion.fps), "SCALAR", _FLOAT, bounds=True)
-    quats = _continuous(rotation_to_quaternion(pose.local[:, written]))
+    quats = continuous_quaternions(rotation_to_quaternion(pose.local[:, written]))
     samplers = [{"input": times, "output": buf.add(pose.root, "VEC3", _FLOAT), "interpolation": "LINEAR"}]
     channels = [{"sampler": 0, "target": {"node": root, "path": "translation"}}]
     for k in range(len(written)):
@@ -458,28 +464,6 @@ def _document(
         "buffers": [{"byteLength": len(buf.data) + (-len(buf.data) % 4)}],
     }
     return doc, bytes(buf.data), mesh.n_vertices, int(len(mesh.faces))
-
-
-def wav_bytes(samples: np.ndarray, sr: int) -> bytes:
-    """Mono speech as a 16-bit PCM WAV file's bytes, marked as gesturekit's (:data:`WAV_TAG`).
-
-    Parameters
-    ----------
-    samples : np.ndarray, shape (n,)
-        Float samples in [-1, 1] (clipped beyond), written as ``round(32767 * x)``.
-    sr : int
-        Sample rate, Hz.
-    """
-    pcm = np.round(np.clip(np.asarray(samples, dtype=np.float64), -1.0, 1.0) * 32767).astype("<i2").tobytes()
-    tag = WAV_TAG + b"\0" * (2 - len(WAV_TAG) % 2)  # a zero-terminated string, of even length
-    info = b"INFO" + b"ISFT" + struct.pack("<I", len(tag)) + tag
-    chunks = [
-        b"fmt " + struct.pack("<IHHIIHH", 16, 1, 1, int(sr), 2 * int(sr), 2, 16),
-        b"LIST" + struct.pack("<I", len(info)) + info,
-        b"data" + struct.pack("<I", len(pcm)) + pcm + b"\0" * (len(pcm) % 2),
-    ]
-    body = b"WAVE" + b"".join(chunks)
-    return b"RIFF" + struct.pack("<I", len(body)) + body
 
 
 # ----------------------------------------------------------------------------- reading back

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import ConfigError, GestureKitError
 from ..motion import AUDIO_SR
-from .video import _ffmpeg
+from .video import ffmpeg_executable
 
 __all__ = ["measure_loudness", "normalise_loudness"]
 
@@ -34,7 +34,7 @@ def measure_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR) -> float:
         raise ConfigError(f"audio must be mono samples, shape (samples,), got {a.shape}")
     run = subprocess.run(
         [
-            _ffmpeg(),
+            ffmpeg_executable(),
             "-hide_banner",
             "-nostdin",
             "-f",

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import Target, target_path, write_to
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion
 from ..skeleton import JOINT_NAMES, JOINT_STATES, N_JOINTS, PARENTS, JointPresence
@@ -55,23 +55,23 @@ _KEY_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
 def save_npz(
-    path: str | os.PathLike,
+    path: Target,
     *,
     motion: Motion,
     arrays: Mapping[str, np.ndarray] | None = None,
     config: Mapping[str, Any] | None = None,
     overwrite: bool = False,
     compress: bool = True,
-) -> Path:
+) -> Path | None:
     """Save a motion, extra arrays and its settings to an ``.npz`` archive.
 
-    The file is written atomically to exactly ``path`` (no suffix is added)
-    and readable by ``np.load(path, allow_pickle=False)``.
+    A path is written atomically to exactly ``path`` (no suffix is added); a binary file
+    object gets the same bytes at its position. Either reads with ``np.load(..., allow_pickle=False)``.
 
     Parameters
     ----------
-    path : str or os.PathLike
-        The archive to create.
+    path : str, os.PathLike or binary file object
+        The archive to create, or where to write it (``io.BytesIO``, an open file).
     motion : Motion
         Positions (frames, 55, 3) in metres (exactly as they are), the frame rate and
         which joints are real (:attr:`Motion.presence`, stored as ``joint_status``).
@@ -90,8 +90,8 @@ def save_npz(
 
     Returns
     -------
-    pathlib.Path
-        ``path``, the archive written.
+    pathlib.Path or None
+        ``path``, the archive written; None for a file object.
 
     Raises
     ------
@@ -100,28 +100,30 @@ def save_npz(
         config is not JSON-serialisable, or ``path`` exists and ``overwrite``
         is False.
     """
+    where = target_path(path, "motion.npz")
     if not isinstance(motion, Motion):
-        raise ConfigError(f"motion must be a gesturekit Motion, got {type(motion).__name__}", path=path)
+        raise ConfigError(f"motion must be a gesturekit Motion, got {type(motion).__name__}", path=where)
     entries: list[tuple[str, np.ndarray]] = [
         ("positions", np.ascontiguousarray(motion.positions, dtype=np.float32)),
         ("fps", np.array(float(motion.fps), dtype=np.float64)),
         ("joint_names", np.array(JOINT_NAMES, dtype=np.str_)),
         ("parents", np.asarray(PARENTS, dtype=np.int64)),
         ("joint_status", np.array(motion.presence.status, dtype=np.str_)),
-        ("config", np.array(_config_json(config, path), dtype=np.str_)),
+        ("config", np.array(_config_json(config, where), dtype=np.str_)),
         ("format_version", np.array(FORMAT_VERSION, dtype=np.int64)),
     ]
     extra = arrays or {}
     for name in sorted(extra):
-        entries.append((name, _checked_extra(name, extra[name], path)))
+        entries.append((name, _checked_extra(name, extra[name], where)))
     for name, arr in entries:
         if (name == "positions" or name.endswith("_positions")) and np.issubdtype(arr.dtype, np.floating):
             bad = np.atleast_1d(~np.isfinite(arr).all(axis=tuple(range(1, arr.ndim))))
             if bad.any():
                 raise ConfigError(
-                    f"not written: {name} holds NaN or infinite values (from frame {int(np.argmax(bad))} on)", path=path
+                    f"not written: {name} holds NaN or infinite values (from frame {int(np.argmax(bad))} on)",
+                    path=where,
                 )
-    if overwrite:
+    if overwrite and isinstance(path, (str, os.PathLike)):
         from ..outputs import check_output
 
         check_output(path, "file", overwrite=True)  # only an npz gesturekit wrote is replaced
@@ -137,7 +139,7 @@ def save_npz(
                 info.external_attr = 0o644 << 16
                 zf.writestr(info, buf.getvalue())
 
-    return atomic_write(path, write, overwrite=overwrite)
+    return write_to(path, write, overwrite=overwrite)
 
 
 def _config_json(config: Mapping[str, Any] | None, path) -> str:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io import Target, target_path
 from ..character.retarget import Retargeted, retarget
 from ..character.target import Character
 from ..errors import ConfigError
@@ -37,17 +38,19 @@ __all__ = [
 ]
 
 
-def save_result_npz(result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+def save_result_npz(result: SynthesisResult, path: Target, *, overwrite: bool = False) -> Path | None:
     """An npz archive of a synthesis (read it back with :func:`gesturekit.export.npz.load_npz`).
 
     It holds ``positions`` (the final motion, (T, 55, 3) metres), ``fps``,
     ``knn_positions`` (the k-NN motion), ``refined_positions`` (with a refiner),
     the search record as ``search_*`` arrays and :meth:`SynthesisResult.metadata` as its config.
 
+    ``path`` is a path (written atomically) or a binary file object (:func:`~gesturekit.export.npz.save_npz`).
+
     Returns
     -------
-    Path
-        ``path``, complete.
+    Path or None
+        ``path``, complete; None for a file object.
 
     Examples
     --------
@@ -72,7 +75,7 @@ def save_result_npz(result: SynthesisResult, path: str | os.PathLike[str], *, ov
     >>> path == save_result_npz(res, path, overwrite=True)
     True
     """
-    result.check_finite(path)
+    result.check_finite(target_path(path, "result.npz"))
     arrays = {"knn_positions": result.knn_motion.positions}
     if result.refined_motion is not None:
         arrays["refined_positions"] = result.refined_motion.positions
@@ -94,7 +97,7 @@ def save_result_bvh(
 
 
 def export_result_bvh(
-    result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False, units: str = "cm"
+    result: SynthesisResult, path: Target, *, overwrite: bool = False, units: str = "cm"
 ) -> BvhReport:
     """A BVH file of the final motion, and how well it reproduces the motion's positions.
 
@@ -126,7 +129,7 @@ def export_result_bvh(
     >>> report.root, report.max_error < 1e-4  # metres: the file holds the motion
     ('spine_mid', True)
     """
-    result.check_finite(path)
+    result.check_finite(target_path(path, "result.bvh"))
     return export_bvh(path, result.motion, overwrite=overwrite, units=units, remedy=_bvh_remedy(result))
 
 

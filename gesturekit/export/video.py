@@ -30,6 +30,7 @@ import numpy as np
 
 from .._io import atomic_write
 from .._optional import require
+from ..datasets.audio import write_wav
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG
@@ -38,7 +39,7 @@ if TYPE_CHECKING:
     from ..character.target import Character
     from ..viz.render import RenderStyle
 
-__all__ = ["render_video", "probe_media", "AUDIO_OUT_SR"]
+__all__ = ["render_video", "probe_media", "AUDIO_OUT_SR", "ffmpeg_executable", "check_resolution", "encode_command"]
 
 #: Sample rate of the soundtrack in written videos, Hz: the usual rate of video audio,
 #: and short AAC frames, so the audio stream ends within a millisecond of the speech.
@@ -49,7 +50,8 @@ _CRF = 18
 _AUDIO_BITRATE = "96k"
 
 
-def _ffmpeg() -> str:
+def ffmpeg_executable() -> str:
+    """The path of the ffmpeg binary shipped with ``imageio-ffmpeg`` (an optional extra; a clear error without it)."""
     # imported here: the binary is looked up (and checked) only when a video is made or read
     return require("imageio_ffmpeg", purpose="writing or reading a video").get_ffmpeg_exe()
 
@@ -148,7 +150,7 @@ def render_video(
                 f"not written: the motion holds NaN or infinite positions (from frame {int(np.argmax(bad))} on)",
                 path=path,
             )
-    width, height = _check_resolution(resolution)
+    width, height = check_resolution(resolution)
     if audio is not None:
         audio = _check_audio(audio, sr)
     motions = [motion] if side_by_side is None else [motion, side_by_side]
@@ -170,8 +172,9 @@ def render_video(
             # the whole frames nearest to the audio's duration; at least one
             n_frames = max(1, int(math.floor(seconds * fps + 0.5)))
             wav = Path(tmp) / "audio.wav"
-            _write_wav(wav, audio, sr)
-        cmd = _encode_command(encoded, width, height, fps, wav, seconds)
+            # float samples: nothing is requantised before the AAC encoder
+            write_wav(wav, audio, sr=int(sr), encoding="float32", overwrite=True)
+        cmd = encode_command(encoded, width, height, fps, wav, seconds)
         _encode(cmd, frames, rendered, n_frames, progress, Path(tmp) / "ffmpeg.log", path)
 
         def copy(f: IO[bytes]) -> None:
@@ -181,7 +184,8 @@ def render_video(
         return atomic_write(path, copy, overwrite=overwrite)
 
 
-def _check_resolution(resolution: Any) -> tuple[int, int]:
+def check_resolution(resolution: Any) -> tuple[int, int]:
+    """``(width, height)`` of a video in whole, even pixels, or a ConfigError saying what is wrong."""
     try:
         width, height = (int(v) for v in resolution)
         whole = len(resolution) == 2 and width == resolution[0] and height == resolution[1]
@@ -209,19 +213,13 @@ def _check_audio(audio: Any, sr: Any) -> np.ndarray:
     return audio.astype(np.float32, copy=False)
 
 
-def _write_wav(path: Path, audio: np.ndarray, sr: int) -> None:
-    import soundfile
-
-    # float samples: nothing is clipped or requantised before the AAC encoder
-    soundfile.write(path, audio, int(sr), subtype="FLOAT")
-
-
-def _encode_command(
+def encode_command(
     out: Path, width: int, height: int, fps: float, wav: Path | None, seconds: float | None
 ) -> list[str]:
+    """The ffmpeg command that encodes raw RGB frames from stdin (and the WAV, if any) into ``out`` (H.264/AAC)."""
     rate = Fraction(fps).limit_denominator(1001)
     cmd = [
-        _ffmpeg(),
+        ffmpeg_executable(),
         "-hide_banner",
         "-nostdin",
         "-loglevel",
@@ -371,7 +369,7 @@ def probe_media(path: str | os.PathLike, *, decode: bool = True) -> dict:
         raise InputFileError("does not exist or is not a file", path=path)
     source = f"file:{path.resolve()}"
     header = subprocess.run(
-        [_ffmpeg(), "-hide_banner", "-nostdin", "-i", source], stdin=subprocess.DEVNULL, capture_output=True
+        [ffmpeg_executable(), "-hide_banner", "-nostdin", "-i", source], stdin=subprocess.DEVNULL, capture_output=True
     ).stderr.decode("utf-8", "replace")
     info = _parse_header(header)
     if info["video"] is None and info["audio"] is None:
@@ -448,7 +446,19 @@ def _measure(source: str, info: dict, path: Path) -> None:
         maps += ["-map", "0:a:0"]
     # framecrc lists every decoded frame with its time stamp and duration; no pixels are kept
     run = subprocess.run(
-        [_ffmpeg(), "-hide_banner", "-nostdin", "-loglevel", "error", "-i", source, *maps, "-f", "framecrc", "-"],
+        [
+            ffmpeg_executable(),
+            "-hide_banner",
+            "-nostdin",
+            "-loglevel",
+            "error",
+            "-i",
+            source,
+            *maps,
+            "-f",
+            "framecrc",
+            "-",
+        ],
         stdin=subprocess.DEVNULL,
         capture_output=True,
     )

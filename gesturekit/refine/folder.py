@@ -2,14 +2,27 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from .._io import read_json_marker
-from ..errors import InputFileError
+from ..errors import DatabaseError, InputFileError
+from ..folders import read_json_marker
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "read_refiner_config"]
+if TYPE_CHECKING:
+    from ..database import MatchingDatabase
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "read_refiner_config",
+    "check_layout",
+    "trained_on",
+    "describe_training",
+    "provenance",
+]
 
 FORMAT = "gesturekit-refiner"
 FORMAT_VERSION = 1
@@ -88,3 +101,83 @@ def _check_structure(cfg: dict, path: Path) -> None:
     for key in _MODEL_CHANNELS:
         if key in model and not (isinstance(model[key], list) and all(_positive_int(c) for c in model[key])):
             raise bad(f"model.{key} must be a list of positive integers, found {model[key]!r}")
+
+
+# ---- what a refiner folder's config.json says of its training ------------------------------------
+
+
+def check_layout(config: dict, db: MatchingDatabase, *, where: str | os.PathLike[str]) -> None:
+    """Refuse a database whose features have another layout than a refiner's training data.
+
+    Parameters
+    ----------
+    config : dict
+        The refiner's ``config.json``.
+    db : MatchingDatabase
+    where : str or path
+        The refiner, as the message names it.
+
+    Raises
+    ------
+    DatabaseError
+        Naming the database and the refiner.
+    """
+    meta = db.meta
+    mine = config.get("layout")
+    theirs = meta.get("layout")
+    if theirs != mine or list(meta.get("joint_names", [])) != list(config.get("joint_names", [])):
+        diff = sorted(k for k in set(mine or {}) | set(theirs or {}) if (mine or {}).get(k) != (theirs or {}).get(k))
+        detail = f" (differs in: {', '.join(diff)})" if diff else " (another skeleton)"
+        raise DatabaseError(
+            f"the database has another feature layout than refiner {where} was trained on{detail}; "
+            "use a refiner trained on this database (`gesturekit train-refiner --db ...`)",
+            path=db.path,
+        )
+
+
+def _speaker(source: str) -> str:
+    # the generated demo speaker is the same at any length: "demo (seed 0, 20 min)" -> "demo (seed 0)"
+    return re.sub(r",\s*[0-9.]+\s*min\)", ")", source) if source.startswith("demo") else source
+
+
+def trained_on(config: dict, db: MatchingDatabase) -> bool:
+    """Whether a refiner (its ``config.json``) was trained on ``db``: the same folder, or the same
+    recorded source with the same takes and clips; for the generated demo speaker, the same
+    generator seed at any length."""
+    trained = config.get("database") or {}
+    if db.path is not None and trained.get("path"):
+        if Path(trained["path"]).expanduser().resolve() == Path(db.path).expanduser().resolve():
+            return True
+    source = str(db.meta.get("build", {}).get("source", ""))
+    theirs = str(trained.get("source", ""))
+    if not source or not theirs:
+        return False
+    if source.startswith("demo") and theirs.startswith("demo"):
+        return _speaker(source) == _speaker(theirs)
+    return source == theirs and trained.get("takes") == len(db.take_names) and trained.get("clips") == db.n_clips
+
+
+def describe_training(config: dict) -> str:
+    """The training database of a refiner, as its ``config.json`` records it, in a few words."""
+    t = config.get("database") or {}
+    name = t.get("label") or t.get("source") or t.get("path") or "an unrecorded database"
+    counts = f" ({t['takes']} takes, {t['clips']} clips)" if "takes" in t and "clips" in t else ""
+    return f"{name}{counts}"
+
+
+def provenance(path: str | os.PathLike[str], config: dict) -> dict:
+    """What reproduces a refined result: the refiner's folder, the database it was trained on
+    (from its ``config.json``) and the sha256 of its weights (``generator.pt``), hex."""
+    folder = Path(path).expanduser().resolve()
+    digest = hashlib.sha256()
+    with open(folder / "generator.pt", "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    trained = config.get("database") or {}
+    return {
+        "path": str(folder),
+        "trained_on": {k: trained.get(k) for k in ("path", "label", "source", "takes", "clips")},
+        "generator_sha256": digest.hexdigest(),
+        "preset": config.get("preset"),
+        "iteration": config.get("iteration"),
+    }

@@ -41,7 +41,7 @@ from ..errors import ConfigError, DatabaseError, InputFileError
 from ..features import LAYOUT
 from ..motion import Motion
 from ..skeleton import FPS, JOINT_NAMES
-from .folder import FORMAT, FORMAT_VERSION, read_refiner_config
+from .folder import FORMAT, FORMAT_VERSION, check_layout, describe_training, provenance, read_refiner_config, trained_on
 from .model import GENERATOR_STRIDE, Generator, ModelConfig
 
 if TYPE_CHECKING:
@@ -212,7 +212,6 @@ class Refiner:
         DatabaseError
             Naming the database and the refiner.
         """
-        from . import check_layout
 
         check_layout(self.config, db, where=self.path if self.path is not None else "refiner")
 
@@ -330,7 +329,6 @@ class Refiner:
         for a refiner not loaded from a folder. Warns when it was trained on another database.
         """
         from ..errors import warn
-        from . import describe_training, provenance, trained_on
 
         if self.path is None:
             return None

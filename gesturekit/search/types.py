@@ -20,7 +20,9 @@ from ..errors import ConfigError
 if TYPE_CHECKING:  # imported where the candidate table is made
     import pandas as pd
 
-__all__ = ["SearchConfig", "SearchResult", "CANDIDATE_FIELDS", "describe_steps"]
+    from ..database import MatchingDatabase
+
+__all__ = ["SearchConfig", "SearchResult", "CANDIDATE_FIELDS", "describe_steps", "window_source"]
 
 
 @dataclass(frozen=True)
@@ -310,6 +312,75 @@ class SearchResult:
             }
         )
         return df[keep].reset_index(drop=True)
+
+    def chosen_distances(self) -> tuple[float, float]:
+        """Mean pose and audio distance of the chosen windows over the steps.
+
+        Returns
+        -------
+        (pose_dist, audio_dist) : tuple of float
+            Means of ``cand_pose_dist`` (z-scored units) and ``cand_audio_dist`` (cosine, 0..2)
+            at each step's chosen ``position``; steps whose choice is outside the record (a pin)
+            are left out; NaN when no step is left.
+        """
+        idx = np.flatnonzero(self.position >= 0)
+        if not idx.size:
+            return float("nan"), float("nan")
+        at = self.position[idx]
+        return float(np.mean(self.cand_pose_dist[idx, at])), float(np.mean(self.cand_audio_dist[idx, at]))
+
+    def candidates_table(self, step: int, db: MatchingDatabase) -> pd.DataFrame:
+        """The recorded candidates of one step, best first, with their source take and time.
+
+        Parameters
+        ----------
+        step : int
+            ``0 <= step < n_steps``.
+        db : MatchingDatabase
+            The database the result was searched in.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per recorded candidate (at most ``config.record``, at least
+            ``k + 1``): ``position`` (in the combined ranking, 0 = best),
+            ``clip``, ``start`` (frame in the clip), ``take``, ``source_s``
+            (seconds into the take), ``pose_dist`` (z-scored units),
+            ``audio_dist`` (cosine, 0..2), ``pose_rank``, ``audio_rank``,
+            ``combined`` (their sum) and ``chosen``.
+
+        Raises
+        ------
+        ConfigError
+            A step out of range.
+        """
+        import pandas as pd
+
+        if not 0 <= int(step) < self.n_steps:
+            raise ConfigError(f"step must be in 0..{self.n_steps - 1}, got {step}")
+        table = self.candidates_frame()
+        table = table[table["step"] == int(step)].drop(columns="step").reset_index(drop=True)
+        src = [window_source(db, c, s) for c, s in zip(table["clip"], table["start"])]
+        table.insert(3, "take", pd.Series([t for t, _ in src], dtype="object"))
+        table.insert(4, "source_s", pd.Series([t for _, t in src], dtype="float64"))
+        return table
+
+
+def window_source(db: MatchingDatabase, clip: int, start: int) -> tuple[str, float]:
+    """Where a database window comes from: its take's name and the time of ``start`` in the take.
+
+    Parameters
+    ----------
+    db : MatchingDatabase
+    clip, start : int
+        The window's clip and its first frame in the clip.
+
+    Returns
+    -------
+    (take, seconds) : tuple of str and float
+    """
+    take = db.take_names[int(db.clip_take[int(clip)])]
+    return take, (int(db.clip_start[int(clip)]) + int(start)) / db.fps
 
 
 def describe_steps(steps: Iterable[int], *, segment: int, fps: float | None = None, most: int = 3) -> str:

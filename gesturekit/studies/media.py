@@ -21,16 +21,15 @@ from __future__ import annotations
 import os
 import subprocess
 import tempfile
-import wave
 from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from .._io import atomic_write
 from .._optional import require
+from ..datasets.audio import write_wav
 from ..errors import GestureKitError
-from ..export.video import _encode_command, _ffmpeg, probe_media
+from ..export.video import encode_command, ffmpeg_executable, probe_media
 from ..study import stimulus_id
 
 __all__ = ["OVERLAY_TEXT", "check_media_id", "overlay_box", "draw_overlay", "make_check_videos", "make_audio_check"]
@@ -113,12 +112,12 @@ def _write_check(
     with tempfile.TemporaryDirectory(dir=out.parent, prefix=".check-") as tmp:
         wav, encoded = Path(tmp) / "speech.wav", Path(tmp) / "check.mp4"
         subprocess.run(
-            [_ffmpeg(), "-hide_banner", "-nostdin", "-loglevel", "error", "-i", f"file:{host}", "-vn", "-c:a"]
+            [ffmpeg_executable(), "-hide_banner", "-nostdin", "-loglevel", "error", "-i", f"file:{host}", "-vn", "-c:a"]
             + ["pcm_f32le", f"file:{wav}"],
             check=True,
             capture_output=True,
         )
-        cmd = _encode_command(encoded, v["width"], v["height"], v["fps"], wav, seconds)
+        cmd = encode_command(encoded, v["width"], v["height"], v["fps"], wav, seconds)
         with open(Path(tmp) / "ffmpeg.log", "wb") as log:
             proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
             assert proc.stdin is not None
@@ -232,15 +231,6 @@ def make_audio_check(folder: str | os.PathLike, *, seed: int) -> dict:
     folder = Path(folder)
     beeps = 3 + int(np.random.default_rng([int(seed), 0xBEE9]).integers(5))
     cid = check_media_id(seed, "", "audio")
-    pcm = np.round(beep_samples(beeps) * 32767).astype("<i2").tobytes()
     (folder / "checks").mkdir(exist_ok=True)
-
-    def write(f) -> None:
-        with wave.open(f, "wb") as w:
-            w.setnchannels(1)
-            w.setsampwidth(2)
-            w.setframerate(BEEP_SR)
-            w.writeframes(pcm)
-
-    atomic_write(folder / "checks" / f"{cid}.wav", write, overwrite=True)
+    write_wav(folder / "checks" / f"{cid}.wav", beep_samples(beeps), sr=BEEP_SR, overwrite=True)
     return {"id": cid, "file": f"checks/{cid}.wav", "beeps": beeps}

@@ -3,7 +3,7 @@
 Numeric arrays are handed to plotly as float32 typed-array specs (little-endian,
 base64), the form plotly itself serialises them to; :func:`data_array` reads
 any form back. Used by :mod:`gesturekit.viz.skeleton_figure`,
-:mod:`gesturekit.viz.charts` and :mod:`gesturekit.viz.viewer`.
+:mod:`gesturekit.viz.figures` and :mod:`gesturekit.viz.viewer`.
 """
 
 from __future__ import annotations

@@ -17,7 +17,9 @@ render) reads the same numbers and draws them its own way.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +29,8 @@ from ..errors import ConfigError
 from ..skeleton import ABSENT, DERIVED, JOINT_NAMES, N_JOINTS, PARENTS, RECORDED, JointPresence, joint_index
 
 __all__ = [
+    "LOOKS",
+    "RenderStyle",
     "APPEARANCE",
     "Appearance",
     "BodyShapes",
@@ -509,3 +513,114 @@ class Appearance:
 
 #: The appearance every view uses.
 APPEARANCE = Appearance()
+
+
+# ---- the style of a rendered scene ------------------------------------------------------------
+
+#: What a scene draws: the page's skinned character, or the earlier capsule figure.
+LOOKS = ("character", "capsules")
+
+
+@dataclass(frozen=True)
+class RenderStyle:
+    """How a rendered scene looks and is framed.
+
+    With ``look="character"`` (the default) the picture is the page's: the
+    skinned character, the colour schemes, light, camera (vertical field of
+    view :data:`gesturekit.character.look.FIELD_OF_VIEW`) and background of
+    :mod:`gesturekit.character.look`, side-by-side characters on one stage, no
+    floor (the body is cut at the waist); ``appearance``, ``view_angle``,
+    ``elevation``, the tessellation and ``text_color`` do not apply. With
+    ``look="capsules"`` the figure is the notebooks' one: the appearance's
+    capsules, head sphere, colours (first motion blue, second orange), light
+    (fixed to the camera), floor and contact shadow, one panel per motion.
+
+    Parameters
+    ----------
+    look : str
+        One of :data:`LOOKS`.
+    neutral : bool
+        The character in the neutral colour scheme
+        (:data:`gesturekit.character.look.NEUTRAL`), whatever its place: the
+        look of study stimuli.
+    appearance : Appearance
+        The look of the body (:data:`gesturekit.viz.appearance.APPEARANCE` by default).
+    text_color : colour
+        Colour of the panel labels (anything PyVista accepts).
+    view_box : ((xmin, xmax), (ymin, ymax), (zmin, zmax))
+        Pelvis-relative region, metres, framed when ``fit_motion`` is off: a
+        standing speaker's upper body and reach. Its bottom is the floor. On a
+        user's character (``character=`` of :class:`SkeletonScene`), relative
+        to its pelvis at rest.
+    fit_motion : bool
+        Frame every motion over the whole clip, so that the figure fills the
+        view (the page's framing rule: the character's
+        :func:`gesturekit.character.look.stage_layout`, the capsules'
+        appearance bounds). Off, every
+        clip is framed by ``view_box``, so that clips of different systems
+        look alike (user-study stimuli).
+    view_angle : float
+        Vertical field of view of the perspective camera, degrees, in (0, 120).
+    elevation : float
+        How far the camera looks down at the figure, degrees in [0, 60): a
+        little, so that the floor shows as a band.
+    capsule_sides, sphere_resolution, head_resolution : int
+        Tessellation of the capsules' tubes, their round ends and the head.
+    multi_samples : int
+        Multisample anti-aliasing samples per pixel, 0 for none. Smoother
+        edges, but in software rendering (no GPU) 4 samples make each frame
+        about five times slower.
+    font_size : int
+        Size of the panel labels, points.
+    """
+
+    look: str = "character"
+    neutral: bool = False
+    appearance: Appearance = APPEARANCE
+    text_color: object = "#202020"
+    view_box: tuple = ((-0.6, 0.6), (-0.35, 0.85), (-0.3, 0.45))
+    fit_motion: bool = True
+    view_angle: float = 20.0
+    elevation: float = 10.0
+    capsule_sides: int = 10
+    sphere_resolution: int = 8
+    head_resolution: int = 20
+    multi_samples: int = 0
+    font_size: int = 14
+
+    def __post_init__(self) -> None:
+        if self.look not in LOOKS:
+            raise ConfigError(f"unknown look {self.look!r}; choose one of {', '.join(LOOKS)}")
+        if not isinstance(self.appearance, Appearance):
+            raise ConfigError(f"appearance must be an Appearance, got {type(self.appearance).__name__}")
+        box = np.asarray(self.view_box, dtype=np.float64)
+        if box.shape != (3, 2) or not np.all(np.isfinite(box)) or np.any(box[:, 1] <= box[:, 0]):
+            raise ConfigError(
+                f"view_box must be ((xmin, xmax), (ymin, ymax), (zmin, zmax)) with min < max, got {self.view_box}"
+            )
+        if not 0 < self.view_angle < 120:
+            raise ConfigError(f"view_angle must be in (0, 120) degrees, got {self.view_angle}")
+        if not 0 <= self.elevation < 60:
+            raise ConfigError(f"elevation must be in [0, 60) degrees, got {self.elevation}")
+        if self.capsule_sides < 3 or min(self.sphere_resolution, self.head_resolution) < 4:
+            raise ConfigError("capsule_sides must be at least 3, sphere_resolution and head_resolution at least 4")
+        if self.multi_samples < 0:
+            raise ConfigError("multi_samples must not be negative")
+
+    def to_json(self) -> dict:
+        """The style as a JSON-ready dict (:meth:`from_json` reads it back)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict) -> RenderStyle:
+        """The style :meth:`to_json` wrote."""
+        fields = {k: _to_tuples(v) for k, v in data.items() if k != "appearance"}
+        appearance = Appearance(**{k: _to_tuples(v) for k, v in data["appearance"].items()})
+        return cls(appearance=appearance, **fields)
+
+
+def _to_tuples(value: Any) -> Any:
+    """JSON lists back to tuples, recursively (the style's fields are tuples)."""
+    if isinstance(value, list):
+        return tuple(_to_tuples(v) for v in value)
+    return value

@@ -3,7 +3,7 @@
 Every capsule of the appearance (:mod:`gesturekit.viz.appearance`) is an open
 tube between its two points plus a ball of its radius at each end; the
 appearance's spheres (the head) are balls. Each frame only rewrites the
-meshes' points and normals in numpy. Part of :mod:`gesturekit.viz.render`.
+meshes' points and normals in numpy. The capsule look of :class:`gesturekit.viz.render.SkeletonScene` draws them.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pyvista as pv
 
 if TYPE_CHECKING:
     from ..skeleton import JointPresence
-    from .render import RenderStyle
+    from .appearance import RenderStyle
 
 __all__ = ["BodyMeshes"]
 

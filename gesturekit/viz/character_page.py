@@ -20,6 +20,7 @@ that few, else a median cut of them.
 
 from __future__ import annotations
 
+import base64
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -34,7 +35,17 @@ from ..errors import ConfigError
 if TYPE_CHECKING:
     from ..character.retarget import Retargeted
 
-__all__ = ["MAX_COLORS", "PALETTE_ERROR", "ROOT_NAME", "palette", "page_skeleton", "page_character", "framed_points"]
+__all__ = [
+    "QUATERNION_SCALE",
+    "typed_array",
+    "MAX_COLORS",
+    "PALETTE_ERROR",
+    "ROOT_NAME",
+    "palette",
+    "page_skeleton",
+    "page_character",
+    "framed_points",
+]
 
 #: Colours a page's palette holds at most (its vertex colour indices are bytes).
 MAX_COLORS = 256
@@ -47,10 +58,26 @@ PALETTE_ERROR = 0.1
 ROOT_NAME = "gesturekit_root"
 
 
-def _typed(values: np.ndarray, dtype: str) -> dict:
-    from .viewer import _typed as typed
+#: Joint rotations travel as int16 quaternions: ``round(q * QUATERNION_SCALE)`` (the page normalises them again).
+QUATERNION_SCALE = 32767
 
-    return typed(values, dtype)
+
+def typed_array(values: np.ndarray, dtype: str) -> dict:
+    """A typed-array spec ``{"dtype", "bdata", "shape"}`` of ``values`` as little-endian ``dtype`` (how the
+    page receives every array: base64 of the raw bytes, the shape as ``"n,m"``).
+
+    Parameters
+    ----------
+    values : np.ndarray
+    dtype : str
+        A numpy dtype code such as ``"f4"``, ``"u2"`` or ``"i2"``.
+    """
+    a = np.ascontiguousarray(values, dtype=np.dtype(dtype).newbyteorder("<"))
+    return {
+        "dtype": dtype,
+        "bdata": base64.b64encode(a.tobytes()).decode("ascii"),
+        "shape": ",".join(map(str, a.shape)),
+    }
 
 
 def palette(colors: npt.ArrayLike, *, max_colors: int = MAX_COLORS) -> tuple[np.ndarray, np.ndarray]:
@@ -161,8 +188,6 @@ def page_character(retargeted: Retargeted, *, scheme: str, skin: CharacterSkin |
         int16 xyzw quaternions times 32767, relative to the parent) and ``root`` ((frames, 3), metres), as
         the page's typed-array specs; B is the character's bones (plus one added root).
     """
-    from .viewer import QUATERNION_SCALE
-
     ch = retargeted.character
     names, parents, rest, added = page_skeleton(ch)
     body = skin if skin is not None else _skin(ch, scheme)
@@ -191,19 +216,19 @@ def page_character(retargeted: Retargeted, *, scheme: str, skin: CharacterSkin |
             "names": list(names),
             "parents": [int(p) for p in parents],
             "in_rig": [True] * n_bones,
-            "offsets": _typed(offsets, "f4"),
-            "rest": _typed(rest, "f4"),
+            "offsets": typed_array(offsets, "f4"),
+            "rest": typed_array(rest, "f4"),
         },
         "mesh": {
-            "vertices": _typed(body.vertices, "f4"),
-            "normals": _typed(body.normals, "f4"),
-            "faces": _typed(body.faces, "u2" if body.n_vertices < 2**16 else "u4"),
-            "joints": _typed(joints, "u1" if n_bones < 256 else "u2"),
-            "weights": _typed(body.weights, "f4"),
-            "parts": _typed(parts, "u1"),
+            "vertices": typed_array(body.vertices, "f4"),
+            "normals": typed_array(body.normals, "f4"),
+            "faces": typed_array(body.faces, "u2" if body.n_vertices < 2**16 else "u4"),
+            "joints": typed_array(joints, "u1" if n_bones < 256 else "u2"),
+            "weights": typed_array(body.weights, "f4"),
+            "parts": typed_array(parts, "u1"),
         },
-        "rotations": _typed(quats, "i2"),
-        "root": _typed(root, "f4"),
+        "rotations": typed_array(quats, "i2"),
+        "root": typed_array(root, "f4"),
     }
 
 

@@ -31,13 +31,10 @@ from __future__ import annotations
 
 import contextlib
 import ctypes.util
-import dataclasses
 import math
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import pyvista as pv
@@ -49,114 +46,13 @@ from ..character.target import Character
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
 from ..skeleton import N_JOINTS, JointPresence
-from .appearance import APPEARANCE, DERIVED_POINTS, Appearance, BodyShapes, hex_to_rgb
+from .appearance import DERIVED_POINTS, LOOKS, Appearance, BodyShapes, RenderStyle, hex_to_rgb
 from .body_meshes import BodyMeshes
 from .character_render import CharacterDrawing, CharacterStage
 
-__all__ = ["LOOKS", "RenderStyle", "SkeletonScene", "render_image", "view_bounds"]
-
-#: What a scene draws: the page's skinned character, or the earlier capsule figure.
-LOOKS = ("character", "capsules")
+__all__ = ["LOOKS", "RenderStyle", "SkeletonScene", "render_image", "view_bounds", "check_scene", "check_character"]
 
 _WINDOW_ENV = "VTK_DEFAULT_OPENGL_WINDOW"
-
-
-@dataclass(frozen=True)
-class RenderStyle:
-    """How a rendered scene looks and is framed.
-
-    With ``look="character"`` (the default) the picture is the page's: the
-    skinned character, the colour schemes, light, camera (vertical field of
-    view :data:`gesturekit.character.look.FIELD_OF_VIEW`) and background of
-    :mod:`gesturekit.character.look`, side-by-side characters on one stage, no
-    floor (the body is cut at the waist); ``appearance``, ``view_angle``,
-    ``elevation``, the tessellation and ``text_color`` do not apply. With
-    ``look="capsules"`` the figure is the notebooks' one: the appearance's
-    capsules, head sphere, colours (first motion blue, second orange), light
-    (fixed to the camera), floor and contact shadow, one panel per motion.
-
-    Parameters
-    ----------
-    look : str
-        One of :data:`LOOKS`.
-    neutral : bool
-        The character in the neutral colour scheme
-        (:data:`gesturekit.character.look.NEUTRAL`), whatever its place: the
-        look of study stimuli.
-    appearance : Appearance
-        The look of the body (:data:`gesturekit.viz.appearance.APPEARANCE` by default).
-    text_color : colour
-        Colour of the panel labels (anything PyVista accepts).
-    view_box : ((xmin, xmax), (ymin, ymax), (zmin, zmax))
-        Pelvis-relative region, metres, framed when ``fit_motion`` is off: a
-        standing speaker's upper body and reach. Its bottom is the floor. On a
-        user's character (``character=`` of :class:`SkeletonScene`), relative
-        to its pelvis at rest.
-    fit_motion : bool
-        Frame every motion over the whole clip, so that the figure fills the
-        view (the page's framing rule: the character's
-        :func:`gesturekit.character.look.stage_layout`, the capsules'
-        appearance bounds). Off, every
-        clip is framed by ``view_box``, so that clips of different systems
-        look alike (user-study stimuli).
-    view_angle : float
-        Vertical field of view of the perspective camera, degrees, in (0, 120).
-    elevation : float
-        How far the camera looks down at the figure, degrees in [0, 60): a
-        little, so that the floor shows as a band.
-    capsule_sides, sphere_resolution, head_resolution : int
-        Tessellation of the capsules' tubes, their round ends and the head.
-    multi_samples : int
-        Multisample anti-aliasing samples per pixel, 0 for none. Smoother
-        edges, but in software rendering (no GPU) 4 samples make each frame
-        about five times slower.
-    font_size : int
-        Size of the panel labels, points.
-    """
-
-    look: str = "character"
-    neutral: bool = False
-    appearance: Appearance = APPEARANCE
-    text_color: object = "#202020"
-    view_box: tuple = ((-0.6, 0.6), (-0.35, 0.85), (-0.3, 0.45))
-    fit_motion: bool = True
-    view_angle: float = 20.0
-    elevation: float = 10.0
-    capsule_sides: int = 10
-    sphere_resolution: int = 8
-    head_resolution: int = 20
-    multi_samples: int = 0
-    font_size: int = 14
-
-    def __post_init__(self) -> None:
-        if self.look not in LOOKS:
-            raise ConfigError(f"unknown look {self.look!r}; choose one of {', '.join(LOOKS)}")
-        if not isinstance(self.appearance, Appearance):
-            raise ConfigError(f"appearance must be an Appearance, got {type(self.appearance).__name__}")
-        box = np.asarray(self.view_box, dtype=np.float64)
-        if box.shape != (3, 2) or not np.all(np.isfinite(box)) or np.any(box[:, 1] <= box[:, 0]):
-            raise ConfigError(
-                f"view_box must be ((xmin, xmax), (ymin, ymax), (zmin, zmax)) with min < max, got {self.view_box}"
-            )
-        if not 0 < self.view_angle < 120:
-            raise ConfigError(f"view_angle must be in (0, 120) degrees, got {self.view_angle}")
-        if not 0 <= self.elevation < 60:
-            raise ConfigError(f"elevation must be in [0, 60) degrees, got {self.elevation}")
-        if self.capsule_sides < 3 or min(self.sphere_resolution, self.head_resolution) < 4:
-            raise ConfigError("capsule_sides must be at least 3, sphere_resolution and head_resolution at least 4")
-        if self.multi_samples < 0:
-            raise ConfigError("multi_samples must not be negative")
-
-    def to_json(self) -> dict:
-        """The style as a JSON-ready dict (:meth:`from_json` reads it back)."""
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_json(cls, data: dict) -> RenderStyle:
-        """The style :meth:`to_json` wrote."""
-        fields = {k: _to_tuples(v) for k, v in data.items() if k != "appearance"}
-        appearance = Appearance(**{k: _to_tuples(v) for k, v in data["appearance"].items()})
-        return cls(appearance=appearance, **fields)
 
 
 @contextlib.contextmanager
@@ -226,7 +122,7 @@ def view_bounds(
     of the region.
     """
     style = style or RenderStyle()
-    _check_character(character, style)
+    check_character(character, style)
     if character is not None:
         box = None if style.fit_motion else np.asarray(style.view_box)
         return CharacterStage(motions, view_box=box, character=character).box.T.copy()
@@ -326,8 +222,8 @@ class SkeletonScene:
     ):
         motions = list(motions)
         self.style = style or RenderStyle()
-        _check_scene(motions, labels, resolution)
-        _check_character(character, self.style)
+        check_scene(motions, labels, resolution)
+        check_character(character, self.style)
         self.motions = motions
         self.fps = float(motions[0].fps)
         self.n_frames = max(m.n_frames for m in motions)
@@ -538,7 +434,8 @@ class SkeletonScene:
         self.close()
 
 
-def _check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int]) -> None:
+def check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int]) -> None:
+    """Refuse a scene :class:`SkeletonScene` cannot draw (one or two motions, labels, resolution): ConfigError."""
     if not 1 <= len(motions) <= 2:
         raise ConfigError(f"a scene shows one or two motions, got {len(motions)}")
     for m in motions:
@@ -567,7 +464,8 @@ def _check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution
         )
 
 
-def _check_character(character: object, style: RenderStyle) -> None:
+def check_character(character: object, style: RenderStyle) -> None:
+    """Refuse a ``character=`` that is not a :class:`~gesturekit.character.target.Character` for this style."""
     if character is None:
         return
     if not isinstance(character, Character):
@@ -613,10 +511,3 @@ def render_image(
     motions = [motion] if side_by_side is None else [motion, side_by_side]
     with SkeletonScene(motions, labels=labels, resolution=resolution, style=style, character=character) as scene:
         return scene.render_frame(frame)
-
-
-def _to_tuples(value: Any) -> Any:
-    """JSON lists back to tuples, recursively (the style's fields are tuples)."""
-    if isinstance(value, list):
-        return tuple(_to_tuples(v) for v in value)
-    return value

@@ -5,7 +5,7 @@
 in the calling process; a long one in several rendering processes
 (:mod:`gesturekit.viz.render_worker`), each with its own offscreen window,
 taking turns by chunks of :data:`CHUNK_FRAMES` frames. The scene reaches them
-as a job file (:func:`_write_job`, read back by :func:`_scene_from_job`), the
+as a job file (:func:`_write_job`, read back by :func:`scene_from_job`), the
 frames come back as raw RGB through pipes.
 """
 
@@ -29,7 +29,7 @@ from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
 from ..skeleton import JointPresence
 from .character_user import character_arrays, character_from_arrays
-from .render import RenderStyle, SkeletonScene, _check_character, _check_scene
+from .render import RenderStyle, SkeletonScene, check_character, check_scene
 
 __all__ = ["CHUNK_FRAMES", "PARALLEL_MIN_FRAMES", "default_workers", "render_frames"]
 
@@ -106,8 +106,8 @@ def render_frames(
     """
     motions = list(motions)
     style = style or RenderStyle()
-    _check_scene(motions, labels, resolution)
-    _check_character(character, style)
+    check_scene(motions, labels, resolution)
+    check_character(character, style)
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ConfigError(f"workers must be a positive whole number, got {workers!r}")
     n_frames = max(m.n_frames for m in motions)
@@ -156,7 +156,7 @@ def _write_job(
     np.savez(path, allow_pickle=False, **arrays)
 
 
-def _scene_from_job(path: str) -> SkeletonScene:
+def scene_from_job(path: str) -> SkeletonScene:
     """The scene a job file written by :func:`_write_job` describes (in a rendering process)."""
     with np.load(path, allow_pickle=False) as data:
         spec = json.loads(str(data["spec"]))

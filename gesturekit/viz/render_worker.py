@@ -23,9 +23,9 @@ def main(argv: list[str]) -> int:
     from .._optional import require
 
     require("pyvista", purpose="rendering")
-    from .render_pool import _scene_from_job
+    from .render_pool import scene_from_job
 
-    scene = _scene_from_job(job)
+    scene = scene_from_job(job)
     out = sys.stdout.buffer
     try:
         for start in range(worker * chunk, scene.n_frames, workers * chunk):

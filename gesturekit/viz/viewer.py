@@ -52,11 +52,12 @@ from ..character.paint import EMPTY_BODY, paint
 from ..character.retarget import retarget
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
 from ..character.target import Character
+from ..datasets.audio import wav_bytes
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
 from ..skeleton import DERIVED, JOINT_NAMES, N_JOINTS
 from ._plotly import _frames_at, _motions_and_labels, _time_grid
-from .character_page import framed_points, page_character
+from .character_page import QUATERNION_SCALE, framed_points, page_character, typed_array
 from .web.build import SHELL, bundle
 
 if TYPE_CHECKING:
@@ -71,7 +72,6 @@ __all__ = [
     "viewer_data",
     "read_viewer_data",
     "wav_data_uri",
-    "wav_bytes",
     "ViewerArgs",
     "viewer_args",
     "read_viewer_args",
@@ -84,37 +84,8 @@ CONTROLS_HEIGHT = 48
 #: length embeds about 8 MB of joint rotations and 19 MB of speech (base64 adds a third).
 VIEWER_MAX_FRAMES = 9000
 
-#: Joint rotations travel as int16 quaternions: ``round(q * QUATERNION_SCALE)`` (the page normalises them again).
-QUATERNION_SCALE = 32767
-
 _DATA_ID = "gk-data"
 _AUDIO_PREFIX = "data:audio/wav;base64,"
-
-
-def wav_bytes(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> bytes:
-    """Mono audio as a WAV file's bytes: 16-bit PCM at ``sr``.
-
-    Parameters
-    ----------
-    audio : array_like
-        Shape (samples,), float in [-1, 1] (clipped beyond; NaN as 0).
-    sr : int
-        Sample rate, Hz.
-
-    Returns
-    -------
-    bytes
-        The file; a sample ``x`` is stored as ``round(x * 32767)``.
-    """
-    a = np.clip(np.nan_to_num(np.asarray(audio, dtype=np.float64).ravel()), -1.0, 1.0)
-    pcm = np.round(a * 32767.0).astype("<i2")
-    buf = io.BytesIO()
-    with wave.open(buf, "wb") as w:
-        w.setnchannels(1)
-        w.setsampwidth(2)
-        w.setframerate(int(sr))
-        w.writeframes(pcm.tobytes())
-    return buf.getvalue()
 
 
 def wav_data_uri(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> str:
@@ -179,16 +150,6 @@ class ViewerArgs(TypedDict):
     hash: str
 
 
-def _typed(values: np.ndarray, dtype: str) -> dict:
-    """A typed-array spec ``{"dtype", "bdata", "shape"}`` of ``values`` as little-endian ``dtype``."""
-    a = np.ascontiguousarray(values, dtype=np.dtype(dtype).newbyteorder("<"))
-    return {
-        "dtype": dtype,
-        "bdata": base64.b64encode(a.tobytes()).decode("ascii"),
-        "shape": ",".join(map(str, a.shape)),
-    }
-
-
 def _array(spec: dict) -> np.ndarray:
     """A typed-array spec's values, in its own dtype (native byte order) and shape."""
     out = np.frombuffer(base64.b64decode(spec["bdata"]), dtype=np.dtype(spec["dtype"]).newbyteorder("<"))
@@ -227,19 +188,19 @@ def _character(motion: Motion, scheme: str) -> dict:
             "names": list(JOINT_NAMES),
             "parents": _page_parents(rig),
             "in_rig": [bool(x) for x in rig.in_rig],
-            "offsets": _typed(rig.offsets, "f4"),
-            "rest": _typed(rig.rest, "f4"),
+            "offsets": typed_array(rig.offsets, "f4"),
+            "rest": typed_array(rig.rest, "f4"),
         },
         "mesh": {
-            "vertices": _typed(mesh.vertices, "f4"),
-            "normals": _typed(mesh.normals, "f4"),
-            "faces": _typed(mesh.faces, "u2" if mesh.n_vertices < 2**16 else "u4"),
-            "joints": _typed(mesh.joints, "u1"),
-            "weights": _typed(mesh.weights, "f4"),
-            "parts": _typed(mesh.parts, "u1"),
+            "vertices": typed_array(mesh.vertices, "f4"),
+            "normals": typed_array(mesh.normals, "f4"),
+            "faces": typed_array(mesh.faces, "u2" if mesh.n_vertices < 2**16 else "u4"),
+            "joints": typed_array(mesh.joints, "u1"),
+            "weights": typed_array(mesh.weights, "f4"),
+            "parts": typed_array(mesh.parts, "u1"),
         },
-        "rotations": _typed(quats, "i2"),
-        "root": _typed(pose.root, "f4"),
+        "rotations": typed_array(quats, "i2"),
+        "root": typed_array(pose.root, "f4"),
     }
 
 

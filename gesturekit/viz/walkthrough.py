@@ -172,7 +172,7 @@ def synthesis_table(results: Sequence[SynthesisResult], *, labels: Sequence[str]
     rows = []
     for label, r in zip(labels, results):
         s = r.search
-        idx = np.flatnonzero(s.position >= 0)
+        pose_dist, audio_dist = s.chosen_distances()
         N = r.config.segment
         x = r.motion.positions
         joins = boundary_jumps(x, np.arange(1, s.n_steps) * N)
@@ -183,8 +183,8 @@ def synthesis_table(results: Sequence[SynthesisResult], *, labels: Sequence[str]
                 "segment": N,
                 "steps": s.n_steps,
                 "clips_used": int(np.unique(s.clip).size),
-                "pose_dist": float(np.mean(s.cand_pose_dist[idx, s.position[idx]])) if idx.size else float("nan"),
-                "audio_dist": float(np.mean(s.cand_audio_dist[idx, s.position[idx]])) if idx.size else float("nan"),
+                "pose_dist": pose_dist,
+                "audio_dist": audio_dist,
                 "relaxed_steps": len(r.relaxed_steps),
                 "boundary_jump": joins["jump"],
                 "boundary_jump_ratio": joins["ratio"],

@@ -132,8 +132,11 @@ def test_damaged_bone_samples_are_read_again(kp, tmp_path):
 
 def test_nothing_non_finite_is_written_from_a_staged_take(kp, tmp_path):
     """The last guard, when a staged array turns non-finite after it was checked: the file is named."""
-    from gesturekit._database_build import StagedTake, assemble
-    from gesturekit._database_stage import BuildConfig, check_staged_unit
+    from gesturekit.database import BuildConfig
+    from gesturekit.database.build import assemble
+    from gesturekit.database.folder import FolderOut
+    from gesturekit.database.stage import StagedTake
+    from gesturekit.database.stage_check import check_staged_unit
     from gesturekit.errors import DatabaseError
 
     config = BuildConfig(overlap_stride=16)
@@ -145,10 +148,10 @@ def test_nothing_non_finite_is_written_from_a_staged_take(kp, tmp_path):
     _resave(units[1] / "0.overlap.G.npy", lambda a: np.full_like(a, np.inf))
     (tmp_path / "out").mkdir()
     with pytest.raises(DatabaseError, match=r"0\.overlap\.G\.npy: .*take 'take_01' .*non-finite.*overlap/G\.npy"):
-        assemble(tmp_path / "out", staged, config)
+        assemble(FolderOut(tmp_path / "out"), staged, config)
     _resave(units[0] / "0.moments_F.npy", lambda a: np.full_like(a, np.nan))
     with pytest.raises(DatabaseError, match=r"0\.moments_F\.npy: .*take 'take_00'.*non-finite"):
-        assemble(tmp_path / "out", staged, config)
+        assemble(FolderOut(tmp_path / "out"), staged, config)
 
 
 # ---- a full disk while staging ---------------------------------------------------------------------
@@ -172,16 +175,16 @@ def _full_disk(monkeypatch, how: str) -> list[str]:
         return real(file, arr, *args, **kwargs)
 
     # which take is being staged: the staging of each take starts with its features
-    import gesturekit._database_stage as stage
+    import gesturekit.database.clips as clips
 
     failed_take = [""]
-    real_features = stage.take_features
+    real_features = clips.take_features
 
     def features(take, **kwargs):
         failed_take[0] = take.name
         return real_features(take, **kwargs)
 
-    monkeypatch.setattr(stage, "take_features", features)
+    monkeypatch.setattr(clips, "take_features", features)
     monkeypatch.setattr(np, "save", save)
     return failed
 

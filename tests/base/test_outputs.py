@@ -518,12 +518,27 @@ def test_a_dataset_bvh_is_not_taken_for_gesturekit_output(zeggs_files, tmp_path)
 
 def test_the_folder_markers_are_those_the_writers_write():
     """outputs recognises folders by the markers declared in _io: the writers' own formats and files."""
-    from gesturekit import _database_folder
-    from gesturekit._io import DATABASE_CLIP_ARRAYS, FOLDER_KINDS
+    from gesturekit.database import folder as database_folder
     from gesturekit.evaluate import fgd
+    from gesturekit.folders import FOLDER_KINDS
     from gesturekit.refine import folder
 
-    assert FOLDER_KINDS["database"][:2] == ("database.json", _database_folder.FORMAT)
+    assert FOLDER_KINDS["database"][:2] == ("database.json", database_folder.FORMAT)
     assert FOLDER_KINDS["refiner"][:2] == ("config.json", folder.FORMAT)
     assert FOLDER_KINDS["fgd"][1] == fgd._FORMAT
-    assert _database_folder.CLIP_ARRAYS == DATABASE_CLIP_ARRAYS
+
+
+def test_a_folder_of_every_database_file_with_a_damaged_marker_is_recognised(tmp_path):
+    """The names outputs recognises a database folder by include every name the folder format writes."""
+    from gesturekit.database.folder import FOLDER_FILES
+    from gesturekit.folders import folder_kind
+
+    for name in FOLDER_FILES:
+        if name == "overlap":
+            (tmp_path / name).mkdir()
+        else:
+            (tmp_path / name).write_bytes(b"")
+    (tmp_path / "database.json").write_text("{cut short", encoding="utf-8")
+    assert folder_kind(tmp_path) == "database"
+    (tmp_path / "notes.txt").write_text("mine", encoding="utf-8")
+    assert folder_kind(tmp_path) is None

@@ -24,7 +24,7 @@ from gesturekit.character.target import Character, facing_frame
 from gesturekit.character.user import read_character
 from gesturekit.control import parse_control
 from gesturekit.errors import ConfigError, GestureKitError, InputFileError, MotionFileError
-from gesturekit.interactive import control_adherence
+from gesturekit.evaluate.metrics import control_adherence, overall_adherence
 from gesturekit.motion import Motion
 from gesturekit.skeleton import FINGERS, JOINT_NAMES, N_JOINTS, joint_index
 from tests.character_rigs import CASES, RigSpec, custom_map, truth, write_rig
@@ -85,8 +85,10 @@ def test_every_rig_follows_our_directions_reach_and_controls(tmp_path, name, db,
     np.testing.assert_allclose(rep.reach_scale, np.array(t.arm_length) / ours, rtol=1e-3)
     # the control holds on the character as on ours
     thresholds = db.thresholds
-    a_ours = 100 * control_adherence(motion, control, thresholds)
-    a_theirs = 100 * control_adherence(out.our_motion(), control, thresholds)
+    a_ours, a_theirs = (
+        100 * overall_adherence(control_adherence(m.positions, control, thresholds=thresholds, fps=m.fps))
+        for m in (motion, out.our_motion())
+    )
     print(f"   control adherence: ours {a_ours:.1f} %, on the character {a_theirs:.1f} %")
     assert a_ours > 50  # the control did something to measure
     assert abs(a_theirs - a_ours) <= ADHERENCE_POINTS

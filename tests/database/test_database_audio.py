@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from gesturekit._database_audio import AudioStorage, decode_take_audio, encode_take_audio, take_audio_fields, to_int16
 from gesturekit.database import BuildConfig, MatchingDatabase
+from gesturekit.database.audio import AudioStorage, decode_take_audio, encode_take_audio, take_audio_fields, to_int16
 from gesturekit.errors import ConfigError, DatabaseError
 from tests.badinput import assert_refused, run_cli, snapshot
 from tests.cli.test_cli import _positions_folder

@@ -244,10 +244,10 @@ def test_a_killed_build_resumes(five, joint_map, tmp_path):
     """kill -9 after two takes are staged; the same command then reads only the other three."""
     script = textwrap.dedent("""
         import os, signal, sys
-        import gesturekit._database_build as build
+        import gesturekit.database.stage as stage
         from gesturekit.cli import main
 
-        real, done = build.stage_job, []
+        real, done = stage.stage_job, []
 
         def dying(job):
             result = real(job)
@@ -256,7 +256,7 @@ def test_a_killed_build_resumes(five, joint_map, tmp_path):
                 os.kill(os.getpid(), signal.SIGKILL)
             return result
 
-        build.stage_job = dying  # what the build calls for each take, in this process with --workers 1
+        stage.stage_job = dying  # what the build calls for each take, in this process with --workers 1
         main(["build-db", sys.argv[1], "--joint-map", sys.argv[2], "--out", sys.argv[3], "--workers", "1"])
     """)
     run = subprocess.run(
@@ -309,8 +309,9 @@ def test_a_dask_cluster_build_writes_the_same_bytes(five, joint_map, tmp_path):
 )
 def test_moments_combined_take_by_take_match_those_of_all_frames(tmp_path_factory, sizes, seed):
     """Chan's update over takes of any sizes (empty ones too) gives the mean and std of all frames."""
-    from gesturekit._database_build import StagedTake, combine_moments
-    from gesturekit._database_stage import MOMENT_KEYS, _moments
+    from gesturekit.database.build import combine_moments
+    from gesturekit.database.clips import MOMENT_KEYS, moments
+    from gesturekit.database.stage import StagedTake
 
     rng = np.random.default_rng(seed)
     folder = tmp_path_factory.mktemp("moments")
@@ -319,7 +320,7 @@ def test_moments_combined_take_by_take_match_those_of_all_frames(tmp_path_factor
     staged = []
     for i, n in enumerate(sizes):
         for k in MOMENT_KEYS:
-            np.save(folder / f"{i}.moments_{k}.npy", _moments(parts[k][i]))
+            np.save(folder / f"{i}.moments_{k}.npy", moments(parts[k][i]))
         staged.append(StagedTake(folder, {"index": i, "name": f"t{i}", "count": n}))
     stats = combine_moments(staged)
     for k in dims:
@@ -335,18 +336,18 @@ def test_moments_combined_take_by_take_match_those_of_all_frames(tmp_path_factor
     width=st.integers(1, 3),
 )
 def test_npy_written_row_by_row_is_what_numpy_saves(tmp_path_factory, rows, dtype, width):
-    from gesturekit._database_build import _NpyWriter
+    from gesturekit.database.folder import NpyWriter
 
     folder = tmp_path_factory.mktemp("npy")
     parts = [np.arange(n * width * 2).reshape(n, width, 2).astype(dtype) for n in rows]
     whole = np.concatenate(parts)
     np.save(folder / "saved.npy", whole)
-    w = _NpyWriter(folder / "written.npy", whole.dtype, whole.shape)
+    w = NpyWriter(folder / "written.npy", whole.dtype, whole.shape)
     for p in parts:
         w.write(p)
     w.close()
     assert (folder / "written.npy").read_bytes() == (folder / "saved.npy").read_bytes()
-    w = _NpyWriter(folder / "appended.npy", whole.dtype, (2 * whole.shape[0], *whole.shape[1:]))
+    w = NpyWriter(folder / "appended.npy", whole.dtype, (2 * whole.shape[0], *whole.shape[1:]))
     w.copy_from(folder / "saved.npy")
     w.write(whole)
     w.close()
@@ -366,19 +367,15 @@ def test_thresholds_read_in_pieces_are_the_percentiles_of_every_frame(
 ):
     """Percentiles of each attribute column, read from attributes.npy a few rows at a time, are
     numpy's over the whole (clips * frames, 9) array."""
-    from gesturekit import _database_build
     from gesturekit.control import ATTRIBUTE_NAMES
+    from gesturekit.database.folder import column_percentiles
 
     n = len(ATTRIBUTE_NAMES)
     attrs = np.random.default_rng(seed).normal(size=(clips, frames, n)).astype(np.float32)
     path = tmp_path_factory.mktemp("attrs") / "attributes.npy"
     np.save(path, attrs)
-    chunk = _database_build._CHUNK_BYTES
-    _database_build._CHUNK_BYTES = chunk_rows * n * 4  # pieces of a few frames, crossing clip boundaries
-    try:
-        got = _database_build._column_percentiles(path, q)
-    finally:
-        _database_build._CHUNK_BYTES = chunk
+    # pieces of a few frames, crossing clip boundaries
+    got = column_percentiles(path, q, chunk_bytes=chunk_rows * n * 4)
     flat = attrs.reshape(-1, n).astype(np.float64)
     for i, name in enumerate(ATTRIBUTE_NAMES):
         assert got[name] == [float(np.percentile(flat[:, i], q[0])), float(np.percentile(flat[:, i], q[1]))]
@@ -514,8 +511,8 @@ def test_a_parallel_build_reports_the_error_a_serial_build_gives(tmp_path):
 def test_a_take_staged_with_other_audio_options_is_not_reused(tmp_path):
     """The staged audio is encoded as the build asks: a rerun with another --audio-rate or
     --audio-format stages the take again rather than reusing audio of another form."""
-    from gesturekit._database_stage import job_key
     from gesturekit.database import BuildConfig
+    from gesturekit.database.stage import job_key
     from gesturekit.datasets.takes import TakeSource
 
     motion, audio = tmp_path / "t.npy", tmp_path / "t.wav"

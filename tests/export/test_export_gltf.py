@@ -34,8 +34,8 @@ from gesturekit.errors import ConfigError, GestureKitWarning, OutputError
 from gesturekit.export.gltf import (
     ROUGHNESS,
     WARN_ABOVE,
-    _continuous,
     accessor_array,
+    continuous_quaternions,
     export_gltf,
     node_matrices,
     read_glb,
@@ -288,7 +288,7 @@ def test_quaternions_keep_one_sign_and_their_rotations(seed, frames):
     steps = Rotation.from_rotvec(rng.normal(0, 0.3, (frames, 3)))
     r = np.cumprod([Rotation.random(random_state=seed), *steps])
     mats = np.stack([x.as_matrix() for x in r])
-    q = _continuous(rotation_to_quaternion(mats))
+    q = continuous_quaternions(rotation_to_quaternion(mats))
     assert (np.sum(q[1:] * q[:-1], axis=-1) >= 0).all()
     np.testing.assert_allclose(quaternion_matrix(q), mats, atol=1e-9)
 

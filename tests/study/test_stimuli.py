@@ -18,7 +18,7 @@ from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SystemUnavailable
-from gesturekit.export.video import _ffmpeg, probe_media
+from gesturekit.export.video import ffmpeg_executable, probe_media
 from gesturekit.study import (
     balanced_latin_square,
     make_stimuli,
@@ -102,7 +102,7 @@ def test_loudness_normalisation():
 def _soundtrack_loudness(path) -> float:
     raw = subprocess.run(
         [
-            _ffmpeg(),
+            ffmpeg_executable(),
             "-nostdin",
             "-loglevel",
             "error",

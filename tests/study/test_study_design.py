@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from gesturekit.cli import main
 from gesturekit.errors import ConfigError, OutputError
-from gesturekit.export.video import _ffmpeg, probe_media
+from gesturekit.export.video import ffmpeg_executable, probe_media
 from gesturekit.studies import (
     Page,
     check_answer,
@@ -320,7 +320,7 @@ def test_pairwise_only_pages_carry_the_checks(pairwise_study):
 
 
 def _ffmpeg_header(path):
-    text = subprocess.run([_ffmpeg(), "-hide_banner", "-i", str(path)], capture_output=True, text=True).stderr
+    text = subprocess.run([ffmpeg_executable(), "-hide_banner", "-i", str(path)], capture_output=True, text=True).stderr
     return text
 
 
@@ -336,7 +336,21 @@ def _metadata(header):
 
 def _decode_audio(path):
     raw = subprocess.run(
-        [_ffmpeg(), "-nostdin", "-loglevel", "error", "-i", str(path), "-f", "f32le", "-ac", "1", "-ar", "16000", "-"],
+        [
+            ffmpeg_executable(),
+            "-nostdin",
+            "-loglevel",
+            "error",
+            "-i",
+            str(path),
+            "-f",
+            "f32le",
+            "-ac",
+            "1",
+            "-ar",
+            "16000",
+            "-",
+        ],
         capture_output=True,
         check=True,
     ).stdout

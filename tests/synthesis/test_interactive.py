@@ -1,23 +1,20 @@
-"""The app's computations without streamlit: control tables, box selections, uploads, exports, the search record."""
+"""The app's computations without streamlit: box selections, uploads, exports, the search record."""
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 
 import numpy as np
-import pandas as pd
 import pytest
 import soundfile as sf
-from hypothesis import given, settings
-from hypothesis import strategies as hst
 
 from gesturekit import interactive as gs
-from gesturekit.control import ControlTrack, Segment, parse_control
+from gesturekit.control import ControlTrack, constraint_mask, frame_attributes
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import AudioFileError, ConfigError, GestureKitWarning
-from gesturekit.motion import AUDIO_SR, Motion
-from gesturekit.skeleton import N_JOINTS, joint_index
+from gesturekit.motion import AUDIO_SR
 from gesturekit.synthesize import SynthesisConfig, synthesize
 
 
@@ -33,103 +30,7 @@ def result(db):
     return synthesize(speech, db=db, config=config)
 
 
-# ---- the control table --------------------------------------------------------------------------
-
-
-def test_rows_with_the_same_times_form_one_segment_and_blank_rows_are_ignored():
-    table = pd.DataFrame(
-        [
-            {"start_s": 3.0, "end_s": 4.0, "constraint": "speed=slow"},
-            {"start_s": None, "end_s": None, "constraint": None},  # a row just added in the editor
-            {"start_s": 0.5, "end_s": 2.0, "constraint": "left_hand=high"},
-            {"start_s": 0.5, "end_s": 2.0, "constraint": "width=wide"},
-        ]
-    )
-    track = gs.track_from_segments(table)
-    assert track.to_text() == "0.5-2:left_hand=high+width=wide,3-4:speed=slow"
-
-
-@pytest.mark.parametrize(
-    "rows, message",
-    [
-        ([{"start_s": 1.0, "end_s": None, "constraint": "speed=slow"}], "control row 1: fill in end_s"),
-        (
-            [
-                {"start_s": 1.0, "end_s": 2.0, "constraint": "speed=slow"},
-                {"start_s": 3.0, "end_s": 2.0, "constraint": "speed=fast"},
-            ],
-            "control row 2: .*end must be after start",
-        ),
-        ([{"start_s": 1.0, "end_s": 2.0, "constraint": "hands=up"}], "control row 1: unknown constraint 'hands=up'"),
-        (
-            [
-                {"start_s": 1.0, "end_s": 2.0, "constraint": "speed=slow"},
-                {"start_s": 1.0, "end_s": 2.0, "constraint": "speed=fast"},
-            ],
-            "control row 2: speed is set twice .*row 1",
-        ),
-        (
-            [
-                {"start_s": 1.0, "end_s": 3.0, "constraint": "speed=slow"},
-                {"start_s": 2.0, "end_s": 4.0, "constraint": "width=wide"},
-            ],
-            "overlap",
-        ),
-        (
-            [{"start_s": "soon", "end_s": 2.0, "constraint": "speed=slow"}],
-            "control row 1: start_s and end_s must be numbers",
-        ),
-    ],
-)
-def test_invalid_rows_are_config_errors_naming_the_row(rows, message):
-    with pytest.raises(ConfigError, match=message):
-        gs.track_from_segments(rows)
-
-
-_constraint = hst.sampled_from(gs.CONSTRAINT_CHOICES)
-
-
-@hst.composite
-def _tracks(draw):
-    """Non-overlapping segments on a 0.05 s grid, each with 1-2 constraints of distinct controls."""
-    cuts = sorted(draw(hst.sets(hst.integers(0, 400), min_size=0, max_size=10)))
-    segs = []
-    for a, b in zip(cuts[::2], cuts[1::2]):
-        picked = draw(hst.lists(_constraint, min_size=1, max_size=2, unique_by=lambda c: c.split("=")[0]))
-        segs.append(Segment(a * 0.05, b * 0.05, tuple(tuple(c.split("=")) for c in picked)))
-    return ControlTrack(tuple(segs))
-
-
-@settings(max_examples=60, deadline=None)
-@given(track=_tracks())
-def test_a_track_survives_the_table(track):
-    assert gs.track_from_segments(gs.segments_frame(track)) == track
-
-
-def test_adding_a_segment_cuts_what_it_overlaps():
-    table = gs.segments_frame(parse_control("0-4:speed=slow,5-6:width=wide"))
-    out = gs.add_segment(table, 1.0, 2.0, "left_hand=high")
-    assert gs.track_from_segments(out).to_text() == "0-1:speed=slow,1-2:left_hand=high,2-4:speed=slow,5-6:width=wide"
-    out = gs.add_segment(out, 3.5, 5.5, "speed=fast")
-    assert (
-        gs.track_from_segments(out).to_text()
-        == "0-1:speed=slow,1-2:left_hand=high,2-3.5:speed=slow,3.5-5.5:speed=fast,5.5-6:width=wide"
-    )
-    with pytest.raises(ConfigError, match="unknown constraint"):
-        gs.add_segment(out, 0, 1, "nonsense")
-
-
-@settings(max_examples=60, deadline=None)
-@given(adds=hst.lists(hst.tuples(hst.integers(0, 100), hst.integers(1, 30), _constraint), min_size=1, max_size=8))
-def test_any_sequence_of_additions_leaves_a_valid_table_ending_with_the_last_range(adds):
-    table = gs.empty_segments()
-    for a, length, constraint in adds:
-        table = gs.add_segment(table, a / 10, (a + length) / 10, constraint)
-    track = gs.track_from_segments(table)  # never overlapping
-    a, length, constraint = adds[-1]
-    name, value = constraint.split("=")
-    covering = [s for s in track.segments if s.start_s <= a / 10 + 1e-9 and s.end_s >= (a + length) / 10 - 1e-9]
-    assert len(covering) == 1 and covering[0].constraints == ((name, value),)
+# ---- box selections ----------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize(
@@ -211,10 +112,18 @@ def test_download_names_are_safe(result):
 # ---- the search record --------------------------------------------------------------------------
 
 
+def test_steps_overview_adds_each_chosen_windows_source(result, db):
+    table = result.steps_overview(db)
+    assert list(table.columns[:7]) == ["step", "first_frame", "start_s", "clip", "start", "take", "source_s"]
+    for row in table.itertuples():
+        assert row.take == db.take_names[int(db.clip_take[row.clip])]
+        assert row.source_s == pytest.approx((int(db.clip_start[row.clip]) + row.start) / db.fps)
+
+
 def test_candidates_table_lists_the_recorded_candidates_with_their_source(result, db):
     s = result.search
     for step in (0, s.n_steps // 2, s.n_steps - 1):
-        table = gs.candidates_table(result, db, step)
+        table = result.search.candidates_table(step, db)
         assert len(table) == int(np.count_nonzero(s.cand_clip[step] >= 0)) == 6
         assert list(table["clip"]) == list(s.cand_clip[step])
         assert list(table["chosen"]).index(True) == s.position[step]
@@ -223,7 +132,7 @@ def test_candidates_table_lists_the_recorded_candidates_with_their_source(result
         assert r["source_s"] == pytest.approx((int(db.clip_start[r["clip"]]) + r["start"]) / db.fps)
         assert (table["combined"] == table["pose_rank"] + table["audio_rank"]).all()
     with pytest.raises(ConfigError, match="step must be in"):
-        gs.candidates_table(result, db, s.n_steps)
+        result.search.candidates_table(s.n_steps, db)
 
 
 def test_step_audio_and_candidate_motion_cover_one_step(result, db):
@@ -246,14 +155,17 @@ def test_comparing_k_matches_single_runs(result, db):
     assert 0.0 <= table["control_met"][0] <= 1.0
 
 
-def test_control_adherence_counts_constrained_frames_meeting_their_constraint():
-    pos = np.zeros((30, N_JOINTS, 3), dtype=np.float32)
-    pos[:15, joint_index("left_wrist"), 1] = 0.5  # high for the first second, low after
-    motion = Motion(pos, 15.0)
-    thresholds = {"left_hand_height": (0.1, 0.4)}
-    assert gs.control_adherence(motion, parse_control("0-1:left_hand=high"), thresholds) == 1.0
-    assert gs.control_adherence(motion, parse_control("0-2:left_hand=high"), thresholds) == 0.5
-    assert np.isnan(gs.control_adherence(motion, ControlTrack(()), thresholds))
+def test_comparison_tables_control_met_is_the_fraction_of_constrained_frames_meeting_them(result, db):
+    """The unified control adherence (evaluate.metrics, per segment) against a plain frame-by-frame count."""
+    table = gs.comparison_table([result], db.thresholds)
+    m = result.motion
+    labels = result.control.frame_labels(m.n_frames, fps=m.fps)
+    attrs = frame_attributes(m.positions, fps=m.fps)
+    met = [bool(constraint_mask(attrs[t], c, dict(db.thresholds))) for t, c in enumerate(labels) if c]
+    assert len(met) > 0
+    assert table["control_met"][0] == pytest.approx(np.mean(met), abs=1e-12)
+    plain = dataclasses.replace(result, config=result.config.with_control(ControlTrack(())))
+    assert np.isnan(gs.comparison_table([plain], db.thresholds)["control_met"][0])
 
 
 def test_without_a_refiner_nothing_changes(result):
@@ -267,14 +179,3 @@ def test_a_silent_upload_warns_naming_the_upload():
     with pytest.warns(GestureKitWarning, match=r"^quiet\.wav: the audio is silent"):
         audio, _ = gs.read_speech_upload("quiet.wav", buf.getvalue())
     assert not audio.any()
-
-
-def test_players_get_the_audio_at_its_own_level():
-    quiet = (0.01 * np.sin(np.linspace(0, 200, AUDIO_SR))).astype(np.float32)
-    quiet[10] = 3.0  # beyond full scale: clipped, not rescaled
-    back, sr = sf.read(io.BytesIO(gs.wav_bytes(quiet)), dtype="float32")
-    assert sr == AUDIO_SR and back.shape == quiet.shape
-    assert back[10] == pytest.approx(1.0, abs=1e-4)
-    np.testing.assert_allclose(np.delete(back, 10), np.delete(quiet, 10), atol=1 / 32767)
-    silent, _ = sf.read(io.BytesIO(gs.wav_bytes(np.zeros(100, np.float32))))
-    assert not silent.any()

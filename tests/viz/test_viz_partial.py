@@ -37,7 +37,7 @@ from gesturekit.viz._plotly import data_array
 from gesturekit.viz.appearance import APPEARANCE, DERIVED_PART, DERIVED_POINTS, point_states
 from gesturekit.viz.figures import skeleton_figure
 from gesturekit.viz.render import RenderStyle, SkeletonScene, render_image, view_bounds
-from gesturekit.viz.render_pool import _scene_from_job, _write_job
+from gesturekit.viz.render_pool import _write_job, scene_from_job
 from gesturekit.viz.viewer import viewer_data
 
 THUMBS = tuple(f"{side}_thumb{k}" for side in ("left", "right") for k in range(1, 5))
@@ -255,7 +255,7 @@ def test_the_rendering_processes_get_the_joints_that_exist(tmp_path):
     partial, full = upper_body(2), Motion(_demo()[:2], 15.0)
     path = tmp_path / "job.npz"
     _write_job(path, [partial, full], None, (64, 48), RenderStyle())
-    with _scene_from_job(str(path)) as scene:
+    with scene_from_job(str(path)) as scene:
         assert [m.joints for m in scene.motions] == [partial.joints, None]
         picture = scene.render_frame(1)
     with SkeletonScene([partial, full], resolution=(64, 48)) as direct:

@@ -3,11 +3,11 @@
 :func:`build_from_sources` is what :func:`gesturekit.workspace.build_database`
 (``gesturekit build-db FOLDER``) runs once the folder's takes are found:
 
-1. the takes are staged beside the output (:mod:`gesturekit._database_stage`),
+1. the takes are staged beside the output (:mod:`gesturekit.database.stage`),
    by this process, worker processes or a Dask cluster; units an interrupted
    build staged already are reused;
 2. the database is written from the staged takes in order of take name
-   (:func:`gesturekit._database_build.assemble`) into the output's temporary
+   (:func:`gesturekit.database.build.assemble`) into the output's temporary
    folder, which is swapped into place (:func:`gesturekit.outputs.write_folder`);
 3. the staging folder is removed.
 
@@ -20,7 +20,7 @@ the database's statistics and thresholds are kept, the new takes z-scored with
 them and put after the old ones, whose arrays are copied unchanged.
 
 With ``--normalize-bones`` the database has one skeleton (:mod:`gesturekit.bones`): the
-takes are read once first to fit it (:func:`~gesturekit._database_stage.sample_job`,
+takes are read once first to fit it (:func:`~gesturekit.database.stage.sample_job`,
 staged like the takes, so a resumed build reuses it; the fit reads the samples one row
 at a time), then read again and staged normalised with it, and it is stored in
 ``database.json``. Appending keeps the database's skeleton: the new takes are read once
@@ -42,18 +42,31 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._database_build import BuildProgress, StagedTake, assemble, reemit, run_jobs
-from ._database_folder import open_staging, read_database, remove_staging, staging_folder
-from ._database_stage import BuildConfig, StageJob, job_key, sample_job, staged_takes
-from .bones import Skeleton, fit_skeleton
-from .errors import ConfigError, DatabaseError, InputFileError
-from .motion import AUDIO_SR
-from .skeleton import JointPresence
+from ..bones import Skeleton, fit_skeleton
+from ..errors import ConfigError, DatabaseError, InputFileError
+from ..motion import AUDIO_SR
+from ..skeleton import JointPresence
+from .build import assemble
+from .config import BuildConfig
+from .folder import FolderOut, read_database
+from .stage import (
+    BuildProgress,
+    StagedTake,
+    StageJob,
+    job_key,
+    open_staging,
+    reemit,
+    remove_staging,
+    run_jobs,
+    sample_job,
+    staged_takes,
+    staging_folder,
+)
 
 if TYPE_CHECKING:
     from distributed import Client
 
-    from .datasets.takes import TakeSource
+    from ..datasets.takes import TakeSource
 
 __all__ = ["build_from_sources", "recorded_build", "recorded_reading"]
 
@@ -158,7 +171,7 @@ def _append_config(build: dict[str, Any], given: BuildConfig | None, out: Path) 
 
 def _recorded_sources(takes: list[dict], out: Path) -> list[tuple[TakeSource, tuple[str, ...] | None]]:
     """The files the database's takes were read from (with, for a file of several takes, which of them)."""
-    from .datasets.takes import TakeSource
+    from ..datasets.takes import TakeSource
 
     units: dict[tuple[str, str], tuple[TakeSource, list[str] | None]] = {}
     for t in takes:
@@ -291,8 +304,8 @@ def build_from_sources(
         Options that do not fit the database appended to, an output that may not be written, a take
         that cannot be read (the message names the file), a recorded source that is gone.
     """
-    from .datasets.takes import count_takes
-    from .outputs import check_output, output_lock, write_folder
+    from ..datasets.takes import count_takes
+    from ..outputs import check_output, output_lock, write_folder
 
     if keep_stats and not append:
         raise ConfigError("--keep-stats keeps the statistics of a database appended to; it needs --append")
@@ -368,7 +381,7 @@ def build_from_sources(
         cfg = config
 
         def fill(tmp: Path) -> None:
-            assemble(tmp, staged, cfg, base=base if keep_stats else None, skeleton=skeleton)
+            assemble(FolderOut(tmp), staged, cfg, base=base if keep_stats else None, skeleton=skeleton)
 
         write_folder(out, "database", fill, overwrite=overwrite or append, inputs=inputs, locked=True)
         remove_staging(staging)
@@ -425,7 +438,7 @@ def _fit_skeleton(
         Appending: a take's median length of a bone is more than
         :data:`~gesturekit.bones.FIT_TOLERANCE` from the stored skeleton's (naming the take and bone).
     """
-    from .datasets.takes import count_takes
+    from ..datasets.takes import count_takes
 
     plain = {**reading, "options": replace(reading["options"], normalize_bones=False, skeleton=None)}
     key = {**reading_key, "pass": "bone samples"}

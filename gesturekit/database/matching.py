@@ -1,33 +1,11 @@
-"""MatchingDatabase: takes -> features -> 64-frame clips, saved as plain arrays + JSON.
+"""MatchingDatabase: the clips the search matches against, with their features, poses and attributes.
 
 Features are computed on each whole take (so look-ahead near a clip's end uses
 the real following frames), then the take is cut into non-overlapping clips of
 ``clip_frames`` frames; the tail that does not fill a clip is dropped. On
 request a second, overlapping cut (stride ``overlap_stride``) is stored for
-training the refiner.
-
-On disk a database is a folder::
-
-    database.json        format version, feature layout, build config, takes, thresholds
-    F.npy  (M,64,112)    z-scored audio features f_t          float32
-    P.npy  (M,64,96)     z-scored pose features p_t           float32
-    G.npy  (M,64,165)    output poses g_t, metres             float32
-    A.npy  (M,64,28)     cGAN audio input (m_t, dm_t), raw    float32
-    valid.npy (M,64)     frame may start a segment            bool
-    attributes.npy (M,64,9)  control attributes               float32
-    pose_track.npy (M,70,24) raw feature-joint positions of frames s..s+69
-    clip_take.npy, clip_start.npy (M,)  take index and start frame of each clip
-    stats.npz            z-scoring statistics (F, P, A)
-    audio.npy            all takes' audio, int16 at 16 kHz, a lower rate or FLAC (optional; _database_audio)
-    overlap/             the overlapping cut, same arrays per window (optional)
-
-Every array is a plain ``.npy`` (memory-mapped on load, never pickled); the
-folder is written under a temporary name and swapped into place, by the rules
-of :mod:`gesturekit.outputs` (``database.json`` is the marker that lets
-``--force`` recognise a database). Writing, reading and checking the folder
-is :mod:`gesturekit._database_folder`'s part; building, in two passes over
-takes staged on disk, :mod:`gesturekit._database_stage` and
-:mod:`gesturekit._database_build`'s.
+training the refiner. The folder a database is saved as is described in
+:mod:`gesturekit.database.folder`; building it, in :mod:`gesturekit.database.build`.
 """
 
 from __future__ import annotations
@@ -39,45 +17,21 @@ from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
-from ._database_audio import AudioStorage, read_take_audio
-from ._database_build import build_in_memory
-from ._database_folder import FORMAT_VERSION, read_database, write_database
-from ._database_stage import BuildConfig, TakeFeatures, take_features
-from .bones import Skeleton
-from .control import ATTRIBUTE_UNITS
-from .errors import ConfigError, DatabaseError
-from .features import ZScore, audio_frame_features, cgan_audio_features, stack_audio_features
-from .motion import AUDIO_SR, Take
-from .skeleton import JointPresence
+from ..bones import Skeleton
+from ..control import ATTRIBUTE_UNITS
+from ..errors import ConfigError, DatabaseError
+from ..features import ZScore, audio_frame_features, cgan_audio_features, stack_audio_features
+from ..motion import AUDIO_SR, Take
+from ..skeleton import JointPresence
+from .audio import AudioStorage, read_take_audio
+from .build import build_in_memory
+from .config import BuildConfig
+from .folder import read_database, write_database
 
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["FORMAT_VERSION", "BuildConfig", "TakeFeatures", "take_features", "MatchingDatabase", "normalise_exclusions"]
-
-
-def normalise_exclusions(
-    takes: Iterable[object], ranges: Iterable[Any]
-) -> tuple[tuple[str, ...], tuple[tuple[str, float, float], ...]]:
-    """Held-out takes and (take, start_s, end_s) ranges as plain tuples, for configs.
-
-    Raises
-    ------
-    ConfigError
-        A range entry is not a (take, start, end) triple of a name and two finite numbers
-        with ``0 <= start < end``.
-    """
-    out = []
-    for r in ranges:
-        try:
-            take, a, b = r
-            take, a, b = str(take), float(a), float(b)
-        except (TypeError, ValueError):
-            raise ConfigError(f"exclude_ranges entries must be (take, start_s, end_s), got {r!r}") from None
-        if not (np.isfinite(a) and np.isfinite(b) and 0 <= a < b):
-            raise ConfigError(f"exclude range {take}:{a:g}-{b:g} s: need finite times with 0 <= start < end")
-        out.append((take, a, b))
-    return tuple(str(t) for t in takes), tuple(out)
+__all__ = ["MatchingDatabase"]
 
 
 class _Array(property):
@@ -311,7 +265,7 @@ class MatchingDatabase:
 
     def take_audio(self, take: int | str) -> np.ndarray:
         """A take's audio, float32 at 16 kHz, shape (samples,), whatever form it is stored in
-        (requires a database built with ``store_audio``; see :mod:`gesturekit._database_audio`)."""
+        (requires a database built with ``store_audio``; see :mod:`gesturekit.database.audio`)."""
         if self.audio is None:
             raise DatabaseError("this database was built without audio (store_audio=False)")
         return read_take_audio(self.audio, self._take(take), self.audio_storage, path=self.path)
@@ -383,11 +337,11 @@ class MatchingDatabase:
     ) -> MatchingDatabase:
         """Build a database in memory from takes.
 
-        The same two passes as a folder build (each take featurised, cut and
-        staged on disk, then the arrays written take by take; see
-        :mod:`gesturekit._database_build`), in a temporary folder that is read
-        back into memory and removed. The takes are listed in the database by
-        name.
+        Each take is featurised and cut into clips as it is read, then the
+        takes are assembled in order of name into the database's arrays
+        (:mod:`gesturekit.database.build`): the arrays a build from files
+        writes into its folder, the same numbers. The takes are listed in the
+        database by name.
 
         Parameters
         ----------
@@ -441,7 +395,17 @@ class MatchingDatabase:
             An array holds NaN or infinite values; nothing is written.
         """
         path = Path(path)
-        write_database(self, path, overwrite=overwrite, inputs=inputs, locked=locked)
+        write_database(
+            path,
+            meta=self.meta,
+            arrays=self.arrays,
+            stats=self.stats,
+            audio=self.audio,
+            overlap=self.overlap,
+            overwrite=overwrite,
+            inputs=inputs,
+            locked=locked,
+        )
         self.path = path
         return path
 

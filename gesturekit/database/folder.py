@@ -1,13 +1,34 @@
-"""A matching database's folder on disk: writing it, and reading it back with every check; and the
-staging folder an out-of-core build keeps beside it until the database is written.
+"""A matching database's folder on disk: its format, writing it, and reading it back with every check.
 
-The layout of the folder is described in :mod:`gesturekit.database`;
-:meth:`~gesturekit.database.MatchingDatabase.save` and
-:meth:`~gesturekit.database.MatchingDatabase.load` call :func:`write_database`
-and :func:`read_database`. Reading trusts nothing: ``database.json`` is checked
-against the structure writing produces and the arrays against it (shapes,
-dtypes, every clip inside its take), arrays are never unpickled, and a
-damaged folder is a :class:`~gesturekit.errors.DatabaseError` naming the file.
+A database is a folder::
+
+    database.json        format version, feature layout, build config, takes, thresholds
+    F.npy  (M,64,112)    z-scored audio features f_t          float32
+    P.npy  (M,64,96)     z-scored pose features p_t           float32
+    G.npy  (M,64,165)    output poses g_t, metres             float32
+    A.npy  (M,64,28)     cGAN audio input (m_t, dm_t), raw    float32
+    valid.npy (M,64)     frame may start a segment            bool
+    attributes.npy (M,64,9)  control attributes               float32
+    pose_track.npy (M,70,24) raw feature-joint positions of frames s..s+69
+    clip_take.npy, clip_start.npy (M,)  take index and start frame of each clip
+    stats.npz            z-scoring statistics (F, P, A)
+    audio.npy            all takes' audio, int16 at 16 kHz, a lower rate or FLAC (optional;
+                         :mod:`gesturekit.database.audio`)
+    overlap/             the overlapping cut, same arrays per window (optional)
+
+Every array is a plain ``.npy`` (memory-mapped on load, never pickled); the
+folder is written under a temporary name and swapped into place, by the rules
+of :mod:`gesturekit.outputs` (``database.json`` is the marker that lets
+``--force`` recognise a database, so it is written last).
+
+:meth:`~gesturekit.database.MatchingDatabase.save` writes a database held in
+memory with :func:`write_database`; a build from staged takes writes the folder
+array by array, front to back, through a :class:`FolderOut`
+(:func:`gesturekit.database.build.assemble`). Reading
+(:func:`read_database`) trusts nothing: ``database.json`` is checked against the
+structure writing produces and the arrays against it (shapes, dtypes, every
+clip inside its take), arrays are never unpickled, and a damaged folder is a
+:class:`~gesturekit.errors.DatabaseError` naming the file.
 """
 
 from __future__ import annotations
@@ -15,53 +36,50 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import uuid
 import zipfile
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import IO, Any, Literal
 
 import numpy as np
 
-from . import limits
-from ._database_audio import AudioStorage, encode_take_audio, read_take_audio, take_audio_fields
-from ._io import DATABASE_CLIP_ARRAYS, read_json_marker
-from ._version import __version__
-from .bones import Skeleton
-from .control import ATTRIBUTE_NAMES
-from .errors import ConfigError, DatabaseError, GestureKitError, OutputError
-from .features import LAYOUT
-from .motion import AUDIO_SR
-from .skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
-
-if TYPE_CHECKING:
-    from .database import MatchingDatabase
+from .. import limits
+from ..bones import Skeleton
+from ..control import ATTRIBUTE_NAMES
+from ..errors import ConfigError, DatabaseError, GestureKitError
+from ..features import LAYOUT
+from ..folders import read_json_marker
+from ..motion import AUDIO_SR
+from ..skeleton import JOINT_NAMES, POSE_FEATURE_INDICES, JointPresence
+from .audio import AudioStorage, encode_take_audio, read_take_audio, take_audio_fields
 
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
     "CLIP_ARRAYS",
-    "STAGING_VERSION",
+    "INDEX_ARRAYS",
+    "FOLDER_FILES",
     "write_database",
     "write_stats",
     "write_meta",
     "read_database",
-    "staging_folder",
-    "is_staging",
-    "open_staging",
-    "remove_staging",
+    "NpyWriter",
+    "FolderOut",
 ]
 
+#: ``database.json``'s ``format`` and ``format_version``: a folder of another version is refused on load.
 FORMAT = "gesturekit-matching-database"
 FORMAT_VERSION = 1
-#: The staging folder of an out-of-core build (``.NAME.staging`` beside the database): its marker file
-#: and format; a staged unit records the version, and one of another version is staged again.
-STAGING_FORMAT = "gesturekit-database-staging"
-STAGING_VERSION = 1
-_MARKER = "staging.json"
-# the per-clip arrays of a cut, each with M clips first (declared in _io); clip_take and clip_start index them
-CLIP_ARRAYS = DATABASE_CLIP_ARRAYS
-_INDEX_ARRAYS = ("clip_take", "clip_start")
+#: The per-clip arrays of a cut (``NAME.npy``), each with M clips first.
+CLIP_ARRAYS = ("F", "P", "G", "A", "valid", "attributes", "pose_track")
+#: The arrays that index the clips: each clip's take and its first frame in the take.
+INDEX_ARRAYS = ("clip_take", "clip_start")
+#: Every name a database folder can hold, its marker included (what lets a folder whose
+#: ``database.json`` was cut short be recognised and rebuilt in place).
+FOLDER_FILES = frozenset(
+    [f"{a}.npy" for a in (*CLIP_ARRAYS, *INDEX_ARRAYS, "audio")] + ["stats.npz", "overlap", "database.json"]
+)
+_CHUNK_BYTES = 64 << 20  # attribute columns are read in pieces of this size
 _MESSAGES = {
     "no_folder": "no database folder here (build one with `gesturekit build-db`)",
     "no_file": "not a gesturekit database: database.json is missing",
@@ -72,9 +90,29 @@ _MESSAGES = {
 
 
 def write_database(
-    db: MatchingDatabase, path: Path, *, overwrite: bool, inputs: Iterable[str | os.PathLike | None], locked: bool
+    path: Path,
+    *,
+    meta: dict[str, Any],
+    arrays: dict[str, np.ndarray],
+    stats: dict[str, np.ndarray],
+    audio: np.ndarray | None,
+    overlap: dict[str, np.ndarray] | None,
+    overwrite: bool,
+    inputs: Iterable[str | os.PathLike | None],
+    locked: bool,
 ) -> None:
-    """Write ``db`` as the folder ``path`` by the rules of :func:`gesturekit.outputs.write_folder`.
+    """Write a database's parts as the folder ``path`` by the rules of :func:`gesturekit.outputs.write_folder`.
+
+    Parameters
+    ----------
+    path : Path
+        The database folder.
+    meta, arrays, stats, audio, overlap
+        The database: ``database.json``'s content (its ``counts`` are written anew), the
+        arrays of :data:`CLIP_ARRAYS` and :data:`INDEX_ARRAYS` (M clips first), the z-scoring
+        vectors, ``audio.npy`` (or None) and the overlapping cut (or None).
+    overwrite, inputs, locked
+        See :func:`gesturekit.outputs.write_folder`.
 
     Raises
     ------
@@ -83,40 +121,40 @@ def write_database(
     DatabaseError
         An array holds NaN or infinite values; nothing is written.
     """
-    from .outputs import write_folder
+    from ..outputs import write_folder
 
-    _check_finite(db, path)
+    _check_finite(arrays, overlap, stats, audio, path)
 
     def fill(tmp: Path) -> None:
-        for k, v in db.arrays.items():
+        for k, v in arrays.items():
             np.save(tmp / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
-        write_stats(tmp / "stats.npz", db.stats)
-        meta = dict(db.meta)
-        if db.audio is not None:
-            audio, meta = _stored_audio(db)
-            np.save(tmp / "audio.npy", audio, allow_pickle=False)
-        if db.overlap is not None:
+        write_stats(tmp / "stats.npz", stats)
+        held = dict(meta)
+        if audio is not None:
+            stored, held = _stored_audio(audio, meta)
+            np.save(tmp / "audio.npy", stored, allow_pickle=False)
+        if overlap is not None:
             (tmp / "overlap").mkdir()
-            for k, v in db.overlap.items():
+            for k, v in overlap.items():
                 np.save(tmp / "overlap" / f"{k}.npy", np.ascontiguousarray(v), allow_pickle=False)
-        write_meta(tmp, meta, n_clips=db.n_clips)
+        write_meta(tmp, held, n_clips=int(arrays["clip_take"].shape[0]))
 
     write_folder(path, "database", fill, overwrite=overwrite, inputs=inputs, locked=locked)
 
 
-def _stored_audio(db: MatchingDatabase) -> tuple[np.ndarray, dict]:
+def _stored_audio(audio: np.ndarray, meta: dict[str, Any]) -> tuple[np.ndarray, dict]:
     """``audio.npy``'s array and ``database.json``'s content for the storage the build asked for.
 
-    A database built in memory holds int16 at 16 kHz; when its build asked for another
-    storage (``audio_format``, ``audio_rate``) each take is encoded here, and the takes'
+    A database whose audio is held as int16 at 16 kHz while its build asked for another
+    storage (``audio_format``, ``audio_rate``) has each take encoded here, and the takes'
     audio entries and the ``"audio"`` entry are written for it. A database that holds
     what its build asked for is written as it is.
     """
-    meta = dict(db.meta)
+    meta = dict(meta)
     held = AudioStorage.from_meta(meta)
     build = meta.get("build", {})
     wanted = AudioStorage(format=build.get("audio_format", "pcm"), rate=build.get("audio_rate", AUDIO_SR))
-    audio = np.asarray(db.audio)
+    audio = np.asarray(audio)
     if wanted == held:
         return audio, meta
     parts, takes, offset = [], [], 0
@@ -159,11 +197,17 @@ def write_meta(folder: Path, meta: dict[str, Any], *, n_clips: int) -> None:
     (folder / "database.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
 
 
-def _check_finite(db: MatchingDatabase, path: Path) -> None:
+def _check_finite(
+    arrays: dict[str, np.ndarray],
+    overlap: dict[str, np.ndarray] | None,
+    stats: dict[str, np.ndarray],
+    audio: np.ndarray | None,
+    path: Path,
+) -> None:
     """Refuse to save arrays with NaN or infinite values (they would poison every search)."""
-    parts = [("", db.arrays), ("overlap ", db.overlap or {}), ("z-scoring ", db.stats)]
-    for where, arrays in parts:
-        for k, v in arrays.items():
+    parts = [("", arrays), ("overlap ", overlap or {}), ("z-scoring ", stats)]
+    for where, group in parts:
+        for k, v in group.items():
             v = np.asarray(v) if where == "z-scoring " else v
             if not np.issubdtype(v.dtype, np.floating):
                 continue
@@ -179,8 +223,8 @@ def _check_finite(db: MatchingDatabase, path: Path) -> None:
                         "audio features are not finite; nothing was written",
                         path=path,
                     )
-    if db.audio is not None and np.issubdtype(np.asarray(db.audio).dtype, np.floating):
-        if not np.isfinite(db.audio).all():
+    if audio is not None and np.issubdtype(np.asarray(audio).dtype, np.floating):
+        if not np.isfinite(audio).all():
             raise DatabaseError("the database's audio holds NaN or infinite values; nothing was written", path=path)
 
 
@@ -221,12 +265,12 @@ def read_database(path: Path, *, mmap: bool) -> dict:
         except OSError as exc:
             raise DatabaseError(f"{p.name} cannot be read ({exc.strerror or exc})", path=path) from None
 
-    arrays = {k: read(path / f"{k}.npy") for k in CLIP_ARRAYS + _INDEX_ARRAYS}
+    arrays = {k: read(path / f"{k}.npy") for k in CLIP_ARRAYS + INDEX_ARRAYS}
     stats = _read_stats(path)
     audio = read(path / "audio.npy") if (path / "audio.npy").exists() else None
     overlap = None
     if (path / "overlap").is_dir():
-        overlap = {k: read(path / "overlap" / f"{k}.npy") for k in CLIP_ARRAYS + _INDEX_ARRAYS}
+        overlap = {k: read(path / "overlap" / f"{k}.npy") for k in CLIP_ARRAYS + INDEX_ARRAYS}
     _check_arrays(meta, arrays, stats, path, where="")
     _check_clip_order(meta, arrays["clip_take"], path)
     if overlap is not None:
@@ -425,54 +469,125 @@ def _check_clip_order(meta: dict, clip_take: np.ndarray, path: Path) -> None:
         raise DatabaseError("clip_take.npy does not match the takes' first_clip/n_clips in database.json", path=path)
 
 
-# ---- the staging folder -------------------------------------------------------------------------
+# ---- writing a folder front to back -------------------------------------------------------------
 
 
-def staging_folder(out: Path) -> Path:
-    """The staging folder of a build of the database folder ``out``: ``.NAME.staging`` beside it."""
-    from .outputs import beside_name
+class NpyWriter:
+    """An ``.npy`` file written front to back: its header for the final shape, then rows in order.
 
-    return out.parent / beside_name(out, ".staging")
+    The bytes are those :func:`numpy.save` writes for the whole array. Rows are
+    appended with plain writes, not through a memory map: pages of a mapped
+    output count towards the process's resident memory until they are unmapped,
+    which for a whole dataset is the dataset's size.
 
-
-def is_staging(path: Path) -> bool:
-    """Whether ``path`` is a staging folder gesturekit made (its ``staging.json`` says so)."""
-    try:
-        marker = limits.read_json(path / _MARKER)
-    except GestureKitError:
-        return False
-    return isinstance(marker, dict) and marker.get("format") == STAGING_FORMAT
-
-
-def open_staging(path: Path) -> None:
-    """Make the staging folder ``path``, or reuse the one an interrupted build left (its unfinished
-    units removed).
-
-    Raises
-    ------
-    OutputError
-        Something that is not a gesturekit staging folder is at ``path``.
+    Parameters
+    ----------
+    path : Path
+        The file to write (created).
+    dtype : np.dtype
+    shape : tuple of int
+        The whole array's shape, rows first.
     """
-    from .outputs import write_errors
 
-    with write_errors(path):
-        if path.is_symlink() or (path.exists() and not is_staging(path)):
-            raise OutputError(
-                "is in the way of the build's staging folder and is not one gesturekit made; move it away", path=path
+    def __init__(self, path: Path, dtype: np.dtype, shape: tuple[int, ...]) -> None:
+        self.path, self.dtype, self.shape = path, np.dtype(dtype), shape
+        self.rows = 0
+        self.file: IO[bytes] = open(path, "wb")  # noqa: SIM115 (closed by close(), the writers outlive one block)
+        header = {"descr": np.lib.format.dtype_to_descr(self.dtype), "fortran_order": False, "shape": shape}
+        np.lib.format.write_array_header_1_0(self.file, header)
+
+    def write(self, rows: np.ndarray) -> None:
+        """Append ``rows`` (this dtype, this row shape)."""
+        if rows.dtype != self.dtype or rows.shape[1:] != self.shape[1:]:
+            raise GestureKitError(f"{self.path.name}: staged rows of {rows.dtype} {rows.shape} do not fit {self.shape}")
+        self.file.write(np.ascontiguousarray(rows).tobytes())
+        self.rows += rows.shape[0]
+
+    def copy_from(self, path: Path) -> None:
+        """Append the rows of the ``.npy`` file ``path`` (of this dtype and row shape) byte for byte."""
+        with open(path, "rb") as src:
+            version = np.lib.format.read_magic(src)
+            read_header = (
+                np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
             )
-        if not path.exists():
-            tmp = path.parent / f"{path.name}.tmp-{uuid.uuid4().hex[:12]}"
-            tmp.mkdir(parents=True)
-            marker = {"format": STAGING_FORMAT, "version": STAGING_VERSION, "gesturekit": __version__}
-            (tmp / _MARKER).write_text(json.dumps(marker), encoding="utf-8")
-            os.replace(tmp, path)
-            return
-        for entry in path.iterdir():
-            if ".tmp-" in entry.name:
-                shutil.rmtree(entry, ignore_errors=True)
+            shape, fortran, dtype = read_header(src)
+            if fortran or dtype != self.dtype or tuple(shape[1:]) != self.shape[1:]:
+                raise GestureKitError(f"{path} holds {dtype} {shape}; cannot append it to {self.shape}")
+            shutil.copyfileobj(src, self.file, 16 << 20)
+        self.rows += int(shape[0])
+
+    def close(self) -> None:
+        """Close the file; every row of the shape must have been written."""
+        self.file.close()
+        if self.rows != self.shape[0]:
+            raise GestureKitError(f"{self.path.name}: wrote {self.rows} rows of {self.shape[0]}")
+
+    def __enter__(self) -> NpyWriter:
+        return self
+
+    def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
+        if exc_type is None:
+            self.close()
+        else:  # the error that stopped the writing is the one to report, not the rows missing after it
+            self.file.close()
 
 
-def remove_staging(path: Path) -> None:
-    """Remove a staging folder gesturekit made (anything else is left alone)."""
-    if is_staging(path) and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
+def column_percentiles(
+    path: Path, percentiles: tuple[float, float], *, chunk_bytes: int = _CHUNK_BYTES
+) -> dict[str, list[float]]:
+    """Low and high percentiles of each attribute over every frame of the ``attributes.npy`` at ``path``.
+
+    Read a column at a time in pieces of about ``chunk_bytes`` (float64, as the thresholds have
+    always been computed): the same numbers as :func:`numpy.percentile` over the whole column.
+
+    Returns
+    -------
+    dict
+        Attribute name -> [low, high].
+    """
+    n_attr = len(ATTRIBUTE_NAMES)
+    out: dict[str, list[float]] = {}
+    with open(path, "rb") as f:
+        np.lib.format.read_magic(f)
+        shape, _fortran, dtype = np.lib.format.read_array_header_1_0(f)
+        start = f.tell()
+        frames = int(np.prod(shape[:-1]))
+        step = max(1, chunk_bytes // (n_attr * dtype.itemsize))
+        for i, name in enumerate(ATTRIBUTE_NAMES):
+            col = np.empty(frames, dtype=np.float64)
+            f.seek(start)
+            for lo in range(0, frames, step):
+                rows = np.fromfile(f, dtype=dtype, count=min(step, frames - lo) * n_attr)
+                col[lo : lo + rows.shape[0] // n_attr] = rows.reshape(-1, n_attr)[:, i]
+            out[name] = [float(v) for v in np.percentile(col, list(percentiles))]
+    return out
+
+
+class FolderOut:
+    """A database folder as :func:`gesturekit.database.build.assemble` writes it: each array an
+    ``.npy`` file written front to back (:class:`NpyWriter`), so that only a few takes are in
+    memory at once.
+
+    Parameters
+    ----------
+    folder : Path
+        An empty folder (the output's temporary folder).
+    """
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+
+    def array(self, cut: str, name: str, dtype: np.dtype, shape: tuple[int, ...]) -> NpyWriter:
+        """The writer of array ``name`` of the cut ``cut`` (``""``, or ``"overlap"``: its sub-folder)."""
+        sub = self.folder / cut if cut else self.folder
+        sub.mkdir(exist_ok=True)
+        return NpyWriter(sub / f"{name}.npy", dtype, shape)
+
+    def thresholds(self, percentiles: tuple[float, float]) -> dict[str, list[float]]:
+        """The attributes' thresholds over every frame of the ``attributes.npy`` written."""
+        return column_percentiles(self.folder / "attributes.npy", percentiles)
+
+    def finish(self, meta: dict[str, Any], stats: dict[str, np.ndarray], *, n_clips: int) -> None:
+        """Write ``stats.npz``, then ``database.json`` (the marker, last)."""
+        write_stats(self.folder / "stats.npz", stats)
+        write_meta(self.folder, meta, n_clips=n_clips)

@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ConfigError, DatabaseError
-from .motion import AUDIO_SR
+from ..errors import ConfigError, DatabaseError
+from ..motion import AUDIO_SR
 
 __all__ = [
     "AUDIO_FORMATS",
