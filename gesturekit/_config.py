@@ -316,9 +316,17 @@ def check_option(cls: type, name: str, value: Any, *, what: str | None = None) -
         if value not in opt.choices:
             raise ConfigError(f"{label} must be one of {', '.join(map(str, opt.choices))}, got {value!r}")
         return value
-    integer = _integer(cls, name, opt)
-    if opt.kind is str or isinstance(default_of(cls, name), (str, tuple)):
+    try:
+        default = default_of(cls, name)
+    except KeyError:  # a required option
+        default = None
+    if isinstance(default, bool):  # a switch
+        if not isinstance(value, bool):
+            raise ConfigError(f"{label} must be True or False, got {value!r}")
+        return value
+    if opt.kind is str or isinstance(default, (str, tuple)):
         return value  # text and tuples are checked by the class itself
+    integer = _integer(cls, name, opt)
     ok = not isinstance(value, bool) and isinstance(value, numbers.Integral if integer else numbers.Real)
     if ok:
         above = opt.low is None or value > opt.low or (value == opt.low and not opt.low_open)

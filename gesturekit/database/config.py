@@ -13,9 +13,10 @@ from typing import Any
 
 import numpy as np
 
+from .._config import option, option_of
 from ..errors import ConfigError
 from ..motion import AUDIO_SR
-from .audio import AudioStorage
+from .audio import AUDIO_FORMATS, MIN_AUDIO_RATE, AudioStorage
 
 __all__ = ["BuildConfig", "normalise_exclusions"]
 
@@ -58,19 +59,39 @@ class BuildConfig:
         with ``store_audio=False``.
     """
 
-    clip_frames: int = 64
-    overlap_stride: int | None = None
-    percentiles: tuple[float, float] = (15.0, 85.0)
-    store_audio: bool = True
-    label: str = ""
+    clip_frames: int = option(64, help="frames per clip, T_match", low=16, unit="frames")
+    overlap_stride: int | None = option(
+        None,
+        help="also store an overlapping cut (stride in frames) for the refiner",
+        low=1,
+        kind=int,
+        unit="frames",
+        limit=lambda config: config.clip_frames,
+    )
+    percentiles: tuple[float, float] = option(
+        (15.0, 85.0), help="attribute percentiles that define low/high controls", low=0.0, high=100.0
+    )
+    store_audio: bool = option(True, help="keep the takes' audio in the database")
+    label: str = option("", help="a description stored with the database")
     source: str = ""
     joint_map: str | None = None
-    audio_format: str = "pcm"
-    audio_rate: int = AUDIO_SR
+    audio_format: str = option(
+        "pcm",
+        help="how the kept audio is stored: pcm (int16) or flac (lossless, about half the size)",
+        choices=AUDIO_FORMATS,
+    )
+    audio_rate: int = option(
+        AUDIO_SR,
+        help="sample rate of the kept audio (lower rates are for listening only)",
+        low=MIN_AUDIO_RATE,
+        high=AUDIO_SR,
+        unit="Hz",
+        metavar="HZ",
+    )
     reading: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
-        if self.clip_frames < 16:
+        if self.clip_frames < (option_of(BuildConfig, "clip_frames").low or 0):
             raise ConfigError(f"clip_frames must be at least 16, got {self.clip_frames}")
         if self.overlap_stride is not None and not 1 <= self.overlap_stride <= self.clip_frames:
             raise ConfigError(f"overlap_stride must be in 1..{self.clip_frames}, got {self.overlap_stride}")
