@@ -29,9 +29,7 @@ if TYPE_CHECKING:  # named in annotations only
     import pandas as pd
 
     from .database import MatchingDatabase
-
-    # the result records the configuration that made it; the configuration lives with the stages
-    from .synthesize import SynthesisConfig
+    from .synthesis_config import SynthesisConfig
 
 __all__ = ["Speech", "QueryFeatures", "MotionRefiner", "SynthesisResult", "load_speech"]
 

@@ -39,9 +39,7 @@ from .synthesis_types import MotionRefiner, QueryFeatures, Speech, SynthesisResu
 
 if TYPE_CHECKING:
     from .features import ZScore
-
-    # SynthesisConfig lives in synthesize.py, which runs these stages; only its type is named here
-    from .synthesize import SynthesisConfig
+    from .synthesis_config import SynthesisConfig
 
 __all__ = ["Synthesizer", "synthesizer_for", "search_request", "check_refiner"]
 

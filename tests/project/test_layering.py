@@ -149,6 +149,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         (
             "gesturekit",
             "gesturekit.live",
+            "gesturekit.synthesis_config",
             "gesturekit.synthesis_types",
             "gesturekit.synthesize",
             "gesturekit.synthesizer",
@@ -426,35 +427,15 @@ def test_no_stale_entries():
     assert not twice, f"listed in more than one layer: {', '.join(twice)}"
 
 
-# What the two checks below still find in parts of the package being rebuilt elsewhere, by the
-# branch that owns them (issue 28). Each entry must still be found (test_known_findings_are_current),
-# so an entry is deleted here when its part is fixed, and nothing new is added by anyone.
-KNOWN_CIRCLES: dict[frozenset[str], str] = {
-    frozenset({"gesturekit.synthesis_types", "gesturekit.synthesize", "gesturekit.synthesizer"}): (
-        "SynthesisConfig moves below the stages"
-    )
-}
-KNOWN_PRIVATE: dict[str, str] = {}
-
-
 def test_no_import_circle():
     """No circle in the import graph, imports under ``if TYPE_CHECKING:`` included."""
-    found = [c for c in circles(graph(type_checking=True)) if frozenset(c) not in KNOWN_CIRCLES]
+    found = circles(graph(type_checking=True))
     assert not found, "import circles (TYPE_CHECKING imports included):\n" + "\n".join(" <-> ".join(c) for c in found)
 
 
 def test_no_module_reaches_into_anothers_private_names():
-    found = [f for f in private_reaches() if f not in KNOWN_PRIVATE]
+    found = private_reaches()
     assert not found, "private names imported across modules:\n" + "\n".join(found)
-
-
-def test_known_findings_are_current():
-    """Every known circle and private reach is still there: a fixed one is taken off the list."""
-    circles_now = {frozenset(c) for c in circles(graph(type_checking=True))}
-    gone = [" <-> ".join(sorted(c)) for c in KNOWN_CIRCLES if c not in circles_now]
-    gone += [f for f in KNOWN_PRIVATE if f not in private_reaches()]
-    where = "KNOWN_CIRCLES / KNOWN_PRIVATE in tests/project/test_layering.py"
-    assert not gone, f"fixed: delete from {where}:\n" + "\n".join(gone)
 
 
 def test_the_core_never_imports_streamlit():
