@@ -55,6 +55,7 @@ def _clicks(times, seconds: float) -> np.ndarray:
 BEATS = np.array([1.0, 2.6, 3.8, 5.4, 6.6, 8.2])  # on the 15 fps grid, at least 1.2 s apart
 
 
+@pytest.mark.slow
 def test_audio_onsets_find_clicks():
     onsets = M.audio_onsets(_clicks(BEATS, 10.0))
     assert len(onsets) == len(BEATS)
@@ -99,6 +100,7 @@ def test_pick_peaks_rejects_bad_windows():
         M.pick_peaks(np.ones(5), pre_max=1, post_max=0, pre_avg=1, post_avg=1, delta=0.0, wait=0)
 
 
+@pytest.mark.slow
 def test_audio_onsets_equal_librosa_onset_detect_on_real_speech(shared_data, tmp_path):
     # librosa's own picker is a cached numba gufunc: run it in a child process with a private cache
     import os

@@ -22,6 +22,7 @@ def design(tiny_study, tmp_path_factory):  # noqa: F811
     return init_study(folder, pairwise=True)
 
 
+@pytest.mark.slow
 def test_export_writes_a_config_per_participant(design, tmp_path):
     files = export_hemvip(design, tmp_path / "configs", media_url="https://cdn.example/m/")
     assert [f.name for f in files] == [f"participant_{r:04d}.json" for r in range(1, design.participants + 1)]

@@ -122,6 +122,7 @@ def _soundtrack_loudness(path) -> float:
     return measure_loudness(np.frombuffer(raw, dtype="<f4"))
 
 
+@pytest.mark.slow
 def test_stimuli_command_three_speeches_by_three_systems(demo_path, speech_folder, tmp_path, capsys):
     out = tmp_path / "study"
     args = [

@@ -104,6 +104,7 @@ def test_the_page_skins_the_character_as_the_retargeting_does(motion, rigs, case
     assert lo[1] > 0.3
 
 
+@pytest.mark.slow
 def test_a_bvh_character_gets_a_body_of_capsules(motion, rigs):
     ch = rigs("bvh_zeggs_a")
     assert ch.skin is None
