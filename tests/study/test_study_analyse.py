@@ -268,6 +268,7 @@ def _answer(page, key: dict, person: int, careless: bool) -> dict:
     return {}
 
 
+@pytest.mark.slow
 def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_study, tmp_path, capsys):  # noqa: F811
     from gesturekit.cli import main
     from gesturekit.studies.analyse import _manifest
