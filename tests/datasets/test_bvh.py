@@ -304,6 +304,7 @@ def hierarchies(draw):
     return joints, values, style
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(hierarchies())
 def test_fk_equals_scipy_composition(case):

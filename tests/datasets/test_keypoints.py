@@ -76,6 +76,7 @@ def test_csv_takes_are_discovered(examples):
     assert all(s.kind == "positions" and s.audio is not None for s in sources)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["txt", "csv", "npy"])
 def test_database_builds_from_each_format_on_the_command_line(tmp_path, examples, fmt):
     folder = examples[fmt]
