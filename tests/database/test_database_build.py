@@ -131,6 +131,7 @@ _PEAK = """
 """
 
 
+@pytest.mark.slow
 def test_peak_memory_does_not_grow_with_the_dataset(joint_map, tmp_path):
     """Ten times the takes (5 min of data against 30 s), each build in a fresh process: the peak resident
     memory grows by less than 20 % (the build that held every take grew by about 70 % here)."""
@@ -160,6 +161,7 @@ def test_peak_memory_does_not_grow_with_the_dataset(joint_map, tmp_path):
 # ---- appending -------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_append_recomputing_statistics_equals_a_build_of_all_takes(five, joint_map, tmp_path):
     folder = tmp_path / "takes"
     folder.mkdir()
@@ -179,6 +181,7 @@ def test_append_recomputing_statistics_equals_a_build_of_all_takes(five, joint_m
     assert_same_folder(tmp_path / "db", tmp_path / "all")
 
 
+@pytest.mark.slow
 def test_append_keeping_statistics_leaves_the_old_arrays_as_they_were(five, joint_map, tmp_path):
     folder = tmp_path / "takes"
     folder.mkdir()

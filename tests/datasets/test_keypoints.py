@@ -295,6 +295,7 @@ def test_negative_axes_are_read_as_values_on_the_command_line():
     assert (args.up, args.forward, args.units, args.normalize_bones) == ("-z", "-x", None, False)
 
 
+@pytest.mark.slow
 def test_the_readme_keypoint_example_runs_as_written(tmp_path, monkeypatch):
     import re
     import shlex

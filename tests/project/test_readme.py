@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 import soundfile as sf
 
 from gesturekit.datasets.synthetic import generate_demo_take
@@ -21,6 +22,7 @@ def python_example() -> str:
     return match.group(1)
 
 
+@pytest.mark.slow
 def test_the_readme_python_example_runs(demo_home, tmp_path, monkeypatch):
     code = python_example()
     # the example's folders are a user's; here they are the demo database and the shipped refiner
