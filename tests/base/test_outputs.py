@@ -458,6 +458,7 @@ _TRAIN = """
 """
 
 
+@pytest.mark.slow
 def test_kill_during_a_checkpoint_keeps_the_last_complete_one(small_db, tmp_path, monkeypatch):
     import gesturekit.refine.train as train_module
     from gesturekit.refine.infer import Refiner

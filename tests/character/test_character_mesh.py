@@ -175,6 +175,7 @@ def test_no_triangle_inverts_and_no_vertex_stretches_over_the_whole_demo_databas
     )
 
 
+@pytest.mark.slow
 def test_the_deformation_check_finds_the_fold_of_a_blended_elbow():
     """The check above can fail: blend the forearm's end into the upper arm (instead of the two capsules
     that turn about the elbow) and the frames where the elbow bends most fold it."""

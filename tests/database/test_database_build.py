@@ -80,6 +80,7 @@ def assert_same_folder(a: Path, b: Path) -> None:
 # ---- streaming and parallel builds -----------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("options", [("--overlap-stride", "8"), ("--no-audio",)], ids=["audio+overlap", "no-audio"])
 def test_serial_and_parallel_builds_write_the_same_bytes(five, joint_map, tmp_path, options):
     build(five, tmp_path / "serial", joint_map, "--workers", "1", *options)

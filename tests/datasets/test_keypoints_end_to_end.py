@@ -37,6 +37,8 @@ from gesturekit.workspace import build_database
 from tests.badinput import assert_refused, run_cli, snapshot
 from tests.viz.test_viz_partial import foreground
 
+pytestmark = pytest.mark.slow  # its module fixtures build keypoint databases from generated takes
+
 CONTROLLED = (4.0, 28.0)  # seconds of the output under the control
 FPS = 15
 

@@ -134,6 +134,7 @@ def test_motion_beats_are_the_speed_minima_of_the_strokes():
     np.testing.assert_allclose(inner, BEATS, atol=1.01 / FPS)
 
 
+@pytest.mark.slow
 def test_beats_on_onsets_score_higher_than_beats_shifted_by_half_a_second():
     audio = _clicks(BEATS, 10.0)
     on = M.beat_consistency_score(_strokes(BEATS, 10.0), audio, fps=FPS)

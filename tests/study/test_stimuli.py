@@ -185,6 +185,7 @@ def test_a_loudness_that_is_not_a_number_is_refused_before_any_work(demo_path, s
     assert not (tmp_path / "a").exists()
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_same_study_as_local_processes(demo_path, speech_folder, tmp_path):
     from distributed import LocalCluster
 
