@@ -41,10 +41,20 @@ ZEGGS_BVH = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.bvh"
 ZEGGS_WAV = SHARED_DATA / "zeggs" / "067_Speech_2_x_1_0.wav"
 
 
+BROWSER_TESTS = Path(__file__).resolve().parent / "browser"
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects, so that ``-m "not browser"`` sees the marker
 def pytest_collection_modifyitems(config, items):
-    """The ``load`` tests keep every core busy (``tests/load.py``): in a parallel run they would slow
+    """Every test in ``tests/browser`` drives headless Chromium: it gets the ``browser`` marker here, on
+    the folder, so a new browser test cannot be left out of ``-m "not browser"``.
+
+    The ``load`` tests keep every core busy (``tests/load.py``): in a parallel run they would slow
     the tests of the other workers, some of which time things. They run alone: ``pytest -m load``
     (``.ci/run`` runs them after the others); a parallel run that does not ask for them skips them."""
+    for item in items:
+        if BROWSER_TESTS in Path(item.fspath).resolve().parents:
+            item.add_marker(pytest.mark.browser)
     if not os.environ.get("PYTEST_XDIST_WORKER") or "load" in (config.getoption("markexpr") or ""):
         return
     skip = pytest.mark.skip(reason="keeps every core busy: runs alone, with `pytest -m load` (.ci/run does)")

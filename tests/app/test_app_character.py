@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from streamlit.testing.v1 import AppTest
 
 from gesturekit.character.glb import read_glb
@@ -14,6 +15,8 @@ from gesturekit.skeleton import JOINT_NAMES
 from tests.app.test_app_synthesize import speech_file
 from tests.character_rigs import CASES, custom_map, rig_files, truth
 from tests.conftest import shown, viewer
+
+pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"

@@ -16,6 +16,8 @@ from gesturekit.skeleton import bones
 from tests.conftest import chart_spec as _chart
 from tests.conftest import shown, viewer
 
+pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
+
 HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 DATABASE_PAGE = "views/3_Database.py"
 TIMEOUT = 60

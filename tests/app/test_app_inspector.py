@@ -18,6 +18,8 @@ from tests.conftest import chart_spec as chart
 from tests.conftest import plotly_array as array
 from tests.conftest import shown, viewer
 
+pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
+
 HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
 TIMEOUT = 90

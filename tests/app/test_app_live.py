@@ -27,6 +27,8 @@ from gesturekit.errors import ConfigError, GestureKitError
 from gesturekit.motion import AUDIO_SR
 from tests.conftest import shown, viewer
 
+pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
+
 APP = Path(__file__).resolve().parents[2] / "app"
 HOME = APP / "Home.py"
 PAGE = "views/5_Live.py"

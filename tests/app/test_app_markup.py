@@ -153,6 +153,7 @@ def hostile_db(app_env, tmp_path) -> Path:
     return markdown_database(app_env / "db" / "demo", tmp_path / "db" / "hostile", label=LABEL, take=TAKE)
 
 
+@pytest.mark.slow
 def test_a_label_and_take_name_from_database_json_are_shown_literally_on_home_and_database(hostile_db):
     at = _open(AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run(), hostile_db)
     _assert_literal(at, LABEL)  # Home: the sidebar's label and the page's source line
@@ -161,6 +162,7 @@ def test_a_label_and_take_name_from_database_json_are_shown_literally_on_home_an
     _assert_literal(at, LABEL, TAKE)  # the summary's label and source, the clip's take
 
 
+@pytest.mark.slow
 def test_a_take_name_is_shown_literally_by_the_synthesis_and_the_inspector(hostile_db):
     at = _open(AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run(), hostile_db)
     at.switch_page("views/1_Synthesize.py").run()
@@ -170,6 +172,7 @@ def test_a_take_name_is_shown_literally_by_the_synthesis_and_the_inspector(hosti
     _assert_literal(at, TAKE)  # the step's chosen take: the demo database has one take
 
 
+@pytest.mark.slow
 def test_a_typed_path_is_echoed_literally_in_an_error(app_env, tmp_path):
     typed = str(tmp_path / "![p](http:" / "127.0.0.1:8599" / "path.png)")
     at = _open(AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run(), Path(typed))
@@ -177,6 +180,7 @@ def test_a_typed_path_is_echoed_literally_in_an_error(app_env, tmp_path):
     assert any(typed in visible(rendered(e.value)) for e in at.error)
 
 
+@pytest.mark.slow
 def test_a_label_and_take_names_from_the_build_form_are_shown_literally(app_env, tmp_path):
     folder = tmp_path / "kp"
     write_keypoint_example(folder, fmt="csv", takes=2, seconds=6.0, seed=1)

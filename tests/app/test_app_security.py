@@ -94,6 +94,7 @@ def _listening(port: int) -> set[str]:
     return found
 
 
+@pytest.mark.slow
 def test_the_readme_command_serves_on_127_0_0_1_only(demo_home, tmp_path):
     if not Path("/proc/net/tcp").is_file():
         pytest.skip("needs Linux's /proc/net/tcp to see which addresses the server listens on")
@@ -167,6 +168,7 @@ def _type_database(at: AppTest, path: str) -> AppTest:
     return at.sidebar.text_input(key="_gk.database_typed").input(path).run()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["a database", "missing", "dot-dot", "symlink"])
 def test_a_database_outside_the_allowed_folders_is_refused_alike(app_env, tmp_path, outside, kind):
     db = outside / "db"
@@ -195,6 +197,7 @@ def test_a_database_outside_the_allowed_folders_is_refused_alike(app_env, tmp_pa
     assert "clip" not in " ".join(c.value for c in at.sidebar.caption)
 
 
+@pytest.mark.slow
 def test_a_database_inside_an_allowed_root_from_the_environment_opens(app_env, outside, monkeypatch):
     shutil.copytree(app_env / "db" / "demo", outside / "db")
     monkeypatch.setenv(APP_ROOTS_ENV, os.pathsep.join(["", str(outside)]))
@@ -217,6 +220,7 @@ def _speech_folder(folder: Path) -> Path:
     return folder
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("exists", [True, False])
 def test_the_study_page_does_not_list_a_folder_outside(app_env, outside, exists):
     folder = _speech_folder(outside / "speech") if exists else outside / "speech"
@@ -230,6 +234,7 @@ def test_the_study_page_does_not_list_a_folder_outside(app_env, outside, exists)
     assert not at.get("dataframe")
 
 
+@pytest.mark.slow
 def test_the_study_page_writes_no_study_outside(app_env, tmp_path, outside):
     speech = _speech_folder(tmp_path / "speech")
     target = outside / "study"
@@ -253,6 +258,7 @@ def _build(at: AppTest, *, folder: str, out: str, joint_map: str | None = None) 
     return at.sidebar.button(key="_gk.build_go").click().run()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["output outside", "output in the package", "takes outside", "joint map outside"])
 def test_building_a_database_reads_and_writes_only_allowed_folders(app_env, tmp_path, outside, case):
     import gesturekit
@@ -283,6 +289,7 @@ def test_building_a_database_reads_and_writes_only_allowed_folders(app_env, tmp_
     assert not (Path(gesturekit.__file__).parent / "assets" / "built").exists()
 
 
+@pytest.mark.slow
 def test_a_refiner_outside_is_refused_and_the_shipped_one_is_not(app_env, outside):
     (outside / "refiner").mkdir()
     at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
@@ -300,6 +307,7 @@ def test_a_refiner_outside_is_refused_and_the_shipped_one_is_not(app_env, outsid
 # ---- nothing of the server in the browser --------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_an_unexpected_error_shows_a_reference_not_a_traceback(app_env, monkeypatch, caplog):
     secret = "/srv/private/lab-notes"
 
@@ -321,6 +329,7 @@ def test_an_unexpected_error_shows_a_reference_not_a_traceback(app_env, monkeypa
     assert GENERIC.match(shown(again.error[0].value)).group(1) != reference
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("inside", [True, False], ids=["inside", "outside"])
 @pytest.mark.parametrize("error", ["OSError", "GestureKitError"])
 def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(
@@ -341,6 +350,7 @@ def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(
     assert inside or "/srv/private" not in _texts(at)
 
 
+@pytest.mark.slow
 @settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     parts=st.lists(

@@ -39,6 +39,7 @@ def test_streamlit_run_finds_the_app_with_its_lifespan():
     assert found.is_asgi_app and found.app_name == "app"
 
 
+@pytest.mark.slow
 def test_server_start_prepares_search_and_refiner_of_the_default_database(common, monkeypatch):
     import gesturekit.interactive as gs
 
@@ -68,6 +69,7 @@ def test_server_start_prepares_search_and_refiner_of_the_default_database(common
     assert common.example_audio(first).shape == (int(gs.SPEECH_EXAMPLES[first][0] * 16000),) and made == [first]
 
 
+@pytest.mark.slow
 def test_server_start_without_a_database_builds_nothing(common, tmp_path, monkeypatch, caplog):
     monkeypatch.setenv("GESTUREKIT_HOME", str(tmp_path / "empty"))
     with caplog.at_level("DEBUG", logger="gesturekit.app"):
@@ -76,6 +78,7 @@ def test_server_start_without_a_database_builds_nothing(common, tmp_path, monkey
     assert not [r for r in caplog.records if r.name == "gesturekit.app"]
 
 
+@pytest.mark.slow
 def test_server_start_with_a_broken_database_still_starts(common, tmp_path, monkeypatch, caplog):
     home = tmp_path / "broken"
     monkeypatch.setenv("GESTUREKIT_HOME", str(home))

@@ -20,6 +20,8 @@ from gesturekit.studies.store import open_store
 from tests.conftest import shown
 from tests.study_helpers import STUDY_SYSTEMS, study_folder, take_part, tiny_study  # noqa: F401  (fixtures)
 
+pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
+
 HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 PAGE = "views/6_Study.py"
 TIMEOUT = 120

@@ -17,6 +17,8 @@ import pytest
 from gesturekit.datasets.keypoint_example import keypoint_joint_map, write_keypoint_example
 from tests.badinput import assert_refused, run_cli, snapshot
 
+pytestmark = pytest.mark.slow  # builds databases and runs the CLI end to end
+
 SECONDS = 6.0  # 90 frames at 15 fps: one clip per take
 
 

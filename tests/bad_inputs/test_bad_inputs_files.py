@@ -21,6 +21,8 @@ from tests import hostile as h
 from tests.badinput import assert_refused, run_cli, snapshot
 from tests.conftest import make_take
 
+pytestmark = pytest.mark.slow  # builds databases and runs the CLI end to end
+
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory) -> Path:

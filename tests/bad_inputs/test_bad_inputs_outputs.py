@@ -216,6 +216,7 @@ def test_a_locked_output_is_refused_naming_the_writer(world):
         assert_refused(run, names=out, problem="another gesturekit process (pid", before=before)
 
 
+@pytest.mark.slow
 def test_synthesize_refuses_files_another_run_is_writing(world, tmp_path):
     out = tmp_path / "out"
     args = ["synthesize", world / "speech" / "hello.wav", "--db", world / "db", "--out", out, "--refiner", "none"]

@@ -145,6 +145,7 @@ def test_a_command_needing_a_missing_extra_says_what_to_install(base, tmp_path, 
     assert f"needs {EXTRAS[missing][0]}, which is not installed" in run.stderr
 
 
+@pytest.mark.slow
 def test_a_core_only_install_synthesizes_and_refuses_the_refiner_clearly(base, tmp_path):
     """In a fresh interpreter where no optional package can be found (as if not installed; scipy
     looks into sys.modules for torch, so they are absent rather than None): the core modules import,
@@ -261,6 +262,7 @@ def _required(func: ast.AST) -> set[str]:
     return names
 
 
+@pytest.mark.slow
 def test_optional_packages_are_imported_only_through_the_helper():
     """A function imports an optional package, or a module that imports one at its top, only after
     calling require() for that package; and only the leaves (refine's torch modules, viz) import
@@ -314,6 +316,7 @@ print("half-imported seen", seen)
 """
 
 
+@pytest.mark.slow
 def test_a_search_while_another_thread_imports_torch_leaves_the_half_imported_torch_alone():
     pytest.importorskip("torch")
     for _ in range(2):  # a fresh interpreter each time: torch is imported once per process
@@ -344,6 +347,7 @@ while "torch._prims" not in sys.modules:  # well inside torch's import
 """
 
 
+@pytest.mark.slow
 def test_the_process_ends_after_an_optional_import_in_flight():
     pytest.importorskip("torch")
     for _ in range(2):

@@ -382,6 +382,7 @@ def test_kill_during_a_database_save_keeps_the_previous_one(tmp_path):
     np.testing.assert_array_equal(MatchingDatabase.load(out).G, second.G)
 
 
+@pytest.mark.slow
 def test_two_builds_to_one_folder_one_wins_the_other_says_so(tmp_path):
     from tests.badinput import assert_refused, run_cli, snapshot
 
@@ -457,6 +458,7 @@ _TRAIN = """
 """
 
 
+@pytest.mark.slow
 def test_kill_during_a_checkpoint_keeps_the_last_complete_one(small_db, tmp_path, monkeypatch):
     import gesturekit.refine.train as train_module
     from gesturekit.refine.infer import Refiner

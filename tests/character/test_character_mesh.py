@@ -148,6 +148,7 @@ def deformation(mesh: CharacterMesh, rig: Rig, pose: Pose, chunk: int = 256) -> 
 # ---- the whole demo database ---------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_grouped_skinning_equals_skin_vertices():
     rig, mesh, pose = _demo()
     frames = np.array([0, 1, 63, 64, 1000, 4371, pose.n_frames - 1])
@@ -159,6 +160,7 @@ def test_the_grouped_skinning_equals_skin_vertices():
     np.testing.assert_allclose(grouped, plain, atol=2e-6)
 
 
+@pytest.mark.slow
 def test_no_triangle_inverts_and_no_vertex_stretches_over_the_whole_demo_database():
     rig, mesh, pose = _demo()
     assert pose.n_frames == _db().poses.shape[0] * _db().poses.shape[1]
@@ -173,6 +175,7 @@ def test_no_triangle_inverts_and_no_vertex_stretches_over_the_whole_demo_databas
     )
 
 
+@pytest.mark.slow
 def test_the_deformation_check_finds_the_fold_of_a_blended_elbow():
     """The check above can fail: blend the forearm's end into the upper arm (instead of the two capsules
     that turn about the elbow) and the frames where the elbow bends most fold it."""
@@ -270,6 +273,7 @@ def plain_vertex_normals(v: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return acc / np.linalg.norm(acc, axis=1, keepdims=True)
 
 
+@pytest.mark.slow
 def test_vertex_normals_of_many_frames_equal_the_plain_sum_frame_by_frame():
     rig, mesh, pose = _demo()
     posed = skin_vertices(mesh, rig, pose, frames=np.array([0, 500, 9000]))

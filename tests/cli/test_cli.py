@@ -72,6 +72,7 @@ def test_errors_are_one_line_with_exit_status_2(tmp_path, capsys):
     assert "no database folder" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_existing_database_needs_force(tmp_path, capsys):
     folder, jm = _positions_folder(tmp_path)
     out = tmp_path / "db"

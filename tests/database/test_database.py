@@ -257,6 +257,7 @@ def _places(meta):
     return out
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_damaged_database_json_is_refused_or_consistent(saved, data):

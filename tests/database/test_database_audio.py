@@ -219,6 +219,7 @@ def test_a_damaged_flac_stream_is_a_database_error(saved, tmp_path):
 
 
 # ---- command line ------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_build_db_stores_the_audio_as_asked(tmp_path):
     folder, jm = _positions_folder(tmp_path)
     out = tmp_path / "db"

@@ -80,6 +80,7 @@ def assert_same_folder(a: Path, b: Path) -> None:
 # ---- streaming and parallel builds -----------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("options", [("--overlap-stride", "8"), ("--no-audio",)], ids=["audio+overlap", "no-audio"])
 def test_serial_and_parallel_builds_write_the_same_bytes(five, joint_map, tmp_path, options):
     build(five, tmp_path / "serial", joint_map, "--workers", "1", *options)
@@ -131,6 +132,7 @@ _PEAK = """
 """
 
 
+@pytest.mark.slow
 def test_peak_memory_does_not_grow_with_the_dataset(joint_map, tmp_path):
     """Ten times the takes (5 min of data against 30 s), each build in a fresh process: the peak resident
     memory grows by less than 20 % (the build that held every take grew by about 70 % here)."""
@@ -160,6 +162,7 @@ def test_peak_memory_does_not_grow_with_the_dataset(joint_map, tmp_path):
 # ---- appending -------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_append_recomputing_statistics_equals_a_build_of_all_takes(five, joint_map, tmp_path):
     folder = tmp_path / "takes"
     folder.mkdir()
@@ -179,6 +182,7 @@ def test_append_recomputing_statistics_equals_a_build_of_all_takes(five, joint_m
     assert_same_folder(tmp_path / "db", tmp_path / "all")
 
 
+@pytest.mark.slow
 def test_append_keeping_statistics_leaves_the_old_arrays_as_they_were(five, joint_map, tmp_path):
     folder = tmp_path / "takes"
     folder.mkdir()

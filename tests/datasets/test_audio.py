@@ -306,6 +306,7 @@ def test_any_cut_of_a_wav_is_reported_as_truncated(tmp_path, fraction):
     assert "truncated" in _message(path, min_duration=0.0)
 
 
+@pytest.mark.slow
 @settings(deadline=None, max_examples=25, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     rate=st.sampled_from([8000, 11025, 16000, 22050, 32000, 44100, 48000, 96000]),

@@ -210,6 +210,7 @@ def test_zeggs_wrists_match_independent_fk(zeggs):
             np.testing.assert_allclose(motion.positions[t, joint_index(ours)], expected, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_zeggs_wrist_matches_bvhio(zeggs):
     bvhio = pytest.importorskip("bvhio")
     _, motion = zeggs
@@ -303,6 +304,7 @@ def hierarchies(draw):
     return joints, values, style
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(hierarchies())
 def test_fk_equals_scipy_composition(case):

@@ -76,6 +76,7 @@ def test_csv_takes_are_discovered(examples):
     assert all(s.kind == "positions" and s.audio is not None for s in sources)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["txt", "csv", "npy"])
 def test_database_builds_from_each_format_on_the_command_line(tmp_path, examples, fmt):
     folder = examples[fmt]
@@ -294,6 +295,7 @@ def test_negative_axes_are_read_as_values_on_the_command_line():
     assert (args.up, args.forward, args.units, args.normalize_bones) == ("-z", "-x", None, False)
 
 
+@pytest.mark.slow
 def test_the_guide_keypoint_example_runs_as_written(tmp_path, monkeypatch):
     import re
     import shlex

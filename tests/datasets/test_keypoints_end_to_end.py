@@ -37,6 +37,8 @@ from gesturekit.workspace import build_database
 from tests.badinput import assert_refused, run_cli, snapshot
 from tests.viz.test_viz_partial import foreground
 
+pytestmark = pytest.mark.slow  # its module fixtures build keypoint databases from generated takes
+
 CONTROLLED = (4.0, 28.0)  # seconds of the output under the control
 FPS = 15
 
@@ -71,6 +73,7 @@ def _above_high(db, res) -> float:
     return float(np.mean(y[a:b] > high))
 
 
+@pytest.mark.slow
 def test_the_raw_y_down_files_are_refused_without_up(keypoints, tmp_path):
     root, _, _ = keypoints
     before = snapshot(root / "kp")
@@ -178,6 +181,7 @@ def _bone_lengths(g: np.ndarray) -> np.ndarray:
     return np.linalg.norm(pos[:, 1:] - pos[:, PARENTS[1:]], axis=-1)
 
 
+@pytest.mark.slow
 def test_takes_of_different_sizes_get_one_skeleton(three_sizes):
     _, db, _, stdout = three_sizes
     skeleton = db.skeleton
@@ -265,6 +269,7 @@ def test_append_refuses_a_take_that_does_not_fit_the_skeleton(three_sizes, tmp_p
     assert_refused(run, names=tmp_path / "db", problem="give --normalize-bones with --append", before=before)
 
 
+@pytest.mark.slow
 def test_parallel_normalised_builds_write_the_same_bytes(three_sizes, tmp_path):
     root, _, _, _ = three_sizes
     run = _build_cli(root / "kp", tmp_path / "parallel", "--normalize-bones", "--workers", "2")

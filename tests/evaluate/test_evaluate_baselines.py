@@ -150,6 +150,7 @@ class _ScaleRefiner:
         return Motion(motion.positions * 0.5, motion.fps)
 
 
+@pytest.mark.slow
 def test_every_system_runs_and_keeps_out_of_excluded_takes(small_db):
     audio = make_take(6.0, seed=9).audio
     cfg = SynthesisConfig(exclude_takes=("t0",), seed=2)

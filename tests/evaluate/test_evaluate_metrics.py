@@ -55,6 +55,7 @@ def _clicks(times, seconds: float) -> np.ndarray:
 BEATS = np.array([1.0, 2.6, 3.8, 5.4, 6.6, 8.2])  # on the 15 fps grid, at least 1.2 s apart
 
 
+@pytest.mark.slow
 def test_audio_onsets_find_clicks():
     onsets = M.audio_onsets(_clicks(BEATS, 10.0))
     assert len(onsets) == len(BEATS)
@@ -99,6 +100,7 @@ def test_pick_peaks_rejects_bad_windows():
         M.pick_peaks(np.ones(5), pre_max=1, post_max=0, pre_avg=1, post_avg=1, delta=0.0, wait=0)
 
 
+@pytest.mark.slow
 def test_audio_onsets_equal_librosa_onset_detect_on_real_speech(shared_data, tmp_path):
     # librosa's own picker is a cached numba gufunc: run it in a child process with a private cache
     import os
@@ -132,6 +134,7 @@ def test_motion_beats_are_the_speed_minima_of_the_strokes():
     np.testing.assert_allclose(inner, BEATS, atol=1.01 / FPS)
 
 
+@pytest.mark.slow
 def test_beats_on_onsets_score_higher_than_beats_shifted_by_half_a_second():
     audio = _clicks(BEATS, 10.0)
     on = M.beat_consistency_score(_strokes(BEATS, 10.0), audio, fps=FPS)

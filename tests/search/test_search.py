@@ -223,6 +223,7 @@ def _with_prefix(prefix, fn):
         search_module._PREFIX = saved
 
 
+@pytest.mark.slow
 @settings(max_examples=16, deadline=None)
 @given(st.integers(0, 2**31 - 1), st.sampled_from([0.0, 40.0]), st.sampled_from([1, 3, 24, 60]), st.integers(0, 3))
 def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k):
@@ -345,6 +346,7 @@ def test_a_scan_makes_the_products_by_blas_where_many_starts_are_admissible(monk
     assert {m for _, _, m in seen} == {True, False}
 
 
+@pytest.mark.slow
 @settings(max_examples=15, deadline=None)
 @given(st.lists(problems(max_clips=5), min_size=1, max_size=1), st.integers(2, 4), st.integers(0, 2**31 - 1))
 def test_batch_equals_single_runs(problem, n_queries, seed):

@@ -14,6 +14,8 @@ from gesturekit.studies import init_study, media_index, participant_pages
 from gesturekit.studies.hemvip import RESPONSE_COLUMNS, export_hemvip, import_hemvip
 from tests.study_helpers import STUDY_SYSTEMS, tiny_study  # noqa: F401
 
+pytestmark = pytest.mark.slow  # tiny_study builds a demo database and makes a stimuli folder once per module
+
 
 @pytest.fixture(scope="module")
 def design(tiny_study, tmp_path_factory):  # noqa: F811
@@ -22,6 +24,7 @@ def design(tiny_study, tmp_path_factory):  # noqa: F811
     return init_study(folder, pairwise=True)
 
 
+@pytest.mark.slow
 def test_export_writes_a_config_per_participant(design, tmp_path):
     files = export_hemvip(design, tmp_path / "configs", media_url="https://cdn.example/m/")
     assert [f.name for f in files] == [f"participant_{r:04d}.json" for r in range(1, design.participants + 1)]

@@ -122,6 +122,7 @@ def _soundtrack_loudness(path) -> float:
     return measure_loudness(np.frombuffer(raw, dtype="<f4"))
 
 
+@pytest.mark.slow
 def test_stimuli_command_three_speeches_by_three_systems(demo_path, speech_folder, tmp_path, capsys):
     out = tmp_path / "study"
     args = [
@@ -184,6 +185,7 @@ def test_a_loudness_that_is_not_a_number_is_refused_before_any_work(demo_path, s
     assert not (tmp_path / "a").exists()
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_same_study_as_local_processes(demo_path, speech_folder, tmp_path):
     from distributed import LocalCluster
 

@@ -66,6 +66,7 @@ def test_holm_equals_the_plain_step_down_procedure(p, alpha):
 
 
 # statsmodels' multipletests takes about 80 ms a call: fewer examples, and the edge cases named
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(p_values.filter(lambda p: len(p) > 0))
 @example([0.01, 0.01, 0.04, 0.04, 0.5]).via("ties")
@@ -151,6 +152,7 @@ def test_the_true_order_is_recovered_from_ratings_and_from_pairwise_answers():
     assert (bt["elo_lo"] <= bt["elo"]).all() and (bt["elo"] <= bt["elo_hi"]).all()
 
 
+@pytest.mark.slow
 def test_with_no_difference_the_familywise_false_positive_rate_is_near_alpha():
     studies, alpha = 400, 0.05
     hits = 0
@@ -181,6 +183,7 @@ def test_excluded_participants_are_left_out():
     assert (rule == sim.exclusions["excluded"]).all()
 
 
+@pytest.mark.slow
 def test_the_report_names_every_system_and_is_not_replaced_without_force(tmp_path):
     systems = ["gt", "knn", "knn+cgan"]
     sim = simulate_study((5, 4, 4.5), systems=systems, participants=12, seed=5)
@@ -268,6 +271,7 @@ def _answer(page, key: dict, person: int, careless: bool) -> dict:
     return {}
 
 
+@pytest.mark.slow
 def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_study, tmp_path, capsys):  # noqa: F811
     from gesturekit.cli import main
     from gesturekit.studies.analyse import _manifest

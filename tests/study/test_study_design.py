@@ -32,6 +32,8 @@ from gesturekit.studies import (
 from gesturekit.studies.media import OVERLAY_TEXT, beep_samples, draw_overlay, overlay_box
 from tests.study_helpers import STUDY_SYSTEMS, tiny_study  # noqa: F401
 
+pytestmark = pytest.mark.slow  # tiny_study builds a demo database and makes a stimuli folder once per module
+
 SECRET = "5ec7e7" * 8
 
 

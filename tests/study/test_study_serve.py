@@ -21,6 +21,8 @@ from gesturekit.studies.store import open_store
 from tests.study_helpers import tiny_study  # noqa: F401
 from tests.study_serve import ROOT, free_port
 
+pytestmark = pytest.mark.slow  # tiny_study builds a demo database and makes a stimuli folder once per module
+
 PASSWORD = "a long researcher secret"
 
 

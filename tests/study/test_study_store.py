@@ -144,6 +144,7 @@ def test_the_first_body_of_a_page_is_kept_whatever_follows(tmp_path_factory, bod
     store.close()
 
 
+@pytest.mark.slow
 def test_a_server_killed_with_minus_9_loses_no_acknowledged_response(store_url, tmp_path):
     folder = make_folder(tmp_path / "study", rows=4, max_failures=5, video_bytes=20_000)
     proc, base = start_server(folder, store_url)

@@ -81,6 +81,7 @@ def check_equal_to_offline(db, audio, live: LiveSynthesizer, pieces, config=None
     return res, offline
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("chunk", [1, 160, 320, 16000])
 @pytest.mark.parametrize("switched", [False, True], ids=["free", "switched"])
 def test_streamed_motion_equals_synthesize(db, speech, chunk, switched):
@@ -262,6 +263,7 @@ def test_result_round_trips_through_the_npz_export(db, speech, tmp_path):
     np.testing.assert_array_equal(synthesize(speech, db=db, config=loaded).motion.positions, motion.positions)
 
 
+@pytest.mark.slow
 def test_the_live_refiner_holds_back_its_stated_frames(db, speech):
     pytest.importorskip("torch")
     from gesturekit.refine import open_refiner

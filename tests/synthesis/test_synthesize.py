@@ -47,6 +47,7 @@ def test_output_length_is_the_audios_frame_count(demo_db, n_samples):
     assert res.search.n_steps == -(-res.n_frames // 8)
 
 
+@pytest.mark.slow
 def test_sixty_minutes_of_speech(demo_db):
     rng = np.random.default_rng(0)
     t = np.arange(16000 * 60 * 60, dtype=np.float32) / 16000
@@ -131,6 +132,7 @@ def test_pinning_a_candidate_changes_that_step_only_from_there(demo_db, speech):
     np.testing.assert_array_equal(unpinned.search.clip, base.search.clip)
 
 
+@pytest.mark.slow
 def test_batch_equals_single_runs(demo_db, speech):
     audios = [speech, speech[: 16000 * 7], speech[16000 * 3 :]]
     configs = [SynthesisConfig(), SynthesisConfig(k=2, control="0-3:speed=fast"), SynthesisConfig(seed=4)]
@@ -278,6 +280,7 @@ def test_zeggs_bvh_export_read_back_independently(zeggs_db, shared_data, tmp_pat
     assert np.abs(got - res.motion.positions).max() < 1e-3
 
 
+@pytest.mark.slow
 def test_cli_synthesize_with_video_and_controls(zeggs_db, shared_data, tmp_path, capsys):
     from gesturekit.export.video import probe_media
 

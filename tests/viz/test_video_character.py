@@ -267,6 +267,7 @@ def test_the_capsule_look_is_still_there():
         RenderStyle(look="stick")
 
 
+@pytest.mark.slow
 def test_the_command_line_and_the_result_video_choose_the_look(tmp_path, monkeypatch):
     from gesturekit._cli_parser import build_parser
     from gesturekit.demo import open_default_database

@@ -223,6 +223,7 @@ def test_side_by_side_motions_on_one_character_and_a_fixed_box_from_its_pelvis()
     np.testing.assert_allclose(view_bounds([a], style=fixed, character=ch), expected)
 
 
+@pytest.mark.slow
 def test_the_rendering_processes_draw_the_character_as_this_one_does():
     ch = character("mixamo_a_rolled")
     m = Motion(np.concatenate([_demo(), _demo()[::-1][:4]]), FPS)  # two chunks of frames

@@ -118,6 +118,7 @@ def test_join_profile_figure_overlays_one_line_per_motion():
 # ---- beats ------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_beats_figure_marks_motion_beats_and_speech_onsets_in_the_range():
     t = np.arange(90) / 15
     x = _still(90)

@@ -104,6 +104,7 @@ def test_the_page_skins_the_character_as_the_retargeting_does(motion, rigs, case
     assert lo[1] > 0.3
 
 
+@pytest.mark.slow
 def test_a_bvh_character_gets_a_body_of_capsules(motion, rigs):
     ch = rigs("bvh_zeggs_a")
     assert ch.skin is None
@@ -170,6 +171,7 @@ def test_the_standalone_page_holds_the_character(motion, rigs):
     np.testing.assert_allclose(m["points"], posed.position, atol=1e-4)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["vrm0_a", "bvh_zeggs_a"])
 def test_the_page_frames_and_draws_the_character_as_the_mp4_does(motion, rigs, case):
     from gesturekit.viz.character_render import CharacterStage

@@ -37,6 +37,7 @@ def _motion(n_frames: int, *, seed: int = 0, fps: float = 15.0) -> Motion:
     return Motion(pos.astype(np.float32), fps)
 
 
+@pytest.mark.slow
 @settings(max_examples=15, deadline=None)
 @given(hst.integers(1, 60), hst.integers(1, 40), hst.integers(0, 10**6))
 def test_every_shown_frame_poses_each_character_as_the_rig_solve_does_side_by_side(n, max_frames, seed):
@@ -170,6 +171,7 @@ def test_bad_input_is_refused(kwargs, problem):
         skeleton_viewer(motions, **kwargs)
 
 
+@pytest.mark.slow
 @settings(max_examples=5, deadline=None)
 @given(hst.integers(1, 20), hst.integers(0, 10**6), hst.booleans())
 def test_the_component_args_carry_what_the_standalone_page_carries(n, seed, with_speech):

@@ -67,6 +67,7 @@ def _check_step(db, res, query, i, *, N, k, mask, exclude, rule):
     return e
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     seed=st.integers(0, 10_000),
