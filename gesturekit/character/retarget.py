@@ -288,18 +288,19 @@ def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
     v = np.cross(a, b)
     c = np.einsum("...i,...i->...", a, b)
+    s = np.linalg.norm(v, axis=-1)
+    # the axis a x b, made exactly perpendicular to a: near opposite vectors a x b is short and
+    # its direction rounded, and only an axis perpendicular to a keeps R @ a on b (to rounding);
+    # where it vanishes, any axis perpendicular to a (a half turn for opposite vectors)
+    other = np.where(np.abs(a[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    axis = np.where((s > 1e-12)[..., None], v / np.maximum(s, 1e-300)[..., None], np.cross(a, other))
+    axis = axis - np.einsum("...i,...i->...", axis, a)[..., None] * a
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
     k = np.zeros(a.shape[:-1] + (3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    near = c < -1 + 1e-9
-    denom = np.where(near, 1.0, 1.0 + c)
-    r = np.eye(3) + k + (k @ k) / denom[..., None, None]
-    if near.any():
-        an = a[near]
-        axis = np.cross(an, np.where(np.abs(an[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
-        r[near] = 2 * axis[:, :, None] * axis[:, None, :] - np.eye(3)
-    return r
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = axis[..., 2], -axis[..., 1], axis[..., 0]
+    # Rodrigues with sin = |a x b| and cos = a . b, both well-conditioned at every angle
+    return np.eye(3) + s[..., None, None] * k + (1.0 - c)[..., None, None] * (k @ k)
 
 
 def kabsch(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
