@@ -62,6 +62,7 @@ def test_the_readme_is_a_front_page():
         assert f"](docs/{page})" in text, f"the README does not link docs/{page}"
 
 
+@pytest.mark.slow
 def test_the_readme_python_example_runs(demo_home, tmp_path, monkeypatch):
     scope = run_example(
         python_block(README.read_text(encoding="utf-8"), "## Using it"), "README.md", demo_home, tmp_path, monkeypatch
@@ -69,6 +70,7 @@ def test_the_readme_python_example_runs(demo_home, tmp_path, monkeypatch):
     assert scope["res"].motion.positions.shape == (int(5.0 * 15), 55, 3)
 
 
+@pytest.mark.slow
 def test_the_synthesis_guide_python_example_runs(demo_home, tmp_path, monkeypatch):
     guide = GUIDES / "synthesis.md"
     code = python_block(guide.read_text(encoding="utf-8"), "## From Python")
