@@ -2,18 +2,11 @@
 
 from __future__ import annotations
 
+import ast
 import os
 import sys
-import tempfile
-from pathlib import Path
-
-# numba (librosa's onset peak picking, our search loops) caches compiled code on disk; two test
-# workers compiling the same function at once can read each other's half-written cache and crash.
-# Each test process gets its own cache folder (set before anything imports numba).
-os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(tempfile.gettempdir(), f"gesturekit-tests-numba-{os.getpid()}"))
-
-import ast
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
