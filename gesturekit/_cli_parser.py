@@ -313,7 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
     r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
-    from .refine.train import TrainConfig
+    from .refine.config import TrainConfig
 
     add_options(r, TrainConfig, ["seed"])
     _add_exclusions(r, out_of="training")

@@ -174,6 +174,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.export.result",
             "gesturekit.export.video",
             "gesturekit.refine",
+            "gesturekit.refine.config",
             "gesturekit.refine.data",
             "gesturekit.refine.folder",
             "gesturekit.refine.infer",
