@@ -69,9 +69,20 @@ class BuildConfig:
         limit=lambda config: config.clip_frames,
     )
     percentiles: tuple[float, float] = option(
-        (15.0, 85.0), help="attribute percentiles that define low/high controls", low=0.0, high=100.0
+        (15.0, 85.0),
+        help="attribute percentiles that define low/high controls",
+        low=0.0,
+        high=100.0,
+        kind=float,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
     )
-    store_audio: bool = option(True, help="keep the takes' audio in the database")
+    store_audio: bool = option(
+        True,
+        help="keep the takes' audio in the database",
+        flag="--no-audio",
+        switch_help="do not keep the takes' audio in the database",
+    )
     label: str = option("", help="a description stored with the database")
     source: str = ""
     joint_map: str | None = None
