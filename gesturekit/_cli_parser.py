@@ -335,7 +335,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--db", help="matching database folder (default: the demo database)")
     from .study_config import StudyConfig
 
-    add_options(s, StudyConfig, ["audio", "holdouts", "systems"])
+    add_options(
+        s,
+        StudyConfig,
+        ["audio", "holdouts", "systems"],
+        helps={
+            "holdouts": f"{option_of(StudyConfig, 'holdouts').help}; one part per --holdout (repeatable)",
+            "systems": f"{option_of(StudyConfig, 'systems').help}, comma-separated",
+        },
+    )
     s.add_argument("--out", required=True, help="study folder to write")
     add_options(
         s,

@@ -183,6 +183,9 @@ class Option:
         The command line takes several values after the flag (``"+"``, or exactly 2).
     append : bool
         The command line's flag may be given again, each time adding a value.
+    start : optional
+        Where the app's widget starts, where that is not the default (the study page's systems:
+        those that need no held-out part or refiner); :func:`widget_limits` says it as ``start``.
     switch_help : str, optional
         What the command line's flag of a switch says, where it gives the other value than the
         field's default (``--no-audio``: "do not keep ...", for ``store_audio``'s "keep ...").
@@ -203,6 +206,7 @@ class Option:
     default_help: str | None = None
     nargs: str | int | None = None
     append: bool = False
+    start: Any = None
     switch_help: str | None = None
 
     def bounds_text(self, integer: bool) -> str:
@@ -364,8 +368,9 @@ def widget_limits(cls: type, name: str, *, context: Any = None) -> dict[str, Any
     Returns
     -------
     dict
-        ``min``, ``max`` (None: unbounded), ``step`` (None for choices), ``default``, ``choices``
-        (a list, or None), ``help`` and ``unit``.
+        ``min``, ``max`` (None: unbounded), ``step`` (None for choices), ``default``, ``start``
+        (where the widget starts: the option's ``start``, else ``default``), ``choices`` (a list, or
+        None), ``help`` and ``unit``.
 
     Examples
     --------
@@ -398,6 +403,7 @@ def widget_limits(cls: type, name: str, *, context: Any = None) -> dict[str, Any
         "max": number(high),
         "step": step,
         "default": default_of(cls, name),
+        "start": default_of(cls, name) if opt.start is None else opt.start,
         "choices": None if opt.choices is None else list(opt.choices),
         "help": opt.help,
         "unit": opt.unit,

@@ -263,8 +263,6 @@ NOT_OPTIONS = {
     "study.out": "the study folder to write (make_stimuli's out, no option)",
     "study.resolution": "a choice of sizes of StudyConfig.resolution (its default checked below)",
 }
-#: Widgets that set an option but start elsewhere than the field's default, and why.
-OWN_DEFAULT = {"study.systems": "the page starts with systems that need no held-out part or refiner (knn, random)"}
 
 
 def _fields_of(page_key: str) -> tuple[type, str]:
@@ -294,7 +292,7 @@ def test_every_app_widget_that_sets_an_option_has_its_fields_limits_and_default(
             if not key or not key.startswith("_w." + prefix):
                 continue
             page_key = key.removeprefix("_w.")
-            if page_key in NOT_OPTIONS or page_key in OWN_DEFAULT:
+            if page_key in NOT_OPTIONS:
                 continue
             cls, name = _fields_of(page_key)
             lim = widget_limits(cls, name, context=db)
@@ -305,16 +303,67 @@ def test_every_app_widget_that_sets_an_option_has_its_fields_limits_and_default(
                 assert len(widget.options) == len(lim["choices"]), page_key
             if kind == "text_input":  # an empty box: the field's empty default (None, "" or ()); free text
                 assert widget.value == "" and lim["default"] in (None, "", ()), page_key
+            elif kind == "multiselect":  # the field's start (StudyConfig.systems: what needs no holdout)
+                assert tuple(widget.value) == tuple(lim["start"]), page_key
             else:
-                assert widget.value == lim["default"], page_key
-                assert widget.help == lim["help"], page_key
+                assert widget.value == lim["default"] == lim["start"], page_key
+            assert widget.help == lim["help"], page_key
             checked.add(page_key)
     expected = {
         "synth.": {f"synth.{n}" for n in ("k", "segment", "seed", "record", "init", "blend", "mask_rule")}
         | {"synth.refiner_keep_hz"},
-        "study.": {"study.seed", "study.participants", "study.workers", "study.holdouts", "study.control"},
+        "study.": {"study.seed", "study.participants", "study.workers", "study.holdouts", "study.control"}
+        | {"study.systems"},
     }[prefix]
     assert checked == expected
     if prefix == "study.":
         default = "x".join(map(str, default_of(StudyConfig, "resolution")))
         assert at.selectbox(key="_w.study.resolution").value == default
+
+
+def test_an_option_starts_elsewhere_in_the_app_only_where_its_field_says_so():
+    starts = {(cls, n): o.start for cls in CONFIGS for n, o in options_of(cls).items() if o.start is not None}
+    assert set(starts) == {(StudyConfig, "systems")}
+    # the study page's start needs neither a held-out part nor a refiner, and differs from the CLI's default
+    assert not {"gt", "knn+cgan"} & set(starts[StudyConfig, "systems"])
+    assert widget_limits(StudyConfig, "systems")["start"] != default_of(StudyConfig, "systems")
+    assert widget_limits(SearchConfig, "k")["start"] == default_of(SearchConfig, "k")
+
+
+#: Widgets of the sidebar's build form (their key after ``_gk.build_``) that set no BuildConfig field, and what.
+BUILD_NOT_OPTIONS = {
+    "folder": "the folder of takes (build_database's folder)",
+    "naming": "the joint naming preset or a joint map (build_database's joint_map)",
+    "map": "the joint map's file",
+    "fps": "the frame rate of joint-position files (how the takes are read)",
+    "units": "how the takes are read",
+    "up": "how the takes are read",
+    "forward": "how the takes are read",
+    "bones": "how the takes are read (normalize_bones)",
+    "out": "the database folder to write",
+    "workers": "how the build runs (the database is the same for any number)",
+    "overwrite": "whether an existing database is replaced",
+    "go": "the button",
+}
+
+
+@pytest.mark.slow
+def test_every_build_widget_of_the_sidebar_that_sets_an_option_has_its_fields_limits_and_default(app_env):
+    at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
+    assert not at.exception, at.exception
+    checked, others = set(), set()
+    for kind in ("number_input", "selectbox", "multiselect", "slider", "toggle", "checkbox", "text_input", "radio"):
+        for widget in at.sidebar.get(kind):
+            key = widget.key or ""
+            if key.startswith("_gk.build_"):
+                others.add(key.removeprefix("_gk.build_"))
+            if not key.startswith("_gk.build."):
+                continue
+            name = key.removeprefix("_gk.build.")
+            lim = widget_limits(BuildConfig, name)
+            if kind == "number_input":
+                assert (widget.min, widget.max, widget.step) == (lim["min"], lim["max"], lim["step"]), name
+            assert widget.value == lim["default"] and widget.help == lim["help"], name
+            checked.add(name)
+    assert checked == {"label"}
+    assert others == set(BUILD_NOT_OPTIONS) - {"map", "go"}  # the map's box shows with a JSON joint map
