@@ -179,7 +179,7 @@ def _build_config(args: argparse.Namespace) -> tuple[BuildConfig | None, str | N
     """The build-db options as a BuildConfig (None: the database's, with ``--append`` and none given), and the label.
 
     Options left out take BuildConfig's defaults for a new database; with ``--append`` they
-    mean the database's, and any given makes the whole configuration, checked against it. A
+    are the database's, and those given are checked against the database's by the build. A
     label given replaces the database's (None: keep it).
     """
     from .database import BuildConfig
@@ -192,8 +192,17 @@ def _build_config(args: argparse.Namespace) -> tuple[BuildConfig | None, str | N
             raise ConfigError(
                 f"{' and '.join(named)} choose how the audio is kept, but --no-audio keeps none; give one or the other"
             )
-    if args.append and not given:  # --append alone: the database's options
-        return None, label
+    if args.append:
+        if not given:  # --append alone: the database's options
+            return None, label
+        from dataclasses import replace
+
+        from .database.config import recorded_config
+        from .database.sources import recorded_build
+
+        # those left out are the database's; those given must be (checked by the build, naming them)
+        recorded = recorded_build(args.out)
+        return replace(recorded_config(recorded) if recorded is not None else BuildConfig(), **given), label
     values = {k: v for k, v in options_given(args)[BuildConfig].items() if v is not None}  # None: not given
     return BuildConfig(**values), label
 
