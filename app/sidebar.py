@@ -21,6 +21,7 @@ from display import allowed, escape_markdown, user_errors, warnings_shown
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.datasets.takes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES, reading_lines
 from gesturekit.errors import ConfigError, DatabaseError
+from gesturekit.options import widget_limits
 from gesturekit.paths import default_database_path, home
 from gesturekit.workspace import database_folders, is_generated
 
@@ -257,7 +258,10 @@ def _build_expander() -> None:
         out = st.text_input(
             "Database folder to write", key="_gk.build_out", placeholder=str(home() / "db" / "<folder name>")
         )
-        label = st.text_input("Label (optional)", key="_gk.build_label")
+        label_limits = widget_limits(BuildConfig, "label")
+        label = st.text_input(
+            "Label (optional)", value=label_limits["default"], key="_gk.build.label", help=label_limits["help"]
+        )
         workers = st.number_input(
             "Worker processes",
             min_value=1,

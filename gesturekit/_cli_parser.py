@@ -10,6 +10,7 @@ import argparse
 from collections.abc import Sequence
 
 from ._cli_options import add_options
+from ._config import option_of
 
 __all__ = ["build_parser", "join_axis_values"]
 
@@ -186,30 +187,14 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="give every bone one length per take (for keypoints whose bone lengths vary)",
     )
-    b.add_argument(
-        "--overlap-stride", type=int, help="also store an overlapping cut (stride in frames) for the refiner"
+    from .database import BuildConfig
+
+    add_options(
+        b,
+        BuildConfig,
+        ["overlap_stride", "percentiles", "store_audio", "audio_format", "audio_rate", "label"],
+        helps={"label": f"{option_of(BuildConfig, 'label').help} (with --append: replaces its label)"},
     )
-    b.add_argument(
-        "--percentiles",
-        type=float,
-        nargs=2,
-        default=(15.0, 85.0),
-        metavar=("LOW", "HIGH"),
-        help="attribute percentiles that define low/high controls (default 15 85)",
-    )
-    b.add_argument("--no-audio", action="store_true", help="do not keep the takes' audio in the database")
-    b.add_argument(
-        "--audio-format",
-        choices=["pcm", "flac"],
-        help="how the kept audio is stored: pcm (int16, the default) or flac (lossless, about half the size)",
-    )
-    b.add_argument(
-        "--audio-rate",
-        type=int,
-        metavar="HZ",
-        help="sample rate of the kept audio, 4000-16000 Hz (default 16000; lower rates are for listening only)",
-    )
-    b.add_argument("--label", help="a description stored with the database (with --append: replaces its label)")
     b.add_argument("--force", action="store_true", help="replace an existing database")
     b.add_argument(
         "--workers",
@@ -341,18 +326,24 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="TAKE[:START-END]",
         help="leave a take or a time range out of training (repeatable)",
     )
-    # more steps than FGDConfig's 600: the command trains the model the evaluations use
-    f.add_argument("--steps", type=int, default=2000, help="training steps (default 2000)")
     from .evaluate.fgd import FGDConfig
 
-    add_options(f, FGDConfig, ["window", "latent", "seed"])
+    add_options(f, FGDConfig, ["steps", "window", "latent", "seed"])
     f.add_argument("--force", action="store_true", help="replace an existing model")
 
     s = _command(sub, "stimuli")
     s.add_argument("--db", help="matching database folder (default: the demo database)")
     from .study_config import StudyConfig
 
-    add_options(s, StudyConfig, ["audio", "holdouts", "systems"])
+    add_options(
+        s,
+        StudyConfig,
+        ["audio", "holdouts", "systems"],
+        helps={
+            "holdouts": f"{option_of(StudyConfig, 'holdouts').help}; one part per --holdout (repeatable)",
+            "systems": f"{option_of(StudyConfig, 'systems').help}, comma-separated",
+        },
+    )
     s.add_argument("--out", required=True, help="study folder to write")
     add_options(
         s,

@@ -168,8 +168,8 @@ class Option:
         The command-line flag (default ``--`` and the field's name with dashes).
     aliases : tuple of str
         Earlier names of the flag, still read.
-    metavar : str, optional
-        The value's name in ``--help``.
+    metavar : str or tuple of str, optional
+        The value's name in ``--help`` (one name per value where ``nargs`` is a number).
     step : float, optional
         The app's widget step (default 1 for integers).
     limit : callable(context) -> float, optional
@@ -179,10 +179,16 @@ class Option:
         ``low`` itself is refused (a positive number: ``low=0, low_open=True``).
     default_help : str, optional
         How ``--help`` says the default where its value does not (``"all cores"`` for None).
-    nargs : str, optional
-        The command line takes several values after the flag (``"+"``).
+    nargs : str or int, optional
+        The command line takes several values after the flag (``"+"``, or exactly 2).
     append : bool
         The command line's flag may be given again, each time adding a value.
+    start : optional
+        Where the app's widget starts, where that is not the default (the study page's systems:
+        those that need no held-out part or refiner); :func:`widget_limits` says it as ``start``.
+    switch_help : str, optional
+        What the command line's flag of a switch says, where it gives the other value than the
+        field's default (``--no-audio``: "do not keep ...", for ``store_audio``'s "keep ...").
     """
 
     help: str
@@ -193,13 +199,15 @@ class Option:
     kind: type | None = None
     flag: str | None = None
     aliases: tuple[str, ...] = ()
-    metavar: str | None = None
+    metavar: str | tuple[str, ...] | None = None
     step: float | None = None
     limit: Callable[[Any], float] | None = None
     low_open: bool = False
     default_help: str | None = None
-    nargs: str | None = None
+    nargs: str | int | None = None
     append: bool = False
+    start: Any = None
+    switch_help: str | None = None
 
     def bounds_text(self, integer: bool) -> str:
         """``"an integer >= 0"``, ``"a number from 0 to 7.5"``: what a value must be, for messages."""
@@ -324,8 +332,18 @@ def check_option(cls: type, name: str, value: Any, *, what: str | None = None) -
         if not isinstance(value, bool):
             raise ConfigError(f"{label} must be True or False, got {value!r}")
         return value
-    if opt.kind is str or isinstance(default, (str, tuple)):
-        return value  # text and tuples are checked by the class itself
+    if opt.kind is str or isinstance(default, str):
+        return value  # text is checked by the class itself
+    if isinstance(default, tuple):
+        if opt.nargs is None or (opt.low is None and opt.high is None):
+            return value  # text and tuples are checked by the class itself
+        # numbers given one by one after the flag (--percentiles 15 85): each within the bounds
+        return tuple(_checked_number(cls, name, opt, v, label) for v in value)
+    return _checked_number(cls, name, opt, value, label)
+
+
+def _checked_number(cls: type, name: str, opt: Option, value: Any, label: str) -> Any:
+    """``value`` as an ``int`` or ``float`` within the option's bounds, else ConfigError naming ``label``."""
     integer = _integer(cls, name, opt)
     ok = not isinstance(value, bool) and isinstance(value, numbers.Integral if integer else numbers.Real)
     if ok:
@@ -350,8 +368,9 @@ def widget_limits(cls: type, name: str, *, context: Any = None) -> dict[str, Any
     Returns
     -------
     dict
-        ``min``, ``max`` (None: unbounded), ``step`` (None for choices), ``default``, ``choices``
-        (a list, or None), ``help`` and ``unit``.
+        ``min``, ``max`` (None: unbounded), ``step`` (None for choices), ``default``, ``start``
+        (where the widget starts: the option's ``start``, else ``default``), ``choices`` (a list, or
+        None), ``help`` and ``unit``.
 
     Examples
     --------
@@ -384,6 +403,7 @@ def widget_limits(cls: type, name: str, *, context: Any = None) -> dict[str, Any
         "max": number(high),
         "step": step,
         "default": default_of(cls, name),
+        "start": default_of(cls, name) if opt.start is None else opt.start,
         "choices": None if opt.choices is None else list(opt.choices),
         "help": opt.help,
         "unit": opt.unit,

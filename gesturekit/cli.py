@@ -18,13 +18,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ._cli_options import options_given
+from ._cli_options import flag_of, options_given
 from ._cli_parser import build_parser, join_axis_values
 from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
 from .paths import is_file
 
 if TYPE_CHECKING:
-    from .database import MatchingDatabase
+    from .database import BuildConfig, MatchingDatabase
 
 __all__ = ["main", "build_parser"]
 
@@ -123,17 +123,9 @@ def _cmd_build_db(args) -> int:
         there = check_output(out, "database", overwrite=args.force or args.append, inputs=[args.folder])
         if args.append and not there:
             raise ConfigError(f"--append adds takes to a database, and there is none at {out}; build it first")
-        from .database import BuildConfig
         from .workspace import build_database
 
-        config = None
-        if not args.append or _build_options_given(args):  # --append alone: the database's options
-            config = BuildConfig(
-                overlap_stride=args.overlap_stride,
-                percentiles=tuple(args.percentiles),
-                store_audio=not args.no_audio,
-                **_audio_options(args),
-            )
+        config, label = _build_config(args)
         with output_lock(out), _stage_bars() as bar:  # the bar shows once the first take is read
             db = build_database(
                 args.folder,
@@ -154,7 +146,7 @@ def _cmd_build_db(args) -> int:
                 scheduler=args.scheduler,
                 append=args.append,
                 keep_stats=args.keep_stats,
-                label=args.label,
+                label=label,
                 on_progress=lambda p: _advance(
                     bar("fitting the skeleton" if p.phase == "fit" else "reading takes", p.total, "take"),
                     p.done,
@@ -183,15 +175,36 @@ def _check_scale_options(args: argparse.Namespace) -> None:
         raise ConfigError("give either --append (add takes to the database) or --force (replace it), not both")
 
 
-def _build_options_given(args: argparse.Namespace) -> bool:
-    """Whether build options other than the defaults were given (with --append they must match the database's)."""
-    return (
-        args.overlap_stride is not None
-        or args.no_audio
-        or tuple(args.percentiles) != (15.0, 85.0)
-        or args.audio_format is not None
-        or args.audio_rate is not None
-    )
+def _build_config(args: argparse.Namespace) -> tuple[BuildConfig | None, str | None]:
+    """The build-db options as a BuildConfig (None: the database's, with ``--append`` and none given), and the label.
+
+    Options left out take BuildConfig's defaults for a new database; with ``--append`` they
+    are the database's, and those given are checked against the database's by the build. A
+    label given replaces the database's (None: keep it).
+    """
+    from .database import BuildConfig
+
+    given = options_given(args, only_given=True)[BuildConfig]
+    label = given.pop("label", None)
+    if not given.get("store_audio", True):
+        named = [flag_of(BuildConfig, k) for k in ("audio_format", "audio_rate") if k in given]
+        if named:
+            raise ConfigError(
+                f"{' and '.join(named)} choose how the audio is kept, but --no-audio keeps none; give one or the other"
+            )
+    if args.append:
+        if not given:  # --append alone: the database's options
+            return None, label
+        from dataclasses import replace
+
+        from .database.config import recorded_config
+        from .database.sources import recorded_build
+
+        # those left out are the database's; those given must be (checked by the build, naming them)
+        recorded = recorded_build(args.out)
+        return replace(recorded_config(recorded) if recorded is not None else BuildConfig(), **given), label
+    values = {k: v for k, v in options_given(args)[BuildConfig].items() if v is not None}  # None: not given
+    return BuildConfig(**values), label
 
 
 def _print_readings(db: MatchingDatabase) -> None:
@@ -200,21 +213,6 @@ def _print_readings(db: MatchingDatabase) -> None:
 
     for line in reading_lines(db.meta.get("takes", [])):
         _print(line)
-
-
-def _audio_options(args) -> dict:
-    """``--audio-format`` and ``--audio-rate`` as BuildConfig fields, checked against each other and ``--no-audio``."""
-    from .database.audio import MIN_AUDIO_RATE, AudioStorage
-    from .motion import AUDIO_SR
-
-    given = {k: v for k, v in (("audio_format", args.audio_format), ("audio_rate", args.audio_rate)) if v is not None}
-    if given and args.no_audio:
-        named = " and ".join("--" + k.replace("_", "-") for k in given)
-        raise ConfigError(f"{named} choose how the audio is kept, but --no-audio keeps none; give one or the other")
-    if args.audio_rate is not None and not MIN_AUDIO_RATE <= args.audio_rate <= AUDIO_SR:
-        raise ConfigError(f"--audio-rate {args.audio_rate}: the rate must be {MIN_AUDIO_RATE} to {AUDIO_SR} Hz")
-    AudioStorage(**{k.removeprefix("audio_"): v for k, v in given.items()})
-    return given
 
 
 def _cmd_info(args) -> int:
@@ -549,7 +547,7 @@ def _cmd_train_fgd(args) -> int:
         takes += list(ref.exclude_takes)
         ranges += list(ref.exclude_ranges)
     exclude = db.exclusion_mask(takes=takes, ranges=ranges) if (takes or ranges) else None
-    config = FGDConfig(steps=args.steps, **options_given(args)[FGDConfig])
+    config = FGDConfig(**options_given(args)[FGDConfig])
     with _progress_bar(config.steps, "step", "training the FGD autoencoder") as bar:
         model = train_fgd_model(
             db,

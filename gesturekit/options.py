@@ -5,7 +5,8 @@ the command line's flags and the app's widgets read it from there (see :func:`wi
 
 The configurations so declared: :class:`~gesturekit.search.SearchConfig`,
 :class:`~gesturekit.synthesize.SynthesisConfig`, :class:`~gesturekit.refine.train.TrainConfig`,
-:class:`~gesturekit.study_config.StudyConfig` and :class:`~gesturekit.evaluate.run.EvaluationConfig`.
+:class:`~gesturekit.study_config.StudyConfig`, :class:`~gesturekit.evaluate.run.EvaluationConfig`,
+:class:`~gesturekit.evaluate.fgd.FGDConfig` and :class:`~gesturekit.database.BuildConfig`.
 """
 
 from __future__ import annotations

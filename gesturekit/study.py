@@ -64,6 +64,7 @@ if TYPE_CHECKING:
     from distributed import Client
 
     from .character.target import Character
+    from .control import ControlTrack
     from .database import MatchingDatabase
     from .viz.render import RenderStyle
 
@@ -463,30 +464,22 @@ def make_stimuli(
     if config is not None and not isinstance(config, StudyConfig):  # earlier versions': the synthesis's
         config, options = None, {"synthesis": config, **options}
     study = options_config(StudyConfig, config, options)
-    audio, holdouts, systems, seed = study.audio, study.holdouts, study.systems, study.seed
-    participants, control, synthesis, refiner = study.participants, study.control, study.synthesis, study.refiner
-    resolution, loudness_lufs, workers, scheduler = (
-        study.resolution,
-        study.loudness_lufs,
-        study.workers,
-        study.scheduler,
-    )
-    character, character_map = study.character, study.character_map
     from .control import parse_control
     from .evaluate.baselines import SystemUnavailable, parse_systems, refiner_unavailable_reason
     from .export.video import check_resolution
     from .refine import open_refiner
 
     t0 = time.perf_counter()
-    systems = parse_systems(systems)
-    width, height = check_resolution(resolution)
-    for needed in ("pyvista", "imageio_ffmpeg") + (("distributed",) if isinstance(scheduler, str) else ()):
+    systems = parse_systems(study.systems)
+    width, height = check_resolution(study.resolution)
+    for needed in ("pyvista", "imageio_ffmpeg") + (("distributed",) if isinstance(study.scheduler, str) else ()):
         require(needed, purpose="rendering stimuli")  # before the long part (the workers import them again)
-    if not math.isfinite(loudness_lufs):
+    if not math.isfinite(study.loudness_lufs):
         # a NaN target would scale every soundtrack to NaN samples
-        raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {loudness_lufs!r}")
-    track = parse_control(control)
-    user_character, character_record = _study_character(character, character_map)
+        raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {study.loudness_lufs!r}")
+    track = parse_control(study.control)
+    user_character, character_record = _study_character(study.character, study.character_map)
+    refiner = study.refiner
     refiner_name = None if refiner is None else str(getattr(refiner, "path", None) or refiner)
     if "knn+cgan" in systems:
         reason = refiner_unavailable_reason(refiner)
@@ -497,63 +490,46 @@ def make_stimuli(
 
     out = Path(out)
     # the study folder is never the database's or the speech's, nor inside or around them
-    check_output(out, "study", overwrite=overwrite, inputs=[getattr(db, "path", None), *audio])
+    check_output(out, "study", overwrite=overwrite, inputs=[getattr(db, "path", None), *study.audio])
     with output_lock(out):
-        check_output(out, "study", overwrite=overwrite, inputs=[getattr(db, "path", None), *audio])
-        return _make_stimuli_locked(
-            db,
-            out=out,
-            audio=audio,
-            holdouts=holdouts,
-            systems=systems,
-            seed=seed,
-            participants=participants,
-            track=track,
-            config=synthesis,
-            refiner=refiner,
-            refiner_name=refiner_name,
-            width=width,
-            height=height,
-            loudness_lufs=loudness_lufs,
-            workers=workers,
-            scheduler=scheduler,
-            progress=progress,
-            t0=t0,
-            character=user_character,
-            character_record=character_record,
-        )
+        check_output(out, "study", overwrite=overwrite, inputs=[getattr(db, "path", None), *study.audio])
+        prepared = _Prepared(systems, track, refiner, refiner_name, width, height, user_character, character_record)
+        return _make_stimuli_locked(db, study, prepared, out=out, progress=progress, t0=t0)
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """What :func:`make_stimuli` made of a :class:`StudyConfig` before locking the folder: the systems
+    parsed, the control track read, the refiner opened, the resolution checked, the character read."""
+
+    systems: tuple[str, ...]
+    track: ControlTrack
+    refiner: Any
+    refiner_name: str | None
+    width: int
+    height: int
+    character: Any
+    character_record: dict | None
 
 
 def _make_stimuli_locked(
-    db,
+    db: MatchingDatabase,
+    study: StudyConfig,
+    prepared: _Prepared,
     *,
-    out,
-    audio,
-    holdouts,
-    systems,
-    seed,
-    participants,
-    track,
-    config,
-    refiner,
-    refiner_name,
-    width,
-    height,
-    loudness_lufs,
-    workers,
-    scheduler,
-    progress,
-    t0,
-    character=None,
-    character_record=None,
-):
+    out: Path,
+    progress: Callable[[str, int, int], None] | None,
+    t0: float,
+) -> StudyResult:
     """:func:`make_stimuli` once the study folder is checked and locked."""
     from .evaluate.baselines import SystemUnavailable, run_system
     from .outputs import write_errors
     from .synthesize import SynthesisConfig
 
+    systems, track, refiner, character = prepared.systems, prepared.track, prepared.refiner, prepared.character
+    seed, loudness_lufs = study.seed, study.loudness_lufs
     manifest_path, order_path, study_path = out / "manifest.csv", out / "order.csv", out / "study.json"
-    speeches = speech_sources(db, audio=audio, holdouts=holdouts)
+    speeches = speech_sources(db, audio=study.audio, holdouts=study.holdouts)
     if "gt" in systems:
         missing = [s.name for s in speeches if s.gt is None]
         if missing:
@@ -561,12 +537,12 @@ def _make_stimuli_locked(
                 f"gt needs recorded motion, which only held-out parts of the database have "
                 f"(--holdout TAKE:START-END); none for {', '.join(missing)}"
             )
-    base = config or SynthesisConfig(seed=int(seed))
+    base = study.synthesis or SynthesisConfig(seed=int(seed))
     plan = plan_stimuli(
         [s.name for s in speeches],
         systems,
         seed=seed,
-        participants=participants,
+        participants=study.participants,
         controls=track.to_text(),
         synthesis_seed=base.seed,
     )
@@ -603,7 +579,7 @@ def _make_stimuli_locked(
                     "fps": float(res.motion.fps),
                     "joints": None if res.motion.joints is None else res.motion.joints.to_list(),
                     "audio": sound,
-                    "resolution": (width, height),
+                    "resolution": (prepared.width, prepared.height),
                     "character": character,
                 }
             )
@@ -626,8 +602,8 @@ def _make_stimuli_locked(
         j["view_box"] = box
     _run_jobs(
         jobs,
-        workers=workers,
-        scheduler=scheduler,
+        workers=study.workers,
+        scheduler=study.scheduler,
         progress=None if progress is None else (lambda d, t: progress("rendering", d, t)),
     )
 
@@ -635,7 +611,7 @@ def _make_stimuli_locked(
     manifest["duration_s"] = [round(durations[a], 6) for a in manifest["audio"]]
     _write_text(manifest_path, manifest.to_csv(index=False, lineterminator="\n"))
     _write_text(order_path, plan.order.to_csv(index=False, lineterminator="\n"))
-    settings = {
+    settings: dict[str, Any] = {
         "format": "gesturekit-study",
         "database": str(db.path) if db.path is not None else (db.label or "in-memory database"),
         "systems": list(systems),
@@ -644,15 +620,15 @@ def _make_stimuli_locked(
         "participants": int(plan.order["participant"].max()),
         "control": track.to_text(),
         "synthesis": base.to_dict(),
-        "resolution": [width, height],
+        "resolution": [prepared.width, prepared.height],
         "fps": float(db.fps),
         "loudness_lufs": float(loudness_lufs),
         "render_style": "gesturekit house style, fixed camera (fit_motion=False), no labels",
-        "refiner": refiner_name,
+        "refiner": prepared.refiner_name,
     }
-    if character_record is not None:
+    if prepared.character_record is not None:
         settings["render_style"] += "; the user's character in its own colours"
-        settings["character"] = character_record
+        settings["character"] = prepared.character_record
     if box is not None:
         settings["view_box"] = box  # a partial skeleton's stimuli share this fitted, fixed frame
     _write_text(study_path, json.dumps(settings, indent=1) + "\n")

@@ -71,12 +71,18 @@ class StudyConfig:
     audio: Sequence[str | os.PathLike[str]] = option((), help="speech files or folders of them", nargs="+")
     holdouts: Sequence[Any] = option(
         (),
-        help="a held-out part of the database as a speech with recorded motion, for gt (repeatable)",
+        help="held-out parts of the database: speeches whose recorded motion is the ground truth (gt)",
         flag="--holdout",
         append=True,
         metavar="TAKE[:START-END]",
     )
-    systems: str | Sequence[str] = option(STUDY_SYSTEMS, help="comma-separated systems", kind=str)
+    systems: str | Sequence[str] = option(
+        STUDY_SYSTEMS,
+        help="the systems every speech is shown by",
+        kind=str,
+        # the app starts with the systems that need neither a held-out part (gt) nor a refiner (knn+cgan)
+        start=("knn", "random"),
+    )
     seed: int = option(0, help="seed of the ids, the order and the synthesis", low=0)
     participants: int | None = option(
         None,

@@ -68,15 +68,16 @@ def settings(db: MatchingDatabase) -> dict:
             "Held-out parts of the database (needed for gt)",
             key=pk("study.holdouts", ""),
             placeholder="TAKE:START-END, TAKE:START-END",
-            help="their recorded motion is the ground truth; every system's search leaves them out",
+            help=_limits("holdouts")["help"],
         )
     with right:
         st.markdown("**Systems and design**")
         systems = ss["study.systems"] = st.multiselect(
             "Systems",
             list(SYSTEMS),
-            key=pk("study.systems", ["knn", "random"]),
+            key=pk("study.systems", list(_limits("systems")["start"])),
             format_func=lambda s: f"{s}: {SYSTEM_DESCRIPTIONS[s]}",
+            help=_limits("systems")["help"],
         )
         c = st.columns(3)
         seed = ss["study.seed"] = _number(c[0], "Seed", "seed")
@@ -90,11 +91,16 @@ def settings(db: MatchingDatabase) -> dict:
             help=_limits("resolution")["help"],
         )
         control = ss["study.control"] = st.text_input(
-            "Control track (optional)", key=pk("study.control", ""), placeholder="0-3:left_hand=high"
+            "Control track (optional)",
+            key=pk("study.control", _limits("control")["default"]),
+            placeholder="0-3:left_hand=high",
+            help=_limits("control")["help"],
         )
         refiner = ""
         if "knn+cgan" in systems:
-            refiner = ss["study.refiner"] = st.text_input("Refiner folder (for knn+cgan)", key=pk("study.refiner", ""))
+            refiner = ss["study.refiner"] = st.text_input(
+                "Refiner folder (for knn+cgan)", key=pk("study.refiner", ""), help=_limits("refiner")["help"]
+            )
         c = st.columns([3, 1])
         out = ss["study.out"] = c[0].text_input("Study folder to write", key=pk("study.out", str(home() / "study")))
         workers = ss["study.workers"] = _number(

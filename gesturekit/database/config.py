@@ -7,7 +7,7 @@ one the arrays were built with.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,7 +18,7 @@ from ..errors import ConfigError
 from ..motion import AUDIO_SR
 from .audio import AUDIO_FORMATS, MIN_AUDIO_RATE, AudioStorage
 
-__all__ = ["BuildConfig", "normalise_exclusions"]
+__all__ = ["BuildConfig", "recorded_config", "normalise_exclusions"]
 
 
 @dataclass(frozen=True)
@@ -69,9 +69,20 @@ class BuildConfig:
         limit=lambda config: config.clip_frames,
     )
     percentiles: tuple[float, float] = option(
-        (15.0, 85.0), help="attribute percentiles that define low/high controls", low=0.0, high=100.0
+        (15.0, 85.0),
+        help="attribute percentiles that define low/high controls",
+        low=0.0,
+        high=100.0,
+        kind=float,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
     )
-    store_audio: bool = option(True, help="keep the takes' audio in the database")
+    store_audio: bool = option(
+        True,
+        help="keep the takes' audio in the database",
+        flag="--no-audio",
+        switch_help="do not keep the takes' audio in the database",
+    )
     label: str = option("", help="a description stored with the database")
     source: str = ""
     joint_map: str | None = None
@@ -103,6 +114,35 @@ class BuildConfig:
         storage = AudioStorage(format=self.audio_format, rate=self.audio_rate)  # checks both
         if not self.store_audio and not storage.is_default:
             raise ConfigError("an audio format or rate was given, but the database keeps no audio (store_audio=False)")
+
+
+def recorded_config(build: Mapping[str, Any]) -> BuildConfig:
+    """The :class:`BuildConfig` a database's build record (``database.json``'s ``build``) says.
+
+    Parameters
+    ----------
+    build : mapping
+        The record; options a build before they were recorded lacks take their defaults then
+        (percentiles 15 and 85, audio kept as 16 kHz PCM).
+
+    Returns
+    -------
+    BuildConfig
+    """
+    lo, hi = build.get("percentiles") or (15.0, 85.0)
+    reading = build.get("reading")
+    return BuildConfig(
+        clip_frames=int(build["clip_frames"]),
+        overlap_stride=build.get("overlap_stride"),
+        percentiles=(float(lo), float(hi)),
+        store_audio=bool(build.get("store_audio", True)),
+        label=str(build.get("label", "")),
+        source=str(build.get("source", "")),
+        joint_map=build.get("joint_map"),
+        audio_format=str(build.get("audio_format", "pcm")),
+        audio_rate=int(build.get("audio_rate", AUDIO_SR)),
+        reading=reading if isinstance(reading, dict) else None,
+    )
 
 
 def normalise_exclusions(

@@ -44,10 +44,9 @@ import numpy as np
 
 from ..bones import Skeleton, fit_skeleton
 from ..errors import ConfigError, DatabaseError, InputFileError
-from ..motion import AUDIO_SR
 from ..skeleton import JointPresence
 from .build import assemble
-from .config import BuildConfig
+from .config import BuildConfig, recorded_config
 from .folder import FolderOut, read_database
 from .stage import (
     BuildProgress,
@@ -146,19 +145,7 @@ def recorded_reading(build: dict[str, Any], given: dict[str, Any], out: Path) ->
 
 def _append_config(build: dict[str, Any], given: BuildConfig | None, out: Path) -> BuildConfig:
     """The database's build options, checked against those given for the new takes."""
-    lo, hi = build.get("percentiles") or (15.0, 85.0)
-    old = BuildConfig(
-        clip_frames=int(build["clip_frames"]),
-        overlap_stride=build.get("overlap_stride"),
-        percentiles=(float(lo), float(hi)),
-        store_audio=bool(build.get("store_audio", True)),
-        label=str(build.get("label", "")),
-        source=str(build.get("source", "")),
-        joint_map=build.get("joint_map"),
-        audio_format=str(build.get("audio_format", "pcm")),
-        audio_rate=int(build.get("audio_rate", AUDIO_SR)),
-        reading=build.get("reading") if isinstance(build.get("reading"), dict) else None,
-    )
+    old = recorded_config(build)
     if given is not None:
         for attr, option in _SHARED_OPTIONS.items():
             if getattr(given, attr) != getattr(old, attr):

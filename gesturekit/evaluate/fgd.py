@@ -61,7 +61,7 @@ class FGDConfig:
     channels : int
         Channels of the first convolution (the second and third use the same).
     steps : int
-        Training steps (Adam, mean squared reconstruction error).
+        Training steps (Adam, mean squared reconstruction error); ``gesturekit train-fgd``'s default.
     batch : int
         Windows per step.
     lr : float
@@ -75,7 +75,7 @@ class FGDConfig:
     window: int = option(32, help="frames per window, a multiple of 8", low=16, step=8, unit="frames")
     latent: int = option(32, help="size of the latent feature", low=1)
     channels: int = option(32, help="channels of the convolutions", low=1)
-    steps: int = option(600, help="training steps", low=1)
+    steps: int = option(2000, help="training steps", low=1)
     batch: int = option(32, help="windows per step", low=1)
     lr: float = option(1e-3, help="learning rate", low=0.0, low_open=True)
     seed: int = option(0, help="seed", low=0)

@@ -351,6 +351,10 @@ class Evaluation:
         return [folder / n for n in ("results.csv", "results.md", "controls.csv", "controls.md", "evaluation.json")]
 
 
+#: Training steps of the FGD autoencoder an evaluation trains for itself when given none.
+RUN_FGD_STEPS = 600
+
+
 def _fgd_model(
     db: MatchingDatabase,
     fgd_model: FGDModel | str | os.PathLike[str] | None,
@@ -367,7 +371,8 @@ def _fgd_model(
         "FGD autoencoder trained for this run on the database without the held-out part "
         "(save one with `gesturekit train-fgd` and pass it with --fgd-model to reuse it)"
     )
-    return train_fgd_model(db, config=FGDConfig(), exclude=exclude)
+    # a model for this run only: fewer steps than a saved one's (FGDConfig.steps), so an evaluation stays quick
+    return train_fgd_model(db, config=FGDConfig(steps=RUN_FGD_STEPS), exclude=exclude)
 
 
 def _measure(out: SystemOutput, ref: HeldOut, onsets: np.ndarray, fgd_model: FGDModel | None, sigma: float) -> dict:

@@ -195,7 +195,7 @@ def test_a_label_and_take_names_from_the_build_form_are_shown_literally(app_env,
     at.sidebar.selectbox(key="_gk.build_up").set_value("-y")
     at.sidebar.checkbox(key="_gk.build_bones").check()
     at.sidebar.text_input(key="_gk.build_out").input(str(tmp_path / "db" / "built"))
-    at.sidebar.text_input(key="_gk.build_label").input(LABEL)
+    at.sidebar.text_input(key="_gk.build.label").input(LABEL)
     at = at.sidebar.button(key="_gk.build_go").click().run()
     assert not [e.value for e in at.error]
     _assert_literal(at, LABEL, take)  # the new database's label; the reading notes name the takes

@@ -466,6 +466,25 @@ def test_append_without_a_database_is_refused(five, joint_map, tmp_path):
     assert_refused(run, names=tmp_path / "db", problem="there is none", before=before)
 
 
+def test_append_takes_the_databases_options_for_those_left_out_and_refuses_others_given(five, joint_map, tmp_path):
+    folder, out = tmp_path / "takes", tmp_path / "db"
+    folder.mkdir()
+    write = lambda *names: [  # noqa: E731
+        shutil.copy2(five / f"{n}{ext}", folder / f"{n}{ext}") for n in names for ext in (".bvh", ".wav")
+    ]
+    record = lambda: json.loads((out / "database.json").read_text())["build"]  # noqa: E731
+    write("t000", "t001")
+    build(folder, out, joint_map, "--workers", "1", "--percentiles", "10", "90", "--no-audio")
+    write("t002")
+    # --no-audio given (the database's), --percentiles left out: the database's 10 90, not the default 15 85
+    build(folder, out, joint_map, "--append", "--workers", "1", "--no-audio")
+    assert record()["percentiles"] == [10.0, 90.0] and record()["store_audio"] is False
+    assert len(MatchingDatabase.load(out).take_names) == 3
+    before = snapshot(folder, tmp_path)
+    run = run_cli("build-db", folder, "--joint-map", joint_map, "--out", out, "--append", "--percentiles", "15", "85")
+    assert_refused(run, names="--percentiles", problem="database's", before=before)
+
+
 def test_append_with_other_build_options_is_refused(five, joint_map, tmp_path):
     build(five, tmp_path / "db", joint_map, "--workers", "1")
     before = snapshot(five, tmp_path)

@@ -34,6 +34,31 @@ TIMEOUT = 120
 
 #: The options of each command that are no configuration's: what to read and write, and how to run.
 RUN_ARGUMENTS = {
+    "build-db": {
+        "folder",
+        "out",
+        # how the takes are read: ReadOptions and build_database's arguments, recorded with the database
+        "preset",
+        "joint_map",
+        "kind",
+        "fps",
+        "units",
+        "up",
+        "forward",
+        "no_plausibility_check",
+        "allow_duration_mismatch",
+        "normalize_bones",
+        # how the build runs (the database is the same for any), and what it does with one there
+        "force",
+        "workers",
+        "scheduler",
+        "append",
+        "keep_stats",
+        # the generated demo speaker's takes (build_demo_database's arguments), not a build option
+        "demo",
+        "minutes",
+        "seed",
+    },
     "synthesize": {
         "speech",
         "db",
@@ -52,13 +77,13 @@ RUN_ARGUMENTS = {
     },
     "evaluate": {"db", "out", "force"},
     "stimuli": {"db", "out", "force", "max_speech_minutes"},
-    "train-fgd": {"db", "out", "holdout", "steps", "force"},  # --steps: see OWN_CLI_DEFAULT
+    "train-fgd": {"db", "out", "holdout", "force"},
     "train-refiner": {
         "db",
         "demo",
         "out",
         "preset",
-        "iterations",
+        "iterations",  # the preset's (quick or paper) TrainConfig.iterations unless given
         "resume",
         "device",
         "exclude_take",
@@ -68,15 +93,8 @@ RUN_ARGUMENTS = {
     },
 }
 
-#: Options that set a field but start elsewhere than its default, and why.
-OWN_CLI_DEFAULT = {
-    ("train-fgd", "steps"): "the command trains the model evaluations use: 2000 steps, FGDConfig's 600 for tests"
-}
-
-#: Commands whose options are not yet fields of a configuration, and why.
-NOT_YET = {
-    "build-db": "its options default to the database's with --append (None), not to BuildConfig's; "
-    "BuildConfig's fields carry their metadata (checked below)",
+#: Commands whose options are no configuration's, and why.
+NOT_OPTIONS_COMMANDS = {
     "info": "reads a database; no options",
     "study": "its subcommands run a study folder; no configuration",
 }
@@ -93,6 +111,8 @@ def _cli_default(cls: type, name: str):
     """The field's default as the command line holds it before parsing."""
     opt = option_of(cls, name)
     default = default_of(cls, name)
+    if isinstance(default, bool):  # a switch: its flag gives the other value
+        return default
     if opt.nargs or opt.append:
         return None  # not given: the field's empty default
     if isinstance(default, tuple):
@@ -101,15 +121,7 @@ def _cli_default(cls: type, name: str):
 
 
 def test_every_command_is_covered_or_says_why_not():
-    assert set(_commands()) == set(RUN_ARGUMENTS) | set(NOT_YET)
-
-
-def test_an_option_with_its_own_default_is_still_one_of_its_commands_and_differs():
-    fields = {("train-fgd", "steps"): (FGDConfig, "steps")}
-    assert set(fields) == set(OWN_CLI_DEFAULT)
-    for (command, name), (cls, field) in fields.items():
-        (action,) = [a for a in _commands()[command]._actions if a.dest == name]
-        assert name in RUN_ARGUMENTS[command] and action.default != default_of(cls, field)
+    assert set(_commands()) == set(RUN_ARGUMENTS) | set(NOT_OPTIONS_COMMANDS)
 
 
 @pytest.mark.parametrize("command", sorted(RUN_ARGUMENTS))
@@ -135,18 +147,27 @@ def test_every_cli_option_is_one_field_with_its_default_bounds_and_choices(comma
         else:
             assert action.default == _cli_default(cls, name), f"{command} {action.option_strings}: another default"
         assert list(action.choices or []) == list(opt.choices or []), f"{command} {action.option_strings}"
-        assert opt.help in action.help or command == "evaluate" and name == "seed"
-        if opt.kind is not None:
+        switch = not action.required and isinstance(default_of(cls, name), bool)
+        assert (opt.switch_help if switch and opt.switch_help else opt.help) in action.help or (
+            command == "evaluate" and name == "seed"
+        )
+        if switch:  # its flag (--no-audio) stores the other value than the field's default
+            assert action.nargs == 0 and action.const is (not default_of(cls, name)), command
+        elif opt.kind is not None:
             assert action.type is opt.kind
         elif opt.choices is None and not isinstance(default_of(cls, name), tuple):
             assert action.type is type(default_of(cls, name))
     assert parser.get_default(OPTIONS_DEST) == list(seen)
 
 
-def _parse(command: str, flag: str, value: str) -> argparse.Namespace:
+def _parse(command: str, action: argparse.Action, value: str) -> argparse.Namespace:
+    """``command`` with its required arguments and ``value`` for ``action``'s option (each of its values)."""
     required = {"synthesize": ["s.wav"], "evaluate": ["--holdout", "t"], "stimuli": ["--out", "o"]}
     required["train-refiner"] = required["train-fgd"] = ["--out", "o"]
-    return build_parser().parse_args([command, *required[command], f"{flag}={value}"])
+    required["build-db"] = ["takes", "--out", "o"]
+    flag = action.option_strings[0]
+    given = [flag, *[value] * action.nargs] if isinstance(action.nargs, int) else [f"{flag}={value}"]
+    return build_parser().parse_args([command, *required[command], *given])
 
 
 @pytest.mark.parametrize("command", sorted(RUN_ARGUMENTS))
@@ -154,22 +175,40 @@ def test_every_bounded_cli_option_refuses_a_value_out_of_its_fields_bounds(comma
     checked = 0
     for action in _commands()[command]._actions:
         field = getattr(action, FIELD_OF, None)
-        if field is None or option_of(*field).choices is not None:
+        if field is None or option_of(*field).choices is not None or action.nargs == 0:
             continue
         opt = option_of(*field)
         flag = action.option_strings[0]
+        several = isinstance(action.nargs, int)  # each value within the bounds (--percentiles LOW HIGH)
         if opt.low is not None:
             below = opt.low - (0 if opt.low_open else 1)
-            args = _parse(command, flag, f"{below:g}")
             with pytest.raises(ConfigError, match=f"^{flag} must be "):
-                options_given(args)
+                options_given(_parse(command, action, f"{below:g}"))
             checked += 1
             at_low = opt.low + (0.5 if action.type is float else 1) * opt.low_open  # the lowest value taken
-            assert options_given(_parse(command, flag, f"{at_low:g}"))[field[0]][field[1]] == at_low
+            got = options_given(_parse(command, action, f"{at_low:g}"))[field[0]][field[1]]
+            assert got == ((at_low,) * action.nargs if several else at_low)
+        if opt.high is not None:
+            with pytest.raises(ConfigError, match=f"^{flag} must be "):
+                options_given(_parse(command, action, f"{opt.high + 1:g}"))
         if action.type is float:
             with pytest.raises(ConfigError, match=f"^{flag} must be "):
-                options_given(_parse(command, flag, "nan"))
+                options_given(_parse(command, action, "nan"))
     assert checked
+
+
+def test_options_given_tells_the_options_given_from_those_left_at_their_defaults():
+    """``build-db --append`` keeps the database's options for those left out: it must know which were given."""
+    parser = build_parser()
+    left_out = parser.parse_args(["build-db", "takes", "--out", "o", "--append"])
+    assert options_given(left_out, only_given=True)[BuildConfig] == {}
+    assert options_given(left_out)[BuildConfig]["audio_rate"] == default_of(BuildConfig, "audio_rate")
+    # a value equal to the default, given, is given
+    args = ["build-db", "takes", "--out", "o", "--append", "--percentiles", "15", "85", "--no-audio", "--label", "x"]
+    given = options_given(parser.parse_args(args), only_given=True)[BuildConfig]
+    assert given == {"percentiles": (15.0, 85.0), "store_audio": False, "label": "x"}
+    # a second parse starts with nothing given
+    assert options_given(parser.parse_args(["build-db", "t", "--out", "o"]), only_given=True)[BuildConfig] == {}
 
 
 @given(st.data())
@@ -224,8 +263,6 @@ NOT_OPTIONS = {
     "study.out": "the study folder to write (make_stimuli's out, no option)",
     "study.resolution": "a choice of sizes of StudyConfig.resolution (its default checked below)",
 }
-#: Widgets that set an option but start elsewhere than the field's default, and why.
-OWN_DEFAULT = {"study.systems": "the page starts with systems that need no held-out part or refiner (knn, random)"}
 
 
 def _fields_of(page_key: str) -> tuple[type, str]:
@@ -255,7 +292,7 @@ def test_every_app_widget_that_sets_an_option_has_its_fields_limits_and_default(
             if not key or not key.startswith("_w." + prefix):
                 continue
             page_key = key.removeprefix("_w.")
-            if page_key in NOT_OPTIONS or page_key in OWN_DEFAULT:
+            if page_key in NOT_OPTIONS:
                 continue
             cls, name = _fields_of(page_key)
             lim = widget_limits(cls, name, context=db)
@@ -266,16 +303,67 @@ def test_every_app_widget_that_sets_an_option_has_its_fields_limits_and_default(
                 assert len(widget.options) == len(lim["choices"]), page_key
             if kind == "text_input":  # an empty box: the field's empty default (None, "" or ()); free text
                 assert widget.value == "" and lim["default"] in (None, "", ()), page_key
+            elif kind == "multiselect":  # the field's start (StudyConfig.systems: what needs no holdout)
+                assert tuple(widget.value) == tuple(lim["start"]), page_key
             else:
-                assert widget.value == lim["default"], page_key
-                assert widget.help == lim["help"], page_key
+                assert widget.value == lim["default"] == lim["start"], page_key
+            assert widget.help == lim["help"], page_key
             checked.add(page_key)
     expected = {
         "synth.": {f"synth.{n}" for n in ("k", "segment", "seed", "record", "init", "blend", "mask_rule")}
         | {"synth.refiner_keep_hz"},
-        "study.": {"study.seed", "study.participants", "study.workers", "study.holdouts", "study.control"},
+        "study.": {"study.seed", "study.participants", "study.workers", "study.holdouts", "study.control"}
+        | {"study.systems"},
     }[prefix]
     assert checked == expected
     if prefix == "study.":
         default = "x".join(map(str, default_of(StudyConfig, "resolution")))
         assert at.selectbox(key="_w.study.resolution").value == default
+
+
+def test_an_option_starts_elsewhere_in_the_app_only_where_its_field_says_so():
+    starts = {(cls, n): o.start for cls in CONFIGS for n, o in options_of(cls).items() if o.start is not None}
+    assert set(starts) == {(StudyConfig, "systems")}
+    # the study page's start needs neither a held-out part nor a refiner, and differs from the CLI's default
+    assert not {"gt", "knn+cgan"} & set(starts[StudyConfig, "systems"])
+    assert widget_limits(StudyConfig, "systems")["start"] != default_of(StudyConfig, "systems")
+    assert widget_limits(SearchConfig, "k")["start"] == default_of(SearchConfig, "k")
+
+
+#: Widgets of the sidebar's build form (their key after ``_gk.build_``) that set no BuildConfig field, and what.
+BUILD_NOT_OPTIONS = {
+    "folder": "the folder of takes (build_database's folder)",
+    "naming": "the joint naming preset or a joint map (build_database's joint_map)",
+    "map": "the joint map's file",
+    "fps": "the frame rate of joint-position files (how the takes are read)",
+    "units": "how the takes are read",
+    "up": "how the takes are read",
+    "forward": "how the takes are read",
+    "bones": "how the takes are read (normalize_bones)",
+    "out": "the database folder to write",
+    "workers": "how the build runs (the database is the same for any number)",
+    "overwrite": "whether an existing database is replaced",
+    "go": "the button",
+}
+
+
+@pytest.mark.slow
+def test_every_build_widget_of_the_sidebar_that_sets_an_option_has_its_fields_limits_and_default(app_env):
+    at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
+    assert not at.exception, at.exception
+    checked, others = set(), set()
+    for kind in ("number_input", "selectbox", "multiselect", "slider", "toggle", "checkbox", "text_input", "radio"):
+        for widget in at.sidebar.get(kind):
+            key = widget.key or ""
+            if key.startswith("_gk.build_"):
+                others.add(key.removeprefix("_gk.build_"))
+            if not key.startswith("_gk.build."):
+                continue
+            name = key.removeprefix("_gk.build.")
+            lim = widget_limits(BuildConfig, name)
+            if kind == "number_input":
+                assert (widget.min, widget.max, widget.step) == (lim["min"], lim["max"], lim["step"]), name
+            assert widget.value == lim["default"] and widget.help == lim["help"], name
+            checked.add(name)
+    assert checked == {"label"}
+    assert others == set(BUILD_NOT_OPTIONS) - {"map", "go"}  # the map's box shows with a JSON joint map
