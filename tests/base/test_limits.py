@@ -181,6 +181,7 @@ _MEASURE = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/clear_refs").exists(), reason="needs Linux /proc to read peak memory")
 def test_refusing_a_hostile_input_costs_less_than_200_mb(tmp_path):
     """Each hostile file asks for gigabytes (the 1 Hz WAV once took 2.7 GB); refusing it must not."""

@@ -234,6 +234,7 @@ def assert_well_formed(mesh: CharacterMesh, rig: Rig) -> None:
         assert signed_volume(v.astype(np.float64), faces) > 0, "a piece's faces wind inward"
 
 
+@pytest.mark.slow
 def test_the_demo_mesh_is_well_formed_within_budget_and_deterministic():
     rig, mesh, _ = _demo()
     assert_well_formed(mesh, rig)
@@ -412,6 +413,7 @@ def test_a_partial_skeleton_gets_a_well_formed_body_that_follows_its_motion(name
     assert worst["dot"] > 0.0 and worst["excess"] <= 0.0, (name, worst)
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(st.lists(st.booleans(), min_size=N_JOINTS, max_size=N_JOINTS))
 def test_any_layout_with_both_shoulders_gets_a_body_that_neither_folds_nor_stretches(present):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gesturekit.character import solve
 from gesturekit.character.rig import rig_for, rotation_to_quaternion, solve_pose
@@ -16,6 +17,7 @@ def _long_motion() -> Motion:
     return Motion(np.asarray(db.poses).reshape(-1, N_JOINTS, 3)[:9000], 15.0, db.joint_presence)
 
 
+@pytest.mark.slow
 def test_a_long_motions_rest_pose_from_a_spread_of_frames_is_the_whole_motions(monkeypatch):
     motion = _long_motion()
     assert motion.n_frames > solve.MEAN_SHAPE_FRAMES

@@ -27,6 +27,7 @@ def _positions_folder(tmp_path):
     return folder, jm
 
 
+@pytest.mark.slow
 def test_build_and_info_from_position_files(tmp_path, capsys):
     folder, jm = _positions_folder(tmp_path)
     out = tmp_path / "db"

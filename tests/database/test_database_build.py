@@ -93,6 +93,7 @@ def test_serial_and_parallel_builds_write_the_same_bytes(five, joint_map, tmp_pa
     assert not (tmp_path / ".serial.staging").exists() and not (tmp_path / ".parallel.staging").exists()
 
 
+@pytest.mark.slow
 def test_folder_build_matches_the_in_memory_build_of_the_same_takes(five, joint_map, tmp_path):
     """One builder: the folder build and MatchingDatabase.build (used by scripts and the demo) agree."""
     from gesturekit.database import BuildConfig
@@ -223,6 +224,7 @@ def test_append_keeping_statistics_leaves_the_old_arrays_as_they_were(five, join
 # ---- resuming --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_an_interrupted_build_resumes_with_the_takes_staged(five, joint_map, tmp_path):
     folder = tmp_path / "takes"
     shutil.copytree(five, folder)
@@ -244,6 +246,7 @@ def test_an_interrupted_build_resumes_with_the_takes_staged(five, joint_map, tmp
     assert all(got[k] == want[k] for k in got if k != "database.json")
 
 
+@pytest.mark.slow
 def test_a_killed_build_resumes(five, joint_map, tmp_path):
     """kill -9 after two takes are staged; the same command then reads only the other three."""
     script = textwrap.dedent("""
@@ -282,6 +285,7 @@ def test_a_killed_build_resumes(five, joint_map, tmp_path):
 # ---- on a Dask cluster -----------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_dask_cluster_build_writes_the_same_bytes(five, joint_map, tmp_path):
     distributed = pytest.importorskip("distributed", reason="dask.distributed is not installed")
     from gesturekit.workspace import build_database
@@ -385,6 +389,7 @@ def test_thresholds_read_in_pieces_are_the_percentiles_of_every_frame(
         assert got[name] == [float(np.percentile(flat[:, i], q[0])), float(np.percentile(flat[:, i], q[1]))]
 
 
+@pytest.mark.slow
 def test_warnings_of_worker_processes_reach_the_command_line(joint_map, tmp_path):
     """A take whose speech is shorter than its motion is trimmed with a warning, also when a worker
     process reads it (the warning is issued again in the command's process, once)."""
@@ -429,6 +434,7 @@ def test_scale_options_are_refused_with_demo(tmp_path, option):
     assert_refused(run, names=option.split("=")[0], problem="--demo generates", before=before)
 
 
+@pytest.mark.slow
 def test_a_scheduler_that_cannot_be_reached_is_refused(five, joint_map, tmp_path, monkeypatch):
     pytest.importorskip("distributed", reason="dask.distributed is not installed")
     import gesturekit._jobs as jobs_module
@@ -513,6 +519,7 @@ def test_a_staging_folder_that_is_not_ours_is_left_alone(five, joint_map, tmp_pa
     assert_refused(run, names=tmp_path / ".db.staging", problem="not one gesturekit made", before=before)
 
 
+@pytest.mark.slow
 def test_a_parallel_build_reports_the_error_a_serial_build_gives(tmp_path):
     """Every take refused (Y-down keypoints read without --up): two worker processes report the
     first take's error, whichever finishes first, as one process does."""

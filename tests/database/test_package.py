@@ -125,12 +125,14 @@ def test_the_circle_finder_finds_a_circle_through_type_checking():
     assert _circles({"a": {"b"}, "b": set()}) == []
 
 
+@pytest.mark.slow
 def test_no_import_circle_runs_through_the_database_package():
     """Counting every import, those under ``if TYPE_CHECKING:`` too."""
     circles = [c for c in _circles(_graph()) if any(m.startswith("gesturekit.database") for m in c)]
     assert circles == []
 
 
+@pytest.mark.slow
 def test_no_module_imports_a_private_name_of_another_module_of_the_database():
     reaching = []
     for path in sorted(PACKAGE.rglob("*.py")):

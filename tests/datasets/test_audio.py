@@ -156,6 +156,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "suffix, fmt, subtype, rate, channels, band, tol", [c[1:] for c in CASES], ids=[c[0] for c in CASES]
 )
@@ -179,6 +180,7 @@ def test_every_format_rate_and_layout_gives_the_original_features(
     assert_features_match(audio_frame_features(audio), reference_features(band), tol)
 
 
+@pytest.mark.slow
 def test_m4a_is_read_through_ffmpeg(tmp_path):
     ffmpeg = pytest.importorskip("imageio_ffmpeg").get_ffmpeg_exe()
     source, path = tmp_path / "source.wav", tmp_path / "speech.m4a"

@@ -8,6 +8,7 @@ from gesturekit.demo import build_demo_database, open_default_database
 from gesturekit.errors import DatabaseError, OutputError
 
 
+@pytest.mark.slow
 def test_demo_database_is_labelled_and_deterministic(tmp_path):
     seen = []
     a = build_demo_database(tmp_path / "a", minutes=2.0, progress=lambda d, t: seen.append((d, t)))

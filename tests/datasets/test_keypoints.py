@@ -173,6 +173,7 @@ def test_units_auto_refuses_a_body_of_no_human_size(tmp_path, examples, scale):
     assert "take_00.npy" in str(info.value)
 
 
+@pytest.mark.slow
 def test_units_mm_is_accepted_on_the_command_line(tmp_path, examples):
     folder = _copy(examples["npy"], tmp_path / "t")
     _rewrite(folder, lambda a: a * 1000.0)

@@ -26,6 +26,7 @@ def model(db):
     return train_fgd_model(db, config=TINY)
 
 
+@pytest.mark.slow
 def test_identical_motion_has_zero_fgd_and_different_motion_more(db, model):
     a = np.asarray(db.G[:3]).reshape(-1, 55, 3)
     b = np.asarray(db.G[-3:]).reshape(-1, 55, 3)
@@ -46,6 +47,7 @@ def test_training_is_deterministic_and_leaves_the_global_rng_alone(db, model):
     assert not torch.equal(model.net.state_dict()["encoder.out.weight"], other.net.state_dict()["encoder.out.weight"])
 
 
+@pytest.mark.slow
 def test_training_falls_and_held_out_clips_are_not_used(db):
     losses = []
     exclude = db.exclusion_mask(takes=["t1"])

@@ -162,6 +162,7 @@ def test_beat_consistency_is_the_definition(beats, onsets):
     assert M.beat_consistency(beats, onsets, sigma=0.1) == pytest.approx(want, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_constant_pose_has_zero_diversity_jerk_acceleration_and_no_beats():
     x = _rest(90)
     assert M.diversity_l1(x) == 0.0

@@ -68,6 +68,7 @@ def test_parse_holdout():
         parse_holdout("  ")
 
 
+@pytest.mark.slow
 def test_held_out_part_is_the_take_itself(demo_db):
     ref = held_out(demo_db, HOLDOUT)
     assert ref.first_frame == 900 and ref.n_frames == 450

@@ -241,6 +241,7 @@ def poses(draw):
     return fk(root, rv)
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(pos=poses(), order=st.sampled_from(ROTATION_ORDERS))
 def test_random_poses_round_trip(tmp_path, pos, order):

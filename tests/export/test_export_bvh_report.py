@@ -296,6 +296,7 @@ def test_cli_partial_skeleton_says_what_it_wrote(tmp_path):
 # ----------------------------------------------------------------------------- the app
 
 
+@pytest.mark.slow
 def test_app_shows_the_report_beside_the_download(app_env):
     from tests.app.test_app_synthesize import open_page, result, speech_file, upload
     from tests.conftest import shown

@@ -115,6 +115,7 @@ def bvhio_positions(path: Path, r: Retargeted, units: float) -> tuple[list[str],
 # ----------------------------------------------------------------------------- GLB
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", GLTF_CASES)
 def test_glb_of_each_rig_is_valid_and_read_back_to_its_report(case, rigs, tmp_path, validator):  # noqa: F811
     r = rigs[case]

@@ -450,6 +450,7 @@ def test_cli_never_writes_the_speech_over_its_input(tmp_path, cli_world):
 # ----------------------------------------------------------------------------- the app
 
 
+@pytest.mark.slow
 def test_app_offers_the_glb_beside_the_bvh_with_its_speech(app_env, validator, tmp_path):
     from gesturekit import interactive as gs
     from tests.app.test_app_synthesize import open_page, result, speech_file, upload

@@ -122,6 +122,7 @@ def changed_pixels(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- the video file
 
 
+@pytest.mark.slow
 def test_video_has_h264_and_aac_of_the_audio_duration(tmp_path):
     motion = swinging_motion(45)  # 3 s, longer than the audio: cut
     audio = tone(2.5)
@@ -159,6 +160,7 @@ def test_silent_video_lasts_as_long_as_the_motion(tmp_path):
     assert info["video"]["duration"] == pytest.approx(12 / FPS)
 
 
+@pytest.mark.slow
 def test_frames_show_a_moving_skeleton(tmp_path):
     moving = render_video(tmp_path / "moving.mp4", swinging_motion(20), resolution=(320, 240))
     still = render_video(tmp_path / "still.mp4", still_motion(20), resolution=(320, 240))
@@ -377,6 +379,7 @@ def test_stimuli_are_framed_identically_and_previews_fit_the_motion():
     assert np.ptp(fitted_b[0]) > np.ptp(fitted_a[0]) + 0.1  # the arm, raised sideways, widens the view
 
 
+@pytest.mark.slow
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     offsets=hnp.arrays(np.float64, (2, N_JOINTS, 3), elements=st.floats(-1.2, 1.2)),

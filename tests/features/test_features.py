@@ -51,6 +51,7 @@ def add_burst(x: np.ndarray, t_burst: float, *, sr: int = SR, half_width: float 
 # --- the frame grid --------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_energy_peaks_land_on_the_15fps_grid_after_an_hour():
     """The acceptance pin of the frame grid: no drift over 60 minutes of audio.
 
@@ -152,6 +153,7 @@ def test_mel_filterbank_is_librosas_bit_for_bit(sr, n_fft, n_mels):
     np.testing.assert_array_equal(ours, theirs)
 
 
+@pytest.mark.slow
 def test_mfccs_are_librosas_power_to_db_and_mfcc_bit_for_bit():
     """Our dB and DCT steps are librosa's, operation for operation (librosa is not imported at run time);
     the mel power is librosa's matrix product up to float32 rounding (we sum each band in a fixed order)."""

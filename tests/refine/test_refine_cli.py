@@ -58,6 +58,7 @@ def test_synthesize_refuses_a_refiner_of_another_layout(setup):
         synthesize(speech, db=db, refiner=ref)
 
 
+@pytest.mark.slow
 def test_cli_train_refiner_and_synthesize(setup, tmp_path, capsys):
     base, db, _, _ = setup
     out = tmp_path / "ref"

@@ -420,6 +420,7 @@ def test_recorded_databases_match_by_folder_or_by_source_takes_and_clips(tmp_pat
     assert not trained_on(config, _db_like("", path=tmp_path / "other"))
 
 
+@pytest.mark.slow
 def test_a_result_records_its_refiner_and_another_database_is_warned(tiny, tmp_path):
     import hashlib
     import warnings

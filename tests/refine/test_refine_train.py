@@ -205,6 +205,7 @@ def test_folder_contents_and_loss_log(tiny_db, tmp_path):
         train_refiner(tiny_db, out, model=TINY, train=TINY_TRAIN, device="cpu")
 
 
+@pytest.mark.slow
 def test_resume_after_interruption_ends_with_the_same_weights(tiny_db, tmp_path):
     straight = train_refiner(tiny_db, tmp_path / "straight", model=TINY, train=TINY_TRAIN, device="cpu")
 
@@ -224,6 +225,7 @@ def test_resume_after_interruption_ends_with_the_same_weights(tiny_db, tmp_path)
     assert la.equals(lb)
 
 
+@pytest.mark.slow
 def test_resume_extends_a_finished_run(tiny_db, tmp_path):
     short = train_refiner(tiny_db, tmp_path / "s", model=TINY, train=TINY_TRAIN, iterations=6, device="cpu")
     train_refiner(tiny_db, short, resume=True, iterations=10, device="cpu")

@@ -286,6 +286,7 @@ def test_fast_search_equals_reference(problem):
     assert_same(*run_both(P, F, valid, query, **kw))
 
 
+@pytest.mark.slow
 @settings(max_examples=8, deadline=None)
 @given(st.integers(0, 2**31 - 1), st.sampled_from([0.0, 0.25]), st.integers(0, 3))
 def test_fast_search_equals_reference_on_a_larger_database(seed, grid, k):

@@ -36,6 +36,7 @@ def hue(image: np.ndarray) -> np.ndarray:
     return image.max(axis=-1) - image.min(axis=-1) > 30
 
 
+@pytest.mark.slow
 def test_stimuli_command_renders_every_stimulus_on_the_character_and_records_its_file(tmp_path, capsys):
     rig = write_rig(tmp_path, CASES["vrm1_t"], name="presenter")  # a textured VRM 1.0
     out = tmp_path / "study"

@@ -57,6 +57,7 @@ def test_an_unknown_url_is_refused_naming_it(tmp_path):
         open_store("mysql://x", tmp_path)
 
 
+@pytest.mark.slow
 def test_rows_are_handed_out_balanced_under_concurrent_starts(store_url, tmp_path):
     store = open_store(store_url, tmp_path)
     got, barrier = [], threading.Barrier(8)

@@ -126,6 +126,7 @@ def test_step_lengths_and_switches_stream_equally(db, speech, options):
     check_equal_to_offline(db, speech, live, pieces, config)
 
 
+@pytest.mark.slow
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     chunks=st.lists(st.integers(1, 9000), min_size=1, max_size=6),

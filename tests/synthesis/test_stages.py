@@ -59,6 +59,7 @@ def _same_result(a, b) -> None:
         np.testing.assert_array_equal(getattr(a.plan, name), getattr(b.plan, name))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("config", [SynthesisConfig(), CONTROLLED], ids=["default", "controlled"])
 def test_the_stages_one_by_one_give_what_synthesize_gives(db, speech, config):
     syn = Synthesizer(db)

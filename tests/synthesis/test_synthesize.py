@@ -36,6 +36,7 @@ def speech():
     return take.audio
 
 
+@pytest.mark.slow
 @settings(max_examples=12, deadline=None)
 @given(st.integers(16000, 16000 * 40))
 def test_output_length_is_the_audios_frame_count(demo_db, n_samples):

@@ -109,6 +109,7 @@ def test_the_frame_is_the_skinned_mesh_seen_through_the_shared_camera(frame):
     assert (cols < size[0] / 2).sum() > 1000 and (cols >= size[0] / 2).sum() > 1000
 
 
+@pytest.mark.slow
 def test_the_mp4_frame_keeps_the_silhouette(tmp_path):
     motions = [demo_motion(0, 4), demo_motion(20, 4)]
     path = render_video(tmp_path / "pair.mp4", motions[0], side_by_side=motions[1], resolution=(320, 240))

@@ -214,6 +214,7 @@ def test_palette_of_few_colours_is_exact_and_of_many_is_bounded():
         palette(smooth, max_colors=100)
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(
     st.integers(1, 3000),

@@ -75,6 +75,7 @@ def test_neutral_draws_every_motion_grey():
     assert [m["scheme"] for m in data["motions"]] == [look.NEUTRAL, look.NEUTRAL]
 
 
+@pytest.mark.slow
 def test_every_frame_is_kept_up_to_ten_minutes_at_15_fps_and_beyond_the_page_says_so():
     assert VIEWER_MAX_FRAMES >= 10 * 60 * 15
     base = _motion(1).positions

@@ -94,6 +94,7 @@ def test_control_segments_shade_every_row_with_the_waveforms_colours():
     }
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(n=hst.integers(1, 80), fps=hst.sampled_from([7.5, 15.0, 30.0]), speed=hst.floats(0.0, 3.0))
 def test_time_axis_covers_the_motion(n, fps, speed):
