@@ -1,7 +1,7 @@
-"""gesturekit's app: start it with ``streamlit run app/Home.py``.
+"""gesturekit's app: start it with ``gesturekit app`` (from a clone, also ``streamlit run app/Home.py``).
 
 This file is the entrypoint: each page view runs it as ``__main__``, and it
-draws the page the user is on (the pages are declared in :mod:`nav`); the
+draws the page the user is on (the pages are declared in :mod:`gesturekit.app.nav`); the
 home page is :func:`home` below. On a machine without a database, every page
 builds the generated demo speaker's database at the default path first, with
 a progress bar; nothing is downloaded.
@@ -12,11 +12,10 @@ starts (:func:`resources.server_lifespan`), so the first run does not wait for
 them.
 """
 
-import nav
-import resources
-import sidebar
 import streamlit as st
-from display import escape_markdown
+
+from gesturekit.app import nav, resources, sidebar
+from gesturekit.app.display import escape_markdown
 
 
 def home() -> None:
