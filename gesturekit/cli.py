@@ -1,4 +1,4 @@
-"""The command line: ``gesturekit build-db``, ``gesturekit info``, ...
+"""The command line: ``gesturekit build-db``, ``gesturekit info``, ..., ``gesturekit app``; ``gesturekit --version``.
 
 Every command turns errors of the gesturekit family into one line on stderr
 (exit status 2) and prints warnings as ``warning: ...`` lines.
@@ -601,6 +601,12 @@ def _cmd_stimuli(args) -> int:
 
 def _cmd_study(args) -> int:
     from ._cli_study import run
+
+    return run(args)
+
+
+def _cmd_app(args) -> int:
+    from ._cli_app import run
 
     return run(args)
 

@@ -1,5 +1,6 @@
 """The app as served: local by default, only the allowed folders, no traceback or server path in
-the browser. The server is started as the README says; pages run headless with AppTest."""
+the browser. The server is started as a clone starts it (``streamlit run app/Home.py``); pages run
+headless with AppTest."""
 
 from __future__ import annotations
 
@@ -65,7 +66,7 @@ for key in ("server.address", "client.toolbarMode", "client.showErrorDetails", "
     assert values["client.showErrorDetails"] == f"none {where}"
 
 
-# ---- the server, started as the README says ----------------------------------------------------
+# ---- the server, started from a clone -----------------------------------------------------------
 
 
 def _free_port() -> int:
@@ -95,11 +96,13 @@ def _listening(port: int) -> set[str]:
 
 
 @pytest.mark.slow
-def test_the_readme_command_serves_on_127_0_0_1_only(demo_home, tmp_path):
+def test_the_clone_command_serves_on_127_0_0_1_only(demo_home, tmp_path):
+    """``streamlit run app/Home.py`` from a clone's root (the app guide's second command; the README's,
+    ``gesturekit app``, is tests/cli/test_cli_app.py's) reads .streamlit/config.toml's address."""
     if not Path("/proc/net/tcp").is_file():
         pytest.skip("needs Linux's /proc/net/tcp to see which addresses the server listens on")
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    assert "streamlit run app/Home.py\n" in readme  # the launch command, from the repository root
+    guide = (ROOT / "docs" / "guides" / "app.md").read_text(encoding="utf-8")
+    assert "\nstreamlit run app/Home.py " in guide  # the launch command, from the repository root
     port = _free_port()
     env = {**os.environ, "GESTUREKIT_HOME": str(demo_home), "PYTHONPATH": str(ROOT)}
     env.pop(APP_ROOTS_ENV, None)

@@ -202,7 +202,7 @@ def test_every_command_of_the_parser_runs_its_own_function():
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     names = sorted(sub.choices)
     assert names == sorted(
-        ["build-db", "info", "synthesize", "train-refiner", "evaluate", "train-fgd", "stimuli", "study"]
+        ["build-db", "info", "synthesize", "train-refiner", "evaluate", "train-fgd", "stimuli", "study", "app"]
     )
     for name in names:
         assert callable(getattr(cli, "_cmd_" + name.replace("-", "_"))), name

@@ -96,6 +96,7 @@ RUN_ARGUMENTS = {
 NOT_OPTIONS_COMMANDS = {
     "info": "reads a database; no options",
     "study": "its subcommands run a study folder; no configuration",
+    "app": "serves the app: an address, a port and folders, Streamlit's settings; no configuration",
 }
 
 CONFIGS = (SearchConfig, SynthesisConfig, TrainConfig, StudyConfig, EvaluationConfig, FGDConfig, BuildConfig)
