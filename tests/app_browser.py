@@ -132,7 +132,14 @@ def _free_port() -> int:
 
 
 @contextlib.contextmanager
-def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | None = None) -> Iterator[str]:
+def app_server(
+    home: Path,
+    *,
+    demo_minutes: float | None = None,
+    log: Path | None = None,
+    gesturekit: Path | None = None,
+    env: dict[str, str] | None = None,
+) -> Iterator[str]:
     """Run the app on 127.0.0.1 until the block ends; yields its base URL.
 
     Parameters
@@ -144,12 +151,20 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
         ``GESTUREKIT_DEMO_MINUTES``: the size of a demo database built by the app.
     log : Path, optional
         File for the server's output; default a file in ``home``.
+    gesturekit : Path, optional
+        A ``gesturekit`` executable (an installed package's): the server is its ``gesturekit app``,
+        started in ``home``, instead of ``streamlit run app/Home.py`` from the repository root.
+    env : dict, optional
+        The server's environment (default this process's).
     """
     port = _free_port()
-    env = dict(os.environ, GESTUREKIT_HOME=str(home))
+    env = dict(os.environ if env is None else env, GESTUREKIT_HOME=str(home))
     if demo_minutes is not None:
         env["GESTUREKIT_DEMO_MINUTES"] = f"{demo_minutes:g}"
     log = log or Path(home) / "streamlit.log"
+    cwd = REPO
+    # from the repository root, as a user starts it: Streamlit reads ./.streamlit/config.toml
+    # (the viewer toolbar, error details kept to the log), so the tests see what a user sees
     cmd = [
         sys.executable,
         "-m",
@@ -169,11 +184,11 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
         "--global.developmentMode",
         "false",
     ]
+    if gesturekit is not None:  # the command carries the same settings itself, from any folder
+        cmd, cwd = [str(gesturekit), "app", "--port", str(port)], Path(home)
     with open(log, "wb") as out:
-        # from the repository root, as a user starts it: Streamlit reads ./.streamlit/config.toml
-        # (the viewer toolbar, error details kept to the log), so the tests see what a user sees
         proc = subprocess.Popen(
-            cmd, env=env, cwd=str(REPO), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+            cmd, env=env, cwd=str(cwd), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
         )
     url = f"http://127.0.0.1:{port}"
     try:
