@@ -23,7 +23,7 @@ from gesturekit.errors import ConfigError, GestureKitWarning
 from gesturekit.features import audio_frame_features, cgan_audio_features, stack_audio_features
 from gesturekit.search import SearchConfig, SearchRequest, plan_search
 from gesturekit.search.plan import stack_plans
-from gesturekit.synthesize import (
+from gesturekit.synthesis import (
     SynthesisConfig,
     Synthesizer,
     search_request,
