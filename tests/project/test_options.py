@@ -16,9 +16,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.cli._options import FIELD_OF, OPTIONS_DEST, options_given
 from gesturekit.cli._parser import build_parser
-from gesturekit.app import HOME
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.fgd import FGDConfig
