@@ -1,6 +1,6 @@
 """Start Streamlit's server on the packaged app: what ``gesturekit app`` runs once its options are read.
 
-The command line's part (:mod:`gesturekit._cli_app`) never imports Streamlit; this
+The command line's part (:mod:`gesturekit.cli._app`) never imports Streamlit; this
 module hands its arguments to Streamlit's own command line, which reads the
 configuration, finds the entrypoint's ``st.App`` and serves it until interrupted.
 """

@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 import tomllib
 
-from gesturekit._cli_app import APP_FLAGS, app_roots, streamlit_args
 from gesturekit._version import __version__
 from gesturekit.app import HOME
 from gesturekit.cli import build_parser, main
+from gesturekit.cli._app import APP_FLAGS, app_roots, streamlit_args
 from gesturekit.errors import ConfigError
 from gesturekit.paths import APP_ROOTS_ENV
 from tests import app_browser

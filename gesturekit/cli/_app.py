@@ -16,8 +16,8 @@ import ipaddress
 import os
 from pathlib import Path
 
-from .errors import ConfigError, MissingDependencyError
-from .paths import APP_ROOTS_ENV
+from ..errors import ConfigError, MissingDependencyError
+from ..paths import APP_ROOTS_ENV
 
 __all__ = ["ABOUT", "APP_FLAGS", "add_app_parser", "app_roots", "streamlit_args", "run"]
 
@@ -83,7 +83,7 @@ def app_roots(allow: list[str], environ: dict[str, str] | os._Environ) -> str:
 
 def streamlit_args(args: argparse.Namespace) -> list[str]:
     """The arguments of ``streamlit`` that serve the packaged app with ``args``' address and port."""
-    from .app import HOME
+    from ..app import HOME
 
     if not 0 < args.port < 65536:
         raise ConfigError(f"--port {args.port}: a port is between 1 and 65535")
@@ -114,6 +114,6 @@ def run(args: argparse.Namespace) -> int:
             "the allowed folders; the Study page asks for the study's password",
             flush=True,
         )
-    from .app.launch import serve
+    from ..app.launch import serve
 
     return serve(argv)

@@ -9,11 +9,11 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from ._cli_app import ABOUT as _APP_ABOUT
-from ._cli_app import add_app_parser
-from ._cli_options import add_options
-from ._config import option_of
-from ._version import __version__
+from .._config import option_of
+from .._version import __version__
+from ._app import ABOUT as _APP_ABOUT
+from ._app import add_app_parser
+from ._options import add_options
 
 __all__ = ["build_parser", "join_axis_values"]
 
@@ -87,8 +87,8 @@ def _add_choice(parser, flag: str, choices: list[str], help: str) -> None:
 def search_options() -> list[tuple[type, tuple[str, ...]]]:
     """(configuration class, its fields) of the search options ``synthesize`` and ``evaluate`` share, in
     the order ``--help`` lists them (``mask_rule`` is SearchConfig's; SynthesisConfig passes it on)."""
-    from .search import SearchConfig
-    from .synthesize import SynthesisConfig
+    from ..search import SearchConfig
+    from ..synthesis import SynthesisConfig
 
     return [
         (SearchConfig, ("k", "segment", "seed")),
@@ -192,7 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="give every bone one length per take (for keypoints whose bone lengths vary)",
     )
-    from .database import BuildConfig
+    from ..database import BuildConfig
 
     add_options(
         b,
@@ -237,8 +237,8 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--db", help="matching database folder (default: the demo database)")
     y.add_argument("--out", default="out", help="output folder (default: out)")
     _add_search(y, seed="the random initial pose")
-    from .search import SearchConfig
-    from .synthesize import SynthesisConfig
+    from ..search import SearchConfig
+    from ..synthesis import SynthesisConfig
 
     add_options(y, SearchConfig, ["record"])
     y.add_argument(
@@ -303,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
     r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
-    from .refine.config import TrainConfig
+    from ..refine.config import TrainConfig
 
     add_options(r, TrainConfig, ["seed"])
     _add_exclusions(r, out_of="training")
@@ -315,7 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="replace an existing refiner folder")
     e = _command(sub, "evaluate")
     e.add_argument("--db", help="matching database folder (default: the demo database)")
-    from .evaluate.run import EvaluationConfig
+    from ..evaluate.run import EvaluationConfig
 
     add_options(e, EvaluationConfig, ["holdout", "systems", "refiner", "fgd_model", "control", "sigma"])
     _add_search(e, seed="the initial pose and the random baseline")
@@ -331,14 +331,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="TAKE[:START-END]",
         help="leave a take or a time range out of training (repeatable)",
     )
-    from .evaluate.fgd import FGDConfig
+    from ..evaluate.fgd import FGDConfig
 
     add_options(f, FGDConfig, ["steps", "window", "latent", "seed"])
     f.add_argument("--force", action="store_true", help="replace an existing model")
 
     s = _command(sub, "stimuli")
     s.add_argument("--db", help="matching database folder (default: the demo database)")
-    from .study_config import StudyConfig
+    from ..study.config import StudyConfig
 
     add_options(
         s,
@@ -359,7 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--force", action="store_true", help="replace an existing study")
     _add_max_speech(s)
 
-    from ._cli_study import add_study_parser
+    from ._study import add_study_parser
 
     add_study_parser(_command(sub, "study"))
     add_app_parser(_command(sub, "app"))
