@@ -34,7 +34,7 @@ from gesturekit.character.glb import (
 )
 from gesturekit.skeleton import FINGERS
 
-__all__ = ["RigSpec", "RigTruth", "rig_files", "write_rig", "truth", "custom_map", "CASES", "NAMINGS"]
+__all__ = ["RigSpec", "RigTruth", "rig_files", "write_rig", "truth", "custom_map", "cmu_bvh", "CASES", "NAMINGS"]
 
 NAMINGS = ("mixamo", "vrm0", "vrm1", "zeggs", "custom")
 A_POSE_DEGREES = 40.0
@@ -614,6 +614,76 @@ def _bvh(spec: RigSpec) -> bytes:
     n_channels = 6 + 3 * (len(bones) - 1)
     frame = " ".join(["0.000000"] * n_channels)
     lines += ["MOTION", "Frames: 2", "Frame Time: 0.0333333", frame, frame, ""]
+    return "\n".join(lines).encode("ascii")
+
+
+def cmu_bvh(*, unit: float = 0.01, leg_up: bool = False) -> bytes:
+    """A skeleton laid out as the widely used BVH conversion of the CMU mocap database writes it: zero offsets for
+    ``LHipJoint``/``RHipJoint``, ``LowerBack``, ``Neck`` and both ``*Shoulder`` bones (so the chest's children all
+    start where it does), ``Neck1`` between neck and head, ``LeftFingerBase``, ``LeftHandIndex1`` and ``LThumb``
+    on the hand. T-pose, Y up, facing +Z, 1.72 m tall; ``unit`` metres per file unit (0.01: centimetres).
+    ``leg_up``: the left leg points up from the hip in the zero pose, as in a rig whose rest is not standing."""
+    j: list[tuple[str, str | None, tuple[float, float, float]]] = [("Hips", None, (0.0, 0.95, 0.0))]
+    for s, side, x in (("L", "Left", 1.0), ("R", "Right", -1.0)):
+        foot = (0.09 * x, 1.80, 0.0) if leg_up and x > 0 else (0.09 * x, 0.08, 0.0)
+        knee = (0.09 * x, 1.35, 0.0) if leg_up and x > 0 else (0.09 * x, 0.50, 0.0)
+        j += [
+            (f"{s}HipJoint", "Hips", (0.0, 0.95, 0.0)),
+            (f"{side}UpLeg", f"{s}HipJoint", (0.09 * x, 0.90, 0.0)),
+            (f"{side}Leg", f"{side}UpLeg", knee),
+            (f"{side}Foot", f"{side}Leg", foot),
+            (f"{side}ToeBase", f"{side}Foot", (foot[0], foot[1] - 0.06 * (1 if foot[1] < 1 else -1), 0.12)),
+        ]
+    j += [
+        ("LowerBack", "Hips", (0.0, 0.95, 0.0)),
+        ("Spine", "LowerBack", (0.0, 1.10, 0.0)),
+        ("Spine1", "Spine", (0.0, 1.40, 0.0)),
+        ("Neck", "Spine1", (0.0, 1.40, 0.0)),
+        ("Neck1", "Neck", (0.0, 1.47, 0.0)),
+        ("Head", "Neck1", (0.0, 1.55, 0.0)),
+    ]
+    for s, side, x in (("L", "Left", 1.0), ("R", "Right", -1.0)):
+        j += [
+            (f"{side}Shoulder", "Spine1", (0.0, 1.40, 0.0)),
+            (f"{side}Arm", f"{side}Shoulder", (0.18 * x, 1.40, 0.0)),
+            (f"{side}ForeArm", f"{side}Arm", (0.47 * x, 1.40, 0.0)),
+            (f"{side}Hand", f"{side}ForeArm", (0.72 * x, 1.40, 0.0)),
+            (f"{side}FingerBase", f"{side}Hand", (0.80 * x, 1.40, 0.0)),
+            (f"{side}HandIndex1", f"{side}FingerBase", (0.86 * x, 1.40, 0.0)),
+            (f"{s}Thumb", f"{side}Hand", (0.76 * x, 1.39, 0.03)),
+        ]
+    index = {name: i for i, (name, _, _) in enumerate(j)}
+    pos = {name: np.array(p) for name, _, p in j}
+    children: dict[str | None, list[str]] = {}
+    for name, parent, _ in j:
+        children.setdefault(parent, []).append(name)
+    lines = ["HIERARCHY"]
+    order: list[str] = []
+
+    def num(v: np.ndarray) -> str:
+        return " ".join(f"{c / unit:.6f}" for c in v)
+
+    def write(name: str, depth: int) -> None:
+        pad = "\t" * depth
+        parent = j[index[name]][1]
+        order.append(name)
+        lines.append(f"{pad}{'ROOT' if parent is None else 'JOINT'} {name}")
+        lines.append(pad + "{")
+        lines.append(f"{pad}\tOFFSET {num(pos[name] - (pos[parent] if parent else 0.0))}")
+        if parent is None:
+            lines.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation")
+        else:
+            lines.append(f"{pad}\tCHANNELS 3 Zrotation Yrotation Xrotation")
+        for c in children.get(name, []):
+            write(c, depth + 1)
+        if name not in children:
+            tail = np.array([0.0, 0.17, 0.0]) if name == "Head" else np.array([0.0, 0.0, 0.02])
+            lines.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {num(tail)}", f"{pad}\t}}"])
+        lines.append(pad + "}")
+
+    write("Hips", 0)
+    frame = " ".join(["0.000000"] * (6 + 3 * (len(order) - 1)))
+    lines += ["MOTION", "Frames: 2", "Frame Time: 0.0083333", frame, frame, ""]
     return "\n".join(lines).encode("ascii")
 
 

@@ -391,8 +391,13 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
     ConfigError
         A motion without frames or with positions that are not finite, or a slack out of range.
     """
+    if not isinstance(motion, Motion):
+        raise ConfigError(f"retarget poses a character by a Motion, not {type(motion).__name__}")
+    if not isinstance(character, Character):
+        raise ConfigError(f"retarget poses a Character (read_character), not {type(character).__name__}")
     if not (isinstance(wrist_slack, (int, float)) and 0.0 <= wrist_slack <= 0.2):
         raise ConfigError(f"wrist_slack must be a number in [0, 0.2], got {wrist_slack!r}")
+    _check_finite(character, character.rest_rotation[None], character.rest_position[None], what="rest pose")
     rig = rig_for(motion)
     pose = solve_pose(motion, rig)
     r_ours, _ = pose.world(rig)
@@ -407,6 +412,7 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
     kids = _kids(ch, mapped)
     body = _below(ch, ch.pelvis)
     align = _alignment(ch, rig.rest, joint_at, kids)
+    aimed = [[sd for sd in (_through(ch, kids, joint_at, b, c) for c in kids[b]) if sd[1] >= 0] for b in range(m)]
 
     rot = np.empty((n, m, 3, 3))
     pos = np.empty((n, m, 3))
@@ -426,19 +432,20 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
         if b in arms.shoulders:
             wants.update(arms.reach(b, pos))
         held = r_ours[:, j] @ align[b]
-        if len(kids[b]) >= 2:
-            w0 = _fit(held, p, b, kids[b], joint_at, x) @ q[b]
+        if len(aimed[b]) >= 2:
+            w0 = _fit(held, p, b, aimed[b], joint_at, x) @ q[b]
         else:
             w0 = held @ q[b]
-        c = _primary(kids[b], joint_at)
+        s, c = _through(ch, kids, joint_at, b, _primary(kids[b], joint_at)) if kids[b] else (-1, -1)
         if c >= 0:
             cur, _ = _unit(w0 @ (q[b].T @ (p[c] - p[b])))
-            want, ok = _unit(x[:, joint_at[c]] - x[:, j])
+            want, ok = _unit(x[:, joint_at[c]] - x[:, joint_at[s]])
             if b in wants:
                 want, ok = _unit(wants[b])
             want = np.where(ok[:, None], want, cur)
             w0 = swing(cur, want) @ w0
         rot[:, b] = w0
+    _check_finite(ch, rot, pos)
     report = _report(ch, rig, x, joint_at, kids, rot, pos, arms, body)
     scale = float(np.mean(arms.scale))
     return Retargeted(
@@ -451,6 +458,25 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
         source=motion,
         alignment=align,
     )
+
+
+#: Shortest bone a direction is taken from, metres: a child closer than this to its bone (a zero offset, as the
+#: ``Neck`` of the CMU BVH conversions has) is aimed through, at the next matched bone down its chain with length.
+_MIN_LENGTH = 1e-6
+
+
+def _through(ch: Character, kids: list[list[int]], joint_at: np.ndarray, b: int, c: int) -> tuple[int, int]:
+    """The bones whose joints give the direction from ``b`` to its matched child ``c``: ``(b, c)`` itself, or, where
+    ``c`` rests on ``b`` (a zero-length bone), ``(s, d)``: ``d`` the first matched bone down ``c``'s chain (its only
+    or midline child) away from ``b``, ``s`` the last one before it that still rests on ``b``. Their ``b -> d`` is
+    then ``s -> d``, so it follows our ``s -> d``. ``(-1, -1)`` where nothing below has length."""
+    p = ch.rest_position
+    s = b
+    while np.linalg.norm(p[c] - p[b]) <= _MIN_LENGTH:
+        s, c = c, _primary(kids[c], joint_at)
+        if c < 0:
+            return -1, -1
+    return s, c
 
 
 def _primary(kids: list[int], joint_at: np.ndarray) -> int:
@@ -474,8 +500,9 @@ def _alignment(ch: Character, ours_rest: np.ndarray, joint_at: np.ndarray, kids:
             pa = int(ch.parents[b])
             out[b] = out[pa] if pa >= 0 else np.eye(3)
             continue
-        theirs, ok_t = _unit(np.array([p[c] - p[b] for c in kids[b]]).reshape(-1, 3))
-        ours, ok_o = _unit(np.array([ours_rest[joint_at[c]] - ours_rest[j] for c in kids[b]]).reshape(-1, 3))
+        aimed = [sd for sd in (_through(ch, kids, joint_at, b, c) for c in kids[b]) if sd[1] >= 0]
+        theirs, ok_t = _unit(np.array([p[c] - p[b] for _, c in aimed]).reshape(-1, 3))
+        ours, ok_o = _unit(np.array([ours_rest[joint_at[c]] - ours_rest[joint_at[s]] for s, c in aimed]).reshape(-1, 3))
         ok = ok_t & ok_o
         if ok.sum() >= 2:
             out[b] = kabsch(theirs[ok], ours[ok], np.ones(int(ok.sum())))
@@ -487,11 +514,13 @@ def _alignment(ch: Character, ours_rest: np.ndarray, joint_at: np.ndarray, kids:
     return out
 
 
-def _fit(held: np.ndarray, p: np.ndarray, b: int, kids: list[int], joint_at: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The turn (frames, 3, 3) that best points the children of ``b`` along ours, held to ``held`` a little."""
-    j = int(joint_at[b])
-    u, _ = _unit(np.array([p[c] - p[b] for c in kids]))
-    v, ok = _unit(np.stack([x[:, joint_at[c]] - x[:, j] for c in kids], axis=1))
+def _fit(
+    held: np.ndarray, p: np.ndarray, b: int, kids: list[tuple[int, int]], joint_at: np.ndarray, x: np.ndarray
+) -> np.ndarray:
+    """The turn (frames, 3, 3) that best points the children of ``b`` along ours, held to ``held`` a little.
+    ``kids``: ``(s, c)`` of :func:`_through` for each child, ``s`` at ``b``'s place."""
+    u, _ = _unit(np.array([p[c] - p[b] for _, c in kids]).reshape(-1, 3))
+    v, ok = _unit(np.stack([x[:, joint_at[c]] - x[:, joint_at[s]] for s, c in kids], axis=1))
     n = x.shape[0]
     axes = np.tile(np.eye(3), (n, 1, 1))
     uu = np.concatenate([np.broadcast_to(u, (n,) + u.shape), axes], axis=1)
@@ -583,6 +612,16 @@ class _Arms:
         return {s: elbow - shoulder, e: target - elbow}
 
 
+def _check_finite(ch: Character, rot: np.ndarray, pos: np.ndarray, *, what: str = "pose") -> None:
+    """Refuse a pose (frames, M, 3, 3) and (frames, M, 3) that is not finite, naming the first bone and frame where
+    it is not: a result that is not finite is never reported as a match."""
+    bad = ~(np.isfinite(rot).all(axis=(2, 3)) & np.isfinite(pos).all(axis=2))
+    if bad.any():
+        t, b = (int(i[0]) for i in np.nonzero(bad))
+        where = "" if what != "pose" else f" (frame {t}); the character's rest pose cannot carry this motion"
+        raise ConfigError(f"{ch.path}: the {what} of bone {ch.names[b]!r} is not finite{where}")
+
+
 def _report(
     ch: Character,
     rig: Rig,
@@ -600,12 +639,15 @@ def _report(
         if joint_at[b] < 0 or b == ch.pelvis:
             continue
         primary = _primary(kids[b], joint_at)
-        for c in kids[b]:
+        for k in kids[b]:
+            s, c = _through(ch, kids, joint_at, b, k)
+            if c < 0 or s != b:
+                continue  # of no length: its direction is that of the bone below, reported there
             theirs, ok_t = _unit(pos[:, c] - pos[:, b])
             ours, ok_o = _unit(x[:, joint_at[c]] - x[:, joint_at[b]])
             cos = np.clip(np.einsum("ti,ti->t", theirs, ours), -1.0, 1.0)
             ok = ok_t & ok_o
-            names, errors = found[c == primary]
+            names, errors = found[k == primary]
             names.append(f"{ch.names[b]}->{ch.names[c]}")
             errors.append(float(np.degrees(np.arccos(cos[ok])).max()) if ok.any() else 0.0)
     wrist, moved_out, inside, ours_inside = 0.0, [0, 0], [0, 0], [0, 0]

@@ -63,6 +63,10 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         A bone needed (:data:`~gesturekit.character.humanoid.REQUIRED`) is not found (the message names it), the
         map names a bone the file lacks, or the rest pose is not a humanoid's.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise ConfigError(f"read_character takes a file name or path, not {type(path).__name__}")
+    if bone_map is not None and not isinstance(bone_map, (str, os.PathLike, dict)):
+        raise ConfigError(f"bone_map is a JSON file's name or path, or a dict, not {type(bone_map).__name__}")
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix not in CHARACTER_SUFFIXES:
@@ -75,6 +79,7 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         skeleton = read_bvh_skeleton(p)
     else:
         skeleton = read_gltf_skeleton(p)
+    _check_unique(skeleton)
     found, matched_by, expected = _match(skeleton, user_map, p)
     return skeleton.character(found, matched_by, expected)
 
@@ -148,6 +153,18 @@ def _sha256(path: Path) -> str | None:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def _check_unique(skeleton: FileSkeleton) -> None:
+    """Refuse two bones of one name: a map or a name scheme could not say which is meant, nor a BVH of it."""
+    seen: dict[str, int] = {}
+    for i, name in enumerate(skeleton.names):
+        if name in seen:
+            raise InputFileError(
+                f"two bones are named {name!r}; rename one in the modelling tool (bone names must be unique)",
+                path=skeleton.path,
+            )
+        seen[name] = i
 
 
 def _bone_map(spec: str | os.PathLike | dict | None) -> tuple[str, dict[str, str]] | None:
