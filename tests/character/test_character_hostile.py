@@ -353,3 +353,28 @@ def test_retarget_given_other_things_says_so(tmp_path, motion):
         retarget(motion, None)  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="bone_map"):
         read_character(path, bone_map=3)  # type: ignore[arg-type]
+
+
+@pytest.mark.slow
+def test_a_late_error_takes_back_every_file_the_run_wrote(tmp_path, cli_world, monkeypatch):
+    """The npz, the glTF and its speech are written, then the BVH fails: none of them is left behind."""
+    import gesturekit.export.result as result_module
+    from gesturekit.errors import OutputError
+
+    def fail(result, retargeted, path, **kwargs):
+        raise OutputError("cannot write: the disk is full", path=path)
+
+    db, speech = cli_world
+    character = tmp_path / "avatar.glb"
+    character.write_bytes(rig_files(CASES["mixamo_t"])["mixamo.glb"])
+    out = tmp_path / "out"
+    args = ["synthesize", speech, "--db", db, "--out", out, "--refiner", "none", "--character", character]
+    args += ["--format", "npz,glb,bvh"]
+    monkeypatch.setattr(result_module, "export_result_character_bvh", fail)
+    run = run_cli(*args)
+    assert run.code == 2 and "the disk is full" in run.stderr and "speech.bvh" in run.stderr, run.stderr
+    assert sorted(p.name for p in out.iterdir()) == []
+    monkeypatch.undo()
+    run = run_cli(*args)
+    assert run.code == 0, run.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["speech.bvh", "speech.glb", "speech.npz", "speech.wav"]
