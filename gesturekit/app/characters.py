@@ -87,8 +87,8 @@ def _matched_lines(ch: Character) -> list[str]:
     ]
     missing = [JOINT_NAMES[j] for j in range(len(JOINT_NAMES)) if ch.bone_of[j] < 0]
     if missing:
-        fingers = [n for n in missing if n in FINGERS]
-        others = [n for n in missing if n not in FINGERS]
+        fingers = [n for n in missing if any(f in n for f in FINGERS)]
+        others = [n for n in missing if n not in fingers]
         parts = others[:12] + ([f"{len(fingers)} finger joints"] if fingers else [])
         lines.append("no bone for " + ", ".join(parts) + (" ..." if len(others) > 12 else "") + ": not shown")
     return lines
@@ -144,6 +144,8 @@ def sidebar_character() -> Character | None:
         st.success(f"**{escape_markdown(kept['name'])}** is shown", icon=":material/accessibility_new:")
         for line in _matched_lines(ch):
             st.caption(escape_markdown(line))
+        for note in ch.notes:  # a unit found from its size
+            st.warning(escape_markdown(note), icon=":material/straighten:")
         if st.button("Default character", key="_gk.character_default", help="show the default body again"):
             ss.pop(CHARACTER_KEY, None)
             ss.pop(_FAILED, None)

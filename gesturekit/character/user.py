@@ -30,10 +30,19 @@ from ..limits import read_json
 from ..paths import is_file
 from ._user_bvh import read_bvh_skeleton
 from ._user_gltf import read_gltf_skeleton
-from .humanoid import REQUIRED, check_bone_map, match_names, missing_message, name_maps
+from .humanoid import (
+    FAMILIES,
+    REQUIRED,
+    check_bone_map,
+    fingers_by_shape,
+    match_families,
+    match_names,
+    missing_message,
+    name_maps,
+)
 from .target import Character, FileSkeleton
 
-__all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record"]
+__all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record", "bone_tree"]
 
 #: File name suffixes :func:`read_character` reads.
 CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".bvh")
@@ -125,7 +134,10 @@ def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes]
                 problem = problem.replace(str(map_path), str(bone_map[0] if bone_map else ""))
             problem = problem.replace(tmp + os.sep, "")
             shown = None if exc.path is None else bone_map[0] if bone_map and exc.path == str(map_path) else name
-            raise type(exc)(problem, path=shown) from None
+            error = type(exc)(problem, path=shown)
+            if hasattr(exc, "bone_tree"):
+                error.bone_tree = exc.bone_tree  # type: ignore[attr-defined]
+            raise error from None
     return dataclasses.replace(character, path=Path(str(name)))
 
 
@@ -188,10 +200,10 @@ def _match(
         index = {n: i for i, n in enumerate(names)}
         absent = sorted(f"{k} -> {v!r}" for k, v in wanted.items() if v not in index)
         if absent:
-            raise ConfigError(f"{path}: the bone map names bones the file lacks: {', '.join(absent[:8])}")
+            raise _with_tree(f"{path}: the bone map names bones the file lacks: {', '.join(absent[:8])}", skeleton)
         found = {k: index[v] for k, v in wanted.items()}
         if any(k not in found for k in REQUIRED):
-            raise ConfigError(missing_message(found, label, wanted, path=str(path)))
+            raise _with_tree(missing_message(found, label, wanted, path=str(path)), skeleton)
         return found, label, wanted
     if skeleton.humanoid is not None:
         label, found, expected = skeleton.humanoid
@@ -199,7 +211,38 @@ def _match(
             raise ConfigError(missing_message(found, label, expected, path=str(path)))
         return found, label, expected
     scheme, found = match_names(names)
+    label = f"{scheme} names"
     expected = name_maps()[scheme]
+    families = match_families(names, [int(p) for p in skeleton.parents])
+    if (sum(k in families for k in REQUIRED), len(families)) > (sum(k in found for k in REQUIRED), len(found)):
+        found, label, expected = families, FAMILIES, {}
+    found, sides = fingers_by_shape(found, [int(p) for p in skeleton.parents], skeleton.world[:, :3, 3])
+    if sides:
+        label += f", the fingers of the {' and '.join(sides)} hand{'s' if len(sides) > 1 else ''} by their shape"
     if any(k not in found for k in REQUIRED):
-        raise ConfigError(missing_message(found, f"{scheme} names", expected, path=str(path)))
-    return found, f"{scheme} names", expected
+        raise _with_tree(missing_message(found, label, expected, path=str(path)), skeleton)
+    return found, label, expected
+
+
+def _with_tree(message: str, skeleton: FileSkeleton) -> ConfigError:
+    error = ConfigError(message)
+    error.bone_tree = bone_tree(skeleton)  # type: ignore[attr-defined]
+    return error
+
+
+def bone_tree(skeleton: FileSkeleton, most: int = 200) -> str:
+    """The file's bones as an indented tree with their rest positions (metres, the file's axes), for writing a
+    bone map: a glTF node without a name is ``node{index}`` (its index among the file's nodes).
+
+    A :class:`ConfigError` of :func:`read_character` for bones it could not find carries this as ``bone_tree``.
+    """
+    depth = [0] * len(skeleton.names)
+    lines = []
+    for b, name in enumerate(skeleton.names[:most]):
+        p = int(skeleton.parents[b])
+        depth[b] = depth[p] + 1 if p >= 0 else 0
+        x, y, z = skeleton.world[b, :3, 3] * skeleton.units
+        lines.append(f"{'  ' * depth[b]}{name} ({x:.2f}, {y:.2f}, {z:.2f})")
+    more = len(skeleton.names) - most
+    tail = f"\n... and {more} more" if more > 0 else ""
+    return "\n".join(lines) + tail
