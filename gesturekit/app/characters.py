@@ -128,15 +128,18 @@ def sidebar_character() -> Character | None:
                     kept = ss[CHARACTER_KEY] = {"character": character, "name": up.name, "token": token}
                     ss.pop(_FAILED, None)
                 except (GestureKitError, OSError) as exc:
-                    ss[_FAILED] = (token, error_text(exc))
+                    ss[_FAILED] = (token, error_text(exc), getattr(exc, "bone_tree", None))
                 except Exception:  # noqa: BLE001  (a file no reader foresaw: said once, not read again)
                     reference = secrets.token_hex(4)
                     LOG.exception("a character upload could not be read (reference %s)", reference)
                     why = f"could not be read as a character (details in the server log, reference {reference})"
-                    ss[_FAILED] = (token, f"{Path(up.name).name}: {why}")
+                    ss[_FAILED] = (token, f"{Path(up.name).name}: {why}", None)
         failed = ss.get(_FAILED)
         if failed is not None:
             st.error(escape_markdown(failed[1]), icon=":material/error:")
+            if failed[2]:  # the bones it has, for a bone map (a nameless glTF node is node{index})
+                st.caption("Its bones, with their rest positions (metres as read), for a bone map:")
+                st.code(failed[2], language=None)
         if kept is None:
             st.caption("The default body is shown.")
             return None

@@ -8,7 +8,8 @@ viewer) in the place and size it had.
 GLB (:func:`export_character_glb`)
     Their document and binary chunk as read (meshes, materials, textures,
     skins, extensions such as VRM's, their animations), with one animation
-    more, named :data:`ANIMATION`: one key per frame at ``i / fps`` seconds,
+    more, named :data:`ANIMATION`, first of the animations (a viewer that plays
+    one plays the first; theirs follow as they were): one key per frame at ``i / fps`` seconds,
     interpolated linearly, a rotation channel for each bone whose local
     rotation moves and a translation channel for the hips when they move. A
     bone's world rotation in the file is ``S = R_F @ W`` (``W`` the retargeted
@@ -294,8 +295,8 @@ def _document(r: Retargeted, extras: dict[str, Any]) -> tuple[dict[str, Any], by
 
     binary = _append(doc, ch.gltf.binary, buf, samplers)
     animations = [a for a in doc.get("animations", []) if a.get("name") != ANIMATION]
-    if channels:
-        animations.append({"name": ANIMATION, "samplers": samplers, "channels": channels})
+    if channels:  # first: the clip a viewer plays when it plays one (theirs follow, as they were)
+        animations.insert(0, {"name": ANIMATION, "samplers": samplers, "channels": channels})
     if animations:
         doc["animations"] = animations
     else:

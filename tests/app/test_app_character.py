@@ -127,6 +127,11 @@ def test_a_rig_missing_a_bone_is_named(app_env):
     said = errors(at)
     assert len(said) == 1 and "left_elbow" in said[0] and "bone map" in said[0]
     assert "gk.character" not in at.session_state
+    # the bones it has, as a tree with their rest positions, to write the map from
+    (tree,) = [c.value for c in at.code]
+    assert tree.splitlines()[0].startswith("mixamorig:Hips (0.00, 0.98, 0.00)")
+    assert "  mixamorig:Spine (" in tree and f"{truth(CASES['missing_elbow']).bone_names[-1]} (" in tree
+    assert any("rest positions" in c for c in captions(at))
 
 
 def test_a_bvh_character_and_a_bone_map(app_env):
