@@ -48,6 +48,7 @@ from ..motion import AUDIO_SR
 from ..outputs import check_not_input
 from ._character_bvh import (
     CharacterBvhReport,
+    _check_arguments,
     character_bvh_joints,
     check_character_bvh,
     export_character_bvh,
@@ -168,6 +169,7 @@ def export_character_glb(
         scale, bad speech, or a file that exists and may not be replaced
         (:class:`~gesturekit.errors.OutputError`).
     """
+    _check_arguments(path, retargeted, "export_character_glb")
     path = Path(path)
     ch = retargeted.character
     if ch.gltf is None:

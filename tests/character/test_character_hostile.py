@@ -379,3 +379,17 @@ def test_a_late_error_takes_back_every_file_the_run_wrote(tmp_path, cli_world, m
     run = run_cli(*args)
     assert run.code == 0, run.stderr
     assert sorted(p.name for p in out.iterdir()) == ["speech.bvh", "speech.glb", "speech.npz", "speech.wav"]
+
+
+def test_the_writers_given_other_things_say_so(tmp_path, motion):
+    from gesturekit.export.character import export_character_bvh, export_character_glb
+
+    path = tmp_path / "cmu.bvh"
+    path.write_bytes(cmu_bvh())
+    posed = retarget(motion, read_character(path))
+    for write in (export_character_glb, export_character_bvh):
+        with pytest.raises(ConfigError, match="Retargeted"):
+            write(tmp_path / "x", None)  # type: ignore[arg-type]
+        with pytest.raises(ConfigError, match="file name or path"):
+            write(None, posed)  # type: ignore[arg-type]
+    assert not any(p.name.startswith("x") for p in tmp_path.iterdir())
