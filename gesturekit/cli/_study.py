@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 __all__ = ["add_study_parser", "run"]
 
@@ -84,7 +84,7 @@ def add_init(p: argparse.ArgumentParser) -> None:
 
 
 def _study_init(args: argparse.Namespace) -> int:
-    from .studies.design import init_study, participant_pages
+    from ..study.design import init_study, participant_pages
 
     if args.no_rating and not args.pairwise:
         raise ConfigError("--no-rating needs --pairwise: a study needs rating or pairwise pages")
@@ -136,8 +136,8 @@ def add_serve(p: argparse.ArgumentParser) -> None:
 
 
 def _study_serve(args: argparse.Namespace) -> int:
-    from .studies.design import load_design
-    from .studies.server import serve
+    from ..study.design import load_design
+    from ..study.server import serve
 
     design = load_design(args.study)  # errors in design.json before anything listens
     url = f"http://{args.host}:{args.port}{args.root_path.rstrip('/')}/"
@@ -166,8 +166,8 @@ def add_export_hemvip(p: argparse.ArgumentParser) -> None:
 
 
 def _study_export_hemvip(args: argparse.Namespace) -> int:
-    from .studies.design import load_design
-    from .studies.hemvip import export_hemvip
+    from ..study.design import load_design
+    from ..study.hemvip import export_hemvip
 
     files = export_hemvip(load_design(args.study), args.out, media_url=args.media_url, overwrite=args.force)
     print(f"{len(files)} HEMVIP configs in {args.out}")
@@ -183,8 +183,8 @@ def add_import_hemvip(p: argparse.ArgumentParser) -> None:
 
 
 def _study_import_hemvip(args: argparse.Namespace) -> int:
-    from .studies.design import load_design
-    from .studies.hemvip import import_hemvip, write_responses_csv
+    from ..study.design import load_design
+    from ..study.hemvip import import_hemvip, write_responses_csv
 
     frame = import_hemvip(load_design(args.study), args.results)
     write_responses_csv(frame, args.out, overwrite=args.force)
@@ -210,7 +210,7 @@ def add_analyse(p: argparse.ArgumentParser) -> None:
 
 
 def _study_analyse(args: argparse.Namespace) -> int:
-    from .studies.report import analyse_study
+    from ..study.report import analyse_study
 
     report = analyse_study(
         args.study,
