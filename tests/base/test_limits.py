@@ -23,6 +23,7 @@ from gesturekit.errors import AudioFileError, ConfigError, InputFileError, Motio
 from gesturekit.skeleton import N_JOINTS
 from tests import hostile as h
 from tests.datasets.test_bvh import bvh_text, random_values, zeggs_like_skeleton
+from tests.waits import patience
 
 SHARED_SPEECH = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "speech"
 LIMIT_VARS = [
@@ -244,7 +245,7 @@ def test_refusing_a_hostile_input_costs_less_than_200_mb(tmp_path):
         capture_output=True,
         text=True,
         env=env,
-        timeout=300,
+        timeout=patience(300),
         check=False,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]

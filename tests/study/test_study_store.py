@@ -21,6 +21,7 @@ from gesturekit.study.store import PARTICIPANT_COLUMNS, RESPONSE_COLUMNS, body_d
 from tests import study_pg
 from tests._study_standin import make_folder
 from tests.study_serve import kill9, run_participant, start_server
+from tests.waits import patience
 
 
 @pytest.fixture(scope="module")
@@ -153,10 +154,10 @@ def test_a_server_killed_with_minus_9_loses_no_acknowledged_response(store_url, 
 
     async def crowd():
         # one client (one cookie jar: one browser) per participant
-        clients = [httpx.AsyncClient(timeout=60) for _ in range(12)]
+        clients = [httpx.AsyncClient(timeout=patience(120)) for _ in range(12)]
         try:
             tasks = [asyncio.create_task(run_participant(c, base, f"P{i}", acked)) for i, c in enumerate(clients)]
-            deadline = time.monotonic() + 120  # a busy machine may answer slowly; never wait for ever
+            deadline = time.monotonic() + patience(240)  # a busy machine may answer slowly; never wait for ever
             while len(acked) < 20 and not all(t.done() for t in tasks) and time.monotonic() < deadline:
                 await asyncio.sleep(0.01)
             kill9(proc)
