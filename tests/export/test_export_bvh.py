@@ -242,7 +242,9 @@ def poses(draw):
 
 
 @pytest.mark.slow
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(pos=poses(), order=st.sampled_from(ROTATION_ORDERS))
 def test_random_poses_round_trip(tmp_path, pos, order):
     path = write_bvh(tmp_path / "pose.bvh", Motion(pos, 30), rotation_order=order, overwrite=True)

@@ -46,3 +46,25 @@ def test_a_patience_that_is_no_positive_number_is_refused(monkeypatch, text):
     monkeypatch.setenv("GESTUREKIT_TEST_PATIENCE", text)
     with pytest.raises(ValueError, match=f"GESTUREKIT_TEST_PATIENCE must be a positive number, got '{text}'"):
         waits._factor()
+
+
+def test_hypothesis_measures_no_time():
+    """No per-example deadline, no health check on generation time; a test naming its own health
+    checks to suppress replaces the profile's list, so it must name too_slow too."""
+    import re
+    from pathlib import Path
+
+    from hypothesis import HealthCheck, settings
+
+    assert settings.default.deadline is None
+    assert HealthCheck.too_slow in settings.default.suppress_health_check
+    tests = Path(__file__).resolve().parents[1]
+    sources = [p for p in sorted(tests.rglob("*.py")) if p != Path(__file__).resolve()]
+    lists = [
+        (path.name, m.group(1))
+        for path in sources
+        for m in re.finditer(r"suppress_health_check=\[([^\]]*)\]", path.read_text(encoding="utf-8"))
+    ]
+    assert lists and all("too_slow" in names for _, names in lists), [n for n in lists if "too_slow" not in n[1]]
+    timed = [path.name for path in sources for m in re.finditer(r"deadline=(?!None)", path.read_text(encoding="utf-8"))]
+    assert timed == []

@@ -288,7 +288,9 @@ def demo_copy(tmp_path_factory):
     return Path(shutil.copytree(_DEMO, tmp_path_factory.mktemp("refiner") / "demo"))
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(data=st.data())
 def test_a_damaged_config_is_refused_or_loads(demo_copy, data):
     original = (demo_copy / "config.json").read_text()

@@ -123,7 +123,9 @@ def test_responses_are_idempotent_in_order_and_end_after_too_many_failed_checks(
     store.close()
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(bodies=st.lists(st.tuples(st.integers(0, 2), st.sampled_from([{}, {"a": 1}, {"a": 2}])), min_size=1, max_size=8))
 def test_the_first_body_of_a_page_is_kept_whatever_follows(tmp_path_factory, bodies):
     """Property: whatever sequence of submissions arrives, each page keeps the first body stored for it;

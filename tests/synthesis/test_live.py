@@ -128,7 +128,9 @@ def test_step_lengths_and_switches_stream_equally(db, speech, options):
 
 
 @pytest.mark.slow
-@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(
     chunks=st.lists(st.integers(1, 9000), min_size=1, max_size=6),
     at=st.floats(0.0, 2.5),
