@@ -15,11 +15,12 @@ from gesturekit.skeleton import JOINT_NAMES
 from tests.app.test_app_synthesize import speech_file
 from tests.character_rigs import CASES, custom_map, rig_files, truth
 from tests.conftest import shown, viewer
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
-TIMEOUT = 240  # a busy machine: a run here synthesizes, renders an MP4 and writes two files
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 FILE, MAP = "_gk.character_file.0", "_gk.character_map.0"
 
 

@@ -313,7 +313,9 @@ def test_the_hips_get_a_translation_only_when_they_move(rigs, tmp_path):
     assert err.max() < MM and report.max_error < MM
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(
     roll=st.integers(0, 10_000),
     rest=st.sampled_from(["T", "A"]),
