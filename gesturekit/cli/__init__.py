@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import ConfigError, GestureKitError, GestureKitWarning, warn
 from ..paths import is_file
+from ._app import run as _cmd_app  # noqa: F401  (main finds it by name; streamlit is imported only as it runs)
 from ._options import flag_of, options_given
 from ._parser import build_parser, join_axis_values
 
@@ -633,12 +634,6 @@ def _cmd_stimuli(args) -> int:
 
 def _cmd_study(args) -> int:
     from ._study import run
-
-    return run(args)
-
-
-def _cmd_app(args) -> int:
-    from ._app import run
 
     return run(args)
 
