@@ -222,9 +222,11 @@ def _study_analyse(args: argparse.Namespace) -> int:
         store_url=args.store,
         responses=args.responses,
     )
+    f = report.flow
     print(
-        f"{len(report.participants)} participants, {report.excluded} excluded by the checks, "
-        f"{report.included} analysed; systems: {', '.join(report.systems)}"
+        f"{f['started']} started, {f['answered_nothing']} answered nothing, {f['excluded']} excluded by the checks, "
+        f"{f['no_kept_answer']} with no rating or pairwise answer, {f['analysed']} analysed "
+        f"({f['analysed_finished']} finished); systems: {', '.join(report.systems)}"
     )
     if report.summary is not None:
         every = report.summary[report.summary["prompt"] == "all"]

@@ -46,6 +46,7 @@ __all__ = [
     "ratings_table",
     "pairwise_table",
     "exclusions",
+    "participant_flow",
     "participant_means",
     "bootstrap_mean_median",
     "system_summary",
@@ -194,7 +195,7 @@ def pairwise_table(design: Any, store_or_frames: Any, *, manifest: pd.DataFrame 
 
 
 def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = None) -> pd.DataFrame:
-    """Each participant's failed checks and whether they are excluded.
+    """Each participant's failed checks, whether they are excluded, and how far they got.
 
     A participant is excluded who failed more than ``max_failures`` attention
     checks (the design's ``max_failures`` by default) or the audio check.
@@ -203,7 +204,10 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
     -------
     DataFrame
         ``participant``, ``row``, ``failed_checks`` (attention checks failed), ``audio_failed`` (bool),
-        ``excluded`` (bool); every participant of the store, also those who answered nothing.
+        ``excluded`` (bool), ``reason`` (why excluded, else empty), ``answered`` (pages answered),
+        ``pages`` (pages the participant's order has to answer), ``finished`` (bool: the store says so,
+        or, without the store's participants, every page answered); every participant of the store,
+        also those who answered nothing.
     """
     import pandas as pd
 
@@ -216,12 +220,17 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
     failed: dict[str, int] = {}
     audio: dict[str, bool] = {}
     rows: dict[str, int] = {}
+    answered: dict[str, int] = {}
+    finished: dict[str, bool] = {}
     if participants is not None:
         for token, row in zip(participants["token"], participants["row"]):
             rows[str(token)] = int(row)
+        if "status" in participants.columns:
+            finished = {str(t): s == "finished" for t, s in zip(participants["token"], participants["status"])}
     for r in responses.itertuples(index=False):
         token = str(r.token)
         rows[token] = int(r.row)
+        answered[token] = answered.get(token, 0) + 1
         page = pages.page(int(r.row), r.page_id)
         if page is None:
             continue
@@ -230,11 +239,99 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
             audio[token] = True
         elif ok is False:
             failed[token] = failed.get(token, 0) + 1
-    table = pd.DataFrame(
-        [(t, row, failed.get(t, 0), audio.get(t, False)) for t, row in rows.items()], columns=EXCLUSION_COLUMNS[:4]
+    out = []
+    for t, row in rows.items():
+        pages.page(row, "")  # builds the row's pages
+        todo = sum(1 for p in pages.rows[row].values() if p.kind != "done")
+        f, a = failed.get(t, 0), audio.get(t, False)
+        reasons = []
+        if f > max_failures:
+            reasons.append(REASON_ATTENTION)
+        if a:
+            reasons.append(REASON_AUDIO)
+        n = answered.get(t, 0)
+        done = finished[t] if t in finished else n >= todo
+        out.append((t, row, f, a, bool(reasons), "; ".join(reasons), n, todo, bool(done)))
+    return pd.DataFrame(out, columns=[*EXCLUSION_COLUMNS, "reason", "answered", "pages", "finished"])
+
+
+#: why a participant is excluded (``exclusions``'s ``reason``; both, joined by "; ", where both hold)
+REASON_ATTENTION = "failed more attention checks than allowed"
+REASON_AUDIO = "failed the audio check"
+
+
+def participant_flow(participants: pd.DataFrame, analysed: set[str]) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Where each participant ended up, and the counts of the flow (CONSORT style).
+
+    Each participant is in exactly one of: answered nothing, excluded (by the checks), no rating or
+    pairwise answer kept (stopped before the first stimulus page), analysed. The analysed who did
+    not finish are counted by the last page they answered.
+
+    Parameters
+    ----------
+    participants : DataFrame
+        :func:`exclusions`'s columns (``answered``, ``pages``, ``finished``, ``reason`` may be absent,
+        as in a simulated study: then everyone counts as finished).
+    analysed : set of str
+        The participants with at least one kept answer (rating or pairwise, not excluded).
+
+    Returns
+    -------
+    table : DataFrame
+        ``participants`` with ``analysed`` (bool) and ``outcome`` (in words) added.
+    flow : dict
+        ``started``, ``answered_nothing``, ``excluded``, ``excluded_reasons`` (reason -> count),
+        ``no_kept_answer``, ``analysed``, ``analysed_finished``, ``dropped_out`` (last page answered ->
+        analysed participants who stopped there).
+    """
+    table = participants.reset_index(drop=True).copy()
+    n = len(table)
+    answered = table["answered"].astype(int).tolist() if "answered" in table else [1] * n
+    todo = table["pages"].astype(int).tolist() if "pages" in table else [0] * n
+    finished = table["finished"].astype(bool).tolist() if "finished" in table else [True] * n
+    reason = (
+        table["reason"].astype(str).tolist()
+        if "reason" in table
+        else [REASON_ATTENTION if e else "" for e in table["excluded"].astype(bool)]
     )
-    table["excluded"] = (table["failed_checks"] > max_failures) | table["audio_failed"].astype(bool)
-    return table
+    flow: dict[str, Any] = {
+        "started": n,
+        "answered_nothing": 0,
+        "excluded": 0,
+        "excluded_reasons": {},
+        "no_kept_answer": 0,
+        "analysed": 0,
+        "analysed_finished": 0,
+        "dropped_out": {},
+    }
+    outcomes, kept = [], []
+    for token, excluded, k, m, done, why in zip(
+        table["participant"].astype(str), table["excluded"].astype(bool), answered, todo, finished, reason
+    ):
+        stopped = "" if done else f"; dropped out after page {k} of {m}"
+        kept.append(token in analysed and not excluded)
+        if k == 0:
+            flow["answered_nothing"] += 1
+            outcomes.append("answered nothing")
+        elif excluded:
+            flow["excluded"] += 1
+            for r in why.split("; "):
+                flow["excluded_reasons"][r] = flow["excluded_reasons"].get(r, 0) + 1
+            outcomes.append(f"excluded: {why}")
+        elif not kept[-1]:
+            flow["no_kept_answer"] += 1
+            outcomes.append("no rating or pairwise answer" + stopped)
+        else:
+            flow["analysed"] += 1
+            if done:
+                flow["analysed_finished"] += 1
+            else:
+                flow["dropped_out"][k] = flow["dropped_out"].get(k, 0) + 1
+            outcomes.append("analysed" + stopped)
+    flow["dropped_out"] = dict(sorted(flow["dropped_out"].items()))
+    table["analysed"] = kept
+    table["outcome"] = outcomes
+    return table, flow
 
 
 # ---- ratings: per system statistics ------------------------------------------------------------------

@@ -11,7 +11,8 @@
 ``bradley_terry.csv``         pairwise pages: Elo-like scores with bootstrap intervals
 ``significance.html``         the significance matrix per prompt (plotly, self-contained)
 ``boxplots.html``             the participants' means per system and prompt
-``report.md``, ``report.html`` all of it in words and tables
+``report.md``, ``report.html`` all of it in words and tables (the HTML with the figures)
+``plotly.min.js``             the figures' library, once for every HTML file beside it
 ============================  ===========================================================
 
 PNG copies of the figures are written only where plotly can render images (kaleido).
@@ -34,6 +35,7 @@ from .analyse import (
     exclusions,
     pairwise_table,
     pairwise_tests,
+    participant_flow,
     participant_means,
     ratings_table,
     read_responses_csv,
@@ -56,6 +58,7 @@ REPORT_FILES = (
     "boxplots.html",
     "report.md",
     "report.html",
+    "plotly.min.js",
 )
 
 
@@ -66,7 +69,8 @@ class AnalysisReport:
     Attributes
     ----------
     participants : DataFrame
-        :func:`~.analyse.exclusions`'s columns: every participant, excluded or not.
+        :func:`~.analyse.exclusions`'s columns plus ``analysed`` and ``outcome``
+        (:func:`~.analyse.participant_flow`): every participant, analysed or not.
     ratings : DataFrame
         The included participants' ratings (:func:`~.analyse.ratings_table`'s columns).
     pairwise : DataFrame
@@ -81,6 +85,11 @@ class AnalysisReport:
     alpha : float
     rounds : int
         Bootstrap rounds.
+    flow : dict
+        The participant flow's counts (:func:`~.analyse.participant_flow`).
+    warnings : list of str
+        What limits the conclusions (too few participants, systems never compared, a disconnected
+        comparison graph), in words; the report shows them above the tables.
     files : list of Path
         What :func:`write_report` wrote.
     """
@@ -94,12 +103,27 @@ class AnalysisReport:
     systems: tuple[str, ...]
     alpha: float
     rounds: int
+    flow: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
 
     @property
     def included(self) -> int:
-        """Participants analysed."""
-        return int((~self.participants["excluded"].astype(bool)).sum())
+        """Participants analysed: not excluded, with at least one rating or pairwise answer kept."""
+        return int(self.participants["analysed"].astype(bool).sum())
+
+    def flow_lines(self) -> list[str]:
+        """The participant flow in words, one line per step (started, ..., analysed)."""
+        f = self.flow
+        reasons = "; ".join(f"{r}: {n}" for r, n in f["excluded_reasons"].items())
+        dropped = "".join(f"; dropped out after page {k}: {n}" for k, n in f["dropped_out"].items())
+        return [
+            f"Started: {f['started']}",
+            f"Answered nothing: {f['answered_nothing']}",
+            f"Excluded: {f['excluded']}" + (f" ({reasons})" if reasons else ""),
+            f"No rating or pairwise answer: {f['no_kept_answer']}",
+            f"Analysed: {f['analysed']} (finished: {f['analysed_finished']}{dropped})",
+        ]
 
     @property
     def excluded(self) -> int:
@@ -111,8 +135,14 @@ class AnalysisReport:
         lines = [
             "# Study analysis",
             "",
-            f"Participants: {len(self.participants)}; excluded by the checks: {self.excluded} "
-            f"(more failed attention checks than allowed, or the audio check failed); analysed: {self.included}.",
+            "## Participant flow",
+            "",
+            *[f"- {line}" for line in self.flow_lines()],
+            "",
+            "Analysed: not excluded by the checks (more failed attention checks than allowed, or the audio "
+            "check failed) and at least one rating or pairwise answer. Each participant is counted in one "
+            "step; who dropped out is counted by the last page they answered.",
+            "",
             f"Systems: {', '.join(self.systems)}. Bootstrap: {self.rounds} rounds over participants; "
             f"alpha = {self.alpha} (Holm-Bonferroni within each prompt).",
             "",
@@ -215,8 +245,9 @@ def analyse(
             "comparing systems needs at least two of each"
         )
     has_ratings = len(ratings) > 0
+    table, flow = participant_flow(participants, people)
     return AnalysisReport(
-        participants=participants.reset_index(drop=True),
+        participants=table,
         ratings=ratings,
         pairwise=pairwise,
         summary=system_summary(ratings, rounds=rounds, seed=seed) if has_ratings else None,
@@ -225,6 +256,7 @@ def analyse(
         systems=tuple(systems),
         alpha=float(alpha),
         rounds=int(rounds),
+        flow=flow,
     )
 
 
@@ -344,8 +376,13 @@ def write_report(report: AnalysisReport, out: str | Path, *, force: bool = False
     figures: list[tuple[str, go.Figure]] = []
     if report.tests is not None:
         figures = [("significance", significance_figure(report)), ("boxplots", boxplot_figure(report))]
+    if figures:
+        from plotly.offline import get_plotlyjs
+
+        files.append(_write_bytes(out / "plotly.min.js", get_plotlyjs().encode(), force))
     for name, fig in figures:
-        files.append(_write_bytes(out / f"{name}.html", fig.to_html(include_plotlyjs=True).encode(), force))
+        page = fig.to_html(include_plotlyjs="directory", config={"responsive": True})
+        files.append(_write_bytes(out / f"{name}.html", page.encode(), force))
         png = _png(fig)
         if png is not None:
             files.append(_write_bytes(out / f"{name}.png", png, force))
@@ -368,35 +405,88 @@ def _png(fig: go.Figure) -> bytes | None:
         return None
 
 
+#: which figure goes under which section of the report (by the section's heading)
+_FIGURE_SECTIONS = {"boxplots": "Ratings per system", "significance": "Pairwise differences"}
+
+_REPORT_STYLE = (
+    "body{font-family:sans-serif;max-width:1180px;margin:1.5em auto;padding:0 1em;box-sizing:border-box}"
+    ".table{overflow-x:auto}table{border-collapse:collapse;font-size:0.9em}"
+    "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}th{background:#f4f4f4}"
+    "td:first-child,th:first-child{text-align:left}.figure{max-width:100%;overflow-x:auto}"
+    ".warning{background:#fff4e5;border-left:4px solid #e69500;padding:0.4em 0.8em}"
+)
+
+
+def _inline(text: str) -> str:
+    """Markdown's inline code and bold as HTML (the text escaped first)."""
+    import re
+
+    out = html.escape(text)
+    out = re.sub(r"`([^`]+)`", r"<code>\1</code>", out)
+    return re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", out)
+
+
 def _html(report: AnalysisReport, figures: list[tuple[str, go.Figure]]) -> str:
-    """One self-contained HTML page: the tables and the figures (plotly.js inlined once)."""
-    parts = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>Study analysis</title>"]
-    parts.append(
-        "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
-        "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}</style>"
-    )
-    parts.append("</head><body>")
-    for i, (_, fig) in enumerate(figures):
-        parts.append(fig.to_html(full_html=False, include_plotlyjs=(i == 0)))
+    """One HTML page: the title, then each section with its tables and its figures under it.
+
+    plotly.js is not inlined: every figure refers to ``plotly.min.js`` beside the page (written once
+    per analysis folder).
+    """
+    under: dict[str, list[go.Figure]] = {}
+    for name, fig in figures:
+        under.setdefault(_FIGURE_SECTIONS.get(name, ""), []).append(fig)
+    parts = ["<!DOCTYPE html><html><head><meta charset='utf-8'>"]
+    parts.append("<meta name='viewport' content='width=device-width, initial-scale=1'>")
+    parts.append(f"<title>Study analysis</title><style>{_REPORT_STYLE}</style>")
+    parts.append("<script src='plotly.min.js'></script></head><body>")
+    pending: list[go.Figure] = []
+
+    def flush() -> None:
+        for fig in pending:
+            parts.append("<div class='figure'>" + _figure_div(fig) + "</div>")
+        pending.clear()
+
     for block in report.markdown().split("\n\n"):
+        block = block.strip("\n")
+        if not block:
+            continue
         if block.startswith("|"):
-            rows = [r.strip("|").split(" | ") for r in block.splitlines() if not r.startswith("|---")]
+            rows = [r.strip().strip("|").split(" | ") for r in block.splitlines() if not r.startswith("|---")]
             head, body = rows[0], rows[1:]
             parts.append(
-                "<table><tr>"
-                + "".join(f"<th>{html.escape(c.strip())}</th>" for c in head)
+                "<div class='table'><table><tr>"
+                + "".join(f"<th>{_inline(c.strip())}</th>" for c in head)
                 + "</tr>"
-                + "".join("<tr>" + "".join(f"<td>{html.escape(c.strip())}</td>" for c in r) + "</tr>" for r in body)
-                + "</table>"
+                + "".join("<tr>" + "".join(f"<td>{_inline(c.strip())}</td>" for c in r) + "</tr>" for r in body)
+                + "</table></div>"
             )
         elif block.startswith("# "):
-            parts.append(f"<h1>{html.escape(block[2:])}</h1>")
+            parts.append(f"<h1>{_inline(block[2:])}</h1>")
         elif block.startswith("## "):
-            parts.append(f"<h2>{html.escape(block[3:])}</h2>")
+            flush()
+            title = block[3:]
+            parts.append(f"<h2>{_inline(title)}</h2>")
+            pending.extend(f for key, figs in under.items() if key and title.startswith(key) for f in figs)
+        elif block.startswith("- "):
+            items = [line[2:] for line in block.splitlines()]
+            parts.append("<ul>" + "".join(f"<li>{_inline(i)}</li>" for i in items) + "</ul>")
+        elif block.startswith("> "):
+            text = " ".join(line[2:] for line in block.splitlines())
+            parts.append(f"<p class='warning'>{_inline(text)}</p>")
         else:
-            parts.append(f"<p>{html.escape(block)}</p>")
+            parts.append(f"<p>{_inline(block)}</p>")
+    flush()
     parts.append("</body></html>")
     return "\n".join(parts)
+
+
+def _figure_div(fig: go.Figure) -> str:
+    """A figure as a div that fills the page's width (plotly.js loaded by the page); ``fig`` is left as it is."""
+    import plotly.graph_objects as go
+
+    fig = go.Figure(fig)
+    fig.update_layout(width=None, autosize=True)
+    return str(fig.to_html(full_html=False, include_plotlyjs=False, config={"responsive": True}))
 
 
 def analyse_study(

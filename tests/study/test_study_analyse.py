@@ -322,7 +322,9 @@ def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_st
 
     assert main(["study", "analyse", str(folder), "--rounds", "200"]) == 0
     printed = capsys.readouterr().out
-    assert "7 participants, 1 excluded by the checks, 6 analysed" in printed
+    assert (
+        "7 started, 0 answered nothing, 1 excluded by the checks, 0 with no rating or pairwise answer, 6 analysed"
+    ) in printed
     out = folder / "analysis"
     report = (out / "report.md").read_text()
     assert all(s in report for s in QUALITY)
