@@ -56,10 +56,22 @@ __all__ = [
     "bt_win_counts",
     "bt_fit",
     "bradley_terry",
+    "comparison_groups",
+    "wilcoxon_p",
 ]
 
 #: Elo points per natural-log unit of Bradley-Terry strength: 400 points = a factor of 10 in the odds
 ELO_SCALE = 400.0 / math.log(10.0)
+
+#: fewer participants than this get no bootstrap interval: the percentile bootstrap of 4 or fewer values
+#: has a handful of distinct resamples and covers the truth far less often than it claims
+MIN_INTERVAL_N = 5
+
+#: the Wilcoxon p-value is exact (all 2^n sign patterns) up to this many non-zero, untied differences
+EXACT_MAX_N = 25
+
+#: fewer pairs than this can never be significant at 0.05: the smallest two-sided exact p is 2 / 2^n
+MIN_TEST_N = 6
 
 RATING_COLUMNS = ["participant", "row", "speech", "system", "prompt", "value"]
 PAIRWISE_COLUMNS = ["participant", "row", "speech", "system_left", "system_right", "value"]
@@ -399,6 +411,8 @@ def system_summary(ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0
     DataFrame
         ``prompt`` (each prompt, then ``"all"``), ``system``, ``n`` (participants), ``mean``, ``mean_lo``,
         ``mean_hi``, ``median``, ``median_lo``, ``median_hi``; sorted by prompt then mean, best first.
+        An interval is NaN (none) below :data:`MIN_INTERVAL_N` participants, and where it would have
+        zero width (every participant's mean the same): a point is not an interval.
     """
     import pandas as pd
 
@@ -410,7 +424,10 @@ def system_summary(ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0
             v = means.loc[(means["prompt"] == prompt) & (means["system"] == system), "value"].to_numpy()
             if v.size == 0:
                 continue
-            stats = bootstrap_mean_median(v, rounds=rounds, seed=[seed, p_i, s_i], level=level)
+            stats = list(bootstrap_mean_median(v, rounds=rounds, seed=[seed, p_i, s_i], level=level))
+            for lo in (1, 4):  # no interval from too few values, none of zero width
+                if v.size < MIN_INTERVAL_N or not stats[lo + 1] > stats[lo]:
+                    stats[lo] = stats[lo + 1] = math.nan
             out.append((prompt, system, v.size, *stats))
     cols = ["prompt", "system", "n", "mean", "mean_lo", "mean_hi", "median", "median_lo", "median_hi"]
     table = pd.DataFrame(out, columns=cols)
@@ -484,6 +501,36 @@ def rank_biserial(x: np.ndarray, y: np.ndarray) -> float:
     return float((ranks[d > 0].sum() - ranks[d < 0].sum()) / ranks.sum())
 
 
+def wilcoxon_p(d: np.ndarray) -> tuple[float, str]:
+    """Two-sided Wilcoxon signed-rank p-value of the paired differences ``d``, by a method chosen here.
+
+    Zero differences are dropped (Wilcoxon's own treatment). With at most :data:`EXACT_MAX_N` differences
+    left and no ties among their absolute values, the p-value is exact (the null distribution of every
+    sign pattern); otherwise it is the normal approximation with the tie correction of the variance and
+    no continuity correction. The choice is made here, not left to scipy's default, which has changed
+    between versions (newer ones use the exact distribution even with ties, where it does not hold).
+
+    Parameters
+    ----------
+    d : np.ndarray, shape (n,)
+        Paired differences; at least one non-zero.
+
+    Returns
+    -------
+    p : float
+    method : str
+        ``"exact"`` or ``"normal, tie-corrected"``.
+    """
+    from scipy.stats import wilcoxon
+
+    d = np.asarray(d, dtype=np.float64)
+    nonzero = d[d != 0]
+    if nonzero.size <= EXACT_MAX_N and np.unique(np.abs(nonzero)).size == nonzero.size:
+        return float(wilcoxon(nonzero, alternative="two-sided", method="exact").pvalue), "exact"
+    res = wilcoxon(nonzero, alternative="two-sided", method="approx", correction=False, zero_method="wilcox")
+    return float(res.pvalue), "normal, tie-corrected"
+
+
 def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFrame:
     """Wilcoxon signed-rank tests of every pair of systems on the participants' means, Holm-adjusted per prompt.
 
@@ -499,7 +546,10 @@ def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFram
     DataFrame
         ``prompt``, ``system_a``, ``system_b``, ``n`` (participants who rated both), ``mean_diff`` (a - b),
         ``statistic`` (scipy's two-sided W), ``p``, ``p_holm``, ``significant`` (p_holm <= alpha),
-        ``r`` (rank-biserial; positive: a rated higher).
+        ``r`` (rank-biserial; positive: a rated higher), ``method`` (of the p-value, :func:`wilcoxon_p`),
+        ``family`` (tests in the prompt's Holm family), ``result`` (``"a higher"``, ``"b higher"``: the
+        test's direction, the sign of r; ``"no difference found"``; ``"not compared"``: nobody rated
+        both, no test, not in the family, NaN statistics).
     """
     import pandas as pd
     from scipy.stats import wilcoxon
@@ -512,24 +562,30 @@ def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFram
         if prompt not in wide.index.get_level_values(0):
             continue
         block = wide.loc[prompt]
-        family = []
+        family, missing = [], []
         for a, b in combinations(systems, 2):
-            both = block[[a, b]].dropna()
+            both = block.reindex(columns=[a, b])[[a, b]].dropna()
             n = len(both)
             if n == 0:
+                missing.append([prompt, a, b])
                 continue
             x, y = both[a].to_numpy(), both[b].to_numpy()
             if np.all(x == y):  # nothing to rank: no evidence of a difference
-                stat, p = 0.0, 1.0
+                stat, p, method = 0.0, 1.0, "none: no difference"
             else:
-                res = wilcoxon(x, y, alternative="two-sided")
-                stat, p = float(res.statistic), float(res.pvalue)
-            family.append([prompt, a, b, n, float(np.mean(x - y)), stat, p, rank_biserial(x, y)])
+                p, method = wilcoxon_p(x - y)
+                stat = float(wilcoxon(x, y, alternative="two-sided", method="approx").statistic)
+            family.append([prompt, a, b, n, float(np.mean(x - y)), stat, p, rank_biserial(x, y), method])
         adjusted = holm([f[6] for f in family])
         for f, q in zip(family, adjusted):
-            out.append(f[:7] + [float(q), bool(q <= alpha), f[7]])
+            significant = bool(q <= alpha)
+            result = ("a higher" if f[7] > 0 else "b higher") if significant else "no difference found"
+            out.append(f[:7] + [float(q), significant, f[7], f[8], len(family), result])
+        for prompt_, a, b in missing:
+            nan = math.nan
+            out.append([prompt_, a, b, 0, nan, nan, nan, nan, False, nan, "", len(family), "not compared"])
     cols = ["prompt", "system_a", "system_b", "n", "mean_diff", "statistic", "p", "p_holm", "significant", "r"]
-    return pd.DataFrame(out, columns=cols)
+    return pd.DataFrame(out, columns=[*cols, "method", "family", "result"])
 
 
 # ---- pairwise pages: Bradley-Terry -------------------------------------------------------------------
@@ -610,6 +666,31 @@ def bt_fit(wins: np.ndarray, *, prior: float = 1.0, tol: float = 1e-10, max_iter
     return theta
 
 
+def comparison_groups(pairwise: pd.DataFrame) -> list[list[str]]:
+    """The connected parts of the comparison graph (systems joined where some pair of them was compared).
+
+    Returns
+    -------
+    list of list of str
+        Each part's systems, sorted; the parts ordered by their first system. One part: every system
+        can be placed on one scale; more: scores of different parts are not comparable.
+    """
+    parent: dict[str, str] = {}
+
+    def root(x: str) -> str:
+        while parent.setdefault(x, x) != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for left, right in zip(pairwise["system_left"].astype(str), pairwise["system_right"].astype(str)):
+        parent[root(left)] = root(right)
+    parts: dict[str, list[str]] = {}
+    for system in sorted(parent):
+        parts.setdefault(root(system), []).append(system)
+    return sorted(parts.values())
+
+
 def bradley_terry(
     pairwise: pd.DataFrame,
     *,
@@ -621,31 +702,62 @@ def bradley_terry(
 ) -> pd.DataFrame:
     """Bradley-Terry scores on an Elo-like scale, with percentile bootstrap intervals over participants.
 
-    The point estimate is fitted by choix (``ilsr_pairwise``); each bootstrap round resamples the
-    participants with replacement and refits by :func:`bt_fit`, all rounds at once. Scores are
-    400 log10(strength), anchored so that their mean is 0: a system 400 points above another is
-    preferred with odds 10 : 1.
+    Each connected part of the comparison graph (:func:`comparison_groups`) is scored on its own: where
+    no chain of comparisons joins two systems, the data say nothing about their order, and one fit would
+    place them by the prior alone. The point estimate is fitted by choix (``ilsr_pairwise``); each
+    bootstrap round resamples the part's participants with replacement and refits by :func:`bt_fit`,
+    all rounds at once. Scores are 400 log10(strength), anchored so that their mean within the part is
+    0: a system 400 points above another is preferred with odds 10 : 1.
+
+    Parameters
+    ----------
+    systems : sequence of str, optional
+        Order of the systems (default sorted); systems never compared pairwise are left out.
 
     Returns
     -------
     DataFrame
-        ``system``, ``elo``, ``elo_lo``, ``elo_hi``, ``wins``, ``losses``, ``ties`` (comparisons),
-        sorted best first.
+        ``system``, ``group`` (1-based part of the comparison graph), ``elo``, ``elo_lo``, ``elo_hi``,
+        ``wins``, ``losses``, ``ties`` (comparisons), sorted by part, then best first.
     """
     import pandas as pd
 
     from .._optional import require
 
     choix = require("choix", purpose="Bradley-Terry scores")
-    if systems is None:
-        systems = sorted(set(pairwise["system_left"]) | set(pairwise["system_right"]))
-    systems = list(systems)
+    parts = comparison_groups(pairwise)
+    if not parts:
+        raise ConfigError("Bradley-Terry needs pairwise answers comparing at least two systems")
+    order = {s: i for i, s in enumerate(sorted(pairwise_systems(pairwise)) if systems is None else systems)}
+    tables = []
+    for g, part in enumerate(parts):
+        part = sorted(part, key=lambda s: (order.get(s, len(order)), s))
+        mine = pairwise[pairwise["system_left"].astype(str).isin(part)]
+        seeds = [seed, 0xB7] + ([g] if g else [])
+        table = _bt_part(choix, mine, part, rounds=rounds, seed=seeds, level=level, prior=prior)
+        table.insert(1, "group", g + 1)
+        tables.append(table)
+    table = pd.concat(tables, ignore_index=True)
+    return table.sort_values(["group", "elo", "system"], ascending=[True, False, True]).reset_index(drop=True)
+
+
+def pairwise_systems(pairwise: pd.DataFrame) -> set[str]:
+    """Every system of a pairwise table."""
+    return set(pairwise["system_left"].astype(str)) | set(pairwise["system_right"].astype(str))
+
+
+def _bt_part(
+    choix: Any, pairwise: pd.DataFrame, systems: list[str], *, rounds: int, seed: list[int], level: float, prior: float
+) -> pd.DataFrame:
+    """:func:`bradley_terry` of one connected part of the comparison graph."""
+    import pandas as pd
+
     participants, counts = bt_win_counts(pairwise, systems)
     if not participants or len(systems) < 2:
         raise ConfigError("Bradley-Terry needs pairwise answers comparing at least two systems")
     total = counts.sum(axis=0)
     theta = _bt_choix(choix, total, prior)
-    rng = np.random.default_rng([seed, 0xB7])
+    rng = np.random.default_rng(seed)
     boot = []
     block = max(1, 2_000_000 // max(1, len(participants) * len(systems) ** 2))
     flat = counts.reshape(len(participants), -1)
@@ -658,6 +770,8 @@ def bradley_terry(
         boot.append(bt_fit((weights @ flat).reshape(m, len(systems), len(systems)), prior=prior))
     q = [50 * (1 - level), 50 * (1 + level)]
     lo, hi = np.percentile(np.concatenate(boot) * ELO_SCALE, q, axis=0)
+    zero = ~(hi > lo)  # one participant: every resample is the data itself, a point and no interval
+    lo, hi = np.where(zero, np.nan, lo), np.where(zero, np.nan, hi)
     wins = {s: 0 for s in systems}
     losses = {s: 0 for s in systems}
     ties = {s: 0 for s in systems}
@@ -669,7 +783,7 @@ def bradley_terry(
             winner, loser = (left, right) if v < 0 else (right, left)
             wins[winner] += 1
             losses[loser] += 1
-    table = pd.DataFrame(
+    return pd.DataFrame(
         {
             "system": systems,
             "elo": theta * ELO_SCALE,
@@ -680,7 +794,6 @@ def bradley_terry(
             "ties": [ties[s] for s in systems],
         }
     )
-    return table.sort_values(["elo", "system"], ascending=[False, True]).reset_index(drop=True)
 
 
 def _bt_choix(choix: Any, wins: np.ndarray, prior: float) -> np.ndarray:

@@ -31,7 +31,10 @@ import numpy as np
 from .._io import atomic_write
 from ..errors import ConfigError, OutputError
 from .analyse import (
+    MIN_INTERVAL_N,
+    MIN_TEST_N,
     bradley_terry,
+    comparison_groups,
     exclusions,
     pairwise_table,
     pairwise_tests,
@@ -112,6 +115,20 @@ class AnalysisReport:
         """Participants analysed: not excluded, with at least one rating or pairwise answer kept."""
         return int(self.participants["analysed"].astype(bool).sum())
 
+    def _family_line(self) -> str:
+        """The Holm family's size per prompt, and the pairs not compared, in words."""
+        assert self.tests is not None
+        sizes = {str(p): int(m) for p, m in zip(self.tests["prompt"], self.tests["family"])}
+        if len(set(sizes.values())) == 1:
+            line = f"Holm family per prompt: {next(iter(sizes.values()))} tests."
+        else:
+            line = "Holm family per prompt: " + ", ".join(f"{p} {m} tests" for p, m in sizes.items()) + "."
+        missing = self.tests[self.tests["result"] == "not compared"]
+        if len(missing):
+            pairs = ", ".join(dict.fromkeys(f"{r.system_a} vs {r.system_b}" for r in missing.itertuples()))
+            line += f" Not compared (nobody rated both): {pairs}."
+        return line
+
     def flow_lines(self) -> list[str]:
         """The participant flow in words, one line per step (started, ..., analysed)."""
         f = self.flow
@@ -147,6 +164,10 @@ class AnalysisReport:
             f"alpha = {self.alpha} (Holm-Bonferroni within each prompt).",
             "",
         ]
+        if self.warnings:
+            lines += ["## Warnings", ""]
+            for w in self.warnings:
+                lines += [f"> {w}", ""]
         if self.summary is not None:
             lines += [
                 "## Ratings per system",
@@ -163,7 +184,12 @@ class AnalysisReport:
                 "",
                 "Two-sided Wilcoxon signed-rank tests on the participants' averages; `p_holm` is adjusted by "
                 "Holm-Bonferroni within each prompt; `r` is the matched-pairs rank-biserial correlation "
-                "(positive: system_a rated higher; 1: higher for every participant).",
+                "(positive: system_a rated higher; 1: higher for every participant). `result` follows the test "
+                "(the sign of r where significant). p-values: exact (every sign pattern) up to 25 non-zero "
+                "differences without ties, else the normal approximation with the tie correction (`method`); "
+                "zero differences are dropped.",
+                "",
+                self._family_line(),
                 "",
                 _md_table(self.tests, digits=4),
                 "",
@@ -188,7 +214,7 @@ def _md_table(table: pd.DataFrame, *, digits: int) -> str:
     cols = [str(c) for c in table.columns]
     out = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for row in table.itertuples(index=False):
-        cells = [f"{v:.{digits}f}" if isinstance(v, float) else str(v) for v in row]
+        cells = [("-" if not np.isfinite(v) else f"{v:.{digits}f}") if isinstance(v, float) else str(v) for v in row]
         out.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     return "\n".join(out)
 
@@ -246,18 +272,64 @@ def analyse(
         )
     has_ratings = len(ratings) > 0
     table, flow = participant_flow(participants, people)
+    summary = system_summary(ratings, rounds=rounds, seed=seed) if has_ratings else None
+    tests = pairwise_tests(ratings, alpha=alpha) if has_ratings else None
+    bt = bradley_terry(pairwise, systems=systems, rounds=rounds, seed=seed) if len(pairwise) else None
     return AnalysisReport(
         participants=table,
         ratings=ratings,
         pairwise=pairwise,
-        summary=system_summary(ratings, rounds=rounds, seed=seed) if has_ratings else None,
-        tests=pairwise_tests(ratings, alpha=alpha) if has_ratings else None,
-        bradley_terry=bradley_terry(pairwise, systems=systems, rounds=rounds, seed=seed) if len(pairwise) else None,
+        summary=summary,
+        tests=tests,
+        bradley_terry=bt,
         systems=tuple(systems),
         alpha=float(alpha),
         rounds=int(rounds),
         flow=flow,
+        warnings=_warnings(summary, tests, pairwise, alpha),
     )
+
+
+def _warnings(
+    summary: pd.DataFrame | None, tests: pd.DataFrame | None, pairwise: pd.DataFrame, alpha: float
+) -> list[str]:
+    """What limits the analysis's conclusions, in words (see :attr:`AnalysisReport.warnings`)."""
+    out = []
+    if summary is not None:
+        few = summary[summary["n"] < MIN_INTERVAL_N]
+        if len(few):
+            named = ", ".join(dict.fromkeys(f"{r.system} ({r.n})" for r in few.itertuples()))
+            out.append(
+                f"Rated by fewer than {MIN_INTERVAL_N} participants: {named}. No interval is given for them: "
+                "the bootstrap of so few values has a handful of distinct resamples and covers the truth far "
+                "less often than 95 %."
+            )
+        flat = summary[(summary["n"] >= MIN_INTERVAL_N) & summary["mean_lo"].isna()]
+        if len(flat):
+            named = ", ".join(dict.fromkeys(f"{r.system} ({r.prompt})" for r in flat.itertuples()))
+            out.append(f"Every participant's mean is the same for {named}: a point, no interval is given.")
+    if tests is not None:
+        small = tests[(tests["n"] > 0) & (tests["n"] < MIN_TEST_N)]
+        if len(small) and alpha < 2.0 / 2**5:
+            named = ", ".join(dict.fromkeys(f"{r.system_a} vs {r.system_b} ({r.n})" for r in small.itertuples()))
+            out.append(
+                f"Pairs rated together by fewer than {MIN_TEST_N} participants cannot be significant at "
+                f"alpha = {alpha} (the smallest two-sided signed-rank p is 2 / 2^n): {named}."
+            )
+        missing = tests[tests["result"] == "not compared"]
+        if len(missing):
+            named = ", ".join(dict.fromkeys(f"{r.system_a} vs {r.system_b}" for r in missing.itertuples()))
+            out.append(f"Not compared (nobody rated both): {named}; these pairs are not in the Holm family.")
+    if len(pairwise):
+        parts = comparison_groups(pairwise)
+        if len(parts) > 1:
+            named = " | ".join(", ".join(p) for p in parts)
+            out.append(
+                f"The pairwise comparison graph is disconnected ({named}): no chain of comparisons joins these "
+                "parts, so each is scored on its own (mean 0 within it) and scores of different parts are not "
+                "comparable."
+            )
+    return out
 
 
 # ---- figures ---------------------------------------------------------------------------------------
@@ -290,7 +362,11 @@ def significance_figure(report: AnalysisReport) -> go.Figure:
         for t in tests[tests["prompt"] == prompt].itertuples(index=False):
             for a, b, sign in ((t.system_a, t.system_b, 1.0), (t.system_b, t.system_a, -1.0)):
                 i, j = order.index(a), order.index(b)
-                z[i, j] = sign * np.sign(t.mean_diff) if t.significant else 0.0
+                if t.result == "not compared":
+                    text[i][j] = "not compared"
+                    continue
+                # the test's direction (rank-biserial r), not the mean difference's: they can disagree
+                z[i, j] = sign * np.sign(t.r) if t.significant else 0.0
                 text[i][j] = f"p={t.p_holm:.3g}<br>r={sign * t.r:+.2f}"
         fig.add_trace(
             go.Heatmap(
