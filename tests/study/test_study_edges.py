@@ -42,6 +42,7 @@ def _empty_pairwise():
     return pd.DataFrame(columns=A.PAIRWISE_COLUMNS)
 
 
+@pytest.mark.slow  # writes the report's figures
 def test_a_pair_nobody_rated_together_is_listed_as_not_compared_and_the_family_size_is_stated(tmp_path):
     rows = []
     for i in range(8):  # A and B by everyone; C only by those who did not see... nobody rates A with C
