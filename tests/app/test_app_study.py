@@ -15,6 +15,7 @@ import pytest
 from streamlit import config as st_config
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.studies.design import init_study
 from gesturekit.studies.store import open_store
 from tests.conftest import shown
@@ -22,7 +23,6 @@ from tests.study_helpers import STUDY_SYSTEMS, study_folder, take_part, tiny_stu
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 PAGE = "views/6_Study.py"
 TIMEOUT = 120
 PASSWORD = "researcher-pw"

@@ -12,6 +12,7 @@ from scipy.signal import resample_poly
 from streamlit.testing.v1 import AppTest
 
 from gesturekit import interactive as gs
+from gesturekit.app import HOME
 from gesturekit.control import frame_attributes
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
@@ -24,7 +25,6 @@ from tests.conftest import shown, viewer
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 PAGE = "views/1_Synthesize.py"
 TIMEOUT = 90
 EDITOR = "synth.segments_editor"

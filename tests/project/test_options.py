@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 import pytest
 from hypothesis import given
@@ -19,6 +18,7 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit._cli_options import FIELD_OF, OPTIONS_DEST, options_given
 from gesturekit._cli_parser import build_parser
+from gesturekit.app import HOME
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.fgd import FGDConfig
@@ -29,7 +29,6 @@ from gesturekit.search import SearchConfig
 from gesturekit.study import StudyConfig
 from gesturekit.synthesize import SynthesisConfig
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 TIMEOUT = 120
 
 #: The options of each command that are no configuration's: what to read and write, and how to run.

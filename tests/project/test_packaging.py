@@ -129,7 +129,7 @@ def test_extras_are_the_documented_ones():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("folder, extras", [("gesturekit", ("all",)), ("app", ("app",))])
+@pytest.mark.parametrize("folder, extras", [("gesturekit", ("all",)), ("gesturekit/app", ("app",))])
 def test_every_import_is_declared(folder, extras):
     deps = covered(declared(extras))
     missing = {}

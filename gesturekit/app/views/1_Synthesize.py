@@ -4,16 +4,12 @@ from __future__ import annotations
 
 import time
 
-import characters
-import display
 import numpy as np
 import pandas as pd
-import resources
-import sidebar
-import state
 import streamlit as st
 
 from gesturekit import interactive as gs
+from gesturekit.app import characters, display, resources, sidebar, state
 from gesturekit.control import CONSTRAINT_CHOICES, ControlTrack, add_segment, empty_segments, track_from_segments
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.audio import wav_bytes

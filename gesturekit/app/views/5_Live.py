@@ -5,15 +5,11 @@ from __future__ import annotations
 import functools
 from typing import Any
 
-import display
-import live_session as live
-import nav
-import resources
-import sidebar
-import state
 import streamlit as st
 
 from gesturekit import interactive as gs
+from gesturekit.app import display, nav, resources, sidebar, state
+from gesturekit.app import live_session as live
 from gesturekit.database import MatchingDatabase
 from gesturekit.errors import GestureKitError
 from gesturekit.motion import Motion

@@ -4,14 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-import characters
-import display
-import nav
-import sidebar
-import state
 import streamlit as st
 
 from gesturekit import interactive as gs
+from gesturekit.app import characters, display, nav, sidebar, state
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.audio import wav_bytes
 from gesturekit.motion import AUDIO_SR

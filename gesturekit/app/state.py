@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import streamlit as st
-from display import warnings_shown
 
+from gesturekit.app.display import warnings_shown
 from gesturekit.database import MatchingDatabase
 
 if TYPE_CHECKING:

@@ -13,11 +13,10 @@ import os
 from pathlib import Path
 from typing import Any
 
-import characters
-import resources
 import streamlit as st
-from display import allowed, escape_markdown, user_errors, warnings_shown
 
+from gesturekit.app import characters, resources
+from gesturekit.app.display import allowed, escape_markdown, user_errors, warnings_shown
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.datasets.takes import FORWARD_CHOICES, UNIT_CHOICES, UP_CHOICES, reading_lines
 from gesturekit.errors import ConfigError, DatabaseError

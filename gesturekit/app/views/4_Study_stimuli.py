@@ -5,11 +5,9 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-import display
-import sidebar
-import state
 import streamlit as st
 
+from gesturekit.app import display, sidebar, state
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.takes import AUDIO_EXTENSIONS
 from gesturekit.errors import ConfigError

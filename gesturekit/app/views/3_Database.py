@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import display
 import numpy as np
 import pandas as pd
-import sidebar
-import state
 import streamlit as st
 
+from gesturekit.app import display, sidebar, state
 from gesturekit.control import ATTRIBUTE_UNITS
 from gesturekit.database import MatchingDatabase
 from gesturekit.motion import AUDIO_SR, Motion

@@ -28,8 +28,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import streamlit as st
-from display import allowed, escape_markdown, warnings_shown
 
+from gesturekit.app.display import allowed, escape_markdown, warnings_shown
 from gesturekit.database import MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, collect_warnings

@@ -13,11 +13,10 @@ import ipaddress
 import json
 from pathlib import Path
 
-import display
 import pandas as pd
-import state
 import streamlit as st
 
+from gesturekit.app import display, state
 from gesturekit.errors import ConfigError
 from gesturekit.paths import home
 from gesturekit.studies.analyse import exclusions, pairwise_table, ratings_table

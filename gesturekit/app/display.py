@@ -241,7 +241,7 @@ def show_skeletons(
     ``audio``: the speech of the motions (mono float32 at 16 kHz, from their first frame);
     the viewer's play button then plays it and the shown frame follows it, so no separate
     player is needed. A rerun that shows the same motions keeps the drawn view as it is.
-    ``character``: the user's character (app/characters.py), drawn instead of the default body, with
+    ``character``: the user's character (gesturekit/app/characters.py), drawn instead of the default body, with
     the retargeting's report of each motion under the view.
     """
     from gesturekit.viz.viewer import viewer_args

@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import streamlit as st
-from display import LOG, error_text, escape_markdown
 
+from gesturekit.app.display import LOG, error_text, escape_markdown
 from gesturekit.character.user import read_character_upload
 from gesturekit.errors import GestureKitError, collect_warnings
 from gesturekit.skeleton import FINGERS, JOINT_NAMES

@@ -1,6 +1,6 @@
 """The app's pages, declared once: the menu (``st.navigation``), the URLs and Home's list all come from here.
 
-A page is a script in ``app/views/`` that draws itself when run; ``Home.py``
+A page is a script in ``gesturekit/app/views/`` that draws itself when run; ``Home.py``
 runs the one the user is on inside :func:`display.run_page`, after
 :func:`state.page_setup`. Its URL is its title with ``_`` for spaces
 (``/Retrieval_inspector``). The folder is not called ``pages/``: Streamlit
@@ -14,9 +14,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import display
-import state
 import streamlit as st
+
+from gesturekit.app import display, state
 
 __all__ = ["APP_DIR", "HOME_TITLE", "PAGES", "Page", "link", "run"]
 
@@ -26,7 +26,7 @@ HOME_TITLE = "Home"
 
 @dataclass(frozen=True)
 class Page:
-    """A page of the app: its script (relative to ``app/``), title, icon and one-line purpose."""
+    """A page of the app: its script (relative to ``gesturekit/app/``), title, icon and one-line purpose."""
 
     script: str
     title: str
