@@ -34,7 +34,7 @@ _ABOUT = {
     "analyse": (
         "the study's answers: exclusions, per system statistics, tests, Bradley-Terry, a report",
         "Exclude participants by their attention and audio checks, then per system (and prompt) the mean and "
-        "median rating with bootstrap 95 %% intervals over participants, Wilcoxon signed-rank tests of every pair "
+        "median rating with bootstrap 95 % intervals over participants, Wilcoxon signed-rank tests of every pair "
         "of systems with Holm-Bonferroni and rank-biserial effect sizes, Bradley-Terry scores (Elo scale) for "
         "pairwise pages; CSVs, figures and a markdown and HTML report into STUDY/analysis/.",
     ),
@@ -222,27 +222,33 @@ def _study_analyse(args: argparse.Namespace) -> int:
         store_url=args.store,
         responses=args.responses,
     )
-    f = report.flow
+    flow = report.flow
     print(
-        f"{f['started']} started, {f['answered_nothing']} answered nothing, {f['excluded']} excluded by the checks, "
-        f"{f['no_kept_answer']} with no rating or pairwise answer, {f['analysed']} analysed "
-        f"({f['analysed_finished']} finished); systems: {', '.join(report.systems)}"
+        f"{flow['started']} started, {flow['answered_nothing']} answered nothing, {flow['excluded']} excluded by "
+        f"the checks, {flow['no_kept_answer']} with no rating or pairwise answer, {flow['analysed']} analysed "
+        f"({flow['analysed_finished']} finished); systems: {', '.join(report.systems)}"
     )
+    for warning in report.warnings:
+        print(f"warning: {warning}")
+
+    def span(lo: float, hi: float, fmt: str) -> str:  # never a point printed as an interval
+        return f"[{lo:{fmt}}, {hi:{fmt}}]" if lo < hi else "(no interval)"
+
     if report.summary is not None:
         every = report.summary[report.summary["prompt"] == "all"]
-        cells = [f"{r.system} {r.mean:.2f} [{r.mean_lo:.2f}, {r.mean_hi:.2f}]" for r in every.itertuples()]
+        cells = [f"{r.system} {r.mean:.2f} {span(r.mean_lo, r.mean_hi, '.2f')}" for r in every.itertuples()]
         print("mean rating, all prompts (95 % CI): " + "; ".join(cells))
     if report.tests is not None:
-        every = report.tests[report.tests["prompt"] == "all"]
+        every = report.tests[(report.tests["prompt"] == "all") & (report.tests["result"] != "not compared")]
         print(
             f"significantly different pairs (all prompts, Holm, alpha={report.alpha}): "
-            f"{int(every['significant'].sum())} of {len(every)}"
+            f"{int(every['significant'].sum())} of {len(every)} compared"
         )
     if report.bradley_terry is not None:
         cells = [
-            f"{r.system} {r.elo:+.0f} [{r.elo_lo:+.0f}, {r.elo_hi:+.0f}]" for r in report.bradley_terry.itertuples()
+            f"{r.system} {r.elo:+.0f} {span(r.elo_lo, r.elo_hi, '+.0f')}" for r in report.bradley_terry.itertuples()
         ]
-        print("Bradley-Terry (Elo, mean 0): " + "; ".join(cells))
-    for f in report.files:
-        print(f)
+        print("Bradley-Terry (Elo, mean 0 within each connected part): " + "; ".join(cells))
+    for path in report.files:
+        print(path)
     return 0

@@ -51,6 +51,9 @@ if TYPE_CHECKING:
 
 __all__ = ["AnalysisReport", "analyse", "write_report", "analyse_study", "REPORT_FILES"]
 
+#: the most bootstrap rounds an analysis takes (each round's estimates are kept in memory)
+MAX_ROUNDS = 1_000_000
+
 #: the files an analysis writes (PNG figures besides, where a renderer exists)
 REPORT_FILES = (
     "participants.csv",
@@ -253,8 +256,11 @@ def analyse(
     """
     if not 0 < alpha < 1:
         raise ConfigError(f"alpha must be in (0, 1), got {alpha}")
-    if rounds < 1:
-        raise ConfigError(f"the bootstrap needs at least one round, got {rounds}")
+    if not 1 <= rounds <= MAX_ROUNDS:
+        raise ConfigError(
+            f"the bootstrap takes 1 to at most {MAX_ROUNDS:,} rounds, got {rounds:,} (each round's estimates are "
+            "kept: more would fill the memory, and intervals settle long before)"
+        )
     out = set(participants.loc[participants["excluded"].astype(bool), "participant"].astype(str))
     ratings = ratings[~ratings["participant"].astype(str).isin(out)].reset_index(drop=True)
     pairwise = pairwise[~pairwise["participant"].astype(str).isin(out)].reset_index(drop=True)

@@ -23,6 +23,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm, rankdata
 
+from gesturekit.errors import ConfigError
 from gesturekit.studies import analyse as A
 from gesturekit.studies.report import analyse, significance_figure, write_report
 
@@ -176,3 +177,18 @@ def test_the_significance_colour_follows_the_test_not_the_mean_difference():
     order = list(heat.y)
     z = np.asarray(heat.z, dtype=float)
     assert z[order.index("A"), order.index("B")] == -1.0 and z[order.index("B"), order.index("A")] == 1.0
+
+
+def test_the_bootstrap_rounds_are_bounded():
+    ratings = _ratings([(f"p{i}", s, 1 + (i * 3 + len(s)) % 7) for i in range(6) for s in ("A", "B")])
+    with pytest.raises(ConfigError, match="at most"):
+        analyse(ratings, _empty_pairwise(), _people([f"p{i}" for i in range(6)]), rounds=1_000_000_000)
+
+
+def test_the_analyse_help_prints_a_plain_percent(capsys):
+    from gesturekit.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["study", "analyse", "--help"])
+    out = capsys.readouterr().out
+    assert "95 % intervals" in out and "%%" not in out
