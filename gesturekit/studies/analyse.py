@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import ConfigError
+from ..limits import parse_json
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -46,6 +47,7 @@ __all__ = [
     "ratings_table",
     "pairwise_table",
     "exclusions",
+    "broken_videos",
     "participant_flow",
     "participant_means",
     "bootstrap_mean_median",
@@ -118,7 +120,6 @@ def read_responses_csv(path: str | Path) -> pd.DataFrame:
     DataFrame
         The columns of ``Store.responses_frame()``, ``answers`` as dicts.
     """
-    import json
 
     import pandas as pd
 
@@ -128,7 +129,10 @@ def read_responses_csv(path: str | Path) -> pd.DataFrame:
         missing = {"token", "row", "page_id", "kind", "answers"} - set(frame.columns)
         if missing:
             raise ConfigError(f"not a responses file: it lacks the columns {sorted(missing)}", path=path)
-        frame["answers"] = [json.loads(a) if a else {} for a in frame["answers"]]
+        frame["answers"] = [
+            parse_json(a, what=f"the answers of line {i + 2} ", error=ConfigError, path=path) if a else {}
+            for i, a in enumerate(frame["answers"])
+        ]
     except (OSError, ValueError) as e:
         raise ConfigError(f"cannot read the responses: {e}", path=path) from e
     return frame
@@ -201,9 +205,24 @@ def pairwise_table(design: Any, store_or_frames: Any, *, manifest: pd.DataFrame 
         page = pages.page(int(r.row), r.page_id)
         if page is None or len(page.media) != 2 or any(m.id not in key for m in page.media):
             continue
+        if "choice" not in dict(r.answers):  # HEMVIP's broken-video report: no preference (broken_videos)
+            continue
         (speech, left), (_, right) = key[page.media[0].id], key[page.media[1].id]
         rows.append((str(r.token), int(r.row), speech, left, right, float(dict(r.answers)["choice"])))
     return pd.DataFrame(rows, columns=PAIRWISE_COLUMNS)
+
+
+def broken_videos(store_or_frames: Any) -> pd.DataFrame:
+    """HEMVIP's broken-video reports among the answers: ``participant``, ``row``, ``page_id``."""
+    import pandas as pd
+
+    responses, _ = _frames(store_or_frames)
+    rows = [
+        (str(r.token), int(r.row), str(r.page_id))
+        for r in responses.itertuples(index=False)
+        if isinstance(r.answers, dict) and r.answers.get("broken_video")
+    ]
+    return pd.DataFrame(rows, columns=["participant", "row", "page_id"])
 
 
 def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = None) -> pd.DataFrame:

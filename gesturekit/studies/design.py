@@ -42,6 +42,7 @@ import numpy as np
 
 from .._io import atomic_write
 from ..errors import ConfigError, OutputError
+from ..limits import read_json
 from ._fields import ID_RE, Reader, finite, media_file, media_id, question, shown
 
 __all__ = [
@@ -239,12 +240,10 @@ def load_design(folder: str | os.PathLike) -> StudyDesign:
     """
     folder = Path(folder)
     path = folder / "design.json"
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError("is missing: write it with `gesturekit study init`", path=path) from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"is not valid JSON ({exc})", path=path) from None
+    if not path.exists() and not path.is_symlink():
+        raise ConfigError("is missing: write it with `gesturekit study init`", path=path)
+    # a regular file of bounded size and nesting (a FIFO would hang the reader, deep nesting recurse)
+    raw = read_json(path, error=ConfigError)
     r = Reader(path)
     top = (
         "format version seed secret title instructions rating pairwise attention audio_check checks questionnaire "

@@ -28,12 +28,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import atomic_write, csv_safe
 from ..errors import ConfigError, OutputError
 from .analyse import (
     MIN_INTERVAL_N,
     MIN_TEST_N,
     bradley_terry,
+    broken_videos,
     comparison_groups,
     exclusions,
     pairwise_table,
@@ -93,6 +94,8 @@ class AnalysisReport:
         Bootstrap rounds.
     flow : dict
         The participant flow's counts (:func:`~.analyse.participant_flow`).
+    broken_videos : int
+        HEMVIP's broken-video reports (pages answered by the report button: no preference counted).
     warnings : list of str
         What limits the conclusions (too few participants, systems never compared, a disconnected
         comparison graph), in words; the report shows them above the tables.
@@ -111,6 +114,7 @@ class AnalysisReport:
     rounds: int
     flow: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    broken_videos: int = 0
     files: list[Path] = field(default_factory=list)
 
     @property
@@ -167,6 +171,12 @@ class AnalysisReport:
             f"alpha = {self.alpha} (Holm-Bonferroni within each prompt).",
             "",
         ]
+        if self.broken_videos:
+            lines += [
+                f"Broken-video reports: {self.broken_videos} (HEMVIP's report button; those pages count as no "
+                "answer: look at the videos named in the responses).",
+                "",
+            ]
         if self.warnings:
             lines += ["## Warnings", ""]
             for w in self.warnings:
@@ -447,7 +457,8 @@ def write_report(report: AnalysisReport, out: str | Path, *, force: bool = False
 
     def csv(name: str, table: pd.DataFrame | None) -> None:
         if table is not None:
-            files.append(_write_bytes(out / name, table.to_csv(index=False, lineterminator="\n").encode(), force))
+            text = csv_safe(table).to_csv(index=False, lineterminator="\n")
+            files.append(_write_bytes(out / name, text.encode(), force))
         elif (out / name).exists():  # an earlier analysis's, no longer true
             (out / name).unlink()
 
@@ -622,5 +633,6 @@ def analyse_study(
         alpha=alpha,
         seed=seed,
     )
+    report.broken_videos = len(broken_videos(frames))
     write_report(report, folder / "analysis" if out is None else out, force=force)
     return report

@@ -49,6 +49,7 @@ from starlette.requests import Request
 from starlette.responses import HTMLResponse, JSONResponse, RedirectResponse, Response, StreamingResponse
 from starlette.routing import Route
 
+from .._io import csv_safe
 from ..errors import ConfigError, GestureKitError
 from ..limits import parse_json
 from .store import Store, open_store
@@ -371,7 +372,7 @@ class StudyServer:
     async def researcher_csv(self, request: Request) -> Response:
         self._researcher(request)
         frame = await self._db(self.store.responses_frame)
-        frame = frame.assign(answers=frame["answers"].map(json.dumps), events=frame["events"].map(json.dumps))
+        frame = csv_safe(frame).assign(answers=frame["answers"].map(json.dumps), events=frame["events"].map(json.dumps))
         out = io.StringIO()
         frame.to_csv(out, index=False)
         return Response(

@@ -16,6 +16,7 @@ from pathlib import Path
 import pandas as pd
 import streamlit as st
 
+from gesturekit._io import csv_safe
 from gesturekit.app import display, state
 from gesturekit.errors import ConfigError
 from gesturekit.paths import home
@@ -209,7 +210,7 @@ def downloads(tables: dict[str, pd.DataFrame]) -> None:
     for col, (name, frame) in zip(cols, tables.items()):
         col.download_button(
             f"{name}.csv",
-            data=frame.to_csv(index=False).encode("utf-8"),
+            data=csv_safe(frame).to_csv(index=False).encode("utf-8"),
             file_name=f"{name}.csv",
             mime="text/csv",
             key=f"studyrun.download_{name}",
