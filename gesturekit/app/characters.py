@@ -29,7 +29,7 @@ from gesturekit.skeleton import FINGERS, JOINT_NAMES
 
 if TYPE_CHECKING:
     from gesturekit.character.target import Character
-    from gesturekit.synthesize import SynthesisResult
+    from gesturekit.synthesis import SynthesisResult
 
 __all__ = [
     "CHARACTER_KEY",

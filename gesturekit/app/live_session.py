@@ -34,7 +34,7 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.errors import ConfigError, GestureKitError
 from gesturekit.live import LiveSynthesizer
 from gesturekit.motion import AUDIO_SR
-from gesturekit.synthesize import SynthesisConfig, SynthesisResult
+from gesturekit.synthesis import SynthesisConfig, SynthesisResult
 
 __all__ = [
     "CONTROLS",

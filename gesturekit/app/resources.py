@@ -34,7 +34,7 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, collect_warnings
 from gesturekit.paths import default_database_path
-from gesturekit.synthesize import prepare_search
+from gesturekit.synthesis import prepare_search
 
 if TYPE_CHECKING:
     import numpy as np
@@ -239,7 +239,7 @@ def _warm_up(path: str, stamp: int) -> threading.Thread:
     import numpy as np
 
     from gesturekit.motion import AUDIO_SR
-    from gesturekit.synthesize import SynthesisConfig, synthesize
+    from gesturekit.synthesis import SynthesisConfig, synthesize
 
     db = _open(path, stamp)
     noise = np.random.default_rng(0).normal(0.0, 0.1, 2 * AUDIO_SR).astype(np.float32)
@@ -294,7 +294,7 @@ async def server_lifespan(app: object) -> AsyncIterator[None]:
     the default database's search and refiner are prepared in the background.
 
     The default database's search is made ready before the server answers
-    (:func:`gesturekit.synthesize.prepare_search`: its compiled code loaded from the
+    (:func:`gesturekit.synthesis.prepare_search`: its compiled code loaded from the
     cache, or compiled on the first start after an install), so that the first result a
     user asks for comes as fast as the later ones. Nothing is built here: a missing demo
     database is built by the first page view, with a progress bar, and its search made

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from gesturekit.refine.infer import Refiner
-    from gesturekit.synthesize import SynthesisConfig, SynthesisResult
+    from gesturekit.synthesis import SynthesisConfig, SynthesisResult
 
 __all__ = [
     "APP_ICON",
@@ -159,7 +159,7 @@ def run_synthesis(
         Name of the speech, stored in the result (download names, metadata).
     refiner : optional
         A refiner (folder or loaded, opened by :func:`gesturekit.refine.open_refiner`), applied by
-        :func:`gesturekit.synthesize.synthesize`.
+        :func:`gesturekit.synthesis.synthesize`.
 
     Raises
     ------
@@ -167,7 +167,7 @@ def run_synthesis(
         Impossible settings (shown by :func:`display.run_page` / :func:`display.user_errors`).
     """
     from gesturekit.refine import open_refiner
-    from gesturekit.synthesize import synthesize
+    from gesturekit.synthesis import synthesize
 
     with st.spinner("Searching the database…"), warnings_shown():
         result = synthesize(audio, db=db, config=config, refiner=open_refiner(refiner))

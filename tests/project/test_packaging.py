@@ -294,7 +294,7 @@ def test_clean_venv_install_imports_the_search(source, tmp_path):
     python = str(venv / "bin" / "python")
     pip("install", "--quiet", str(source), python=python, cwd=tmp_path, timeout=540)
     probe = (
-        "import importlib.util, gesturekit, gesturekit.search, gesturekit.synthesize; "
+        "import importlib.util, gesturekit, gesturekit.search, gesturekit.synthesis; "
         "import gesturekit.viz.web.build as web; assert web.is_current() and len(web.bundle()) > 100000; "
         "print(gesturekit.__file__); "
         "print(sorted(m for m in ('torch', 'streamlit', 'plotly', 'pyvista', 'dask') "

@@ -25,11 +25,11 @@ import pytest
 
 from gesturekit.cli import main
 from gesturekit.errors import ConfigError, InputFileError
-from gesturekit.studies import init_study
-from gesturekit.studies.analyse import broken_videos, pairwise_table, read_responses_csv
-from gesturekit.studies.hemvip import export_hemvip, import_hemvip, read_vimeo_map
-from gesturekit.studies.report import analyse
-from gesturekit.studies.simulate import simulate_study
+from gesturekit.study import init_study
+from gesturekit.study.analyse import broken_videos, pairwise_table, read_responses_csv
+from gesturekit.study.hemvip import export_hemvip, import_hemvip, read_vimeo_map
+from gesturekit.study.report import analyse
+from gesturekit.study.simulate import simulate_study
 from tests.study.test_hemvip import _simulate
 from tests.study_helpers import tiny_study  # noqa: F401
 
@@ -44,7 +44,7 @@ def design(tiny_study, tmp_path_factory):  # noqa: F811
 
 
 def _vimeo(design):
-    from gesturekit.studies import media_index
+    from gesturekit.study import media_index
 
     return {mid: str(500000000 + i) for i, mid in enumerate(sorted(media_index(design)))}
 

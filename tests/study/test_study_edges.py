@@ -24,8 +24,8 @@ from hypothesis import strategies as st
 from scipy.stats import norm, rankdata
 
 from gesturekit.errors import ConfigError
-from gesturekit.studies import analyse as A
-from gesturekit.studies.report import analyse, significance_figure, write_report
+from gesturekit.study import analyse as A
+from gesturekit.study.report import analyse, significance_figure, write_report
 
 pytest.importorskip("choix")
 

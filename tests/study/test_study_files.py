@@ -8,8 +8,8 @@ import os
 import pytest
 
 from gesturekit.errors import ConfigError
-from gesturekit.studies.analyse import read_responses_csv
-from gesturekit.studies.design import load_design
+from gesturekit.study.analyse import read_responses_csv
+from gesturekit.study.design import load_design
 
 
 def test_a_fifo_design_is_refused_not_read(tmp_path):

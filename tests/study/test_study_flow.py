@@ -11,10 +11,10 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from gesturekit.studies import analyse as A
-from gesturekit.studies.design import init_study
-from gesturekit.studies.report import analyse, write_report
-from gesturekit.studies.store import open_store
+from gesturekit.study import analyse as A
+from gesturekit.study.design import init_study
+from gesturekit.study.report import analyse, write_report
+from gesturekit.study.store import open_store
 from tests.study_helpers import study_folder, take_part, tiny_study  # noqa: F401 (fixtures)
 
 pytestmark = pytest.mark.slow  # tiny_study makes a stimuli folder once per session

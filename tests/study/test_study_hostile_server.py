@@ -14,8 +14,8 @@ from starlette.testclient import TestClient
 
 import tests._study_standin as standin
 from gesturekit.errors import ConfigError
-from gesturekit.studies import server as S
-from gesturekit.studies.store import open_store
+from gesturekit.study import server as S
+from gesturekit.study.store import open_store
 from tests._study_standin import PASSWORD, make_folder
 
 

@@ -343,7 +343,7 @@ def test_a_bad_joint_status_is_refused_naming_the_file(tmp_path, status, problem
 
 
 def test_stimuli_of_a_partial_skeleton_share_one_box_fitted_to_what_they_draw():
-    from gesturekit.study import _job_motion, _study_view_box, stimulus_style
+    from gesturekit.study.stimuli import _job_motion, _study_view_box, stimulus_style
 
     partial = upper_body(3)
     job = {"positions": partial.positions, "fps": 15.0, "joints": partial.presence.to_list()}

@@ -17,7 +17,7 @@ from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
 from gesturekit.motion import AUDIO_SR
 from gesturekit.options import widget_limits
 from gesturekit.search import SearchConfig, describe_steps
-from gesturekit.synthesize import SynthesisConfig
+from gesturekit.synthesis import SynthesisConfig
 from gesturekit.viz.figures import waveform_figure, wrist_figure
 
 _BVH = "_synth.bvh"  # (run, bytes or None, report or why no BVH) of the current result

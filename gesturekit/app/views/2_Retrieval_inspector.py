@@ -11,7 +11,7 @@ from gesturekit.app import characters, display, nav, sidebar, state
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.audio import wav_bytes
 from gesturekit.motion import AUDIO_SR
-from gesturekit.synthesize import SynthesisResult
+from gesturekit.synthesis import SynthesisResult
 from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
 
 STEP = "inspect.step"  # the step shown (per user)

@@ -14,7 +14,7 @@ from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SYSTEM_DESCRIPTIONS, SYSTEMS
 from gesturekit.options import option_of, widget_limits
 from gesturekit.paths import home
-from gesturekit.study import StudyConfig, make_stimuli, plan_stimuli
+from gesturekit.study.stimuli import StudyConfig, make_stimuli, plan_stimuli
 from gesturekit.workspace import speech_files
 
 RESULT = "study.result"  # the user's last study: folder, manifest, order (per session)

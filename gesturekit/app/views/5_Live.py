@@ -13,7 +13,7 @@ from gesturekit.app import live_session as live
 from gesturekit.database import MatchingDatabase
 from gesturekit.errors import GestureKitError
 from gesturekit.motion import Motion
-from gesturekit.synthesize import SynthesisConfig
+from gesturekit.synthesis import SynthesisConfig
 
 STAGE = "live.stage"  # the user's LiveStage (microphone, current performance)
 SINK = "live.sink"  # the transport's audio sink, feeding the stage

@@ -20,10 +20,10 @@ from gesturekit._io import csv_safe
 from gesturekit.app import display, state
 from gesturekit.errors import ConfigError
 from gesturekit.paths import home
-from gesturekit.studies.analyse import exclusions, pairwise_table, ratings_table
-from gesturekit.studies.design import StudyDesign, init_study, load_design, verify_password
-from gesturekit.studies.report import analyse, boxplot_figure, significance_figure
-from gesturekit.studies.store import SQLITE_NAME, open_store
+from gesturekit.study.analyse import exclusions, pairwise_table, ratings_table
+from gesturekit.study.design import StudyDesign, init_study, load_design, verify_password
+from gesturekit.study.report import analyse, boxplot_figure, significance_figure
+from gesturekit.study.store import SQLITE_NAME, open_store
 
 #: Bootstrap rounds of the page's analysis: a quick look at every run (``gesturekit study analyse`` for the report).
 ROUNDS = 1000

@@ -14,7 +14,7 @@ from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from ._config import check_option, default_of, option_of
+from .._config import check_option, default_of, option_of
 
 __all__ = ["add_options", "options_given", "flag_of", "FIELD_OF", "OPTIONS_DEST", "GIVEN_DEST"]
 

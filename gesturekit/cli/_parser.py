@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from ._cli_options import add_options
-from ._config import option_of
+from .._config import option_of
+from ._options import add_options
 
 __all__ = ["build_parser", "join_axis_values"]
 
@@ -83,8 +83,8 @@ def _add_choice(parser, flag: str, choices: list[str], help: str) -> None:
 def search_options() -> list[tuple[type, tuple[str, ...]]]:
     """(configuration class, its fields) of the search options ``synthesize`` and ``evaluate`` share, in
     the order ``--help`` lists them (``mask_rule`` is SearchConfig's; SynthesisConfig passes it on)."""
-    from .search import SearchConfig
-    from .synthesize import SynthesisConfig
+    from ..search import SearchConfig
+    from ..synthesis import SynthesisConfig
 
     return [
         (SearchConfig, ("k", "segment", "seed")),
@@ -187,7 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="give every bone one length per take (for keypoints whose bone lengths vary)",
     )
-    from .database import BuildConfig
+    from ..database import BuildConfig
 
     add_options(
         b,
@@ -232,8 +232,8 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--db", help="matching database folder (default: the demo database)")
     y.add_argument("--out", default="out", help="output folder (default: out)")
     _add_search(y, seed="the random initial pose")
-    from .search import SearchConfig
-    from .synthesize import SynthesisConfig
+    from ..search import SearchConfig
+    from ..synthesis import SynthesisConfig
 
     add_options(y, SearchConfig, ["record"])
     y.add_argument(
@@ -298,7 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--resume", action="store_true", help="go on from the checkpoint in --out")
     r.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda (default auto)")
-    from .refine.config import TrainConfig
+    from ..refine.config import TrainConfig
 
     add_options(r, TrainConfig, ["seed"])
     _add_exclusions(r, out_of="training")
@@ -310,7 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="replace an existing refiner folder")
     e = _command(sub, "evaluate")
     e.add_argument("--db", help="matching database folder (default: the demo database)")
-    from .evaluate.run import EvaluationConfig
+    from ..evaluate.run import EvaluationConfig
 
     add_options(e, EvaluationConfig, ["holdout", "systems", "refiner", "fgd_model", "control", "sigma"])
     _add_search(e, seed="the initial pose and the random baseline")
@@ -326,14 +326,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="TAKE[:START-END]",
         help="leave a take or a time range out of training (repeatable)",
     )
-    from .evaluate.fgd import FGDConfig
+    from ..evaluate.fgd import FGDConfig
 
     add_options(f, FGDConfig, ["steps", "window", "latent", "seed"])
     f.add_argument("--force", action="store_true", help="replace an existing model")
 
     s = _command(sub, "stimuli")
     s.add_argument("--db", help="matching database folder (default: the demo database)")
-    from .study_config import StudyConfig
+    from ..study.config import StudyConfig
 
     add_options(
         s,
@@ -354,7 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--force", action="store_true", help="replace an existing study")
     _add_max_speech(s)
 
-    from ._cli_study import add_study_parser
+    from ._study import add_study_parser
 
     add_study_parser(_command(sub, "study"))
     return p

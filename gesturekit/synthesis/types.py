@@ -4,8 +4,8 @@
 k-NN search's query and the refiner's cGAN audio features. :class:`SynthesisResult`
 is what the last stages assemble and refine. :class:`MotionRefiner` is what the
 synthesis needs of a refiner (:class:`gesturekit.refine.infer.Refiner` is one).
-The stages themselves are :class:`gesturekit.synthesizer.Synthesizer`'s methods;
-every name here is also importable from :mod:`gesturekit.synthesize`.
+The stages themselves are :class:`gesturekit.synthesis.synthesizer.Synthesizer`'s methods;
+every name here is also importable from :mod:`gesturekit.synthesis`.
 """
 
 from __future__ import annotations
@@ -17,19 +17,19 @@ from typing import TYPE_CHECKING, Protocol, TypeAlias, runtime_checkable
 
 import numpy as np
 
-from ._version import __version__
-from .control import ControlTrack
-from .errors import ConfigError, GestureKitError
-from .motion import AUDIO_SR, HoldsMotion, Motion
-from .search import SearchResult
-from .search.plan import SearchPlan
-from .search.types import window_source
+from .._version import __version__
+from ..control import ControlTrack
+from ..errors import ConfigError, GestureKitError
+from ..motion import AUDIO_SR, HoldsMotion, Motion
+from ..search import SearchResult
+from ..search.plan import SearchPlan
+from ..search.types import window_source
 
 if TYPE_CHECKING:  # named in annotations only
     import pandas as pd
 
-    from .database import MatchingDatabase
-    from .synthesis_config import SynthesisConfig
+    from ..database import MatchingDatabase
+    from .config import SynthesisConfig
 
 __all__ = ["Speech", "QueryFeatures", "MotionRefiner", "SynthesisResult", "load_speech"]
 
@@ -40,7 +40,7 @@ Speech: TypeAlias = "str | os.PathLike[str] | np.ndarray"
 @dataclass(frozen=True, eq=False)
 class QueryFeatures:
     """A speech and its features, computed once (:meth:`Synthesizer.features
-    <gesturekit.synthesizer.Synthesizer.features>`).
+    <gesturekit.synthesis.synthesizer.Synthesizer.features>`).
 
     Attributes
     ----------
@@ -94,7 +94,7 @@ def load_speech(audio: Speech) -> tuple[np.ndarray, str]:
         Samples that are not mono, or speech shorter than one frame (1/15 s).
     """
     if isinstance(audio, (str, os.PathLike)):
-        from .datasets.audio import load_audio
+        from ..datasets.audio import load_audio
 
         return load_audio(audio), Path(audio).name
     a = np.asarray(audio, dtype=np.float32)

@@ -1,4 +1,4 @@
-"""The options of a user study's stimuli: :class:`StudyConfig`, what :func:`gesturekit.study.make_stimuli` takes.
+"""The options of a user study's stimuli: :class:`StudyConfig`, what :func:`.stimuli.make_stimuli` takes.
 
 Each field that a user sets is declared with :func:`gesturekit._config.option`, the one
 source of its help, bounds and default for ``gesturekit stimuli`` and the app's Study
@@ -12,13 +12,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from ._config import check_option, option
+from .._config import check_option, option
 
 if TYPE_CHECKING:
     from distributed import Client
 
-    from .character.target import Character
-    from .synthesize import MotionRefiner, SynthesisConfig
+    from ..character.target import Character
+    from ..synthesis import MotionRefiner, SynthesisConfig
 
 __all__ = ["StudyConfig", "STUDY_SYSTEMS"]
 
@@ -28,7 +28,7 @@ STUDY_SYSTEMS: tuple[str, ...] = ("gt", "knn", "knn+cgan")
 
 @dataclass(frozen=True)
 class StudyConfig:
-    """Every option of a study's stimuli (see :func:`gesturekit.study.make_stimuli`).
+    """Every option of a study's stimuli (see :func:`gesturekit.study.stimuli.make_stimuli`).
 
     Parameters
     ----------
@@ -43,7 +43,7 @@ class StudyConfig:
     seed : int
         Seed of the ids, the order and (unless ``synthesis`` says otherwise) the synthesis.
     participants : int, optional
-        See :func:`gesturekit.study.plan_stimuli` (default: the rows of the balanced Latin square).
+        See :func:`gesturekit.study.stimuli.plan_stimuli` (default: the rows of the balanced Latin square).
     control : str
         Control track for every synthesised stimulus (``"0-3:left_hand=high"``), empty for none.
     synthesis : SynthesisConfig, optional

@@ -1,6 +1,6 @@
 """The analysis of a study as one object, and its files: CSVs, figures, a markdown and an HTML report.
 
-:func:`analyse` runs :mod:`gesturekit.studies.analyse` on the long-form tables
+:func:`analyse` runs :mod:`gesturekit.study.analyse` on the long-form tables
 (from a study's store or simulated); :func:`analyse_study` reads a study folder
 (its design and its store) and writes into ``STUDY/analysis/``:
 

@@ -18,13 +18,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ._cli_options import flag_of, options_given
-from ._cli_parser import build_parser, join_axis_values
-from .errors import ConfigError, GestureKitError, GestureKitWarning, warn
-from .paths import is_file
+from ..errors import ConfigError, GestureKitError, GestureKitWarning, warn
+from ..paths import is_file
+from ._options import flag_of, options_given
+from ._parser import build_parser, join_axis_values
 
 if TYPE_CHECKING:
-    from .database import BuildConfig, MatchingDatabase
+    from ..database import BuildConfig, MatchingDatabase
 
 __all__ = ["main", "build_parser"]
 
@@ -83,8 +83,8 @@ def _stage_bars():
 
 
 def _cmd_build_db(args) -> int:
-    from .demo import build_demo_database
-    from .paths import default_database_path
+    from ..demo import build_demo_database
+    from ..paths import default_database_path
 
     _check_positive("--fps", args.fps, "frame rate")
     notes: list[str] = []
@@ -112,10 +112,10 @@ def _cmd_build_db(args) -> int:
         if not args.out:
             raise ConfigError("give the database folder to write with --out")
         if args.fps is not None:
-            from .limits import check_fps
+            from ..limits import check_fps
 
             check_fps(args.fps, what="the frame rate of the joint-position files", option="--fps")
-        from .outputs import check_output, output_lock
+        from ..outputs import check_output, output_lock
 
         out = Path(args.out)
         _check_scale_options(args)
@@ -123,7 +123,7 @@ def _cmd_build_db(args) -> int:
         there = check_output(out, "database", overwrite=args.force or args.append, inputs=[args.folder])
         if args.append and not there:
             raise ConfigError(f"--append adds takes to a database, and there is none at {out}; build it first")
-        from .workspace import build_database
+        from ..workspace import build_database
 
         config, label = _build_config(args)
         with output_lock(out), _stage_bars() as bar:  # the bar shows once the first take is read
@@ -182,7 +182,7 @@ def _build_config(args: argparse.Namespace) -> tuple[BuildConfig | None, str | N
     are the database's, and those given are checked against the database's by the build. A
     label given replaces the database's (None: keep it).
     """
-    from .database import BuildConfig
+    from ..database import BuildConfig
 
     given = options_given(args, only_given=True)[BuildConfig]
     label = given.pop("label", None)
@@ -197,8 +197,8 @@ def _build_config(args: argparse.Namespace) -> tuple[BuildConfig | None, str | N
             return None, label
         from dataclasses import replace
 
-        from .database.config import recorded_config
-        from .database.sources import recorded_build
+        from ..database.config import recorded_config
+        from ..database.sources import recorded_build
 
         # those left out are the database's; those given must be (checked by the build, naming them)
         recorded = recorded_build(args.out)
@@ -209,15 +209,15 @@ def _build_config(args: argparse.Namespace) -> tuple[BuildConfig | None, str | N
 
 def _print_readings(db: MatchingDatabase) -> None:
     """How the takes were read (axes, units, derived and absent joints, bone lengths), when recorded."""
-    from .datasets.takes import reading_lines
+    from ..datasets.takes import reading_lines
 
     for line in reading_lines(db.meta.get("takes", [])):
         _print(line)
 
 
 def _cmd_info(args) -> int:
-    from .database import MatchingDatabase
-    from .paths import default_database_path
+    from ..database import MatchingDatabase
+    from ..paths import default_database_path
 
     db = MatchingDatabase.load(args.database or default_database_path())
     _print(db.summary_text())
@@ -236,7 +236,7 @@ def _check_positive(option: str, value: float | None, what: str) -> None:
 
 def _parse_range(text: str) -> tuple[str, float, float]:
     """``TAKE:START-END`` (seconds; the range after the last ``:``) -> (take, start, end)."""
-    from .control import parse_time_range
+    from ..control import parse_time_range
 
     take, colon, times = text.rpartition(":")
     what = f"--exclude-range {text!r}"
@@ -265,7 +265,7 @@ def _parse_formats(text: str) -> list[str]:
 
 def _parse_holdouts(texts) -> list:
     """Check ``--holdout`` values before any work starts; each as :class:`~gesturekit.evaluate.run.Holdout`."""
-    from .evaluate.run import parse_holdout
+    from ..evaluate.run import parse_holdout
 
     out = []
     for text in texts or ():
@@ -279,13 +279,13 @@ def _parse_holdouts(texts) -> list:
 def _refiner_choice(given: str | None, db):
     """The refiner of ``synthesize``: the one named, none for ``none``, else one trained on ``db``
     (:func:`gesturekit.refine.refiner_for`; the app's default too)."""
-    from ._optional import installed
+    from .._optional import installed
 
     if given is not None:
         return None if given == "none" else given
     if not installed("torch"):  # a gesturekit installed without the refiner's torch
         return None
-    from .refine import refiner_for
+    from ..refine import refiner_for
 
     found = refiner_for(db)
     if found is not None:
@@ -296,25 +296,25 @@ def _refiner_choice(given: str | None, db):
 def _search_options(args: argparse.Namespace) -> dict:
     """The command's options of the search and the synthesis, as :class:`SynthesisConfig` keywords
     (it passes the search's on), checked against the fields' bounds."""
-    from .search import SearchConfig
-    from .synthesize import SynthesisConfig
+    from ..search import SearchConfig
+    from ..synthesis import SynthesisConfig
 
     given = options_given(args)
     return {**given[SearchConfig], **given[SynthesisConfig]}
 
 
 def _cmd_synthesize(args) -> int:
-    from ._cli_character import check_target, read_character_option, write_character_files
-    from ._io import safe_filename
-    from .datasets.audio import load_audio
-    from .export.bvh import bvh_parents
-    from .export.gltf import audio_path_for
-    from .export.result import export_result_bvh, export_result_glb, save_result_npz, save_result_video
-    from .outputs import output_lock, write_errors
-    from .refine import open_refiner
-    from .search import describe_steps
-    from .synthesize import SynthesisConfig, synthesize_batch
-    from .workspace import expand_speech, open_database
+    from .._io import safe_filename
+    from ..datasets.audio import load_audio
+    from ..export.bvh import bvh_parents
+    from ..export.gltf import audio_path_for
+    from ..export.result import export_result_bvh, export_result_glb, save_result_npz, save_result_video
+    from ..outputs import output_lock, write_errors
+    from ..refine import open_refiner
+    from ..search import describe_steps
+    from ..synthesis import SynthesisConfig, synthesize_batch
+    from ..workspace import expand_speech, open_database
+    from ._character import check_target, read_character_option, write_character_files
 
     formats = _parse_formats(args.format)
     character = read_character_option(args, formats)  # None without --character; read before the search
@@ -332,7 +332,7 @@ def _cmd_synthesize(args) -> int:
             )
         first[stem] = f
     if args.video:  # before the search, so that nothing is written
-        from ._optional import require
+        from .._optional import require
 
         require("pyvista", purpose="--video")
         require("imageio_ffmpeg", purpose="--video")
@@ -422,12 +422,12 @@ def _cmd_synthesize(args) -> int:
 def _cmd_train_refiner(args) -> int:
     from dataclasses import replace
 
-    from ._optional import require
+    from .._optional import require
 
     require("torch", purpose="train-refiner")
-    from .refine.data import PairsConfig
-    from .refine.train import TrainConfig, preset, train_refiner
-    from .workspace import open_database
+    from ..refine.data import PairsConfig
+    from ..refine.train import TrainConfig, preset, train_refiner
+    from ..workspace import open_database
 
     if args.demo == bool(args.db):
         raise ConfigError("give the database to train on with --db, or --demo for the demo database")
@@ -436,7 +436,7 @@ def _cmd_train_refiner(args) -> int:
     exclude_ranges = tuple(_parse_range(x) for x in (args.exclude_range or ()))
     db = open_database(None if args.demo else args.db)
     if args.demo:
-        from .demo import DEMO_MINUTES, DEMO_SEED
+        from ..demo import DEMO_MINUTES, DEMO_SEED
 
         standard = f"demo (seed {DEMO_SEED}, {DEMO_MINUTES:g} min)"
         if db.meta["build"].get("source") != standard:
@@ -472,7 +472,7 @@ def _cmd_train_refiner(args) -> int:
             on_step=on_step,
             on_pairs=lambda done, total: _advance(bar("k-NN training pairs", total, "window"), done),
         )
-    from .refine.folder import read_refiner_config
+    from ..refine.folder import read_refiner_config
 
     cfg = read_refiner_config(out)
     _print(f"refiner    {out}")
@@ -484,14 +484,14 @@ def _cmd_train_refiner(args) -> int:
 
 def _control_from_arg(text: str | None) -> str | None:
     """A --control value (track text or a CSV/JSON file) as normalised track text; None if not given."""
-    from .control import load_control_file, parse_control
+    from ..control import load_control_file, parse_control
 
     if not text:
         return None
     if is_file(text):
         return load_control_file(text).to_text()
     if text.strip().lower().endswith((".csv", ".json")):
-        from .errors import InputFileError
+        from ..errors import InputFileError
 
         if os.path.exists(text):  # a FIFO or a device: refused by name, never read
             return load_control_file(text).to_text()
@@ -503,9 +503,9 @@ def _control_from_arg(text: str | None) -> str | None:
 
 
 def _cmd_evaluate(args) -> int:
-    from .evaluate.run import EvaluationConfig, run_evaluation
-    from .synthesize import SynthesisConfig
-    from .workspace import open_database
+    from ..evaluate.run import EvaluationConfig, run_evaluation
+    from ..synthesis import SynthesisConfig
+    from ..workspace import open_database
 
     out = Path(args.out)
     targets = [out / n for n in ("results.csv", "results.md", "controls.csv", "controls.md", "evaluation.json")]
@@ -516,7 +516,7 @@ def _cmd_evaluate(args) -> int:
     given = options_given(args)[EvaluationConfig]  # --beat-sigma checked before the database is read
     control = _control_from_arg(args.control)
     db = open_database(args.db)
-    from .outputs import check_output
+    from ..outputs import check_output
 
     check_output(out, "evaluation", overwrite=args.force, inputs=[db.path])  # before the long part
     config = EvaluationConfig(**{**given, "control": control, "synthesis": SynthesisConfig(**_search_options(args))})
@@ -529,16 +529,16 @@ def _cmd_evaluate(args) -> int:
 
 
 def _cmd_train_fgd(args) -> int:
-    from .evaluate.fgd import FGDConfig, train_fgd_model
-    from .evaluate.run import held_out
-    from .workspace import open_database
+    from ..evaluate.fgd import FGDConfig, train_fgd_model
+    from ..evaluate.run import held_out
+    from ..workspace import open_database
 
     out = Path(args.out)
     if (out / "fgd.json").exists() and not args.force:
         raise GestureKitError(f"{out}: an FGD model exists here already; add --force to replace it")
     _parse_holdouts(args.holdout)
     db = open_database(args.db)
-    from .outputs import check_output
+    from ..outputs import check_output
 
     check_output(out, "fgd", overwrite=args.force, inputs=[db.path])  # before training
     takes, ranges = [], []
@@ -567,8 +567,8 @@ def _cmd_train_fgd(args) -> int:
 def _cmd_stimuli(args) -> int:
     import re
 
-    from .study import StudyConfig, make_stimuli
-    from .workspace import open_database
+    from ..study.stimuli import StudyConfig, make_stimuli
+    from ..workspace import open_database
 
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", args.resolution)
     if not m:
@@ -600,7 +600,7 @@ def _cmd_stimuli(args) -> int:
 
 
 def _cmd_study(args) -> int:
-    from ._cli_study import run
+    from ._study import run
 
     return run(args)
 
@@ -617,7 +617,7 @@ def _format_warning(message, category, filename, lineno, line=None):
 
 def _limits_of(args):
     """The input limits the command's options set (``--max-speech-minutes``), for the command's run."""
-    from .limits import SPEECH_MINUTES, override
+    from ..limits import SPEECH_MINUTES, override
 
     return override(SPEECH_MINUTES, getattr(args, "max_speech_minutes", None), option="--max-speech-minutes")
 

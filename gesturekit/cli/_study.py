@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 __all__ = ["add_study_parser", "run"]
 
@@ -86,7 +86,7 @@ def add_init(p: argparse.ArgumentParser) -> None:
 
 
 def _study_init(args: argparse.Namespace) -> int:
-    from .studies.design import init_study, participant_pages
+    from ..study.design import init_study, participant_pages
 
     if args.no_rating and not args.pairwise:
         raise ConfigError("--no-rating needs --pairwise: a study needs rating or pairwise pages")
@@ -138,8 +138,8 @@ def add_serve(p: argparse.ArgumentParser) -> None:
 
 
 def _study_serve(args: argparse.Namespace) -> int:
-    from .studies.design import load_design
-    from .studies.server import serve
+    from ..study.design import load_design
+    from ..study.server import serve
 
     design = load_design(args.study)  # errors in design.json before anything listens
     url = f"http://{args.host}:{args.port}{args.root_path.rstrip('/')}/"
@@ -169,8 +169,8 @@ def add_export_hemvip(p: argparse.ArgumentParser) -> None:
 
 
 def _study_export_hemvip(args: argparse.Namespace) -> int:
-    from .studies.design import load_design
-    from .studies.hemvip import HEMVIP_VERSION, export_hemvip, read_vimeo_map
+    from ..study.design import load_design
+    from ..study.hemvip import HEMVIP_VERSION, export_hemvip, read_vimeo_map
 
     if args.media_url is not None or args.vimeo is None:
         raise ConfigError(
@@ -193,9 +193,9 @@ def add_import_hemvip(p: argparse.ArgumentParser) -> None:
 def _study_import_hemvip(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .outputs import check_not_input
-    from .studies.design import load_design
-    from .studies.hemvip import import_hemvip, write_responses_csv
+    from ..outputs import check_not_input
+    from ..study.design import load_design
+    from ..study.hemvip import import_hemvip, write_responses_csv
 
     folder = Path(args.study)
     inputs = [*args.results, *(folder / n for n in ("design.json", "manifest.csv", "order.csv", "responses.sqlite3"))]
@@ -231,7 +231,7 @@ def add_analyse(p: argparse.ArgumentParser) -> None:
 
 
 def _study_analyse(args: argparse.Namespace) -> int:
-    from .studies.report import analyse_study
+    from ..study.report import analyse_study
 
     report = analyse_study(
         args.study,

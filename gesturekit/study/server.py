@@ -527,7 +527,7 @@ def create_app(
         An open store instead of ``db``.
     api : module or None
         What reads the design (``load_design``, ``participant_pages``, ``media_index``, ``check_answer``,
-        ``verify_password``); default :mod:`gesturekit.studies.design`.
+        ``verify_password``); default :mod:`gesturekit.study.design`.
 
     Returns
     -------

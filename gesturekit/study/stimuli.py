@@ -49,24 +49,24 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
-from ._config import options_config
-from ._io import atomic_write
-from ._jobs import run_jobs
-from ._optional import require
-from .errors import ConfigError
-from .export.loudness import measure_loudness, normalise_loudness
-from .motion import AUDIO_SR, Motion
-from .skeleton import JointPresence
-from .study_config import StudyConfig
+from .._config import options_config
+from .._io import atomic_write
+from .._jobs import run_jobs
+from .._optional import require
+from ..errors import ConfigError
+from ..export.loudness import measure_loudness, normalise_loudness
+from ..motion import AUDIO_SR, Motion
+from ..skeleton import JointPresence
+from .config import StudyConfig
 
 if TYPE_CHECKING:
     import pandas as pd
     from distributed import Client
 
-    from .character.target import Character
-    from .control import ControlTrack
-    from .database import MatchingDatabase
-    from .viz.render import RenderStyle
+    from ..character.target import Character
+    from ..control import ControlTrack
+    from ..database import MatchingDatabase
+    from ..viz.render import RenderStyle
 
 __all__ = [
     "StimulusSpeech",
@@ -267,9 +267,9 @@ def speech_sources(
         ``TAKE`` or ``TAKE:START-END``: the database's own speech and recorded motion (``gt``),
         kept out of every system's search.
     """
-    from .datasets.audio import load_audio
-    from .evaluate.run import held_out
-    from .workspace import expand_speech
+    from ..datasets.audio import load_audio
+    from ..evaluate.run import held_out
+    from ..workspace import expand_speech
 
     out = [StimulusSpeech(f.name, load_audio(f)) for f in expand_speech(audio)]
     for h in holdouts:
@@ -299,7 +299,7 @@ def stimulus_style(view_box: Sequence[Sequence[float]] | None = None) -> RenderS
         stimuli together (:func:`_study_view_box`), so they still share one camera.
     """
     require("pyvista", purpose="rendering stimuli")
-    from .viz.render import RenderStyle
+    from ..viz.render import RenderStyle
 
     if view_box is None:
         return RenderStyle(fit_motion=False, neutral=True)
@@ -313,7 +313,7 @@ def _study_view_box(motions: Sequence[Motion], character: Character | None = Non
     if character is None and all(m.presence.is_full for m in motions):
         return None
     require("pyvista", purpose="rendering stimuli")
-    from .viz.render import RenderStyle, view_bounds
+    from ..viz.render import RenderStyle, view_bounds
 
     # one at a time: given together, the stage would stand them side by side
     boxes = np.stack([view_bounds([m], style=RenderStyle(), character=character) for m in motions])
@@ -325,8 +325,8 @@ def _study_view_box(motions: Sequence[Motion], character: Character | None = Non
 def _study_character(character: Any, bone_map: Any) -> tuple[Character | None, dict | None]:
     """The character every stimulus shows (read from its file) and what study.json records of it: the
     names and SHA-256 of its file and bone map, how its bones were matched."""
-    from .character.target import Character
-    from .character.user import character_record, read_character
+    from ..character.target import Character
+    from ..character.user import character_record, read_character
 
     if character is None:
         if bone_map is not None:
@@ -350,7 +350,7 @@ def _job_motion(job: dict) -> Motion:
 
 def _render_stimulus(job: dict) -> str:
     """Render one stimulus (runs in a worker process or on a Dask worker)."""
-    from .export.video import render_video
+    from ..export.video import render_video
 
     motion = _job_motion(job)
     # one process per stimulus already keeps every core busy
@@ -464,10 +464,10 @@ def make_stimuli(
     if config is not None and not isinstance(config, StudyConfig):  # earlier versions': the synthesis's
         config, options = None, {"synthesis": config, **options}
     study = options_config(StudyConfig, config, options)
-    from .control import parse_control
-    from .evaluate.baselines import SystemUnavailable, parse_systems, refiner_unavailable_reason
-    from .export.video import check_resolution
-    from .refine import open_refiner
+    from ..control import parse_control
+    from ..evaluate.baselines import SystemUnavailable, parse_systems, refiner_unavailable_reason
+    from ..export.video import check_resolution
+    from ..refine import open_refiner
 
     t0 = time.perf_counter()
     systems = parse_systems(study.systems)
@@ -486,7 +486,7 @@ def make_stimuli(
         if reason:
             raise SystemUnavailable(reason)
         refiner = open_refiner(refiner)
-    from .outputs import check_output, output_lock
+    from ..outputs import check_output, output_lock
 
     out = Path(out)
     # the study folder is never the database's or the speech's, nor inside or around them
@@ -522,9 +522,9 @@ def _make_stimuli_locked(
     t0: float,
 ) -> StudyResult:
     """:func:`make_stimuli` once the study folder is checked and locked."""
-    from .evaluate.baselines import SystemUnavailable, run_system
-    from .outputs import write_errors
-    from .synthesize import SynthesisConfig
+    from ..evaluate.baselines import SystemUnavailable, run_system
+    from ..outputs import write_errors
+    from ..synthesis import SynthesisConfig
 
     systems, track, refiner, character = prepared.systems, prepared.track, prepared.refiner, prepared.character
     seed, loudness_lufs = study.seed, study.loudness_lufs

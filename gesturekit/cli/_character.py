@@ -14,12 +14,12 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .character.target import Character
-from .errors import ConfigError
-from .outputs import check_output
+from ..character.target import Character
+from ..errors import ConfigError
+from ..outputs import check_output
 
 if TYPE_CHECKING:
-    from .synthesize import SynthesisResult
+    from ..synthesis import SynthesisResult
 
 __all__ = ["read_character_option", "check_target", "write_character_files"]
 
@@ -39,7 +39,7 @@ def read_character_option(args: argparse.Namespace, formats: Sequence[str]) -> C
         if bone_map is not None:
             raise ConfigError("--character-map names the bones of a --character; give the character too")
         return None
-    from .character.user import read_character
+    from ..character.user import read_character
 
     character = read_character(given, bone_map=bone_map)
     if character.gltf is None and "glb" in formats:
@@ -57,7 +57,7 @@ def check_target(
     if character is None or kind != "bvh":
         check_output(path, "file", overwrite=overwrite, inputs=[*inputs, *([character.path] if character else [])])
         return
-    from .export.character import character_bvh_joints, check_character_bvh
+    from ..export.character import character_bvh_joints, check_character_bvh
 
     joints = character_bvh_joints(character)
     check_character_bvh(path, joints, overwrite=overwrite, inputs=[*inputs, character.path])
@@ -86,8 +86,8 @@ def write_character_files(
     show : callable
         Prints one line.
     """
-    from .evaluate.metrics import control_adherence, overall_adherence
-    from .export.result import export_result_character_bvh, export_result_character_glb, retarget_result
+    from ..evaluate.metrics import control_adherence, overall_adherence
+    from ..export.result import export_result_character_bvh, export_result_character_glb, retarget_result
 
     retargeted = retarget_result(result, character)
     show(f"  on {character.path.name} ({character.matched_by}): {retargeted.report.summary()}")

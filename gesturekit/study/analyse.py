@@ -7,7 +7,7 @@ row, speech, system, prompt, value) and :func:`pairwise_table` (participant,
 speech, system_left, system_right, value, -2 = clearly left .. +2 = clearly
 right). :func:`exclusions` counts each participant's failed attention checks
 and the audio check. Everything after that works on these tables, so a
-simulated study (:mod:`gesturekit.studies.simulate`) or an imported HEMVIP one
+simulated study (:mod:`gesturekit.study.simulate`) or an imported HEMVIP one
 is analysed by the same code:
 
 - per system (and per prompt) the mean and the median over participants of

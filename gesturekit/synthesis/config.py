@@ -1,7 +1,7 @@
 """The options of a synthesis: :class:`SynthesisConfig`, saved with every output.
 
-It sits below the stages (:mod:`gesturekit.synthesizer`), which read it, and
-:mod:`gesturekit.synthesize`, which re-exports it with the entry points.
+It sits below the stages (:mod:`gesturekit.synthesis.synthesizer`), which read it, and
+:mod:`gesturekit.synthesis`, which re-exports it with the entry points.
 """
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._config import config_from_dict, config_to_dict, option, option_of
-from .blend import BLEND_MODES, KEEP_BELOW_HZ
-from .control import ControlTrack, parse_control
-from .database import normalise_exclusions
-from .errors import ConfigError
-from .search import SearchConfig
-from .search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
+from .._config import config_from_dict, config_to_dict, option, option_of
+from ..blend import BLEND_MODES, KEEP_BELOW_HZ
+from ..control import ControlTrack, parse_control
+from ..database import normalise_exclusions
+from ..errors import ConfigError
+from ..search import SearchConfig
+from ..search.types import RENAMED_SEARCH_KEYS, renamed_search_keys
 
 __all__ = ["PAPER_SETTINGS", "SEARCH_OPTIONS", "SynthesisConfig"]
 

@@ -1,6 +1,6 @@
 """A study's design (``design.json``): what participants see, in which order, and the checks.
 
-``design.json`` sits in a stimuli folder (:mod:`gesturekit.study`) beside ``manifest.csv``,
+``design.json`` sits in a stimuli folder (:mod:`gesturekit.study.stimuli`) beside ``manifest.csv``,
 ``order.csv`` and ``study.json``; like them it is kept from participants. Its fields::
 
     format, version      "gesturekit-study-design", 1

@@ -3,17 +3,17 @@
 Each stage is a public method, and :meth:`Synthesizer.run` runs them all:
 
 1. :meth:`~Synthesizer.features`: the speech's k-NN query and the refiner's cGAN audio
-   features, computed once (:class:`~gesturekit.synthesis_types.QueryFeatures`);
+   features, computed once (:class:`~gesturekit.synthesis.types.QueryFeatures`);
 2. :meth:`~Synthesizer.plan`: what the search is given (:class:`~gesturekit.search.plan.SearchPlan`);
 3. :meth:`~Synthesizer.search`: Algorithm 1 for several plans, one scan of the database per step
    (:meth:`SearchIndex.search_plans <gesturekit.search.index.SearchIndex.search_plans>`);
 4. :meth:`~Synthesizer.assemble`: the k-NN motion, the blended motion, the result;
 5. :meth:`~Synthesizer.refine`: the refiner applied to the k-NN motion.
 
-:func:`gesturekit.synthesize.synthesize` and :func:`~gesturekit.synthesize.synthesize_batch`
+:func:`gesturekit.synthesis.synthesize` and :func:`~gesturekit.synthesis.synthesize_batch`
 run the stages on the database's shared index (:func:`synthesizer_for`);
 :class:`gesturekit.live.LiveSynthesizer`, the baselines and the retrieval inspector drive the
-same stages. Every public name here is also importable from :mod:`gesturekit.synthesize`.
+same stages. Every public name here is also importable from :mod:`gesturekit.synthesis`.
 """
 
 from __future__ import annotations
@@ -27,19 +27,19 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .blend import blend_segments, keep_slow
-from .control import ControlTrack
-from .database import MatchingDatabase
-from .errors import ConfigError, warn
-from .features import audio_frame_features, cgan_audio_features, n_audio_frames, stack_audio_features
-from .motion import Motion
-from .search import SearchIndex, SearchResult
-from .search.plan import SearchPlan, SearchRequest, plan_search
-from .synthesis_types import MotionRefiner, QueryFeatures, Speech, SynthesisResult, load_speech
+from ..blend import blend_segments, keep_slow
+from ..control import ControlTrack
+from ..database import MatchingDatabase
+from ..errors import ConfigError, warn
+from ..features import audio_frame_features, cgan_audio_features, n_audio_frames, stack_audio_features
+from ..motion import Motion
+from ..search import SearchIndex, SearchResult
+from ..search.plan import SearchPlan, SearchRequest, plan_search
+from .types import MotionRefiner, QueryFeatures, Speech, SynthesisResult, load_speech
 
 if TYPE_CHECKING:
-    from .features import ZScore
-    from .synthesis_config import SynthesisConfig
+    from ..features import ZScore
+    from .config import SynthesisConfig
 
 __all__ = ["Synthesizer", "synthesizer_for", "search_request", "check_refiner"]
 
@@ -131,7 +131,7 @@ class Synthesizer:
 
     Examples
     --------
-    The stages one by one give what :func:`~gesturekit.synthesize.synthesize` gives::
+    The stages one by one give what :func:`~gesturekit.synthesis.synthesize` gives::
 
         syn = Synthesizer(db)
         feats = syn.features(speech)
@@ -410,7 +410,7 @@ def _warn_controls_past_the_end(track: ControlTrack, features: QueryFeatures) ->
             )
 
 
-#: Each database's search index, shared by :func:`~gesturekit.synthesize.synthesize`, its batch
+#: Each database's search index, shared by :func:`~gesturekit.synthesis.synthesize`, its batch
 #: and the live synthesis (:func:`synthesizer_for`): built on the first call, kept while the
 #: database lives (a weak reference: the cache keeps no database alive, and it holds only
 #: the index, never the database).
@@ -430,7 +430,7 @@ def synthesizer_for(db: MatchingDatabase, *, refiner: MotionRefiner | None = Non
     -------
     Synthesizer
         A new object each call; the index it builds on first use serves every later call with
-        the same database (:func:`~gesturekit.synthesize.synthesize` uses it), until the database is dropped.
+        the same database (:func:`~gesturekit.synthesis.synthesize` uses it), until the database is dropped.
     """
     if not isinstance(db, MatchingDatabase):
         raise ConfigError(f"db must be a MatchingDatabase, got {type(db).__name__}")

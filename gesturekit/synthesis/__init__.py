@@ -7,9 +7,9 @@ that made it (:class:`SynthesisConfig`); :mod:`gesturekit.export.result` writes 
 as npz, BVH and MP4. :func:`synthesize_batch` searches several speeches together,
 scanning the database once per step.
 
-Both run the stages of a :class:`~gesturekit.synthesizer.Synthesizer` (features, plan,
-search, assemble, refine; :mod:`gesturekit.synthesizer`) on the database's shared
-search index (:func:`~gesturekit.synthesizer.synthesizer_for`). A refiner is given as an
+Both run the stages of a :class:`~gesturekit.synthesis.synthesizer.Synthesizer` (features, plan,
+search, assemble, refine; :mod:`gesturekit.synthesis.synthesizer`) on the database's shared
+search index (:func:`~gesturekit.synthesis.synthesizer.synthesizer_for`). A refiner is given as an
 object (:class:`MotionRefiner`); the layers above open one from its folder
 (:func:`gesturekit.refine.open_refiner`).
 """
@@ -20,14 +20,14 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from .control import ControlTrack
-from .database import MatchingDatabase
-from .errors import ConfigError
-from .motion import AUDIO_SR
-from .search.plan import rest_pose_frame
-from .synthesis_config import PAPER_SETTINGS, SynthesisConfig
-from .synthesis_types import MotionRefiner, QueryFeatures, Speech, SynthesisResult
+from ..control import ControlTrack
+from ..database import MatchingDatabase
+from ..errors import ConfigError
+from ..motion import AUDIO_SR
+from ..search.plan import rest_pose_frame
+from .config import PAPER_SETTINGS, SynthesisConfig
 from .synthesizer import Synthesizer, check_refiner, search_request, synthesizer_for
+from .types import MotionRefiner, QueryFeatures, Speech, SynthesisResult
 
 __all__ = [
     "PAPER_SETTINGS",
@@ -105,7 +105,7 @@ def synthesize(
     >>> import tempfile
     >>> from gesturekit.demo import build_demo_database
     >>> from gesturekit.datasets.synthetic import generate_demo_take
-    >>> from gesturekit.synthesize import SynthesisConfig, synthesize
+    >>> from gesturekit.synthesis import SynthesisConfig, synthesize
     >>> db = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5)
     >>> speech = generate_demo_take(seconds=4.0, seed=1, name="speech")[0].audio  # 16 kHz mono
     >>> res = synthesize(speech, db=db, config=SynthesisConfig(seed=0, control="1-3:left_hand=high"))
@@ -152,7 +152,7 @@ def synthesize_batch(
     >>> import tempfile
     >>> from gesturekit.demo import build_demo_database
     >>> from gesturekit.datasets.synthetic import generate_demo_take
-    >>> from gesturekit.synthesize import synthesize, synthesize_batch
+    >>> from gesturekit.synthesis import synthesize, synthesize_batch
     >>> db = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5)
     >>> speeches = [generate_demo_take(seconds=s, seed=s, name="speech")[0].audio for s in (2, 3)]
     >>> results = synthesize_batch(speeches, db=db, controls=[None, "0-2:speed=slow"])

@@ -1,4 +1,4 @@
-"""Simulated participants with a known ground truth, to check the analysis (:mod:`gesturekit.studies.analyse`).
+"""Simulated participants with a known ground truth, to check the analysis (:mod:`gesturekit.study.analyse`).
 
 Each system has a true mean rating (on the scale) and a true Bradley-Terry
 strength (Elo points). A participant's rating of a stimulus is the system's

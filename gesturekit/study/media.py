@@ -30,7 +30,7 @@ from .._optional import require
 from ..datasets.audio import write_wav
 from ..errors import GestureKitError
 from ..export.video import encode_command, ffmpeg_executable, probe_media
-from ..study import stimulus_id
+from .stimuli import stimulus_id
 
 __all__ = ["OVERLAY_TEXT", "check_media_id", "overlay_box", "draw_overlay", "make_check_videos", "make_audio_check"]
 
@@ -40,7 +40,7 @@ _BEEP_HZ, _BEEP_S, _GAP_S, _LEAD_S = 880.0, 0.2, 0.5, 0.5
 
 
 def check_media_id(seed: int, speech: str, kind: str) -> str:
-    """The opaque id of a check file: like a stimulus id (:func:`gesturekit.study.stimulus_id`), keyed by the
+    """The opaque id of a check file: like a stimulus id (:func:`gesturekit.study.stimuli.stimulus_id`), keyed by the
     seed, of ``speech`` and a system name no stimulus can have."""
     return stimulus_id(seed, speech, f"\0check:{kind}")
 
