@@ -78,6 +78,12 @@ def test_the_analysed_n_counts_only_who_has_a_kept_answer(crowd, tmp_path):
     assert "Analysed: 13" in html
 
 
+def test_the_instructions_count_the_videos_a_page_shows(crowd):
+    design, _, _ = crowd
+    # 3 systems, and an attention check video on some rating pages: 3 or 4 videos
+    assert "you will see 3 or 4 different animations" in design.instructions
+
+
 def test_the_command_prints_the_flow(crowd, capsys):
     from gesturekit.cli import main
 
