@@ -210,6 +210,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.study",
             "gesturekit.study._fields",
             "gesturekit.study.analyse",
+            "gesturekit.study.bradley_terry",
             "gesturekit.study.config",
             "gesturekit.study.design",
             "gesturekit.study.hemvip",
