@@ -234,7 +234,7 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
         ``participant``, ``row``, ``failed_checks`` (attention checks failed), ``audio_failed`` (bool),
         ``excluded`` (bool), ``reason`` (why excluded, else empty), ``answered`` (pages answered),
         ``pages`` (pages the participant's order has to answer), ``finished`` (bool: the store says so,
-        or, without the store's participants, every page answered); every participant of the store,
+        or, without the store's participants, the last page answered); every participant of the store,
         also those who answered nothing.
     """
     import pandas as pd
@@ -249,6 +249,7 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
     audio: dict[str, bool] = {}
     rows: dict[str, int] = {}
     answered: dict[str, int] = {}
+    furthest: dict[str, int] = {}
     finished: dict[str, bool] = {}
     if participants is not None:
         for token, row in zip(participants["token"], participants["row"]):
@@ -259,6 +260,7 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
         token = str(r.token)
         rows[token] = int(r.row)
         answered[token] = answered.get(token, 0) + 1
+        furthest[token] = max(furthest.get(token, -1), int(r.page_index))
         page = pages.page(int(r.row), r.page_id)
         if page is None:
             continue
@@ -271,6 +273,7 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
     for t, row in rows.items():
         pages.page(row, "")  # builds the row's pages
         todo = sum(1 for p in pages.rows[row].values() if p.kind != "done")
+        last = max((p.index for p in pages.rows[row].values() if p.kind != "done"), default=0)
         f, a = failed.get(t, 0), audio.get(t, False)
         reasons = []
         if f > max_failures:
@@ -278,7 +281,9 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
         if a:
             reasons.append(REASON_AUDIO)
         n = answered.get(t, 0)
-        done = finished[t] if t in finished else n >= todo
+        # without the store's status (a responses CSV, HEMVIP's pages lacking the instructions and the
+        # audio check): finished when the last page to answer was answered
+        done = finished[t] if t in finished else furthest.get(t, -1) >= last
         out.append((t, row, f, a, bool(reasons), "; ".join(reasons), n, todo, bool(done)))
     return pd.DataFrame(out, columns=[*EXCLUSION_COLUMNS, "reason", "answered", "pages", "finished"])
 

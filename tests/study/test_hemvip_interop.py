@@ -26,7 +26,7 @@ import pytest
 from gesturekit.cli import main
 from gesturekit.errors import ConfigError, InputFileError
 from gesturekit.study import init_study
-from gesturekit.study.analyse import broken_videos, pairwise_table, read_responses_csv
+from gesturekit.study.analyse import broken_videos, exclusions, pairwise_table, read_responses_csv
 from gesturekit.study.hemvip import export_hemvip, import_hemvip, read_vimeo_map
 from gesturekit.study.report import analyse
 from gesturekit.study.simulate import simulate_study
@@ -109,6 +109,9 @@ def test_export_then_import_round_trip_through_hemvips_structure(design, tmp_pat
     (tmp_path / "r.json").write_text(json.dumps(sessions))
     got = import_hemvip(design, [tmp_path / "r.json"])
     assert sorted(set(got["token"])) == ["U0", "U1", "U2"]
+    # HEMVIP has no instructions' or audio check's answers: still, whoever reached the end finished
+    flow = exclusions(design, got)
+    assert flow["finished"].all() and (flow["answered"] < flow["pages"]).all()
     for s in sessions:
         mine = got[got["token"] == s["userId"]]
         for trial in s["trials"]:
