@@ -41,7 +41,7 @@ import pyvista as pv
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
-from ..character.look import BACKGROUND, stage_layout
+from ..character.look import BACKGROUND
 from ..character.target import Character
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
@@ -125,12 +125,12 @@ def view_bounds(
     check_character(character, style)
     if character is not None:
         box = None if style.fit_motion else np.asarray(style.view_box)
-        return CharacterStage(motions, view_box=box, character=character).box.T.copy()
+        return CharacterStage(motions, view_box=box, character=character, framing=style.framing).box.T.copy()
     if not style.fit_motion:
         return np.asarray(style.view_box, dtype=np.float64).copy()
     if style.look == "character":
-        # the page's stage: every drawn joint of every character in its place, and the body's margin
-        return stage_layout([m.positions[:, m.presence.drawn] for m in motions])[1].T.copy()
+        # the page's stage: every drawn joint of every character in its place, framed by the one rule
+        return CharacterStage(motions, framing=style.framing).box.T.copy()
     a = style.appearance
     # only what is drawn: absent joints sit on their parents and would only shift the box
     every = np.concatenate([a.body(m.positions, m.presence).drawn_points().reshape(-1, 3) for m in motions])
@@ -253,6 +253,7 @@ class SkeletonScene:
                     neutral=s.neutral,
                     view_box=None if s.fit_motion else np.asarray(s.view_box),
                     character=character,
+                    framing=s.framing,
                 )
                 self._character = CharacterDrawing(
                     stage, self._live(), self.resolution, labels=labels, font_size=s.font_size
