@@ -182,8 +182,9 @@ class CharacterStage:
             [m.positions[:, m.presence.drawn] for m in self.motions], framing="full body", ground=self.ground
         )[1]
         feet = [
-            np.array([dx, 0.0, 0.0]) + (st.vertices.mean(axis=0) if st is not None else 0.0)
+            np.array([dx, 0.0, 0.0]) + st.vertices.mean(axis=0)
             for st, dx in zip(self.stands, self.offsets)
+            if st is not None
         ]
         return stage_meshes(full, self.ground, feet)
 
@@ -261,13 +262,14 @@ class CharacterDrawing:
         self._point_views: list[np.ndarray] = []
         self._color_views: list[np.ndarray] = []
         self._shown: list[int] = []  # the characters that have a body
+        self._actors: list = []  # the characters' actors: their bodies and legs
         # the stage and the still legs: drawn once, unlit, their colours already shaded
         for flat in stage.stage():
             self._add_still(plotter, flat["vertices"], flat["faces"], flat["colors"])
         for i in range(len(stage.motions)):
             legs = stage.stand(i)
             if legs is not None:
-                self._add_still(plotter, *legs)
+                self._actors.append(self._add_still(plotter, *legs))
         for i, faces in enumerate(stage.faces):
             if not len(faces):
                 continue
@@ -280,6 +282,7 @@ class CharacterDrawing:
             mesh.GetPointData().SetScalars(rgb)
             actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
             actor.prop.interpolation = "gouraud"  # colours blend across each triangle, as on the page
+            self._actors.append(actor)
             self._meshes.append(mesh)
             self._colors.append(rgb)
             self._point_views.append(vtk_to_numpy(mesh.GetPoints().GetData()))
@@ -301,7 +304,7 @@ class CharacterDrawing:
             self._labels(plotter, labels, resolution, font_size)
 
     @staticmethod
-    def _add_still(plotter: pv.Plotter, vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray) -> None:
+    def _add_still(plotter: pv.Plotter, vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray) -> object:
         """A mesh that does not move, drawn unlit in its per-vertex sRGB colours."""
         cells = np.hstack([np.full((len(faces), 1), 3, dtype=np.int64), np.asarray(faces, dtype=np.int64)])
         mesh = pv.PolyData(np.asarray(vertices, dtype=np.float64), cells.ravel())
@@ -310,6 +313,12 @@ class CharacterDrawing:
         mesh.GetPointData().SetScalars(rgb)
         actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
         actor.prop.interpolation = "gouraud"
+        return actor
+
+    def set_characters_visible(self, visible: bool) -> None:
+        """Show or hide every character (their bodies and legs), leaving the stage."""
+        for actor in self._actors:
+            actor.SetVisibility(bool(visible))
 
     def _labels(self, plotter: pv.Plotter, labels: Sequence[str], resolution: tuple[int, int], size: int) -> None:
         w, h = resolution

@@ -378,6 +378,25 @@ class SkeletonScene:
         # OpenGL's first row is the bottom one
         return np.ascontiguousarray(image.reshape(h, w, 3)[::-1])
 
+    def stage_image(self) -> np.ndarray:
+        """The picture of the stage alone (the character look: the backdrop, the floor and the shadows,
+        without the characters), shape (height, width, 3), uint8 RGB: what every pixel a character does not
+        cover shows. The characters are shown again afterwards."""
+        if self._character is None:
+            raise ConfigError("only the character look has a stage of its own")
+        self._character.set_characters_visible(False)
+        try:
+            window = self._live().render_window
+            if window is None:
+                raise GestureKitError("the scene's render window is gone")
+            window.Render()
+            w, h = self.resolution
+            window.GetPixelData(0, 0, w - 1, h - 1, 0, self._pixels, 0)
+            image = vtk_to_numpy(self._pixels).reshape(h, w, 3)[::-1]
+            return np.ascontiguousarray(image)
+        finally:
+            self._character.set_characters_visible(True)
+
     def frames(self, progress: Callable[[int, int], None] | None = None) -> Iterator[np.ndarray]:
         """Every frame's picture in order; ``progress(done, total)`` after each one."""
         for frame in range(self.n_frames):

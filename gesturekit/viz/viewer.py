@@ -355,8 +355,7 @@ def viewer_data(
     stage: list[dict] = []
     if ground is not None:
         feet = [
-            np.array([dx, 0.0, 0.0]) + (st.vertices.mean(axis=0) if st is not None else 0.0)
-            for st, dx in zip(stands, offsets)
+            np.array([dx, 0.0, 0.0]) + st.vertices.mean(axis=0) for st, dx in zip(stands, offsets) if st is not None
         ]
         stage = [_flat_spec(s) for s in look.stage_meshes(boxes[look.FULL_BODY], ground, feet)]
     note = ""
