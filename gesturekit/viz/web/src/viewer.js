@@ -175,6 +175,8 @@ function main(D, audio) {
   }
   // a new size frames the box again at the new aspect ratio, unless the user has moved the view
   window.addEventListener("resize", () => { size(); if (!moved) home(); draw(); }, { signal });
+  // the stage alone (the backdrop, the floor and the shadows) and back: what the characters stand in front of
+  gk.showCharacters = (visible) => { for (const c of characters) c.group.visible = visible; draw(); };
   play.disabled = slider.disabled = N < 2;
   size(); home(); draw();
   // where the first frame's time went (milliseconds since the page began to load)
