@@ -67,7 +67,7 @@ SCHEMES: dict[str, dict[str, str]] = {
     "teal": _scheme("#2a8c8c"),
     "red": _scheme("#b8413c"),
     "olive": _scheme("#8a8a2e"),
-    "pink": _scheme("#b5548f"),
+    "rose": _scheme("#b5548f"),
     "gold": _scheme("#d9a81e"),
     # for studies: no colour tells the systems apart, and no skin tone is chosen
     "grey": {"skin": "#b4b4b4", "shirt": "#8c8c8c", "face": "#4a4a4a", "trousers": "#5e5e5e", "shoes": "#3f3f3f"},
@@ -259,7 +259,7 @@ ROLE_SCHEMES: dict[str, str] = {"k-NN": "blue", "refined": "orange", "chosen": "
 
 #: The schemes of candidates by rank (the k-th best candidate, the inspector's ``#k``), cycling: none of
 #: :data:`ROLE_SCHEMES`' colours.
-RANK_SCHEMES = ("green", "purple", "teal", "red", "olive", "pink")
+RANK_SCHEMES = ("green", "purple", "teal", "red", "olive", "rose")
 
 
 def role_scheme(role: str) -> str:
