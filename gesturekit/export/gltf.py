@@ -66,9 +66,9 @@ from ..character.glb import USHORT as _USHORT
 from ..character.glb import GlbBuffer, accessor_array, glb_bytes, node_matrices, read_glb
 from ..character.look import part_colors
 from ..character.mesh import PARTS, build_mesh
-from ..character.stand import stand_mesh, standing_root
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
 from ..character.solve import bvh_parents
+from ..character.stand import stand_mesh, standing_root
 from ..errors import ConfigError, OutputError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG, check_output
