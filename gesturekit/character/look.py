@@ -185,8 +185,8 @@ FRAMINGS = (UPPER_BODY, FULL_BODY)
 #: hips and the top of the legs, so the upper body fills about three quarters of the box's height.
 BELOW_WAIST = 0.25
 
-#: The fraction of frames whose reach across sets the framed box's width and the spacing of side-by-side
-#: characters: a rare, wide gesture may leave the picture or reach into the neighbour's space rather than
+#: The fraction of frames whose reach sets the framed box and the spacing of side-by-side characters: a rare
+#: wide (or raised, or forward) gesture may leave the picture or reach into the neighbour's space rather than
 #: shrink every character for the whole clip. (A clip of one frame is framed whole.)
 REACH_QUANTILE = 0.95
 
@@ -200,11 +200,11 @@ def stage_layout(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where side-by-side characters stand and the box the camera frames, the same for the page and the MP4.
 
-    The one framing rule of every view (the app's pages, notebooks, the MP4): the box holds every drawn joint
-    of every character over the shown frames plus :data:`FRAME_MARGIN`, up and down and in depth; across,
-    the reach of :data:`REACH_QUANTILE` of the frames (each frame's leftmost and rightmost joint); with
-    :data:`UPPER_BODY` it reaches :data:`BELOW_WAIST` of the joints' height below them (the hips), with
-    :data:`FULL_BODY` down to the floor.
+    The one framing rule of every view (the app's pages, notebooks, the MP4): the box holds every
+    character's reach over :data:`REACH_QUANTILE` of the shown frames (each frame's leftmost, rightmost,
+    highest, nearest and farthest drawn joint; a rare gesture beyond it may leave the picture) and its
+    lowest joint in every frame, plus :data:`FRAME_MARGIN`; with :data:`UPPER_BODY` it reaches
+    :data:`BELOW_WAIST` of that height below (the hips), with :data:`FULL_BODY` down to the floor.
     A camera (:func:`camera_for`) fitted to it makes a standing presenter's upper body fill most of the
     picture's height.
 
@@ -233,17 +233,19 @@ def stage_layout(
     if not points or any(np.asarray(p).size == 0 for p in points):
         raise ConfigError("a stage needs at least one character with at least one joint position")
     frames = [np.asarray(p, dtype=np.float64).reshape(len(p), -1, 3) for p in points]
-    # each frame's leftmost and rightmost joint: the reach across of most frames, not of the widest one
-    left = [np.quantile(f[..., 0].min(axis=1), 1 - REACH_QUANTILE) for f in frames]
-    right = [np.quantile(f[..., 0].max(axis=1), REACH_QUANTILE) for f in frames]
+    # each frame's extremes: the reach of most frames, not of the one widest (or highest, or nearest) frame
+    reach = [
+        (np.quantile(f.min(axis=1), 1 - REACH_QUANTILE, axis=0), np.quantile(f.max(axis=1), REACH_QUANTILE, axis=0))
+        for f in frames
+    ]
     if spacing is None:
-        spacing = max(0.7, max(b - a for a, b in zip(left, right)) + 0.1)
+        spacing = max(0.7, max(float(hi[0] - lo[0]) for lo, hi in reach) + 0.1)
     offsets = (np.arange(len(frames)) - (len(frames) - 1) / 2) * float(spacing)
-    every = np.concatenate([f.reshape(-1, 3) + [dx, 0.0, 0.0] for f, dx in zip(frames, offsets)])
-    lo, hi = every.min(axis=0) - FRAME_MARGIN, every.max(axis=0) + FRAME_MARGIN
-    # across, the reach of most frames: a rare wide gesture may leave the picture rather than shrink everyone
-    lo[0] = min(a + dx for a, dx in zip(left, offsets)) - FRAME_MARGIN
-    hi[0] = max(r + dx for r, dx in zip(right, offsets)) + FRAME_MARGIN
+    shift = [np.array([dx, 0.0, 0.0]) for dx in offsets]
+    lo = np.min([r[0] + d for r, d in zip(reach, shift)], axis=0) - FRAME_MARGIN
+    hi = np.max([r[1] + d for r, d in zip(reach, shift)], axis=0) + FRAME_MARGIN
+    # down to the lowest joint of every frame (the spine's): the waist is never cut
+    lo[1] = min(float(f[..., 1].min()) for f in frames) - FRAME_MARGIN
     if framing == FULL_BODY and ground is not None:
         lo[1] = min(lo[1], float(ground) - 0.02)
     else:
