@@ -334,13 +334,17 @@ def open_app(page, url: str, path: str = "", *, heading: str) -> None:
     wait_idle(page)  # the title is drawn by the page's first run: what is idle now is that run's end
 
 
-def go_to(page, title: str, *, tries: int = 3) -> None:
+def go_to(page, title: str, *, tries: int = 3, heading_text: str | None = None) -> None:
     """Switch page within the session through the sidebar navigation (keeps the user's state).
 
     The page switch is a run of the new page; a click that starts none (the link redrawn under
-    it) is made again.
+    it) is made again. ``heading_text``: the new page's title where it is not ``title`` (Home's).
     """
-    link = sidebar(page).locator('[data-testid="stSidebarNav"] a', has_text=title).first
+    nav = sidebar(page).locator('[data-testid="stSidebarNav"] a')
+    if title == "Home":
+        link = nav.first
+    else:  # by its address: "Study" is also the start of "Study stimuli"
+        link = nav.and_(page.locator(f'a[href$="/{title.replace(" ", "_")}"]')).first
     for _ in range(tries):
         wait_idle(page)
         since = runs_seen(page)
@@ -349,7 +353,7 @@ def go_to(page, title: str, *, tries: int = 3) -> None:
             wait_run_begun(page, since, timeout_s=30)
         except Exception:  # noqa: BLE001  (a playwright timeout: click again)
             continue
-        heading(page, title).wait_for()
+        heading(page, heading_text or title).wait_for()
         wait_idle(page)  # the title is drawn by the new page's run
         return
     raise RuntimeError(f"no page switch to {title!r} after {tries} clicks on its link")
@@ -665,7 +669,7 @@ def make_laptop_screenshots(
     with _result_page(out, seconds=seconds, demo_minutes=demo_minutes, box=(0.3, 0.55)) as page:
         for title in APP_PAGES:
             if title != "Synthesize":
-                go_to(page, title)
+                go_to(page, title, heading_text="gesturekit" if title == "Home" else None)
             if problems(page):
                 raise RuntimeError(f"the {title} page shows an error: {problems(page)[0][:500]}")
             for width, height in sizes:

@@ -38,6 +38,7 @@ __all__ = [
     "stage_meshes",
     "FIELD_OF_VIEW",
     "VIEW_DIRECTION",
+    "DEPTH_SHARE",
     "scheme_for",
     "srgb_to_linear",
     "linear_to_srgb",
@@ -106,6 +107,10 @@ LIGHTS: tuple[tuple[tuple[float, float, float], float], ...] = (
 #: The camera's vertical field of view, degrees.
 FIELD_OF_VIEW = 30.0
 
+#: How much of the framed box's half-depth :func:`camera_for` keeps in front of the plane it fits: 1 fits the
+#: box's front face (a presenter far back behind hands that rarely come forward), 0 its middle.
+DEPTH_SHARE = 0.5
+
 #: From the framed box's centre towards the camera: in front, a little above.
 VIEW_DIRECTION = (0.0, 0.12, 1.0)
 
@@ -157,10 +162,11 @@ def camera_for(
     half = np.maximum((hi - lo) / 2, 1e-3)
     d = np.asarray(VIEW_DIRECTION) / np.linalg.norm(VIEW_DIRECTION)
     tan_v = np.tan(np.radians(fov) / 2)
-    # far enough that the box's front face fits both ways (the box's depth moves its front closer)
-    dist = max(half[1] / tan_v, half[0] / (tan_v * aspect)) + half[2]
-    if top:  # the height shown at the box's front face beyond the box's own: all of it below the box
-        centre = centre - [0.0, max(0.0, (dist - half[2]) * tan_v - half[1]), 0.0]
+    # far enough that the box fits both ways halfway between its centre and its front face: a hand reaching
+    # towards the camera at the box's very corner may leave the picture, the body never does
+    dist = max(half[1] / tan_v, half[0] / (tan_v * aspect)) + DEPTH_SHARE * half[2]
+    if top:  # the height shown beyond the box's own: all of it below the box
+        centre = centre - [0.0, max(0.0, (dist - DEPTH_SHARE * half[2]) * tan_v - half[1]), 0.0]
     return {
         "position": [float(x) for x in centre + dist * d],
         "target": [float(x) for x in centre],
@@ -182,8 +188,8 @@ UPPER_BODY, FULL_BODY = "upper body", "full body"
 FRAMINGS = (UPPER_BODY, FULL_BODY)
 
 #: With :data:`UPPER_BODY`, the box reaches this fraction of the joints' height below the lowest joint: the
-#: hips and the top of the legs, so the upper body fills about three quarters of the box's height.
-BELOW_WAIST = 0.25
+#: hips and the top of the legs.
+BELOW_WAIST = 0.15
 
 #: The fraction of frames whose reach sets the framed box and the spacing of side-by-side characters: a rare
 #: wide (or raised, or forward) gesture may leave the picture or reach into the neighbour's space rather than
@@ -197,14 +203,16 @@ def stage_layout(
     spacing: float | None = None,
     framing: str = UPPER_BODY,
     ground: float | None = None,
+    waist: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where side-by-side characters stand and the box the camera frames, the same for the page and the MP4.
 
     The one framing rule of every view (the app's pages, notebooks, the MP4): the box holds every
     character's reach over :data:`REACH_QUANTILE` of the shown frames (each frame's leftmost, rightmost,
-    highest, nearest and farthest drawn joint; a rare gesture beyond it may leave the picture) and its
-    lowest joint in every frame, plus :data:`FRAME_MARGIN`; with :data:`UPPER_BODY` it reaches
-    :data:`BELOW_WAIST` of that height below (the hips), with :data:`FULL_BODY` down to the floor.
+    highest, nearest and farthest drawn joint; a rare gesture beyond it may leave the picture)
+    plus :data:`FRAME_MARGIN`; with :data:`UPPER_BODY` down from there to the pelvis (``waist``) and
+    :data:`BELOW_WAIST` of that height below it (the hips), with :data:`FULL_BODY` down to the floor and
+    every joint of every frame.
     A camera (:func:`camera_for`) fitted to it makes a standing presenter's upper body fill most of the
     picture's height.
 
@@ -220,6 +228,9 @@ def stage_layout(
     ground : float, optional
         Height of the floor (the soles), metres: the bottom of :data:`FULL_BODY` framing. Without it the
         full body is framed as the upper body.
+    waist : float, optional
+        Height of the lowest character's pelvis, metres: the upper body's lower end (hands hanging below it
+        may leave the picture, as in a presenter's medium shot). Without it, the lowest joint of every frame.
 
     Returns
     -------
@@ -244,12 +255,13 @@ def stage_layout(
     shift = [np.array([dx, 0.0, 0.0]) for dx in offsets]
     lo = np.min([r[0] + d for r, d in zip(reach, shift)], axis=0) - FRAME_MARGIN
     hi = np.max([r[1] + d for r, d in zip(reach, shift)], axis=0) + FRAME_MARGIN
-    # down to the lowest joint of every frame (the spine's): the waist is never cut
-    lo[1] = min(float(f[..., 1].min()) for f in frames) - FRAME_MARGIN
     if framing == FULL_BODY and ground is not None:
-        lo[1] = min(lo[1], float(ground) - 0.02)
-    else:
-        lo[1] -= BELOW_WAIST * (hi[1] - lo[1])
+        lo[1] = min(float(f[..., 1].min()) for f in frames + [np.full((1, 1, 3), float(ground) - 0.02)])
+    elif waist is not None:  # the upper body from the pelvis up, and a little of the legs
+        lo[1] = float(waist) - BELOW_WAIST * (hi[1] - float(waist))
+    else:  # down to the lowest joint of every frame, and as far again below the joints' height
+        low = min(float(f[..., 1].min()) for f in frames) - FRAME_MARGIN
+        lo[1] = low - BELOW_WAIST * (hi[1] - low)
     pad = 0.03 * (hi - lo)
     return offsets, np.stack([lo - pad, hi + pad])
 

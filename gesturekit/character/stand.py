@@ -52,6 +52,8 @@ class StandMesh:
         Index into :data:`gesturekit.character.mesh.PARTS` (trousers and shoes).
     floor : float
         Height of the soles (the lowest vertices), metres.
+    pelvis : float
+        Height of the hip joints, metres: where the upper body ends.
     """
 
     vertices: np.ndarray
@@ -59,6 +61,7 @@ class StandMesh:
     faces: np.ndarray
     parts: np.ndarray
     floor: float
+    pelvis: float
 
     @property
     def n_vertices(self) -> int:
@@ -152,6 +155,7 @@ def stand_mesh(rig: Rig, root: np.ndarray, *, detail: float = 1.0) -> StandMesh 
         faces=ff,
         parts=np.concatenate(parts),
         floor=float(np.float32(vv[:, 1].min())),
+        pelvis=float(pelvis),
     )
 
 

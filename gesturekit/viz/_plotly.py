@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
+from ..character.look import SCHEMES, SIDE_BY_SIDE
 from ..errors import ConfigError
 from ..motion import Motion
-from ..character.look import SCHEMES, SIDE_BY_SIDE
 
 #: Colours of the motions of a figure, in order (repeated past the end): the shirts of the 3D views'
 #: side-by-side characters (:data:`gesturekit.character.look.SIDE_BY_SIDE`, k-NN blue, refined orange), so a

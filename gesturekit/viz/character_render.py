@@ -146,7 +146,8 @@ class CharacterStage:
         self.ground = min(floors) if floors else None
         # the page's layout rule on the page's input: every drawn joint over the clip
         drawn = [m.positions[:, m.presence.drawn] for m in self.motions]
-        self.offsets, self.box = stage_layout(drawn, framing=framing, ground=self.ground)
+        waist = min(st.pelvis for st in self.stands if st is not None) if floors else None
+        self.offsets, self.box = stage_layout(drawn, framing=framing, ground=self.ground, waist=waist)
         if view_box is not None:
             self.box = np.asarray(view_box, dtype=np.float64).T.copy()
         self._albedo = [srgb_to_linear(palette[mesh.parts]) for mesh, palette in painted]  # (V, 3), linear light

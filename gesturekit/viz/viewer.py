@@ -289,7 +289,7 @@ def viewer_data(
         None without legs), ``stage`` (the floor and each character's contact shadow,
         :func:`~gesturekit.character.look.stage_meshes`: ``vertices``, ``faces``, sRGB ``colors`` (u1)),
         ``up`` (Y) and ``look`` (``background``, ``ambient``, ``key``, ``light``, ``lights`` (each
-        ``[direction, strength]``), ``fov``, ``view``: the page's camera is
+        ``[direction, strength]``), ``fov``, ``view``, ``depth_share``: the page's camera is
         :func:`~gesturekit.character.look.camera_for` of ``box`` at its own aspect ratio, its top kept at the
         top in the upper-body framing);
         ``motions``: one dict per motion with ``label``, ``offset`` (metres along X),
@@ -350,7 +350,10 @@ def viewer_data(
         out.append(spec)
     floors = [st.floor for st in stands if st is not None]
     ground = min(floors) if floors else None
-    boxes = {f: look.stage_layout(drawn, spacing=spacing, framing=f, ground=ground)[1] for f in look.FRAMINGS}
+    waist = min(st.pelvis for st in stands if st is not None) if floors else None
+    boxes = {
+        f: look.stage_layout(drawn, spacing=spacing, framing=f, ground=ground, waist=waist)[1] for f in look.FRAMINGS
+    }
     box = boxes[framing]
     stage: list[dict] = []
     if ground is not None:
@@ -385,6 +388,7 @@ def viewer_data(
             "lights": [[list(d), k] for d, k in look.LIGHTS],
             "fov": look.FIELD_OF_VIEW,
             "view": list(look.VIEW_DIRECTION),
+            "depth_share": look.DEPTH_SHARE,
         },
         "motions": out,
     }

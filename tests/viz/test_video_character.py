@@ -141,9 +141,10 @@ def test_the_mp4_frame_keeps_the_silhouette(tmp_path):
     width=st.sampled_from([64, 160, 320]),
 )
 def test_every_joint_of_every_character_stays_in_frame(offsets, width):
+    # the full body framed: every joint of a pose (the upper body's framing leaves hands below the hips out)
     motion = Motion((_demo()[:1] + offsets[:1]).astype(np.float32), FPS)
     other = Motion((_demo()[:1] + offsets[1:]).astype(np.float32), FPS)
-    stage = CharacterStage([motion, other])
+    stage = CharacterStage([motion, other], framing="full body")
     camera = stage.camera(width / 120)
     for i, m in enumerate((motion, other)):
         px = pinhole(m.positions[0] + [stage.offsets[i], 0, 0], camera, (width, 120))

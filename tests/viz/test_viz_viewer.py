@@ -160,6 +160,7 @@ def test_the_framing_holds_every_joint_and_the_look_is_the_characters():
         "lights": [[list(d), k] for d, k in look.LIGHTS],
         "fov": look.FIELD_OF_VIEW,
         "view": list(look.VIEW_DIRECTION),
+        "depth_share": look.DEPTH_SHARE,
     }
 
 
