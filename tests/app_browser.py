@@ -625,8 +625,8 @@ def make_front_picture(path: Path, *, seconds: float = 12.0, demo_minutes: float
     return path
 
 
-#: The pages of the app in its navigation (app/nav.py), Home first.
-APP_PAGES = ("Home", "Synthesize", "Retrieval inspector", "Database", "Study stimuli", "Live", "Study")
+#: The pages of the app (app/nav.py): Synthesize first (its result feeds the next two), Home last.
+APP_PAGES = ("Synthesize", "Retrieval inspector", "Database", "Study stimuli", "Live", "Study", "Home")
 
 #: Common laptop windows, (width, height) in CSS pixels.
 LAPTOP_SIZES = ((1280, 800), (1920, 1080))
@@ -667,8 +667,8 @@ def make_laptop_screenshots(
     of generated speech with one box-selected control segment, on a fresh demo database)."""
     shots = []
     with _result_page(out, seconds=seconds, demo_minutes=demo_minutes, box=(0.3, 0.55)) as page:
-        for title in APP_PAGES:
-            if title != "Synthesize":
+        for i, title in enumerate(APP_PAGES):
+            if i:
                 go_to(page, title, heading_text="gesturekit" if title == "Home" else None)
             if problems(page):
                 raise RuntimeError(f"the {title} page shows an error: {problems(page)[0][:500]}")
