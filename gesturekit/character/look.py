@@ -134,7 +134,13 @@ def part_colors(scheme: str) -> np.ndarray:
 
 
 def camera_for(
-    lo: npt.ArrayLike, hi: npt.ArrayLike, aspect: float, *, fov: float = FIELD_OF_VIEW, top: bool = False
+    lo: npt.ArrayLike,
+    hi: npt.ArrayLike,
+    aspect: float,
+    *,
+    fov: float = FIELD_OF_VIEW,
+    top: bool = False,
+    floor: float | None = None,
 ) -> dict:
     """A perspective camera that shows the box ``lo``..``hi`` whole, from :data:`VIEW_DIRECTION`.
 
@@ -149,6 +155,9 @@ def camera_for(
     top : bool
         Where the box is narrower than the picture's height (a wide box in a tall picture), keep its top
         at the picture's top and show more below it (a presenter's legs) rather than centring it.
+    floor : float, optional
+        With ``top``: the floor's height, metres; the picture shows at most 0.1 m below it (the rest of the
+        extra height goes above the box).
 
     Returns
     -------
@@ -165,8 +174,10 @@ def camera_for(
     # far enough that the box fits both ways halfway between its centre and its front face: a hand reaching
     # towards the camera at the box's very corner may leave the picture, the body never does
     dist = max(half[1] / tan_v, half[0] / (tan_v * aspect)) + DEPTH_SHARE * half[2]
-    if top:  # the height shown beyond the box's own: all of it below the box
-        centre = centre - [0.0, max(0.0, (dist - DEPTH_SHARE * half[2]) * tan_v - half[1]), 0.0]
+    if top:  # the height shown beyond the box's own: below the box, down to a little below the floor
+        extra = max(0.0, (dist - DEPTH_SHARE * half[2]) * tan_v - half[1])
+        room = extra if floor is None else max(0.0, lo[1] - extra - float(floor) + 0.1)
+        centre = centre - [0.0, min(extra, room), 0.0]
     return {
         "position": [float(x) for x in centre + dist * d],
         "target": [float(x) for x in centre],

@@ -161,7 +161,8 @@ class CharacterStage:
     def camera(self, aspect: float) -> dict:
         """The page's camera for a picture of width over height ``aspect``
         (:func:`~gesturekit.character.look.camera_for` of :attr:`box`)."""
-        return camera_for(self.box[0], self.box[1], aspect, fov=FIELD_OF_VIEW, top=self.framing == UPPER_BODY)
+        top = self.framing == UPPER_BODY
+        return camera_for(self.box[0], self.box[1], aspect, fov=FIELD_OF_VIEW, top=top, floor=self.ground)
 
     def stand(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Character ``index``'s still legs in its place: vertices (V, 3) float32 metres, faces (F, 3) and shaded

@@ -10,12 +10,16 @@ import { component } from "./component.js";
 
 /** The camera of gesturekit.character.look.camera_for: the box lo..hi whole, seen from the direction dir
  * (with top, a box narrower than the picture's height keeps its top at the picture's top). */
-export function cameraFor(lo, hi, aspect, fov, dir, top, depthShare) {
+export function cameraFor(lo, hi, aspect, fov, dir, top, depthShare, floor) {
   const centre = [0, 1, 2].map((i) => (lo[i] + hi[i]) / 2);
   const half = [0, 1, 2].map((i) => Math.max((hi[i] - lo[i]) / 2, 1e-3));
   const norm = Math.hypot(dir[0], dir[1], dir[2]), tanV = Math.tan((fov * Math.PI) / 360);
   const dist = Math.max(half[1] / tanV, half[0] / (tanV * aspect)) + depthShare * half[2];
-  if (top) centre[1] -= Math.max(0, (dist - depthShare * half[2]) * tanV - half[1]);
+  if (top) {  // the height shown beyond the box's own: below the box, down to a little below the floor
+    const extra = Math.max(0, (dist - depthShare * half[2]) * tanV - half[1]);
+    const room = floor === null || floor === undefined ? extra : Math.max(0, lo[1] - extra - floor + 0.1);
+    centre[1] -= Math.min(extra, room);
+  }
   return { position: centre.map((c, i) => c + (dist * dir[i]) / norm), target: centre };
 }
 
@@ -76,7 +80,7 @@ function main(D, audio) {
   let frame = 0, playing = false, t0 = 0, clock0 = 0, moved = false;
 
   function home() {
-    const c = cameraFor(lo, hi, camera.aspect, D.look.fov, D.look.view, framing === "upper body", D.look.depth_share);
+    const c = cameraFor(lo, hi, camera.aspect, D.look.fov, D.look.view, framing === "upper body", D.look.depth_share, D.ground);
     camera.position.set(c.position[0], c.position[1], c.position[2]);
     camera.up.set(0, 1, 0);
     gk.camera = { position: c.position, target: c.target, fov: camera.fov, aspect: camera.aspect, framing };
@@ -97,7 +101,7 @@ function main(D, audio) {
     D.motions.forEach((m, i) => {
       above.set((lo[0] + hi[0]) / 2 + m.offset, hi[1], (lo[2] + hi[2]) / 2).project(camera);
       labels[i].style.left = ((above.x + 1) / 2) * w + "px";
-      labels[i].style.top = Math.max(2, ((1 - above.y) / 2) * h - 16) + "px";
+      labels[i].style.top = Math.max(D.title ? 24 : 2, ((1 - above.y) / 2) * h - 16) + "px";
     });
   }
   function draw() {
