@@ -628,6 +628,9 @@ def make_front_picture(path: Path, *, seconds: float = 12.0, demo_minutes: float
 #: The pages of the app (app/nav.py): Synthesize first (its result feeds the next two), Home last.
 APP_PAGES = ("Synthesize", "Retrieval inspector", "Database", "Study stimuli", "Live", "Study", "Home")
 
+#: The 3D view a page's screenshot scrolls to (its key).
+_VIEW_OF = {"Retrieval inspector": "inspect.views", "Database": "db.skeleton"}
+
 #: Common laptop windows, (width, height) in CSS pixels.
 LAPTOP_SIZES = ((1280, 800), (1920, 1080))
 
