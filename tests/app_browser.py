@@ -682,6 +682,8 @@ def make_laptop_screenshots(
                     page.get_by_role("heading", name="Result").first.evaluate(
                         "el => el.scrollIntoView({block: 'start'})"
                     )
+                elif title in _VIEW_OF and keyed(page, _VIEW_OF[title]).count():  # its 3D view, scrolled to
+                    keyed(page, _VIEW_OF[title]).first.evaluate("el => el.scrollIntoView({block: 'center'})")
                 for view in _viewer_frames(page):
                     view.wait_for_function("() => document.body.dataset.drawn === '1'")
                     view.evaluate(_PAINTED)
