@@ -694,8 +694,7 @@ def make_laptop_screenshots(
                 for view in _viewer_frames(page):
                     view.wait_for_function("() => document.body.dataset.drawn === '1'")
                     view.evaluate(_PAINTED)
-                page.evaluate(_PAINTED)
-                time.sleep(1.0)  # a resized 3D view draws again
+                page.evaluate(_PAINTED)  # each 3D view drew at the new size (its resize draws at once)
                 png = out / f".{_slug(title)}_{width}x{height}.png"
                 page.screenshot(path=str(png), type="png")
                 shots.append(_jpeg(png, out / f"{_slug(title)}_{width}x{height}.jpg"))
