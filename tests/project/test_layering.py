@@ -107,6 +107,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.character.rig",
             "gesturekit.character.skin",
             "gesturekit.character.solve",
+            "gesturekit.character.stand",
             "gesturekit.character.target",
             "gesturekit.character.user",
         ),
