@@ -244,7 +244,9 @@ def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(stu
     out = tmp_path / "analysis"
     assert cli_main(["study", "analyse", str(study_folder), "--out", str(out), "--rounds", "200"]) == 0
     printed = capsys.readouterr().out
-    assert "3 participants, 1 excluded by the checks, 2 analysed" in printed
+    assert (
+        "3 started, 0 answered nothing, 1 excluded by the checks, 0 with no rating or pairwise answer, 2 analysed"
+    ) in printed
     from gesturekit.study.report import analyse_study
 
     report = analyse_study(study_folder, out=tmp_path / "again", rounds=200)
@@ -259,6 +261,6 @@ def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(stu
     means = report.summary[report.summary["prompt"] == "all"].set_index("system")["mean"]
     assert means.to_dict() == {s: float(v) for s, v in SCORES.items()}
     markdown = (out / "report.md").read_text(encoding="utf-8")
-    assert "excluded by the checks: 1" in markdown
+    assert "Excluded: 1 (failed more attention checks than allowed: 1)" in markdown and "Analysed: 2" in markdown
     lines = {line.split("|")[1].strip(): line for line in markdown.splitlines() if line.startswith("| ")}
     assert "False" in lines[tokens["pid-attentive"]] and "True" in lines[tokens["pid-inattentive"]]

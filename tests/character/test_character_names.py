@@ -51,7 +51,9 @@ def _matched_names(ch) -> dict[str, str]:
     return ch.matched()
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(
     naming=st.sampled_from(FAMILY_NAMINGS),
     rest=st.sampled_from(["T", "A"]),

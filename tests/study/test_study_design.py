@@ -195,7 +195,7 @@ def test_no_pages_at_all_and_bad_json_are_refused(study):
         raw["rating"]["enabled"] = raw["pairwise"]["enabled"] = False
         _expect_error(study.folder, raw, "rating.enabled")
         (study.folder / "design.json").write_text("{not json")
-        with pytest.raises(ConfigError, match="design.json: is not valid JSON"):
+        with pytest.raises(ConfigError, match="design.json: not valid JSON"):
             load_design(study.folder)
         (study.folder / "design.json").write_text("[]")
         with pytest.raises(ConfigError, match="must be an object"):

@@ -84,8 +84,10 @@ def test_a_returning_prolific_participant_resumes_and_failed_rows_are_given_agai
     store = open_store(store_url, tmp_path)
     first, new = store.start(3, prolific_pid="P1", study_id="S", session_id="A")
     assert new and first.row == 1
-    again, new = store.start(3, prolific_pid="P1", study_id="S", session_id="B")
+    again, new = store.start(3, prolific_pid="P1", study_id="S", session_id="A")
     assert not new and again.token == first.token
+    # the id alone, from another session, takes nothing over
+    assert store.start(3, prolific_pid="P1", study_id="S", session_id="B") == (None, False)
     second = store.start(3, prolific_pid="P2")[0]
     assert second.row == 2
     # P2 fails two checks (max 1): its row is free again for the next participant

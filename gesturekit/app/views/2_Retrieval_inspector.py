@@ -8,6 +8,7 @@ import streamlit as st
 
 from gesturekit import interactive as gs
 from gesturekit.app import characters, display, nav, sidebar, state
+from gesturekit.character import look
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.audio import wav_bytes
 from gesturekit.motion import AUDIO_SR
@@ -115,9 +116,12 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
             )
         motions = [gs.candidate_motion(db, int(s.clip[step]), int(s.start[step]), b - a)]
         labels = ["chosen" + (" (pinned)" if s.pinned[step] else f" #{int(s.position[step])}")]
+        # one meaning per colour on every page: the chosen one gold, the candidate of rank r as k = r elsewhere
+        schemes = [look.role_scheme("chosen")]
         for r in others.head(shown).itertuples():
             motions.append(gs.candidate_motion(db, r.clip, r.start, b - a))
             labels.append(f"#{r.position}")
+            schemes.append(look.rank_scheme(int(r.position)))
         # the step's input speech is the clock: it is what every candidate was matched against
         display.show_skeletons(
             motions,
@@ -126,6 +130,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
             key="inspect.views",
             audio=gs.step_speech(result, step),
             character=characters.current_character(),
+            schemes=schemes,
         )
 
     st.markdown("**Listen and choose**")
@@ -233,6 +238,7 @@ def compare_view(db: MatchingDatabase, record: dict) -> None:
         key="inspect.compare_views",
         audio=result.audio,
         character=characters.current_character(),
+        schemes=[look.rank_scheme(k) for k in done["ks"]],
     )
     table = gs.comparison_table(done["results"], db.thresholds)
     table["control_met"] = (100 * table["control_met"]).round()  # whole percent, one format for every row
