@@ -29,7 +29,7 @@ from .exact import TINY, compiled, pose_err_factor
 
 __all__ = ["ReducedPose", "QueryCodes", "reduce_pose", "quantise_query", "clip_bounds", "QUERY_LEVELS"]
 
-#: Largest magnitude of a query code: ``127 * 32767 * D`` stays below 2**31 for D up to 516.
+#: Largest magnitude of a query code (fewer for D above 516, so that ``127 * levels * D < 2**31``).
 QUERY_LEVELS = 32767
 
 
@@ -113,11 +113,12 @@ def reduce_pose(P3: np.ndarray, workers: int = 1) -> ReducedPose:
 def quantise_query(q: np.ndarray) -> QueryCodes:
     """Round a query pose ``q`` (D,) float32 to 16-bit codes with one float32 scale."""
     q64 = np.asarray(q, np.float64)
+    levels = max(1, min(QUERY_LEVELS, (2**31 - 1) // (127 * max(1, q64.size))))  # the integer product cannot overflow
     top = float(np.abs(q64).max()) if q64.size else 0.0
-    scale = float(np.float32(top / QUERY_LEVELS))
+    scale = float(np.float32(top / levels))
     if not scale > 0.0:  # an all-zero query (or one that underflows): nothing is rounded
         scale = 1.0
-    codes = np.clip(np.rint(q64 / scale), -QUERY_LEVELS, QUERY_LEVELS).astype(np.int16)
+    codes = np.clip(np.rint(q64 / scale), -levels, levels).astype(np.int16)
     kept = scale * codes.astype(np.float64)  # exact: 24-bit scale times 16-bit code
     # float64 norms carry relative errors near 1e-16: the bound's float32 terms cover them
     lost = float(np.sqrt(np.sum((q64 - kept) ** 2)))
