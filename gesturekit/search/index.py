@@ -9,15 +9,16 @@ material, with the authors' choices and ours, see ``docs/METHOD.md`` and
 configuration) with one scan of the database per step.
 
 Exactness. The result equals :func:`gesturekit.search.reference.search_reference`
-decision for decision. Each step scans the database once in float32
-(``||p||^2 - 2 p.q``: for one query, a few clips at a time, BLAS's matrix-vector
-product where most starts are admissible and a compiled pass over the admissible
-rows alone where few are; for several queries a matrix product), keeps per clip the starts whose
-float32 value lies within a proven error bound of the clip's minimum, and
-decides among those with the exact float64 definitions of
-:mod:`gesturekit.search.reference`. The same bound-and-re-check is applied to
-the ordering of clips by pose and by audio distance, so ties and near-ties are
-always settled by the exact values.
+decision for decision. Each step scans the database once. One query's scan reads an
+8-bit copy of the pose features (:mod:`gesturekit.search.reduced`, a few clips at a
+time), whose estimates lie within a proven bound per clip; where that bound leaves a
+clip's nearest start open, the starts that could be nearest are estimated again in
+float32 (``||p||^2 - 2 p.q``), and the nearest start of every clip is. Several
+queries' scan is a float32 matrix product. Per clip the starts whose float32 value
+lies within a proven error bound of the clip's minimum are decided among with the
+exact float64 definitions of :mod:`gesturekit.search.reference`. The same
+bound-and-re-check is applied to the ordering of clips by pose and by audio
+distance, so ties and near-ties are always settled by the exact values.
 
 Error bound (pose). For a row ``p`` and the query ``q`` (both float32, D = 96
 values), the float32 estimate ``A = fl(np32 + fl(-2 q.p))`` with ``np32`` the
@@ -107,8 +108,10 @@ class SearchIndex:
 
     Notes
     -----
-    Extra memory: ``12 M T`` bytes of per-frame norms; per search, a few arrays
-    of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
+    Extra memory: ``12 M T`` bytes of per-frame norms; from the first single query on,
+    the 8-bit copy of the pose features (:meth:`reduced`, ``(D + 8) M T`` bytes and
+    ``4 (D + 8) M`` per clip); per search, a few arrays of ``4 M T`` bytes per control
+    mask in use and a scan buffer of at most 16 MB.
     """
 
     def __init__(self, P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> None:

@@ -138,6 +138,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.search.index",
             "gesturekit.search.kernels",
             "gesturekit.search.plan",
+            "gesturekit.search.reduced",
             "gesturekit.search.reference",
             "gesturekit.search.stream",
             "gesturekit.search.threads",
