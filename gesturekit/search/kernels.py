@@ -155,9 +155,7 @@ def threshold(best: float, err: float) -> np.float32:
 
 
 @kernel()
-def reduce_clips(
-    poses: np.ndarray, out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-) -> None:
+def reduce_clips(poses: np.ndarray, out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> None:
     """The reduced copy of ``poses`` (nc, T, D) float32 (see :mod:`gesturekit.search.reduced`).
 
     ``out`` is ``(codes, coef, kappa, centre, stats)``: (nc, T, D) int8, (nc, T) float32 twice,

@@ -164,7 +164,11 @@ def straddling_problems(draw):
         m, s = rng.integers(0, M), rng.integers(0, T)
         init = tuple((P[m, s] + draw(st.sampled_from([0.0, 1e-5, 1e-2])) * rng.standard_normal(D)).tolist())
     kw["config"] = SearchConfig(
-        k=draw(st.integers(0, M)), segment=N, record=draw(st.integers(1, M + 1)), seed=draw(st.integers(0, 5)), init_pose=init
+        k=draw(st.integers(0, M)),
+        segment=N,
+        record=draw(st.integers(1, M + 1)),
+        seed=draw(st.integers(0, 5)),
+        init_pose=init,
     )
     return P, F, valid, query, kw
 
