@@ -88,13 +88,14 @@ def reduce_many(
             undecided[c, j] = np.isfinite(best[j]) and (count[j] > 1 or np.float64(best[j]) + q_sqnorm[j] <= err)
 
 
-# float32 products in any order (reassociation, FMA, SIMD lanes): the pose error bound allows it
+# float32 products in any order (reassociation, FMA, SIMD lanes): the error bounds allow it
 @kernel(fastmath={"reassoc", "contract"})
-def dot32(row: np.ndarray, query: np.ndarray) -> float:
-    """``row . query`` in float32, summed in any order (the pose error bound allows it)."""
+def dot32_at(poses: np.ndarray, c: int, s: int, query: np.ndarray) -> float:
+    """``poses[c, s] . query`` in float32, summed in any order, without making a view of the row
+    (a view in a loop costs reference counting)."""
     acc = np.float32(0.0)
-    for j in range(row.shape[0]):
-        acc += row[j] * query[j]
+    for j in range(query.shape[0]):
+        acc += poses[c, s, j] * query[j]
     return acc
 
 
@@ -108,7 +109,7 @@ def audio_estimate(
     d = audio_sqnorms[clip, start] * query_sqnorm
     if d == 0.0:
         return 1.0, False
-    return 1.0 - np.float64(dot32(audio[clip, start], query_audio)) / np.sqrt(d), True
+    return 1.0 - np.float64(dot32_at(audio, clip, start, query_audio)) / np.sqrt(d), True
 
 
 @kernel()
@@ -344,7 +345,7 @@ def scan_reduced(
         t32 = threshold(best, err)
         for s in range(T):
             if est[c, s] < inf and (zero or est[c, s] <= t32):
-                est[c, s] = bias[c, s] + np.float32(-2.0) * dot32(poses[c, s], query_pose)
+                est[c, s] = bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query_pose)
             else:
                 est[c, s] = inf
         err32 = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
@@ -361,7 +362,7 @@ def scan_reduced(
         if best_d2[c] < np.inf:
             s = best_start[c]
             if not undecided[c]:
-                est[c, s] = bias[c, s] + np.float32(-2.0) * dot32(poses[c, s], query_pose)
+                est[c, s] = bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query_pose)
                 best_d2[c] = np.float64(est[c, s]) + q_sqnorm
                 best_err[c] = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
             audio_est[c], audio_inexact[c] = audio_estimate(features, sqnorms, c, s, query_audio, query_audio_sqnorm)

@@ -204,7 +204,7 @@ def test_a_planted_lock_link_is_never_followed(tmp_path):
 def test_the_search_kernels_use_the_safe_cache(monkeypatch):
     from gesturekit.search import kernels
 
-    for name in ("scan_reduced", "reduce_clips", "survivors", "rank_top", "dot32", "reduce_many", "admissible_ends"):
+    for name in ("scan_reduced", "reduce_clips", "survivors", "rank_top", "dot32_at", "reduce_many", "admissible_ends"):
         cache = getattr(kernels, name)._cache
         assert isinstance(cache, compile_cache._LockedCache), name
         assert Path(cache.cache_path) == compile_cache.cache_folder(kernels.__file__)
