@@ -46,9 +46,9 @@ import numpy as np
 from ..errors import ConfigError, warn
 from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
-from .exact import TINY, audio_err, compiled, pose_err_factor, reduce_chunk
+from .exact import TINY, audio_err, compiled, initial_order, pose_err_factor, reduce_chunk
 from .plan import SearchPlan, stack_plans
-from .reduced import ReducedPose, quantise_query, reduce_pose
+from .reduced import ReducedPose, compiled_reduced, quantise_query, reduce_pose
 from .threads import matrix_product, single_threaded_blas, worker_count
 from .types import CANDIDATE_FIELDS, SearchConfig, SearchResult, describe_steps
 
@@ -70,27 +70,6 @@ _SUB_CLIPS = 1024
 #: throughout (or many clips repeat others); otherwise prefixes 8 times longer, up to the
 #: whole orders (same result).
 _PREFIX = 1024
-
-
-def _initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
-    """The order the rank groups of :meth:`SearchIndex._decide` start from.
-
-    Returns ``(order, L)``: the survivors with the ``L = min(prefix, n)`` smallest
-    estimates first, sorted, the others after them in any order. Any order near the
-    sorted one will do: the groups of near-equal estimates (equal exact values
-    included) are proven whatever the order inside them (``prefix_groups`` of :mod:`~gesturekit.search.kernels`),
-    and those that matter are re-sorted with exact values. Sorting float32 copies of
-    the estimates is then enough (they misplace only values closer than float32
-    rounding), and numpy sorts and partitions float32 keys faster than float64 ones.
-    """
-    n = v.size
-    key = v.astype(np.float32)
-    if prefix >= n:
-        return np.argsort(key), n
-    order = np.argpartition(key, prefix - 1)
-    head = order[:prefix]
-    order[:prefix] = head[np.argsort(key[head])]
-    return order, prefix
 
 
 class SearchIndex:
@@ -187,7 +166,7 @@ class SearchIndex:
 
         One query's scan reads the reduced copy (:meth:`reduced`) of the admissible starts
         and, where its bound leaves a clip's nearest start open, the float32 features of
-        the few starts that could be nearest (:func:`~gesturekit.search.kernels.scan_reduced`);
+        the few starts that could be nearest (:func:`~gesturekit.search.reduced_kernels.scan_reduced`);
         several queries' scan is a float32 matrix product of the starts any of them may use.
 
         Returns
@@ -263,7 +242,7 @@ class SearchIndex:
                 for a in range(0, nc, _SUB_CLIPS):
                     z = min(nc, a + _SUB_CLIPS)
                     x0, x1 = c0 + a, c0 + z
-                    compiled().scan_reduced(
+                    compiled_reduced().scan_reduced(
                         G2[a:z],
                         bias2[a:z],
                         (red.codes[x0:x1], red.coef[x0:x1], red.kappa[x0:x1], red.centre[x0:x1], red.stats[x0:x1]),
@@ -404,8 +383,8 @@ class SearchIndex:
         out_f = np.empty((2, min(width, n)))
         prefix = _PREFIX
         while True:  # sorted prefixes first; whole orders when they cannot decide
-            pose_order, n_pose_sorted = _initial_order(estimates[0], prefix)
-            audio_order, n_audio_sorted = _initial_order(estimates[2], prefix)
+            pose_order, n_pose_sorted = initial_order(estimates[0], prefix)
+            audio_order, n_audio_sorted = initial_order(estimates[2], prefix)
             if (
                 k.rank_top(
                     estimates,

@@ -20,14 +20,24 @@ and ``i . i_q`` is an exact integer, so the estimate
 
 from __future__ import annotations
 
+import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 
-from .exact import TINY, compiled, pose_err_factor
+from .exact import TINY, pose_err_factor
 
-__all__ = ["ReducedPose", "QueryCodes", "reduce_pose", "quantise_query", "clip_bounds", "QUERY_LEVELS"]
+__all__ = [
+    "ReducedPose",
+    "QueryCodes",
+    "reduce_pose",
+    "quantise_query",
+    "clip_bounds",
+    "compiled_reduced",
+    "QUERY_LEVELS",
+]
 
 #: Largest magnitude of a query code (fewer for D above 516, so that ``127 * levels * D < 2**31``).
 QUERY_LEVELS = 32767
@@ -84,6 +94,14 @@ class QueryCodes:
     norm: float
 
 
+@functools.cache
+def compiled_reduced() -> ModuleType:
+    """The compiled loops of the reduced scan (:mod:`gesturekit.search.reduced_kernels`), imported on first use."""
+    from . import reduced_kernels  # numba is heavy: imported when a search first runs
+
+    return reduced_kernels
+
+
 def reduce_pose(P3: np.ndarray, workers: int = 1) -> ReducedPose:
     """The reduced copy of the pose features ``P3`` (M, T, D) float32, made by ``workers`` threads."""
     M, T, D = P3.shape
@@ -94,7 +112,7 @@ def reduce_pose(P3: np.ndarray, workers: int = 1) -> ReducedPose:
         centre=np.empty((M, D), np.float32),
         stats=np.empty((M, 4)),
     )
-    kernel = compiled().reduce_clips
+    kernel = compiled_reduced().reduce_clips
     cuts = np.linspace(0, M, max(1, min(workers, M)) + 1).astype(int)
 
     def part(ab: tuple[int, int]) -> None:
@@ -130,7 +148,7 @@ def clip_bounds(stats: np.ndarray, centred_sqnorm: np.ndarray, query: QueryCodes
     """The error bound of each clip's reduced estimates for one query (vectorised form).
 
     ``stats`` (M, 4) as in :class:`ReducedPose`, ``centred_sqnorm`` (M,) ``|q - c_m|^2``.
-    The compiled scan computes the same bound clip by clip (:func:`~gesturekit.search.kernels.reduced_bound`).
+    The compiled scan computes the same bound clip by clip (:func:`~gesturekit.search.reduced_kernels.reduced_bound`).
 
     Returns
     -------

@@ -139,6 +139,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.search.kernels",
             "gesturekit.search.plan",
             "gesturekit.search.reduced",
+            "gesturekit.search.reduced_kernels",
             "gesturekit.search.reference",
             "gesturekit.search.stream",
             "gesturekit.search.threads",

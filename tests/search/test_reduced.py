@@ -10,8 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gesturekit.search import SearchConfig, SearchIndex, exact_pose_sqdist
-from gesturekit.search.exact import TINY, compiled, pose_err_factor
-from gesturekit.search.reduced import clip_bounds, quantise_query, reduce_pose
+from gesturekit.search.exact import TINY, pose_err_factor
+from gesturekit.search.reduced import clip_bounds, compiled_reduced, quantise_query, reduce_pose
 from tests.search.test_search import assert_same, run_both
 
 ROW_KINDS = ["normal", "offset", "grid", "edges", "constant", "tiny", "huge", "spike", "zero"]
@@ -76,7 +76,7 @@ def _estimates(P: np.ndarray, q: np.ndarray):
     M, T, D = P.shape
     red = reduce_pose(P)
     codes = quantise_query(q)
-    k = compiled()
+    k = compiled_reduced()
     arrays = (red.codes, red.coef, red.kappa, red.centre, red.stats)
     qs = np.float32(codes.scale)
     est = np.empty((M, T))

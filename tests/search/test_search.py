@@ -234,11 +234,12 @@ def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k
     assert_same(*_with_prefix(prefix, lambda: run_both(P, F, valid, query, config=cfg)))
 
 
-def _spy_kernel(monkeypatch, name, note):
-    """Make the search call ``note(args, out)`` after each call of its compiled kernel ``name``."""
+def _spy_kernel(monkeypatch, name, note, loader="compiled"):
+    """Make the search call ``note(args, out)`` after each call of its compiled kernel ``name``
+    (of the module that ``loader``, a loader the search module imports, gives)."""
     import gesturekit.search.index as search_module
 
-    kernels = search_module.compiled()
+    kernels = getattr(search_module, loader)()
 
     class Recording:
         def __getattr__(self, attr):
@@ -252,7 +253,7 @@ def _spy_kernel(monkeypatch, name, note):
 
             return spied
 
-    monkeypatch.setattr(search_module, "compiled", lambda: Recording())
+    monkeypatch.setattr(search_module, loader, lambda: Recording())
 
 
 def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
@@ -320,7 +321,12 @@ def test_the_scan_gives_the_reference_result_whatever_clips_it_takes_at_a_time(p
 
 def test_the_reduced_scan_reads_only_admissible_rows_where_few_starts_are_admissible(monkeypatch):
     seen = []
-    _spy_kernel(monkeypatch, "scan_reduced", lambda args, out: seen.append(np.isfinite(args[1]).sum(axis=1)))
+    _spy_kernel(
+        monkeypatch,
+        "scan_reduced",
+        lambda args, out: seen.append(np.isfinite(args[1]).sum(axis=1)),
+        loader="compiled_reduced",
+    )
     rng = np.random.default_rng(3)
     M, T, D, A = 16, 20, 96, 112
     P = rng.standard_normal((M, T, D)).astype(np.float32)
