@@ -15,12 +15,14 @@ from pathlib import Path
 
 import httpx
 
+from tests.waits import patience, wait_until
+
 ROOT = Path(__file__).resolve().parents[1]
 
 _LAUNCH = """
 import importlib, sys, uvicorn
 sys.path.insert(0, sys.argv[5])
-from gesturekit.studies.server import create_app
+from gesturekit.study.server import create_app
 api = None if sys.argv[3] == "-" else importlib.import_module(sys.argv[3])
 app = create_app(sys.argv[1], db=None if sys.argv[2] == "-" else sys.argv[2], api=api)
 uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[4]), log_level="warning", server_header=False)
@@ -40,17 +42,23 @@ def start_server(folder: Path, db: str | None, api: str | None = "tests._study_s
     args = [sys.executable, "-c", _LAUNCH, str(folder), db or "-", api or "-", str(port), str(ROOT)]
     proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     base = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(f"the study server exited: {proc.stderr.read().decode()[-2000:]}")
+
+    def answers() -> bool:
         try:
-            httpx.get(base + "/researcher", timeout=1)
-            return proc, base
+            httpx.get(base + "/researcher", timeout=patience(10))
         except httpx.TransportError:
-            time.sleep(0.1)
-    proc.kill()
-    raise RuntimeError("the study server did not start in 30 s")
+            return False
+        return True
+
+    def exited() -> str | None:
+        return None if proc.poll() is None else f"it exited: {proc.stderr.read().decode()[-2000:]}"
+
+    try:
+        wait_until(answers, what="the study server answers", timeout_s=120, interval_s=0.1, give_up=exited)
+    except AssertionError as e:
+        proc.kill()
+        raise RuntimeError(str(e)) from None
+    return proc, base
 
 
 def kill9(proc: subprocess.Popen) -> None:

@@ -4,23 +4,23 @@ downloads."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.character.glb import read_glb
 from gesturekit.character.user import read_character_upload
 from gesturekit.skeleton import JOINT_NAMES
 from tests.app.test_app_synthesize import speech_file
 from tests.character_rigs import CASES, custom_map, rig_files, truth
 from tests.conftest import shown, viewer
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
-TIMEOUT = 240  # a busy machine: a run here synthesizes, renders an MP4 and writes two files
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 FILE, MAP = "_gk.character_file.0", "_gk.character_map.0"
 
 
@@ -128,6 +128,11 @@ def test_a_rig_missing_a_bone_is_named(app_env):
     said = errors(at)
     assert len(said) == 1 and "left_elbow" in said[0] and "bone map" in said[0]
     assert "gk.character" not in at.session_state
+    # the bones it has, as a tree with their rest positions, to write the map from
+    (tree,) = [c.value for c in at.code]
+    assert tree.splitlines()[0].startswith("mixamorig:Hips (0.00, 0.98, 0.00)")
+    assert "  mixamorig:Spine (" in tree and f"{truth(CASES['missing_elbow']).bone_names[-1]} (" in tree
+    assert any("rest positions" in c for c in captions(at))
 
 
 def test_a_bvh_character_and_a_bone_map(app_env):
@@ -156,7 +161,7 @@ def test_a_file_no_reader_foresaw_is_a_message_with_a_reference(app_env, monkeyp
     def unforeseen(name, data, *, bone_map=None):
         raise IndexError("deep inside a reader")
 
-    monkeypatch.setattr(sys.modules["characters"], "read_character_upload", unforeseen)
+    monkeypatch.setattr(sys.modules["gesturekit.app.characters"], "read_character_upload", unforeseen)
     name, data = rig("mixamo_t")
     at = upload_character(at, "odd.glb", data)
     (said,) = errors(at)

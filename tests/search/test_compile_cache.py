@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from gesturekit.search import compile_cache
+from tests.waits import patience
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -115,7 +116,7 @@ def _together(script: str, args: list[list[str]], env: dict, *, delay_s: float, 
 
 def _run_at_once(tmp_path: Path, groups: list[list], env: dict) -> list[list[float]]:
     """Start one process per group of specialisations, all compiling at the same moment; their results."""
-    return _together(CHILD, [[str(tmp_path), json.dumps(g)] for g in groups], env, delay_s=2.0, timeout_s=300)
+    return _together(CHILD, [[str(tmp_path), json.dumps(g)] for g in groups], env, delay_s=2.0, timeout_s=patience(300))
 
 
 @pytest.fixture
@@ -223,7 +224,7 @@ SEARCHER = """
 import hashlib, json, sys, time
 import numpy as np
 from gesturekit.database import MatchingDatabase
-from gesturekit.synthesize import SynthesisConfig, synthesize, synthesize_batch
+from gesturekit.synthesis import SynthesisConfig, synthesize, synthesize_batch
 folder, kinds, go = sys.argv[1], json.loads(sys.argv[2]), float(sys.argv[3])
 rng = np.random.default_rng(7)
 speech = [rng.normal(0, 0.1, 16000 * 4).astype(np.float32) for _ in range(2)]

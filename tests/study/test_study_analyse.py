@@ -1,4 +1,4 @@
-"""The study's analysis (gesturekit.studies.analyse, .report) on simulated participants with a known truth.
+"""The study's analysis (gesturekit.study.analyse, .report) on simulated participants with a known truth.
 
 - The true order of the systems is recovered from ratings (means, Wilcoxon-Holm) and from pairwise
   answers (Bradley-Terry); with no true difference, the family-wise false-positive rate of the Holm
@@ -25,9 +25,10 @@ from hypothesis import strategies as st
 from scipy import stats
 
 from gesturekit.errors import ConfigError, OutputError
-from gesturekit.studies import analyse as A
-from gesturekit.studies.report import REPORT_FILES, analyse, write_report
-from gesturekit.studies.simulate import simulate_study
+from gesturekit.study import analyse as A
+from gesturekit.study import bradley_terry as BT
+from gesturekit.study.report import REPORT_FILES, analyse, write_report
+from gesturekit.study.simulate import simulate_study
 from tests.study_helpers import tiny_study  # noqa: F401 (a fixture)
 
 choix = pytest.importorskip("choix")
@@ -100,7 +101,7 @@ def test_bradley_terry_fit_equals_choix(k):
     wins = rng.integers(0, 9, size=(5, k, k)).astype(float) * 2
     fast = A.bt_fit(wins, prior=1.0, tol=1e-13)
     for b in range(wins.shape[0]):
-        np.testing.assert_allclose(fast[b], A._bt_choix(choix, wins[b], 1.0), atol=1e-7)
+        np.testing.assert_allclose(fast[b], BT._bt_choix(choix, wins[b], 1.0), atol=1e-7)
         assert fast[b].mean() == pytest.approx(0, abs=1e-12)
 
 
@@ -274,9 +275,9 @@ def _answer(page, key: dict, person: int, careless: bool) -> dict:
 @pytest.mark.slow
 def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_study, tmp_path, capsys):  # noqa: F811
     from gesturekit.cli import main
-    from gesturekit.studies.analyse import _manifest
-    from gesturekit.studies.design import check_answer, init_study, participant_pages
-    from gesturekit.studies.store import open_store
+    from gesturekit.study.analyse import _manifest
+    from gesturekit.study.design import check_answer, init_study, participant_pages
+    from gesturekit.study.store import open_store
 
     folder = tmp_path / "study"
     shutil.copytree(tiny_study, folder)
@@ -322,7 +323,9 @@ def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_st
 
     assert main(["study", "analyse", str(folder), "--rounds", "200"]) == 0
     printed = capsys.readouterr().out
-    assert "7 participants, 1 excluded by the checks, 6 analysed" in printed
+    assert (
+        "7 started, 0 answered nothing, 1 excluded by the checks, 0 with no rating or pairwise answer, 6 analysed"
+    ) in printed
     out = folder / "analysis"
     report = (out / "report.md").read_text()
     assert all(s in report for s in QUALITY)
@@ -337,7 +340,7 @@ def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_st
     assert "--force" in capsys.readouterr().err
     assert (out / "report.md").read_text() == report
     # the same responses as a CSV (as study import-hemvip writes them) give the same analysis
-    from gesturekit.studies.hemvip import write_responses_csv
+    from gesturekit.study.hemvip import write_responses_csv
 
     write_responses_csv(frames[0], tmp_path / "responses.csv")
     again = tmp_path / "again"
