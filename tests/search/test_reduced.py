@@ -180,6 +180,7 @@ def test_near_ties_across_the_bound_give_the_reference_result(problem):
     assert_same(*run_both(P, F, valid, query, **kw))
 
 
+@pytest.mark.slow  # loads the batch's kernels: about a second on 2 cores
 def test_a_batch_does_not_make_the_reduced_copy():
     # several queries' scan is a float32 matrix product: the copy's memory is spent only for single queries
     rng = np.random.default_rng(2)
