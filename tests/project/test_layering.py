@@ -142,6 +142,8 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.search.index",
             "gesturekit.search.kernels",
             "gesturekit.search.plan",
+            "gesturekit.search.reduced",
+            "gesturekit.search.reduced_kernels",
             "gesturekit.search.reference",
             "gesturekit.search.stream",
             "gesturekit.search.threads",

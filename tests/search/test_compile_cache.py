@@ -203,12 +203,16 @@ def test_a_planted_lock_link_is_never_followed(tmp_path):
 
 
 def test_the_search_kernels_use_the_safe_cache(monkeypatch):
-    from gesturekit.search import kernels
+    from gesturekit.search import kernels, reduced_kernels
 
-    for name in ("scan_one", "survivors", "rank_top", "dot32", "reduce_many", "admissible_ends"):
-        cache = getattr(kernels, name)._cache
-        assert isinstance(cache, compile_cache._LockedCache), name
-        assert Path(cache.cache_path) == compile_cache.cache_folder(kernels.__file__)
+    for module, names in (
+        (kernels, ("survivors", "rank_top", "dot32_at", "reduce_many", "admissible_ends")),
+        (reduced_kernels, ("scan_reduced", "reduce_clips", "reduced_estimate")),
+    ):
+        for name in names:
+            cache = getattr(module, name)._cache
+            assert isinstance(cache, compile_cache._LockedCache), name
+            assert Path(cache.cache_path) == compile_cache.cache_folder(module.__file__)
 
 
 def test_kernel_refuses_a_cache_option():
