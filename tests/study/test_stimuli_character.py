@@ -15,10 +15,10 @@ from gesturekit.cli import main
 from gesturekit.demo import open_default_database
 from gesturekit.errors import ConfigError, InputFileError
 from gesturekit.evaluate.run import held_out
-from gesturekit.study.stimuli import make_stimuli
+from gesturekit.study.stimuli import make_stimuli, stimulus_style
 from gesturekit.viz.character_render import CharacterStage
 from tests.character_rigs import CASES, custom_map, write_rig
-from tests.viz.test_video_character import drawn, iou
+from tests.viz.test_video_character import drawn, iou, stage_alone
 from tests.viz.test_video_character_user import reference_vertices, silhouette
 
 HOLDOUT = "demo0_000:10-11.2"
@@ -61,10 +61,12 @@ def test_stimuli_command_renders_every_stimulus_on_the_character_and_records_its
     stage = CharacterStage([gt], view_box=study["view_box"], character=ch)
     video = frames_of(out / manifest.loc[manifest["system"] == "gt", "file"].item())
     assert len(video) == gt.n_frames
+    # the stage the stimuli stand on, without the character: as make_stimuli frames them
+    alone = stage_alone([gt], (160, 120), style=stimulus_style(study["view_box"]), character=ch)
     for frame in (0, 11):
         expected = silhouette(reference_vertices(ch, ch.skin, gt, frame), ch.skin.faces, stage.camera(4 / 3))
         assert expected.sum() > 300
-        assert iou(drawn(video[frame].astype(np.uint8), tolerance=40), expected) >= 0.88
+        assert iou(drawn(video[frame].astype(np.uint8), alone, tolerance=40), expected) >= 0.88
     # both stimuli show the character in its own colours, framed alike
     other = frames_of(out / manifest.loc[manifest["system"] == "knn", "file"].item())
     for image in (video[5], other[5]):
@@ -88,7 +90,9 @@ def test_a_bvh_skeleton_in_stimuli_is_drawn_in_the_neutral_grey(tmp_path):
     assert res.settings["character"]["sha256"] == hashlib.sha256(rig.read_bytes()).hexdigest()
     assert res.settings["character"]["file"] == "skeleton.bvh"
     image = frames_of(res.videos[0])[3]
-    body = drawn(image.astype(np.uint8), tolerance=40)
+    gt = held_out(open_default_database(), HOLDOUT).motion
+    alone = stage_alone([gt], SIZE, style=stimulus_style(res.settings.get("view_box")), character=read_character(rig))
+    body = drawn(image.astype(np.uint8), alone, tolerance=40)
     assert body.sum() > 200
     assert hue(image).sum() == 0  # tubes in the neutral scheme: no colour tells anything apart
 

@@ -51,9 +51,11 @@ def without_thumbs() -> JointPresence:
     return JointPresence.from_names(recorded=[n for n in JOINT_NAMES if n not in THUMBS])
 
 
-def stage_alone(motions: list[Motion], size: tuple[int, int], style: RenderStyle | None = None) -> np.ndarray:
-    """The picture of the stage the motions stand on, without them."""
-    with SkeletonScene(motions, resolution=size, style=style) as scene:
+def stage_alone(
+    motions: list[Motion], size: tuple[int, int], style: RenderStyle | None = None, character=None
+) -> np.ndarray:
+    """The picture of the stage the motions stand on, without them (on a user's ``character`` where given)."""
+    with SkeletonScene(motions, resolution=size, style=style, character=character) as scene:
         return scene.stage_image()
 
 

@@ -20,7 +20,6 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from PIL import Image, ImageDraw
 
-from gesturekit.character.look import camera_for
 from gesturekit.character.mesh import build_mesh
 from gesturekit.character.retarget import retarget
 from gesturekit.character.rig import rig_for, solve_pose
@@ -36,7 +35,7 @@ from gesturekit.viz.character_user import character_arrays, character_from_array
 from gesturekit.viz.render import RenderStyle, SkeletonScene, render_image, view_bounds
 from gesturekit.viz.render_pool import render_frames
 from tests.character_rigs import CASES, write_rig
-from tests.viz.test_video_character import FPS, _demo, drawn, iou, pinhole
+from tests.viz.test_video_character import FPS, _demo, drawn, iou, pinhole, stage_alone
 
 SIZE = (160, 120)
 
@@ -133,13 +132,15 @@ def test_the_frame_is_the_retargeted_skin_seen_through_the_shared_camera(name):
     ch, m = character(name), motion(0, 4)
     with SkeletonScene([m], resolution=SIZE, character=ch) as scene:
         image = scene.render_frame(3)
+        alone = scene.stage_image()
     stage = CharacterStage([m], character=ch)
     skin = stage.users[0].skin
     expected = silhouette(
-        reference_vertices(ch, skin, m, 3) + [stage.offsets[0], 0, 0], skin.faces, camera_for(*stage.box, 4 / 3)
+        reference_vertices(ch, skin, m, 3) + [stage.offsets[0], 0, 0], skin.faces, stage.camera(4 / 3)
     )
     assert expected.sum() > 800
-    assert iou(drawn(image), expected) >= 0.95
+    # about 2000 pixels of thin limbs in the upper-body framing: a pixel along each edge is about 5 % of IoU
+    assert iou(drawn(image, alone), expected) >= 0.93
 
 
 def test_a_bvh_skeleton_is_drawn_as_tubes_along_its_bones():
@@ -154,7 +155,7 @@ def test_a_bvh_skeleton_is_drawn_as_tubes_along_its_bones():
     ends = r.position[1][bones], r.position[1][ch.parents[bones]]
     long = np.linalg.norm(ends[0] - ends[1], axis=1) > 0.05
     mid = pinhole(((ends[0] + ends[1]) / 2)[long] + [stage.offsets[0], 0, 0], camera, (320, 240))
-    body = drawn(image)
+    body = drawn(image, stage_alone([m], (320, 240), character=ch))
     # the middle of every framed bone is on the picture and drawn
     assert len(mid) > 10
     for col, row in np.rint(mid).astype(int):
@@ -212,7 +213,7 @@ def test_side_by_side_motions_on_one_character_and_a_fixed_box_from_its_pelvis()
     ch = character("vrm0_a")
     a, b = motion(0, 2), motion(20, 2)
     image = render_image(a, side_by_side=b, labels=("k-NN", "refined"), resolution=(320, 240), character=ch)
-    cols = np.nonzero(drawn(image))[1]
+    cols = np.nonzero(drawn(image, stage_alone([a, b], (320, 240), character=ch)))[1]
     assert (cols < 160).sum() > 500 and (cols >= 160).sum() > 500
     stage = CharacterStage([a, b], character=ch)
     assert stage.offsets[0] < 0 < stage.offsets[1]
@@ -252,7 +253,9 @@ def test_the_mp4_frame_at_a_known_time_is_the_retargeted_skin(tmp_path):
     expected = silhouette(
         reference_vertices(ch, ch.skin, m, 3) + [stage.offsets[0], 0, 0], ch.skin.faces, stage.camera(4 / 3)
     )
-    assert iou(drawn(frames[3], tolerance=40), expected) >= 0.9  # coding noise blurs edges and flat areas
+    assert (
+        iou(drawn(frames[3], stage_alone([m], SIZE, character=ch), tolerance=40), expected) >= 0.9
+    )  # coding noise blurs edges and flat areas
 
 
 def test_a_character_is_refused_where_it_cannot_be_drawn(tmp_path):
