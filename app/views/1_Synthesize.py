@@ -37,7 +37,12 @@ _VIDEO = "_synth.video"  # {"run": n, "bytes": mp4, "note": how long it took, "c
 
 UPLOAD, EXAMPLE = "Upload a file", "Example speech"
 _INIT_LABELS = {"random": "random database frame (paper)", "rest": "rest pose"}
-_BLEND_LABELS = {"none": "none (paper)", "offset": "offset fade at joins"}
+_BLEND_LABELS = {
+    "dead": "dead blending (ours, default)",
+    "inertialize": "inertialization (ours)",
+    "offset": "offset fade at joins (ours)",
+    "none": "none: hard joins (paper)",
+}
 _MASK_LABELS = {"ends": "first and last frame of a window (paper)", "all": "every frame of a window"}
 
 
