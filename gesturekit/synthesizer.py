@@ -376,8 +376,8 @@ class Synthesizer:
         audio_features : np.ndarray, shape (T, 28), float32
             The speech's cGAN audio features over the same frames (:attr:`QueryFeatures.audio`).
         keep_hz : float
-            Hz; the k-NN motion's content slower than this is kept (:func:`gesturekit.blend.keep_slow`),
-            0: the refiner's output as it is.
+            Hz; the k-NN motion's content slower than this is kept (:func:`gesturekit.blend.keep_slow`)
+            and so are its bones (:meth:`keep_bones`); 0: the refiner's output as it is.
 
         Returns
         -------
@@ -387,10 +387,13 @@ class Synthesizer:
         if self._refiner is None:
             raise ConfigError("this Synthesizer has no refiner (give one: Synthesizer(db, refiner=...))")
         refined = self._refiner.refine_motion(knn, audio_features)
-        if keep_hz > 0:
-            kept = keep_slow(refined.flat(), knn.flat(), keep_hz, fps=knn.fps)
-            refined = Motion.from_flat(kept, refined.fps, knn.joints)
-        return refined
+        if keep_hz <= 0:
+            return refined  # the paper: the generator's output as it is
+        kept = keep_slow(refined.flat(), knn.flat(), keep_hz, fps=knn.fps)
+        refined = Motion.from_flat(kept, refined.fps, knn.joints)
+        # the generator's positions stretch the bones (by centimetres at the fingers): the k-NN
+        # motion's bones again, so that a BVH or glTF file holds the refined motion
+        return self.keep_bones(refined, knn)
 
     # -- every stage ------------------------------------------------------------------------
 

@@ -113,20 +113,29 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     assert res.n_frames == 60
 
     # the 3D view: every joint of the first frame at the result's positions, one animation frame per frame
+    # without a refiner: the hard joins beside the blended output
     skel = viewer(at, "synth.skeleton")
-    assert len(skel["motions"]) == 1 and len(skel["times"]) == res.n_frames
-    m = skel["motions"][0]
+    assert len(skel["motions"]) == 2 and len(skel["times"]) == res.n_frames
+    hard, m = skel["motions"]
+
+    def shown_at(motion, f):  # the joints of frame f (the second figure stands to the side: its offset removed)
+        p = np.asarray(motion["points"][f][:N_JOINTS])
+        return p - np.asarray(motion["points"][0][0]) + res.motion.positions[0, 0]
+
     # posed by the rig's rotations, sent as int16 quaternions: their rounding moves a fingertip by under 2 mm
-    np.testing.assert_allclose(m["points"][0][:N_JOINTS], res.motion.positions[0], atol=2e-3)
+    np.testing.assert_allclose(shown_at(m, 0), res.motion.positions[0], atol=2e-3)
+    np.testing.assert_allclose(shown_at(m, 9), res.motion.positions[9], atol=2e-3)  # after a join
+    np.testing.assert_allclose(shown_at(hard, 9), res.knn_motion.positions[9], atol=2e-3)
     assert skel["up"] == [0, 1, 0] and skel["look"]["view"][2] > 0  # in front of the character, Y up
 
     # the wrist plot: the result's own wrist heights and speeds, the control band, the thresholds
     wrists = chart(at, "synth.wrists")
-    attrs = frame_attributes(res.motion.positions, fps=res.motion.fps)
+    motions = (res.knn_motion, res.motion)  # the hard joins and the output, as in the 3D view
+    attrs = [frame_attributes(m.positions, fps=res.motion.fps) for m in motions]
     for trace in wrists["data"]:
         col = db.attribute_names.index(trace["meta"]["attribute"])
-        np.testing.assert_allclose(array(trace["y"]), attrs[:, col], atol=1e-5)
-    assert sorted(t["meta"]["attribute"] for t in wrists["data"]) == sorted(a for a, _ in WRIST_ROWS)
+        np.testing.assert_allclose(array(trace["y"]), attrs[trace["meta"]["motion"]][:, col], atol=1e-5)
+    assert sorted(t["meta"]["attribute"] for t in wrists["data"]) == sorted(2 * [a for a, _ in WRIST_ROWS])
     assert set(bands(wrists)) == {(1.0, 2.5, "left_hand=high")}
     lines = {s["name"]: s["y0"] for s in wrists["layout"]["shapes"] if s["type"] == "line"}
     assert lines["left_hand_height high"] == pytest.approx(db.thresholds["left_hand_height"][1])
@@ -223,7 +232,11 @@ def test_settings_that_differ_from_the_paper_are_named(app_env):
     at.radio(key="_w.synth.mode").set_value("Example speech").run()
     if at.toggle(key="_w.synth.refine").value:
         at.toggle(key="_w.synth.refine").set_value(False).run()
-    assert not [c.value for c in at.caption if "Differs from the paper" in c.value]  # the defaults are the paper's
+    # without a refiner the joins are blended by default: our one departure, named
+    (note,) = [shown(c.value) for c in at.caption if shown(c.value).startswith("Differs from the paper")]
+    assert note == "Differs from the paper: blending: dead (paper none)"
+    at.selectbox(key="_w.synth.blend").set_value("none").run()
+    assert not [c.value for c in at.caption if "Differs from the paper" in c.value]  # the paper's settings
     at.number_input(key="_w.synth.segment").set_value(6)
     at.selectbox(key="_w.synth.init").set_value("rest").run()
     (note,) = [shown(c.value) for c in at.caption if shown(c.value).startswith("Differs from the paper")]
