@@ -55,7 +55,7 @@ def _rows(db, speech, modes) -> list[tuple[str, float, float, float, float]]:
         mean_jerk,
         overall_adherence,
     )
-    from gesturekit.synthesize import SynthesisConfig, synthesize
+    from gesturekit.synthesis import SynthesisConfig, synthesize
 
     jerk0, acc0 = _own(db)
     rows = []

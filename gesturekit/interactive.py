@@ -36,7 +36,7 @@ from .export.bvh import BvhReport
 from .export.result import export_result_bvh, save_result_npz, save_result_video
 from .motion import AUDIO_SR, Motion
 from .refine import open_refiner
-from .synthesize import SynthesisConfig, SynthesisResult, synthesize_batch
+from .synthesis import SynthesisConfig, SynthesisResult, synthesize_batch
 
 if TYPE_CHECKING:
     from .datasets.audio import AudioInfo

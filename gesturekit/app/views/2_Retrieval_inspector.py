@@ -1,0 +1,267 @@
+"""Step through the search: each step's candidates, their distances and clips; pin a choice; compare k."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import streamlit as st
+
+from gesturekit import interactive as gs
+from gesturekit.app import characters, display, nav, sidebar, state
+from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.audio import wav_bytes
+from gesturekit.motion import AUDIO_SR
+from gesturekit.synthesis import SynthesisResult
+from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
+
+STEP = "inspect.step"  # the step shown (per user)
+CANDIDATE = "inspect.candidate"  # the position of the candidate inspected at that step
+COMPARE = "inspect.compare"  # {"run": n, "ks": [...], "results": [...]}
+_LAST_ROW = "_inspect.last_selected_step"  # the steps-table selection already applied
+CONTEXT_S = 1.0  # seconds of a candidate's take heard around it
+
+_n, _t = st.column_config.NumberColumn, st.column_config.TextColumn
+#: Every column of the page's tables, named in words (ranks count from 0, the best).
+CANDIDATE_COLUMNS = {
+    "position": _n("combined position"),
+    "clip": _n("clip"),
+    "start": _n("start frame"),
+    "take": _t("take"),
+    "source_s": _n("source time [s]", format="%.2f"),
+    "pose_dist": _n("pose distance", format="%.3f"),
+    "audio_dist": _n("audio distance", format="%.4f"),
+    "pose_rank": _n("pose rank"),
+    "audio_rank": _n("audio rank"),
+    "combined": _n("combined rank"),
+    "chosen": st.column_config.CheckboxColumn("chosen"),
+}
+STEPS_COLUMNS = {
+    "step": _n("step"),
+    "first_frame": _n("first frame"),
+    "start_s": _n("time [s]", format="%.2f"),
+    "clip": _n("clip"),
+    "start": _n("start frame"),
+    "take": _t("take"),
+    "source_s": _n("source time [s]", format="%.2f"),
+    "position": _n("combined position"),
+    "candidates": _n("clips that survived"),
+    "relaxed": st.column_config.CheckboxColumn("control relaxed"),
+    "pinned": st.column_config.CheckboxColumn("pinned"),
+}
+COMPARE_COLUMNS = {
+    "k": _n("k"),
+    "pose_dist": _n("mean pose distance", format="%.3f"),
+    "audio_dist": _n("mean audio distance", format="%.4f"),
+    "relaxed_steps": _n("steps relaxed"),
+    "pinned_steps": _n("steps pinned"),
+    "control_met": _n("control met", format="%d%%"),
+}
+
+
+def _rerun_with(db, record, config) -> None:
+    """Synthesise again with new pins (everything else as before) and redraw."""
+    result = record["result"]
+    state.run_synthesis(db, result.audio, config=config, source=result.source, refiner=record["refiner"])
+    st.rerun()
+
+
+def pick_step(db: MatchingDatabase, result: SynthesisResult) -> int:
+    """The steps table (a selected row picks the step) and the step number input."""
+    ss = st.session_state
+    table = result.steps_overview(db)
+    with st.expander(f"All {len(table)} steps", expanded=False):
+        selected = display.selected_row(table, key="inspect.steps_table", height=240, column_config=STEPS_COLUMNS)
+    key = state.picked_key(STEP, selected, last=_LAST_ROW, n=len(table))  # a new result may have fewer steps
+    step = st.number_input(
+        "Step", min_value=0, max_value=len(table) - 1, step=1, key=key, help="or select a row of the steps table"
+    )
+    ss[STEP] = int(step)
+    return int(step)
+
+
+def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
+    ss = st.session_state
+    result = record["result"]
+    s, N, fps = result.search, result.config.segment, result.motion.fps
+    a, b = step * N, min((step + 1) * N, result.n_frames)
+    overview = result.steps_overview(db).iloc[step]
+    flags = (" · **pinned**" if s.pinned[step] else "") + (" · control relaxed" if s.relaxed[step] else "")
+    st.markdown(
+        f"**Step {step}** · output frames {a}–{b - 1} ({a / fps:.2f}–{b / fps:.2f} s) · "
+        f"chosen: clip {int(s.clip[step])} from frame {int(s.start[step])} "
+        f"(take **{display.escape_markdown(overview['take'])}** at {overview['source_s']:.2f} s){flags} · "
+        f"{int(s.n_candidates[step])} clips survived"
+    )
+    table = result.search.candidates_table(step, db)
+    st.dataframe(table, hide_index=True, key="inspect.candidates", column_config=CANDIDATE_COLUMNS)
+
+    views, plot = st.columns([3, 2])
+    with plot:
+        names = [f"{r.take} at {r.source_s:.2f} s" for r in table.itertuples()]
+        names += [""] * (s.cand_clip.shape[1] - len(names))
+        st.plotly_chart(
+            candidates_figure(s, step, names=names, height=300),
+            key="inspect.candidates_plot",
+            config={"displaylogo": False},
+        )
+    with views:
+        others = table[~table["chosen"]]
+        shown = 0
+        if len(others):
+            key = state.persistent_key("inspect.n_views", 4)
+            ss[key] = min(int(ss[key]), len(others))
+            shown = ss["inspect.n_views"] = st.slider(
+                "Alternatives shown in 3D", min_value=0, max_value=len(others), key=key
+            )
+        motions = [gs.candidate_motion(db, int(s.clip[step]), int(s.start[step]), b - a)]
+        labels = ["chosen" + (" (pinned)" if s.pinned[step] else f" #{int(s.position[step])}")]
+        for r in others.head(shown).itertuples():
+            motions.append(gs.candidate_motion(db, r.clip, r.start, b - a))
+            labels.append(f"#{r.position}")
+        # the step's input speech is the clock: it is what every candidate was matched against
+        display.show_skeletons(
+            motions,
+            labels=labels,
+            height=360,
+            key="inspect.views",
+            audio=gs.step_speech(result, step),
+            character=characters.current_character(),
+        )
+
+    st.markdown("**Listen and choose**")
+    positions = [int(p) for p in table["position"]]
+    key = state.persistent_key(CANDIDATE, positions[0])
+    if ss[key] not in positions:
+        ss[key] = positions[0]
+    row_of = {int(r.position): r for r in table.itertuples()}
+    pick = ss[CANDIDATE] = st.selectbox(
+        "Candidate",
+        positions,
+        key=key,
+        format_func=lambda p: (
+            f"#{p}: clip {row_of[p].clip} from frame {row_of[p].start} "
+            f"({row_of[p].take} at {row_of[p].source_s:.2f} s)" + (" · chosen" if row_of[p].chosen else "")
+        ),
+    )
+    r = row_of[pick]
+    c = st.columns(3)
+    with c[0]:
+        st.caption("the input speech of this step: ▶ Play in the 3D view above plays it with the candidates")
+    with c[1]:
+        st.caption(f"candidate #{pick}'s own speech in the database")
+        if db.audio is not None:
+            st.audio(wav_bytes(db.segment_audio(r.clip, r.start, b - a)), format="audio/wav")
+            context(db, r, b - a)
+        else:
+            st.caption("(this database was built without audio)")
+    with c[2]:
+        if st.button(
+            "Use this candidate instead",
+            key="inspect.use",
+            disabled=bool(r.chosen),
+            type="primary",
+            help="pin it at this step and run the synthesis again; later steps continue from it",
+        ):
+            _rerun_with(db, record, result.config.with_pin(step, r.clip, r.start))
+
+
+def context(db: MatchingDatabase, r: Any, n_frames: int) -> None:
+    """The candidate's speech with a second of its take on either side, the window shaded.
+
+    ``r``: a row of the candidates table (``clip``, ``start``, ``take``).
+    """
+    audio, a, b, t0 = gs.segment_in_context(db, r.clip, r.start, n_frames, context_s=CONTEXT_S)
+    st.caption(
+        f"…with up to {CONTEXT_S:g} s around it: the window is {a:.2f}–{b:.2f} s of this "
+        f"{len(audio) / AUDIO_SR:.2f} s excerpt ({display.escape_markdown(r.take)} at {t0 + a:.2f}–{t0 + b:.2f} s)"
+    )
+    st.audio(wav_bytes(audio), format="audio/wav")
+    fig = waveform_figure(audio, AUDIO_SR, bands=[(a, b, "window")], height=150)
+    fig.update_layout(showlegend=False, margin=dict(l=10, r=10, t=25, b=10), yaxis_title=None)
+    st.plotly_chart(fig, key="inspect.context", config={"displaylogo": False})
+
+
+def pins_view(db: MatchingDatabase, record: dict) -> None:
+    result = record["result"]
+    pins = result.config.pins
+    st.subheader("Pins")
+    if not pins:
+        st.caption("No pinned step: every step took the k-th best candidate.")
+        return
+    for i, (clip, start) in pins.items():
+        take = db.take_names[int(db.clip_take[clip])]
+        c = st.columns([4, 1])
+        c[0].markdown(
+            f"step **{i}**: clip {clip} from frame {start} ({display.escape_markdown(take)} at "
+            f"{(int(db.clip_start[clip]) + start) / db.fps:.2f} s)"
+        )
+        if c[1].button("Remove", key=f"inspect.unpin_{i}"):
+            _rerun_with(db, record, result.config.without_pin(i))
+    if len(pins) > 1 and st.button("Remove all pins", key="inspect.unpin_all"):
+        config = result.config
+        for i in list(pins):
+            config = config.without_pin(i)
+        _rerun_with(db, record, config)
+
+
+def compare_view(db: MatchingDatabase, record: dict) -> None:
+    ss = st.session_state
+    result = record["result"]
+    st.subheader("Compare k")
+    st.caption("The same speech, controls, pins and seed, taking the k-th best candidate at every step.")
+    ks = ss["inspect.ks"] = st.multiselect("k", list(range(10)), key=state.persistent_key("inspect.ks", [0, 1, 2]))
+    if st.button("Compare", key="inspect.compare_go", disabled=not ks):
+        with st.spinner("Searching…"):
+            results = gs.compare_k(
+                result.audio,
+                db=db,
+                config=result.config,
+                ks=sorted(ks),
+                refiner=record["refiner"],
+                source=result.source,
+            )
+        ss[COMPARE] = {"run": record["run"], "ks": sorted(ks), "results": results}
+    done = ss.get(COMPARE)
+    if done is None or done["run"] != record["run"]:
+        return
+    motions = [r.refined_motion if r.refined_motion is not None else r.motion for r in done["results"]]
+    labels = [f"k = {k}" for k in done["ks"]]
+    display.show_skeletons(
+        motions,
+        labels=labels,
+        height=420,
+        key="inspect.compare_views",
+        audio=result.audio,
+        character=characters.current_character(),
+    )
+    table = gs.comparison_table(done["results"], db.thresholds)
+    table["control_met"] = (100 * table["control_met"]).round()  # whole percent, one format for every row
+    st.dataframe(table, hide_index=True, key="inspect.compare_table", column_config=COMPARE_COLUMNS)
+    st.plotly_chart(
+        wrist_figure(motions, labels=labels, bands=result.control, thresholds=db.thresholds),
+        key="inspect.compare_wrists",
+        config={"displaylogo": False},
+    )
+
+
+def main() -> None:
+    st.title("Retrieval inspector")
+    db = sidebar.sidebar_database()
+    record = state.current_synthesis(db)
+    if record is None:
+        st.info("Run a synthesis on the Synthesize page first: this page shows how its search chose every step.")
+        nav.link("Synthesize")
+        return
+    result = record["result"]
+    st.caption(
+        f"**{display.escape_markdown(result.source)}** · "
+        f"{result.search.n_steps} steps of {result.config.segment} frames · "
+        f"k = {result.config.k} · candidates in the combined ranking of pose rank + audio rank, best first"
+    )
+    step = pick_step(db, result)
+    step_view(db, record, step)
+    pins_view(db, record)
+    compare_view(db, record)
+
+
+main()
