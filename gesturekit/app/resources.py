@@ -142,7 +142,19 @@ def rebuild_demo(path: Path) -> None:
             )
 
 
-@st.cache_resource(max_entries=8, show_spinner="Opening the database…")
+def _spinning(text: str, fn, *args):
+    """``fn(*args)`` under a spinner when called from a page's script run; as it is from a warm-up
+    thread or the server's start, which have no page to show one on (a spinner there logs that
+    the thread has no ScriptRunContext). The cached loaders below show no spinner of their own."""
+    from streamlit.runtime.scriptrunner import get_script_run_ctx
+
+    if get_script_run_ctx(suppress_warning=True) is None:
+        return fn(*args)
+    with st.spinner(text):
+        return fn(*args)
+
+
+@st.cache_resource(max_entries=8, show_spinner=False)
 def _open(path: str, stamp: int) -> MatchingDatabase:
     # ``stamp`` (database.json's mtime) is only part of the cache key: a rebuilt database differs
     return MatchingDatabase.load(path)
@@ -159,7 +171,8 @@ def load_database(path: str | os.PathLike) -> MatchingDatabase:
         No database there, or one that cannot be read (the message names the folder).
     """
     path = Path(path).expanduser().resolve()
-    return _open(str(path), _stamp(path / "database.json"))  # none: load() raises the precise error
+    # no stamp: load() raises the precise error
+    return _spinning("Opening the database…", _open, str(path), _stamp(path / "database.json"))
 
 
 def _stamp(file: Path) -> int:
@@ -193,10 +206,14 @@ def _in_background(name: str, *steps) -> threading.Thread:
     return thread
 
 
-@st.cache_resource(show_spinner="Generating the example speech…", max_entries=4)
 def example_audio(label: str) -> np.ndarray:
     """Example speech (a key of :data:`gesturekit.interactive.SPEECH_EXAMPLES`): mono float32 at
     16 kHz, read-only, made once per server and shared by every session."""
+    return _spinning("Generating the example speech…", _example_audio, label)
+
+
+@st.cache_resource(show_spinner=False, max_entries=4)
+def _example_audio(label: str) -> np.ndarray:
     from gesturekit.interactive import example_speech
 
     audio = example_speech(label)
@@ -318,7 +335,7 @@ async def server_lifespan(app: object) -> AsyncIterator[None]:
     yield
 
 
-@st.cache_resource(max_entries=4, show_spinner="Loading the refiner…")
+@st.cache_resource(max_entries=4, show_spinner=False)
 def _open_refiner(path: str, stamp: int):
     # ``stamp`` (config.json's mtime) is only part of the cache key: a retrained refiner differs
     from gesturekit.refine import load_refiner as load
@@ -389,6 +406,7 @@ def load_refiner(path: str | os.PathLike, db: MatchingDatabase) -> Refiner:
         one, or one trained on another feature layout than ``db``'s (the message names the folder).
     """
     path = _allowed_refiner(path)
-    refiner = _open_refiner(str(path), _stamp(path / "config.json"))  # none: the loader raises the precise error
+    # no stamp: the loader raises the precise error
+    refiner = _spinning("Loading the refiner…", _open_refiner, str(path), _stamp(path / "config.json"))
     refiner.check_database(db)
     return refiner
