@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 
 import streamlit as st
 
-from gesturekit.app.display import allowed, escape_markdown, warnings_shown
+from gesturekit.app.display import allowed, warnings_shown
 from gesturekit.database import MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, collect_warnings
@@ -109,8 +109,9 @@ def ensure_demo_database() -> Path:
             return path
         note = st.empty()
         note.info(
-            f"No database yet at {escape_markdown(path)}: building the generated demo speaker's database "
-            f"({minutes:g} minutes of synthetic speech and motion, no download)."
+            "No database yet: building the generated demo speaker's database "
+            f"({minutes:g} minutes of synthetic speech and motion, no download; about 10 s, and up to half a "
+            "minute more once after an install to prepare the search)."
         )
         bar = st.progress(0.0, text="generating the demo speaker…")
 
@@ -125,7 +126,7 @@ def ensure_demo_database() -> Path:
             bar.progress(1.0, text="preparing the search (once after an install)…")
             prepare_search(db)
         bar.progress(1.0, text="demo database ready")
-        note.success(f"Built the demo database at {escape_markdown(path)} ({minutes:g} minutes of generated speaker).")
+        note.success(f"Built the demo database ({minutes:g} minutes of generated speaker).")
     return path
 
 

@@ -371,3 +371,32 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
     at.text_input(key="_w.synth.refiner_path").input("").run()
     assert any("folder of a trained refiner" in e for e in errors(at))
     assert at.button(key="synth.go").disabled
+
+
+def _page_text(at: AppTest) -> list[str]:
+    """Every text an audience reads on the page: markdown, captions, notes, labels of buttons and downloads."""
+    texts = []
+    for kind in ("markdown", "caption", "info", "success", "warning", "error", "title", "header", "subheader"):
+        texts += [shown(str(e.value)) for e in at.get(kind)]
+    texts += [str(d.proto.label) for d in at.get("download_button")]
+    texts += [str(b.label) for b in at.button]
+    return texts
+
+
+def test_a_run_shows_no_server_paths_flags_or_source_strings(app_env, db):
+    from gesturekit.refine import default_refiner_path
+
+    at = open_page()
+    at.radio(key="_w.synth.mode").set_value("Example speech").run()
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    assert result(at).refined_motion is not None  # the demo refiner, on by default: its path is not shown
+    texts = _page_text(at)
+    assert texts
+    home = str(app_env)  # the server's folders: the databases, the refiner, the working folder
+    for text in texts:
+        for path in (home, str(db.path), str(default_refiner_path()), str(Path.cwd())):
+            assert path not in text, text
+        assert " --" not in text and not text.startswith("--"), text  # no command-line flags
+        assert "gesturekit.datasets" not in text and "generator=" not in text, text
+    assert not [w for w in at.main.warning if "off the motion" in shown(w.value)]  # the demo's files are exact
