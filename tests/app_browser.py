@@ -25,10 +25,11 @@ import socket
 import subprocess
 import sys
 import tempfile
-import time
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
+
+from tests.waits import patience, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 HOME_SCRIPT = REPO / "app" / "Home.py"
@@ -48,8 +49,15 @@ CHROMIUM_FLAGS = (
     "--disable-sync",
 )
 
-#: Seconds to wait for the server, a page, or a result (generous: the machine may be busy).
-TIMEOUT_S = 120
+#: Seconds to wait for the server, a page, or a result: a deadline that ends a hang (tests/waits.py).
+TIMEOUT_S = patience(180)
+
+try:  # Playwright's assertions (expect) wait 5 s unless told: as long as a page's waits, here
+    from playwright.sync_api import expect as _expect
+
+    _expect.set_options(timeout=TIMEOUT_S * 1000)
+except ImportError:  # the browser tests skip, with the reason (unavailable)
+    pass
 
 #: The page shows no script run: the app's script state, and Streamlit's status widget gone (while a
 #: run lasts, the header shows it: "Running…" and a Stop button of Streamlit's own).
@@ -176,24 +184,22 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
             cmd, env=env, cwd=str(REPO), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
         )
     url = f"http://127.0.0.1:{port}"
+
+    def healthy() -> bool:
+        try:
+            with urllib.request.urlopen(f"{url}/_stcore/health", timeout=patience(10)) as r:
+                return r.status == 200
+        except OSError:
+            return False
+
+    def exited() -> str | None:
+        return None if proc.poll() is None else f"it exited with {proc.returncode}"
+
     try:
-        deadline = time.monotonic() + TIMEOUT_S
-        while True:
-            if proc.poll() is not None:
-                raise RuntimeError(
-                    f"streamlit exited with {proc.returncode}:\n{log.read_text(errors='replace')[-3000:]}"
-                )
-            try:
-                with urllib.request.urlopen(f"{url}/_stcore/health", timeout=2) as r:
-                    if r.status == 200:
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                raise RuntimeError(
-                    f"streamlit did not answer within {TIMEOUT_S} s:\n{log.read_text(errors='replace')[-3000:]}"
-                )
-            time.sleep(0.2)
+        try:
+            wait_until(healthy, what="streamlit answers", timeout_s=180, interval_s=0.2, give_up=exited)
+        except AssertionError as e:
+            raise RuntimeError(f"{e}:\n{log.read_text(errors='replace')[-3000:]}") from None
         yield url
     finally:
         stop(proc)
@@ -607,7 +613,8 @@ def make_front_picture(path: Path, *, seconds: float = 12.0, demo_minutes: float
         page.set_viewport_size({"width": 1280, "height": 860})
         page.get_by_role("heading", name="Result").first.evaluate("el => el.scrollIntoView({block: 'start'})")
         page.mouse.wheel(0, 130)
-        time.sleep(4)  # the 3D view draws its first frame
+        for frame in _viewer_frames(page):  # each 3D view has drawn its first frame
+            frame.locator('body[data-drawn="1"]').wait_for(state="attached")
         png = path.with_suffix(".part.png")
         page.screenshot(path=str(png), type="png")
     with Image.open(png) as im:

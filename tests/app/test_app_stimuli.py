@@ -8,11 +8,12 @@ from streamlit.testing.v1 import AppTest
 from gesturekit.app import HOME
 from gesturekit.datasets.synthetic import generate_demo_take
 from tests.conftest import shown
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 PAGE = "views/4_Study_stimuli.py"
-TIMEOUT = 120
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 
 
 def _page() -> AppTest:

@@ -20,11 +20,12 @@ from gesturekit.study.design import init_study
 from gesturekit.study.store import open_store
 from tests.conftest import shown
 from tests.study_helpers import STUDY_SYSTEMS, study_folder, take_part, tiny_study  # noqa: F401  (fixtures)
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 PAGE = "views/6_Study.py"
-TIMEOUT = 120
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 PASSWORD = "researcher-pw"
 
 

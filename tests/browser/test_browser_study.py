@@ -41,6 +41,7 @@ import pytest
 from gesturekit.cli import main as cli_main
 from tests import app_browser
 from tests.study_helpers import study_folder, tiny_study  # noqa: F401  (fixtures)
+from tests.waits import patience, wait_until
 
 pytestmark = pytest.mark.skipif(
     app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
@@ -71,13 +72,19 @@ def study_server(folder: Path, log: Path) -> Iterator[str]:
     with open(log, "wb") as out:
         proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     try:
-        deadline = time.monotonic() + app_browser.TIMEOUT_S
-        while True:  # up once it accepts a connection (a request to / would start a participant)
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"the study server did not start:\n{log.read_text(errors='replace')[-3000:]}")
-            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
-                break
-            time.sleep(0.1)
+
+        def accepts() -> bool:  # up once it accepts a connection (a request to / would start a participant)
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=patience(10)):
+                return True
+            return False
+
+        def exited() -> str | None:
+            return None if proc.poll() is None else f"it exited with {proc.returncode}"
+
+        try:
+            wait_until(accepts, what="the study server accepts", timeout_s=180, interval_s=0.1, give_up=exited)
+        except AssertionError as e:
+            raise RuntimeError(f"{e}:\n{log.read_text(errors='replace')[-3000:]}") from None
         yield f"http://127.0.0.1:{port}"
     finally:
         app_browser.stop(proc)

@@ -42,6 +42,7 @@ from gesturekit.export.gltf import (
 )
 from gesturekit.motion import Motion
 from gesturekit.skeleton import DERIVABLE_JOINTS, JOINT_NAMES, N_JOINTS, PARENTS, JointPresence
+from tests.waits import patience
 
 REPO = Path(__file__).resolve().parents[2]
 VALIDATOR = REPO / "tools" / "gltf-validator"
@@ -169,7 +170,7 @@ def validator():
             shutil.rmtree(tmp, ignore_errors=True)
 
     def check(path: Path) -> dict:
-        done = node([str(home / "validate.mjs"), str(path)], capture_output=True, text=True, timeout=120)
+        done = node([str(home / "validate.mjs"), str(path)], capture_output=True, text=True, timeout=patience(300))
         assert done.returncode == 0, done.stderr
         return json.loads(done.stdout)
 

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from gesturekit.search import compile_cache
+from tests.waits import patience
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -115,7 +116,7 @@ def _together(script: str, args: list[list[str]], env: dict, *, delay_s: float, 
 
 def _run_at_once(tmp_path: Path, groups: list[list], env: dict) -> list[list[float]]:
     """Start one process per group of specialisations, all compiling at the same moment; their results."""
-    return _together(CHILD, [[str(tmp_path), json.dumps(g)] for g in groups], env, delay_s=2.0, timeout_s=300)
+    return _together(CHILD, [[str(tmp_path), json.dumps(g)] for g in groups], env, delay_s=2.0, timeout_s=patience(300))
 
 
 @pytest.fixture

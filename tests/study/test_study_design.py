@@ -155,7 +155,9 @@ def _expect_error(folder, raw, field):
     assert "design.json" in str(err.value) and f"'{field}" in str(err.value), str(err.value)
 
 
-@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(st.sampled_from(MUTATIONS), st.data())
 def test_every_bad_field_is_named_with_the_file(study, mutation, data):
     good = json.loads((study.folder / "design.json").read_text())
