@@ -151,7 +151,9 @@ def _beat_consistency(db, holdout, *, seeds=(0,), systems=("knn", "random")) -> 
     onsets = metrics.audio_onsets(ref.audio)
     out = {system: [] for system in systems}
     for seed in seeds:
-        config = replace(SynthesisConfig(seed=seed), exclude_takes=ref.exclude_takes, exclude_ranges=ref.exclude_ranges)
+        config = replace(
+            SynthesisConfig(seed=seed, blend="none"), exclude_takes=ref.exclude_takes, exclude_ranges=ref.exclude_ranges
+        )
         for system in systems:
             made = run_system(system, db=db, audio=ref.audio, config=config, control=ControlTrack(()), gt=ref.motion)
             x = made.motion.positions[: ref.n_frames]
