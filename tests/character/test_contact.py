@@ -84,9 +84,7 @@ def test_a_hand_in_the_chest_is_in_the_torso(pose):
 
 @settings(max_examples=25, deadline=None)
 @given(
-    angle=st.floats(-np.pi, np.pi),
-    shift=st.lists(st.floats(-2, 2), min_size=3, max_size=3),
-    which=st.integers(0, 3),
+    angle=st.floats(-np.pi, np.pi), shift=st.lists(st.floats(-2, 2), min_size=3, max_size=3), which=st.integers(0, 3)
 )
 def test_the_measures_turn_with_the_body(pose, angle, shift, which):
     # the same body turned about the vertical and moved: the same answers
