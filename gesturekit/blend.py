@@ -1,5 +1,27 @@
-"""Optional transitions between search segments (not in the paper, which leaves smoothing to the
-cGAN), and the step that keeps the k-NN motion's slow content in refined motion."""
+"""Transitions between search segments (not in the paper, which leaves smoothing to the cGAN),
+and the step that keeps the k-NN motion's slow content in refined motion.
+
+Modes (:data:`BLEND_MODES`) of :func:`blend_segments`:
+
+- ``"none"``: the paper's hard joins;
+- ``"offset"``: the new segment starts where the previous one was heading, and the
+  difference fades out with a cosine over ``frames`` frames;
+- ``"inertialize"`` (ours): inertialization as in game motion matching. At a join the output
+  keeps its position and velocity; the difference between where it was heading and the new
+  segment (an offset and its rate of change) decays like a critically damped spring,
+  ``x(t) = (x0 + (v0 + y x0) t) exp(-y t)``, and the new segment's own motion is added on top,
+  so the join is smooth in position and velocity. ``y`` is set by the half-life: the time an
+  offset without velocity takes to fall to half.
+- ``"dead"`` (the default, ours): dead blending, inertialization's extrapolate-and-fade form.
+  The output is extrapolated from the join with its last velocity, which decays with the
+  half-life, and cross-faded into the new segment with a smoothstep whose weight is one half
+  at the half-life (it ends at twice that).
+
+Every mode is causal: a join changes only the frames from it to the next join, computed
+from the two output frames before it and the new segment, so live synthesis
+(:mod:`gesturekit.live`) applies the same function a segment at a time
+(:func:`blend_segment`).
+"""
 
 from __future__ import annotations
 
@@ -7,9 +29,33 @@ import numpy as np
 
 from .errors import ConfigError
 
-__all__ = ["BLEND_MODES", "KEEP_BELOW_HZ", "blend_segments", "fade_weights", "keep_slow"]
+__all__ = [
+    "BLEND_MODES",
+    "DEFAULT_BLEND",
+    "DEFAULT_HALFLIFE_S",
+    "KEEP_BELOW_HZ",
+    "blend_segment",
+    "blend_segments",
+    "fade_weights",
+    "keep_slow",
+]
 
-BLEND_MODES = ("none", "offset")
+BLEND_MODES = ("none", "offset", "inertialize", "dead")
+
+#: The blend a synthesis uses by default (it shapes the output only without a refiner, which
+#: is given the k-NN motion itself). Chosen by measurement (``bench/bench_blend.py``): on the
+#: ZEGGS take and the keypoint example, dead blending at 0.12 s gives jerk and acceleration
+#: within 10 % of the database's own and keeps the control adherence of the hard joins;
+#: inertialization smooths as much but holds controls a little less (offsets decay after the
+#: segment's own motion has already moved on).
+DEFAULT_BLEND = "dead"
+
+#: Default half-life of ``"inertialize"`` and ``"dead"``, seconds (``bench/bench_blend.py``).
+DEFAULT_HALFLIFE_S = 0.12
+
+#: ``u`` with ``(1 + u) exp(-u) = 1/2``: a critically damped offset without velocity is half
+#: its start after ``u / y`` (``y`` the spring's decay rate).
+_HALF_U = 1.6783469900166608
 
 #: Default cut-off of :func:`keep_slow` in synthesis, Hz: about the segment rate (15 fps / 8 frames).
 KEEP_BELOW_HZ = 2.0
@@ -22,7 +68,61 @@ def fade_weights(frames: int) -> np.ndarray:
     return 0.5 * (1 + np.cos(np.pi * (j + 1) / (frames + 1)))
 
 
-def blend_segments(g: np.ndarray, boundaries: np.ndarray, *, mode: str = "none", frames: int = 4) -> np.ndarray:
+def _spring(x0: np.ndarray, v0: np.ndarray, n: int, halflife: float) -> np.ndarray:
+    """A critically damped offset from ``x0`` with rate ``v0`` (per frame) at frames 0..n-1,
+    shape (n, D), decaying to half (without velocity) after ``halflife`` frames."""
+    y = _HALF_U / halflife
+    t = np.arange(n, dtype=np.float64)[:, None]
+    return (x0[None, :] + (v0[None, :] + y * x0[None, :]) * t) * np.exp(-y * t)
+
+
+def _dead(before: np.ndarray, seg: np.ndarray, halflife: float) -> np.ndarray:
+    """Dead blending of ``seg`` (n, D) after the output frames ``before`` (2, D)."""
+    n = len(seg)
+    v = before[1] - before[0]
+    lam = np.log(2.0) / halflife
+    t = np.arange(1, n + 1, dtype=np.float64)[:, None]  # frames since the last output frame
+    extrapolated = before[1][None, :] + v[None, :] * (1.0 - np.exp(-lam * t)) / lam
+    u = np.clip(t / (2.0 * halflife), 0.0, 1.0)
+    w = u * u * (3.0 - 2.0 * u)  # smoothstep: 1/2 at the half-life, 1 at twice it
+    return (1.0 - w) * extrapolated + w * seg
+
+
+def blend_segment(before: np.ndarray, seg: np.ndarray, *, mode: str, halflife: float, frames: int = 4) -> np.ndarray:
+    """One segment after a join, as :func:`blend_segments` makes it (``"inertialize"``, ``"dead"``).
+
+    Parameters
+    ----------
+    before : np.ndarray, shape (2, D)
+        The two output frames before the join (already blended).
+    seg : np.ndarray, shape (n, D)
+        The new segment's frames, up to the next join (n >= 1).
+    mode : {"inertialize", "dead"}
+    halflife : float
+        Half-life in frames (> 0).
+
+    Returns
+    -------
+    np.ndarray, shape (n, D), float64
+    """
+    before = np.asarray(before, np.float64)
+    seg = np.asarray(seg, np.float64)
+    if mode == "dead":
+        return _dead(before, seg, halflife)
+    v_out = before[1] - before[0]
+    x0 = before[1] + v_out - seg[0]  # where the output was heading, less where the segment is
+    v_seg = seg[1] - seg[0] if len(seg) > 1 else np.zeros_like(v_out)
+    return seg + _spring(x0, v_out - v_seg, len(seg), halflife)
+
+
+def blend_segments(
+    g: np.ndarray,
+    boundaries: np.ndarray,
+    *,
+    mode: str = "none",
+    frames: int = 4,
+    halflife: float = DEFAULT_HALFLIFE_S * 15.0,
+) -> np.ndarray:
     """Smooth the jumps where one segment follows another.
 
     ``"offset"``: at each boundary ``b`` the new segment starts where the previous
@@ -30,6 +130,8 @@ def blend_segments(g: np.ndarray, boundaries: np.ndarray, *, mode: str = "none",
     new segment's first frame is added to the new segment and faded out over
     ``frames`` frames with a smooth (cosine) weight, so the join is continuous
     and the segment's own motion is kept after the fade.
+    ``"inertialize"`` and ``"dead"``: see the module's description; each join's
+    transition lasts until the next join, which starts its own from the output.
 
     Parameters
     ----------
@@ -37,13 +139,26 @@ def blend_segments(g: np.ndarray, boundaries: np.ndarray, *, mode: str = "none",
         Concatenated segments (e.g. flattened joint positions, metres).
     boundaries : np.ndarray of int
         First frame of every segment after the first.
-    mode : {"none", "offset"}
+    mode : {"none", "offset", "inertialize", "dead"}
     frames : int
-        Fade length in frames (>= 1).
+        Fade length of ``"offset"`` in frames (>= 1).
+    halflife : float
+        Half-life of ``"inertialize"`` and ``"dead"`` in frames (> 0).
 
     Returns
     -------
     np.ndarray, shape (T, D), same dtype; ``g`` itself is not modified.
+    Joins before frame 2 (no velocity to carry) and motions under 3 frames are left as they are.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> g = np.concatenate([np.arange(4.0), np.arange(10.0, 14.0)])[:, None]  # a jump of 7 at frame 4
+    >>> out = blend_segments(g, np.array([4]), mode="inertialize", halflife=2.0)
+    >>> float(out[4, 0])  # the join continues the first segment's motion
+    4.0
+    >>> bool(abs(out[-1, 0] - 13.0) < abs(4.0 - 10.0))  # and the offset decays towards the new segment
+    True
     """
     if mode not in BLEND_MODES:
         raise ConfigError(f"blend must be one of {', '.join(BLEND_MODES)}, got {mode!r}")
@@ -52,8 +167,18 @@ def blend_segments(g: np.ndarray, boundaries: np.ndarray, *, mode: str = "none",
         return out
     if frames < 1:
         raise ConfigError(f"blend frames must be at least 1, got {frames}")
+    if not (np.isfinite(halflife) and halflife > 0):
+        raise ConfigError(f"blend half-life must be a positive number of frames, got {halflife}")
+    cuts = np.asarray(boundaries, dtype=np.int64)
+    if mode in ("inertialize", "dead"):
+        ends = [*cuts[1:].tolist(), len(out)]
+        for b, e in zip(cuts.tolist(), ends):
+            if b < 2 or b >= len(out):
+                continue
+            out[b:e] = blend_segment(out[b - 2 : b], out[b:e], mode=mode, halflife=halflife).astype(out.dtype)
+        return out
     weight = fade_weights(frames)
-    for b in np.asarray(boundaries, dtype=np.int64):
+    for b in cuts:
         if b < 2 or b >= len(out):
             continue
         expected = out[b - 1] + (out[b - 1] - out[b - 2])

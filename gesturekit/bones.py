@@ -53,6 +53,7 @@ __all__ = [
     "Skeleton",
     "bone_length_spread",
     "bone_samples",
+    "bones_like",
     "fit_bone_lengths",
     "fit_skeleton",
     "group_frames",
@@ -266,6 +267,53 @@ def normalise_bone_lengths(
         misfit_bone=misfit_bone,
     )
     return out, report
+
+
+def bones_like(positions: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``positions`` given the bones of ``reference``, frame by frame.
+
+    Roots keep their positions; every other joint is placed at its (already placed) parent plus
+    the bone's length in the same frame of ``reference`` along the bone's direction in
+    ``positions`` (where that bone has no direction, along the reference's). The children of
+    each :data:`RIGID_GROUPS` joint are placed at the reference's offsets in the group's frame
+    (:func:`group_frames`) turned by the frame of ``positions``, so a group keeps the reference's
+    shape. Motion blended from clips that a BVH file holds (one length per bone, one shape per
+    group) is then held by it again.
+
+    Parameters
+    ----------
+    positions, reference : np.ndarray, shape (frames, 55, 3)
+        Joint positions, metres: e.g. blended motion and the motion it was blended from.
+
+    Returns
+    -------
+    np.ndarray, shape (frames, 55, 3), float64
+    """
+    pos, ref = _check(positions), _check(reference)
+    if pos.shape != ref.shape:
+        raise ConfigError(f"positions {pos.shape} and reference {ref.shape} differ in shape")
+    out = pos.copy()
+    turns: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for name, joint, _frame, _children in _GROUPS:
+        mine, ok_mine = group_frames(pos, name)
+        theirs, ok_theirs = group_frames(ref, name)
+        ok = ok_mine & ok_theirs
+        turns[int(joint)] = (mine @ np.swapaxes(theirs, -1, -2), ok)  # reference frame -> this frame
+    for j in range(N_JOINTS):  # parents precede children
+        p = int(PARENTS[j])
+        if p < 0:
+            continue
+        offset = ref[:, j] - ref[:, p]
+        length = np.linalg.norm(offset, axis=-1, keepdims=True)
+        d = pos[:, j] - pos[:, p]
+        norm = np.linalg.norm(d, axis=-1, keepdims=True)
+        has = norm > _ZERO
+        placed = np.where(has, d / np.where(has, norm, 1.0) * length, offset)
+        if p in turns:
+            turn, ok = turns[p]
+            placed = np.where(ok[:, None], np.einsum("tab,tb->ta", turn, offset), placed)
+        out[:, j] = out[:, p] + placed
+    return out
 
 
 def _carried(ok: np.ndarray) -> np.ndarray:

@@ -5,10 +5,16 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from .database import BuildConfig, MatchingDatabase
 from .errors import DatabaseError
 from .paths import default_database_path
+
+if TYPE_CHECKING:
+    from .bones import Skeleton
 
 __all__ = ["DEMO_MINUTES", "DEMO_SEED", "build_demo_database", "open_default_database"]
 
@@ -72,12 +78,35 @@ def _build_demo(
             progress(total * (0.5 + 0.5 * i / len(takes)), total)
 
     db = MatchingDatabase.build(
-        takes,
+        [_on_skeleton(t, skeleton) for t in takes] if (skeleton := _demo_skeleton(takes)) else takes,
         config=BuildConfig(overlap_stride=8, label=DEMO_LABEL, source=f"demo (seed {seed}, {minutes:g} min)"),
         progress=build_progress,
+        skeleton=skeleton,
     )
     db.save(out, overwrite=overwrite, locked=True)
     return db
+
+
+def _demo_skeleton(takes: list) -> Skeleton | None:
+    """The demo speaker's one skeleton (its bones are those of one rest skeleton in every frame), fitted
+    over every take as ``build-db --normalize-bones`` fits one, so the database says it holds one skeleton
+    and its BVH and glTF files are exact."""
+    from .bones import bone_samples, fit_skeleton
+
+    if not takes:
+        return None
+    return fit_skeleton([bone_samples(t.motion.positions) for t in takes], takes=len(takes))
+
+
+def _on_skeleton(take, skeleton: Skeleton):
+    """``take`` with its positions placed on ``skeleton`` (a change of float rounding for the demo speaker)."""
+    from dataclasses import replace
+
+    from .bones import normalise_bone_lengths
+    from .motion import Motion
+
+    pos, _ = normalise_bone_lengths(take.motion.positions, take.motion.joints, skeleton=skeleton)
+    return replace(take, motion=Motion(pos.astype(np.float32), take.motion.fps, take.motion.joints))
 
 
 def open_default_database(

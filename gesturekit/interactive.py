@@ -44,6 +44,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "SPEECH_EXAMPLES",
+    "BLEND_LABELS",
     "EXPORT_KINDS",
     "selected_time_range",
     "example_speech",
@@ -185,12 +186,27 @@ def read_speech_upload(name: str, data: bytes) -> tuple[np.ndarray, AudioInfo]:
 # ---- what to show ------------------------------------------------------------------------------
 
 
+#: What a page calls each blend mode's joins (:data:`gesturekit.blend.BLEND_MODES`).
+BLEND_LABELS = {
+    "none": "hard joins",
+    "offset": "offset fade",
+    "inertialize": "inertialized joins",
+    "dead": "dead-blended joins",
+}
+
+
 def display_motions(result: SynthesisResult) -> tuple[list[Motion], list[str]]:
-    """The motions to show for a result: k-NN and refined side by side when refined, else the output."""
+    """The motions to show for a result, with their labels.
+
+    Refined: the k-NN motion (the paper's hard joins) and the refined one side by side. Without a
+    refiner and with a blend (:mod:`gesturekit.blend`): the hard joins and the blended output side
+    by side, so what the blend does is seen. Else the output alone.
+    """
     if result.refined_motion is not None:
         return [result.knn_motion, result.refined_motion], ["k-NN", "k-NN + refiner"]
-    label = "k-NN" if result.config.blend == "none" else f"k-NN, {result.config.blend} blend"
-    return [result.motion], [label]
+    if result.config.blend == "none":
+        return [result.motion], ["k-NN"]
+    return [result.knn_motion, result.motion], ["k-NN, hard joins", f"k-NN, {BLEND_LABELS[result.config.blend]}"]
 
 
 # ---- exports ------------------------------------------------------------------------------------

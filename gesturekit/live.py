@@ -19,8 +19,10 @@ recording with the result's configuration, frame for frame:
   ``m_{t+14}`` is known, i.e. about ``14 / 15 + 1024 / 16000 = 0.997`` s of speech after ``t``
   (:attr:`~LiveSynthesizer.algorithmic_delay_s`), one step at a time from the previous
   step's pose (:class:`gesturekit.search.stream.StepSearch`); the past is never searched again.
-- Blending (``config.blend = "offset"``) is causal: a join is faded into the frames after it
-  from the two frames before it, so a step's frames are final when the step is taken.
+- Blending (``config.blend``, see :mod:`gesturekit.blend`) is causal: a join changes the frames
+  after it from the two frames before it, so a step's frames are final when the step is taken
+  (and given the k-NN motion's bones as offline, :meth:`Synthesizer.keep_bones
+  <gesturekit.synthesis.Synthesizer.keep_bones>`).
 - Controls switched with :meth:`~LiveSynthesizer.set_control` hold from the next step not yet
   taken; the result's configuration records them as a control track (seconds), and
   ``synthesize(speech, db=db, config=result.config)`` gives the same motion.
@@ -39,7 +41,7 @@ import threading
 
 import numpy as np
 
-from .blend import fade_weights
+from .blend import blend_segment, fade_weights
 from .control import ControlTrack, Segment, constraint_mask, parse_control
 from .database import MatchingDatabase
 from .errors import ConfigError
@@ -399,6 +401,14 @@ class LiveSynthesizer:
         self._out.append(g)
         if self._config.blend == "none":
             return
+        if self._config.blend in ("inertialize", "dead"):
+            if a >= 2 and len(g):  # blend_segments skips joins before frame 2
+                out = self._out.data
+                seg = blend_segment(
+                    out[a - 2 : a], g, mode=self._config.blend, halflife=self._config.blend_halflife * self._fps
+                )
+                out[a : a + len(g)] = seg.astype(np.float32)
+            return
         out, b_end, F = self._out.data, self._out.n, len(self._fade)
         if a >= 2:  # blend_segments skips joins before frame 2
             self._offsets[a] = np.empty(0, np.float32)  # the offset is taken when its turn comes
@@ -420,6 +430,11 @@ class LiveSynthesizer:
         if self._refiner is None:
             ready = self._out.n
             frames = self._out.view[self._returned : ready]
+            if self._config.blend != "none" and len(frames):
+                presence = self._db.joint_presence
+                blended = Motion.from_flat(frames, self._fps, presence)
+                knn = Motion.from_flat(self._knn.view[self._returned : ready], self._fps, presence)
+                frames = self._stages.keep_bones(blended, knn).flat()
         else:
             ready = self._refine(final=final)
             frames = self._refined.view[self._returned : ready]
@@ -476,6 +491,8 @@ class LiveSynthesizer:
         )
         knn = Motion.from_flat(self._knn.view.copy(), db.fps, db.joint_presence)
         out = Motion.from_flat(self._out.view.copy(), db.fps, db.joint_presence)
+        if self._config.blend != "none":
+            out = self._stages.keep_bones(out, knn)
         refined = None
         if self._refiner is not None:
             refined = Motion.from_flat(self._refined.view.copy(), db.fps, db.joint_presence)

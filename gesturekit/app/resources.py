@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 
 import streamlit as st
 
-from gesturekit.app.display import allowed, escape_markdown, warnings_shown
+from gesturekit.app.display import allowed, warnings_shown
 from gesturekit.database import MatchingDatabase
 from gesturekit.demo import DEMO_MINUTES, build_demo_database
 from gesturekit.errors import ConfigError, collect_warnings
@@ -109,8 +109,9 @@ def ensure_demo_database() -> Path:
             return path
         note = st.empty()
         note.info(
-            f"No database yet at {escape_markdown(path)}: building the generated demo speaker's database "
-            f"({minutes:g} minutes of synthetic speech and motion, no download)."
+            "No database yet: building the generated demo speaker's database "
+            f"({minutes:g} minutes of synthetic speech and motion, no download; about 10 s, and up to half a "
+            "minute more once after an install to prepare the search)."
         )
         bar = st.progress(0.0, text="generating the demo speaker…")
 
@@ -125,7 +126,7 @@ def ensure_demo_database() -> Path:
             bar.progress(1.0, text="preparing the search (once after an install)…")
             prepare_search(db)
         bar.progress(1.0, text="demo database ready")
-        note.success(f"Built the demo database at {escape_markdown(path)} ({minutes:g} minutes of generated speaker).")
+        note.success(f"Built the demo database ({minutes:g} minutes of generated speaker).")
     return path
 
 
@@ -142,7 +143,19 @@ def rebuild_demo(path: Path) -> None:
             )
 
 
-@st.cache_resource(max_entries=8, show_spinner="Opening the database…")
+def _spinning(text: str, fn, *args):
+    """``fn(*args)`` under a spinner when called from a page's script run; as it is from a warm-up
+    thread or the server's start, which have no page to show one on (a spinner there logs that
+    the thread has no ScriptRunContext). The cached loaders below show no spinner of their own."""
+    from streamlit.runtime.scriptrunner import get_script_run_ctx
+
+    if get_script_run_ctx(suppress_warning=True) is None:
+        return fn(*args)
+    with st.spinner(text):
+        return fn(*args)
+
+
+@st.cache_resource(max_entries=8, show_spinner=False)
 def _open(path: str, stamp: int) -> MatchingDatabase:
     # ``stamp`` (database.json's mtime) is only part of the cache key: a rebuilt database differs
     return MatchingDatabase.load(path)
@@ -159,7 +172,8 @@ def load_database(path: str | os.PathLike) -> MatchingDatabase:
         No database there, or one that cannot be read (the message names the folder).
     """
     path = Path(path).expanduser().resolve()
-    return _open(str(path), _stamp(path / "database.json"))  # none: load() raises the precise error
+    # no stamp: load() raises the precise error
+    return _spinning("Opening the database…", _open, str(path), _stamp(path / "database.json"))
 
 
 def _stamp(file: Path) -> int:
@@ -193,10 +207,14 @@ def _in_background(name: str, *steps) -> threading.Thread:
     return thread
 
 
-@st.cache_resource(show_spinner="Generating the example speech…", max_entries=4)
 def example_audio(label: str) -> np.ndarray:
     """Example speech (a key of :data:`gesturekit.interactive.SPEECH_EXAMPLES`): mono float32 at
     16 kHz, read-only, made once per server and shared by every session."""
+    return _spinning("Generating the example speech…", _example_audio, label)
+
+
+@st.cache_resource(show_spinner=False, max_entries=4)
+def _example_audio(label: str) -> np.ndarray:
     from gesturekit.interactive import example_speech
 
     audio = example_speech(label)
@@ -318,7 +336,7 @@ async def server_lifespan(app: object) -> AsyncIterator[None]:
     yield
 
 
-@st.cache_resource(max_entries=4, show_spinner="Loading the refiner…")
+@st.cache_resource(max_entries=4, show_spinner=False)
 def _open_refiner(path: str, stamp: int):
     # ``stamp`` (config.json's mtime) is only part of the cache key: a retrained refiner differs
     from gesturekit.refine import load_refiner as load
@@ -389,6 +407,7 @@ def load_refiner(path: str | os.PathLike, db: MatchingDatabase) -> Refiner:
         one, or one trained on another feature layout than ``db``'s (the message names the folder).
     """
     path = _allowed_refiner(path)
-    refiner = _open_refiner(str(path), _stamp(path / "config.json"))  # none: the loader raises the precise error
+    # no stamp: the loader raises the precise error
+    refiner = _spinning("Loading the refiner…", _open_refiner, str(path), _stamp(path / "config.json"))
     refiner.check_database(db)
     return refiner

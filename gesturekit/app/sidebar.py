@@ -125,7 +125,7 @@ def sidebar_database() -> MatchingDatabase:
         db = resources.load_database(path)
     show_database_label(db, container=st.sidebar)
     counts = f"{_count(db.n_clips, 'clip')} · {_count(len(db.take_names), 'take')}"
-    st.sidebar.caption(f"{escape_markdown(db.path)} · {counts}")
+    st.sidebar.caption(counts)  # the folder's name is in the label above; its path is the server's
     return db
 
 

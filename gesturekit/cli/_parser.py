@@ -94,7 +94,7 @@ def search_options() -> list[tuple[type, tuple[str, ...]]]:
         (SearchConfig, ("k", "segment", "seed")),
         (SynthesisConfig, ("init",)),
         (SearchConfig, ("mask_rule",)),
-        (SynthesisConfig, ("blend",)),
+        (SynthesisConfig, ("blend", "blend_halflife", "blend_frames")),
     ]
 
 

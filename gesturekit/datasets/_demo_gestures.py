@@ -51,6 +51,25 @@ def _rest_pose(rng: np.random.Generator) -> np.ndarray:
     return p
 
 
+# the speaker's gesture space: a wrist keeps this far (m) to its own side of the body's midline, and
+# further the higher it is, so the hands stay in front of the torso, go up beside the head rather
+# than over the face, and never cross; the bound is convex, so the straight moves between keyposes
+# keep to it too
+_MIDLINE_GAP = 0.09
+_WIDEN_ABOVE, _WIDEN_RATE = 0.30, 1.1  # above this wrist height (m) the gap grows by this much per metre
+# and a wrist nearer the midline keeps further forward, clear of the belly and chest: z + _LEAN x >= _FRONT
+_FRONT, _LEAN = 0.214, 0.6
+
+
+def in_gesture_space(pose: np.ndarray) -> np.ndarray:
+    """A copy of ``pose`` with the wrist target moved outward into the speaker's gesture space."""
+    pose = pose.copy()
+    x, y, z = pose[WRIST]
+    x = max(x, _MIDLINE_GAP + _WIDEN_RATE * max(0.0, y - _WIDEN_ABOVE))
+    pose[WRIST] = (x, y, max(z, _FRONT - _LEAN * x))
+    return pose
+
+
 _MAX_SPEED = 2.3  # fastest wrist movement of a keypose move, m/s (peak)
 _MIN_JERK_PEAK = 1.875  # peak speed of a minimum-jerk move over its mean speed
 
@@ -60,7 +79,7 @@ class ArmTrack:
 
     def __init__(self, rest: np.ndarray):
         self.times = [0.0]
-        self.poses = [reachable(rest)]
+        self.poses = [in_gesture_space(reachable(rest))]
         self.pending_retraction: float | None = None  # earliest start of an owed retraction
 
     @property
@@ -75,12 +94,13 @@ class ArmTrack:
         """Hold the current pose until ``t0``, then move to ``pose``, arriving at ``t1``.
 
         A wrist target beyond comfortable reach is pulled towards the shoulder, so that the
-        straight-line moves between keyposes stay inside the arm's reach, and a move that
-        would be faster than :data:`_MAX_SPEED` at its peak stops short.
+        straight-line moves between keyposes stay inside the arm's reach, then moved outward
+        into the gesture space (:func:`in_gesture_space`), and a move that would be faster than
+        :data:`_MAX_SPEED` at its peak stops short (towards a point inside both bounds).
         """
         t0 = max(t0, self.times[-1])
         t1 = max(t1, t0 + 0.05)
-        pose = reachable(pose)
+        pose = in_gesture_space(reachable(pose))
         step = pose[WRIST] - self.poses[-1][WRIST]
         longest = _MAX_SPEED * (t1 - t0) / _MIN_JERK_PEAK
         if np.linalg.norm(step) > longest:

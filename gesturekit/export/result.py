@@ -106,7 +106,7 @@ def export_result_bvh(
     is more than 1 cm off the positions. ``units`` (``"cm"`` or ``"m"``) are those of the
     file's offsets and root positions. The warning names what would help: for a database
     without one skeleton ``build-db --normalize-bones``; for one with it (whose clips the
-    file holds exactly) what changed the bones afterwards: blending and the refiner.
+    file holds exactly) what changed the bones afterwards: the refiner.
 
     Returns
     -------
@@ -234,9 +234,8 @@ def _bvh_remedy(result: SynthesisResult) -> str | None:
     if not result.one_skeleton:
         return None
     # the database's clips have one skeleton: only what is done to them afterwards changes their bones
+    # (a blend gives the k-NN motion's bones back, see Synthesizer.keep_bones)
     causes = []
-    if result.config.blend != "none":
-        causes.append("without blending the joins (`--blend none`)")
     if result.refined_motion is not None:
         causes.append("without the refiner (`--refiner none`)")
     if not causes:

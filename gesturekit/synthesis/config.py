@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._config import config_from_dict, config_to_dict, option, option_of
-from ..blend import BLEND_MODES, KEEP_BELOW_HZ
+from ..blend import BLEND_MODES, DEFAULT_BLEND, DEFAULT_HALFLIFE_S, KEEP_BELOW_HZ
 from ..control import ControlTrack, parse_control
 from ..database import normalise_exclusions
 from ..errors import ConfigError
@@ -26,7 +26,8 @@ __all__ = ["PAPER_SETTINGS", "SEARCH_OPTIONS", "SynthesisConfig"]
 
 #: The settings of Habibie et al. 2022: option -> (the paper's value, how a value is written,
 #: the paper's value as written after it). ``refiner_keep_hz`` counts only when a refiner is
-#: applied (the paper uses the refiner's output as it is).
+#: applied (the paper uses the refiner's output as it is), ``blend`` only without one (the
+#: refiner is given the k-NN motion, never the blended one).
 PAPER_SETTINGS = {
     "k": (0, "k = {}", "0"),
     "segment": (8, "N = {}", "8"),
@@ -59,9 +60,18 @@ class SynthesisConfig:
     init : {"random", "rest"}
         ``random``: a random database frame that satisfies the first step's control
         (the authors' choice); ``rest``: the database's rest pose (see :func:`~gesturekit.search.plan.rest_pose_frame`).
-    blend : {"none", "offset"}
-        ``none`` is the paper (the refiner smooths); ``offset`` fades each join over ``blend_frames``.
+    blend : {"inertialize", "dead", "offset", "none"}
+        How the output joins its segments when no refiner is applied (a refiner is given the
+        k-NN motion itself). ``none`` is the paper (the refiner smooths); ``dead`` (the default,
+        ours: dead blending) extrapolates the previous segment with a decaying velocity and
+        cross-fades into the new one over about ``2 * blend_halflife``; ``inertialize`` carries
+        each join's position and velocity through and lets the offset decay with
+        ``blend_halflife``; ``offset`` fades each join over ``blend_frames``. See
+        :mod:`gesturekit.blend`.
     blend_frames : int
+        Frames of the ``offset`` fade.
+    blend_halflife : float
+        Seconds; half-life of ``inertialize`` and ``dead``.
     control : str or ControlTrack
         The control track, e.g. ``"0-3:left_hand=low,3-6:speed=slow"`` (seconds); kept as its
         text, and parsed once (:attr:`control_track`).
@@ -86,9 +96,24 @@ class SynthesisConfig:
         flag="--init-pose",
     )
     blend: str = option(
-        "none", help="none: the paper's hard joins; offset: a short fade at each join (ours)", choices=BLEND_MODES
+        DEFAULT_BLEND,
+        help="joins without a refiner: dead (default, ours): dead blending, the last motion extrapolated and "
+        "cross-faded; inertialize (ours): position and velocity carried through, the offset decaying; offset: "
+        "a short fade (ours); none: the paper's hard joins",
+        choices=BLEND_MODES,
     )
-    blend_frames: int = option(4, help="frames of the fade at each join (blend offset)", low=1, unit="frames")
+    blend_frames: int = option(
+        4, help="frames of the fade at each join (blend offset)", low=1, unit="frames", metavar="N"
+    )
+    blend_halflife: float = option(
+        DEFAULT_HALFLIFE_S,
+        help="half-life of a join's transition (blend dead, inertialize)",
+        low=0.01,
+        high=2.0,
+        unit="s",
+        metavar="S",
+        step=0.02,
+    )
     control: str = ""
     exclude_takes: tuple = ()
     exclude_ranges: tuple = ()
@@ -110,8 +135,9 @@ class SynthesisConfig:
         search: SearchConfig | None = None,
         *,
         init: str = "random",
-        blend: str = "none",
+        blend: str = DEFAULT_BLEND,
         blend_frames: int = 4,
+        blend_halflife: float = DEFAULT_HALFLIFE_S,
         control: str | ControlTrack = "",
         exclude_takes: Sequence[str] = (),
         exclude_ranges: Sequence[tuple[str, float, float]] = (),
@@ -143,6 +169,13 @@ class SynthesisConfig:
             raise ConfigError(f"blend must be one of {', '.join(BLEND_MODES)}, got {blend!r}")
         if not isinstance(blend_frames, int) or blend_frames < option_of(SynthesisConfig, "blend_frames").low:
             raise ConfigError(f"blend_frames must be a positive integer, got {blend_frames!r}")
+        low, high = option_of(SynthesisConfig, "blend_halflife").low, option_of(SynthesisConfig, "blend_halflife").high
+        if (
+            isinstance(blend_halflife, bool)
+            or not isinstance(blend_halflife, numbers.Real)
+            or not (np.isfinite(blend_halflife) and low <= blend_halflife <= high)
+        ):
+            raise ConfigError(f"blend_halflife must be {low:g}-{high:g} seconds, got {blend_halflife!r}")
         track = control if isinstance(control, ControlTrack) else parse_control(control)  # validates
         takes, ranges = normalise_exclusions(exclude_takes, exclude_ranges)
         for name, value in (
@@ -150,6 +183,7 @@ class SynthesisConfig:
             ("init", init),
             ("blend", blend),
             ("blend_frames", blend_frames),
+            ("blend_halflife", float(blend_halflife)),
             ("control", track.to_text()),
             ("exclude_takes", takes),
             ("exclude_ranges", ranges),
@@ -210,7 +244,7 @@ class SynthesisConfig:
         Parameters
         ----------
         refined : bool
-            Whether a refiner is applied (``refiner_keep_hz`` counts only then).
+            Whether a refiner is applied (``refiner_keep_hz`` counts only then, ``blend`` only without).
 
         Returns
         -------
@@ -220,7 +254,8 @@ class SynthesisConfig:
         out = []
         for name, (paper, form, paper_text) in PAPER_SETTINGS.items():
             value = getattr(self, name)
-            if value != paper and (refined or name != "refiner_keep_hz"):
+            counts = refined if name == "refiner_keep_hz" else (not refined if name == "blend" else True)
+            if value != paper and counts:
                 out.append(f"{form.format(value)} (paper {paper_text})")
         return out
 

@@ -289,9 +289,14 @@ class Synthesizer:
         db = self._db
         g = np.asarray(db.G[found.frames[:, 0], found.frames[:, 1]], dtype=np.float32)  # (T, 165)
         boundaries = np.arange(1, found.n_steps) * config.segment
-        blended = blend_segments(g, boundaries, mode=config.blend, frames=config.blend_frames)
+        blended = blend_segments(
+            g, boundaries, mode=config.blend, frames=config.blend_frames, halflife=config.blend_halflife * db.fps
+        )
+        motion = Motion.from_flat(blended, db.fps, db.joint_presence)
+        if config.blend != "none":
+            motion = self.keep_bones(motion, Motion.from_flat(g, db.fps, db.joint_presence))
         return SynthesisResult(
-            motion=Motion.from_flat(blended, db.fps, db.joint_presence),
+            motion=motion,
             knn_motion=Motion.from_flat(g, db.fps, db.joint_presence),
             search=found,
             audio=features.samples,
@@ -301,6 +306,36 @@ class Synthesizer:
             plan=plan,
             one_skeleton=self.one_skeleton,
         )
+
+    @staticmethod
+    def keep_bones(motion: Motion, knn: Motion) -> Motion:
+        """Blended motion with the k-NN motion's bones again.
+
+        Blending moves each joint by its own offset, which changes the bones' lengths a little;
+        a BVH or glTF file (one length per bone) then no longer holds the motion exactly. This
+        places every joint back at its parent plus the bone's length in the same frame of the
+        k-NN motion along its blended direction, and each rigid group (finger roots on the wrist,
+        neck and collars on the chest) in its k-NN shape (:func:`gesturekit.bones.bones_like`):
+        clips a BVH file holds (a database with one skeleton, :attr:`one_skeleton`, or one take)
+        give blended motion it holds too.
+
+        Parameters
+        ----------
+        motion : Motion
+            Blended motion, (T, 55, 3) metres.
+        knn : Motion
+            The k-NN motion it was blended from, (T, 55, 3) metres.
+
+        Returns
+        -------
+        Motion
+            The same frames with the bones' lengths and rigid shapes of the k-NN motion.
+        """
+        from ..bones import bones_like
+
+        if motion.n_frames == 0:
+            return motion
+        return Motion(bones_like(motion.positions, knn.positions).astype(np.float32), motion.fps, motion.joints)
 
     def refine(self, result: SynthesisResult, features: QueryFeatures) -> SynthesisResult:
         """Stage 5: the refiner applied to the k-NN motion; it becomes the result's output.
@@ -341,8 +376,8 @@ class Synthesizer:
         audio_features : np.ndarray, shape (T, 28), float32
             The speech's cGAN audio features over the same frames (:attr:`QueryFeatures.audio`).
         keep_hz : float
-            Hz; the k-NN motion's content slower than this is kept (:func:`gesturekit.blend.keep_slow`),
-            0: the refiner's output as it is.
+            Hz; the k-NN motion's content slower than this is kept (:func:`gesturekit.blend.keep_slow`)
+            and so are its bones (:meth:`keep_bones`); 0: the refiner's output as it is.
 
         Returns
         -------
@@ -352,10 +387,13 @@ class Synthesizer:
         if self._refiner is None:
             raise ConfigError("this Synthesizer has no refiner (give one: Synthesizer(db, refiner=...))")
         refined = self._refiner.refine_motion(knn, audio_features)
-        if keep_hz > 0:
-            kept = keep_slow(refined.flat(), knn.flat(), keep_hz, fps=knn.fps)
-            refined = Motion.from_flat(kept, refined.fps, knn.joints)
-        return refined
+        if keep_hz <= 0:
+            return refined  # the paper: the generator's output as it is
+        kept = keep_slow(refined.flat(), knn.flat(), keep_hz, fps=knn.fps)
+        refined = Motion.from_flat(kept, refined.fps, knn.joints)
+        # the generator's positions stretch the bones (by centimetres at the fingers): the k-NN
+        # motion's bones again, so that a BVH or glTF file holds the refined motion
+        return self.keep_bones(refined, knn)
 
     # -- every stage ------------------------------------------------------------------------
 

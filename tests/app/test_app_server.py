@@ -42,13 +42,32 @@ def test_streamlit_run_finds_the_app_with_its_lifespan():
 
 
 @pytest.mark.slow
+def test_the_start_and_its_warm_up_threads_log_no_missing_script_run_context(common, monkeypatch):
+    import threading
+
+    import streamlit.runtime.scriptrunner_utils.script_run_context as context
+
+    said: list[str] = []
+    monkeypatch.setattr(context._LOGGER, "warning", lambda msg, *args, **kw: said.append(msg % args))
+    common._example_audio.clear()  # so the warm-up makes it (its cache once showed a spinner from the thread)
+    _start_and_stop(common)
+    threads = [t for t in threading.enumerate() if t.name.startswith("gesturekit-warm")]
+    assert threads  # the start began its warm-up
+    for thread in threads:
+        thread.join(timeout=300)
+    for cached in (common._warm_up, common._warm_refiner, common._example_audio):
+        cached.clear()  # the next start warms up again
+    assert not [m for m in said if "ScriptRunContext" in m], said
+
+
+@pytest.mark.slow
 def test_server_start_prepares_search_and_refiner_of_the_default_database(common, monkeypatch):
     import gesturekit.interactive as gs
 
     made = []
     real = gs.example_speech
     monkeypatch.setattr(gs, "example_speech", lambda label: made.append(label) or real(label))
-    common.example_audio.clear()
+    common._example_audio.clear()
     _start_and_stop(common)
     path = default_database_path().resolve()
     db = common.load_database(path)

@@ -114,20 +114,29 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     assert res.n_frames == 60
 
     # the 3D view: every joint of the first frame at the result's positions, one animation frame per frame
+    # without a refiner: the hard joins beside the blended output
     skel = viewer(at, "synth.skeleton")
-    assert len(skel["motions"]) == 1 and len(skel["times"]) == res.n_frames
-    m = skel["motions"][0]
+    assert len(skel["motions"]) == 2 and len(skel["times"]) == res.n_frames
+    hard, m = skel["motions"]
+
+    def shown_at(motion, f):  # the joints of frame f (the second figure stands to the side: its offset removed)
+        p = np.asarray(motion["points"][f][:N_JOINTS])
+        return p - np.asarray(motion["points"][0][0]) + res.motion.positions[0, 0]
+
     # posed by the rig's rotations, sent as int16 quaternions: their rounding moves a fingertip by under 2 mm
-    np.testing.assert_allclose(m["points"][0][:N_JOINTS], res.motion.positions[0], atol=2e-3)
+    np.testing.assert_allclose(shown_at(m, 0), res.motion.positions[0], atol=2e-3)
+    np.testing.assert_allclose(shown_at(m, 9), res.motion.positions[9], atol=2e-3)  # after a join
+    np.testing.assert_allclose(shown_at(hard, 9), res.knn_motion.positions[9], atol=2e-3)
     assert skel["up"] == [0, 1, 0] and skel["look"]["view"][2] > 0  # in front of the character, Y up
 
     # the wrist plot: the result's own wrist heights and speeds, the control band, the thresholds
     wrists = chart(at, "synth.wrists")
-    attrs = frame_attributes(res.motion.positions, fps=res.motion.fps)
+    motions = (res.knn_motion, res.motion)  # the hard joins and the output, as in the 3D view
+    attrs = [frame_attributes(m.positions, fps=res.motion.fps) for m in motions]
     for trace in wrists["data"]:
         col = db.attribute_names.index(trace["meta"]["attribute"])
-        np.testing.assert_allclose(array(trace["y"]), attrs[:, col], atol=1e-5)
-    assert sorted(t["meta"]["attribute"] for t in wrists["data"]) == sorted(a for a, _ in WRIST_ROWS)
+        np.testing.assert_allclose(array(trace["y"]), attrs[trace["meta"]["motion"]][:, col], atol=1e-5)
+    assert sorted(t["meta"]["attribute"] for t in wrists["data"]) == sorted(2 * [a for a, _ in WRIST_ROWS])
     assert set(bands(wrists)) == {(1.0, 2.5, "left_hand=high")}
     lines = {s["name"]: s["y0"] for s in wrists["layout"]["shapes"] if s["type"] == "line"}
     assert lines["left_hand_height high"] == pytest.approx(db.thresholds["left_hand_height"][1])
@@ -224,7 +233,11 @@ def test_settings_that_differ_from_the_paper_are_named(app_env):
     at.radio(key="_w.synth.mode").set_value("Example speech").run()
     if at.toggle(key="_w.synth.refine").value:
         at.toggle(key="_w.synth.refine").set_value(False).run()
-    assert not [c.value for c in at.caption if "Differs from the paper" in c.value]  # the defaults are the paper's
+    # without a refiner the joins are blended by default: our one departure, named
+    (note,) = [shown(c.value) for c in at.caption if shown(c.value).startswith("Differs from the paper")]
+    assert note == "Differs from the paper: blending: dead (paper none)"
+    at.selectbox(key="_w.synth.blend").set_value("none").run()
+    assert not [c.value for c in at.caption if "Differs from the paper" in c.value]  # the paper's settings
     at.number_input(key="_w.synth.segment").set_value(6)
     at.selectbox(key="_w.synth.init").set_value("rest").run()
     (note,) = [shown(c.value) for c in at.caption if shown(c.value).startswith("Differs from the paper")]
@@ -359,3 +372,32 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
     at.text_input(key="_w.synth.refiner_path").input("").run()
     assert any("folder of a trained refiner" in e for e in errors(at))
     assert at.button(key="synth.go").disabled
+
+
+def _page_text(at: AppTest) -> list[str]:
+    """Every text an audience reads on the page: markdown, captions, notes, labels of buttons and downloads."""
+    texts = []
+    for kind in ("markdown", "caption", "info", "success", "warning", "error", "title", "header", "subheader"):
+        texts += [shown(str(e.value)) for e in at.get(kind)]
+    texts += [str(d.proto.label) for d in at.get("download_button")]
+    texts += [str(b.label) for b in at.button]
+    return texts
+
+
+def test_a_run_shows_no_server_paths_flags_or_source_strings(app_env, db):
+    from gesturekit.refine import default_refiner_path
+
+    at = open_page()
+    at.radio(key="_w.synth.mode").set_value("Example speech").run()
+    at.button(key="synth.go").click().run()
+    assert not at.exception and not errors(at)
+    assert result(at).refined_motion is not None  # the demo refiner, on by default: its path is not shown
+    texts = _page_text(at)
+    assert texts
+    home = str(app_env)  # the server's folders: the databases, the refiner, the working folder
+    for text in texts:
+        for path in (home, str(db.path), str(default_refiner_path()), str(Path.cwd())):
+            assert path not in text, text
+        assert " --" not in text and not text.startswith("--"), text  # no command-line flags
+        assert "gesturekit.datasets" not in text and "generator=" not in text, text
+    assert not [w for w in at.main.warning if "off the motion" in shown(w.value)]  # the demo's files are exact

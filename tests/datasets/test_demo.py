@@ -40,3 +40,35 @@ def test_cli_builds_demo_at_default_path(tmp_path, monkeypatch, capsys):
     assert "generated demo speaker" in out and "takes      1" in out
     assert main(["info"]) == 0
     assert "clips      28 x 64 frames" in capsys.readouterr().out  # 2 min = 1800 frames -> 28 clips
+
+
+@pytest.mark.slow
+def test_the_demo_database_holds_one_skeleton_so_its_files_are_exact(tmp_path):
+    import warnings
+
+    from gesturekit.bones import bone_length_spread
+    from gesturekit.datasets.synthetic import generate_demo_take
+    from gesturekit.errors import GestureKitWarning
+    from gesturekit.export.result import export_result_bvh, export_result_glb
+    from gesturekit.synthesis import SynthesisConfig, synthesize
+
+    db = build_demo_database(tmp_path / "demo", minutes=2.0)
+    assert db.skeleton is not None and MatchingDatabase.load(db.path).skeleton is not None
+    frames = np.asarray(db.G, np.float32).reshape(-1, 55, 3)
+    assert bone_length_spread(frames).max() < 1e-5  # one length per bone, metres
+    speech = generate_demo_take(seconds=8.0, seed=5, name="q")[0].audio
+    try:
+        from gesturekit.refine import open_refiner
+
+        refiners = [None, open_refiner("demo")]
+    except ImportError:  # no torch: the k-NN results only
+        refiners = [None]
+    for refiner in refiners:
+        for config in (SynthesisConfig(), SynthesisConfig(blend="none", control="1-6:both_hands=high")):
+            res = synthesize(speech, db=db, config=config, refiner=refiner)
+            assert res.one_skeleton
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", GestureKitWarning)  # no "up to ... off the motion"
+                bvh = export_result_bvh(res, tmp_path / "r.bvh", overwrite=True)
+                glb = export_result_glb(res, tmp_path / "r.glb", overwrite=True)
+            assert bvh.max_error < 1e-4 and glb.max_error < 1e-4, (bvh.summary(), glb.summary())

@@ -29,7 +29,7 @@ from gesturekit.datasets.keypoint_example import write_keypoint_example
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.errors import GestureKitWarning
 from gesturekit.export.bvh import export_bvh
-from gesturekit.export.result import export_result_bvh
+from gesturekit.export.result import export_result_bvh, export_result_glb
 from gesturekit.export.video import render_video
 from gesturekit.skeleton import DERIVED, PARENTS, RECORDED, joint_index
 from gesturekit.synthesis import SynthesisConfig, synthesize
@@ -217,15 +217,16 @@ def test_the_bvh_of_a_result_is_within_a_centimetre_of_its_motion(three_sizes, t
         assert export_result_bvh(loose, tmp_path / "loose.bvh").max_error > 0.05
 
 
-def test_the_warning_of_a_database_with_one_skeleton_names_what_would_help(three_sizes, tmp_path):
+@pytest.mark.parametrize("blend", ["offset", "inertialize", "dead"])
+def test_blended_results_of_a_database_with_one_skeleton_keep_it(three_sizes, tmp_path, blend):
     _, db, audio, _ = three_sizes
-    res = synthesize(audio, db=db, config=SynthesisConfig(seed=3, blend="offset"))
-    with pytest.warns(GestureKitWarning) as caught:
+    res = synthesize(audio, db=db, config=SynthesisConfig(seed=3, blend=blend))
+    assert not np.array_equal(res.motion.positions, res.knn_motion.positions)  # the joins were blended
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GestureKitWarning)  # the blend keeps the bones: nothing to warn about
         report = export_result_bvh(res, tmp_path / "blended.bvh")
-    assert report.max_error > 0.01  # the fades at the joins change the bones' lengths
-    message = str(caught[0].message)
-    assert "--normalize-bones" not in message
-    assert "one skeleton" in message and "`--blend none`" in message
+        glb = export_result_glb(res, tmp_path / "blended.glb")
+    assert report.max_error < 1e-3 and glb.max_error < 1e-3, (report.summary(), glb.summary())
 
 
 def test_info_shows_the_skeleton(three_sizes):

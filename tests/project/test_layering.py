@@ -98,6 +98,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.character._user_bvh",
             "gesturekit.character._user_gltf",
             "gesturekit.character.bone_body",
+            "gesturekit.character.contact",
             "gesturekit.character.glb",
             "gesturekit.character.humanoid",
             "gesturekit.character.look",

@@ -168,9 +168,20 @@ def test_comparison_tables_control_met_is_the_fraction_of_constrained_frames_mee
     assert np.isnan(gs.comparison_table([plain], db.thresholds)["control_met"][0])
 
 
-def test_without_a_refiner_nothing_changes(result):
+def test_without_a_refiner_the_joins_are_compared(result):
+    from gesturekit.blend import BLEND_MODES
+
+    assert set(gs.BLEND_LABELS) == set(BLEND_MODES)
     motions, labels = gs.display_motions(result)
-    assert motions == [result.motion] and labels == ["k-NN"]
+    if result.config.blend == "none":
+        assert motions == [result.motion] and labels == ["k-NN"]
+    else:  # the hard joins beside the blended output
+        assert motions == [result.knn_motion, result.motion]
+        assert labels == ["k-NN, hard joins", f"k-NN, {gs.BLEND_LABELS[result.config.blend]}"]
+    plain = dataclasses.replace(result, config=dataclasses.replace(result.config, blend="none"))
+    plain = dataclasses.replace(plain, motion=plain.knn_motion)
+    motions, labels = gs.display_motions(plain)
+    assert motions == [plain.motion] and labels == ["k-NN"]
 
 
 def test_a_silent_upload_warns_naming_the_upload():

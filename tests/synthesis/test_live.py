@@ -117,8 +117,15 @@ def test_offline_control_track_and_options_stream_equally(db, speech):
 
 @pytest.mark.parametrize(
     "options",
-    [{"segment": 1}, {"segment": 2, "blend": "offset"}, {"segment": 20}, {"segment": 8, "mask_rule": "all"}],
-    ids=["N1", "N2-offset", "N20", "mask-all"],
+    [
+        {"segment": 1},
+        {"segment": 2, "blend": "offset"},
+        {"segment": 20},
+        {"segment": 8, "mask_rule": "all"},
+        {"segment": 3, "blend": "inertialize", "blend_halflife": 0.5},  # transitions longer than a step
+        {"segment": 8, "blend": "none"},
+    ],
+    ids=["N1", "N2-offset", "N20", "mask-all", "N3-inertialize", "N8-none"],
 )
 def test_step_lengths_and_switches_stream_equally(db, speech, options):
     config = SynthesisConfig(**options)

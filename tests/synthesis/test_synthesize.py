@@ -171,9 +171,22 @@ def test_rest_init_starts_from_the_rest_frame(demo_db, speech):
     assert demo_db.attribute("hand_speed")[c, f] <= demo_db.thresholds["hand_speed"][0]
 
 
-def test_offset_blend_shrinks_the_jumps_at_joins(demo_db, speech):
-    none = synthesize(speech, db=demo_db)
-    off = synthesize(speech, db=demo_db, config=SynthesisConfig(blend="offset"))
+def test_blend_none_is_the_paper_and_the_default_smooths(demo_db, speech):
+    none = synthesize(speech, db=demo_db, config=SynthesisConfig(blend="none"))
+    default = synthesize(speech, db=demo_db)
+    assert SynthesisConfig().blend == "dead" and default.config.blend == "dead"
+    np.testing.assert_array_equal(none.motion.positions, none.knn_motion.positions)  # the hard joins
+    np.testing.assert_array_equal(default.knn_motion.positions, none.knn_motion.positions)
+    assert not np.array_equal(default.motion.positions, none.motion.positions)
+    assert SynthesisConfig().paper_differences(refined=False) == ["blending: dead (paper none)"]
+    # a refiner is given the k-NN motion: the blend does not count
+    assert SynthesisConfig(refiner_keep_hz=0.0).paper_differences(refined=True) == []
+
+
+@pytest.mark.parametrize("mode", ["offset", "inertialize", "dead"])
+def test_blends_shrink_the_jumps_at_joins(demo_db, speech, mode):
+    none = synthesize(speech, db=demo_db, config=SynthesisConfig(blend="none"))
+    off = synthesize(speech, db=demo_db, config=SynthesisConfig(blend=mode))
     b = np.arange(8, none.n_frames, 8)
 
     def join_jerk(m):
@@ -254,7 +267,9 @@ def test_zeggs_left_hand_high_paper_rule(zeggs_db, beat_speech):
 
 
 def test_zeggs_left_hand_high_every_frame_rule(zeggs_db, beat_speech):
-    res = synthesize(beat_speech, db=zeggs_db, config=SynthesisConfig(control="0-1000:left_hand=high", mask_rule="all"))
+    res = synthesize(
+        beat_speech, db=zeggs_db, config=SynthesisConfig(control="0-1000:left_hand=high", mask_rule="all", blend="none")
+    )
     high = res.motion.positions[:, LW, 1] > zeggs_db.thresholds["left_hand_height"][1]
     relaxed_frames = np.zeros(res.n_frames, bool)
     for i in res.relaxed_steps:
@@ -327,7 +342,7 @@ def test_cli_synthesize_with_video_and_controls(zeggs_db, shared_data, tmp_path,
     k=st.integers(0, 3),
     segment=st.integers(1, 12),
     init=st.sampled_from(["random", "rest"]),
-    blend=st.sampled_from(["none", "offset"]),
+    blend=st.sampled_from(["none", "offset", "inertialize", "dead"]),
     mask_rule=st.sampled_from(["ends", "all"]),
     keep=st.sampled_from([0.0, 1.5, 2.0]),
     refined=st.booleans(),
@@ -339,7 +354,7 @@ def test_paper_differences_name_exactly_the_settings_that_differ(k, segment, ini
         "k = ": k != 0,
         "N = ": segment != 8,
         "initial pose": init != "random",
-        "blending": blend != "none",
+        "blending": blend != "none" and not refined,
         "control held at": mask_rule != "ends",
         "kept below": refined and keep != 0,
     }
@@ -352,8 +367,10 @@ def test_paper_differences_name_exactly_the_settings_that_differ(k, segment, ini
 
 def test_the_paper_search_has_no_differences():
     assert SynthesisConfig(refiner_keep_hz=0.0).paper_differences(refined=True) == []
-    assert SynthesisConfig().paper_differences(refined=False) == []
-    assert SynthesisConfig(seed=9, record=3).paper_differences(refined=False) == []  # no effect on the method
+    assert SynthesisConfig(blend="none").paper_differences(refined=False) == []
+    assert (
+        SynthesisConfig(blend="none", seed=9, record=3).paper_differences(refined=False) == []
+    )  # no effect on the method
 
 
 # -- one plan, one source of truth for the search's options and the control track ---------------------
@@ -433,6 +450,7 @@ def test_the_search_options_live_in_one_nested_config(k, segment, record, seed, 
         "mask_rule",
         "blend",
         "blend_frames",
+        "blend_halflife",
         "control",
         "exclude_takes",
         "exclude_ranges",
@@ -468,6 +486,7 @@ def test_a_config_saved_by_an_earlier_version_reads_back():
     assert cfg.pins == {3: (4, 5)} and cfg.exclude_ranges == (("b", 1.0, 2.5),) and cfg.exclude_takes == ("a",)
     # written back under the current names: N is "segment", the recorded candidates "record"
     renamed = {{"step": "segment", "topk": "record"}.get(name, name): value for name, value in saved.items()}
+    renamed["blend_halflife"] = SynthesisConfig().blend_halflife  # saved before it was an option: the default
     assert cfg.control_track.to_text() == "0-4.25:both_hands=high" and cfg.to_dict() == renamed
     assert SynthesisConfig.from_dict(renamed) == cfg
     with pytest.raises(ConfigError, match="unknown synthesis options: nope"):
@@ -478,3 +497,17 @@ def test_a_config_saved_by_an_earlier_version_reads_back():
         SynthesisConfig(
             search=__import__("gesturekit.search", fromlist=["SearchConfig"]).SearchConfig(init_pose=(1.0,))
         )
+
+
+@pytest.mark.slow
+def test_zeggs_default_joins_move_like_the_take(zeggs_db, beat_speech):
+    from gesturekit.evaluate.metrics import kinematic_magnitudes, mean_jerk
+
+    clips = np.asarray(zeggs_db.G, np.float32).reshape(zeggs_db.n_clips, -1, 55, 3)
+    own = np.concatenate([kinematic_magnitudes(c, fps=zeggs_db.fps, order=3) for c in clips]).mean()
+    hard = synthesize(beat_speech, db=zeggs_db, config=SynthesisConfig(blend="none"))
+    smooth = synthesize(beat_speech, db=zeggs_db)
+    ratio_hard = mean_jerk(hard.motion.positions, fps=zeggs_db.fps) / own
+    ratio = mean_jerk(smooth.motion.positions, fps=zeggs_db.fps) / own
+    assert ratio_hard > 1.8 and 0.7 <= ratio <= 1.3, (ratio_hard, ratio)
+    np.testing.assert_array_equal(smooth.knn_motion.positions, hard.knn_motion.positions)

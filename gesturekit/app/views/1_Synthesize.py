@@ -33,7 +33,12 @@ _VIDEO = "_synth.video"  # {"run": n, "bytes": mp4, "note": how long it took, "c
 
 UPLOAD, EXAMPLE = "Upload a file", "Example speech"
 _INIT_LABELS = {"random": "random database frame (paper)", "rest": "rest pose"}
-_BLEND_LABELS = {"none": "none (paper)", "offset": "offset fade at joins"}
+_BLEND_LABELS = {
+    "dead": "dead blending (ours, default)",
+    "inertialize": "inertialization (ours)",
+    "offset": "offset fade at joins (ours)",
+    "none": "none: hard joins (paper)",
+}
 _MASK_LABELS = {"ends": "first and last frame of a window (paper)", "all": "every frame of a window"}
 
 
@@ -274,6 +279,18 @@ def settings(db: MatchingDatabase) -> dict:
     return {"options": out, "refiner": refiner, "ok": ok}
 
 
+def _refiner_name(made_by: dict) -> str:
+    """What the page calls a refiner: the shipped demo refiner, or its folder's name (never the server's path)."""
+    from pathlib import Path
+
+    from gesturekit.refine import default_refiner_path
+
+    path = Path(str(made_by.get("path", "")))
+    if path == default_refiner_path():
+        return "the demo refiner"
+    return f"the refiner {path.name}" if path.name else "a refiner"
+
+
 def _paper_differences(options: dict, *, refined: bool) -> list[str]:
     try:
         return SynthesisConfig(**options).paper_differences(refined=refined)
@@ -350,7 +367,7 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         parts.append(f"{len(c.pins)} pinned step{'s' if len(c.pins) > 1 else ''}")
     if result.refined_motion is not None:
         made_by = getattr(result, "refiner", None)
-        parts.append(f"refined by {display.escape_markdown(made_by['path'])}" if made_by else "refined")
+        parts.append(f"refined by {display.escape_markdown(_refiner_name(made_by))}" if made_by else "refined")
     differs = c.paper_differences(refined=result.refined_motion is not None)
     if differs:
         parts.append("differs from the paper: " + "; ".join(differs))
