@@ -193,6 +193,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.viz.render",
             "gesturekit.viz.render_pool",
             "gesturekit.viz.render_worker",
+            "gesturekit.viz.retrieval",
             "gesturekit.viz.skeleton_figure",
             "gesturekit.viz.viewer",
             "gesturekit.viz.walkthrough",
