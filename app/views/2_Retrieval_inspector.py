@@ -94,6 +94,18 @@ def _clicked(event: Any) -> list[dict]:
         return []
 
 
+def _custom(point: dict) -> list[int]:
+    """A clicked point's ``customdata`` as integers: the browser sends a list, or an object
+    keyed "0", "1", ... for a trace whose customdata is a typed array."""
+    data = point.get("customdata")
+    if isinstance(data, dict):
+        data = [data[k] for k in sorted(data, key=int)]
+    try:
+        return [int(v) for v in data] if isinstance(data, list) else []
+    except (TypeError, ValueError):
+        return []
+
+
 def _selected_rows(event: Any) -> list[int]:
     try:
         return [int(r) for r in event["selection"]["rows"]]
@@ -112,18 +124,11 @@ def sync_candidate(step: int, table: Any) -> int:
     positions = [int(p) for p in table["position"]]
     by_window = {(int(r.clip), int(r.start)): int(r.position) for r in table.itertuples()}
     chosen = [int(p) for p, c in zip(table["position"], table["chosen"]) if c]
+    windows = [tuple(_custom(p)[:2]) for p in _clicked(ss.get(SCATTER_KEY))]
     picks = {
         "table": [positions[r] for r in _selected_rows(ss.get(TABLE_KEY)) if 0 <= r < len(positions)],
-        "scatter": [
-            by_window[(int(p["customdata"][0]), int(p["customdata"][1]))]
-            for p in _clicked(ss.get(SCATTER_KEY))
-            if isinstance(p.get("customdata"), list) and (int(p["customdata"][0]), int(p["customdata"][1])) in by_window
-        ],
-        "strip": [
-            int(p["customdata"][0])
-            for p in _clicked(ss.get(STRIP_KEY))
-            if isinstance(p.get("customdata"), list) and int(p["customdata"][0]) in positions
-        ],
+        "scatter": [by_window[w] for w in windows if w in by_window],
+        "strip": [c[0] for c in (_custom(p) for p in _clicked(ss.get(STRIP_KEY))) if c and c[0] in positions],
     }
     seen = ss.get(_LAST_PICKS)
     widget = state.persistent_key(CANDIDATE, chosen[0] if chosen else positions[0])
@@ -272,7 +277,7 @@ def why_view(db: MatchingDatabase, result: SynthesisResult, step: int, table: An
         config={"displaylogo": False},
     )
     st.plotly_chart(
-        candidates_strip(views, query, selected=pick, height=240),
+        candidates_strip(views, query, selected=pick),
         key=STRIP_KEY,
         config={"displaylogo": False},
         on_select="rerun",

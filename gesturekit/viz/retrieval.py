@@ -216,21 +216,28 @@ def _pose_panel(
         )
 
 
-def _pose_axes(fig: go.Figure, views: Sequence[CandidateView], query: np.ndarray | None, *, n_cols: int) -> None:
-    """The same equal-aspect front-view range in every pose subplot, so sizes compare across them."""
+def _pose_axes(fig: go.Figure, views: Sequence[CandidateView], query: np.ndarray | None, *, n_axes: int) -> None:
+    """The same equal-aspect front-view range in the first ``n_axes`` subplots, so sizes compare across them."""
     pts = [np.asarray(v.window[:, :, :2]).reshape(-1, 2) for v in views]
     if query is not None:
         pts.append(np.asarray(query)[:, :2])
     allp = np.concatenate(pts + [np.zeros((1, 2), np.float32)])
     lo, hi = allp.min(axis=0) - 0.08, allp.max(axis=0) + 0.08
-    for c in range(1, n_cols + 1):
-        xa = "x" if c == 1 else f"x{c}"
-        fig.update_xaxes(range=[float(lo[0]), float(hi[0])], visible=False, row=1, col=c)
-        fig.update_yaxes(range=[float(lo[1]), float(hi[1])], visible=False, scaleanchor=xa, scaleratio=1, row=1, col=c)
+    for i in range(1, n_axes + 1):
+        suffix = "" if i == 1 else str(i)
+        fig.layout[f"xaxis{suffix}"].update(range=[float(lo[0]), float(hi[0])], visible=False)
+        fig.layout[f"yaxis{suffix}"].update(
+            range=[float(lo[1]), float(hi[1])], visible=False, scaleanchor=f"x{suffix}", scaleratio=1
+        )
 
 
 def candidates_strip(
-    views: Sequence[CandidateView], query: np.ndarray | None, *, selected: int | None = None, height: int = 230
+    views: Sequence[CandidateView],
+    query: np.ndarray | None,
+    *,
+    selected: int | None = None,
+    per_row: int = 5,
+    row_height: int = 210,
 ) -> go.Figure:
     """Every candidate of a step small, side by side: first frame over the query's ghost, wrist paths.
 
@@ -243,13 +250,15 @@ def candidates_strip(
     selected : int, optional
         Position of the candidate selected for a closer look (drawn in
         :data:`SELECTED_COLOR` unless it is the chosen one, which is :data:`CHOSEN_COLOR`).
-    height : int
-        Figure height in pixels.
+    per_row : int
+        Candidates per row (more rows for more candidates).
+    row_height : int
+        Pixels per row of candidates.
 
     Returns
     -------
     plotly.graph_objects.Figure
-        One subplot per candidate, titled ``#position`` with its distances; traces with
+        One subplot per candidate, rows of ``per_row``, titled ``#position`` with its distances; traces with
         ``meta["part"]`` in ``"ghost"``, ``"first frame"``, ``"left wrist path"``, ``"right
         wrist path"`` and ``meta["candidate"]`` its position.
 
@@ -261,19 +270,26 @@ def candidates_strip(
     views = list(views)
     if not views:
         raise ConfigError("candidates_strip needs at least one candidate")
+    if int(per_row) < 1 or int(row_height) < 1:
+        raise ConfigError(f"candidates_strip needs per_row and row_height >= 1, got {per_row} and {row_height}")
     query = _checked_query(query)
     titles = [
         f"<b>#{v.position}</b>{' chosen' if v.chosen else ''}<br>pose {v.pose_dist:.2f} · audio {v.audio_dist:.3f}"
         for v in views
     ]
-    fig = make_subplots(rows=1, cols=len(views), subplot_titles=titles, horizontal_spacing=0.01)
-    for c, v in enumerate(views, start=1):
-        _pose_panel(fig, v, query, row=1, col=c, color=_color(v, selected), width=2.0, marker=9)
-    _pose_axes(fig, views, query, n_cols=len(views))
+    n_cols = min(len(views), per_row)
+    n_rows = -(-len(views) // n_cols)
+    fig = make_subplots(
+        rows=n_rows, cols=n_cols, subplot_titles=titles, horizontal_spacing=0.01, vertical_spacing=0.12 / n_rows
+    )
+    for i, v in enumerate(views):
+        row, col = divmod(i, n_cols)
+        _pose_panel(fig, v, query, row=row + 1, col=col + 1, color=_color(v, selected), width=2.0, marker=9)
+    _pose_axes(fig, views, query, n_axes=len(views))
     for a in fig.layout.annotations:
         a.font = dict(size=12)
     fig.update_layout(
-        height=height,
+        height=row_height * n_rows,
         margin=dict(l=4, r=4, t=44, b=4),
         showlegend=False,
         plot_bgcolor="#ffffff",
@@ -378,7 +394,7 @@ def candidate_figure(
         ],
     )
     _pose_panel(fig, view, query, row=1, col=1, color=color, width=3.0, marker=11)
-    _pose_axes(fig, [view], query, n_cols=1)
+    _pose_axes(fig, [view], query, n_axes=1)
 
     # the filmstrip: poses along the clip's time, each squeezed into the seconds between drawn frames
     drawn = sorted(set(range(a % every, n_clip, every)) | {b - 1})

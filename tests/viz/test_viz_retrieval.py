@@ -118,6 +118,8 @@ def test_the_strip_draws_every_candidate_over_the_ghost_with_its_wrist_paths(db,
     # one range for every panel: sizes compare across candidates
     ranges = {tuple(fig.layout[f"xaxis{'' if c == 1 else c}"].range) for c in range(1, len(views) + 1)}
     assert len(ranges) == 1
+    # rows of at most five stay readable
+    assert candidates_strip(views, q, per_row=5).layout.height == 210 * -(-len(views) // 5)
 
 
 def test_the_large_view_marks_the_window_in_the_whole_clip_beside_the_steps_speech(db, result):
