@@ -63,6 +63,7 @@ __all__ = [
     "clip_speech",
     "compare_k",
     "comparison_table",
+    "parse_times",
 ]
 
 #: Example speech the app offers: label -> (seconds, seed) of a take of the generated demo speaker.
@@ -473,3 +474,26 @@ def comparison_table(results: Sequence[SynthesisResult], thresholds: Mapping[str
             }
         )
     return pd.DataFrame(rows)
+
+
+def parse_times(text: str, *, duration: float) -> list[float]:
+    """Times typed as ``"1, 2.5, 4"`` (seconds, commas or spaces between them), in order.
+
+    Raises
+    ------
+    ConfigError
+        Nothing typed, something that is not a number, or a time outside ``0 .. duration``.
+    """
+    parts = [p for p in str(text).replace(",", " ").split() if p]
+    if not parts:
+        raise ConfigError("type one or more times in seconds, e.g. 1, 2.5, 4")
+    times = []
+    for p in parts:
+        try:
+            t = float(p)
+        except ValueError:
+            raise ConfigError(f"{p!r} is not a time in seconds") from None
+        if not (math.isfinite(t) and 0 <= t <= duration):
+            raise ConfigError(f"{p} s lies outside the result (0 to {duration:.2f} s)")
+        times.append(t)
+    return times

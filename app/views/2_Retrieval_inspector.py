@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import characters
 import display
 import nav
+import numpy as np
 import sidebar
 import state
 import streamlit as st
@@ -17,6 +19,7 @@ from gesturekit.datasets.audio import wav_bytes
 from gesturekit.motion import AUDIO_SR
 from gesturekit.synthesize import SynthesisResult
 from gesturekit.viz.figures import candidates_figure, waveform_figure, wrist_figure
+from gesturekit.viz.paper import FORMATS, figure_bytes, filmstrip_figure
 from gesturekit.viz.retrieval import candidate_figure, candidates_strip
 
 STEP = "inspect.step"  # the step shown (per user)
@@ -358,11 +361,59 @@ def compare_view(db: MatchingDatabase, record: dict) -> None:
     table["control_met"] = (100 * table["control_met"]).round()  # whole percent, one format for every row
     st.dataframe(table, hide_index=True, key="inspect.compare_table", column_config=COMPARE_COLUMNS)
     st.markdown(control_words(result.config.search.mask_rule))
-    st.plotly_chart(
-        wrist_figure(motions, labels=labels, bands=result.control, thresholds=db.thresholds),
-        key="inspect.compare_wrists",
-        config={"displaylogo": False},
+    duration = max(m.duration for m in motions)
+    default = (0.0, round(min(duration, 10.0), 2))
+    zoom = ss["inspect.zoom"] = st.slider(
+        "Time range shown [s]",
+        min_value=0.0,
+        max_value=round(duration, 2),
+        step=0.1,
+        key=state.persistent_key("inspect.zoom", default),
+        help="the wrist plot and its exported figure show these seconds (a long result is unreadable as a whole)",
     )
+    wrists = wrist_figure(motions, labels=labels, bands=result.control, thresholds=db.thresholds)
+    if zoom[1] > zoom[0]:
+        wrists.update_xaxes(range=list(zoom))
+    st.plotly_chart(wrists, key="inspect.compare_wrists", config={"displaylogo": False})
+    paper_view(motions, labels, wrists, zoom, duration)
+
+
+def paper_view(motions: list, labels: list[str], wrists: Any, zoom: tuple[float, float], duration: float) -> None:
+    """Figures for a paper: a filmstrip of the compared results at chosen times and the wrist plot,
+    as PNG, SVG or PDF at print size (made when the download is clicked)."""
+    ss = st.session_state
+    st.markdown("**Figures for a paper**")
+    c = st.columns([3, 1, 1, 1])
+    evenly = ", ".join(f"{t:.1f}" for t in np.linspace(zoom[0], zoom[1], 5))
+    text = ss["inspect.film_times"] = c[0].text_input(
+        "Filmstrip times [s]", key=state.persistent_key("inspect.film_times", evenly), help="commas between them"
+    )
+    fmt = ss["inspect.fig_format"] = c[1].selectbox(
+        "Format", list(FORMATS), key=state.persistent_key("inspect.fig_format", "pdf"), format_func=str.upper
+    )
+    width = ss["inspect.fig_width"] = c[2].number_input(
+        "Width [mm]", min_value=40.0, max_value=500.0, step=5.0, key=state.persistent_key("inspect.fig_width", 170.0)
+    )
+    dpi = ss["inspect.fig_dpi"] = c[3].number_input(
+        "PNG dpi", min_value=72, max_value=1200, step=50, key=state.persistent_key("inspect.fig_dpi", 300)
+    )
+    with display.user_errors():
+        times = gs.parse_times(text, duration=duration)
+        film = filmstrip_figure(motions, times, labels=labels)
+        st.plotly_chart(film, key="inspect.filmstrip", config={"displaylogo": False})
+        d = st.columns(2)
+        for col, name, fig, kwargs in (
+            (d[0], "filmstrip", film, {}),
+            (d[1], "wrists", wrists, {"time_range": zoom if zoom[1] > zoom[0] else None}),
+        ):
+            col.download_button(
+                f"{name.capitalize()} ({fmt.upper()}, {width:g} mm)",
+                data=functools.partial(figure_bytes, fig, fmt, width_mm=float(width), dpi=int(dpi), **kwargs),
+                file_name=f"{name}.{fmt}",
+                mime=FORMATS[fmt],
+                key=f"inspect.export_{name}",
+                on_click="ignore",
+            )
 
 
 def control_words(mask_rule: str) -> str:

@@ -259,3 +259,23 @@ def test_control_met_and_steps_relaxed_are_explained_in_words(app_env):
     assert "**control met**: of the output frames a control covers" in words
     assert "**steps relaxed**: steps where no database window satisfied the control" in words
     assert "first and last frame" in words  # the rule the search used
+
+
+def test_figures_for_a_paper_are_offered_at_print_size_over_a_chosen_range(app_env):
+    at = synthesized()
+    at.button(key="inspect.compare_go").click().run()
+    at.slider(key="_w.inspect.zoom").set_value((1.0, 3.0)).run()
+    assert not at.exception
+    # the page's wrist plot shows the range; the filmstrip's times default to it, evenly
+    assert chart(at, "inspect.compare_wrists")["layout"]["xaxis"]["range"] == [1.0, 3.0]
+    assert at.text_input(key="_w.inspect.film_times").value == "0.0, 1.0, 2.0, 3.0, 4.0"  # the default's range
+    at.text_input(key="_w.inspect.film_times").set_value("0.5, 1.5, 2.5").run()
+    film = chart(at, "inspect.filmstrip")
+    poses = [t["meta"] for t in film["data"] if t["meta"]["part"] == "pose"]
+    assert sorted({m["time"] for m in poses}) == [0.5, 1.5, 2.5] and {m["motion"] for m in poses} == {0, 1, 2}
+    names = [b.proto.label for b in at.get("download_button")]
+    assert "Filmstrip (PDF, 170 mm)" in names and "Wrists (PDF, 170 mm)" in names
+    # a time outside the result is a message, not a traceback
+    at.text_input(key="_w.inspect.film_times").set_value("0.5, 999").run()
+    assert not at.exception
+    assert any("lies outside the result" in shown(e.value) for e in at.error)

@@ -190,6 +190,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.viz.character_user",
             "gesturekit.viz.figures",
             "gesturekit.viz.notebook",
+            "gesturekit.viz.paper",
             "gesturekit.viz.render",
             "gesturekit.viz.render_pool",
             "gesturekit.viz.render_worker",
