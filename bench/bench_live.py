@@ -37,7 +37,7 @@ from machine import describe_machine  # noqa: E402
 from gesturekit.database import MatchingDatabase  # noqa: E402
 from gesturekit.live import LiveSynthesizer  # noqa: E402
 from gesturekit.motion import AUDIO_SR  # noqa: E402
-from gesturekit.synthesize import SynthesisConfig  # noqa: E402
+from gesturekit.synthesis import SynthesisConfig  # noqa: E402
 
 CHUNK_MS = 20
 

@@ -185,7 +185,7 @@ def search_figures(path: Path, runs: int) -> dict:
     from gesturekit.database import MatchingDatabase
     from gesturekit.datasets.synthetic import generate_demo_take
     from gesturekit.search import SearchConfig, SearchIndex
-    from gesturekit.synthesize import synthesize, synthesizer_for
+    from gesturekit.synthesis import synthesize, synthesizer_for
 
     speech = generate_demo_take(seconds=60.0, seed=7, name="query")[0].audio
     # compiled kernels and lazy imports load outside the measurements, on another instance of the database

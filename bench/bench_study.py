@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT))
 
 from machine import describe_machine  # noqa: E402  (bench/ is the script's folder)
 
-from gesturekit.studies.store import open_store  # noqa: E402
+from gesturekit.study.store import open_store  # noqa: E402
 from tests import study_pg  # noqa: E402
 from tests._study_standin import make_folder  # noqa: E402
 from tests.study_serve import kill9, run_participant, start_server  # noqa: E402

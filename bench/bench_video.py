@@ -53,7 +53,7 @@ def main(argv=None) -> int:
     from gesturekit.demo import build_demo_database
     from gesturekit.export.video import render_video
     from gesturekit.refine import open_refiner
-    from gesturekit.synthesize import synthesize
+    from gesturekit.synthesis import synthesize
     from gesturekit.viz.render import RenderStyle
     from gesturekit.viz.render_pool import default_workers
 

@@ -4,6 +4,7 @@ An implementation of Habibie et al., "A Motion Matching-based Framework for
 Controllable Gesture Synthesis from Speech" (SIGGRAPH 2022).
 """
 
+from . import _moved
 from ._version import __version__
 from .control import ControlTrack, parse_control
 from .database import BuildConfig, MatchingDatabase
@@ -17,7 +18,7 @@ from .errors import (
     MotionFileError,
 )
 from .motion import AUDIO_SR, Motion, Take
-from .synthesizer import Synthesizer
+from .synthesis.synthesizer import Synthesizer
 
 __all__ = [
     "AUDIO_SR",
@@ -37,3 +38,5 @@ __all__ = [
     "parse_control",
     "__version__",
 ]
+
+_moved.install()  # the old paths of the modules that moved into packages, for one release

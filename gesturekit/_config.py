@@ -2,7 +2,7 @@
 
 Every option a user sets is a field of a frozen configuration dataclass declared with
 :func:`option`, whose metadata (help, bounds, choices, unit) is the one source the
-command line's options (:mod:`gesturekit._cli_options`) and the app's widget limits
+command line's options (:mod:`gesturekit.cli._options`) and the app's widget limits
 (:func:`widget_limits`) are made from::
 
     @dataclass(frozen=True)

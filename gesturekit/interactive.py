@@ -37,7 +37,7 @@ from .export.result import export_result_bvh, save_result_npz, save_result_video
 from .motion import AUDIO_SR, Motion
 from .refine import open_refiner
 from .search.explain import query_pose_frame
-from .synthesize import SynthesisConfig, SynthesisResult, synthesize_batch
+from .synthesis import SynthesisConfig, SynthesisResult, synthesize_batch
 from .viz.retrieval import CandidateView
 
 if TYPE_CHECKING:

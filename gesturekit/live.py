@@ -3,8 +3,8 @@
 :class:`LiveSynthesizer` takes mono speech at 16 kHz as it arrives (:meth:`~LiveSynthesizer.push`)
 and returns the motion frames that the speech so far determines; :meth:`~LiveSynthesizer.finish`
 ends the speech and returns the rest, and :meth:`~LiveSynthesizer.result` gives the whole
-performance as the :class:`~gesturekit.synthesize.SynthesisResult` that
-:func:`~gesturekit.synthesize.synthesize` returns (npz, BVH and MP4 export and the retrieval
+performance as the :class:`~gesturekit.synthesis.SynthesisResult` that
+:func:`~gesturekit.synthesis.synthesize` returns (npz, BVH and MP4 export and the retrieval
 inspector take it as they take any result).
 
 Equal to the offline synthesis. The motion streamed equals ``synthesize`` on the whole
@@ -47,7 +47,7 @@ from .features import LAYOUT, audio_frame_features, cgan_audio_features, n_audio
 from .motion import AUDIO_SR, Motion
 from .search.plan import SearchPlan, exclusions, resolved_search_config
 from .search.stream import StepSearch
-from .synthesize import MotionRefiner, SynthesisConfig, SynthesisResult, search_request, synthesizer_for
+from .synthesis import MotionRefiner, SynthesisConfig, SynthesisResult, search_request, synthesizer_for
 
 __all__ = ["LiveSynthesizer"]
 
@@ -95,7 +95,7 @@ class LiveSynthesizer:
     ----------
     db : MatchingDatabase
     config : SynthesisConfig, optional
-        As for :func:`~gesturekit.synthesize.synthesize` (k, N, seed, initial pose, blending,
+        As for :func:`~gesturekit.synthesis.synthesize` (k, N, seed, initial pose, blending,
         exclusions, an initial control track); pins are refused (the speech's length is not known).
     refiner : MotionRefiner, optional
         Refines on a bounded window (see the module's notes); adds ``REFINE_LOOKAHEAD / 15`` s.
@@ -114,7 +114,7 @@ class LiveSynthesizer:
     >>> from gesturekit.demo import build_demo_database
     >>> from gesturekit.datasets.synthetic import generate_demo_take
     >>> from gesturekit.live import LiveSynthesizer
-    >>> from gesturekit.synthesize import synthesize
+    >>> from gesturekit.synthesis import synthesize
     >>> db = build_demo_database(tempfile.mkdtemp() + "/demo", minutes=0.5)
     >>> speech = generate_demo_take(seconds=3.0, seed=1, name="speech")[0].audio
     >>> live = LiveSynthesizer(db)

@@ -4,8 +4,8 @@ An option is a field declared with :func:`option` (its help, bounds, choices and
 the command line's flags and the app's widgets read it from there (see :func:`widget_limits`).
 
 The configurations so declared: :class:`~gesturekit.search.SearchConfig`,
-:class:`~gesturekit.synthesize.SynthesisConfig`, :class:`~gesturekit.refine.train.TrainConfig`,
-:class:`~gesturekit.study_config.StudyConfig`, :class:`~gesturekit.evaluate.run.EvaluationConfig`,
+:class:`~gesturekit.synthesis.SynthesisConfig`, :class:`~gesturekit.refine.train.TrainConfig`,
+:class:`~gesturekit.study.config.StudyConfig`, :class:`~gesturekit.evaluate.run.EvaluationConfig`,
 :class:`~gesturekit.evaluate.fgd.FGDConfig` and :class:`~gesturekit.database.BuildConfig`.
 """
 

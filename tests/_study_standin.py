@@ -1,4 +1,4 @@
-"""A small stand-in for gesturekit.studies.design in the server's tests: a study folder with fake media
+"""A small stand-in for gesturekit.study.design in the server's tests: a study folder with fake media
 (random bytes under opaque names) and the page sequence of the shared contract (instructions, audio check,
 two rating pages, the second with an attention check, one pairwise page, a questionnaire, done)."""
 
@@ -89,7 +89,7 @@ def make_folder(folder: Path, rows: int = 4, max_failures: int = 0, video_bytes:
 
 
 def load_design(folder: Path) -> SimpleNamespace:
-    """The design with the attributes of gesturekit.studies.design.StudyDesign that the server reads."""
+    """The design with the attributes of gesturekit.study.design.StudyDesign that the server reads."""
     raw = json.loads((Path(folder) / "design.json").read_text())
     return SimpleNamespace(
         raw=raw,

@@ -11,7 +11,7 @@ import soundfile as sf
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.demo import build_demo_database
-from gesturekit.study import make_stimuli
+from gesturekit.study.stimuli import make_stimuli
 
 STUDY_SYSTEMS = ("knn", "random", "audio-only")
 
@@ -67,7 +67,7 @@ def take_part(store, design, *, attentive: bool = True, pages: int | None = None
     """
     import pandas as pd
 
-    from gesturekit.studies.design import check_answer, participant_pages
+    from gesturekit.study.design import check_answer, participant_pages
 
     systems = dict(pd.read_csv(design.folder / "manifest.csv", dtype=str)[["id", "system"]].values)
     person, _ = store.start(design.participants, prolific_pid=pid)

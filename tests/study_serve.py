@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 _LAUNCH = """
 import importlib, sys, uvicorn
 sys.path.insert(0, sys.argv[5])
-from gesturekit.studies.server import create_app
+from gesturekit.study.server import create_app
 api = None if sys.argv[3] == "-" else importlib.import_module(sys.argv[3])
 app = create_app(sys.argv[1], db=None if sys.argv[2] == "-" else sys.argv[2], api=api)
 uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[4]), log_level="warning", server_header=False)

@@ -1,7 +1,7 @@
 """MkDocs hook: the Examples page shows the Examples sections of the docstrings it names.
 
 ``docs/examples.md`` names each function or class by its public import path on a line of its
-own, ``<!-- example: gesturekit.synthesize.synthesize -->``; the hook puts that docstring's
+own, ``<!-- example: gesturekit.synthesis.synthesize -->``; the hook puts that docstring's
 Examples section there (read statically by griffe, as the API reference is), so the page and the
 doctests that ``tests/project/test_doctests.py`` runs are one text. ``mkdocs.yml`` names this
 file under ``hooks``.

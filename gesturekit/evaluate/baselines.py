@@ -7,7 +7,7 @@
                distance, as Algorithm 1 measures audio), whatever the pose
 ``pose-only``  per step, the window whose pose feature is nearest the last output pose
                (Euclidean), whatever the audio: the paper's "simple k-NN"
-``knn``        Algorithm 1 (:func:`gesturekit.synthesize.synthesize`), the paper's k-NN
+``knn``        Algorithm 1 (:func:`gesturekit.synthesis.synthesize`), the paper's k-NN
 ``knn+cgan``   the k-NN motion refined by a trained refiner (the paper's full system)
 =============  ==================================================================================
 
@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from typing_extensions import Unpack  # typing.Unpack is Python 3.11+; only the type checker reads it
 
     from ..database import MatchingDatabase
-    from ..synthesize import MotionRefiner, SynthesisConfig
+    from ..synthesis import MotionRefiner, SynthesisConfig
 
 __all__ = [
     "SYSTEMS",
@@ -443,7 +443,7 @@ def run_system(
     SystemUnavailable
         ``gt`` without a recording, ``knn+cgan`` without a usable refiner.
     """
-    from ..synthesize import SynthesisConfig, synthesize, synthesizer_for
+    from ..synthesis import SynthesisConfig, synthesize, synthesizer_for
 
     if system not in SYSTEMS:
         raise ConfigError(f"unknown system {system!r}; known systems: {', '.join(SYSTEMS)}")

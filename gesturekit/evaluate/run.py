@@ -55,7 +55,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from ..database import MatchingDatabase
-    from ..synthesize import MotionRefiner, SynthesisConfig
+    from ..synthesis import MotionRefiner, SynthesisConfig
     from .fgd import FGDModel
 
 __all__ = [
@@ -486,7 +486,7 @@ def run_evaluation(
     fgd_model, refiner = config.fgd_model, config.refiner
     import pandas as pd
 
-    from ..synthesize import SynthesisConfig
+    from ..synthesis import SynthesisConfig
 
     systems = parse_systems(systems)
     ref = held_out(db, holdout, margin_s=config.margin_s)

@@ -1,6 +1,6 @@
 """The loudness of a soundtrack: EBU R 128 integrated loudness, measured by ffmpeg, and a gain to a target.
 
-User-study stimuli (:mod:`gesturekit.study`) bring every speech to one loudness, so that
+User-study stimuli (:mod:`gesturekit.study.stimuli`) bring every speech to one loudness, so that
 nothing but the motion tells the stimuli apart.
 """
 

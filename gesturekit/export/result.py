@@ -3,7 +3,7 @@ speech as a WAV beside it), MP4 (the motion with its speech); and on a user's ch
 by :func:`gesturekit.character.user.read_character`): their GLB or VRM animated, and a BVH of their skeleton.
 
 Each writer refuses a result whose motion is not finite
-(:meth:`~gesturekit.synthesize.SynthesisResult.check_finite`), writes atomically and
+(:meth:`~gesturekit.synthesis.SynthesisResult.check_finite`), writes atomically and
 replaces an existing file only with ``overwrite=True``.
 """
 
@@ -19,7 +19,7 @@ from .._io import Target, target_path
 from ..character.retarget import Retargeted, retarget
 from ..character.target import Character
 from ..errors import ConfigError
-from ..synthesize import SynthesisResult
+from ..synthesis import SynthesisResult
 from .bvh import BvhReport, export_bvh
 from .character import CharacterBvhReport, CharacterGltfReport, export_character_bvh, export_character_glb
 from .gltf import GltfReport, export_gltf
@@ -60,7 +60,7 @@ def save_result_npz(result: SynthesisResult, path: Target, *, overwrite: bool = 
     >>> from gesturekit.datasets.synthetic import generate_demo_take
     >>> from gesturekit.export.npz import load_npz
     >>> from gesturekit.export.result import save_result_npz
-    >>> from gesturekit.synthesize import synthesize
+    >>> from gesturekit.synthesis import synthesize
     >>> out = Path(tempfile.mkdtemp())
     >>> db = build_demo_database(out / "demo", minutes=0.5)
     >>> res = synthesize(generate_demo_take(seconds=2.0, seed=1, name="speech")[0].audio, db=db)
@@ -121,7 +121,7 @@ def export_result_bvh(
     >>> from gesturekit.demo import build_demo_database
     >>> from gesturekit.datasets.synthetic import generate_demo_take
     >>> from gesturekit.export.result import export_result_bvh
-    >>> from gesturekit.synthesize import synthesize
+    >>> from gesturekit.synthesis import synthesize
     >>> out = Path(tempfile.mkdtemp())
     >>> db = build_demo_database(out / "demo", minutes=0.5)
     >>> res = synthesize(generate_demo_take(seconds=2.0, seed=1, name="speech")[0].audio, db=db)

@@ -20,7 +20,7 @@ from .folder import check_layout, describe_training, provenance, read_refiner_co
 
 if TYPE_CHECKING:
     from ..database import MatchingDatabase
-    from ..synthesize import MotionRefiner
+    from ..synthesis import MotionRefiner
     from .infer import Refiner
 
 __all__ = [
@@ -60,7 +60,7 @@ def open_refiner(refiner: MotionRefiner | str | os.PathLike[str] | None) -> Moti
     a loaded refiner (any object with ``check_database`` and ``refine_motion``) and None pass through.
 
     The one place where the command line, the app, evaluation and studies turn a refiner they
-    were given into the object :func:`gesturekit.synthesize.synthesize` takes.
+    were given into the object :func:`gesturekit.synthesis.synthesize` takes.
 
     Raises
     ------
@@ -75,7 +75,7 @@ def open_refiner(refiner: MotionRefiner | str | os.PathLike[str] | None) -> Moti
     >>> from gesturekit.demo import build_demo_database
     >>> from gesturekit.datasets.synthetic import generate_demo_take
     >>> from gesturekit.refine import open_refiner
-    >>> from gesturekit.synthesize import synthesize
+    >>> from gesturekit.synthesis import synthesize
     >>> refiner = open_refiner("demo")  # the one shipped, trained on the demo speaker
     >>> open_refiner(refiner) is refiner and open_refiner(None) is None
     True

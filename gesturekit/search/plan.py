@@ -161,7 +161,7 @@ def plan_search(db: MatchingDatabase, query: np.ndarray, request: SearchRequest)
         The database to search.
     query : np.ndarray, shape (T_out, 112), float32
         The speech's audio features z-scored with ``db``'s statistics, one row per output
-        frame at 15 fps (:meth:`gesturekit.synthesizer.Synthesizer.features` computes them).
+        frame at 15 fps (:meth:`gesturekit.synthesis.synthesizer.Synthesizer.features` computes them).
     request : SearchRequest
         The search's options, initial pose, control track and exclusions.
 

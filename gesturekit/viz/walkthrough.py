@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from ..features import FeatureLayout
     from ..motion import Motion
     from ..search.plan import SearchPlan
-    from ..synthesize import SynthesisResult
+    from ..synthesis import SynthesisResult
 
 __all__ = [
     "StepExplanation",
@@ -58,7 +58,7 @@ def _plan(result: SynthesisResult, db: MatchingDatabase) -> SearchPlan:
     """The plan a synthesis searched with (made again only for a result that does not keep one)."""
     if result.plan is not None:
         return result.plan
-    from ..synthesize import synthesizer_for
+    from ..synthesis import synthesizer_for
 
     stages = synthesizer_for(db)
     return stages.plan(stages.features(result.audio), result.config)
@@ -70,7 +70,7 @@ def step_inputs(result: SynthesisResult, db: MatchingDatabase, step: int) -> dic
     Parameters
     ----------
     result : SynthesisResult
-        A finished synthesis (:func:`gesturekit.synthesize.synthesize`); its plan is read.
+        A finished synthesis (:func:`gesturekit.synthesis.synthesize`); its plan is read.
     db : MatchingDatabase
         The database it searched.
     step : int

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.keypoint_example import write_keypoint_example
 from gesturekit.skeleton import DERIVED
@@ -14,7 +15,6 @@ from tests.conftest import shown
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 TIMEOUT = 60
 
 

@@ -4,11 +4,11 @@ downloads."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.character.glb import read_glb
 from gesturekit.character.user import read_character_upload
 from gesturekit.skeleton import JOINT_NAMES
@@ -18,7 +18,6 @@ from tests.conftest import shown, viewer
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
 TIMEOUT = 240  # a busy machine: a run here synthesizes, renders an MP4 and writes two files
 FILE, MAP = "_gk.character_file.0", "_gk.character_map.0"
@@ -156,7 +155,7 @@ def test_a_file_no_reader_foresaw_is_a_message_with_a_reference(app_env, monkeyp
     def unforeseen(name, data, *, bone_map=None):
         raise IndexError("deep inside a reader")
 
-    monkeypatch.setattr(sys.modules["characters"], "read_character_upload", unforeseen)
+    monkeypatch.setattr(sys.modules["gesturekit.app.characters"], "read_character_upload", unforeseen)
     name, data = rig("mixamo_t")
     at = upload_character(at, "odd.glb", data)
     (said,) = errors(at)

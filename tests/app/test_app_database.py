@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import DEMO_LABEL
 from gesturekit.demo import build_demo_database
@@ -18,7 +19,6 @@ from tests.conftest import shown, viewer
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 DATABASE_PAGE = "views/3_Database.py"
 TIMEOUT = 60
 

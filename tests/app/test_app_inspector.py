@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import io
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +11,7 @@ import soundfile as sf
 from streamlit.testing.v1 import AppTest
 
 from gesturekit import interactive as gs
+from gesturekit.app import HOME
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from tests.conftest import chart_spec as chart
@@ -20,7 +20,6 @@ from tests.conftest import shown, viewer
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
 TIMEOUT = 90
 TOPK = 5

@@ -9,7 +9,6 @@ and the test feeds the audio callback the page gave it, as the transport would.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from types import SimpleNamespace
 
 import av
@@ -21,6 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as hst
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.errors import ConfigError, GestureKitError
@@ -29,8 +29,6 @@ from tests.conftest import shown, viewer
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-APP = Path(__file__).resolve().parents[2] / "app"
-HOME = APP / "Home.py"
 PAGE = "views/5_Live.py"
 RATE = 48000
 FRAME = 960  # 20 ms at 48 kHz, as the browser's Opus stream is decoded
@@ -38,12 +36,10 @@ FRAME = 960  # 20 ms at 48 kHz, as the browser's Opus stream is decoded
 
 @pytest.fixture(scope="module")
 def live():
-    """The page's engine (``app/live_session.py``), imported as the app imports it."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.syspath_prepend(str(APP))
-        import live_session
+    """The page's engine (``gesturekit/app/live_session.py``), imported as the app imports it."""
+    from gesturekit.app import live_session
 
-        yield live_session
+    return live_session
 
 
 @pytest.fixture(scope="module")

@@ -17,10 +17,10 @@ from hypothesis import strategies as st
 from markdown_it import MarkdownIt
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.datasets.keypoint_example import write_keypoint_example
 
 ROOT = Path(__file__).resolve().parents[2]
-HOME = ROOT / "app" / "Home.py"
 TIMEOUT = 90
 
 #: CommonMark with raw HTML passed through and GitHub's tables and strikethrough: the most a
@@ -65,14 +65,13 @@ def _no_link(out: str) -> None:
 
 
 def _escape():
-    import display  # app/ is on the path of the tests that use it (see the fixture below)
+    from gesturekit.app import display
 
     return display.escape_markdown
 
 
 @pytest.fixture
-def escape(monkeypatch):
-    monkeypatch.syspath_prepend(str(ROOT / "app"))
+def escape():
     return _escape()
 
 
@@ -106,13 +105,7 @@ def test_escaped_payloads_render_as_their_own_text(escape, text):
 )
 def test_any_escaped_line_renders_as_itself_without_links_images_or_html(text):
     """Whatever one line of text holds, its rendering is that text, with no link, image or tag."""
-    import sys
-
-    sys.path.insert(0, str(ROOT / "app"))
-    try:
-        escape = _escape()
-    finally:
-        sys.path.remove(str(ROOT / "app"))
+    escape = _escape()
     out = rendered(f" {escape(text)} ")  # spaces around it: a bare link may begin after one
     _no_link(out)
     # the renderer trims a paragraph's ends, and turns NUL into U+FFFD, as browsers do

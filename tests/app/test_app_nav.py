@@ -1,18 +1,15 @@
-"""The app's pages are declared once (app/nav.py): every page script, at the URLs users and tests open."""
+"""The app's pages are declared once (gesturekit/app/nav.py): every page script, at the URLs users and tests open."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-APP_DIR = Path(__file__).resolve().parents[2] / "app"
+from gesturekit.app import APP_DIR
 
 
 @pytest.fixture
-def nav(monkeypatch):
-    monkeypatch.syspath_prepend(str(APP_DIR))
-    import nav as module
+def nav():
+    from gesturekit.app import nav as module
 
     return module
 

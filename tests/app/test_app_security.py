@@ -21,6 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.errors import ConfigError, InputFileError
 from gesturekit.paths import APP_ROOTS_ENV, allowed_roots, check_allowed
@@ -28,7 +29,6 @@ from tests import app_browser
 from tests.conftest import shown
 
 ROOT = Path(__file__).resolve().parents[2]
-HOME = ROOT / "app" / "Home.py"
 STUDY_PAGE = "views/4_Study_stimuli.py"
 SYNTH_PAGE = "views/1_Synthesize.py"
 TIMEOUT = 90
@@ -364,8 +364,7 @@ def test_a_file_error_names_a_server_path_only_inside_the_allowed_folders(
 )
 def test_an_error_text_keeps_folders_outside_private(app_env, outside, monkeypatch, parts, kind):
     """Whatever the file, only its last part is shown when it lies outside the allowed folders."""
-    monkeypatch.syspath_prepend(str(ROOT / "app"))
-    import display
+    from gesturekit.app import display
 
     path = outside.joinpath(*parts)
     exc = (

@@ -1,5 +1,5 @@
-"""The app's server start: ``streamlit run app/Home.py`` serves Home's ``st.App``, whose lifespan
-prepares the default database's search and refiner in the background."""
+"""The app's server start: ``gesturekit app`` and ``streamlit run app/Home.py`` serve Home's ``st.App``,
+whose lifespan prepares the default database's search and refiner in the background."""
 
 from __future__ import annotations
 
@@ -9,17 +9,17 @@ from pathlib import Path
 
 import pytest
 
+from gesturekit.app import HOME
 from gesturekit.paths import default_database_path
 from gesturekit.workspace import is_generated
 
-APP_DIR = Path(__file__).resolve().parents[2] / "app"
+CLONE_HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 
 
 @pytest.fixture
-def common(app_env, monkeypatch):
+def common(app_env):
     """The app's resources module (what the server's start prepares)."""
-    monkeypatch.syspath_prepend(str(APP_DIR))
-    import resources as module
+    from gesturekit.app import resources as module
 
     return module
 
@@ -35,8 +35,9 @@ def _start_and_stop(common) -> None:
 def test_streamlit_run_finds_the_app_with_its_lifespan():
     from streamlit.web.server.app_discovery import discover_asgi_app
 
-    found = discover_asgi_app(APP_DIR / "Home.py")
-    assert found.is_asgi_app and found.app_name == "app"
+    for home in (HOME, CLONE_HOME):  # the packaged entrypoint, and the clone's script that serves it
+        found = discover_asgi_app(home)
+        assert found.is_asgi_app and found.app_name == "app", home
 
 
 @pytest.mark.slow

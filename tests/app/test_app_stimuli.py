@@ -1,18 +1,16 @@
 """The Study stimuli page, run headless with Streamlit's AppTest."""
 
-from pathlib import Path
-
 import pandas as pd
 import pytest
 import soundfile as sf
 from streamlit.testing.v1 import AppTest
 
+from gesturekit.app import HOME
 from gesturekit.datasets.synthetic import generate_demo_take
 from tests.conftest import shown
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 PAGE = "views/4_Study_stimuli.py"
 TIMEOUT = 120
 

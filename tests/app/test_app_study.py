@@ -15,14 +15,14 @@ import pytest
 from streamlit import config as st_config
 from streamlit.testing.v1 import AppTest
 
-from gesturekit.studies.design import init_study
-from gesturekit.studies.store import open_store
+from gesturekit.app import HOME
+from gesturekit.study.design import init_study
+from gesturekit.study.store import open_store
 from tests.conftest import shown
 from tests.study_helpers import STUDY_SYSTEMS, study_folder, take_part, tiny_study  # noqa: F401  (fixtures)
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 PAGE = "views/6_Study.py"
 TIMEOUT = 120
 PASSWORD = "researcher-pw"
@@ -167,7 +167,7 @@ def test_errors_are_messages(app_env, study_folder, tmp_path):  # noqa: F811
 
 def test_the_design_is_made_on_the_page(app_env, study_folder):  # noqa: F811
     """A stimuli folder without a design: the page's form writes it as ``gesturekit study init`` does."""
-    from gesturekit.studies.design import load_design, verify_password
+    from gesturekit.study.design import load_design, verify_password
 
     with listening_on("127.0.0.1"):
         at = _page(study_folder)

@@ -12,6 +12,7 @@ from scipy.signal import resample_poly
 from streamlit.testing.v1 import AppTest
 
 from gesturekit import interactive as gs
+from gesturekit.app import HOME
 from gesturekit.control import frame_attributes
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
@@ -24,7 +25,6 @@ from tests.conftest import shown, viewer
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 PAGE = "views/1_Synthesize.py"
 TIMEOUT = 90
 EDITOR = "synth.segments_editor"
@@ -309,7 +309,7 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
 
     from scipy.ndimage import uniform_filter1d
 
-    import gesturekit.synthesize as synthesis
+    import gesturekit.synthesis as synthesis
     from gesturekit.motion import Motion
 
     real = synthesis.synthesize
@@ -333,7 +333,7 @@ def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_pat
     folder = tmp_path / "my-refiner"
     folder.mkdir()
     (folder / "config.json").write_text("{}", encoding="utf-8")
-    monkeypatch.setattr("gesturekit.synthesize.synthesize", synthesize)
+    monkeypatch.setattr("gesturekit.synthesis.synthesize", synthesize)
     monkeypatch.setattr("gesturekit.refine.load_refiner", lambda path: StandIn())
     checked = []
     monkeypatch.setattr("gesturekit.refine.check_refiner", lambda path, db: checked.append(path) or Path(path))

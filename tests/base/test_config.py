@@ -17,7 +17,7 @@ from gesturekit.refine.data import PairsConfig
 from gesturekit.refine.model import ModelConfig
 from gesturekit.refine.train import TrainConfig
 from gesturekit.search import SearchConfig
-from gesturekit.synthesize import SynthesisConfig
+from gesturekit.synthesis import SynthesisConfig
 
 names = st.text("abcdefghij_", min_size=1, max_size=8)
 ranges = st.tuples(names, st.floats(0, 49), st.floats(50, 100))  # start < end

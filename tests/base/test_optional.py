@@ -190,7 +190,7 @@ def test_the_apps_video_without_the_render_extra_is_a_message(monkeypatch, missi
     """The app's MP4 (gesturekit.interactive.render_mp4): a GestureKitError the page shows as a message."""
     from gesturekit.interactive import render_mp4
     from gesturekit.motion import Motion
-    from gesturekit.synthesize import SynthesisConfig, SynthesisResult
+    from gesturekit.synthesis import SynthesisConfig, SynthesisResult
 
     motion = Motion(np.zeros((15, 55, 3), np.float32), 15)
     result = SynthesisResult(

@@ -310,7 +310,7 @@ def test_a_nan_motion_is_not_exported(tmp_path):
 
 
 def test_a_refiner_that_yields_nan_is_named(tmp_path):
-    from gesturekit.synthesize import SynthesisConfig, SynthesisResult
+    from gesturekit.synthesis import SynthesisConfig, SynthesisResult
 
     knn = still(6)
     refined = Motion(np.full_like(knn.positions, np.nan), knn.fps)

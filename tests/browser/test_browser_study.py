@@ -87,7 +87,7 @@ class Participant:
     """One participant's browser session: answers each page attentively or not, as told."""
 
     def __init__(self, browser, url: str, pid: str, folder: Path, *, attentive: bool) -> None:
-        from gesturekit.studies.design import load_design, participant_pages
+        from gesturekit.study.design import load_design, participant_pages
 
         design = load_design(folder)
         self.attentive = attentive
@@ -190,8 +190,8 @@ class Participant:
 def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(study_folder, tmp_path, capsys):  # noqa: F811
     from playwright.sync_api import sync_playwright
 
-    from gesturekit.studies.design import load_design
-    from gesturekit.studies.store import open_store
+    from gesturekit.study.design import load_design
+    from gesturekit.study.store import open_store
 
     init = ["study", "init", str(study_folder), "--pairwise", "--attention", "2", "--password", PASSWORD]
     assert cli_main(init) == 0
@@ -238,7 +238,7 @@ def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(stu
     assert cli_main(["study", "analyse", str(study_folder), "--out", str(out), "--rounds", "200"]) == 0
     printed = capsys.readouterr().out
     assert "3 participants, 1 excluded by the checks, 2 analysed" in printed
-    from gesturekit.studies.report import analyse_study
+    from gesturekit.study.report import analyse_study
 
     report = analyse_study(study_folder, out=tmp_path / "again", rounds=200)
     table = report.participants.set_index("participant")

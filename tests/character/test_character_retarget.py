@@ -50,7 +50,7 @@ def db():
 def controlled(db):
     """A synthesis of the demo speech with both hands held high, then low, and its control."""
     from gesturekit.datasets.synthetic import generate_demo_take
-    from gesturekit.synthesize import SynthesisConfig, synthesize
+    from gesturekit.synthesis import SynthesisConfig, synthesize
 
     take, _ = generate_demo_take(seconds=12.0, seed=3, name="speech")
     text = "0-6:left_hand=high+right_hand=high,6-12:both_hands=low"

@@ -183,7 +183,7 @@ def test_synthesize_refuses_speech_files_written_to_the_same_outputs(tmp_path, n
     ],
 )
 def test_segment_and_record_options_read_their_earlier_names_too(command, given, expected):
-    from gesturekit._cli_parser import build_parser
+    from gesturekit.cli._parser import build_parser
 
     positional = ["speech.wav"] if command == "synthesize" else ["--holdout", "take"]
     args = build_parser().parse_args([command, *positional, *given])
@@ -196,7 +196,7 @@ def test_every_command_of_the_parser_runs_its_own_function():
     import argparse
 
     import gesturekit.cli as cli
-    from gesturekit._cli_parser import build_parser
+    from gesturekit.cli._parser import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
@@ -208,7 +208,7 @@ def test_every_command_of_the_parser_runs_its_own_function():
         assert callable(getattr(cli, "_cmd_" + name.replace("-", "_"))), name
     assert parser.parse_args(["info"]).command == "info"
     # study's subcommands: each its own function in _cli_study.py
-    import gesturekit._cli_study as study
+    import gesturekit.cli._study as study
 
     group = next(a for a in sub.choices["study"]._actions if isinstance(a, argparse._SubParsersAction))
     assert {"init", "export-hemvip", "import-hemvip"} <= set(group.choices)

@@ -286,7 +286,7 @@ def test_axes_are_refused_for_habibie2021_takes(tmp_path):
 
 
 def test_negative_axes_are_read_as_values_on_the_command_line():
-    from gesturekit._cli_parser import build_parser, join_axis_values
+    from gesturekit.cli._parser import build_parser, join_axis_values
 
     assert join_axis_values(["synthesize", "--out", "-y"]) == ["synthesize", "--out", "-y"]  # only --up, --forward
     argv = join_axis_values(["build-db", "f", "--up", "-z", "--forward", "-x", "--out", "db"])

@@ -32,7 +32,7 @@ from gesturekit.export.bvh import export_bvh
 from gesturekit.export.result import export_result_bvh
 from gesturekit.export.video import render_video
 from gesturekit.skeleton import DERIVED, PARENTS, RECORDED, joint_index
-from gesturekit.synthesize import SynthesisConfig, synthesize
+from gesturekit.synthesis import SynthesisConfig, synthesize
 from gesturekit.workspace import build_database
 from tests.badinput import assert_refused, run_cli, snapshot
 from tests.viz.test_viz_partial import foreground

@@ -18,7 +18,7 @@ from gesturekit.evaluate.baselines import (
     run_system,
 )
 from gesturekit.motion import Motion
-from gesturekit.synthesize import SynthesisConfig
+from gesturekit.synthesis import SynthesisConfig
 from tests.conftest import make_take
 
 

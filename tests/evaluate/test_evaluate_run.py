@@ -24,7 +24,7 @@ from gesturekit.evaluate.run import (
     parse_holdout,
     run_evaluation,
 )
-from gesturekit.synthesize import SynthesisConfig
+from gesturekit.synthesis import SynthesisConfig
 
 HOLDOUT = "demo0_001:60-90"
 

@@ -35,7 +35,7 @@ def test_no_module_imports_the_version_back_through_the_package():
     "old, new",
     [
         ("gesturekit.viz.session", "gesturekit.interactive"),
-        ("gesturekit.export.stimuli", "gesturekit.study"),
+        ("gesturekit.export.stimuli", "gesturekit.study.stimuli"),
         ("gesturekit.export.files", "gesturekit._io"),
     ],
 )

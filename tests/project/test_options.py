@@ -10,15 +10,15 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from streamlit.testing.v1 import AppTest
 
-from gesturekit._cli_options import FIELD_OF, OPTIONS_DEST, options_given
-from gesturekit._cli_parser import build_parser
+from gesturekit.app import HOME
+from gesturekit.cli._options import FIELD_OF, OPTIONS_DEST, options_given
+from gesturekit.cli._parser import build_parser
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.fgd import FGDConfig
@@ -26,10 +26,9 @@ from gesturekit.evaluate.run import EvaluationConfig
 from gesturekit.options import check_option, default_of, option_of, options_of, widget_limits
 from gesturekit.refine.train import TrainConfig
 from gesturekit.search import SearchConfig
-from gesturekit.study import StudyConfig
-from gesturekit.synthesize import SynthesisConfig
+from gesturekit.study.stimuli import StudyConfig
+from gesturekit.synthesis import SynthesisConfig
 
-HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 TIMEOUT = 120
 
 #: The options of each command that are no configuration's: what to read and write, and how to run.

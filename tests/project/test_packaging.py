@@ -129,7 +129,7 @@ def test_extras_are_the_documented_ones():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("folder, extras", [("gesturekit", ("all",)), ("app", ("app",))])
+@pytest.mark.parametrize("folder, extras", [("gesturekit", ("all",)), ("gesturekit/app", ("app",))])
 def test_every_import_is_declared(folder, extras):
     deps = covered(declared(extras))
     missing = {}
@@ -294,7 +294,7 @@ def test_clean_venv_install_imports_the_search(source, tmp_path):
     python = str(venv / "bin" / "python")
     pip("install", "--quiet", str(source), python=python, cwd=tmp_path, timeout=540)
     probe = (
-        "import importlib.util, gesturekit, gesturekit.search, gesturekit.synthesize; "
+        "import importlib.util, gesturekit, gesturekit.search, gesturekit.synthesis; "
         "import gesturekit.viz.web.build as web; assert web.is_current() and len(web.bundle()) > 100000; "
         "print(gesturekit.__file__); "
         "print(sorted(m for m in ('torch', 'streamlit', 'plotly', 'pyvista', 'dask') "

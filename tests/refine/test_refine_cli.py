@@ -11,7 +11,7 @@ from gesturekit.cli import main
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.refine.infer import Refiner
 from gesturekit.refine.train import TrainConfig, train_refiner
-from gesturekit.synthesize import SynthesisConfig, synthesize
+from gesturekit.synthesis import SynthesisConfig, synthesize
 from tests.conftest import make_take
 from tests.refine_helpers import TINY, _one_torch_thread  # noqa: F401 (an autouse fixture)
 

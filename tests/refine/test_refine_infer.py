@@ -426,7 +426,7 @@ def test_a_result_records_its_refiner_and_another_database_is_warned(tiny, tmp_p
     import warnings
 
     from gesturekit.errors import GestureKitWarning
-    from gesturekit.synthesize import synthesize
+    from gesturekit.synthesis import synthesize
 
     db, out = tiny
     audio = make_take(4.0, seed=5, name="q").audio

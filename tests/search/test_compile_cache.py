@@ -219,7 +219,7 @@ SEARCHER = """
 import hashlib, json, sys, time
 import numpy as np
 from gesturekit.database import MatchingDatabase
-from gesturekit.synthesize import SynthesisConfig, synthesize, synthesize_batch
+from gesturekit.synthesis import SynthesisConfig, synthesize, synthesize_batch
 folder, kinds, go = sys.argv[1], json.loads(sys.argv[2]), float(sys.argv[3])
 rng = np.random.default_rng(7)
 speech = [rng.normal(0, 0.1, 16000 * 4).astype(np.float32) for _ in range(2)]

@@ -10,8 +10,8 @@ import pytest
 
 from gesturekit.cli import main
 from gesturekit.errors import InputFileError, OutputError
-from gesturekit.studies import init_study, media_index, participant_pages
-from gesturekit.studies.hemvip import RESPONSE_COLUMNS, export_hemvip, import_hemvip
+from gesturekit.study import init_study, media_index, participant_pages
+from gesturekit.study.hemvip import RESPONSE_COLUMNS, export_hemvip, import_hemvip
 from tests.study_helpers import STUDY_SYSTEMS, tiny_study  # noqa: F401
 
 pytestmark = pytest.mark.slow  # tiny_study builds a demo database and makes a stimuli folder once per module

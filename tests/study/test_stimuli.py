@@ -19,7 +19,7 @@ from gesturekit.demo import build_demo_database
 from gesturekit.errors import ConfigError
 from gesturekit.evaluate.baselines import SystemUnavailable
 from gesturekit.export.video import ffmpeg_executable, probe_media
-from gesturekit.study import (
+from gesturekit.study.stimuli import (
     balanced_latin_square,
     make_stimuli,
     measure_loudness,

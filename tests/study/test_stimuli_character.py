@@ -15,7 +15,7 @@ from gesturekit.cli import main
 from gesturekit.demo import open_default_database
 from gesturekit.errors import ConfigError, InputFileError
 from gesturekit.evaluate.run import held_out
-from gesturekit.study import make_stimuli
+from gesturekit.study.stimuli import make_stimuli
 from gesturekit.viz.character_render import CharacterStage
 from tests.character_rigs import CASES, custom_map, write_rig
 from tests.viz.test_video_character import drawn, iou

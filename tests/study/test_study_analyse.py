@@ -1,4 +1,4 @@
-"""The study's analysis (gesturekit.studies.analyse, .report) on simulated participants with a known truth.
+"""The study's analysis (gesturekit.study.analyse, .report) on simulated participants with a known truth.
 
 - The true order of the systems is recovered from ratings (means, Wilcoxon-Holm) and from pairwise
   answers (Bradley-Terry); with no true difference, the family-wise false-positive rate of the Holm
@@ -25,9 +25,9 @@ from hypothesis import strategies as st
 from scipy import stats
 
 from gesturekit.errors import ConfigError, OutputError
-from gesturekit.studies import analyse as A
-from gesturekit.studies.report import REPORT_FILES, analyse, write_report
-from gesturekit.studies.simulate import simulate_study
+from gesturekit.study import analyse as A
+from gesturekit.study.report import REPORT_FILES, analyse, write_report
+from gesturekit.study.simulate import simulate_study
 from tests.study_helpers import tiny_study  # noqa: F401 (a fixture)
 
 choix = pytest.importorskip("choix")
@@ -274,9 +274,9 @@ def _answer(page, key: dict, person: int, careless: bool) -> dict:
 @pytest.mark.slow
 def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_study, tmp_path, capsys):  # noqa: F811
     from gesturekit.cli import main
-    from gesturekit.studies.analyse import _manifest
-    from gesturekit.studies.design import check_answer, init_study, participant_pages
-    from gesturekit.studies.store import open_store
+    from gesturekit.study.analyse import _manifest
+    from gesturekit.study.design import check_answer, init_study, participant_pages
+    from gesturekit.study.store import open_store
 
     folder = tmp_path / "study"
     shutil.copytree(tiny_study, folder)
@@ -337,7 +337,7 @@ def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_st
     assert "--force" in capsys.readouterr().err
     assert (out / "report.md").read_text() == report
     # the same responses as a CSV (as study import-hemvip writes them) give the same analysis
-    from gesturekit.studies.hemvip import write_responses_csv
+    from gesturekit.study.hemvip import write_responses_csv
 
     write_responses_csv(frames[0], tmp_path / "responses.csv")
     again = tmp_path / "again"

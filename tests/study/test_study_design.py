@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from gesturekit.cli import main
 from gesturekit.errors import ConfigError, OutputError
 from gesturekit.export.video import ffmpeg_executable, probe_media
-from gesturekit.studies import (
+from gesturekit.study import (
     Page,
     check_answer,
     hash_password,
@@ -29,7 +29,7 @@ from gesturekit.studies import (
     participant_pages,
     verify_password,
 )
-from gesturekit.studies.media import OVERLAY_TEXT, beep_samples, draw_overlay, overlay_box
+from gesturekit.study.media import OVERLAY_TEXT, beep_samples, draw_overlay, overlay_box
 from tests.study_helpers import STUDY_SYSTEMS, tiny_study  # noqa: F401
 
 pytestmark = pytest.mark.slow  # tiny_study builds a demo database and makes a stimuli folder once per module

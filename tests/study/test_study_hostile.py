@@ -13,8 +13,8 @@ import pytest
 from starlette.testclient import TestClient
 
 import tests._study_standin as api
-from gesturekit.studies.server import COOKIE, MAX_BODY, create_app, parse_range
-from gesturekit.studies.store import open_store
+from gesturekit.study.server import COOKIE, MAX_BODY, create_app, parse_range
+from gesturekit.study.store import open_store
 from tests._study_standin import PASSWORD, SPEECHES, SYSTEMS, good_body, make_folder
 
 

@@ -15,9 +15,9 @@ import httpx
 import pytest
 from starlette.testclient import TestClient
 
-from gesturekit.studies.design import init_study, participant_pages
-from gesturekit.studies.server import COOKIE, create_app
-from gesturekit.studies.store import open_store
+from gesturekit.study.design import init_study, participant_pages
+from gesturekit.study.server import COOKIE, create_app
+from gesturekit.study.store import open_store
 from tests.study_helpers import tiny_study  # noqa: F401
 from tests.study_serve import ROOT, free_port
 

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gesturekit.errors import ConfigError
-from gesturekit.studies.store import PARTICIPANT_COLUMNS, RESPONSE_COLUMNS, body_digest, open_store
+from gesturekit.study.store import PARTICIPANT_COLUMNS, RESPONSE_COLUMNS, body_digest, open_store
 from tests import study_pg
 from tests._study_standin import make_folder
 from tests.study_serve import kill9, run_participant, start_server

@@ -15,7 +15,7 @@ from gesturekit.control import ControlTrack, constraint_mask, frame_attributes
 from gesturekit.demo import build_demo_database
 from gesturekit.errors import AudioFileError, ConfigError, GestureKitWarning
 from gesturekit.motion import AUDIO_SR
-from gesturekit.synthesize import SynthesisConfig, synthesize
+from gesturekit.synthesis import SynthesisConfig, synthesize
 
 
 @pytest.fixture(scope="module")

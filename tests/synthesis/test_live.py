@@ -15,7 +15,7 @@ from gesturekit.export.npz import load_npz
 from gesturekit.export.result import save_result_npz
 from gesturekit.features import LAYOUT, frame_centres
 from gesturekit.live import LiveSynthesizer
-from gesturekit.synthesize import SynthesisConfig, SynthesisResult, synthesize
+from gesturekit.synthesis import SynthesisConfig, SynthesisResult, synthesize
 
 SR = 16000
 

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from gesturekit.database import MatchingDatabase
-from gesturekit.synthesize import SynthesisConfig, synthesize, synthesize_batch
+from gesturekit.synthesis import SynthesisConfig, synthesize, synthesize_batch
 
 pytestmark = pytest.mark.slow
 

@@ -16,7 +16,7 @@ from gesturekit.export.result import save_result_bvh, save_result_npz
 from gesturekit.motion import Motion
 from gesturekit.search.reference import search_reference
 from gesturekit.skeleton import joint_index
-from gesturekit.synthesize import SynthesisConfig, rest_pose_frame, synthesize, synthesize_batch
+from gesturekit.synthesis import SynthesisConfig, rest_pose_frame, synthesize, synthesize_batch
 
 LW = joint_index("left_wrist")
 
@@ -213,7 +213,7 @@ class _HalfRefiner:
 
 def test_a_refiner_is_an_object_and_a_folder_is_opened_above(demo_db, speech, tmp_path):
     from gesturekit.refine import open_refiner
-    from gesturekit.synthesize import MotionRefiner
+    from gesturekit.synthesis import MotionRefiner
 
     refiner = _HalfRefiner()
     assert isinstance(refiner, MotionRefiner) and open_refiner(refiner) is refiner and open_refiner(None) is None
@@ -371,7 +371,7 @@ def test_a_given_control_is_the_one_searched_and_recorded(demo_db, speech):
 
 def test_the_result_keeps_the_plan_it_searched_with(demo_db, speech):
     from gesturekit.search import plan_search
-    from gesturekit.synthesize import search_request
+    from gesturekit.synthesis import search_request
 
     cfg = SynthesisConfig(k=1, segment=6, init="rest", control="1-5:speed=slow", exclude_takes=(demo_db.take_names[0],))
     res = synthesize(speech, db=demo_db, config=cfg)

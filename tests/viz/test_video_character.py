@@ -26,7 +26,7 @@ from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.export.video import render_video
 from gesturekit.motion import Motion
 from gesturekit.skeleton import JOINT_NAMES, N_JOINTS, JointPresence, joint_index
-from gesturekit.study import stimulus_style
+from gesturekit.study.stimuli import stimulus_style
 from gesturekit.viz.character_render import CharacterStage, linear_to_srgb, shade, srgb_to_linear, visible_faces
 from gesturekit.viz.render import RenderStyle, SkeletonScene, render_image, view_bounds
 from gesturekit.viz.render_pool import render_frames
@@ -270,10 +270,10 @@ def test_the_capsule_look_is_still_there():
 
 @pytest.mark.slow
 def test_the_command_line_and_the_result_video_choose_the_look(tmp_path, monkeypatch):
-    from gesturekit._cli_parser import build_parser
+    from gesturekit.cli._parser import build_parser
     from gesturekit.demo import open_default_database
     from gesturekit.export import result as result_module
-    from gesturekit.synthesize import synthesize
+    from gesturekit.synthesis import synthesize
 
     parse = build_parser().parse_args
     assert parse(["synthesize", "a.wav", "--db", "db", "--video"]).video_style == "character"

@@ -268,7 +268,7 @@ def test_the_result_video_passes_the_character_on(tmp_path, monkeypatch):
     from gesturekit.datasets.synthetic import generate_demo_take
     from gesturekit.demo import open_default_database
     from gesturekit.export import result as result_module
-    from gesturekit.synthesize import synthesize
+    from gesturekit.synthesis import synthesize
 
     take, _ = generate_demo_take(seconds=2.0, seed=5, name="look")
     res = synthesize(take.audio, db=open_default_database())

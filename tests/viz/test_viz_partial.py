@@ -343,7 +343,7 @@ def test_a_bad_joint_status_is_refused_naming_the_file(tmp_path, status, problem
 
 
 def test_stimuli_of_a_partial_skeleton_share_one_box_fitted_to_what_they_draw():
-    from gesturekit.study import _job_motion, _study_view_box, stimulus_style
+    from gesturekit.study.stimuli import _job_motion, _study_view_box, stimulus_style
 
     partial = upper_body(3)
     job = {"positions": partial.positions, "fps": 15.0, "joints": partial.presence.to_list()}
@@ -379,11 +379,8 @@ def test_a_motion_with_every_joint_absent_is_refused_by_every_view(view):
         draw()
 
 
-def test_the_app_says_under_a_view_what_is_derived_and_what_is_absent(monkeypatch):
-    from pathlib import Path
-
-    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "app"))
-    import display
+def test_the_app_says_under_a_view_what_is_derived_and_what_is_absent():
+    from gesturekit.app import display
 
     partial, full = upper_body(2), Motion(_demo()[:2], 15.0)
     assert display.skeleton_note(full) == "" and display.skeleton_note([full, full]) == ""

@@ -15,7 +15,7 @@ from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.errors import ConfigError, GestureKitWarning
 from gesturekit.search.explain import query_pose_frame
 from gesturekit.skeleton import BODY_JOINTS, N_JOINTS, joint_index
-from gesturekit.synthesize import SynthesisConfig, synthesize
+from gesturekit.synthesis import SynthesisConfig, synthesize
 from gesturekit.viz.retrieval import (
     CHOSEN_COLOR,
     GHOST_COLOR,

@@ -19,7 +19,7 @@ from gesturekit.features import LAYOUT
 from gesturekit.motion import Motion
 from gesturekit.search import SearchConfig, search
 from gesturekit.search.reference import cosine_distance, pose_sqdist, window_admissible
-from gesturekit.synthesize import SynthesisConfig, synthesize
+from gesturekit.synthesis import SynthesisConfig, synthesize
 from gesturekit.viz.walkthrough import (
     constraints_table,
     control_statistics,
