@@ -8,8 +8,8 @@ import re
 import numpy as np
 import pytest
 
-from gesturekit.errors import ConfigError
 from gesturekit.datasets.synthetic import generate_demo_take
+from gesturekit.errors import ConfigError
 from gesturekit.viz.figures import wrist_figure
 from gesturekit.viz.paper import CSS_PX_PER_MM, figure_bytes, filmstrip_figure
 from gesturekit.viz.retrieval import front_view_lines
