@@ -66,4 +66,4 @@ def test_a_click_in_the_strip_shows_that_candidate_large_over_the_querys_ghost(i
     assert app_browser.problems(page) == []
     out = _out(tmp_path)
     out.mkdir(parents=True, exist_ok=True)
-    app_browser.screenshot(page, out / "browser_inspector_why.png")
+    app_browser.screenshot(page, out / "inspector_why.png")
