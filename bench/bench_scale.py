@@ -10,9 +10,10 @@ for two sizes, H/2 and H hours, it prints, measured in this one run:
 * the database's size on disk and the stored audio's share of it (and what FLAC or
   8 kHz storage would make of it);
 * the time to open it, a search step vs one float32 matrix-vector product over the
-  pose matrix read from the disk cache (target <= 1.5x), 60 s of speech end to end
-  (``synthesize``) vs 113 such products (target <= 1.6x; each run bracketed by products,
-  as the steps are), and the memory the search allocates beyond the database (target < 10 %);
+  pose matrix read from the disk cache (target <= 1.0x), 60 s of speech end to end
+  (``synthesize``; target <= 2 s at 100 hours) vs 113 such products (each run bracketed by
+  products, as the steps are), and the memory the search allocates beyond the database, its
+  8-bit copy of the pose features included (target < 25 %);
 
 then a projection to 100 hours from the slope between the two sizes. With
 ``--tile-hours T`` the search figures are also measured on the larger database
@@ -20,6 +21,7 @@ repeated to T hours on disk (the scan's work does not depend on the clips repeat
 decisions do more, as repeated clips tie exactly).
 
 Usage: python bench/bench_scale.py --hours 1 [--workers N] [--keep] [--tile-hours 100]
+       python bench/bench_scale.py --search-only FOLDER   (the search figures of a database folder)
 """
 
 from __future__ import annotations
@@ -276,15 +278,15 @@ def _fmt_bytes(n: float) -> str:
 def print_search(label: str, s: dict) -> None:
     print(
         f"  {label}: {s['frames'] / 1e6:.2f} M frames; opened in {s['open'] * 1e3:.0f} ms; "
-        f"step {s['step'] * 1e3:.1f} ms vs mat-vec {s['gemv'] * 1e3:.1f} ms = {s['ratio']:.2f}x (target <= 1.5x); "
-        f"60 s of speech {s['e2e']:.2f} s = {s['e2e_ratio']:.2f}x 113 mat-vecs (target <= 1.6x; "
-        f"first call, index prepared: {s['e2e_first']:.2f} s)"
+        f"step {s['step'] * 1e3:.1f} ms vs mat-vec {s['gemv'] * 1e3:.1f} ms = {s['ratio']:.2f}x (target <= 1.0x); "
+        f"60 s of speech {s['e2e']:.2f} s (target <= 2 s at 100 h) = {s['e2e_ratio']:.2f}x 113 mat-vecs "
+        f"(first call, index prepared: {s['e2e_first']:.2f} s)"
     )
     print(
         f"    memory beyond the database during the first synthesis: numpy {_fmt_bytes(s['traced'])}, "
         f"anonymous RSS {_fmt_bytes(s['anon'])} = {max(s['traced'], s['anon']) / s['searched']:.1%} of the "
         f"searched arrays P, F, valid ({_fmt_bytes(s['searched'])}), "
-        f"{max(s['traced'], s['anon']) / s['folder']:.1%} of the folder (target < 10 %)"
+        f"{max(s['traced'], s['anon']) / s['folder']:.1%} of the folder (target < 25 %, the 8-bit copy included)"
     )
 
 
@@ -338,7 +340,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--runs", type=int, default=5, help="pairs of (search, mat-vec) timed per size")
     ap.add_argument("--keep", action="store_true", help="keep the takes and databases (the folder is printed)")
     ap.add_argument("--dir", help="where to make the temporary folder (default: the system's)")
+    ap.add_argument("--search-only", metavar="FOLDER", help="only the search figures of this database folder")
     args = ap.parse_args(argv)
+    if args.search_only:
+        print(machine())
+        print_search(f"search of {args.search_only}", search_figures(Path(args.search_only), args.runs))
+        return
     if not args.hours > 0 or args.workers < 1:
         ap.error("--hours must be positive and --workers at least 1")
 

@@ -3,12 +3,13 @@
 Prints, measured in this one run on this machine:
 
 * per search step vs one float32 matrix-vector product over the whole pose matrix
-  (M T x 96), the memory-bound floor of a scan (target <= 1.5x);
+  (M T x 96), the memory-bound floor of a float32 scan (target <= 1.0x: one query's scan
+  reads an 8-bit copy of the pose features, see gesturekit.search.reduced);
 * the fast search vs the literal reference (gesturekit.search.reference), per
   clip-step (target >= 250x);
 * end-to-end time for 60 s of speech (900 frames, 113 steps; target < 2 s);
 * a batch of 32 query sequences vs 32 single runs (target >= 5x);
-* peak extra memory of the search vs the database size (target < 10%).
+* peak extra memory of the search vs the database size, the 8-bit copy included (target < 25%).
 
 The database is random: 9,624 clips x 64 frames (the "Oliver" database of the
 paper), features drawn from a standard normal distribution, as the z-scored
@@ -133,9 +134,10 @@ def main(argv=None):
     del idx2
     print(
         f"\n[memory] index (norms, bounds) {index_bytes / 2**20:.1f} MiB = {index_bytes / db_bytes:.1%} of the "
-        f"database; peak extra during a search (tracemalloc) {peak_single / 2**20:.1f} MiB -> with the index "
-        f"{(index_bytes + peak_single) / db_bytes:.1%}; during a batch of {args.batch}: "
-        f"{peak_batch / 2**20:.1f} MiB -> {(index_bytes + peak_batch) / db_bytes:.1%} (target < 10%)"
+        f"database; peak extra during a search (tracemalloc; the 8-bit copy it makes included) "
+        f"{peak_single / 2**20:.1f} MiB -> with the index {(index_bytes + peak_single) / db_bytes:.1%}; during a "
+        f"batch of {args.batch}: {peak_batch / 2**20:.1f} MiB -> {(index_bytes + peak_batch) / db_bytes:.1%} "
+        "(target < 25%)"
     )
 
     # 2. per step vs one matrix-vector product
@@ -144,7 +146,7 @@ def main(argv=None):
     print(
         f"\n[per step] {cfg.segment} frames per step: {t_step * 1e3:.1f} ms per step (median of {len(ratios)} runs of "
         f"30 steps); one float32 matrix-vector product over ({P2.shape[0]}, {D}): {t_gemv * 1e3:.1f} ms; "
-        f"ratio per pair: median {np.median(ratios):.2f}x, best {min(ratios):.2f}x (target <= 1.5x)"
+        f"ratio per pair: median {np.median(ratios):.2f}x, best {min(ratios):.2f}x (target <= 1.0x)"
     )
 
     # 3. end to end for 60 s of speech

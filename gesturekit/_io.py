@@ -19,11 +19,11 @@ import unicodedata
 import uuid
 from collections.abc import Callable
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from .errors import ConfigError
 
-__all__ = ["atomic_write", "write_to", "Target", "safe_filename"]
+__all__ = ["atomic_write", "write_to", "Target", "safe_filename", "csv_safe"]
 
 # names Windows refuses whatever the extension, compared case-insensitively
 _RESERVED_NAMES = frozenset(
@@ -232,3 +232,34 @@ def safe_filename(name: str, *, max_length: int = 100, default: str = "unnamed")
 def _clean_default(default: str) -> str:
     clean = re.sub(r"[^A-Za-z0-9_-]", "_", default).strip("_")
     return clean or "unnamed"
+
+
+#: what a spreadsheet takes for the start of a formula (and the tab and carriage return that hide one)
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_safe(frame: Any) -> Any:
+    """A copy of a DataFrame whose text cells cannot run as spreadsheet formulas.
+
+    A text cell that starts with ``= + - @``, a tab or a carriage return gets a leading ``'``
+    (the OWASP advice for CSV injection), unless it is a plain number such as ``-2``; numbers
+    themselves are left alone.
+    """
+    import pandas as pd
+
+    def cell(value: Any) -> Any:
+        if isinstance(value, str) and value.startswith(_FORMULA_START):
+            try:
+                float(value)
+                return value
+            except ValueError:
+                return "'" + value
+        return value
+
+    out = frame.copy()
+    for column in out.columns:
+        if out[column].dtype == object or pd.api.types.is_string_dtype(out[column]):
+            out[column] = out[column].map(cell)
+    if out.columns.dtype == object:
+        out.columns = [cell(c) for c in out.columns]
+    return out

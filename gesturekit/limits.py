@@ -74,6 +74,7 @@ __all__ = [
     "file_kind",
     "check_regular",
     "read_json",
+    "parse_json",
     "check_npz",
 ]
 
@@ -559,6 +560,35 @@ def read_json(
         return json.loads(text)
     except (ValueError, RecursionError) as exc:
         raise error(f"{what}{'is ' if what else ''}not valid JSON ({exc})", path=where) from None
+
+
+def parse_json(
+    text: str | bytes,
+    *,
+    what: str = "",
+    error: type[GestureKitError] = InputFileError,
+    path: str | os.PathLike[str] | None = None,
+) -> object:
+    """JSON text (a cell, a request body) parsed, refused when nested deeper than :data:`JSON_DEPTH`.
+
+    Raises
+    ------
+    GestureKitError
+        Of type ``error``: not UTF-8, too deep, or not JSON; the message starts with ``what``.
+    """
+    import json
+
+    try:
+        text = text.decode("utf-8") if isinstance(text, bytes) else text
+    except UnicodeDecodeError as exc:
+        raise error(f"{what}is not UTF-8 text (byte {exc.start})", path=path) from None
+    depth = _json_depth(text)
+    if depth > JSON_DEPTH:
+        raise error(f"{what}nests {depth} levels deep, beyond the {JSON_DEPTH} allowed", path=path)
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise error(f"{what}{'is ' if what else ''}not valid JSON ({exc})", path=path) from None
 
 
 def _json_depth(text: str) -> int:

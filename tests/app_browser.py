@@ -5,6 +5,8 @@ of the docs' screenshots::
 
     python -m tests.app_browser --out docs/screenshots
     python -m tests.app_browser --front docs/images/app.jpg     # the README's picture
+    python -m tests.app_browser --laptop docs/screenshots/laptop # every page at 1280x800 and 1920x1080,
+                                                                  # and a CLI MP4's frames at three times
 
 Chromium is Debian's (``apt-get install chromium``), driven through the
 ``playwright`` Python package; Playwright's own browser downloads are not
@@ -25,10 +27,11 @@ import socket
 import subprocess
 import sys
 import tempfile
-import time
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
+
+from tests.waits import patience, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 HOME_SCRIPT = REPO / "app" / "Home.py"
@@ -48,8 +51,15 @@ CHROMIUM_FLAGS = (
     "--disable-sync",
 )
 
-#: Seconds to wait for the server, a page, or a result (generous: the machine may be busy).
-TIMEOUT_S = 120
+#: Seconds to wait for the server, a page, or a result: a deadline that ends a hang (tests/waits.py).
+TIMEOUT_S = patience(180)
+
+try:  # Playwright's assertions (expect) wait 5 s unless told: as long as a page's waits, here
+    from playwright.sync_api import expect as _expect
+
+    _expect.set_options(timeout=TIMEOUT_S * 1000)
+except ImportError:  # the browser tests skip, with the reason (unavailable)
+    pass
 
 #: The page shows no script run: the app's script state, and Streamlit's status widget gone (while a
 #: run lasts, the header shows it: "Running…" and a Stop button of Streamlit's own).
@@ -132,7 +142,14 @@ def _free_port() -> int:
 
 
 @contextlib.contextmanager
-def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | None = None) -> Iterator[str]:
+def app_server(
+    home: Path,
+    *,
+    demo_minutes: float | None = None,
+    log: Path | None = None,
+    gesturekit: Path | None = None,
+    env: dict[str, str] | None = None,
+) -> Iterator[str]:
     """Run the app on 127.0.0.1 until the block ends; yields its base URL.
 
     Parameters
@@ -144,12 +161,20 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
         ``GESTUREKIT_DEMO_MINUTES``: the size of a demo database built by the app.
     log : Path, optional
         File for the server's output; default a file in ``home``.
+    gesturekit : Path, optional
+        A ``gesturekit`` executable (an installed package's): the server is its ``gesturekit app``,
+        started in ``home``, instead of ``streamlit run app/Home.py`` from the repository root.
+    env : dict, optional
+        The server's environment (default this process's).
     """
     port = _free_port()
-    env = dict(os.environ, GESTUREKIT_HOME=str(home))
+    env = dict(os.environ if env is None else env, GESTUREKIT_HOME=str(home))
     if demo_minutes is not None:
         env["GESTUREKIT_DEMO_MINUTES"] = f"{demo_minutes:g}"
     log = log or Path(home) / "streamlit.log"
+    cwd = REPO
+    # from the repository root, as a user starts it: Streamlit reads ./.streamlit/config.toml
+    # (the viewer toolbar, error details kept to the log), so the tests see what a user sees
     cmd = [
         sys.executable,
         "-m",
@@ -169,31 +194,29 @@ def app_server(home: Path, *, demo_minutes: float | None = None, log: Path | Non
         "--global.developmentMode",
         "false",
     ]
+    if gesturekit is not None:  # the command carries the same settings itself, from any folder
+        cmd, cwd = [str(gesturekit), "app", "--port", str(port)], Path(home)
     with open(log, "wb") as out:
-        # from the repository root, as a user starts it: Streamlit reads ./.streamlit/config.toml
-        # (the viewer toolbar, error details kept to the log), so the tests see what a user sees
         proc = subprocess.Popen(
-            cmd, env=env, cwd=str(REPO), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+            cmd, env=env, cwd=str(cwd), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
         )
     url = f"http://127.0.0.1:{port}"
+
+    def healthy() -> bool:
+        try:
+            with urllib.request.urlopen(f"{url}/_stcore/health", timeout=patience(10)) as r:
+                return r.status == 200
+        except OSError:
+            return False
+
+    def exited() -> str | None:
+        return None if proc.poll() is None else f"it exited with {proc.returncode}"
+
     try:
-        deadline = time.monotonic() + TIMEOUT_S
-        while True:
-            if proc.poll() is not None:
-                raise RuntimeError(
-                    f"streamlit exited with {proc.returncode}:\n{log.read_text(errors='replace')[-3000:]}"
-                )
-            try:
-                with urllib.request.urlopen(f"{url}/_stcore/health", timeout=2) as r:
-                    if r.status == 200:
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                raise RuntimeError(
-                    f"streamlit did not answer within {TIMEOUT_S} s:\n{log.read_text(errors='replace')[-3000:]}"
-                )
-            time.sleep(0.2)
+        try:
+            wait_until(healthy, what="streamlit answers", timeout_s=180, interval_s=0.2, give_up=exited)
+        except AssertionError as e:
+            raise RuntimeError(f"{e}:\n{log.read_text(errors='replace')[-3000:]}") from None
         yield url
     finally:
         stop(proc)
@@ -332,13 +355,17 @@ def open_app(page, url: str, path: str = "", *, heading: str) -> None:
     wait_idle(page)  # the title is drawn by the page's first run: what is idle now is that run's end
 
 
-def go_to(page, title: str, *, tries: int = 3) -> None:
+def go_to(page, title: str, *, tries: int = 3, heading_text: str | None = None) -> None:
     """Switch page within the session through the sidebar navigation (keeps the user's state).
 
     The page switch is a run of the new page; a click that starts none (the link redrawn under
-    it) is made again.
+    it) is made again. ``heading_text``: the new page's title where it is not ``title`` (Home's).
     """
-    link = sidebar(page).locator('[data-testid="stSidebarNav"] a', has_text=title).first
+    nav = sidebar(page).locator('[data-testid="stSidebarNav"] a')
+    if title == "Home":
+        link = nav.first
+    else:  # by its address: "Study" is also the start of "Study stimuli"
+        link = nav.and_(page.locator(f'a[href$="/{title.replace(" ", "_")}"]')).first
     for _ in range(tries):
         wait_idle(page)
         since = runs_seen(page)
@@ -347,7 +374,7 @@ def go_to(page, title: str, *, tries: int = 3) -> None:
             wait_run_begun(page, since, timeout_s=30)
         except Exception:  # noqa: BLE001  (a playwright timeout: click again)
             continue
-        heading(page, title).wait_for()
+        heading(page, heading_text or title).wait_for()
         wait_idle(page)  # the title is drawn by the new page's run
         return
     raise RuntimeError(f"no page switch to {title!r} after {tries} clicks on its link")
@@ -607,7 +634,8 @@ def make_front_picture(path: Path, *, seconds: float = 12.0, demo_minutes: float
         page.set_viewport_size({"width": 1280, "height": 860})
         page.get_by_role("heading", name="Result").first.evaluate("el => el.scrollIntoView({block: 'start'})")
         page.mouse.wheel(0, 130)
-        time.sleep(4)  # the 3D view draws its first frame
+        for frame in _viewer_frames(page):  # each 3D view has drawn its first frame
+            frame.locator('body[data-drawn="1"]').wait_for(state="attached")
         png = path.with_suffix(".part.png")
         page.screenshot(path=str(png), type="png")
     with Image.open(png) as im:
@@ -619,10 +647,117 @@ def make_front_picture(path: Path, *, seconds: float = 12.0, demo_minutes: float
     return path
 
 
+#: The pages of the app (app/nav.py): Synthesize first (its result feeds the next two), Home last.
+APP_PAGES = ("Synthesize", "Retrieval inspector", "Database", "Study stimuli", "Live", "Study", "Home")
+
+#: The 3D view a page's screenshot scrolls to (its key).
+_VIEW_OF = {"Retrieval inspector": "inspect.views", "Database": "db.skeleton"}
+
+#: Common laptop windows, (width, height) in CSS pixels.
+LAPTOP_SIZES = ((1280, 800), (1920, 1080))
+
+
+def _jpeg(png: Path, path: Path, *, quality: int = 82, most_bytes: int = 290_000) -> Path:
+    """``png`` as a JPEG at ``path`` (atomically), smaller than ``most_bytes`` (quality lowered, then the picture
+    scaled down, as needed); ``png`` is removed."""
+    from PIL import Image
+
+    part = path.with_name(f".{path.name}.part")
+    with Image.open(png) as im:
+        rgb = im.convert("RGB")
+    scale = 1.0
+    while True:
+        pic = rgb if scale == 1.0 else rgb.resize((int(rgb.width * scale), int(rgb.height * scale)), Image.LANCZOS)
+        pic.save(part, format="JPEG", quality=quality, optimize=True, progressive=True)
+        if part.stat().st_size < most_bytes or scale < 0.5:
+            break
+        if quality > 70:
+            quality -= 6
+        else:
+            scale *= 0.85
+    png.unlink()
+    os.replace(part, path)
+    return path
+
+
+def _slug(title: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "_", title.lower()).strip("_")
+
+
+def make_laptop_screenshots(
+    out: Path, *, seconds: float = 12.0, demo_minutes: float = 3.0, sizes: tuple[tuple[int, int], ...] = LAPTOP_SIZES
+) -> list[Path]:
+    """Every page of the app as a user's laptop window shows it (no scrolling), at each of ``sizes``, as JPEGs
+    ``<page>_<width>x<height>.jpg`` in ``out``; the pages after Synthesize show its result (a run on ``seconds``
+    of generated speech with one box-selected control segment, on a fresh demo database)."""
+    shots = []
+    with _result_page(out, seconds=seconds, demo_minutes=demo_minutes, box=(0.3, 0.55)) as page:
+        for i, title in enumerate(APP_PAGES):
+            if i:
+                go_to(page, title, heading_text="gesturekit" if title == "Home" else None)
+            if problems(page):
+                raise RuntimeError(f"the {title} page shows an error: {problems(page)[0][:500]}")
+            for width, height in sizes:
+                page.set_viewport_size({"width": width, "height": height})
+                wait_idle(page)
+                if title == "Synthesize":  # the result, as a user scrolls to it
+                    page.get_by_role("heading", name="Result").first.evaluate(
+                        "el => el.scrollIntoView({block: 'start'})"
+                    )
+                elif title in _VIEW_OF and keyed(page, _VIEW_OF[title]).count():  # its 3D view, scrolled to
+                    keyed(page, _VIEW_OF[title]).first.evaluate("el => el.scrollIntoView({block: 'center'})")
+                for view in _viewer_frames(page):
+                    view.wait_for_function("() => document.body.dataset.drawn === '1'")
+                    view.evaluate(_PAINTED)
+                page.evaluate(_PAINTED)  # each 3D view drew at the new size (its resize draws at once)
+                png = out / f".{_slug(title)}_{width}x{height}.png"
+                page.screenshot(path=str(png), type="png")
+                shots.append(_jpeg(png, out / f"{_slug(title)}_{width}x{height}.jpg"))
+    return shots
+
+
+def make_mp4_frames(
+    out: Path, *, speech: Path | None = None, seconds: float = 20.0, at=(0.15, 0.5, 0.85)
+) -> list[Path]:
+    """Frames of an MP4 the command line makes on the embedded demo database, at the fractions ``at`` of its
+    length, as JPEGs ``mp4_<time>s.jpg`` in ``out``: ``gesturekit synthesize SPEECH --video`` (``speech``, or
+    ``seconds`` of generated speech), k-NN and refined side by side."""
+    import imageio_ffmpeg
+
+    out.mkdir(parents=True, exist_ok=True)
+    shots = []
+    with tempfile.TemporaryDirectory(prefix="gesturekit-mp4-") as tmp:
+        home = Path(tmp)
+        wav = speech if speech is not None else write_speech(home / "speech.wav", seconds=seconds)
+        env = dict(os.environ, GESTUREKIT_HOME=str(home))
+        cmd = [sys.executable, "-m", "gesturekit", "synthesize", str(wav), "--out", str(home / "out"), "--video"]
+        subprocess.run(cmd, env=env, cwd=str(REPO), check=True, stdout=subprocess.DEVNULL)
+        mp4 = next((home / "out").rglob("*.mp4"))
+        reader = imageio_ffmpeg.read_frames(str(mp4))
+        meta = next(reader)
+        (w, h), fps, duration = meta["size"], float(meta["fps"]), float(meta["duration"])
+        wanted = {int(round(a * duration * fps)): a for a in at}
+        try:
+            for i, data in enumerate(reader):
+                if i in wanted:
+                    from PIL import Image
+
+                    png = out / f".mp4_{i}.png"
+                    Image.frombytes("RGB", (w, h), data).save(png)
+                    shots.append(_jpeg(png, out / f"mp4_{i / fps:05.1f}s.jpg"))
+                if i >= max(wanted):
+                    break
+        finally:
+            reader.close()
+    return shots
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description="Screenshots of the app's pages for the docs.")
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "screenshots")
     parser.add_argument("--front", type=Path, help="only the front picture, to this file (docs/images/app.jpg)")
+    parser.add_argument("--laptop", type=Path, help="every page at laptop sizes and a CLI MP4's frames, to this folder")
+    parser.add_argument("--speech", type=Path, help="with --laptop: the speech of the MP4 (default: generated)")
     args = parser.parse_args(argv)
     reason = unavailable()
     if reason:
@@ -630,6 +765,10 @@ def main(argv=None) -> int:
         return 1
     if args.front:
         print(make_front_picture(args.front))
+        return 0
+    if args.laptop:
+        for p in make_mp4_frames(args.laptop, speech=args.speech) + make_laptop_screenshots(args.laptop):
+            print(p)
         return 0
     for p in make_screenshots(args.out) + make_viewer_screenshots(args.out):
         print(p)

@@ -34,9 +34,11 @@ from gesturekit.character.glb import (
 )
 from gesturekit.skeleton import FINGERS
 
-__all__ = ["RigSpec", "RigTruth", "rig_files", "write_rig", "truth", "custom_map", "CASES", "NAMINGS"]
+__all__ = ["RigSpec", "RigTruth", "rig_files", "write_rig", "truth", "custom_map", "cmu_bvh", "CASES", "NAMINGS"]
 
-NAMINGS = ("mixamo", "vrm0", "vrm1", "zeggs", "custom")
+NAMINGS = ("mixamo", "vrm0", "vrm1", "zeggs", "custom", "blender", "unreal", "cc", "uma", "nameless")
+#: Naming families matched by their common words (:func:`gesturekit.character.humanoid.match_families`).
+FAMILY_NAMINGS = ("blender", "unreal", "cc", "uma")
 A_POSE_DEGREES = 40.0
 _SIDES = (("L", "left", "Left", 1.0), ("R", "right", "Right", -1.0))
 _VRM_FINGER = {"thumb": "Thumb", "index": "Index", "middle": "Middle", "ring": "Ring", "pinky": "Little"}
@@ -268,6 +270,62 @@ def _mixamo_name(key: str, spec: RigSpec) -> str:
     return (spec.prefix if spec.naming == "mixamo" else "") + name
 
 
+_FAMILY_PARTS = {
+    # key part: (blender "Part.L", unreal "part_l", CC "CC_Base_L_Part", UMA "LeftPart")
+    "collar": ("Shoulder", "clavicle", "Clavicle", "Shoulder"),
+    "upper": ("UpperArm", "upperarm", "Upperarm", "Arm"),
+    "fore": ("LowerArm", "lowerarm", "Forearm", "ForeArm"),
+    "twist": ("LowerArmTwist", "lowerarm_twist_01", "ForearmTwist01", "ForeArmTwist"),
+    "hand": ("Hand", "hand", "Hand", "Hand"),
+    "upleg": ("UpperLeg", "thigh", "Thigh", "UpLeg"),
+    "leg": ("LowerLeg", "calf", "Calf", "Leg"),
+    "foot": ("Foot", "foot", "Foot", "Foot"),
+    "toe": ("Toe", "ball", "ToeBase", "ToeBase"),
+    "toe_end": ("Toe_end", "ball_end", "ToeBaseNub", "Toe_End"),
+}
+_FAMILY_CENTRE = {
+    "hips": ("Hips", "pelvis", "CC_Base_Hip", "Hips"),
+    "spine_extra": ("SpineTwist", "spine_twist_01", "CC_Base_SpineTwist", "SpineTwist"),
+    "neck": ("Neck", "neck_01", "CC_Base_NeckTwist01", "Neck"),
+    "neck1": ("Neck.001", "neck_02", "CC_Base_NeckTwist02", "Neck1"),
+    "head": ("Head", "head", "CC_Base_Head", "Head"),
+    "head_top": ("Head_end", "head_end", "CC_Base_HeadNub", "HeadTop_End"),
+}
+_CC_FINGER = {"thumb": "Thumb", "index": "Index", "middle": "Mid", "ring": "Ring", "pinky": "Pinky"}
+
+
+def _family_name(key: str, spec: RigSpec) -> str:
+    """A bone's name in the Blender (``.L``/``.R``), Unreal (``_l``/``_r``), Character Creator (``CC_Base_L_``) or
+    UMA (``Left``, fingers ``HandFinger02_01``) family; finger tips named so that no name says which they are."""
+    f = FAMILY_NAMINGS.index(spec.naming)
+    if key in _FAMILY_CENTRE:
+        return _FAMILY_CENTRE[key][f]
+    if key.startswith("spine"):
+        k = int(key[5:])
+        return (
+            "Spine" if k == 0 else f"Spine.{k:03d}",
+            f"spine_{k + 1:02d}",
+            "CC_Base_" + ("Waist", "Spine01", "Spine02", "Spine03")[k],
+            ("LowerBack", "Spine", "Spine1", "Spine2")[k],
+        )[f]
+    s, part = key[0], key[2:]
+    if part in _FAMILY_PARTS:
+        word = _FAMILY_PARTS[part][f]
+        side = "Left" if s == "L" else "Right"
+        return (f"{word}.{s}", f"{word}_{s.lower()}", f"CC_Base_{s}_{word}", side + word)[f]
+    finger, i = part[:-1], int(part[-1])
+    side = "Left" if s == "L" else "Right"
+    if i == 4:  # the tip: a leaf whose name says no phalanx
+        tips = (f"{finger}_tip.{s}", f"{finger}_leaf_{s.lower()}", f"CC_Base_{s}_{_CC_FINGER[finger]}Nub")
+        return (*tips, f"{side}{finger}Tip")[f]
+    return (
+        f"{'' if finger == 'thumb' else 'f_'}{finger}.{i:02d}.{s}",
+        f"{finger}_{i:02d}_{s.lower()}",
+        f"CC_Base_{s}_{_CC_FINGER[finger]}{i}",
+        f"{side}HandFinger{FINGERS.index(finger) + 1:02d}_{i:02d}",
+    )[f]
+
+
 def _vrm_names(key: str, spec: RigSpec, ours: str | None) -> tuple[str, str | None]:
     """(node name, humanoid bone name or None) of a VRM character's bone."""
     n = _spine_count(spec)
@@ -335,6 +393,10 @@ def _bones(spec: RigSpec) -> list[tuple[str, int, np.ndarray, str | None, str | 
             pos = pos * (-1, 1, -1) if spec.naming == "vrm0" else pos  # VRM 0.x faces -Z
         elif spec.naming == "custom":
             name = f"bone_{i:02d}"
+        elif spec.naming == "nameless":
+            name = f"node{i + (1 if spec.armature else 0)}"  # what a reader calls a glTF node without a name
+        elif spec.naming in FAMILY_NAMINGS:
+            name = _family_name(key, spec)
         else:
             name = _mixamo_name(key, spec)
         out.append((name, -1 if parent is None else index[parent], pos, ours, human))
@@ -484,7 +546,9 @@ def _gltf(spec: RigSpec) -> bytes:
         parent_rot = world_rot[p] if p >= 0 else np.eye(3)
         t = parent_rot.T @ (frame_pos[i] - (frame_pos[p] if p >= 0 else 0.0))
         world_rot.append(parent_rot @ rot[i])
-        node: dict[str, Any] = {"name": name, "translation": [float(x) for x in t]}
+        node: dict[str, Any] = {"translation": [float(x) for x in t]}
+        if spec.naming != "nameless":
+            node = {"name": name, **node}
         if spec.roll_seed is not None:
             node["rotation"] = _quaternion(rot[i])
         nodes.append(node)
@@ -614,6 +678,76 @@ def _bvh(spec: RigSpec) -> bytes:
     n_channels = 6 + 3 * (len(bones) - 1)
     frame = " ".join(["0.000000"] * n_channels)
     lines += ["MOTION", "Frames: 2", "Frame Time: 0.0333333", frame, frame, ""]
+    return "\n".join(lines).encode("ascii")
+
+
+def cmu_bvh(*, unit: float = 0.01, leg_up: bool = False) -> bytes:
+    """A skeleton laid out as the widely used BVH conversion of the CMU mocap database writes it: zero offsets for
+    ``LHipJoint``/``RHipJoint``, ``LowerBack``, ``Neck`` and both ``*Shoulder`` bones (so the chest's children all
+    start where it does), ``Neck1`` between neck and head, ``LeftFingerBase``, ``LeftHandIndex1`` and ``LThumb``
+    on the hand. T-pose, Y up, facing +Z, 1.72 m tall; ``unit`` metres per file unit (0.01: centimetres).
+    ``leg_up``: the left leg points up from the hip in the zero pose, as in a rig whose rest is not standing."""
+    j: list[tuple[str, str | None, tuple[float, float, float]]] = [("Hips", None, (0.0, 0.95, 0.0))]
+    for s, side, x in (("L", "Left", 1.0), ("R", "Right", -1.0)):
+        foot = (0.09 * x, 1.80, 0.0) if leg_up and x > 0 else (0.09 * x, 0.08, 0.0)
+        knee = (0.09 * x, 1.35, 0.0) if leg_up and x > 0 else (0.09 * x, 0.50, 0.0)
+        j += [
+            (f"{s}HipJoint", "Hips", (0.0, 0.95, 0.0)),
+            (f"{side}UpLeg", f"{s}HipJoint", (0.09 * x, 0.90, 0.0)),
+            (f"{side}Leg", f"{side}UpLeg", knee),
+            (f"{side}Foot", f"{side}Leg", foot),
+            (f"{side}ToeBase", f"{side}Foot", (foot[0], foot[1] - 0.06 * (1 if foot[1] < 1 else -1), 0.12)),
+        ]
+    j += [
+        ("LowerBack", "Hips", (0.0, 0.95, 0.0)),
+        ("Spine", "LowerBack", (0.0, 1.10, 0.0)),
+        ("Spine1", "Spine", (0.0, 1.40, 0.0)),
+        ("Neck", "Spine1", (0.0, 1.40, 0.0)),
+        ("Neck1", "Neck", (0.0, 1.47, 0.0)),
+        ("Head", "Neck1", (0.0, 1.55, 0.0)),
+    ]
+    for s, side, x in (("L", "Left", 1.0), ("R", "Right", -1.0)):
+        j += [
+            (f"{side}Shoulder", "Spine1", (0.0, 1.40, 0.0)),
+            (f"{side}Arm", f"{side}Shoulder", (0.18 * x, 1.40, 0.0)),
+            (f"{side}ForeArm", f"{side}Arm", (0.47 * x, 1.40, 0.0)),
+            (f"{side}Hand", f"{side}ForeArm", (0.72 * x, 1.40, 0.0)),
+            (f"{side}FingerBase", f"{side}Hand", (0.80 * x, 1.40, 0.0)),
+            (f"{side}HandIndex1", f"{side}FingerBase", (0.86 * x, 1.40, 0.0)),
+            (f"{s}Thumb", f"{side}Hand", (0.76 * x, 1.39, 0.03)),
+        ]
+    index = {name: i for i, (name, _, _) in enumerate(j)}
+    pos = {name: np.array(p) for name, _, p in j}
+    children: dict[str | None, list[str]] = {}
+    for name, parent, _ in j:
+        children.setdefault(parent, []).append(name)
+    lines = ["HIERARCHY"]
+    order: list[str] = []
+
+    def num(v: np.ndarray) -> str:
+        return " ".join(f"{c / unit:.6f}" for c in v)
+
+    def write(name: str, depth: int) -> None:
+        pad = "\t" * depth
+        parent = j[index[name]][1]
+        order.append(name)
+        lines.append(f"{pad}{'ROOT' if parent is None else 'JOINT'} {name}")
+        lines.append(pad + "{")
+        lines.append(f"{pad}\tOFFSET {num(pos[name] - (pos[parent] if parent else 0.0))}")
+        if parent is None:
+            lines.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation")
+        else:
+            lines.append(f"{pad}\tCHANNELS 3 Zrotation Yrotation Xrotation")
+        for c in children.get(name, []):
+            write(c, depth + 1)
+        if name not in children:
+            tail = np.array([0.0, 0.17, 0.0]) if name == "Head" else np.array([0.0, 0.0, 0.02])
+            lines.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {num(tail)}", f"{pad}\t}}"])
+        lines.append(pad + "}")
+
+    write("Hips", 0)
+    frame = " ".join(["0.000000"] * (6 + 3 * (len(order) - 1)))
+    lines += ["MOTION", "Frames: 2", "Frame Time: 0.0083333", frame, frame, ""]
     return "\n".join(lines).encode("ascii")
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, settings
 
 from gesturekit.motion import AUDIO_SR, Motion, Take
 from gesturekit.skeleton import N_JOINTS
@@ -27,6 +28,13 @@ def _parse_one_at_a_time(*args, **kwargs):
 
 
 ast.parse = _parse_one_at_a_time
+
+# No per-example deadline (hypothesis's default is 200 ms) and no health check on how long examples
+# take to generate: on a busy machine an example that is quick alone can take seconds, and a
+# deadline there fails tests for the machine's load, not for what they check. Every test file's own
+# @settings starts from this profile (one that names its own health checks names too_slow too).
+settings.register_profile("gesturekit", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("gesturekit")
 
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"

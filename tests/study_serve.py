@@ -15,6 +15,8 @@ from pathlib import Path
 
 import httpx
 
+from tests.waits import patience, wait_until
+
 ROOT = Path(__file__).resolve().parents[1]
 
 _LAUNCH = """
@@ -40,17 +42,23 @@ def start_server(folder: Path, db: str | None, api: str | None = "tests._study_s
     args = [sys.executable, "-c", _LAUNCH, str(folder), db or "-", api or "-", str(port), str(ROOT)]
     proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     base = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(f"the study server exited: {proc.stderr.read().decode()[-2000:]}")
+
+    def answers() -> bool:
         try:
-            httpx.get(base + "/researcher", timeout=1)
-            return proc, base
+            httpx.get(base + "/researcher", timeout=patience(10))
         except httpx.TransportError:
-            time.sleep(0.1)
-    proc.kill()
-    raise RuntimeError("the study server did not start in 30 s")
+            return False
+        return True
+
+    def exited() -> str | None:
+        return None if proc.poll() is None else f"it exited: {proc.stderr.read().decode()[-2000:]}"
+
+    try:
+        wait_until(answers, what="the study server answers", timeout_s=120, interval_s=0.1, give_up=exited)
+    except AssertionError as e:
+        proc.kill()
+        raise RuntimeError(str(e)) from None
+    return proc, base
 
 
 def kill9(proc: subprocess.Popen) -> None:

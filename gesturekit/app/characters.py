@@ -87,8 +87,8 @@ def _matched_lines(ch: Character) -> list[str]:
     ]
     missing = [JOINT_NAMES[j] for j in range(len(JOINT_NAMES)) if ch.bone_of[j] < 0]
     if missing:
-        fingers = [n for n in missing if n in FINGERS]
-        others = [n for n in missing if n not in FINGERS]
+        fingers = [n for n in missing if any(f in n for f in FINGERS)]
+        others = [n for n in missing if n not in fingers]
         parts = others[:12] + ([f"{len(fingers)} finger joints"] if fingers else [])
         lines.append("no bone for " + ", ".join(parts) + (" ..." if len(others) > 12 else "") + ": not shown")
     return lines
@@ -128,15 +128,18 @@ def sidebar_character() -> Character | None:
                     kept = ss[CHARACTER_KEY] = {"character": character, "name": up.name, "token": token}
                     ss.pop(_FAILED, None)
                 except (GestureKitError, OSError) as exc:
-                    ss[_FAILED] = (token, error_text(exc))
+                    ss[_FAILED] = (token, error_text(exc), getattr(exc, "bone_tree", None))
                 except Exception:  # noqa: BLE001  (a file no reader foresaw: said once, not read again)
                     reference = secrets.token_hex(4)
                     LOG.exception("a character upload could not be read (reference %s)", reference)
                     why = f"could not be read as a character (details in the server log, reference {reference})"
-                    ss[_FAILED] = (token, f"{Path(up.name).name}: {why}")
+                    ss[_FAILED] = (token, f"{Path(up.name).name}: {why}", None)
         failed = ss.get(_FAILED)
         if failed is not None:
             st.error(escape_markdown(failed[1]), icon=":material/error:")
+            if failed[2]:  # the bones it has, for a bone map (a nameless glTF node is node{index})
+                st.caption("Its bones, with their rest positions (metres as read), for a bone map:")
+                st.code(failed[2], language=None)
         if kept is None:
             st.caption("The default body is shown.")
             return None
@@ -144,6 +147,8 @@ def sidebar_character() -> Character | None:
         st.success(f"**{escape_markdown(kept['name'])}** is shown", icon=":material/accessibility_new:")
         for line in _matched_lines(ch):
             st.caption(escape_markdown(line))
+        for note in ch.notes:  # a unit found from its size
+            st.warning(escape_markdown(note), icon=":material/straighten:")
         if st.button("Default character", key="_gk.character_default", help="show the default body again"):
             ss.pop(CHARACTER_KEY, None)
             ss.pop(_FAILED, None)

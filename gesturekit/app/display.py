@@ -243,6 +243,7 @@ def show_skeletons(
     height: int = 520,
     audio: np.ndarray | None = None,
     character: Character | None = None,
+    schemes: Sequence[str] | None = None,
 ) -> None:
     """Show motions side by side in gesturekit's 3D viewer, a Streamlit component (:func:`viewer_component`).
 
@@ -253,11 +254,13 @@ def show_skeletons(
     the viewer's play button then plays it and the shown frame follows it, so no separate
     player is needed. A rerun that shows the same motions keeps the drawn view as it is.
     ``character``: the user's character (gesturekit/app/characters.py), drawn instead of the default body, with
-    the retargeting's report of each motion under the view.
+    the retargeting's report of each motion under the view. ``schemes``: each motion's colour scheme by
+    what it shows (:func:`gesturekit.character.look.role_scheme`, :func:`~gesturekit.character.look.rank_scheme`),
+    so a colour means one thing on every page; default by place (k-NN blue, refined orange).
     """
     from gesturekit.viz.viewer import viewer_args
 
-    args = viewer_args(motions, labels=labels, title=title, audio=audio, character=character)
+    args = viewer_args(motions, labels=labels, title=title, audio=audio, character=character, schemes=schemes)
     viewer_component()(**args, height=int(height), key=key, default=None)
     if character is not None:
         _retarget_summary(motions, labels, character)

@@ -247,7 +247,7 @@ class LiveSession:
         """Why the synthesis stopped, when it failed (a message for the page); else None."""
         return self._error
 
-    def wait(self, timeout: float = 60.0) -> bool:
+    def wait(self, timeout: float = 300.0) -> bool:
         """Block until everything queued so far has been synthesised; False if ``timeout`` (s) passed first."""
         done = threading.Event()
         self._queue.put(("mark", done))
@@ -280,7 +280,7 @@ class LiveSession:
             t0=float(heard0),
         )
 
-    def stop(self, timeout: float = 60.0) -> SynthesisResult:
+    def stop(self, timeout: float = 300.0) -> SynthesisResult:
         """The end of the speech: synthesise what is queued, the rest, and return the whole performance.
 
         Raises

@@ -8,9 +8,13 @@ import numpy as np
 
 from ..datasets.bvh import unit_scale
 from ..datasets.bvh_file import parse_bvh
+from ..errors import MotionFileError
 from .target import FileSkeleton
 
-__all__ = ["read_bvh_skeleton"]
+__all__ = ["read_bvh_skeleton", "MAX_OFFSET"]
+
+#: Largest offset of a joint from its parent, in the file's units (a kilometre in millimetres).
+MAX_OFFSET = 1e6
 
 
 def read_bvh_skeleton(path: Path) -> FileSkeleton:
@@ -23,6 +27,15 @@ def read_bvh_skeleton(path: Path) -> FileSkeleton:
     """
     data = parse_bvh(path)
     n = data.n_joints
+    offsets = np.asarray(data.offsets, dtype=np.float64)
+    for j in range(n):  # before any sum: 1e308 offsets overflow to inf, and inf - inf to NaN
+        size = float(np.abs(offsets[j]).max(initial=0.0)) if np.isfinite(offsets[j]).all() else np.inf
+        if not size <= MAX_OFFSET:
+            raise MotionFileError(
+                f"joint {data.names[j]!r} has the offset {offsets[j].tolist()}, not a finite length below "
+                f"{MAX_OFFSET:.0e} units",
+                path=path,
+            )
     world = np.tile(np.eye(4), (n, 1, 1))
     for j in range(n):  # parents precede children in a BVH
         p = int(data.parents[j])

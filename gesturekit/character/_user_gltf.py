@@ -26,10 +26,17 @@ from .humanoid import VRM_BONES
 from .mesh import vertex_normals
 from .target import FileSkeleton, GltfSource, empty_skin, reorder, topological
 
-__all__ = ["read_gltf_skeleton", "MAX_VERTICES"]
+__all__ = ["read_gltf_skeleton", "MAX_VERTICES", "MAX_TEXTURE_PIXELS", "MAX_NODE_SCALE"]
 
-#: Most vertices a character's body may have (a detailed game character has some 100 000).
+#: Most vertices a character's body may have (a detailed game character has some 100 000): counted from the
+#: accessors' declared counts before any is read.
 MAX_VERTICES = 2_000_000
+
+#: Most pixels of one texture (4096 x 4096), read from the image's header before it is decoded.
+MAX_TEXTURE_PIXELS = 4096 * 4096
+
+#: Largest and smallest scale a node may carry (a factor of a million either way is no unit conversion).
+MAX_NODE_SCALE = 1e6
 
 _TRIANGLES = 4
 
@@ -45,6 +52,8 @@ def read_gltf_skeleton(path: Path) -> FileSkeleton:
     try:
         check_bytes(path.stat().st_size, what="a character file", path=path)
         doc, binary = _load(path)
+        _check_references(doc, path)
+        _check_transforms(doc, path)
         return _skeleton(path, doc, binary)
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, OSError, RecursionError) as e:
         raise InputFileError(f"not a readable glTF character ({type(e).__name__}: {e})", path=path) from None
@@ -60,17 +69,22 @@ def _load(path: Path) -> tuple[dict[str, Any], bytes]:
         doc, binary = read_glb(path.read_bytes())
         if len(doc.get("buffers", [])) > 1 or any("uri" in b for b in doc.get("buffers", [])):
             raise InputFileError("a GLB whose data is outside its binary chunk is not read", path=path)
-        return doc, bytes(binary)
-    doc = dict(read_json(path, what="a glTF file"))  # type: ignore[call-overload]
-    blob = bytearray()
-    bases = []
-    for b in doc.get("buffers", []):
-        blob.extend(b"\0" * (-len(blob) % 4))
-        bases.append(len(blob))
-        blob.extend(_uri_bytes(path, b.get("uri", "")))
-    for v in doc.get("bufferViews", []):
-        v["byteOffset"] = v.get("byteOffset", 0) + bases[v["buffer"]]
-        v["buffer"] = 0
+        if not any("uri" in img for img in doc.get("images", [])):
+            return doc, bytes(binary)
+        blob = bytearray(binary)
+    else:
+        doc = dict(read_json(path, what="a glTF file"))  # type: ignore[call-overload]
+        blob = bytearray()
+        bases = []
+        for b in doc.get("buffers", []):
+            blob.extend(b"\0" * (-len(blob) % 4))
+            bases.append(len(blob))
+            blob.extend(_uri_bytes(path, b.get("uri", "")))
+        for i, v in enumerate(doc.get("bufferViews", [])):
+            _index(v.get("buffer"), len(bases), f"buffer view {i}'s buffer", path)
+            v["byteOffset"] = v.get("byteOffset", 0) + bases[v["buffer"]]
+            v["buffer"] = 0
+    # an image is a buffer view or a URI (a data URI, or a file beside a .gltf) in a GLB and a .gltf alike
     for img in doc.get("images", []):
         if "uri" in img:
             data = _uri_bytes(path, img.pop("uri"))
@@ -81,6 +95,103 @@ def _load(path: Path) -> tuple[dict[str, Any], bytes]:
             img.setdefault("mimeType", "image/jpeg" if data[:2] == b"\xff\xd8" else "image/png")
     doc["buffers"] = [{"byteLength": len(blob)}] if blob else []
     return doc, bytes(blob)
+
+
+def _index(value: Any, n: int, what: str, path: Path) -> int:
+    """``value`` as an index into a list of ``n``, or our error naming ``what`` (a negative index is no "last")."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < n:
+        raise InputFileError(f"{what} is {value!r}, not an index from 0 to {n - 1}", path=path)
+    return value
+
+
+def _node_label(doc: dict[str, Any], i: int) -> str:
+    name = doc["nodes"][i].get("name")
+    return f"node {i} ({name!r})" if isinstance(name, str) else f"node {i} (node{i})"
+
+
+def _check_references(doc: dict[str, Any], path: Path) -> None:
+    """Every index the reader follows is within its list (a negative one too is refused, not read as "the last")."""
+    count = {k: len(doc.get(k, [])) for k in ("nodes", "meshes", "skins", "accessors", "bufferViews", "materials")}
+    count |= {k: len(doc.get(k, [])) for k in ("textures", "images")}
+    for i, node in enumerate(doc.get("nodes", [])):
+        label = _node_label(doc, i)
+        for c in node.get("children", ()):
+            _index(c, count["nodes"], f"a child of {label}", path)
+        if "mesh" in node:
+            _index(node["mesh"], count["meshes"], f"the mesh of {label}", path)
+        if "skin" in node:
+            _index(node["skin"], count["skins"], f"the skin of {label}", path)
+    for k, skin in enumerate(doc.get("skins", [])):
+        for j in skin.get("joints", ()):
+            _index(j, count["nodes"], f"a joint of skin {k}", path)
+        if "inverseBindMatrices" in skin:
+            _index(skin["inverseBindMatrices"], count["accessors"], f"skin {k}'s inverse bind matrices", path)
+    for k, mesh in enumerate(doc.get("meshes", [])):
+        for prim in mesh.get("primitives", ()):
+            for attr, a in prim.get("attributes", {}).items():
+                _index(a, count["accessors"], f"mesh {k}'s {attr}", path)
+            if "indices" in prim:
+                _index(prim["indices"], count["accessors"], f"mesh {k}'s indices", path)
+            if "material" in prim:
+                _index(prim["material"], count["materials"], f"mesh {k}'s material", path)
+    for k, acc in enumerate(doc.get("accessors", [])):
+        if "bufferView" in acc:
+            _index(acc["bufferView"], count["bufferViews"], f"accessor {k}'s buffer view", path)
+    for k, material in enumerate(doc.get("materials", [])):
+        texture = material.get("pbrMetallicRoughness", {}).get("baseColorTexture")
+        if texture is not None:
+            _index(texture.get("index"), count["textures"], f"material {k}'s base colour texture", path)
+    for k, texture in enumerate(doc.get("textures", [])):
+        if "source" in texture:
+            _index(texture["source"], count["images"], f"texture {k}'s image", path)
+    for k, img in enumerate(doc.get("images", [])):
+        _index(img.get("bufferView"), count["bufferViews"], f"image {k}'s buffer view", path)
+
+
+def _check_transforms(doc: dict[str, Any], path: Path) -> None:
+    """Each node's transform is finite, a rotation a quaternion of non-zero length, a scale neither mirrored nor
+    beyond :data:`MAX_NODE_SCALE` either way (checked before any is used: a NaN would reach the rest pose)."""
+    for i, node in enumerate(doc.get("nodes", [])):
+        label = _node_label(doc, i)
+        if "matrix" in node:
+            m = _numbers(node["matrix"], 16, f"the matrix of {label}", path).reshape(4, 4).T
+            linear = m[:3, :3]
+        else:
+            _numbers(node.get("translation", (0, 0, 0)), 3, f"the translation of {label}", path)
+            q = _numbers(node.get("rotation", (0, 0, 0, 1)), 4, f"the rotation of {label}", path)
+            if not np.linalg.norm(q) > 1e-6:
+                raise InputFileError(f"the rotation of {label} is a quaternion of zero length", path=path)
+            linear = np.diag(_numbers(node.get("scale", (1, 1, 1)), 3, f"the scale of {label}", path))
+        _check_linear(linear, label, path)
+
+
+def _check_linear(linear: np.ndarray, label: str, path: Path) -> None:
+    sizes = np.linalg.svd(linear, compute_uv=False)
+    if not (sizes.max() <= MAX_NODE_SCALE and sizes.min() >= 1.0 / MAX_NODE_SCALE):
+        raise InputFileError(
+            f"{label} is scaled by {sizes.min():.3g} to {sizes.max():.3g}, beyond a factor of {MAX_NODE_SCALE:.0e} "
+            "either way; export the character at its own size",
+            path=path,
+        )
+    if np.linalg.det(linear) < 0:
+        raise InputFileError(
+            f"{label} is mirrored (a negative scale); a mirrored rig turns its left into its right: apply the "
+            "mirror in the modelling tool and export again",
+            path=path,
+        )
+
+
+def _numbers(value: Any, n: int, what: str, path: Path) -> np.ndarray:
+    """``value`` as ``n`` finite floats, or our error naming ``what``."""
+    try:
+        out = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputFileError(f"{what} is not {n} numbers", path=path) from None
+    if out.shape != (n,):
+        raise InputFileError(f"{what} has {out.size} numbers, not {n}", path=path)
+    if not np.isfinite(out).all():
+        raise InputFileError(f"{what} is not finite ({out.tolist()})", path=path)
+    return out
 
 
 def _uri_bytes(path: Path, uri: str) -> bytes:
@@ -96,6 +207,9 @@ def _uri_bytes(path: Path, uri: str) -> bytes:
     other = path.parent / uri
     if not other.is_file():
         raise InputFileError(f"the file {uri!r} it names is missing", path=path)
+    if other.is_symlink() or other.resolve().parent != path.parent.resolve():
+        # a link beside it may point anywhere: its bytes would end up in the GLB written from it
+        raise InputFileError(f"{uri!r} is a link to a file outside the glTF's folder; copy the file there", path=path)
     check_bytes(other.stat().st_size, what="a glTF buffer", path=other)
     return other.read_bytes()
 
@@ -139,6 +253,10 @@ def _skeleton(path: Path, doc: dict[str, Any], binary: bytes) -> FileSkeleton:
     names_t, parents_t, new = reorder(names, parents, order)
     node_of = np.array([bone_nodes[o] for o in order], dtype=np.int64)
     world_all = node_matrices(nodes, {}, 1)[0]
+    for n in bone_nodes:  # scales that are each allowed may still compose to one that is not
+        if not np.isfinite(world_all[n]).all():
+            raise InputFileError(f"the rest pose of {_node_label(doc, n)} is not finite", path=path)
+        _check_linear(world_all[n, :3, :3], _node_label(doc, n), path)
     found = None
     if humanoid:
         label = "VRM 1.0 humanoid" if kind == "vrm1" else "VRM 0.x humanoid"
@@ -198,6 +316,18 @@ def _skin(
     parts: list[dict[str, np.ndarray]] = []
     total = 0
     images: dict[int, np.ndarray] = {}
+    declared = 0
+    for node in doc.get("nodes", []):  # the vertices the accessors declare, counted before any is read
+        if "mesh" in node:
+            for prim in doc["meshes"][node["mesh"]]["primitives"]:
+                if prim.get("mode", _TRIANGLES) == _TRIANGLES:
+                    declared += int(doc["accessors"][prim["attributes"]["POSITION"]]["count"])
+    if declared > MAX_VERTICES:
+        raise InputFileError(
+            f"a body of {declared} vertices, more than the {MAX_VERTICES} a character may have; "
+            "decimate it in the modelling tool",
+            path=path,
+        )
     for i, node in enumerate(doc.get("nodes", [])):
         if "mesh" not in node:
             continue
@@ -209,7 +339,14 @@ def _skin(
                 if "inverseBindMatrices" in skin
                 else np.tile(np.eye(4), (len(joints), 1, 1))
             )
-            mats = world[joints] @ ibm
+            if len(ibm) < len(joints):
+                raise InputFileError(f"skin {node['skin']} has fewer inverse bind matrices than joints", path=path)
+            for k, j in enumerate(joints):
+                if not np.isfinite(ibm[k]).all():
+                    label = _node_label(doc, j)
+                    raise InputFileError(f"the inverse bind matrix of {label} is not finite", path=path)
+                _check_linear(ibm[k, :3, :3], f"the inverse bind matrix of {_node_label(doc, j)}", path)
+            mats = world[joints] @ ibm[: len(joints)]
             to_bone = np.array([bone_of_node[j] for j in joints], dtype=np.int64)
         else:
             a = parent[i]
@@ -321,10 +458,11 @@ def _colors(
                 images[source] = _image(doc, binary, source)
             img = images[source]
             uv = accessor_array(doc, binary, attrs[key]).astype(np.float64)
+            uv = np.where(np.isfinite(uv), uv, 0.0)
             h, w = img.shape[:2]
             x = np.floor(np.mod(uv[:, 0], 1.0) * w).astype(np.int64).clip(0, w - 1)
             y = np.floor(np.mod(uv[:, 1], 1.0) * h).astype(np.int64).clip(0, h - 1)
-            color *= _linear(img[y, x])
+            color *= _linear(img[y, x] / 255.0)  # only the texels sampled become floats
     if "COLOR_0" in attrs:
         c = accessor_array(doc, binary, attrs["COLOR_0"]).astype(np.float64)[:, :3]
         acc = doc["accessors"][attrs["COLOR_0"]]
@@ -334,7 +472,8 @@ def _colors(
 
 
 def _image(doc: dict[str, Any], binary: bytes, index: int) -> np.ndarray:
-    """An image of the file as sRGB floats (height, width, 3)."""
+    """An image of the file as sRGB bytes (height, width, 3), uint8; refused past :data:`MAX_TEXTURE_PIXELS`
+    from its header, before it is decoded."""
     from PIL import Image
 
     img = doc["images"][index]
@@ -345,9 +484,15 @@ def _image(doc: dict[str, Any], binary: bytes, index: int) -> np.ndarray:
     data = binary[start : start + length]
     try:
         with Image.open(io.BytesIO(data)) as im:
-            if im.width * im.height > 8192 * 8192:
-                raise ValueError("a texture larger than 8192 x 8192")
-            return np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+            if im.width * im.height > MAX_TEXTURE_PIXELS:
+                side = int(MAX_TEXTURE_PIXELS**0.5)
+                raise ConfigError(
+                    f"image {index} is {im.width} x {im.height} pixels, more than a character's texture may have "
+                    f"({side} x {side}); scale it down"
+                )
+            return np.asarray(im.convert("RGB"), dtype=np.uint8)
+    except ConfigError:
+        raise
     except ValueError:
         raise
     except Exception as e:  # Pillow's own errors (an unknown format, a truncated file, a decompression bomb)

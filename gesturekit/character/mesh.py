@@ -23,7 +23,7 @@ from .rig import Rig
 __all__ = ["PARTS", "CharacterMesh", "build_mesh", "vertex_normals"]
 
 #: What each vertex is made of; a colour scheme gives each its colour.
-PARTS = ("skin", "shirt", "face")
+PARTS = ("skin", "shirt", "face", "trousers", "shoes")
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, warn
 from ..skeleton import JOINT_NAMES, PARENTS, joint_index
 from .humanoid import PELVIS
 
@@ -114,7 +114,9 @@ class Character:
     gltf : GltfSource or None
         For a glTF or VRM.
     bvh_units : float
-        Metres per unit of a BVH file (1 for glTF).
+        Metres per unit of the file (for a BVH; for a glTF 1, unless its size said otherwise).
+    notes : tuple of str
+        What was changed to read it, for a person (a unit found from the character's size).
     """
 
     path: Path
@@ -130,6 +132,7 @@ class Character:
     skin: CharacterSkin | None = None
     gltf: GltfSource | None = field(default=None, repr=False)
     bvh_units: float = 1.0
+    notes: tuple[str, ...] = ()
 
     @property
     def n_bones(self) -> int:
@@ -203,6 +206,8 @@ class FileSkeleton:
         """The character in our frame, its bones matched by ``found`` (our joint or ``"pelvis"`` -> bone)."""
         del expected
         _check_tree(self, found)
+        if not np.isfinite(self.world).all():
+            raise ConfigError(f"{self.path}: the rest pose is not finite")
         pos = self.world[:, :3, 3] * self.units
         rot = _rotations(self.world[:, :3, :3])
         try:
@@ -212,6 +217,14 @@ class FileSkeleton:
         except ConfigError as e:
             why = "a character's rest pose must stand upright, arms apart"
             raise ConfigError(f"{self.path}: {e.problem}; {why}") from None
+        notes = []
+        factor, note = _size_factor(self, pos, turn[1])
+        if factor != 1.0:
+            self.units *= factor
+            pos = pos * factor
+            notes.append(note)
+            warn(note)
+        _check_legs(self, found, pos, turn[1])
         bone_of = np.full(len(JOINT_NAMES), -1, dtype=np.int64)
         for k, b in found.items():
             if k != PELVIS:
@@ -243,7 +256,96 @@ class FileSkeleton:
             skin=skin,
             gltf=self.gltf,
             bvh_units=self.units,
+            notes=tuple(notes),
         )
+
+
+#: A humanoid's height, metres: a character outside it is read in another unit where one fits, else refused.
+HUMAN_HEIGHT = (0.5, 3.0)
+
+#: Metres per unit a file's lengths may evidently be in: metres, centimetres, millimetres, inches, and the
+#: length unit of the common BVH conversion of the CMU mocap database (inches / 0.45).
+_UNITS = {"metres": 1.0, "centimetres": 0.01, "millimetres": 0.001, "inches": 0.0254, "CMU mocap units": 0.056444}
+
+
+def _height(sk: FileSkeleton, pos: np.ndarray, up: np.ndarray) -> float:
+    """The character's height along ``up`` (metres as read): its body's where it has one, else its bones'."""
+    points = pos
+    if sk.skin is not None and len(sk.skin["vertices"]):
+        points = np.concatenate([pos, sk.skin["vertices"] * sk.units])
+    along = points @ up
+    return float(along.max() - along.min())
+
+
+def _size_factor(sk: FileSkeleton, pos: np.ndarray, up: np.ndarray) -> tuple[float, str]:
+    """The factor that brings a character of implausible size into :data:`HUMAN_HEIGHT`, and the note saying so.
+
+    A BVH's unit was guessed from its offsets, so any of :data:`_UNITS` may be its own; a glTF is metres by its
+    specification, and a converter that wrote it at 1/100 (or 100 times, or in millimetres) is undone.
+
+    Raises
+    ------
+    ConfigError
+        No unit gives a humanoid's height.
+    """
+    height = _height(sk, pos, up)
+    low, high = HUMAN_HEIGHT
+    if low <= height <= high:
+        return 1.0, ""
+    raw = height / sk.units  # in the file's own units
+    if sk.kind == "bvh":
+        options = {f"read in {name}": size / sk.units for name, size in _UNITS.items()}
+    else:
+        options = {"scaled by 100 (written at 1/100 of its size)": 100.0}
+        options |= {"read in centimetres": 0.01, "read in millimetres": 0.001}
+    fits = {name: f for name, f in options.items() if low <= height * f <= high}
+    if not fits:
+        raise ConfigError(
+            f"{sk.path}: the character is {height:.3g} m tall as read ({raw:.4g} file units), and no unit "
+            f"(metres, centimetres, millimetres, inches) makes it a humanoid of {low} to {high} m; scale it in "
+            "the modelling tool and export again"
+        )
+    name = min(fits, key=lambda n: abs(np.log(height * fits[n] / 1.7)))
+    factor = fits[name]
+    read_as = {1.0: "metres", 0.01: "centimetres", 0.001: "millimetres"}.get(sk.units, f"units of {sk.units:g} m")
+    note = (
+        f"{sk.path.name}: {height:.3g} m tall as read in {read_as}, outside a humanoid's {low} to {high} m: "
+        f"{name}, {height * factor:.2f} m tall"
+    )
+    return factor, note
+
+
+def _check_legs(sk: FileSkeleton, found: Mapping[str, int], pos: np.ndarray, up: np.ndarray) -> None:
+    """Refuse a rest pose with a leg (a chain from the pelvis that is not the spine) ending above the pelvis.
+
+    Raises
+    ------
+    ConfigError
+        Naming the bone at the end of the leg and how far above the pelvis it is.
+    """
+    pelvis, spine = found[PELVIS], found["spine_mid"]
+    children: dict[int, list[int]] = {}
+    for b, p in enumerate(sk.parents):
+        children.setdefault(int(p), []).append(b)
+    height = float((pos @ up).max() - (pos @ up).min())
+    for first in children.get(pelvis, []):
+        below = [first]
+        for b in below:
+            below.extend(children.get(b, []))
+        if spine in below:
+            continue
+        ends = [b for b in below if b not in children]
+        reach = max(float(np.linalg.norm(pos[b] - pos[pelvis])) for b in below)
+        if reach < 0.2 * height:
+            continue  # a short bone (a tail, a skirt bone) is no leg
+        top = max(ends, key=lambda b: float(pos[b] @ up))
+        rise = float((pos[top] - pos[pelvis]) @ up)
+        if rise > 0.1 * height:
+            raise ConfigError(
+                f"{sk.path}: in the rest pose the leg from {sk.names[first]!r} ends at {sk.names[top]!r}, "
+                f"{rise:.2f} m above the pelvis: it points up. A character's rest pose must stand, legs down "
+                "(for a BVH: its pose with every rotation zero); pose it so in the modelling tool and export again"
+            )
 
 
 def _rotations(m: np.ndarray) -> np.ndarray:

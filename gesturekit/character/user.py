@@ -30,10 +30,19 @@ from ..limits import read_json
 from ..paths import is_file
 from ._user_bvh import read_bvh_skeleton
 from ._user_gltf import read_gltf_skeleton
-from .humanoid import REQUIRED, check_bone_map, match_names, missing_message, name_maps
+from .humanoid import (
+    FAMILIES,
+    REQUIRED,
+    check_bone_map,
+    fingers_by_shape,
+    match_families,
+    match_names,
+    missing_message,
+    name_maps,
+)
 from .target import Character, FileSkeleton
 
-__all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record"]
+__all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record", "bone_tree"]
 
 #: File name suffixes :func:`read_character` reads.
 CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".bvh")
@@ -63,6 +72,10 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         A bone needed (:data:`~gesturekit.character.humanoid.REQUIRED`) is not found (the message names it), the
         map names a bone the file lacks, or the rest pose is not a humanoid's.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise ConfigError(f"read_character takes a file name or path, not {type(path).__name__}")
+    if bone_map is not None and not isinstance(bone_map, (str, os.PathLike, dict)):
+        raise ConfigError(f"bone_map is a JSON file's name or path, or a dict, not {type(bone_map).__name__}")
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix not in CHARACTER_SUFFIXES:
@@ -75,6 +88,7 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         skeleton = read_bvh_skeleton(p)
     else:
         skeleton = read_gltf_skeleton(p)
+    _check_unique(skeleton)
     found, matched_by, expected = _match(skeleton, user_map, p)
     return skeleton.character(found, matched_by, expected)
 
@@ -120,7 +134,10 @@ def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes]
                 problem = problem.replace(str(map_path), str(bone_map[0] if bone_map else ""))
             problem = problem.replace(tmp + os.sep, "")
             shown = None if exc.path is None else bone_map[0] if bone_map and exc.path == str(map_path) else name
-            raise type(exc)(problem, path=shown) from None
+            error = type(exc)(problem, path=shown)
+            if hasattr(exc, "bone_tree"):
+                error.bone_tree = exc.bone_tree  # type: ignore[attr-defined]
+            raise error from None
     return dataclasses.replace(character, path=Path(str(name)))
 
 
@@ -150,6 +167,18 @@ def _sha256(path: Path) -> str | None:
     return digest.hexdigest()
 
 
+def _check_unique(skeleton: FileSkeleton) -> None:
+    """Refuse two bones of one name: a map or a name scheme could not say which is meant, nor a BVH of it."""
+    seen: dict[str, int] = {}
+    for i, name in enumerate(skeleton.names):
+        if name in seen:
+            raise InputFileError(
+                f"two bones are named {name!r}; rename one in the modelling tool (bone names must be unique)",
+                path=skeleton.path,
+            )
+        seen[name] = i
+
+
 def _bone_map(spec: str | os.PathLike | dict | None) -> tuple[str, dict[str, str]] | None:
     if spec is None:
         return None
@@ -171,10 +200,10 @@ def _match(
         index = {n: i for i, n in enumerate(names)}
         absent = sorted(f"{k} -> {v!r}" for k, v in wanted.items() if v not in index)
         if absent:
-            raise ConfigError(f"{path}: the bone map names bones the file lacks: {', '.join(absent[:8])}")
+            raise _with_tree(f"{path}: the bone map names bones the file lacks: {', '.join(absent[:8])}", skeleton)
         found = {k: index[v] for k, v in wanted.items()}
         if any(k not in found for k in REQUIRED):
-            raise ConfigError(missing_message(found, label, wanted, path=str(path)))
+            raise _with_tree(missing_message(found, label, wanted, path=str(path)), skeleton)
         return found, label, wanted
     if skeleton.humanoid is not None:
         label, found, expected = skeleton.humanoid
@@ -182,7 +211,38 @@ def _match(
             raise ConfigError(missing_message(found, label, expected, path=str(path)))
         return found, label, expected
     scheme, found = match_names(names)
+    label = f"{scheme} names"
     expected = name_maps()[scheme]
+    families = match_families(names, [int(p) for p in skeleton.parents])
+    if (sum(k in families for k in REQUIRED), len(families)) > (sum(k in found for k in REQUIRED), len(found)):
+        found, label, expected = families, FAMILIES, {}
+    found, sides = fingers_by_shape(found, [int(p) for p in skeleton.parents], skeleton.world[:, :3, 3])
+    if sides:
+        label += f", the fingers of the {' and '.join(sides)} hand{'s' if len(sides) > 1 else ''} by their shape"
     if any(k not in found for k in REQUIRED):
-        raise ConfigError(missing_message(found, f"{scheme} names", expected, path=str(path)))
-    return found, f"{scheme} names", expected
+        raise _with_tree(missing_message(found, label, expected, path=str(path)), skeleton)
+    return found, label, expected
+
+
+def _with_tree(message: str, skeleton: FileSkeleton) -> ConfigError:
+    error = ConfigError(message)
+    error.bone_tree = bone_tree(skeleton)  # type: ignore[attr-defined]
+    return error
+
+
+def bone_tree(skeleton: FileSkeleton, most: int = 200) -> str:
+    """The file's bones as an indented tree with their rest positions (metres, the file's axes), for writing a
+    bone map: a glTF node without a name is ``node{index}`` (its index among the file's nodes).
+
+    A :class:`ConfigError` of :func:`read_character` for bones it could not find carries this as ``bone_tree``.
+    """
+    depth = [0] * len(skeleton.names)
+    lines = []
+    for b, name in enumerate(skeleton.names[:most]):
+        p = int(skeleton.parents[b])
+        depth[b] = depth[p] + 1 if p >= 0 else 0
+        x, y, z = skeleton.world[b, :3, 3] * skeleton.units
+        lines.append(f"{'  ' * depth[b]}{name} ({x:.2f}, {y:.2f}, {z:.2f})")
+    more = len(skeleton.names) - most
+    tail = f"\n... and {more} more" if more > 0 else ""
+    return "\n".join(lines) + tail

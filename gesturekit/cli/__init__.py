@@ -1,4 +1,4 @@
-"""The command line: ``gesturekit build-db``, ``gesturekit info``, ...
+"""The command line: ``gesturekit build-db``, ``gesturekit info``, ..., ``gesturekit app``; ``gesturekit --version``.
 
 Every command turns errors of the gesturekit family into one line on stderr
 (exit status 2) and prints warnings as ``warning: ...`` lines.
@@ -14,12 +14,13 @@ import re
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import ConfigError, GestureKitError, GestureKitWarning, warn
 from ..paths import is_file
+from ._app import run as _cmd_app  # noqa: F401  (main finds it by name; streamlit is imported only as it runs)
 from ._options import flag_of, options_given
 from ._parser import build_parser, join_axis_values
 
@@ -308,7 +309,13 @@ def _cmd_synthesize(args) -> int:
     from ..datasets.audio import load_audio
     from ..export.bvh import bvh_parents
     from ..export.gltf import audio_path_for
-    from ..export.result import export_result_bvh, export_result_glb, save_result_npz, save_result_video
+    from ..export.result import (
+        export_result_bvh,
+        export_result_glb,
+        retarget_result,
+        save_result_npz,
+        save_result_video,
+    )
     from ..outputs import output_lock, write_errors
     from ..refine import open_refiner
     from ..search import describe_steps
@@ -375,15 +382,18 @@ def _cmd_synthesize(args) -> int:
             # under the lock, since another run may have written them while this one searched
             held.enter_context(output_lock(p))
             check_target(p, kind, character, overwrite=args.force, inputs=files)
-        for f, stem, res in zip(files, stems, results):
+        # a late error (a character that cannot carry a result, a disk that fills up) takes back what this run wrote
+        held.enter_context(_taken_back_on_error(list(targets.values())))
+        retargeted = [None if character is None else retarget_result(res, character) for res in results]
+        for f, stem, res, on_theirs in zip(files, stems, results, retargeted):
             res.source = f.name
             reports: list[str] = []
             if "npz" in formats:
                 save_result_npz(res, targets[(stem, "npz")], overwrite=args.force)
-            if character is not None:  # their character in place of ours
+            if on_theirs is not None:  # their character in place of ours
                 theirs = {k: targets[(stem, k)] for k in tree}
                 write_character_files(
-                    res, character, theirs, overwrite=args.force, thresholds=db.thresholds, show=reports.append
+                    res, on_theirs, theirs, overwrite=args.force, thresholds=db.thresholds, show=reports.append
                 )
             if "bvh" in formats and character is None:
                 reports.append(
@@ -417,6 +427,29 @@ def _cmd_synthesize(args) -> int:
             for line in reports:
                 _print(line)
     return _done(args)
+
+
+@contextlib.contextmanager
+def _taken_back_on_error(paths: Sequence[Path]) -> Iterator[None]:
+    """Remove the files of ``paths`` written inside the block when it fails, so a run leaves all its outputs or
+    none (each file is itself written to a temporary name and renamed)."""
+    before = {p: _stamp(p) for p in paths}
+    try:
+        yield
+    except BaseException:
+        for p in paths:
+            if _stamp(p) != before[p] and p.is_file() and not p.is_symlink():
+                with contextlib.suppress(OSError):
+                    p.unlink()
+        raise
+
+
+def _stamp(path: Path) -> tuple[int, int] | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_ino, st.st_mtime_ns
 
 
 def _cmd_train_refiner(args) -> int:

@@ -14,6 +14,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..character.retarget import Retargeted
 from ..character.target import Character
 from ..errors import ConfigError
 from ..outputs import check_output
@@ -65,7 +66,7 @@ def check_target(
 
 def write_character_files(
     result: SynthesisResult,
-    character: Character,
+    character: Character | Retargeted,
     targets: Mapping[str, Path],
     *,
     overwrite: bool,
@@ -77,7 +78,9 @@ def write_character_files(
     Parameters
     ----------
     result : SynthesisResult
-    character : Character
+    character : Character or Retargeted
+        The character, or the result's motion already retargeted onto it (so that a character that cannot carry
+        the motion is refused before any file of the result is written).
     targets : mapping
         ``"glb"`` and/or ``"bvh"`` -> the file to write.
     overwrite : bool
@@ -90,6 +93,7 @@ def write_character_files(
     from ..export.result import export_result_character_bvh, export_result_character_glb, retarget_result
 
     retargeted = retarget_result(result, character)
+    character = retargeted.character
     show(f"  on {character.path.name} ({character.matched_by}): {retargeted.report.summary()}")
     if "glb" in targets:
         glb = export_result_character_glb(result, retargeted, targets["glb"], overwrite=overwrite)

@@ -10,6 +10,9 @@ import argparse
 from collections.abc import Sequence
 
 from .._config import option_of
+from .._version import __version__
+from ._app import ABOUT as _APP_ABOUT
+from ._app import add_app_parser
 from ._options import add_options
 
 __all__ = ["build_parser", "join_axis_values"]
@@ -66,6 +69,7 @@ _ABOUT = {
         "run a user study on a stimuli folder: design, hosting, analysis, HEMVIP interop",
         "Subcommands that turn a stimuli folder into a running study (see `gesturekit study SUBCOMMAND -h`).",
     ),
+    "app": _APP_ABOUT,
 }
 
 
@@ -138,6 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="gesturekit", description="Controllable speech-driven gesture synthesis by motion matching."
     )
+    p.add_argument("--version", action="version", version=f"gesturekit {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
@@ -357,4 +362,5 @@ def build_parser() -> argparse.ArgumentParser:
     from ._study import add_study_parser
 
     add_study_parser(_command(sub, "study"))
+    add_app_parser(_command(sub, "app"))
     return p

@@ -28,13 +28,15 @@ _ABOUT = {
     ),
     "export-hemvip": (
         "write the study as HEMVIP configs: one JSON per participant",
-        "Write one HEMVIP (webMUSHRA) experiment config per participant row into OUT, pages of type video "
-        "(rating) and videopc (pairwise), the media referred to as URL/<id>.mp4.",
+        "Write one HEMVIP experiment config per participant row into OUT (HEMVIP's configs/<test id>), pages of "
+        "type video (rating) and videopc (pairwise), for HEMVIP's genea2022 branch (github.com/jonepatr/hemvip). "
+        "HEMVIP plays Vimeo videos only: upload the media and give --vimeo a CSV of id,vimeo (each media id, its "
+        "Vimeo id or URL). OUT/codes.jsonl is the completion for HEMVIP's codes collection (mongoimport).",
     ),
     "analyse": (
         "the study's answers: exclusions, per system statistics, tests, Bradley-Terry, a report",
         "Exclude participants by their attention and audio checks, then per system (and prompt) the mean and "
-        "median rating with bootstrap 95 %% intervals over participants, Wilcoxon signed-rank tests of every pair "
+        "median rating with bootstrap 95 % intervals over participants, Wilcoxon signed-rank tests of every pair "
         "of systems with Holm-Bonferroni and rank-biserial effect sizes, Bradley-Terry scores (Elo scale) for "
         "pairwise pages; CSVs, figures and a markdown and HTML report into STUDY/analysis/.",
     ),
@@ -161,16 +163,22 @@ def add_export_hemvip(p: argparse.ArgumentParser) -> None:
     """Options of ``study export-hemvip``."""
     p.add_argument("study", metavar="STUDY", help="study folder with design.json")
     p.add_argument("--out", required=True, help="folder to write the configs into")
-    p.add_argument("--media-url", default="/media", help="URL prefix of the media files (default /media)")
+    p.add_argument("--vimeo", metavar="CSV", help="id,vimeo: the Vimeo video of every media id of the study")
+    p.add_argument("--media-url", help=argparse.SUPPRESS)  # refused with the reason: HEMVIP plays Vimeo only
     p.add_argument("--force", action="store_true", help="replace configs written before")
 
 
 def _study_export_hemvip(args: argparse.Namespace) -> int:
     from ..study.design import load_design
-    from ..study.hemvip import export_hemvip
+    from ..study.hemvip import HEMVIP_VERSION, export_hemvip, read_vimeo_map
 
-    files = export_hemvip(load_design(args.study), args.out, media_url=args.media_url, overwrite=args.force)
-    print(f"{len(files)} HEMVIP configs in {args.out}")
+    if args.media_url is not None or args.vimeo is None:
+        raise ConfigError(
+            f"HEMVIP ({HEMVIP_VERSION}) plays every video with Vimeo's player, so plain media URLs never play: "
+            "upload the study's media to Vimeo and give --vimeo a CSV of id,vimeo (each media id, its Vimeo id)"
+        )
+    files = export_hemvip(load_design(args.study), args.out, vimeo=read_vimeo_map(args.vimeo), overwrite=args.force)
+    print(f"{len(files)} HEMVIP configs for {HEMVIP_VERSION} in {args.out}; completion: {args.out}/codes.jsonl")
     return 0
 
 
@@ -183,12 +191,25 @@ def add_import_hemvip(p: argparse.ArgumentParser) -> None:
 
 
 def _study_import_hemvip(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..outputs import check_not_input
     from ..study.design import load_design
     from ..study.hemvip import import_hemvip, write_responses_csv
 
-    frame = import_hemvip(load_design(args.study), args.results)
+    folder = Path(args.study)
+    inputs = [*args.results, *(folder / n for n in ("design.json", "manifest.csv", "order.csv", "responses.sqlite3"))]
+    check_not_input(args.out, inputs)  # --force must never replace the study's key or a result file
+    notes: list[str] = []
+    frame = import_hemvip(load_design(args.study), args.results, notes=notes)
+    for note in notes:
+        print(note)
     write_responses_csv(frame, args.out, overwrite=args.force)
-    print(f"{len(frame)} responses of {frame['token'].nunique()} participants in {args.out}")
+    broken = sum(1 for a in frame["answers"] if a.get("broken_video"))
+    print(
+        f"{len(frame)} responses of {frame['token'].nunique()} participants in {args.out}; "
+        f"broken-video reports: {broken}"
+    )
     return 0
 
 
@@ -222,25 +243,33 @@ def _study_analyse(args: argparse.Namespace) -> int:
         store_url=args.store,
         responses=args.responses,
     )
+    flow = report.flow
     print(
-        f"{len(report.participants)} participants, {report.excluded} excluded by the checks, "
-        f"{report.included} analysed; systems: {', '.join(report.systems)}"
+        f"{flow['started']} started, {flow['answered_nothing']} answered nothing, {flow['excluded']} excluded by "
+        f"the checks, {flow['no_kept_answer']} with no rating or pairwise answer, {flow['analysed']} analysed "
+        f"({flow['analysed_finished']} finished); systems: {', '.join(report.systems)}"
     )
+    for warning in report.warnings:
+        print(f"warning: {warning}")
+
+    def span(lo: float, hi: float, fmt: str) -> str:  # never a point printed as an interval
+        return f"[{lo:{fmt}}, {hi:{fmt}}]" if lo < hi else "(no interval)"
+
     if report.summary is not None:
         every = report.summary[report.summary["prompt"] == "all"]
-        cells = [f"{r.system} {r.mean:.2f} [{r.mean_lo:.2f}, {r.mean_hi:.2f}]" for r in every.itertuples()]
+        cells = [f"{r.system} {r.mean:.2f} {span(r.mean_lo, r.mean_hi, '.2f')}" for r in every.itertuples()]
         print("mean rating, all prompts (95 % CI): " + "; ".join(cells))
     if report.tests is not None:
-        every = report.tests[report.tests["prompt"] == "all"]
+        every = report.tests[(report.tests["prompt"] == "all") & (report.tests["result"] != "not compared")]
         print(
             f"significantly different pairs (all prompts, Holm, alpha={report.alpha}): "
-            f"{int(every['significant'].sum())} of {len(every)}"
+            f"{int(every['significant'].sum())} of {len(every)} compared"
         )
     if report.bradley_terry is not None:
         cells = [
-            f"{r.system} {r.elo:+.0f} [{r.elo_lo:+.0f}, {r.elo_hi:+.0f}]" for r in report.bradley_terry.itertuples()
+            f"{r.system} {r.elo:+.0f} {span(r.elo_lo, r.elo_hi, '+.0f')}" for r in report.bradley_terry.itertuples()
         ]
-        print("Bradley-Terry (Elo, mean 0): " + "; ".join(cells))
-    for f in report.files:
-        print(f)
+        print("Bradley-Terry (Elo, mean 0 within each connected part): " + "; ".join(cells))
+    for path in report.files:
+        print(path)
     return 0

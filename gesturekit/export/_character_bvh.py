@@ -123,6 +123,16 @@ def bvh_joint_names(names: tuple[str, ...] | list[str]) -> tuple[str, ...]:
     return tuple(out)
 
 
+def _check_arguments(path: object, retargeted: object, function: str) -> None:
+    """Our error, not a bare ``TypeError``, for a call given something else than a path and a retargeted motion."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise ConfigError(f"{function} writes to a file name or path, not {type(path).__name__}")
+    if not isinstance(retargeted, Retargeted):
+        raise ConfigError(
+            f"{function} writes a Retargeted (gesturekit.character.retarget.retarget), not {type(retargeted).__name__}"
+        )
+
+
 def export_character_bvh(
     path: str | os.PathLike[str], retargeted: Retargeted, *, units: str | None = None, overwrite: bool = False
 ) -> CharacterBvhReport:
@@ -153,6 +163,7 @@ def export_character_bvh(
         Units not ``"cm"`` or ``"m"``, or a file there that may not be replaced
         (:class:`~gesturekit.errors.OutputError`).
     """
+    _check_arguments(path, retargeted, "export_character_bvh")
     path = Path(path)
     ch = retargeted.character
     if units is not None and units not in UNITS:

@@ -8,7 +8,8 @@ viewer) in the place and size it had.
 GLB (:func:`export_character_glb`)
     Their document and binary chunk as read (meshes, materials, textures,
     skins, extensions such as VRM's, their animations), with one animation
-    more, named :data:`ANIMATION`: one key per frame at ``i / fps`` seconds,
+    more, named :data:`ANIMATION`, first of the animations (a viewer that plays
+    one plays the first; theirs follow as they were): one key per frame at ``i / fps`` seconds,
     interpolated linearly, a rotation channel for each bone whose local
     rotation moves and a translation channel for the hips when they move. A
     bone's world rotation in the file is ``S = R_F @ W`` (``W`` the retargeted
@@ -47,6 +48,7 @@ from ..motion import AUDIO_SR
 from ..outputs import check_not_input
 from ._character_bvh import (
     CharacterBvhReport,
+    _check_arguments,
     character_bvh_joints,
     check_character_bvh,
     export_character_bvh,
@@ -167,6 +169,7 @@ def export_character_glb(
         scale, bad speech, or a file that exists and may not be replaced
         (:class:`~gesturekit.errors.OutputError`).
     """
+    _check_arguments(path, retargeted, "export_character_glb")
     path = Path(path)
     ch = retargeted.character
     if ch.gltf is None:
@@ -294,8 +297,8 @@ def _document(r: Retargeted, extras: dict[str, Any]) -> tuple[dict[str, Any], by
 
     binary = _append(doc, ch.gltf.binary, buf, samplers)
     animations = [a for a in doc.get("animations", []) if a.get("name") != ANIMATION]
-    if channels:
-        animations.append({"name": ANIMATION, "samplers": samplers, "channels": channels})
+    if channels:  # first: the clip a viewer plays when it plays one (theirs follow, as they were)
+        animations.insert(0, {"name": ANIMATION, "samplers": samplers, "channels": channels})
     if animations:
         doc["animations"] = animations
     else:

@@ -22,6 +22,10 @@ an animated, skinned character:
   with a plain PBR material (metallic 0, roughness :data:`ROUGHNESS`) of the
   part's colour in the chosen scheme (:func:`gesturekit.character.look.part_colors`,
   converted to linear light as glTF's ``baseColorFactor`` is).
+* **Legs.** Our motions hold the upper body only; the still hips, legs and shoes of
+  :func:`gesturekit.character.stand.stand_mesh` are a second mesh (``legs``, not skinned) on a node of
+  their own, in the motion's frame: the pelvis at the origin (as in the BVH), the soles on the floor at
+  ``extras.floor`` metres (negative: below the pelvis).
 * **Speech.** glTF has no audio; the speech is written as a 16-bit WAV beside
   the file (the same name with ``.wav``) and named in the extras of the
   ``asset`` and of the scene: ``{"audio": "take.wav", "fps": 15.0, "frames": ..}``.
@@ -64,6 +68,7 @@ from ..character.look import part_colors
 from ..character.mesh import PARTS, build_mesh
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
 from ..character.solve import bvh_parents
+from ..character.stand import stand_mesh, standing_root
 from ..errors import ConfigError, OutputError
 from ..motion import AUDIO_SR, Motion
 from ..outputs import MP4_TAG, check_output
@@ -366,6 +371,25 @@ def _linear(srgb: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
+def _material(name: str, srgb: np.ndarray) -> dict[str, Any]:
+    """A plain PBR material of one part's sRGB colour (glTF's ``baseColorFactor`` is in linear light)."""
+    return {
+        "name": name,
+        "pbrMetallicRoughness": {
+            "baseColorFactor": [*(float(c) for c in _linear(srgb)), 1.0],
+            "metallicFactor": 0.0,
+            "roughnessFactor": ROUGHNESS,
+        },
+    }
+
+
+def _unit_normals(normals: np.ndarray) -> np.ndarray:
+    """Normals of unit length (glTF requires it); a zero normal becomes +Y."""
+    n = np.asarray(normals, dtype=np.float64)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(length > 1e-12, n / np.maximum(length, 1e-12), [0.0, 1.0, 0.0])
+
+
 def continuous_quaternions(q: np.ndarray) -> np.ndarray:
     """Quaternions (frames, ..., 4) with each one's sign chosen to be nearest the previous frame's."""
     q = q.copy()
@@ -429,17 +453,35 @@ def _document(
             continue
         indices = buf.add(faces.reshape(-1), "SCALAR", index_type, target=_ELEMENT_ARRAY_BUFFER)
         primitives.append({"attributes": attributes, "indices": indices, "material": len(materials), "mode": 4})
-        materials.append(
-            {
-                "name": name,
-                "pbrMetallicRoughness": {
-                    "baseColorFactor": [*(float(c) for c in _linear(colors[p])), 1.0],
-                    "metallicFactor": 0.0,
-                    "roughnessFactor": ROUGHNESS,
-                },
-            }
-        )
+        materials.append(_material(name, colors[p]))
     nodes.append({"name": "character", "mesh": 0, "skin": 0})
+    scene_nodes = [root, len(nodes) - 1]
+    meshes: list[dict[str, Any]] = [{"name": "body", "primitives": primitives}]
+    # the still legs (our motions have no legs to move them): a plain mesh in the motion's frame, on the floor
+    stand = stand_mesh(rig, standing_root(pose.root))
+    if stand is not None:
+        legs = {
+            "POSITION": buf.add(stand.vertices, "VEC3", _FLOAT, target=_ARRAY_BUFFER, bounds=True),
+            "NORMAL": buf.add(_unit_normals(stand.normals), "VEC3", _FLOAT, target=_ARRAY_BUFFER),
+        }
+        leg_primitives = []
+        leg_part = stand.parts[stand.faces[:, 0]]
+        for p, name in enumerate(PARTS):
+            faces = stand.faces[leg_part == p]
+            if not len(faces):
+                continue
+            index = buf.add(
+                faces.reshape(-1),
+                "SCALAR",
+                _USHORT if stand.n_vertices <= 65535 else _UINT,
+                target=_ELEMENT_ARRAY_BUFFER,
+            )
+            leg_primitives.append({"attributes": legs, "indices": index, "material": len(materials), "mode": 4})
+            materials.append(_material(name, colors[p]))
+        meshes.append({"name": "legs", "primitives": leg_primitives})
+        nodes.append({"name": "legs", "mesh": 1})
+        scene_nodes.append(len(nodes) - 1)
+        extras = {**extras, "floor": float(stand.floor)}
 
     n = pose.n_frames
     times = buf.add(np.arange(n) / float(motion.fps), "SCALAR", _FLOAT, bounds=True)
@@ -453,9 +495,9 @@ def _document(
     doc = {
         "asset": {"version": "2.0", "generator": GENERATOR, "extras": extras},
         "scene": 0,
-        "scenes": [{"name": "gesturekit", "nodes": [root, len(nodes) - 1], "extras": extras}],
+        "scenes": [{"name": "gesturekit", "nodes": scene_nodes, "extras": extras}],
         "nodes": nodes,
-        "meshes": [{"name": "body", "primitives": primitives}],
+        "meshes": meshes,
         "materials": materials,
         "skins": [skin],
         "animations": [{"name": "motion", "samplers": samplers, "channels": channels}],

@@ -22,6 +22,7 @@ __all__ = [
     "audio_err",
     "compiled",
     "reduce_chunk",
+    "initial_order",
     "MAX_ABS",
 ]
 
@@ -148,3 +149,24 @@ def reduce_chunk(
     count = np.count_nonzero(A <= thr[:, None], axis=1)
     undecided = finite & ((count > 1) | (am64 + nq[0] <= err))
     return s0[:, None], amin[:, None], undecided[:, None]
+
+
+def initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
+    """The order the rank groups of :meth:`~gesturekit.search.index.SearchIndex._decide` start from.
+
+    Returns ``(order, L)``: the survivors with the ``L = min(prefix, n)`` smallest
+    estimates first, sorted, the others after them in any order. Any order near the
+    sorted one will do: the groups of near-equal estimates (equal exact values
+    included) are proven whatever the order inside them (``prefix_groups`` of :mod:`~gesturekit.search.kernels`),
+    and those that matter are re-sorted with exact values. Sorting float32 copies of
+    the estimates is then enough (they misplace only values closer than float32
+    rounding), and numpy sorts and partitions float32 keys faster than float64 ones.
+    """
+    n = v.size
+    key = v.astype(np.float32)
+    if prefix >= n:
+        return np.argsort(key), n
+    order = np.argpartition(key, prefix - 1)
+    head = order[:prefix]
+    order[:prefix] = head[np.argsort(key[head])]
+    return order, prefix

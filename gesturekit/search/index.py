@@ -9,15 +9,16 @@ material, with the authors' choices and ours, see ``docs/METHOD.md`` and
 configuration) with one scan of the database per step.
 
 Exactness. The result equals :func:`gesturekit.search.reference.search_reference`
-decision for decision. Each step scans the database once in float32
-(``||p||^2 - 2 p.q``: for one query, a few clips at a time, BLAS's matrix-vector
-product where most starts are admissible and a compiled pass over the admissible
-rows alone where few are; for several queries a matrix product), keeps per clip the starts whose
-float32 value lies within a proven error bound of the clip's minimum, and
-decides among those with the exact float64 definitions of
-:mod:`gesturekit.search.reference`. The same bound-and-re-check is applied to
-the ordering of clips by pose and by audio distance, so ties and near-ties are
-always settled by the exact values.
+decision for decision. Each step scans the database once. One query's scan reads an
+8-bit copy of the pose features (:mod:`gesturekit.search.reduced`, a few clips at a
+time), whose estimates lie within a proven bound per clip; where that bound leaves a
+clip's nearest start open, the starts that could be nearest are estimated again in
+float32 (``||p||^2 - 2 p.q``), and the nearest start of every clip is. Several
+queries' scan is a float32 matrix product. Per clip the starts whose float32 value
+lies within a proven error bound of the clip's minimum are decided among with the
+exact float64 definitions of :mod:`gesturekit.search.reference`. The same
+bound-and-re-check is applied to the ordering of clips by pose and by audio
+distance, so ties and near-ties are always settled by the exact values.
 
 Error bound (pose). For a row ``p`` and the query ``q`` (both float32, D = 96
 values), the float32 estimate ``A = fl(np32 + fl(-2 q.p))`` with ``np32`` the
@@ -45,8 +46,9 @@ import numpy as np
 from ..errors import ConfigError, warn
 from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
-from .exact import TINY, audio_err, compiled, pose_err_factor, reduce_chunk
+from .exact import TINY, audio_err, compiled, initial_order, pose_err_factor, reduce_chunk
 from .plan import SearchPlan, stack_plans
+from .reduced import ReducedPose, compiled_reduced, quantise_query, reduce_pose
 from .threads import matrix_product, single_threaded_blas, worker_count
 from .types import CANDIDATE_FIELDS, SearchConfig, SearchResult, describe_steps
 
@@ -58,13 +60,9 @@ __all__ = ["SearchIndex", "search", "search_batch"]
 #: Clips scanned per chunk are chosen so that one chunk's float32 result holds this many bytes.
 _CHUNK_BYTES = 16 << 20
 
-#: Clips multiplied and reduced at a time by one query's scan: their estimates stay in the
-#: processor's cache between the product and the reduction.
+#: Clips estimated and reduced at a time by one query's scan: their estimates stay in the
+#: processor's cache between the estimates and the reduction.
 _SUB_CLIPS = 1024
-
-#: Above this share of admissible starts, BLAS's product of all rows is faster than the
-#: compiled product of the admissible rows alone (it is compute-bound; BLAS is memory-bound).
-_DENSE = 0.5
 
 #: Survivors sorted first by each ranking in a query's decisions; the rest is only
 #: partitioned off. Enough whenever the top of the combined ranking lies within the
@@ -72,27 +70,6 @@ _DENSE = 0.5
 #: throughout (or many clips repeat others); otherwise prefixes 8 times longer, up to the
 #: whole orders (same result).
 _PREFIX = 1024
-
-
-def _initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
-    """The order the rank groups of :meth:`SearchIndex._decide` start from.
-
-    Returns ``(order, L)``: the survivors with the ``L = min(prefix, n)`` smallest
-    estimates first, sorted, the others after them in any order. Any order near the
-    sorted one will do: the groups of near-equal estimates (equal exact values
-    included) are proven whatever the order inside them (``prefix_groups`` of :mod:`~gesturekit.search.kernels`),
-    and those that matter are re-sorted with exact values. Sorting float32 copies of
-    the estimates is then enough (they misplace only values closer than float32
-    rounding), and numpy sorts and partitions float32 keys faster than float64 ones.
-    """
-    n = v.size
-    key = v.astype(np.float32)
-    if prefix >= n:
-        return np.argsort(key), n
-    order = np.argpartition(key, prefix - 1)
-    head = order[:prefix]
-    order[:prefix] = head[np.argsort(key[head])]
-    return order, prefix
 
 
 class SearchIndex:
@@ -110,8 +87,10 @@ class SearchIndex:
 
     Notes
     -----
-    Extra memory: ``12 M T`` bytes of per-frame norms; per search, a few arrays
-    of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
+    Extra memory: ``12 M T`` bytes of per-frame norms; from the first single query on,
+    the 8-bit copy of the pose features (:meth:`reduced`, ``(D + 8) M T`` bytes and
+    ``4 (D + 8) M`` per clip); per search, a few arrays of ``4 M T`` bytes per control
+    mask in use and a scan buffer of at most 16 MB.
     """
 
     def __init__(self, P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> None:
@@ -131,6 +110,16 @@ class SearchIndex:
         self._na64 = checked_sqnorms(np.asarray(self._F2), "audio", self._workers)
         self._na2 = self._na64.reshape(M, T)
         self._scratch = threading.local()
+        self._reduced: ReducedPose | None = None
+        self._reduced_lock = threading.Lock()
+
+    def reduced(self) -> ReducedPose:
+        """The reduced pose copy one query's scan reads (:mod:`gesturekit.search.reduced`),
+        made on first use: a batch's matrix product reads the float32 features instead."""
+        with self._reduced_lock:
+            if self._reduced is None:
+                self._reduced = reduce_pose(self._P3, self._workers)
+            return self._reduced
 
     # -- admissibility -------------------------------------------------------------------------
 
@@ -149,23 +138,18 @@ class SearchIndex:
         return cache[key][0], key
 
     def _bias(self, cache, key):
-        """What the scan needs of the admissible starts under ``key``: ``(bias, admitted)``.
-
-        ``bias`` (M T,) float32 is ``|p|^2`` where a start is admissible, +inf elsewhere;
-        ``admitted`` (M + 1,) int64 counts the admissible starts of the clips before each clip.
-        """
-        adm, scan = cache[key]
-        if scan is None:
-            admitted = np.zeros(adm.shape[0] + 1, np.int64)
-            np.cumsum(np.count_nonzero(adm, axis=1), out=admitted[1:])
-            scan = (np.where(adm.ravel(), self._np32, np.float32(np.inf)), admitted)
-            cache[key] = (adm, scan)
-        return scan
+        """What the scan needs of the admissible starts under ``key``: ``bias`` (M T,) float32,
+        ``|p|^2`` where a start is admissible, +inf elsewhere."""
+        adm, bias = cache[key]
+        if bias is None:
+            bias = np.where(adm.ravel(), self._np32, np.float32(np.inf))
+            cache[key] = (adm, bias)
+        return bias
 
     # -- one scan of the database for several queries ------------------------------------------
 
-    def _scan(self, Q, biases, fq, scratch=None, pool=None, admitted=None):
-        """Per query and clip: the float32 argmin, min, and the rows needing an exact look.
+    def _scan(self, Q, biases, fq, scratch=None, pool=None):
+        """Per query and clip: the nearest start's estimate, its bound, and the rows needing an exact look.
 
         Parameters
         ----------
@@ -179,22 +163,25 @@ class SearchIndex:
             Keeps a single query's product buffer between steps (fresh pages cost page faults).
         pool : ThreadPoolExecutor, optional
             Threads to share out each chunk's product and reductions by clips.
-        admitted : np.ndarray, shape (M + 1,), int64, optional
-            With one query: the count of its admissible starts before each clip (see
-            :meth:`_bias`). Where few starts are admissible the products are made for
-            those alone, else for all starts by a matrix product.
+
+        One query's scan reads the reduced copy (:meth:`reduced`) of the admissible starts
+        and, where its bound leaves a clip's nearest start open, the float32 features of
+        the few starts that could be nearest (:func:`~gesturekit.search.reduced_kernels.scan_reduced`);
+        several queries' scan is a float32 matrix product of the starts any of them may use.
 
         Returns
         -------
         s0 : (B, M) int64
-            A start of least float32 estimate per clip.
-        amin : (B, M) float32
-            That estimate ``A = |p|^2 - 2 p.q`` (+inf: no admissible start).
+            A start of least estimate per clip.
+        d2 : (B, M) float64
+            Its squared pose distance estimate (+inf: no admissible start).
+        err : (B, M) float64
+            The error bound of that estimate.
         nq : (B,) float64
             ``|q|^2``.
         undecided : list of B (clips, rows) pairs
-            Clips whose minimum is not decisive; ``rows[i]`` holds the estimates of all T
-            starts of clip ``clips[i]``.
+            Clips whose minimum is not decisive; ``rows[i]`` holds float32 estimates
+            ``|p|^2 - 2 p.q`` of the T starts of clip ``clips[i]`` (+inf: cannot be nearest).
         audio : (av, inexact)
             ``av[b, m]`` (B, M) float64 is the estimated cosine distance of clip ``m``'s start
             ``s0`` to query ``b``'s audio feature (float32 product, float64 norms; NaN
@@ -229,7 +216,12 @@ class SearchIndex:
         # per query group and clip: one past the last admissible start (0: none)
         range_ends = [] if B == 1 else [compiled().admissible_ends(bias.reshape(M, T)) for bias, _, _ in ranges]
         s0 = np.empty((M, B), np.int64)
-        amin = np.empty((M, B), np.float32)
+        d2 = np.empty((M, B))
+        err = np.empty((M, B))
+        if B == 1:
+            red = self.reduced()
+            codes = quantise_query(Qp[0])
+            query_codes = (codes.codes, codes.scale, codes.lost, codes.norm)
         # the audio estimate of each clip's s0 per query, made while the clip is at hand
         fqp = np.ascontiguousarray(np.asarray(fq, np.float32)[perm])
         f64 = fqp.astype(np.float64)
@@ -246,23 +238,22 @@ class SearchIndex:
             if B == 1:  # a few clips at a time, reduced while their estimates are in cache
                 G2 = G.reshape(nc, T)
                 bias2 = biases[0][r0:r1].reshape(nc, T)
-                scan = (s0[c0:c1, 0], amin[c0:c1, 0], np.empty(nc, bool))
+                und = np.empty(nc, bool)
                 for a in range(0, nc, _SUB_CLIPS):
                     z = min(nc, a + _SUB_CLIPS)
-                    # BLAS's product of all rows, or the compiled one of the admissible rows alone
-                    dense = admitted[c0 + z] - admitted[c0 + a] > _DENSE * (z - a) * T
-                    if dense:
-                        np.dot(self._P2[r0 + a * T : r0 + z * T], W[0], out=G[a * T : z * T, 0])
-                    compiled().scan_one(
+                    x0, x1 = c0 + a, c0 + z
+                    compiled_reduced().scan_reduced(
                         G2[a:z],
                         bias2[a:z],
-                        (self._P3[c0 + a : c0 + z], Qp[0], float(nq[0]), dense),
-                        (self._npmax[c0 + a : c0 + z], self._pose_c, TINY),
-                        tuple(x[a:z] for x in scan),
-                        (self._F3[c0 + a : c0 + z], self._na2[c0 + a : c0 + z], fqp[0], float(nbp[0])),
-                        (av[c0 + a : c0 + z, 0], inexact[c0 + a : c0 + z, 0]),
+                        (red.codes[x0:x1], red.coef[x0:x1], red.kappa[x0:x1], red.centre[x0:x1], red.stats[x0:x1]),
+                        query_codes,
+                        (self._P3[x0:x1], Qp[0], float(nq[0])),
+                        (self._npmax[x0:x1], self._pose_c, TINY),
+                        (s0[x0:x1, 0], d2[x0:x1, 0], err[x0:x1, 0], und[a:z]),
+                        (self._F3[x0:x1], self._na2[x0:x1], fqp[0], float(nbp[0])),
+                        (av[x0:x1, 0], inexact[x0:x1, 0]),
                     )
-                ci = np.flatnonzero(scan[2])
+                ci = np.flatnonzero(und)
                 if ci.size:
                     found.append((ci + c0, np.zeros(ci.size, np.int64), G2[ci]))
                 return found
@@ -270,7 +261,8 @@ class SearchIndex:
             L = int(max(ends[c0:c1].max() for ends in range_ends))
             if L == 0:
                 s0[c0:c1] = 0
-                amin[c0:c1] = np.inf
+                d2[c0:c1] = np.inf
+                err[c0:c1] = 0.0
                 return found
             G3 = G[: nc * L].reshape(nc, L, B)
             product(self._P3[c0:c1, :L], W, G3)
@@ -278,7 +270,9 @@ class SearchIndex:
                 bias2 = bias[r0:r1].reshape(nc, T)[:, :L]
                 s0c, amc, und = reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)
                 s0[c0:c1, j0:j1] = s0c
-                amin[c0:c1, j0:j1] = amc
+                nqj = nq[j0:j1]
+                d2[c0:c1, j0:j1] = amc.astype(np.float64) + nqj  # +inf stays +inf
+                err[c0:c1, j0:j1] = self._pose_c * (self._npmax[c0:c1, None] + nqj) + TINY
                 compiled().audio_at(
                     self._F3[c0:c1],
                     self._na2[c0:c1],
@@ -324,14 +318,15 @@ class SearchIndex:
         inv = np.empty(B, np.int64)
         inv[perm] = np.arange(B)
         # back to the callers' query order, one C-contiguous row per query
-        return s0.T[inv], amin.T[inv], nq[inv], undecided, (av.T[inv], inexact.T[inv])
+        return s0.T[inv], d2.T[inv], err.T[inv], nq[inv], undecided, (av.T[inv], inexact.T[inv])
 
     # -- exact decisions for one query ----------------------------------------------------------
 
     def _decide(
         self,
         best_start,
-        best_est,
+        best_d2,
+        best_err,
         q_sqnorm,
         undecided,
         query_pose,
@@ -342,8 +337,8 @@ class SearchIndex:
     ):
         """Steps 1-4 of Algorithm 1 for one query, after the scan; None when no clip survives.
 
-        Step 1 (per clip the nearest admissible non-zero start) takes the scan's float32
-        minimum where it is decisive and resolves the other clips exactly, tier by tier.
+        Step 1 (per clip the nearest admissible non-zero start) takes the scan's minimum
+        where it is decisive and resolves the other clips exactly, tier by tier.
         Steps 2-4 rank the survivors by pose and by audio distance: ranks are known up to
         groups of near-equal estimates, and only groups holding a clip that could make the
         top ``width`` of the combined ranking are settled with exact values. The compiled
@@ -365,7 +360,8 @@ class SearchIndex:
         undecided_clips, undecided_rows = undecided
         n = k.survivors(
             best_start,
-            best_est,
+            best_d2,
+            best_err,
             float(q_sqnorm),
             (self._npmax, self._pose_c, TINY),
             undecided_clips,
@@ -387,8 +383,8 @@ class SearchIndex:
         out_f = np.empty((2, min(width, n)))
         prefix = _PREFIX
         while True:  # sorted prefixes first; whole orders when they cannot decide
-            pose_order, n_pose_sorted = _initial_order(estimates[0], prefix)
-            audio_order, n_audio_sorted = _initial_order(estimates[2], prefix)
+            pose_order, n_pose_sorted = initial_order(estimates[0], prefix)
+            audio_order, n_audio_sorted = initial_order(estimates[2], prefix)
             if (
                 k.rank_top(
                     estimates,
@@ -580,15 +576,17 @@ class SearchIndex:
         """
         rows, widths = queries
         run = map if pool is None or len(active) < 4 else pool.map
-        scans = [self._bias(cache, keys[b]) for b in active]
+        biases = [self._bias(cache, keys[b]) for b in active]
         fq = np.stack([rows[b] for b in active])
-        s0, amin, nq, undecided, (av, inexact) = self._scan(
-            poses[active], [bias for bias, _ in scans], fq, cache.setdefault("scratch", {}), pool, scans[0][1]
+        s0, d2, err, nq, undecided, (av, inexact) = self._scan(
+            poses[active], biases, fq, cache.setdefault("scratch", {}), pool
         )
 
         def decide(j):
             b = active[j]
-            return self._decide(s0[j], amin[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j], widths[b])
+            return self._decide(
+                s0[j], d2[j], err[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j], widths[b]
+            )
 
         return dict(zip(active, run(decide, range(len(active)))))
 

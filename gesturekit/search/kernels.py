@@ -6,7 +6,8 @@ package (numba is heavy). The loops are module-level functions compiled by
 every later process, including those that call each other, and stays whole when several
 processes compile at once.
 
-The scan: :func:`scan_one` (one query, a few clips at a time), :func:`reduce_many` and
+The scan: :func:`~gesturekit.search.reduced_kernels.scan_reduced` (one query, a few clips
+at a time, from the reduced copy; in :mod:`gesturekit.search.reduced_kernels`), :func:`reduce_many` and
 :func:`audio_at` (several queries after a matrix product), :func:`admissible_ends`,
 :func:`row_stats` (validation and norms). The exact decisions of one query after the
 scan (see :meth:`gesturekit.search.index.SearchIndex._decide`): :func:`survivors` and
@@ -87,13 +88,14 @@ def reduce_many(
             undecided[c, j] = np.isfinite(best[j]) and (count[j] > 1 or np.float64(best[j]) + q_sqnorm[j] <= err)
 
 
-# float32 products in any order (reassociation, FMA, SIMD lanes): the pose error bound allows it
+# float32 products in any order (reassociation, FMA, SIMD lanes): the error bounds allow it
 @kernel(fastmath={"reassoc", "contract"})
-def dot32(row: np.ndarray, query: np.ndarray) -> float:
-    """``row . query`` in float32, summed in any order (the pose error bound allows it)."""
+def dot32_at(poses: np.ndarray, c: int, s: int, query: np.ndarray) -> float:
+    """``poses[c, s] . query`` in float32, summed in any order, without making a view of the row
+    (a view in a loop costs reference counting)."""
     acc = np.float32(0.0)
-    for j in range(row.shape[0]):
-        acc += row[j] * query[j]
+    for j in range(query.shape[0]):
+        acc += poses[c, s, j] * query[j]
     return acc
 
 
@@ -107,19 +109,17 @@ def audio_estimate(
     d = audio_sqnorms[clip, start] * query_sqnorm
     if d == 0.0:
         return 1.0, False
-    return 1.0 - np.float64(dot32(audio[clip, start], query_audio)) / np.sqrt(d), True
+    return 1.0 - np.float64(dot32_at(audio, clip, start, query_audio)) / np.sqrt(d), True
 
 
 @kernel()
-def clip_minimum(
-    est: np.ndarray, c: int, q_sqnorm: float, pose_bound: tuple[np.ndarray, float, float]
-) -> tuple[int, float, bool]:
+def clip_minimum(est: np.ndarray, c: int, offset: float, err: float) -> tuple[int, float, bool]:
     """The reduction of one clip's row of estimates ``est[c]`` (T,) float32.
 
+    ``est[c, s] + offset`` estimates the squared distance of start ``s`` within ``err``.
     Returns the first start of least estimate, that estimate, and whether it is not
     decisive: another start within twice the error bound of it, or a possible exact zero.
     """
-    clip_max_sqnorm, err_factor, tiny = pose_bound
     T = est.shape[1]
     inf = np.float32(np.inf)
     # four running minima: one would make a chain of dependent comparisons (the minimum
@@ -133,11 +133,7 @@ def clip_minimum(
     for s in range(T - T % 4, T):
         m0 = min(m0, est[c, s])
     best = min(min(m0, m1), min(m2, m3))
-    err = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
-    t64 = np.float64(best) + 2.0 * err
-    t32 = np.float32(t64)
-    if t32 < t64:  # round the float32 threshold up
-        t32 = np.nextafter(t32, inf)
+    t32 = threshold(best, err)
     count = 0
     for s in range(T):
         count += est[c, s] <= t32
@@ -146,68 +142,17 @@ def clip_minimum(
         if est[c, s] == best:
             arg = s
             break
-    return arg, best, bool(np.isfinite(best) and (count > 1 or np.float64(best) + q_sqnorm <= err))
+    return arg, best, bool(np.isfinite(best) and (count > 1 or np.float64(best) + offset <= err))
 
 
 @kernel()
-def scan_one(
-    est: np.ndarray,
-    bias: np.ndarray,
-    pose: tuple[np.ndarray, np.ndarray, float, bool],
-    pose_bound: tuple[np.ndarray, float, float],
-    scan_out: tuple[np.ndarray, np.ndarray, np.ndarray],
-    audio: tuple[np.ndarray, np.ndarray, np.ndarray, float],
-    audio_out: tuple[np.ndarray, np.ndarray],
-) -> None:
-    """The scan of one query over a few clips: estimates, reductions and the audio estimate.
-
-    Parameters
-    ----------
-    est : (nc, T) float32
-        Out: ``|p|^2 - 2 p.q`` per start (+inf where not admissible). In: ``-2 p.q``
-        (a matrix product's, any summation order) when ``multiplied``.
-    bias : (nc, T) float32
-        ``|p|^2`` where the start is admissible, +inf elsewhere.
-    pose : (poses, query_pose, q_sqnorm, multiplied)
-        The clips' pose features (nc, T, D) float32, ``p_{t-1}`` (D,) float32, its
-        squared norm, and whether ``est`` holds the products already. If not, they are
-        made here for admissible starts only: the rows of the others are never read
-        (the faster way when few starts are admissible; a matrix product is faster
-        for many).
-    pose_bound : (clip_max_sqnorm, err_factor, tiny)
-        As for :func:`reduce_many`.
-    scan_out : (best_start, best_est, undecided), each (nc,)
-        Out: as for :func:`reduce_many`.
-    audio : (features, sqnorms, query, query_sqnorm)
-        The clips' audio features (nc, T, A) float32 and their squared norms (nc, T)
-        float64, ``f_t`` (A,) float32 and its squared norm.
-    audio_out : (audio_est, audio_inexact), (nc,) float64, bool
-        Out: the cosine distance estimate at each clip's ``best_start`` (float32 product,
-        float64 norms), and False where that value is exact (a zero norm).
-    """
-    poses, query_pose, q_sqnorm, multiplied = pose
-    best_start, best_est, undecided = scan_out
-    features, sqnorms, query_audio, query_audio_sqnorm = audio
-    audio_est, audio_inexact = audio_out
-    nc, T = est.shape
-    inf = np.float32(np.inf)
-    for c in range(nc):
-        if multiplied:
-            for s in range(T):
-                est[c, s] = bias[c, s] + est[c, s]  # one float32 add, as the error bound assumes
-        else:
-            for s in range(T):
-                b = bias[c, s]
-                # exact scaling by -2, then one float32 add; not admissible: its row is never read
-                est[c, s] = inf if b == inf else b + np.float32(-2.0) * dot32(poses[c, s], query_pose)
-        best_start[c], best_est[c], undecided[c] = clip_minimum(est, c, q_sqnorm, pose_bound)
-    # a loop of its own: the audio rows are scattered, and the processor can fetch several
-    # at once only when little other work lies between their loads
-    for c in range(nc):
-        if best_est[c] < inf:
-            audio_est[c], audio_inexact[c] = audio_estimate(
-                features, sqnorms, c, best_start[c], query_audio, query_audio_sqnorm
-            )
+def threshold(best: float, err: float) -> np.float32:
+    """``best + 2 err`` rounded up to float32: no estimate within twice the bound of ``best`` lies above it."""
+    t64 = np.float64(best) + 2.0 * err
+    t32 = np.float32(t64)
+    if t32 < t64:
+        t32 = np.nextafter(t32, np.float32(np.inf))
+    return t32
 
 
 @kernel()
@@ -408,7 +353,8 @@ def resolve_clip(
 @kernel()
 def survivors(
     best_start: np.ndarray,
-    best_est: np.ndarray,
+    best_d2: np.ndarray,
+    best_err: np.ndarray,
     q_sqnorm: float,
     pose_bound: tuple[np.ndarray, float, float],
     undecided_clips: np.ndarray,
@@ -427,16 +373,18 @@ def survivors(
 
     Parameters
     ----------
-    best_start, best_est : (M,) int64, float32
-        The scan's first start of least estimate per clip and that estimate (+inf: none).
+    best_start, best_d2, best_err : (M,) int64, float64, float64
+        The scan's start of least estimate per clip, its squared distance estimate (+inf:
+        none) and that estimate's error bound.
     q_sqnorm, pose_bound
-        As for :func:`reduce_many` (one query).
+        As for :func:`reduce_many` (one query): the float32 bound of the undecided rows.
     undecided_clips, undecided_rows : (c,) int64, (c, T) float32
-        Clips whose minimum was not decisive and their rows of estimates (resolved exactly).
+        Clips whose minimum was not decisive and their rows of float32 estimates
+        ``|p|^2 - 2 p.q`` (resolved exactly).
     poses, query_pose, audio, query_audio
         The database's pose (M, T, D) and audio (M, T, A) features, ``p_{t-1}`` and ``f_t``.
     scan_audio_est, scan_audio_inexact : (M,) float64, bool
-        The scan's audio estimates at ``best_start`` (see :func:`scan_one`).
+        The scan's audio estimates at ``best_start`` (see :func:`~gesturekit.search.reduced_kernels.scan_reduced`).
     audio_bound : float
         The error bound of an inexact audio estimate.
     windows : (2, >= M) int64
@@ -466,8 +414,8 @@ def survivors(
             if st < 0:
                 continue
             vm, em = val, 0.0
-        elif np.isfinite(best_est[m]):
-            st, vm, em = best_start[m], np.float64(best_est[m]) + q_sqnorm, err
+        elif np.isfinite(best_d2[m]):
+            st, vm, em = best_start[m], best_d2[m], best_err[m]
         else:
             continue
         clips[n] = m

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import ConfigError
+from ..limits import parse_json
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -46,6 +47,8 @@ __all__ = [
     "ratings_table",
     "pairwise_table",
     "exclusions",
+    "broken_videos",
+    "participant_flow",
     "participant_means",
     "bootstrap_mean_median",
     "system_summary",
@@ -55,10 +58,19 @@ __all__ = [
     "bt_win_counts",
     "bt_fit",
     "bradley_terry",
+    "comparison_groups",
+    "wilcoxon_p",
 ]
 
-#: Elo points per natural-log unit of Bradley-Terry strength: 400 points = a factor of 10 in the odds
-ELO_SCALE = 400.0 / math.log(10.0)
+#: fewer participants than this get no bootstrap interval: the percentile bootstrap of 4 or fewer values
+#: has a handful of distinct resamples and covers the truth far less often than it claims
+MIN_INTERVAL_N = 5
+
+#: the Wilcoxon p-value is exact (all 2^n sign patterns) up to this many non-zero, untied differences
+EXACT_MAX_N = 25
+
+#: fewer pairs than this can never be significant at 0.05: the smallest two-sided exact p is 2 / 2^n
+MIN_TEST_N = 6
 
 RATING_COLUMNS = ["participant", "row", "speech", "system", "prompt", "value"]
 PAIRWISE_COLUMNS = ["participant", "row", "speech", "system_left", "system_right", "value"]
@@ -105,7 +117,6 @@ def read_responses_csv(path: str | Path) -> pd.DataFrame:
     DataFrame
         The columns of ``Store.responses_frame()``, ``answers`` as dicts.
     """
-    import json
 
     import pandas as pd
 
@@ -115,7 +126,10 @@ def read_responses_csv(path: str | Path) -> pd.DataFrame:
         missing = {"token", "row", "page_id", "kind", "answers"} - set(frame.columns)
         if missing:
             raise ConfigError(f"not a responses file: it lacks the columns {sorted(missing)}", path=path)
-        frame["answers"] = [json.loads(a) if a else {} for a in frame["answers"]]
+        frame["answers"] = [
+            parse_json(a, what=f"the answers of line {i + 2} ", error=ConfigError, path=path) if a else {}
+            for i, a in enumerate(frame["answers"])
+        ]
     except (OSError, ValueError) as e:
         raise ConfigError(f"cannot read the responses: {e}", path=path) from e
     return frame
@@ -188,13 +202,28 @@ def pairwise_table(design: Any, store_or_frames: Any, *, manifest: pd.DataFrame 
         page = pages.page(int(r.row), r.page_id)
         if page is None or len(page.media) != 2 or any(m.id not in key for m in page.media):
             continue
+        if "choice" not in dict(r.answers):  # HEMVIP's broken-video report: no preference (broken_videos)
+            continue
         (speech, left), (_, right) = key[page.media[0].id], key[page.media[1].id]
         rows.append((str(r.token), int(r.row), speech, left, right, float(dict(r.answers)["choice"])))
     return pd.DataFrame(rows, columns=PAIRWISE_COLUMNS)
 
 
+def broken_videos(store_or_frames: Any) -> pd.DataFrame:
+    """HEMVIP's broken-video reports among the answers: ``participant``, ``row``, ``page_id``."""
+    import pandas as pd
+
+    responses, _ = _frames(store_or_frames)
+    rows = [
+        (str(r.token), int(r.row), str(r.page_id))
+        for r in responses.itertuples(index=False)
+        if isinstance(r.answers, dict) and r.answers.get("broken_video")
+    ]
+    return pd.DataFrame(rows, columns=["participant", "row", "page_id"])
+
+
 def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = None) -> pd.DataFrame:
-    """Each participant's failed checks and whether they are excluded.
+    """Each participant's failed checks, whether they are excluded, and how far they got.
 
     A participant is excluded who failed more than ``max_failures`` attention
     checks (the design's ``max_failures`` by default) or the audio check.
@@ -203,7 +232,10 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
     -------
     DataFrame
         ``participant``, ``row``, ``failed_checks`` (attention checks failed), ``audio_failed`` (bool),
-        ``excluded`` (bool); every participant of the store, also those who answered nothing.
+        ``excluded`` (bool), ``reason`` (why excluded, else empty), ``answered`` (pages answered),
+        ``pages`` (pages the participant's order has to answer), ``finished`` (bool: the store says so,
+        or, without the store's participants, the last page answered); every participant of the store,
+        also those who answered nothing.
     """
     import pandas as pd
 
@@ -216,12 +248,19 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
     failed: dict[str, int] = {}
     audio: dict[str, bool] = {}
     rows: dict[str, int] = {}
+    answered: dict[str, int] = {}
+    furthest: dict[str, int] = {}
+    finished: dict[str, bool] = {}
     if participants is not None:
         for token, row in zip(participants["token"], participants["row"]):
             rows[str(token)] = int(row)
+        if "status" in participants.columns:
+            finished = {str(t): s == "finished" for t, s in zip(participants["token"], participants["status"])}
     for r in responses.itertuples(index=False):
         token = str(r.token)
         rows[token] = int(r.row)
+        answered[token] = answered.get(token, 0) + 1
+        furthest[token] = max(furthest.get(token, -1), int(r.page_index))
         page = pages.page(int(r.row), r.page_id)
         if page is None:
             continue
@@ -230,11 +269,102 @@ def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = 
             audio[token] = True
         elif ok is False:
             failed[token] = failed.get(token, 0) + 1
-    table = pd.DataFrame(
-        [(t, row, failed.get(t, 0), audio.get(t, False)) for t, row in rows.items()], columns=EXCLUSION_COLUMNS[:4]
+    out = []
+    for t, row in rows.items():
+        pages.page(row, "")  # builds the row's pages
+        todo = sum(1 for p in pages.rows[row].values() if p.kind != "done")
+        last = max((p.index for p in pages.rows[row].values() if p.kind != "done"), default=0)
+        f, a = failed.get(t, 0), audio.get(t, False)
+        reasons = []
+        if f > max_failures:
+            reasons.append(REASON_ATTENTION)
+        if a:
+            reasons.append(REASON_AUDIO)
+        n = answered.get(t, 0)
+        # without the store's status (a responses CSV, HEMVIP's pages lacking the instructions and the
+        # audio check): finished when the last page to answer was answered
+        done = finished[t] if t in finished else furthest.get(t, -1) >= last
+        out.append((t, row, f, a, bool(reasons), "; ".join(reasons), n, todo, bool(done)))
+    return pd.DataFrame(out, columns=[*EXCLUSION_COLUMNS, "reason", "answered", "pages", "finished"])
+
+
+#: why a participant is excluded (``exclusions``'s ``reason``; both, joined by "; ", where both hold)
+REASON_ATTENTION = "failed more attention checks than allowed"
+REASON_AUDIO = "failed the audio check"
+
+
+def participant_flow(participants: pd.DataFrame, analysed: set[str]) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Where each participant ended up, and the counts of the flow (CONSORT style).
+
+    Each participant is in exactly one of: answered nothing, excluded (by the checks), no rating or
+    pairwise answer kept (stopped before the first stimulus page), analysed. The analysed who did
+    not finish are counted by the last page they answered.
+
+    Parameters
+    ----------
+    participants : DataFrame
+        :func:`exclusions`'s columns (``answered``, ``pages``, ``finished``, ``reason`` may be absent,
+        as in a simulated study: then everyone counts as finished).
+    analysed : set of str
+        The participants with at least one kept answer (rating or pairwise, not excluded).
+
+    Returns
+    -------
+    table : DataFrame
+        ``participants`` with ``analysed`` (bool) and ``outcome`` (in words) added.
+    flow : dict
+        ``started``, ``answered_nothing``, ``excluded``, ``excluded_reasons`` (reason -> count),
+        ``no_kept_answer``, ``analysed``, ``analysed_finished``, ``dropped_out`` (last page answered ->
+        analysed participants who stopped there).
+    """
+    table = participants.reset_index(drop=True).copy()
+    n = len(table)
+    answered = table["answered"].astype(int).tolist() if "answered" in table else [1] * n
+    todo = table["pages"].astype(int).tolist() if "pages" in table else [0] * n
+    finished = table["finished"].astype(bool).tolist() if "finished" in table else [True] * n
+    reason = (
+        table["reason"].astype(str).tolist()
+        if "reason" in table
+        else [REASON_ATTENTION if e else "" for e in table["excluded"].astype(bool)]
     )
-    table["excluded"] = (table["failed_checks"] > max_failures) | table["audio_failed"].astype(bool)
-    return table
+    flow: dict[str, Any] = {
+        "started": n,
+        "answered_nothing": 0,
+        "excluded": 0,
+        "excluded_reasons": {},
+        "no_kept_answer": 0,
+        "analysed": 0,
+        "analysed_finished": 0,
+        "dropped_out": {},
+    }
+    outcomes, kept = [], []
+    for token, excluded, k, m, done, why in zip(
+        table["participant"].astype(str), table["excluded"].astype(bool), answered, todo, finished, reason
+    ):
+        stopped = "" if done else f"; dropped out after page {k} of {m}"
+        kept.append(token in analysed and not excluded)
+        if k == 0:
+            flow["answered_nothing"] += 1
+            outcomes.append("answered nothing")
+        elif excluded:
+            flow["excluded"] += 1
+            for r in why.split("; "):
+                flow["excluded_reasons"][r] = flow["excluded_reasons"].get(r, 0) + 1
+            outcomes.append(f"excluded: {why}")
+        elif not kept[-1]:
+            flow["no_kept_answer"] += 1
+            outcomes.append("no rating or pairwise answer" + stopped)
+        else:
+            flow["analysed"] += 1
+            if done:
+                flow["analysed_finished"] += 1
+            else:
+                flow["dropped_out"][k] = flow["dropped_out"].get(k, 0) + 1
+            outcomes.append("analysed" + stopped)
+    flow["dropped_out"] = dict(sorted(flow["dropped_out"].items()))
+    table["analysed"] = kept
+    table["outcome"] = outcomes
+    return table, flow
 
 
 # ---- ratings: per system statistics ------------------------------------------------------------------
@@ -302,6 +432,8 @@ def system_summary(ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0
     DataFrame
         ``prompt`` (each prompt, then ``"all"``), ``system``, ``n`` (participants), ``mean``, ``mean_lo``,
         ``mean_hi``, ``median``, ``median_lo``, ``median_hi``; sorted by prompt then mean, best first.
+        An interval is NaN (none) below :data:`MIN_INTERVAL_N` participants, and where it would have
+        zero width (every participant's mean the same): a point is not an interval.
     """
     import pandas as pd
 
@@ -313,7 +445,10 @@ def system_summary(ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0
             v = means.loc[(means["prompt"] == prompt) & (means["system"] == system), "value"].to_numpy()
             if v.size == 0:
                 continue
-            stats = bootstrap_mean_median(v, rounds=rounds, seed=[seed, p_i, s_i], level=level)
+            stats = list(bootstrap_mean_median(v, rounds=rounds, seed=[seed, p_i, s_i], level=level))
+            for lo in (1, 4):  # no interval from too few values, none of zero width
+                if v.size < MIN_INTERVAL_N or not stats[lo + 1] > stats[lo]:
+                    stats[lo] = stats[lo + 1] = math.nan
             out.append((prompt, system, v.size, *stats))
     cols = ["prompt", "system", "n", "mean", "mean_lo", "mean_hi", "median", "median_lo", "median_hi"]
     table = pd.DataFrame(out, columns=cols)
@@ -387,6 +522,36 @@ def rank_biserial(x: np.ndarray, y: np.ndarray) -> float:
     return float((ranks[d > 0].sum() - ranks[d < 0].sum()) / ranks.sum())
 
 
+def wilcoxon_p(d: np.ndarray) -> tuple[float, str]:
+    """Two-sided Wilcoxon signed-rank p-value of the paired differences ``d``, by a method chosen here.
+
+    Zero differences are dropped (Wilcoxon's own treatment). With at most :data:`EXACT_MAX_N` differences
+    left and no ties among their absolute values, the p-value is exact (the null distribution of every
+    sign pattern); otherwise it is the normal approximation with the tie correction of the variance and
+    no continuity correction. The choice is made here, not left to scipy's default, which has changed
+    between versions (newer ones use the exact distribution even with ties, where it does not hold).
+
+    Parameters
+    ----------
+    d : np.ndarray, shape (n,)
+        Paired differences; at least one non-zero.
+
+    Returns
+    -------
+    p : float
+    method : str
+        ``"exact"`` or ``"normal, tie-corrected"``.
+    """
+    from scipy.stats import wilcoxon
+
+    d = np.asarray(d, dtype=np.float64)
+    nonzero = d[d != 0]
+    if nonzero.size <= EXACT_MAX_N and np.unique(np.abs(nonzero)).size == nonzero.size:
+        return float(wilcoxon(nonzero, alternative="two-sided", method="exact").pvalue), "exact"
+    res = wilcoxon(nonzero, alternative="two-sided", method="approx", correction=False, zero_method="wilcox")
+    return float(res.pvalue), "normal, tie-corrected"
+
+
 def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFrame:
     """Wilcoxon signed-rank tests of every pair of systems on the participants' means, Holm-adjusted per prompt.
 
@@ -402,7 +567,10 @@ def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFram
     DataFrame
         ``prompt``, ``system_a``, ``system_b``, ``n`` (participants who rated both), ``mean_diff`` (a - b),
         ``statistic`` (scipy's two-sided W), ``p``, ``p_holm``, ``significant`` (p_holm <= alpha),
-        ``r`` (rank-biserial; positive: a rated higher).
+        ``r`` (rank-biserial; positive: a rated higher), ``method`` (of the p-value, :func:`wilcoxon_p`),
+        ``family`` (tests in the prompt's Holm family), ``result`` (``"a higher"``, ``"b higher"``: the
+        test's direction, the sign of r; ``"no difference found"``; ``"not compared"``: nobody rated
+        both, no test, not in the family, NaN statistics).
     """
     import pandas as pd
     from scipy.stats import wilcoxon
@@ -415,188 +583,31 @@ def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFram
         if prompt not in wide.index.get_level_values(0):
             continue
         block = wide.loc[prompt]
-        family = []
+        family, missing = [], []
         for a, b in combinations(systems, 2):
-            both = block[[a, b]].dropna()
+            both = block.reindex(columns=[a, b])[[a, b]].dropna()
             n = len(both)
             if n == 0:
+                missing.append([prompt, a, b])
                 continue
             x, y = both[a].to_numpy(), both[b].to_numpy()
             if np.all(x == y):  # nothing to rank: no evidence of a difference
-                stat, p = 0.0, 1.0
+                stat, p, method = 0.0, 1.0, "none: no difference"
             else:
-                res = wilcoxon(x, y, alternative="two-sided")
-                stat, p = float(res.statistic), float(res.pvalue)
-            family.append([prompt, a, b, n, float(np.mean(x - y)), stat, p, rank_biserial(x, y)])
+                p, method = wilcoxon_p(x - y)
+                stat = float(wilcoxon(x, y, alternative="two-sided", method="approx").statistic)
+            family.append([prompt, a, b, n, float(np.mean(x - y)), stat, p, rank_biserial(x, y), method])
         adjusted = holm([f[6] for f in family])
         for f, q in zip(family, adjusted):
-            out.append(f[:7] + [float(q), bool(q <= alpha), f[7]])
+            significant = bool(q <= alpha)
+            result = ("a higher" if f[7] > 0 else "b higher") if significant else "no difference found"
+            out.append(f[:7] + [float(q), significant, f[7], f[8], len(family), result])
+        for prompt_, a, b in missing:
+            nan = math.nan
+            out.append([prompt_, a, b, 0, nan, nan, nan, nan, False, nan, "", len(family), "not compared"])
     cols = ["prompt", "system_a", "system_b", "n", "mean_diff", "statistic", "p", "p_holm", "significant", "r"]
-    return pd.DataFrame(out, columns=cols)
+    return pd.DataFrame(out, columns=[*cols, "method", "family", "result"])
 
 
-# ---- pairwise pages: Bradley-Terry -------------------------------------------------------------------
-
-
-def bt_win_counts(pairwise: pd.DataFrame, systems: Sequence[str]) -> tuple[list[str], np.ndarray]:
-    """Each participant's wins of system i over j.
-
-    A clear or slight preference (|value| >= 1) counts 2 for the preferred system; no preference
-    (0) counts 1 for each, so that a tie is half a win each way.
-
-    Returns
-    -------
-    participants : list of str
-    counts : np.ndarray, shape (participants, k, k), float
-        ``counts[p, i, j]``: participant p's wins of ``systems[i]`` over ``systems[j]``.
-    """
-    index = {s: i for i, s in enumerate(systems)}
-    participants = sorted(set(pairwise["participant"].astype(str)))
-    p_index = {p: i for i, p in enumerate(participants)}
-    counts = np.zeros((len(participants), len(systems), len(systems)))
-    for p, left, right, v in zip(
-        pairwise["participant"].astype(str), pairwise["system_left"], pairwise["system_right"], pairwise["value"]
-    ):
-        i, j, k = p_index[p], index[left], index[right]
-        if v < 0:
-            counts[i, j, k] += 2
-        elif v > 0:
-            counts[i, k, j] += 2
-        else:
-            counts[i, j, k] += 1
-            counts[i, k, j] += 1
-    return participants, counts
-
-
-def bt_fit(wins: np.ndarray, *, prior: float = 1.0, tol: float = 1e-10, max_iter: int = 100) -> np.ndarray:
-    """Maximum-likelihood Bradley-Terry log-strengths of many win matrices at once (Newton's method).
-
-    P(i beats j) = 1 / (1 + exp(theta_j - theta_i)). Every pair starts with ``prior`` wins each
-    way (``prior`` ties' worth: a weak pull towards equal strength that keeps the fit finite when
-    a system wins every comparison).
-
-    Parameters
-    ----------
-    wins : np.ndarray, shape (..., k, k)
-        ``wins[..., i, j]``: wins of i over j (the diagonal is ignored).
-    prior : float
-        Pseudo-wins added both ways for every pair; > 0 unless every pair is compared both ways.
-    tol : float
-        Stop when no strength moves by more than this.
-    max_iter : int
-        Newton steps at most.
-
-    Returns
-    -------
-    np.ndarray, shape (..., k)
-        Log-strengths, mean 0 (natural-log units; times :data:`ELO_SCALE` for Elo points).
-    """
-    w = np.array(wins, dtype=np.float64)
-    k = w.shape[-1]
-    eye = np.eye(k, dtype=bool)
-    w = np.where(eye, 0.0, w + prior)
-    n = w + np.swapaxes(w, -1, -2)
-    total = w.sum(axis=-1)
-    theta = np.zeros(w.shape[:-1])
-    centre = np.ones((k, k)) / k
-    for _ in range(max_iter):
-        sig = 1.0 / (1.0 + np.exp(theta[..., None, :] - theta[..., :, None]))  # P(i beats j)
-        grad = total - (n * sig).sum(axis=-1)
-        h = n * sig * (1.0 - sig)
-        lap = np.where(eye, h.sum(axis=-1)[..., None] * eye, -h)  # the negative Hessian
-        # the likelihood ignores a common shift: fix it by asking for mean 0 (the 1 1^T / k term)
-        step = np.linalg.solve(lap + centre, grad[..., None])[..., 0]
-        theta = theta + step
-        theta -= theta.mean(axis=-1, keepdims=True)
-        if np.max(np.abs(step)) < tol:
-            break
-    return theta
-
-
-def bradley_terry(
-    pairwise: pd.DataFrame,
-    *,
-    systems: Sequence[str] | None = None,
-    rounds: int = 10_000,
-    seed: int = 0,
-    level: float = 0.95,
-    prior: float = 1.0,
-) -> pd.DataFrame:
-    """Bradley-Terry scores on an Elo-like scale, with percentile bootstrap intervals over participants.
-
-    The point estimate is fitted by choix (``ilsr_pairwise``); each bootstrap round resamples the
-    participants with replacement and refits by :func:`bt_fit`, all rounds at once. Scores are
-    400 log10(strength), anchored so that their mean is 0: a system 400 points above another is
-    preferred with odds 10 : 1.
-
-    Returns
-    -------
-    DataFrame
-        ``system``, ``elo``, ``elo_lo``, ``elo_hi``, ``wins``, ``losses``, ``ties`` (comparisons),
-        sorted best first.
-    """
-    import pandas as pd
-
-    from .._optional import require
-
-    choix = require("choix", purpose="Bradley-Terry scores")
-    if systems is None:
-        systems = sorted(set(pairwise["system_left"]) | set(pairwise["system_right"]))
-    systems = list(systems)
-    participants, counts = bt_win_counts(pairwise, systems)
-    if not participants or len(systems) < 2:
-        raise ConfigError("Bradley-Terry needs pairwise answers comparing at least two systems")
-    total = counts.sum(axis=0)
-    theta = _bt_choix(choix, total, prior)
-    rng = np.random.default_rng([seed, 0xB7])
-    boot = []
-    block = max(1, 2_000_000 // max(1, len(participants) * len(systems) ** 2))
-    flat = counts.reshape(len(participants), -1)
-    for start in range(0, int(rounds), block):
-        m = min(block, int(rounds) - start)
-        pick = rng.integers(0, len(participants), size=(m, len(participants)))
-        # how often each round drew each participant, all rounds in one bincount
-        offsets = pick + len(participants) * np.arange(m)[:, None]
-        weights = np.bincount(offsets.ravel(), minlength=m * len(participants)).reshape(m, -1).astype(np.float64)
-        boot.append(bt_fit((weights @ flat).reshape(m, len(systems), len(systems)), prior=prior))
-    q = [50 * (1 - level), 50 * (1 + level)]
-    lo, hi = np.percentile(np.concatenate(boot) * ELO_SCALE, q, axis=0)
-    wins = {s: 0 for s in systems}
-    losses = {s: 0 for s in systems}
-    ties = {s: 0 for s in systems}
-    for left, right, v in zip(pairwise["system_left"], pairwise["system_right"], pairwise["value"]):
-        if v == 0:
-            ties[left] += 1
-            ties[right] += 1
-        else:
-            winner, loser = (left, right) if v < 0 else (right, left)
-            wins[winner] += 1
-            losses[loser] += 1
-    table = pd.DataFrame(
-        {
-            "system": systems,
-            "elo": theta * ELO_SCALE,
-            "elo_lo": lo,
-            "elo_hi": hi,
-            "wins": [wins[s] for s in systems],
-            "losses": [losses[s] for s in systems],
-            "ties": [ties[s] for s in systems],
-        }
-    )
-    return table.sort_values(["elo", "system"], ascending=[False, True]).reset_index(drop=True)
-
-
-def _bt_choix(choix: Any, wins: np.ndarray, prior: float) -> np.ndarray:
-    """choix's maximum-likelihood log-strengths of one win matrix (with the prior as whole comparisons).
-
-    choix takes a list of (winner, loser) comparisons: counts are scaled to whole numbers (wins
-    count 2 and ties 1 each way, the prior ``prior`` each way, all integers when ``prior`` is).
-    """
-    k = wins.shape[0]
-    data = []
-    for i in range(k):
-        for j in range(k):
-            if i != j:
-                data.extend([(i, j)] * int(round(wins[i, j] + prior)))
-    theta = np.asarray(choix.ilsr_pairwise(k, data, alpha=0.0, tol=1e-12), dtype=np.float64)
-    return theta - theta.mean()
+# Bradley-Terry lives in its own module; its names stay importable from here
+from .bradley_terry import ELO_SCALE, bradley_terry, bt_fit, bt_win_counts, comparison_groups  # noqa: E402

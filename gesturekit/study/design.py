@@ -42,6 +42,7 @@ import numpy as np
 
 from .._io import atomic_write
 from ..errors import ConfigError, OutputError
+from ..limits import read_json
 from ._fields import ID_RE, Reader, finite, media_file, media_id, question, shown
 
 __all__ = [
@@ -81,7 +82,7 @@ DEFAULT_QUESTIONNAIRE = (
 _SCRYPT = {"n": 2**14, "r": 8, "p": 1}
 
 
-def default_instructions(animations: int, scale: str = "likert7") -> str:
+def default_instructions(animations: int, scale: str = "likert7", *, checks: bool = False) -> str:
     """The paper's instructions (its supplementary material), for ``animations`` animations per speech.
 
     Parameters
@@ -90,12 +91,15 @@ def default_instructions(animations: int, scale: str = "likert7") -> str:
         Videos per speech (the study's systems).
     scale : str
         ``"likert7"`` (the paper's seven points) or ``"slider100"``.
+    checks : bool
+        Some rating pages show one video more (an attention check): the count says so.
     """
+    count = f"{animations} or {animations + 1}" if checks else f"{animations}"
     answer = "a seven-point scale" if scale == "likert7" else "a slider from 0 to 100"
     return (
         "The purpose of this user study is to measure the synthesis quality of AI-based methods that "
         "automatically generate the 3D body and hand gestures of a virtual character from speech input. "
-        f"For each audio clip, you will see {animations} different animations that consist mostly of synthetic "
+        f"For each audio clip, you will see {count} different animations that consist mostly of synthetic "
         "videos but may also include direct copies of the actual performance. After watching each clip, you "
         f"will be asked to provide responses to two prompts using {answer}. The prompts are: "
         f"{DEFAULT_PROMPTS[0]['text']} {DEFAULT_PROMPTS[1]['text']} "
@@ -239,12 +243,10 @@ def load_design(folder: str | os.PathLike) -> StudyDesign:
     """
     folder = Path(folder)
     path = folder / "design.json"
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError("is missing: write it with `gesturekit study init`", path=path) from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"is not valid JSON ({exc})", path=path) from None
+    if not path.exists() and not path.is_symlink():
+        raise ConfigError("is missing: write it with `gesturekit study init`", path=path)
+    # a regular file of bounded size and nesting (a FIFO would hang the reader, deep nesting recurse)
+    raw = read_json(path, error=ConfigError)
     r = Reader(path)
     top = (
         "format version seed secret title instructions rating pairwise attention audio_check checks questionnaire "
@@ -648,7 +650,7 @@ def init_study(
         "seed": seed,
         "secret": secret,
         "title": "Rating virtual character gestures",
-        "instructions": default_instructions(animations, scale),
+        "instructions": default_instructions(animations, scale, checks=bool(rating) and attention > 0),
         "rating": {"enabled": bool(rating), "scale": scale, "prompts": [dict(p) for p in DEFAULT_PROMPTS]},
         "pairwise": {
             "enabled": bool(pairwise),

@@ -33,6 +33,8 @@ import json
 import math
 import os
 import re
+import stat
+import time
 from collections import Counter
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
@@ -42,13 +44,22 @@ from typing import Any
 import anyio
 import anyio.to_thread
 from starlette.applications import Starlette
+from starlette.middleware import Middleware
 from starlette.requests import Request
 from starlette.responses import HTMLResponse, JSONResponse, RedirectResponse, Response, StreamingResponse
 from starlette.routing import Route
 
+from .._io import csv_safe
+from ..errors import ConfigError, GestureKitError
+from ..limits import parse_json
 from .store import Store, open_store
 
 MAX_BODY = 64 * 1024
+#: request headers beyond this many bytes in all are refused (431): no participant's browser sends more
+MAX_HEADER_BYTES = 16 * 1024
+#: wrong researcher passwords allowed per client address within :data:`PASSWORD_WINDOW_S`; then 429
+PASSWORD_TRIES = 10
+PASSWORD_WINDOW_S = 60.0
 DB_THREADS = 8
 COOKIE = "gk_study"
 EVENT_KINDS = ("play", "pause", "seeked", "ended")
@@ -59,9 +70,9 @@ TEMPLATES = Path(__file__).parent / "templates"
 
 
 class _Refused(Exception):
-    def __init__(self, status: int, message: str) -> None:
+    def __init__(self, status: int, message: str, headers: dict[str, str] | None = None) -> None:
         super().__init__(message)
-        self.status, self.message = status, message
+        self.status, self.message, self.headers = status, message, headers or {}
 
 
 def _number(value: Any) -> bool:
@@ -148,6 +159,9 @@ class StudyServer:
         self.store = store
         self.rows = int(self.design.participants)
         self.media = api.media_index(self.design)
+        check_media(self.folder, self.media)
+        self.clock = time.monotonic
+        self._failures: dict[str, list[float]] = {}
         self._pages: dict[int, list] = {}
         self._limiter = anyio.CapacityLimiter(DB_THREADS)
         import jinja2
@@ -194,6 +208,15 @@ class StudyServer:
                 return self.render("message.html", request, 400, heading="Invalid link", text="Please check the link.")
             params[name] = value
         person, _ = await self._db(lambda: self.store.start(self.rows, **params))
+        if person is None:  # the Prolific id is known, from another study or session: no takeover
+            return self.render(
+                "message.html",
+                request,
+                409,
+                heading="Already started",
+                text="This Prolific ID has started the study in another session. Please continue in the "
+                "browser you started in, or contact the researcher.",
+            )
         response = RedirectResponse(f"{base}/p/{person.token}/", status_code=303)
         response.set_cookie(
             COOKIE,
@@ -248,9 +271,9 @@ class StudyServer:
                 raise _Refused(413, "the submission is too large")
             chunks.append(chunk)
         try:
-            body = json.loads(b"".join(chunks))
-        except (ValueError, UnicodeDecodeError) as exc:
-            raise _Refused(400, "the body is not JSON") from exc
+            body = parse_json(b"".join(chunks), what="the body ", error=ConfigError)
+        except GestureKitError as exc:  # not JSON, not UTF-8, or nested deeper than any answer
+            raise _Refused(400, exc.problem) from exc
         person = await self._db(self.store.participant, token)
         if person is None:
             raise _Refused(404, "no such participant")
@@ -292,7 +315,10 @@ class StudyServer:
         media = self.media.get(request.path_params["media_id"])
         if media is None or await self._db(self.store.participant, token) is None:
             raise _Refused(404, "no such media")
-        return ranged_file(Path(media.path), request.headers.get("range"))
+        try:
+            return ranged_file(Path(media.path), request.headers.get("range"), inside=self.folder)
+        except (OSError, ValueError):  # swapped for a link, a folder or something outside since the start
+            raise _Refused(404, "no such media") from None
 
     # ------------------------------------------------------------ researcher
 
@@ -300,15 +326,25 @@ class StudyServer:
         stored = self.design.password_hash
         if not stored:
             raise _Refused(403, "the study has no researcher password: set one with gesturekit study init --password")
+        client = request.client.host if request.client else "-"
+        now = self.clock()
+        recent = [t for t in self._failures.get(client, []) if now - t < PASSWORD_WINDOW_S]
+        self._failures[client] = recent
+        if len(recent) >= PASSWORD_TRIES:
+            wait = max(1, math.ceil(PASSWORD_WINDOW_S - (now - recent[0])))
+            raise _Refused(429, f"too many wrong passwords: try again in {wait} s", {"Retry-After": str(wait)})
         header = request.headers.get("authorization", "")
         password = None
         if header.lower().startswith("basic "):
             try:
                 _, _, password = base64.b64decode(header[6:], validate=True).decode().partition(":")
-            except (binascii.Error, UnicodeDecodeError):
+            except (binascii.Error, ValueError):  # not base64, not ASCII, or not UTF-8 inside
                 password = None
         if password is None or not self.api.verify_password(password, stored):
+            if header:  # a wrong password (not a browser's first, bare request) counts against the address
+                recent.append(now)
             raise _Refused(401, "the researcher's page needs the study's password")
+        self._failures.pop(client, None)
 
     async def researcher(self, request: Request) -> Response:
         self._researcher(request)
@@ -336,7 +372,7 @@ class StudyServer:
     async def researcher_csv(self, request: Request) -> Response:
         self._researcher(request)
         frame = await self._db(self.store.responses_frame)
-        frame = frame.assign(answers=frame["answers"].map(json.dumps), events=frame["events"].map(json.dumps))
+        frame = csv_safe(frame).assign(answers=frame["answers"].map(json.dumps), events=frame["events"].map(json.dumps))
         out = io.StringIO()
         frame.to_csv(out, index=False)
         return Response(
@@ -371,11 +407,67 @@ def parse_range(header: str | None, size: int) -> tuple[int, int] | None:
     return lo, hi
 
 
-def ranged_file(path: Path, range_header: str | None) -> Response:
+def check_media(folder: Path, media: dict) -> None:
+    """Refuse to serve a study whose media are missing, not regular files, symbolic links or outside it.
+
+    Raises
+    ------
+    ConfigError
+        Naming every such file (the study folder as the path).
+    """
+    root = folder.resolve()
+    missing, linked, outside, odd = [], [], [], []
+    for m in media.values():
+        path = Path(m.path)
+        try:
+            st = os.lstat(path)
+        except OSError:
+            missing.append(path)
+            continue
+        if stat.S_ISLNK(st.st_mode):
+            linked.append(path)
+        elif not path.resolve().is_relative_to(root):
+            outside.append(path)
+        elif not stat.S_ISREG(st.st_mode):
+            odd.append(path)
+    problems = []
+    for files, what in (
+        (missing, "missing"),
+        (linked, "symbolic links (only regular files of the folder are served)"),
+        (outside, "outside the study folder"),
+        (odd, "not regular files"),
+    ):
+        if files:
+            named = ", ".join(str(f) for f in sorted(files)[:10]) + (
+                f" and {len(files) - 10} more" if len(files) > 10 else ""
+            )
+            problems.append(f"{len(files)} media {what}: {named}")
+    if problems:
+        raise ConfigError("cannot serve the study: " + "; ".join(problems), path=folder)
+
+
+def _open_regular(path: Path, inside: Path | None) -> tuple[Any, int]:
+    """``path`` opened for reading if it is a regular file (no symbolic link) inside ``inside``; (file, size).
+
+    Raises OSError (a link: ELOOP) or ValueError (not regular, or outside)."""
+    if inside is not None and not path.resolve().is_relative_to(inside.resolve()):
+        raise ValueError(f"{path} is outside {inside}")
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    f = os.fdopen(fd, "rb")
+    st = os.fstat(f.fileno())
+    if not stat.S_ISREG(st.st_mode):
+        f.close()
+        raise ValueError(f"{path} is not a regular file")
+    return f, st.st_size
+
+
+def ranged_file(path: Path, range_header: str | None, *, inside: Path | None = None) -> Response:
     """A file as a 200 or, for a ``Range`` request, a 206 with ``Content-Range`` (416 when unsatisfiable).
 
-    Cached privately; no file name, ETag or modification time is sent."""
-    size = path.stat().st_size
+    Only a regular file is served, never through a symbolic link, and, given ``inside``, only one that
+    lies in that folder once resolved (OSError or ValueError otherwise). Cached privately; no file name,
+    ETag or modification time is sent."""
+    f, size = _open_regular(path, inside)
     headers = {
         "Accept-Ranges": "bytes",
         "Cache-Control": "private, max-age=3600",
@@ -385,6 +477,7 @@ def ranged_file(path: Path, range_header: str | None) -> Response:
     try:
         span = parse_range(range_header, size)
     except ValueError:
+        f.close()
         return Response(status_code=416, headers={**headers, "Content-Range": f"bytes */{size}"})
     first, last = span if span is not None else (0, size - 1)
     headers["Content-Length"] = str(max(0, last - first + 1))
@@ -392,7 +485,7 @@ def ranged_file(path: Path, range_header: str | None) -> Response:
         headers["Content-Range"] = f"bytes {first}-{last}/{size}"
 
     def chunks() -> Iterator[bytes]:
-        with open(path, "rb") as f:
+        with f:
             f.seek(first)
             left = last - first + 1
             while left > 0:
@@ -403,6 +496,20 @@ def ranged_file(path: Path, range_header: str | None) -> Response:
                 yield data
 
     return StreamingResponse(chunks(), status_code=206 if span is not None else 200, headers=headers)
+
+
+class _HeaderLimit:
+    """Refuse (431) a request whose headers exceed :data:`MAX_HEADER_BYTES` in all, before any handler runs."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] == "http" and sum(len(k) + len(v) for k, v in scope["headers"]) > MAX_HEADER_BYTES:
+            response = Response("request headers too large", status_code=431, headers=_NO_STORE)
+            await response(scope, receive, send)
+            return
+        await self.app(scope, receive, send)
 
 
 def create_app(
@@ -433,7 +540,7 @@ def create_app(
             try:
                 return await handler(request)
             except _Refused as refusal:
-                headers = dict(_NO_STORE)
+                headers = {**_NO_STORE, **refusal.headers}
                 if refusal.status == 401:
                     headers["WWW-Authenticate"] = 'Basic realm="study", charset="UTF-8"'
                 if request.method == "POST":
@@ -457,7 +564,7 @@ def create_app(
         yield
         server.store.close()
 
-    app = Starlette(routes=routes, lifespan=lifespan)
+    app = Starlette(routes=routes, lifespan=lifespan, middleware=[Middleware(_HeaderLimit)])
     app.state.study = server
     return app
 
@@ -498,4 +605,5 @@ def serve(
         forwarded_allow_ips=forwarded_allow_ips,
         server_header=False,
         log_level="warning",
+        h11_max_incomplete_event_size=MAX_HEADER_BYTES,
     )

@@ -32,13 +32,15 @@ import sqlite3
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
 
 SQLITE_NAME = "responses.sqlite3"
+#: seconds a participant who has answered nothing yet holds their order row
+RESERVE_S = 30 * 60
 STATUSES = ("active", "finished", "failed_checks")
 PARTICIPANT_COLUMNS = (
     "token",
@@ -179,8 +181,14 @@ class Store:
 
     def start(
         self, rows: int, *, prolific_pid: str | None = None, study_id: str | None = None, session_id: str | None = None
-    ) -> tuple[Participant, bool]:
+    ) -> tuple[Participant | None, bool]:
         """A new participant on the next free order row, or the one this Prolific id already started.
+
+        A known ``prolific_pid`` resumes only with the ``study_id`` and ``session_id`` it started with
+        (Prolific keeps both for a participant's attempt); otherwise (someone who knows only the id)
+        nothing is handed out and None is returned. Rows are balanced over the participants who have
+        answered a page or started within :data:`RESERVE_S`: entries that never answer stop holding a
+        row, so a flood of them does not shift the balanced order.
 
         Parameters
         ----------
@@ -191,8 +199,8 @@ class Store:
 
         Returns
         -------
-        (Participant, bool)
-            The participant and whether it is new.
+        (Participant or None, bool)
+            The participant (None: the Prolific id belongs to another session) and whether it is new.
         """
         if rows < 1:
             raise ConfigError(f"a study needs at least one order row, got {rows}")
@@ -202,12 +210,20 @@ class Store:
                 cur.execute("SELECT pg_advisory_xact_lock(27027)")
             if prolific_pid:
                 cur.execute(
-                    "SELECT token FROM participants WHERE prolific_pid = %s ORDER BY started_at", (prolific_pid,)
+                    "SELECT token, study_id, session_id FROM participants WHERE prolific_pid = %s ORDER BY started_at",
+                    (prolific_pid,),
                 )
                 found = cur.fetchone()
                 if found is not None:
-                    return self._participant(cur, found[0]), False  # type: ignore[return-value]
-            cur.execute("SELECT row, COUNT(*) FROM participants WHERE status <> 'failed_checks' GROUP BY row")
+                    if (found[1], found[2]) != (study_id, session_id):
+                        return None, False
+                    return self._participant(cur, found[0]), False
+            cutoff = (datetime.now(timezone.utc) - timedelta(seconds=RESERVE_S)).isoformat(timespec="milliseconds")
+            cur.execute(
+                "SELECT row, COUNT(*) FROM participants p WHERE status <> 'failed_checks' AND (started_at >= %s "
+                "OR EXISTS (SELECT 1 FROM responses r WHERE r.token = p.token)) GROUP BY row",
+                (cutoff.replace("+00:00", "Z"),),
+            )
             held = {int(r): int(n) for r, n in cur.fetchall()}
             row = min(range(1, rows + 1), key=lambda r: (held.get(r, 0), r))
             token = secrets.token_urlsafe(24)

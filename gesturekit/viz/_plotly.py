@@ -16,13 +16,14 @@ from typing import Any
 
 import numpy as np
 
+from ..character.look import SCHEMES, SIDE_BY_SIDE
 from ..errors import ConfigError
 from ..motion import Motion
-from .appearance import APPEARANCE
 
-#: Colours of the motions of a figure, in order (repeated past the end): the appearance's, so a
-#: motion has one colour in every view.
-MOTION_COLORS = APPEARANCE.motion_colors
+#: Colours of the motions of a figure, in order (repeated past the end): the shirts of the 3D views'
+#: side-by-side characters (:data:`gesturekit.character.look.SIDE_BY_SIDE`, k-NN blue, refined orange), so a
+#: motion has one colour on the page's 3D view, in its plots and in the MP4.
+MOTION_COLORS = tuple(SCHEMES[s]["shirt"] for s in SIDE_BY_SIDE)
 
 _BAND_COLORS = ("#4c78a8", "#f58518", "#54a24b", "#e45756", "#b279a2", "#72b7b2", "#eeca3b", "#9d755d")
 

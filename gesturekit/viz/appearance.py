@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ..character.look import FRAMINGS
 from ..character.paint import DERIVED_COLOR
 from ..errors import ConfigError
 from ..skeleton import ABSENT, DERIVED, JOINT_NAMES, N_JOINTS, PARENTS, RECORDED, JointPresence, joint_index
@@ -528,8 +529,8 @@ class RenderStyle:
     With ``look="character"`` (the default) the picture is the page's: the
     skinned character, the colour schemes, light, camera (vertical field of
     view :data:`gesturekit.character.look.FIELD_OF_VIEW`) and background of
-    :mod:`gesturekit.character.look`, side-by-side characters on one stage, no
-    floor (the body is cut at the waist); ``appearance``, ``view_angle``,
+    :mod:`gesturekit.character.look`, side-by-side characters standing on one
+    floor with their contact shadows; ``appearance``, ``view_angle``,
     ``elevation``, the tessellation and ``text_color`` do not apply. With
     ``look="capsules"`` the figure is the notebooks' one: the appearance's
     capsules, head sphere, colours (first motion blue, second orange), light
@@ -572,6 +573,9 @@ class RenderStyle:
         about five times slower.
     font_size : int
         Size of the panel labels, points.
+    framing : str
+        The character look's framing with ``fit_motion``: the presenter's upper body or the full body
+        (:data:`gesturekit.character.look.FRAMINGS`, :func:`gesturekit.character.look.stage_layout`).
     """
 
     look: str = "character"
@@ -587,10 +591,13 @@ class RenderStyle:
     head_resolution: int = 20
     multi_samples: int = 0
     font_size: int = 14
+    framing: str = "upper body"
 
     def __post_init__(self) -> None:
         if self.look not in LOOKS:
             raise ConfigError(f"unknown look {self.look!r}; choose one of {', '.join(LOOKS)}")
+        if self.framing not in FRAMINGS:
+            raise ConfigError(f"unknown framing {self.framing!r}; choose one of {', '.join(FRAMINGS)}")
         if not isinstance(self.appearance, Appearance):
             raise ConfigError(f"appearance must be an Appearance, got {type(self.appearance).__name__}")
         box = np.asarray(self.view_box, dtype=np.float64)

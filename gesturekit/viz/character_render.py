@@ -23,6 +23,8 @@ from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
 
 from ..character.look import (
     FIELD_OF_VIEW,
+    FRAMINGS,
+    UPPER_BODY,
     camera_for,
     linear_to_srgb,
     part_colors,
@@ -30,11 +32,13 @@ from ..character.look import (
     shade,
     srgb_to_linear,
     stage_layout,
+    stage_meshes,
 )
 from ..character.mesh import PARTS, CharacterMesh, build_mesh
 from ..character.paint import EMPTY_BODY, paint
 from ..character.rig import Pose, Rig, rig_for, solve_pose
 from ..character.skin import skin_normals, skin_vertices
+from ..character.stand import StandMesh, stand_mesh, standing_root
 from ..character.target import Character
 from ..errors import ConfigError
 from ..motion import Motion
@@ -74,6 +78,10 @@ class CharacterStage:
         A user's character (:func:`gesturekit.character.user.read_character`) that every motion is retargeted
         onto (:class:`~gesturekit.viz.character_user.UserBody`): its own skin and colours instead of our
         character, framed on its bones that follow the motion.
+    framing : str
+        :func:`~gesturekit.character.look.stage_layout`'s framing (:data:`~gesturekit.character.look.FRAMINGS`).
+    schemes : sequence of str, optional
+        Each character's colour scheme (default by place, :func:`~gesturekit.character.look.scheme_for`).
 
     Attributes
     ----------
@@ -85,7 +93,11 @@ class CharacterStage:
         Each character's colour scheme.
     users : list of UserBody or None
         With a ``character``: each motion on it (:class:`~gesturekit.viz.character_user.UserBody`); then
-        the attributes of our body (``rigs``, ``poses``, ``meshes``) are not set.
+        the attributes of our body (``rigs``, ``poses``, ``meshes``, ``stands``) are not set.
+    stands : list of StandMesh or None
+        Each character's still legs (:func:`gesturekit.character.stand.stand_mesh`), in its motion's frame.
+    ground : float or None
+        The floor's height, metres (the lowest soles), None without legs.
     """
 
     def __init__(
@@ -95,16 +107,27 @@ class CharacterStage:
         neutral: bool = False,
         view_box: object = None,
         character: Character | None = None,
+        framing: str = UPPER_BODY,
+        schemes: Sequence[str] | None = None,
     ):
         self.motions = list(motions)
         if not self.motions:
             raise ConfigError("a stage needs at least one motion")
-        self.schemes = [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
+        if framing not in FRAMINGS:
+            raise ConfigError(f"unknown framing {framing!r}; choose one of {', '.join(FRAMINGS)}")
+        if schemes is not None and len(schemes) != len(self.motions):
+            raise ConfigError(f"{len(self.motions)} motions need as many colour schemes, got {len(schemes)}")
+        self.framing = framing
+        self.schemes = (
+            list(schemes) if schemes is not None else [scheme_for(i, neutral=neutral) for i in range(len(self.motions))]
+        )
         self.users: list[UserBody] | None = None
+        self.ground: float | None = None
+        self.stands: list[StandMesh | None] = [None] * len(self.motions)
         if character is not None:
             self.users = [UserBody(m, character, s) for m, s in zip(self.motions, self.schemes)]
             self.faces = [u.faces for u in self.users]
-            self.offsets, self.box = stage_layout([u.framing_points() for u in self.users])
+            self.offsets, self.box = stage_layout([u.framing_points() for u in self.users], framing=framing)
             if view_box is not None:
                 pelvis = np.asarray(character.rest_position[character.pelvis], dtype=np.float64)
                 self.box = np.asarray(view_box, dtype=np.float64).T + pelvis
@@ -115,11 +138,20 @@ class CharacterStage:
         painted = [paint(_body(r), m.presence, s) for r, m, s in zip(self.rigs, self.motions, self.schemes)]
         self.meshes = [mesh for mesh, _ in painted]
         self.faces = [visible_faces(mesh, r) for mesh, r in zip(self.meshes, self.rigs)]
+        self.stands = [
+            stand_mesh(r, standing_root(p.root)) if mesh.n_vertices else None
+            for r, p, mesh in zip(self.rigs, self.poses, self.meshes)
+        ]
+        floors = [st.floor for st in self.stands if st is not None]
+        self.ground = min(floors) if floors else None
         # the page's layout rule on the page's input: every drawn joint over the clip
-        self.offsets, self.box = stage_layout([m.positions[:, m.presence.drawn] for m in self.motions])
+        drawn = [m.positions[:, m.presence.drawn] for m in self.motions]
+        waist = min(st.pelvis for st in self.stands if st is not None) if floors else None
+        self.offsets, self.box = stage_layout(drawn, framing=framing, ground=self.ground, waist=waist)
         if view_box is not None:
             self.box = np.asarray(view_box, dtype=np.float64).T.copy()
         self._albedo = [srgb_to_linear(palette[mesh.parts]) for mesh, palette in painted]  # (V, 3), linear light
+        self._palettes = [palette for _, palette in painted]
 
     @property
     def n_frames(self) -> int:
@@ -129,7 +161,34 @@ class CharacterStage:
     def camera(self, aspect: float) -> dict:
         """The page's camera for a picture of width over height ``aspect``
         (:func:`~gesturekit.character.look.camera_for` of :attr:`box`)."""
-        return camera_for(self.box[0], self.box[1], aspect, fov=FIELD_OF_VIEW)
+        top = self.framing == UPPER_BODY
+        return camera_for(self.box[0], self.box[1], aspect, fov=FIELD_OF_VIEW, top=top, floor=self.ground)
+
+    def stand(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Character ``index``'s still legs in its place: vertices (V, 3) float32 metres, faces (F, 3) and shaded
+        sRGB colours (V, 3) uint8, lit by the same rule as the body; None without legs."""
+        st = self.stands[index]
+        if st is None:
+            return None
+        v = st.vertices.copy()
+        v[:, 0] += np.float32(self.offsets[index])
+        colours = shade(st.normals, srgb_to_linear(self._palettes[index][st.parts]))
+        return v, st.faces, colours
+
+    def stage(self) -> list[dict]:
+        """The floor and each character's contact shadow (:func:`~gesturekit.character.look.stage_meshes`),
+        as the page draws them; none without legs."""
+        if self.ground is None:
+            return []
+        full = stage_layout(
+            [m.positions[:, m.presence.drawn] for m in self.motions], framing="full body", ground=self.ground
+        )[1]
+        feet = [
+            np.array([dx, 0.0, 0.0]) + st.vertices.mean(axis=0)
+            for st, dx in zip(self.stands, self.offsets)
+            if st is not None
+        ]
+        return stage_meshes(full, self.ground, feet)
 
     def vertices(self, index: int, frame: int) -> np.ndarray:
         """Character ``index``'s skinned vertices at ``frame`` (its last past its end), shifted to its
@@ -205,6 +264,14 @@ class CharacterDrawing:
         self._point_views: list[np.ndarray] = []
         self._color_views: list[np.ndarray] = []
         self._shown: list[int] = []  # the characters that have a body
+        self._actors: list = []  # the characters' actors: their bodies and legs
+        # the stage and the still legs: drawn once, unlit, their colours already shaded
+        for flat in stage.stage():
+            self._add_still(plotter, flat["vertices"], flat["faces"], flat["colors"])
+        for i in range(len(stage.motions)):
+            legs = stage.stand(i)
+            if legs is not None:
+                self._actors.append(self._add_still(plotter, *legs))
         for i, faces in enumerate(stage.faces):
             if not len(faces):
                 continue
@@ -217,6 +284,7 @@ class CharacterDrawing:
             mesh.GetPointData().SetScalars(rgb)
             actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
             actor.prop.interpolation = "gouraud"  # colours blend across each triangle, as on the page
+            self._actors.append(actor)
             self._meshes.append(mesh)
             self._colors.append(rgb)
             self._point_views.append(vtk_to_numpy(mesh.GetPoints().GetData()))
@@ -230,11 +298,29 @@ class CharacterDrawing:
         cam.SetViewAngle(camera["fov"])  # VTK's view angle is vertical, like three.js's fov
         distance = float(np.linalg.norm(np.subtract(camera["position"], camera["target"])))
         reach = float(np.linalg.norm(stage.box[1] - stage.box[0]))
-        cam.SetClippingRange(max(1e-3, distance - 2 * reach), distance + 2 * reach)
+        # the floor reaches from under the camera far behind the characters
+        cam.SetClippingRange(max(1e-2, 0.02 * distance), distance + 2 * reach + 12.0)
         plotter.renderer.camera_set = True
         self._frame = 0
         if labels is not None:
             self._labels(plotter, labels, resolution, font_size)
+
+    @staticmethod
+    def _add_still(plotter: pv.Plotter, vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray) -> object:
+        """A mesh that does not move, drawn unlit in its per-vertex sRGB colours."""
+        cells = np.hstack([np.full((len(faces), 1), 3, dtype=np.int64), np.asarray(faces, dtype=np.int64)])
+        mesh = pv.PolyData(np.asarray(vertices, dtype=np.float64), cells.ravel())
+        rgb = numpy_to_vtk(np.ascontiguousarray(colours, dtype=np.uint8), deep=True)
+        rgb.SetName("rgb")
+        mesh.GetPointData().SetScalars(rgb)
+        actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
+        actor.prop.interpolation = "gouraud"
+        return actor
+
+    def set_characters_visible(self, visible: bool) -> None:
+        """Show or hide every character (their bodies and legs), leaving the stage."""
+        for actor in self._actors:
+            actor.SetVisibility(bool(visible))
 
     def _labels(self, plotter: pv.Plotter, labels: Sequence[str], resolution: tuple[int, int], size: int) -> None:
         w, h = resolution

@@ -41,7 +41,7 @@ import pyvista as pv
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
-from ..character.look import BACKGROUND, stage_layout
+from ..character.look import BACKGROUND
 from ..character.target import Character
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
@@ -125,12 +125,12 @@ def view_bounds(
     check_character(character, style)
     if character is not None:
         box = None if style.fit_motion else np.asarray(style.view_box)
-        return CharacterStage(motions, view_box=box, character=character).box.T.copy()
+        return CharacterStage(motions, view_box=box, character=character, framing=style.framing).box.T.copy()
     if not style.fit_motion:
         return np.asarray(style.view_box, dtype=np.float64).copy()
     if style.look == "character":
-        # the page's stage: every drawn joint of every character in its place, and the body's margin
-        return stage_layout([m.positions[:, m.presence.drawn] for m in motions])[1].T.copy()
+        # the page's stage: every drawn joint of every character in its place, framed by the one rule
+        return CharacterStage(motions, framing=style.framing).box.T.copy()
     a = style.appearance
     # only what is drawn: absent joints sit on their parents and would only shift the box
     every = np.concatenate([a.body(m.positions, m.presence).drawn_points().reshape(-1, 3) for m in motions])
@@ -253,6 +253,7 @@ class SkeletonScene:
                     neutral=s.neutral,
                     view_box=None if s.fit_motion else np.asarray(s.view_box),
                     character=character,
+                    framing=s.framing,
                 )
                 self._character = CharacterDrawing(
                     stage, self._live(), self.resolution, labels=labels, font_size=s.font_size
@@ -376,6 +377,25 @@ class SkeletonScene:
             raise GestureKitError(f"the render window gave {image.size} values instead of {w}x{h}x3")
         # OpenGL's first row is the bottom one
         return np.ascontiguousarray(image.reshape(h, w, 3)[::-1])
+
+    def stage_image(self) -> np.ndarray:
+        """The picture of the stage alone (the character look: the backdrop, the floor and the shadows,
+        without the characters), shape (height, width, 3), uint8 RGB: what every pixel a character does not
+        cover shows. The characters are shown again afterwards."""
+        if self._character is None:
+            raise ConfigError("only the character look has a stage of its own")
+        self._character.set_characters_visible(False)
+        try:
+            window = self._live().render_window
+            if window is None:
+                raise GestureKitError("the scene's render window is gone")
+            window.Render()
+            w, h = self.resolution
+            window.GetPixelData(0, 0, w - 1, h - 1, 0, self._pixels, 0)
+            image = vtk_to_numpy(self._pixels).reshape(h, w, 3)[::-1]
+            return np.ascontiguousarray(image)
+        finally:
+            self._character.set_characters_visible(True)
 
     def frames(self, progress: Callable[[int, int], None] | None = None) -> Iterator[np.ndarray]:
         """Every frame's picture in order; ``progress(done, total)`` after each one."""

@@ -51,6 +51,7 @@ from ..character.mesh import build_mesh
 from ..character.paint import EMPTY_BODY, paint
 from ..character.retarget import retarget
 from ..character.rig import Rig, rig_for, rotation_to_quaternion, solve_pose
+from ..character.stand import StandMesh, stand_mesh, standing_root
 from ..character.target import Character
 from ..datasets.audio import wav_bytes
 from ..errors import ConfigError
@@ -120,6 +121,8 @@ class ViewOptions(TypedDict, total=False):
     spacing : float or None
     neutral : bool
     character : Character or None
+    schemes : sequence of str or None
+    framing : str
         As for :func:`viewer_data` (which names them, with their defaults).
     """
 
@@ -130,6 +133,8 @@ class ViewOptions(TypedDict, total=False):
     spacing: float | None
     neutral: bool
     character: Character | None
+    schemes: Sequence[str] | None
+    framing: str
 
 
 class ViewerArgs(TypedDict):
@@ -173,15 +178,37 @@ def _page_parents(rig: Rig) -> list[int]:
     return out
 
 
-def _character(motion: Motion, scheme: str) -> dict:
-    """One motion's rig, mesh and animation (over all its frames), as typed-array specs."""
+def _stand_spec(stand: StandMesh) -> dict:
+    """The still legs' arrays (:func:`gesturekit.character.stand.stand_mesh`) as typed-array specs."""
+    return {
+        "vertices": typed_array(stand.vertices, "f4"),
+        "normals": typed_array(stand.normals, "f4"),
+        "faces": typed_array(stand.faces, "u2" if stand.n_vertices < 2**16 else "u4"),
+        "parts": typed_array(stand.parts, "u1"),
+    }
+
+
+def _flat_spec(mesh: dict) -> dict:
+    """An unlit stage mesh of :func:`gesturekit.character.look.stage_meshes` as typed-array specs."""
+    return {
+        "vertices": typed_array(mesh["vertices"], "f4"),
+        "faces": typed_array(mesh["faces"], "u4"),
+        "colors": typed_array(mesh["colors"], "u1"),
+    }
+
+
+def _character(motion: Motion, scheme: str) -> tuple[dict, StandMesh | None]:
+    """One motion's rig, mesh and animation (over all its frames), as typed-array specs, and its still legs."""
     rig = rig_for(motion)
     pose = solve_pose(motion, rig)
     # a motion without a bone of any length (every joint at one point) has no body to build around
-    mesh = build_mesh(rig) if (rig.lengths[rig.parents >= 0] > 1e-6).any() else EMPTY_BODY
+    has_body = bool((rig.lengths[rig.parents >= 0] > 1e-6).any())
+    mesh = build_mesh(rig) if has_body else EMPTY_BODY
+    stand = stand_mesh(rig, standing_root(pose.root)) if has_body else None
     quats = np.round(rotation_to_quaternion(pose.local) * QUATERNION_SCALE).astype(np.int16)
     mesh, colors = paint(mesh, motion.presence, scheme)
     return {
+        "stand": _stand_spec(stand) if stand is not None else None,
         "scheme": scheme,
         "colors": [[round(float(c), 6) for c in row] for row in colors],
         "rig": {
@@ -201,7 +228,7 @@ def _character(motion: Motion, scheme: str) -> dict:
         },
         "rotations": typed_array(quats, "i2"),
         "root": typed_array(pose.root, "f4"),
-    }
+    }, stand
 
 
 def viewer_data(
@@ -214,6 +241,8 @@ def viewer_data(
     spacing: float | None = None,
     neutral: bool = False,
     character: Character | None = None,
+    schemes: Sequence[str] | None = None,
+    framing: str = look.UPPER_BODY,
 ) -> dict:
     """What :func:`skeleton_viewer` draws, as a JSON-ready dict.
 
@@ -240,6 +269,13 @@ def viewer_data(
         character, its mesh and colours (a character without a mesh as
         :func:`gesturekit.character.bone_body.bone_body` in the motion's scheme), framed on its
         pelvis, matched bones and head (see :mod:`gesturekit.viz.character_page`).
+    schemes : sequence of str, optional
+        Each motion's colour scheme (keys of :data:`gesturekit.character.look.SCHEMES`), by what it shows
+        (:func:`~gesturekit.character.look.role_scheme`, :func:`~gesturekit.character.look.rank_scheme`);
+        default by place (:func:`~gesturekit.character.look.scheme_for`).
+    framing : str
+        The view's first framing (:data:`gesturekit.character.look.FRAMINGS`); the page's button switches
+        between the two boxes (``box`` and ``boxes``).
 
     Returns
     -------
@@ -248,16 +284,23 @@ def viewer_data(
         grid time is shown); ``n_grid`` (frames of the grid); ``times`` (seconds, one per
         shown frame); ``note`` (what the page says about dropped frames, or ``""``);
         ``box`` (the framed box's lower and upper corners, metres, from
-        :func:`~gesturekit.character.look.stage_layout`), ``up`` (Y) and ``look`` (``background``,
-        ``ambient``, ``key``, ``light``, ``fov``, ``view``: the page's camera is
-        :func:`~gesturekit.character.look.camera_for` of ``box`` at its own aspect ratio);
+        :func:`~gesturekit.character.look.stage_layout` in ``framing``), ``boxes`` (the box of each of
+        :data:`~gesturekit.character.look.FRAMINGS`), ``framing``, ``ground`` (the floor's height, metres, or
+        None without legs), ``stage`` (the floor and each character's contact shadow,
+        :func:`~gesturekit.character.look.stage_meshes`: ``vertices``, ``faces``, sRGB ``colors`` (u1)),
+        ``up`` (Y) and ``look`` (``background``, ``ambient``, ``key``, ``light``, ``lights`` (each
+        ``[direction, strength]``), ``fov``, ``view``, ``depth_share``: the page's camera is
+        :func:`~gesturekit.character.look.camera_for` of ``box`` at its own aspect ratio, its top kept at the
+        top in the upper-body framing);
         ``motions``: one dict per motion with ``label``, ``offset`` (metres along X),
         ``derived`` (names of its derived joints; the page says what grey means), ``scheme``,
         ``colors`` (sRGB in [0, 1] of each of :data:`~gesturekit.character.mesh.PARTS`, then of
         derived parts), ``rig`` (``names``, ``parents`` (a joint not in the rig hangs from its
         nearest ancestor in it), ``in_rig``, ``offsets`` and ``rest``, shape (55, 3), metres),
         ``mesh`` (:class:`~gesturekit.character.mesh.CharacterMesh`'s arrays, ``parts``
-        indexing ``colors``), ``rotations`` (each joint's rotation relative to its parent per
+        indexing ``colors``), ``stand`` (the still legs, :func:`gesturekit.character.stand.stand_mesh`:
+        ``vertices``, ``normals``, ``faces``, ``parts`` indexing ``colors``, in the motion's frame; None
+        without a body or on a user's character), ``rotations`` (each joint's rotation relative to its parent per
         shown frame, shape (shown frames, 55, 4), xyzw quaternions times
         :data:`QUATERNION_SCALE` as int16) and ``root`` (the root's position per shown frame,
         shape (shown frames, 3), metres). Arrays are typed-array specs (``dtype``, ``bdata``,
@@ -273,6 +316,14 @@ def viewer_data(
         count, a non-positive fps or ``max_frames`` below 1.
     """
     motions, labels = _motions_and_labels(motions, labels, who="skeleton_viewer", drawn=True)
+    if schemes is not None and len(schemes) != len(motions):
+        raise ConfigError(f"{len(motions)} motions need as many colour schemes, got {len(schemes)}")
+    if schemes is not None:
+        unknown = [s for s in schemes if s not in look.SCHEMES]
+        if unknown:
+            raise ConfigError(f"unknown colour scheme {unknown[0]!r}; choose one of {', '.join(look.SCHEMES)}")
+    if framing not in look.FRAMINGS:
+        raise ConfigError(f"unknown framing {framing!r}; choose one of {', '.join(look.FRAMINGS)}")
     grid_fps, n_grid, step, times = _time_grid(motions, fps=fps, max_frames=max_frames)
     shown = [Motion(m.positions[_frames_at(m, times)], m.fps, m.presence) for m in motions]
     if character is not None:
@@ -281,10 +332,11 @@ def viewer_data(
     else:
         # framed on what is drawn: joints not in the data have no body
         drawn = [s.positions[:, np.array([st != "absent" for st in s.presence.status])] for s in shown]
-    offsets, box = look.stage_layout(drawn, spacing=spacing)
+    offsets, _ = look.stage_layout(drawn, spacing=spacing)
     out: list[dict] = []
+    stands: list[StandMesh | None] = []
     for i, (label, m, dx) in enumerate(zip(labels, shown, offsets)):
-        scheme = look.scheme_for(i, neutral=neutral)
+        scheme = look.scheme_for(i, neutral=neutral) if schemes is None else schemes[i]
         if character is not None:
             spec = {"label": label or "", "offset": float(dx), "derived": []}
             spec.update(page_character(posed[i], scheme=scheme))
@@ -292,8 +344,23 @@ def viewer_data(
                 spec["mesh"] = {"shared": 0}
         else:
             spec = {"label": label or "", "offset": float(dx), "derived": list(m.presence.names(DERIVED))}
-            spec.update(_character(m, scheme))
+            body, stand = _character(m, scheme)
+            spec.update(body)
+            stands.append(stand)
         out.append(spec)
+    floors = [st.floor for st in stands if st is not None]
+    ground = min(floors) if floors else None
+    waist = min(st.pelvis for st in stands if st is not None) if floors else None
+    boxes = {
+        f: look.stage_layout(drawn, spacing=spacing, framing=f, ground=ground, waist=waist)[1] for f in look.FRAMINGS
+    }
+    box = boxes[framing]
+    stage: list[dict] = []
+    if ground is not None:
+        feet = [
+            np.array([dx, 0.0, 0.0]) + st.vertices.mean(axis=0) for st, dx in zip(stands, offsets) if st is not None
+        ]
+        stage = [_flat_spec(s) for s in look.stage_meshes(boxes[look.FULL_BODY], ground, feet)]
     note = ""
     if step > 1:
         note = (
@@ -308,14 +375,20 @@ def viewer_data(
         "times": [round(float(t), 4) for t in times],
         "note": note,
         "box": [[float(x) for x in corner] for corner in box],
+        "boxes": {f: [[float(x) for x in corner] for corner in b] for f, b in boxes.items()},
+        "framing": framing,
+        "ground": ground,
+        "stage": stage,
         "up": [0, 1, 0],
         "look": {
             "background": look.BACKGROUND,
             "ambient": look.AMBIENT,
             "key": look.KEY,
             "light": list(look.LIGHT_DIRECTION),
+            "lights": [[list(d), k] for d, k in look.LIGHTS],
             "fov": look.FIELD_OF_VIEW,
             "view": list(look.VIEW_DIRECTION),
+            "depth_share": look.DEPTH_SHARE,
         },
         "motions": out,
     }
@@ -383,6 +456,7 @@ def read_viewer_data(page: str) -> dict:
 
 def _decoded(data: dict) -> dict:
     """:func:`viewer_data`'s dict with its arrays decoded and each motion's ``points`` (see :func:`read_viewer_data`)."""
+    data["stage"] = [{name: _array(value) for name, value in mesh.items()} for mesh in data.get("stage", [])]
     for m in data["motions"]:
         if "shared" in m["mesh"]:
             m["mesh"] = data["motions"][m["mesh"]["shared"]]["mesh"]
@@ -390,6 +464,8 @@ def _decoded(data: dict) -> dict:
             for name, value in m[group].items():
                 if isinstance(value, dict):
                     m[group][name] = _array(value)
+        if m.get("stand"):
+            m["stand"] = {name: _array(value) for name, value in m["stand"].items()}
         m["rotations"] = _array(m["rotations"]).astype(np.float64) / QUATERNION_SCALE
         m["root"] = _array(m["root"]).astype(np.float64)
         m["points"] = _joint_positions(m)

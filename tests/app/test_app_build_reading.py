@@ -12,10 +12,11 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.keypoint_example import write_keypoint_example
 from gesturekit.skeleton import DERIVED
 from tests.conftest import shown
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
-TIMEOUT = 60
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 
 
 def _fill(at: AppTest, folder: Path, out: Path, *, up: str) -> AppTest:

@@ -15,11 +15,12 @@ from gesturekit.skeleton import JOINT_NAMES
 from tests.app.test_app_synthesize import speech_file
 from tests.character_rigs import CASES, custom_map, rig_files, truth
 from tests.conftest import shown, viewer
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
-TIMEOUT = 240  # a busy machine: a run here synthesizes, renders an MP4 and writes two files
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 FILE, MAP = "_gk.character_file.0", "_gk.character_map.0"
 
 
@@ -127,6 +128,11 @@ def test_a_rig_missing_a_bone_is_named(app_env):
     said = errors(at)
     assert len(said) == 1 and "left_elbow" in said[0] and "bone map" in said[0]
     assert "gk.character" not in at.session_state
+    # the bones it has, as a tree with their rest positions, to write the map from
+    (tree,) = [c.value for c in at.code]
+    assert tree.splitlines()[0].startswith("mixamorig:Hips (0.00, 0.98, 0.00)")
+    assert "  mixamorig:Spine (" in tree and f"{truth(CASES['missing_elbow']).bone_names[-1]} (" in tree
+    assert any("rest positions" in c for c in captions(at))
 
 
 def test_a_bvh_character_and_a_bone_map(app_env):

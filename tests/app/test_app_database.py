@@ -16,11 +16,12 @@ from gesturekit.demo import build_demo_database
 from gesturekit.skeleton import bones
 from tests.conftest import chart_spec as _chart
 from tests.conftest import shown, viewer
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 DATABASE_PAGE = "views/3_Database.py"
-TIMEOUT = 60
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 
 
 @pytest.fixture(scope="module")

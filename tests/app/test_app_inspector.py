@@ -17,11 +17,12 @@ from gesturekit.datasets.synthetic import generate_demo_take
 from tests.conftest import chart_spec as chart
 from tests.conftest import plotly_array as array
 from tests.conftest import shown, viewer
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 SYNTH, INSPECT = "views/1_Synthesize.py", "views/2_Retrieval_inspector.py"
-TIMEOUT = 90
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 TOPK = 5
 
 

@@ -26,6 +26,7 @@ from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.errors import ConfigError, GestureKitError
 from gesturekit.motion import AUDIO_SR
 from tests.conftest import shown, viewer
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
@@ -90,14 +91,14 @@ def test_a_frame_in_a_format_it_cannot_read_is_the_sessions_error_not_the_transp
     assert session.on_frame(frame) is frame  # the transport is not interrupted
     assert "'u8'" in session.error
     with pytest.raises(GestureKitError, match="u8"):
-        session.stop()
+        session.stop(APP_RUN_S)
 
 
 def test_frames_in_20_ms_pieces_give_the_speech_resampled_whole(live, db, speech48):
     session = live.LiveSession(db, clock=lambda: 100.0)
     for frame in stereo_frames(speech48):
         assert session.on_frame(frame) is frame  # the stream goes on untouched
-    result = session.stop()
+    result = session.stop(APP_RUN_S)
     whole = soxr.resample(speech48, RATE, AUDIO_SR, quality="HQ")
     assert abs(len(result.audio) - len(whole)) <= 1
     n = min(len(result.audio), len(whole))
@@ -116,7 +117,7 @@ def test_the_view_shows_the_newest_frame_and_how_long_ago_its_speech_was_heard(l
         session.on_frame(frame)
         n_in += FRAME
         if i in (80, 199):
-            assert session.wait()
+            assert session.wait(APP_RUN_S)
             view = session.view()
             # the newest frame determined, drawn now
             assert view.frame == view.frames - 1 == session._synth.frames_out - 1
@@ -129,7 +130,7 @@ def test_the_view_shows_the_newest_frame_and_how_long_ago_its_speech_was_heard(l
     later = 0.37
     now["t"] += later  # no speech since: the same frame, its latency grows
     assert session.view().latency_s == pytest.approx(view.latency_s + later)
-    session.stop()
+    session.stop(APP_RUN_S)
 
 
 def test_a_control_switched_while_talking_holds_from_the_speech_received_on(live, db, speech48):
@@ -137,13 +138,13 @@ def test_a_control_switched_while_talking_holds_from_the_speech_received_on(live
     frames = list(stereo_frames(speech48))
     for f in frames[:150]:  # 3 s
         session.on_frame(f)
-    assert session.wait()
+    assert session.wait(APP_RUN_S)
     switched_at = session.view().frames / db.fps
     session.set_control("left_hand=high")
     for f in frames[150:]:
         session.on_frame(f)
     assert session.control == "left_hand=high"
-    result = session.stop()
+    result = session.stop(APP_RUN_S)
     (segment,) = result.control.segments
     assert segment.constraints == (("left_hand", "high"),)
     assert segment.start_s == pytest.approx(switched_at, abs=1 / db.fps)
@@ -155,10 +156,10 @@ def test_a_bad_control_is_shown_as_the_sessions_error_and_stop_raises_it(live, d
     for f in list(stereo_frames(speech48))[:20]:
         session.on_frame(f)
     session.set_control("left_hand=sideways")
-    assert session.wait()
+    assert session.wait(APP_RUN_S)
     assert "left_hand" in session.error and "sideways" in session.error
     with pytest.raises(GestureKitError, match="sideways"):
-        session.stop()
+        session.stop(APP_RUN_S)
 
 
 def test_stop_after_a_stop_starts_nothing_until_the_stream_is_off(live, db, speech48):
@@ -234,7 +235,7 @@ def mic(monkeypatch):
 
 
 def open_live(mic) -> AppTest:
-    at = AppTest.from_file(str(HOME), default_timeout=90).run()
+    at = AppTest.from_file(str(HOME), default_timeout=APP_RUN_S).run()
     at.switch_page(PAGE).run()
     assert not at.exception, at.exception
     return at
@@ -262,7 +263,7 @@ def test_talking_switching_controls_and_stop_give_a_whole_result(app_env, mic, s
     for f in frames[:150]:  # 3 s of speech, through the callback the page gave the transport
         mic.callback(f)
     stage = at.session_state["live.stage"]
-    assert stage.session.wait()
+    assert stage.session.wait(APP_RUN_S)
     at.run()
     first = viewer(at, "live.skeleton")
     assert "free" in first["title"]
@@ -275,7 +276,7 @@ def test_talking_switching_controls_and_stop_give_a_whole_result(app_env, mic, s
     switched_s = stage.session.view().frames / 15
     for f in frames[150:]:
         mic.callback(f)
-    assert stage.session.wait()
+    assert stage.session.wait(APP_RUN_S)
     at.run()
     later = viewer(at, "live.skeleton")
     assert "left_hand=high" in later["title"]
@@ -300,7 +301,7 @@ def test_stopping_the_stream_in_the_browser_is_stop_too_and_the_inspector_opens_
     at = open_live(mic)
     for f in list(stereo_frames(speech48))[:100]:
         mic.callback(f)
-    assert at.session_state["live.stage"].session.wait()
+    assert at.session_state["live.stage"].session.wait(APP_RUN_S)
     mic.playing = False  # the component's own stop button
     at.run()
     assert not at.exception, at.exception
@@ -321,7 +322,7 @@ def test_stop_after_too_little_speech_says_so_on_the_page(app_env, mic, speech48
     at = open_live(mic)
     for f in list(stereo_frames(speech48))[:2]:  # 40 ms: less than a frame of motion
         mic.callback(f)
-    assert at.session_state["live.stage"].session.wait()
+    assert at.session_state["live.stage"].session.wait(APP_RUN_S)
     at.run()
     button(at, "live.stop").click().run()
     assert not at.exception, at.exception

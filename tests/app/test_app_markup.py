@@ -19,9 +19,10 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit.app import HOME
 from gesturekit.datasets.keypoint_example import write_keypoint_example
+from tests.waits import APP_RUN_S
 
 ROOT = Path(__file__).resolve().parents[2]
-TIMEOUT = 90
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 
 #: CommonMark with raw HTML passed through and GitHub's tables and strikethrough: the most a
 #: renderer could make of the text (Streamlit's own renderer does not pass raw HTML).

@@ -12,6 +12,7 @@ import pytest
 from gesturekit.app import HOME
 from gesturekit.paths import default_database_path
 from gesturekit.workspace import is_generated
+from tests.waits import patience
 
 CLONE_HOME = Path(__file__).resolve().parents[2] / "app" / "Home.py"
 
@@ -59,7 +60,7 @@ def test_server_start_prepares_search_and_refiner_of_the_default_database(common
     warm_refiner = common._warm_refiner(str(refiner), (refiner / "config.json").stat().st_mtime_ns)
     assert warm_refiner.name == "gesturekit-warm-refiner"
     for thread in (search, warm_refiner):
-        thread.join(timeout=300)
+        thread.join(timeout=patience(300))
         assert not thread.is_alive()
     from gesturekit.search.exact import compiled
 

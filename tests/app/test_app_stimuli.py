@@ -8,11 +8,12 @@ from streamlit.testing.v1 import AppTest
 from gesturekit.app import HOME
 from gesturekit.datasets.synthetic import generate_demo_take
 from tests.conftest import shown
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 PAGE = "views/4_Study_stimuli.py"
-TIMEOUT = 120
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 
 
 def _page() -> AppTest:
@@ -51,3 +52,27 @@ def test_a_missing_folder_is_an_error_message(app_env, tmp_path):
     at.text_input(key="_w.study.folder").set_value(str(tmp_path / "nowhere")).run()
     assert not at.exception
     assert any("no such folder" in shown(e.value) for e in at.error)
+
+
+def test_knn_cgan_uses_the_shipped_refiner_and_choices_are_checked_before_the_work(app_env, tmp_path):
+    speech = tmp_path / "speech"
+    speech.mkdir()
+    take, _ = generate_demo_take(seconds=2.0, seed=3, name="s")
+    sf.write(speech / "hello.wav", take.audio[:19200], 16000)
+    at = _page()
+    at.text_input(key="_w.study.folder").set_value(str(speech)).run()
+    at.multiselect(key="_w.study.systems").set_value(["knn", "knn+cgan"]).run()
+    assert not at.exception, at.exception
+    # the demo database's refiner is offered, as on the Synthesize page
+    refiner = at.text_input(key="_w.study.refiner").value
+    assert refiner and "refiner" in refiner
+    assert any(b.key == "study.go" for b in at.button)
+    # no refiner: said on the page, in its words, and nothing to start
+    at.text_input(key="_w.study.refiner").set_value("").run()
+    errors = [shown(e.value) for e in at.error]
+    assert any("knn+cgan needs a refiner" in e and "Refiner folder" in e for e in errors), errors
+    assert not any("--refiner" in e for e in errors)
+    assert not any(b.key == "study.go" for b in at.button)
+    at.text_input(key="_w.study.refiner").set_value(str(tmp_path / "nowhere")).run()
+    assert any("no refiner" in shown(e.value) for e in at.error)
+    assert not any(b.key == "study.go" for b in at.button)

@@ -20,11 +20,12 @@ from gesturekit.study.design import init_study
 from gesturekit.study.store import open_store
 from tests.conftest import shown
 from tests.study_helpers import STUDY_SYSTEMS, study_folder, take_part, tiny_study  # noqa: F401  (fixtures)
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 PAGE = "views/6_Study.py"
-TIMEOUT = 120
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 PASSWORD = "researcher-pw"
 
 
@@ -110,6 +111,12 @@ def test_the_page_shows_who_took_part_the_counts_the_analysis_and_csv_downloads(
     assert overall["system"].tolist() == ["knn", "audio-only", "random"]
     assert overall["mean"].tolist() == [6.0, 4.0, 2.0]
     assert set(_table(at, "bradley_terry")["system"]) == set(STUDY_SYSTEMS)
+    # the flow: 5 started; the careless one excluded; the slow one has answered the instructions only
+    flow = "\n".join(m.value for m in at.markdown)
+    for line in ("Started: 5", "Excluded: 1", "No rating or pairwise answer: 1", "Analysed: 3 (finished: 3)"):
+        assert line in flow, line
+    assert "3 participants analysed" in "\n".join(c.value for c in at.caption)
+    assert len(at.get("plotly_chart")) == 2  # the box plots and the significance matrix
     labels = {b.proto.label for b in at.get("download_button")}
     assert {f"{n}.csv" for n in ("participants", "responses", "ratings", "pairwise", "exclusions", "summary")} <= labels
     assert "token" not in people.columns  # a participant's key to their session stays in the CSV only

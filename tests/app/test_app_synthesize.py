@@ -22,11 +22,12 @@ from gesturekit.viz.figures import WRIST_ROWS
 from tests.conftest import chart_spec as chart
 from tests.conftest import plotly_array as array
 from tests.conftest import shown, viewer
+from tests.waits import APP_RUN_S
 
 pytestmark = pytest.mark.slow  # each module builds its demo database (demo_home) and runs pages in AppTest
 
 PAGE = "views/1_Synthesize.py"
-TIMEOUT = 90
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 EDITOR = "synth.segments_editor"
 
 

@@ -10,6 +10,7 @@ import soundfile as sf
 
 from gesturekit.errors import GestureKitWarning, collect_warnings, warn
 from gesturekit.interactive import read_speech_upload
+from tests.waits import patience
 
 
 def test_warn_issues_a_gesturekit_warning_outside_a_collection():
@@ -24,13 +25,13 @@ def test_collections_nest_and_take_nothing_from_other_threads():
     def other():
         with collect_warnings() as mine:
             started.set()
-            release.wait(5)
+            assert release.wait(patience(120))
             warn("from the other thread")
         seen_by_other.extend(mine)
 
     t = threading.Thread(target=other)
     t.start()
-    started.wait(5)
+    assert started.wait(patience(120))
     with warnings.catch_warnings():
         warnings.simplefilter("error", GestureKitWarning)  # nothing may escape the collections
         with collect_warnings() as outer:

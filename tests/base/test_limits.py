@@ -23,6 +23,7 @@ from gesturekit.errors import AudioFileError, ConfigError, InputFileError, Motio
 from gesturekit.skeleton import N_JOINTS
 from tests import hostile as h
 from tests.datasets.test_bvh import bvh_text, random_values, zeggs_like_skeleton
+from tests.waits import patience
 
 SHARED_SPEECH = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "speech"
 LIMIT_VARS = [
@@ -85,7 +86,9 @@ def test_override_holds_inside_its_block_only_and_outranks_the_environment(monke
             pass
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(hours=st.floats(0.01, 100), seconds=st.floats(0, 1e6) | st.sampled_from([math.inf, math.nan]))
 def test_duration_is_refused_exactly_beyond_the_limit(hours, seconds, monkeypatch):
     monkeypatch.setenv("GESTUREKIT_MAX_TAKE_HOURS", repr(hours))
@@ -244,7 +247,7 @@ def test_refusing_a_hostile_input_costs_less_than_200_mb(tmp_path):
         capture_output=True,
         text=True,
         env=env,
-        timeout=300,
+        timeout=patience(300),
         check=False,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -288,7 +291,9 @@ def test_shared_recordings_still_load(name):
     assert 16.5 < info.duration < 17.5 and audio.shape[0] > 16 * 16000
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(fraction=st.floats(0.05, 0.995), kind=st.sampled_from(["ogg", "opus"]))
 def test_any_cut_of_an_ogg_stream_is_reported(fraction, kind, speech, tmp_path):
     path = h.cut(speech[kind], tmp_path / f"cut_{kind}.ogg", fraction)

@@ -26,6 +26,7 @@ from gesturekit.errors import GestureKitError, MissingDependencyError
 from tests.badinput import assert_refused, run_cli, snapshot
 from tests.project.test_layering import PACKAGE, ROOT, is_module, module_name
 from tests.project.test_packaging import declared
+from tests.waits import patience
 
 
 @pytest.fixture(scope="module")
@@ -175,7 +176,9 @@ def test_a_core_only_install_synthesizes_and_refuses_the_refiner_clearly(base, t
         sys.exit(main(["synthesize", speech, "--db", db, "--out", out + "2", "--refiner", "demo"]))
         """
     )
-    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    run = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=patience(300), cwd=ROOT
+    )
     assert run.returncode == 2, run.stderr
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["speech.bvh", "speech.npz"]
     assert "Traceback" not in run.stderr
@@ -321,7 +324,11 @@ def test_a_search_while_another_thread_imports_torch_leaves_the_half_imported_to
     pytest.importorskip("torch")
     for _ in range(2):  # a fresh interpreter each time: torch is imported once per process
         run = subprocess.run(
-            [sys.executable, "-c", _WHILE_TORCH_IMPORTS], capture_output=True, text=True, timeout=120, cwd=ROOT
+            [sys.executable, "-c", _WHILE_TORCH_IMPORTS],
+            capture_output=True,
+            text=True,
+            timeout=patience(300),
+            cwd=ROOT,
         )
         assert run.returncode == 0, run.stderr[-3000:]
         assert int(run.stdout.split()[-1]) > 0  # the search did run while torch was half-imported
@@ -352,7 +359,11 @@ def test_the_process_ends_after_an_optional_import_in_flight():
     pytest.importorskip("torch")
     for _ in range(2):
         run = subprocess.run(
-            [sys.executable, "-c", _EXIT_DURING_TORCH_IMPORT], capture_output=True, text=True, timeout=120, cwd=ROOT
+            [sys.executable, "-c", _EXIT_DURING_TORCH_IMPORT],
+            capture_output=True,
+            text=True,
+            timeout=patience(300),
+            cwd=ROOT,
         )
         assert run.returncode == 0, run.stderr[-3000:]
         assert run.stdout.strip() == "torch imported when finalizers ran: True", run.stdout + run.stderr[-3000:]

@@ -25,11 +25,12 @@ from gesturekit.export.result import save_result_bvh, save_result_npz, save_resu
 from gesturekit.motion import Motion
 from gesturekit.outputs import check_not_input, check_output, clean_stale, output_lock, write_folder
 from tests.conftest import make_take
+from tests.waits import patience, wait_until
 
 REPO = Path(__file__).resolve().parents[2]
 
 
-def run_script(code: str, *args, timeout=120) -> subprocess.CompletedProcess:
+def run_script(code: str, *args, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run a Python snippet in a fresh interpreter that imports this checkout of gesturekit."""
     env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     return subprocess.run(
@@ -38,7 +39,7 @@ def run_script(code: str, *args, timeout=120) -> subprocess.CompletedProcess:
         env=env,
         capture_output=True,
         text=True,
-        timeout=timeout,
+        timeout=patience(timeout),
     )
 
 
@@ -418,10 +419,9 @@ def test_two_builds_to_one_folder_one_wins_the_other_says_so(tmp_path):
         text=True,
     )
     try:
-        for _ in range(3000):
-            if ready.exists() or first.poll() is not None:
-                break
-            threading.Event().wait(0.02)
+        wait_until(
+            lambda: ready.exists() or first.poll() is not None, what="the first build holds the lock", timeout_s=300
+        )
         assert ready.exists(), first.communicate()[1]
         before = snapshot(out)
         second = run_cli("build-db", "--demo", "--minutes", "0.1", "--out", out, "--force")
@@ -430,7 +430,7 @@ def test_two_builds_to_one_folder_one_wins_the_other_says_so(tmp_path):
         )
     finally:
         go.touch()
-        _, err = first.communicate(timeout=120)
+        _, err = first.communicate(timeout=patience(300))
     assert first.returncode == 0, err
     assert MatchingDatabase.load(out).take_names == ["a", "b"]
     assert sorted(os.listdir(tmp_path)) == ["db", "go", "ready"]

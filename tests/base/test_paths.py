@@ -97,7 +97,9 @@ def test_an_empty_path_asks_for_one(roots, typed):
         check_allowed(typed, what="study folder to write", write=True)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(parts=st.lists(st.sampled_from(["a", "b", "..", "."]), max_size=6))
 def test_dot_dot_cannot_leave_a_root(roots, parts):
     """Without links, a path is allowed exactly when its normalised form stays inside the root."""

@@ -66,7 +66,9 @@ def test_speech_files_of_something_that_is_not_a_folder_is_refused(tmp_path):
         assert info.value.path == str(path)
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(order=st.permutations(["x.wav", "speech", "y.flac"]))
 def test_expand_speech_keeps_the_order_and_puts_a_folder_s_files_in_its_place(tmp_path, order):
     speech = tmp_path / "speech"

@@ -93,7 +93,7 @@ def test_upload_box_select_run_then_inspect(served, tmp_path, machine):
         view = app_browser.viewer_locator(page, "synth.skeleton")
         view.locator("#play").click()
         # playing: the view draws later frames (times out, and fails, if it stays on frame 0)
-        view.locator('canvas#c:not([data-frame="0"])').wait_for(state="attached", timeout=30_000)
+        view.locator('canvas#c:not([data-frame="0"])').wait_for(state="attached")
         # a rerun that shows the same result keeps the drawn view: the same scene, not built again
         shown = app_browser.viewer_frame(page, "synth.skeleton")
         shown.evaluate("() => { window.__kept = window.gk; }")

@@ -29,6 +29,7 @@ from scipy.signal import correlate
 from gesturekit.motion import AUDIO_SR
 from gesturekit.viz.viewer import read_viewer_args
 from tests import app_browser, load
+from tests.waits import patience
 
 pytestmark = pytest.mark.skipif(
     app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
@@ -124,7 +125,7 @@ def live_run(request, tmp_path_factory):
         with load.OtherWork() as other:
             _start(page)
             seen = []
-            deadline = time.monotonic() + SPEECH_S + 60
+            deadline = time.monotonic() + SPEECH_S + patience(60)
             updates = REAL_TIME[request.param].updates
             while time.monotonic() < deadline:
                 look = page.evaluate(_LIVE_VIEW, seen[-1]["frame"] if seen else None)

@@ -54,13 +54,11 @@ def test_an_82_s_result_holds_all_1230_frames_and_its_speech(result_view):
 def test_play_starts_speech_and_view_together_and_they_stay_within_one_frame(result_view):
     _, view = result_view
     view.locator("#play").click()
-    view.wait_for_function("() => gk.playing", timeout=30_000)
+    view.wait_for_function("() => gk.playing")
     early = view.evaluate(_STATE)
     assert early["playing"] and not early["paused"]  # one button started both
     # 3 s of the speech's clock later (it runs on the browser's audio clock, busy machine or not)
-    view.wait_for_function(
-        "(t) => document.getElementById('gk-audio').currentTime >= t", arg=early["t"] + 3.0, timeout=30_000
-    )
+    view.wait_for_function("(t) => document.getElementById('gk-audio').currentTime >= t", arg=early["t"] + 3.0)
     late = view.evaluate(_STATE)
     view.locator("#play").click()  # pause
     assert not late["paused"]
@@ -80,7 +78,7 @@ def test_seeking_either_moves_both(result_view):
     # seeking the speech moves the view (once the speech has seeked: an event of its own)
     view.evaluate("() => { document.getElementById('gk-audio').currentTime = 60.5; }")
     try:
-        view.wait_for_function(f"() => gk.frame === {math.floor(60.5 * FPS)}", timeout=30_000)
+        view.wait_for_function(f"() => gk.frame === {math.floor(60.5 * FPS)}")
     except Exception:  # noqa: BLE001  (a playwright timeout: the assertions below say what was shown)
         pass
     state = view.evaluate(_STATE)

@@ -13,6 +13,7 @@ import json
 import pytest
 
 from tests import app_browser
+from tests.waits import patience
 
 try:
     from playwright.sync_api import expect
@@ -80,7 +81,7 @@ def _table(page, *, expect: int = 0) -> list[str]:
     """
     cells = _grid(page).locator('[role="gridcell"]')
     if expect:
-        cells.nth(expect - 1).wait_for(state="attached", timeout=30_000)
+        cells.nth(expect - 1).wait_for(state="attached")
     return [c.inner_text() for c in cells.all()]
 
 
@@ -111,7 +112,7 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
     cell = grid.locator(f'td[role="gridcell"]#glide-cell-{column + 1}-{row}')  # see _selected_cell
     # the accessible table is filled a moment after the grid is drawn; without its rows, the click
     # below would aim at the whole body and may land on the editor's empty row (adding a row)
-    canvas.locator('tbody tr[role="row"]').nth(row).wait_for(state="attached", timeout=30_000)
+    canvas.locator('tbody tr[role="row"]').nth(row).wait_for(state="attached")
     for _ in range(3):  # a busy machine may open the cell's editor late: try again
         canvas.scroll_into_view_if_needed()
         box = canvas.bounding_box()
@@ -120,7 +121,7 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
         row_height = (box["height"] - header) / (rows + 1)  # the data rows and the editor's empty row
         page.mouse.click(box["x"] + box["width"] / 2, box["y"] + header + row_height / 2)
         try:  # the selection shows in the table a moment after the click
-            selected.first.wait_for(state="attached", timeout=5000)
+            selected.first.wait_for(state="attached", timeout=patience(15) * 1000)
         except Exception:  # noqa: BLE001  (a playwright timeout: the click selected nothing, click again)
             continue
         at = _selected_cell(grid)
@@ -140,7 +141,7 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
         page.keyboard.press("Enter")
         editor = page.locator("#portal textarea, #portal input").first
         try:
-            editor.wait_for(state="visible", timeout=5000)
+            editor.wait_for(state="visible", timeout=patience(15) * 1000)
         except Exception:  # noqa: BLE001  (not opened: select again)
             page.keyboard.press("Escape")
             continue
@@ -150,14 +151,14 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
         # before them (nothing was sent)
         page.keyboard.type(text, delay=50)
         try:
-            expect(editor).to_have_value(text, timeout=10_000)
+            expect(editor).to_have_value(text, timeout=patience(30) * 1000)
         except AssertionError:
             page.keyboard.press("Escape")
             continue
         since = app_browser.runs_seen(page)
         page.keyboard.press("Enter")
         try:  # the grid shows the committed value a moment later
-            expect(cell).to_have_text(text, timeout=10_000)
+            expect(cell).to_have_text(text, timeout=patience(30) * 1000)
         except AssertionError:
             continue
         app_browser.wait_run(page, since)  # the edit reached the server, which ran the page with it

@@ -41,6 +41,7 @@ import pytest
 from gesturekit.cli import main as cli_main
 from tests import app_browser
 from tests.study_helpers import study_folder, tiny_study  # noqa: F401  (fixtures)
+from tests.waits import patience, wait_until
 
 pytestmark = pytest.mark.skipif(
     app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
@@ -71,13 +72,19 @@ def study_server(folder: Path, log: Path) -> Iterator[str]:
     with open(log, "wb") as out:
         proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     try:
-        deadline = time.monotonic() + app_browser.TIMEOUT_S
-        while True:  # up once it accepts a connection (a request to / would start a participant)
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"the study server did not start:\n{log.read_text(errors='replace')[-3000:]}")
-            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
-                break
-            time.sleep(0.1)
+
+        def accepts() -> bool:  # up once it accepts a connection (a request to / would start a participant)
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=patience(10)):
+                return True
+            return False
+
+        def exited() -> str | None:
+            return None if proc.poll() is None else f"it exited with {proc.returncode}"
+
+        try:
+            wait_until(accepts, what="the study server accepts", timeout_s=180, interval_s=0.1, give_up=exited)
+        except AssertionError as e:
+            raise RuntimeError(f"{e}:\n{log.read_text(errors='replace')[-3000:]}") from None
         yield f"http://127.0.0.1:{port}"
     finally:
         app_browser.stop(proc)
@@ -237,7 +244,9 @@ def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(stu
     out = tmp_path / "analysis"
     assert cli_main(["study", "analyse", str(study_folder), "--out", str(out), "--rounds", "200"]) == 0
     printed = capsys.readouterr().out
-    assert "3 participants, 1 excluded by the checks, 2 analysed" in printed
+    assert (
+        "3 started, 0 answered nothing, 1 excluded by the checks, 0 with no rating or pairwise answer, 2 analysed"
+    ) in printed
     from gesturekit.study.report import analyse_study
 
     report = analyse_study(study_folder, out=tmp_path / "again", rounds=200)
@@ -252,6 +261,6 @@ def test_participants_complete_or_fail_the_study_and_the_analysis_shows_both(stu
     means = report.summary[report.summary["prompt"] == "all"].set_index("system")["mean"]
     assert means.to_dict() == {s: float(v) for s, v in SCORES.items()}
     markdown = (out / "report.md").read_text(encoding="utf-8")
-    assert "excluded by the checks: 1" in markdown
+    assert "Excluded: 1 (failed more attention checks than allowed: 1)" in markdown and "Analysed: 2" in markdown
     lines = {line.split("|")[1].strip(): line for line in markdown.splitlines() if line.startswith("| ")}
     assert "False" in lines[tokens["pid-attentive"]] and "True" in lines[tokens["pid-inattentive"]]

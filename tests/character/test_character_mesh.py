@@ -243,7 +243,8 @@ def test_the_demo_mesh_is_well_formed_within_budget_and_deterministic():
     again = build_mesh(rig)
     for name in ("vertices", "normals", "faces", "joints", "weights", "parts"):
         assert np.array_equal(getattr(again, name), getattr(mesh, name)), name
-    assert {PARTS[p] for p in np.unique(mesh.parts)} == set(PARTS)
+    # the moving body: skin, shirt and face (the trousers and shoes are the still legs')
+    assert {PARTS[p] for p in np.unique(mesh.parts)} == {"skin", "shirt", "face"}
 
 
 def test_the_body_is_a_half_body_presenter_facing_forward():

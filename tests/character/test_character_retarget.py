@@ -296,7 +296,7 @@ def test_a_character_of_our_own_shape_follows_us_exactly(db):
         matched_by="test",
         to_file=np.eye(4),
     )
-    out = retarget(motion, ch)
+    out = retarget(motion, ch, wrist_slack=0.0)  # the exact end: hands at our reach
     assert out.report.max_direction_error < 1e-5
     assert out.report.side_error.max() < 1e-3
     assert out.report.wrist_error < 1e-9
@@ -322,7 +322,7 @@ def test_a_hand_that_would_enter_the_torso_is_moved_out_and_counted(tmp_path, db
     shift = pos[:, joint_index("chest")] + [0.0, 0.0, TORSO_RADIUS * np.linalg.norm(width) + 0.01] - pos[:, lw]
     fingers = [joint_index(f"left_{f}{k}") for f in ("thumb", "index", "middle", "ring", "pinky") for k in range(1, 5)]
     pos[:, [lw, *fingers]] += shift[:, None]
-    out = retarget(Motion(pos, 15.0, db.joint_presence), ch)
+    out = retarget(Motion(pos, 15.0, db.joint_presence), ch, wrist_slack=0.0)  # every target at our reach
     rep = out.report
     print(f"\nshort arms: {rep.summary()}")
     assert rep.ours_inside[0] == 0

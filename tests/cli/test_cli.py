@@ -8,6 +8,7 @@ import soundfile as sf
 from gesturekit.cli import main
 from gesturekit.database import MatchingDatabase
 from tests.conftest import make_take
+from tests.waits import patience
 
 
 def _positions_folder(tmp_path):
@@ -107,7 +108,9 @@ def test_position_files_need_joint_map_and_fps(tmp_path, capsys):
 
 
 def test_python_dash_m_runs_the_cli():
-    r = subprocess.run([sys.executable, "-m", "gesturekit", "--help"], capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "gesturekit", "--help"], capture_output=True, text=True, timeout=patience(300)
+    )
     assert r.returncode == 0 and "build-db" in r.stdout
 
 
@@ -202,7 +205,7 @@ def test_every_command_of_the_parser_runs_its_own_function():
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     names = sorted(sub.choices)
     assert names == sorted(
-        ["build-db", "info", "synthesize", "train-refiner", "evaluate", "train-fgd", "stimuli", "study"]
+        ["build-db", "info", "synthesize", "train-refiner", "evaluate", "train-fgd", "stimuli", "study", "app"]
     )
     for name in names:
         assert callable(getattr(cli, "_cmd_" + name.replace("-", "_"))), name

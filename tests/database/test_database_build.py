@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 
 from gesturekit.database import MatchingDatabase
 from tests.badinput import assert_refused, run_cli, snapshot
+from tests.waits import patience
 
 ROOT = Path(__file__).resolve().parents[2]
 TAKE_SECONDS = 10.0
@@ -147,7 +148,7 @@ def test_peak_memory_does_not_grow_with_the_dataset(joint_map, tmp_path):
             text=True,
             cwd=ROOT,
             env={**os.environ, "PYTHONPATH": str(ROOT)},
-            timeout=300,
+            timeout=patience(300),
         )
         assert run.returncode == 0, run.stderr
         code, peak_kib = run.stdout.split()
@@ -271,7 +272,7 @@ def test_a_killed_build_resumes(five, joint_map, tmp_path):
         capture_output=True,
         cwd=ROOT,
         env={**os.environ, "PYTHONPATH": str(ROOT)},
-        timeout=300,
+        timeout=patience(300),
     )
     assert run.returncode == -9, run.stderr
     assert not (tmp_path / "db" / "database.json").exists()

@@ -296,7 +296,9 @@ def test_truncated_wav_is_detected_from_its_header(tmp_path, keep):
         assert f"declares {len(whole) - 44} bytes" in message and f"only {keep - 44} bytes" in message
 
 
-@settings(deadline=None, max_examples=40, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    deadline=None, max_examples=40, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(fraction=st.floats(0.0, 1.0, exclude_max=True))
 def test_any_cut_of_a_wav_is_reported_as_truncated(tmp_path, fraction):
     whole = tmp_path / "whole.wav"
@@ -309,7 +311,9 @@ def test_any_cut_of_a_wav_is_reported_as_truncated(tmp_path, fraction):
 
 
 @pytest.mark.slow
-@settings(deadline=None, max_examples=25, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    deadline=None, max_examples=25, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(
     rate=st.sampled_from([8000, 11025, 16000, 22050, 32000, 44100, 48000, 96000]),
     channels=st.integers(1, 6),

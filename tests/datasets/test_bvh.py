@@ -241,11 +241,12 @@ def test_zeggs_y_is_up_and_left_is_plus_x_at_rest(zeggs):
 
 def test_zeggs_fk_is_fast(zeggs):
     data, _ = zeggs
-    start = time.perf_counter()
+    # the processor time of the work, not the wall clock: other work on a busy machine stretches the latter
+    start = time.process_time()
     positions = forward_kinematics(data)
-    elapsed = time.perf_counter() - start
+    elapsed = time.process_time() - start
     assert positions.shape == (2065, data.n_joints, 3)
-    assert elapsed < 2.0, f"forward kinematics of the ZEGGS take took {elapsed:.2f} s"
+    assert elapsed < 2.0, f"forward kinematics of the ZEGGS take took {elapsed:.2f} s of processor time"
 
 
 def test_zeggs_end_sites_are_joints(zeggs):

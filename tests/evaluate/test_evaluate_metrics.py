@@ -12,6 +12,7 @@ from gesturekit.errors import ConfigError
 from gesturekit.evaluate import metrics as M
 from gesturekit.motion import AUDIO_SR
 from gesturekit.skeleton import N_JOINTS, joint_index
+from tests.waits import patience
 
 FPS = 15
 LW = joint_index("left_wrist")
@@ -121,7 +122,9 @@ def test_audio_onsets_equal_librosa_onset_detect_on_real_speech(shared_data, tmp
         "    np.save(out / (f.name + '.npy'), t)\n"
     )
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
-    subprocess.run([sys.executable, "-c", code, str(tmp_path), *map(str, files)], check=True, env=env, timeout=300)
+    subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path), *map(str, files)], check=True, env=env, timeout=patience(300)
+    )
     for f in files:
         ref = np.load(tmp_path / (f.name + ".npy"), allow_pickle=False)
         assert len(ours[f.name]) > 20, f.name

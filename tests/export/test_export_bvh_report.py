@@ -209,7 +209,9 @@ def test_disconnected_skeleton_is_refused(tmp_path, absent, names):
 # ----------------------------------------------------------------------------- property
 
 
-@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(
     pos=poses(), order=st.sampled_from(ROTATION_ORDERS), units=st.sampled_from(["cm", "m"]), decimals=st.integers(4, 8)
 )

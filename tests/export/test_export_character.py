@@ -245,8 +245,8 @@ def test_their_animations_stay_and_an_earlier_gesturekit_one_is_replaced(tmp_pat
     for path in (first, again):
         doc, binary = read_glb(path.read_bytes())
         names = [a["name"] for a in doc["animations"]]
-        assert names == ["wave", ANIMATION]
-        wave = doc["animations"][0]
+        assert names == [ANIMATION, "wave"]  # ours first: the clip a viewer that plays one plays
+        wave = doc["animations"][1]
         assert accessor_array(doc, binary, wave["samplers"][0]["output"])[1] == pytest.approx(
             [0, 0.3826834, 0, 0.9238795]
         )
@@ -313,7 +313,9 @@ def test_the_hips_get_a_translation_only_when_they_move(rigs, tmp_path):
     assert err.max() < MM and report.max_error < MM
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(
     roll=st.integers(0, 10_000),
     rest=st.sampled_from(["T", "A"]),
@@ -454,7 +456,7 @@ def test_synthesize_with_a_character_writes_their_files_and_prints_the_reports(t
     assert "0.00 mm" in glb and "0.00 mm" in bvh
     assert any(line.startswith("control met on ") and "avatar.vrm's" in line for line in lines)
     doc, _ = read_glb((out / "speech.glb").read_bytes())
-    assert "VRM" in doc["extensions"] and doc["animations"][-1]["name"] == ANIMATION
+    assert "VRM" in doc["extensions"] and doc["animations"][0]["name"] == ANIMATION
     assert validator(out / "speech.glb")["issues"]["numErrors"] == 0
     assert (
         parse_bvh(out / "speech.bvh").names == parse_bvh(out / "speech.bvh").names

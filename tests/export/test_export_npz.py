@@ -122,7 +122,9 @@ arrays_strategy = st.dictionaries(
 )
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(arrays=arrays_strategy, frames=st.integers(0, 3), fps=st.floats(1, 240))
 def test_any_extra_arrays_round_trip(tmp_path, arrays, frames, fps):
     motion = make_motion(frames=frames, fps=fps)

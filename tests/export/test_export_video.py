@@ -354,7 +354,8 @@ def test_probe_rejects_missing_and_non_media_files(tmp_path):
 
 def test_front_view_shows_the_character_facing_the_camera():
     motion = still_motion(1)
-    with SkeletonScene([motion], resolution=(320, 240)) as scene:
+    # the whole body framed (the upper body's medium shot leaves hands hanging below the hips out)
+    with SkeletonScene([motion], resolution=(320, 240), style=RenderStyle(framing="full body")) as scene:
         image = scene.render_frame(0)
         px = scene.project(motion.positions[0])
     left, right = px[joint_index("left_wrist")], px[joint_index("right_wrist")]

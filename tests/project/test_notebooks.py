@@ -16,6 +16,7 @@ import pytest
 
 from gesturekit.demo import open_default_database
 from gesturekit.viz.viewer import read_viewer_data
+from tests.waits import patience
 
 NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"
 NAMES = (
@@ -95,7 +96,7 @@ def test_notebook_runs_top_to_bottom(name, demo_home, monkeypatch, capsys, tmp_p
     # and a numba cache of its own: compiled code cached by one process can crash another
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
     client = nbclient.NotebookClient(
-        nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}
+        nb, timeout=patience(600), kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}
     )
     t0 = time.perf_counter()
     client.execute()  # raises CellExecutionError, with the failing cell and its traceback

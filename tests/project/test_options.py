@@ -28,8 +28,9 @@ from gesturekit.refine.train import TrainConfig
 from gesturekit.search import SearchConfig
 from gesturekit.study.stimuli import StudyConfig
 from gesturekit.synthesis import SynthesisConfig
+from tests.waits import APP_RUN_S
 
-TIMEOUT = 120
+TIMEOUT = APP_RUN_S  # a script run's deadline, which ends a hang (tests/waits.py)
 
 #: The options of each command that are no configuration's: what to read and write, and how to run.
 RUN_ARGUMENTS = {
@@ -96,6 +97,7 @@ RUN_ARGUMENTS = {
 NOT_OPTIONS_COMMANDS = {
     "info": "reads a database; no options",
     "study": "its subcommands run a study folder; no configuration",
+    "app": "serves the app: an address, a port and folders, Streamlit's settings; no configuration",
 }
 
 CONFIGS = (SearchConfig, SynthesisConfig, TrainConfig, StudyConfig, EvaluationConfig, FGDConfig, BuildConfig)

@@ -20,9 +20,9 @@ REPO = Path(__file__).resolve().parents[2]
 README = REPO / "README.md"
 GUIDES = REPO / "docs" / "guides"
 
-#: The two commands on a fresh machine, exactly as the README has always given them.
-LAUNCH = "pip install -r requirements.txt && streamlit run app/Home.py\n"
-TEST = "pip install -r requirements-test.txt && python -m pytest -n 2\n"
+#: The two commands on a fresh machine, exactly as the README gives them (.ci/run runs TEST as written).
+LAUNCH = "pip install --retries 1 --no-compile -r requirements.txt && gesturekit app\n"
+TEST = "pip install --retries 1 --no-compile -r requirements-test.txt && python -m pytest -n 2\n"
 
 
 def python_block(text: str, heading: str = "") -> str:

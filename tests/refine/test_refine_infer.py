@@ -21,6 +21,7 @@ from gesturekit.refine.train import TrainConfig, train_refiner
 from gesturekit.skeleton import JOINT_NAMES
 from tests.conftest import make_take
 from tests.refine_helpers import TINY, _one_torch_thread  # noqa: F401 (an autouse fixture)
+from tests.waits import patience
 
 
 def random_refiner(seed=0, channels=(8, 8, 8, 8)):
@@ -220,7 +221,7 @@ def test_check_refiner_reads_the_folder_without_torch_and_refuses_another_layout
         f"check_refiner({str(out)!r}, MatchingDatabase.load({str(Path(db.path))!r})); "
         "assert 'torch' not in sys.modules, 'torch was imported'"
     )
-    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=patience(300))
 
 
 def test_a_refiner_of_another_layout_is_refused(tiny, tmp_path):
@@ -287,7 +288,9 @@ def demo_copy(tmp_path_factory):
     return Path(shutil.copytree(_DEMO, tmp_path_factory.mktemp("refiner") / "demo"))
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(data=st.data())
 def test_a_damaged_config_is_refused_or_loads(demo_copy, data):
     original = (demo_copy / "config.json").read_text()

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from gesturekit.search import compile_cache
+from tests.waits import patience
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -115,7 +116,7 @@ def _together(script: str, args: list[list[str]], env: dict, *, delay_s: float, 
 
 def _run_at_once(tmp_path: Path, groups: list[list], env: dict) -> list[list[float]]:
     """Start one process per group of specialisations, all compiling at the same moment; their results."""
-    return _together(CHILD, [[str(tmp_path), json.dumps(g)] for g in groups], env, delay_s=2.0, timeout_s=300)
+    return _together(CHILD, [[str(tmp_path), json.dumps(g)] for g in groups], env, delay_s=2.0, timeout_s=patience(300))
 
 
 @pytest.fixture
@@ -202,12 +203,16 @@ def test_a_planted_lock_link_is_never_followed(tmp_path):
 
 
 def test_the_search_kernels_use_the_safe_cache(monkeypatch):
-    from gesturekit.search import kernels
+    from gesturekit.search import kernels, reduced_kernels
 
-    for name in ("scan_one", "survivors", "rank_top", "dot32", "reduce_many", "admissible_ends"):
-        cache = getattr(kernels, name)._cache
-        assert isinstance(cache, compile_cache._LockedCache), name
-        assert Path(cache.cache_path) == compile_cache.cache_folder(kernels.__file__)
+    for module, names in (
+        (kernels, ("survivors", "rank_top", "dot32_at", "reduce_many", "admissible_ends")),
+        (reduced_kernels, ("scan_reduced", "reduce_clips", "reduced_estimate")),
+    ):
+        for name in names:
+            cache = getattr(module, name)._cache
+            assert isinstance(cache, compile_cache._LockedCache), name
+            assert Path(cache.cache_path) == compile_cache.cache_folder(module.__file__)
 
 
 def test_kernel_refuses_a_cache_option():

@@ -86,11 +86,12 @@ def test_memory_beyond_the_database_grows_by_a_few_bytes_per_frame(masks):
     per_frame_search = (s1 - s0) / frames
     assert per_frame_index <= 12.5  # float32 and float64 squared norms of each frame
     # the index, admissible starts and biases of the base and of each control in use, a scan buffer
-    # (here M T float32; never over 16 MB), the exclusions' window test: about 40 bytes, 5 %
-    assert per_frame_search <= 0.06 * SEARCHED_PER_FRAME
-    # at 5.4 M frames and with fixed costs of this size, under 10 % of the searched arrays
+    # (here M T float32; never over 16 MB), the exclusions' window test: about 40 bytes, 5 %; and
+    # the 8-bit copy of the pose features a single query's scan reads: D + 8 bytes
+    assert per_frame_search <= 0.06 * SEARCHED_PER_FRAME + (D + 8)
+    # at 5.4 M frames and with fixed costs of this size, under 25 % of the searched arrays
     at_100h = 5.4e6
-    assert s1 + per_frame_search * (at_100h - large * T) < 0.10 * SEARCHED_PER_FRAME * at_100h
+    assert s1 + per_frame_search * (at_100h - large * T) < 0.25 * SEARCHED_PER_FRAME * at_100h
 
 
 @settings(max_examples=40, deadline=None)

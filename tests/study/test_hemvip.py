@@ -26,7 +26,8 @@ def design(tiny_study, tmp_path_factory):  # noqa: F811
 
 @pytest.mark.slow
 def test_export_writes_a_config_per_participant(design, tmp_path):
-    files = export_hemvip(design, tmp_path / "configs", media_url="https://cdn.example/m/")
+    vimeo = {mid: str(700000 + i) for i, mid in enumerate(sorted(media_index(design)))}
+    files = export_hemvip(design, tmp_path / "configs", vimeo=vimeo)
     assert [f.name for f in files] == [f"participant_{r:04d}.json" for r in range(1, design.participants + 1)]
     index = media_index(design)
     for row, f in enumerate(files, start=1):
@@ -40,12 +41,12 @@ def test_export_writes_a_config_per_participant(design, tmp_path):
         assert kinds.count("videopc") == sum(p.kind == "pairwise" for p in pages)
         for page in config["pages"]:
             for cond, url in page.get("stimuli", []):
-                assert url == f"https://cdn.example/m/{cond}.mp4" and cond in index
+                assert url == f"https://player.vimeo.com/video/{vimeo[cond]}" and cond in index
         assert [q["name"] for q in config["pages"][-1]["questionnaire"]] == ["age", "comments"]
         # nothing names a system or a speech
         assert not any(s in text for s in STUDY_SYSTEMS) and ".wav" not in text
     with pytest.raises(OutputError, match="exists"):
-        export_hemvip(design, tmp_path / "configs")
+        export_hemvip(design, tmp_path / "configs", vimeo=vimeo)
 
 
 def _simulate(design, row, rng, token):
@@ -144,7 +145,10 @@ def test_import_refuses_what_is_not_this_study(design, tmp_path):
 
 
 def test_hemvip_commands(design, tmp_path, capsys):
-    assert main(["study", "export-hemvip", str(design.folder), "--out", str(tmp_path / "cfg")]) == 0
+    vimeo = tmp_path / "vimeo.csv"
+    vimeo.write_text("id,vimeo\n" + "".join(f"{m},{700000 + i}\n" for i, m in enumerate(sorted(media_index(design)))))
+    cfg = str(tmp_path / "cfg")
+    assert main(["study", "export-hemvip", str(design.folder), "--out", cfg, "--vimeo", str(vimeo)]) == 0
     assert len(list((tmp_path / "cfg").glob("participant_*.json"))) == design.participants
     _, session = _simulate(design, 3, np.random.default_rng(2), "PID3")
     (tmp_path / "r.json").write_text(json.dumps([session]))

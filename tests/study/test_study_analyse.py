@@ -26,6 +26,7 @@ from scipy import stats
 
 from gesturekit.errors import ConfigError, OutputError
 from gesturekit.study import analyse as A
+from gesturekit.study import bradley_terry as BT
 from gesturekit.study.report import REPORT_FILES, analyse, write_report
 from gesturekit.study.simulate import simulate_study
 from tests.study_helpers import tiny_study  # noqa: F401 (a fixture)
@@ -100,7 +101,7 @@ def test_bradley_terry_fit_equals_choix(k):
     wins = rng.integers(0, 9, size=(5, k, k)).astype(float) * 2
     fast = A.bt_fit(wins, prior=1.0, tol=1e-13)
     for b in range(wins.shape[0]):
-        np.testing.assert_allclose(fast[b], A._bt_choix(choix, wins[b], 1.0), atol=1e-7)
+        np.testing.assert_allclose(fast[b], BT._bt_choix(choix, wins[b], 1.0), atol=1e-7)
         assert fast[b].mean() == pytest.approx(0, abs=1e-12)
 
 
@@ -322,7 +323,9 @@ def test_the_command_analyses_a_study_and_excludes_who_failed_the_checks(tiny_st
 
     assert main(["study", "analyse", str(folder), "--rounds", "200"]) == 0
     printed = capsys.readouterr().out
-    assert "7 participants, 1 excluded by the checks, 6 analysed" in printed
+    assert (
+        "7 started, 0 answered nothing, 1 excluded by the checks, 0 with no rating or pairwise answer, 6 analysed"
+    ) in printed
     out = folder / "analysis"
     report = (out / "report.md").read_text()
     assert all(s in report for s in QUALITY)

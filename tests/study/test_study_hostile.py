@@ -64,8 +64,8 @@ def test_a_participant_goes_through_in_order_and_resumes_after_a_reload(study):
     done = client.get(f"/p/{token}/").text
     assert "C0MPLETE" in done
     assert store.participants_frame()["status"].tolist() == ["finished"]
-    # coming back through the entry link gives the same participant
-    again = TestClient(app).get("/?PROLIFIC_PID=P1&STUDY_ID=S&SESSION_ID=Y")
+    # coming back through the entry link (the same Prolific session) gives the same participant
+    again = TestClient(app).get("/?PROLIFIC_PID=P1&STUDY_ID=S&SESSION_ID=X")
     assert "C0MPLETE" in again.text and len(store.participants_frame()) == 1
 
 

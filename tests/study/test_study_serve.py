@@ -9,7 +9,6 @@ import re
 import shutil
 import subprocess
 import sys
-import time
 
 import httpx
 import pytest
@@ -20,6 +19,7 @@ from gesturekit.study.server import COOKIE, create_app
 from gesturekit.study.store import open_store
 from tests.study_helpers import tiny_study  # noqa: F401
 from tests.study_serve import ROOT, free_port
+from tests.waits import patience, wait_until
 
 pytestmark = pytest.mark.slow  # tiny_study builds a demo database and makes a stimuli folder once per module
 
@@ -122,14 +122,17 @@ def test_the_serve_command_binds_this_machine_only_by_default(design, tmp_path):
         text=True,
     )
     try:
-        deadline = time.monotonic() + 60
-        while True:
+
+        def answer() -> httpx.Response | None:
             try:
-                r = httpx.get(f"http://127.0.0.1:{port}/?PROLIFIC_PID=cli")
-                break
+                return httpx.get(f"http://127.0.0.1:{port}/?PROLIFIC_PID=cli", timeout=patience(10))
             except httpx.TransportError:
-                assert proc.poll() is None and time.monotonic() < deadline
-                time.sleep(0.2)
+                return None
+
+        def exited() -> str | None:
+            return None if proc.poll() is None else f"it exited with {proc.returncode}"
+
+        r = wait_until(answer, what="the study server answers", timeout_s=120, interval_s=0.2, give_up=exited)
         assert r.status_code == 303 and r.headers["location"].startswith("/p/")
         assert "server" not in r.headers
         listening = subprocess.run(["ss", "-ltnH", f"sport = :{port}"], capture_output=True, text=True).stdout

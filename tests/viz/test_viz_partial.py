@@ -298,7 +298,9 @@ def test_npz_keeps_which_joints_are_real_and_the_exact_positions(tmp_path):
     assert {JOINT_NAMES[j] for j, s in enumerate(status) if s == DERIVED} == set(DERIVED_TORSO)
 
 
-@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(st.lists(st.sampled_from(JOINT_STATES), min_size=N_JOINTS, max_size=N_JOINTS))
 def test_npz_round_trips_any_presence(tmp_path, status):
     presence = JointPresence(tuple(status))

@@ -144,14 +144,23 @@ def test_the_framing_holds_every_joint_and_the_look_is_the_characters():
     assert data["up"] == [0, 1, 0] and data["look"]["view"] == list(look.VIEW_DIRECTION)
     pts = m.positions.reshape(-1, 3)
     lo, hi = np.asarray(data["box"])
-    assert np.all(lo <= pts.min(axis=0) - look.FRAME_MARGIN) and np.all(hi >= pts.max(axis=0) + look.FRAME_MARGIN)
+    # the reach of most frames (each frame's extremes), and the lowest joint of every frame
+    q = look.REACH_QUANTILE
+    assert np.all(hi >= np.quantile(m.positions.max(axis=1), q, axis=0) + look.FRAME_MARGIN)
+    assert np.all(lo[[0, 2]] <= np.quantile(m.positions.min(axis=1), 1 - q, axis=0)[[0, 2]] - look.FRAME_MARGIN)
+    # the upper body's box reaches below the joints (the hips); the full body's down to the floor under the legs
+    assert lo[1] < pts[:, 1].min() - look.FRAME_MARGIN - 0.1
+    full = np.asarray(data["boxes"][look.FULL_BODY])
+    assert data["ground"] is not None and full[0, 1] <= data["ground"] < lo[1]
     assert data["look"] == {
         "background": look.BACKGROUND,
         "ambient": look.AMBIENT,
         "key": look.KEY,
         "light": list(look.LIGHT_DIRECTION),
+        "lights": [[list(d), k] for d, k in look.LIGHTS],
         "fov": look.FIELD_OF_VIEW,
         "view": list(look.VIEW_DIRECTION),
+        "depth_share": look.DEPTH_SHARE,
     }
 
 

@@ -363,7 +363,9 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
         )
     motions, labels = gs.display_motions(result)
     labels = labels if len(motions) > 1 else None
-    left, right = st.columns([3, 2])
+    # side by side, the characters take the page's width (in a column, two presenters would be a quarter of its
+    # height); a lone character shares the row with the speech's controls
+    left, right = st.columns([3, 2]) if len(motions) == 1 else (st.container(), st.container())
     with left:
         title = f"{result.source}: {result.n_frames} frames, {result.n_frames / result.motion.fps:.1f} s"
         # sent before the wrist plot is made, so the browser draws the 3D view meanwhile

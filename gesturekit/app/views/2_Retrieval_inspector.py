@@ -10,6 +10,7 @@ import streamlit as st
 
 from gesturekit import interactive as gs
 from gesturekit.app import characters, display, nav, sidebar, state
+from gesturekit.character import look
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.audio import wav_bytes
 from gesturekit.motion import AUDIO_SR
@@ -198,9 +199,12 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
         alternatives = list(others.head(shown).itertuples())
         if not r.chosen and all(o.position != pick for o in alternatives):
             alternatives = [r] + alternatives[: max(shown - 1, 0)]  # the selected one is always shown
+        # one meaning per colour on every page: the chosen one gold, the candidate of rank r as k = r elsewhere
+        schemes = [look.role_scheme("chosen")]
         for o in alternatives:
             motions.append(gs.candidate_motion(db, o.clip, o.start, b - a))
             labels.append(f"#{o.position}" + (" (selected)" if o.position == pick else ""))
+            schemes.append(look.rank_scheme(int(o.position)))
         # the step's input speech is the clock: it is what every candidate was matched against
         display.show_skeletons(
             motions,
@@ -209,6 +213,7 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
             key="inspect.views",
             audio=gs.step_speech(result, step),
             character=characters.current_character(),
+            schemes=schemes,
         )
 
     st.markdown("**Listen and choose**")
@@ -352,6 +357,7 @@ def compare_view(db: MatchingDatabase, record: dict) -> None:
         key="inspect.compare_views",
         audio=result.audio,
         character=characters.current_character(),
+        schemes=[look.rank_scheme(k) for k in done["ks"]],
     )
     table = gs.comparison_table(done["results"], db.thresholds)
     table["control_met"] = (100 * table["control_met"]).round()  # whole percent, one format for every row

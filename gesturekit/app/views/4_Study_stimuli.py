@@ -7,7 +7,7 @@ from pathlib import Path
 
 import streamlit as st
 
-from gesturekit.app import display, sidebar, state
+from gesturekit.app import display, resources, sidebar, state
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.takes import AUDIO_EXTENSIONS
 from gesturekit.errors import ConfigError
@@ -96,8 +96,11 @@ def settings(db: MatchingDatabase) -> dict:
         )
         refiner = ""
         if "knn+cgan" in systems:
+            # the refiner Synthesize applies by default (one trained on this database, or the shipped one)
             refiner = ss["study.refiner"] = st.text_input(
-                "Refiner folder (for knn+cgan)", key=pk("study.refiner", ""), help=_limits("refiner")["help"]
+                "Refiner folder (for knn+cgan)",
+                key=pk("study.refiner", resources.default_refiner(db)),
+                help=_limits("refiner")["help"],
             )
         c = st.columns([3, 1])
         out = ss["study.out"] = c[0].text_input("Study folder to write", key=pk("study.out", str(home() / "study")))
@@ -121,6 +124,7 @@ def settings(db: MatchingDatabase) -> dict:
         "resolution": tuple(int(v) for v in resolution.split("x")),
         "control": control.strip(),
         "refiner": refiner.strip() or None,
+        "refiner_checked": _refiner_checked(db, systems, refiner.strip()),
         "out": out.strip(),
         "workers": workers,
         "overwrite": overwrite,
@@ -128,10 +132,28 @@ def settings(db: MatchingDatabase) -> dict:
     }
 
 
+def _refiner_checked(db: MatchingDatabase, systems: list, refiner: str) -> bool:
+    """Whether the refiner knn+cgan needs is there and fits ``db`` (said on the page when not)."""
+    if "knn+cgan" not in systems:
+        return True
+    if not refiner:
+        st.error(
+            "knn+cgan needs a refiner: type the folder of one trained on this database in "
+            "**Refiner folder**, or leave knn+cgan out of the systems."
+        )
+        return False
+    with display.user_errors():  # config and layout only (no torch); the weights load with the work
+        resources.check_refiner(refiner, db)
+        return True
+    return False
+
+
 def conditions(opts: dict) -> bool:
-    """The table of conditions the study will have; False when it has none yet."""
+    """The table of conditions the study will have; False when it has none yet or a choice is wrong."""
     if not opts["names"] or not opts["systems"]:
         st.info("Choose speech (a folder, uploads or held-out parts) and at least one system.")
+        return False
+    if not opts["refiner_checked"]:
         return False
     plan = plan_stimuli(
         opts["names"], opts["systems"], seed=opts["seed"], participants=opts["participants"], controls=opts["control"]

@@ -16,12 +16,13 @@ from pathlib import Path
 import pandas as pd
 import streamlit as st
 
+from gesturekit._io import csv_safe
 from gesturekit.app import display, state
 from gesturekit.errors import ConfigError
 from gesturekit.paths import home
 from gesturekit.study.analyse import exclusions, pairwise_table, ratings_table
 from gesturekit.study.design import StudyDesign, init_study, load_design, verify_password
-from gesturekit.study.report import analyse
+from gesturekit.study.report import analyse, boxplot_figure, significance_figure
 from gesturekit.study.store import SQLITE_NAME, open_store
 
 #: Bootstrap rounds of the page's analysis: a quick look at every run (``gesturekit study analyse`` for the report).
@@ -178,17 +179,23 @@ def analysis(ratings: pd.DataFrame, pairwise: pd.DataFrame, excl: pd.DataFrame) 
         st.info(display.escape_markdown(exc.problem))
         return {}
     st.caption(
-        f"{report.included} participants analysed, {report.excluded} excluded by the checks; bootstrap "
-        f"{ROUNDS} rounds (`gesturekit study analyse` writes the full report)."
+        f"{report.included} participants analysed (not excluded, at least one rating or pairwise answer), "
+        f"{report.excluded} excluded by the checks; bootstrap {ROUNDS} rounds "
+        "(`gesturekit study analyse` writes the full report)."
     )
-    tables = {}
+    st.markdown("**Participant flow**\n\n" + "\n".join(f"- {line}" for line in report.flow_lines()))
+    for warning in report.warnings:
+        st.warning(display.escape_markdown(warning))
+    tables = {"flow": report.participants}
     if report.summary is not None:
         st.markdown("**Ratings per system** (participants' means; 95 % bootstrap intervals)")
         st.dataframe(report.summary, hide_index=True, key="studyrun.summary")
+        st.plotly_chart(boxplot_figure(report), key="studyrun.boxplots")
         tables["summary"] = report.summary
     if report.tests is not None:
         st.markdown("**Pairwise differences** (Wilcoxon signed-rank, Holm-Bonferroni)")
         st.dataframe(report.tests, hide_index=True, key="studyrun.tests")
+        st.plotly_chart(significance_figure(report), key="studyrun.significance")
         tables["tests"] = report.tests
     if report.bradley_terry is not None:
         st.markdown("**Pairwise preferences** (Bradley-Terry, Elo scale)")
@@ -203,7 +210,7 @@ def downloads(tables: dict[str, pd.DataFrame]) -> None:
     for col, (name, frame) in zip(cols, tables.items()):
         col.download_button(
             f"{name}.csv",
-            data=frame.to_csv(index=False).encode("utf-8"),
+            data=csv_safe(frame).to_csv(index=False).encode("utf-8"),
             file_name=f"{name}.csv",
             mime="text/csv",
             key=f"studyrun.download_{name}",

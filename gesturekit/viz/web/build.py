@@ -66,7 +66,7 @@ canvas{display:block;width:100%;height:100%;cursor:grab;touch-action:none}
 <body data-key="__KEY__">
 <div id="stage" style="height:__HEIGHT__px"><canvas id="c" title="drag: orbit, scroll: zoom, double-click: reset"></canvas>
 <div id="title"></div><div id="dropped"></div><div id="derived"></div><div id="nogl"></div></div>
-<div id="bar"><button id="play">&#9654; Play</button><input id="s" type="range" min="0" value="0" step="1"><span id="t"></span><span id="note"></span></div>
+<div id="bar"><button id="play">&#9654; Play</button><input id="s" type="range" min="0" value="0" step="1"><span id="t"></span><span id="note"></span><button id="framing" title="frame the upper body or the whole body">Full body</button></div>
 """
 
 #: The component's page: the shell, then the bundle as a module of its own (the browser caches it); the

@@ -7,6 +7,8 @@ import {
   Color,
   Group,
   Matrix4,
+  Mesh,
+  MeshBasicMaterial,
   MeshLambertMaterial,
   Skeleton,
   SkinnedMesh,
@@ -31,6 +33,36 @@ export function decode(spec) {
 /** The characters of the data's motions, each in its own group shifted along X. */
 export function buildCharacters(data) {
   return data.motions.map((m) => character(m, data.motions));
+}
+
+/** The still legs (gesturekit.character.stand): a plain mesh in the motion's frame, lit as the body. */
+function standing(spec, linear) {
+  const geometry = new BufferGeometry(), parts = decode(spec.parts), colors = new Float32Array(3 * parts.length);
+  for (let v = 0; v < parts.length; v++) {
+    const c = linear[parts[v]];
+    colors[3 * v] = c.r; colors[3 * v + 1] = c.g; colors[3 * v + 2] = c.b;
+  }
+  geometry.setAttribute("position", new BufferAttribute(decode(spec.vertices), 3));
+  geometry.setAttribute("normal", new BufferAttribute(decode(spec.normals), 3));
+  geometry.setAttribute("color", new BufferAttribute(colors, 3));
+  geometry.setIndex(new BufferAttribute(decode(spec.faces), 1));
+  return new Mesh(geometry, new MeshLambertMaterial({ vertexColors: true }));
+}
+
+/** The stage's unlit meshes (gesturekit.character.look.stage_meshes): the floor and the contact shadows. */
+export function buildStage(data) {
+  return data.stage.map((spec) => {
+    const geometry = new BufferGeometry(), rgb = decode(spec.colors), colors = new Float32Array(rgb.length);
+    const c = new Color();
+    for (let v = 0; v < rgb.length; v += 3) {
+      c.setRGB(rgb[v] / 255, rgb[v + 1] / 255, rgb[v + 2] / 255, SRGBColorSpace);
+      colors[v] = c.r; colors[v + 1] = c.g; colors[v + 2] = c.b;
+    }
+    geometry.setAttribute("position", new BufferAttribute(decode(spec.vertices), 3));
+    geometry.setAttribute("color", new BufferAttribute(colors, 3));
+    geometry.setIndex(new BufferAttribute(decode(spec.faces), 1));
+    return new Mesh(geometry, new MeshBasicMaterial({ vertexColors: true }));
+  });
 }
 
 function character(m, motions) {
@@ -72,6 +104,7 @@ function character(m, motions) {
   const group = new Group();
   group.position.x = m.offset;
   group.add(skinned);
+  if (m.stand) group.add(standing(m.stand, linear));
   const quats = decode(m.rotations), roots = decode(m.root);
   return {
     group,

@@ -5,15 +5,21 @@
 import { AmbientLight, Color, DirectionalLight, PerspectiveCamera, Scene, Vector3, WebGLRenderer } from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 
-import { buildCharacters } from "./character.js";
+import { buildCharacters, buildStage } from "./character.js";
 import { component } from "./component.js";
 
-/** The camera of gesturekit.character.look.camera_for: the box lo..hi whole, seen from the direction dir. */
-export function cameraFor(lo, hi, aspect, fov, dir) {
+/** The camera of gesturekit.character.look.camera_for: the box lo..hi whole, seen from the direction dir
+ * (with top, a box narrower than the picture's height keeps its top at the picture's top). */
+export function cameraFor(lo, hi, aspect, fov, dir, top, depthShare, floor) {
   const centre = [0, 1, 2].map((i) => (lo[i] + hi[i]) / 2);
   const half = [0, 1, 2].map((i) => Math.max((hi[i] - lo[i]) / 2, 1e-3));
   const norm = Math.hypot(dir[0], dir[1], dir[2]), tanV = Math.tan((fov * Math.PI) / 360);
-  const dist = Math.max(half[1] / tanV, half[0] / (tanV * aspect)) + half[2];
+  const dist = Math.max(half[1] / tanV, half[0] / (tanV * aspect)) + depthShare * half[2];
+  if (top) {  // the height shown beyond the box's own: below the box, down to a little below the floor
+    const extra = Math.max(0, (dist - depthShare * half[2]) * tanV - half[1]);
+    const room = floor === null || floor === undefined ? extra : Math.max(0, lo[1] - extra - floor + 0.1);
+    centre[1] -= Math.min(extra, room);
+  }
   return { position: centre.map((c, i) => c + (dist * dir[i]) / norm), target: centre };
 }
 
@@ -55,22 +61,30 @@ function main(D, audio) {
   // three.js's Lambert surface sends albedo / pi of the light it gets: intensities of pi * strength give
   // colour = albedo * (ambient + key * max(0, n . l)), in linear light (the output is sRGB)
   scene.add(new AmbientLight(0xffffff, Math.PI * D.look.ambient));
-  const key = new DirectionalLight(0xffffff, Math.PI * D.look.key);
-  key.position.set(D.look.light[0], D.look.light[1], D.look.light[2]);
-  scene.add(key);  // its target stays at the origin: the light comes from the direction of its position
+  // key, fill and rim: the sum of their Lambert terms, as gesturekit.character.look.shade adds them
+  for (const [dir, strength] of D.look.lights) {
+    const light = new DirectionalLight(0xffffff, Math.PI * strength);
+    light.position.set(dir[0], dir[1], dir[2]);
+    scene.add(light);  // its target stays at the origin: the light comes from the direction of its position
+  }
   const glReady = performance.now();
+  for (const m of buildStage(D)) scene.add(m);
   const characters = buildCharacters(D);
   for (const c of characters) scene.add(c.group);
   const camera = new PerspectiveCamera(D.look.fov, 1, 0.01, 100);
   const controls = renderer ? new OrbitControls(camera, canvas) : null;
-  const lo = D.box[0], hi = D.box[1];
+  // the wheel zooms towards the point under the cursor: side-by-side characters stay in view
+  if (controls) controls.zoomToCursor = true;
+  let framing = D.framing, lo = D.boxes[framing][0], hi = D.boxes[framing][1];
+  const framingButton = document.getElementById("framing");
   let frame = 0, playing = false, t0 = 0, clock0 = 0, moved = false;
 
   function home() {
-    const c = cameraFor(lo, hi, camera.aspect, D.look.fov, D.look.view);
+    const c = cameraFor(lo, hi, camera.aspect, D.look.fov, D.look.view, framing === "upper body", D.look.depth_share, D.ground);
     camera.position.set(c.position[0], c.position[1], c.position[2]);
     camera.up.set(0, 1, 0);
-    gk.camera = { position: c.position, target: c.target, fov: camera.fov, aspect: camera.aspect };
+    gk.camera = { position: c.position, target: c.target, fov: camera.fov, aspect: camera.aspect, framing };
+    if (framingButton) framingButton.textContent = framing === "upper body" ? "Full body" : "Upper body";
     if (controls) { controls.target.set(c.target[0], c.target[1], c.target[2]); controls.update(); }
     else camera.lookAt(c.target[0], c.target[1], c.target[2]);
   }
@@ -87,7 +101,7 @@ function main(D, audio) {
     D.motions.forEach((m, i) => {
       above.set((lo[0] + hi[0]) / 2 + m.offset, hi[1], (lo[2] + hi[2]) / 2).project(camera);
       labels[i].style.left = ((above.x + 1) / 2) * w + "px";
-      labels[i].style.top = Math.max(2, ((1 - above.y) / 2) * h - 16) + "px";
+      labels[i].style.top = Math.max(D.title ? 24 : 2, ((1 - above.y) / 2) * h - 16) + "px";
     });
   }
   function draw() {
@@ -144,6 +158,14 @@ function main(D, audio) {
     audio.addEventListener("seeked", () => { if (!playing) show(audio.currentTime); }, { signal });
   }
   play.addEventListener("click", toggle, { signal });
+  if (framingButton) {
+    framingButton.style.display = D.ground === null || D.ground === undefined ? "none" : "";
+    framingButton.addEventListener("click", () => {
+      framing = framing === "upper body" ? "full body" : "upper body";
+      lo = D.boxes[framing][0]; hi = D.boxes[framing][1];
+      moved = false; home(); draw();
+    }, { signal });
+  }
   document.addEventListener("keydown", (e) => { if (e.code === "Space") { e.preventDefault(); toggle(); } }, { signal });
   slider.addEventListener("input", () => {
     const k = Number(slider.value), t = D.times[k] + 0.25 / D.fps;  // inside frame k's interval
@@ -157,6 +179,8 @@ function main(D, audio) {
   }
   // a new size frames the box again at the new aspect ratio, unless the user has moved the view
   window.addEventListener("resize", () => { size(); if (!moved) home(); draw(); }, { signal });
+  // the stage alone (the backdrop, the floor and the shadows) and back: what the characters stand in front of
+  gk.showCharacters = (visible) => { for (const c of characters) c.group.visible = visible; draw(); };
   play.disabled = slider.disabled = N < 2;
   size(); home(); draw();
   // where the first frame's time went (milliseconds since the page began to load)
