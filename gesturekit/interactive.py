@@ -36,7 +36,9 @@ from .export.bvh import BvhReport
 from .export.result import export_result_bvh, save_result_npz, save_result_video
 from .motion import AUDIO_SR, Motion
 from .refine import open_refiner
+from .search.explain import query_pose_frame
 from .synthesis import SynthesisConfig, SynthesisResult, synthesize_batch
+from .viz.retrieval import CandidateView
 
 if TYPE_CHECKING:
     from .datasets.audio import AudioInfo
@@ -57,8 +59,12 @@ __all__ = [
     "candidate_motion",
     "segment_in_context",
     "step_speech",
+    "query_pose",
+    "candidate_views",
+    "clip_speech",
     "compare_k",
     "comparison_table",
+    "parse_times",
 ]
 
 #: Example speech the app offers: label -> (seconds, seed) of a take of the generated demo speaker.
@@ -354,6 +360,66 @@ def step_speech(result: SynthesisResult, step: int) -> np.ndarray:
     return np.asarray(result.audio[a:b], dtype=np.float32)
 
 
+def query_pose(db: MatchingDatabase, result: SynthesisResult, step: int) -> np.ndarray | None:
+    """The pose step ``step`` matched its candidates against (``p_{t-1}``) as joints, or None.
+
+    Returns
+    -------
+    np.ndarray, shape (55, 3), float32, or None
+        Pelvis-relative joint positions in metres of the database frame
+        :func:`gesturekit.search.explain.query_pose_frame` names; None when the initial
+        pose of step 0 is no database frame.
+    """
+    frame = query_pose_frame(db.P, result.search, step)
+    if frame is None:
+        return None
+    return candidate_motion(db, frame[0], frame[1], 1).positions[0]
+
+
+def candidate_views(db: MatchingDatabase, result: SynthesisResult, step: int) -> list[CandidateView]:
+    """The recorded candidates of one step, best first, each with its whole database clip.
+
+    Parameters
+    ----------
+    db : MatchingDatabase
+        The database the result was searched in.
+    result : SynthesisResult
+    step : int
+        ``0 <= step < result.search.n_steps``.
+
+    Returns
+    -------
+    list of CandidateView
+        One per row of :meth:`~gesturekit.search.SearchResult.candidates_table`, in its
+        order; ``label`` names the take and time, ``chosen`` marks the search's choice.
+    """
+    table = result.search.candidates_table(step, db)
+    n = result.config.segment
+    views = []
+    for r in table.itertuples():
+        clip = candidate_motion(db, int(r.clip), 0, db.G.shape[1]).positions
+        views.append(
+            CandidateView(
+                position=int(r.position),
+                clip_positions=clip,
+                start=int(r.start),
+                segment=n,
+                pose_dist=float(r.pose_dist),
+                audio_dist=float(r.audio_dist),
+                label=f"{r.take} at {r.source_s:.2f} s",
+                chosen=bool(r.chosen),
+            )
+        )
+    return views
+
+
+def clip_speech(db: MatchingDatabase, clip: int) -> np.ndarray | None:
+    """A database clip's own speech over its frames, float32 at 16 kHz; None without audio."""
+    if db.audio is None:
+        return None
+    return np.asarray(db.segment_audio(int(clip), 0, db.G.shape[1]), dtype=np.float32)
+
+
 def compare_k(
     audio: str | os.PathLike[str] | np.ndarray,
     *,
@@ -424,3 +490,26 @@ def comparison_table(results: Sequence[SynthesisResult], thresholds: Mapping[str
             }
         )
     return pd.DataFrame(rows)
+
+
+def parse_times(text: str, *, duration: float) -> list[float]:
+    """Times typed as ``"1, 2.5, 4"`` (seconds, commas or spaces between them), in order.
+
+    Raises
+    ------
+    ConfigError
+        Nothing typed, something that is not a number, or a time outside ``0 .. duration``.
+    """
+    parts = [p for p in str(text).replace(",", " ").split() if p]
+    if not parts:
+        raise ConfigError("type one or more times in seconds, e.g. 1, 2.5, 4")
+    times = []
+    for p in parts:
+        try:
+            t = float(p)
+        except ValueError:
+            raise ConfigError(f"{p!r} is not a time in seconds") from None
+        if not (math.isfinite(t) and 0 <= t <= duration):
+            raise ConfigError(f"{p} s lies outside the result (0 to {duration:.2f} s)")
+        times.append(t)
+    return times

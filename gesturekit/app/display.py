@@ -63,6 +63,7 @@ __all__ = [
     "show_glb_report",
     "show_skeletons",
     "viewer_component",
+    "microphones_component",
     "skeleton_note",
     "user_errors",
     "warnings_shown",
@@ -221,6 +222,16 @@ def viewer_component() -> Any:
 
     bundle()  # a missing build says how to make it, here rather than as a blank frame
     return declare_component("skeleton_viewer", path=str(STATIC))
+
+
+@functools.cache
+def microphones_component() -> Any:
+    """A component that says which microphones the browser offers (``components/microphones``):
+    it returns ``{"api": bool, "microphones": int, "secure": bool}`` once the browser has looked,
+    the ``default`` before; it shows nothing."""
+    from streamlit.components.v1 import declare_component
+
+    return declare_component("gk_microphones", path=str(Path(__file__).resolve().parent / "components" / "microphones"))
 
 
 def show_skeletons(

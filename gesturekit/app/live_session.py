@@ -38,6 +38,7 @@ from gesturekit.synthesis import SynthesisConfig, SynthesisResult
 
 __all__ = [
     "CONTROLS",
+    "FilePlayer",
     "ICE_SERVERS_ENV",
     "NO_ICE_SERVERS",
     "LiveSession",
@@ -49,9 +50,18 @@ __all__ = [
 
 #: The page's control buttons: label -> the constraint held from the next step on (None: free).
 CONTROLS: dict[str, str | None] = {
+    "Free": None,
     "Left hand high": "left_hand=high",
     "Left hand low": "left_hand=low",
-    "Left hand free": None,
+    "Right hand high": "right_hand=high",
+    "Right hand low": "right_hand=low",
+    "Both hands high": "both_hands=high",
+    "Slow": "speed=slow",
+    "Fast": "speed=fast",
+    "Symmetric": "symmetry=symmetric",
+    "Asymmetric": "symmetry=asymmetric",
+    "Narrow": "width=narrow",
+    "Wide": "width=wide",
 }
 #: WebRTC configuration with no STUN/TURN server: on one machine (127.0.0.1) the browser and the
 #: server find each other through their local addresses, and nothing outside is contacted.
@@ -415,6 +425,88 @@ class LiveStage:
         """The browser's stream is off: the next frames begin a new performance."""
         with self._lock:
             self._armed = True
+
+
+class FilePlayer:
+    """Speech from a file streamed into a :class:`LiveStage` in real time, as a microphone sends it.
+
+    A thread hands the stage's performance one :data:`CHUNK_S` chunk of samples each time its
+    moment comes (the file's time since :meth:`start`), through :meth:`LiveSession.feed`: the
+    same path, queue, resampling and synthesis as the microphone's frames. For demos without a
+    microphone, and for tests.
+
+    Parameters
+    ----------
+    stage : LiveStage
+        Where the performance runs (begun by the first chunk).
+    samples : np.ndarray, shape (n,)
+        Mono speech, float32 in [-1, 1].
+    rate : int
+        Its sample rate, Hz.
+    """
+
+    #: Seconds of speech handed over at a time (a microphone's WebRTC frame is 20 ms).
+    CHUNK_S = 0.02
+
+    def __init__(
+        self,
+        stage: LiveStage,
+        samples: np.ndarray,
+        rate: int,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        wait: Callable[[float], bool] | None = None,
+    ) -> None:
+        x = np.asarray(samples, dtype=np.float32).ravel()
+        if x.size == 0 or int(rate) <= 0:
+            raise ConfigError("the speech file holds no sound to play")
+        self._stage, self._x, self._rate, self._clock = stage, x, int(rate), clock
+        self._stopped = threading.Event()
+        self._wait = wait or self._stopped.wait
+        self._sent = 0
+        self._thread: threading.Thread | None = None
+
+    @property
+    def duration_s(self) -> float:
+        """Seconds of speech in the file."""
+        return self._x.size / self._rate
+
+    @property
+    def position_s(self) -> float:
+        """Seconds of speech handed over so far."""
+        return self._sent / self._rate
+
+    @property
+    def playing(self) -> bool:
+        """Started, and not yet at the file's end nor stopped."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self) -> None:
+        """Begin streaming (once)."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="gesturekit-live-file", daemon=True)
+            self._thread.start()
+
+    def stop(self) -> None:
+        """Stop streaming; what was handed over stays in the performance."""
+        self._stopped.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        n = max(1, int(round(self.CHUNK_S * self._rate)))
+        t0 = self._clock()
+        for a in range(0, self._x.size, n):
+            due = t0 + a / self._rate - self._clock()
+            if due > 0 and self._wait(due):
+                return  # stopped while waiting
+            if self._stopped.is_set():
+                return
+            session = self._stage.begin()
+            if session is None:
+                return
+            session.feed(self._x[a : a + n], self._rate)
+            self._sent = min(a + n, self._x.size)
 
 
 def _failure(exc: Exception) -> str:

@@ -34,7 +34,7 @@ if TYPE_CHECKING:  # named in annotations only: pandas is imported where a table
 
     from ..database import MatchingDatabase
 
-__all__ = ["StepExplanation", "explain_step", "plan_step_inputs", "explain_plan_step"]
+__all__ = ["StepExplanation", "explain_step", "plan_step_inputs", "explain_plan_step", "query_pose_frame"]
 
 #: Rows of pose features whose exact distances are computed at once (bounds the float64 scratch).
 _CHUNK_ROWS = 1 << 15
@@ -296,3 +296,50 @@ def explain_plan_step(db: MatchingDatabase, plan: SearchPlan, result: SearchResu
     (``result.pinned``).
     """
     return explain_step(db, **plan_step_inputs(plan, result, db.P, step))
+
+
+def query_pose_frame(P: np.ndarray, result: SearchResult, step: int) -> tuple[int, int] | None:
+    """The database frame whose pose feature step ``step`` matched against: ``p_{t-1}`` as (clip, frame).
+
+    Every candidate's pose distance is measured from this pose to the candidate's first frame,
+    so drawing its joints next to a candidate shows that distance by eye.
+
+    Parameters
+    ----------
+    P : np.ndarray, shape (M, T, 96)
+        The database's pose features (``db.P``).
+    result : SearchResult
+        A finished search.
+    step : int
+        ``0 <= step < result.n_steps``.
+
+    Returns
+    -------
+    (clip, frame) or None
+        For a later step the last frame of the previous step's window (pinned or chosen);
+        for step 0 the initial pose's frame (``result.init_frame``, or the frame whose pose
+        feature equals ``result.init_pose``); None when the initial pose is no database frame
+        (a pose given by its feature values).
+
+    Raises
+    ------
+    ConfigError
+        ``step`` out of range.
+    """
+    if not 0 <= int(step) < result.n_steps:
+        raise ConfigError(f"step must be in 0..{result.n_steps - 1}, got {step}")
+    i, n = int(step), int(result.config.segment)
+    if i > 0:
+        return int(result.clip[i - 1]), int(result.start[i - 1]) + n - 1
+    if result.init_frame[0] >= 0:
+        return int(result.init_frame[0]), int(result.init_frame[1])
+    pose = np.asarray(result.init_pose, dtype=np.float32).ravel()
+    M, T, D = np.shape(P)
+    if pose.shape != (D,):
+        return None
+    per = max(1, _CHUNK_ROWS // T)  # clips compared at once (bounds the scratch of a large database)
+    for a in range(0, M, per):
+        hits = np.argwhere(np.all(np.asarray(P[a : a + per], dtype=np.float32) == pose, axis=2))
+        if hits.size:
+            return a + int(hits[0, 0]), int(hits[0, 1])
+    return None

@@ -472,7 +472,13 @@ def wrist_figure(
 
 
 def candidates_figure(
-    search: SearchResult, step: int, *, names: Sequence[str] | None = None, title: str | None = None, height: int = 320
+    search: SearchResult,
+    step: int,
+    *,
+    names: Sequence[str] | None = None,
+    title: str | None = None,
+    height: int = 320,
+    selected: int | None = None,
 ) -> go.Figure:
     """The candidates of one search step: pose distance against audio distance, the chosen one ringed.
 
@@ -491,6 +497,8 @@ def candidates_figure(
     title : str, optional
     height : int
         Figure height in pixels.
+    selected : int, optional
+        Position of a candidate looked at closely: ringed in blue (when it is not the chosen one).
 
     Returns
     -------
@@ -498,8 +506,8 @@ def candidates_figure(
         A marker trace with ``meta["part"] == "candidates"``: one point per
         recorded candidate, x the pose distance (z-scored feature units), y the
         audio (cosine) distance, labelled by its position in the combined
-        ranking; and, when the chosen window is in the table, a trace with
-        ``meta["part"] == "chosen"`` of one point on it.
+        ranking; when the chosen window is in the table, a trace with
+        ``meta["part"] == "chosen"`` of one point on it; and likewise ``"selected"``.
 
     Raises
     ------
@@ -557,6 +565,19 @@ def candidates_figure(
                 hoverinfo="skip",
                 marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#c0502d", width=3)),
                 meta={"part": "chosen"},
+            )
+        )
+    if selected is not None and int(selected) != chosen and int(selected) in keep:
+        j = int(np.flatnonzero(keep == int(selected))[0])
+        fig.add_trace(
+            go.Scatter(
+                x=[x[j]],
+                y=[y[j]],
+                mode="markers",
+                name="selected",
+                hoverinfo="skip",
+                marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#2c5d8f", width=3)),
+                meta={"part": "selected"},
             )
         )
     fig.update_layout(

@@ -204,3 +204,78 @@ def test_a_result_of_another_database_is_not_inspected_against_this_one(app_env,
     assert not at.exception
     assert any("Synthesize page first" in shown(i.value) for i in at.info)
     assert not at.get("plotly_chart")
+
+
+def _large(at: AppTest) -> int:
+    """The candidate the large view shows (its traces say which)."""
+    return {t["meta"]["candidate"] for t in chart(at, "inspect.candidate_large")["data"]}.pop()
+
+
+def test_table_scatter_and_strip_select_the_candidate_shown_large(app_env, db):
+    at = set_step(synthesized(), 3)
+    res = result(at)
+    s = res.search
+    chosen = int(s.position[3])
+    assert _large(at) == chosen  # a new step shows its chosen candidate
+    strip = chart(at, "inspect.strip")
+    assert {t["meta"]["candidate"] for t in strip["data"]} == set(range(TOPK))
+    assert sum(t["meta"]["part"] == "ghost" for t in strip["data"]) == TOPK
+    others = [p for p in range(TOPK) if p != chosen]
+
+    at.session_state["inspect.candidates"] = {"selection": {"rows": [others[0]], "columns": []}}
+    at.run()
+    assert _large(at) == others[0] and at.selectbox(key="_w.inspect.candidate").value == others[0]
+    (ring,) = [t for t in chart(at, "inspect.candidates_plot")["data"] if t["meta"]["part"] == "selected"]
+    assert array(ring["x"])[0] == pytest.approx(s.cand_pose_dist[3][others[0]])
+
+    clip, start = int(s.cand_clip[3][others[1]]), int(s.cand_start[3][others[1]])
+    at.session_state["inspect.candidates_plot"] = {
+        "selection": {"points": [{"customdata": [clip, start, 0, 0, 0]}], "point_indices": [], "box": [], "lasso": []}
+    }
+    at.run()
+    assert _large(at) == others[1]
+
+    at.session_state["inspect.strip"] = {
+        # as the browser sends it: a typed array's values keyed "0", "1", ...
+        "selection": {"points": [{"customdata": {"0": others[2]}}], "point_indices": [], "box": [], "lasso": []}
+    }
+    at.run()
+    assert _large(at) == others[2] and at.selectbox(key="_w.inspect.candidate").value == others[2]
+    # the 3D view always shows the selected one beside the chosen one
+    assert any(m["label"] == f"#{others[2]} (selected)" for m in viewer(at, "inspect.views")["motions"])
+    # the selectbox selects too, and the two distances are said in words
+    at.selectbox(key="_w.inspect.candidate").set_value(others[0]).run()
+    assert _large(at) == others[0]
+    assert any(m.value.startswith(f"**Why this clip?** Candidate **#{others[0]}**") for m in at.markdown)
+    # another step starts again from its chosen candidate
+    at = set_step(at, 4)
+    assert _large(at) == int(s.position[4])
+
+
+def test_control_met_and_steps_relaxed_are_explained_in_words(app_env):
+    at = synthesized()
+    at.button(key="inspect.compare_go").click().run()
+    words = " ".join(m.value for m in at.markdown)
+    assert "**control met**: of the output frames a control covers" in words
+    assert "**steps relaxed**: steps where no database window satisfied the control" in words
+    assert "first and last frame" in words  # the rule the search used
+
+
+def test_figures_for_a_paper_are_offered_at_print_size_over_a_chosen_range(app_env):
+    at = synthesized()
+    at.button(key="inspect.compare_go").click().run()
+    at.slider(key="_w.inspect.zoom").set_value((1.0, 3.0)).run()
+    assert not at.exception
+    # the page's wrist plot shows the range; the filmstrip's times default to it, evenly
+    assert chart(at, "inspect.compare_wrists")["layout"]["xaxis"]["range"] == [1.0, 3.0]
+    assert at.text_input(key="_w.inspect.film_times").value == "0.0, 1.0, 2.0, 3.0, 4.0"  # the default's range
+    at.text_input(key="_w.inspect.film_times").set_value("0.5, 1.5, 2.5").run()
+    film = chart(at, "inspect.filmstrip")
+    poses = [t["meta"] for t in film["data"] if t["meta"]["part"] == "pose"]
+    assert sorted({m["time"] for m in poses}) == [0.5, 1.5, 2.5] and {m["motion"] for m in poses} == {0, 1, 2}
+    names = [b.proto.label for b in at.get("download_button")]
+    assert "Filmstrip (PDF, 170 mm)" in names and "Wrists (PDF, 170 mm)" in names
+    # a time outside the result is a message, not a traceback
+    at.text_input(key="_w.inspect.film_times").set_value("0.5, 999").run()
+    assert not at.exception
+    assert any("lies outside the result" in shown(e.value) for e in at.error)

@@ -331,3 +331,84 @@ def test_stop_after_too_little_speech_says_so_on_the_page(app_env, mic, speech48
     assert mic.calls[-1]["desired_playing_state"] is False  # the microphone is closed all the same
     at.run()  # the panel's next refresh still says it
     assert any("shorter than one frame" in shown(e.value) for e in at.error)
+
+
+# --- without a microphone --------------------------------------------------------------------------
+def test_file_player_hands_the_speech_over_in_order_at_its_time(live):
+    """Each 20 ms chunk is fed when its moment has come, in order; Stop halts it."""
+    fed, waits = [], []
+    now = [0.0]
+
+    class Session:
+        def feed(self, samples, rate, **_):
+            fed.append((now[0], np.array(samples), rate))
+
+    class Stage:
+        def begin(self):
+            return Session()
+
+    def wait(seconds):
+        waits.append(seconds)
+        now[0] += seconds  # a clock that the wait moves on
+        return False
+
+    x = np.random.default_rng(0).uniform(-1, 1, 16000 + 123).astype(np.float32)
+    player = live.FilePlayer(Stage(), x, 16000, clock=lambda: now[0], wait=wait)
+    player.start()
+    player._thread.join(10)
+    assert not player.playing and player.position_s == pytest.approx(x.size / 16000)
+    np.testing.assert_array_equal(np.concatenate([f[1] for f in fed]), x)
+    assert {len(f[1]) for f in fed[:-1]} == {320}  # 20 ms at 16 kHz
+    for i, (t, _, rate) in enumerate(fed):
+        assert rate == 16000 and t == pytest.approx(i * 320 / 16000)  # real time, not faster
+    with pytest.raises(ConfigError, match="no sound"):
+        live.FilePlayer(Stage(), np.zeros(0, np.float32), 16000)
+
+
+def test_a_browser_without_a_microphone_is_told_so_and_offered_a_file(app_env, mic):
+    at = open_live(mic)
+    at.session_state["live.devices"] = {"api": True, "microphones": 0, "secure": True}
+    at.run()
+    assert not at.exception, at.exception
+    (warning,) = [shown(w.value) for w in at.warning if "microphone" in shown(w.value)]
+    assert "No microphone was found" in warning and "Live from a file" in warning
+    assert "NotFoundError" not in warning
+    calls = len(mic.calls)
+    at.run()
+    assert len(mic.calls) == calls  # no Start that would fail with the browser's own error
+    at.session_state["live.devices"] = {"api": False, "microphones": 0, "secure": False}
+    at.run()
+    assert any("served over HTTPS or from this machine" in shown(w.value) for w in at.warning)
+
+
+def test_live_from_a_file_streams_it_through_the_live_path_with_every_control(app_env, mic):
+    import io
+    import time
+
+    import soundfile as sf
+
+    take, _ = generate_demo_take(seconds=3.0, seed=91, name="speech")
+    buf = io.BytesIO()
+    sf.write(buf, take.audio, 16000, format="WAV")
+    at = open_live(mic)
+    at.file_uploader(key="live.file").set_value(("talk.wav", buf.getvalue(), "audio/wav")).run()
+    button(at, "live.file_go").click().run()
+    assert not at.exception, at.exception
+    player = at.session_state["live.player"]
+    assert player.playing and at.get("audio")  # the speech plays in the page too
+    while player.position_s < 1.2:
+        time.sleep(0.05)
+    # any control, not only the left hand's, switches while it plays
+    button(at, "live.control.speed=fast").click().run()
+    assert at.session_state["live.control"] == "speed=fast"
+    player._thread.join(10)
+    at.session_state["live.stage"].session.wait()
+    at.run()  # the panel sees the file's end: the page keeps the performance
+    at.run()
+    assert not at.exception, at.exception
+    result = at.session_state["gk.synthesis"]["result"]
+    assert result.n_frames == pytest.approx(3.0 * 15, abs=1)  # the whole file, streamed
+    (segment,) = result.control.segments
+    # held from the first step not yet searched when it was pressed (the search waits for 0.93 s of lookahead)
+    assert segment.label() == "speed=fast" and 0.0 < segment.start_s < 2.5 and segment.end_s == pytest.approx(3.0)
+    assert "live.download_wav" in {d.key for d in at.get("download_button")}

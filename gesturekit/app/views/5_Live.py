@@ -11,8 +11,9 @@ from gesturekit import interactive as gs
 from gesturekit.app import display, nav, resources, sidebar, state
 from gesturekit.app import live_session as live
 from gesturekit.database import MatchingDatabase
+from gesturekit.datasets.audio import wav_bytes
 from gesturekit.errors import GestureKitError
-from gesturekit.motion import Motion
+from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.synthesis import SynthesisConfig
 
 STAGE = "live.stage"  # the user's LiveStage (microphone, current performance)
@@ -23,6 +24,9 @@ _STOPPING = "_live.stopping"  # Stop was pressed: the next run asks the browser 
 _BVH = "_live.bvh"  # (run, bytes or None, report or why no BVH) of the performance shown
 _VIDEO = "_live.video"  # {"run": n, "bytes": mp4}
 _FAILED = "_live.failed"  # why the last performance could not be kept (see finish)
+PLAYER = "live.player"  # the FilePlayer of Live from a file (None: none began)
+_FILE_AUDIO = "_live.file_audio"  # the speech it plays, also played in the browser
+_NO_MIC = "_live.no_mic"  # the browser said it offers no microphone
 #: Seconds between refreshes of the live figure and latency while the microphone is on. Each refresh
 #: is a run of the panel on the server and a new view in the browser: faster refreshes, on a machine
 #: whose cores are busy, delay the audio stream itself (measured on 2 shared cores: 0.2 s made the
@@ -56,6 +60,56 @@ def microphone(stage: live.LiveStage, *, stopping: bool) -> Any:
     )
 
 
+def microphones_found() -> dict | None:
+    """What the browser offers (``api``: it can open a microphone at all; ``microphones``: how many
+    it lists; ``secure``: the page is served so that browsers allow one), or None until it said."""
+    value = display.microphones_component()(key="live.devices", default=None)
+    return value if isinstance(value, dict) else None
+
+
+def no_microphone_words(found: dict) -> str:
+    """Why Start cannot work in this browser, in the page's words, with what to do instead."""
+    if not found.get("api"):
+        why = "This browser offers no microphone to web pages here" + (
+            ": browsers allow one only on pages served over HTTPS or from this machine (127.0.0.1)."
+            if not found.get("secure")
+            else "."
+        )
+    else:
+        why = "No microphone was found: none is connected, or the browser may not use it."
+    return f"{why} Connect one and reload the page, or play a speech file through Live below (**Live from a file**)."
+
+
+def file_player(stage: live.LiveStage, *, mic_on: bool) -> bool:
+    """Live from a file: an uploaded speech streamed in real time through the same live path as the
+    microphone, its sound played here. Returns whether a file is playing."""
+    ss = st.session_state
+    player: live.FilePlayer | None = ss.get(PLAYER)
+    playing = player is not None and player.playing
+    with st.expander("Live from a file", expanded=playing or ss.get(_NO_MIC, False)):
+        st.caption(
+            "Speech from a file, sent to the live synthesis as the microphone would send it: in real time, "
+            "20 ms at a time. The control buttons switch it while it plays; **Stop** keeps it as a result."
+        )
+        upload = st.file_uploader(
+            "Speech file", type=None, key="live.file", disabled=playing or mic_on, help="WAV, FLAC, OGG, MP3 ..."
+        )
+        if playing:
+            st.caption(f"Playing {player.position_s:.1f} of {player.duration_s:.1f} s")
+        if upload is not None and not playing and not mic_on:
+            if st.button("Play through Live", key="live.file_go", type="primary"):
+                with display.user_errors():
+                    audio, _ = gs.read_speech_upload(upload.name, upload.getvalue())
+                    stage.rearm()
+                    player = ss[PLAYER] = live.FilePlayer(stage, audio, AUDIO_SR)
+                    ss[_FILE_AUDIO] = audio
+                    player.start()
+                    playing = True
+        if playing and _FILE_AUDIO in ss:
+            st.audio(wav_bytes(ss[_FILE_AUDIO]), format="audio/wav", autoplay=True)
+    return playing
+
+
 def finish(stage: live.LiveStage) -> None:
     """Stop: the whole performance becomes the user's synthesis (downloads, Retrieval inspector).
 
@@ -83,8 +137,10 @@ def control_buttons(stage: live.LiveStage) -> None:
         ss[CONTROL] = constraint
         stage.set_control(constraint)
 
-    cols = st.columns(len(live.CONTROLS))
-    for col, (label, constraint) in zip(cols, live.CONTROLS.items()):
+    items = list(live.CONTROLS.items())
+    per_row = 6
+    cols = [c for a in range(0, len(items), per_row) for c in st.columns(per_row)]
+    for col, (label, constraint) in zip(cols, items):
         held = ss.get(CONTROL) == constraint
         col.button(
             label,
@@ -95,7 +151,7 @@ def control_buttons(stage: live.LiveStage) -> None:
         )
 
 
-def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool) -> None:
+def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool, from_file: bool = False) -> None:
     """The body as it is now, the latency, the control buttons and Stop (redrawn every :data:`REFRESH_S`)."""
     session = stage.session
     if session is not None:
@@ -126,6 +182,9 @@ def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool) -> No
             help="speech the synthesis needs beyond a frame before the frame is determined",
         )
         c[2].metric("Compute per step", f"{view.compute_s * 1000:.0f} ms", help="resampling and the latest search")
+    player = st.session_state.get(PLAYER)
+    if from_file and player is not None and not player.playing:
+        st.rerun()  # the file has ended: the whole page runs again and keeps the performance
     if st.button("Stop", type="primary", key="live.stop", disabled=session is None):
         finish(stage)
         st.session_state[_STOPPING] = True  # the next run asks the browser to close the microphone
@@ -164,21 +223,31 @@ def main() -> None:
     ss = st.session_state
     st.caption(
         "Speak into the microphone: the body gestures to your voice as you talk, about a second behind it "
-        "(a step's speech feature looks 0.93 s ahead). Switch the left hand's control while talking; **Stop** "
+        "(a step's speech feature looks 0.93 s ahead). Switch the controls while talking; **Stop** "
         "keeps the whole performance as a result: downloads here, and the Retrieval inspector."
     )
     stage: live.LiveStage = ss.setdefault(STAGE, live.LiveStage())
     stage.control = ss.get(CONTROL)
     stage.configure(lambda control: live.LiveSession(db, config=SynthesisConfig(), name=SOURCE, control=control))
-    ctx = microphone(stage, stopping=bool(ss.pop(_STOPPING, False)))
-    playing = bool(ctx.state.playing)
+    stopping = bool(ss.pop(_STOPPING, False))
+    if stopping and ss.get(PLAYER) is not None:
+        ss[PLAYER].stop()
+    found = microphones_found()
+    ss[_NO_MIC] = found is not None and (not found.get("api") or not found.get("microphones"))
+    if ss[_NO_MIC]:  # say so in the page's words, rather than a Start that fails with the browser's
+        st.warning(no_microphone_words(found), icon=":material/mic_off:")
+        mic_on = False
+    else:
+        mic_on = bool(microphone(stage, stopping=stopping).state.playing)
+    from_file = file_player(stage, mic_on=mic_on)
+    playing = mic_on or from_file
     if not playing:
-        if stage.session is not None:  # the browser's stream was stopped: that is Stop too
+        if stage.session is not None:  # the stream was stopped (the browser's, or the file's end): Stop too
             finish(stage)
         stage.rearm()
 
     def panel() -> None:  # redrawn on its own: errors shown as on the rest of the page (display.run_page)
-        display.run_page(functools.partial(live_panel, db, stage, playing))
+        display.run_page(functools.partial(live_panel, db, stage, playing, from_file))
 
     st.fragment(run_every=REFRESH_S if playing else None)(panel)()
     record = state.current_synthesis(db)
