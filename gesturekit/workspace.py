@@ -80,8 +80,10 @@ def database_folders(*, cwd: str | os.PathLike | None = None) -> dict[str, str]:
 
     The others are the folders holding a ``database.json`` directly inside
     ``<cwd>/db`` and gesturekit's home ``db`` folder (see
-    :func:`gesturekit.paths.home`), sorted by name within each, each labelled
-    ``"<name>  (<where>)"``. The default is listed whether or not it is built yet.
+    :func:`gesturekit.paths.home`), sorted by name within each, each labelled in words, without
+    the server's paths: ``"a database you built: <name>"``, or ``"... (working folder)"`` for one
+    in ``<cwd>/db`` whose name is also in the home folder. The default is listed whether or not it
+    is built yet.
 
     Parameters
     ----------
@@ -89,13 +91,18 @@ def database_folders(*, cwd: str | os.PathLike | None = None) -> dict[str, str]:
         The working directory whose ``db`` folder is searched (default: the current one).
     """
     out = {str(default_database_path().expanduser().resolve()): DEMO_DATABASE_LABEL}
-    for base in (Path.cwd() if cwd is None else Path(cwd)) / "db", home() / "db":
+    found: list[tuple[Path, str]] = []
+    for base, where in ((Path.cwd() if cwd is None else Path(cwd)) / "db", "working folder"), (home() / "db", ""):
         try:
-            found = sorted(p for p in base.iterdir() if (p / "database.json").is_file())
+            found += [(p, where) for p in sorted(base.iterdir()) if (p / "database.json").is_file()]
         except OSError:  # no such folder, or one that cannot be listed: nothing to offer there
             continue
-        for p in found:
-            out.setdefault(str(p.resolve()), f"{p.name}  ({base})")
+    names = [p.name for p, _ in found]
+    for p, where in found:
+        label = f"a database you built: {p.name}"
+        if where and names.count(p.name) > 1:  # the same name in both places: say which one
+            label += f" ({where})"
+        out.setdefault(str(p.resolve()), label)
     return out
 
 

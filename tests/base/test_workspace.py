@@ -92,7 +92,7 @@ def test_expand_speech_refuses_a_folder_without_speech(tmp_path):
 def test_database_folders_lists_the_default_first_then_built_databases(tmp_path, monkeypatch):
     home, cwd = tmp_path / "home", tmp_path / "work"
     monkeypatch.setenv("GESTUREKIT_HOME", str(home))
-    for folder in (home / "db" / "b", home / "db" / "a", cwd / "db" / "mine"):
+    for folder in (home / "db" / "b", home / "db" / "a", cwd / "db" / "mine", cwd / "db" / "a"):
         folder.mkdir(parents=True)
         (folder / "database.json").write_text("{}")
     (home / "db" / "empty").mkdir()  # no database.json: not offered
@@ -100,10 +100,13 @@ def test_database_folders_lists_the_default_first_then_built_databases(tmp_path,
     found = database_folders(cwd=cwd)
     assert list(found.items()) == [
         (str((home / "db" / "demo").resolve()), DEMO_DATABASE_LABEL),
-        (str((cwd / "db" / "mine").resolve()), f"mine  ({cwd / 'db'})"),
-        (str((home / "db" / "a").resolve()), f"a  ({home / 'db'})"),
-        (str((home / "db" / "b").resolve()), f"b  ({home / 'db'})"),
+        (str((cwd / "db" / "a").resolve()), "a database you built: a (working folder)"),
+        (str((cwd / "db" / "mine").resolve()), "a database you built: mine"),
+        (str((home / "db" / "a").resolve()), "a database you built: a"),
+        (str((home / "db" / "b").resolve()), "a database you built: b"),
     ]
+    for label in found.values():  # said in words: no server path in a label
+        assert str(tmp_path) not in label and "/" not in label
     # the home's db folder seen again through the working directory is listed once
     assert list(database_folders(cwd=home)) == [str((home / "db" / n).resolve()) for n in ("demo", "a", "b")]
 

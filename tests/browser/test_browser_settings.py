@@ -275,7 +275,7 @@ def test_the_database_chosen_stays_chosen_on_every_page(served):
         build_demo_database(other, minutes=1.0)
     with app_browser.browser() as page:
         app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
-        _choose_database(page, f"other  ({home / 'db'})")
+        _choose_database(page, "a database you built: other")
         for title in ("Database", "Synthesize", "Live", "Database", "Study stimuli", "Retrieval inspector", "Live"):
             app_browser.go_to(page, title)  # the new page drawn, and the app idle
             sidebar = app_browser.sidebar(page).inner_text()
