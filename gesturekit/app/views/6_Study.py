@@ -60,8 +60,10 @@ def choose_folder() -> Path | None:
         return None
     path = display.allowed(Path(folder.strip()).expanduser(), what="study folder")
     if not (path / "manifest.csv").is_file():
+        # the folder is in the input above: the message says what is wrong without repeating the path
         raise ConfigError(
-            "not a study folder (no manifest.csv): make the stimuli first (Study stimuli page)", path=path
+            "the study folder typed above is not a study yet (no manifest.csv): "
+            "make the stimuli first (Study stimuli page)"
         )
     return path
 
