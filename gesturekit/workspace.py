@@ -35,6 +35,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEMO_DATABASE_LABEL",
+    "database_words",
     "build_database",
     "database_folders",
     "expand_speech",
@@ -104,6 +105,13 @@ def database_folders(*, cwd: str | os.PathLike | None = None) -> dict[str, str]:
             label += f" ({where})"
         out.setdefault(str(p.resolve()), label)
     return out
+
+
+def database_words(folder: str | os.PathLike) -> str:
+    """A database said in words, as :func:`database_folders` labels it, for pages an audience sees
+    (no server path): ``"a database you chose: <name>"`` for one typed in from elsewhere."""
+    path = Path(folder).expanduser().resolve()
+    return database_folders().get(str(path), f"a database you chose: {path.name}")
 
 
 def build_database(

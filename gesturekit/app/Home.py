@@ -16,6 +16,7 @@ import streamlit as st
 
 from gesturekit.app import nav, resources, sidebar
 from gesturekit.app.display import escape_markdown
+from gesturekit.workspace import database_words
 
 
 def home() -> None:
@@ -35,8 +36,10 @@ def home() -> None:
     st.subheader("Open database")
     sidebar.show_database_label(db)
     d = db.describe()
+    said = database_words(d["path"])  # in words: the server's folder is not shown
     st.markdown(
-        f"{escape_markdown(d['path'])}: {d['takes']} takes, {d['clips']} clips of {d['clip_frames']} frames "
+        f"{escape_markdown(said[:1].upper() + said[1:])}: {d['takes']} takes, "
+        f"{d['clips']} clips of {d['clip_frames']} frames "
         f"({d['minutes_in_clips']:.1f} minutes at {d['fps']} fps), "
         f"{'with' if d['has_audio'] else 'without'} audio. Source: {escape_markdown(d['source'] or 'unknown')}."
     )

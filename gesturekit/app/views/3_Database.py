@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import streamlit as st
@@ -13,16 +11,10 @@ from gesturekit.control import ATTRIBUTE_UNITS
 from gesturekit.database import MatchingDatabase
 from gesturekit.motion import AUDIO_SR, Motion
 from gesturekit.viz.figures import attribute_histograms, waveform_figure
-from gesturekit.workspace import database_folders
+from gesturekit.workspace import database_words
 
 CLIP = "db.clip"  # the clip shown in the viewer (per user)
 _LAST_ROW = "_db.last_selected_clip"  # the table selection already applied
-
-
-def _said(folder: str) -> str:
-    """The database in words, as the sidebar lists it (no server path on the page)."""
-    path = Path(folder).expanduser().resolve()
-    return database_folders().get(str(path), f"a database you chose: {path.name}")
 
 
 def summary(db: MatchingDatabase) -> None:
@@ -39,7 +31,7 @@ def summary(db: MatchingDatabase) -> None:
     st.markdown(
         f"**Label:** {display.escape_markdown(d['label'] or '(none)')}  \n"
         f"**Source:** {display.escape_markdown(d['source'] or '(unknown)')}  \n"
-        f"**Database:** {display.escape_markdown(_said(d['path']))}  \n"
+        f"**Database:** {display.escape_markdown(database_words(d['path']))}  \n"
         f"**Clip size:** {d['clip_frames']} frames = {d['clip_frames'] / d['fps']:.2f} s; "
         + ", ".join(f"{k} {v}" for k, v in d["feature_sizes"].items())
         + (f"; {d['overlap_windows']} overlapping windows for the refiner" if d["overlap_windows"] else "")
