@@ -38,7 +38,7 @@ from .motion import AUDIO_SR, Motion
 from .refine import open_refiner
 from .search.explain import query_pose_frame
 from .synthesis import SynthesisConfig, SynthesisResult, synthesize_batch
-from .viz.retrieval import CandidateView
+from .viz.candidate_view import CandidateView
 
 if TYPE_CHECKING:
     from .datasets.audio import AudioInfo

@@ -470,6 +470,9 @@ def write_report(report: AnalysisReport, out: str | Path, *, force: bool = False
     if report.tests is not None:
         figures = [("significance", significance_figure(report)), ("boxplots", boxplot_figure(report))]
     if figures:
+        from .._optional import require
+
+        require("plotly", purpose="the analysis's figures")
         from plotly.offline import get_plotlyjs
 
         files.append(_write_bytes(out / "plotly.min.js", get_plotlyjs().encode(), force))
@@ -575,6 +578,9 @@ def _html(report: AnalysisReport, figures: list[tuple[str, go.Figure]]) -> str:
 
 def _figure_div(fig: go.Figure) -> str:
     """A figure as a div that fills the page's width (plotly.js loaded by the page); ``fig`` is left as it is."""
+    from .._optional import require
+
+    require("plotly", purpose="the analysis's figures")
     import plotly.graph_objects as go
 
     fig = go.Figure(fig)

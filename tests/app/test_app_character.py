@@ -74,7 +74,8 @@ def test_a_character_is_matched_drawn_and_written_until_the_default_is_chosen(ap
     # their bones and mesh, not our 55 joints
     assert m["rig"]["names"] == list(mine.names) and m["scheme"] == "character"
     assert len(skel["times"]) == res.n_frames
-    assert any(c.startswith("Your character: ") and "bones follow ours within" in c for c in captions(at))
+    # one line per view, named as the view is ("k-NN, dead-blended joins: 42 bones follow ours within ...")
+    assert any(c.startswith("k-NN") and ": " in c and "bones follow ours within" in c for c in captions(at))
     downloads = {d.proto.label: d for d in at.get("download_button")}
     assert {"Character GLB", "Its speech (WAV)", "Character BVH"} <= set(downloads)
     made = at.session_state["_gk.character_files"]

@@ -211,7 +211,10 @@ def test_a_database_inside_an_allowed_root_from_the_environment_opens(app_env, o
     monkeypatch.setenv(APP_ROOTS_ENV, os.pathsep.join(["", str(outside)]))
     at = _type_database(AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run(), str(outside / "db"))
     assert not at.exception and not at.error
-    assert any(str((outside / "db").resolve()) in shown(c.value) for c in at.sidebar.caption)
+    # the folder typed is the one opened (the page names it, not its server path) and its clips are counted
+    assert Path(at.session_state["gk.database"]).resolve() == (outside / "db").resolve()
+    captions = " ".join(shown(c.value) for c in at.sidebar.caption)
+    assert " clips" in captions and str(outside) not in captions
 
 
 def _study_page() -> AppTest:

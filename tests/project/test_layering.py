@@ -201,6 +201,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.viz.render",
             "gesturekit.viz.render_pool",
             "gesturekit.viz.render_worker",
+            "gesturekit.viz.candidate_view",
             "gesturekit.viz.retrieval",
             "gesturekit.viz.skeleton_figure",
             "gesturekit.viz.viewer",
