@@ -20,8 +20,17 @@ then a projection to 100 hours from the slope between the two sizes. With
 repeated to T hours on disk (the scan's work does not depend on the clips repeating; the
 decisions do more, as repeated clips tie exactly).
 
+With ``--bounds FOLDER`` it prints, for the first steps of a synthesis on that database, how
+many clips bounds per clip or per block of starts could leave unread without changing the step's
+table (``docs/METHOD.md``, "Exact arithmetic"): a clip may be left unread only when it is known to
+lie after every listed clip in both rankings, so it prints the listed clips' largest pose and audio
+distances and the share of clips that spheres per block of starts place beyond the first, and that
+also the audio, at every start those spheres leave open, places beyond the second (exact minima:
+the best any audio bound could do; and the bound of a cone around each block's audio directions).
+
 Usage: python bench/bench_scale.py --hours 1 [--workers N] [--keep] [--tile-hours 100]
        python bench/bench_scale.py --search-only FOLDER   (the search figures of a database folder)
+       python bench/bench_scale.py --bounds FOLDER [--block 8]   (what skipping clips could save)
 """
 
 from __future__ import annotations
@@ -241,6 +250,87 @@ def search_figures(path: Path, runs: int) -> dict:
     }
 
 
+def bound_figures(path: Path, steps: int = 9, block: int = 8, width: int = 10) -> None:
+    """Print, per step of 12 s of speech, the share of clips that bounds could leave unread.
+
+    A clip left unread must lie after every one of the ``width`` listed clips in both rankings
+    (then the listed clips' ranks do not count it, and its own combined rank exceeds theirs by 2
+    at least). Per block of ``block`` starts: a sphere around the admissible starts' pose features
+    (float64 centre, largest radius) bounds the block's pose distances; the blocks whose lower
+    bound is above the least upper bound of the clip cannot hold its nearest start. The audio
+    distances at the other blocks' starts are taken exactly (the best any audio bound could do)
+    and bounded by a cone around each block's unit audio directions. Every distance is float64.
+    """
+    from gesturekit.database import MatchingDatabase
+    from gesturekit.datasets.synthetic import generate_demo_take
+    from gesturekit.search.admissible import base_starts
+    from gesturekit.synthesis import synthesize
+
+    db = MatchingDatabase.load(path)
+    speech = generate_demo_take(seconds=12.0, seed=7, name="query")[0].audio
+    res = synthesize(speech, db=db)
+    chosen, query = res.search, res.plan.query
+    M, T, D = db.P.shape
+    N = chosen.config.segment
+    nb = T // block
+    adm_all = base_starts(np.asarray(db.valid), N)
+    print(f"bounds of {path}: {M} clips; blocks of {block} starts; {width} listed clips; exact distances in float64")
+    for i in range(1, min(steps + 1, chosen.clip.size)):
+        p = np.asarray(db.P[chosen.clip[i - 1], chosen.start[i - 1] + N - 1], np.float64)
+        f = np.asarray(query[i * N], np.float64)
+        f /= np.linalg.norm(f)
+        d_near, a_near = np.full(M, np.inf), np.full(M, np.inf)
+        pose_lb, audio_open, audio_cone = np.full(M, np.inf), np.full(M, np.inf), np.full(M, np.inf)
+        for c0 in range(0, M, 2048):
+            c1 = min(M, c0 + 2048)
+            P = np.asarray(db.P[c0:c1], np.float64)
+            U = np.asarray(db.F[c0:c1], np.float64)
+            U /= np.maximum(np.linalg.norm(U, axis=-1, keepdims=True), 1e-300)
+            adm = adm_all[c0:c1]
+            d2 = ((P - p) ** 2).sum(-1)
+            d2[~adm | (d2 == 0)] = np.inf
+            cos = 1.0 - U @ f
+            s = d2.argmin(1)
+            rows = np.arange(c1 - c0)
+            d_near[c0:c1] = d2[rows, s]
+            a_near[c0:c1] = np.where(np.isfinite(d_near[c0:c1]), cos[rows, s], np.inf)
+            ab = adm[:, : nb * block].reshape(-1, nb, block)
+            cnt = ab.sum(-1)
+            Pb = P[:, : nb * block].reshape(-1, nb, block, D)
+            cen = (Pb * ab[..., None]).sum(2) / np.maximum(cnt, 1)[..., None]
+            rad = np.sqrt((((Pb - cen[:, :, None]) ** 2).sum(-1) * ab).max(-1))
+            dc = np.sqrt(((cen - p) ** 2).sum(-1))
+            lb = np.where(cnt > 0, np.maximum(dc - rad, 0.0) ** 2, np.inf)
+            ub = np.where(cnt > 0, (dc + rad) ** 2, np.inf)
+            open_ = lb <= ub.min(1, keepdims=True)
+            pose_lb[c0:c1] = np.where(open_, lb, np.inf).min(1)
+            cb = np.where(adm, cos, np.inf)[:, : nb * block].reshape(-1, nb, block).min(-1)
+            audio_open[c0:c1] = np.where(open_, cb, np.inf).min(1)
+            Ub = U[:, : nb * block].reshape(-1, nb, block, U.shape[-1])
+            axis = (Ub * ab[..., None]).sum(2)
+            axis /= np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-300)
+            half = np.arccos(np.clip(np.where(ab, (Ub * axis[:, :, None]).sum(-1), 1.0).min(-1), -1, 1))
+            gap = np.arccos(np.clip(axis @ f, -1, 1))
+            audio_cone[c0:c1] = np.where(open_, 1.0 - np.cos(np.maximum(gap - half, 0.0)), np.inf).min(1)
+        idx = np.flatnonzero(np.isfinite(d_near))
+        d, a = d_near[idx], a_near[idx]
+        pose_rank = np.empty(idx.size, np.int64)
+        pose_rank[np.lexsort((idx, d))] = np.arange(idx.size)
+        audio_rank = np.empty(idx.size, np.int64)
+        audio_rank[np.lexsort((idx, a))] = np.arange(idx.size)
+        listed = np.lexsort((idx, pose_rank + audio_rank))[:width]
+        d_top, a_top = d[listed].max(), a[listed].max()
+        far = pose_lb[idx] > d_top
+        shares = [np.mean(d > d_top), far.mean(), np.mean(far & (a > a_top))]
+        shares += [np.mean(far & (audio_open[idx] > a_top)), np.mean(far & (audio_cone[idx] > a_top))]
+        print(
+            f"  step {i}: {idx.size} clips; listed ranks up to {pose_rank[listed].max()} (pose), "
+            f"{audio_rank[listed].max()} (audio); clips beyond the listed: by pose at the nearest start "
+            "{:.1%}, by the block spheres {:.1%}, and by audio at the nearest start {:.1%}, "
+            "at every open start {:.1%}, by the cones {:.1%}".format(*shares)
+        )
+
+
 def tile(src: Path, dst: Path, hours: float) -> Path:
     """``src`` (without its audio and overlapping cut) repeated to at least ``hours`` of clips at ``dst``."""
     from gesturekit.database.folder import CLIP_ARRAYS
@@ -341,7 +431,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--keep", action="store_true", help="keep the takes and databases (the folder is printed)")
     ap.add_argument("--dir", help="where to make the temporary folder (default: the system's)")
     ap.add_argument("--search-only", metavar="FOLDER", help="only the search figures of this database folder")
+    ap.add_argument("--bounds", metavar="FOLDER", help="only what bounds could leave unread in this database")
+    ap.add_argument("--block", type=int, default=8, help="starts per block for --bounds")
     args = ap.parse_args(argv)
+    if args.bounds:
+        print(machine())
+        bound_figures(Path(args.bounds), block=args.block)
+        return
     if args.search_only:
         print(machine())
         print_search(f"search of {args.search_only}", search_figures(Path(args.search_only), args.runs))
