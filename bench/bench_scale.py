@@ -23,7 +23,7 @@ decisions do more, as repeated clips tie exactly).
 With ``--bounds FOLDER`` it prints, for the first steps of a synthesis on that database, how
 many clips bounds per clip or per block of starts could leave unread without changing the step's
 table (``docs/METHOD.md``, "Exact arithmetic"): a clip may be left unread only when it is known to
-lie after every listed clip in both rankings, so it prints the listed clips' largest pose and audio
+lie after every listed clip in both rankings, so it prints the deciding clips' largest pose and audio
 distances and the share of clips that spheres per block of starts place beyond the first, and that
 also the audio, at every start those spheres leave open, places beyond the second (exact minima:
 the best any audio bound could do; and the bound of a cone around each block's audio directions).
@@ -253,11 +253,14 @@ def search_figures(path: Path, runs: int) -> dict:
 def bound_figures(path: Path, steps: int = 9, block: int = 8, width: int = 10) -> None:
     """Print, per step of 12 s of speech, the share of clips that bounds could leave unread.
 
-    A clip left unread must lie after every one of the ``width`` listed clips in both rankings
-    (then the listed clips' ranks do not count it, and its own combined rank exceeds theirs by 2
-    at least). Per block of ``block`` starts: a sphere around the admissible starts' pose features
-    (float64 centre, largest radius) bounds the block's pose distances; the blocks whose lower
-    bound is above the least upper bound of the clip cannot hold its nearest start. The audio
+    A clip left unread must lie after every deciding clip (combined rank at most the table's
+    last, ``width`` rows) in both rankings: then their ranks do not count it, and its own
+    combined rank exceeds theirs by 2 at least (tests/search/test_skip_rule.py). The figures
+    are what the rule allows with the deciding clips known: an upper bound on what a search that
+    must first find them could leave unread. Per block of ``block`` starts: a sphere around the
+    admissible starts' pose features (float64 centre, largest radius) bounds the block's pose
+    distances; the blocks whose lower bound is above the least upper bound of the clip cannot
+    hold its nearest start. The audio
     distances at the other blocks' starts are taken exactly (the best any audio bound could do)
     and bounded by a cone around each block's unit audio directions. Every distance is float64.
     """
@@ -274,7 +277,7 @@ def bound_figures(path: Path, steps: int = 9, block: int = 8, width: int = 10) -
     N = chosen.config.segment
     nb = T // block
     adm_all = base_starts(np.asarray(db.valid), N)
-    print(f"bounds of {path}: {M} clips; blocks of {block} starts; {width} listed clips; exact distances in float64")
+    print(f"bounds of {path}: {M} clips; blocks of {block} starts; {width} rows listed; exact distances in float64")
     for i in range(1, min(steps + 1, chosen.clip.size)):
         p = np.asarray(db.P[chosen.clip[i - 1], chosen.start[i - 1] + N - 1], np.float64)
         f = np.asarray(query[i * N], np.float64)
@@ -318,14 +321,16 @@ def bound_figures(path: Path, steps: int = 9, block: int = 8, width: int = 10) -
         pose_rank[np.lexsort((idx, d))] = np.arange(idx.size)
         audio_rank = np.empty(idx.size, np.int64)
         audio_rank[np.lexsort((idx, a))] = np.arange(idx.size)
-        listed = np.lexsort((idx, pose_rank + audio_rank))[:width]
+        combined = pose_rank + audio_rank
+        # the deciding clips: combined rank at most the table's last (ties included)
+        listed = np.flatnonzero(combined <= np.sort(combined)[min(width, idx.size) - 1])
         d_top, a_top = d[listed].max(), a[listed].max()
         far = pose_lb[idx] > d_top
         shares = [np.mean(d > d_top), far.mean(), np.mean(far & (a > a_top))]
         shares += [np.mean(far & (audio_open[idx] > a_top)), np.mean(far & (audio_cone[idx] > a_top))]
         print(
-            f"  step {i}: {idx.size} clips; listed ranks up to {pose_rank[listed].max()} (pose), "
-            f"{audio_rank[listed].max()} (audio); clips beyond the listed: by pose at the nearest start "
+            f"  step {i}: {idx.size} clips; deciding ranks up to {pose_rank[listed].max()} (pose), "
+            f"{audio_rank[listed].max()} (audio); clips beyond the deciding ones: by pose at the nearest start "
             "{:.1%}, by the block spheres {:.1%}, and by audio at the nearest start {:.1%}, "
             "at every open start {:.1%}, by the cones {:.1%}".format(*shares)
         )
