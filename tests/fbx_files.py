@@ -30,7 +30,17 @@ import numpy as np
 
 from tests.character_rigs import RigSpec, _bones, _png, _tubes
 
-__all__ = ["FbxSpec", "fbx_ascii_61", "fbx_binary", "fbx_texture", "fbx_scene", "FbxScene", "node_bytes"]
+__all__ = [
+    "RawProperty",
+    "ObjectId",
+    "FbxSpec",
+    "fbx_ascii_61",
+    "fbx_binary",
+    "fbx_texture",
+    "fbx_scene",
+    "FbxScene",
+    "node_bytes",
+]
 
 # the sub-rotations the writers give some bones (degrees, X then Y then Z): PreRotation, Lcl Rotation, PostRotation
 _TURNS = {
@@ -366,10 +376,19 @@ class _L(int):
     """An FBX 64-bit integer property (object ids)."""
 
 
+ObjectId = _L
+
+
+class RawProperty(bytes):
+    """A property written as these bytes, type code included (for a header that lies about its data)."""
+
+
 Node = tuple[str, list[Any], list[Any]]
 
 
 def _property(v: Any, compress: bool) -> bytes:
+    if isinstance(v, RawProperty):
+        return bytes(v)
     if isinstance(v, _L):
         return b"L" + struct.pack("<q", int(v))
     if isinstance(v, bool):

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import ConfigError, InputFileError, MissingDependencyError, warn
 from ..limits import check_bytes, check_npz, max_input_bytes
-from ._user_gltf import MAX_TEXTURE_PIXELS, MAX_VERTICES, _check_references, _check_transforms, _skeleton
+from ._user_gltf import MAX_TEXTURE_PIXELS, MAX_VERTICES, _check_linear, _check_references, _check_transforms, _skeleton
 from .glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UINT, GlbBuffer
 from .target import FileSkeleton
 
@@ -173,6 +173,8 @@ def _document(path: Path, data: dict[str, np.ndarray]) -> tuple[dict[str, Any], 
         raise InputFileError("it holds no nodes (no skeleton, no mesh)", path=path)
     gl = {i: k for k, i in enumerate(keep)}  # FBX node -> glTF node
     world_gl = np.einsum("ab,nbc,cd->nad", c, world, c_inv)
+    for i in keep:  # a node scaled to nothing (or mirrored, or absurdly) before any matrix of it is inverted
+        _check_linear(world_gl[i, :3, :3], f"node {names[i]!r}", path)
     nodes: list[dict[str, Any]] = []
     for i in keep:
         p = int(parents[i])
