@@ -17,7 +17,8 @@ the body and its colours, the GLB written from a motion and everything downstrea
   cluster's inverse bind matrix is ``C G inv(B) inv(C)`` (``G`` its geometry-to-bone matrix, ``B`` the mesh's
   geometry-to-world at bind), the mesh's vertices ``C B v``;
 - polygons cut into triangles as fans from their first corner (what FBX characters hold are triangles and
-  convex quads); a vertex per distinct (position, UV, normal) of a corner; the 4 largest weights of each vertex;
+  convex quads); one primitive per material, with a vertex per distinct (position, UV, normal) of its corners;
+  the 4 largest weights of each vertex;
 - a material's base colour is its texture when it has one (embedded in the file, or a file of the name it gives
   beside the FBX or in its ``NAME.fbm`` folder), else its ``DiffuseColor`` times ``DiffuseFactor`` (read as sRGB).
 """
@@ -42,7 +43,7 @@ from ._user_gltf import MAX_TEXTURE_PIXELS, MAX_VERTICES, _check_linear, _check_
 from .glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UINT, GlbBuffer
 from .target import FileSkeleton
 
-__all__ = ["read_fbx_skeleton", "FBX_PACKAGE", "READ_TIMEOUT_S"]
+__all__ = ["read_fbx_skeleton", "fans", "FBX_PACKAGE", "READ_TIMEOUT_S"]
 
 #: The package that reads FBX (``pip install ufbx``).
 FBX_PACKAGE = "ufbx"
@@ -206,17 +207,20 @@ def _document(path: Path, data: dict[str, np.ndarray]) -> tuple[dict[str, Any], 
         if mesh is None:
             continue
         primitives = []
-        attributes = {
-            "POSITION": buf.add(mesh["vertices"].astype(np.float32), "VEC3", FLOAT, target=ARRAY_BUFFER, bounds=True),
-            "NORMAL": buf.add(mesh["normals"].astype(np.float32), "VEC3", FLOAT, target=ARRAY_BUFFER),
-        }
-        if "uv" in mesh:
-            attributes["TEXCOORD_0"] = buf.add(mesh["uv"].astype(np.float32), "VEC2", FLOAT, target=ARRAY_BUFFER)
-        if "joints" in mesh:
-            attributes["JOINTS_0"] = buf.add(mesh["joints"].astype(np.uint16), "VEC4", _USHORT, target=ARRAY_BUFFER)
-            attributes["WEIGHTS_0"] = buf.add(mesh["weights"].astype(np.float32), "VEC4", FLOAT, target=ARRAY_BUFFER)
         for material, faces in mesh["parts"]:
-            index = buf.add(faces.astype(np.uint32).reshape(-1), "SCALAR", UINT, target=ELEMENT_ARRAY_BUFFER)
+            # each material's own vertices (a glTF reader reads every primitive's attributes in full)
+            used, local = np.unique(faces.reshape(-1), return_inverse=True)
+            attributes = {
+                "POSITION": buf.add(_f32(mesh["vertices"][used]), "VEC3", FLOAT, target=ARRAY_BUFFER, bounds=True),
+                "NORMAL": buf.add(_f32(mesh["normals"][used]), "VEC3", FLOAT, target=ARRAY_BUFFER),
+            }
+            if "uv" in mesh:
+                attributes["TEXCOORD_0"] = buf.add(_f32(mesh["uv"][used]), "VEC2", FLOAT, target=ARRAY_BUFFER)
+            if "joints" in mesh:
+                joints = mesh["joints"][used].astype(np.uint16)
+                attributes["JOINTS_0"] = buf.add(joints, "VEC4", _USHORT, target=ARRAY_BUFFER)
+                attributes["WEIGHTS_0"] = buf.add(_f32(mesh["weights"][used]), "VEC4", FLOAT, target=ARRAY_BUFFER)
+            index = buf.add(local.astype(np.uint32), "SCALAR", UINT, target=ELEMENT_ARRAY_BUFFER)
             prim: dict[str, Any] = {"attributes": attributes, "indices": index}
             if material >= 0:
                 prim["material"] = material
@@ -252,6 +256,10 @@ def _document(path: Path, data: dict[str, np.ndarray]) -> tuple[dict[str, Any], 
     doc["accessors"] = buf.accessors
     doc["buffers"] = [{"byteLength": len(buf.data)}] if buf.data else []
     return doc, bytes(buf.data)
+
+
+def _f32(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float32)
 
 
 def _linear(c: np.ndarray) -> np.ndarray:
@@ -369,13 +377,8 @@ def _mesh(
         raise InputFileError(
             f"a body of more than {MAX_VERTICES} vertices; decimate it in the modelling tool", path=path
         )
-    # fans from each polygon's first corner
-    tri_face = np.repeat(np.arange(len(faces)), np.maximum(count - 2, 0))
-    step = np.arange(len(tri_face)) - np.repeat(
-        np.cumsum(np.maximum(count - 2, 0)) - np.maximum(count - 2, 0), np.maximum(count - 2, 0)
-    )
-    first = begin[tri_face]
-    triangles = corner_vertex[np.stack([first, first + step + 1, first + step + 2], axis=1)]
+    tri_face, tri_corners = fans(begin, count)
+    triangles = corner_vertex[tri_corners]
     out: dict[str, Any] = {}
     source = unique[:, 0]
     v = np.c_[positions[source], np.ones(len(source))]
@@ -418,6 +421,28 @@ def _mesh(
         parts.append((material, triangles[tri_material == m]))
     out["parts"] = parts
     return out
+
+
+def fans(begin: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Polygons cut into triangle fans from their first corner.
+
+    Parameters
+    ----------
+    begin, count : np.ndarray, shape (F,), int
+        Each polygon's first corner and number of corners (a polygon of fewer than 3 gives no triangle).
+
+    Returns
+    -------
+    face : np.ndarray, shape (T,), int64
+        The polygon of each triangle, in order.
+    corners : np.ndarray, shape (T, 3), int64
+        Its corners: ``begin, begin + i + 1, begin + i + 2`` for its ``i``-th triangle.
+    """
+    n = np.maximum(np.asarray(count, dtype=np.int64) - 2, 0)
+    face = np.repeat(np.arange(len(n)), n)
+    step = np.arange(len(face)) - np.repeat(np.cumsum(n) - n, n)
+    first = np.asarray(begin, dtype=np.int64)[face]
+    return face, np.stack([first, first + step + 1, first + step + 2], axis=1)
 
 
 def _fbx(gl: dict[int, int], node: int) -> int:

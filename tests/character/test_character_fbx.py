@@ -14,7 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from gesturekit.character._user_fbx import fans
 from gesturekit.character.glb import node_matrices
 from gesturekit.character.user import read_character
 from gesturekit.errors import ConfigError, InputFileError
@@ -68,7 +71,9 @@ def test_an_fbx_character_reads_as_its_rig(tmp_path, case):
         assert ch.names[ch.bone(joint)] == bone, joint
     # the body: every vertex where the generated tube has it, finite, with weights summing to 1
     skin = ch.skin
-    assert skin is not None and skin.n_vertices > 0 and len(skin.faces) == 2 * len(fbx_scene(spec).polygons)
+    scene = fbx_scene(spec)
+    assert skin is not None and len(skin.faces) == 2 * len(scene.polygons)  # each quad in two triangles
+    assert skin.n_vertices == len(scene.vertices)  # one vertex per position (its UV and normal are one)
     assert np.isfinite(skin.vertices).all() and np.isfinite(skin.normals).all()
     tube = _tubes(_bones(spec.rig), spec.rig)[0].astype(np.float64)
     gap = np.linalg.norm(skin.vertices[:, None, :] - tube[None, :, :], axis=-1).min(axis=1)
@@ -109,9 +114,15 @@ def test_the_z_up_file_reads_as_the_y_up_one(tmp_path):
 def test_the_unit_is_the_files_and_a_hundredfold_error_is_undone(tmp_path, unit, declared, note):
     """``UnitScaleFactor`` gives the unit (Mixamo: centimetres); a file whose numbers are metres but which says
     centimetres (1/100 of its size, as some converters write) is scaled back and says so."""
-    ch = read_character(_write(tmp_path, FbxSpec(unit=unit, declared=declared)))
+    path = _write(tmp_path, FbxSpec(unit=unit, declared=declared))
+    if note:
+        with pytest.warns(UserWarning, match=note):
+            ch = read_character(path)
+        assert note in " ".join(ch.notes)
+    else:
+        ch = read_character(path)
+        assert ch.notes == ()
     assert abs(ch.rest_position[:, 1].max() - 1.75) < 1e-6
-    assert (note in " ".join(ch.notes)) if note else ch.notes == ()
 
 
 def test_a_missing_texture_is_drawn_in_its_plain_colour_with_a_warning(tmp_path):
@@ -121,6 +132,28 @@ def test_a_missing_texture_is_drawn_in_its_plain_colour_with_a_warning(tmp_path)
     with pytest.warns(UserWarning, match="gone.png"):
         ch = read_character(path)
     assert ch.skin is not None and np.isfinite(ch.skin.colors).all()
+
+
+@settings(max_examples=60)
+@given(st.lists(st.integers(0, 7), max_size=30))
+def test_fans_equal_the_plain_loop(counts):
+    """The vectorised fans are the polygon-by-polygon loop's triangles, in its order."""
+    count = np.array(counts, dtype=np.int64)
+    begin = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64) if len(count) else count
+    face, corners = fans(begin, count)
+    want = [(f, (b, b + i + 1, b + i + 2)) for f, (b, c) in enumerate(zip(begin, count)) for i in range(c - 2)]
+    assert face.tolist() == [w[0] for w in want]
+    assert corners.reshape(-1, 3).tolist() == [list(w[1]) for w in want]
+
+
+def test_an_uploaded_fbx_reads_with_its_embedded_texture(tmp_path):
+    """The app's upload: only the file itself, so its texture is the embedded one."""
+    from gesturekit.character.user import read_character_upload
+
+    data = fbx_binary(FbxSpec(texture="embedded"))
+    ch = read_character_upload("my hero.fbx", data)
+    assert ch.path == Path("my hero.fbx") and ch.kind == "fbx"
+    assert (np.round(ch.skin.colors * 255) == (255, 0, 0)).all(axis=1).any()  # the texture's red corner
 
 
 # ----------------------------------------------------------------------------- bad files
