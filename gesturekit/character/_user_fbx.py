@@ -106,15 +106,19 @@ def _run_reader(path: Path) -> dict[str, np.ndarray]:
             f"reading an FBX character needs the {FBX_PACKAGE} package: pip install {FBX_PACKAGE}", path=path
         )
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    # this very gesturekit in the child, run in a temporary folder (so no other checkout's is found first)
+    home = os.fspath(Path(__file__).resolve().parents[2])
+    start = f"import sys; sys.path.insert(0, {home!r}); from gesturekit.character._fbx_read import main; main()"
     with tempfile.TemporaryDirectory(prefix="gesturekit-fbx-") as tmp:
         out = Path(tmp) / "scene.npz"
         try:
             run = subprocess.run(
-                [sys.executable, "-m", "gesturekit.character._fbx_read", os.fspath(path.resolve()), os.fspath(out)],
+                [sys.executable, "-c", start, os.fspath(path.resolve()), os.fspath(out)],
                 capture_output=True,
                 env=env,
                 timeout=READ_TIMEOUT_S,
                 preexec_fn=_limit_memory if os.name == "posix" else None,
+                cwd=tmp,
                 check=False,
             )
         except subprocess.TimeoutExpired:

@@ -208,6 +208,20 @@ def test_a_bad_fbx_is_refused_naming_the_file(tmp_path, case):
     print(case, e.value)
 
 
+@pytest.mark.skipif(__import__("os").name != "posix", reason="the reader's memory limit is set on POSIX")
+def test_a_reader_that_runs_out_of_memory_is_a_clean_error(tmp_path, monkeypatch):
+    """The FBX reader runs under a memory limit in its own process: when it dies, the caller does not."""
+    import gesturekit.character._user_fbx as user_fbx
+
+    path = _write(tmp_path, _PLAIN)
+    monkeypatch.setattr(user_fbx, "_memory_limit", lambda: 40_000_000)  # too little for Python and numpy
+    with pytest.raises(InputFileError) as e:
+        read_character(path)
+    assert str(path) in str(e.value) and "FBX reader" in str(e.value), str(e.value)
+    monkeypatch.undo()
+    assert read_character(path).kind == "fbx"
+
+
 @pytest.mark.slow
 def test_the_command_line_refuses_a_bad_fbx_in_one_line_and_writes_nothing(tmp_path):
     from tests.export.test_export_bvh_report import _cli_world
