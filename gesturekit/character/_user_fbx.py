@@ -125,7 +125,13 @@ def _run_reader(path: Path) -> dict[str, np.ndarray]:
             raise InputFileError(f"reading it took more than {READ_TIMEOUT_S:.0f} s", path=path) from None
         message = run.stderr.decode("utf-8", "replace").strip().splitlines()
         if run.returncode == 3:
-            said = message[-1] if message else "no reason given"
+            said = message[-1][:300] if message else "no reason given"
+            if "OutOfMemory" in said or "MemoryLimit" in said:
+                raise InputFileError(
+                    f"reading it needs more than the {_memory_limit() / 1e9:.1f} GB of memory allowed "
+                    f"({FBX_PACKAGE}: {said}); GESTUREKIT_MAX_INPUT_GB raises the limit",
+                    path=path,
+                )
             raise InputFileError(f"not an FBX file the FBX reader ({FBX_PACKAGE}) can read: {said}", path=path)
         if run.returncode != 0 or not out.is_file():
             why = (
@@ -133,8 +139,10 @@ def _run_reader(path: Path) -> dict[str, np.ndarray]:
                 if run.returncode < 0 and -run.returncode in signal.valid_signals()
                 else f"exit status {run.returncode}"
             )
-            if any("MemoryError" in m for m in message):
-                why = f"more than {_memory_limit() / 1e9:.1f} GB of memory"
+            if any("memory" in m.lower() for m in message):
+                why = f"it needs more than the {_memory_limit() / 1e9:.1f} GB of memory allowed"
+            elif message:
+                why += f": {message[-1][:200]}"
             raise InputFileError(f"the FBX reader ({FBX_PACKAGE}) stopped on it ({why})", path=path)
         check_npz(out, max_bytes=max_input_bytes(), what="the FBX reader's arrays", owner=path)
         with np.load(out, allow_pickle=False) as z:
