@@ -78,6 +78,8 @@ class FbxSpec:
     texture : str
         ``"file"`` (a PNG beside the FBX, named by ``RelativeFilename``), ``"embedded"`` (the PNG in the Video's
         ``Content``; binary only) or ``"none"``.
+    armature : bool
+        Binary only: the bones and the mesh under a null ``Armature`` (:data:`ARMATURE`), as Blender exports.
     """
 
     rig: RigSpec = field(default_factory=RigSpec)
@@ -86,6 +88,12 @@ class FbxSpec:
     up: str = "y"
     turns: bool = True
     texture: str = "file"
+    armature: bool = False
+
+
+#: The ``Armature`` null of a Blender export (``FbxSpec.armature``): turned -90 degrees about X, scaled 100;
+#: the root bone undoes both, the mesh is its child.
+ARMATURE = ((-90.0, 0.0, 0.0), 100.0)
 
 
 @dataclass
@@ -107,6 +115,8 @@ class FbxScene:
     texel: np.ndarray  # (8, 8, 3) uint8, the PNG's pixels, top row first
     settings: tuple[int, ...]
     unit_scale_factor: float
+    scaling: np.ndarray  # (M,) each bone's Lcl Scaling (uniform)
+    armature: np.ndarray | None  # (4, 4) the Armature null's world matrix; the mesh's world at bind
 
 
 def _euler(deg: tuple[float, ...]) -> np.ndarray:
@@ -172,23 +182,28 @@ def fbx_scene(spec: FbxSpec) -> FbxScene:
     fbx_uv = uv.astype(np.float64).copy()
     fbx_uv[:, 1] = 1.0 - fbx_uv[:, 1]  # glTF's V runs down from the top, FBX's up from the bottom
     declared = spec.unit * 100.0 if spec.declared is None else spec.declared
+    scaling = np.ones(len(bones))
+    armature = None
+    if spec.armature:
+        from scipy.spatial.transform import Rotation
+
+        turn, size = ARMATURE
+        armature = np.eye(4)
+        armature[:3, :3] = _euler(turn) * size
+        inv = np.linalg.inv(armature)
+        for i in range(len(bones)):
+            if parents[i] < 0:  # the root bone undoes the armature's turn and scale: its world stays as it was
+                local = inv @ world[i]
+                translation[i] = local[:3, 3]
+                scaling[i] = 1.0 / size
+                pre = Rotation.from_matrix(local[:3, :3] * size).as_euler("xyz", degrees=True)
+                turns[i] = (tuple(pre), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        vertices = vertices @ inv[:3, :3].T + inv[:3, 3]
+        normals = normals @ _euler(turn)
     return FbxScene(
-        names,
-        parents,
-        translation,
-        turns,
-        world,
-        vertices,
-        normals,
-        fbx_uv,
-        polygons,
-        material,
-        clusters,
-        png,
-        texel,
-        settings,
-        declared,
-    )
+        names, parents, translation, turns, world, vertices, normals, fbx_uv, polygons, material, clusters, png,
+        texel, settings, declared, scaling, armature,
+    )  # fmt: skip
 
 
 def _polygon_index(polygons: list[list[int]]) -> list[int]:
@@ -439,6 +454,16 @@ def fbx_binary(spec: FbxSpec, *, version: int = 7400, compress: bool = True, tex
     objects: list[Node] = []
     links: list[Node] = []
     ids = {name: _L(1000 + i) for i, name in enumerate(s.names)}
+    top_id = _L(0)
+    if s.armature is not None:
+        top_id = _L(10)
+        turn, size = ARMATURE
+        null = _p70(
+            ("Lcl Rotation", "Lcl Rotation", "", "A", *map(float, turn)),
+            ("Lcl Scaling", "Lcl Scaling", "", "A", *[float(size)] * 3),
+        )
+        objects.append(("Model", [top_id, "Armature\x00\x01Model", "Null"], [("Version", [232], []), null]))
+        links.append(("C", ["OO", top_id, _L(0)], []))
     for i, name in enumerate(s.names):
         pre, lcl, post = s.turns[i]
         attr = _L(5000 + i)
@@ -457,12 +482,13 @@ def fbx_binary(spec: FbxSpec, *, version: int = 7400, compress: bool = True, tex
                         ("PostRotation", "Vector3D", "Vector", "", *map(float, post)),
                         ("Lcl Translation", "Lcl Translation", "", "A", *map(float, s.translation[i])),
                         ("Lcl Rotation", "Lcl Rotation", "", "A", *map(float, lcl)),
+                        ("Lcl Scaling", "Lcl Scaling", "", "A", *[float(s.scaling[i])] * 3),
                     ),
                 ],
             )
         )
         links.append(("C", ["OO", attr, ids[name]], []))
-        parent = _L(0) if s.parents[i] < 0 else ids[s.names[s.parents[i]]]
+        parent = top_id if s.parents[i] < 0 else ids[s.names[s.parents[i]]]
         links.append(("C", ["OO", ids[name], parent], []))
     corners = np.array(_polygon_index(s.polygons), dtype=np.int32)
     uv_index = np.where(corners >= 0, corners, -corners - 1).astype(np.int32)
@@ -518,7 +544,7 @@ def fbx_binary(spec: FbxSpec, *, version: int = 7400, compress: bool = True, tex
         )
     )
     objects.append(("Model", [mesh, "Body\x00\x01Model", "Mesh"], [("Version", [232], [])]))
-    links += [("C", ["OO", mesh, _L(0)], []), ("C", ["OO", geom, mesh], [])]
+    links += [("C", ["OO", mesh, top_id], []), ("C", ["OO", geom, mesh], [])]
     for k, (name, color) in enumerate((("skin", (0.87, 0.68, 0.57)), ("cloth", (0.25, 0.35, 0.6)))):
         material = _L(30 + k)
         objects.append(
@@ -569,6 +595,7 @@ def fbx_binary(spec: FbxSpec, *, version: int = 7400, compress: bool = True, tex
         )
     )
     links.append(("C", ["OO", skin, geom], []))
+    mesh_world = np.eye(4) if s.armature is None else s.armature
     for b, (idx, w) in s.clusters.items():
         cluster = _L(3000 + b)
         objects.append(
@@ -580,7 +607,7 @@ def fbx_binary(spec: FbxSpec, *, version: int = 7400, compress: bool = True, tex
                     ("UserData", ["", ""], []),
                     ("Indexes", [idx.astype(np.int32)], []),
                     ("Weights", [w], []),
-                    ("Transform", [np.array(_matrix(np.linalg.inv(s.world[b])))], []),
+                    ("Transform", [np.array(_matrix(np.linalg.inv(s.world[b]) @ mesh_world))], []),
                     ("TransformLink", [np.array(_matrix(s.world[b]))], []),
                 ],
             )

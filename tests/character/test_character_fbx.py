@@ -41,6 +41,7 @@ FILES = {
     "ascii_61_cm_file_texture": (FbxSpec(), "ascii", 0),
     "binary_7400_z_up_embedded": (FbxSpec(up="z", texture="embedded"), "binary", 7400),
     "binary_7500_uncompressed": (FbxSpec(), "binary-raw", 7500),
+    "binary_7400_blender_armature": (FbxSpec(armature=True, texture="embedded"), "binary", 7400),
 }
 
 
