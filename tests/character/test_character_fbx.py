@@ -92,6 +92,7 @@ def test_an_fbx_character_reads_as_its_rig(tmp_path, case):
     assert (colours == (255, 0, 0)).all(axis=1).any()
 
 
+@pytest.mark.slow
 def test_the_z_up_file_reads_as_the_y_up_one(tmp_path):
     """The axis system is the file's: the same character written Z up (3ds Max's axes) reads the same."""
     y = read_character(_write(tmp_path, FbxSpec(), name="y.fbx"))
