@@ -1,9 +1,9 @@
 """What a search step must know of a clip it does not read (docs/METHOD.md, "Exact arithmetic").
 
-The rule stated there: a clip that lies after every listed clip of the step's table in both
-rankings (pose distance above the largest listed one, audio distance above the largest listed
-one) changes neither the listed clips, nor their ranks, nor the choice, so it may be left unread;
-a clip after them in one ranking only may not. These tests hold the rule against
+The rule stated there: a clip whose lower bounds place it after every deciding clip of those
+read (combined rank, counted over the clips read, at most the table's last) in both rankings
+changes neither the listed clips, nor their ranks, nor the choice, so it may be left unread;
+being after the listed clips only is not enough. These tests hold the rule against
 :func:`gesturekit.search.reference.search_reference` on the adversarial databases of
 ``test_search.py`` (exact ties, duplicated clips, zero audio vectors, controls, exclusions, k > 0).
 """
