@@ -109,7 +109,7 @@ FIELD_OF_VIEW = 30.0
 
 #: How much of the framed box's half-depth :func:`camera_for` keeps in front of the plane it fits: 1 fits the
 #: box's front face (a presenter far back behind hands that rarely come forward), 0 its middle.
-DEPTH_SHARE = 0.5
+DEPTH_SHARE = 0.25
 
 #: From the framed box's centre towards the camera: in front, a little above.
 VIEW_DIRECTION = (0.0, 0.12, 1.0)
@@ -193,6 +193,10 @@ BODY_MARGIN = 0.14
 #: Metres the framed box keeps around every joint: the arms' and the head's thickness.
 FRAME_MARGIN = 0.07
 
+#: Metres the framed box keeps below the lowest joint of every frame with :data:`UPPER_BODY`: a hanging hand's
+#: lowest joint is a fingertip (or a wrist, where the data hold no fingers), the hand's surface a little beyond it.
+HAND_MARGIN = 0.03
+
 #: The framings of :func:`stage_layout`: the presenter's upper body (and whatever the hands reach), or the
 #: whole body down to the floor.
 UPPER_BODY, FULL_BODY = "upper body", "full body"
@@ -222,8 +226,9 @@ def stage_layout(
     character's reach over :data:`REACH_QUANTILE` of the shown frames (each frame's leftmost, rightmost,
     highest, nearest and farthest drawn joint; a rare gesture beyond it may leave the picture)
     plus :data:`FRAME_MARGIN`; with :data:`UPPER_BODY` down from there to the pelvis (``waist``) and
-    :data:`BELOW_WAIST` of that height below it (the hips), with :data:`FULL_BODY` down to the floor and
-    every joint of every frame.
+    :data:`BELOW_WAIST` of that height below it (the hips), or lower where a hand hangs lower in any frame (the
+    lowest drawn joint of every frame and :data:`HAND_MARGIN`: hands are never cut), with :data:`FULL_BODY`
+    down to the floor and every joint of every frame.
     A camera (:func:`camera_for`) fitted to it makes a standing presenter's upper body fill most of the
     picture's height.
 
@@ -240,8 +245,8 @@ def stage_layout(
         Height of the floor (the soles), metres: the bottom of :data:`FULL_BODY` framing. Without it the
         full body is framed as the upper body.
     waist : float, optional
-        Height of the lowest character's pelvis, metres: the upper body's lower end (hands hanging below it
-        may leave the picture, as in a presenter's medium shot). Without it, the lowest joint of every frame.
+        Height of the lowest character's pelvis, metres: the upper body's lower end (lower where a hand hangs
+        below it in any frame). Without it, the lowest joint of every frame.
 
     Returns
     -------
@@ -268,12 +273,13 @@ def stage_layout(
     hi = np.max([r[1] + d for r, d in zip(reach, shift)], axis=0) + FRAME_MARGIN
     if framing == FULL_BODY and ground is not None:
         lo[1] = min(float(f[..., 1].min()) for f in frames + [np.full((1, 1, 3), float(ground) - 0.02)])
-    elif waist is not None:  # the upper body from the pelvis up, and a little of the legs
-        lo[1] = float(waist) - BELOW_WAIST * (hi[1] - float(waist))
+    elif waist is not None:  # the upper body from the pelvis up, a little of the legs, and every hand hanging low
+        lowest = min(float(f[..., 1].min()) for f in frames) - HAND_MARGIN
+        lo[1] = min(float(waist) - BELOW_WAIST * (hi[1] - float(waist)), lowest)
     else:  # down to the lowest joint of every frame, and as far again below the joints' height
         low = min(float(f[..., 1].min()) for f in frames) - FRAME_MARGIN
         lo[1] = low - BELOW_WAIST * (hi[1] - low)
-    pad = 0.03 * (hi - lo)
+    pad = 0.03 * (hi - lo) * [1.0, 0.5, 1.0]
     return offsets, np.stack([lo - pad, hi + pad])
 
 

@@ -315,7 +315,13 @@ def video(record: dict) -> None:
     result = record["result"]
     done = ss.get(_VIDEO)
     token = characters.character_token()
-    if done is not None and done.get("character") != token:  # made on another character: made again
+    full = st.checkbox(
+        "Full body",
+        key="synth.video_full_body",
+        help="frame the MP4 on the whole person down to the floor (default: the upper body and every hand)",
+    )
+    framing = "full body" if full else "upper body"
+    if done is not None and (done.get("character"), done.get("framing")) != (token, framing):  # made again
         ss.pop(_VIDEO)
         done = None
     if done is not None and done["run"] == record["run"]:
@@ -339,7 +345,7 @@ def video(record: dict) -> None:
 
         t0 = time.perf_counter()
         try:
-            data = characters.render_mp4(result, progress=progress)  # on the user's character, if any
+            data = characters.render_mp4(result, progress=progress, framing=framing)  # on the user's character, if any
         except GestureKitError as exc:
             bar.empty()
             st.error(f"Could not render the video: {display.escape_markdown(exc)}")
@@ -351,7 +357,7 @@ def video(record: dict) -> None:
             f"Rendered {frames} frames in {seconds:.1f} s ({frames / max(seconds, 1e-9):.0f} frames/s); "
             "download it below."
         )
-        ss[_VIDEO] = {"run": record["run"], "bytes": data, "note": note, "character": token}
+        ss[_VIDEO] = {"run": record["run"], "bytes": data, "note": note, "character": token, "framing": framing}
         st.video(data, format="video/mp4")
         st.caption(note)
 
