@@ -32,14 +32,15 @@ _DERIVED = "_synth.figures"  # figures of the current result: {"run": n, name: f
 _VIDEO = "_synth.video"  # {"run": n, "bytes": mp4, "note": how long it took, "character": its token or None}
 
 UPLOAD, EXAMPLE = "Upload a file", "Example speech"
-_INIT_LABELS = {"random": "random database frame (paper)", "rest": "rest pose"}
+# short enough for a laptop's column (tests/browser/test_browser_laptop.py); each option's help says the rest
+_INIT_LABELS = {"random": "random frame (paper)", "rest": "rest pose"}
 _BLEND_LABELS = {
-    "dead": "dead blending (ours, default)",
-    "inertialize": "inertialization (ours)",
-    "offset": "offset fade at joins (ours)",
-    "none": "none: hard joins (paper)",
+    "dead": "dead blending (ours)",
+    "inertialize": "inertialize (ours)",
+    "offset": "offset fade (ours)",
+    "none": "hard joins (paper)",
 }
-_MASK_LABELS = {"ends": "first and last frame of a window (paper)", "all": "every frame of a window"}
+_MASK_LABELS = {"ends": "window ends (paper)", "all": "every frame"}
 
 
 def _set_speech(token, name: str, audio: np.ndarray, summary: str, notes=()) -> None:
