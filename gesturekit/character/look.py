@@ -34,6 +34,9 @@ __all__ = [
     "SHADOW_COLOR",
     "FRAMINGS",
     "UPPER_BODY",
+    "LEAST_VIEW_HEIGHT",
+    "fitted_height",
+    "HAND_MARGIN",
     "FULL_BODY",
     "stage_meshes",
     "FIELD_OF_VIEW",
@@ -184,6 +187,36 @@ def camera_for(
         "up": [0.0, 1.0, 0.0],
         "fov": float(fov),
     }
+
+
+#: The least height, pixels, of a view that :func:`fitted_height` makes less high than asked.
+LEAST_VIEW_HEIGHT = 200
+
+
+def fitted_height(box: npt.ArrayLike, width: float, most: float) -> int:
+    """The height, pixels, of a view ``width`` pixels wide that its upper-body ``box`` fills both ways.
+
+    Side-by-side characters make a box wider than high: a view as high as asked would frame it by its width and
+    leave the characters a small part of the height (and empty floor under them). The page's 3D view
+    (``web/src/viewer.js``, ``fittedHeight``) is therefore no higher than the box fills at :func:`camera_for`'s
+    fit, ``width * height / width`` of the box, at most ``most`` (the height asked for) and at least
+    :data:`LEAST_VIEW_HEIGHT` (or ``most``, if less). A box higher than wide keeps ``most``.
+
+    Parameters
+    ----------
+    box : array_like, shape (2, 3)
+        The framed box's lower and upper corners, metres (:func:`stage_layout`).
+    width, most : float
+        The view's width and the height asked for, pixels.
+
+    Returns
+    -------
+    int
+        Pixels, rounded as the page rounds them (half up).
+    """
+    b = np.asarray(box, dtype=np.float64).reshape(2, 3)
+    wide = (b[1, 0] - b[0, 0]) / max(b[1, 1] - b[0, 1], 1e-3)
+    return int(np.floor(min(most, max(min(most, LEAST_VIEW_HEIGHT), width / wide)) + 0.5))
 
 
 #: Metres between the joints and the body's surface, at most: the chest's half-depth, the hips' half-width

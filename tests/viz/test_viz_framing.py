@@ -106,6 +106,30 @@ def test_no_hand_leaves_the_mp4_where_the_hands_hang_below_the_hips():
         assert px[:, 1].max() > 0.8 * h  # and the picture ends a little below the lowest hand, not far below
 
 
+@given(
+    across=st.floats(0.3, 4.0), high=st.floats(0.3, 2.0), width=st.integers(200, 2000), most=st.integers(150, 900)
+)
+def test_a_view_is_no_higher_than_its_box_fills(across, high, width, most):
+    box = np.array([[-across / 2, -0.3, -0.2], [across / 2, high - 0.3, 0.4]])
+    h = look.fitted_height(box, width, most)
+    assert min(most, look.LEAST_VIEW_HEIGHT) <= h <= most
+    if h == most:  # as high as asked: the box is framed by its height, or the view could not be higher
+        assert width / most >= across / high - 1e-9 or h >= width * high / across - 0.5
+    elif h > look.LEAST_VIEW_HEIGHT:  # less high: the box fills it both ways, the camera's two fits agree
+        cam = look.camera_for(box[0], box[1], width / h)
+        by_height = (high / 2) / np.tan(np.radians(cam["fov"]) / 2)
+        by_width = (across / 2) / (np.tan(np.radians(cam["fov"]) / 2) * width / h)
+        assert by_width == pytest.approx(by_height, rel=1 / h + 1e-9)
+
+
+def test_two_presenters_side_by_side_get_a_lower_view_than_one():
+    motion = speaker()
+    one = look.stage_layout([motion.positions], waist=0.0)[1]
+    two = look.stage_layout([motion.positions, motion.positions], waist=0.0)[1]
+    assert look.fitted_height(one, 640, 480) == 480
+    assert look.fitted_height(two, 640, 480) < 0.8 * 480
+
+
 def test_side_by_side_characters_stand_closer_than_their_widest_gesture():
     motion = speaker()
     x = motion.positions[..., 0]

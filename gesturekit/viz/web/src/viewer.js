@@ -23,12 +23,12 @@ export function cameraFor(lo, hi, aspect, fov, dir, top, depthShare, floor) {
   return { position: centre.map((c, i) => c + (dist * dir[i]) / norm), target: centre };
 }
 
-/** The drawing's height in pixels for a canvas width pixels wide: the height at which the upper-body box of
- * side-by-side characters fills it both ways (cameraFor fits the box's width there), at most `most` (the height
- * asked for) and at least 200 pixels (or `most`, if less). A box taller than it is wide keeps `most`. */
-export function fittedHeight(box, width, most) {
+/** gesturekit.character.look.fitted_height: the drawing's height in pixels for a canvas `width` pixels wide, at
+ * which the upper-body box of side-by-side characters fills it both ways (cameraFor fits the box's width there),
+ * at most `most` (the height asked for) and at least `least` pixels (or `most`, if less). */
+export function fittedHeight(box, width, most, least) {
   const wide = (box[1][0] - box[0][0]) / Math.max(box[1][1] - box[0][1], 1e-3);
-  return Math.round(Math.min(most, Math.max(Math.min(most, 200), width / wide)));
+  return Math.floor(Math.min(most, Math.max(Math.min(most, least), width / wide)) + 0.5);
 }
 
 /** Draw the data D with the speech element audio (or null); resized(), if given, is called when the drawing
@@ -101,7 +101,7 @@ function main(D, audio, resized) {
   // (the upper body fills most of the height) holds, and no empty floor is left under them
   const most = Number(stage.dataset.most) || stage.clientHeight;
   function size() {
-    const fitted = fittedHeight(D.boxes["upper body"], Math.max(1, canvas.clientWidth), most);
+    const fitted = fittedHeight(D.boxes["upper body"], Math.max(1, canvas.clientWidth), most, D.look.least_height);
     if (stage.style.height !== fitted + "px") {
       stage.style.height = fitted + "px";
       if (resized) resized();
