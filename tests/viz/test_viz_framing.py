@@ -106,9 +106,7 @@ def test_no_hand_leaves_the_mp4_where_the_hands_hang_below_the_hips():
         assert px[:, 1].max() > 0.8 * h  # and the picture ends a little below the lowest hand, not far below
 
 
-@given(
-    across=st.floats(0.3, 4.0), high=st.floats(0.3, 2.0), width=st.integers(200, 2000), most=st.integers(150, 900)
-)
+@given(across=st.floats(0.3, 4.0), high=st.floats(0.3, 2.0), width=st.integers(200, 2000), most=st.integers(150, 900))
 def test_a_view_is_no_higher_than_its_box_fills(across, high, width, most):
     box = np.array([[-across / 2, -0.3, -0.2], [across / 2, high - 0.3, 0.4]])
     h = look.fitted_height(box, width, most)
