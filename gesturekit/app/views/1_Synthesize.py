@@ -317,7 +317,7 @@ def video(record: dict) -> None:
     done = ss.get(_VIDEO)
     token = characters.character_token()
     full = st.checkbox(
-        "Full body",
+        "Full-body MP4",
         key="synth.video_full_body",
         help="frame the MP4 on the whole person down to the floor (default: the upper body and every hand)",
     )
