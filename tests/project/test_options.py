@@ -72,6 +72,7 @@ RUN_ARGUMENTS = {
         "character_map",
         "video",
         "video_style",
+        "video_full_body",  # RenderStyle.framing of the MP4
         "force",
         "max_speech_minutes",
     },
