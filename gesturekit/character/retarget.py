@@ -32,13 +32,19 @@ cosines), the elbow bent towards where ours points (off the line from shoulder
 to wrist): the hands do exactly what ours do, and the two bones turn away from
 ours by about a degree per percent that their upper-arm-to-forearm ratio differs
 from ours. A ``wrist_slack`` lets the wrist stay up to that fraction of the arm's
-length from the target where our directions put it elsewhere, trading reach for
-direction. The default, :data:`WRIST_SLACK` (5 %), was chosen on arms whose
+length from the target, trading reach for direction: within that circle the
+wrist goes where the two bones turn least from ours (the larger of their two
+angles, :func:`_wrist_within`), which is where our directions put it when that
+is close enough. The default, :data:`WRIST_SLACK` (5 %), was chosen on arms whose
 upper-arm-to-forearm ratio is ours -24 % to +20 % (the range of real rigs): at
--12 % to +20 % every arm bone then stays within 1.7 degrees of ours in the median
-and 4.9 at the 95th percentile (against 6.5 and 12.6 with no slack), at -24 %
-within 4.6 and 10.1 (8.7 and 16.4 with none); ``wrist_slack=0`` is the other end:
-the hands exactly at our scaled reach (``bench/bench_arms.py``).
+-20 % to +20 % every arm bone then stays within 2.9 degrees of ours in the median
+and 6.8 at the 95th percentile (against 6.5 and 12.6 with no slack), at -24 %
+within 4.4 and 9.8 (8.7 and 16.4 with none). At -24 % no wrist within 5 % of
+the reach does better: with the same elbow angle a shorter upper arm points
+further from the line from shoulder to wrist, and turning the arm back onto our
+directions moves the hand sideways by about a tenth of the arm in a right-angled
+elbow; a median of 4 degrees there needs 5.5 %. ``wrist_slack=0`` is the other
+end: the hands exactly at our scaled reach (``bench/bench_arms.py``).
 
 **The torso proxy**: a capsule around their spine from the pelvis up, of radius
 :data:`TORSO_RADIUS` times their shoulder width, and the same around ours. A
@@ -587,11 +593,7 @@ class _Arms:
         self.targets[side] = target.copy()
         # where our directions alone put their wrist; the hand goes there unless that is further than the slack
         # from the scaled reach, so that the arm's bones turn away from ours only as much as the reach needs
-        straight = shoulder + a * _unit(xe - xs)[0] + c * _unit(xw - xe)[0]
-        off = straight - target
-        far = np.linalg.norm(off, axis=1, keepdims=True)
-        slack = self.slack * (a + c)
-        target = target + off * np.minimum(1.0, slack / np.maximum(far, 1e-12))
+        target = shoulder + _wrist_within(target - shoulder, xe - xs, xw - xe, a, c, self.slack * (a + c))
         d_ours, _ = _distance_to_chain(xw, self.our_torso())
         ours_in = d_ours < self.ours_radius
         d, near = _distance_to_chain(target, self.torso(pos))
@@ -615,6 +617,82 @@ class _Arms:
         up = np.sqrt(np.clip(a * a - along * along, 0.0, None))
         elbow = shoulder + along[:, None] * u + up[:, None] * bend
         return {s: elbow - shoulder, e: target - elbow}
+
+
+#: Points on the circle of the slack around the scaled reach at which the wrist is tried, and the finer turn tried
+#: around the best of them (a wrist at most ``slack * 2 pi / _AROUND`` from the best point of the circle).
+_AROUND = 72
+
+
+def _wrist_within(
+    target: np.ndarray, upper: np.ndarray, fore: np.ndarray, a: float, c: float, radius: float
+) -> np.ndarray:
+    """Where the wrist goes, relative to the shoulder (frames, 3): the point within ``radius`` of ``target`` at which
+    the two-bone solve turns the upper arm and the forearm least from ours (the larger of their two angles).
+
+    Our directions put the wrist at ``a u + c f`` (``u``, ``f`` our upper arm's and forearm's directions), where the
+    angles are 0: it is taken when within the radius. Else the best point is on the circle around the target: on
+    the line to that point the elbow's angle is nearest ours, and off it the whole arm turns about the shoulder so
+    that the two bones share the turn (their errors have opposite signs along the line). The target, ours and the
+    solve's elbow are all in the plane of ``u`` and ``f``, so this is a search on a circle in that plane.
+
+    Parameters
+    ----------
+    target : np.ndarray, shape (frames, 3)
+        Our reach scaled to their arm, from their shoulder.
+    upper, fore : np.ndarray, shape (frames, 3)
+        Our upper arm (shoulder to elbow) and forearm (elbow to wrist).
+    a, c : float
+        Their upper arm's and forearm's lengths, metres.
+    radius : float
+        How far the wrist may be from ``target``, metres.
+    """
+    u, ok_u = _unit(upper)
+    f, ok_f = _unit(fore)
+    straight = a * u + c * f
+    if radius <= 0.0:
+        return target
+    inside = np.linalg.norm(straight - target, axis=1) <= radius
+    # the plane's axes: e1 along our upper arm, e2 towards our forearm's side of it (down for a straight arm)
+    e2, ok2 = _unit(f - np.einsum("ti,ti->t", f, u)[:, None] * u)
+    down = np.array([0.0, -1.0, 0.0]) - u[:, 1:2] * u
+    e2 = np.where(ok2[:, None], e2, _unit(down)[0])
+    e1 = u
+    t2 = np.stack([np.einsum("ti,ti->t", target, e1), np.einsum("ti,ti->t", target, e2)], axis=1)
+    u2 = np.stack([np.ones(len(u)), np.zeros(len(u))], axis=1)
+    f2 = np.stack([np.einsum("ti,ti->t", f, e1), np.einsum("ti,ti->t", f, e2)], axis=1)
+    # an elbow bent towards our elbow's side of the line from the shoulder: our upper arm's side
+    step = 2 * np.pi / _AROUND
+    best_phi = np.zeros(len(u))
+    for turns in (np.arange(_AROUND) * step, np.linspace(-step, step, 17)):
+        phi = turns[None, :] + (0.0 if turns[0] == 0.0 else best_phi[:, None])
+        w = t2[:, None, :] + radius * np.stack([np.cos(phi), np.sin(phi)], axis=2)
+        err = _two_bone_error(w, u2, f2, a, c)
+        best_phi = np.take_along_axis(phi, np.argmin(err, axis=1)[:, None], axis=1)[:, 0]
+    w2 = t2 + radius * np.stack([np.cos(best_phi), np.sin(best_phi)], axis=1)
+    out = w2[:, :1] * e1 + w2[:, 1:] * e2
+    use = inside | ~(ok_u & ok_f)
+    out[use] = np.where(inside[use, None], straight[use], target[use])
+    return out
+
+
+def _two_bone_error(w: np.ndarray, u: np.ndarray, f: np.ndarray, a: float, c: float) -> np.ndarray:
+    """The larger angle (radians) of the upper arm and the forearm to ``u`` and ``f`` when a two-bone arm of lengths
+    ``a``, ``c`` reaches for ``w`` (frames, K, 2) in the plane, its elbow on ``u``'s side; ``u``, ``f`` (frames, 2)."""
+    d = np.linalg.norm(w, axis=2)
+    dist = np.clip(d, abs(a - c) + 1e-9, (a + c) * (1 - 1e-12))
+    axis = w / np.maximum(d, 1e-12)[..., None]
+    normal = np.stack([-axis[..., 1], axis[..., 0]], axis=2)
+    side = np.sign(np.einsum("tki,ti->tk", normal, u))
+    normal = normal * np.where(side == 0, 1.0, side)[..., None]
+    along = (a * a - c * c + dist * dist) / (2 * dist)
+    up = np.sqrt(np.clip(a * a - along * along, 0.0, None))
+    elbow = along[..., None] * axis + up[..., None] * normal
+    wrist = dist[..., None] * axis
+    cos_u = np.einsum("tki,ti->tk", elbow, u) / a
+    fore = wrist - elbow
+    cos_f = np.einsum("tki,ti->tk", fore, f) / np.maximum(np.linalg.norm(fore, axis=2), 1e-12)
+    return np.maximum(np.arccos(np.clip(cos_u, -1, 1)), np.arccos(np.clip(cos_f, -1, 1)))
 
 
 def _check_finite(ch: Character, rot: np.ndarray, pos: np.ndarray, *, what: str = "pose") -> None:
