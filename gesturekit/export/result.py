@@ -180,7 +180,12 @@ def retarget_result(result: SynthesisResult, character: Character | Retargeted) 
 
 
 def export_result_character_glb(
-    result: SynthesisResult, character: Character | Retargeted, path: str | os.PathLike[str], *, overwrite: bool = False
+    result: SynthesisResult,
+    character: Character | Retargeted,
+    path: str | os.PathLike[str],
+    *,
+    overwrite: bool = False,
+    their_clips: str = "keep",
 ) -> CharacterGltfReport:
     """The user's glTF or VRM character with the final motion as its animation ``"gesturekit"``, its speech as a
     WAV beside it (:func:`gesturekit.export.gltf.audio_path_for`), and how well the file reproduces the
@@ -196,6 +201,8 @@ def export_result_character_glb(
     path : str or os.PathLike
     overwrite : bool
         Replace files gesturekit wrote.
+    their_clips : {"keep", "drop"}
+        The character's own animations: kept after ours (default) or left out.
 
     Returns
     -------
@@ -203,7 +210,8 @@ def export_result_character_glb(
         ``report.summary()`` is one line.
     """
     result.check_finite(path)
-    return export_character_glb(path, retarget_result(result, character), audio=result.audio, overwrite=overwrite)
+    posed = retarget_result(result, character)
+    return export_character_glb(path, posed, audio=result.audio, overwrite=overwrite, their_clips=their_clips)
 
 
 def export_result_character_bvh(

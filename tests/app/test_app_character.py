@@ -170,3 +170,22 @@ def test_a_file_no_reader_foresaw_is_a_message_with_a_reference(app_env, monkeyp
     assert "deep inside" not in said and "Traceback" not in said
     assert "gk.character" not in at.session_state
     at.file_uploader(key="synth.upload")  # the page is drawn on below the sidebar
+
+
+def test_the_characters_own_clips_are_kept_after_ours_or_left_out(app_env, tmp_path):
+    from tests.export.test_export_character import waving_glb
+
+    at = upload_character(open_page(), "waving.glb", waving_glb(tmp_path).read_bytes())
+    assert at.radio(key="_gk.character_clips").value == "keep"  # the default: theirs kept, ours first
+    at = run_synthesis(at)
+
+    def clips() -> list[str]:
+        made = at.session_state["_gk.character_files"]
+        (glb,) = [v for k, v in made.items() if k[2] == "glb" and k[3] == at.radio(key="_gk.character_clips").value]
+        return [a["name"] for a in read_glb(glb["data"])[0]["animations"]]
+
+    assert clips() == ["gesturekit", "wave"]
+    at.radio(key="_gk.character_clips").set_value("drop").run()
+    assert not at.exception and not errors(at), (at.exception, errors(at))
+    assert clips() == ["gesturekit"]
+    assert any("its own clips left out: wave" in c for c in captions(at))

@@ -15,7 +15,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gesturekit.character.retarget import WRIST_SLACK, _wrist_within, retarget
+from gesturekit.character._arms import wrist_within
+from gesturekit.character.retarget import WRIST_SLACK, retarget
 from gesturekit.character.user import read_character
 from gesturekit.motion import Motion
 from gesturekit.skeleton import joint_index
@@ -105,7 +106,7 @@ def test_the_wrist_goes_where_the_arm_turns_least_within_the_slack(change, slack
     fore *= co / np.linalg.norm(fore, axis=1, keepdims=True)
     target = (a + c) / (ao + co) * (upper + fore)
     radius = slack * (a + c)
-    w = _wrist_within(target, upper, fore, a, c, radius)
+    w = wrist_within(target, upper, fore, a, c, radius)
     assert (np.linalg.norm(w - target, axis=1) <= radius * (1 + 1e-9) + 1e-12).all()
     mine = _plane_error(w, upper, fore, a, c)
     # the reference: many points of the ball around the target, in 3D

@@ -93,6 +93,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         "character",
         (
             "gesturekit.character",
+            "gesturekit.character._arms",
             "gesturekit.character._body",
             "gesturekit.character._loft",
             "gesturekit.character._user_bvh",
