@@ -8,7 +8,7 @@ left one) and :attr:`Character.to_file` takes points back to it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -202,8 +202,16 @@ class FileSkeleton:
     skin: dict[str, np.ndarray] | None = None
     gltf: GltfSource | None = field(default=None, repr=False)
 
-    def character(self, found: Mapping[str, int], matched_by: str, expected: Mapping[str, str] | None) -> Character:
-        """The character in our frame, its bones matched by ``found`` (our joint or ``"pelvis"`` -> bone)."""
+    def character(
+        self,
+        found: Mapping[str, int],
+        matched_by: str,
+        expected: Mapping[str, str] | None,
+        *,
+        notes: Sequence[str] = (),
+    ) -> Character:
+        """The character in our frame, its bones matched by ``found`` (our joint or ``"pelvis"`` -> bone); ``notes``
+        what the match changed, for a person (warned and kept in :attr:`Character.notes`)."""
         del expected
         _check_tree(self, found)
         if not np.isfinite(self.world).all():
@@ -217,7 +225,9 @@ class FileSkeleton:
         except ConfigError as e:
             why = "a character's rest pose must stand upright, arms apart"
             raise ConfigError(f"{self.path}: {e.problem}; {why}") from None
-        notes = []
+        notes = list(notes)
+        for note in notes:
+            warn(note)
         factor, note = _size_factor(self, pos, turn[1])
         if factor != 1.0:
             self.units *= factor
