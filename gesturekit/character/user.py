@@ -33,16 +33,14 @@ from ._user_gltf import read_gltf_skeleton
 from .humanoid import (
     FAMILIES,
     REQUIRED,
-    SHAPE,
     check_bone_map,
     fingers_by_shape,
-    match_by_shape,
     match_families,
     match_names,
     missing_message,
     name_maps,
-    sides_by_rest_pose,
 )
+from .shape import SHAPE, match_by_shape, sides_by_rest_pose
 from .target import Character, FileSkeleton
 
 __all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record", "bone_tree"]
@@ -62,8 +60,8 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         A JSON bone map (a file, or its content) of the form
         ``{"pelvis": "Hips", "joints": {"spine_mid": "Spine", ...}}``; default: the VRM humanoid of a VRM,
         else bone names (Mixamo's, our BVH presets', the common families), else the hierarchy's shape
-        (:func:`~gesturekit.character.humanoid.match_by_shape`). Left and right are then checked against the rest
-        pose (:func:`~gesturekit.character.humanoid.sides_by_rest_pose`): names that have them the other way round
+        (:func:`~gesturekit.character.shape.match_by_shape`). Left and right are then checked against the rest
+        pose (:func:`~gesturekit.character.shape.sides_by_rest_pose`): names that have them the other way round
         are swapped, and a note says so (warned, and in :attr:`Character.notes`).
 
     Returns

@@ -13,8 +13,8 @@ import warnings
 import numpy as np
 import pytest
 
-from gesturekit.character.humanoid import SHAPE, facing_from_feet, match_by_shape
 from gesturekit.character.retarget import retarget
+from gesturekit.character.shape import SHAPE, facing_from_feet, match_by_shape
 from gesturekit.character.user import read_character
 from gesturekit.errors import GestureKitWarning
 from gesturekit.motion import Motion

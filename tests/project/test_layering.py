@@ -107,6 +107,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.character.paint",
             "gesturekit.character.retarget",
             "gesturekit.character.rig",
+            "gesturekit.character.shape",
             "gesturekit.character.skin",
             "gesturekit.character.solve",
             "gesturekit.character.stand",
