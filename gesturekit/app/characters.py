@@ -45,7 +45,7 @@ __all__ = [
 #: Session-state key of the user's character: ``{"character", "name", "token"}``.
 CHARACTER_KEY = "gk.character"
 #: File types the character uploader takes.
-CHARACTER_TYPES = ["glb", "gltf", "vrm", "bvh"]
+CHARACTER_TYPES = ["glb", "gltf", "vrm", "fbx", "bvh"]
 _FAILED = "_gk.character_failed"  # (token, message) of an upload that could not be used
 _RESETS = "_gk.character_resets"  # a new uploader after "Default character" (it then holds no file)
 _CLIPS = "_gk.character_clips"  # the character's own animations in its GLB: "keep" or "drop"
@@ -107,10 +107,11 @@ def sidebar_character() -> Character | None:
     n = ss.get(_RESETS, 0)
     with st.sidebar.expander("Your character", expanded=kept is not None or _FAILED in ss):
         up = st.file_uploader(
-            "Character: glb, gltf, vrm or bvh",
+            "Character: glb, gltf, vrm, fbx or bvh",
             type=CHARACTER_TYPES,
             key=f"_gk.character_file.{n}",
-            help="a humanoid with a skinned mesh (glTF, GLB, VRM 0.x/1.0) or a BVH skeleton: the 3D views of "
+            help="a humanoid with a skinned mesh (glTF, GLB, VRM 0.x/1.0, FBX with its texture embedded) or a BVH "
+            "skeleton: the 3D views of "
             "Synthesize and the Retrieval inspector draw it, posed by the motion",
         )
         bone_map = st.file_uploader(

@@ -1,4 +1,4 @@
-"""A user's own humanoid character: a glTF/GLB or VRM file with a skinned body, or a BVH skeleton.
+"""A user's own humanoid character: a glTF/GLB, VRM or FBX file with a skinned body, or a BVH skeleton.
 
 :func:`read_character` reads the file, finds which of its bones is which of
 our joints (:mod:`gesturekit.character.humanoid`) and returns a
@@ -29,6 +29,7 @@ from ..errors import ConfigError, GestureKitError, InputFileError
 from ..limits import read_json
 from ..paths import is_file
 from ._user_bvh import read_bvh_skeleton
+from ._user_fbx import read_fbx_skeleton
 from ._user_gltf import read_gltf_skeleton
 from .humanoid import (
     FAMILIES,
@@ -46,7 +47,7 @@ from .target import Character, FileSkeleton
 __all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record", "bone_tree"]
 
 #: File name suffixes :func:`read_character` reads.
-CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".bvh")
+CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".fbx", ".bvh")
 
 
 def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dict | None = None) -> Character:
@@ -55,7 +56,8 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
     Parameters
     ----------
     path : str or path-like
-        A ``.glb``, ``.gltf`` or ``.vrm`` with a skinned humanoid, or a ``.bvh`` skeleton.
+        A ``.glb``, ``.gltf``, ``.vrm`` or ``.fbx`` (binary 7.x, ASCII 6.1 to 7.x) with a skinned humanoid, or a
+        ``.bvh`` skeleton.
     bone_map : str, path-like or dict, optional
         A JSON bone map (a file, or its content) of the form
         ``{"pelvis": "Hips", "joints": {"spine_mid": "Spine", ...}}``; default: the VRM humanoid of a VRM,
@@ -90,6 +92,8 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
     user_map = _bone_map(bone_map)
     if suffix == ".bvh":
         skeleton = read_bvh_skeleton(p)
+    elif suffix == ".fbx":
+        skeleton = read_fbx_skeleton(p)
     else:
         skeleton = read_gltf_skeleton(p)
     _check_unique(skeleton)

@@ -46,7 +46,7 @@ def read_character_option(args: argparse.Namespace, formats: Sequence[str]) -> C
     if character.gltf is None and "glb" in formats:
         raise ConfigError(
             f"{given} is a skeleton without a body, so no glTF of it can be written; "
-            "use --format bvh (or npz,bvh) with it, or give a .glb, .gltf or .vrm character"
+            "use --format bvh (or npz,bvh) with it, or give a .glb, .gltf, .vrm or .fbx character"
         )
     return character
 

@@ -267,7 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument(
         "--character",
         metavar="FILE",
-        help="your own humanoid (.glb, .gltf or .vrm with a skinned body, or a .bvh skeleton): glb then writes "
+        help="your own humanoid (.glb, .gltf, .vrm or .fbx with a skinned body, or a .bvh skeleton): glb then writes "
         "it animated by the motion (its meshes, materials and extensions kept, one animation 'gesturekit' "
         "added) and bvh its skeleton moved by the motion, in the file's own frame and units; the npz keeps "
         "our joints. Bones are matched by the VRM humanoid, Mixamo or ZEGGS names, or --character-map",

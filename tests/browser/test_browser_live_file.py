@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from tests import app_browser
+from tests.waits import patience
 
 pytestmark = pytest.mark.skipif(
     app_browser.unavailable() is not None, reason=f"no browser test: {app_browser.unavailable()}"
@@ -30,5 +31,5 @@ def test_without_a_microphone_the_page_says_so_and_a_file_plays_through_live(tmp
             app_browser.skeleton_canvas(page, "live.skeleton")
             app_browser.button(page, "live.control.right_hand=high").click()
             # at the file's end the performance is kept, with its downloads
-            app_browser.keyed(page, "live.download_wav").wait_for(timeout=60_000)
+            app_browser.keyed(page, "live.download_wav").wait_for(timeout=patience(300) * 1000)
             assert app_browser.problems(page) == []

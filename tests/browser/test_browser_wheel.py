@@ -22,6 +22,7 @@ import pytest
 
 from gesturekit._version import __version__
 from tests import app_browser
+from tests.waits import patience
 
 pytestmark = [
     pytest.mark.slow,
@@ -60,7 +61,7 @@ def _clean_env(venv: Path) -> dict[str, str]:
 
 
 def _run(cmd: list[str], *, cwd: Path, env: dict[str, str] | None = None, timeout: float) -> str:
-    run = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+    run = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=patience(timeout))
     assert run.returncode == 0, f"{' '.join(cmd)} (exit {run.returncode}):\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}"
     return run.stdout
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 import urllib.request
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from gesturekit.cli._app import APP_FLAGS, app_roots, streamlit_args
 from gesturekit.errors import ConfigError
 from gesturekit.paths import APP_ROOTS_ENV
 from tests import app_browser
+from tests.waits import patience, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -118,18 +118,21 @@ def test_the_command_serves_the_packaged_app_on_127_0_0_1_from_any_folder(demo_h
     with log.open("wb") as out:
         proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=out, stderr=subprocess.STDOUT)
     try:
-        deadline, answer = time.monotonic() + 90, None
-        while answer is None:
-            assert proc.poll() is None, log.read_text(errors="replace")
-            assert time.monotonic() < deadline, log.read_text(errors="replace")
+
+        def health() -> str | None:
             try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/_stcore/health", timeout=2) as r:
-                    answer = r.read().decode()
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/_stcore/health", timeout=patience(10)) as r:
+                    return r.read().decode()
             except OSError:
-                time.sleep(0.2)
+                return None
+
+        def exited() -> str | None:
+            return None if proc.poll() is None else log.read_text(errors="replace")
+
+        answer = wait_until(health, what="gesturekit app answers", timeout_s=300, give_up=exited)
         assert answer == "ok"
         assert _listening(port) == {"127.0.0.1"}
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as r:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=patience(30)) as r:
             assert r.status == 200 and b"<noscript>" in r.read()  # Streamlit's page, for the browser to draw
     finally:
         app_browser.stop(proc)

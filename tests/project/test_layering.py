@@ -97,6 +97,8 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.character._body",
             "gesturekit.character._loft",
             "gesturekit.character._user_bvh",
+            "gesturekit.character._user_fbx",
+            "gesturekit.character._fbx_read",
             "gesturekit.character._user_gltf",
             "gesturekit.character.bone_body",
             "gesturekit.character.contact",

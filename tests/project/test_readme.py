@@ -21,8 +21,8 @@ README = REPO / "README.md"
 GUIDES = REPO / "docs" / "guides"
 
 #: The two commands on a fresh machine, exactly as the README gives them (.ci/run runs TEST as written).
-LAUNCH = "pip install --retries 1 --no-compile -r requirements.txt && gesturekit app\n"
-TEST = "pip install --retries 1 --no-compile -r requirements-test.txt && python -m pytest -n 2\n"
+LAUNCH = "PIP_RETRIES=1 pip install --no-compile -r requirements.txt && gesturekit app\n"
+TEST = "PIP_RETRIES=1 pip install --no-compile -r requirements-test.txt && python -m pytest -n 2\n"
 
 
 def python_block(text: str, heading: str = "") -> str:
