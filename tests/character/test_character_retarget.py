@@ -197,7 +197,7 @@ def test_files_that_are_not_characters_are_refused_naming_them(tmp_path):
             read_character(p)
         assert name in str(e.value)
     with pytest.raises(InputFileError, match="character is a"):
-        read_character(tmp_path / "x.fbx")
+        read_character(tmp_path / "x.obj")
     with pytest.raises(InputFileError, match="no such"):
         read_character(tmp_path / "missing.glb")
 
