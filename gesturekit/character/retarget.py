@@ -60,6 +60,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..motion import Motion
 from ..skeleton import JOINT_NAMES, joint_index
@@ -272,6 +273,7 @@ class Retargeted:
         return Motion(out.astype(np.float32), self.fps, self.source.presence)
 
 
+@checks_arguments
 def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest rotations taking unit vectors ``a`` onto unit vectors ``b``.
 
@@ -303,6 +305,7 @@ def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.eye(3) + s[..., None, None] * k + (1.0 - c)[..., None, None] * (k @ k)
 
 
+@checks_arguments
 def kabsch(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     """The rotations that best turn vectors ``u`` onto ``v`` (least squares, weights ``w``).
 
@@ -354,6 +357,7 @@ def _below(ch: Character, top: int) -> np.ndarray:
     return out
 
 
+@checks_arguments
 def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST_SLACK) -> Retargeted:
     """Pose ``character`` by ``motion``, frame by frame (see the module's text).
 

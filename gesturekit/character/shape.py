@@ -13,6 +13,7 @@ from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .humanoid import PELVIS
 
 __all__ = ["SHAPE", "match_by_shape", "facing_from_feet", "sides_by_rest_pose"]
@@ -88,6 +89,7 @@ def _ancestors_of(parents: Sequence[int], b: int) -> list[int]:
     return out
 
 
+@checks_arguments
 def facing_from_feet(
     parents: Sequence[int], positions: np.ndarray, pelvis: int, spine: int, up: np.ndarray
 ) -> np.ndarray | None:
@@ -140,6 +142,7 @@ def facing_from_feet(
     return ahead / (2 * length)
 
 
+@checks_arguments
 def match_by_shape(parents: Sequence[int], positions: np.ndarray, ends: Collection[int] = ()) -> dict[str, int]:
     """Our joints found from the hierarchy's shape and the rest pose alone, for a rig whose names say nothing.
 
@@ -241,6 +244,7 @@ def match_by_shape(parents: Sequence[int], positions: np.ndarray, ends: Collecti
     return found
 
 
+@checks_arguments
 def sides_by_rest_pose(
     found: Mapping[str, int], parents: Sequence[int], positions: np.ndarray, names: Sequence[str]
 ) -> tuple[dict[str, int], str]:

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError, warn
 from ..skeleton import JOINT_NAMES, PARENTS, joint_index
 from .humanoid import PELVIS
@@ -153,6 +154,7 @@ class Character:
         return out
 
 
+@checks_arguments
 def facing_frame(pelvis: np.ndarray, head: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
     """The rotation from a file's world frame to ours, from its rest pose.
 
@@ -400,6 +402,7 @@ def _check_tree(sk: FileSkeleton, found: Mapping[str, int]) -> None:
             )
 
 
+@checks_arguments
 def topological(parents: list[int]) -> list[int]:
     """An order of the bones in which every parent comes before its children (depth first, file order kept)."""
     children: dict[int, list[int]] = {}
@@ -416,6 +419,7 @@ def topological(parents: list[int]) -> list[int]:
     return order
 
 
+@checks_arguments
 def reorder(names: list[str], parents: list[int], order: list[int]) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     """Names and parents in ``order``; also the inverse (old index -> new)."""
     new = np.empty(len(order), dtype=np.int64)
@@ -424,6 +428,7 @@ def reorder(names: list[str], parents: list[int], order: list[int]) -> tuple[tup
     return tuple(names[o] for o in order), out_parents, new
 
 
+@checks_arguments
 def empty_skin() -> dict[str, Any]:
     """A skin without triangles."""
     return {

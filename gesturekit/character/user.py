@@ -24,6 +24,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from .._arguments import checks_arguments
 from .._io import safe_filename
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..limits import read_json
@@ -50,6 +51,7 @@ __all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "cha
 CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".fbx", ".bvh")
 
 
+@checks_arguments
 def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dict | None = None) -> Character:
     """Read a user's humanoid character and match its bones to our joints.
 
@@ -106,6 +108,7 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
     return skeleton.character(found, matched_by, expected, notes=notes)
 
 
+@checks_arguments
 def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes] | None = None) -> Character:
     """Read an uploaded character file (and bone map) via a temporary folder, as :func:`read_character` reads one.
 
@@ -154,6 +157,7 @@ def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes]
     return dataclasses.replace(character, path=Path(str(name)))
 
 
+@checks_arguments
 def character_record(character: Character, *, bone_map: str | os.PathLike | dict | None = None) -> dict[str, Any]:
     """What names a character's files, for a record of what made an output (a study's ``study.json``).
 
@@ -257,6 +261,7 @@ def _with_tree(message: str, skeleton: FileSkeleton) -> ConfigError:
     return error
 
 
+@checks_arguments
 def bone_tree(skeleton: FileSkeleton, most: int = 200) -> str:
     """The file's bones as an indented tree with their rest positions (metres, the file's axes), for writing a
     bone map: a glTF node without a name is ``node{index}`` (its index among the file's nodes).

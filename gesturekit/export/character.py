@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..character.glb import FLOAT, GlbBuffer, accessor_array, glb_bytes, node_matrices, read_glb
 from ..character.retarget import Retargeted
 from ..character.rig import rotation_to_quaternion
@@ -147,6 +148,7 @@ class CharacterGltfReport:
         return "; ".join(parts)
 
 
+@checks_arguments
 def export_character_glb(
     path: str | os.PathLike[str],
     retargeted: Retargeted,

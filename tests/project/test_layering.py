@@ -47,6 +47,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     (
         "base",
         (
+            "gesturekit._arguments",
             "gesturekit._config",
             "gesturekit._io",
             "gesturekit._jobs",
