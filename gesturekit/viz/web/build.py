@@ -23,8 +23,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..._arguments import checks_arguments
-
 __all__ = [
     "HERE",
     "STATIC",
@@ -79,7 +77,6 @@ _INDEX = (
 )
 
 
-@checks_arguments
 def source_hash(root: Path = HERE) -> str:
     """SHA-256 (hex) of the bundle's sources under ``root``: each file's path and bytes, in path order."""
     h = hashlib.sha256()
@@ -90,7 +87,6 @@ def source_hash(root: Path = HERE) -> str:
     return h.hexdigest()
 
 
-@checks_arguments
 def is_current(root: Path = HERE) -> bool:
     """Whether ``root/static`` holds the build of the current sources."""
     made = root / "static" / _HASH_FILE
@@ -98,7 +94,6 @@ def is_current(root: Path = HERE) -> bool:
     return built and made.read_text().strip() == source_hash(root)
 
 
-@checks_arguments
 def bundle() -> str:
     """The built bundle's text (``static/viewer.js``).
 
@@ -135,7 +130,6 @@ def _node() -> tuple[list[str], list[str]]:
     return [node_path], [npm_path]
 
 
-@checks_arguments
 def build(*, force: bool = False, root: Path = HERE) -> bool:
     """Build the bundle unless ``root/static`` already holds the build of the current sources.
 
@@ -164,7 +158,6 @@ def build(*, force: bool = False, root: Path = HERE) -> bool:
     return True
 
 
-@checks_arguments
 def bundle_module(entry: Path, out: Path, *, root: Path = HERE) -> Path:
     """Bundle the ES module ``entry`` and the npm packages it imports into one file, as the viewer is bundled.
 
@@ -207,7 +200,6 @@ def _install(root: Path, *, always: bool) -> tuple[list[str], dict[str, str]]:
     return node, env
 
 
-@checks_arguments
 def main(argv: list[str] | None = None) -> int:
     """The command line: ``python -m gesturekit.viz.web.build [--force]``."""
     parser = argparse.ArgumentParser(prog="python -m gesturekit.viz.web.build", description=__doc__.split("\n")[0])
