@@ -289,6 +289,7 @@ def render_mp4(
     *,
     progress: Callable[[int, int], None] | None = None,
     resolution: tuple[int, int] = (640, 480),
+    framing: str = "upper body",
 ) -> bytes:
     """The result as an MP4 (H.264 + AAC, the speech as soundtrack); k-NN and refined side by side if refined.
 
@@ -298,11 +299,18 @@ def render_mp4(
         Called after each rendered frame.
     resolution : (int, int)
         Width and height in pixels (even numbers).
+    framing : str
+        The presenter's upper body and every hand, or the whole body (:data:`gesturekit.character.look.FRAMINGS`).
     """
     with tempfile.TemporaryDirectory(prefix="gesturekit-video-") as tmp:
         path = Path(tmp) / "result.mp4"
         save_result_video(
-            result, path, progress=progress, side_by_side=result.refined_motion is not None, resolution=resolution
+            result,
+            path,
+            progress=progress,
+            side_by_side=result.refined_motion is not None,
+            resolution=resolution,
+            framing=framing,
         )
         return path.read_bytes()
 

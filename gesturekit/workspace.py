@@ -46,7 +46,7 @@ __all__ = [
 ]
 
 #: How :func:`database_folders` names the default (demo) database.
-DEMO_DATABASE_LABEL = "demo database (generated speaker)"
+DEMO_DATABASE_LABEL = "demo (generated speaker)"
 _GENERATOR_MODULE = "gesturekit.datasets.synthetic"  # what a generated take names as its source
 
 

@@ -65,18 +65,21 @@ def character_token() -> tuple | None:
     return None if kept is None else kept["token"]
 
 
-def render_mp4(result: SynthesisResult, *, progress: Callable[[int, int], None] | None = None) -> bytes:
-    """:func:`gesturekit.interactive.render_mp4` of the result, drawn on the user's character when there is one."""
+def render_mp4(
+    result: SynthesisResult, *, progress: Callable[[int, int], None] | None = None, framing: str = "upper body"
+) -> bytes:
+    """:func:`gesturekit.interactive.render_mp4` of the result, drawn on the user's character when there is one,
+    framed on the upper body and every hand or on the whole body (``framing``)."""
     from gesturekit import interactive as gs
     from gesturekit.export.result import save_result_video
 
     ch = current_character()
     if ch is None:
-        return gs.render_mp4(result, progress=progress)
+        return gs.render_mp4(result, progress=progress, framing=framing)
     with tempfile.TemporaryDirectory(prefix="gesturekit-video-") as tmp:
         path = Path(tmp) / "result.mp4"
         side = result.refined_motion is not None
-        save_result_video(result, path, progress=progress, side_by_side=side, character=ch)
+        save_result_video(result, path, progress=progress, side_by_side=side, character=ch, framing=framing)
         return path.read_bytes()
 
 

@@ -55,6 +55,8 @@ __all__ = [
     "error_text",
     "escape_markdown",
     "result_bvh",
+    "DOWNLOADS_PER_ROW",
+    "download_columns",
     "result_downloads",
     "result_glb",
     "run_page",
@@ -367,6 +369,18 @@ _DOWNLOAD_LABELS = {
 }
 
 
+#: Download buttons side by side at most: on a laptop's window (1280 pixels wide) a row of more cuts their labels.
+DOWNLOADS_PER_ROW = 4
+
+
+def download_columns(n: int, *, per_row: int = DOWNLOADS_PER_ROW) -> list[DeltaGenerator]:
+    """``n`` columns for download buttons, in rows of ``per_row`` (the last row's columns as wide as the others)."""
+    cols: list[DeltaGenerator] = []
+    while len(cols) < n:
+        cols.extend(st.columns(per_row)[: n - len(cols)])
+    return cols
+
+
 def result_downloads(
     record: dict,
     kinds: Sequence[str],
@@ -376,7 +390,8 @@ def result_downloads(
     before_video: Callable[[DeltaGenerator], None],
     glb_key: str | None = None,
 ) -> None:
-    """A result's downloads in one row, the MP4 last, and the BVH's (and glTF's) report under them.
+    """A result's downloads in rows of :data:`DOWNLOADS_PER_ROW`, the MP4 last, and the BVH's (and glTF's) report
+    under them.
 
     ``record`` is the page's result record (``"run"``, ``"result"``); ``kinds`` the files
     before the MP4, of ``"wav"``, ``"npz"``, ``"bvh"``, ``"glb"``, ``"csv"``, ``"json"``; ``prefix``
@@ -388,7 +403,7 @@ def result_downloads(
     from gesturekit import interactive as gs
 
     result = record["result"]
-    cols = st.columns(len(kinds) + 1)
+    cols = download_columns(len(kinds) + 1)
     bvh, report = result_bvh(record, key=keys[0])  # made once per result, for the report under the buttons
     made: dict[str, bytes | None] = {"bvh": bvh}
     glb_report: GltfReport | str | None = None

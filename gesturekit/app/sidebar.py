@@ -201,7 +201,8 @@ def _build_from_folder(
 
 def _reading_inputs() -> tuple[str, str | None, str, bool]:
     """The form's units, up axis, forward axis and bone normalisation (``build-db``'s options of the same names)."""
-    left, right = st.columns(2)
+    # one under another: two columns of the sidebar cut the choices' words
+    left = right = st.container()
     units = left.selectbox(
         "Units", list(UNIT_CHOICES), key="_gk.build_units", help="auto: from the body's size (BVH: the skeleton's)"
     )

@@ -35,6 +35,9 @@ __all__ = [
     "SHADOW_COLOR",
     "FRAMINGS",
     "UPPER_BODY",
+    "LEAST_VIEW_HEIGHT",
+    "fitted_height",
+    "HAND_MARGIN",
     "FULL_BODY",
     "stage_meshes",
     "FIELD_OF_VIEW",
@@ -110,7 +113,7 @@ FIELD_OF_VIEW = 30.0
 
 #: How much of the framed box's half-depth :func:`camera_for` keeps in front of the plane it fits: 1 fits the
 #: box's front face (a presenter far back behind hands that rarely come forward), 0 its middle.
-DEPTH_SHARE = 0.5
+DEPTH_SHARE = 0.25
 
 #: From the framed box's centre towards the camera: in front, a little above.
 VIEW_DIRECTION = (0.0, 0.12, 1.0)
@@ -190,12 +193,46 @@ def camera_for(
     }
 
 
+#: The least height, pixels, of a view that :func:`fitted_height` makes less high than asked.
+LEAST_VIEW_HEIGHT = 200
+
+
+def fitted_height(box: npt.ArrayLike, width: float, most: float) -> int:
+    """The height, pixels, of a view ``width`` pixels wide that its upper-body ``box`` fills both ways.
+
+    Side-by-side characters make a box wider than high: a view as high as asked would frame it by its width and
+    leave the characters a small part of the height (and empty floor under them). The page's 3D view
+    (``web/src/viewer.js``, ``fittedHeight``) is therefore no higher than the box fills at :func:`camera_for`'s
+    fit, ``width * height / width`` of the box, at most ``most`` (the height asked for) and at least
+    :data:`LEAST_VIEW_HEIGHT` (or ``most``, if less). A box higher than wide keeps ``most``.
+
+    Parameters
+    ----------
+    box : array_like, shape (2, 3)
+        The framed box's lower and upper corners, metres (:func:`stage_layout`).
+    width, most : float
+        The view's width and the height asked for, pixels.
+
+    Returns
+    -------
+    int
+        Pixels, rounded as the page rounds them (half up).
+    """
+    b = np.asarray(box, dtype=np.float64).reshape(2, 3)
+    wide = (b[1, 0] - b[0, 0]) / max(b[1, 1] - b[0, 1], 1e-3)
+    return int(np.floor(min(most, max(min(most, LEAST_VIEW_HEIGHT), width / wide)) + 0.5))
+
+
 #: Metres between the joints and the body's surface, at most: the chest's half-depth, the hips' half-width
 #: beyond the spine. Side-by-side characters keep this much to either side of their joints.
 BODY_MARGIN = 0.14
 
 #: Metres the framed box keeps around every joint: the arms' and the head's thickness.
 FRAME_MARGIN = 0.07
+
+#: Metres the framed box keeps below the lowest joint of every frame with :data:`UPPER_BODY`: a hanging hand's
+#: lowest joint is a fingertip (or a wrist, where the data hold no fingers), the hand's surface a little beyond it.
+HAND_MARGIN = 0.03
 
 #: The framings of :func:`stage_layout`: the presenter's upper body (and whatever the hands reach), or the
 #: whole body down to the floor.
@@ -227,8 +264,9 @@ def stage_layout(
     character's reach over :data:`REACH_QUANTILE` of the shown frames (each frame's leftmost, rightmost,
     highest, nearest and farthest drawn joint; a rare gesture beyond it may leave the picture)
     plus :data:`FRAME_MARGIN`; with :data:`UPPER_BODY` down from there to the pelvis (``waist``) and
-    :data:`BELOW_WAIST` of that height below it (the hips), with :data:`FULL_BODY` down to the floor and
-    every joint of every frame.
+    :data:`BELOW_WAIST` of that height below it (the hips), or lower where a hand hangs lower in any frame (the
+    lowest drawn joint of every frame and :data:`HAND_MARGIN`: hands are never cut), with :data:`FULL_BODY`
+    down to the floor and every joint of every frame.
     A camera (:func:`camera_for`) fitted to it makes a standing presenter's upper body fill most of the
     picture's height.
 
@@ -245,8 +283,8 @@ def stage_layout(
         Height of the floor (the soles), metres: the bottom of :data:`FULL_BODY` framing. Without it the
         full body is framed as the upper body.
     waist : float, optional
-        Height of the lowest character's pelvis, metres: the upper body's lower end (hands hanging below it
-        may leave the picture, as in a presenter's medium shot). Without it, the lowest joint of every frame.
+        Height of the lowest character's pelvis, metres: the upper body's lower end (lower where a hand hangs
+        below it in any frame). Without it, the lowest joint of every frame.
 
     Returns
     -------
@@ -273,12 +311,13 @@ def stage_layout(
     hi = np.max([r[1] + d for r, d in zip(reach, shift)], axis=0) + FRAME_MARGIN
     if framing == FULL_BODY and ground is not None:
         lo[1] = min(float(f[..., 1].min()) for f in frames + [np.full((1, 1, 3), float(ground) - 0.02)])
-    elif waist is not None:  # the upper body from the pelvis up, and a little of the legs
-        lo[1] = float(waist) - BELOW_WAIST * (hi[1] - float(waist))
+    elif waist is not None:  # the upper body from the pelvis up, a little of the legs, and every hand hanging low
+        lowest = min(float(f[..., 1].min()) for f in frames) - HAND_MARGIN
+        lo[1] = min(float(waist) - BELOW_WAIST * (hi[1] - float(waist)), lowest)
     else:  # down to the lowest joint of every frame, and as far again below the joints' height
         low = min(float(f[..., 1].min()) for f in frames) - FRAME_MARGIN
         lo[1] = low - BELOW_WAIST * (hi[1] - low)
-    pad = 0.03 * (hi - lo)
+    pad = 0.03 * (hi - lo) * [1.0, 0.5, 1.0]
     return offsets, np.stack([lo - pad, hi + pad])
 
 

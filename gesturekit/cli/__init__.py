@@ -410,6 +410,7 @@ def _cmd_synthesize(args) -> int:
                         overwrite=args.force,
                         progress=lambda done, total: _advance(bar, done),
                         look=args.video_style,
+                        framing="full body" if args.video_full_body else "upper body",
                         character=character,  # their character, as in the glTF and BVH
                     )
                 written.append(targets[(stem, "mp4")])

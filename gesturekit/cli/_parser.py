@@ -291,6 +291,11 @@ def build_parser() -> argparse.ArgumentParser:
         default="character",
         help="the MP4's look: the page's character (default) or the earlier capsule figure",
     )
+    y.add_argument(
+        "--video-full-body",
+        action="store_true",
+        help="frame the MP4 on the whole body down to the floor (default: the upper body and every hand)",
+    )
     y.add_argument("--force", action="store_true", help="replace existing output files")
     _add_max_speech(y)
 

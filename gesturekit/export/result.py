@@ -274,10 +274,13 @@ def save_result_video(
     resolution: tuple[int, int] = (640, 480),
     look: str = "character",
     character: Character | None = None,
+    framing: str = "upper body",
 ) -> Path:
     """An MP4 of the character with the speech (H.264 + AAC); the k-NN and the refined motion side by
     side when ``side_by_side`` and the result was refined. ``resolution`` is (width, height) in pixels;
     ``look`` one of :data:`gesturekit.viz.render.LOOKS` (the page's character, or the capsule figure);
+    ``framing`` the presenter's upper body and every hand (default) or the whole body down to the floor
+    (:data:`gesturekit.character.look.FRAMINGS`);
     ``character`` a user's character the motion is retargeted onto (see
     :func:`gesturekit.export.video.render_video`).
 
@@ -292,7 +295,7 @@ def save_result_video(
     require("pyvista", purpose="rendering a video")  # the rendering libraries load only when rendering
     from ..viz.render import RenderStyle
 
-    style = RenderStyle(look=look)
+    style = RenderStyle(look=look, framing=framing)
     if side_by_side and result.refined_motion is not None:
         return render_video(
             path,

@@ -294,7 +294,8 @@ def viewer_data(
         ``up`` (Y) and ``look`` (``background``, ``ambient``, ``key``, ``light``, ``lights`` (each
         ``[direction, strength]``), ``fov``, ``view``, ``depth_share``: the page's camera is
         :func:`~gesturekit.character.look.camera_for` of ``box`` at its own aspect ratio, its top kept at the
-        top in the upper-body framing);
+        top in the upper-body framing; ``least_height``: the drawing is
+        :func:`~gesturekit.character.look.fitted_height` of the upper-body box high, at most as high as asked);
         ``motions``: one dict per motion with ``label``, ``offset`` (metres along X),
         ``derived`` (names of its derived joints; the page says what grey means), ``scheme``,
         ``colors`` (sRGB in [0, 1] of each of :data:`~gesturekit.character.mesh.PARTS`, then of
@@ -392,6 +393,7 @@ def viewer_data(
             "fov": look.FIELD_OF_VIEW,
             "view": list(look.VIEW_DIRECTION),
             "depth_share": look.DEPTH_SHARE,
+            "least_height": look.LEAST_VIEW_HEIGHT,
         },
         "motions": out,
     }

@@ -12,6 +12,7 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit import interactive as gs
 from gesturekit.app import HOME
+from gesturekit.character import look
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from tests.conftest import chart_spec as chart
@@ -95,11 +96,17 @@ def test_every_step_lists_its_k_candidates_with_their_sources(app_env, db):
         assert list(cands["take"]) == [db.take_names[int(db.clip_take[c])] for c in cands["clip"]]
         np.testing.assert_allclose(cands["pose_dist"], s.cand_pose_dist[step])
         assert cands["chosen"].tolist().index(True) == s.position[step]
-        # the chosen window and four alternatives, animated together; one point per candidate
+        # the chosen window alone in 3D, framed as a presenter, in the chosen one's colours; one point per candidate
         views = viewer(at, "inspect.views")
         step_frames = min((step + 1) * res.config.segment, res.n_frames) - step * res.config.segment
-        assert len(views["motions"]) == 5 and len(views["times"]) == step_frames
-        assert views["motions"][0]["label"].startswith("chosen")
+        assert len(views["motions"]) == 1 and len(views["times"]) == step_frames
+        assert views["title"] == f"#{int(s.position[step])} · chosen"
+        assert views["motions"][0]["scheme"] == look.role_scheme("chosen")
+        window = gs.candidate_motion(db, int(s.clip[step]), int(s.start[step]), step_frames)
+        shown_joints = window.presence.drawn
+        np.testing.assert_allclose(
+            views["motions"][0]["points"][:, shown_joints], window.positions[:, shown_joints], atol=2e-3
+        )
         (points,) = [t for t in chart(at, "inspect.candidates_plot")["data"] if t["meta"]["part"] == "candidates"]
         np.testing.assert_allclose(array(points["x"]), s.cand_pose_dist[step])
     assert any(m.value.startswith(f"**Step {s.n_steps - 1}**") for m in at.markdown)
@@ -241,8 +248,10 @@ def test_table_scatter_and_strip_select_the_candidate_shown_large(app_env, db):
     }
     at.run()
     assert _large(at) == others[2] and at.selectbox(key="_w.inspect.candidate").value == others[2]
-    # the 3D view always shows the selected one beside the chosen one
-    assert any(m["label"] == f"#{others[2]} (selected)" for m in viewer(at, "inspect.views")["motions"])
+    # the 3D view shows the selected one, one at a time, in the colour of its rank
+    views = viewer(at, "inspect.views")
+    assert views["title"] == f"#{others[2]} · selected" and len(views["motions"]) == 1
+    assert views["motions"][0]["scheme"] == look.rank_scheme(others[2])
     # the selectbox selects too, and the two distances are said in words
     at.selectbox(key="_w.inspect.candidate").set_value(others[0]).run()
     assert _large(at) == others[0]

@@ -315,6 +315,13 @@ def test_rendering_the_video_gives_an_mp4_with_the_speech(app_env, tmp_path):
     assert info["video"]["codec"] == "h264" and info["audio"]["codec"] == "aac"
     assert info["video"]["frames"] == result(at).n_frames == 30
     assert info["audio"]["duration"] == pytest.approx(2.0, abs=0.03)
+    assert at.session_state["_synth.video"]["framing"] == "upper body"
+    # the full body: the video made before no longer stands for the choice; rendered again, framed so
+    at.checkbox(key="synth.video_full_body").check().run()
+    assert not at.get("video") and at.button(key="synth.render")
+    at.button(key="synth.render").click().run()
+    assert not at.exception and len(at.get("video")) == 1
+    assert at.session_state["_synth.video"]["framing"] == "full body"
 
 
 def test_with_a_refiner_k_nn_and_refined_are_shown_side_by_side(app_env, tmp_path, monkeypatch):

@@ -12,6 +12,7 @@ import json
 
 import pytest
 
+from gesturekit.workspace import DEMO_DATABASE_LABEL
 from tests import app_browser
 from tests.waits import patience
 
@@ -202,12 +203,12 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
             typed.press("Enter")
         _expect_kept(page, cells)
 
-        _choose_database(page, "demo database (generated speaker)")
+        _choose_database(page, DEMO_DATABASE_LABEL)
         _expect_kept(page, cells)
 
         # and straight back again, without typing
         _choose_database(page, "another folder…")
-        _choose_database(page, "demo database (generated speaker)")
+        _choose_database(page, DEMO_DATABASE_LABEL)
         _expect_kept(page, cells)
 
         app_browser.go_to(page, "Database")
@@ -233,7 +234,7 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
 def _switch_database_and_back(page) -> None:
     _choose_database(page, "another folder…")
     app_browser.main_area(page).get_by_text("Type the folder of a database").first.wait_for()
-    _choose_database(page, "demo database (generated speaker)")
+    _choose_database(page, DEMO_DATABASE_LABEL)
 
 
 def test_the_other_pages_keep_their_settings_too(served):

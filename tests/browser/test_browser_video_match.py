@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from gesturekit.character import look
 from gesturekit.character.look import BACKGROUND
 from gesturekit.demo import open_default_database
 from gesturekit.export.video import render_video
@@ -72,13 +73,19 @@ def mp4_frame(path, index: int) -> np.ndarray:
 
 
 def test_a_screenshot_of_the_page_and_the_mp4_frame_overlap(pair, tmp_path):
-    from gesturekit.viz.viewer import skeleton_viewer
+    from gesturekit.viz.viewer import read_viewer_data, skeleton_viewer
 
     fps = pair[0].fps
     # no labels on either: the characters are compared, not two fonts
-    video = render_video(tmp_path / "pair.mp4", pair[0], side_by_side=pair[1], resolution=(WIDTH, HEIGHT))
     page_file = tmp_path / "view.html"
     page_file.write_text(skeleton_viewer(pair, labels=("", ""), height=HEIGHT, key="match"), encoding="utf-8")
+    # side by side, the page's drawing is no higher than the characters fill: the MP4 is made as large (even)
+    high = look.fitted_height(
+        read_viewer_data(page_file.read_text(encoding="utf-8"))["boxes"][look.UPPER_BODY], WIDTH, HEIGHT
+    )
+    high -= high % 2
+    page_file.write_text(skeleton_viewer(pair, labels=("", ""), height=high, key="match"), encoding="utf-8")
+    video = render_video(tmp_path / "pair.mp4", pair[0], side_by_side=pair[1], resolution=(WIDTH, high))
     with app_browser.browser(width=WIDTH, height=HEIGHT + 200) as page:
         page.goto(page_file.as_uri())
         page.locator('body[data-drawn="1"]').wait_for(state="attached")
@@ -95,11 +102,11 @@ def test_a_screenshot_of_the_page_and_the_mp4_frame_overlap(pair, tmp_path):
             canvas = page.locator("canvas#c")
             shot = np.asarray(Image.open(io.BytesIO(canvas.screenshot(type="png"))).convert("RGB"))
             frame = mp4_frame(video, k)
-            a, b = silhouette(to_size(shot, (WIDTH, HEIGHT))), silhouette(frame)
+            a, b = silhouette(to_size(shot, (WIDTH, high))), silhouette(frame)
             assert b.sum() > 0.02 * b.size, "the MP4 frame shows (almost) nothing"
             assert a.sum() > 0.02 * a.size, "the page shows (almost) nothing: is WebGL drawing?"
             overlap = iou(a, b)
             assert overlap >= 0.9, (t, overlap)
             # and the colours: the same shading, up to H.264's coding and three.js's per-pixel lighting
             both = a & b
-            assert np.abs(to_size(shot, (WIDTH, HEIGHT)).astype(int) - frame)[both].mean() < 15
+            assert np.abs(to_size(shot, (WIDTH, high)).astype(int) - frame)[both].mean() < 15

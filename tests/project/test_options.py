@@ -73,6 +73,7 @@ RUN_ARGUMENTS = {
         "character_clips",  # what the character's GLB keeps of the file's own clips: a run argument, as the map
         "video",
         "video_style",
+        "video_full_body",  # RenderStyle.framing of the MP4
         "force",
         "max_speech_minutes",
     },

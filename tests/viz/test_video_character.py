@@ -307,6 +307,11 @@ def test_the_command_line_and_the_result_video_choose_the_look(tmp_path, monkeyp
     for look in ("character", "capsules"):
         result_module.save_result_video(res, tmp_path / f"{look}.mp4", look=look)
     assert [s.look for s in seen] == ["character", "capsules"]
+    # the framing: the upper body and every hand unless --video-full-body
+    assert not parse(["synthesize", "a.wav", "--db", "db", "--video"]).video_full_body
+    assert parse(["synthesize", "a.wav", "--db", "db", "--video", "--video-full-body"]).video_full_body
+    result_module.save_result_video(res, tmp_path / "full.mp4", framing="full body")
+    assert [s.framing for s in seen] == ["upper body", "upper body", "full body"]
     assert not any(s.neutral for s in seen)  # the app and the command line show the side-by-side schemes
 
 

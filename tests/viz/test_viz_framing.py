@@ -11,19 +11,23 @@ import functools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gesturekit.character import look
 from gesturekit.character.paint import paint
 from gesturekit.demo import open_default_database
 from gesturekit.motion import Motion
+from gesturekit.skeleton import hand_indices
 from gesturekit.viz._plotly import MOTION_COLORS
 from gesturekit.viz.appearance import RenderStyle
 from gesturekit.viz.character_render import CharacterStage
 from gesturekit.viz.render import SkeletonScene
 from gesturekit.viz.viewer import viewer_data
 
-#: The least share of the picture's height a presenter's upper body fills, alone in the picture.
-FILL = 0.6
+#: The least share of the picture's height a presenter's upper body fills, alone in the picture (from the top
+#: down to the pelvis; below it the picture holds the hips and every hand hanging down, never cut).
+FILL = 0.55
 
 
 @functools.cache
@@ -68,6 +72,60 @@ def test_the_full_body_shows_the_feet_on_the_floor_and_the_head():
     assert 0 < rows.min() and rows.max() < 480  # head and feet inside the picture
     assert feet[1] < 480 and rows.max() >= feet[1] - 3  # the shoes reach the floor's line
     assert (rows.max() - rows.min()) / 480 > 0.75  # the whole person fills the height
+
+
+def _hands() -> np.ndarray:
+    return np.concatenate([hand_indices("left"), hand_indices("right")])
+
+
+@settings(max_examples=25)
+@given(frame=st.integers(0, 63), drop=st.floats(0.0, 0.6), waist=st.floats(-0.05, 0.05))
+def test_the_upper_body_box_reaches_below_every_hand_of_every_frame(frame, drop, waist):
+    points = speaker().positions[:64].copy()
+    points[frame, _hands(), 1] -= drop  # one frame's hands hang lower (a shrug, a bow)
+    _, box = look.stage_layout([points], waist=waist)
+    assert box[0, 1] <= points[..., 1].min() - look.HAND_MARGIN
+    # the hips below the pelvis are in it whatever the hands do, and the top is that of the reach
+    assert box[0, 1] <= waist - look.BELOW_WAIST * (box[1, 1] - waist) * 0.9
+    _, still = look.stage_layout([speaker().positions[:64]], waist=waist)
+    assert box[1, 1] == pytest.approx(still[1, 1], abs=0.05)
+
+
+@pytest.mark.slow
+def test_no_hand_leaves_the_mp4_where_the_hands_hang_below_the_hips():
+    motion = speaker()
+    hands = motion.positions[:, _hands()]
+    # the clip's hands hang well below the pelvis: a medium shot cut at the hips would cut them
+    assert hands[..., 1].min() < -0.2
+    for size in [(640, 480), (1280, 720)]:
+        with SkeletonScene([motion], resolution=size) as scene:
+            px = scene.project(hands.reshape(-1, 3))
+        w, h = size
+        assert np.all((px[:, 0] >= 0) & (px[:, 0] < w)), (px[:, 0].min(), px[:, 0].max())
+        assert np.all((px[:, 1] >= 0) & (px[:, 1] < h)), (px[:, 1].min(), px[:, 1].max())
+        assert px[:, 1].max() > 0.8 * h  # and the picture ends a little below the lowest hand, not far below
+
+
+@given(across=st.floats(0.3, 4.0), high=st.floats(0.3, 2.0), width=st.integers(200, 2000), most=st.integers(150, 900))
+def test_a_view_is_no_higher_than_its_box_fills(across, high, width, most):
+    box = np.array([[-across / 2, -0.3, -0.2], [across / 2, high - 0.3, 0.4]])
+    h = look.fitted_height(box, width, most)
+    assert min(most, look.LEAST_VIEW_HEIGHT) <= h <= most
+    if h == most:  # as high as asked: the box is framed by its height, or the view could not be higher
+        assert width / most >= across / high - 1e-9 or h >= width * high / across - 0.5
+    elif h > look.LEAST_VIEW_HEIGHT:  # less high: the box fills it both ways, the camera's two fits agree
+        cam = look.camera_for(box[0], box[1], width / h)
+        by_height = (high / 2) / np.tan(np.radians(cam["fov"]) / 2)
+        by_width = (across / 2) / (np.tan(np.radians(cam["fov"]) / 2) * width / h)
+        assert by_width == pytest.approx(by_height, rel=1 / h + 1e-9)
+
+
+def test_two_presenters_side_by_side_get_a_lower_view_than_one():
+    motion = speaker()
+    one = look.stage_layout([motion.positions], waist=0.0)[1]
+    two = look.stage_layout([motion.positions, motion.positions], waist=0.0)[1]
+    assert look.fitted_height(one, 640, 480) == 480
+    assert look.fitted_height(two, 640, 480) < 0.8 * 480
 
 
 def test_side_by_side_characters_stand_closer_than_their_widest_gesture():

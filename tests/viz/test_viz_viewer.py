@@ -161,6 +161,7 @@ def test_the_framing_holds_every_joint_and_the_look_is_the_characters():
         "fov": look.FIELD_OF_VIEW,
         "view": list(look.VIEW_DIRECTION),
         "depth_share": look.DEPTH_SHARE,
+        "least_height": look.LEAST_VIEW_HEIGHT,
     }
 
 

@@ -32,14 +32,15 @@ _DERIVED = "_synth.figures"  # figures of the current result: {"run": n, name: f
 _VIDEO = "_synth.video"  # {"run": n, "bytes": mp4, "note": how long it took, "character": its token or None}
 
 UPLOAD, EXAMPLE = "Upload a file", "Example speech"
-_INIT_LABELS = {"random": "random database frame (paper)", "rest": "rest pose"}
+# short enough for a laptop's column (tests/browser/test_browser_laptop.py); each option's help says the rest
+_INIT_LABELS = {"random": "random frame (paper)", "rest": "rest pose"}
 _BLEND_LABELS = {
-    "dead": "dead blending (ours, default)",
-    "inertialize": "inertialization (ours)",
-    "offset": "offset fade at joins (ours)",
-    "none": "none: hard joins (paper)",
+    "dead": "dead blending (ours)",
+    "inertialize": "inertialize (ours)",
+    "offset": "offset fade (ours)",
+    "none": "hard joins (paper)",
 }
-_MASK_LABELS = {"ends": "first and last frame of a window (paper)", "all": "every frame of a window"}
+_MASK_LABELS = {"ends": "window ends (paper)", "all": "every frame"}
 
 
 def _set_speech(token, name: str, audio: np.ndarray, summary: str, notes=()) -> None:
@@ -315,7 +316,13 @@ def video(record: dict) -> None:
     result = record["result"]
     done = ss.get(_VIDEO)
     token = characters.character_token()
-    if done is not None and done.get("character") != token:  # made on another character: made again
+    full = st.checkbox(
+        "Full-body MP4",
+        key="synth.video_full_body",
+        help="frame the MP4 on the whole person down to the floor (default: the upper body and every hand)",
+    )
+    framing = "full body" if full else "upper body"
+    if done is not None and (done.get("character"), done.get("framing")) != (token, framing):  # made again
         ss.pop(_VIDEO)
         done = None
     if done is not None and done["run"] == record["run"]:
@@ -339,7 +346,7 @@ def video(record: dict) -> None:
 
         t0 = time.perf_counter()
         try:
-            data = characters.render_mp4(result, progress=progress)  # on the user's character, if any
+            data = characters.render_mp4(result, progress=progress, framing=framing)  # on the user's character, if any
         except GestureKitError as exc:
             bar.empty()
             st.error(f"Could not render the video: {display.escape_markdown(exc)}")
@@ -351,7 +358,7 @@ def video(record: dict) -> None:
             f"Rendered {frames} frames in {seconds:.1f} s ({frames / max(seconds, 1e-9):.0f} frames/s); "
             "download it below."
         )
-        ss[_VIDEO] = {"run": record["run"], "bytes": data, "note": note, "character": token}
+        ss[_VIDEO] = {"run": record["run"], "bytes": data, "note": note, "character": token, "framing": framing}
         st.video(data, format="video/mp4")
         st.caption(note)
 

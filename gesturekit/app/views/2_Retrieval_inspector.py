@@ -186,35 +186,25 @@ def step_view(db: MatchingDatabase, record: dict, step: int) -> None:
         )
         st.caption("Click a point, a row of the table or a candidate in the strip to look at it closely.")
     with views:
-        others = table[~table["chosen"]]
-        shown = 0
-        if len(others):
-            key = state.persistent_key("inspect.n_views", 4)
-            ss[key] = min(int(ss[key]), len(others))
-            shown = ss["inspect.n_views"] = st.slider(
-                "Alternatives shown in 3D", min_value=0, max_value=len(others), key=key
-            )
-        motions = [gs.candidate_motion(db, int(s.clip[step]), int(s.start[step]), b - a)]
-        labels = ["chosen" + (" (pinned)" if s.pinned[step] else f" #{int(s.position[step])}")]
-        alternatives = list(others.head(shown).itertuples())
-        if not r.chosen and all(o.position != pick for o in alternatives):
-            alternatives = [r] + alternatives[: max(shown - 1, 0)]  # the selected one is always shown
-        # one meaning per colour on every page: the chosen one gold, the candidate of rank r as k = r elsewhere
-        schemes = [look.role_scheme("chosen")]
-        for o in alternatives:
-            motions.append(gs.candidate_motion(db, o.clip, o.start, b - a))
-            labels.append(f"#{o.position}" + (" (selected)" if o.position == pick else ""))
-            schemes.append(look.rank_scheme(int(o.position)))
+        # one candidate at a time, framed as a presenter (the page's one framing rule): the one selected in the
+        # table, the plot, the strip or the Candidate box below, at first the chosen one
+        if r.chosen:
+            motion = gs.candidate_motion(db, int(s.clip[step]), int(s.start[step]), b - a)
+            what, scheme = f"#{pick} · chosen" + (" (pinned)" if s.pinned[step] else ""), look.role_scheme("chosen")
+        else:
+            motion = gs.candidate_motion(db, r.clip, r.start, b - a)
+            what, scheme = f"#{pick} · selected", look.rank_scheme(pick)
         # the step's input speech is the clock: it is what every candidate was matched against
         display.show_skeletons(
-            motions,
-            labels=labels,
+            [motion],
+            title=what,
             height=360,
             key="inspect.views",
             audio=gs.step_speech(result, step),
             character=characters.current_character(),
-            schemes=schemes,
+            schemes=[scheme],
         )
+        st.caption("In 3D: the selected candidate. Select another in the table, the plot, the strip or below.")
 
     st.markdown("**Listen and choose**")
     positions = [int(p) for p in table["position"]]

@@ -208,7 +208,7 @@ def analysis(ratings: pd.DataFrame, pairwise: pd.DataFrame, excl: pd.DataFrame) 
 
 def downloads(tables: dict[str, pd.DataFrame]) -> None:
     st.subheader("Downloads")
-    cols = st.columns(len(tables))
+    cols = display.download_columns(len(tables))
     for col, (name, frame) in zip(cols, tables.items()):
         col.download_button(
             f"{name}.csv",

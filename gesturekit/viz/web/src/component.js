@@ -15,9 +15,12 @@ export function component(run) {
     if (!msg || msg.type !== "streamlit:render") return;
     const a = msg.args;
     document.body.dataset.key = a.key;
-    document.getElementById("stage").style.height = a.height + "px";
+    const stage = document.getElementById("stage");
+    const fresh = a.hash !== shown || stage.dataset.most !== String(a.height);
+    stage.dataset.most = String(a.height);  // the viewer may draw less high (viewer.js: fittedHeight)
+    if (fresh) stage.style.height = a.height + "px";
     send("streamlit:setFrameHeight", { height: document.body.scrollHeight });
-    if (a.hash === shown) return;  // the same viewer again: nothing to redraw
+    if (!fresh) return;  // the same viewer again: nothing to redraw
     shown = a.hash;
     if (takedown) takedown();
     const old = document.getElementById("gk-audio");
@@ -37,7 +40,7 @@ export function component(run) {
     window.gkArgs = { data: a.data, audio: a.audio || null, key: a.key, hash: a.hash };
     const data = JSON.parse(a.data);
     document.getElementById("stage").style.background = data.look.background;
-    takedown = run(data, audio);
+    takedown = run(data, audio, () => send("streamlit:setFrameHeight", { height: document.body.scrollHeight }));
   });
   send("streamlit:componentReady", { apiVersion: 1 });
 }

@@ -23,8 +23,17 @@ export function cameraFor(lo, hi, aspect, fov, dir, top, depthShare, floor) {
   return { position: centre.map((c, i) => c + (dist * dir[i]) / norm), target: centre };
 }
 
-/** Draw the data D with the speech element audio (or null); returns a function that takes the view down. */
-function main(D, audio) {
+/** gesturekit.character.look.fitted_height: the drawing's height in pixels for a canvas `width` pixels wide, at
+ * which the upper-body box of side-by-side characters fills it both ways (cameraFor fits the box's width there),
+ * at most `most` (the height asked for) and at least `least` pixels (or `most`, if less). */
+export function fittedHeight(box, width, most, least) {
+  const wide = (box[1][0] - box[0][0]) / Math.max(box[1][1] - box[0][1], 1e-3);
+  return Math.floor(Math.min(most, Math.max(Math.min(most, least), width / wide)) + 0.5);
+}
+
+/** Draw the data D with the speech element audio (or null); resized(), if given, is called when the drawing
+ * changes its height. Returns a function that takes the view down. */
+function main(D, audio, resized) {
   const begun = performance.now();
   const gone = new AbortController(), signal = gone.signal;
   const N = D.times.length, shownFps = D.fps / D.frame_step;
@@ -88,7 +97,15 @@ function main(D, audio) {
     if (controls) { controls.target.set(c.target[0], c.target[1], c.target[2]); controls.update(); }
     else camera.lookAt(c.target[0], c.target[1], c.target[2]);
   }
+  // side by side, the drawing is no taller than the characters fill: its width frames them, the presenter rule
+  // (the upper body fills most of the height) holds, and no empty floor is left under them
+  const most = Number(stage.dataset.most) || stage.clientHeight;
   function size() {
+    const fitted = fittedHeight(D.boxes["upper body"], Math.max(1, canvas.clientWidth), most, D.look.least_height);
+    if (stage.style.height !== fitted + "px") {
+      stage.style.height = fitted + "px";
+      if (resized) resized();
+    }
     const w = Math.max(1, canvas.clientWidth), h = Math.max(1, canvas.clientHeight);
     if (renderer) { renderer.setPixelRatio(window.devicePixelRatio || 1); renderer.setSize(w, h, false); }
     camera.aspect = w / h;
