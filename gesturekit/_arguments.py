@@ -23,6 +23,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 _NONE_OK = re.compile(r"\b(None|Optional|Any|object)\b")
 _ARRAY = re.compile(r"\b(ndarray|ArrayLike|NDArray)\b")
+_PATH = re.compile(r"\b(PathLike|Path)\b")
 _TEXT_OK = re.compile(r"\b(str|PathLike|Path|Any|object|Speech)\b")
 
 
@@ -71,7 +72,8 @@ def checks_arguments(func: F) -> F:
             else:
                 continue
             if value is None and not none_ok:
-                raise ConfigError(f"{name}: the argument {arg} is None; it takes {text}")
+                what = f"a file name or path ({text})" if _PATH.search(text) else text
+                raise ConfigError(f"{name}: the argument {arg} is None; it takes {what}")
             if array_only and isinstance(value, str):
                 raise ConfigError(f"{name}: the argument {arg} is the text {value[:40]!r}; it takes {text}")
         return func(*args, **kwargs)

@@ -197,6 +197,7 @@ def camera_for(
 LEAST_VIEW_HEIGHT = 200
 
 
+@checks_arguments
 def fitted_height(box: npt.ArrayLike, width: float, most: float) -> int:
     """The height, pixels, of a view ``width`` pixels wide that its upper-body ``box`` fills both ways.
 
