@@ -6,8 +6,8 @@ export (``upper_arm.L``-style names, A-pose, rolled bones), each with a generate
 a mocap BVH laid out as the common CMU conversion writes it (CMU names, zero-length ``Neck`` and shoulder bones,
 its own unit). The motion is a synthesis of the demo speaker's 8 s example on the demo database. For each family,
 the viewer's page (as the app and ``character_view`` show it) is screenshotted in headless Chromium and the MP4
-(:func:`gesturekit.export.video.render_video`) decoded, both at one frame:
-``docs/screenshots/character-FAMILY-page.png`` and ``character-FAMILY-mp4.png``.
+(:func:`gesturekit.export.video.render_video`) decoded, both at one frame, and written into docs/screenshots as
+``character-mixamo-page.png`` and ``character-mixamo-mp4.png``, and so on for each family.
 
 Usage (from the repository's root, with the viewer's bundle built: ``python gesturekit/viz/web/build.py``)::
 
