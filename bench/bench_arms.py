@@ -34,12 +34,12 @@ def main() -> None:
     motion = Motion(db.poses[: args.clips].reshape(-1, 55, 3).astype(np.float32), 15.0, db.joint_presence)
     print(f"{motion.n_frames} frames; default wrist slack {WRIST_SLACK:.0%}")
     with tempfile.TemporaryDirectory() as tmp:
-        for change in (-0.24, -0.12, 0.1, 0.2):
+        for change in (-0.24, -0.2, -0.12, 0.1, 0.2):
             ch = _rig(Path(tmp), change)
-            for slack in (0.0, 0.02, 0.05, 0.08, 0.1):
+            for slack in (0.0, 0.02, 0.05, 0.055, 0.08, 0.1):
                 med, p95, wrist = arm_errors(motion, ch, slack)
                 print(
-                    f"ratio {change:+.0%} slack {slack:4.0%}: bones median {med:4.1f} p95 {p95:4.1f} deg, "
+                    f"ratio {change:+.0%} slack {slack:5.1%}: bones median {med:4.1f} p95 {p95:4.1f} deg, "
                     f"hands {100 * wrist:4.1f} % of the arm"
                 )
 

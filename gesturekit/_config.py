@@ -26,6 +26,7 @@ import numbers
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, ClassVar, TypeVar
 
+from ._arguments import checks_arguments
 from .errors import ConfigError
 
 __all__ = [
@@ -223,6 +224,7 @@ class Option:
         return f"a finite {what.split()[-1]}"
 
 
+@checks_arguments
 def option(
     default: Any = dataclasses.MISSING,
     *,
@@ -254,6 +256,7 @@ def option(
     return dataclasses.field(default=default, compare=compare, hash=hash, metadata=meta)
 
 
+@checks_arguments
 def options_of(cls: type) -> dict[str, Option]:
     """The options of a configuration class, field name -> :class:`Option`, in field order.
 
@@ -269,11 +272,13 @@ def options_of(cls: type) -> dict[str, Option]:
     return {f.name: f.metadata[_KEY] for f in dataclasses.fields(cls) if _KEY in f.metadata}
 
 
+@checks_arguments
 def option_of(cls: type, name: str) -> Option:
     """The :class:`Option` of the field ``name`` of ``cls``; KeyError if it is no option."""
     return options_of(cls)[name]
 
 
+@checks_arguments
 def default_of(cls: type, name: str) -> Any:
     """The default value of the field ``name`` of ``cls`` (its factory's value where it has one)."""
     for f in dataclasses.fields(cls):
@@ -294,6 +299,7 @@ def _integer(cls: type, name: str, opt: Option) -> bool:
     return kind is int
 
 
+@checks_arguments
 def check_option(cls: type, name: str, value: Any, *, what: str | None = None) -> Any:
     """``value`` checked against the option's metadata: its choices, or its type and bounds.
 
@@ -354,6 +360,7 @@ def _checked_number(cls: type, name: str, opt: Option, value: Any, label: str) -
     return int(value) if integer else float(value)
 
 
+@checks_arguments
 def widget_limits(cls: type, name: str, *, context: Any = None) -> dict[str, Any]:
     """What an input widget for the option ``name`` of ``cls`` allows, as plain values.
 
@@ -410,6 +417,7 @@ def widget_limits(cls: type, name: str, *, context: Any = None) -> dict[str, Any
     }
 
 
+@checks_arguments
 def options_config(cls: type[C], config: C | None, options: Mapping[str, Any]) -> C:
     """``config`` (or the defaults of ``cls``) with the fields ``options`` replaced.
 

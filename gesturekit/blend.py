@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._arguments import checks_arguments
 from .errors import ConfigError
 
 __all__ = [
@@ -61,6 +62,7 @@ _HALF_U = 1.6783469900166608
 KEEP_BELOW_HZ = 2.0
 
 
+@checks_arguments
 def fade_weights(frames: int) -> np.ndarray:
     """The weights an ``"offset"`` blend fades a join's offset with, shape (frames,), float64:
     a cosine from 1 to 0, exclusive at both ends."""
@@ -88,6 +90,7 @@ def _dead(before: np.ndarray, seg: np.ndarray, halflife: float) -> np.ndarray:
     return (1.0 - w) * extrapolated + w * seg
 
 
+@checks_arguments
 def blend_segment(before: np.ndarray, seg: np.ndarray, *, mode: str, halflife: float, frames: int = 4) -> np.ndarray:
     """One segment after a join, as :func:`blend_segments` makes it (``"inertialize"``, ``"dead"``).
 
@@ -115,6 +118,7 @@ def blend_segment(before: np.ndarray, seg: np.ndarray, *, mode: str, halflife: f
     return seg + _spring(x0, v_out - v_seg, len(seg), halflife)
 
 
+@checks_arguments
 def blend_segments(
     g: np.ndarray,
     boundaries: np.ndarray,
@@ -188,6 +192,7 @@ def blend_segments(
     return out
 
 
+@checks_arguments
 def keep_slow(refined: np.ndarray, knn: np.ndarray, hz: float, fps: float = 15.0) -> np.ndarray:
     """``refined`` with its content slower than ``hz`` replaced by ``knn``'s.
 

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._arguments import checks_arguments
 from .errors import ConfigError
 from .skeleton import JOINT_NAMES, N_JOINTS, PARENTS, JointPresence, joint_index
 
@@ -106,6 +107,7 @@ def _lengths(pos: np.ndarray) -> np.ndarray:
     return out
 
 
+@checks_arguments
 def fit_bone_lengths(positions: np.ndarray, presence: JointPresence | None = None) -> np.ndarray:
     """One length per bone: the median over the frames, shape (55,), metres (0 for roots and absent joints).
 
@@ -124,6 +126,7 @@ def fit_bone_lengths(positions: np.ndarray, presence: JointPresence | None = Non
     return lengths
 
 
+@checks_arguments
 def bone_length_spread(positions: np.ndarray, presence: JointPresence | None = None) -> np.ndarray:
     """How much each bone's length varies: the standard deviation over frames, shape (55,), metres."""
     pos = _check(positions)
@@ -179,6 +182,7 @@ class BoneLengthReport:
         )
 
 
+@checks_arguments
 def normalise_bone_lengths(
     positions: np.ndarray,
     presence: JointPresence | None = None,
@@ -269,6 +273,7 @@ def normalise_bone_lengths(
     return out, report
 
 
+@checks_arguments
 def bones_like(positions: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """``positions`` given the bones of ``reference``, frame by frame.
 
@@ -327,6 +332,7 @@ def _carried(ok: np.ndarray) -> np.ndarray:
 # ---- one skeleton for many takes --------------------------------------------------------------------
 
 
+@checks_arguments
 def group_frames(positions: np.ndarray, group: str) -> tuple[np.ndarray, np.ndarray]:
     """The frame of a rigid group in every frame of the data (see the module notes).
 
@@ -369,6 +375,7 @@ def _frames(first: np.ndarray, across: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return frames, ok
 
 
+@checks_arguments
 def sample_rows() -> tuple[str, ...]:
     """What each row of :func:`bone_samples` holds: ``"length:JOINT"`` (the bone ending at the joint,
     metres) for the 55 joints, then ``"GROUP:CHILD:x|y|z"`` (the child's bone direction in the
@@ -382,6 +389,7 @@ def sample_rows() -> tuple[str, ...]:
 _N_ROWS = len(sample_rows())
 
 
+@checks_arguments
 def bone_samples(positions: np.ndarray) -> np.ndarray:
     """What a skeleton is fitted from, per frame of one take (:func:`fit_skeleton`).
 
@@ -580,6 +588,7 @@ class Skeleton:
         return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
 
+@checks_arguments
 def fit_skeleton(
     samples: Sequence[np.ndarray] | Callable[[int], np.ndarray],
     *,

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import limits
+from ._arguments import checks_arguments
 from .errors import ConfigError, InputFileError
 from .skeleton import FPS, joint_index
 
@@ -84,6 +85,7 @@ CONSTRAINTS: dict[str, tuple[tuple[str, ...], dict[str, str]]] = {
 }
 
 
+@checks_arguments
 def frame_attributes(positions: np.ndarray, *, fps: float = FPS) -> np.ndarray:
     """Control attributes of every frame of one take.
 
@@ -235,6 +237,7 @@ _SECONDS = r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)"
 _TIME_RANGE_RE = re.compile(rf"^\s*({_SECONDS})\s*-\s*({_SECONDS})\s*$")
 
 
+@checks_arguments
 def parse_time_range(text: str, *, what: str = "time range", form: str = "START-END") -> tuple[float, float]:
     """``"START-END"`` in seconds -> ``(start, end)``, with ``0 <= start < end`` and both finite.
 
@@ -287,6 +290,7 @@ def _parse_constraints(text: str) -> tuple[tuple[str, str], ...]:
     return tuple(out)
 
 
+@checks_arguments
 def parse_control(text: str) -> ControlTrack:
     """Parse ``"0-3:left_hand=low,3-6:speed=slow+symmetry=symmetric"`` (seconds).
 
@@ -325,6 +329,7 @@ def parse_control(text: str) -> ControlTrack:
 _CONTROL_COLUMNS = ("start_s", "end_s", "constraint")
 
 
+@checks_arguments
 def load_control_file(path: str | os.PathLike) -> ControlTrack:
     """Read a control track from CSV (columns start_s, end_s, constraint) or JSON (a list of such objects).
 
@@ -387,6 +392,7 @@ def load_control_file(path: str | os.PathLike) -> ControlTrack:
         raise InputFileError(problem, path=p) from None
 
 
+@checks_arguments
 def constraint_mask(
     attributes: np.ndarray, constraints: tuple[tuple[str, str], ...], thresholds: dict[str, tuple[float, float]]
 ) -> np.ndarray:
@@ -415,6 +421,7 @@ def constraint_mask(
     return mask
 
 
+@checks_arguments
 def step_masks(
     track: ControlTrack,
     attributes: np.ndarray,
@@ -470,6 +477,7 @@ CONSTRAINT_CHOICES: tuple[str, ...] = tuple(
 )
 
 
+@checks_arguments
 def empty_segments() -> pd.DataFrame:
     """A control table without rows, with the column types the editor needs."""
     import pandas as pd  # kept local: only the table needs pandas
@@ -483,6 +491,7 @@ def empty_segments() -> pd.DataFrame:
     )
 
 
+@checks_arguments
 def segments_frame(track: ControlTrack) -> pd.DataFrame:
     """A control track as a table: one row per constraint, sorted by time.
 
@@ -521,6 +530,7 @@ def _is_blank(value: object) -> bool:
         return False
 
 
+@checks_arguments
 def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack:
     """The control track a segment table describes.
 
@@ -587,6 +597,7 @@ def _constraint_pair(text: str) -> tuple[str, str]:
     return name, value
 
 
+@checks_arguments
 def add_segment(table: pd.DataFrame, start_s: float, end_s: float, constraint: str) -> pd.DataFrame:
     """The table with a new constraint over a time range, replacing what it overlaps.
 

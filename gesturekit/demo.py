@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ._arguments import checks_arguments
 from .database import BuildConfig, MatchingDatabase
 from .errors import DatabaseError
 from .paths import default_database_path
@@ -23,6 +24,7 @@ DEMO_SEED = 0
 DEMO_TAKE_SECONDS = 120.0
 
 
+@checks_arguments
 def build_demo_database(
     out: str | os.PathLike | None = None,
     *,
@@ -109,6 +111,7 @@ def _on_skeleton(take, skeleton: Skeleton):
     return replace(take, motion=Motion(pos.astype(np.float32), take.motion.fps, take.motion.joints))
 
 
+@checks_arguments
 def open_default_database(
     *,
     build_if_missing: bool = True,

@@ -13,6 +13,7 @@ import os
 import threading
 import warnings
 from collections.abc import Iterator
+from types import FrameType
 
 __all__ = [
     "GestureKitError",
@@ -94,7 +95,21 @@ def warn(message: str, *, stacklevel: int = 1) -> None:
     if stack:
         stack[-1].append(message)
     else:
-        warnings.warn(GestureKitWarning(message), stacklevel=stacklevel + 1)
+        warnings.warn(GestureKitWarning(message), stacklevel=_past_checks(stacklevel + 1))
+
+
+def _past_checks(stacklevel: int) -> int:
+    """``stacklevel`` (counted from :func:`warn`'s caller's caller) with the frames of the argument checks
+    (:mod:`gesturekit._arguments`) between skipped, so that a warning names the line that called gesturekit."""
+    import sys
+
+    frame: FrameType | None = sys._getframe(2)  # warn's caller: stack level 2
+    level, at = stacklevel, 2
+    while frame is not None and at < level:
+        frame, at = frame.f_back, at + 1
+        if frame is not None and frame.f_code.co_filename.endswith(f"{os.sep}_arguments.py"):
+            level += 1
+    return level
 
 
 @contextlib.contextmanager

@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ._arguments import checks_arguments
 from .errors import ConfigError
 from .motion import AUDIO_SR, n_audio_frames
 from .skeleton import FPS, JOINT_NAMES, N_JOINTS, POSE_FEATURE_JOINTS
@@ -122,6 +123,7 @@ assert (LAYOUT.frame_dim, LAYOUT.audio_dim, LAYOUT.pose_dim, LAYOUT.motion_dim, 
 )
 
 
+@checks_arguments
 def frame_centres(n_frames: int, *, sr: int = AUDIO_SR, fps: int = FPS, first: int = 0) -> np.ndarray:
     """Sample index of the centre of each frame, shape (n_frames,), int64.
 
@@ -236,6 +238,7 @@ class _MelBands:
 _BANDS: dict[tuple[int, int, int], _MelBands] = {}
 
 
+@checks_arguments
 def audio_frame_features(
     audio: np.ndarray,
     *,
@@ -307,6 +310,7 @@ def _stack(x: np.ndarray, offsets: tuple[int, ...]) -> np.ndarray:
     return x[idx].reshape(n, -1)
 
 
+@checks_arguments
 def stack_audio_features(m: np.ndarray, *, layout: FeatureLayout = LAYOUT) -> np.ndarray:
     """Audio features ``f_t = [m_t, m_{t+2}, ..., m_{t+14}]``.
 
@@ -325,6 +329,7 @@ def stack_audio_features(m: np.ndarray, *, layout: FeatureLayout = LAYOUT) -> np
     return _stack(m, layout.audio_offsets).astype(np.float32, copy=False)
 
 
+@checks_arguments
 def pose_features(positions: np.ndarray, *, layout: FeatureLayout = LAYOUT) -> np.ndarray:
     """Pose features ``p_t``: the 8 feature joints at ``t, t+2, t+4, t+6``.
 
@@ -345,6 +350,7 @@ def pose_features(positions: np.ndarray, *, layout: FeatureLayout = LAYOUT) -> n
     return _stack(joints, layout.pose_offsets).astype(np.float32, copy=False)
 
 
+@checks_arguments
 def cgan_audio_features(m: np.ndarray) -> np.ndarray:
     """The cGAN's audio input: ``m_t`` and its time derivative (central differences, per frame).
 
@@ -363,6 +369,7 @@ def cgan_audio_features(m: np.ndarray) -> np.ndarray:
     return np.concatenate([m, d], axis=1).astype(np.float32)
 
 
+@checks_arguments
 def valid_starts(n_frames: int, *, layout: FeatureLayout = LAYOUT) -> np.ndarray:
     """Frames whose audio and pose features need no padding, shape (n_frames,), bool.
 

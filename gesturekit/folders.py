@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ._arguments import checks_arguments
 from .errors import GestureKitError
 from .limits import read_json
 from .paths import is_dir
@@ -41,6 +42,7 @@ _FOLDER_NAMES = {
 }
 
 
+@checks_arguments
 def read_json_marker(
     folder: str | os.PathLike,
     name: str,
@@ -100,6 +102,7 @@ def read_json_marker(
     return content
 
 
+@checks_arguments
 def folder_kind(path: str | os.PathLike[str]) -> str | None:
     """Which of gesturekit's folders (a key of :data:`FOLDER_KINDS`) ``path`` is, from its marker file.
 

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from ._arguments import checks_arguments
 from ._io import safe_filename
 from .database import MatchingDatabase
 from .datasets.audio import wav_bytes
@@ -91,6 +92,7 @@ _MIN_RANGE_S = 1.0 / 15.0
 _TIME_DECIMALS = 2  # box-selected times are rounded to 10 ms
 
 
+@checks_arguments
 def selected_time_range(selection: Mapping | None, *, duration: float) -> tuple[float, float] | None:
     """The time range of the latest box selection on a chart whose x axis is time.
 
@@ -123,6 +125,7 @@ def selected_time_range(selection: Mapping | None, *, duration: float) -> tuple[
 # ---- speech -------------------------------------------------------------------------------------
 
 
+@checks_arguments
 def example_speech(label: str) -> np.ndarray:
     """Generated example speech of the demo speaker (deterministic).
 
@@ -145,6 +148,7 @@ def example_speech(label: str) -> np.ndarray:
     return take.audio
 
 
+@checks_arguments
 def read_speech_upload(name: str, data: bytes) -> tuple[np.ndarray, AudioInfo]:
     """Decode an uploaded speech file (any format the audio reader takes) via a temporary folder.
 
@@ -201,6 +205,7 @@ BLEND_LABELS = {
 }
 
 
+@checks_arguments
 def display_motions(result: SynthesisResult) -> tuple[list[Motion], list[str]]:
     """The motions to show for a result, with their labels.
 
@@ -218,6 +223,7 @@ def display_motions(result: SynthesisResult) -> tuple[list[Motion], list[str]]:
 # ---- exports ------------------------------------------------------------------------------------
 
 
+@checks_arguments
 def export_filename(result: SynthesisResult, kind: str) -> str:
     """A safe download name, e.g. ``"speech_k0_seed0.bvh"``, from the speech's name and the settings."""
     if kind not in EXPORT_KINDS:
@@ -227,6 +233,7 @@ def export_filename(result: SynthesisResult, kind: str) -> str:
     return safe_filename(f"{stem}_k{c.k}_seed{c.seed}", max_length=80, default="gesturekit") + EXPORT_KINDS[kind][0]
 
 
+@checks_arguments
 def export_bytes(result: SynthesisResult, kind: str) -> bytes:
     """A result in one downloadable form.
 
@@ -254,6 +261,7 @@ def export_bytes(result: SynthesisResult, kind: str) -> bytes:
     return buf.getvalue()
 
 
+@checks_arguments
 def export_bvh_bytes(result: SynthesisResult, name: str = "result.bvh") -> tuple[bytes, BvhReport]:
     """The result's BVH file, and its report (:func:`~gesturekit.export.result.export_result_bvh`).
 
@@ -275,6 +283,7 @@ def export_bvh_bytes(result: SynthesisResult, name: str = "result.bvh") -> tuple
     return buf.getvalue(), report
 
 
+@checks_arguments
 def render_mp4(
     result: SynthesisResult,
     *,
@@ -309,6 +318,7 @@ def render_mp4(
 # ---- the search record --------------------------------------------------------------------------
 
 
+@checks_arguments
 def candidate_motion(db: MatchingDatabase, clip: int, start: int, n_frames: int) -> Motion:
     """Frames ``start .. start + n_frames`` of a database clip (fewer at the clip's end)."""
     g = np.asarray(db.G[int(clip), int(start) : int(start) + int(n_frames)], dtype=np.float32)
@@ -317,6 +327,7 @@ def candidate_motion(db: MatchingDatabase, clip: int, start: int, n_frames: int)
     return Motion.from_flat(g, db.fps, db.joint_presence)
 
 
+@checks_arguments
 def segment_in_context(
     db: MatchingDatabase, clip: int, start: int, n_frames: int, *, context_s: float = 1.0
 ) -> tuple[np.ndarray, float, float, float]:
@@ -359,6 +370,7 @@ def segment_in_context(
     return np.asarray(take[a:b], dtype=np.float32), (s0 - a) / AUDIO_SR, (s1 - a) / AUDIO_SR, a / AUDIO_SR
 
 
+@checks_arguments
 def step_speech(result: SynthesisResult, step: int) -> np.ndarray:
     """The input speech under one step's output frames, float32 at 16 kHz."""
     n = result.config.segment
@@ -368,6 +380,7 @@ def step_speech(result: SynthesisResult, step: int) -> np.ndarray:
     return np.asarray(result.audio[a:b], dtype=np.float32)
 
 
+@checks_arguments
 def query_pose(db: MatchingDatabase, result: SynthesisResult, step: int) -> np.ndarray | None:
     """The pose step ``step`` matched its candidates against (``p_{t-1}``) as joints, or None.
 
@@ -384,6 +397,7 @@ def query_pose(db: MatchingDatabase, result: SynthesisResult, step: int) -> np.n
     return candidate_motion(db, frame[0], frame[1], 1).positions[0]
 
 
+@checks_arguments
 def candidate_views(db: MatchingDatabase, result: SynthesisResult, step: int) -> list[CandidateView]:
     """The recorded candidates of one step, best first, each with its whole database clip.
 
@@ -421,6 +435,7 @@ def candidate_views(db: MatchingDatabase, result: SynthesisResult, step: int) ->
     return views
 
 
+@checks_arguments
 def clip_speech(db: MatchingDatabase, clip: int) -> np.ndarray | None:
     """A database clip's own speech over its frames, float32 at 16 kHz; None without audio."""
     if db.audio is None:
@@ -428,6 +443,7 @@ def clip_speech(db: MatchingDatabase, clip: int) -> np.ndarray | None:
     return np.asarray(db.segment_audio(int(clip), 0, db.G.shape[1]), dtype=np.float32)
 
 
+@checks_arguments
 def compare_k(
     audio: str | os.PathLike[str] | np.ndarray,
     *,
@@ -469,6 +485,7 @@ def compare_k(
     return results
 
 
+@checks_arguments
 def comparison_table(results: Sequence[SynthesisResult], thresholds: Mapping[str, tuple[float, float]]) -> pd.DataFrame:
     """One row per result: k, the chosen windows' mean pose and audio distance, relaxed steps, control adherence.
 
@@ -500,6 +517,7 @@ def comparison_table(results: Sequence[SynthesisResult], thresholds: Mapping[str
     return pd.DataFrame(rows)
 
 
+@checks_arguments
 def parse_times(text: str, *, duration: float) -> list[float]:
     """Times typed as ``"1, 2.5, 4"`` (seconds, commas or spaces between them), in order.
 

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import IO, TYPE_CHECKING
 
+from ._arguments import checks_arguments
 from .errors import ConfigError, GestureKitError, InputFileError, MotionFileError
 
 if TYPE_CHECKING:
@@ -134,6 +135,7 @@ _overrides: contextvars.ContextVar[Mapping[str, tuple[float, str | None]]] = con
 
 
 @contextlib.contextmanager
+@checks_arguments
 def override(limit: Limit, value: float | None, *, option: str | None = None) -> Iterator[None]:
     """Set ``limit`` to ``value`` inside the block (nothing changes when ``value`` is None).
 
@@ -179,21 +181,25 @@ JSON_MB = Limit("GESTUREKIT_MAX_JSON_MB", 64.0, "MB")
 JSON_DEPTH = 32
 
 
+@checks_arguments
 def max_speech_seconds() -> float:
     """Longest speech accepted for synthesis, seconds (``GESTUREKIT_MAX_SPEECH_MINUTES`` x 60)."""
     return SPEECH_MINUTES.value() * 60.0
 
 
+@checks_arguments
 def max_take_seconds() -> float:
     """Longest take (motion or its audio) accepted for a database, seconds."""
     return TAKE_HOURS.value() * 3600.0
 
 
+@checks_arguments
 def max_input_bytes() -> float:
     """Most memory one input may take once decoded, bytes."""
     return INPUT_GB.value() * 1e9
 
 
+@checks_arguments
 def describe_seconds(seconds: float) -> str:
     """A duration in the unit that reads best: ``"8.0 s"``, ``"2.2 h"``, ``"3.2e+07 h"``."""
     if not math.isfinite(seconds):
@@ -206,6 +212,7 @@ def describe_seconds(seconds: float) -> str:
     return f"{hours:.1f} h" if hours < 1e5 else f"{hours:.2g} h"
 
 
+@checks_arguments
 def describe_bytes(n: float) -> str:
     """A size such as ``"16.0 KB"``, ``"2.7 GB"`` (powers of 1000)."""
     for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("KB", 1e3)):
@@ -214,6 +221,7 @@ def describe_bytes(n: float) -> str:
     return f"{int(n)} bytes"
 
 
+@checks_arguments
 def check_duration(
     seconds: float,
     *,
@@ -264,6 +272,7 @@ def check_duration(
     )
 
 
+@checks_arguments
 def check_sample_rate(rate: float, *, what: str, path: str | os.PathLike[str] | None = None) -> None:
     """Refuse a sample rate outside :data:`MIN_SAMPLE_RATE` .. :data:`MAX_SAMPLE_RATE`.
 
@@ -290,6 +299,7 @@ def check_sample_rate(rate: float, *, what: str, path: str | os.PathLike[str] | 
     )
 
 
+@checks_arguments
 def check_fps(fps: float, *, what: str, path: str | os.PathLike[str] | None = None, option: str | None = None) -> None:
     """Refuse a motion frame rate outside :data:`MIN_FPS` .. :data:`MAX_FPS`.
 
@@ -324,6 +334,7 @@ def check_fps(fps: float, *, what: str, path: str | os.PathLike[str] | None = No
     raise InputFileError(message, path=path)
 
 
+@checks_arguments
 def check_bytes(n: float, *, what: str, path: str | os.PathLike[str] | None = None) -> None:
     """Refuse an input that would take more than :data:`INPUT_GB` once decoded.
 
@@ -349,6 +360,7 @@ def check_bytes(n: float, *, what: str, path: str | os.PathLike[str] | None = No
     )
 
 
+@checks_arguments
 def npy_header(
     f: IO[bytes], *, path: str | os.PathLike[str] | None = None, name: str = "npy"
 ) -> tuple[tuple[int, ...], np.dtype, int]:
@@ -392,6 +404,7 @@ def npy_header(
     return tuple(int(n) for n in shape), dtype, offset
 
 
+@checks_arguments
 def npz_headers(path: str | os.PathLike[str]) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     """Shape and dtype of every array in an ``.npz`` archive, read without loading the arrays.
 
@@ -426,6 +439,7 @@ def npz_headers(path: str | os.PathLike[str]) -> dict[str, tuple[tuple[int, ...]
         raise MotionFileError(f"cannot read the npz archive: {exc}", path=path) from None
 
 
+@checks_arguments
 def array_bytes(shape: tuple[int, ...], itemsize: int) -> float:
     """Bytes of an array of ``shape`` with ``itemsize``-byte elements (float, never overflows)."""
     n = float(itemsize)
@@ -437,6 +451,7 @@ def array_bytes(shape: tuple[int, ...], itemsize: int) -> float:
 # ---- files: regular ones only, JSON bounded, npz archives checked -------------------------------------
 
 
+@checks_arguments
 def file_kind(mode: int) -> str:
     """What a file of ``st_mode`` ``mode`` is, in words (``"a FIFO"``, ``"a character device"``, ...)."""
     import stat
@@ -455,6 +470,7 @@ def file_kind(mode: int) -> str:
     return "not a regular file"
 
 
+@checks_arguments
 def check_regular(
     path: str | os.PathLike[str],
     *,
@@ -498,6 +514,7 @@ def check_regular(
     return st.st_size
 
 
+@checks_arguments
 def read_json(
     path: str | os.PathLike[str],
     *,
@@ -562,6 +579,7 @@ def read_json(
         raise error(f"{what}{'is ' if what else ''}not valid JSON ({exc})", path=where) from None
 
 
+@checks_arguments
 def parse_json(
     text: str | bytes,
     *,
@@ -603,6 +621,7 @@ def _json_depth(text: str) -> int:
     return int(np.cumsum(steps).max(initial=0))
 
 
+@checks_arguments
 def check_npz(
     path: str | os.PathLike[str],
     *,

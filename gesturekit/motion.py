@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._arguments import checks_arguments
 from .errors import ConfigError
 from .skeleton import FPS, N_JOINTS, PARENTS, JointPresence
 
@@ -15,6 +16,7 @@ __all__ = ["Motion", "HoldsMotion", "Take", "AUDIO_SR", "resample_positions", "o
 AUDIO_SR = 16000
 
 
+@checks_arguments
 def n_audio_frames(n_samples: int, *, sr: int = AUDIO_SR, fps: int = FPS) -> int:
     """Whole frames at ``fps`` in ``n_samples`` of audio at ``sr`` Hz: ``floor(n_samples * fps / sr)``.
 
@@ -128,6 +130,7 @@ class Take:
         return min(self.motion.duration, len(self.audio) / AUDIO_SR)
 
 
+@checks_arguments
 def resample_positions(positions: np.ndarray, fps_in: float, fps_out: float) -> np.ndarray:
     """Resample positions to another frame rate by linear interpolation in time.
 
@@ -154,6 +157,7 @@ def resample_positions(positions: np.ndarray, fps_in: float, fps_out: float) -> 
     return (positions[i0] * (1 - w) + positions[i1] * w).astype(positions.dtype, copy=False)
 
 
+@checks_arguments
 def output_frame_count(n_in: int, fps_in: float, fps_out: float) -> int:
     """Whole frames at ``fps_out`` that fit in ``n_in`` frames at ``fps_in`` (duration ``n_in/fps_in``)."""
     # a small tolerance so 2065 frames at 30 fps give 1032 frames at 15 fps, not 1031 by rounding

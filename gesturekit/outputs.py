@@ -47,6 +47,7 @@ import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
+from ._arguments import checks_arguments
 from .errors import OutputError
 from .folders import FOLDER_KINDS, folder_kind
 
@@ -134,6 +135,7 @@ def _file_is_owned(path: Path) -> bool:
     return False
 
 
+@checks_arguments
 def check_not_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike | None]) -> None:
     """Refuse an output that is, lies inside, or contains one of the ``inputs``.
 
@@ -162,6 +164,7 @@ def check_not_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike |
             raise OutputError(f"contains the input {inp}; choose an output that does not", path=out)
 
 
+@checks_arguments
 def check_output(
     path: str | os.PathLike, kind: str, *, overwrite: bool, inputs: Iterable[str | os.PathLike | None] = ()
 ) -> bool:
@@ -244,6 +247,7 @@ _held = threading.local()
 _NAME_MAX = 255
 
 
+@checks_arguments
 def beside_name(path: str | os.PathLike, suffix: str) -> str:
     """The name of a hidden file beside ``path``: ``.NAME`` + ``suffix``, shortened to fit a file name.
 
@@ -323,6 +327,7 @@ def _what_is(path: Path) -> str:
 
 
 @contextlib.contextmanager
+@checks_arguments
 def output_lock(path: str | os.PathLike) -> Iterator[None]:
     """Hold the exclusive lock of one output path for the block.
 
@@ -388,6 +393,7 @@ def output_lock(path: str | os.PathLike) -> Iterator[None]:
 # ---- stale temporaries ------------------------------------------------------------------------------
 
 
+@checks_arguments
 def pid_alive(pid: int) -> bool:
     """Whether a process with this id runs (on this machine)."""
     if pid <= 0:
@@ -403,6 +409,7 @@ def pid_alive(pid: int) -> bool:
     return True
 
 
+@checks_arguments
 def clean_stale(path: str | os.PathLike, *, own: bool = False) -> list[Path]:
     """Remove what interrupted writers of ``path`` left beside it.
 
@@ -468,6 +475,7 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(err, os.strerror(err), os.fspath(b))
 
 
+@checks_arguments
 def swap_folder(tmp: Path, path: Path) -> None:
     """Put the finished folder ``tmp`` in the place of ``path`` (which may exist) and delete the old one.
 
@@ -490,6 +498,7 @@ def swap_folder(tmp: Path, path: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
+@checks_arguments
 def write_folder(
     path: str | os.PathLike,
     kind: str,
@@ -548,6 +557,7 @@ def write_folder(
 
 
 @contextlib.contextmanager
+@checks_arguments
 def write_errors(path: str | os.PathLike) -> Iterator[None]:
     """Turn an ``OSError`` raised in the block into an :class:`OutputError` naming ``path``."""
     try:

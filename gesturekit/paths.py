@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ._arguments import checks_arguments
 from .errors import ConfigError
 
 __all__ = [
@@ -29,22 +30,26 @@ class PathNotAllowedError(ConfigError):
     """A path lies outside the folders the app may use (see :func:`check_allowed`)."""
 
 
+@checks_arguments
 def home() -> Path:
     """gesturekit's own folder: ``$GESTUREKIT_HOME``, else ``~/.cache/gesturekit``."""
     env = os.environ.get("GESTUREKIT_HOME")
     return Path(env).expanduser() if env else Path.home() / ".cache" / "gesturekit"
 
 
+@checks_arguments
 def default_database_path() -> Path:
     """Where the embedded demo database is built and found by default."""
     return home() / "db" / "demo"
 
 
+@checks_arguments
 def assets() -> Path:
     """The files shipped inside the package (the demo refiner); read-only for the app."""
     return Path(__file__).resolve().parent / "assets"
 
 
+@checks_arguments
 def allowed_roots(*, write: bool = False) -> tuple[Path, ...]:
     """The folders the app may use, resolved, in this order, without repeats.
 
@@ -76,6 +81,7 @@ def allowed_roots(*, write: bool = False) -> tuple[Path, ...]:
     return tuple(out)
 
 
+@checks_arguments
 def is_allowed(path: str | os.PathLike, *, write: bool = False) -> bool:
     """Whether ``path``, with symbolic links and ``..`` resolved, lies in one of :func:`allowed_roots`."""
     return _inside(Path(path).expanduser().resolve(), allowed_roots(write=write))
@@ -85,6 +91,7 @@ def _inside(resolved: Path, roots: tuple[Path, ...]) -> bool:
     return any(resolved == root or resolved.is_relative_to(root) for root in roots)
 
 
+@checks_arguments
 def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) -> Path:
     """Refuse a path outside the folders the app may use; return it resolved.
 
@@ -129,6 +136,7 @@ def check_allowed(path: str | os.PathLike, *, what: str, write: bool = False) ->
     )
 
 
+@checks_arguments
 def is_file(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` names an existing regular file; never raises.
 
@@ -142,6 +150,7 @@ def is_file(path: str | os.PathLike[str]) -> bool:
         return False
 
 
+@checks_arguments
 def is_dir(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` names an existing folder; never raises (see :func:`is_file`)."""
     try:

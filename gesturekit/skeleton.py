@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._arguments import checks_arguments
+
 __all__ = [
     "BODY_JOINTS",
     "FINGERS",
@@ -101,6 +103,7 @@ POSE_FEATURE_JOINTS: tuple[str, ...] = (
 )
 
 
+@checks_arguments
 def joint_index(name: str) -> int:
     """Index of a joint of the 55-joint skeleton by name."""
     try:
@@ -112,12 +115,14 @@ def joint_index(name: str) -> int:
 POSE_FEATURE_INDICES = np.array([joint_index(n) for n in POSE_FEATURE_JOINTS], dtype=np.int64)
 
 
+@checks_arguments
 def bones() -> np.ndarray:
     """Bones as (child, parent) index pairs, shape (54, 2); the root has none."""
     child = np.flatnonzero(PARENTS >= 0)
     return np.stack([child, PARENTS[child]], axis=1)
 
 
+@checks_arguments
 def hand_indices(side: str) -> np.ndarray:
     """Indices of the 21 joints of the ``"left"`` or ``"right"`` hand, wrist first."""
     if side not in ("left", "right"):
@@ -157,6 +162,7 @@ DERIVABLE_JOINTS: tuple[str, ...] = (
 )
 
 
+@checks_arguments
 def missing_required(present: Iterable[str]) -> list[str]:
     """What each need lacks among the joints ``present``, one line per need; empty when none lacks.
 

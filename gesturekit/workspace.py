@@ -21,6 +21,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ._arguments import checks_arguments
 from .database import BuildConfig, MatchingDatabase
 from .datasets.takes import AUDIO_EXTENSIONS, ReadOptions, discover_takes
 from .errors import InputFileError
@@ -49,6 +50,7 @@ DEMO_DATABASE_LABEL = "demo (generated speaker)"
 _GENERATOR_MODULE = "gesturekit.datasets.synthetic"  # what a generated take names as its source
 
 
+@checks_arguments
 def open_database(path: str | os.PathLike | None = None) -> MatchingDatabase:
     """The database at ``path``, or the demo database at the default path when ``path`` is None or empty.
 
@@ -67,6 +69,7 @@ def open_database(path: str | os.PathLike | None = None) -> MatchingDatabase:
     return open_default_database()
 
 
+@checks_arguments
 def is_generated(db: MatchingDatabase) -> bool:
     """Whether ``db`` holds the generated demo speaker (or takes of it) rather than recorded motion."""
     if str(db.meta.get("build", {}).get("source", "")).startswith("demo"):
@@ -76,6 +79,7 @@ def is_generated(db: MatchingDatabase) -> bool:
     )
 
 
+@checks_arguments
 def database_folders(*, cwd: str | os.PathLike | None = None) -> dict[str, str]:
     """Databases a user can pick: resolved folder (a string) -> label, the default demo database first.
 
@@ -107,6 +111,7 @@ def database_folders(*, cwd: str | os.PathLike | None = None) -> dict[str, str]:
     return out
 
 
+@checks_arguments
 def database_words(folder: str | os.PathLike) -> str:
     """A database said in words, as :func:`database_folders` labels it, for pages an audience sees
     (no server path): ``"a database you chose: <name>"`` for one typed in from elsewhere."""
@@ -114,6 +119,7 @@ def database_words(folder: str | os.PathLike) -> str:
     return database_folders().get(str(path), f"a database you chose: {path.name}")
 
 
+@checks_arguments
 def build_database(
     folder: str | os.PathLike,
     out: str | os.PathLike,
@@ -339,6 +345,7 @@ def _read_joint_map(
     return joint_map
 
 
+@checks_arguments
 def speech_files(folder: str | os.PathLike) -> list[Path]:
     """The speech files directly inside ``folder`` (not recursive), sorted by name.
 
@@ -356,6 +363,7 @@ def speech_files(folder: str | os.PathLike) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.suffix.lower() in AUDIO_EXTENSIONS and p.is_file())
 
 
+@checks_arguments
 def expand_speech(items: Iterable[str | os.PathLike]) -> list[Path]:
     """The speech files a list of files and folders names, in its order.
 

@@ -36,7 +36,20 @@ from gesturekit.skeleton import FINGERS
 
 __all__ = ["RigSpec", "RigTruth", "rig_files", "write_rig", "truth", "custom_map", "cmu_bvh", "CASES", "NAMINGS"]
 
-NAMINGS = ("mixamo", "vrm0", "vrm1", "zeggs", "custom", "blender", "unreal", "cc", "uma", "nameless")
+NAMINGS = (
+    "mixamo",
+    "vrm0",
+    "vrm1",
+    "zeggs",
+    "custom",
+    "blender",
+    "unreal",
+    "cc",
+    "uma",
+    "nameless",
+    "sideless",
+    "mirrored",
+)
 #: Naming families matched by their common words (:func:`gesturekit.character.humanoid.match_families`).
 FAMILY_NAMINGS = ("blender", "unreal", "cc", "uma")
 A_POSE_DEGREES = 40.0
@@ -68,7 +81,9 @@ class RigSpec:
     naming : str
         ``"mixamo"`` (``prefix`` + Hips, Spine.., LeftArm, LeftHandIndex1..4, HeadTop_End), ``"zeggs"`` (our
         BVH preset's names: Spine, Spine1..Spine3, Neck, Neck1, HeadEnd), ``"vrm0"`` / ``"vrm1"`` (VRoid-like
-        node names, matched through the humanoid map) or ``"custom"`` (``bone_00``.., see :func:`custom_map`).
+        node names, matched through the humanoid map), ``"custom"`` (``bone_00``.., see :func:`custom_map`),
+        ``"nameless"`` (glTF nodes without names), ``"sideless"`` (``arm_a`` on the right, ``arm_b`` on the left)
+        or ``"mirrored"`` (Mixamo's names with ``Left`` on the character's right).
     prefix : str
         Mixamo's name prefix (``""`` allowed).
     rest : str
@@ -242,6 +257,14 @@ def _template(spec: RigSpec) -> list[tuple[str, str | None, np.ndarray, str | No
 # ----------------------------------------------------------------------------- names
 
 
+def _sideless_name(key: str) -> str:
+    """A name that says the part but not the side: ``arm_a`` (the right) and ``arm_b`` (the left), so that neither
+    the names nor their order tells left from right."""
+    if key[:2] in ("L_", "R_"):
+        return f"{key[2:]}_{'b' if key[0] == 'L' else 'a'}"
+    return key
+
+
 def _mixamo_name(key: str, spec: RigSpec) -> str:
     fixed = {"hips": "Hips", "spine_extra": "Spine_extra", "neck": "Neck", "neck1": "Neck1", "head": "Head"}
     if key in fixed:
@@ -267,7 +290,7 @@ def _mixamo_name(key: str, spec: RigSpec) -> str:
             "toe_end": "Toe_End",
         }
         name = side + (parts[part] if part in parts else f"Hand{part[:-1].capitalize()}{part[-1]}")
-    return (spec.prefix if spec.naming == "mixamo" else "") + name
+    return (spec.prefix if spec.naming in ("mixamo", "mirrored") else "") + name
 
 
 _FAMILY_PARTS = {
@@ -393,6 +416,10 @@ def _bones(spec: RigSpec) -> list[tuple[str, int, np.ndarray, str | None, str | 
             pos = pos * (-1, 1, -1) if spec.naming == "vrm0" else pos  # VRM 0.x faces -Z
         elif spec.naming == "custom":
             name = f"bone_{i:02d}"
+        elif spec.naming == "sideless":
+            name = _sideless_name(key)
+        elif spec.naming == "mirrored":  # Mixamo's names, Left on the character's right
+            name = _mixamo_name(key.replace("L_", "X_").replace("R_", "L_").replace("X_", "R_"), spec)
         elif spec.naming == "nameless":
             name = f"node{i + (1 if spec.armature else 0)}"  # what a reader calls a glTF node without a name
         elif spec.naming in FAMILY_NAMINGS:

@@ -25,6 +25,7 @@ import streamlit as st
 from gesturekit.app.display import LOG, error_text, escape_markdown
 from gesturekit.character.user import read_character_upload
 from gesturekit.errors import GestureKitError, collect_warnings
+from gesturekit.export.character import THEIR_CLIPS
 from gesturekit.skeleton import FINGERS, JOINT_NAMES
 
 if TYPE_CHECKING:
@@ -47,7 +48,9 @@ CHARACTER_KEY = "gk.character"
 CHARACTER_TYPES = ["glb", "gltf", "vrm", "fbx", "bvh"]
 _FAILED = "_gk.character_failed"  # (token, message) of an upload that could not be used
 _RESETS = "_gk.character_resets"  # a new uploader after "Default character" (it then holds no file)
-_MADE = "_gk.character_files"  # {(run, token, kind): (bytes or None, summary or why not, warnings)}
+_CLIPS = "_gk.character_clips"  # the character's own animations in its GLB: "keep" or "drop"
+_CLIP_LABELS = {"keep": "keep after ours", "drop": "leave out"}
+_MADE = "_gk.character_files"  # {(run, token, kind, clips): (bytes or None, summary or why not, warnings)}
 
 
 def current_character() -> Character | None:
@@ -153,6 +156,16 @@ def sidebar_character() -> Character | None:
             st.caption(escape_markdown(line))
         for note in ch.notes:  # a unit found from its size
             st.warning(escape_markdown(note), icon=":material/straighten:")
+        if ch.gltf is not None and ch.gltf.document.get("animations"):
+            st.radio(
+                "Its own animations in the Character GLB",
+                THEIR_CLIPS,
+                format_func=_CLIP_LABELS.__getitem__,
+                key=_CLIPS,
+                horizontal=True,
+                help="the file's own clips: kept after the motion's (viewers that play one play the first, the "
+                "motion's), or left out",
+            )
         if st.button("Default character", key="_gk.character_default", help="show the default body again"):
             ss.pop(CHARACTER_KEY, None)
             ss.pop(_FAILED, None)
@@ -177,7 +190,8 @@ def _character_file(record: dict, kind: str) -> dict:
 
     ss = st.session_state
     kept = ss[CHARACTER_KEY]
-    key = (record["run"], kept["token"], kind)
+    clips = ss.get(_CLIPS, THEIR_CLIPS[0])
+    key = (record["run"], kept["token"], kind, clips)
     made = ss.get(_MADE, {})
     if key not in made:
         result = record["result"]
@@ -188,7 +202,7 @@ def _character_file(record: dict, kind: str) -> dict:
                 posed = retarget(result.motion, ch)
                 path = Path(tmp) / _file_name(record, ch, kind)
                 if kind == "glb":  # its speech beside it, as the WAV it names
-                    glb = export_result_character_glb(result, posed, path)
+                    glb = export_result_character_glb(result, posed, path, their_clips=clips)
                     out["speech"] = None if glb.audio is None else glb.audio.read_bytes()
                     out["summary"] = glb.summary()
                 else:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .look import NEUTRAL, part_colors
 from .mesh import PARTS, vertex_normals
 from .target import Character, CharacterSkin
@@ -84,6 +85,7 @@ def _below(parents: np.ndarray, top: int) -> np.ndarray:
     return out
 
 
+@checks_arguments
 def bone_body(character: Character, *, scheme: str = NEUTRAL) -> CharacterSkin:
     """A body of capsules around the character's bones, in its rest pose, skinned rigidly to them.
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..skeleton import FINGERS, N_JOINTS, joint_index
 from ._body import _TORSO
@@ -43,6 +44,7 @@ _SPINE, _NECK, _HEAD, _TOP = (joint_index(n) for n in ("spine_mid", "neck", "hea
 _LS, _RS, _LW, _RW = (joint_index(n) for n in ("left_shoulder", "right_shoulder", "left_wrist", "right_wrist"))
 
 
+@checks_arguments
 def hand_joints(side: str) -> np.ndarray:
     """The joints of one hand (``"left"`` or ``"right"``): its wrist and 20 finger joints, shape (21,)."""
     if side not in ("left", "right"):
@@ -89,6 +91,7 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-12)
 
 
+@checks_arguments
 def pose_contacts(positions: np.ndarray) -> PoseContacts:
     """Hands in the head or the torso and crossed wrists, frame by frame (see the module notes).
 

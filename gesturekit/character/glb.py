@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 
 __all__ = [
@@ -71,6 +72,7 @@ class GlbBuffer:
         return len(self.accessors) - 1
 
 
+@checks_arguments
 def glb_bytes(doc: Mapping[str, Any], binary: bytes) -> bytes:
     """A GLB container: 12-byte header, the JSON chunk (padded with spaces) and the binary chunk
     (padded with zeros), each a multiple of 4 bytes."""
@@ -89,6 +91,7 @@ def glb_bytes(doc: Mapping[str, Any], binary: bytes) -> bytes:
     )
 
 
+@checks_arguments
 def read_glb(data: bytes) -> tuple[dict[str, Any], bytes]:
     """The JSON and the binary chunk of a GLB file's bytes.
 
@@ -120,6 +123,7 @@ def read_glb(data: bytes) -> tuple[dict[str, Any], bytes]:
     return doc, binary
 
 
+@checks_arguments
 def accessor_array(doc: Mapping[str, Any], binary: bytes, index: int) -> np.ndarray:
     """Accessor ``index`` of a glTF document as an array (count, components) (``(count,)`` for scalars).
 
@@ -152,6 +156,7 @@ def accessor_array(doc: Mapping[str, Any], binary: bytes, index: int) -> np.ndar
     return rows[:, 0] if acc["type"] == "SCALAR" else rows
 
 
+@checks_arguments
 def quaternion_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) of quaternions (..., 4) ``(x, y, z, w)``, normalised first."""
     q = np.asarray(q, dtype=np.float64)
@@ -166,6 +171,7 @@ def quaternion_matrix(q: np.ndarray) -> np.ndarray:
     )
 
 
+@checks_arguments
 def node_matrices(
     nodes: Sequence[Mapping[str, Any]], tracks: Mapping[tuple[int, str], np.ndarray], n_frames: int
 ) -> np.ndarray:

@@ -28,10 +28,11 @@ distal bone stands for it where the file has one.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..skeleton import FINGERS, JOINT_NAMES
 
@@ -125,6 +126,7 @@ def _vrm(version: int) -> dict[str, str]:
 VRM_BONES: Mapping[int, Mapping[str, str]] = {0: _vrm(0), 1: _vrm(1)}
 
 
+@checks_arguments
 def name_maps() -> dict[str, dict[str, str]]:
     """The bone-name schemes tried on a rig without a VRM humanoid: ``{scheme: {our joint: their bone name}}``.
 
@@ -144,6 +146,7 @@ def _strip(name: str) -> str:
     return name.rsplit(":", 1)[-1]
 
 
+@checks_arguments
 def match_names(bone_names: Sequence[str]) -> tuple[str, dict[str, int]]:
     """The name scheme that finds the most of a rig's bones, and what it finds.
 
@@ -175,6 +178,7 @@ def match_names(bone_names: Sequence[str]) -> tuple[str, dict[str, int]]:
     return best[2], best[3]
 
 
+@checks_arguments
 def check_bone_map(content: object, *, source: str) -> dict[str, str]:
     """A user's JSON bone map, checked: ``{"pelvis": name, "joints": {our joint: their bone name}}``.
 
@@ -214,6 +218,7 @@ def check_bone_map(content: object, *, source: str) -> dict[str, str]:
     return out
 
 
+@checks_arguments
 def missing_message(found: Mapping[str, object], scheme: str, expected: Mapping[str, str] | None, *, path: str) -> str:
     """Why a rig is refused: which required joints lack a bone, and the names that were looked for."""
     lack = [k for k in REQUIRED if k not in found]
@@ -283,6 +288,7 @@ def _finger_of(base: str) -> tuple[str, int] | None:
     return (finger, k) if 1 <= k <= 4 else None
 
 
+@checks_arguments
 def match_families(names: Sequence[str], parents: Sequence[int]) -> dict[str, int]:
     """Our joints found by the common naming families and the hierarchy, where no one scheme names them.
 
@@ -376,8 +382,9 @@ def _descendants(children: list[list[int]], b: int) -> list[int]:
     return out
 
 
+@checks_arguments
 def fingers_by_shape(
-    found: dict[str, int], parents: Sequence[int], positions: np.ndarray
+    found: dict[str, int], parents: Sequence[int], positions: np.ndarray, ends: Collection[int] = ()
 ) -> tuple[dict[str, int], list[str]]:
     """Fingers found from the hand's shape where names did not find them: five chains under a hand.
 
@@ -393,6 +400,8 @@ def fingers_by_shape(
     parents : sequence of int
     positions : np.ndarray, shape (M, 3)
         Rest positions (any frame and unit).
+    ends : collection of int
+        A BVH's End Sites, left out of the chains.
 
     Returns
     -------
@@ -401,10 +410,9 @@ def fingers_by_shape(
     sides : list of str
         The sides (``"left"``, ``"right"``) whose fingers were found so.
     """
-    n = len(parents)
-    children: list[list[int]] = [[] for _ in range(n)]
+    children: list[list[int]] = [[] for _ in parents]
     for b, p in enumerate(parents):
-        if p >= 0:
+        if p >= 0 and b not in ends:
             children[p].append(b)
     out, sides = dict(found), []
     for side in ("left", "right"):

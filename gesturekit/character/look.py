@@ -18,6 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from .mesh import PARTS
 
@@ -118,11 +119,13 @@ DEPTH_SHARE = 0.25
 VIEW_DIRECTION = (0.0, 0.12, 1.0)
 
 
+@checks_arguments
 def scheme_for(index: int, *, neutral: bool = False) -> str:
     """The scheme of the ``index``-th of side-by-side motions (:data:`NEUTRAL` for all when ``neutral``)."""
     return NEUTRAL if neutral else SIDE_BY_SIDE[int(index) % len(SIDE_BY_SIDE)]
 
 
+@checks_arguments
 def part_colors(scheme: str) -> np.ndarray:
     """Shape (len(PARTS), 3), float: each part's sRGB colour in [0, 1], in the order of :data:`PARTS`.
 
@@ -136,6 +139,7 @@ def part_colors(scheme: str) -> np.ndarray:
     return np.array([[int(SCHEMES[scheme][p][i : i + 2], 16) / 255 for i in (1, 3, 5)] for p in PARTS])
 
 
+@checks_arguments
 def camera_for(
     lo: npt.ArrayLike,
     hi: npt.ArrayLike,
@@ -193,6 +197,7 @@ def camera_for(
 LEAST_VIEW_HEIGHT = 200
 
 
+@checks_arguments
 def fitted_height(box: npt.ArrayLike, width: float, most: float) -> int:
     """The height, pixels, of a view ``width`` pixels wide that its upper-body ``box`` fills both ways.
 
@@ -245,6 +250,7 @@ BELOW_WAIST = 0.15
 REACH_QUANTILE = 0.95
 
 
+@checks_arguments
 def stage_layout(
     points: Sequence[np.ndarray],
     *,
@@ -326,6 +332,7 @@ ROLE_SCHEMES: dict[str, str] = {"k-NN": "blue", "refined": "orange", "chosen": "
 RANK_SCHEMES = ("green", "purple", "teal", "red", "olive", "rose")
 
 
+@checks_arguments
 def role_scheme(role: str) -> str:
     """The scheme of a character showing ``role``: a key of :data:`ROLE_SCHEMES`.
 
@@ -339,6 +346,7 @@ def role_scheme(role: str) -> str:
     return ROLE_SCHEMES[role]
 
 
+@checks_arguments
 def rank_scheme(rank: int) -> str:
     """The scheme of the candidate of rank ``rank`` (0: the best), from :data:`RANK_SCHEMES`."""
     if int(rank) < 0:
@@ -350,6 +358,7 @@ def _rgb(hex_colour: str) -> np.ndarray:
     return np.array([int(hex_colour[i : i + 2], 16) / 255 for i in (1, 3, 5)])
 
 
+@checks_arguments
 def stage_meshes(box: npt.ArrayLike, ground: float, feet: Sequence[npt.ArrayLike]) -> list[dict]:
     """The stage under side-by-side characters: the floor and a contact shadow under each, unlit.
 
@@ -429,18 +438,21 @@ def _mesh(v: np.ndarray, f: np.ndarray, colours: np.ndarray) -> dict:
     }
 
 
+@checks_arguments
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     """sRGB values in [0, 1] to linear light, same shape (the sRGB transfer function's inverse)."""
     c = np.asarray(c, dtype=np.float64)
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
+@checks_arguments
 def linear_to_srgb(c: np.ndarray) -> np.ndarray:
     """Linear light in [0, 1] (clipped) to sRGB values in [0, 1], same shape."""
     c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
+@checks_arguments
 def shade(normals: np.ndarray, albedo: np.ndarray) -> np.ndarray:
     """The shared Lambert shading of each vertex, in 8-bit sRGB.
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import csr_matrix
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ._body import body_pieces
 from ._loft import signed_volume
@@ -58,6 +59,7 @@ class CharacterMesh:
         return int(self.vertices.shape[0])
 
 
+@checks_arguments
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals, shape (..., V, 3), of vertices (..., V, 3) and faces (F, 3)."""
     v = np.asarray(vertices, dtype=np.float64)
@@ -74,6 +76,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
 
 
+@checks_arguments
 def build_mesh(rig: Rig, *, detail: float = 1.0) -> CharacterMesh:
     """The character's body around a rig's rest pose.
 

@@ -32,13 +32,19 @@ cosines), the elbow bent towards where ours points (off the line from shoulder
 to wrist): the hands do exactly what ours do, and the two bones turn away from
 ours by about a degree per percent that their upper-arm-to-forearm ratio differs
 from ours. A ``wrist_slack`` lets the wrist stay up to that fraction of the arm's
-length from the target where our directions put it elsewhere, trading reach for
-direction. The default, :data:`WRIST_SLACK` (5 %), was chosen on arms whose
+length from the target, trading reach for direction: within that circle the
+wrist goes where the two bones turn least from ours (the larger of their two
+angles, :func:`gesturekit.character._arms.wrist_within`), which is where our directions put it when that
+is close enough. The default, :data:`WRIST_SLACK` (5 %), was chosen on arms whose
 upper-arm-to-forearm ratio is ours -24 % to +20 % (the range of real rigs): at
--12 % to +20 % every arm bone then stays within 1.7 degrees of ours in the median
-and 4.9 at the 95th percentile (against 6.5 and 12.6 with no slack), at -24 %
-within 4.6 and 10.1 (8.7 and 16.4 with none); ``wrist_slack=0`` is the other end:
-the hands exactly at our scaled reach (``bench/bench_arms.py``).
+-20 % to +20 % every arm bone then stays within 2.9 degrees of ours in the median
+and 6.8 at the 95th percentile (against 6.5 and 12.6 with no slack), at -24 %
+within 4.4 and 9.8 (8.7 and 16.4 with none). At -24 % no wrist within 5 % of
+the reach does better: with the same elbow angle a shorter upper arm points
+further from the line from shoulder to wrist, and turning the arm back onto our
+directions moves the hand sideways by about a tenth of the arm in a right-angled
+elbow; a median of 4 degrees there needs 5.5 %. ``wrist_slack=0`` is the other
+end: the hands exactly at our scaled reach (``bench/bench_arms.py``).
 
 **The torso proxy**: a capsule around their spine from the pelvis up, of radius
 :data:`TORSO_RADIUS` times their shoulder width, and the same around ours. A
@@ -54,16 +60,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..motion import Motion
 from ..skeleton import JOINT_NAMES, joint_index
+from ._arms import TORSO_RADIUS, Arms, distance_to_chain, unit
 from .rig import Rig, rig_for, solve_pose
 from .target import Character
 
 __all__ = ["TORSO_RADIUS", "WRIST_SLACK", "RetargetReport", "Retargeted", "retarget", "swing", "kabsch"]
-
-#: Radius of the torso capsule as a fraction of the shoulder width (the distance between the upper-arm joints).
-TORSO_RADIUS = 0.3
 
 #: How far a wrist may stay from our reach scaled to their arm by default, as a fraction of their arm's length:
 #: 5 %, so that the upper arm and forearm keep close to our directions where their proportions differ from ours
@@ -72,8 +77,6 @@ WRIST_SLACK = 0.05
 
 #: Weight of ``R_ours A``'s axes in the fit of a bone with several children (the children weigh 1 each).
 _HOLD = 0.05
-
-_SPINE = ("spine_mid", "chest", "upper_chest")
 
 #: The child a bone with several children points at exactly (the others are fitted together with it).
 _MIDLINE = frozenset(("chest", "upper_chest", "neck", "neck_upper", "head", "left_middle1", "right_middle1"))
@@ -249,14 +252,14 @@ class Retargeted:
             if pa < 0:
                 continue
             length = np.linalg.norm(x[:, j] - x[:, pa], axis=1, keepdims=True)
-            ours, _ = _unit(x[:, j] - x[:, pa])
+            ours, _ = unit(x[:, j] - x[:, pa])
             b, bp = int(ch.bone_of[j]), int(ch.bone_of[pa])
             d = ours
             if b >= 0 and bp >= 0 and b in kids[bp] and b != _primary(kids[bp], joint_at):
-                shape, _ = _unit(self.alignment[bp].T @ (rest[j] - rest[pa]))
+                shape, _ = unit(self.alignment[bp].T @ (rest[j] - rest[pa]))
                 d = turns[:, bp] @ shape
             elif b >= 0 and bp >= 0:
-                d, ok = _unit(self.position[:, b] - self.position[:, bp])
+                d, ok = unit(self.position[:, b] - self.position[:, bp])
                 d = np.where(ok[:, None], d, ours)
             out[:, j] = out[:, pa] + length * d
             side = JOINT_NAMES[j].removesuffix("_wrist")
@@ -270,13 +273,7 @@ class Retargeted:
         return Motion(out.astype(np.float32), self.fps, self.source.presence)
 
 
-def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit vectors of ``v`` (..., 3) and where they are defined (length above 1e-9)."""
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    ok = n[..., 0] > 1e-9
-    return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-9), ok
-
-
+@checks_arguments
 def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest rotations taking unit vectors ``a`` onto unit vectors ``b``.
 
@@ -308,6 +305,7 @@ def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.eye(3) + s[..., None, None] * k + (1.0 - c)[..., None, None] * (k @ k)
 
 
+@checks_arguments
 def kabsch(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     """The rotations that best turn vectors ``u`` onto ``v`` (least squares, weights ``w``).
 
@@ -359,21 +357,7 @@ def _below(ch: Character, top: int) -> np.ndarray:
     return out
 
 
-def _distance_to_chain(x: np.ndarray, chain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distance of points ``x`` (T, 3) to polylines ``chain`` (T, n, 3), and the nearest points (T, 3)."""
-    best = np.full(len(x), np.inf)
-    near = np.zeros_like(x)
-    for i in range(chain.shape[1] - 1):
-        a, b = chain[:, i], chain[:, i + 1]
-        ab = b - a
-        t = np.clip(np.einsum("ti,ti->t", x - a, ab) / np.maximum(np.einsum("ti,ti->t", ab, ab), 1e-18), 0, 1)
-        q = a + t[:, None] * ab
-        d = np.linalg.norm(x - q, axis=1)
-        closer = d < best
-        best[closer], near[closer] = d[closer], q[closer]
-    return best, near
-
-
+@checks_arguments
 def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST_SLACK) -> Retargeted:
     """Pose ``character`` by ``motion``, frame by frame (see the module's text).
 
@@ -422,7 +406,7 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
     rot = np.empty((n, m, 3, 3))
     pos = np.empty((n, m, 3))
     wants: dict[int, np.ndarray] = {}
-    arms = _Arms(ch, rig, x, joint_at, float(wrist_slack))
+    arms = Arms(ch, rig, x, joint_at, float(wrist_slack))
     for b in range(m):
         pa = int(ch.parents[b])
         if not body[b] or b == ch.pelvis or pa < 0:
@@ -443,10 +427,10 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
             w0 = held @ q[b]
         s, c = _through(ch, kids, joint_at, b, _primary(kids[b], joint_at)) if kids[b] else (-1, -1)
         if c >= 0:
-            cur, _ = _unit(w0 @ (q[b].T @ (p[c] - p[b])))
-            want, ok = _unit(x[:, joint_at[c]] - x[:, joint_at[s]])
+            cur, _ = unit(w0 @ (q[b].T @ (p[c] - p[b])))
+            want, ok = unit(x[:, joint_at[c]] - x[:, joint_at[s]])
             if b in wants:
-                want, ok = _unit(wants[b])
+                want, ok = unit(wants[b])
             want = np.where(ok[:, None], want, cur)
             w0 = swing(cur, want) @ w0
         rot[:, b] = w0
@@ -506,8 +490,8 @@ def _alignment(ch: Character, ours_rest: np.ndarray, joint_at: np.ndarray, kids:
             out[b] = out[pa] if pa >= 0 else np.eye(3)
             continue
         aimed = [sd for sd in (_through(ch, kids, joint_at, b, c) for c in kids[b]) if sd[1] >= 0]
-        theirs, ok_t = _unit(np.array([p[c] - p[b] for _, c in aimed]).reshape(-1, 3))
-        ours, ok_o = _unit(np.array([ours_rest[joint_at[c]] - ours_rest[joint_at[s]] for s, c in aimed]).reshape(-1, 3))
+        theirs, ok_t = unit(np.array([p[c] - p[b] for _, c in aimed]).reshape(-1, 3))
+        ours, ok_o = unit(np.array([ours_rest[joint_at[c]] - ours_rest[joint_at[s]] for s, c in aimed]).reshape(-1, 3))
         ok = ok_t & ok_o
         if ok.sum() >= 2:
             out[b] = kabsch(theirs[ok], ours[ok], np.ones(int(ok.sum())))
@@ -524,97 +508,14 @@ def _fit(
 ) -> np.ndarray:
     """The turn (frames, 3, 3) that best points the children of ``b`` along ours, held to ``held`` a little.
     ``kids``: ``(s, c)`` of :func:`_through` for each child, ``s`` at ``b``'s place."""
-    u, _ = _unit(np.array([p[c] - p[b] for _, c in kids]).reshape(-1, 3))
-    v, ok = _unit(np.stack([x[:, joint_at[c]] - x[:, joint_at[s]] for s, c in kids], axis=1))
+    u, _ = unit(np.array([p[c] - p[b] for _, c in kids]).reshape(-1, 3))
+    v, ok = unit(np.stack([x[:, joint_at[c]] - x[:, joint_at[s]] for s, c in kids], axis=1))
     n = x.shape[0]
     axes = np.tile(np.eye(3), (n, 1, 1))
     uu = np.concatenate([np.broadcast_to(u, (n,) + u.shape), axes], axis=1)
     vv = np.concatenate([v, np.swapaxes(held, 1, 2)], axis=1)  # held's columns: where it sends each axis
     w = np.concatenate([ok.astype(float), np.full((n, 3), _HOLD)], axis=1)
     return kabsch(uu, vv, w)
-
-
-class _Arms:
-    """Each arm's reach: the scaled wrist target, kept out of the torso, and the two-bone solve for it."""
-
-    def __init__(self, ch: Character, rig: Rig, x: np.ndarray, joint_at: np.ndarray, slack: float):
-        self.slack = slack
-        self.ch, self.x = ch, x
-        p = ch.rest_position
-        self.sides: dict[int, tuple[str, int, int, int]] = {}
-        self.scale = [1.0, 1.0]
-        self.targets: dict[str, np.ndarray] = {}
-        self.moved: dict[str, np.ndarray] = {}
-        self.ours_in: dict[str, np.ndarray] = {}
-        ls, rs = ch.bone("left_shoulder"), ch.bone("right_shoulder")
-        self.radius = TORSO_RADIUS * float(np.linalg.norm(p[ls] - p[rs]))
-        ours_width = float(
-            np.linalg.norm(rig.rest[joint_index("left_shoulder")] - rig.rest[joint_index("right_shoulder")])
-        )
-        self.ours_radius = TORSO_RADIUS * ours_width
-        self.spine = [k for k in _SPINE if rig.in_rig[joint_index(k)] and ch.bone(k) >= 0]
-        for i, side in enumerate(("left", "right")):
-            s, e, w = (ch.bone(f"{side}_{k}") for k in ("shoulder", "elbow", "wrist"))
-            js, je, jw = (joint_index(f"{side}_{k}") for k in ("shoulder", "elbow", "wrist"))
-            if min(joint_at[s], joint_at[e], joint_at[w]) < 0:
-                continue
-            theirs = float(np.linalg.norm(p[e] - p[s]) + np.linalg.norm(p[w] - p[e]))
-            ours = float(rig.lengths[je] + rig.lengths[jw])
-            self.scale[i] = theirs / ours if ours > 1e-9 else 1.0
-            self.sides[s] = (side, e, w, i)
-            del js
-        self.shoulders = set(self.sides)
-
-    def torso(self, pos: np.ndarray) -> np.ndarray:
-        """Their spine (frames, n, 3): the pelvis, then each matched spine bone."""
-        ch = self.ch
-        return np.stack([pos[:, ch.pelvis]] + [pos[:, ch.bone(k)] for k in self.spine], axis=1)
-
-    def our_torso(self) -> np.ndarray:
-        x = self.x
-        return np.stack([np.zeros((len(x), 3))] + [x[:, joint_index(k)] for k in self.spine], axis=1)
-
-    def reach(self, s: int, pos: np.ndarray) -> dict[int, np.ndarray]:
-        """The wanted directions of the upper arm (bone ``s``) and the forearm, frames x 3 each."""
-        side, e, w, i = self.sides[s]
-        ch, x = self.ch, self.x
-        p = ch.rest_position
-        xs, xe, xw = (x[:, joint_index(f"{side}_{k}")] for k in ("shoulder", "elbow", "wrist"))
-        shoulder = pos[:, s]
-        a = float(np.linalg.norm(p[e] - p[s]))
-        c = float(np.linalg.norm(p[w] - p[e]))
-        target = shoulder + self.scale[i] * (xw - xs)
-        self.targets[side] = target.copy()
-        # where our directions alone put their wrist; the hand goes there unless that is further than the slack
-        # from the scaled reach, so that the arm's bones turn away from ours only as much as the reach needs
-        straight = shoulder + a * _unit(xe - xs)[0] + c * _unit(xw - xe)[0]
-        off = straight - target
-        far = np.linalg.norm(off, axis=1, keepdims=True)
-        slack = self.slack * (a + c)
-        target = target + off * np.minimum(1.0, slack / np.maximum(far, 1e-12))
-        d_ours, _ = _distance_to_chain(xw, self.our_torso())
-        ours_in = d_ours < self.ours_radius
-        d, near = _distance_to_chain(target, self.torso(pos))
-        moved = (d < self.radius) & ~ours_in
-        if moved.any():
-            out, ok = _unit(target[moved] - near[moved])
-            out[~ok] = [0.0, 0.0, 1.0]  # on the spine itself: forward
-            target[moved] = near[moved] + out * (self.radius * 1.001)
-        self.moved[side], self.ours_in[side] = moved, ours_in
-        axis = target - shoulder
-        dist = np.clip(np.linalg.norm(axis, axis=1), abs(a - c) + 1e-9, (a + c) * (1 - 1e-12))
-        u, ok = _unit(axis)
-        u[~ok] = [0.0, -1.0, 0.0]
-        target = shoulder + u * dist[:, None]
-        bend = (xe - xs) - np.einsum("ti,ti->t", xe - xs, u)[:, None] * u
-        bend, ok = _unit(bend)
-        if not ok.all():  # a straight arm: bend towards where our elbow is, else down
-            alt = np.array([0.0, -1.0, 0.0]) - u[~ok, 1:2] * u[~ok]
-            bend[~ok] = _unit(alt)[0]
-        along = (a * a - c * c + dist * dist) / (2 * dist)
-        up = np.sqrt(np.clip(a * a - along * along, 0.0, None))
-        elbow = shoulder + along[:, None] * u + up[:, None] * bend
-        return {s: elbow - shoulder, e: target - elbow}
 
 
 def _check_finite(ch: Character, rot: np.ndarray, pos: np.ndarray, *, what: str = "pose") -> None:
@@ -635,7 +536,7 @@ def _report(
     kids: list[list[int]],
     rot: np.ndarray,
     pos: np.ndarray,
-    arms: _Arms,
+    arms: Arms,
     body: np.ndarray,
 ) -> RetargetReport:
     del rot
@@ -648,8 +549,8 @@ def _report(
             s, c = _through(ch, kids, joint_at, b, k)
             if c < 0 or s != b:
                 continue  # of no length: its direction is that of the bone below, reported there
-            theirs, ok_t = _unit(pos[:, c] - pos[:, b])
-            ours, ok_o = _unit(x[:, joint_at[c]] - x[:, joint_at[b]])
+            theirs, ok_t = unit(pos[:, c] - pos[:, b])
+            ours, ok_o = unit(x[:, joint_at[c]] - x[:, joint_at[b]])
             cos = np.clip(np.einsum("ti,ti->t", theirs, ours), -1.0, 1.0)
             ok = ok_t & ok_o
             names, errors = found[k == primary]
@@ -663,7 +564,7 @@ def _report(
         if keep.any():
             miss = np.linalg.norm(pos[keep, w] - arms.targets[side][keep], axis=1).max()
             wrist = max(wrist, float(miss) / length)
-        d, _ = _distance_to_chain(pos[:, w], arms.torso(pos))
+        d, _ = distance_to_chain(pos[:, w], arms.torso(pos))
         moved_out[i] = int(arms.moved[side].sum())
         inside[i] = int(((d < arms.radius) & ~arms.ours_in[side]).sum())
         ours_inside[i] = int(arms.ours_in[side].sum())

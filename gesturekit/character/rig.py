@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..bones import fit_bone_lengths
 from ..errors import ConfigError
 from ..motion import Motion
@@ -130,6 +131,7 @@ def _anchor(rig: Rig, j: int) -> int:
     return p if p >= 0 else rig.root
 
 
+@checks_arguments
 def rig_for(motion: Motion, *, rest: np.ndarray | None = None) -> Rig:
     """The rig of a motion: its drawn joints' hierarchy, median bone lengths and a T-pose.
 
@@ -167,6 +169,7 @@ def rig_for(motion: Motion, *, rest: np.ndarray | None = None) -> Rig:
     return rig
 
 
+@checks_arguments
 def solve_pose(motion: Motion, rig: Rig | None = None) -> Pose:
     """The rotations that move ``rig``'s rest pose onto the motion's joint positions, frame by frame.
 
@@ -201,6 +204,7 @@ def _checked(motion: Motion) -> np.ndarray:
     return positions
 
 
+@checks_arguments
 def rotation_to_quaternion(r: np.ndarray) -> np.ndarray:
     """Unit quaternions ``(x, y, z, w)`` (glTF's and three.js's order) of rotation matrices.
 

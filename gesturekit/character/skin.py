@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .mesh import CharacterMesh
 from .rig import Pose, Rig
 from .target import CharacterSkin
@@ -16,6 +17,7 @@ from .target import CharacterSkin
 __all__ = ["linear_blend", "skin_vertices", "skin_normals", "pose_skin"]
 
 
+@checks_arguments
 def skin_vertices(mesh: CharacterMesh, rig: Rig, pose: Pose, frames: np.ndarray | None = None) -> np.ndarray:
     """The mesh's vertices in the pose's frames.
 
@@ -36,6 +38,7 @@ def skin_vertices(mesh: CharacterMesh, rig: Rig, pose: Pose, frames: np.ndarray 
     return _blend(mesh, pose.skinning(rig), frames, mesh.vertices, moves=True).astype(np.float32)
 
 
+@checks_arguments
 def linear_blend(
     joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray, x: np.ndarray, *, moves: bool
 ) -> np.ndarray:
@@ -78,6 +81,7 @@ def _blend(mesh: CharacterMesh, m: np.ndarray, frames: np.ndarray | None, x: np.
     return linear_blend(mesh.joints, mesh.weights, m, x, moves=moves)
 
 
+@checks_arguments
 def skin_normals(mesh: CharacterMesh, rig: Rig, pose: Pose, frames: np.ndarray | None = None) -> np.ndarray:
     """The mesh's rest normals carried into the pose's frames, as a GPU skins them.
 
@@ -101,6 +105,7 @@ def _unit(n: np.ndarray) -> np.ndarray:
     return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0).astype(np.float32)
 
 
+@checks_arguments
 def pose_skin(skin: CharacterSkin, matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A user's character's mesh in a pose: its vertices and its normals, as for our mesh.
 

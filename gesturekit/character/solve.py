@@ -60,6 +60,7 @@ import os
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..skeleton import FINGERS, JOINT_NAMES, N_JOINTS, PARENTS, JointPresence, joint_index
 
@@ -104,6 +105,7 @@ _SPINE_MID = joint_index("spine_mid")
 # ----------------------------------------------------------------------------- hierarchy
 
 
+@checks_arguments
 def bvh_parents(presence: JointPresence, *, path: str | os.PathLike[str] | None = None) -> np.ndarray:
     """The hierarchy of the drawn joints, shape (55,), int64.
 
@@ -161,11 +163,13 @@ def bvh_parents(presence: JointPresence, *, path: str | os.PathLike[str] | None 
     return parents
 
 
+@checks_arguments
 def children_of(parents: np.ndarray) -> tuple[tuple[int, ...], ...]:
     """Children of every joint in the hierarchy ``parents``, in skeleton order."""
     return tuple(tuple(int(c) for c in np.flatnonzero(parents == j)) for j in range(N_JOINTS))
 
 
+@checks_arguments
 def depth_first(parents: np.ndarray) -> tuple[int, ...]:
     """The written joints in the order of the file (depth first, children in skeleton order)."""
     children = children_of(parents)
@@ -181,6 +185,7 @@ def depth_first(parents: np.ndarray) -> tuple[int, ...]:
 # ----------------------------------------------------------------------------- rest pose
 
 
+@checks_arguments
 def rest_offsets(
     positions: np.ndarray,
     *,
@@ -343,6 +348,7 @@ def _mean_shape(positions: np.ndarray, joint: int, children: tuple[int, ...], *,
 # ----------------------------------------------------------------------------- rotations
 
 
+@checks_arguments
 def solve_rotations(
     positions: np.ndarray, offsets: np.ndarray, parents: np.ndarray = PARENTS
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -484,6 +490,7 @@ def _nearest_rotation(h: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- Euler angles
 
 
+@checks_arguments
 def euler_from_matrices(m: np.ndarray, order: str) -> tuple[np.ndarray, np.ndarray]:
     """Intrinsic Euler angles of rotation matrices, and the other solution.
 
@@ -520,6 +527,7 @@ def euler_from_matrices(m: np.ndarray, order: str) -> tuple[np.ndarray, np.ndarr
     return angles, other
 
 
+@checks_arguments
 def continuous_angles(angles: np.ndarray, other: np.ndarray) -> np.ndarray:
     """Per frame, the solution (and multiple of 2 pi) closest to the previous frame; shape (frames, ..., 3)."""
     out = np.empty_like(angles)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..skeleton import joint_index
 from ._body import _Frame, _tube
 from ._loft import Chain, loft, signed_volume
@@ -68,6 +69,7 @@ class StandMesh:
         return int(self.vertices.shape[0])
 
 
+@checks_arguments
 def standing_root(root: np.ndarray) -> np.ndarray:
     """Where the legs stand under a motion's root (``spine_mid``) positions (frames, 3): their median, shape (3,),
     metres (a speaker's pelvis-relative spine barely moves; the median ignores a few odd frames)."""
@@ -79,6 +81,7 @@ def _closed(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return faces[:, ::-1] if signed_volume(verts, faces) < 0 else faces
 
 
+@checks_arguments
 def stand_mesh(rig: Rig, root: np.ndarray, *, detail: float = 1.0) -> StandMesh | None:
     """Hips, legs and shoes standing under a rig whose ``spine_mid`` stands at ``root``.
 

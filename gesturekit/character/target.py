@@ -8,13 +8,14 @@ left one) and :attr:`Character.to_file` takes points back to it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError, warn
 from ..skeleton import JOINT_NAMES, PARENTS, joint_index
 from .humanoid import PELVIS
@@ -153,6 +154,7 @@ class Character:
         return out
 
 
+@checks_arguments
 def facing_frame(pelvis: np.ndarray, head: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
     """The rotation from a file's world frame to ours, from its rest pose.
 
@@ -202,8 +204,16 @@ class FileSkeleton:
     skin: dict[str, np.ndarray] | None = None
     gltf: GltfSource | None = field(default=None, repr=False)
 
-    def character(self, found: Mapping[str, int], matched_by: str, expected: Mapping[str, str] | None) -> Character:
-        """The character in our frame, its bones matched by ``found`` (our joint or ``"pelvis"`` -> bone)."""
+    def character(
+        self,
+        found: Mapping[str, int],
+        matched_by: str,
+        expected: Mapping[str, str] | None,
+        *,
+        notes: Sequence[str] = (),
+    ) -> Character:
+        """The character in our frame, its bones matched by ``found`` (our joint or ``"pelvis"`` -> bone); ``notes``
+        what the match changed, for a person (warned and kept in :attr:`Character.notes`)."""
         del expected
         _check_tree(self, found)
         if not np.isfinite(self.world).all():
@@ -217,7 +227,9 @@ class FileSkeleton:
         except ConfigError as e:
             why = "a character's rest pose must stand upright, arms apart"
             raise ConfigError(f"{self.path}: {e.problem}; {why}") from None
-        notes = []
+        notes = list(notes)
+        for note in notes:
+            warn(note)
         factor, note = _size_factor(self, pos, turn[1])
         if factor != 1.0:
             self.units *= factor
@@ -390,6 +402,7 @@ def _check_tree(sk: FileSkeleton, found: Mapping[str, int]) -> None:
             )
 
 
+@checks_arguments
 def topological(parents: list[int]) -> list[int]:
     """An order of the bones in which every parent comes before its children (depth first, file order kept)."""
     children: dict[int, list[int]] = {}
@@ -406,6 +419,7 @@ def topological(parents: list[int]) -> list[int]:
     return order
 
 
+@checks_arguments
 def reorder(names: list[str], parents: list[int], order: list[int]) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     """Names and parents in ``order``; also the inverse (old index -> new)."""
     new = np.empty(len(order), dtype=np.int64)
@@ -414,6 +428,7 @@ def reorder(names: list[str], parents: list[int], order: list[int]) -> tuple[tup
     return tuple(names[o] for o in order), out_parents, new
 
 
+@checks_arguments
 def empty_skin() -> dict[str, Any]:
     """A skin without triangles."""
     return {

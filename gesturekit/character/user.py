@@ -24,6 +24,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from .._arguments import checks_arguments
 from .._io import safe_filename
 from ..errors import ConfigError, GestureKitError, InputFileError
 from ..limits import read_json
@@ -41,6 +42,7 @@ from .humanoid import (
     missing_message,
     name_maps,
 )
+from .shape import SHAPE, match_by_shape, sides_by_rest_pose
 from .target import Character, FileSkeleton
 
 __all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record", "bone_tree"]
@@ -49,6 +51,7 @@ __all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "cha
 CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".fbx", ".bvh")
 
 
+@checks_arguments
 def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dict | None = None) -> Character:
     """Read a user's humanoid character and match its bones to our joints.
 
@@ -60,7 +63,10 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
     bone_map : str, path-like or dict, optional
         A JSON bone map (a file, or its content) of the form
         ``{"pelvis": "Hips", "joints": {"spine_mid": "Spine", ...}}``; default: the VRM humanoid of a VRM,
-        else bone names (Mixamo's, our BVH presets').
+        else bone names (Mixamo's, our BVH presets', the common families), else the hierarchy's shape
+        (:func:`~gesturekit.character.shape.match_by_shape`). Left and right are then checked against the rest
+        pose (:func:`~gesturekit.character.shape.sides_by_rest_pose`): names that have them the other way round
+        are swapped, and a note says so (warned, and in :attr:`Character.notes`).
 
     Returns
     -------
@@ -94,9 +100,15 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         skeleton = read_gltf_skeleton(p)
     _check_unique(skeleton)
     found, matched_by, expected = _match(skeleton, user_map, p)
-    return skeleton.character(found, matched_by, expected)
+    notes: tuple[str, ...] = ()
+    if user_map is None:  # a map the user wrote is taken as written
+        found, note = sides_by_rest_pose(found, skeleton.parents.tolist(), skeleton.world[:, :3, 3], skeleton.names)
+        if note:
+            notes, matched_by = (f"{p.name}: {note}",), f"{matched_by}, left and right from the rest pose"
+    return skeleton.character(found, matched_by, expected, notes=notes)
 
 
+@checks_arguments
 def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes] | None = None) -> Character:
     """Read an uploaded character file (and bone map) via a temporary folder, as :func:`read_character` reads one.
 
@@ -145,6 +157,7 @@ def read_character_upload(name: str, data: bytes, *, bone_map: tuple[str, bytes]
     return dataclasses.replace(character, path=Path(str(name)))
 
 
+@checks_arguments
 def character_record(character: Character, *, bone_map: str | os.PathLike | dict | None = None) -> dict[str, Any]:
     """What names a character's files, for a record of what made an output (a study's ``study.json``).
 
@@ -220,12 +233,26 @@ def _match(
     families = match_families(names, [int(p) for p in skeleton.parents])
     if (sum(k in families for k in REQUIRED), len(families)) > (sum(k in found for k in REQUIRED), len(found)):
         found, label, expected = families, FAMILIES, {}
-    found, sides = fingers_by_shape(found, [int(p) for p in skeleton.parents], skeleton.world[:, :3, 3])
+    parents, rest, ends = [int(p) for p in skeleton.parents], skeleton.world[:, :3, 3], _end_sites(skeleton)
+    if any(k not in found for k in REQUIRED):  # names fail: the hierarchy's shape, sides from the rest pose
+        shaped = match_by_shape(parents, rest, ends)
+        if all(k in shaped for k in REQUIRED):
+            found, label, expected = shaped, SHAPE, {}
+    found, sides = fingers_by_shape(found, parents, rest, ends)
     if sides:
         label += f", the fingers of the {' and '.join(sides)} hand{'s' if len(sides) > 1 else ''} by their shape"
     if any(k not in found for k in REQUIRED):
         raise _with_tree(missing_message(found, label, expected, path=str(path)), skeleton)
     return found, label, expected
+
+
+def _end_sites(skeleton: FileSkeleton) -> set[int]:
+    """A BVH's End Sites: the leaves its reader named after their parent (``NAME_End`` below ``NAME``)."""
+    if skeleton.kind != "bvh":
+        return set()
+    names, parents = skeleton.names, skeleton.parents
+    has_child = set(int(p) for p in parents)
+    return {b for b, p in enumerate(parents) if p >= 0 and b not in has_child and names[b] == f"{names[p]}_End"}
 
 
 def _with_tree(message: str, skeleton: FileSkeleton) -> ConfigError:
@@ -234,6 +261,7 @@ def _with_tree(message: str, skeleton: FileSkeleton) -> ConfigError:
     return error
 
 
+@checks_arguments
 def bone_tree(skeleton: FileSkeleton, most: int = 200) -> str:
     """The file's bones as an indented tree with their rest positions (metres, the file's axes), for writing a
     bone map: a glTF node without a name is ``node{index}`` (its index among the file's nodes).

@@ -392,9 +392,8 @@ def _cmd_synthesize(args) -> int:
                 save_result_npz(res, targets[(stem, "npz")], overwrite=args.force)
             if on_theirs is not None:  # their character in place of ours
                 theirs = {k: targets[(stem, k)] for k in tree}
-                write_character_files(
-                    res, on_theirs, theirs, overwrite=args.force, thresholds=db.thresholds, show=reports.append
-                )
+                options = {"overwrite": args.force, "thresholds": db.thresholds, "their_clips": args.character_clips}
+                write_character_files(res, on_theirs, theirs, show=reports.append, **options)
             if "bvh" in formats and character is None:
                 reports.append(
                     f"  BVH {export_result_bvh(res, targets[(stem, 'bvh')], overwrite=args.force).summary()}"

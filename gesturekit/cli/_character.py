@@ -72,6 +72,7 @@ def write_character_files(
     overwrite: bool,
     thresholds: Mapping[str, tuple[float, float]],
     show: Callable[[str], None],
+    their_clips: str = "keep",
 ) -> None:
     """Retarget a result's motion onto ``character`` and write its files; print what they hold.
 
@@ -88,6 +89,8 @@ def write_character_files(
         The database's attribute thresholds, for control adherence.
     show : callable
         Prints one line.
+    their_clips : {"keep", "drop"}
+        The character's own animations in its GLB (``--character-clips``).
     """
     from ..evaluate.metrics import control_adherence, overall_adherence
     from ..export.result import export_result_character_bvh, export_result_character_glb, retarget_result
@@ -96,7 +99,9 @@ def write_character_files(
     character = retargeted.character
     show(f"  on {character.path.name} ({character.matched_by}): {retargeted.report.summary()}")
     if "glb" in targets:
-        glb = export_result_character_glb(result, retargeted, targets["glb"], overwrite=overwrite)
+        glb = export_result_character_glb(
+            result, retargeted, targets["glb"], overwrite=overwrite, their_clips=their_clips
+        )
         show(f"  glTF {glb.summary()}")
     if "bvh" in targets:
         bvh = export_result_character_bvh(result, retargeted, targets["bvh"], overwrite=overwrite)

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 from .._config import option_of
 from .._version import __version__
+from ..export.character import THEIR_CLIPS
 from ._app import ABOUT as _APP_ABOUT
 from ._app import add_app_parser
 from ._options import add_options
@@ -275,6 +276,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--character-map",
         metavar="JSON",
         help='bone map of --character: {"pelvis": "Hips", "joints": {"spine_mid": "Spine", ...}}',
+    )
+    y.add_argument(
+        "--character-clips",
+        choices=THEIR_CLIPS,
+        default=THEIR_CLIPS[0],
+        help="the animations --character's file has of its own, in the glb: keep them after ours (default: "
+        "viewers that play one play the first, ours) or drop them (ours is the only one)",
     )
     y.add_argument("--video", action="store_true", help="also render an MP4 of the character with the speech")
     y.add_argument(

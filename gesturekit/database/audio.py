@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError, DatabaseError
 from ..motion import AUDIO_SR
 
@@ -139,6 +140,7 @@ class EncodedAudio:
     samples: int
 
 
+@checks_arguments
 def to_int16(audio: np.ndarray) -> np.ndarray:
     """Float samples in [-1, 1] as int16 (rounded, clipped), the database's sample format; shape kept."""
     return np.clip(np.round(np.asarray(audio, dtype=np.float32) * 32767), -32768, 32767).astype(np.int16)
@@ -155,6 +157,7 @@ def _resample(x: np.ndarray, up: int, down: int, n_out: int) -> np.ndarray:
     return out
 
 
+@checks_arguments
 def encode_take_audio(audio: np.ndarray, storage: AudioStorage) -> EncodedAudio:
     """One take's audio in the form ``storage`` keeps it.
 
@@ -190,6 +193,7 @@ def encode_take_audio(audio: np.ndarray, storage: AudioStorage) -> EncodedAudio:
     return EncodedAudio(np.frombuffer(buf.getvalue(), dtype=np.uint8).copy(), n)
 
 
+@checks_arguments
 def decode_take_audio(data: np.ndarray, samples: int, storage: AudioStorage) -> np.ndarray:
     """A take's stored audio back as float32 at 16 kHz.
 
@@ -236,6 +240,7 @@ def decode_take_audio(data: np.ndarray, samples: int, storage: AudioStorage) -> 
     return (up / 32767.0).astype(np.float32)
 
 
+@checks_arguments
 def take_audio_fields(encoded: EncodedAudio, offset: int, storage: AudioStorage) -> dict[str, int]:
     """A take's audio entries of ``database.json``, its data starting at element ``offset`` of ``audio.npy``.
 
@@ -251,6 +256,7 @@ def take_audio_fields(encoded: EncodedAudio, offset: int, storage: AudioStorage)
     return fields
 
 
+@checks_arguments
 def read_take_audio(
     audio: np.ndarray, take: dict, storage: AudioStorage, *, path: str | os.PathLike[str] | None = None
 ) -> np.ndarray:

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._version import __version__
 from ..control import ATTRIBUTE_NAMES
 from ..errors import ConfigError, DatabaseError, GestureKitError
@@ -167,6 +168,7 @@ class MemoryOut:
         }
 
 
+@checks_arguments
 def combine_moments(staged: Sequence[TakeRows]) -> dict[str, np.ndarray]:
     """The z-scoring statistics of F, P and A from the takes' moments, combined in the order given.
 
@@ -216,6 +218,7 @@ def combine_moments(staged: Sequence[TakeRows]) -> dict[str, np.ndarray]:
     return stats
 
 
+@checks_arguments
 def check_takes(staged: Sequence[TakeRows], base: dict | None) -> list | None:
     """Unique names, the same joints in every take (and the base database); the joints' list or None.
 
@@ -244,6 +247,7 @@ def check_takes(staged: Sequence[TakeRows], base: dict | None) -> list | None:
     return joints
 
 
+@checks_arguments
 def assemble(
     out: ArrayOut,
     staged: Sequence[TakeRows],
@@ -373,6 +377,7 @@ def assemble(
     return meta, stats
 
 
+@checks_arguments
 def build_in_memory(
     takes: Iterable[Take],
     *,

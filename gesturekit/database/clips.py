@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..control import frame_attributes
 from ..errors import ConfigError, warn
 from ..features import (
@@ -74,6 +75,7 @@ class TakeFeatures:
         return int(self.positions.shape[0])
 
 
+@checks_arguments
 def take_features(take: Take, *, layout: FeatureLayout = LAYOUT) -> TakeFeatures:
     """Compute every per-frame array of a take, trimming motion and audio to the shorter.
 
@@ -119,6 +121,7 @@ def take_features(take: Take, *, layout: FeatureLayout = LAYOUT) -> TakeFeatures
     )
 
 
+@checks_arguments
 def windows(n_frames: int, length: int, stride: int) -> np.ndarray:
     """Start frames of windows of ``length`` frames every ``stride`` frames inside ``n_frames``, int64."""
     if n_frames < length:
@@ -126,6 +129,7 @@ def windows(n_frames: int, length: int, stride: int) -> np.ndarray:
     return np.arange(0, n_frames - length + 1, stride, dtype=np.int64)
 
 
+@checks_arguments
 def cut(tf: TakeFeatures, starts: np.ndarray, length: int, track_len: int) -> dict[str, np.ndarray]:
     """The clip arrays of the windows starting at ``starts``: each (len(starts), length, ...) and
     ``pose_track`` (len(starts), track_len, 24), its frames past the take's end held at the last."""
@@ -142,6 +146,7 @@ def cut(tf: TakeFeatures, starts: np.ndarray, length: int, track_len: int) -> di
     }
 
 
+@checks_arguments
 def moments(x: np.ndarray) -> np.ndarray:
     """(2, dims) float64: the mean and the sum of squared deviations of the rows of ``x`` (zeros for none)."""
     if x.shape[0] == 0:
@@ -203,6 +208,7 @@ class TakeClips:
         return None
 
 
+@checks_arguments
 def take_clips(take: Take, index: int, config: BuildConfig) -> TakeClips:
     """Featurise and cut one take, encode its audio, and compute its z-scoring moments.
 

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._config import option, option_of
 from ..errors import ConfigError
 from ..motion import AUDIO_SR
@@ -116,6 +117,7 @@ class BuildConfig:
             raise ConfigError("an audio format or rate was given, but the database keeps no audio (store_audio=False)")
 
 
+@checks_arguments
 def recorded_config(build: Mapping[str, Any]) -> BuildConfig:
     """The :class:`BuildConfig` a database's build record (``database.json``'s ``build``) says.
 
@@ -145,6 +147,7 @@ def recorded_config(build: Mapping[str, Any]) -> BuildConfig:
     )
 
 
+@checks_arguments
 def normalise_exclusions(
     takes: Iterable[object], ranges: Iterable[Any]
 ) -> tuple[tuple[str, ...], tuple[tuple[str, float, float], ...]]:

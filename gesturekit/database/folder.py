@@ -44,6 +44,7 @@ from typing import IO, Any, Literal
 import numpy as np
 
 from .. import limits
+from .._arguments import checks_arguments
 from ..bones import Skeleton
 from ..control import ATTRIBUTE_NAMES
 from ..errors import ConfigError, DatabaseError, GestureKitError
@@ -89,6 +90,7 @@ _MESSAGES = {
 }
 
 
+@checks_arguments
 def write_database(
     path: Path,
     *,
@@ -174,6 +176,7 @@ def _stored_audio(audio: np.ndarray, meta: dict[str, Any]) -> tuple[np.ndarray, 
     return (np.concatenate(parts) if parts else np.zeros(0, wanted.dtype)), meta
 
 
+@checks_arguments
 def write_stats(path: Path, stats: dict[str, Any]) -> None:
     """Write the z-scoring statistics as ``stats.npz``, the same bytes for the same statistics.
 
@@ -189,6 +192,7 @@ def write_stats(path: Path, stats: dict[str, Any]) -> None:
                 np.lib.format.write_array(member, np.asarray(v), allow_pickle=False)
 
 
+@checks_arguments
 def write_meta(folder: Path, meta: dict[str, Any], *, n_clips: int) -> None:
     """Write ``database.json`` (``meta`` with the counts of clips and takes) into ``folder``: the marker
     that lets a later ``--force`` recognise the folder, so written last."""
@@ -228,6 +232,7 @@ def _check_finite(
             raise DatabaseError("the database's audio holds NaN or infinite values; nothing was written", path=path)
 
 
+@checks_arguments
 def read_database(path: Path, *, mmap: bool) -> dict:
     """Read and check a database folder.
 

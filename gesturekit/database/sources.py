@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..bones import Skeleton, fit_skeleton
 from ..errors import ConfigError, DatabaseError, InputFileError
 from ..skeleton import JointPresence
@@ -81,6 +82,7 @@ _SHARED_OPTIONS = {
 }
 
 
+@checks_arguments
 def recorded_build(out: str | os.PathLike[str]) -> dict[str, Any] | None:
     """The build options recorded by the database at ``out`` (None when there is no readable database)."""
     try:
@@ -100,6 +102,7 @@ _READING_OPTIONS = {
 }
 
 
+@checks_arguments
 def recorded_reading(build: dict[str, Any], given: dict[str, Any], out: Path) -> dict[str, Any]:
     """The reading options to append with: the database's recorded ones, which those given must equal.
 
@@ -230,6 +233,7 @@ def _check_unchanged(take: dict, sources: dict, out: Path) -> None:
             )
 
 
+@checks_arguments
 def build_from_sources(
     sources: Sequence[TakeSource],
     out: Path,

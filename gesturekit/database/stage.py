@@ -50,6 +50,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import limits
+from .._arguments import checks_arguments
 from .._jobs import run_jobs as _run
 from .._version import __version__
 from ..errors import ConfigError, GestureKitError, OutputError, collect_warnings, warn
@@ -145,6 +146,7 @@ class StagedTake:
 # ---- running the units ------------------------------------------------------------------
 
 
+@checks_arguments
 def run_jobs(
     jobs: Sequence[StageJob],
     *,
@@ -201,6 +203,7 @@ def _save(path: Path, array: np.ndarray) -> None:
         np.save(path, np.ascontiguousarray(array), allow_pickle=False)
 
 
+@checks_arguments
 def stage_take(take: Take, folder: Path, index: int, config: BuildConfig) -> dict[str, Any]:
     """Make one take into its clips (:func:`~gesturekit.database.clips.take_clips`) and write every
     array into ``folder`` as ``INDEX.NAME.npy``.
@@ -266,6 +269,7 @@ def _file_identity(path: Path | None) -> list[Any]:
     return [os.path.abspath(path), st.st_size, st.st_mtime_ns]
 
 
+@checks_arguments
 def job_key(
     source: TakeSource,
     reading_key: dict[str, Any],
@@ -299,6 +303,7 @@ def job_key(
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:32]
 
 
+@checks_arguments
 def staged_takes(staging: Path, key: str) -> dict[str, Any] | None:
     """The record of a complete staged unit (``takes`` and ``warnings``), or None when it is not staged."""
     try:
@@ -343,6 +348,7 @@ def _reusable(
     return None, f"{what}: staged copy damaged ({reason}), staged again"
 
 
+@checks_arguments
 def stage_job(job: StageJob) -> dict[str, Any]:
     """Stage one unit (the function a worker process or a cluster worker runs).
 
@@ -363,6 +369,7 @@ def stage_job(job: StageJob) -> dict[str, Any]:
     return _run_unit(job, stage, check_staged_unit, keep_warnings=True)
 
 
+@checks_arguments
 def sample_job(job: StageJob) -> dict[str, Any]:
     """Read one unit's takes for fitting a skeleton (``--normalize-bones``): each take's
     :func:`gesturekit.bones.bone_samples` as ``INDEX.bones.npy`` (rows, frames) float32.
@@ -433,6 +440,7 @@ def _run_unit(
     return {**result, "reused": False, "damaged": damaged}
 
 
+@checks_arguments
 def reemit(messages: Iterable[str]) -> None:
     """Issue again the warnings a worker collected while staging."""
     for message in messages:
@@ -442,6 +450,7 @@ def reemit(messages: Iterable[str]) -> None:
 # ---- the staging folder -------------------------------------------------------------------------
 
 
+@checks_arguments
 def staging_folder(out: Path) -> Path:
     """The staging folder of a build of the database folder ``out``: ``.NAME.staging`` beside it."""
     from ..outputs import beside_name
@@ -449,6 +458,7 @@ def staging_folder(out: Path) -> Path:
     return out.parent / beside_name(out, ".staging")
 
 
+@checks_arguments
 def is_staging(path: Path) -> bool:
     """Whether ``path`` is a staging folder gesturekit made (its ``staging.json`` says so)."""
     try:
@@ -458,6 +468,7 @@ def is_staging(path: Path) -> bool:
     return isinstance(marker, dict) and marker.get("format") == STAGING_FORMAT
 
 
+@checks_arguments
 def open_staging(path: Path) -> None:
     """Make the staging folder ``path``, or reuse the one an interrupted build left (its unfinished
     units removed).
@@ -486,6 +497,7 @@ def open_staging(path: Path) -> None:
                 shutil.rmtree(entry, ignore_errors=True)
 
 
+@checks_arguments
 def remove_staging(path: Path) -> None:
     """Remove a staging folder gesturekit made (anything else is left alone)."""
     if is_staging(path) and not path.is_symlink():

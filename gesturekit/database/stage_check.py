@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError, GestureKitError
 from ..features import LAYOUT
 from ..limits import check_regular, npy_header, read_json
@@ -100,6 +101,7 @@ def _checked_records(folder: Path, fields: dict[str, Any]) -> list[dict[str, Any
     return takes
 
 
+@checks_arguments
 def check_staged_unit(folder: Path, config: BuildConfig) -> None:
     """Check a unit :func:`~gesturekit.database.stage.stage_job` staged before it is reused: its
     record, and every array of each take present, a regular file, complete, of the dtype and shape
@@ -151,6 +153,7 @@ def check_staged_unit(folder: Path, config: BuildConfig) -> None:
             _staged_array(folder, f"{i}.moments_{key}.npy", f64, (2, dims[key]), finite=True)
 
 
+@checks_arguments
 def check_sampled_unit(folder: Path, config: BuildConfig) -> None:
     """Check a unit :func:`~gesturekit.database.stage.sample_job` wrote before it is reused: its record and each take's
     ``bones.npy`` (float32, a row per sample and a column per frame, finite bone lengths).

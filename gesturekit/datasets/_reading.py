@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..bones import Skeleton, normalise_bone_lengths
 from ..motion import Motion
 from ..skeleton import JointPresence
@@ -138,6 +139,7 @@ def normalise_motion(motion: Motion, reading: Reading, *, skeleton: Skeleton | N
     return out, replace(reading, bones=report.summary())
 
 
+@checks_arguments
 def reading_lines(takes: Iterable[Mapping]) -> list[str]:
     """How a database's takes were read, for printing: one line per distinct reading.
 

@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import limits
+from .._arguments import checks_arguments
 from .._io import Target, write_to
 from .._optional import optional
 from ..errors import AudioFileError, ConfigError, InputFileError, warn
@@ -116,6 +117,7 @@ class AudioInfo:
 WAV_ENCODINGS = ("pcm16", "float32")
 
 
+@checks_arguments
 def wav_bytes(
     samples: npt.ArrayLike, *, sr: int = AUDIO_SR, encoding: Literal["pcm16", "float32"] = "pcm16", mark: bool = False
 ) -> bytes:
@@ -170,6 +172,7 @@ def wav_bytes(
     return b"RIFF" + struct.pack("<I", len(body)) + body
 
 
+@checks_arguments
 def write_wav(
     target: Target,
     samples: npt.ArrayLike,
@@ -216,6 +219,7 @@ class LoadOptions(TypedDict, total=False):
     take: bool
 
 
+@checks_arguments
 def load_audio(path: str | os.PathLike, **options: Unpack[LoadOptions]) -> np.ndarray:
     """Read an audio file as mono float32 at ``sr`` Hz.
 
@@ -259,6 +263,7 @@ def load_audio(path: str | os.PathLike, **options: Unpack[LoadOptions]) -> np.nd
     return load_audio_with_info(path, **options)[0]
 
 
+@checks_arguments
 def load_audio_with_info(
     path: str | os.PathLike,
     *,
@@ -329,6 +334,7 @@ def load_audio_with_info(
     return np.ascontiguousarray(mono, dtype=np.float32), info
 
 
+@checks_arguments
 def resample(x: np.ndarray, orig_sr: int, target_sr: int) -> np.ndarray:
     """Resample mono audio with soxr's high-quality filter.
 

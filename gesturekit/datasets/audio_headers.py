@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .. import limits
+from .._arguments import checks_arguments
 from ..errors import AudioFileError
 
 if TYPE_CHECKING:
@@ -87,6 +88,7 @@ class Budget:
         )
 
 
+@checks_arguments
 def check_file(path: Path, budget: Budget) -> str | None:
     """Fail early on a missing, empty, truncated or too long file; return the sniffed container name."""
     if not path.exists():

@@ -35,6 +35,7 @@ from dataclasses import replace
 import numpy as np
 
 from .. import limits
+from .._arguments import checks_arguments
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion, output_frame_count
 from ..skeleton import FPS
@@ -117,6 +118,7 @@ def _frame_indices(data: BvhData, frames: slice | Sequence[int] | np.ndarray | N
     return idx
 
 
+@checks_arguments
 def forward_kinematics(data: BvhData, *, frames: slice | Sequence[int] | np.ndarray | None = None) -> np.ndarray:
     """World positions of every joint.
 
@@ -140,6 +142,7 @@ def forward_kinematics(data: BvhData, *, frames: slice | Sequence[int] | np.ndar
     return out
 
 
+@checks_arguments
 def resample_world_positions(data: BvhData, *, fps: float = FPS) -> np.ndarray:
     """World positions at another frame rate, with rigid bones.
 
@@ -185,6 +188,7 @@ def resample_world_positions(data: BvhData, *, fps: float = FPS) -> np.ndarray:
     return out
 
 
+@checks_arguments
 def unit_scale(data: BvhData, *, units: str = "auto") -> float:
     """Factor that converts the file's length units to metres.
 
@@ -218,6 +222,7 @@ def _check_fps(fps) -> None:
         raise ConfigError(f"fps must be a positive number, got {fps!r}")
 
 
+@checks_arguments
 def load_bvh_motion(
     path: str | os.PathLike,
     *,
@@ -234,6 +239,7 @@ def load_bvh_motion(
     )[0]
 
 
+@checks_arguments
 def read_bvh_take(
     path: str | os.PathLike,
     *,

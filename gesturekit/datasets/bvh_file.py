@@ -22,6 +22,7 @@ from typing import NoReturn
 import numpy as np
 
 from .. import limits
+from .._arguments import checks_arguments
 from ..errors import MotionFileError
 
 __all__ = ["BvhData", "parse_bvh", "parse_bvh_text"]
@@ -106,6 +107,7 @@ class BvhData:
 # ----------------------------------------------------------------------------- parsing
 
 
+@checks_arguments
 def parse_bvh(path: str | os.PathLike) -> BvhData:
     """Read a BVH file.
 
@@ -153,6 +155,7 @@ def parse_bvh(path: str | os.PathLike) -> BvhData:
     return parse_bvh_text(text, path=path)
 
 
+@checks_arguments
 def parse_bvh_text(text: str, *, path: str | os.PathLike | None = None) -> BvhData:
     """Parse the text of a BVH file (see :func:`parse_bvh`).
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import limits
+from .._arguments import checks_arguments
 from ..errors import ConfigError, MotionFileError, warn
 from ..motion import AUDIO_SR, Motion, Take
 from ..paths import is_file
@@ -43,6 +44,7 @@ _READ_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error)
 _UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
 
+@checks_arguments
 def load_habibie2021(
     path: str | os.PathLike, *, units: str = "m", joint_order: np.ndarray | list[int] | None = None
 ) -> list[Take]:
@@ -154,6 +156,7 @@ def _open_npz(path: Path):
     return loaded
 
 
+@checks_arguments
 def is_habibie2021_npz(path: str | os.PathLike) -> bool:
     """Whether an ``.npz`` file holds the arrays ``wav`` and ``body`` (reads the archive's index only).
 
@@ -170,6 +173,7 @@ def is_habibie2021_npz(path: str | os.PathLike) -> bool:
         return "wav" in npz.files and "body" in npz.files
 
 
+@checks_arguments
 def count_sequences(path: str | os.PathLike) -> int:
     """Sequences (takes) of an archive, from the ``body`` array's header alone (no data is read).
 

@@ -35,6 +35,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._io import atomic_write
 from ..errors import ConfigError, GestureKitError
 from ..motion import AUDIO_SR
@@ -71,6 +72,7 @@ def _our_joint_of_column() -> dict[str, str | None]:
     return out
 
 
+@checks_arguments
 def keypoint_joint_map() -> dict:
     """The position joint map of the layout: a dict for :func:`gesturekit.datasets.positions.load_position_joint_map`.
 
@@ -85,6 +87,7 @@ def keypoint_joint_map() -> dict:
     return {"pelvis": None, "names": list(KEYPOINT_NAMES), "joints": joints}
 
 
+@checks_arguments
 def keypoint_positions(
     positions: np.ndarray, *, seed: int, noise: float = BONE_NOISE, scale: float = 1.0, fan_jitter: float = 0.0
 ) -> np.ndarray:
@@ -159,6 +162,7 @@ def _array_bytes(array: np.ndarray, fmt: str) -> bytes:
     return buf.getvalue()
 
 
+@checks_arguments
 def write_keypoint_example(
     out: str | os.PathLike[str],
     *,
@@ -240,6 +244,7 @@ def _map_bytes() -> bytes:
     return (json.dumps(keypoint_joint_map(), indent=1) + "\n").encode()
 
 
+@checks_arguments
 def main(argv: Sequence[str] | None = None) -> int:
     """The command line: ``python -m gesturekit.datasets.keypoint_example OUT [options]``."""
     p = argparse.ArgumentParser(

@@ -39,6 +39,7 @@ from typing import NoReturn
 import numpy as np
 
 from .. import limits
+from .._arguments import checks_arguments
 from ..errors import ConfigError, InputFileError, MotionFileError
 from ..motion import Motion, resample_positions
 from ..paths import is_file
@@ -133,6 +134,7 @@ class PositionJointMap:
         return np.array([n in self.joints for n in JOINT_NAMES], dtype=bool)
 
 
+@checks_arguments
 def load_position_joint_map(spec: str | os.PathLike[str] | Mapping | PositionJointMap) -> PositionJointMap:
     """A position joint map from a JSON file or a dict.
 
@@ -220,6 +222,7 @@ def _validate(content: object, *, name: str, path: Path | None) -> PositionJoint
     )
 
 
+@checks_arguments
 def read_position_array(path: str | os.PathLike, *, fps: float | None = None) -> np.ndarray:
     """Read joint positions from a file, shape (frames, joints, 3), float64.
 
@@ -352,6 +355,7 @@ def _from_npz(path: Path) -> np.ndarray:
         )
 
 
+@checks_arguments
 def load_positions_motion(
     path: str | os.PathLike[str],
     *,
@@ -368,6 +372,7 @@ def load_positions_motion(
     )[0]
 
 
+@checks_arguments
 def read_positions_take(
     path: str | os.PathLike[str],
     *,

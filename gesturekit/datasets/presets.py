@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
+from .._arguments import checks_arguments
 from .._config import config_to_dict
 from ..errors import ConfigError, InputFileError
 from ..limits import read_json
@@ -87,6 +88,7 @@ class JointMap:
         return config_to_dict(self, exclude=("name",))
 
 
+@checks_arguments
 def missing_and_unknown(names: Iterable[str]) -> tuple[list[str], list[str]]:
     """Compare joint names with our 55.
 
@@ -103,6 +105,7 @@ def missing_and_unknown(names: Iterable[str]) -> tuple[list[str], list[str]]:
     return missing, unknown
 
 
+@checks_arguments
 def mapping_problems(joints: Mapping, *, value_ok: Callable[[object], bool], values_must_be: str) -> list[str]:
     """What is wrong with a map from our joint names to source joints, one phrase per problem.
 
@@ -159,6 +162,7 @@ def _mixamo_like(name: str) -> JointMap:
 PRESETS: Mapping[str, JointMap] = MappingProxyType({"zeggs": _mixamo_like("zeggs"), "beat": _mixamo_like("beat")})
 
 
+@checks_arguments
 def load_joint_map(spec: str | os.PathLike | Mapping | JointMap) -> JointMap:
     """A complete joint map from a preset name, a JSON file or a dict.
 

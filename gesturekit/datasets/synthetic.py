@@ -54,6 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion, Take, n_audio_frames
 from ..skeleton import FPS
@@ -132,6 +133,7 @@ class DemoEvents:
 # ---------------------------------------------------------------------------------------------
 
 
+@checks_arguments
 def generate_demo_takes(
     *,
     minutes: float = 20.0,
@@ -207,6 +209,7 @@ def generate_demo_takes(
     return takes
 
 
+@checks_arguments
 def generate_demo_take(*, seconds: float, seed: int, name: str) -> tuple[Take, DemoEvents]:
     """Generate one take of the demo speaker and its ground-truth events.
 

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..bones import Skeleton
 from ..errors import ConfigError, InputFileError
 from ..motion import Motion, Take
@@ -78,6 +79,7 @@ def _is_habibie_npz(path: Path) -> bool:
     return is_habibie2021_npz(path)
 
 
+@checks_arguments
 def discover_takes(folder: str | os.PathLike, *, kind: str = "auto") -> list[TakeSource]:
     """List the takes in ``folder`` (not recursive), sorted by name.
 
@@ -131,6 +133,7 @@ def discover_takes(folder: str | os.PathLike, *, kind: str = "auto") -> list[Tak
     return out
 
 
+@checks_arguments
 def count_takes(sources: list[TakeSource]) -> int:
     """Number of takes the sources hold (an npz of the 2021 layout holds several)."""
     n = 0
@@ -205,6 +208,7 @@ class ReadOptions:
             raise ConfigError("a skeleton is given to the takes with normalize_bones=True")
 
 
+@checks_arguments
 def iter_takes(
     sources: list[TakeSource],
     *,
@@ -318,6 +322,7 @@ def _file_record(key: str, path: Path) -> dict[str, str]:
     return {key: str(path), f"{key}_stat": f"{st.st_size}:{st.st_mtime_ns}"}
 
 
+@checks_arguments
 def check_durations(
     motion: Motion, n_samples: int, *, path: str | os.PathLike[str], fps_option: tuple[str, float] | None
 ) -> None:
@@ -368,6 +373,7 @@ def _normalise(motion: Motion, skeleton: Skeleton | None) -> tuple[np.ndarray, s
     return positions.astype(np.float32), report.summary()
 
 
+@checks_arguments
 def fit_takes_skeleton(
     sources: list[TakeSource],
     *,

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..control import ControlTrack
 from ..errors import ConfigError
 from ..motion import Motion
@@ -95,6 +96,7 @@ class SystemOutput:
     relaxed_steps: int = 0
 
 
+@checks_arguments
 def parse_systems(systems: str | Sequence[str]) -> tuple[str, ...]:
     """``"gt,knn"`` or a sequence -> a tuple of known system names (order kept, duplicates dropped)."""
     if isinstance(systems, str):
@@ -115,6 +117,7 @@ def parse_systems(systems: str | Sequence[str]) -> tuple[str, ...]:
 # ---- admissible windows -------------------------------------------------------------------------
 
 
+@checks_arguments
 def admissible_windows(
     valid: np.ndarray,
     *,
@@ -244,6 +247,7 @@ def _check_n(n_frames: int, segment: int) -> int:
     return -(-int(n_frames) // int(segment))
 
 
+@checks_arguments
 def random_segments(
     valid: np.ndarray, *, n_frames: int, seed: int = 0, **rules: Unpack[WindowRules]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -280,6 +284,7 @@ def random_segments(
     return _frames(choices, int(n_frames), segment), relaxed
 
 
+@checks_arguments
 def audio_nearest_segments(
     F: np.ndarray, valid: np.ndarray, query: np.ndarray, **rules: Unpack[WindowRules]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -334,6 +339,7 @@ def _initial_pose(P: np.ndarray, adm: np.ndarray, seed: int) -> np.ndarray:
     return np.asarray(P.reshape(-1, P.shape[-1])[pick], dtype=np.float32)
 
 
+@checks_arguments
 def pose_nearest_segments(
     P: np.ndarray,
     valid: np.ndarray,
@@ -394,6 +400,7 @@ def pose_nearest_segments(
 # ---- running a system ---------------------------------------------------------------------------
 
 
+@checks_arguments
 def refiner_unavailable_reason(refiner: MotionRefiner | str | os.PathLike[str] | None) -> str | None:
     """Why ``knn+cgan`` cannot run with this refiner (None: it can), said before any work starts."""
     if refiner is None:
@@ -404,6 +411,7 @@ def refiner_unavailable_reason(refiner: MotionRefiner | str | os.PathLike[str] |
     return None
 
 
+@checks_arguments
 def run_system(
     system: str,
     *,

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._config import option, option_of
 from .._optional import require
 from ..errors import ConfigError, InputFileError
@@ -268,6 +269,7 @@ class FGDModel:
         return write_folder(path, "fgd", fill, overwrite=overwrite)
 
 
+@checks_arguments
 def load_fgd_model(path: str | os.PathLike) -> FGDModel:
     """Open a model folder written by :meth:`FGDModel.save` (tensors only, ``weights_only=True``).
 
@@ -318,6 +320,7 @@ def _training_windows(db: MatchingDatabase, exclude: np.ndarray | None, window: 
     return G[keep], np.flatnonzero(keep)
 
 
+@checks_arguments
 def train_fgd_model(
     db: MatchingDatabase,
     *,
@@ -379,6 +382,7 @@ def train_fgd_model(
     return FGDModel(config, net, mean, std, info)
 
 
+@checks_arguments
 def fgd(model: FGDModel, generated: np.ndarray, reference: np.ndarray) -> float:
     """Fréchet Gesture Distance between a generated and a reference motion.
 

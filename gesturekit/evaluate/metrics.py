@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..control import ATTRIBUTE_NAMES, ControlTrack, constraint_mask, frame_attributes
 from ..errors import ConfigError
 from ..motion import AUDIO_SR
@@ -109,6 +110,7 @@ def _select(x: np.ndarray, joints: Sequence[int] | None) -> np.ndarray:
 # ---- beats -------------------------------------------------------------------------------------
 
 
+@checks_arguments
 def joint_speeds(positions: np.ndarray, *, fps: float, joints: Sequence[int] | None = None) -> np.ndarray:
     """Speed of every joint in every frame.
 
@@ -132,6 +134,7 @@ def joint_speeds(positions: np.ndarray, *, fps: float, joints: Sequence[int] | N
     return np.linalg.norm(np.gradient(x, axis=0), axis=2) * fps
 
 
+@checks_arguments
 def kinetic_velocity(
     positions: np.ndarray, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS, smooth_s: float = 1 / 15
 ) -> np.ndarray:
@@ -162,6 +165,7 @@ def kinetic_velocity(
     return v
 
 
+@checks_arguments
 def motion_beats(
     positions: np.ndarray,
     *,
@@ -201,6 +205,7 @@ def motion_beats(
     return idx / _fps(fps)
 
 
+@checks_arguments
 def pick_peaks(
     x: np.ndarray, *, pre_max: int, post_max: int, pre_avg: int, post_avg: int, delta: float, wait: int
 ) -> np.ndarray:
@@ -253,6 +258,7 @@ def pick_peaks(
     return np.asarray(peaks, dtype=np.int64)
 
 
+@checks_arguments
 def audio_onsets(audio: np.ndarray, *, sr: int = AUDIO_SR, hop_length: int = 160) -> np.ndarray:
     """Onset times of speech: peaks of librosa's spectral-flux onset envelope.
 
@@ -301,6 +307,7 @@ def audio_onsets(audio: np.ndarray, *, sr: int = AUDIO_SR, hop_length: int = 160
     return librosa.frames_to_time(frames, sr=sr, hop_length=hop).astype(np.float64)
 
 
+@checks_arguments
 def beat_consistency(motion_beat_times: np.ndarray, onset_times: np.ndarray, *, sigma: float = 0.1) -> float:
     """Gaussian beat-alignment score of motion beats against audio onsets.
 
@@ -334,6 +341,7 @@ def beat_consistency(motion_beat_times: np.ndarray, onset_times: np.ndarray, *, 
     return float(np.mean(np.exp(-(d**2) / (2 * sigma**2))))
 
 
+@checks_arguments
 def beat_consistency_score(
     positions: np.ndarray,
     audio: np.ndarray,
@@ -370,6 +378,7 @@ def beat_consistency_score(
 # ---- diversity ---------------------------------------------------------------------------------
 
 
+@checks_arguments
 def diversity_l1(positions: np.ndarray, *, window: int = 15, joints: Sequence[int] | None = None) -> float:
     """BEAT's L1 diversity over non-overlapping windows of the motion.
 
@@ -405,6 +414,7 @@ def diversity_l1(positions: np.ndarray, *, window: int = 15, joints: Sequence[in
 # ---- Fréchet distance --------------------------------------------------------------------------
 
 
+@checks_arguments
 def gaussian_statistics(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean and covariance of a feature set.
 
@@ -428,6 +438,7 @@ def _psd_sqrt(c: np.ndarray) -> np.ndarray:
     return (v * np.sqrt(np.clip(w, 0, None))) @ v.T
 
 
+@checks_arguments
 def frechet_distance(mean1: np.ndarray, cov1: np.ndarray, mean2: np.ndarray, cov2: np.ndarray) -> float:
     """Fréchet (2-Wasserstein) distance between two Gaussians, squared as FID/FGD report it.
 
@@ -462,6 +473,7 @@ def frechet_distance(mean1: np.ndarray, cov1: np.ndarray, mean2: np.ndarray, cov
 # ---- kinematics --------------------------------------------------------------------------------
 
 
+@checks_arguments
 def kinematic_magnitudes(
     positions: np.ndarray, *, fps: float, order: int = 1, joints: Sequence[int] | None = KINEMATIC_JOINTS
 ) -> np.ndarray:
@@ -489,6 +501,7 @@ def kinematic_magnitudes(
     return (np.linalg.norm(np.diff(x, n=order, axis=0), axis=2) * fps**order).ravel()
 
 
+@checks_arguments
 def hellinger_distance(p: np.ndarray, q: np.ndarray) -> float:
     """Hellinger distance between two histograms (normalised here), ``sqrt(1 - sum sqrt(p q))``.
 
@@ -510,6 +523,7 @@ def hellinger_distance(p: np.ndarray, q: np.ndarray) -> float:
     return float(min(1.0, math.sqrt(0.5 * np.sum(d * d))))
 
 
+@checks_arguments
 def kinematic_hellinger(
     positions: np.ndarray,
     reference: np.ndarray,
@@ -557,18 +571,21 @@ def kinematic_hellinger(
     return hellinger_distance(ha, hb)
 
 
+@checks_arguments
 def mean_acceleration(positions: np.ndarray, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS) -> float:
     """Mean magnitude of joint acceleration (second differences), m/s^2; NaN under 3 frames."""
     v = kinematic_magnitudes(positions, fps=fps, order=2, joints=joints)
     return float(v.mean()) if v.size else float("nan")
 
 
+@checks_arguments
 def mean_jerk(positions: np.ndarray, *, fps: float, joints: Sequence[int] | None = KINEMATIC_JOINTS) -> float:
     """Mean magnitude of joint jerk (third differences), m/s^3; 0 for a constant pose, NaN under 4 frames."""
     v = kinematic_magnitudes(positions, fps=fps, order=3, joints=joints)
     return float(v.mean()) if v.size else float("nan")
 
 
+@checks_arguments
 def boundary_jumps(
     positions: np.ndarray, boundaries: np.ndarray | Sequence[int], *, joints: Sequence[int] | None = KINEMATIC_JOINTS
 ) -> dict:
@@ -607,6 +624,7 @@ def boundary_jumps(
 _STAT_ATTRIBUTES = ("left_hand_height", "left_hand_speed", "hand_speed", "asymmetry")
 
 
+@checks_arguments
 def control_adherence(positions: np.ndarray, track: ControlTrack, *, thresholds: dict, fps: float) -> pd.DataFrame:
     """Per control segment: the fraction of frames meeting its constraint, and attribute statistics.
 
@@ -667,6 +685,7 @@ def control_adherence(positions: np.ndarray, track: ControlTrack, *, thresholds:
     return pd.DataFrame(rows, columns=columns)
 
 
+@checks_arguments
 def overall_adherence(table: pd.DataFrame) -> float:
     """Frame-weighted mean adherence of a :func:`control_adherence` table (NaN if it has no frame)."""
     frames = np.asarray(table["frames"], dtype=np.float64)

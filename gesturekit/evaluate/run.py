@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._config import check_option, option, options_config
 from ..control import ControlTrack, Segment, parse_control, parse_time_range
 from ..errors import ConfigError, warn
@@ -132,6 +133,7 @@ class Holdout:
         return f"{self.take}:{self.start_s:g}-{self.end_s:g}"
 
 
+@checks_arguments
 def parse_holdout(text: str | Holdout) -> Holdout:
     """``"TAKE"`` or ``"TAKE:START-END"`` (seconds) -> :class:`Holdout`.
 
@@ -197,6 +199,7 @@ class HeldOut(HoldsMotion):
         }
 
 
+@checks_arguments
 def held_out(db: MatchingDatabase, holdout: Holdout | str, *, margin_s: float | None = None) -> HeldOut:
     """Resolve a held-out part: its recorded motion, its speech, and what to exclude.
 
@@ -264,6 +267,7 @@ def held_out(db: MatchingDatabase, holdout: Holdout | str, *, margin_s: float | 
     return HeldOut(h, f0, motion, audio, ex_takes, ex_ranges)
 
 
+@checks_arguments
 def default_control_track(duration_s: float, *, controls: Sequence[tuple[str, str]] = DEFAULT_CONTROLS) -> ControlTrack:
     """Equal stretches of ``duration_s`` seconds, each asking for one constraint in turn."""
     if not duration_s > 0:
@@ -454,6 +458,7 @@ class EvaluationConfig:
         check_option(EvaluationConfig, "sigma", self.sigma)
 
 
+@checks_arguments
 def run_evaluation(
     db: MatchingDatabase,
     config: EvaluationConfig | None = None,
@@ -573,6 +578,7 @@ def run_evaluation(
     return Evaluation(table, controls, ref, outputs, notes, settings)
 
 
+@checks_arguments
 def evaluate(db: MatchingDatabase, config: EvaluationConfig | None = None, **options: Any) -> pd.DataFrame:
     """:func:`run_evaluation`'s table: one row per system, one column per measure."""
     return run_evaluation(db, config, **options).table
@@ -589,6 +595,7 @@ def _cell(v: object, floatfmt: str) -> str:
     return str(v).replace("|", "\\|")
 
 
+@checks_arguments
 def markdown_table(df: pd.DataFrame, *, floatfmt: str = ".4g") -> str:
     """A pandas DataFrame as a GitHub-flavoured markdown table (numbers right-aligned; NaN as "–")."""
     cols = list(df.columns)
@@ -607,6 +614,7 @@ def markdown_table(df: pd.DataFrame, *, floatfmt: str = ".4g") -> str:
     return "\n".join([line([str(c) for c in cols]), rule] + [line(r) for r in body])
 
 
+@checks_arguments
 def write_text(text: str, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
     """Write a UTF-8 text file atomically."""
     from .._io import atomic_write
@@ -615,6 +623,7 @@ def write_text(text: str, path: str | os.PathLike[str], *, overwrite: bool = Fal
     return atomic_write(path, lambda f: f.write(data), overwrite=overwrite)
 
 
+@checks_arguments
 def write_csv(df: pd.DataFrame, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
     """Write a DataFrame as CSV (no index, full float precision) atomically."""
     return write_text(df.to_csv(index=False, lineterminator="\n"), path, overwrite=overwrite)

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..character.retarget import Retargeted
 from ..character.solve import ROTATION_ORDERS, continuous_angles, euler_from_matrices
 from ..character.target import Character
@@ -133,6 +134,7 @@ def _check_arguments(path: object, retargeted: object, function: str) -> None:
         )
 
 
+@checks_arguments
 def export_character_bvh(
     path: str | os.PathLike[str], retargeted: Retargeted, *, units: str | None = None, overwrite: bool = False
 ) -> CharacterBvhReport:
@@ -215,6 +217,7 @@ def export_character_bvh(
     return report
 
 
+@checks_arguments
 def check_character_bvh(
     path: Path, joints: list[str], *, overwrite: bool, inputs: list[Path | str | os.PathLike[str]]
 ) -> None:
@@ -256,6 +259,7 @@ def _layout(ch: Character) -> tuple[list[int], set[int]]:
     return written, (_end_sites(ch.names, ch.parents, written) if ch.kind == "bvh" else set())
 
 
+@checks_arguments
 def character_bvh_joints(ch: Character) -> list[str]:
     """The JOINT and ROOT names of the character's BVH, in bone order (End Sites left out)."""
     written, ends = _layout(ch)

@@ -54,6 +54,7 @@ from typing import Protocol
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._io import Target, target_path, write_to
 from ..bones import fit_bone_lengths
 from ..character.solve import (
@@ -245,6 +246,7 @@ def _names(names: tuple[str, ...] | list[str], most: int = 12) -> str:
     return shown + (f" and {len(names) - most} more" if len(names) > most else "")
 
 
+@checks_arguments
 def write_bvh(
     path: Target,
     motion: Motion,
@@ -272,6 +274,7 @@ def write_bvh(
     return report.path if isinstance(path, (str, os.PathLike)) else None
 
 
+@checks_arguments
 def export_bvh(
     path: Target,
     motion: Motion,

@@ -9,7 +9,8 @@ GLB (:func:`export_character_glb`)
     Their document and binary chunk as read (meshes, materials, textures,
     skins, extensions such as VRM's, their animations), with one animation
     more, named :data:`ANIMATION`, first of the animations (a viewer that plays
-    one plays the first; theirs follow as they were): one key per frame at ``i / fps`` seconds,
+    one plays the first; theirs follow as they were, or are left out with
+    ``their_clips="drop"``): one key per frame at ``i / fps`` seconds,
     interpolated linearly, a rotation channel for each bone whose local
     rotation moves and a translation channel for the hips when they move. A
     bone's world rotation in the file is ``S = R_F @ W`` (``W`` the retargeted
@@ -40,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..character.glb import FLOAT, GlbBuffer, accessor_array, glb_bytes, node_matrices, read_glb
 from ..character.retarget import Retargeted
 from ..character.rig import rotation_to_quaternion
@@ -60,6 +62,7 @@ from .gltf import GENERATOR, WARN_ABOVE, continuous_quaternions, speech_targets
 
 __all__ = [
     "ANIMATION",
+    "THEIR_CLIPS",
     "CHARACTER_GLB_SUFFIXES",
     "CharacterGltfReport",
     "CharacterBvhReport",
@@ -71,6 +74,11 @@ __all__ = [
 
 #: The name of the animation :func:`export_character_glb` adds.
 ANIMATION = "gesturekit"
+
+#: What :func:`export_character_glb` does with the character's own animations: ``"keep"`` them after ours (the
+#: default: viewers and engines that play one animation play the first, ours, and the file keeps what it had) or
+#: ``"drop"`` them (ours is the only one; their keys stay in the binary chunk, referenced by nothing).
+THEIR_CLIPS: tuple[str, ...] = ("keep", "drop")
 
 #: Suffixes a character's GLB may be written with (a VRM keeps its own).
 CHARACTER_GLB_SUFFIXES = (".glb", ".vrm")
@@ -103,6 +111,10 @@ class CharacterGltfReport:
     worst_frame : int
     size : int
         Bytes of the file.
+    their_clips : tuple of str
+        The character's own animations kept in the file, after ours.
+    dropped_clips : tuple of str
+        The character's own animations left out (``their_clips="drop"``).
     """
 
     path: Path
@@ -116,6 +128,8 @@ class CharacterGltfReport:
     worst_bone: str
     worst_frame: int
     size: int
+    their_clips: tuple[str, ...] = ()
+    dropped_clips: tuple[str, ...] = ()
 
     def summary(self) -> str:
         """One line: the file, its error, what is animated, its size."""
@@ -127,9 +141,14 @@ class CharacterGltfReport:
         ]
         if self.audio is not None:
             parts.append(f"speech in {self.audio.name}")
+        if self.their_clips:
+            parts.append(f"its own clips after ours: {', '.join(self.their_clips)}")
+        if self.dropped_clips:
+            parts.append(f"its own clips left out: {', '.join(self.dropped_clips)}")
         return "; ".join(parts)
 
 
+@checks_arguments
 def export_character_glb(
     path: str | os.PathLike[str],
     retargeted: Retargeted,
@@ -137,6 +156,7 @@ def export_character_glb(
     audio: np.ndarray | None = None,
     sr: int = AUDIO_SR,
     overwrite: bool = False,
+    their_clips: str = "keep",
 ) -> CharacterGltfReport:
     """Write the user's glTF or VRM character with our motion as its animation :data:`ANIMATION`, atomically.
 
@@ -157,6 +177,8 @@ def export_character_glb(
         Its sample rate, Hz.
     overwrite : bool
         Replace existing files that gesturekit wrote (never the character's own file).
+    their_clips : {"keep", "drop"}
+        The character's own animations: kept after ours, or left out (:data:`THEIR_CLIPS`).
 
     Returns
     -------
@@ -170,6 +192,8 @@ def export_character_glb(
         (:class:`~gesturekit.errors.OutputError`).
     """
     _check_arguments(path, retargeted, "export_character_glb")
+    if their_clips not in THEIR_CLIPS:
+        raise ConfigError(f"their_clips is one of {', '.join(THEIR_CLIPS)}, not {their_clips!r}")
     path = Path(path)
     ch = retargeted.character
     if ch.gltf is None:
@@ -181,7 +205,7 @@ def export_character_glb(
     extras: dict[str, Any] = {"fps": float(retargeted.fps), "frames": int(retargeted.n_frames), "units": "m"}
     if wav_path is not None:
         extras["audio"] = wav_path.name
-    doc, binary, animated = _document(retargeted, extras)
+    doc, binary, animated, dropped = _document(retargeted, extras, keep=their_clips == "keep")
     data = glb_bytes(doc, binary)
     err, frames = _measure(data, retargeted, path)
     frame, bone = worst(err)
@@ -197,6 +221,8 @@ def export_character_glb(
         worst_bone=ch.names[bone],
         worst_frame=frame,
         size=len(data),
+        their_clips=tuple(str(a.get("name", "")) for a in doc.get("animations", []) if a.get("name") != ANIMATION),
+        dropped_clips=dropped,
     )
     warning = None
     if report.max_error > WARN_ABOVE:
@@ -232,7 +258,9 @@ def _trs(node: dict[str, Any], name: str, path: Path) -> None:
         )
 
 
-def _document(r: Retargeted, extras: dict[str, Any]) -> tuple[dict[str, Any], bytes, list[int]]:
+def _document(
+    r: Retargeted, extras: dict[str, Any], *, keep: bool = True
+) -> tuple[dict[str, Any], bytes, list[int], tuple[str, ...]]:
     """Their document with the animation added, the binary chunk, and the bones animated."""
     ch = r.character
     assert ch.gltf is not None
@@ -297,6 +325,9 @@ def _document(r: Retargeted, extras: dict[str, Any]) -> tuple[dict[str, Any], by
 
     binary = _append(doc, ch.gltf.binary, buf, samplers)
     animations = [a for a in doc.get("animations", []) if a.get("name") != ANIMATION]
+    dropped: tuple[str, ...] = ()
+    if not keep:
+        dropped, animations = tuple(str(a.get("name", f"animation {i}")) for i, a in enumerate(animations)), []
     if channels:  # first: the clip a viewer plays when it plays one (theirs follow, as they were)
         animations.insert(0, {"name": ANIMATION, "samplers": samplers, "channels": channels})
     if animations:
@@ -313,7 +344,7 @@ def _document(r: Retargeted, extras: dict[str, Any]) -> tuple[dict[str, Any], by
         scene["extras"] = _merged(scene.get("extras"), extras)
     # the asset first: gesturekit.outputs recognises its files by the generator at the head of the JSON
     out = {"asset": asset, **{k: v for k, v in doc.items() if k != "asset"}}
-    return out, binary, sorted(animated)
+    return out, binary, sorted(animated), dropped
 
 
 def _merged(theirs: object, ours: dict[str, Any]) -> dict[str, Any]:

@@ -55,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._io import Target, target_path
 from .._version import __version__
 from ..character.glb import ARRAY_BUFFER as _ARRAY_BUFFER
@@ -190,11 +191,13 @@ class GltfReport:
         return "; ".join(parts)
 
 
+@checks_arguments
 def audio_path_for(path: str | os.PathLike[str]) -> Path:
     """Where :func:`export_gltf` writes the speech of ``path``: the same name with ``.wav``."""
     return Path(path).with_suffix(".wav")
 
 
+@checks_arguments
 def speech_targets(
     path: Path, audio: np.ndarray | None, sr: int, *, overwrite: bool
 ) -> tuple[Path | None, np.ndarray | None]:
@@ -245,6 +248,7 @@ def speech_targets(
     return wav_path, samples
 
 
+@checks_arguments
 def export_gltf(
     path: Target,
     motion: Motion,
@@ -390,6 +394,7 @@ def _unit_normals(normals: np.ndarray) -> np.ndarray:
     return np.where(length > 1e-12, n / np.maximum(length, 1e-12), [0.0, 1.0, 0.0])
 
 
+@checks_arguments
 def continuous_quaternions(q: np.ndarray) -> np.ndarray:
     """Quaternions (frames, ..., 4) with each one's sign chosen to be nearest the previous frame's."""
     q = q.copy()

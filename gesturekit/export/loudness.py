@@ -12,6 +12,7 @@ import subprocess
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError, GestureKitError
 from ..motion import AUDIO_SR
 from .video import ffmpeg_executable
@@ -21,6 +22,7 @@ __all__ = ["measure_loudness", "normalise_loudness"]
 _LOUDNESS_RE = re.compile(r"Integrated loudness:\s*I:\s*(-?[0-9.]+|-inf)\s*LUFS", re.S)
 
 
+@checks_arguments
 def measure_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR) -> float:
     """Integrated loudness (EBU R 128 / ITU-R BS.1770) of mono audio, LUFS, measured by ffmpeg.
 
@@ -63,6 +65,7 @@ def measure_loudness(audio: np.ndarray, *, sr: int = AUDIO_SR) -> float:
     return -70.0 if m.group(1) == "-inf" else float(m.group(1))
 
 
+@checks_arguments
 def normalise_loudness(
     audio: np.ndarray, *, sr: int = AUDIO_SR, target_lufs: float = -23.0, peak: float = 0.98
 ) -> tuple[np.ndarray, float]:

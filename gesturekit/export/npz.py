@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._io import Target, target_path, write_to
 from ..errors import ConfigError, MotionFileError
 from ..motion import Motion
@@ -54,6 +55,7 @@ _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 _KEY_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
+@checks_arguments
 def save_npz(
     path: Target,
     *,
@@ -179,6 +181,7 @@ def _checked_extra(name: str, value: Any, path) -> np.ndarray:
     return np.asarray(arr, order="C")
 
 
+@checks_arguments
 def load_npz(path: str | os.PathLike) -> tuple[Motion, dict[str, np.ndarray], dict[str, Any]]:
     """Load an archive written by :func:`save_npz`.
 

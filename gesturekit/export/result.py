@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._io import Target, target_path
 from ..character.retarget import Retargeted, retarget
 from ..character.target import Character
@@ -38,6 +39,7 @@ __all__ = [
 ]
 
 
+@checks_arguments
 def save_result_npz(result: SynthesisResult, path: Target, *, overwrite: bool = False) -> Path | None:
     """An npz archive of a synthesis (read it back with :func:`gesturekit.export.npz.load_npz`).
 
@@ -83,6 +85,7 @@ def save_result_npz(result: SynthesisResult, path: Target, *, overwrite: bool = 
     return save_npz(path, motion=result.motion, arrays=arrays, config=result.metadata(), overwrite=overwrite)
 
 
+@checks_arguments
 def save_result_bvh(
     result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False, units: str = "cm"
 ) -> Path:
@@ -96,6 +99,7 @@ def save_result_bvh(
     return export_result_bvh(result, path, overwrite=overwrite, units=units).path
 
 
+@checks_arguments
 def export_result_bvh(
     result: SynthesisResult, path: Target, *, overwrite: bool = False, units: str = "cm"
 ) -> BvhReport:
@@ -133,6 +137,7 @@ def export_result_bvh(
     return export_bvh(path, result.motion, overwrite=overwrite, units=units, remedy=_bvh_remedy(result))
 
 
+@checks_arguments
 def export_result_glb(
     result: SynthesisResult, path: str | os.PathLike[str], *, overwrite: bool = False, scheme: str = "blue"
 ) -> GltfReport:
@@ -156,6 +161,7 @@ def export_result_glb(
     )
 
 
+@checks_arguments
 def retarget_result(result: SynthesisResult, character: Character | Retargeted) -> Retargeted:
     """The final motion of ``result`` on a user's character (:func:`gesturekit.character.retarget.retarget`).
 
@@ -179,8 +185,14 @@ def retarget_result(result: SynthesisResult, character: Character | Retargeted) 
     return retarget(result.motion, character)
 
 
+@checks_arguments
 def export_result_character_glb(
-    result: SynthesisResult, character: Character | Retargeted, path: str | os.PathLike[str], *, overwrite: bool = False
+    result: SynthesisResult,
+    character: Character | Retargeted,
+    path: str | os.PathLike[str],
+    *,
+    overwrite: bool = False,
+    their_clips: str = "keep",
 ) -> CharacterGltfReport:
     """The user's glTF or VRM character with the final motion as its animation ``"gesturekit"``, its speech as a
     WAV beside it (:func:`gesturekit.export.gltf.audio_path_for`), and how well the file reproduces the
@@ -196,6 +208,8 @@ def export_result_character_glb(
     path : str or os.PathLike
     overwrite : bool
         Replace files gesturekit wrote.
+    their_clips : {"keep", "drop"}
+        The character's own animations: kept after ours (default) or left out.
 
     Returns
     -------
@@ -203,9 +217,11 @@ def export_result_character_glb(
         ``report.summary()`` is one line.
     """
     result.check_finite(path)
-    return export_character_glb(path, retarget_result(result, character), audio=result.audio, overwrite=overwrite)
+    posed = retarget_result(result, character)
+    return export_character_glb(path, posed, audio=result.audio, overwrite=overwrite, their_clips=their_clips)
 
 
+@checks_arguments
 def export_result_character_bvh(
     result: SynthesisResult,
     character: Character | Retargeted,
@@ -247,6 +263,7 @@ def _bvh_remedy(result: SynthesisResult) -> str | None:
     )
 
 
+@checks_arguments
 def save_result_video(
     result: SynthesisResult,
     path: str | os.PathLike[str],

@@ -28,6 +28,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._io import atomic_write
 from .._optional import require
 from ..datasets.audio import write_wav
@@ -50,12 +51,14 @@ _CRF = 18
 _AUDIO_BITRATE = "96k"
 
 
+@checks_arguments
 def ffmpeg_executable() -> str:
     """The path of the ffmpeg binary shipped with ``imageio-ffmpeg`` (an optional extra; a clear error without it)."""
     # imported here: the binary is looked up (and checked) only when a video is made or read
     return require("imageio_ffmpeg", purpose="writing or reading a video").get_ffmpeg_exe()
 
 
+@checks_arguments
 def render_video(
     path: str | os.PathLike,
     motion: Motion,
@@ -184,6 +187,7 @@ def render_video(
         return atomic_write(path, copy, overwrite=overwrite)
 
 
+@checks_arguments
 def check_resolution(resolution: Any) -> tuple[int, int]:
     """``(width, height)`` of a video in whole, even pixels, or a ConfigError saying what is wrong."""
     try:
@@ -213,6 +217,7 @@ def _check_audio(audio: Any, sr: Any) -> np.ndarray:
     return audio.astype(np.float32, copy=False)
 
 
+@checks_arguments
 def encode_command(
     out: Path, width: int, height: int, fps: float, wav: Path | None, seconds: float | None
 ) -> list[str]:
@@ -336,6 +341,7 @@ _LAYOUT_CHANNELS = {
 }
 
 
+@checks_arguments
 def probe_media(path: str | os.PathLike, *, decode: bool = True) -> dict:
     """Codecs, sizes, rates and durations of a media file, read with the ffmpeg binary.
 

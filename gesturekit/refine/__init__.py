@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .._arguments import checks_arguments
 from .._optional import require
 from ..errors import GestureKitError
 from .folder import check_layout, describe_training, provenance, read_refiner_config, trained_on
@@ -36,6 +37,7 @@ __all__ = [
 ]
 
 
+@checks_arguments
 def default_refiner_path() -> Path:
     """The refiner shipped with gesturekit, trained on the default demo database.
 
@@ -45,6 +47,7 @@ def default_refiner_path() -> Path:
     return Path(__file__).resolve().parents[1] / "assets" / "demo-refiner"
 
 
+@checks_arguments
 def load_refiner(path: str | os.PathLike[str] | None = None, *, device: str = "cpu") -> Refiner:
     """A :class:`~gesturekit.refine.infer.Refiner` from a folder; ``None`` or ``"demo"``: the shipped one."""
     require("torch", purpose="a refiner")
@@ -55,6 +58,7 @@ def load_refiner(path: str | os.PathLike[str] | None = None, *, device: str = "c
     return Refiner.load(path, device=device)
 
 
+@checks_arguments
 def open_refiner(refiner: MotionRefiner | str | os.PathLike[str] | None) -> MotionRefiner | None:
     """A refiner to give to synthesis: a folder or ``"demo"`` is loaded (:func:`load_refiner`),
     a loaded refiner (any object with ``check_database`` and ``refine_motion``) and None pass through.
@@ -91,6 +95,7 @@ def open_refiner(refiner: MotionRefiner | str | os.PathLike[str] | None) -> Moti
     return load_refiner(refiner)
 
 
+@checks_arguments
 def check_refiner(path: str | os.PathLike[str], db: MatchingDatabase) -> Path:
     """Check a refiner folder against a database without loading its weights (nor torch).
 
@@ -115,6 +120,7 @@ def check_refiner(path: str | os.PathLike[str], db: MatchingDatabase) -> Path:
     return path
 
 
+@checks_arguments
 def refiner_for(db: MatchingDatabase) -> Path | None:
     """The refiner applied to ``db`` when none is named: one in ``<db>/refiner`` or the shipped
     demo refiner (:func:`default_refiner_path`), whichever was trained on ``db`` (:func:`trained_on`);

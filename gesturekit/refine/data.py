@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._config import JsonConfig
 from ..database import MatchingDatabase, normalise_exclusions
 from ..errors import ConfigError, DatabaseError, collect_warnings
@@ -121,6 +122,7 @@ class TrainingPairs:
         return int(self.window.shape[0])
 
 
+@checks_arguments
 def training_windows(db: MatchingDatabase, config: PairsConfig = PairsConfig()) -> np.ndarray:
     """Indices of the overlapping-cut windows used for training (none touches held-out frames).
 
@@ -177,6 +179,7 @@ def draw_k(n: int, config: PairsConfig) -> np.ndarray:
     return np.where(one, 1, other).astype(np.int64)
 
 
+@checks_arguments
 def make_training_pairs(
     db: MatchingDatabase, *, config: PairsConfig = PairsConfig(), progress: Callable[[int, int], None] | None = None
 ) -> TrainingPairs:

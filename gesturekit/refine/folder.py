@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .._arguments import checks_arguments
 from ..errors import DatabaseError, InputFileError
 from ..folders import read_json_marker
 
@@ -35,6 +36,7 @@ _MESSAGES = {
 }
 
 
+@checks_arguments
 def read_refiner_config(path: str | os.PathLike) -> dict:
     """The ``config.json`` of a refiner folder, checked for format, version and structure.
 
@@ -106,6 +108,7 @@ def _check_structure(cfg: dict, path: Path) -> None:
 # ---- what a refiner folder's config.json says of its training ------------------------------------
 
 
+@checks_arguments
 def check_layout(config: dict, db: MatchingDatabase, *, where: str | os.PathLike[str]) -> None:
     """Refuse a database whose features have another layout than a refiner's training data.
 
@@ -140,6 +143,7 @@ def _speaker(source: str) -> str:
     return re.sub(r",\s*[0-9.]+\s*min\)", ")", source) if source.startswith("demo") else source
 
 
+@checks_arguments
 def trained_on(config: dict, db: MatchingDatabase) -> bool:
     """Whether a refiner (its ``config.json``) was trained on ``db``: the same folder, or the same
     recorded source with the same takes and clips; for the generated demo speaker, the same
@@ -157,6 +161,7 @@ def trained_on(config: dict, db: MatchingDatabase) -> bool:
     return source == theirs and trained.get("takes") == len(db.take_names) and trained.get("clips") == db.n_clips
 
 
+@checks_arguments
 def describe_training(config: dict) -> str:
     """The training database of a refiner, as its ``config.json`` records it, in a few words."""
     t = config.get("database") or {}
@@ -165,6 +170,7 @@ def describe_training(config: dict) -> str:
     return f"{name}{counts}"
 
 
+@checks_arguments
 def provenance(path: str | os.PathLike[str], config: dict) -> dict:
     """What reproduces a refined result: the refiner's folder, the database it was trained on
     (from its ``config.json``) and the sha256 of its weights (``generator.pt``), hex."""

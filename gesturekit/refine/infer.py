@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 from .. import limits
+from .._arguments import checks_arguments
 from ..blend import keep_slow
 from ..errors import ConfigError, DatabaseError, InputFileError
 from ..features import LAYOUT
@@ -54,6 +55,7 @@ __all__ = ["FORMAT", "FORMAT_VERSION", "Refiner", "read_refiner_config", "read_l
 STATE_FILES = ("generator.pt", "critic.pt", "train_state.pt")
 
 
+@checks_arguments
 def file_sha256(path: str | os.PathLike) -> str:
     """Hex SHA-256 of a file's bytes."""
     h = hashlib.sha256()
@@ -63,6 +65,7 @@ def file_sha256(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
+@checks_arguments
 def load_state(path: str | os.PathLike, name: str, cfg: dict) -> dict:
     """One ``.pt`` file of a refiner folder, checked against the hash in ``config.json``.
 
@@ -115,6 +118,7 @@ def read_stats(path: str | os.PathLike) -> dict[str, np.ndarray]:
     return stats
 
 
+@checks_arguments
 def read_loss_log(path: str | os.PathLike) -> pd.DataFrame:
     """The loss log of a refiner folder as a pandas DataFrame (one row per logging interval).
 

@@ -28,6 +28,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from .._arguments import checks_arguments
 from .._config import JsonConfig
 from ..errors import ConfigError
 
@@ -177,6 +178,7 @@ class Critic(nn.Module):
         return self.score(x.flatten(1)).squeeze(1)
 
 
+@checks_arguments
 def xavier_init(module: nn.Module, *, generator: torch.Generator | None = None) -> None:
     """Xavier-uniform weights and zero biases for every convolution and linear layer (in place).
 
@@ -190,6 +192,7 @@ def xavier_init(module: nn.Module, *, generator: torch.Generator | None = None) 
                 nn.init.zeros_(m.bias)
 
 
+@checks_arguments
 def build_models(config: ModelConfig, *, seed: int = 0) -> tuple[Generator, Critic]:
     """A generator and a critic with Xavier initialisation drawn from ``seed``."""
     g = torch.Generator().manual_seed(int(seed))
@@ -199,6 +202,7 @@ def build_models(config: ModelConfig, *, seed: int = 0) -> tuple[Generator, Crit
     return gen, critic
 
 
+@checks_arguments
 def count_parameters(module: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in module.parameters() if p.requires_grad)

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .._arguments import checks_arguments
 from .._io import atomic_write
 from .._version import __version__
 from ..database import MatchingDatabase
@@ -100,6 +101,7 @@ PRESETS: dict[str, Preset] = {
 }
 
 
+@checks_arguments
 def preset(name: str) -> Preset:
     """A training preset by name (``quick`` or ``paper``)."""
     if name not in PRESETS:
@@ -107,6 +109,7 @@ def preset(name: str) -> Preset:
     return PRESETS[name]
 
 
+@checks_arguments
 def gradient_penalty(
     critic: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
     audio: torch.Tensor,
@@ -143,6 +146,7 @@ def gradient_penalty(
     return weight * (norm - 1.0).pow(2).mean()
 
 
+@checks_arguments
 def normalisation_stats(db: MatchingDatabase, pairs: TrainingPairs) -> dict[str, np.ndarray]:
     """z-scoring statistics: the database's for the audio, the training windows' for the motion.
 
@@ -400,6 +404,7 @@ def _database_summary(db: MatchingDatabase) -> dict:
     }
 
 
+@checks_arguments
 def train_refiner(
     db: MatchingDatabase,
     out: str | os.PathLike,

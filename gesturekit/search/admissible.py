@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 
 __all__ = ["MASK_RULES", "window_all", "base_starts", "control_starts", "admissible_starts", "draw_initial_frame"]
@@ -22,6 +23,7 @@ __all__ = ["MASK_RULES", "window_all", "base_starts", "control_starts", "admissi
 MASK_RULES = ("ends", "all")
 
 
+@checks_arguments
 def window_all(flags: np.ndarray, n: int) -> np.ndarray:
     """Whether a whole window holds a flag.
 
@@ -45,6 +47,7 @@ def window_all(flags: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+@checks_arguments
 def base_starts(valid: np.ndarray, n: int, exclude: np.ndarray | None = None) -> np.ndarray:
     """Admissible starts without a control: a valid start, the window inside its clip, nothing excluded.
 
@@ -70,6 +73,7 @@ def base_starts(valid: np.ndarray, n: int, exclude: np.ndarray | None = None) ->
     return adm
 
 
+@checks_arguments
 def control_starts(mask: np.ndarray, n: int, rule: str = "ends") -> np.ndarray:
     """Starts whose window a control mask admits under the mask rule.
 
@@ -99,6 +103,7 @@ def control_starts(mask: np.ndarray, n: int, rule: str = "ends") -> np.ndarray:
     return out
 
 
+@checks_arguments
 def admissible_starts(
     valid: np.ndarray, n: int, *, exclude: np.ndarray | None = None, mask: np.ndarray | None = None, rule: str = "ends"
 ) -> np.ndarray:
@@ -130,6 +135,7 @@ def admissible_starts(
     return adm
 
 
+@checks_arguments
 def draw_initial_frame(admissible: np.ndarray, seed: int) -> tuple[int, int]:
     """The random initial pose's database frame: the k-th admissible frame in clip order,
     ``k`` drawn with ``seed`` (found per clip, without an index of every frame).

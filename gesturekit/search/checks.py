@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from .exact import MAX_ABS, compiled
 from .types import SearchConfig
@@ -30,6 +31,7 @@ __all__ = [
 ]
 
 
+@checks_arguments
 def check_segment(n: int, clip_frames: int) -> None:
     """Refuse a segment length N (frames per step, already a positive integer) longer than a clip."""
     if n > clip_frames:
@@ -83,6 +85,7 @@ class SearchOptions(TypedDict, total=False):
     exclude: np.ndarray | None
 
 
+@checks_arguments
 def validate_db(P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The database's pose features (M, T, D), audio features (M, T, A) and valid frames (M, T) checked
     for shape and dtype, as C-contiguous float32, float32 and bool arrays."""
@@ -100,6 +103,7 @@ def validate_db(P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> tuple[np.nda
     return P, F, valid
 
 
+@checks_arguments
 def validate_call(
     shape: tuple[int, int, int, int],
     query: np.ndarray,
@@ -169,6 +173,7 @@ def validate_call(
     )
 
 
+@checks_arguments
 def validate(
     P: np.ndarray, F: np.ndarray, valid: np.ndarray, query: np.ndarray, **options: Unpack[SearchOptions]
 ) -> CheckedCall:
@@ -182,6 +187,7 @@ def validate(
     return call
 
 
+@checks_arguments
 def checked_sqnorms(x2: np.ndarray, name: str, workers: int = 1) -> np.ndarray:
     """Squared norms (float64) of the rows of a float32 (rows, dims) matrix, read once.
 

@@ -43,6 +43,8 @@ from typing import Any
 import numba
 from numba.core import caching
 
+from .._arguments import checks_arguments
+
 try:
     import fcntl
 except ImportError:  # pragma: no cover  (not on Windows: no on-disk cache there)
@@ -81,6 +83,7 @@ def _digest(source: str) -> str:
     return h.hexdigest()[:16]
 
 
+@checks_arguments
 def cache_folder(source: str | os.PathLike[str]) -> Path:
     """The folder that holds the compiled code of the functions defined in ``source``.
 
@@ -237,6 +240,7 @@ class _LockedCache(caching.FunctionCache):
             LOG.debug("compiled-code cache not written (%s)", self._cache_path, exc_info=True)
 
 
+@checks_arguments
 def kernel(**options: Any) -> Callable[[Callable[..., Any]], Any]:
     """A decorator: ``numba.njit(nogil=True, **options)`` with the safe on-disk cache.
 

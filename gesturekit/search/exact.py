@@ -15,6 +15,8 @@ from types import ModuleType
 
 import numpy as np
 
+from .._arguments import checks_arguments
+
 __all__ = [
     "exact_pose_sqdist",
     "exact_cosine_distance",
@@ -33,6 +35,7 @@ TINY = 1e-30
 MAX_ABS = 1e15
 
 
+@checks_arguments
 def pose_err_factor(dims: int) -> float:
     """Multiple of ``max|p|^2 + |q|^2`` bounding the float32 pose estimate's error.
 
@@ -42,12 +45,14 @@ def pose_err_factor(dims: int) -> float:
     return (dims + 32) * U32
 
 
+@checks_arguments
 def audio_err(dims: int) -> float:
     """Bound on the error of the cosine distance estimated from a float32 dot product of
     A values (``gamma_A |a| |b|``, relative to ``|a| |b|``) and float64 norms."""
     return (dims + 16) * U32 + 1e-12
 
 
+@checks_arguments
 def exact_pose_sqdist(rows: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Exact squared pose distances of several rows to one query.
 
@@ -70,6 +75,7 @@ def exact_pose_sqdist(rows: np.ndarray, q: np.ndarray) -> np.ndarray:
     return acc
 
 
+@checks_arguments
 def exact_cosine_distance(rows: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Exact cosine distances of several audio features ``rows`` (n, A) to one ``f`` (A,), all float32.
 
@@ -102,6 +108,7 @@ def compiled() -> ModuleType:
     return kernels
 
 
+@checks_arguments
 def reduce_chunk(
     G3: np.ndarray, bias: np.ndarray, nq: np.ndarray, npmax: np.ndarray, c_err: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -151,6 +158,7 @@ def reduce_chunk(
     return s0[:, None], amin[:, None], undecided[:, None]
 
 
+@checks_arguments
 def initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
     """The order the rank groups of :meth:`~gesturekit.search.index.SearchIndex._decide` start from.
 

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from .admissible import admissible_starts
 from .checks import check_segment
@@ -118,6 +119,7 @@ def _nearest(P, pose, ok) -> tuple[np.ndarray, np.ndarray]:
     return start.astype(np.int64), best
 
 
+@checks_arguments
 def explain_step(
     db: MatchingDatabase,
     query_features: np.ndarray,
@@ -249,6 +251,7 @@ def explain_step(
     )
 
 
+@checks_arguments
 def plan_step_inputs(plan: SearchPlan, result: SearchResult, pose_features: np.ndarray, step: int) -> dict:
     """What step ``step`` of a finished search searched with: the keyword arguments of :func:`explain_step`.
 
@@ -289,6 +292,7 @@ def plan_step_inputs(plan: SearchPlan, result: SearchResult, pose_features: np.n
     }
 
 
+@checks_arguments
 def explain_plan_step(db: MatchingDatabase, plan: SearchPlan, result: SearchResult, step: int) -> StepExplanation:
     """:func:`explain_step` for step ``step`` of a finished search (see :func:`plan_step_inputs`).
 
@@ -298,6 +302,7 @@ def explain_plan_step(db: MatchingDatabase, plan: SearchPlan, result: SearchResu
     return explain_step(db, **plan_step_inputs(plan, result, db.P, step))
 
 
+@checks_arguments
 def query_pose_frame(P: np.ndarray, result: SearchResult, step: int) -> tuple[int, int] | None:
     """The database frame whose pose feature step ``step`` matched against: ``p_{t-1}`` as (clip, frame).
 

@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError, warn
 from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
@@ -624,6 +625,7 @@ class SearchIndex:
         poses[b] = self.P[m, s + N - 1]
 
 
+@checks_arguments
 def search(
     P: np.ndarray, F: np.ndarray, valid: np.ndarray, query: np.ndarray, **options: Unpack[SearchOptions]
 ) -> SearchResult:
@@ -670,6 +672,7 @@ def search(
     return SearchIndex(P, F, valid).search(query, **options)
 
 
+@checks_arguments
 def search_batch(
     P: np.ndarray,
     F: np.ndarray,

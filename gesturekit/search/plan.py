@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..control import ControlTrack, step_masks
 from ..errors import ConfigError
 from .checks import check_segment
@@ -132,6 +133,7 @@ class SearchPlan:
         return int(step)
 
 
+@checks_arguments
 def rest_pose_frame(db: MatchingDatabase) -> tuple[int, int]:
     """The database frame used as the rest pose: hands lowest among the slowest frames.
 
@@ -152,6 +154,7 @@ def rest_pose_frame(db: MatchingDatabase) -> tuple[int, int]:
     return int(clip), int(frame)
 
 
+@checks_arguments
 def plan_search(db: MatchingDatabase, query: np.ndarray, request: SearchRequest) -> SearchPlan:
     """Everything the search of one speech needs, computed once.
 
@@ -200,6 +203,7 @@ def plan_search(db: MatchingDatabase, query: np.ndarray, request: SearchRequest)
     )
 
 
+@checks_arguments
 def resolved_search_config(db: MatchingDatabase, request: SearchRequest) -> SearchConfig:
     """The request's search options with its initial pose resolved: the rest pose's
     feature (:func:`rest_pose_frame`) when ``request.init`` is ``"rest"``."""
@@ -208,6 +212,7 @@ def resolved_search_config(db: MatchingDatabase, request: SearchRequest) -> Sear
     return request.search
 
 
+@checks_arguments
 def exclusions(db: MatchingDatabase, request: SearchRequest) -> np.ndarray | None:
     """Database frames no window may contain, shape (M, T) bool, or None when nothing is excluded."""
     if request.exclude_takes or request.exclude_ranges:
@@ -238,6 +243,7 @@ class PlanBatch:
     exclude: np.ndarray | None
 
 
+@checks_arguments
 def stack_plans(plans: Sequence[SearchPlan]) -> PlanBatch:
     """The plans' inputs as one batch: their masks in one stack, each step's index moved along.
 

@@ -27,6 +27,7 @@ from types import ModuleType
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .exact import TINY, pose_err_factor
 
 __all__ = [
@@ -102,6 +103,7 @@ def compiled_reduced() -> ModuleType:
     return reduced_kernels
 
 
+@checks_arguments
 def reduce_pose(P3: np.ndarray, workers: int = 1) -> ReducedPose:
     """The reduced copy of the pose features ``P3`` (M, T, D) float32, made by ``workers`` threads."""
     M, T, D = P3.shape
@@ -128,6 +130,7 @@ def reduce_pose(P3: np.ndarray, workers: int = 1) -> ReducedPose:
     return out
 
 
+@checks_arguments
 def quantise_query(q: np.ndarray) -> QueryCodes:
     """Round a query pose ``q`` (D,) float32 to 16-bit codes with one float32 scale."""
     q64 = np.asarray(q, np.float64)
@@ -144,6 +147,7 @@ def quantise_query(q: np.ndarray) -> QueryCodes:
     return QueryCodes(codes=codes, scale=scale, lost=lost, norm=norm)
 
 
+@checks_arguments
 def clip_bounds(stats: np.ndarray, centred_sqnorm: np.ndarray, query: QueryCodes, dims: int) -> np.ndarray:
     """The error bound of each clip's reduced estimates for one query (vectorised form).
 

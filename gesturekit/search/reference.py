@@ -67,6 +67,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError, warn
 from .checks import SearchOptions, validate
 from .types import SearchResult, describe_steps
@@ -77,6 +78,7 @@ if TYPE_CHECKING:  # typing.Unpack is Python 3.11+; only the type checker reads 
 __all__ = ["pose_sqdist", "cosine_distance", "window_admissible", "search_reference"]
 
 
+@checks_arguments
 def pose_sqdist(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
     """Squared Euclidean distance, exactly as defined for the search.
 
@@ -97,6 +99,7 @@ def pose_sqdist(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray
     return total
 
 
+@checks_arguments
 def cosine_distance(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
     """Cosine distance ``1 - a.b / (|a| |b|)`` of two audio features (A float32 values each),
     exactly as defined for the search: in [0, 2], and 1 when either vector is all zeros."""
@@ -111,6 +114,7 @@ def cosine_distance(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.nda
     return 1.0 - dot / math.sqrt(na * nb)
 
 
+@checks_arguments
 def window_admissible(
     m: int,
     s: int,
@@ -169,6 +173,7 @@ def _nearest_per_clip(P, p_prev, n, *, valid, exclude, mask, rule):
     return survivors
 
 
+@checks_arguments
 def search_reference(
     P: np.ndarray, F: np.ndarray, valid: np.ndarray, query: np.ndarray, **options: Unpack[SearchOptions]
 ) -> SearchResult:

@@ -18,11 +18,13 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._optional import loaded, optional
 
 __all__ = ["matrix_product", "single_threaded_blas", "worker_count"]
 
 
+@checks_arguments
 def worker_count() -> int:
     """Threads a search runs: one per core this process may use, at most 8."""
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
@@ -40,6 +42,7 @@ def _numpy_product(rows: np.ndarray, W: np.ndarray, out: np.ndarray) -> None:
     np.matmul(rows, W.T, out=out)
 
 
+@checks_arguments
 def matrix_product(n_queries: int) -> MatrixProduct:
     """``out[:] = rows @ W.T`` for float32 arrays; the fastest routine for the shape on a CPU.
 
@@ -86,6 +89,7 @@ def _blas_controller() -> Any:
 
 
 @contextlib.contextmanager
+@checks_arguments
 def single_threaded_blas() -> Iterator[None]:
     """numpy's BLAS, and torch when it is loaded, limited to one thread while a search
     runs (the search runs its own threads); restored afterwards."""

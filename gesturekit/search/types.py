@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._config import config_from_dict, config_to_dict, option, option_of
 from ..errors import ConfigError
 
@@ -366,6 +367,7 @@ class SearchResult:
         return table
 
 
+@checks_arguments
 def window_source(db: MatchingDatabase, clip: int, start: int) -> tuple[str, float]:
     """Where a database window comes from: its take's name and the time of ``start`` in the take.
 
@@ -383,6 +385,7 @@ def window_source(db: MatchingDatabase, clip: int, start: int) -> tuple[str, flo
     return take, (int(db.clip_start[int(clip)]) + int(start)) / db.fps
 
 
+@checks_arguments
 def describe_steps(steps: Iterable[int], *, segment: int, fps: float | None = None, most: int = 3) -> str:
     """Search steps said briefly: runs of consecutive steps joined, long lists cut short.
 

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..limits import parse_json
 
@@ -109,6 +110,7 @@ def _manifest(design: Any, manifest: pd.DataFrame | None) -> dict[str, tuple[str
     return {str(i): (str(a), str(s)) for i, a, s in zip(manifest["id"], manifest["audio"], manifest["system"])}
 
 
+@checks_arguments
 def read_responses_csv(path: str | Path) -> pd.DataFrame:
     """Responses written as CSV (``answers`` as JSON text, e.g. by ``study import-hemvip``) as a frame.
 
@@ -150,6 +152,7 @@ class _Pages:
         return self.rows[row].get(str(page_id))
 
 
+@checks_arguments
 def ratings_table(design: Any, store_or_frames: Any, *, manifest: pd.DataFrame | None = None) -> pd.DataFrame:
     """The answers of the rating pages, one row per participant, stimulus and prompt.
 
@@ -183,6 +186,7 @@ def ratings_table(design: Any, store_or_frames: Any, *, manifest: pd.DataFrame |
     return pd.DataFrame(rows, columns=RATING_COLUMNS)
 
 
+@checks_arguments
 def pairwise_table(design: Any, store_or_frames: Any, *, manifest: pd.DataFrame | None = None) -> pd.DataFrame:
     """The answers of the pairwise pages, one row per participant and pair shown.
 
@@ -209,6 +213,7 @@ def pairwise_table(design: Any, store_or_frames: Any, *, manifest: pd.DataFrame 
     return pd.DataFrame(rows, columns=PAIRWISE_COLUMNS)
 
 
+@checks_arguments
 def broken_videos(store_or_frames: Any) -> pd.DataFrame:
     """HEMVIP's broken-video reports among the answers: ``participant``, ``row``, ``page_id``."""
     import pandas as pd
@@ -222,6 +227,7 @@ def broken_videos(store_or_frames: Any) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["participant", "row", "page_id"])
 
 
+@checks_arguments
 def exclusions(design: Any, store_or_frames: Any, *, max_failures: int | None = None) -> pd.DataFrame:
     """Each participant's failed checks, whether they are excluded, and how far they got.
 
@@ -293,6 +299,7 @@ REASON_ATTENTION = "failed more attention checks than allowed"
 REASON_AUDIO = "failed the audio check"
 
 
+@checks_arguments
 def participant_flow(participants: pd.DataFrame, analysed: set[str]) -> tuple[pd.DataFrame, dict[str, Any]]:
     """Where each participant ended up, and the counts of the flow (CONSORT style).
 
@@ -370,6 +377,7 @@ def participant_flow(participants: pd.DataFrame, analysed: set[str]) -> tuple[pd
 # ---- ratings: per system statistics ------------------------------------------------------------------
 
 
+@checks_arguments
 def participant_means(ratings: pd.DataFrame) -> pd.DataFrame:
     """Each participant's mean rating per prompt and system (over the speeches), plus prompt ``"all"``.
 
@@ -386,6 +394,7 @@ def participant_means(ratings: pd.DataFrame) -> pd.DataFrame:
     return pd.concat([per, every], ignore_index=True)[["participant", "prompt", "system", "value"]]
 
 
+@checks_arguments
 def bootstrap_mean_median(
     values: np.ndarray, *, rounds: int = 10_000, seed: int | Sequence[int] = 0, level: float = 0.95
 ) -> tuple[float, float, float, float, float, float]:
@@ -424,6 +433,7 @@ def bootstrap_mean_median(
     return float(x.mean()), float(m_lo), float(m_hi), float(np.median(x)), float(d_lo), float(d_hi)
 
 
+@checks_arguments
 def system_summary(ratings: pd.DataFrame, *, rounds: int = 10_000, seed: int = 0, level: float = 0.95) -> pd.DataFrame:
     """Per prompt and system: participants, mean and median of the participants' means, bootstrap intervals.
 
@@ -469,6 +479,7 @@ def _prompts(ratings: pd.DataFrame) -> list[str]:
 # ---- ratings: tests between systems ------------------------------------------------------------------
 
 
+@checks_arguments
 def holm(pvalues: Sequence[float] | np.ndarray) -> np.ndarray:
     """Holm-Bonferroni adjusted p-values (step-down; reject where adjusted <= alpha).
 
@@ -495,6 +506,7 @@ def holm(pvalues: Sequence[float] | np.ndarray) -> np.ndarray:
     return adjusted
 
 
+@checks_arguments
 def rank_biserial(x: np.ndarray, y: np.ndarray) -> float:
     """Matched-pairs rank-biserial correlation of ``x - y`` (Kerby 2014): (R+ - R-) / (R+ + R-).
 
@@ -522,6 +534,7 @@ def rank_biserial(x: np.ndarray, y: np.ndarray) -> float:
     return float((ranks[d > 0].sum() - ranks[d < 0].sum()) / ranks.sum())
 
 
+@checks_arguments
 def wilcoxon_p(d: np.ndarray) -> tuple[float, str]:
     """Two-sided Wilcoxon signed-rank p-value of the paired differences ``d``, by a method chosen here.
 
@@ -552,6 +565,7 @@ def wilcoxon_p(d: np.ndarray) -> tuple[float, str]:
     return float(res.pvalue), "normal, tie-corrected"
 
 
+@checks_arguments
 def pairwise_tests(ratings: pd.DataFrame, *, alpha: float = 0.05) -> pd.DataFrame:
     """Wilcoxon signed-rank tests of every pair of systems on the participants' means, Holm-adjusted per prompt.
 

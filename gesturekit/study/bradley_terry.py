@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 
 if TYPE_CHECKING:
@@ -24,6 +25,7 @@ __all__ = ["ELO_SCALE", "bt_win_counts", "bt_fit", "comparison_groups", "bradley
 ELO_SCALE = 400.0 / math.log(10.0)
 
 
+@checks_arguments
 def bt_win_counts(pairwise: pd.DataFrame, systems: Sequence[str]) -> tuple[list[str], np.ndarray]:
     """Each participant's wins of system i over j.
 
@@ -54,6 +56,7 @@ def bt_win_counts(pairwise: pd.DataFrame, systems: Sequence[str]) -> tuple[list[
     return participants, counts
 
 
+@checks_arguments
 def bt_fit(wins: np.ndarray, *, prior: float = 1.0, tol: float = 1e-10, max_iter: int = 100) -> np.ndarray:
     """Maximum-likelihood Bradley-Terry log-strengths of many win matrices at once (Newton's method).
 
@@ -99,6 +102,7 @@ def bt_fit(wins: np.ndarray, *, prior: float = 1.0, tol: float = 1e-10, max_iter
     return theta
 
 
+@checks_arguments
 def comparison_groups(pairwise: pd.DataFrame) -> list[list[str]]:
     """The connected parts of the comparison graph (systems joined where some pair of them was compared).
 
@@ -124,6 +128,7 @@ def comparison_groups(pairwise: pd.DataFrame) -> list[list[str]]:
     return sorted(parts.values())
 
 
+@checks_arguments
 def bradley_terry(
     pairwise: pd.DataFrame,
     *,
@@ -174,6 +179,7 @@ def bradley_terry(
     return table.sort_values(["group", "elo", "system"], ascending=[True, False, True]).reset_index(drop=True)
 
 
+@checks_arguments
 def pairwise_systems(pairwise: pd.DataFrame) -> set[str]:
     """Every system of a pairwise table."""
     return set(pairwise["system_left"].astype(str)) | set(pairwise["system_right"].astype(str))

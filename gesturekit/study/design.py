@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._io import atomic_write
 from ..errors import ConfigError, OutputError
 from ..limits import read_json
@@ -82,6 +83,7 @@ DEFAULT_QUESTIONNAIRE = (
 _SCRYPT = {"n": 2**14, "r": 8, "p": 1}
 
 
+@checks_arguments
 def default_instructions(animations: int, scale: str = "likert7", *, checks: bool = False) -> str:
     """The paper's instructions (its supplementary material), for ``animations`` animations per speech.
 
@@ -227,6 +229,7 @@ def _folder_plan(folder: Path) -> tuple[dict[str, tuple[str, str]], dict[int, tu
     return stimuli, order
 
 
+@checks_arguments
 def load_design(folder: str | os.PathLike) -> StudyDesign:
     """Read and validate ``design.json`` of a study folder.
 
@@ -394,6 +397,7 @@ def _expect(design: StudyDesign, kind: str) -> dict:
     return {"sync": {"min": SCALE_RANGE[design.scale][0], "max": _MISMATCH_MAX[design.scale]}}
 
 
+@checks_arguments
 def participant_pages(design: StudyDesign, row: int) -> list[Page]:
     """One participant's pages, in order: instructions, the audio check, a rating page per speech (in
     order.csv's order, its stimuli in their positions), pairwise pages, the questionnaire, done.
@@ -477,6 +481,7 @@ def participant_pages(design: StudyDesign, row: int) -> list[Page]:
     ]
 
 
+@checks_arguments
 def media_index(design: StudyDesign) -> dict[str, Media]:
     """Every media file the study may serve, by id: the stimuli, the check videos, the beeps."""
     out = {sid: Media(sid, design.folder / f, "stimulus") for sid, (_, f) in design.stimuli.items()}
@@ -486,6 +491,7 @@ def media_index(design: StudyDesign) -> dict[str, Media]:
     return out
 
 
+@checks_arguments
 def check_answer(page: Page, answers: Mapping[str, Any]) -> bool | None:
     """Whether a page's answers pass its check; None when the page holds no check.
 
@@ -511,6 +517,7 @@ def check_answer(page: Page, answers: Mapping[str, Any]) -> bool | None:
 # ---- the researcher's password ------------------------------------------------------------------
 
 
+@checks_arguments
 def hash_password(password: str, *, salt: bytes | None = None) -> str:
     """A salted scrypt hash of ``password``: ``scrypt$N$r$p$SALT$HASH`` (hex), for design.json.
 
@@ -538,6 +545,7 @@ def _parse_hash(stored: str) -> tuple[int, int, int, bytes, bytes] | None:
     return n, r, p, bytes.fromhex(m[4]), bytes.fromhex(m[5])
 
 
+@checks_arguments
 def verify_password(password: str, stored: str | None) -> bool:
     """Whether ``password`` matches a :func:`hash_password` hash (constant-time compare); False for none."""
     parsed = None if stored is None else _parse_hash(stored)
@@ -551,6 +559,7 @@ def verify_password(password: str, stored: str | None) -> bool:
 # ---- writing a design ---------------------------------------------------------------------------
 
 
+@checks_arguments
 def init_study(
     folder: str | os.PathLike,
     *,

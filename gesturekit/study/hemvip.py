@@ -42,6 +42,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .._arguments import checks_arguments
 from .._io import atomic_write, csv_safe
 from ..errors import ConfigError, GestureKitError, InputFileError, OutputError
 from ..limits import JSON_MB, check_regular, describe_bytes, parse_json
@@ -87,6 +88,7 @@ def _question_item(q: dict) -> dict:
     return item
 
 
+@checks_arguments
 def read_vimeo_map(path: str | os.PathLike) -> dict[str, str]:
     """A CSV of ``id,vimeo`` (a media id and its Vimeo video: the number or its vimeo.com URL) as id -> number.
 
@@ -118,6 +120,7 @@ def _vimeo_id(value: Any, media: str, path: Path | None = None) -> str:
     return match.group(1)
 
 
+@checks_arguments
 def hemvip_config(design: StudyDesign, row: int, *, vimeo: dict[str, str]) -> dict:
     """The HEMVIP config of one participant row (see the module documentation).
 
@@ -200,6 +203,7 @@ def _completion(design: StudyDesign) -> str:
     return design.completion_code
 
 
+@checks_arguments
 def export_hemvip(
     design: StudyDesign, out: str | os.PathLike, *, vimeo: dict[str, str], overwrite: bool = False
 ) -> list[Path]:
@@ -306,6 +310,7 @@ def _read_sessions(path: Path) -> list[tuple[str, Any]]:
     return [(f"session {k}", session) for k, session in enumerate(data if isinstance(data, list) else [data])]
 
 
+@checks_arguments
 def import_hemvip(
     design: StudyDesign, results: Sequence[str | os.PathLike], *, notes: list[str] | None = None
 ) -> pd.DataFrame:
@@ -469,6 +474,7 @@ def _questionnaire(design: StudyDesign, participant: Any) -> dict | None:
     return answers
 
 
+@checks_arguments
 def write_responses_csv(frame: pd.DataFrame, out: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Write responses as CSV (``answers`` as JSON text); refuses to replace a file without ``overwrite``."""
     out = Path(out)

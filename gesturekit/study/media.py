@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._optional import require
 from ..datasets.audio import write_wav
 from ..errors import GestureKitError
@@ -39,17 +40,20 @@ BEEP_SR = 48000
 _BEEP_HZ, _BEEP_S, _GAP_S, _LEAD_S = 880.0, 0.2, 0.5, 0.5
 
 
+@checks_arguments
 def check_media_id(seed: int, speech: str, kind: str) -> str:
     """The opaque id of a check file: like a stimulus id (:func:`gesturekit.study.stimuli.stimulus_id`), keyed by the
     seed, of ``speech`` and a system name no stimulus can have."""
     return stimulus_id(seed, speech, f"\0check:{kind}")
 
 
+@checks_arguments
 def overlay_box(width: int, height: int) -> tuple[int, int, int, int]:
     """The band the overlay text is drawn in: ``(x0, y0, x1, y1)`` pixels, across the frame's middle."""
     return width // 20, int(height * 0.38), width - width // 20, int(height * 0.62)
 
 
+@checks_arguments
 def draw_overlay(frame: np.ndarray, text: str) -> np.ndarray:
     """``frame`` (H, W, 3) uint8 RGB with ``text`` in white on a dark band (:func:`overlay_box`), on one
     line or two, as large as fits."""
@@ -139,6 +143,7 @@ def _write_check(
         os.replace(encoded, out)
 
 
+@checks_arguments
 def make_check_videos(
     folder: str | os.PathLike,
     *,
@@ -220,6 +225,7 @@ def beep_samples(beeps: int) -> np.ndarray:
     return np.concatenate(parts)
 
 
+@checks_arguments
 def make_audio_check(folder: str | os.PathLike, *, seed: int) -> dict:
     """Write the audio check, ``folder/checks/<id>.wav``: 3 to 7 beeps (by the seed), 16-bit mono.
 

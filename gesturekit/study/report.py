@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._io import atomic_write, csv_safe
 from ..errors import ConfigError, OutputError
 from .analyse import (
@@ -232,6 +233,7 @@ def _md_table(table: pd.DataFrame, *, digits: int) -> str:
     return "\n".join(out)
 
 
+@checks_arguments
 def analyse(
     ratings: pd.DataFrame,
     pairwise: pd.DataFrame,
@@ -438,6 +440,7 @@ def _write_bytes(path: Path, data: bytes, force: bool) -> Path:
     return atomic_write(path, lambda f: f.write(data), overwrite=force)
 
 
+@checks_arguments
 def write_report(report: AnalysisReport, out: str | Path, *, force: bool = False) -> list[Path]:
     """Write the analysis's files into ``out`` (created; see the module's table).
 
@@ -588,6 +591,7 @@ def _figure_div(fig: go.Figure) -> str:
     return str(fig.to_html(full_html=False, include_plotlyjs=False, config={"responsive": True}))
 
 
+@checks_arguments
 def analyse_study(
     folder: str | Path,
     *,

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from .analyse import EXCLUSION_COLUMNS, PAIRWISE_COLUMNS, RATING_COLUMNS
 
@@ -60,6 +61,7 @@ class SimulatedStudy:
     true_elo: dict[str, float]
 
 
+@checks_arguments
 def simulate_study(
     true_means: Sequence[float] = (5.0, 4.0, 3.0),
     *,

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._config import options_config
 from .._io import atomic_write
 from .._jobs import run_jobs
@@ -88,6 +89,7 @@ _ID_DIGITS = 10
 # ---- the design ---------------------------------------------------------------------------------
 
 
+@checks_arguments
 def stimulus_id(seed: int, speech: str, system: str, *, digits: int = _ID_DIGITS) -> str:
     """The opaque id of one stimulus: hex digits of HMAC-SHA256(key=seed, speech + system).
 
@@ -109,6 +111,7 @@ def stimulus_id(seed: int, speech: str, system: str, *, digits: int = _ID_DIGITS
     return hmac.new(key, msg, hashlib.sha256).hexdigest()[:digits]
 
 
+@checks_arguments
 def balanced_latin_square(n: int) -> np.ndarray:
     """A balanced Latin square (Williams design) of ``n`` conditions.
 
@@ -142,6 +145,7 @@ class _Plan:
     order: pd.DataFrame
 
 
+@checks_arguments
 def plan_stimuli(
     speeches: Sequence[str],
     systems: Sequence[str],
@@ -253,6 +257,7 @@ class StimulusSpeech:
     exclude_ranges: tuple = ()
 
 
+@checks_arguments
 def speech_sources(
     db: MatchingDatabase, *, audio: Sequence[str | os.PathLike[str]] = (), holdouts: Sequence[Any] = ()
 ) -> list[StimulusSpeech]:
@@ -287,6 +292,7 @@ def speech_sources(
 # ---- rendering ----------------------------------------------------------------------------------
 
 
+@checks_arguments
 def stimulus_style(view_box: Sequence[Sequence[float]] | None = None) -> RenderStyle:
     """The one look of every stimulus: the page's character in the neutral grey scheme, with a fixed
     camera (never fitted to a motion), so that neither colour nor framing tells the systems apart.
@@ -430,6 +436,7 @@ def _write_text(path: Path, text: str) -> None:
     atomic_write(path, write, overwrite=True)
 
 
+@checks_arguments
 def make_stimuli(
     db: MatchingDatabase,
     config: StudyConfig | None = None,

@@ -20,6 +20,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..control import ControlTrack
 from ..database import MatchingDatabase
 from ..errors import ConfigError
@@ -47,6 +48,7 @@ __all__ = [
 ]
 
 
+@checks_arguments
 def prepare_search(db: MatchingDatabase) -> None:
     """Make the search of ``db`` ready: its index built, its compiled code loaded.
 
@@ -71,6 +73,7 @@ def prepare_search(db: MatchingDatabase) -> None:
     syn.run([silence, silence], [SynthesisConfig()] * 2)
 
 
+@checks_arguments
 def synthesize(
     audio: Speech,
     *,
@@ -120,6 +123,7 @@ def synthesize(
     return synthesize_batch([audio], db=db, config=config, controls=[control], refiner=refiner)[0]
 
 
+@checks_arguments
 def synthesize_batch(
     audios: Iterable[Speech],
     *,

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..blend import blend_segments, keep_slow
 from ..control import ControlTrack
 from ..database import MatchingDatabase
@@ -44,6 +45,7 @@ if TYPE_CHECKING:
 __all__ = ["Synthesizer", "synthesizer_for", "search_request", "check_refiner"]
 
 
+@checks_arguments
 def search_request(config: SynthesisConfig) -> SearchRequest:
     """The search-level part of a synthesis configuration: what :func:`plan_search` is given.
 
@@ -72,6 +74,7 @@ def search_request(config: SynthesisConfig) -> SearchRequest:
     )
 
 
+@checks_arguments
 def check_refiner(refiner: object, db: MatchingDatabase) -> dict | None:
     """Refuse what is no refiner, or one of another feature layout than ``db``.
 
@@ -456,6 +459,7 @@ _SHARED_INDEX: weakref.WeakKeyDictionary[MatchingDatabase, _IndexSlot] = weakref
 _SHARED_LOCK = threading.Lock()
 
 
+@checks_arguments
 def synthesizer_for(db: MatchingDatabase, *, refiner: MotionRefiner | None = None) -> Synthesizer:
     """A Synthesizer of ``db`` that shares the database's cached search index.
 

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Protocol, TypeAlias, runtime_checkable
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .._version import __version__
 from ..control import ControlTrack
 from ..errors import ConfigError, GestureKitError
@@ -74,6 +75,7 @@ class QueryFeatures:
         return len(self.samples) / AUDIO_SR
 
 
+@checks_arguments
 def load_speech(audio: Speech) -> tuple[np.ndarray, str]:
     """Speech as mono float32 samples at 16 kHz, and what a result calls it.
 

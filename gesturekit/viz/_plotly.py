@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..character.look import SCHEMES, SIDE_BY_SIDE
 from ..errors import ConfigError
 from ..motion import Motion
@@ -38,6 +39,7 @@ def _xyz(points: np.ndarray) -> dict:
     return {"x": _typed(points[:, 0]), "y": _typed(points[:, 1]), "z": _typed(points[:, 2])}
 
 
+@checks_arguments
 def data_array(value: dict | Sequence[Any] | np.ndarray) -> np.ndarray:
     """A plotly data array as numbers, whichever form it takes.
 

@@ -21,6 +21,7 @@ import numpy.typing as npt
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..evaluate.metrics import KINEMATIC_JOINTS, audio_onsets, kinetic_velocity, motion_beats
 from ..motion import AUDIO_SR, Motion
@@ -48,6 +49,7 @@ LOSS_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
 )
 
 
+@checks_arguments
 def loss_curves_figure(log: pd.DataFrame, *, smooth: int = 1, title: str | None = None, height: int = 380) -> go.Figure:
     """Training curves of a refiner: the critic's losses, the generator's loss and its terms.
 
@@ -115,6 +117,7 @@ def loss_curves_figure(log: pd.DataFrame, *, smooth: int = 1, title: str | None 
     return fig
 
 
+@checks_arguments
 def join_profile(
     positions: npt.ArrayLike,
     boundaries: Sequence[int],
@@ -167,6 +170,7 @@ def join_profile(
     return offsets, disp[(b - 1)[:, None] + offsets[None, :]].mean(axis=0)
 
 
+@checks_arguments
 def join_profile_figure(
     motions: Motion | Sequence[Motion],
     boundaries: Sequence[int],
@@ -220,6 +224,7 @@ def join_profile_figure(
     return fig
 
 
+@checks_arguments
 def beats_figure(
     motions: Motion | Sequence[Motion],
     audio: np.ndarray,
@@ -331,6 +336,7 @@ def beats_figure(
     return fig
 
 
+@checks_arguments
 def metrics_figure(
     table: pd.DataFrame,
     *,
@@ -399,6 +405,7 @@ def metrics_figure(
     return fig
 
 
+@checks_arguments
 def adherence_figure(controls: pd.DataFrame, *, title: str | None = None, height: int = 420) -> go.Figure:
     """Control adherence per control segment and system, with and without the control.
 

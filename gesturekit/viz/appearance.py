@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from .._arguments import checks_arguments
 from ..character.look import FRAMINGS
 from ..character.paint import DERIVED_COLOR
 from ..errors import ConfigError
@@ -61,6 +62,7 @@ _POINT_SOURCES: tuple[tuple[str, ...], ...] = (
 )
 
 
+@checks_arguments
 def point_states(presence: JointPresence | None) -> tuple[str, ...]:
     """The state of each body point (the 55 joints, then :data:`DERIVED_POINTS`).
 
@@ -161,12 +163,14 @@ class BodyShapes:
         return self.points[:, self.drawn]
 
 
+@checks_arguments
 def hex_to_rgb(color: str) -> np.ndarray:
     """``"#rrggbb"`` as floats in [0, 1], shape (3,)."""
     c = color.lstrip("#")
     return np.array([int(c[i : i + 2], 16) for i in (0, 2, 4)], dtype=np.float64) / 255.0
 
 
+@checks_arguments
 def rgb_to_hex(rgb: npt.ArrayLike) -> str:
     """Floats in [0, 1] (clipped), shape (3,), as ``"#rrggbb"``."""
     v = np.clip(np.round(np.asarray(rgb, dtype=np.float64) * 255.0), 0, 255).astype(int)

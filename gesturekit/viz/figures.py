@@ -31,6 +31,7 @@ import numpy as np
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
+from .._arguments import checks_arguments
 from ..control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, ControlTrack, frame_attributes
 from ..errors import ConfigError
 from ..motion import Motion
@@ -69,6 +70,7 @@ def _attribute_unit(name: str) -> str:
     return ATTRIBUTE_UNITS.get(name, "m/s" if "speed" in name else "m")
 
 
+@checks_arguments
 def attribute_histograms(
     db: MatchingDatabase, *, bins: int = 40, names: Sequence[str] | None = None, cols: int = 3
 ) -> go.Figure:
@@ -210,6 +212,7 @@ def _band_marks(
     return shapes, notes
 
 
+@checks_arguments
 def waveform_figure(
     audio: np.ndarray,
     sr: int,
@@ -338,6 +341,7 @@ def _as_bands(bands) -> list[tuple[float, float, str]]:
     return _band_check(bands)
 
 
+@checks_arguments
 def wrist_figure(
     motions: Motion | Sequence[Motion],
     *,
@@ -471,6 +475,7 @@ def wrist_figure(
     return fig
 
 
+@checks_arguments
 def candidates_figure(
     search: SearchResult,
     step: int,

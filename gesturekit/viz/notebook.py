@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy.typing as npt
 
+from .._arguments import checks_arguments
 from .._io import atomic_write
 from ..errors import ConfigError
 from ..motion import AUDIO_SR, Motion
@@ -76,6 +77,7 @@ class CharacterView:
         return atomic_write(path, lambda f: f.write(data), overwrite=overwrite)
 
 
+@checks_arguments
 def character_view(
     motions: Motion | Sequence[Motion],
     *,

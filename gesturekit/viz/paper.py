@@ -21,6 +21,7 @@ import numpy as np
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..motion import Motion
 from ._plotly import MOTION_COLORS, _motions_and_labels, plotly_safe
@@ -35,6 +36,7 @@ FORMATS = {"png": "image/png", "svg": "image/svg+xml", "pdf": "application/pdf"}
 CSS_PX_PER_MM = 96 / 25.4
 
 
+@checks_arguments
 def filmstrip_figure(
     motions: Motion | Sequence[Motion],
     times: Sequence[float],
@@ -121,6 +123,7 @@ def filmstrip_figure(
     return fig
 
 
+@checks_arguments
 def figure_bytes(
     fig: go.Figure,
     fmt: str,

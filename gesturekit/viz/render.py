@@ -41,6 +41,7 @@ import pyvista as pv
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
+from .._arguments import checks_arguments
 from ..character.look import BACKGROUND
 from ..character.target import Character
 from ..errors import ConfigError, GestureKitError
@@ -104,6 +105,7 @@ def _shadow_centre(*bodies: BodyShapes) -> np.ndarray:
     return np.concatenate([b.drawn_points().reshape(-1, 3) for b in bodies]).mean(axis=0)
 
 
+@checks_arguments
 def view_bounds(
     motions: Sequence[Motion], *, style: RenderStyle | None = None, character: Character | None = None
 ) -> np.ndarray:
@@ -454,6 +456,7 @@ class SkeletonScene:
         self.close()
 
 
+@checks_arguments
 def check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution: tuple[int, int]) -> None:
     """Refuse a scene :class:`SkeletonScene` cannot draw (one or two motions, labels, resolution): ConfigError."""
     if not 1 <= len(motions) <= 2:
@@ -484,6 +487,7 @@ def check_scene(motions: list[Motion], labels: Sequence[str] | None, resolution:
         )
 
 
+@checks_arguments
 def check_character(character: object, style: RenderStyle) -> None:
     """Refuse a ``character=`` that is not a :class:`~gesturekit.character.target.Character` for this style."""
     if character is None:
@@ -494,6 +498,7 @@ def check_character(character: object, style: RenderStyle) -> None:
         raise ConfigError(f"a user's character is drawn in the character look, not {style.look!r}")
 
 
+@checks_arguments
 def render_image(
     motion: Motion,
     *,

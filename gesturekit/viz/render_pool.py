@@ -24,6 +24,7 @@ from typing import IO
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..character.target import Character
 from ..errors import ConfigError, GestureKitError
 from ..motion import Motion
@@ -44,6 +45,7 @@ PARALLEL_MIN_FRAMES = 150
 _BUFFER_BYTES = 256 << 20
 
 
+@checks_arguments
 def default_workers() -> int:
     """The cores this process may run on: the number of rendering processes used by default."""
     try:
@@ -52,6 +54,7 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
+@checks_arguments
 def render_frames(
     motions: Sequence[Motion],
     *,

@@ -27,6 +27,7 @@ import numpy as np
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..motion import AUDIO_SR
 from ..skeleton import BODY_JOINTS, N_JOINTS, joint_index
@@ -60,6 +61,7 @@ _LEFT_WRIST, _RIGHT_WRIST = joint_index("left_wrist"), joint_index("right_wrist"
 _HAND_TIPS = ((_LEFT_WRIST, joint_index("left_middle4")), (_RIGHT_WRIST, joint_index("right_middle4")))
 
 
+@checks_arguments
 def front_view_lines(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A pose's body seen from the front, as one polyline broken by NaN.
 
@@ -185,6 +187,7 @@ def _pose_axes(fig: go.Figure, views: Sequence[CandidateView], query: np.ndarray
         )
 
 
+@checks_arguments
 def candidates_strip(
     views: Sequence[CandidateView],
     query: np.ndarray | None,
@@ -274,6 +277,7 @@ def _envelope(audio: np.ndarray, t0: float, sr: int, bins: int) -> tuple[np.ndar
     return t.astype(np.float32), lo, hi
 
 
+@checks_arguments
 def candidate_figure(
     view: CandidateView,
     query: np.ndarray | None,

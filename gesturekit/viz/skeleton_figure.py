@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import plotly.graph_objects as go
 
+from .._arguments import checks_arguments
 from ..motion import Motion
 from ..skeleton import BODY_JOINTS, N_JOINTS, JointPresence, joint_index
 from ._plotly import _frames_at, _motions_and_labels, _time_grid, _xyz, plotly_safe
@@ -155,6 +156,7 @@ def _torso_and_head(
     return out
 
 
+@checks_arguments
 def skeleton_figure(
     motions: Motion | Sequence[Motion],
     *,

@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, TypedDict
 import numpy as np
 import numpy.typing as npt
 
+from .._arguments import checks_arguments
 from ..character import look
 from ..character.mesh import build_mesh
 from ..character.paint import EMPTY_BODY, paint
@@ -89,6 +90,7 @@ _DATA_ID = "gk-data"
 _AUDIO_PREFIX = "data:audio/wav;base64,"
 
 
+@checks_arguments
 def wav_data_uri(audio: npt.ArrayLike, *, sr: int = AUDIO_SR) -> str:
     """Mono audio as a ``data:audio/wav;base64,...`` URI of :func:`wav_bytes` (same parameters)."""
     return _AUDIO_PREFIX + base64.b64encode(wav_bytes(audio, sr=sr)).decode("ascii")
@@ -231,6 +233,7 @@ def _character(motion: Motion, scheme: str) -> tuple[dict, StandMesh | None]:
     }, stand
 
 
+@checks_arguments
 def viewer_data(
     motions: Motion | Sequence[Motion],
     *,
@@ -426,6 +429,7 @@ def _joint_positions(m: dict) -> np.ndarray:
     return pos + np.array([m["offset"], 0.0, 0.0])
 
 
+@checks_arguments
 def read_viewer_data(page: str) -> dict:
     """The data of a :func:`skeleton_viewer` page, with its arrays and the speech decoded.
 
@@ -487,6 +491,7 @@ def _speech(audio: npt.ArrayLike, sr: int, data: dict) -> np.ndarray:
     return a
 
 
+@checks_arguments
 def viewer_args(
     motions: Motion | Sequence[Motion],
     *,
@@ -521,6 +526,7 @@ def viewer_args(
     return {"data": text, "audio": wav, "hash": digest.hexdigest()}
 
 
+@checks_arguments
 def read_viewer_args(data: str, audio: bytes | None, key: str) -> dict:
     """:func:`viewer_args`' data and speech decoded, as :func:`read_viewer_data` decodes a page.
 
@@ -546,6 +552,7 @@ def read_viewer_args(data: str, audio: bytes | None, key: str) -> dict:
     return out
 
 
+@checks_arguments
 def skeleton_viewer(
     motions: Motion | Sequence[Motion],
     *,

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import plotly.graph_objects as go
 
+from .._arguments import checks_arguments
 from ..control import ATTRIBUTE_NAMES, CONSTRAINTS, constraint_mask
 from ..errors import ConfigError
 from ..search.admissible import admissible_starts
@@ -64,6 +65,7 @@ def _plan(result: SynthesisResult, db: MatchingDatabase) -> SearchPlan:
     return stages.plan(stages.features(result.audio), result.config)
 
 
+@checks_arguments
 def step_inputs(result: SynthesisResult, db: MatchingDatabase, step: int) -> dict:
     """What step ``step`` of a synthesis searched with: the keyword arguments of :func:`explain_step`.
 
@@ -84,6 +86,7 @@ def step_inputs(result: SynthesisResult, db: MatchingDatabase, step: int) -> dic
     return plan_step_inputs(_plan(result, db), result.search, db.P, step)
 
 
+@checks_arguments
 def explain_synthesis_step(result: SynthesisResult, db: MatchingDatabase, step: int) -> StepExplanation:
     """:func:`explain_step` for step ``step`` of a finished synthesis (see :func:`step_inputs`).
 
@@ -96,6 +99,7 @@ def explain_synthesis_step(result: SynthesisResult, db: MatchingDatabase, step: 
 # ---- tables ---------------------------------------------------------------------------------------
 
 
+@checks_arguments
 def constraints_table(db: MatchingDatabase, *, segment: int = 8) -> pd.DataFrame:
     """Every constraint a control can set, with its threshold and how much of the database it admits.
 
@@ -141,6 +145,7 @@ def constraints_table(db: MatchingDatabase, *, segment: int = 8) -> pd.DataFrame
     return pd.DataFrame(rows)
 
 
+@checks_arguments
 def synthesis_table(results: Sequence[SynthesisResult], *, labels: Sequence[str] | None = None) -> pd.DataFrame:
     """Syntheses side by side: their settings, the chosen windows' distances and the joins they make.
 
@@ -194,6 +199,7 @@ def synthesis_table(results: Sequence[SynthesisResult], *, labels: Sequence[str]
     return pd.DataFrame(rows)
 
 
+@checks_arguments
 def motion_measures(
     motions: Sequence[Motion],
     *,
@@ -254,6 +260,7 @@ def motion_measures(
     return pd.DataFrame(rows)
 
 
+@checks_arguments
 def control_statistics(
     runs: Sequence[tuple[str, Motion, ControlTrack | str]], *, thresholds: Mapping[str, tuple[float, float]]
 ) -> pd.DataFrame:
@@ -313,6 +320,7 @@ def control_statistics(
 # ---- figures --------------------------------------------------------------------------------------
 
 
+@checks_arguments
 def rankings_figure(
     explanation: StepExplanation, *, names: Mapping[int, str] | None = None, title: str | None = None, height: int = 420
 ) -> go.Figure:
@@ -410,6 +418,7 @@ def rankings_figure(
     return fig
 
 
+@checks_arguments
 def feature_blocks(kind: str, *, layout: FeatureLayout | None = None) -> dict[str, slice]:
     """Named column blocks of a search feature: one per time offset.
 
@@ -433,6 +442,7 @@ def feature_blocks(kind: str, *, layout: FeatureLayout | None = None) -> dict[st
     return {fmt.format(o): slice(i * size, (i + 1) * size) for i, o in enumerate(offsets)}
 
 
+@checks_arguments
 def feature_figure(
     values: np.ndarray,
     *,

@@ -13,7 +13,7 @@ from gesturekit.character.glb import read_glb
 from gesturekit.character.user import read_character_upload
 from gesturekit.skeleton import JOINT_NAMES
 from tests.app.test_app_synthesize import speech_file
-from tests.character_rigs import CASES, custom_map, rig_files, truth
+from tests.character_rigs import CASES, RigSpec, custom_map, rig_files, truth
 from tests.conftest import shown, viewer
 from tests.waits import APP_RUN_S
 
@@ -142,16 +142,18 @@ def test_a_bvh_character_and_a_bone_map(app_env):
     assert not errors(at)
     said = " ".join(captions(at))
     assert "matched by zeggs names" in said and "capsules around its bones" in said
-    # custom names need the user's map: without it the file is refused, with it the character is read
-    name, data = rig("custom_names")
+    # custom names on a tree whose arms differ (one without its collar) need the user's map: without it the file is
+    # refused, with it the character is read
+    spec = RigSpec(naming="custom", roll_seed=5, drop=("left_collar",))
+    ((name, data),) = rig_files(spec).items()
     at = upload_character(at, name, data)
     assert errors(at) and at.session_state["gk.character"]["name"] == "zeggs.bvh"  # the last good one stays
-    bone_map = json.dumps(custom_map(CASES["custom_names"])).encode()
+    bone_map = json.dumps(custom_map(spec)).encode()
     at = upload_character(at, "bones.json", bone_map, key=MAP)
     assert not errors(at) and at.session_state["gk.character"]["name"] == name
     assert "matched by JSON map bones.json" in " ".join(captions(at))
     ch = at.session_state["gk.character"]["character"]
-    assert ch.matched() == truth(CASES["custom_names"]).joint_map
+    assert ch.matched() == truth(spec).joint_map
 
 
 def test_a_file_no_reader_foresaw_is_a_message_with_a_reference(app_env, monkeypatch):
@@ -170,3 +172,22 @@ def test_a_file_no_reader_foresaw_is_a_message_with_a_reference(app_env, monkeyp
     assert "deep inside" not in said and "Traceback" not in said
     assert "gk.character" not in at.session_state
     at.file_uploader(key="synth.upload")  # the page is drawn on below the sidebar
+
+
+def test_the_characters_own_clips_are_kept_after_ours_or_left_out(app_env, tmp_path):
+    from tests.export.test_export_character import waving_glb
+
+    at = upload_character(open_page(), "waving.glb", waving_glb(tmp_path).read_bytes())
+    assert at.radio(key="_gk.character_clips").value == "keep"  # the default: theirs kept, ours first
+    at = run_synthesis(at)
+
+    def clips() -> list[str]:
+        made = at.session_state["_gk.character_files"]
+        (glb,) = [v for k, v in made.items() if k[2] == "glb" and k[3] == at.radio(key="_gk.character_clips").value]
+        return [a["name"] for a in read_glb(glb["data"])[0]["animations"]]
+
+    assert clips() == ["gesturekit", "wave"]
+    at.radio(key="_gk.character_clips").set_value("drop").run()
+    assert not at.exception and not errors(at), (at.exception, errors(at))
+    assert clips() == ["gesturekit"]
+    assert any("its own clips left out: wave" in c for c in captions(at))

@@ -100,7 +100,8 @@ def _index_in_file(path, name: str) -> int:
 
 
 def test_nameless_nodes_are_matched_by_a_map_of_node_indices_and_the_error_shows_the_tree(tmp_path):
-    spec = RigSpec(naming="nameless", rest="A")
+    # one arm without its collar: the hierarchy's shape cannot pair the arms, so only a map can say
+    spec = RigSpec(naming="nameless", rest="A", drop=("left_collar",))
     path = write_rig(tmp_path, spec, "khronos")
     assert all("name" not in n for n in read_glb(path.read_bytes())[0]["nodes"][:-1])
     with pytest.raises(ConfigError, match="no bone found for pelvis") as e:

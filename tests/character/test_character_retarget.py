@@ -197,7 +197,7 @@ def test_files_that_are_not_characters_are_refused_naming_them(tmp_path):
             read_character(p)
         assert name in str(e.value)
     with pytest.raises(InputFileError, match="character is a"):
-        read_character(tmp_path / "x.fbx")
+        read_character(tmp_path / "x.obj")
     with pytest.raises(InputFileError, match="no such"):
         read_character(tmp_path / "missing.glb")
 
@@ -331,7 +331,7 @@ def test_a_hand_that_would_enter_the_torso_is_moved_out_and_counted(tmp_path, db
     # the hand is on the capsule's surface, in front
     hand = out.position[:, ch.bone("left_wrist")]
     spine = [ch.pelvis] + [ch.bone(k) for k in ("spine_mid", "chest", "upper_chest")]
-    from gesturekit.character.retarget import _distance_to_chain
+    from gesturekit.character._arms import distance_to_chain as _distance_to_chain
 
     d, _ = _distance_to_chain(hand, out.position[:, spine])
     assert (d >= rep.torso_radius * 0.999).all()

@@ -212,34 +212,38 @@ def _with(data: bytes, change) -> bytes:
     return glb_bytes(doc, binary if extra is None else extra)
 
 
-def test_their_animations_stay_and_an_earlier_gesturekit_one_is_replaced(tmp_path, motion, validator):  # noqa: F811
+def _add_wave(doc, binary):
+    """A clip of their own, ``wave``: one rotation of node 1 over a second."""
+    buf = GlbBuffer()
+    t = buf.add(np.array([0.0, 1.0]), "SCALAR", 5126, bounds=True)
+    q = buf.add(np.array([[0, 0, 0, 1], [0, 0.3826834, 0, 0.9238795]]), "VEC4", 5126)
+    base = len(binary)
+    doc["bufferViews"] += [{**v, "byteOffset": v["byteOffset"] + base} for v in buf.views]
+    n = len(doc["accessors"])
+    doc["accessors"] += [{**a, "bufferView": a["bufferView"] + len(doc["bufferViews"]) - 2} for a in buf.accessors]
+    sampler = {"input": n + t, "output": n + q, "interpolation": "LINEAR"}
+    doc["animations"] = [
+        {"name": "wave", "samplers": [sampler], "channels": [{"sampler": 0, "target": {"node": 1, "path": "rotation"}}]}
+    ]
+    data2 = binary + bytes(buf.data)
+    doc["buffers"][0]["byteLength"] = len(data2)
+    return data2
+
+
+def waving_glb(folder: Path) -> Path:
+    """A Mixamo-like character with a clip of its own, ``wave``."""
     ((_, data),) = rig_files(CASES["mixamo_t"]).items()
+    src = folder / "waving.glb"
+    src.write_bytes(_with(data, _add_wave))
+    return src
 
-    def add_wave(doc, binary):
-        buf = GlbBuffer()
-        t = buf.add(np.array([0.0, 1.0]), "SCALAR", 5126, bounds=True)
-        q = buf.add(np.array([[0, 0, 0, 1], [0, 0.3826834, 0, 0.9238795]]), "VEC4", 5126)
-        base = len(binary)
-        doc["bufferViews"] += [{**v, "byteOffset": v["byteOffset"] + base} for v in buf.views]
-        n = len(doc["accessors"])
-        doc["accessors"] += [{**a, "bufferView": a["bufferView"] + len(doc["bufferViews"]) - 2} for a in buf.accessors]
-        sampler = {"input": n + t, "output": n + q, "interpolation": "LINEAR"}
-        doc["animations"] = [
-            {
-                "name": "wave",
-                "samplers": [sampler],
-                "channels": [{"sampler": 0, "target": {"node": 1, "path": "rotation"}}],
-            }
-        ]
-        data2 = binary + bytes(buf.data)
-        doc["buffers"][0]["byteLength"] = len(data2)
-        return data2
 
-    src = tmp_path / "waving.glb"
-    src.write_bytes(_with(data, add_wave))
+def test_their_animations_stay_and_an_earlier_gesturekit_one_is_replaced(tmp_path, motion, validator):  # noqa: F811
+    src = waving_glb(tmp_path)
     r = retarget(motion, read_character(src))
     first = tmp_path / "first.glb"
-    export_character_glb(first, r)
+    report = export_character_glb(first, r)
+    assert report.their_clips == ("wave",) and not report.dropped_clips and "after ours: wave" in report.summary()
     again = tmp_path / "again.glb"  # our own output as the character: one 'gesturekit' animation, not two
     export_character_glb(again, retarget(motion, read_character(first)))
     for path in (first, again):
@@ -251,6 +255,23 @@ def test_their_animations_stay_and_an_earlier_gesturekit_one_is_replaced(tmp_pat
             [0, 0.3826834, 0, 0.9238795]
         )
         assert validator(path)["issues"]["numErrors"] == 0
+
+
+def test_their_clips_can_be_left_out_and_ours_is_then_the_only_one(tmp_path, motion, validator):  # noqa: F811
+    r = retarget(motion, read_character(waving_glb(tmp_path)))
+    kept, dropped = tmp_path / "kept.glb", tmp_path / "dropped.glb"
+    export_character_glb(kept, r, their_clips="keep")
+    report = export_character_glb(dropped, r, their_clips="drop")
+    assert report.dropped_clips == ("wave",) and not report.their_clips and "left out: wave" in report.summary()
+    docs = {p.name: read_glb(p.read_bytes()) for p in (kept, dropped)}
+    assert [a["name"] for a in docs["kept.glb"][0]["animations"]] == [ANIMATION, "wave"]
+    assert [a["name"] for a in docs["dropped.glb"][0]["animations"]] == [ANIMATION]
+    # the same motion either way, read back to the report's error
+    assert docs["kept.glb"][0]["animations"][0] == docs["dropped.glb"][0]["animations"][0]
+    assert report.max_error < 1e-4
+    assert validator(dropped)["issues"]["numErrors"] == 0
+    with pytest.raises(ConfigError, match="their_clips is one of keep, drop"):
+        export_character_glb(tmp_path / "x.glb", r, their_clips="first")
 
 
 def test_animated_matrix_nodes_become_trs_and_non_uniform_scales_are_refused(tmp_path, motion, validator):  # noqa: F811
@@ -465,6 +486,23 @@ def test_synthesize_with_a_character_writes_their_files_and_prints_the_reports(t
     again = run_cli(*args, "--format", "glb,bvh")
     assert again.code == 2 and "exists already" in again.stderr
     assert run_cli(*args, "--format", "glb,bvh", "--force").code == 0
+
+
+@pytest.mark.parametrize("clips,names", [(None, [ANIMATION, "wave"]), ("drop", [ANIMATION])])
+def test_synthesize_keeps_or_drops_the_characters_own_clips(tmp_path, cli_world, clips, names):
+    from tests.badinput import run_cli
+
+    db, speech_path = cli_world
+    out = tmp_path / "out"
+    args = ["synthesize", speech_path, "--db", db, "--out", out, "--refiner", "none", "--format", "glb"]
+    args += ["--character", waving_glb(tmp_path)] + ([] if clips is None else ["--character-clips", clips])
+    run = run_cli(*args)
+    assert run.code == 0, run.stderr
+    doc, _ = read_glb((out / "speech.glb").read_bytes())
+    assert [a["name"] for a in doc["animations"]] == names
+    assert ("its own clips left out: wave" in run.stdout) == (clips == "drop")
+    bad = run_cli(*args, "--character-clips", "first")
+    assert bad.code == 2 and "--character-clips" in bad.stderr
 
 
 def test_synthesize_refuses_a_character_missing_a_bone_or_a_glb_of_a_skeleton(tmp_path, cli_world):

@@ -47,6 +47,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     (
         "base",
         (
+            "gesturekit._arguments",
             "gesturekit._config",
             "gesturekit._io",
             "gesturekit._jobs",
@@ -93,6 +94,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         "character",
         (
             "gesturekit.character",
+            "gesturekit.character._arms",
             "gesturekit.character._body",
             "gesturekit.character._loft",
             "gesturekit.character._user_bvh",
@@ -108,6 +110,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.character.paint",
             "gesturekit.character.retarget",
             "gesturekit.character.rig",
+            "gesturekit.character.shape",
             "gesturekit.character.skin",
             "gesturekit.character.solve",
             "gesturekit.character.stand",

@@ -70,6 +70,7 @@ RUN_ARGUMENTS = {
         "format",
         "character",
         "character_map",
+        "character_clips",  # what the character's GLB keeps of the file's own clips: a run argument, as the map
         "video",
         "video_style",
         "video_full_body",  # RenderStyle.framing of the MP4

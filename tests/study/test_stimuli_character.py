@@ -129,7 +129,7 @@ def test_bad_characters_are_one_line_errors_and_no_study_is_started(tmp_path, ca
     cases = [
         (["--character", str(bad)], "broken.vrm"),
         (["--character", str(tmp_path / "missing.glb")], "no such character file"),
-        (["--character", str(tmp_path / "model.fbx")], "not .fbx"),
+        (["--character", str(tmp_path / "model.obj")], "not .obj"),
         (["--character", str(rig), "--character-map", str(wrong_map)], "NoSuchBone"),
         (["--character-map", str(wrong_map)], "needs a character"),
     ]
