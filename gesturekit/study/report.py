@@ -498,9 +498,12 @@ def _png(fig: go.Figure) -> bytes | None:
 
     if find_spec("kaleido") is None:
         return None
+    from ..viz.paper import static_image
+
+    layout = fig.layout
     try:
-        return fig.to_image(format="png")
-    except Exception:  # a renderer that cannot start (no browser for kaleido 1.x): the HTML figures stand
+        return static_image(fig, "png", width=layout.width or 700, height=layout.height or 500)
+    except ConfigError:  # no browser, or one that never answered: the HTML figures stand
         return None
 
 

@@ -10,12 +10,24 @@ so an 82 s wrist plot can be shown over the seconds a reader should look at.
 Export uses plotly's static image export (the ``kaleido`` package), which draws in the
 system's Chrome or Chromium (Debian's ``chromium`` is found on its own) and needs no
 network. Where either is missing, :func:`figure_bytes` raises a
-:class:`~gesturekit.errors.ConfigError` that says what to install.
+:class:`~gesturekit.errors.ConfigError` that says what to install. :func:`static_image` is the
+export itself, with a deadline: on a busy machine the exporter's browser has been seen to start
+and then never answer, so an export that has not finished in time is abandoned (its browser
+closed) and tried once more, and then reported instead of waiting for ever.
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import os
+import queue
+import signal
+import threading
+import time
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import plotly.graph_objects as go
@@ -27,7 +39,11 @@ from ..motion import Motion
 from ._plotly import MOTION_COLORS, _motions_and_labels, plotly_safe
 from .retrieval import front_view_lines
 
-__all__ = ["FORMATS", "filmstrip_figure", "figure_bytes", "CSS_PX_PER_MM"]
+__all__ = ["FORMATS", "filmstrip_figure", "figure_bytes", "static_image", "CSS_PX_PER_MM", "EXPORT_TIMEOUT_S"]
+
+#: Seconds one static export may take (the browser's start included) before it is abandoned and
+#: tried again: a quiet machine takes 2-5 s, one at a load of 12 about 30 s.
+EXPORT_TIMEOUT_S = 120.0
 
 #: Formats :func:`figure_bytes` writes: name -> MIME type.
 FORMATS = {"png": "image/png", "svg": "image/svg+xml", "pdf": "application/pdf"}
@@ -179,14 +195,142 @@ def figure_bytes(
         out.update_xaxes(range=[a, b], autorange=False)
     out.update_layout(width=width, height=height)
     scale = int(dpi) / 96 if fmt == "png" else 1.0
+    return static_image(out, fmt, width=width, height=height, scale=scale)
+
+
+def _in_own_loop(make: Any) -> Any:
+    """``asyncio.run(make())`` in a thread of its own (the caller may be inside a running loop:
+    a notebook); its exception is raised here."""
+    box: queue.Queue[tuple[bool, Any]] = queue.Queue(maxsize=1)
+
+    def run() -> None:
+        try:
+            box.put((True, asyncio.run(make())))
+        except BaseException as exc:  # handed to the caller, who raises it
+            box.put((False, exc))
+
+    worker = threading.Thread(target=run, name="gesturekit-figure-export", daemon=True)
+    worker.start()
+    worker.join()
+    ok, value = box.get()
+    if not ok:
+        raise value
+    return value
+
+
+def _processes() -> dict[int, int]:
+    """Process id -> parent's id, from Linux's /proc (empty elsewhere)."""
+    parent: dict[int, int] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+            parent[int(stat.parent.name)] = int(text[text.rindex(")") + 2 :].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue  # a process that ended meanwhile
+    return parent
+
+
+def _below(root: int, parent: dict[int, int]) -> set[int]:
+    """The descendants of process ``root``."""
+    found, todo = set(), [root]
+    while todo:
+        pid = todo.pop()
+        kids = [c for c, p in parent.items() if p == pid and c not in found]
+        found.update(kids)
+        todo.extend(kids)
+    return found
+
+
+def _end_browsers(known: set[int]) -> None:
+    """Kill the browsers an abandoned export left running: this process's descendants that were not
+    in ``known``, started by kaleido's browser driver (choreographer), and everything under them.
+    Other new children (another thread's work) are left alone."""
+    parent = _processes()
+    doomed: set[int] = set()
+    for pid in _below(os.getpid(), parent) - known:
+        try:
+            command = Path(f"/proc/{pid}/cmdline").read_bytes()
+        except OSError:
+            continue
+        if b"choreographer" in command:
+            doomed |= {pid} | _below(pid, parent)
+    for pid in doomed:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+
+
+@checks_arguments
+def static_image(
+    fig: go.Figure,
+    fmt: str,
+    *,
+    width: int,
+    height: int,
+    scale: float = 1.0,
+    timeout_s: float = EXPORT_TIMEOUT_S,
+    attempts: int = 2,
+) -> bytes:
+    """A plotly figure as PNG, SVG or PDF bytes, drawn by kaleido, with a deadline.
+
+    Parameters
+    ----------
+    fig : plotly.graph_objects.Figure
+    fmt : {"png", "svg", "pdf"}
+    width, height : int
+        CSS pixels of the drawing.
+    scale : float
+        Pixels of a PNG per CSS pixel.
+    timeout_s : float
+        Seconds one try may take, the browser's start included; a try that takes longer is
+        cancelled, which closes its browser.
+    attempts : int
+        Tries before giving up.
+
+    Returns
+    -------
+    bytes
+        The file.
+
+    Raises
+    ------
+    ConfigError
+        No kaleido or no browser, a drawing that failed, or ``attempts`` tries that each ran
+        past ``timeout_s``.
+    """
+    if fmt not in FORMATS:
+        raise ConfigError(f"figures are exported as {', '.join(FORMATS)}, not {fmt!r}")
+    if not (timeout_s > 0 and attempts >= 1):
+        raise ConfigError(f"an export needs a positive deadline and at least one try, got {timeout_s}, {attempts}")
     try:
-        import kaleido  # noqa: F401  (plotly's exporter: say what is missing before plotly does)
+        import kaleido
     except ImportError:
         raise ConfigError("exporting a figure needs the kaleido package: pip install 'kaleido>=1'") from None
-    try:
-        return bytes(out.to_image(format=fmt, width=width, height=height, scale=scale))
-    except (RuntimeError, OSError, ValueError) as exc:
-        raise ConfigError(
-            f"could not draw the figure as {fmt.upper()}: {exc}. The export draws in Chrome or Chromium "
-            "(apt-get install chromium, or set BROWSER_PATH to a Chrome)"
-        ) from exc
+    spec = fig.to_dict()
+    opts = {"format": fmt, "width": int(width), "height": int(height), "scale": float(scale)}
+
+    # no MathJax: kaleido's page would load it from a CDN (nothing is fetched at run time; no figure
+    # of ours has TeX), and on a machine without a network that script tag can hold the page back
+    kopts = {"mathjax": False}
+
+    async def once() -> bytes:
+        return await asyncio.wait_for(kaleido.calc_fig(spec, opts=opts, kopts=kopts), timeout_s)
+
+    for _ in range(int(attempts)):
+        before = _below(os.getpid(), _processes())
+        start = time.monotonic()
+        try:
+            return bytes(_in_own_loop(once))
+        except Exception as exc:  # kaleido's own errors (no browser, a failed drawing) have no common base
+            if isinstance(exc, (TimeoutError, asyncio.TimeoutError)) or time.monotonic() - start >= timeout_s:
+                # a browser that never answered (cancelled, it may say it "closed"): end what it left
+                # running, and try a new one
+                _end_browsers(before)
+                continue
+            raise ConfigError(
+                f"could not draw the figure as {fmt.upper()}: {exc}. The export draws in Chrome or Chromium "
+                "(apt-get install chromium, or set BROWSER_PATH to a Chrome)"
+            ) from exc
+    raise ConfigError(
+        f"drawing the figure as {fmt.upper()} did not finish in {timeout_s:.0f} s, {int(attempts)} times; "
+        "the machine may be very busy: try again"
+    )

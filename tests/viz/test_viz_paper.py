@@ -76,3 +76,69 @@ def test_the_wrist_figure_exports_at_print_size_zoomed_to_a_range():
     assert fig.layout.xaxis.range[0] == 0  # the figure itself is not changed
     pdf = figure_bytes(filmstrip_figure(motions, [0.5, 1.5]), "pdf", width_mm=85)
     assert pdf.startswith(b"%PDF")
+
+
+def test_an_export_that_does_not_finish_in_time_is_tried_again(monkeypatch):
+    """kaleido is replaced by a stand-in whose first drawing never finishes, the way a browser that
+    started but never answered left a busy CI machine waiting: the second try's bytes come back."""
+    import asyncio
+
+    import kaleido
+    import plotly.graph_objects as go
+
+    from gesturekit.viz.paper import static_image
+
+    calls = []
+
+    async def calc_fig(spec, opts=None, *, topojson=None, kopts=None):
+        calls.append((opts, kopts))
+        if len(calls) == 1:
+            await asyncio.sleep(3600)
+        return b"drawn"
+
+    monkeypatch.setattr(kaleido, "calc_fig", calc_fig)
+    fig = go.Figure(go.Scatter(x=[0, 1], y=[1, 0]))
+    assert static_image(fig, "png", width=300, height=200, scale=2, timeout_s=0.3) == b"drawn"
+    assert len(calls) == 2
+    assert calls[0][0] == {"format": "png", "width": 300, "height": 200, "scale": 2.0}
+    assert calls[0][1] == {"mathjax": False}  # nothing fetched from a CDN
+    calls.clear()
+    with pytest.raises(ConfigError, match=r"did not finish in 0 s, 1 times"):
+        static_image(fig, "png", width=300, height=200, timeout_s=0.3, attempts=1)
+
+
+@pytest.mark.slow  # two tries of 1.5 s
+def test_a_browser_that_never_answers_is_ended_and_reported(tmp_path, monkeypatch):
+    """A real kaleido driving a 'browser' that starts and never speaks: the export gives up with our
+    error after its tries, and leaves no process of that browser running."""
+    import os
+    from pathlib import Path
+
+    import plotly.graph_objects as go
+
+    from gesturekit.viz.paper import static_image
+
+    if not Path("/proc/self/stat").is_file():
+        pytest.skip("finding the abandoned browser's processes reads Linux's /proc")
+    pids = tmp_path / "pids"
+    fake = tmp_path / "chromium"
+    fake.write_text(f'#!/bin/sh\necho $$ >> "{pids}"\nexec sleep 600\n')
+    fake.chmod(0o755)
+    monkeypatch.setenv("BROWSER_PATH", str(fake))
+    fig = go.Figure(go.Scatter(x=[0, 1], y=[1, 0]))
+    with pytest.raises(ConfigError, match=r"did not finish in 2 s, 2 times"):
+        static_image(fig, "png", width=300, height=200, timeout_s=1.5)
+    started = [int(p) for p in pids.read_text().split()]
+    assert len(started) == 2  # one browser per try
+
+    def running(pid: int) -> bool:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            return False
+        return state != "Z"
+
+    from tests.waits import wait_until
+
+    wait_until(lambda: not any(running(p) for p in started), what="the abandoned browsers end", timeout_s=30)
+    assert os.getpid() not in started
