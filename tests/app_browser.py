@@ -6,7 +6,9 @@ of the docs' screenshots::
     python -m tests.app_browser --out docs/screenshots
     python -m tests.app_browser --front docs/images/app.jpg     # the README's picture
     python -m tests.app_browser --laptop docs/screenshots/laptop # every page at 1280x800 and 1920x1080,
-                                                                  # and a CLI MP4's frames at three times
+                                                                  # a CLI MP4's frames at three times, and
+                                                                  # the control timeline and inspector closer
+    python -m tests.app_browser --timeline docs/screenshots/laptop # only the last two
 
 Chromium is Debian's (``apt-get install chromium``), driven through the
 ``playwright`` Python package; Playwright's own browser downloads are not
@@ -769,6 +771,70 @@ def make_laptop_screenshots(
     return shots
 
 
+def make_timeline_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 3.0) -> list[Path]:
+    """The control timeline and the inspector's candidates as a 1280x800 laptop window shows them, as JPEGs in
+    ``out``: ``controls_timeline_1280x800.jpg`` (ranges painted in three lanes, a curve drawn in a fourth, the
+    play cursor stopped part way) and ``inspector_candidates_1280x800.jpg`` (a step's chosen candidate large over
+    the query's ghost, the others in the strip) after a run with those controls."""
+    out.mkdir(parents=True, exist_ok=True)
+    shots = []
+    with tempfile.TemporaryDirectory(prefix="gesturekit-shots-") as tmp:
+        home = Path(tmp)
+        wav = write_speech(home / "speech.wav", seconds=seconds)
+        with app_server(home, demo_minutes=demo_minutes) as url, browser(width=1280, height=800) as page:
+            open_app(page, url, "Synthesize", heading="Synthesize")
+            upload(page, wav)
+            synthesize_ready(page)
+            paint_range(page, "left_hand", 0.08, 0.3)
+            timeline(page).locator('.lane[data-lane="speed"] button.level[data-level="slow"]').click()
+            paint_range(page, "speed", 0.25, 0.55)
+            paint_range(page, "symmetry", 0.6, 0.85)
+            timeline(page).locator('button.curve[data-lane="right_hand"]').click()
+            track = lane_track(page, "right_hand")
+            track.scroll_into_view_if_needed()
+            box = track.bounding_box()
+            ys = (0.15, 0.2, 0.5, 0.85, 0.9, 0.6, 0.3)  # high, through the middle, low, back up
+
+            def curve() -> None:
+                xs = [box["x"] + box["width"] * (0.35 + 0.09 * i) for i in range(len(ys))]
+                page.mouse.move(xs[0], box["y"] + box["height"] * ys[0])
+                page.mouse.down()
+                for x, y in zip(xs[1:], ys[1:]):
+                    page.mouse.move(x, box["y"] + box["height"] * y, steps=6)
+                page.mouse.up()
+
+            edit_timeline(page, curve, what="drawing a curve")
+            run_and_wait(page)
+            wait_idle(page)
+            # a click on the speech's waveform puts the play cursor there (4.4 s), as playing to it would
+            wave = timeline(page).locator("#wavetrack")
+            wave.scroll_into_view_if_needed()
+            at = wave.bounding_box()
+            page.mouse.click(at["x"] + at["width"] * 4.4 / seconds, at["y"] + at["height"] / 2)
+            timeline_frame(page).wait_for_function("() => Math.abs(window.gkTimeline.cursor - 4.4) < 0.1")
+            heading(page, "2 · Controls").evaluate("el => el.scrollIntoView({block: 'start'})")
+            page.evaluate(_PAINTED)
+            png = out / ".controls_timeline_1280x800.png"
+            page.screenshot(path=str(png), type="png")
+            shots.append(_jpeg(png, out / "controls_timeline_1280x800.jpg"))
+            if problems(page):
+                raise RuntimeError(f"the Synthesize page shows an error: {problems(page)[0][:500]}")
+            go_to(page, "Retrieval inspector")
+            large = keyed(page, "inspect.candidate_large")
+            large.locator(".js-plotly-plot").first.wait_for()
+            large.first.evaluate("el => el.scrollIntoView({block: 'start'})")
+            page.mouse.move(800, 400)  # over the page, not the sidebar
+            page.mouse.wheel(0, -150)  # its title too
+            wait_idle(page)
+            page.evaluate(_PAINTED)
+            png = out / ".inspector_candidates_1280x800.png"
+            page.screenshot(path=str(png), type="png")
+            shots.append(_jpeg(png, out / "inspector_candidates_1280x800.jpg"))
+            if problems(page):
+                raise RuntimeError(f"the inspector shows an error: {problems(page)[0][:500]}")
+    return shots
+
+
 def make_mp4_frames(
     out: Path, *, speech: Path | None = None, seconds: float = 20.0, at=(0.15, 0.5, 0.85)
 ) -> list[Path]:
@@ -811,6 +877,7 @@ def main(argv=None) -> int:
     parser.add_argument("--front", type=Path, help="only the front picture, to this file (docs/images/app.jpg)")
     parser.add_argument("--laptop", type=Path, help="every page at laptop sizes and a CLI MP4's frames, to this folder")
     parser.add_argument("--speech", type=Path, help="with --laptop: the speech of the MP4 (default: generated)")
+    parser.add_argument("--timeline", type=Path, help="only the control timeline and the inspector at 1280x800, here")
     args = parser.parse_args(argv)
     reason = unavailable()
     if reason:
@@ -819,8 +886,13 @@ def main(argv=None) -> int:
     if args.front:
         print(make_front_picture(args.front))
         return 0
+    if args.timeline:
+        for p in make_timeline_screenshots(args.timeline):
+            print(p)
+        return 0
     if args.laptop:
-        for p in make_mp4_frames(args.laptop, speech=args.speech) + make_laptop_screenshots(args.laptop):
+        shots = make_mp4_frames(args.laptop, speech=args.speech) + make_laptop_screenshots(args.laptop)
+        for p in shots + make_timeline_screenshots(args.laptop):
             print(p)
         return 0
     for p in make_screenshots(args.out) + make_viewer_screenshots(args.out):

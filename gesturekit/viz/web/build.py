@@ -90,7 +90,7 @@ body{margin:0;font-family:"Source Sans Pro",system-ui,sans-serif;font-size:13px;
 #tl:focus-visible{outline:2px solid #9bb5d6;outline-offset:-2px}
 #bar{display:flex;align-items:center;gap:8px;height:34px}
 #bar button,.levels button{font:inherit;border:1px solid #ccc;border-radius:6px;background:#fff;cursor:pointer}
-#bar button{padding:3px 10px}
+#bar button{padding:3px 10px;white-space:nowrap;flex:none}
 #bar button:disabled{color:#aaa;cursor:default}
 #clock{min-width:110px;font-variant-numeric:tabular-nums;color:#31333f}
 #selinfo{color:#6b7280;font-size:12px;white-space:nowrap;overflow:hidden;text-overflow:ellipsis}

@@ -201,7 +201,7 @@ function drawWave() {
   for (let t = 0; t <= S.dur + 1e-9; t += every) {
     const x = (t / S.dur) * w;
     g.fillRect(x, 0, 1, 4);
-    g.fillText(`${+t.toFixed(1)} s`, Math.min(x + 2, w - 30), 11);
+    if (x + 34 <= w) g.fillText(`${+t.toFixed(1)} s`, x + 2, 11);  // a label that would not fit is left out
   }
 }
 
