@@ -17,7 +17,7 @@ function post(type, fields) {
 
 const S = {
   lanes: [], ranges: [], sel: -1, undo: [], redo: [], paint: {}, drag: null, pending: null,
-  curveLanes: new Set(), curves: {}, dur: 1, step: 1, sent: null, n: 0,
+  curveLanes: new Set(), curves: {}, dur: 1, step: 1, sent: null, n: 0, mine: new Set(),
   session: Math.random().toString(36).slice(2, 10), audio: null, audioHash: null, audioUrl: null,
   cursor: 0, playing: false, following: null, shown: false, peaks: [], tracks: {}, lanesKey: null,
 };
@@ -66,6 +66,7 @@ function pushUndo() {
 function send(curve) {
   S.n += 1;
   S.sent = `${S.session}-${S.n}`;
+  S.mine.add(S.sent);
   const ranges = S.ranges.map((r) => ({ lane: r.lane, level: r.level, start_s: round6(r.start), end_s: round6(r.end) }));
   post("streamlit:setComponentValue", { value: { edit: S.sent, ranges, curve: curve || null }, dataType: "json" });
 }
@@ -530,6 +531,9 @@ function adopt(a) {
     S.ranges = incoming;
     S.shown = true;
     return;
+  }
+  if (a.edit && a.edit !== S.sent && S.mine.has(a.edit)) {
+    return;  // the page's answer to an edit of ours that a newer one has replaced: that one's answer follows
   }
   if (a.edit && a.edit === S.sent) {
     // the page's answer to our last edit (joined, sorted): the same ranges, kept selected
