@@ -19,8 +19,6 @@ DOCUMENTED = (
     "gesturekit.MatchingDatabase.build",
     "gesturekit.MatchingDatabase.load",
     "gesturekit.parse_control",
-    "gesturekit.control_lanes.track_from_ranges",
-    "gesturekit.control_lanes.ranges_from_curve",
     "gesturekit.search.SearchConfig",
     "gesturekit.options.widget_limits",
     "gesturekit.synthesis.synthesize",
