@@ -194,8 +194,10 @@ class ControlTrack:
         """The constraints active at each output frame (frame t at time t/fps)."""
         out: list[tuple[tuple[str, str], ...]] = [()] * n_frames
         for seg in self.segments:
-            a = int(np.ceil(seg.start_s * fps - 1e-9))
-            b = int(np.ceil(seg.end_s * fps - 1e-9))
+            # times are kept to the microsecond: a step boundary such as 16/15 s is stored as 1.066667 s, a
+            # hair after frame 16, which must still start there (1e-4 frames is far above that rounding)
+            a = int(np.ceil(seg.start_s * fps - 1e-4))
+            b = int(np.ceil(seg.end_s * fps - 1e-4))
             for t in range(max(a, 0), min(b, n_frames)):
                 out[t] = seg.constraints
         return out

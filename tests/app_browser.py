@@ -6,7 +6,9 @@ of the docs' screenshots::
     python -m tests.app_browser --out docs/screenshots
     python -m tests.app_browser --front docs/images/app.jpg     # the README's picture
     python -m tests.app_browser --laptop docs/screenshots/laptop # every page at 1280x800 and 1920x1080,
-                                                                  # and a CLI MP4's frames at three times
+                                                                  # a CLI MP4's frames at three times, and
+                                                                  # the control timeline and inspector closer
+    python -m tests.app_browser --timeline docs/screenshots/laptop # only the last two
 
 Chromium is Debian's (``apt-get install chromium``), driven through the
 ``playwright`` Python package; Playwright's own browser downloads are not
@@ -386,7 +388,7 @@ def upload(page, wav: Path) -> None:
     The page names the speech it works on in a caption below the uploader
     (the uploader's own list shows the name as soon as the file is chosen).
     The run may still be drawing the rest of the page (the new waveform):
-    :func:`box_select` waits for its end.
+    :func:`wait_idle` waits for its end.
     """
     keyed(page, "synth.upload").locator('input[type="file"]').set_input_files(str(wav))
     main_area(page).locator('[data-testid="stCaptionContainer"] strong', has_text=wav.name).first.wait_for()
@@ -394,45 +396,98 @@ def upload(page, wav: Path) -> None:
 
 
 def synthesize_ready(page) -> None:
-    """Wait until the Synthesize page is drawn whole: its waveform chart, the segment table and Run."""
-    keyed(page, "synth.waveform").locator(".main-svg").first.wait_for(state="visible")
+    """Wait until the Synthesize page is drawn whole: its control timeline, the segment table and Run."""
+    lane_track(page, "left_hand").wait_for(state="visible")
     remounted(page, "synth.segments_editor").locator("canvas").first.wait_for(state="attached")
     button(page, "synth.go").wait_for()
 
 
-def box_select(page, start_frac: float, end_frac: float, *, label: str = "both_hands=high", tries: int = 3) -> None:
-    """Drag across the waveform chart of the Synthesize page between two fractions of its plot
-    area's width, and wait until the band ``label`` of the new segment is drawn on it.
+def timeline(page):
+    """A frame locator of the Synthesize page's control timeline (app/timeline.py, a component)."""
+    return keyed(page, "synth.timeline").frame_locator("iframe").first
 
-    A drag on a chart that a run is about to replace (the page still drawing, say, the waveform of
-    speech just uploaded) is lost with that chart: the drag starts only once the page is idle, and
-    is made again when no run follows it. The band must not be on the chart before.
-    """
-    chart = keyed(page, "synth.waveform")
-    band = chart.locator("text", has_text=label).first
+
+def timeline_frame(page):
+    """The control timeline's frame (Playwright ``Frame``): its script's ``gkTimeline`` holds the ranges it
+    shows, the selection (``sel``), the undo stack, the play cursor (``cursor``, seconds) and ``playing``."""
+    lane_track(page, "left_hand").wait_for(state="attached")
+    for frame in page.frames:
+        try:
+            if frame.evaluate("() => !!window.gkTimeline && document.body.dataset.key === 'synth.timeline'"):
+                return frame
+        except Exception:  # noqa: BLE001 (a frame navigating away; look at the next)
+            continue
+    raise RuntimeError("no control timeline frame")
+
+
+def lane_track(page, lane: str):
+    """The lane ``lane`` of the control timeline (where ranges are painted)."""
+    return timeline(page).locator(f'.track[data-lane="{lane}"]')
+
+
+def timeline_ranges(page) -> list[tuple[str, str, float, float]]:
+    """The ranges the control timeline draws: (lane, level, start_s, end_s), sorted."""
+    got = timeline(page).locator(".range:not(.draft)")
+    out = []
+    for i in range(got.count()):
+        r = got.nth(i)
+        out.append(
+            (
+                r.get_attribute("data-lane") or "",
+                r.get_attribute("data-level") or "",
+                float(r.get_attribute("data-start") or "nan"),
+                float(r.get_attribute("data-end") or "nan"),
+            )
+        )
+    return sorted(out)
+
+
+def drag(page, x0: float, y0: float, x1: float, y1: float | None = None, *, steps: int = 8) -> None:
+    """A real mouse drag from (x0, y0) to (x1, y1) in page pixels, through ``steps`` moves."""
+    page.mouse.move(x0, y0)
+    page.mouse.down()
+    page.mouse.move(x1, y0 if y1 is None else y1, steps=steps)
+    page.mouse.up()
+
+
+def edit_timeline(page, action, *, what: str, tries: int = 3) -> None:
+    """Do ``action()`` (a drag or key in the control timeline) once the page is idle, and wait for the runs it
+    starts (the page takes the edit into its table, then draws again). An action made while a run was replacing
+    the page is made again when no run follows it (``what`` names it in the error)."""
     for _ in range(tries):
         wait_idle(page)
         since = runs_seen(page)
-        drag = chart.locator("rect.nsewdrag").first  # the plot area (not the legend, nor the toolbar)
-        drag.wait_for(state="visible")
-        drag.scroll_into_view_if_needed()
-        box = drag.bounding_box()
-        y = box["y"] + box["height"] / 2
-        page.mouse.move(box["x"] + box["width"] * start_frac, y)
-        page.mouse.down()
-        page.mouse.move(box["x"] + box["width"] * (start_frac + end_frac) / 2, y, steps=5)
-        page.mouse.move(box["x"] + box["width"] * end_frac, y, steps=5)
-        page.mouse.up()
+        action()
         try:
-            # the selection reaches the server at once, even on a busy machine: a run that has not
-            # begun in 30 s was never asked for (the selection was lost): drag again
+            # the edit reaches the server at once, even on a busy machine: a run that has not begun in 30 s
+            # was never asked for
             wait_run_begun(page, since, timeout_s=30)
         except Exception:  # noqa: BLE001  (a playwright timeout)
             continue
         wait_run(page, since)
-        band.wait_for(state="visible")
         return
-    raise RuntimeError(f"no band {label!r} on the waveform after {tries} drags across it")
+    raise RuntimeError(f"{what}: no run of the page after {tries} tries")
+
+
+def paint_range(page, lane: str, start_frac: float, end_frac: float) -> None:
+    """Paint a range in the control timeline's lane ``lane`` by dragging from ``start_frac`` to ``end_frac`` of its
+    width (in the lane's level picked now), and wait until the page has taken it."""
+    track = lane_track(page, lane)
+    track.wait_for(state="visible")
+    track.scroll_into_view_if_needed()
+    before = len([r for r in timeline_ranges(page) if r[0] == lane])
+
+    def paint() -> None:
+        box = track.bounding_box()
+        y = box["y"] + box["height"] / 2
+        drag(page, box["x"] + box["width"] * start_frac, y, box["x"] + box["width"] * end_frac)
+
+    edit_timeline(page, paint, what=f"painting in the lane {lane}")
+    wait_until(
+        lambda: len([r for r in timeline_ranges(page) if r[0] == lane]) > before,
+        what=f"a new range in the lane {lane}",
+        timeout_s=60,
+    )
 
 
 def run_and_wait(page) -> None:
@@ -577,7 +632,7 @@ def make_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 
 
     The app runs on a fresh demo database of ``demo_minutes`` in a temporary
     home; the Synthesize page gets ``seconds`` of generated speech with one
-    box-selected control segment.
+    painted control range.
     """
     shots = []
     with _result_page(out, seconds=seconds, demo_minutes=demo_minutes, box=(0.3, 0.55)) as page:
@@ -609,7 +664,7 @@ def make_viewer_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: f
 @contextlib.contextmanager
 def _result_page(out: Path, *, seconds: float, demo_minutes: float, box: tuple[float, float] | None = None):
     """A browser page on Synthesize with a result of ``seconds`` of generated speech (one
-    box-selected control segment over the fractions ``box`` of the waveform, if given), served
+    control range painted in the timeline's "both hands" lane over the fractions ``box`` of it, if given), served
     from a fresh demo database of ``demo_minutes`` in a temporary home; ``out`` is created."""
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="gesturekit-shots-") as tmp:
@@ -619,7 +674,7 @@ def _result_page(out: Path, *, seconds: float, demo_minutes: float, box: tuple[f
             open_app(page, url, "Synthesize", heading="Synthesize")
             upload(page, wav)
             if box is not None:
-                box_select(page, *box)
+                paint_range(page, "both_hands", *box)
             run_and_wait(page)
             wait_idle(page)
             yield page
@@ -689,7 +744,7 @@ def make_laptop_screenshots(
 ) -> list[Path]:
     """Every page of the app as a user's laptop window shows it (no scrolling), at each of ``sizes``, as JPEGs
     ``<page>_<width>x<height>.jpg`` in ``out``; the pages after Synthesize show its result (a run on ``seconds``
-    of generated speech with one box-selected control segment, on a fresh demo database)."""
+    of generated speech with one painted control range, on a fresh demo database)."""
     shots = []
     with _result_page(out, seconds=seconds, demo_minutes=demo_minutes, box=(0.3, 0.55)) as page:
         for i, title in enumerate(APP_PAGES):
@@ -713,6 +768,70 @@ def make_laptop_screenshots(
                 png = out / f".{_slug(title)}_{width}x{height}.png"
                 page.screenshot(path=str(png), type="png")
                 shots.append(_jpeg(png, out / f"{_slug(title)}_{width}x{height}.jpg"))
+    return shots
+
+
+def make_timeline_screenshots(out: Path, *, seconds: float = 12.0, demo_minutes: float = 3.0) -> list[Path]:
+    """The control timeline and the inspector's candidates as a 1280x800 laptop window shows them, as JPEGs in
+    ``out``: ``controls_timeline_1280x800.jpg`` (ranges painted in three lanes, a curve drawn in a fourth, the
+    play cursor stopped part way) and ``inspector_candidates_1280x800.jpg`` (a step's chosen candidate large over
+    the query's ghost, the others in the strip) after a run with those controls."""
+    out.mkdir(parents=True, exist_ok=True)
+    shots = []
+    with tempfile.TemporaryDirectory(prefix="gesturekit-shots-") as tmp:
+        home = Path(tmp)
+        wav = write_speech(home / "speech.wav", seconds=seconds)
+        with app_server(home, demo_minutes=demo_minutes) as url, browser(width=1280, height=800) as page:
+            open_app(page, url, "Synthesize", heading="Synthesize")
+            upload(page, wav)
+            synthesize_ready(page)
+            paint_range(page, "left_hand", 0.08, 0.3)
+            timeline(page).locator('.lane[data-lane="speed"] button.level[data-level="slow"]').click()
+            paint_range(page, "speed", 0.25, 0.55)
+            paint_range(page, "symmetry", 0.6, 0.85)
+            timeline(page).locator('button.curve[data-lane="right_hand"]').click()
+            track = lane_track(page, "right_hand")
+            track.scroll_into_view_if_needed()
+            box = track.bounding_box()
+            ys = (0.15, 0.2, 0.5, 0.85, 0.9, 0.6, 0.3)  # high, through the middle, low, back up
+
+            def curve() -> None:
+                xs = [box["x"] + box["width"] * (0.35 + 0.09 * i) for i in range(len(ys))]
+                page.mouse.move(xs[0], box["y"] + box["height"] * ys[0])
+                page.mouse.down()
+                for x, y in zip(xs[1:], ys[1:]):
+                    page.mouse.move(x, box["y"] + box["height"] * y, steps=6)
+                page.mouse.up()
+
+            edit_timeline(page, curve, what="drawing a curve")
+            run_and_wait(page)
+            wait_idle(page)
+            # a click on the speech's waveform puts the play cursor there (4.4 s), as playing to it would
+            wave = timeline(page).locator("#wavetrack")
+            wave.scroll_into_view_if_needed()
+            at = wave.bounding_box()
+            page.mouse.click(at["x"] + at["width"] * 4.4 / seconds, at["y"] + at["height"] / 2)
+            timeline_frame(page).wait_for_function("() => Math.abs(window.gkTimeline.cursor - 4.4) < 0.1")
+            heading(page, "2 · Controls").evaluate("el => el.scrollIntoView({block: 'start'})")
+            page.evaluate(_PAINTED)
+            png = out / ".controls_timeline_1280x800.png"
+            page.screenshot(path=str(png), type="png")
+            shots.append(_jpeg(png, out / "controls_timeline_1280x800.jpg"))
+            if problems(page):
+                raise RuntimeError(f"the Synthesize page shows an error: {problems(page)[0][:500]}")
+            go_to(page, "Retrieval inspector")
+            large = keyed(page, "inspect.candidate_large")
+            large.locator(".js-plotly-plot").first.wait_for()
+            large.first.evaluate("el => el.scrollIntoView({block: 'start'})")
+            page.mouse.move(800, 400)  # over the page, not the sidebar
+            page.mouse.wheel(0, -150)  # its title too
+            wait_idle(page)
+            page.evaluate(_PAINTED)
+            png = out / ".inspector_candidates_1280x800.png"
+            page.screenshot(path=str(png), type="png")
+            shots.append(_jpeg(png, out / "inspector_candidates_1280x800.jpg"))
+            if problems(page):
+                raise RuntimeError(f"the inspector shows an error: {problems(page)[0][:500]}")
     return shots
 
 
@@ -758,6 +877,7 @@ def main(argv=None) -> int:
     parser.add_argument("--front", type=Path, help="only the front picture, to this file (docs/images/app.jpg)")
     parser.add_argument("--laptop", type=Path, help="every page at laptop sizes and a CLI MP4's frames, to this folder")
     parser.add_argument("--speech", type=Path, help="with --laptop: the speech of the MP4 (default: generated)")
+    parser.add_argument("--timeline", type=Path, help="only the control timeline and the inspector at 1280x800, here")
     args = parser.parse_args(argv)
     reason = unavailable()
     if reason:
@@ -766,8 +886,13 @@ def main(argv=None) -> int:
     if args.front:
         print(make_front_picture(args.front))
         return 0
+    if args.timeline:
+        for p in make_timeline_screenshots(args.timeline):
+            print(p)
+        return 0
     if args.laptop:
-        for p in make_mp4_frames(args.laptop, speech=args.speech) + make_laptop_screenshots(args.laptop):
+        shots = make_mp4_frames(args.laptop, speech=args.speech) + make_laptop_screenshots(args.laptop)
+        for p in shots + make_timeline_screenshots(args.laptop):
             print(p)
         return 0
     for p in make_screenshots(args.out) + make_viewer_screenshots(args.out):

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._arguments import checks_arguments
-from ..character.look import SCHEMES, SIDE_BY_SIDE
+from ..character.look import ROLE_SCHEMES, SCHEMES, SIDE_BY_SIDE
 from ..errors import ConfigError
 from ..motion import Motion
 
@@ -25,6 +25,11 @@ from ..motion import Motion
 #: side-by-side characters (:data:`gesturekit.character.look.SIDE_BY_SIDE`, k-NN blue, refined orange), so a
 #: motion has one colour on the page's 3D view, in its plots and in the MP4.
 MOTION_COLORS = tuple(SCHEMES[s]["shirt"] for s in SIDE_BY_SIDE)
+
+#: The colour of what a plot shows by its role (:data:`gesturekit.character.look.ROLE_SCHEMES`: the k-NN result,
+#: the refined motion, the candidate a search step chose): the shirt of a character in that role, so a role has
+#: one colour in the 3D views, the 2D figures and the MP4s.
+ROLE_COLORS = {role: SCHEMES[scheme]["shirt"] for role, scheme in ROLE_SCHEMES.items()}
 
 _BAND_COLORS = ("#4c78a8", "#f58518", "#54a24b", "#e45756", "#b279a2", "#72b7b2", "#eeca3b", "#9d755d")
 

@@ -35,7 +35,7 @@ from .._arguments import checks_arguments
 from ..control import ATTRIBUTE_NAMES, ATTRIBUTE_UNITS, ControlTrack, frame_attributes
 from ..errors import ConfigError
 from ..motion import Motion
-from ._plotly import _BAND_COLORS, MOTION_COLORS, _motions_and_labels, data_array, plotly_safe
+from ._plotly import _BAND_COLORS, MOTION_COLORS, ROLE_COLORS, _motions_and_labels, data_array, plotly_safe
 from .skeleton_figure import DEFAULT_MAX_FRAMES, skeleton_figure
 
 if TYPE_CHECKING:
@@ -568,7 +568,7 @@ def candidates_figure(
                 mode="markers",
                 name="chosen",
                 hoverinfo="skip",
-                marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#c0502d", width=3)),
+                marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color=ROLE_COLORS["chosen"], width=3)),
                 meta={"part": "chosen"},
             )
         )

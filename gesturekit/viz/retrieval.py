@@ -31,7 +31,7 @@ from .._arguments import checks_arguments
 from ..errors import ConfigError
 from ..motion import AUDIO_SR
 from ..skeleton import BODY_JOINTS, N_JOINTS, joint_index
-from ._plotly import plotly_safe
+from ._plotly import ROLE_COLORS, plotly_safe
 from .candidate_view import CandidateView
 
 __all__ = [
@@ -45,8 +45,8 @@ __all__ = [
     "candidates_strip",
 ]
 
-#: The chosen candidate, as the candidates' scatter rings it.
-CHOSEN_COLOR = "#c0502d"
+#: The chosen candidate, in every view and figure: the palette's "chosen" role (gold, as its character's shirt).
+CHOSEN_COLOR = ROLE_COLORS["chosen"]
 #: The candidate selected for a closer look (when it is not the chosen one): the app's first motion colour.
 SELECTED_COLOR = "#2c5d8f"
 #: Every other candidate, as the candidates' scatter draws them.

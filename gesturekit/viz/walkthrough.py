@@ -28,6 +28,7 @@ from ..control import ATTRIBUTE_NAMES, CONSTRAINTS, constraint_mask
 from ..errors import ConfigError
 from ..search.admissible import admissible_starts
 from ..search.explain import StepExplanation, explain_plan_step, explain_step, plan_step_inputs
+from ._plotly import ROLE_COLORS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -392,7 +393,7 @@ def rankings_figure(
             mode="markers",
             name="chosen",
             hoverinfo="skip",
-            marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color="#c0502d", width=3)),
+            marker=dict(size=18, color="rgba(0,0,0,0)", line=dict(color=ROLE_COLORS["chosen"], width=3)),
             meta={"part": "chosen"},
         )
     )
@@ -403,7 +404,7 @@ def rankings_figure(
         y0=total,
         x1=total,
         y1=0,
-        line=dict(color="#c0502d", dash="dash", width=1),
+        line=dict(color=ROLE_COLORS["chosen"], dash="dash", width=1),
         name="combined rank",
     )
     pad = 0.02 * len(r) + 1  # room for the ring of a clip at rank 0

@@ -13,7 +13,7 @@ from streamlit.testing.v1 import AppTest
 
 from gesturekit import interactive as gs
 from gesturekit.app import HOME
-from gesturekit.control import frame_attributes
+from gesturekit.control import CONSTRAINTS, frame_attributes
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import generate_demo_take
 from gesturekit.export.video import probe_media
@@ -65,17 +65,28 @@ def add_rows(at: AppTest, *rows: dict) -> AppTest:
     return at.run()
 
 
-def box(at: AppTest, x0: float, x1: float) -> AppTest:
-    """Box-select a time range on the waveform, as the browser would report it."""
-    at.session_state["synth.waveform"] = {
-        "selection": {
-            "points": [],
-            "point_indices": [],
-            "lasso": [],
-            "box": [{"xref": "x", "yref": "y", "x": [x0, x1], "y": [-1, 1]}],
-        }
+def timeline_edit(at: AppTest, edit: str, ranges: list[tuple], curve: dict | None = None) -> AppTest:
+    """An edit in the control timeline, as its page in the browser reports it: (lane, level, start, end) ranges."""
+    at.session_state["synth.timeline"] = {
+        "edit": edit,
+        "ranges": [{"lane": a, "level": b, "start_s": s, "end_s": e} for a, b, s, e in ranges],
+        "curve": curve,
     }
     return at.run()
+
+
+def timeline_args(at: AppTest) -> dict:
+    """The args the control timeline (app/timeline.py) was drawn with."""
+    import json
+
+    for el in at.get("component_instance"):
+        if el.proto.component_name.endswith("control_timeline"):
+            return json.loads(el.proto.json_args)
+    raise AssertionError("no control timeline on the page")
+
+
+def shown_ranges(at: AppTest) -> list[tuple[str, str, float, float]]:
+    return sorted((r["lane"], r["level"], r["start_s"], r["end_s"]) for r in timeline_args(at)["ranges"])
 
 
 def bands(spec: dict) -> list[tuple[float, float, str]]:
@@ -101,7 +112,7 @@ def test_upload_a_control_segment_and_run_shows_the_result(app_env, db):
     assert any("WAV (PCM_16), 22050 Hz, 2 channels, 4.00 s" in shown(c.value) for c in at.caption)
     at = add_rows(at, {"start_s": 1.0, "end_s": 2.5, "constraint": "left_hand=high"})
     assert not at.exception and not errors(at)
-    assert bands(chart(at, "synth.waveform")) == [(1.0, 2.5, "left_hand=high")]
+    assert shown_ranges(at) == [("left_hand", "high", 1.0, 2.5)]
     # the demo database offers its shipped refiner; this test looks at the k-NN motion alone
     if at.toggle(key="_w.synth.refine").value:
         at.toggle(key="_w.synth.refine").set_value(False).run()
@@ -163,14 +174,13 @@ def test_a_first_visit_opens_on_example_speech_until_a_file_is_uploaded(app_env)
     assert at.radio(key="_w.synth.mode").value == "Upload a file"
     assert [shown(c.value) for c in at.caption if shown(c.value) == hint] == [hint]
     assert any(shown(c.value).startswith(f"{example} ·") for c in at.caption)
-    wave = chart(at, "synth.waveform")
-    assert array(wave["data"][0]["x"])[-1] == pytest.approx(gs.SPEECH_EXAMPLES[example][0], abs=0.05)
+    assert timeline_args(at)["duration_s"] == pytest.approx(gs.SPEECH_EXAMPLES[example][0], abs=0.05)
     assert not at.button(key="synth.go").disabled
 
     at = upload(at, speech_file(3.0), name="mine.wav")
     assert not [c for c in at.caption if shown(c.value) == hint]
     assert any(shown(c.value).startswith("mine.wav ·") for c in at.caption)
-    assert array(chart(at, "synth.waveform")["data"][0]["x"])[-1] == pytest.approx(3.0, abs=0.05)
+    assert timeline_args(at)["duration_s"] == pytest.approx(3.0, abs=0.05)
     at.button(key="synth.go").click().run()
     assert not at.exception and result(at).source == "mine.wav" and result(at).n_frames == 45
 
@@ -179,22 +189,59 @@ def test_a_first_visit_opens_on_example_speech_until_a_file_is_uploaded(app_env)
     assert any(shown(c.value).startswith("mine.wav ·") for c in at.caption)
 
 
-def test_box_selecting_on_the_waveform_adds_and_cuts_segments(app_env):
+def test_timeline_edits_become_the_control_table_and_table_edits_the_timeline(app_env, db):
     at = upload(open_page(), speech_file(4.0))
-    at.selectbox(key="_w.synth.new_constraint").set_value("speed=fast").run()
-    at = box(at, 2.3456, 0.5)  # dragged right to left
-    assert not at.exception and not errors(at)
-    assert at.data_editor[0].value.to_dict("records") == [{"start_s": 0.5, "end_s": 2.35, "constraint": "speed=fast"}]
-    assert bands(chart(at, "synth.waveform")) == [(0.5, 2.35, "speed=fast")]
+    args = timeline_args(at)
+    assert [lane["name"] for lane in args["lanes"]] == list(CONSTRAINTS)
+    assert args["step_s"] == pytest.approx(8 / 15) and args["ranges"] == []
+    lane = next(x for x in args["lanes"] if x["name"] == "left_hand")
+    assert lane["levels"] == ["low", "high"] and lane["curve"]
+    assert (lane["low"], lane["high"]) == pytest.approx(db.thresholds["left_hand_height"])
 
-    at.selectbox(key="_w.synth.new_constraint").set_value("width=wide").run()
-    at = box(at, 2.0, 3.0)
-    assert bands(chart(at, "synth.waveform")) == [(0.5, 2.0, "speed=fast"), (2.0, 3.0, "width=wide")]
-    at.run()  # the same selection again adds nothing
+    # two lanes overlapping: the table holds one row per range, the track cuts where each begins and ends
+    at = timeline_edit(at, "s-1", [("speed", "fast", 0.533333, 2.133333), ("left_hand", "low", 1.066667, 3.2)])
+    assert not at.exception and not errors(at)
+    rows = at.data_editor[0].value.to_dict("records")
+    assert rows == [
+        {"start_s": 0.533333, "end_s": 2.133333, "constraint": "speed=fast"},
+        {"start_s": 1.066667, "end_s": 3.2, "constraint": "left_hand=low"},
+    ]
+    assert shown_ranges(at) == [("left_hand", "low", 1.066667, 3.2), ("speed", "fast", 0.533333, 2.133333)]
+    assert timeline_args(at)["edit"] == "s-1"  # the timeline knows the page holds its edit
+    at.run()  # the same edit again changes nothing
     assert len(at.data_editor[0].value) == 2
 
+    # a row typed into the table shows in the timeline
+    at = add_rows(at, {"start_s": 3.2, "end_s": 4.0, "constraint": "width=wide"})
+    assert ("width", "wide", 3.2, 4.0) in shown_ranges(at)
+
+    # one lane overlapping itself is refused in words, naming the rows
+    at = add_rows(at, {"start_s": 1.0, "end_s": 2.0, "constraint": "speed=slow"})
+    assert any("both set speed" in e for e in errors(at)), errors(at)
+    assert at.button(key="synth.go").disabled
+
     at.button(key="synth.clear_segments").click().run()
-    assert at.data_editor[0].value.empty and bands(chart(at, "synth.waveform")) == []
+    assert at.data_editor[0].value.empty and shown_ranges(at) == []
+
+
+def test_a_curve_drawn_in_the_timeline_becomes_ranges_step_by_step(app_env, db):
+    at = upload(open_page(), speech_file(4.0))
+    low, high = db.thresholds["right_hand_height"]
+    # above the high threshold over the first second, below the low one from 2 s on
+    curve = {
+        "lane": "right_hand",
+        "t": [0.0, 1.0, 1.01, 2.0, 2.01, 4.0],
+        "y": [high + 0.1] * 2 + [0.5 * (low + high)] * 2 + [low - 0.1] * 2,
+    }
+    at = timeline_edit(at, "c-1", [("speed", "slow", 0.0, 4.0)], curve=curve)
+    assert not at.exception and not errors(at)
+    got = shown_ranges(at)
+    step = 8 / 15
+    assert got == [
+        ("right_hand", "high", 0.0, round(2 * step, 6)),
+        ("right_hand", "low", round(4 * step, 6), 4.0),
+        ("speed", "slow", 0.0, 4.0),
+    ]
 
 
 def test_a_bad_upload_is_an_error_message_not_a_traceback(app_env):
@@ -297,7 +344,8 @@ def test_settings_reach_the_config_and_survive_a_page_switch(app_env):
     assert viewer(at, "synth.skeleton")  # the result is still there
 
     other = open_page()  # another user sees none of it: a first visit, on the example speech
-    assert "gk.synthesis" not in other.session_state and not other.get("component_instance")
+    assert "gk.synthesis" not in other.session_state
+    assert not [c for c in other.get("component_instance") if c.proto.component_name.endswith("skeleton_viewer")]
     assert other.number_input(key="_w.synth.k").value == 0 and other.data_editor[0].value.empty
     assert other.session_state["synth.speech"]["token"] == ("example", "demo speaker, 8 s (generated)")
 

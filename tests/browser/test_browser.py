@@ -66,7 +66,7 @@ def _assert_what_a_user_sees(page, url: str) -> None:
         page.keyboard.press("Escape")
 
 
-def test_upload_box_select_run_then_inspect(served, tmp_path, machine):
+def test_upload_paint_a_control_run_then_inspect(served, tmp_path, machine):
     url, home = served
     wav = app_browser.write_speech(tmp_path / "my speech.wav", seconds=6.0)
     out = _shots(tmp_path)
@@ -79,10 +79,9 @@ def test_upload_box_select_run_then_inspect(served, tmp_path, machine):
         main = app_browser.main_area(page)
         assert main.get_by_text("WAV (PCM_16), 16000 Hz, 1 channel, 6.00 s").count() == 1
 
-        # a control segment by dragging across the waveform: its band appears, labelled
-        app_browser.box_select(page, 0.25, 0.6)
-        waveform = app_browser.keyed(page, "synth.waveform")
-        assert waveform.locator("text", has_text="both_hands=high").count() == 1
+        # a control range painted by dragging in the timeline's lane: it appears there, at its level
+        app_browser.paint_range(page, "both_hands", 0.25, 0.6)
+        assert [r[:2] for r in app_browser.timeline_ranges(page)] == [("both_hands", "high")]
 
         app_browser.run_and_wait(page)
         # the 3D view has drawn on a canvas of real size, and plays; the wrist plot has its four rows

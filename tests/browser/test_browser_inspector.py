@@ -67,3 +67,80 @@ def test_a_click_in_the_strip_shows_that_candidate_large_over_the_querys_ghost(i
     out = _out(tmp_path)
     out.mkdir(parents=True, exist_ok=True)
     app_browser.screenshot(page, out / "inspector_why.png")
+
+
+def _rgb(hex_colour: str) -> str:
+    """``#rrggbb`` as the browser's computed style writes it."""
+    r, g, b = (int(hex_colour[i : i + 2], 16) for i in (1, 3, 5))
+    return f"rgb({r}, {g}, {b})"
+
+
+def test_the_chosen_candidate_is_drawn_in_the_palettes_chosen_colour(inspected):
+    from gesturekit.character.look import ROLE_SCHEMES, SCHEMES
+
+    page = inspected
+    chosen = _rgb(SCHEMES[ROLE_SCHEMES["chosen"]]["shirt"])  # the shirt of the chosen candidate's character
+    strip = app_browser.keyed(page, "inspect.strip")
+    strip.locator(".js-plotly-plot").first.wait_for()
+    assert chosen in strip.evaluate(_STROKES)  # the chosen candidate's first frame among the others
+    scatter = app_browser.keyed(page, "inspect.candidates_plot").locator(".js-plotly-plot").first
+    ring = scatter.evaluate(
+        """(gd) => { const t = gd.querySelectorAll('.scatterlayer .trace');
+        const i = gd._fullData.findIndex((d) => d.meta && d.meta.part === 'chosen');
+        const p = t[i].querySelector('path.point'); return getComputedStyle(p).stroke; }"""
+    )
+    assert ring == chosen
+
+
+def _set(page, key: str, value: str) -> None:
+    field = app_browser.keyed(page, key).locator("input")
+    with app_browser.run_after(page):
+        field.fill(value)
+        field.press("Enter")
+
+
+def _choose(page, key: str, option: str) -> None:
+    box = app_browser.keyed(page, key).locator('[data-testid="stSelectbox"] input')
+    if box.input_value() == option:
+        return
+    with app_browser.run_after(page):  # typed, as a user may: the typed text filters the options
+        box.click()
+        page.keyboard.type(option)
+        page.keyboard.press("Enter")
+
+
+def test_a_figure_exported_from_the_page_downloads_as_an_image_of_the_stated_size(inspected, tmp_path):
+    import io
+    import xml.etree.ElementTree as ET
+
+    from PIL import Image
+
+    from gesturekit.viz.paper import CSS_PX_PER_MM
+
+    page = inspected
+    width_px = round(100 * CSS_PX_PER_MM)  # 100 mm at 96 CSS pixels per inch
+    # the figures for a paper come with a comparison of k: the default ks
+    compare = app_browser.button(page, "inspect.compare_go")
+    compare.scroll_into_view_if_needed()
+    with app_browser.run_after(page):
+        compare.click()
+    app_browser.keyed(page, "_w.inspect.fig_width").locator("input").wait_for()
+    _set(page, "_w.inspect.fig_width", "100")
+    _set(page, "_w.inspect.fig_dpi", "192")  # twice the CSS pixels
+    got = {}
+    for fmt in ("PNG", "SVG"):
+        _choose(page, "_w.inspect.fig_format", fmt)
+        button = app_browser.keyed(page, "inspect.export_wrists").get_by_role("button", name=f"Wrists ({fmt}, 100 mm)")
+        button.scroll_into_view_if_needed()
+        with page.expect_download() as info:
+            button.click()
+        download = info.value
+        assert download.suggested_filename == f"wrists.{fmt.lower()}"
+        path = tmp_path / download.suggested_filename
+        download.save_as(path)
+        got[fmt] = path.read_bytes()
+    with Image.open(io.BytesIO(got["PNG"])) as im:
+        assert im.format == "PNG" and im.width == 2 * width_px and im.height > 100
+    svg = ET.fromstring(got["SVG"])
+    assert svg.tag.endswith("svg") and float(svg.get("width")) == width_px
+    assert app_browser.problems(page) == []

@@ -168,7 +168,7 @@ def _edit_cell(page, row: int, column: int, text: str) -> None:
 
 
 def _bands(page) -> int:
-    return app_browser.keyed(page, "synth.waveform").locator("text", has_text="both_hands=high").count()
+    return len([r for r in app_browser.timeline_ranges(page) if r[:2] == ("both_hands", "high")])
 
 
 def _expect_kept(page, cells: list[str]) -> None:
@@ -185,9 +185,9 @@ def test_database_switch_and_page_switch_keep_every_setting(served, tmp_path):
         app_browser.synthesize_ready(page)
         for label, value in SETTINGS.items():
             _set_number(page, label, value)
-        app_browser.box_select(page, 0.2, 0.45)
+        app_browser.paint_range(page, "both_hands", 0.2, 0.45)
         assert _bands(page) == 1
-        # an edit in the table itself (the editor's own state, not a box selection)
+        # an edit in the table itself (the editor's own state, not the timeline)
         _edit_cell(page, 0, 1, "4.25")
         cells = _table(page)
         assert len(cells) == 3 and cells[1] == "4.25" and cells[2] == "both_hands=high"

@@ -259,7 +259,6 @@ def test_every_field_default_is_within_its_own_bounds_and_choices():
 NOT_OPTIONS = {
     "synth.mode": "where the speech comes from",
     "synth.example": "which example speech",
-    "synth.new_constraint": "the control table's next row",
     "synth.refine": "whether a refiner is used",
     "synth.refiner_path": "the refiner's folder, opened by the page (the synthesis takes the refiner itself)",
     "study.folder": "a folder of speech files, listed into StudyConfig.audio with the uploads",

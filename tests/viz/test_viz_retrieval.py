@@ -174,3 +174,30 @@ def test_bad_inputs_are_refused_with_a_message():
         candidates_strip([], None)
     with pytest.raises(ConfigError, match="fps"):
         candidate_figure(v, None, fps=0)
+
+
+def test_every_2d_view_draws_the_chosen_candidate_in_the_palettes_chosen_colour(db, result):
+    from gesturekit.character.look import ROLE_SCHEMES, SCHEMES
+    from gesturekit.viz.figures import candidates_figure
+    from gesturekit.viz.walkthrough import explain_synthesis_step, rankings_figure
+
+    chosen = SCHEMES[ROLE_SCHEMES["chosen"]]["shirt"]  # what the chosen candidate's character wears in 3D
+    step = 2
+    views = gs.candidate_views(db, result, step)
+    q = gs.query_pose(db, result, step)
+    (view,) = [v for v in views if v.chosen]
+    # the large view and the strip: the chosen candidate's first frame
+    large = candidate_figure(view, q, fps=db.fps)
+    strip = candidates_strip(views, q)
+    for fig in (large, strip):
+        colours = {t.line.color for t in _parts(fig, "first frame") if t.meta.get("candidate") == view.position}
+        assert colours == {chosen}
+    # the pose-vs-audio scatter and the rankings: the ring around the chosen one (and the combined rank's line)
+    (ring,) = _parts(candidates_figure(result.search, step), "chosen")
+    assert ring.marker.line.color == chosen
+    rankings = rankings_figure(explain_synthesis_step(result, db, step))
+    assert _parts(rankings, "chosen")[0].marker.line.color == chosen
+    assert {s.line.color for s in rankings.layout.shapes if s.name == "combined rank"} == {chosen}
+    # and nothing on them in the colour that meant "chosen" before
+    for fig in (large, strip, rankings):
+        assert "#c0502d" not in fig.to_json()

