@@ -16,9 +16,11 @@ Silhouettes are the pixels not of the background; the colour difference is the m
 (0-255, over the three channels) inside both silhouettes, one pixel in from their edges (where a pixel is
 partly the body and partly the background in one picture and not the other).
 
-``python -m tests.browser.test_browser_materials [--size 1280x800] [--out DIR]`` prints the figures and
-writes the pictures (the page, the MP4 frame and the reference at each time), and the figures of the same
-character drawn in one colour per vertex (its materials left out) for comparison.
+``python -m tests.browser.test_browser_materials [--size 1280x800] [--out docs/screenshots] [--every]`` prints
+the figures, and those of the same character drawn in one colour per vertex (its materials left out) for
+comparison; with ``--out`` it writes the page's and the MP4's pictures at the middle time
+(``character-materials-page.png``, ``character-materials-mp4.png``), with ``--every`` each picture and its
+reference at every time.
 """
 
 from __future__ import annotations
@@ -179,11 +181,13 @@ def _file_camera(ch, camera: dict) -> dict:
 
 
 def measure(
-    folder: Path, size: tuple[int, int], *, times=TIMES, own: bool = True, out: Path | None = None
+    folder: Path, size: tuple[int, int], *, times=TIMES, own: bool = True, out: Path | None = None, every: bool = False
 ) -> list[dict]:
     """The page and the MP4 against the reference at ``times``; one dict of figures per (time, picture).
 
     ``own=False`` draws the character in one colour per vertex (its materials left out), for comparison.
+    ``out``: a folder for ``character-materials-page.png`` and ``character-materials-mp4.png`` (in its own
+    materials, at the middle time); with ``every``, each picture and its reference at every time instead.
     """
     from PIL import Image
 
@@ -236,10 +240,12 @@ def measure(
             for name, got, reference in (("page", shot, want), ("mp4", mp4, want_mp4)):
                 iou, diff, n = compare(got, reference)
                 rows.append({"t": at, "picture": name, "iou": iou, "difference": diff, "pixels": n})
-                if out is not None:
+                if out is not None and every:
                     tag = f"{'own' if own else 'vertex'}-{name}-{at:.2f}s"
                     Image.fromarray(got).save(out / f"materials-{tag}.png")
                     Image.fromarray(reference).save(out / f"materials-reference-{name}-{at:.2f}s.png")
+                elif out is not None and own and t == times[len(times) // 2]:
+                    Image.fromarray(got).save(out / f"character-materials-{name}.png")
     return rows
 
 
@@ -274,7 +280,8 @@ def test_the_textured_character_matches_a_plain_gltf_rendering(figures, picture)
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="A textured character: the page and the MP4 against GLTFLoader.")
     parser.add_argument("--size", default="1280x800", help="WIDTHxHEIGHT, pixels")
-    parser.add_argument("--out", type=Path, default=None, help="a folder for the pictures")
+    parser.add_argument("--out", type=Path, default=None, help="a folder for the page's and the MP4's pictures")
+    parser.add_argument("--every", action="store_true", help="every picture and its reference, at every time")
     args = parser.parse_args(argv)
     reason = app_browser.unavailable()
     if reason:
@@ -286,7 +293,7 @@ def main(argv: list[str] | None = None) -> int:
     for own in (True, False):
         print("in its own materials:" if own else "in one colour per vertex (as before):")
         with tempfile.TemporaryDirectory(prefix="gesturekit-materials-") as tmp:
-            for row in measure(Path(tmp), (w, h), own=own, out=args.out):
+            for row in measure(Path(tmp), (w, h), own=own, out=args.out, every=args.every):
                 print("  " + _line(row))
     return 0
 
