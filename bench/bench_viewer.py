@@ -9,7 +9,10 @@ painted over ``--seconds`` and the mean time of the page's own drawing call; the
 so at least 15 painted frames per second keep playback smooth. The load average is printed too: other
 work on the machine slows the software renderer.
 
-Usage: python bench/bench_viewer.py [--seconds 6] [--sizes 760x520,1280x720]
+With ``--character FILE`` the motions are retargeted onto a user's character (a GLB, glTF or VRM is drawn
+in its own materials and textures).
+
+Usage: python bench/bench_viewer.py [--seconds 6] [--sizes 760x520,1280x720] [--character FILE]
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=6.0)
     parser.add_argument("--sizes", default="760x520,1280x720")
+    parser.add_argument("--character", type=Path, default=None, help="a user's character file")
     args = parser.parse_args(argv)
     import numpy as np
     from machine import describe_machine  # bench/ is the script's folder
@@ -70,6 +74,15 @@ def main(argv=None) -> int:
     db = open_default_database()
     clips = np.asarray(db.poses).reshape(len(db.poses), -1, 55, 3)
     motions = [Motion(np.concatenate(clips[k : k + 4]), db.fps, db.joint_presence) for k in (0, 8)]
+    character = None
+    if args.character is not None:
+        from gesturekit.character.user import read_character
+
+        character = read_character(args.character)
+        print(
+            f"character: {args.character.name}"
+            + (" in its own materials" if character.skin and character.skin.has_materials else "")
+        )
     with tempfile.TemporaryDirectory(prefix="gesturekit-bench-") as tmp:
         for name, shown, labels in (
             ("one character", motions[:1], None),
@@ -78,10 +91,14 @@ def main(argv=None) -> int:
             for size in args.sizes.split(","):
                 w, h = (int(v) for v in size.split("x"))
                 page_file = Path(tmp) / f"{len(shown)}_{w}.html"
-                page_file.write_text(skeleton_viewer(shown, labels=labels, height=h), encoding="utf-8")
+                page_file.write_text(
+                    skeleton_viewer(shown, labels=labels, height=h, character=character), encoding="utf-8"
+                )
                 with browser.browser(width=w, height=h + 60) as page:
                     page.goto(page_file.as_uri())
                     page.wait_for_selector('body[data-drawn="1"]', state="attached")
+                    if character is not None:  # its textures are read before the stepping starts
+                        page.wait_for_selector('body[data-materials="1"]', state="attached")
                     r = page.evaluate(_STEP, args.seconds)
                 fps = r["painted"] / r["seconds"]
                 verdict = "smooth at 15 fps" if fps >= 15 else "BELOW the 15 fps playback"

@@ -111,6 +111,11 @@ class RigSpec:
     mesh, texture : bool
         glTF: a skinned 8-sided tube around every bone segment (two materials); a generated 8 x 8 PNG
         base colour with TEXCOORD_0.
+    textured : bool
+        glTF: three textured materials, as a textured character's: the skin a 64 x 64 gradient with a checker
+        (linear, mipmapped), the clothes a 64 x 64 checker (nearest), the forearms a striped RGBA image under
+        alpha MASK (double-sided, every other stripe cut away); TEXCOORD_0 around and along each tube, the
+        seam's vertices doubled as exporters write them.
     seed : int
         The texture's colours.
     fmt : str
@@ -132,6 +137,7 @@ class RigSpec:
     drop: tuple[str, ...] = ()
     mesh: bool = True
     texture: bool = False
+    textured: bool = False
     seed: int = 0
     fmt: str = "glb"
 
@@ -503,7 +509,7 @@ def _tubes(bones: list, spec: RigSpec) -> tuple[np.ndarray, ...]:
     """An 8-sided open tube around every bone segment (parent -> child), weighted to the parent bone and
     blended with its neighbours at the ends: positions, normals, uvs, joints, weights, (skin, cloth) faces."""
     pos, nor, uv, jnt, wgt = [], [], [], [], []
-    faces: tuple[list, list] = ([], [])
+    faces: tuple[list, list, list] = ([], [], [])
     parents = [b[1] for b in bones]
     for c, (_, p, end, _, _) in enumerate(bones):
         if p < 0:
@@ -537,6 +543,8 @@ def _tubes(bones: list, spec: RigSpec) -> tuple[np.ndarray, ...]:
                     wgt.append((1.0, 0, 0, 0))
         name = bones[p][3] or ""
         part = faces[0] if any(s in name for s in _SKIN_PARTS) else faces[1]
+        if spec.textured and "elbow" in name:
+            part = faces[2]
         for k in range(8):
             i0, i1, j0, j1 = base + k, base + k + 1, base + 9 + k, base + 9 + k + 1
             part.extend([(i0, i1, j1), (i0, j1, j0)])
@@ -548,6 +556,7 @@ def _tubes(bones: list, spec: RigSpec) -> tuple[np.ndarray, ...]:
         np.array(wgt, dtype=np.float32),
         np.array(faces[0], dtype=np.uint32).reshape(-1),
         np.array(faces[1], dtype=np.uint32).reshape(-1),
+        np.array(faces[2], dtype=np.uint32).reshape(-1),
     )
 
 
@@ -597,7 +606,7 @@ def _gltf(spec: RigSpec) -> bytes:
         "skins": [skin],
     }
     if spec.mesh:
-        pos, nor, uv, jnt, wgt, skin_faces, cloth_faces = _tubes(bones, spec)
+        pos, nor, uv, jnt, wgt, skin_faces, cloth_faces, mask_faces = _tubes(bones, spec)
         attributes = {
             "POSITION": buf.add(pos, "VEC3", FLOAT, target=ARRAY_BUFFER, bounds=True),
             "NORMAL": buf.add(nor, "VEC3", FLOAT, target=ARRAY_BUFFER),
@@ -629,8 +638,11 @@ def _gltf(spec: RigSpec) -> bytes:
             doc["samplers"] = [{"magFilter": 9728, "minFilter": 9728}]
             doc["textures"] = [{"sampler": 0, "source": 0}]
             materials[1]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+        if spec.textured:
+            attributes["TEXCOORD_0"] = buf.add(uv, "VEC2", FLOAT, target=ARRAY_BUFFER)
+            _textured_materials(doc, buf, materials)
         primitives = []
-        for material, faces in enumerate((skin_faces, cloth_faces)):
+        for material, faces in enumerate((skin_faces, cloth_faces, mask_faces)):
             if len(faces):
                 index = buf.add(faces, "SCALAR", UINT, target=ELEMENT_ARRAY_BUFFER)
                 primitives.append({"attributes": attributes, "indices": index, "material": material})
@@ -643,6 +655,69 @@ def _gltf(spec: RigSpec) -> bytes:
     doc["accessors"] = buf.accessors
     doc["buffers"] = [{"byteLength": len(buf.data) + (-len(buf.data) % 4)}]
     return glb_bytes(doc, bytes(buf.data))
+
+
+def _embed_png(buf: GlbBuffer, png: bytes) -> int:
+    """Append a PNG to the binary chunk as a buffer view; the view's index."""
+    buf.data.extend(b"\0" * (-len(buf.data) % 4))
+    buf.views.append({"buffer": 0, "byteOffset": len(buf.data), "byteLength": len(png)})
+    buf.data.extend(png)
+    return len(buf.views) - 1
+
+
+def _png_rgba(rgba: np.ndarray) -> bytes:
+    """An 8-bit RGBA PNG of ``rgba`` (height, width, 4) uint8 (written by Pillow, as tools write them)."""
+    import io
+
+    from PIL import Image
+
+    out = io.BytesIO()
+    Image.fromarray(rgba, "RGBA").save(out, format="PNG")
+    return out.getvalue()
+
+
+def _textured_materials(doc: dict[str, Any], buf: GlbBuffer, materials: list[dict[str, Any]]) -> None:
+    """Three images, samplers and textures in ``doc``; the skin, cloth and a third, masked material."""
+    n = 64
+    y, x = np.mgrid[0:n, 0:n]
+    checker = ((x // 8 + y // 8) % 2).astype(np.uint8)
+    gradient = np.stack([64 + 3 * x, 96 + 2 * y, 140 + 60 * checker], axis=-1).clip(0, 255).astype(np.uint8)
+    cloth = np.where(checker[..., None] == 1, [40, 70, 150], [230, 200, 90]).astype(np.uint8)
+    stripes = np.zeros((n, n, 4), dtype=np.uint8)
+    stripes[..., :3] = np.array([200, 60, 60]) + (y[..., None] * np.array([0, 2, 1]))
+    stripes[..., 3] = np.where((x // 8) % 2 == 0, 255, 0)
+    pngs = [_png(n, n, gradient), _png(n, n, cloth), _png_rgba(stripes)]
+    doc["images"] = [
+        {"name": name, "bufferView": _embed_png(buf, png), "mimeType": "image/png"}
+        for name, png in zip(("skin", "cloth", "stripes"), pngs)
+    ]
+    linear, nearest = 9729, 9728
+    doc["samplers"] = [
+        {"magFilter": linear, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497},
+        {"magFilter": nearest, "minFilter": nearest},
+    ]
+    doc["textures"] = [{"sampler": 0, "source": 0}, {"sampler": 1, "source": 1}, {"sampler": 0, "source": 2}]
+    materials[0]["pbrMetallicRoughness"] = {
+        "baseColorFactor": [1.0, 0.9, 0.85, 1.0],
+        "baseColorTexture": {"index": 0},
+        "metallicFactor": 0.0,
+        "roughnessFactor": 1.0,
+    }
+    materials[1]["pbrMetallicRoughness"] = {
+        "baseColorFactor": [0.9, 0.95, 1.0, 1.0],
+        "baseColorTexture": {"index": 1},
+        "metallicFactor": 0.0,
+        "roughnessFactor": 1.0,
+    }
+    materials.append(
+        {
+            "name": "sleeves",
+            "pbrMetallicRoughness": {"baseColorTexture": {"index": 2}, "metallicFactor": 0.0, "roughnessFactor": 1.0},
+            "alphaMode": "MASK",
+            "alphaCutoff": 0.5,
+            "doubleSided": True,
+        }
+    )
 
 
 def _vrm_extension(doc: dict[str, Any], spec: RigSpec, bones: list, offset: int) -> None:

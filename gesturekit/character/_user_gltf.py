@@ -23,6 +23,7 @@ from ..limits import check_bytes, read_json
 from ..skeleton import FINGERS
 from .glb import accessor_array, node_matrices, read_glb
 from .humanoid import VRM_BONES
+from .materials import MAX_TEXTURE_PIXELS, materials_glb
 from .mesh import vertex_normals
 from .target import FileSkeleton, GltfSource, empty_skin, reorder, topological
 
@@ -32,8 +33,6 @@ __all__ = ["read_gltf_skeleton", "MAX_VERTICES", "MAX_TEXTURE_PIXELS", "MAX_NODE
 #: accessors' declared counts before any is read.
 MAX_VERTICES = 2_000_000
 
-#: Most pixels of one texture (4096 x 4096), read from the image's header before it is decoded.
-MAX_TEXTURE_PIXELS = 4096 * 4096
 
 #: Largest and smallest scale a node may carry (a factor of a million either way is no unit conversion).
 MAX_NODE_SCALE = 1e6
@@ -365,9 +364,15 @@ def _skin(
             parts.append(part)
     if not parts:
         return empty_skin()
-    out = {key: np.concatenate([p[key] for p in parts]) for key in parts[0] if key != "faces"}
+    out = {key: np.concatenate([p[key] for p in parts]) for key in parts[0] if key not in ("faces", "material")}
     starts = np.cumsum([0] + [len(p["vertices"]) for p in parts[:-1]])
     out["faces"] = np.concatenate([p["faces"] + s for p, s in zip(parts, starts)])
+    # each triangle's material: the file's, or the default one the materials GLB appends after them
+    n_materials = len(doc.get("materials", []))
+    out["face_materials"] = np.concatenate(
+        [np.full(len(p["faces"]), n_materials if p["material"][0] < 0 else p["material"][0]) for p in parts]
+    ).astype(np.int64)
+    out["materials"] = np.frombuffer(materials_glb(doc, binary), dtype=np.uint8)
     return out
 
 
@@ -407,6 +412,15 @@ def _primitive(
         normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
     else:
         normals = vertex_normals(pos.astype(np.float32), faces.astype(np.int32)).astype(np.float64)
+    uvs = (
+        np.nan_to_num(accessor_array(doc, binary, attrs["TEXCOORD_0"]).astype(np.float64)[:, :2])
+        if "TEXCOORD_0" in attrs
+        else np.zeros((n, 2))
+    )
+    if "TEXCOORD_0" in attrs:
+        acc = doc["accessors"][attrs["TEXCOORD_0"]]
+        if acc.get("normalized"):  # quantised UVs (KHR_mesh_quantization) are normalised integers
+            uvs /= {5121: 255.0, 5123: 65535.0}.get(acc["componentType"], 1.0)
     return {
         "vertices": pos,
         "normals": normals,
@@ -414,6 +428,8 @@ def _primitive(
         "joints": to_bone[joints],
         "weights": weights,
         "colors": _colors(doc, binary, prim, n, images),
+        "uvs": uvs,
+        "material": np.array([int(prim.get("material", -1))]),
     }
 
 

@@ -50,6 +50,15 @@ class CharacterSkin:
         Their weights, non-negative, each row summing to 1.
     colors : np.ndarray, shape (V, 3), float32
         sRGB in [0, 1]: the material's base colour times its texture at the vertex (and the vertex colour).
+    uvs : np.ndarray or None, shape (V, 2), float32
+        The file's ``TEXCOORD_0`` (zeros where a primitive has none), glTF's convention: the image's top left
+        at (0, 0). None where the body has no materials of its own.
+    face_materials : np.ndarray or None, shape (F,), int64
+        Each triangle's material in :attr:`materials`.
+    materials : bytes
+        The file's materials, textures and images as a materials GLB
+        (:func:`gesturekit.character.materials.materials_glb`); empty where the body is drawn in
+        :attr:`colors` alone.
     """
 
     vertices: np.ndarray
@@ -58,6 +67,14 @@ class CharacterSkin:
     joints: np.ndarray
     weights: np.ndarray
     colors: np.ndarray
+    uvs: np.ndarray | None = None
+    face_materials: np.ndarray | None = None
+    materials: bytes = b""
+
+    @property
+    def has_materials(self) -> bool:
+        """Whether the body is drawn in its file's own materials (else in :attr:`colors`)."""
+        return bool(self.materials) and self.uvs is not None and self.face_materials is not None
 
     @property
     def n_vertices(self) -> int:
@@ -253,6 +270,9 @@ class FileSkeleton:
                 joints=s["joints"].astype(np.int64),
                 weights=s["weights"].astype(np.float32),
                 colors=s["colors"].astype(np.float32),
+                uvs=s["uvs"].astype(np.float32) if "uvs" in s else None,
+                face_materials=s["face_materials"].astype(np.int64) if "face_materials" in s else None,
+                materials=s["materials"].tobytes() if "materials" in s else b"",
             )
         return Character(
             path=self.path,

@@ -15,7 +15,11 @@ character without a mesh (a BVH skeleton) is drawn as
 
 The page colours vertices through a palette of at most 256 colours
 (:func:`palette`): the mesh's own sRGB colours exactly (to 8 bits) where it has
-that few, else a median cut of them.
+that few, else a median cut of them. A glTF or VRM body is then drawn in its
+file's own materials: the page reads the materials GLB
+(:mod:`gesturekit.character.materials`) with three.js's ``GLTFLoader`` and
+puts each material, its textures on the file's UVs, on its triangles; the
+palette is what shows until they are loaded (or where they cannot be).
 """
 
 from __future__ import annotations
@@ -184,7 +188,9 @@ def page_character(retargeted: Retargeted, *, scheme: str, skin: CharacterSkin |
     dict
         ``scheme``, ``colors`` (the palette, sRGB in [0, 1]), ``rig`` (``names``, ``parents``, ``in_rig``,
         ``offsets`` and ``rest``, shape (B, 3), metres), ``mesh`` (``vertices``, ``normals``, ``faces``,
-        ``joints`` (u1, or u2 for 256 bones or more), ``weights``, ``parts``), ``rotations`` ((frames, B, 4)
+        ``joints`` (u1, or u2 for 256 bones or more), ``weights``, ``parts``; and where the character's body has
+        its file's materials, ``uvs`` (V, 2), ``groups`` (``[first index, index count, material]`` of the faces,
+        sorted by material) and ``materials``, the materials GLB's bytes), ``rotations`` ((frames, B, 4)
         int16 xyzw quaternions times 32767, relative to the parent) and ``root`` ((frames, 3), metres), as
         the page's typed-array specs; B is the character's bones (plus one added root).
     """
@@ -209,6 +215,19 @@ def page_character(retargeted: Retargeted, *, scheme: str, skin: CharacterSkin |
         pal, parts = palette(body.colors)
     joints = body.joints + (1 if added else 0)
     n_bones = len(names)
+    faces = body.faces
+    own: dict = {}
+    if body is ch.skin and body.has_materials:
+        # the file's own materials (the page's GLTFLoader reads them): triangles grouped by material, in order
+        which = np.asarray(body.face_materials, dtype=np.int64)
+        order = np.argsort(which, kind="stable")
+        faces = faces[order]
+        kinds, starts, counts = np.unique(which[order], return_index=True, return_counts=True)
+        own = {
+            "uvs": typed_array(np.asarray(body.uvs), "f4"),
+            "groups": [[int(3 * a), int(3 * c), int(k)] for k, a, c in zip(kinds, starts, counts)],
+            "materials": typed_array(np.frombuffer(body.materials, dtype=np.uint8), "u1"),
+        }
     return {
         "scheme": "character" if ch.skin is not None and ch.skin.n_vertices else scheme,
         "colors": [[round(float(x), 6) for x in row] for row in pal],
@@ -222,10 +241,11 @@ def page_character(retargeted: Retargeted, *, scheme: str, skin: CharacterSkin |
         "mesh": {
             "vertices": typed_array(body.vertices, "f4"),
             "normals": typed_array(body.normals, "f4"),
-            "faces": typed_array(body.faces, "u2" if body.n_vertices < 2**16 else "u4"),
+            "faces": typed_array(faces, "u2" if body.n_vertices < 2**16 else "u4"),
             "joints": typed_array(joints, "u1" if n_bones < 256 else "u2"),
             "weights": typed_array(body.weights, "f4"),
             "parts": typed_array(parts, "u1"),
+            **own,
         },
         "rotations": typed_array(quats, "i2"),
         "root": typed_array(root, "f4"),

@@ -229,6 +229,77 @@ class CharacterStage:
         return np.array([centre[0] + self.offsets[index], self.box[1, 1], centre[2]])
 
 
+#: The fragment shader's texturing of a user's material (VTK's ``//VTK::TCoord::Impl``): the vertex colour
+#: (the material's factor, shaded, sRGB) times the texel, in linear light, shown as sRGB; a texel whose alpha
+#: (times the factor's) is under the cutoff is not drawn. ``{cutoff}`` and ``{alpha}`` are filled in per material.
+_TEXTURED = """
+  vec4 texel = texture(actortexture, tcoordVCVSOutput);
+  if (texel.a * {alpha} < {cutoff}) discard;
+  vec3 shaded = gl_FragData[0].rgb;
+  vec3 a = mix(shaded / 12.92, pow((shaded + 0.055) / 1.055, vec3(2.4)), step(0.04045, shaded));
+  vec3 b = mix(texel.rgb / 12.92, pow((texel.rgb + 0.055) / 1.055, vec3(2.4)), step(0.04045, texel.rgb));
+  vec3 lin = clamp(a * b, 0.0, 1.0);
+  gl_FragData[0] = vec4(mix(lin * 12.92, 1.055 * pow(lin, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, lin)), 1.0);
+"""
+
+
+def _texture(image: np.ndarray, nearest: bool):
+    """A VTK texture of an RGBA image (height, width, 4), uint8, top row first, repeated as glTF's default
+    sampler repeats; interpolated and mipmapped unless ``nearest``."""
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+    from vtkmodules.vtkRenderingCore import vtkTexture
+
+    h, w = image.shape[:2]
+    data = vtkImageData()
+    data.SetDimensions(w, h, 1)
+    # VTK's rows run from the bottom: the texture coordinate t = 1 - v reaches the image's top row at v = 0
+    texels = numpy_to_vtk(np.ascontiguousarray(image[::-1].reshape(-1, 4)), deep=True)
+    data.GetPointData().SetScalars(texels)
+    texture = vtkTexture()
+    texture.SetInputData(data)
+    texture.SetColorModeToDirectScalars()
+    texture.SetRepeat(True)
+    texture.SetInterpolate(not nearest)
+    texture.SetMipmap(not nearest)
+    return texture
+
+
+def _material_actors(plotter: pv.Plotter, mesh: pv.PolyData, user: UserBody, faces: np.ndarray) -> list:
+    """One unlit actor per material of a user's character, its triangles of ``mesh`` (sharing its points and
+    colours), textured on the file's UVs where the material has a base colour texture; a single-sided material's
+    back faces are not drawn, as a glTF viewer draws them."""
+    skin = user.skin
+    uvs = np.asarray(skin.uvs, dtype=np.float32)
+    tcoords = numpy_to_vtk(np.ascontiguousarray(np.stack([uvs[:, 0], 1.0 - uvs[:, 1]], axis=1)), deep=True)
+    which = np.asarray(skin.face_materials)
+    textures = {}
+    actors = []
+    for k, mat in enumerate(user.materials):
+        mine = faces[which == k]
+        if not len(mine):
+            continue
+        part = pv.PolyData()
+        part.SetPoints(mesh.GetPoints())  # one set of points: posing the mesh poses every part
+        cells = np.hstack([np.full((len(mine), 1), 3, dtype=np.int64), mine.astype(np.int64)])
+        part.faces = cells.ravel()
+        part.GetPointData().SetScalars(mesh.GetPointData().GetScalars())
+        actor = plotter.add_mesh(part, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
+        actor.prop.interpolation = "gouraud"
+        actor.prop.backface_culling = not mat.double_sided
+        if mat.image is not None:
+            part.GetPointData().SetTCoords(tcoords)
+            key = (mat.image, mat.nearest)
+            if key not in textures:
+                textures[key] = _texture(user.images[mat.image], mat.nearest)
+            actor.SetTexture(textures[key])
+            # OPAQUE ignores alpha; BLEND is cut at half (the MP4 sorts no transparent layers)
+            cutoff = {"MASK": mat.alpha_cutoff, "BLEND": 0.5}.get(mat.alpha_mode, -1.0)
+            code = _TEXTURED.format(alpha=f"{float(np.clip(mat.color[3], 0, 1)):.6f}", cutoff=f"{cutoff:.6f}")
+            actor.GetShaderProperty().AddFragmentShaderReplacement("//VTK::TCoord::Impl", True, code, False)
+        actors.append(actor)
+    return actors
+
+
 #: Pixels from a label's anchor (:meth:`CharacterStage.label_anchor`) up to the label's top, as on the page.
 LABEL_RAISE = 16
 
@@ -282,9 +353,13 @@ class CharacterDrawing:
             rgb = numpy_to_vtk(stage.colors(i, 0), deep=True)
             rgb.SetName("rgb")
             mesh.GetPointData().SetScalars(rgb)
-            actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
-            actor.prop.interpolation = "gouraud"  # colours blend across each triangle, as on the page
-            self._actors.append(actor)
+            user = stage.users[i] if stage.users is not None else None
+            if user is not None and user.materials:
+                self._actors.extend(_material_actors(plotter, mesh, user, faces))
+            else:
+                actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
+                actor.prop.interpolation = "gouraud"  # colours blend across each triangle, as on the page
+                self._actors.append(actor)
             self._meshes.append(mesh)
             self._colors.append(rgb)
             self._point_views.append(vtk_to_numpy(mesh.GetPoints().GetData()))

@@ -18,12 +18,14 @@ presenter's half body, as for our character.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..character.bone_body import bone_body
+from ..character.materials import SkinMaterial, read_materials
 from ..character.retarget import Retargeted, retarget
 from ..character.skin import pose_skin
 from ..character.target import Character, CharacterSkin
@@ -89,6 +91,20 @@ class UserBody:
         from ..character.look import srgb_to_linear
 
         self._albedo = srgb_to_linear(self.skin.colors)
+        #: The body's own materials and their images (:func:`~gesturekit.character.materials.read_materials`),
+        #: empty where it is drawn in its colours alone.
+        self.materials: list[SkinMaterial] = []
+        self.images: list[np.ndarray] = []
+        if self.skin.has_materials:
+            self.materials, self.images = read_materials(self.skin.materials)
+            # a textured material's vertices are shaded in its factor alone: the MP4 multiplies in the texture
+            # texel by texel (gesturekit.viz.character_render), as the page does
+            faces, which = self.skin.faces, np.asarray(self.skin.face_materials)
+            vertex_material = np.full(self.skin.n_vertices, -1, dtype=np.int64)
+            vertex_material[faces.reshape(-1)] = np.repeat(which, 3)
+            for k, mat in enumerate(self.materials):
+                if mat.image is not None:
+                    self._albedo[vertex_material == k] = np.clip(mat.color[:3], 0.0, 1.0)
         self._posed: tuple[int, np.ndarray, np.ndarray] | None = None
 
     @property
@@ -113,7 +129,9 @@ class UserBody:
         return self._pose(frame)[0].copy()
 
     def colors(self, frame: int) -> np.ndarray:
-        """The skin's own colours at ``frame``, shaded by its skinned normals, shape (V, 3), uint8 sRGB."""
+        """The skin's own colours at ``frame``, shaded by its skinned normals, shape (V, 3), uint8 sRGB; where
+        the body has textures (:attr:`materials`), a textured material's vertices carry its factor shaded, which
+        the texture multiplies in linear light."""
         from ..character.look import shade
 
         return shade(self._pose(frame)[1], self._albedo)
@@ -177,6 +195,10 @@ def character_arrays(character: Character) -> dict[str, np.ndarray]:
     if ch.skin is not None:
         for name in ("vertices", "normals", "faces", "joints", "weights", "colors"):
             out[f"character_skin_{name}"] = np.asarray(getattr(ch.skin, name))
+        if ch.skin.has_materials:
+            out["character_skin_uvs"] = np.asarray(ch.skin.uvs)
+            out["character_skin_face_materials"] = np.asarray(ch.skin.face_materials)
+            out["character_skin_materials"] = np.frombuffer(ch.skin.materials, dtype=np.uint8)
     return out
 
 
@@ -192,6 +214,13 @@ def character_from_arrays(data: Any) -> Character | None:
         skin = CharacterSkin(
             **{n: data[f"character_skin_{n}"] for n in ("vertices", "normals", "faces", "joints", "weights", "colors")}
         )
+        if "character_skin_materials" in data:
+            skin = dataclasses.replace(
+                skin,
+                uvs=data["character_skin_uvs"],
+                face_materials=data["character_skin_face_materials"],
+                materials=np.asarray(data["character_skin_materials"], dtype=np.uint8).tobytes(),
+            )
     numbers = data["character_numbers"]
     return Character(
         path=Path(text["path"]),

@@ -107,6 +107,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.character.glb",
             "gesturekit.character.humanoid",
             "gesturekit.character.look",
+            "gesturekit.character.materials",
             "gesturekit.character.mesh",
             "gesturekit.character.paint",
             "gesturekit.character.retarget",

@@ -14,6 +14,7 @@ import {
   SkinnedMesh,
   SRGBColorSpace,
 } from "three";
+import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
 
 const TYPES = {
   f4: Float32Array,
@@ -32,7 +33,42 @@ export function decode(spec) {
 
 /** The characters of the data's motions, each in its own group shifted along X. */
 export function buildCharacters(data) {
-  return data.motions.map((m) => character(m, data.motions));
+  const loaded = new Map();  // side by side, one character's materials are read once
+  return data.motions.map((m) => character(m, data.motions, loaded));
+}
+
+/** A glTF material as the look lights it: its colour, textures, alpha and sides on a Lambert surface, the
+ * surface the MP4 draws too (gesturekit.character.look.shade); its own emissive and normal map kept. */
+function lambert(m) {
+  const out = new MeshLambertMaterial({
+    name: m.name,
+    color: m.color,
+    map: m.map,
+    opacity: m.opacity,
+    transparent: m.transparent,
+    alphaTest: m.alphaTest,
+    side: m.side,
+    depthWrite: m.depthWrite,
+  });
+  if (m.emissive) out.emissive.copy(m.emissive);
+  if (m.emissiveMap) out.emissiveMap = m.emissiveMap;
+  if (m.emissiveIntensity !== undefined) out.emissiveIntensity = m.emissiveIntensity;
+  if (m.normalMap) {
+    out.normalMap = m.normalMap;
+    out.normalScale.copy(m.normalScale);
+    out.normalScale.y *= -1;  // no tangents: as GLTFLoader does for a mesh without them
+  }
+  if (m.aoMap) { out.aoMap = m.aoMap; out.aoMapIntensity = m.aoMapIntensity; }
+  return out;
+}
+
+/** The materials of a materials GLB (gesturekit.character.materials.materials_glb), read by GLTFLoader. */
+async function fileMaterials(spec) {
+  const bytes = decode(spec);
+  const gltf = await new GLTFLoader().parseAsync(bytes.buffer, "");
+  const n = gltf.parser.json.materials.length;
+  const made = await Promise.all(Array.from({ length: n }, (_, i) => gltf.parser.getDependency("material", i)));
+  return made.map(lambert);
 }
 
 /** The still legs (gesturekit.character.stand): a plain mesh in the motion's frame, lit as the body. */
@@ -65,7 +101,7 @@ export function buildStage(data) {
   });
 }
 
-function character(m, motions) {
+function character(m, motions, loaded) {
   const rig = m.rig, n = rig.parents.length;
   const offsets = decode(rig.offsets), rest = decode(rig.rest);
   const bones = [], inverses = [];
@@ -96,7 +132,20 @@ function character(m, motions) {
   geometry.setAttribute("skinWeight", new BufferAttribute(decode(mesh.weights), 4));
   geometry.setAttribute("color", new BufferAttribute(colors, 3));
   geometry.setIndex(new BufferAttribute(decode(mesh.faces), 1));
+  let ready = Promise.resolve(false);
+  if (mesh.materials) {
+    geometry.setAttribute("uv", new BufferAttribute(decode(mesh.uvs), 2));
+    for (const [start, count] of mesh.groups) geometry.addGroup(start, count, 0);  // one material until loaded
+    if (!loaded.has(mesh)) loaded.set(mesh, fileMaterials(mesh.materials));
+  }
   const skinned = new SkinnedMesh(geometry, new MeshLambertMaterial({ vertexColors: true }));
+  if (mesh.materials) {
+    ready = loaded.get(mesh).then((made) => {
+      geometry.groups.forEach((g, i) => { g.materialIndex = mesh.groups[i][2]; });
+      skinned.material = made;
+      return true;
+    });
+  }
   skinned.frustumCulled = false;  // its bounds move with the pose
   skinned.add(root);
   // bind with the identity: the rest pose is in the mesh's own frame, whatever group holds it
@@ -108,6 +157,8 @@ function character(m, motions) {
   const quats = decode(m.rotations), roots = decode(m.root);
   return {
     group,
+    /** Resolves to true once the body wears its file's own materials (false: it has none). */
+    ready,
     /** Pose the bones at shown frame k: the joints' rotations (int16, scaled by 32767) and the root's position. */
     pose(k) {
       const q = k * n * 4;

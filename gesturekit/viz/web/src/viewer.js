@@ -132,6 +132,21 @@ function main(D, audio, resized) {
     document.body.dataset.drawn = "1";
     gk.frame = frame; gk.drawn += 1; gk.drawMs = performance.now() - started;
   }
+  // a character in its file's own materials: drawn again once they are read (textures decode asynchronously)
+  Promise.all(characters.map((c) => c.ready)).then(
+    (own) => {
+      if (signal.aborted) return;
+      gk.materials = own.some(Boolean);
+      if (renderer) draw();
+      document.body.dataset.materials = "1";
+    },
+    (e) => {
+      gk.materials = false;
+      gk.materialsError = String(e && e.message ? e.message : e);
+      document.body.dataset.materials = "failed";
+      console.warn("the character's materials could not be read: " + gk.materialsError);
+    },
+  );
   const frameAt = (t) => Math.min(N - 1, Math.max(0, Math.floor(t * shownFps + 1e-6)));
   function now() {
     if (audio) return audio.currentTime;
