@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ._arguments import checks_arguments
 from .control import CONSTRAINT_CHOICES, CONSTRAINTS, SEGMENT_COLUMNS, ControlTrack, Segment, empty_segments
 from .errors import ConfigError
 from .skeleton import FPS
@@ -58,6 +59,7 @@ LANE_LABELS: dict[str, str] = {
 _EPS = 1e-6  # seconds: times closer than this are one time (the table keeps microseconds)
 
 
+@checks_arguments
 def lane_levels(lane: str) -> tuple[str, str]:
     """The levels of ``lane``: its "low" value first, its "high" value second (``("slow", "fast")``)."""
     if lane not in CONSTRAINTS:
@@ -66,6 +68,7 @@ def lane_levels(lane: str) -> tuple[str, str]:
     return by_side["low"], by_side["high"]
 
 
+@checks_arguments
 def curve_attribute(lane: str) -> str | None:
     """The one attribute a curve drawn in ``lane`` gives values of, or None for a lane of several
     (``both_hands`` tests two attributes at once: a curve of one value cannot say both)."""
@@ -126,6 +129,7 @@ def _checked(records: Iterable[Mapping]) -> list[tuple[float, float, str, str]]:
     return [(s, e, lane, level) for s, e, lane, level, _ in out]
 
 
+@checks_arguments
 def track_from_ranges(ranges: pd.DataFrame | Sequence[Mapping]) -> ControlTrack:
     """The control track of a timeline's ranges (rows of the control table).
 
@@ -178,6 +182,7 @@ def track_from_ranges(ranges: pd.DataFrame | Sequence[Mapping]) -> ControlTrack:
     return ControlTrack(tuple(Segment(a, b, c) for a, b, c in pieces))
 
 
+@checks_arguments
 def ranges_from_track(track: ControlTrack) -> list[dict]:
     """A track's ranges: for each lane, one range per stretch of one level (touching segments joined).
 
@@ -203,6 +208,7 @@ def ranges_from_track(track: ControlTrack) -> list[dict]:
     return out
 
 
+@checks_arguments
 def ranges_frame(track: ControlTrack) -> pd.DataFrame:
     """:func:`ranges_from_track` as the control table (columns :data:`gesturekit.control.SEGMENT_COLUMNS`),
     sorted by start time."""
@@ -215,6 +221,7 @@ def ranges_frame(track: ControlTrack) -> pd.DataFrame:
     return table.sort_values(["start_s", "end_s"], kind="stable").reset_index(drop=True)
 
 
+@checks_arguments
 def ranges_from_curve(
     lane: str,
     times_s: np.ndarray,
@@ -310,6 +317,7 @@ def ranges_from_curve(
     return [{"start_s": a, "end_s": b, "constraint": f"{lane}={level}"} for a, b, level in pieces]
 
 
+@checks_arguments
 def replace_in_lane(
     ranges: Sequence[Mapping], lane: str, new: Sequence[Mapping], *, start_s: float, end_s: float
 ) -> list[dict]:
@@ -345,6 +353,7 @@ def replace_in_lane(
     return sorted(out, key=lambda r: (float(r["start_s"]), float(r["end_s"])))
 
 
+@checks_arguments
 def curve_span(times_s: np.ndarray, *, n_frames: int, segment: int, fps: float = FPS) -> tuple[float, float] | None:
     """The stretch of the steps a curve over ``times_s`` decides (:func:`ranges_from_curve`), seconds.
 

@@ -161,7 +161,7 @@ def fbx_scene(spec: FbxSpec) -> FbxScene:
         translation[i] = above[:3, :3].T @ (pos[i] - above[:3, 3])
         world[i, :3, :3] = above[:3, :3] @ local_rot
         world[i, :3, 3] = pos[i]
-    v, n, uv, jnt, wgt, skin_faces, cloth_faces = _tubes(bones, spec.rig)
+    v, n, uv, jnt, wgt, skin_faces, cloth_faces, _ = _tubes(bones, spec.rig)  # no third (textured) part
     vertices = (v.astype(np.float64) @ axes.T) * scale
     normals = n.astype(np.float64) @ axes.T
     polygons, material = [], []

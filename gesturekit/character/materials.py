@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from ..errors import ConfigError
 from .glb import glb_bytes, read_glb
 
@@ -83,6 +84,7 @@ def _image_header(data: bytes, index: int) -> tuple[int, int]:
     return size
 
 
+@checks_arguments
 def materials_glb(document: dict[str, Any], binary: bytes) -> bytes:
     """The materials GLB of a glTF document whose images are buffer views of ``binary``.
 
@@ -142,6 +144,7 @@ def materials_glb(document: dict[str, Any], binary: bytes) -> bytes:
     return glb_bytes(doc, bytes(out))
 
 
+@checks_arguments
 def read_materials(glb: bytes) -> tuple[list[SkinMaterial], list[np.ndarray]]:
     """The materials of a materials GLB (:func:`materials_glb`) and their images.
 

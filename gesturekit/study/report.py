@@ -498,6 +498,9 @@ def _png(fig: go.Figure) -> bytes | None:
 
     if find_spec("kaleido") is None:
         return None
+    from .._optional import require
+
+    require("plotly", purpose="the analysis's figures")  # it drew fig already: here for the import's sake
     from ..viz.paper import static_image
 
     layout = fig.layout

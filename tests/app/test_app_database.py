@@ -14,7 +14,7 @@ from gesturekit.database import MatchingDatabase
 from gesturekit.datasets.synthetic import DEMO_LABEL
 from gesturekit.demo import build_demo_database
 from gesturekit.skeleton import bones
-from gesturekit.workspace import database_words
+from gesturekit.workspace import DEMO_DATABASE_LABEL, database_words
 from tests.conftest import chart_spec as _chart
 from tests.conftest import shown, viewer
 from tests.waits import APP_RUN_S
@@ -153,7 +153,7 @@ def test_databases_in_the_working_directory_are_offered(app_env, tmp_path):
     shutil.copytree(app_env / "db" / "demo", tmp_path / "db" / "copy")
     at = AppTest.from_file(str(HOME), default_timeout=TIMEOUT).run()
     options = at.sidebar.selectbox[0].options
-    assert options[0].startswith("demo database") and options[1] == "a database you built: copy"
+    assert options[0] == DEMO_DATABASE_LABEL and options[1] == "a database you built: copy"
     at.sidebar.selectbox[0].select_index(1).run()
     assert not at.exception
     # the folder's name in the sidebar's label, its path on the server not in the caption under it
