@@ -537,11 +537,13 @@ def skeleton_canvas(page, key: str):
 
 
 def _viewer_frames(page) -> list:
-    """The frames of the page's skeleton viewers (their body names their key)."""
+    """The frames of the page's skeleton viewers (their body names their key, and they hold a stage; the
+    control timeline's frame names its key too, but draws no 3D view)."""
     out = []
     for frame in page.frames:
         try:
-            if frame.evaluate("() => !!(document.body && document.body.dataset.key)"):
+            viewer = "() => !!(document.body && document.body.dataset.key && document.getElementById('stage'))"
+            if frame.evaluate(viewer):
                 out.append(frame)
         except Exception:  # noqa: BLE001 (a frame navigating away; look at the next)
             continue

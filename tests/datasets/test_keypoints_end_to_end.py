@@ -62,7 +62,7 @@ def keypoints(tmp_path_factory):
 
 
 def _synth(db, audio, control: str | None, rule: str = "ends"):
-    ctl = None if control is None else f"{CONTROLLED[0]:g}-{CONTROLLED[1]:g}:{control}"
+    ctl = "" if control is None else f"{CONTROLLED[0]:g}-{CONTROLLED[1]:g}:{control}"
     return synthesize(audio, db=db, config=SynthesisConfig(control=ctl, mask_rule=rule, seed=3))
 
 
