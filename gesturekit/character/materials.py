@@ -25,7 +25,7 @@ import numpy as np
 from .._arguments import checks_arguments
 from ..errors import ConfigError
 from .glb import glb_bytes, read_glb
-from .mtoon import MToon, from_vrm0, read_mtoon
+from .mtoon import MToon, file_materials, read_mtoon
 
 __all__ = ["SkinMaterial", "materials_glb", "read_materials", "MAX_TEXTURE_PIXELS"]
 
@@ -114,8 +114,12 @@ def materials_glb(document: dict[str, Any], binary: bytes) -> bytes:
     Raises
     ------
     ConfigError
-        An image past its buffer, unreadable, or larger than :data:`MAX_TEXTURE_PIXELS`.
+        An image past its buffer, unreadable, or larger than :data:`MAX_TEXTURE_PIXELS`; an MToon (VRM 1.0's
+        extension, VRM 0.x's material properties) with a colour or number that is not finite.
     """
+    # a VRM's MToon is checked here, where the file is read, not first where the MP4 draws it
+    for m in file_materials(document):
+        read_mtoon(m, len(document.get("textures", [])))
     out = bytearray()
     views: list[dict[str, Any]] = []
     images = []
@@ -182,8 +186,6 @@ def read_materials(glb: bytes) -> tuple[list[SkinMaterial], list[np.ndarray]]:
         with Image.open(io.BytesIO(data)) as im:
             images.append(np.asarray(im.convert("RGBA"), dtype=np.uint8))
     textures, samplers = doc.get("textures", []), doc.get("samplers", [])
-    # a VRM 0.x keeps its MToon beside the materials: read as a VRM viewer reads it, as a 1.0 material
-    v0 = (doc.get("extensions") or {}).get("VRM", {}).get("materialProperties") or []
 
     def image_of(ref: Any) -> tuple[int | None, bool]:
         """A texture reference's image and whether it is magnified without interpolation."""
@@ -199,9 +201,8 @@ def read_materials(glb: bytes) -> tuple[list[SkinMaterial], list[np.ndarray]]:
         return int(source), nearest
 
     out = []
-    for i, m in enumerate(doc.get("materials", [])):
-        if i < len(v0) and isinstance(v0[i], dict):
-            m = from_vrm0(v0[i], m)
+    # a VRM 0.x keeps its MToon beside the materials: read as a VRM viewer reads it, as a 1.0 material
+    for i, m in enumerate(file_materials(doc)):
         pbr = m.get("pbrMetallicRoughness", {})
         factor = [float(x) for x in pbr.get("baseColorFactor", (1.0, 1.0, 1.0, 1.0))]
         image, nearest = image_of(pbr.get("baseColorTexture"))

@@ -102,9 +102,25 @@ class MToon:
         return self.outline_mode != "none" and self.outline_width > 0
 
 
-def _gamma(values: Sequence[float], n: int) -> list[float]:
-    """sRGB-ish values of Unity's gamma space to linear light, as three-vrm reads a VRM 0.x colour: ``x ** 2.2``."""
-    return [float(v) ** 2.2 for v in list(values)[:n]]
+def _numbers(value: Any, n: int, where: str) -> list[float]:
+    """The first ``n`` of a list of finite numbers, or a ConfigError naming ``where``."""
+    try:
+        v = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where} is not a list of numbers: {value!r}") from None
+    if v.size < n or not np.isfinite(v[:n]).all():
+        raise ConfigError(f"{where} is not {n} finite numbers: {value!r}")
+    return [float(x) for x in v[:n]]
+
+
+def _gamma(value: Any, n: int, where: str) -> list[float]:
+    """A VRM 0.x colour (Unity's gamma space) in linear light, as three-vrm reads it: each value ``** 2.2``."""
+    return [max(x, 0.0) ** 2.2 for x in _numbers(value, n, where)]
+
+
+def _number_of(table: dict[str, Any], key: str, label: str) -> float:
+    """``table[key]`` as a finite number, or a ConfigError naming ``label``'s ``key``."""
+    return _numbers(table[key], 1, f"{label}'s {key}")[0]
 
 
 @checks_arguments
@@ -126,48 +142,57 @@ def from_vrm0(properties: dict[str, Any], material: dict[str, Any]) -> dict[str,
         of the properties and their MToon; for any other shader (``VRM_USE_GLTFSHADER``), ``material`` itself.
     """
     shader = str(properties.get("shader", ""))
+    label = f"the VRM 0.x material {properties.get('name', material.get('name', ''))!r}"
     floats = properties.get("floatProperties") or {}
     vectors = properties.get("vectorProperties") or {}
     textures = properties.get("textureProperties") or {}
     keywords = properties.get("keywordMap") or {}
+    if not all(isinstance(x, dict) for x in (floats, vectors, textures, keywords)):
+        raise ConfigError(f"{label}'s properties are not tables of names")
+
+    def number(key: str, default: float) -> float:
+        return _numbers(floats.get(key, default), 1, f"{label}'s {key}")[0]
+
+    def colour(key: str, default: Sequence[float], n: int = 3) -> list[float]:
+        return _gamma(vectors.get(key, default), n, f"{label}'s {key}")
+
     if shader == "VRM/MToon":
         transparent = bool(keywords.get("_ALPHABLEND_ON", False))
         cutout = bool(keywords.get("_ALPHATEST_ON", False))
-        color = vectors.get("_Color", (1.0, 1.0, 1.0, 1.0))
-        shift = float(floats.get("_ShadeShift", 0.0))
-        toony = float(floats.get("_ShadeToony", 0.9))
+        alpha = _numbers(vectors.get("_Color", (1.0, 1.0, 1.0, 1.0)), 4, f"{label}'s _Color")[3]
+        shift, toony = number("_ShadeShift", 0.0), number("_ShadeToony", 0.9)
         toony = toony + (1.0 - toony) * (0.5 + 0.5 * shift)  # three-vrm's remapping of the 0.x pair
         shift = -shift - (1.0 - toony)
-        k = int(floats.get("_OutlineWidthMode", 0))
+        k = int(number("_OutlineWidthMode", 0.0))
         mode = OUTLINE_MODES[k] if 0 <= k < len(OUTLINE_MODES) else "none"
-        mixed = int(floats.get("_OutlineColorMode", 0)) == 1
+        mixed = int(number("_OutlineColorMode", 0.0)) == 1
         ext: dict[str, Any] = {
             "specVersion": "1.0",
-            "shadeColorFactor": _gamma(vectors.get("_ShadeColor", (0.97, 0.81, 0.86, 1.0)), 3),
+            "shadeColorFactor": colour("_ShadeColor", (0.97, 0.81, 0.86, 1.0)),
             "shadingShiftFactor": shift,
             "shadingToonyFactor": toony,
-            "parametricRimColorFactor": _gamma(vectors.get("_RimColor", (0.0, 0.0, 0.0, 1.0)), 3),
-            "parametricRimFresnelPowerFactor": float(floats.get("_RimFresnelPower", 1.0)),
-            "parametricRimLiftFactor": float(floats.get("_RimLift", 0.0)),
-            "rimLightingMixFactor": float(floats.get("_RimLightingMix", 0.0)),
+            "parametricRimColorFactor": colour("_RimColor", (0.0, 0.0, 0.0, 1.0)),
+            "parametricRimFresnelPowerFactor": number("_RimFresnelPower", 1.0),
+            "parametricRimLiftFactor": number("_RimLift", 0.0),
+            "rimLightingMixFactor": number("_RimLightingMix", 0.0),
             "outlineWidthMode": mode,
-            "outlineWidthFactor": 0.01 * float(floats.get("_OutlineWidth", 0.0)),
-            "outlineColorFactor": _gamma(vectors.get("_OutlineColor", (0.0, 0.0, 0.0)), 3),
-            "outlineLightingMixFactor": float(floats.get("_OutlineLightingMix", 1.0)) if mixed else 0.0,
+            "outlineWidthFactor": 0.01 * number("_OutlineWidth", 0.0),
+            "outlineColorFactor": colour("_OutlineColor", (0.0, 0.0, 0.0)),
+            "outlineLightingMixFactor": number("_OutlineLightingMix", 1.0) if mixed else 0.0,
         }
         if "_ShadeTexture" in textures:
-            ext["shadeMultiplyTexture"] = {"index": int(textures["_ShadeTexture"])}
+            ext["shadeMultiplyTexture"] = {"index": int(_number_of(textures, "_ShadeTexture", label))}
         out: dict[str, Any] = {
-            "pbrMetallicRoughness": {"baseColorFactor": [*_gamma(color, 3), float(list(color)[3])]},
-            "emissiveFactor": _gamma(vectors.get("_EmissionColor", (0.0, 0.0, 0.0, 1.0)), 3),
+            "pbrMetallicRoughness": {"baseColorFactor": [*colour("_Color", (1.0, 1.0, 1.0, 1.0)), alpha]},
+            "emissiveFactor": colour("_EmissionColor", (0.0, 0.0, 0.0, 1.0)),
             "alphaMode": "BLEND" if transparent else "MASK" if cutout else "OPAQUE",
-            "doubleSided": int(floats.get("_CullMode", 2)) == 0,
+            "doubleSided": int(number("_CullMode", 2.0)) == 0,
             "extensions": {EXTENSION: ext},
         }
         if cutout:
-            out["alphaCutoff"] = float(floats.get("_Cutoff", 0.5))
+            out["alphaCutoff"] = number("_Cutoff", 0.5)
     elif shader.startswith("VRM/Unlit"):
-        color = _gamma(vectors.get("_Color", (1.0, 1.0, 1.0, 1.0)), 4)
+        color = colour("_Color", (1.0, 1.0, 1.0, 1.0), 4)
         ext = {"specVersion": "1.0", "shadeColorFactor": color[:3]}
         out = {
             "pbrMetallicRoughness": {"baseColorFactor": color},
@@ -175,16 +200,30 @@ def from_vrm0(properties: dict[str, Any], material: dict[str, Any]) -> dict[str,
             "extensions": {EXTENSION: ext},
         }
         if shader == "VRM/UnlitCutout":
-            out["alphaCutoff"] = float(floats.get("_Cutoff", 0.5))
+            out["alphaCutoff"] = number("_Cutoff", 0.5)
     else:
         return material
     if "_MainTex" in textures:
-        out["pbrMetallicRoughness"]["baseColorTexture"] = {"index": int(textures["_MainTex"])}
+        main = int(_number_of(textures, "_MainTex", label))
+        out["pbrMetallicRoughness"]["baseColorTexture"] = {"index": main}
         if shader.startswith("VRM/Unlit"):
-            out["extensions"][EXTENSION]["shadeMultiplyTexture"] = {"index": int(textures["_MainTex"])}
+            out["extensions"][EXTENSION]["shadeMultiplyTexture"] = {"index": main}
     if "name" in material:
         out["name"] = material["name"]
     return out
+
+
+@checks_arguments
+def file_materials(document: dict[str, Any]) -> list[dict[str, Any]]:
+    """The glTF materials of a document as a VRM viewer reads them: a VRM 0.x's turned into the 1.0 form by
+    :func:`from_vrm0` where its ``VRM`` extension has material properties for them, every other one as it is."""
+    vrm = (document.get("extensions") or {}).get("VRM")
+    v0 = vrm.get("materialProperties") if isinstance(vrm, dict) else None
+    v0 = v0 if isinstance(v0, list) else []
+    return [
+        from_vrm0(v0[i], m) if i < len(v0) and isinstance(v0[i], dict) else m
+        for i, m in enumerate(document.get("materials", []))
+    ]
 
 
 def _color(value: Any, default: tuple[float, float, float], where: str) -> tuple[float, float, float]:
@@ -233,8 +272,9 @@ def read_mtoon(material: dict[str, Any], n_textures: int = 0) -> MToon | None:
         raise ConfigError(f"{name}'s outline width mode is {mode!r}, not one of {', '.join(OUTLINE_MODES)}")
     shade_texture = None
     ref = ext.get("shadeMultiplyTexture")
-    if isinstance(ref, dict) and 0 <= int(ref.get("index", -1)) < n_textures:
-        shade_texture = int(ref["index"])
+    if isinstance(ref, dict) and "index" in ref:
+        index = _numbers(ref["index"], 1, f"{name}'s shade multiply texture")[0]
+        shade_texture = int(index) if 0 <= index < n_textures else None
     return MToon(
         shade_color=_color(ext.get("shadeColorFactor"), (0.0, 0.0, 0.0), f"{name}'s shade colour"),
         shade_texture=shade_texture,
