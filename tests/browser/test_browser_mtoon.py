@@ -1,22 +1,24 @@
 """A VRM's toon shading (MToon): the page and the MP4 against a plain three-vrm rendering of its GLB.
 
 The character is generated (:class:`tests.character_rigs.RigSpec` ``mtoon``): a VRM 1.0 whose three textured
-materials (as in :mod:`tests.browser.test_browser_materials`) are toon-shaded in ``VRMC_materials_mtoon``, each
-shade colour far from its base colour (the skin's shade purple, the clothes' green), with shading shifts and
-toony factors, the base texture as shade multiply texture, a rim and a screen-space outline on the skin, a
-world-space outline lit half on the clothes, the masked sleeves double-sided with a hard edge. Our motion is
+materials (as in :mod:`tests.browser.test_browser_materials`) are toon-shaded in ``VRMC_materials_mtoon``, and
+its VRM 0.x twin with the same MToon in ``materialProperties``: each shade colour far from its base colour (the
+skin's shade purple, the clothes' green), shading shifts and toony factors, the base texture as shade multiply
+texture, a rim and a screen-space outline on the skin, a world-space outline lit half on the clothes, the masked
+sleeves double-sided with a hard edge. Our motion is
 retargeted onto it and written with it (:func:`gesturekit.character.export_character_glb`); the *reference*
 is that GLB opened by three.js's ``GLTFLoader`` with three-vrm's ``VRMLoaderPlugin`` in headless Chromium, its
 clip played to the time shown, drawn with nothing of ours: the same camera, the look's ambient and directional
-lights. Against it, at three times of the motion, as :mod:`tests.browser.test_browser_materials` measures:
+lights. Against it, at 1280 x 800 pixels and three times of the motion, as
+:mod:`tests.browser.test_browser_materials` measures:
 
 - the page (:func:`gesturekit.viz.viewer.skeleton_viewer` with ``character=``), its canvas screenshotted;
 - the MP4's renderer (:class:`gesturekit.viz.render.SkeletonScene`), the reference drawn through its camera;
 - ``plain``: the same GLB drawn by three.js's ``GLTFLoader`` alone, which ignores MToon: it must fail the
   bounds, or the character would not tell a renderer that draws MToon from one that does not.
 
-A VRM 0.x keeps its MToon in other names and units (``materialProperties``); the parameters our reader takes
-from both versions are those three-vrm gives its materials (:func:`test_our_mtoon_parameters_are_three_vrms`).
+The parameters our reader takes from both versions (a VRM 0.x keeps its MToon in other names and units) are
+those three-vrm gives its materials (:func:`test_our_mtoon_parameters_are_three_vrms`).
 
 ``python -m tests.browser.test_browser_mtoon [--size 1280x800] [--out docs/screenshots] [--every] [--vrm0]``
 prints the figures, and those of the page and the MP4 with the MToon left out for comparison; with ``--out``
@@ -55,11 +57,16 @@ def _fails(row: dict) -> bool:
     return not (row["iou"] >= MIN_IOU and row["difference"] <= MAX_DIFFERENCE)
 
 
-@pytest.fixture(scope="module")
-def figures(tmp_path_factory):
+#: The pictures' size, pixels: a laptop's browser window.
+SIZE = (1280, 800)
+
+
+@pytest.fixture(scope="module", params=["vrm1", "vrm0"])
+def figures(request, tmp_path_factory):
     folder = tmp_path_factory.mktemp("mtoon")
+    spec = TOON if request.param == "vrm1" else TOON0
     try:
-        return measure(folder, (640, 400), spec=TOON, vrm=True, plain=True, name="mtoon")
+        return measure(folder, SIZE, spec=spec, vrm=True, plain=True, name="mtoon")
     except RuntimeError as exc:  # no node to bundle the reference with
         pytest.skip(f"no browser test: {exc}")
 
