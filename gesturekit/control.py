@@ -21,7 +21,7 @@ import io
 import json
 import os
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -562,6 +562,29 @@ def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack
     records = table.to_dict("records") if isinstance(table, pd.DataFrame) else [dict(r) for r in table]
     groups: dict[tuple[float, float], list[tuple[str, str]]] = {}
     first_row: dict[tuple[float, float], int] = {}
+    for i, seg in filled_rows(records):
+        key = (seg.start_s, seg.end_s)
+        name, value = seg.constraints[0]
+        if any(n == name for n, _ in groups.get(key, [])):
+            raise ConfigError(
+                f"control row {i}: {name} is set twice for {seg.start_s:g}-{seg.end_s:g} s "
+                f"(also in row {first_row[key]})"
+            )
+        groups.setdefault(key, []).append((name, value))
+        first_row.setdefault(key, i)
+    return ControlTrack(tuple(Segment(a, b, tuple(c)) for (a, b), c in groups.items()))
+
+
+@checks_arguments
+def filled_rows(records: Iterable[Mapping]) -> Iterator[tuple[int, Segment]]:
+    """Each filled row of a control table, checked: (its number counted from 1, a segment of its one
+    constraint); rows left blank (just added in an editor) are skipped.
+
+    Raises
+    ------
+    ConfigError
+        A row with a missing or invalid value, or end not after start; the message names the row.
+    """
     for i, r in enumerate(records, start=1):
         cells = [r.get(c) for c in SEGMENT_COLUMNS]
         if all(_is_blank(v) for v in cells):
@@ -579,18 +602,9 @@ def track_from_segments(table: pd.DataFrame | Sequence[Mapping]) -> ControlTrack
                 f"control row {i}: unknown constraint {text!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}"
             )
         try:
-            Segment(start, end, (_constraint_pair(text),))
+            yield i, Segment(start, end, (_constraint_pair(text),))
         except ConfigError as exc:
             raise ConfigError(f"control row {i}: {exc.problem}") from None
-        key = (round(start, 6), round(end, 6))
-        name = text.split("=", 1)[0]
-        if any(n == name for n, _ in groups.get(key, [])):
-            raise ConfigError(
-                f"control row {i}: {name} is set twice for {start:g}-{end:g} s (also in row {first_row[key]})"
-            )
-        groups.setdefault(key, []).append(_constraint_pair(text))
-        first_row.setdefault(key, i)
-    return ControlTrack(tuple(Segment(a, b, tuple(c)) for (a, b), c in groups.items()))
 
 
 def _constraint_pair(text: str) -> tuple[str, str]:

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._arguments import checks_arguments
-from .control import CONSTRAINT_CHOICES, CONSTRAINTS, SEGMENT_COLUMNS, ControlTrack, Segment, empty_segments
+from .control import CONSTRAINTS, SEGMENT_COLUMNS, ControlTrack, Segment, empty_segments, filled_rows
 from .errors import ConfigError
 from .skeleton import FPS
 
@@ -76,44 +76,9 @@ def curve_attribute(lane: str) -> str | None:
     return attrs[0] if len(attrs) == 1 else None
 
 
-def _is_blank(value: object) -> bool:
-    if value is None:
-        return True
-    if isinstance(value, str):
-        return not value.strip()
-    import pandas as pd  # kept local: only the table needs pandas
-
-    try:
-        return bool(pd.isna(value))
-    except (TypeError, ValueError):
-        return False
-
-
 def _checked(records: Iterable[Mapping]) -> list[tuple[float, float, str, str]]:
     """(start, end, lane, level) of each filled row, in row order; a bad row raises, named from 1."""
-    out: list[tuple[float, float, str, str, int]] = []
-    for i, r in enumerate(records, start=1):
-        cells = [r.get(c) for c in SEGMENT_COLUMNS]
-        if all(_is_blank(v) for v in cells):
-            continue  # a row just added in the editor
-        missing = [c for c, v in zip(SEGMENT_COLUMNS, cells) if _is_blank(v)]
-        if missing:
-            raise ConfigError(f"control row {i}: fill in {', '.join(missing)}")
-        try:
-            start, end = float(r["start_s"]), float(r["end_s"])
-        except (TypeError, ValueError):
-            raise ConfigError(f"control row {i}: start_s and end_s must be numbers of seconds") from None
-        text = str(r["constraint"]).strip()
-        if text not in CONSTRAINT_CHOICES:
-            raise ConfigError(
-                f"control row {i}: unknown constraint {text!r}; choose one of {', '.join(CONSTRAINT_CHOICES)}"
-            )
-        lane, _, level = text.partition("=")
-        try:
-            seg = Segment(start, end, ((lane, level),))
-        except ConfigError as exc:
-            raise ConfigError(f"control row {i}: {exc.problem}") from None
-        out.append((seg.start_s, seg.end_s, lane, level, i))
+    out = [(seg.start_s, seg.end_s, *seg.constraints[0], i) for i, seg in filled_rows(records)]
     by_lane: dict[str, list[tuple[float, float, int]]] = {}
     for start, end, lane, _, i in out:
         by_lane.setdefault(lane, []).append((start, end, i))

@@ -43,7 +43,9 @@ within 4.4 and 9.8 (8.7 and 16.4 with none). At -24 % no wrist within 5 % of
 the reach does better: with the same elbow angle a shorter upper arm points
 further from the line from shoulder to wrist, and turning the arm back onto our
 directions moves the hand sideways by about a tenth of the arm in a right-angled
-elbow; a median of 4 degrees there needs 5.5 %. ``wrist_slack=0`` is the other
+elbow; no wrist off the arm's plane and no swivel of the elbow about the line to
+the wrist does better (the tests search both), and a collar that took part of the
+reach would move the target with the shoulder; a median of 4 degrees there needs 5.5 %. ``wrist_slack=0`` is the other
 end: the hands exactly at our scaled reach (``bench/bench_arms.py``).
 
 **The torso proxy**: a capsule around their spine from the pelvis up, of radius

@@ -373,6 +373,9 @@ def test_a_browser_without_a_microphone_is_told_so_and_offered_a_file(app_env, m
     (warning,) = [shown(w.value) for w in at.warning if "microphone" in shown(w.value)]
     assert "No microphone was found" in warning and "Live from a file" in warning
     assert "NotFoundError" not in warning
+    # nor a hint to press a Start that is not there: the hint points at the file player
+    hints = [shown(i.value) for i in at.info]
+    assert not any("Start" in h for h in hints) and any("Live from a file" in h for h in hints), hints
     calls = len(mic.calls)
     at.run()
     assert len(mic.calls) == calls  # no Start that would fail with the browser's own error

@@ -145,6 +145,17 @@ def test_a_curve_drawn_in_a_lane_gives_a_level_per_step(served):
         app_browser.open_app(page, url, "Synthesize", heading="Synthesize")
         app_browser.upload(page, wav)
         app_browser.synthesize_ready(page)
+        # at a laptop's width no lane's level buttons reach into its track, and every track starts at one x
+        frame = app_browser.timeline_frame(page)
+        edges = frame.evaluate(
+            """() => [...document.querySelectorAll('.row.lane')].map((row) => [
+                row.dataset.lane,
+                row.querySelector('.levels').getBoundingClientRect().right,
+                row.querySelector('.track').getBoundingClientRect().left])"""
+        )
+        assert len(edges) == 8
+        assert [lane for lane, right, left in edges if right > left] == [], edges
+        assert len({round(left, 1) for _, _, left in edges}) == 1, edges
         app_browser.timeline(page).locator('button.curve[data-lane="right_hand"]').click()
         track = app_browser.lane_track(page, "right_hand")
         track.scroll_into_view_if_needed()

@@ -40,8 +40,9 @@ def _number(col, label: str, name: str, **options):
     (an empty box: None, the field's default where it is None)."""
     lim = _limits(name)
     key = state.persistent_key(f"study.{name}", lim["default"])
+    help_ = lim["help"] + (f" (empty: {lim['default_help']})" if lim["default_help"] else "")
     return col.number_input(
-        label, min_value=lim["min"], max_value=lim["max"], step=lim["step"], key=key, help=lim["help"], **options
+        label, min_value=lim["min"], max_value=lim["max"], step=lim["step"], key=key, help=help_, **options
     )
 
 
@@ -74,14 +75,16 @@ def settings(db: MatchingDatabase) -> dict:
             "Systems",
             list(SYSTEMS),
             key=pk("study.systems", list(_limits("systems")["start"])),
-            format_func=lambda s: f"{s}: {SYSTEM_DESCRIPTIONS[s]}",
-            help=_limits("systems")["help"],
+            # short names on the chips so several fit a laptop's column; what each is, in the help and below
+            help=_limits("systems")["help"]
+            + "\n\n"
+            + "\n".join(f"- **{s}**: {SYSTEM_DESCRIPTIONS[s]}" for s in SYSTEMS),
         )
+        if systems:
+            st.caption(" · ".join(f"**{s}**: {SYSTEM_DESCRIPTIONS[s]}" for s in systems))
         c = st.columns(3)
         seed = ss["study.seed"] = _number(c[0], "Seed", "seed")
-        participants = ss["study.participants"] = _number(
-            c[1], "Participants", "participants", placeholder=_limits("participants")["default_help"]
-        )
+        participants = ss["study.participants"] = _number(c[1], "Participants", "participants", placeholder="auto")
         resolution = ss["study.resolution"] = c[2].selectbox(
             "Resolution",
             RESOLUTIONS,

@@ -163,8 +163,13 @@ def live_panel(db: MatchingDatabase, stage: live.LiveStage, playing: bool, from_
     if session is not None and session.error:
         st.error(display.escape_markdown(session.error), icon=":material/error:")
     if view is None:
-        hint = "Listening: the body moves once the first second of speech has arrived…" if playing else ""
-        st.info(hint or "Press **Start** above and allow the microphone; then speak.", icon=":material/mic:")
+        if playing:
+            hint = "Listening: the body moves once the first second of speech has arrived…"
+        elif st.session_state.get(_NO_MIC):  # no Start to press: say where the body comes from instead
+            hint = "Upload a speech file in **Live from a file** above and play it: the body appears here."
+        else:
+            hint = "Press **Start** above and allow the microphone; then speak."
+        st.info(hint, icon=":material/mic:")
     else:
         title = f"speech {view.speech_s:.1f} s · frame {view.frame} · {view.control or 'free'}"
         made_with = session.db  # the sidebar may have changed since it began

@@ -176,7 +176,22 @@ function build() {
   const cursor = el("div");
   cursor.id = "cursor";
   root.append(cursor);
+  fitNames(root);
   new ResizeObserver(() => { drawWave(); placeCursor(); }).observe(wtrack);
+}
+
+// The names' column is as wide as the widest lane needs (a name and its level buttons), so no
+// button reaches into the lanes; all rows share the width so the tracks stay aligned in time.
+function fitNames(root) {
+  let need = LABEL_W;
+  for (const name of root.querySelectorAll(".row.lane .name")) {
+    const css = getComputedStyle(name);
+    const pad = parseFloat(css.paddingLeft) + parseFloat(css.paddingRight) + parseFloat(css.columnGap || "0");
+    const label = name.querySelector(".label");
+    const levels = name.querySelector(".levels");
+    need = Math.max(need, Math.ceil(label.scrollWidth + levels.getBoundingClientRect().width + pad + 2));
+  }
+  document.documentElement.style.setProperty("--label-w", need + "px");
 }
 
 function drawWave() {
