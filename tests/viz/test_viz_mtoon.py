@@ -19,6 +19,7 @@ import pyvista as pv
 from gesturekit.character.look import LIGHTS, linear_to_srgb, srgb_to_linear
 from gesturekit.character.materials import SkinMaterial
 from gesturekit.character.mtoon import MToon, mtoon_shade
+from gesturekit.motion import Motion
 from gesturekit.viz.character_mtoon import MToonActors, outline_points
 from gesturekit.viz.render import _opengl_window_choice
 
@@ -140,3 +141,24 @@ def test_an_outline_is_pushed_out_by_its_width_in_metres_or_in_the_pictures_heig
     out = np.zeros_like(v)
     assert outline_points(v, n, screen, CAMERA, out=out) is out
     np.testing.assert_allclose(out, want)
+
+
+@pytest.mark.slow
+def test_the_rendering_processes_draw_the_toon_shaded_character_as_this_one_does(tmp_path):
+    """The MToon travels with the character to the rendering processes: their frames are this process's, and
+    not those of the same character with its MToon left out."""
+    from gesturekit.character.user import read_character
+    from gesturekit.viz.render_pool import render_frames
+    from tests.browser.test_browser_materials import motion, without_mtoon
+    from tests.character_rigs import RigSpec, write_rig
+
+    ch = read_character(write_rig(tmp_path, RigSpec(naming="vrm1", rest="A", textured=True, mtoon=True), "toon"))
+    full = motion()
+    m = Motion(full.positions[:20], full.fps, full.presence)
+    serial = list(render_frames([m], resolution=(96, 64), workers=1, character=ch))
+    pooled = list(render_frames([m], resolution=(96, 64), workers=2, character=ch))
+    assert len(serial) == len(pooled) == 20
+    for one, other in zip(serial, pooled):
+        np.testing.assert_array_equal(one, other)
+    plain = next(render_frames([m], resolution=(96, 64), workers=1, character=without_mtoon(ch)))
+    assert np.abs(serial[0].astype(int) - plain.astype(int)).mean() > 2
