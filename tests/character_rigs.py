@@ -123,6 +123,9 @@ class RigSpec:
         as UniVRM writes them): a shading shift and toony per material, the base texture as shade multiply
         texture, a rim and a screen-space outline on the skin, a world-space outline lit half on the clothes.
         With ``textured`` the most of it; alone, on the two plain materials.
+    normal_map : bool
+        With ``textured``: a tangent-space normal map on the clothes (tilted squares, no TANGENT attribute), as
+        a textured character's clothes have.
     seed : int
         The texture's colours.
     fmt : str
@@ -146,6 +149,7 @@ class RigSpec:
     texture: bool = False
     textured: bool = False
     mtoon: bool = False
+    normal_map: bool = False
     seed: int = 0
     fmt: str = "glb"
 
@@ -158,6 +162,8 @@ class RigSpec:
             raise ValueError(f"fmt must be 'glb' or 'bvh', not {self.fmt!r}")
         if self.fmt == "bvh" and self.naming in ("vrm0", "vrm1"):
             raise ValueError("a VRM character is a glTF file, not BVH")
+        if self.normal_map and not self.textured:
+            raise ValueError("a normal map needs the textured materials' UVs")
         if self.mtoon and self.naming not in ("vrm0", "vrm1"):
             raise ValueError("MToon materials are a VRM's")
         if not 2 <= self.spine_bones <= 4:
@@ -651,6 +657,8 @@ def _gltf(spec: RigSpec) -> bytes:
         if spec.textured:
             attributes["TEXCOORD_0"] = buf.add(uv, "VEC2", FLOAT, target=ARRAY_BUFFER)
             _textured_materials(doc, buf, materials)
+            if spec.normal_map:
+                _normal_map(doc, buf, materials[1])
         primitives = []
         for material, faces in enumerate((skin_faces, cloth_faces, mask_faces)):
             if len(faces):
@@ -730,6 +738,19 @@ def _textured_materials(doc: dict[str, Any], buf: GlbBuffer, materials: list[dic
             "doubleSided": True,
         }
     )
+
+
+def _normal_map(doc: dict[str, Any], buf: GlbBuffer, material: dict[str, Any]) -> None:
+    """A tangent-space normal map (64 x 64, squares tilted +-0.6 across and +-0.5 along) as ``material``'s."""
+    n = 64
+    y, x = np.mgrid[0:n, 0:n]
+    nx, ny = np.where((x // 16) % 2 == 0, 0.6, -0.6), np.where((y // 16) % 2 == 0, 0.5, -0.5)
+    rgb = np.stack([nx, ny, np.sqrt(1 - nx**2 - ny**2)], axis=-1) * 127.5 + 127.5
+    doc["images"].append(
+        {"name": "bumps", "bufferView": _embed_png(buf, _png(n, n, rgb.astype(np.uint8))), "mimeType": "image/png"}
+    )
+    doc["textures"].append({"sampler": 0, "source": len(doc["images"]) - 1})
+    material["normalTexture"] = {"index": len(doc["textures"]) - 1, "scale": 1.0}
 
 
 def _vrm_extension(doc: dict[str, Any], spec: RigSpec, bones: list, offset: int) -> None:

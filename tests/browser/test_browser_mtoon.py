@@ -1,24 +1,25 @@
 """A VRM's toon shading (MToon): the page and the MP4 against a plain three-vrm rendering of its GLB.
 
 The character is generated (:class:`tests.character_rigs.RigSpec` ``mtoon``): a VRM 1.0 whose three textured
-materials (as in :mod:`tests.browser.test_browser_materials`) are toon-shaded in ``VRMC_materials_mtoon``, and
-its VRM 0.x twin with the same MToon in ``materialProperties``: each shade colour far from its base colour (the
-skin's shade purple, the clothes' green), shading shifts and toony factors, the base texture as shade multiply
-texture, a rim and a screen-space outline on the skin, a world-space outline lit half on the clothes, the masked
-sleeves double-sided with a hard edge. Our motion is
-retargeted onto it and written with it (:func:`gesturekit.character.export_character_glb`); the *reference*
-is that GLB opened by three.js's ``GLTFLoader`` with three-vrm's ``VRMLoaderPlugin`` in headless Chromium, its
-clip played to the time shown, drawn with nothing of ours: the same camera, the look's ambient and directional
-lights. Against it, at 1280 x 800 pixels and three times of the motion, as
-:mod:`tests.browser.test_browser_materials` measures:
+materials (as in :mod:`tests.browser.test_browser_materials`) are toon-shaded in ``VRMC_materials_mtoon``, and its
+VRM 0.x twin with the same MToon in ``materialProperties``: each shade colour far from its base colour (the skin's
+shade purple, the clothes' green), shading shifts and toony factors, the base texture as shade multiply texture, a
+rim and a screen-space outline on the skin, a world-space outline lit half on the clothes, the masked sleeves
+double-sided with a hard edge. Our motion is retargeted onto it and written with it
+(:func:`gesturekit.character.export_character_glb`); the *reference* is that GLB opened by three.js's
+``GLTFLoader`` with three-vrm's ``VRMLoaderPlugin`` in headless Chromium, its clip played to the time shown, drawn
+with nothing of ours: the same camera, the look's ambient and directional lights. Against it, at 1280 x 800 pixels
+and three times of the motion, as :mod:`tests.browser.test_browser_materials` measures:
 
 - the page (:func:`gesturekit.viz.viewer.skeleton_viewer` with ``character=``), its canvas screenshotted;
 - the MP4's renderer (:class:`gesturekit.viz.render.SkeletonScene`), the reference drawn through its camera;
 - ``plain``: the same GLB drawn by three.js's ``GLTFLoader`` alone, which ignores MToon: it must fail the
   bounds, or the character would not tell a renderer that draws MToon from one that does not.
 
-The parameters our reader takes from both versions (a VRM 0.x keeps its MToon in other names and units) are
-those three-vrm gives its materials (:func:`test_our_mtoon_parameters_are_three_vrms`).
+With a normal map on the clothes, the page still draws what three-vrm draws
+(:func:`test_a_normal_map_under_mtoon_is_drawn_as_three_vrm_draws_it`). The parameters our reader takes from
+both versions (a VRM 0.x keeps its MToon in other names and units) are those three-vrm gives its materials
+(:func:`test_our_mtoon_parameters_are_three_vrms`).
 
 ``python -m tests.browser.test_browser_mtoon [--size 1280x800] [--out docs/screenshots] [--every] [--vrm0]``
 prints the figures, and those of the page and the MP4 with the MToon left out for comparison; with ``--out``
@@ -51,6 +52,8 @@ pytestmark = [
 #: The generated toon-shaded VRM 1.0 (and its VRM 0.x twin).
 TOON = RigSpec(naming="vrm1", rest="A", roll_seed=6, textured=True, mtoon=True)
 TOON0 = RigSpec(naming="vrm0", rest="A", roll_seed=6, textured=True, mtoon=True)
+#: The toon-shaded VRM 1.0 with a normal map on its clothes.
+BUMPY = RigSpec(naming="vrm1", rest="A", roll_seed=6, textured=True, mtoon=True, normal_map=True)
 
 
 def _fails(row: dict) -> bool:
@@ -90,6 +93,20 @@ def test_a_renderer_that_ignores_mtoon_fails_the_same_bounds(figures):
     assert len(rows) == len(TIMES)
     assert all(r["pixels"] > 2000 for r in rows)
     assert all(_fails(r) for r in rows), "the shade colours do not tell MToon from its glTF fallback"
+
+
+def test_a_normal_map_under_mtoon_is_drawn_as_three_vrm_draws_it(tmp_path):
+    """The clothes with a normal map (no tangents: three.js derives them, flipping the map's green as GLTFLoader
+    does): the page as three-vrm draws it; the MP4, which leaves normal maps out, still within the bounds."""
+    try:
+        rows = measure(tmp_path, SIZE, spec=BUMPY, vrm=True, times=TIMES[1:2], name="bumpy")
+    except RuntimeError as exc:
+        pytest.skip(f"no browser test: {exc}")
+    for r in rows:
+        print(_line(r))
+    page, mp4 = rows
+    assert page["iou"] >= MIN_IOU and page["difference"] <= 1.0, _line(page)  # the same shading, as drawn
+    assert mp4["iou"] >= MIN_IOU and mp4["difference"] <= MAX_DIFFERENCE, _line(mp4)
 
 
 def _close(a, b) -> bool:

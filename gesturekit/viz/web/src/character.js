@@ -75,7 +75,13 @@ async function fileMaterials(spec) {
   const gltf = await loader.parseAsync(bytes.buffer, "");
   const n = gltf.parser.json.materials.length;
   const made = await Promise.all(Array.from({ length: n }, (_, i) => gltf.parser.getDependency("material", i)));
-  return made.map((m) => (m.isMToonMaterial ? m : lambert(m)));
+  return made.map((m) => (m.isMToonMaterial ? mtoon(m) : lambert(m)));
+}
+
+/** An MToon material as GLTFLoader finishes it on a mesh without tangents: its normal map's green flipped. */
+function mtoon(m) {
+  if (m.normalMap) m.normalScale.y *= -1;
+  return m;
 }
 
 /** The outline of an MToon material, or null: as three-vrm outlines a VRM's primitive, the material again drawn
