@@ -10,7 +10,9 @@ linear light, per vertex, and converted to sRGB (:func:`shade`), so VTK draws
 them unlit (:class:`CharacterDrawing`) and its own light model cannot make the
 MP4 differ from the page. With a user's character (``character=``), each motion
 is retargeted onto it and its own skin and colours are drawn by the same rules
-(:mod:`gesturekit.viz.character_user`).
+(:mod:`gesturekit.viz.character_user`); its toon-shaded (MToon) materials, whose
+step between lit and shade colour is too sharp for colours per vertex, are shaded
+per fragment by the same rule as the page's (:mod:`gesturekit.viz.character_mtoon`).
 """
 
 from __future__ import annotations
