@@ -12,7 +12,10 @@ the load average (other work on the machine slows both).
 The speech is the shared BEAT recording ``../shared/data/speech/beat_lawrence_0_19_19.wav``
 (82 s) when present, else 82 s of the generated speaker.
 
-Usage: python bench/bench_video.py [--seconds 82] [--resolution 640x480] [--workers N]
+With ``--character FILE`` a third MP4 is rendered with the motions retargeted onto a user's character (a
+VRM is drawn toon-shaded, in its MToon), and its speed is printed against our character's.
+
+Usage: python bench/bench_video.py [--seconds 82] [--resolution 640x480] [--workers N] [--character FILE]
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seconds", type=float, default=82.0, help="speech length when BEAT is absent")
     parser.add_argument("--resolution", default="640x480", help="video size, WIDTHxHEIGHT")
     parser.add_argument("--workers", type=int, default=None, help="rendering processes (default: every core)")
+    parser.add_argument("--character", type=Path, default=None, help="also render on a user's character file")
     args = parser.parse_args(argv)
     width, height = (int(v) for v in args.resolution.lower().split("x"))
 
@@ -74,8 +78,14 @@ def main(argv=None) -> int:
         )
         workers = args.workers or default_workers()
         runs = {}
-        for look in ("capsules", "character"):
-            out = tmp / f"{look}.mp4"
+        character = None
+        if args.character is not None:
+            from gesturekit.character.user import read_character
+
+            character = read_character(args.character)
+        looks = ("capsules", "character") + (() if character is None else (args.character.name,))
+        for look in looks:
+            out = tmp / "user.mp4" if look == getattr(args.character, "name", None) else tmp / f"{look}.mp4"
             load = os.getloadavg()[0]
             cpu, t0 = _cpu_seconds(), time.perf_counter()
             render_video(
@@ -86,7 +96,8 @@ def main(argv=None) -> int:
                 labels=("k-NN", "k-NN + refiner"),
                 resolution=(width, height),
                 workers=workers,
-                style=RenderStyle(look=look),
+                style=RenderStyle(look="capsules" if look == "capsules" else "character"),
+                character=character if look not in ("capsules", "character") else None,
             )
             wall, cpu = time.perf_counter() - t0, _cpu_seconds() - cpu
             frames = round(len(result.audio) / 16000 * left.fps)
@@ -96,6 +107,9 @@ def main(argv=None) -> int:
                 f"(load average before: {load:.1f})"
             )
         print(f"character vs capsules: {runs['character'] / runs['capsules']:.2f}x the frames per second")
+        if character is not None:
+            mine = runs[args.character.name] / runs["character"]
+            print(f"{args.character.name} vs our character: {mine:.2f}x the frames per second")
     return 0
 
 

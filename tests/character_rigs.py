@@ -116,6 +116,16 @@ class RigSpec:
         (linear, mipmapped), the clothes a 64 x 64 checker (nearest), the forearms a striped RGBA image under
         alpha MASK (double-sided, every other stripe cut away); TEXCOORD_0 around and along each tube, the
         seam's vertices doubled as exporters write them.
+    mtoon : bool
+        VRM only: every material toon-shaded as VRoid exports them, its shade colour far from its base colour
+        (VRM 1.0: ``VRMC_materials_mtoon`` in each material; VRM 0.x: the ``VRM`` extension's
+        ``materialProperties``, shader ``VRM/MToon``, sRGB colours, the glTF materials ``KHR_materials_unlit``
+        as UniVRM writes them): a shading shift and toony per material, the base texture as shade multiply
+        texture, a rim and a screen-space outline on the skin, a world-space outline lit half on the clothes.
+        With ``textured`` the most of it; alone, on the two plain materials.
+    normal_map : bool
+        With ``textured``: a tangent-space normal map on the clothes (tilted squares, no TANGENT attribute), as
+        a textured character's clothes have.
     seed : int
         The texture's colours.
     fmt : str
@@ -138,6 +148,8 @@ class RigSpec:
     mesh: bool = True
     texture: bool = False
     textured: bool = False
+    mtoon: bool = False
+    normal_map: bool = False
     seed: int = 0
     fmt: str = "glb"
 
@@ -150,6 +162,10 @@ class RigSpec:
             raise ValueError(f"fmt must be 'glb' or 'bvh', not {self.fmt!r}")
         if self.fmt == "bvh" and self.naming in ("vrm0", "vrm1"):
             raise ValueError("a VRM character is a glTF file, not BVH")
+        if self.normal_map and not self.textured:
+            raise ValueError("a normal map needs the textured materials' UVs")
+        if self.mtoon and self.naming not in ("vrm0", "vrm1"):
+            raise ValueError("MToon materials are a VRM's")
         if not 2 <= self.spine_bones <= 4:
             raise ValueError(f"spine_bones must be 2..4, not {self.spine_bones}")
 
@@ -641,6 +657,8 @@ def _gltf(spec: RigSpec) -> bytes:
         if spec.textured:
             attributes["TEXCOORD_0"] = buf.add(uv, "VEC2", FLOAT, target=ARRAY_BUFFER)
             _textured_materials(doc, buf, materials)
+            if spec.normal_map:
+                _normal_map(doc, buf, materials[1])
         primitives = []
         for material, faces in enumerate((skin_faces, cloth_faces, mask_faces)):
             if len(faces):
@@ -651,6 +669,8 @@ def _gltf(spec: RigSpec) -> bytes:
         nodes.append({"name": "body", "mesh": 0, "skin": 0})
         doc["scenes"][0]["nodes"].append(len(nodes) - 1)
     _vrm_extension(doc, spec, bones, offset)
+    if spec.mtoon and spec.mesh:
+        _mtoon_materials(doc, spec)
     doc["bufferViews"] = buf.views
     doc["accessors"] = buf.accessors
     doc["buffers"] = [{"byteLength": len(buf.data) + (-len(buf.data) % 4)}]
@@ -720,6 +740,19 @@ def _textured_materials(doc: dict[str, Any], buf: GlbBuffer, materials: list[dic
     )
 
 
+def _normal_map(doc: dict[str, Any], buf: GlbBuffer, material: dict[str, Any]) -> None:
+    """A tangent-space normal map (64 x 64, squares tilted +-0.6 across and +-0.5 along) as ``material``'s."""
+    n = 64
+    y, x = np.mgrid[0:n, 0:n]
+    nx, ny = np.where((x // 16) % 2 == 0, 0.6, -0.6), np.where((y // 16) % 2 == 0, 0.5, -0.5)
+    rgb = np.stack([nx, ny, np.sqrt(1 - nx**2 - ny**2)], axis=-1) * 127.5 + 127.5
+    doc["images"].append(
+        {"name": "bumps", "bufferView": _embed_png(buf, _png(n, n, rgb.astype(np.uint8))), "mimeType": "image/png"}
+    )
+    doc["textures"].append({"sampler": 0, "source": len(doc["images"]) - 1})
+    material["normalTexture"] = {"index": len(doc["textures"]) - 1, "scale": 1.0}
+
+
 def _vrm_extension(doc: dict[str, Any], spec: RigSpec, bones: list, offset: int) -> None:
     humans = [(b[4], i + offset) for i, b in enumerate(bones) if b[4] is not None]
     if spec.naming == "vrm0":
@@ -737,6 +770,107 @@ def _vrm_extension(doc: dict[str, Any], spec: RigSpec, bones: list, offset: int)
                 "humanoid": {"humanBones": {h: {"node": n} for h, n in humans}},
             }
         }
+
+
+#: Each material's toon shading (VRM 1.0 form, linear colours), by the material's name: the shade colours far from
+#: the base colours (a renderer that ignores MToon draws another picture), the skin with a rim and an outline in
+#: screen coordinates, the clothes with an outline in world coordinates lit half, the sleeves a hard edge.
+_MTOON = {
+    "skin": {
+        "shadeColorFactor": [0.55, 0.22, 0.45],
+        "shadingShiftFactor": -0.1,
+        "shadingToonyFactor": 0.9,
+        "parametricRimColorFactor": [0.3, 0.22, 0.1],
+        "parametricRimFresnelPowerFactor": 3.0,
+        "parametricRimLiftFactor": 0.05,
+        "rimLightingMixFactor": 0.5,
+        "outlineWidthMode": "screenCoordinates",
+        "outlineWidthFactor": 0.006,
+        "outlineColorFactor": [0.12, 0.04, 0.08],
+        "outlineLightingMixFactor": 0.0,
+    },
+    "cloth": {
+        "shadeColorFactor": [0.08, 0.3, 0.12],
+        "shadingShiftFactor": 0.15,
+        "shadingToonyFactor": 0.75,
+        "outlineWidthMode": "worldCoordinates",
+        "outlineWidthFactor": 0.006,
+        "outlineColorFactor": [0.05, 0.05, 0.2],
+        "outlineLightingMixFactor": 0.5,
+    },
+    "sleeves": {"shadeColorFactor": [0.35, 0.02, 0.3], "shadingShiftFactor": 0.0, "shadingToonyFactor": 0.97},
+}
+
+
+def _srgb(values: list[float]) -> list[float]:
+    """Linear colours as a VRM 0.x stores them (Unity's gamma space, three-vrm reads them back by ``** 2.2``)."""
+    return [round(float(v) ** (1 / 2.2), 6) for v in values]
+
+
+def _mtoon_materials(doc: dict[str, Any], spec: RigSpec) -> None:
+    """Toon-shade every material of ``doc`` (:data:`_MTOON`), in the form of the spec's VRM version."""
+    materials = doc["materials"]
+    if spec.naming == "vrm1":
+        for m in materials:
+            ext = {"specVersion": "1.0", **_MTOON[m["name"]]}
+            base = m["pbrMetallicRoughness"].get("baseColorTexture")
+            if base is not None and m["name"] != "sleeves":
+                ext["shadeMultiplyTexture"] = {"index": base["index"]}
+            m["extensions"] = {"VRMC_materials_mtoon": ext}
+            if m["name"] == "cloth":
+                m["emissiveFactor"] = [0.02, 0.02, 0.06]
+        doc["extensionsUsed"].append("VRMC_materials_mtoon")
+        return
+    # VRM 0.x, as UniVRM writes it: unlit glTF materials, the MToon beside them
+    properties = []
+    for m in materials:
+        v1 = _MTOON[m["name"]]
+        pbr = m["pbrMetallicRoughness"]
+        color = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0])
+        textures = {}
+        if "baseColorTexture" in pbr:
+            textures["_MainTex"] = pbr["baseColorTexture"]["index"]
+            if m["name"] != "sleeves":
+                textures["_ShadeTexture"] = pbr["baseColorTexture"]["index"]
+        floats = {
+            "_ShadeShift": -float(v1["shadingShiftFactor"]),
+            "_ShadeToony": float(v1["shadingToonyFactor"]),
+            "_CullMode": 0.0 if m.get("doubleSided") else 2.0,
+            "_Cutoff": float(m.get("alphaCutoff", 0.5)),
+            "_OutlineWidthMode": {"none": 0.0, "worldCoordinates": 1.0, "screenCoordinates": 2.0}[
+                v1.get("outlineWidthMode", "none")
+            ],
+            "_OutlineWidth": 100.0 * float(v1.get("outlineWidthFactor", 0.0)),
+            "_OutlineColorMode": 1.0 if v1.get("outlineLightingMixFactor", 0.0) > 0 else 0.0,
+            "_OutlineLightingMix": float(v1.get("outlineLightingMixFactor", 0.0)),
+            "_RimFresnelPower": float(v1.get("parametricRimFresnelPowerFactor", 1.0)),
+            "_RimLift": float(v1.get("parametricRimLiftFactor", 0.0)),
+            "_RimLightingMix": float(v1.get("rimLightingMixFactor", 0.0)),
+            "_ZWrite": 1.0,
+        }
+        vectors = {
+            "_Color": [*_srgb(color[:3]), float(color[3])],
+            "_ShadeColor": [*_srgb(v1["shadeColorFactor"]), 1.0],
+            "_RimColor": [*_srgb(v1.get("parametricRimColorFactor", [0.0, 0.0, 0.0])), 1.0],
+            "_OutlineColor": [*_srgb(v1.get("outlineColorFactor", [0.0, 0.0, 0.0])), 1.0],
+            "_MainTex": [0.0, 0.0, 1.0, 1.0],
+        }
+        keywords = {"_ALPHATEST_ON": True} if m.get("alphaMode") == "MASK" else {}
+        properties.append(
+            {
+                "name": m["name"],
+                "shader": "VRM/MToon",
+                "renderQueue": 2450 if keywords else 2000,
+                "floatProperties": floats,
+                "vectorProperties": vectors,
+                "textureProperties": textures,
+                "keywordMap": keywords,
+                "tagMap": {"RenderType": "TransparentCutout" if keywords else "Opaque"},
+            }
+        )
+        m["extensions"] = {"KHR_materials_unlit": {}}
+    doc["extensions"]["VRM"]["materialProperties"] = properties
+    doc["extensionsUsed"].append("KHR_materials_unlit")
 
 
 # ----------------------------------------------------------------------------- BVH

@@ -1,13 +1,14 @@
 """The character guide's pictures: one character of each family, driven by a synthesis result, in the page and the MP4.
 
 Each character is generated here with the properties of its family (no third-party asset): a Mixamo-like GLB
-(``mixamorig:`` names, T-pose), a VRM 1.0-like file (its humanoid map, VRoid-like node names, A-pose), a Blender
-export (``upper_arm.L``-style names, A-pose, rolled bones), each with a generated texture of its own colours, and
-a mocap BVH laid out as the common CMU conversion writes it (CMU names, zero-length ``Neck`` and shoulder bones,
-its own unit). The motion is a synthesis of the demo speaker's 8 s example on the demo database. For each family,
-the viewer's page (as the app and ``character_view`` show it) is screenshotted in headless Chromium and the MP4
-(:func:`gesturekit.export.video.render_video`) decoded, both at one frame, and written into docs/screenshots as
-``character-mixamo-page.png`` and ``character-mixamo-mp4.png``, and so on for each family.
+(``mixamorig:`` names, T-pose), a VRM 1.0-like file (its humanoid map, VRoid-like node names, A-pose, its materials
+toon-shaded in MToon with outlines), a Blender export (``upper_arm.L``-style names, A-pose, rolled bones), each
+with a generated texture of its own colours, and a mocap BVH laid out as the common CMU conversion writes it (CMU
+names, zero-length ``Neck`` and shoulder bones, its own unit). The motion is a synthesis of the demo speaker's 8 s
+example on the demo database. For each family, the viewer's page (as the app and ``character_view`` show it) is
+screenshotted in headless Chromium and the MP4 (:func:`gesturekit.export.video.render_video`) decoded, both at one
+frame, and written into docs/screenshots as ``character-mixamo-page.png`` and ``character-mixamo-mp4.png``, and so
+on for each family.
 
 Usage (from the repository's root, with the viewer's bundle built: ``python gesturekit/viz/web/build.py``)::
 
@@ -28,7 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 #: Family -> (file name, what it stands for).
 FAMILIES = {
     "mixamo": ("mixamo-character.glb", "a Mixamo download: mixamorig: names, T-pose"),
-    "vrm": ("avatar.vrm", "a VRM 1.0 avatar: its humanoid map, A-pose"),
+    "vrm": ("avatar.vrm", "a VRM 1.0 avatar: its humanoid map, A-pose, toon-shaded (MToon)"),
     "blender": ("blender-export.glb", "a Blender export: .L/.R names, A-pose, rolled bones"),
     "bvh": ("cmu-mocap.bvh", "a mocap BVH: CMU names, zero-length Neck and shoulders"),
 }
@@ -48,7 +49,7 @@ def character_file(family: str, folder: Path) -> Path:
         return path
     spec = {
         "mixamo": RigSpec(naming="mixamo", rest="T", texture=True, seed=3),
-        "vrm": RigSpec(naming="vrm1", rest="A", texture=True, seed=5),
+        "vrm": RigSpec(naming="vrm1", rest="A", texture=True, mtoon=True, seed=5),
         "blender": RigSpec(naming="blender", rest="A", roll_seed=2, texture=True, seed=11),
     }[family]
     return write_rig(folder, spec, Path(name).stem)

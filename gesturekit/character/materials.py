@@ -25,6 +25,7 @@ import numpy as np
 from .._arguments import checks_arguments
 from ..errors import ConfigError
 from .glb import glb_bytes, read_glb
+from .mtoon import MToon, file_materials, read_mtoon
 
 __all__ = ["SkinMaterial", "materials_glb", "read_materials", "MAX_TEXTURE_PIXELS"]
 
@@ -55,6 +56,12 @@ class SkinMaterial:
     alpha_cutoff : float
         Under ``"MASK"``, texels of a smaller alpha (times the factor's) are not drawn.
     double_sided : bool
+    mtoon : MToon or None
+        The material's toon shading (a VRM's MToon, :mod:`gesturekit.character.mtoon`), or None: Lambert.
+    shade_image : int or None
+        The MToon's shade multiply texture's image, or None.
+    shade_nearest : bool
+        That texture is magnified without interpolation.
     """
 
     name: str
@@ -64,6 +71,9 @@ class SkinMaterial:
     alpha_mode: str
     alpha_cutoff: float
     double_sided: bool
+    mtoon: MToon | None = None
+    shade_image: int | None = None
+    shade_nearest: bool = False
 
 
 def _image_header(data: bytes, index: int) -> tuple[int, int]:
@@ -104,8 +114,12 @@ def materials_glb(document: dict[str, Any], binary: bytes) -> bytes:
     Raises
     ------
     ConfigError
-        An image past its buffer, unreadable, or larger than :data:`MAX_TEXTURE_PIXELS`.
+        An image past its buffer, unreadable, or larger than :data:`MAX_TEXTURE_PIXELS`; an MToon (VRM 1.0's
+        extension, VRM 0.x's material properties) with a colour or number that is not finite.
     """
+    # a VRM's MToon is checked here, where the file is read, not first where the MP4 draws it
+    for m in file_materials(document):
+        read_mtoon(m, len(document.get("textures", [])))
     out = bytearray()
     views: list[dict[str, Any]] = []
     images = []
@@ -172,19 +186,30 @@ def read_materials(glb: bytes) -> tuple[list[SkinMaterial], list[np.ndarray]]:
         with Image.open(io.BytesIO(data)) as im:
             images.append(np.asarray(im.convert("RGBA"), dtype=np.uint8))
     textures, samplers = doc.get("textures", []), doc.get("samplers", [])
+
+    def image_of(ref: Any) -> tuple[int | None, bool]:
+        """A texture reference's image and whether it is magnified without interpolation."""
+        if not isinstance(ref, dict) or not 0 <= int(ref.get("index", -1)) < len(textures):
+            return None, False
+        texture = textures[int(ref["index"])]
+        source = texture.get("source")
+        if source is None or not 0 <= int(source) < len(images):
+            return None, False
+        nearest = False
+        if "sampler" in texture and 0 <= int(texture["sampler"]) < len(samplers):
+            nearest = samplers[int(texture["sampler"])].get("magFilter") == _NEAREST
+        return int(source), nearest
+
     out = []
-    for i, m in enumerate(doc.get("materials", [])):
+    # a VRM 0.x keeps its MToon beside the materials: read as a VRM viewer reads it, as a 1.0 material
+    for i, m in enumerate(file_materials(doc)):
         pbr = m.get("pbrMetallicRoughness", {})
         factor = [float(x) for x in pbr.get("baseColorFactor", (1.0, 1.0, 1.0, 1.0))]
-        image, nearest = None, False
-        ref = pbr.get("baseColorTexture")
-        if ref is not None and 0 <= int(ref.get("index", -1)) < len(textures):
-            texture = textures[int(ref["index"])]
-            source = texture.get("source")
-            if source is not None and 0 <= int(source) < len(images):
-                image = int(source)
-                if "sampler" in texture and 0 <= int(texture["sampler"]) < len(samplers):
-                    nearest = samplers[int(texture["sampler"])].get("magFilter") == _NEAREST
+        image, nearest = image_of(pbr.get("baseColorTexture"))
+        mtoon = read_mtoon(m, len(textures))
+        shade_image, shade_nearest = (None, False)
+        if mtoon is not None and mtoon.shade_texture is not None:
+            shade_image, shade_nearest = image_of({"index": mtoon.shade_texture})
         out.append(
             SkinMaterial(
                 name=str(m.get("name", f"material {i}")),
@@ -194,6 +219,9 @@ def read_materials(glb: bytes) -> tuple[list[SkinMaterial], list[np.ndarray]]:
                 alpha_mode=str(m.get("alphaMode", "OPAQUE")),
                 alpha_cutoff=float(m.get("alphaCutoff", 0.5)),
                 double_sided=bool(m.get("doubleSided", False)),
+                mtoon=mtoon,
+                shade_image=shade_image,
+                shade_nearest=shade_nearest,
             )
         )
     return out, images

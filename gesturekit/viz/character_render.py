@@ -10,7 +10,9 @@ linear light, per vertex, and converted to sRGB (:func:`shade`), so VTK draws
 them unlit (:class:`CharacterDrawing`) and its own light model cannot make the
 MP4 differ from the page. With a user's character (``character=``), each motion
 is retargeted onto it and its own skin and colours are drawn by the same rules
-(:mod:`gesturekit.viz.character_user`).
+(:mod:`gesturekit.viz.character_user`); its toon-shaded (MToon) materials, whose
+step between lit and shade colour is too sharp for colours per vertex, are shaded
+per fragment by the same rule as the page's (:mod:`gesturekit.viz.character_mtoon`).
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ from ..character.stand import StandMesh, stand_mesh, standing_root
 from ..character.target import Character
 from ..errors import ConfigError
 from ..motion import Motion
+from .character_mtoon import MToonActors
 from .character_user import UserBody
 
 __all__ = ["srgb_to_linear", "linear_to_srgb", "shade", "visible_faces", "CharacterStage", "CharacterDrawing"]
@@ -276,7 +279,7 @@ def _material_actors(plotter: pv.Plotter, mesh: pv.PolyData, user: UserBody, fac
     actors = []
     for k, mat in enumerate(user.materials):
         mine = faces[which == k]
-        if not len(mine):
+        if not len(mine) or mat.mtoon is not None:  # toon-shaded: gesturekit.viz.character_mtoon
             continue
         part = pv.PolyData()
         part.SetPoints(mesh.GetPoints())  # one set of points: posing the mesh poses every part
@@ -336,6 +339,9 @@ class CharacterDrawing:
         self._color_views: list[np.ndarray] = []
         self._shown: list[int] = []  # the characters that have a body
         self._actors: list = []  # the characters' actors: their bodies and legs
+        self._mtoon: list[MToonActors | None] = []  # each shown character's toon-shaded materials
+        w, h = resolution
+        camera = stage.camera(w / h)
         # the stage and the still legs: drawn once, unlit, their colours already shaded
         for flat in stage.stage():
             self._add_still(plotter, flat["vertices"], flat["faces"], flat["colors"])
@@ -354,18 +360,22 @@ class CharacterDrawing:
             rgb.SetName("rgb")
             mesh.GetPointData().SetScalars(rgb)
             user = stage.users[i] if stage.users is not None else None
+            toon = None
             if user is not None and user.materials:
                 self._actors.extend(_material_actors(plotter, mesh, user, faces))
+                if any(mat.mtoon is not None for mat in user.materials):
+                    toon = MToonActors(plotter, mesh, faces, user, camera)
+                    toon.update(v, user.normals(0))
+                    self._actors.extend(toon.actors)
             else:
                 actor = plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
                 actor.prop.interpolation = "gouraud"  # colours blend across each triangle, as on the page
                 self._actors.append(actor)
+            self._mtoon.append(toon)
             self._meshes.append(mesh)
             self._colors.append(rgb)
             self._point_views.append(vtk_to_numpy(mesh.GetPoints().GetData()))
             self._color_views.append(vtk_to_numpy(rgb))
-        w, h = resolution
-        camera = stage.camera(w / h)
         cam = plotter.renderer.GetActiveCamera()
         cam.SetPosition(*camera["position"])
         cam.SetFocalPoint(*camera["target"])
@@ -423,4 +433,7 @@ class CharacterDrawing:
             mesh.GetPoints().Modified()
             self._color_views[k][:] = self.stage.colors(i, frame)
             rgb.Modified()
+            toon = self._mtoon[k]
+            if toon is not None and self.stage.users is not None:
+                toon.update(v, self.stage.users[i].normals(frame))
         self._frame = frame

@@ -128,6 +128,13 @@ class UserBody:
         """The skin at ``frame`` (its last past its end), shape (V, 3), float32, metres (a fresh array)."""
         return self._pose(frame)[0].copy()
 
+    def normals(self, frame: int) -> np.ndarray:
+        """The skin's unit normals at ``frame`` (its last past its end), shape (V, 3), float32 (a fresh array;
+        zero where a vertex has no area around it)."""
+        n = self._pose(frame)[1].astype(np.float32)
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
     def colors(self, frame: int) -> np.ndarray:
         """The skin's own colours at ``frame``, shaded by its skinned normals, shape (V, 3), uint8 sRGB; where
         the body has textures (:attr:`materials`), a textured material's vertices carry its factor shaded, which

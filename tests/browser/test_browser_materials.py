@@ -60,13 +60,43 @@ TIMES = (0.5, 2.0, 3.4)
 MIN_IOU, MAX_DIFFERENCE = 0.95, 8.0
 BG = np.array([int(BACKGROUND[i : i + 2], 16) for i in (1, 3, 5)])
 
-#: ``window.reference(url, clip, t, camera, look, size)``: the GLB's clip at time t, drawn by three.js alone.
+#: ``window.reference(url, clip, t, camera, look, size, vrm)``: the GLB's clip at time t, drawn by three.js alone
+#: (with ``vrm``, by three.js and three-vrm's loader plugin, as a VRM viewer draws it); ``window.mtoon(url)``: the
+#: MToon parameters three-vrm gives each material of the GLB.
 PROBE = """
 import * as THREE from "three";
 import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
+import { VRMLoaderPlugin } from "@pixiv/three-vrm";
 
-window.reference = async (url, name, t, camera, look, size) => {
-  const gltf = await new GLTFLoader().loadAsync(url);
+function loader(vrm) {
+  const loader = new GLTFLoader();
+  if (vrm) loader.register((parser) => new VRMLoaderPlugin(parser));
+  return loader;
+}
+
+window.mtoon = async (url) => {
+  const gltf = await loader(true).loadAsync(url), seen = new Map();
+  gltf.scene.traverse((o) => {
+    for (const m of o.isMesh ? [o.material].flat() : []) {
+      if (!m.isMToonMaterial || seen.has(m.name)) continue;
+      seen.set(m.name, {
+        outline: Boolean(m.isOutline), lit: m.color.toArray(), opacity: m.opacity, shade: m.shadeColorFactor.toArray(),
+        shift: m.shadingShiftFactor, toony: m.shadingToonyFactor, rim: m.parametricRimColorFactor.toArray(),
+        rimPower: m.parametricRimFresnelPowerFactor, rimLift: m.parametricRimLiftFactor,
+        rimMix: m.rimLightingMixFactor, emissive: m.emissive.toArray(), outlineMode: m.outlineWidthMode,
+        outlineWidth: m.outlineWidthFactor, outlineColor: m.outlineColorFactor.toArray(),
+        outlineMix: m.outlineLightingMixFactor, map: Boolean(m.map), shadeMap: Boolean(m.shadeMultiplyTexture),
+        alphaTest: m.alphaTest, doubleSided: m.side === THREE.DoubleSide,
+      });
+    }
+  });
+  return Object.fromEntries(seen);
+};
+
+window.reference = async (url, name, t, camera, look, size, vrm) => {
+  const gltf = await loader(vrm).loadAsync(url);
+  // a VRM viewer's update, before the clip poses the bones: its materials' uniforms (the alpha cutoff)
+  if (vrm && gltf.userData.vrm) gltf.userData.vrm.update(0);
   const mixer = new THREE.AnimationMixer(gltf.scene);
   mixer.clipAction(gltf.animations.find((c) => c.name === name)).play();
   mixer.setTime(t);
@@ -154,16 +184,23 @@ class Reference:
         kind = {".html": "text/html", ".js": "text/javascript"}.get(path.suffix, "model/gltf-binary")
         route.fulfill(status=200, body=path.read_bytes(), content_type=kind)
 
-    def draw(self, page, glb: str, t: float, camera: dict, look: dict, size: tuple[int, int]) -> np.ndarray:
-        from PIL import Image
-
+    def open(self, page) -> None:
+        """Open the probe page in ``page`` (once)."""
         if page.url != f"{ORIGIN}/index.html":
             page.route(f"{ORIGIN}/**", self.serve)
             page.goto(f"{ORIGIN}/index.html")
             page.wait_for_function("() => typeof window.reference === 'function'")
+
+    def draw(
+        self, page, glb: str, t: float, camera: dict, look: dict, size: tuple[int, int], *, vrm: bool = False
+    ) -> np.ndarray:
+        """The GLB ``glb`` (a file of the folder) at ``t`` seconds, drawn by three.js (``vrm``: and three-vrm)."""
+        from PIL import Image
+
+        self.open(page)
         page.evaluate(
-            "([u, c, t, cam, look, size]) => window.reference(u, c, t, cam, look, size)",
-            [f"{ORIGIN}/{glb}", ANIMATION, t, camera, look, list(size)],
+            "([u, c, t, cam, look, size, vrm]) => window.reference(u, c, t, cam, look, size, vrm)",
+            [f"{ORIGIN}/{glb}", ANIMATION, t, camera, look, list(size), vrm],
         )
         return np.asarray(Image.open(io.BytesIO(page.locator("#view").screenshot(type="png"))).convert("RGB"))
 
@@ -180,28 +217,62 @@ def _file_camera(ch, camera: dict) -> dict:
     }
 
 
+def without_mtoon(ch):
+    """The character ``ch`` with its materials' MToon left out (VRM 1.0's extension and VRM 0.x's material
+    properties): its glTF materials alone, as a renderer that ignores MToon draws them."""
+    from gesturekit.character.glb import glb_bytes, read_glb
+
+    doc, binary = read_glb(ch.skin.materials)
+    for m in doc.get("materials", []):
+        (m.get("extensions") or {}).pop("VRMC_materials_mtoon", None)
+    doc.pop("extensions", None)
+    return dataclasses.replace(ch, skin=dataclasses.replace(ch.skin, materials=glb_bytes(doc, binary)))
+
+
+#: What :func:`measure` draws: the character in its own materials, in one colour per vertex (its materials left
+#: out), or in its glTF materials with their MToon left out.
+DRAWN = ("own", "vertex", "no mtoon")
+
+
 def measure(
-    folder: Path, size: tuple[int, int], *, times=TIMES, own: bool = True, out: Path | None = None, every: bool = False
+    folder: Path,
+    size: tuple[int, int],
+    *,
+    spec: RigSpec = TEXTURED,
+    vrm: bool = False,
+    times=TIMES,
+    drawn: str = "own",
+    plain: bool = False,
+    out: Path | None = None,
+    every: bool = False,
+    name: str = "materials",
 ) -> list[dict]:
     """The page and the MP4 against the reference at ``times``; one dict of figures per (time, picture).
 
-    ``own=False`` draws the character in one colour per vertex (its materials left out), for comparison.
-    ``out``: a folder for ``character-materials-page.png`` and ``character-materials-mp4.png`` (in its own
-    materials, at the middle time); with ``every``, each picture and its reference at every time instead.
+    ``spec``: the character; ``vrm``: the reference is drawn with three-vrm's loader plugin. ``drawn`` (one of
+    :data:`DRAWN`): how the page and the MP4 draw the character, for comparison. ``plain``: also the GLB drawn by
+    three.js alone against the reference, through the page's camera (picture ``"plain"``: what a renderer that
+    ignores MToon draws). ``out``: a folder for ``character-{name}-page.png`` and ``character-{name}-mp4.png``
+    (in its own materials, at the middle time); with ``every``, each picture and its reference at every time
+    instead.
     """
     from PIL import Image
 
     from gesturekit.viz.render import SkeletonScene
     from gesturekit.viz.viewer import read_viewer_data, skeleton_viewer
 
-    ch = read_character(write_rig(folder / "rigs", TEXTURED, "textured"))
+    ch = read_character(write_rig(folder / "rigs", spec, name))
     m = motion()
-    report = export_character_glb(folder / "textured_animated.glb", retarget(m, ch))
-    drawn = ch if own else dataclasses.replace(ch, skin=dataclasses.replace(ch.skin, materials=b""))
+    report = export_character_glb(folder / f"{name}_animated.glb", retarget(m, ch))
+    shown = {
+        "own": ch,
+        "vertex": dataclasses.replace(ch, skin=dataclasses.replace(ch.skin, materials=b"")),
+        "no mtoon": without_mtoon(ch),
+    }[drawn]
     ref = Reference(folder)
     w, h = size
-    html = skeleton_viewer([m], character=drawn, labels=[""], height=h, key="materials")
-    page_file = folder / "materials.html"
+    html = skeleton_viewer([m], character=shown, labels=[""], height=h, key="materials")
+    page_file = folder / f"{name}.html"
     page_file.write_text(html, encoding="utf-8")
     data = read_viewer_data(html)
     r_f = rotation_of(ch.to_file[:3, :3])
@@ -215,13 +286,13 @@ def measure(
     with contextlib.ExitStack() as stack:
         page = stack.enter_context(app_browser.browser(width=w, height=h + 200))
         other = page.context.browser.new_page(viewport={"width": w, "height": h})  # the reference's own page
-        scene = stack.enter_context(SkeletonScene([m], resolution=size, character=drawn))
+        scene = stack.enter_context(SkeletonScene([m], resolution=size, character=shown))
         assert scene._character is not None
         mp4_camera = _file_camera(ch, scene._character.stage.camera(w / h))
         page.goto(page_file.as_uri())
         page.locator('body[data-materials="1"]').wait_for(state="attached")
         assert page.evaluate("() => window.devicePixelRatio") == 1
-        assert page.evaluate("() => gk.materials") is own
+        assert page.evaluate("() => gk.materials") is (drawn != "vertex")
         for t in times:
             k = int(np.floor(t * m.fps / step + 1e-6))
             frame = k * step
@@ -235,17 +306,21 @@ def measure(
             page_camera = _file_camera(ch, page.evaluate("() => gk.camera"))
             mp4 = scene.render_frame(frame)
             at = frame / m.fps
-            want = ref.draw(other, report.path.name, at, page_camera, look, (shot.shape[1], shot.shape[0]))
-            want_mp4 = ref.draw(other, report.path.name, at, mp4_camera, look, (mp4.shape[1], mp4.shape[0]))
-            for name, got, reference in (("page", shot, want), ("mp4", mp4, want_mp4)):
+            page_size, mp4_size = (shot.shape[1], shot.shape[0]), (mp4.shape[1], mp4.shape[0])
+            want = ref.draw(other, report.path.name, at, page_camera, look, page_size, vrm=vrm)
+            want_mp4 = ref.draw(other, report.path.name, at, mp4_camera, look, mp4_size, vrm=vrm)
+            pictures = [("page", shot, want), ("mp4", mp4, want_mp4)]
+            if plain:
+                pictures.append(("plain", ref.draw(other, report.path.name, at, page_camera, look, page_size), want))
+            for picture, got, reference in pictures:
                 iou, diff, n = compare(got, reference)
-                rows.append({"t": at, "picture": name, "iou": iou, "difference": diff, "pixels": n})
+                rows.append({"t": at, "picture": picture, "iou": iou, "difference": diff, "pixels": n})
                 if out is not None and every:
-                    tag = f"{'own' if own else 'vertex'}-{name}-{at:.2f}s"
-                    Image.fromarray(got).save(out / f"materials-{tag}.png")
-                    Image.fromarray(reference).save(out / f"materials-reference-{name}-{at:.2f}s.png")
-                elif out is not None and own and t == times[len(times) // 2]:
-                    Image.fromarray(got).save(out / f"character-materials-{name}.png")
+                    tag = f"{drawn.replace(' ', '-')}-{picture}-{at:.2f}s"
+                    Image.fromarray(got).save(out / f"{name}-{tag}.png")
+                    Image.fromarray(reference).save(out / f"{name}-reference-{picture}-{at:.2f}s.png")
+                elif out is not None and drawn == "own" and picture != "plain" and t == times[len(times) // 2]:
+                    Image.fromarray(got).save(out / f"character-{name}-{picture}.png")
     return rows
 
 
@@ -290,10 +365,10 @@ def main(argv: list[str] | None = None) -> int:
     w, h = (int(x) for x in args.size.split("x"))
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
-    for own in (True, False):
-        print("in its own materials:" if own else "in one colour per vertex (as before):")
+    for drawn in ("own", "vertex"):
+        print("in its own materials:" if drawn == "own" else "in one colour per vertex (as before):")
         with tempfile.TemporaryDirectory(prefix="gesturekit-materials-") as tmp:
-            for row in measure(Path(tmp), (w, h), own=own, out=args.out, every=args.every):
+            for row in measure(Path(tmp), (w, h), drawn=drawn, out=args.out, every=args.every):
                 print("  " + _line(row))
     return 0
 

@@ -236,7 +236,8 @@ def test_the_source_hash_changes_with_any_source(tmp_path):
 
 def test_no_library_is_copied_into_the_web_module():
     """Outside node_modules/ and static/ (both made by the build, ignored by git) are only the project's own
-    files: the npm manifest and lock, the build, and small ES modules that import three by its package name."""
+    files: the npm manifest and lock, the build, and small ES modules that import three (and three-vrm) by their
+    package names."""
     own = {"package.json", "package-lock.json", "build.mjs", "build.py", "__init__.py"}
     for path in web.HERE.rglob("*"):
         rel = path.relative_to(web.HERE)
@@ -247,7 +248,7 @@ def test_no_library_is_copied_into_the_web_module():
             assert path.suffix == ".js" and len(text) < 24_000, rel  # the control timeline is the largest
             assert not re.search(r"@license|Copyright|three\.module", text), rel
             for spec in re.findall(r"from\s+\"([^\"]+)\"", text):
-                assert spec.startswith(("three", "./")), (rel, spec)
+                assert spec.startswith(("three", "@pixiv/three-vrm", "./")), (rel, spec)
         else:
             assert str(rel) in own, rel
 
@@ -277,11 +278,19 @@ def test_a_module_outside_the_folder_is_bundled_with_the_locked_three(tmp_path):
 def test_the_npm_packages_are_pinned_and_locked():
     package = json.loads((web.HERE / "package.json").read_text())
     lock = json.loads((web.HERE / "package-lock.json").read_text())
-    assert set(package["dependencies"]) == {"three"} and set(package["devDependencies"]) == {"esbuild"}
+    assert set(package["dependencies"]) == {"three", "@pixiv/three-vrm"}
+    assert set(package["devDependencies"]) == {"esbuild"}
     for name, version in {**package["dependencies"], **package["devDependencies"]}.items():
         assert re.fullmatch(r"\d+\.\d+\.\d+", version), (name, version)  # exact: no range
         assert lock["packages"][f"node_modules/{name}"]["version"] == version
         assert lock["packages"][f"node_modules/{name}"]["integrity"].startswith("sha512-")  # npm ci checks it
+    # what they bring (three-vrm's own packages) is locked as exactly
+    for key, entry in lock["packages"].items():
+        if key:
+            assert re.fullmatch(r"\d+\.\d+\.\d+", entry["version"]), key
+            assert entry["integrity"].startswith("sha512-"), key
+    vrm = [k for k in lock["packages"] if k.startswith("node_modules/@pixiv/")]
+    assert {lock["packages"][k]["version"] for k in vrm} == {package["dependencies"]["@pixiv/three-vrm"]}
 
 
 def test_a_motion_with_every_joint_at_one_point_has_no_body_but_still_plays():

@@ -1,6 +1,8 @@
 // The skinned characters of a viewer's data (gesturekit.viz.viewer.viewer_data): one SkinnedMesh per motion,
 // its bones posed frame by frame from the data's joint rotations and root positions.
+import { VRMLoaderPlugin } from "@pixiv/three-vrm";
 import {
+  BackSide,
   Bone,
   BufferAttribute,
   BufferGeometry,
@@ -62,13 +64,35 @@ function lambert(m) {
   return out;
 }
 
-/** The materials of a materials GLB (gesturekit.character.materials.materials_glb), read by GLTFLoader. */
+/** The materials of a materials GLB (gesturekit.character.materials.materials_glb), read by GLTFLoader with
+ * three-vrm's plugin: a VRM's MToon (VRMC_materials_mtoon, or a VRM 0.x's material properties, which three-vrm
+ * turns into it first) becomes three-vrm's MToonMaterial, drawn as a VRM viewer draws it; every other material
+ * is drawn on the look's Lambert surface. */
 async function fileMaterials(spec) {
   const bytes = decode(spec);
-  const gltf = await new GLTFLoader().parseAsync(bytes.buffer, "");
+  const loader = new GLTFLoader();
+  loader.register((parser) => new VRMLoaderPlugin(parser));
+  const gltf = await loader.parseAsync(bytes.buffer, "");
   const n = gltf.parser.json.materials.length;
   const made = await Promise.all(Array.from({ length: n }, (_, i) => gltf.parser.getDependency("material", i)));
-  return made.map(lambert);
+  return made.map((m) => (m.isMToonMaterial ? mtoon(m) : lambert(m)));
+}
+
+/** An MToon material as GLTFLoader finishes it on a mesh without tangents: its normal map's green flipped. */
+function mtoon(m) {
+  if (m.normalMap) m.normalScale.y *= -1;
+  return m;
+}
+
+/** The outline of an MToon material, or null: as three-vrm outlines a VRM's primitive, the material again drawn
+ * on the back faces, its vertices pushed out along their normals (gesturekit.character.mtoon describes it). */
+function outlineOf(m) {
+  if (!m.isMToonMaterial || m.outlineWidthMode === "none" || !(m.outlineWidthFactor > 0)) return null;
+  const out = m.clone();
+  out.name += " (outline)";
+  out.isOutline = true;
+  out.side = BackSide;
+  return out;
 }
 
 /** The still legs (gesturekit.character.stand): a plain mesh in the motion's frame, lit as the body. */
@@ -142,7 +166,19 @@ function character(m, motions, loaded) {
   if (mesh.materials) {
     ready = loaded.get(mesh).then((made) => {
       geometry.groups.forEach((g, i) => { g.materialIndex = mesh.groups[i][2]; });
-      skinned.material = made;
+      // each outlined material's triangles once more, after every surface, in its outline material
+      const materials = made.slice(), outlines = new Map();
+      for (const [start, count, k] of mesh.groups) {
+        if (!outlines.has(k)) {
+          const outline = outlineOf(made[k]);
+          outlines.set(k, outline === null ? -1 : materials.push(outline) - 1);
+        }
+        if (outlines.get(k) >= 0) geometry.addGroup(start, count, outlines.get(k));
+      }
+      // as a VRM viewer's update() does each frame: uniforms three-vrm uploads there (the alpha cutoff), and UV
+      // animation held at its start
+      for (const m of materials) if (m.isMToonMaterial) m.update(0);
+      skinned.material = materials;
       return true;
     });
   }
