@@ -90,7 +90,8 @@ def test_a_character_is_matched_drawn_and_written_until_the_default_is_chosen(ap
     at.button(key="synth.render").click().run()
     assert not at.exception and not errors(at), (at.exception, errors(at))
     made_video = at.session_state["_synth.video"]
-    assert made_video["character"] == at.session_state["gk.character"]["token"]
+    kept = at.session_state["gk.character"]
+    assert made_video["character"] == (*kept["token"], kept["character"].wrist_slack)  # the file, map and slack
     assert made_video["bytes"][4:8] == b"ftyp"
     assert any(d.proto.label == "Video (MP4)" for d in at.get("download_button"))
 
