@@ -9,11 +9,13 @@ under :data:`CHARACTER_KEY` until "Default character" is pressed. The
 Synthesize page's viewer and the Retrieval inspector's side-by-side viewers
 then draw it (:func:`display.show_skeletons`); the Synthesize page renders
 its MP4 on it (:func:`render_mp4`) and offers it, posed by the result, as a GLB
-(a glTF or VRM character) and a BVH.
+(a glTF or VRM character) and a BVH. A slider sets how far its wrists may stay from
+our reach (:attr:`~gesturekit.character.target.Character.wrist_slack`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import secrets
 import tempfile
 from collections.abc import Callable
@@ -23,6 +25,7 @@ from typing import TYPE_CHECKING
 import streamlit as st
 
 from gesturekit.app.display import LOG, error_text, escape_markdown
+from gesturekit.character.target import WRIST_SLACK, WRIST_SLACK_MAX
 from gesturekit.character.user import read_character_upload
 from gesturekit.errors import GestureKitError, collect_warnings
 from gesturekit.export.character import THEIR_CLIPS
@@ -50,6 +53,7 @@ _FAILED = "_gk.character_failed"  # (token, message) of an upload that could not
 _RESETS = "_gk.character_resets"  # a new uploader after "Default character" (it then holds no file)
 _CLIPS = "_gk.character_clips"  # the character's own animations in its GLB: "keep" or "drop"
 _CLIP_LABELS = {"keep": "keep after ours", "drop": "leave out"}
+_SLACK = "_gk.wrist_slack"  # the slider's value: percent of the arm's length
 _MADE = "_gk.character_files"  # {(run, token, kind, clips): (bytes or None, summary or why not, warnings)}
 
 
@@ -60,9 +64,10 @@ def current_character() -> Character | None:
 
 
 def character_token() -> tuple | None:
-    """What tells the user's character apart from the one before (its upload's and bone map's ids), or None."""
+    """What tells the user's character apart from the one before (its upload's and bone map's ids and its wrist
+    slack), or None."""
     kept = st.session_state.get(CHARACTER_KEY)
-    return None if kept is None else kept["token"]
+    return None if kept is None else (*kept["token"], kept["character"].wrist_slack)
 
 
 def render_mp4(
@@ -156,6 +161,21 @@ def sidebar_character() -> Character | None:
             st.caption(escape_markdown(line))
         for note in ch.notes:  # a unit found from its size
             st.warning(escape_markdown(note), icon=":material/straighten:")
+        percent = st.slider(
+            "Wrist slack, % of the arm",
+            min_value=0.0,
+            max_value=WRIST_SLACK_MAX * 100,
+            value=WRIST_SLACK * 100,
+            step=0.5,
+            format="%.1f %%",
+            key=_SLACK,
+            help="how far its wrists may stay from where ours reach (scaled to its arm): where its upper arm and "
+            "forearm have other proportions than ours, more slack keeps them closer to our directions; 0 puts "
+            "the hands exactly where ours reach",
+        )
+        slack = round(float(percent) / 100, 6)
+        if slack != ch.wrist_slack:  # the views, the MP4 and the files are then made again (character_token)
+            ch = kept["character"] = dataclasses.replace(ch, wrist_slack=slack)
         if ch.gltf is not None and ch.gltf.document.get("animations"):
             st.radio(
                 "Its own animations in the Character GLB",
@@ -169,6 +189,7 @@ def sidebar_character() -> Character | None:
         if st.button("Default character", key="_gk.character_default", help="show the default body again"):
             ss.pop(CHARACTER_KEY, None)
             ss.pop(_FAILED, None)
+            ss.pop(_SLACK, None)
             ss[_RESETS] = n + 1
             st.rerun()
     return ch
@@ -191,7 +212,7 @@ def _character_file(record: dict, kind: str) -> dict:
     ss = st.session_state
     kept = ss[CHARACTER_KEY]
     clips = ss.get(_CLIPS, THEIR_CLIPS[0])
-    key = (record["run"], kept["token"], kind, clips)
+    key = (record["run"], character_token(), kind, clips)
     made = ss.get(_MADE, {})
     if key not in made:
         result = record["result"]

@@ -46,7 +46,9 @@ directions moves the hand sideways by about a tenth of the arm in a right-angled
 elbow; no wrist off the arm's plane and no swivel of the elbow about the line to
 the wrist does better (the tests search both), and a collar that took part of the
 reach would move the target with the shoulder; a median of 4 degrees there needs 5.5 %. ``wrist_slack=0`` is the other
-end: the hands exactly at our scaled reach (``bench/bench_arms.py``).
+end: the hands exactly at our scaled reach (``bench/bench_arms.py``). A character carries its own slack
+(:attr:`~gesturekit.character.target.Character.wrist_slack`: ``read_character(..., wrist_slack=)``, the
+command line's ``--wrist-slack``, the app's slider); a call's ``wrist_slack`` overrides it.
 
 **The torso proxy**: a capsule around their spine from the pelvis up, of radius
 :data:`TORSO_RADIUS` times their shoulder width, and the same around ours. A
@@ -68,14 +70,9 @@ from ..motion import Motion
 from ..skeleton import JOINT_NAMES, joint_index
 from ._arms import TORSO_RADIUS, Arms, distance_to_chain, unit
 from .rig import Rig, rig_for, solve_pose
-from .target import Character
+from .target import WRIST_SLACK, Character, check_wrist_slack
 
 __all__ = ["TORSO_RADIUS", "WRIST_SLACK", "RetargetReport", "Retargeted", "retarget", "swing", "kabsch"]
-
-#: How far a wrist may stay from our reach scaled to their arm by default, as a fraction of their arm's length:
-#: 5 %, so that the upper arm and forearm keep close to our directions where their proportions differ from ours
-#: (see the module's text); 0 puts the hands exactly where ours reach.
-WRIST_SLACK = 0.05
 
 #: Weight of ``R_ours A``'s axes in the fit of a bone with several children (the children weigh 1 each).
 _HOLD = 0.05
@@ -360,7 +357,7 @@ def _below(ch: Character, top: int) -> np.ndarray:
 
 
 @checks_arguments
-def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST_SLACK) -> Retargeted:
+def retarget(motion: Motion, character: Character, *, wrist_slack: float | None = None) -> Retargeted:
     """Pose ``character`` by ``motion``, frame by frame (see the module's text).
 
     Parameters
@@ -369,9 +366,11 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
         Joint positions (frames, 55, 3), metres, relative to the pelvis.
     character : Character
         From :func:`gesturekit.character.user.read_character`.
-    wrist_slack : float
+    wrist_slack : float, optional
         How far a wrist may stay from our reach scaled to their arm, as a fraction of the arm's length, in
-        [0, 0.2]: 0 puts the hands exactly where ours reach; more keeps more of our arm directions.
+        [0, 0.2]: 0 puts the hands exactly where ours reach; more keeps more of our arm directions. Default:
+        the character's own (:attr:`Character.wrist_slack`, :data:`WRIST_SLACK` unless it was read with
+        another).
 
     Returns
     -------
@@ -386,8 +385,7 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
         raise ConfigError(f"retarget poses a character by a Motion, not {type(motion).__name__}")
     if not isinstance(character, Character):
         raise ConfigError(f"retarget poses a Character (read_character), not {type(character).__name__}")
-    if not (isinstance(wrist_slack, (int, float)) and 0.0 <= wrist_slack <= 0.2):
-        raise ConfigError(f"wrist_slack must be a number in [0, 0.2], got {wrist_slack!r}")
+    slack = character.wrist_slack if wrist_slack is None else check_wrist_slack(wrist_slack)
     _check_finite(character, character.rest_rotation[None], character.rest_position[None], what="rest pose")
     rig = rig_for(motion)
     pose = solve_pose(motion, rig)
@@ -408,7 +406,7 @@ def retarget(motion: Motion, character: Character, *, wrist_slack: float = WRIST
     rot = np.empty((n, m, 3, 3))
     pos = np.empty((n, m, 3))
     wants: dict[int, np.ndarray] = {}
-    arms = Arms(ch, rig, x, joint_at, float(wrist_slack))
+    arms = Arms(ch, rig, x, joint_at, slack)
     for b in range(m):
         pa = int(ch.parents[b])
         if not body[b] or b == ch.pelvis or pa < 0:

@@ -24,12 +24,21 @@ __all__ = [
     "CharacterSkin",
     "GltfSource",
     "Character",
+    "WRIST_SLACK",
+    "WRIST_SLACK_MAX",
+    "check_wrist_slack",
     "FileSkeleton",
     "facing_frame",
     "topological",
     "reorder",
     "empty_skin",
 ]
+
+#: How far a wrist may stay from our reach scaled to the character's arm, as a fraction of the arm's length,
+#: by default (:attr:`Character.wrist_slack`; why 5 %: :mod:`gesturekit.character.retarget`).
+WRIST_SLACK = 0.05
+#: The largest :attr:`Character.wrist_slack`: beyond it the hands no longer do what ours do.
+WRIST_SLACK_MAX = 0.2
 
 
 @dataclass(frozen=True)
@@ -135,6 +144,10 @@ class Character:
         Metres per unit of the file (for a BVH; for a glTF 1, unless its size said otherwise).
     notes : tuple of str
         What was changed to read it, for a person (a unit found from the character's size).
+    wrist_slack : float
+        How far its wrists may stay from our reach scaled to its arm when it is posed, as a fraction of the
+        arm's length, in [0, :data:`WRIST_SLACK_MAX`]: 0 puts the hands exactly where ours reach, more keeps
+        more of our arm directions (:func:`gesturekit.character.retarget.retarget`).
     """
 
     path: Path
@@ -151,6 +164,10 @@ class Character:
     gltf: GltfSource | None = field(default=None, repr=False)
     bvh_units: float = 1.0
     notes: tuple[str, ...] = ()
+    wrist_slack: float = WRIST_SLACK
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "wrist_slack", check_wrist_slack(self.wrist_slack))
 
     @property
     def n_bones(self) -> int:
@@ -169,6 +186,23 @@ class Character:
         out = {PELVIS: self.names[self.pelvis]}
         out |= {JOINT_NAMES[j]: self.names[b] for j, b in enumerate(self.bone_of) if b >= 0}
         return out
+
+
+def check_wrist_slack(value: object, *, name: str = "wrist_slack") -> float:
+    """``value`` as a wrist slack (a fraction of the arm's length in [0, :data:`WRIST_SLACK_MAX`]).
+
+    Raises
+    ------
+    ConfigError
+        Not a real number, not finite, or out of that range; the message names ``name``.
+    """
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    if not ok or not (0.0 <= float(value) <= WRIST_SLACK_MAX):  # type: ignore[arg-type]
+        raise ConfigError(
+            f"{name} is how far a wrist may stay from our reach, a fraction of the arm's length from 0 to "
+            f"{WRIST_SLACK_MAX:g}, got {value!r}"
+        )
+    return float(value)  # type: ignore[arg-type]
 
 
 @checks_arguments

@@ -19,6 +19,7 @@ the same way.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 from pathlib import Path
@@ -43,7 +44,7 @@ from .humanoid import (
     name_maps,
 )
 from .shape import SHAPE, match_by_shape, sides_by_rest_pose
-from .target import Character, FileSkeleton
+from .target import WRIST_SLACK, Character, FileSkeleton, check_wrist_slack
 
 __all__ = ["CHARACTER_SUFFIXES", "read_character", "read_character_upload", "character_record", "bone_tree"]
 
@@ -52,7 +53,9 @@ CHARACTER_SUFFIXES: tuple[str, ...] = (".glb", ".gltf", ".vrm", ".fbx", ".bvh")
 
 
 @checks_arguments
-def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dict | None = None) -> Character:
+def read_character(
+    path: str | os.PathLike, *, bone_map: str | os.PathLike | dict | None = None, wrist_slack: float = WRIST_SLACK
+) -> Character:
     """Read a user's humanoid character and match its bones to our joints.
 
     Parameters
@@ -67,6 +70,9 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         (:func:`~gesturekit.character.shape.match_by_shape`). Left and right are then checked against the rest
         pose (:func:`~gesturekit.character.shape.sides_by_rest_pose`): names that have them the other way round
         are swapped, and a note says so (warned, and in :attr:`Character.notes`).
+    wrist_slack : float
+        How far its wrists may stay from our reach when it is posed, a fraction of the arm's length in
+        [0, 0.2] (:attr:`Character.wrist_slack`): 0 puts the hands exactly where ours reach.
 
     Returns
     -------
@@ -84,6 +90,7 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         raise ConfigError(f"read_character takes a file name or path, not {type(path).__name__}")
     if bone_map is not None and not isinstance(bone_map, (str, os.PathLike, dict)):
         raise ConfigError(f"bone_map is a JSON file's name or path, or a dict, not {type(bone_map).__name__}")
+    slack = check_wrist_slack(wrist_slack)  # before the file is read: a wrong option costs no reading
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix not in CHARACTER_SUFFIXES:
@@ -105,7 +112,8 @@ def read_character(path: str | os.PathLike, *, bone_map: str | os.PathLike | dic
         found, note = sides_by_rest_pose(found, skeleton.parents.tolist(), skeleton.world[:, :3, 3], skeleton.names)
         if note:
             notes, matched_by = (f"{p.name}: {note}",), f"{matched_by}, left and right from the rest pose"
-    return skeleton.character(found, matched_by, expected, notes=notes)
+    character = skeleton.character(found, matched_by, expected, notes=notes)
+    return character if slack == character.wrist_slack else dataclasses.replace(character, wrist_slack=slack)
 
 
 @checks_arguments
@@ -164,11 +172,13 @@ def character_record(character: Character, *, bone_map: str | os.PathLike | dict
     Returns
     -------
     dict
-        ``file`` (the file's name, no folder), ``sha256`` (hex, None where the file is gone), ``matched_by``;
+        ``file`` (the file's name, no folder), ``sha256`` (hex, None where the file is gone), ``matched_by``,
+        ``wrist_slack`` (how far its wrists may stay from our reach);
         with a bone map file also ``bone_map``: its ``file`` and ``sha256``.
     """
     out: dict[str, Any] = {"file": character.path.name, "sha256": _sha256(character.path)}
     out["matched_by"] = character.matched_by
+    out["wrist_slack"] = character.wrist_slack
     if isinstance(bone_map, (str, os.PathLike)):
         out["bone_map"] = {"file": Path(bone_map).name, "sha256": _sha256(Path(bone_map))}
     return out

@@ -36,13 +36,18 @@ def read_character_option(args: argparse.Namespace, formats: Sequence[str]) -> C
     """
     given = getattr(args, "character", None)
     bone_map = getattr(args, "character_map", None)
+    slack = getattr(args, "wrist_slack", None)
     if given is None:
         if bone_map is not None:
             raise ConfigError("--character-map names the bones of a --character; give the character too")
+        if slack is not None:
+            raise ConfigError("--wrist-slack says how a --character's arms are posed; give the character too")
         return None
+    from ..character.target import WRIST_SLACK, check_wrist_slack
     from ..character.user import read_character
 
-    character = read_character(given, bone_map=bone_map)
+    slack = WRIST_SLACK if slack is None else check_wrist_slack(slack, name="--wrist-slack")
+    character = read_character(given, bone_map=bone_map, wrist_slack=slack)
     if character.gltf is None and "glb" in formats:
         raise ConfigError(
             f"{given} is a skeleton without a body, so no glTF of it can be written; "

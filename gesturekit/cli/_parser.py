@@ -278,6 +278,14 @@ def build_parser() -> argparse.ArgumentParser:
         help='bone map of --character: {"pelvis": "Hips", "joints": {"spine_mid": "Spine", ...}}',
     )
     y.add_argument(
+        "--wrist-slack",
+        type=float,
+        metavar="FRACTION",
+        help="how far --character's wrists may stay from our reach, a fraction of its arm's length from 0 to 0.2 "
+        "(default 0.05: where its upper-arm-to-forearm ratio differs from ours, the arm keeps closer to our "
+        "directions; 0: the hands exactly where ours reach)",
+    )
+    y.add_argument(
         "--character-clips",
         choices=THEIR_CLIPS,
         default=THEIR_CLIPS[0],
@@ -368,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
         StudyConfig,
         ["seed", "participants", "control", "refiner", "resolution", "loudness_lufs", "workers", "scheduler"],
     )
-    add_options(s, StudyConfig, ["character", "character_map"])
+    add_options(s, StudyConfig, ["character", "character_map", "wrist_slack"])
     s.add_argument("--force", action="store_true", help="replace an existing study")
     _add_max_speech(s)
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from .._config import check_option, option
+from ..character.target import WRIST_SLACK, WRIST_SLACK_MAX
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -115,7 +116,17 @@ class StudyConfig:
     character_map: str | os.PathLike[str] | dict | None = option(
         None, help="bone map of --character (our joint -> its bone)", kind=str, metavar="JSON"
     )
+    wrist_slack: float = option(
+        WRIST_SLACK,
+        help="how far --character's wrists may stay from our reach, a fraction of its arm's length (0: exactly "
+        "where ours reach; more keeps more of our arm directions where its arm's proportions differ)",
+        low=0.0,
+        high=WRIST_SLACK_MAX,
+        unit="of the arm",
+        metavar="FRACTION",
+        step=0.01,
+    )
 
     def __post_init__(self) -> None:
-        for name in ("seed", "participants", "workers"):
+        for name in ("seed", "participants", "workers", "wrist_slack"):
             object.__setattr__(self, name, check_option(StudyConfig, name, getattr(self, name)))

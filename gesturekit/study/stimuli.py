@@ -328,21 +328,24 @@ def _study_view_box(motions: Sequence[Motion], character: Character | None = Non
     return np.stack([boxes[:, :, 0].min(axis=0), boxes[:, :, 1].max(axis=0)], axis=1).tolist()
 
 
-def _study_character(character: Any, bone_map: Any) -> tuple[Character | None, dict | None]:
+def _study_character(character: Any, bone_map: Any, wrist_slack: float) -> tuple[Character | None, dict | None]:
     """The character every stimulus shows (read from its file) and what study.json records of it: the
     names and SHA-256 of its file and bone map, how its bones were matched."""
-    from ..character.target import Character
+    from ..character.target import WRIST_SLACK, Character
     from ..character.user import character_record, read_character
 
     if character is None:
         if bone_map is not None:
             raise ConfigError("a bone map (--character-map) needs a character (--character)")
+        if wrist_slack != WRIST_SLACK:
+            raise ConfigError("a wrist slack (--wrist-slack) says how a character's arms are posed: give one")
         return None, None
     if isinstance(character, Character):
         if bone_map is not None:
             raise ConfigError("a Character is already matched: give the bone map to read_character instead")
+        character = dataclasses.replace(character, wrist_slack=wrist_slack)
     else:
-        character = read_character(character, bone_map=bone_map)
+        character = read_character(character, bone_map=bone_map, wrist_slack=wrist_slack)
     record = character_record(character, bone_map=bone_map)
     # the glTF document stays here: the rendering needs the bones and the skin only
     return dataclasses.replace(character, gltf=None), record
@@ -485,7 +488,7 @@ def make_stimuli(
         # a NaN target would scale every soundtrack to NaN samples
         raise ConfigError(f"the loudness must be a finite number of LUFS (e.g. -23), got {study.loudness_lufs!r}")
     track = parse_control(study.control)
-    user_character, character_record = _study_character(study.character, study.character_map)
+    user_character, character_record = _study_character(study.character, study.character_map, study.wrist_slack)
     refiner = study.refiner
     refiner_name = None if refiner is None else str(getattr(refiner, "path", None) or refiner)
     if "knn+cgan" in systems:

@@ -305,6 +305,8 @@ def _material_actors(plotter: pv.Plotter, mesh: pv.PolyData, user: UserBody, fac
 
 #: Pixels from a label's anchor (:meth:`CharacterStage.label_anchor`) up to the label's top, as on the page.
 LABEL_RAISE = 16
+#: Pixels kept free between a label's top and the picture's top edge.
+LABEL_MARGIN = 4
 
 
 class CharacterDrawing:
@@ -410,18 +412,22 @@ class CharacterDrawing:
     def _labels(self, plotter: pv.Plotter, labels: Sequence[str], resolution: tuple[int, int], size: int) -> None:
         w, h = resolution
         renderer = plotter.renderer
+        # a picture smaller than 640 x 480 gets smaller labels, so that each fits above its body
+        size = max(6, round(size * min(1.0, w / 640, h / 480)))
         for i, text in enumerate(labels):
             if not str(text):
                 continue
             renderer.SetWorldPoint(*self.stage.label_anchor(i), 1.0)
             renderer.WorldToDisplay()
             x, y, _ = renderer.GetDisplayPoint()  # pixels from the bottom left
-            # the label's top LABEL_RAISE pixels above the anchor, within the picture (VTK places its foot)
-            foot = min(y + LABEL_RAISE - size, h - size - 2)
+            # the label's top LABEL_RAISE pixels above the anchor, and inside the picture: the text hangs from
+            # its position (its glyphs are taller than ``size`` pixels, so placing its foot cut them off)
+            top = min(y + LABEL_RAISE, h - LABEL_MARGIN)
             colour = part_colors(self.stage.schemes[i])[PARTS.index("shirt")]
-            actor = plotter.add_text(str(text), position=(float(np.clip(x, 0, w)), float(foot)), font_size=size)
+            actor = plotter.add_text(str(text), position=(float(np.clip(x, 0, w)), float(top)), font_size=size)
             actor.GetTextProperty().SetColor(*colour)
             actor.GetTextProperty().SetJustificationToCentered()
+            actor.GetTextProperty().SetVerticalJustificationToTop()
 
     def update(self, frame: int) -> None:
         """Pose every character at ``frame``."""

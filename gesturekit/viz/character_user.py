@@ -196,7 +196,7 @@ def character_arrays(character: Character) -> dict[str, np.ndarray]:
         "character_rest_rotation": np.asarray(ch.rest_rotation),
         "character_rest_position": np.asarray(ch.rest_position),
         "character_bone_of": np.asarray(ch.bone_of),
-        "character_numbers": np.array([float(ch.pelvis), float(ch.bvh_units)]),
+        "character_numbers": np.array([float(ch.pelvis), float(ch.bvh_units), ch.wrist_slack]),
         "character_to_file": np.asarray(ch.to_file),
     }
     if ch.skin is not None:
@@ -242,4 +242,5 @@ def character_from_arrays(data: Any) -> Character | None:
         to_file=data["character_to_file"],
         skin=skin,
         bvh_units=float(numbers[1]),
+        wrist_slack=float(numbers[2]),
     )

@@ -90,7 +90,8 @@ def test_a_character_is_matched_drawn_and_written_until_the_default_is_chosen(ap
     at.button(key="synth.render").click().run()
     assert not at.exception and not errors(at), (at.exception, errors(at))
     made_video = at.session_state["_synth.video"]
-    assert made_video["character"] == at.session_state["gk.character"]["token"]
+    kept = at.session_state["gk.character"]
+    assert made_video["character"] == (*kept["token"], kept["character"].wrist_slack)  # the file, map and slack
     assert made_video["bytes"][4:8] == b"ftyp"
     assert any(d.proto.label == "Video (MP4)" for d in at.get("download_button"))
 
@@ -154,6 +155,27 @@ def test_a_bvh_character_and_a_bone_map(app_env):
     assert "matched by JSON map bones.json" in " ".join(captions(at))
     ch = at.session_state["gk.character"]["character"]
     assert ch.matched() == truth(spec).joint_map
+
+
+def test_the_wrist_slack_slider_poses_the_arms_again(app_env):
+    ((name, data),) = rig_files(RigSpec(arm=0.9, forearm=1.1)).items()  # an upper arm shorter than ours
+    at = run_synthesis(upload_character(open_page(), name, data))
+
+    def wrists() -> list[float]:
+        said = [c for c in captions(at) if c.startswith("k-NN") and "wrists within " in c]
+        return [float(c.split("wrists within ")[1].split(" %")[0]) for c in said]
+
+    slider = at.slider(key="_gk.wrist_slack")
+    assert slider.value == 5.0 and slider.max == 20.0
+    before = at.session_state["gk.character"]["character"]
+    assert before.wrist_slack == 0.05 and wrists() and all(0.0 < w <= 5.0 for w in wrists())
+    token = at.session_state["_gk.character_files"] and next(iter(at.session_state["_gk.character_files"]))[1]
+    at.slider(key="_gk.wrist_slack").set_value(0.0).run()
+    assert not at.exception and not errors(at), (at.exception, errors(at))
+    assert at.session_state["gk.character"]["character"].wrist_slack == 0.0
+    assert wrists() and all(w == 0.0 for w in wrists())  # the hands exactly where ours reach
+    made = at.session_state["_gk.character_files"]
+    assert any(key[1] != token and key[1][-1] == 0.0 for key in made)  # its files are made again for it
 
 
 def test_a_file_no_reader_foresaw_is_a_message_with_a_reference(app_env, monkeypatch):

@@ -125,3 +125,33 @@ def test_the_wrist_goes_where_the_arm_turns_least_within_the_slack(change, slack
     straight = a * upper / ao + c * fore / co
     near = np.linalg.norm(straight - target, axis=1) <= radius
     assert np.allclose(w[near], straight[near]) and (mine[near] < 1e-6).all()
+
+
+def test_a_character_read_with_a_slack_is_posed_with_it_unless_told_otherwise(tmp_path, motion):
+    path = write_rig(tmp_path, RigSpec(arm=np.sqrt(0.8), forearm=1 / np.sqrt(0.8)), "short_upper")
+    default, exact = read_character(path), read_character(path, wrist_slack=0)
+    assert default.wrist_slack == WRIST_SLACK and exact.wrist_slack == 0.0
+    held = retarget(motion, exact)
+    assert held.report.wrist_error < 1e-6  # the hands exactly where ours reach
+    np.testing.assert_array_equal(held.position, retarget(motion, default, wrist_slack=0.0).position)
+    loose = retarget(motion, exact, wrist_slack=WRIST_SLACK)  # the call's own slack wins
+    np.testing.assert_array_equal(loose.position, retarget(motion, default).position)
+    assert 0.0 < loose.report.wrist_error <= WRIST_SLACK + 1e-9
+    assert f"wrists within {100 * loose.report.wrist_error:.2f} % of the arm's length" in loose.report.summary()
+
+
+@pytest.mark.parametrize("bad", [-0.01, 0.21, float("nan"), float("inf"), True, "0.05", None])
+def test_a_slack_that_is_not_a_fraction_up_to_a_fifth_is_refused_before_the_file_is_read(tmp_path, motion, bad):
+    from gesturekit.character.target import check_wrist_slack
+    from gesturekit.errors import ConfigError
+
+    missing = tmp_path / "nowhere.glb"  # never opened: the option is checked first
+    with pytest.raises(ConfigError, match="wrist_slack") as refused:
+        read_character(missing, wrist_slack=bad)
+    assert "nowhere.glb" not in str(refused.value)
+    if bad is not None:  # None asks retarget for the character's own
+        ch = _rig(tmp_path, 0.0)
+        with pytest.raises(ConfigError, match="wrist_slack"):
+            retarget(motion, ch, wrist_slack=bad)
+        with pytest.raises(ConfigError, match="--wrist-slack is how far"):
+            check_wrist_slack(bad, name="--wrist-slack")

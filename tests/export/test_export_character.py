@@ -517,7 +517,27 @@ def test_synthesize_refuses_a_character_missing_a_bone_or_a_glb_of_a_skeleton(tm
     assert run.code == 2 and "skel.bvh is a skeleton without a body" in run.stderr
     run = run_cli(*base, "--character-map", tmp_path / "map.json")
     assert run.code == 2 and "--character" in run.stderr
+    run = run_cli(*base, "--wrist-slack", "0")
+    assert run.code == 2 and "--wrist-slack" in run.stderr and "give the character too" in run.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_synthesize_poses_the_arms_with_the_wrist_slack_asked_for(tmp_path, cli_world):
+    from tests.badinput import run_cli
+
+    db, speech_path = cli_world
+    short = write_rig(tmp_path, RigSpec(arm=np.sqrt(0.8), forearm=1 / np.sqrt(0.8)), "short_upper")
+    base = ["synthesize", speech_path, "--db", db, "--refiner", "none", "--format", "bvh", "--character", short]
+    wrists = {}
+    for slack in ("0", "0.2"):
+        run = run_cli(*base, "--out", tmp_path / slack, "--wrist-slack", slack)
+        assert run.code == 0, run.stderr
+        (line,) = [x for x in run.stdout.splitlines() if x.strip().startswith("on short_upper.glb")]
+        wrists[slack] = float(line.split("wrists within ")[1].split(" %")[0])
+    assert wrists["0"] == 0.0 and 0.0 < wrists["0.2"] <= 20.0  # exactly our reach, or nearer our directions
+    bad = run_cli(*base, "--out", tmp_path / "bad", "--wrist-slack", "0.25")
+    assert bad.code == 2 and bad.stderr.startswith("gesturekit: error: --wrist-slack is how far")
+    assert not (tmp_path / "bad").exists()
 
 
 # ----------------------------------------------------------------------------- hostile files

@@ -71,6 +71,7 @@ RUN_ARGUMENTS = {
         "character",
         "character_map",
         "character_clips",  # what the character's GLB keeps of the file's own clips: a run argument, as the map
+        "wrist_slack",  # Character.wrist_slack, read with the character as its map is
         "video",
         "video_style",
         "video_full_body",  # RenderStyle.framing of the MP4

@@ -49,6 +49,7 @@ def test_stimuli_command_renders_every_stimulus_on_the_character_and_records_its
         "file": "presenter.vrm",
         "sha256": hashlib.sha256(rig.read_bytes()).hexdigest(),
         "matched_by": "VRM 1.0 humanoid",
+        "wrist_slack": 0.05,
     }
     manifest = pd.read_csv(out / "manifest.csv")
     assert list(manifest.columns) == ["id", "file", "audio", "system", "controls", "seed", "duration_s"]
@@ -111,12 +112,14 @@ def test_a_bone_map_is_recorded_with_its_file(tmp_path):
         workers=1,
         character=rig,
         character_map=bone_map,
+        wrist_slack=0.0,
     )
     assert res.settings["character"]["bone_map"] == {
         "file": "map.json",
         "sha256": hashlib.sha256(bone_map.read_bytes()).hexdigest(),
     }
     assert res.settings["character"]["matched_by"] == "JSON map map.json"
+    assert res.settings["character"]["wrist_slack"] == 0.0  # the hands held exactly where ours reach
 
 
 def test_bad_characters_are_one_line_errors_and_no_study_is_started(tmp_path, capsys):
@@ -132,6 +135,8 @@ def test_bad_characters_are_one_line_errors_and_no_study_is_started(tmp_path, ca
         (["--character", str(tmp_path / "model.obj")], "not .obj"),
         (["--character", str(rig), "--character-map", str(wrong_map)], "NoSuchBone"),
         (["--character-map", str(wrong_map)], "needs a character"),
+        (["--wrist-slack", "0.1"], "says how a character's arms are posed"),
+        (["--character", str(rig), "--wrist-slack", "0.3"], "--wrist-slack must be a number from 0 to 0.2"),
     ]
     for k, (extra, words) in enumerate(cases):
         out = tmp_path / f"study{k}"

@@ -226,11 +226,11 @@ def test_side_by_side_motions_on_one_character_and_a_fixed_box_from_its_pelvis()
 
 @pytest.mark.slow
 def test_the_rendering_processes_draw_the_character_as_this_one_does():
-    ch = character("mixamo_a_rolled")
+    ch = dataclasses.replace(character("mixamo_a_rolled"), wrist_slack=0.0)  # the hands held exactly
     m = Motion(np.concatenate([_demo(), _demo()[::-1][:4]]), FPS)  # two chunks of frames
     arrays = character_arrays(ch)
     back = character_from_arrays(arrays)
-    assert back.names == ch.names and back.gltf is None
+    assert back.names == ch.names and back.gltf is None and back.wrist_slack == 0.0
     for field in ("parents", "rest_rotation", "rest_position", "bone_of", "to_file"):
         np.testing.assert_array_equal(getattr(back, field), getattr(ch, field))
     np.testing.assert_array_equal(back.skin.colors, ch.skin.colors)
@@ -281,3 +281,24 @@ def test_the_result_video_passes_the_character_on(tmp_path, monkeypatch):
     result_module.save_result_video(res, tmp_path / "theirs.mp4", character=ch)
     result_module.save_result_video(res, tmp_path / "ours.mp4")
     assert seen[0] is ch and seen[1] is None
+
+
+@pytest.mark.parametrize("size", [(640, 480), (320, 240)])
+@pytest.mark.parametrize("theirs", [False, True])
+def test_side_by_side_labels_stand_whole_inside_the_picture(size, theirs):
+    from gesturekit.viz.character_render import LABEL_MARGIN
+
+    ch = character("mixamo_a_rolled") if theirs else None  # a user's character fills the view up to its head
+    image = render_image(
+        motion(0, 1), side_by_side=motion(10, 1), labels=("k-NN", "k-NN + refiner"), resolution=size, character=ch
+    ).astype(int)
+    w = size[0]
+    orange = (image[..., 0] - image[..., 2]) > 60  # the second label, in the refined body's shirt colour
+    lit = np.flatnonzero(orange.any(axis=1))
+    gaps = np.flatnonzero(np.diff(lit) > 1)
+    if gaps.size:  # the body's orange shirt is below the label: keep the label's band of rows only
+        orange[lit[gaps[0]] + 1 :] = False
+    rows, cols = np.nonzero(orange)
+    assert rows.size > 30, "the label is drawn"
+    assert rows.min() >= LABEL_MARGIN - 1 and rows.max() - rows.min() >= 5  # its top inside, its glyphs whole
+    assert cols.min() > w // 2 and cols.max() < w - 1  # within its half, not cut at the right edge
