@@ -432,4 +432,8 @@ def candidate_figure(
     )
     for ann in fig.layout.annotations:
         ann.font = dict(size=12)
+    # the pose panel's title is wider than its narrow column: from the column's left edge, not centred on it
+    # (centred, its longer line ran past the figure's left edge and lost its first letters)
+    first = fig.layout.annotations[0]
+    first.update(x=0.0, xanchor="left", align="left")
     return fig

@@ -161,6 +161,8 @@ def test_errors_are_messages(app_env, study_folder, tmp_path):  # noqa: F811
         assert not _errors(at) and any(b.label == "Write the design" for b in at.button)
         at = _page(study_folder.parent)  # not a stimuli folder
         assert any("manifest.csv" in e for e in _errors(at))
+        at = _page(study_folder.parent / "not_made_yet")  # the first visit: no study yet is no error
+        assert not _errors(at) and any("No study in this folder yet" in shown(i.value) for i in at.info)
         init_study(study_folder, attention=0)
         at = _page(study_folder)  # a design, no participant yet
         assert not _errors(at) and any("No participant has started" in shown(i.value) for i in at.info)

@@ -28,9 +28,9 @@ pytestmark = [
 LAPTOP = (1280, 800)
 
 
-#: Each select box's and download button's text and whether it is cut: a select box shows its chosen option's whole
-#: text in its input (wider inside than shown: cut), a download button its label (an element of it wider inside than
-#: shown).
+#: Each select box's, plot text's and download button's text and whether it is cut: a select box shows its chosen
+#: option's whole text in its input (wider inside than shown: cut), a plot its titles and notes inside its box, a
+#: download button its label (an element of it wider inside than shown).
 _CUT_TEXT = """() => {
   const wider = (e) => e.clientWidth > 0 && e.scrollWidth > e.clientWidth + 1;
   const main = document.querySelector('[data-testid="stApp"]') || document.body;
@@ -40,6 +40,16 @@ _CUT_TEXT = """() => {
     if (!input || !input.offsetParent) continue;  // not shown (a closed expander)
     out.push({kind: "select box", label: box.querySelector("label")?.innerText.trim() || "", text: input.value,
               cut: wider(input)});
+  }
+  for (const plot of main.querySelectorAll('.js-plotly-plot')) {  // a plot's titles and notes inside its box
+    if (!plot.offsetParent) continue;
+    const box = plot.getBoundingClientRect();
+    for (const t of plot.querySelectorAll('g.annotation-text-g, text.gtitle, text.xtitle, text.ytitle')) {
+      const r = t.getBoundingClientRect();
+      if (!r.width) continue;
+      out.push({kind: "plot text", label: t.textContent.trim().slice(0, 60), text: t.textContent.trim(),
+                cut: r.left < box.left - 1 || r.right > box.right + 1 || r.top < box.top - 1});
+    }
   }
   for (const b of main.querySelectorAll('[data-testid="stDownloadButton"] button')) {
     if (!b.offsetParent) continue;
@@ -96,7 +106,7 @@ def laptop(tmp_path_factory):
         yield page
 
 
-def test_no_select_box_nor_download_label_is_cut_on_any_page(laptop):
+def test_no_select_box_plot_text_nor_download_label_is_cut_on_any_page(laptop):
     page = laptop
     seen: dict[str, list[dict]] = {}
     for i, title in enumerate(app_browser.APP_PAGES):
@@ -114,6 +124,7 @@ def test_no_select_box_nor_download_label_is_cut_on_any_page(laptop):
     assert all("Database" in has[p] for p in seen if p != "Study")
     assert {"Initial pose", "Blending", "A control must hold at"} <= has["Synthesize"]
     assert "Candidate" in has["Retrieval inspector"] and "Clips of" in has["Database"]
+    assert any(t["kind"] == "plot text" and "wrist paths" in t["text"] for t in seen["Retrieval inspector"])
     assert sum(t["kind"] == "download" for t in seen["Synthesize"]) == 6  # every file of the result but the MP4
 
 

@@ -105,7 +105,7 @@ def settings(db: MatchingDatabase) -> dict:
                 key=pk("study.refiner", resources.default_refiner(db)),
                 help=_limits("refiner")["help"],
             )
-        c = st.columns([3, 1])
+        c = st.columns([2, 1])  # "Parallel renders" on one line at 1280 px
         out = ss["study.out"] = c[0].text_input("Study folder to write", key=pk("study.out", str(home() / "study")))
         workers = ss["study.workers"] = _number(
             c[1], "Parallel renders", "workers", placeholder=_limits("workers")["default_help"]

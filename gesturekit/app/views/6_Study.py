@@ -59,6 +59,12 @@ def choose_folder() -> Path | None:
         st.info("Type the folder of a study.")
         return None
     path = display.allowed(Path(folder.strip()).expanduser(), what="study folder")
+    if not path.exists():  # the first visit: nothing is wrong yet, there is simply no study
+        st.info(
+            "No study in this folder yet. The **Study stimuli** page makes one (its videos, manifest and "
+            "presentation order); then give it a design here. Or type the folder of an existing study."
+        )
+        return None
     if not (path / "manifest.csv").is_file():
         # the folder is in the input above: the message says what is wrong without repeating the path
         raise ConfigError(
