@@ -108,8 +108,8 @@ def settings(db: MatchingDatabase) -> dict:
         c = st.columns([2, 1])  # "Parallel renders" on one line at 1280 px
         out = ss["study.out"] = c[0].text_input("Study folder to write", key=pk("study.out", str(home() / "study")))
         workers = ss["study.workers"] = _number(
-            c[1], "Parallel renders", "workers", placeholder=_limits("workers")["default_help"]
-        )
+            c[1], "Parallel renders", "workers", placeholder="all"
+        )  # "all cores" did not fit beside the steppers; the help says "(empty: all cores)"
         overwrite = st.checkbox(
             "replace an existing study there",
             key="study.overwrite",
