@@ -434,16 +434,22 @@ def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3)
     chunk = 2048
     Y = np.empty((M, T, dmax), np.float32)
     resid = np.empty((len(LOWD_DIMS), M, T), np.float32)
+    lost32 = np.empty((len(LOWD_DIMS), M, T), np.float32)  # what storing y in float32 loses
+    slack = np.empty((M, T), np.float32)  # bounds the rounding of r: 2e-6 |p - c_m|
     centre = np.empty((M, D))
     for c0 in range(0, M, chunk):
         X = np.asarray(P3[c0 : c0 + chunk], np.float64)
         cm = X.mean(axis=1)
         X -= cm[:, None]
         y = X @ V
-        Y[c0 : c0 + chunk], centre[c0 : c0 + chunk] = y, cm
+        y32 = y.astype(np.float32)
+        Y[c0 : c0 + chunk], centre[c0 : c0 + chunk] = y32, cm
         x2, cum = (X**2).sum(-1), np.cumsum(y**2, axis=-1)
+        # the float64 cancellation in |x|^2 - |y|^2 and the float32 storage of r
+        slack[c0 : c0 + chunk] = 2e-6 * np.sqrt(x2)
         for k, d in enumerate(LOWD_DIMS):
             resid[k, c0 : c0 + chunk] = np.sqrt(np.maximum(x2 - cum[..., d - 1], 0.0))
+            lost32[k, c0 : c0 + chunk] = np.linalg.norm(y[..., :d] - y32[..., :d], axis=-1) * (1 + 1e-6)
     variants = [(d, s) for d in LOWD_DIMS for s in LOWD_CODES]
     picked = np.unique(np.linspace(1, chosen.clip.size - 1, steps).round().astype(int))
     print(
@@ -493,18 +499,21 @@ def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3)
             for k, d in enumerate(LOWD_DIMS):
                 a = np.linalg.norm(Qc - Pq[:, :d] @ V[:, :d].T, axis=-1)[:, None]
                 r = resid[k, c0:c1]
+                # |a - r| and a + r as the exact r could make them
+                apart = np.maximum(np.abs(a - r) - slack[c0:c1] - 1e-12 * a, 0.0)
+                joint = a * (1 + 1e-12) + r + slack[c0:c1]
                 for storage, top in LOWD_CODES.items():
                     y = Y[c0:c1, :, :d].astype(np.float64)
                     if top:
                         scale = np.abs(y).max(axis=-1, keepdims=True) / top
                         scale[scale == 0] = 1.0
                         yq = np.clip(np.rint(y / scale), -top, top) * scale
-                        e = np.linalg.norm(y - yq, axis=-1)
+                        e = np.linalg.norm(y - yq, axis=-1) * (1 + 1e-9) + lost32[k, c0:c1]
                     else:
-                        yq, e = y, 0.0
+                        yq, e = y, lost32[k, c0:c1]
                     g = np.linalg.norm(Pq[:, None, :d] - yq, axis=-1)
-                    lo = np.where(adm, np.maximum(g - e, 0.0) ** 2 + (a - r) ** 2, np.inf)
-                    hi = np.where(adm, (g + e) ** 2 + (a + r) ** 2, np.inf)
+                    lo = np.where(adm, np.maximum(g - e, 0.0) ** 2 + apart**2, np.inf)
+                    hi = np.where(adm, (g + e) ** 2 + joint**2, np.inf)
                     least_hi = np.where(lo > 0, hi, np.inf).min(axis=1)[:, None]
                     cand = adm & ((lo <= least_hi) | ~np.isfinite(least_hi))
                     hit = np.isfinite(d_near[c0:c1])
