@@ -397,7 +397,8 @@ def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3)
     pose row, 448 an audio row).
     Timings, measured in one run: today's scan of a step, the same scan restricted to the candidates
     (d = 16, int8; the pass itself not counted), the same scan given each clip's nearest start only
-    (what any first pass that decided every clip would leave), a float32 product over the d = 16
+    (what any first pass that decided every clip would leave) and given the starts today's 8-bit
+    tier leaves open (what its float32 rows add to that), a float32 product over the d = 16
     coordinates (a stand-in for the pass) and one float32 matrix-vector product over the pose matrix.
     """
     from concurrent.futures import ThreadPoolExecutor
@@ -471,7 +472,7 @@ def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3)
             v: {k: np.zeros(M) for k in ("decided", "cand", "lb", "audio", "open", "lb8", "audio8", "width")}
             for v in variants
         }
-        cand16 = np.zeros((M, T), bool)
+        cand16, open16 = np.zeros((M, T), bool), np.zeros((M, T), bool)
         for c0 in range(0, M, chunk):
             c1 = min(M, c0 + chunk)
             n, rows = c1 - c0, np.arange(c1 - c0)
@@ -492,7 +493,9 @@ def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3)
             est = red.kappa[c0:c1] + red.coef[c0:c1] * (np.float32(qc.scale) * dot.astype(np.float32))
             est = np.where(adm, est.astype(np.float64) + centred[:, None], np.inf)
             err = clip_bounds(red.stats[c0:c1], centred, qc, D)
-            left = _open_starts(est, err, adm).sum(axis=1)
+            left_today = _open_starts(est, err, adm)
+            open16[c0:c1] = left_today
+            left = left_today.sum(axis=1)
             open_today[c0:c1] = np.where(left > 1, left, 0)
             Qc = q - centre[c0:c1]
             Pq = Qc @ V
@@ -581,7 +584,7 @@ def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3)
         if len(timed) < 3:
             oracle = np.zeros((M, T), bool)
             oracle[np.flatnonzero(alive), s_near[alive]] = True
-            timed.append((q.astype(np.float32), plan.query[i * N], cand16.ravel(), oracle.ravel()))
+            timed.append((q.astype(np.float32), plan.query[i * N], cand16.ravel(), open16.ravel(), oracle.ravel()))
 
     def med(xs: list, f: str = "{:.1%}") -> str:
         x = np.asarray(xs, float)
@@ -621,17 +624,17 @@ def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3)
     Y16 = np.ascontiguousarray(Y[..., :16]).reshape(-1, 16)
     out16 = np.empty(Y16.shape[0], np.float32)
     pool = ThreadPoolExecutor(index._workers) if index._workers > 1 else None
-    names = ("today", "candidates", "nearest", "pass")
+    names = ("today", "candidates", "open", "nearest", "pass")
     times: dict = {k: [] for k in names}
     gemvs: list = []
     scratch: dict = {}
     try:
         for _ in range(runs):
-            for q32, f32, cand, oracle in timed:
+            for q32, f32, cand, left, oracle in timed:
                 g0 = best_of(lambda: np.dot(P2, gq, out=out), 3)
                 t_pass = best_of(lambda: np.dot(Y16, gq[:16], out=out16), 3)
                 time.sleep(BLAS_IDLE)
-                biases = (bias, np.where(cand, bias, np.inf), np.where(oracle, bias, np.inf))
+                biases = [bias] + [np.where(x, bias, np.inf) for x in (cand, left, oracle)]
                 with single_threaded_blas():
                     t = [_timed_scan(index, q32, f32, b, pool, scratch) for b in biases]
                 g1 = best_of(lambda: np.dot(P2, gq, out=out), 3)
@@ -649,7 +652,8 @@ def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3)
         f"of a step {r['today']:.2f}x; the same scan on the d=16 int8 candidates only {r['candidates']:.2f}x, plus "
         f"the pass (a float32 product over the 16 coordinates, 64 B a frame; int8 codes would read 32) "
         f"{r['pass']:.2f}x: {new:.2f}x, {r['today'] / new:.2f} times today's speed; given each clip's nearest start "
-        f"only (any first pass that decided every clip) {r['nearest']:.2f}x; load average "
+        f"only (any first pass that decided every clip) {r['nearest']:.2f}x, given the starts today's 8-bit tier "
+        f"leaves (their float32 rows read) {r['open']:.2f}x; load average "
         + " ".join(f"{x:.1f}" for x in os.getloadavg())
     )
 
