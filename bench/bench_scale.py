@@ -28,9 +28,18 @@ distances and the share of clips that spheres per block of starts place beyond t
 also the audio, at every start those spheres leave open, places beyond the second (exact minima:
 the best any audio bound could do; and the bound of a cone around each block's audio directions).
 
+With ``--lowd FOLDER`` it prints, for steps of a synthesis of real speech (``--speech``; by default
+BEAT speech from ``../shared/data/speech``), what a first pass over a PCA projection of the pose
+features to 8 to 32 dimensions, with the residual norm of each frame (an interval on every distance),
+could decide before today's tiers: the clips whose nearest start it decides, the starts it leaves, the
+float32 rows the 8-bit tier still reads among them, the clips the skip rule still has to read, the bytes
+a step would read; and today's scan timed against the same scan on the starts such a pass leaves, the
+same scan given only each clip's nearest start, and one float32 matrix-vector product.
+
 Usage: python bench/bench_scale.py --hours 1 [--workers N] [--keep] [--tile-hours 100]
        python bench/bench_scale.py --search-only FOLDER   (the search figures of a database folder)
        python bench/bench_scale.py --bounds FOLDER [--block 8]   (what skipping clips could save)
+       python bench/bench_scale.py --lowd FOLDER [--speech FILE] [--steps 9]   (what a low-d first pass could save)
 """
 
 from __future__ import annotations
@@ -57,6 +66,8 @@ import numpy as np
 from bench_search import BLAS_IDLE, best_of, step_vs_matvec
 
 FPS_BVH = 30.0
+#: Real speech for ``--lowd`` (the shared test data, read in place; absent: generated speech is used)
+SPEECH = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "speech" / "beat_lawrence_0_19_19.wav"
 STEPS_60S = 113  # 60 s of speech at 15 fps in steps of 8 frames
 
 # the build, in a fresh process so that its peak resident memory is its own
@@ -336,6 +347,317 @@ def bound_figures(path: Path, steps: int = 9, block: int = 8, width: int = 10) -
         )
 
 
+#: Dimensions of the projection ``--lowd`` measures, and how it stores each frame's coordinates:
+#: float32, or int8 / int4 codes with a scale per frame (the largest code).
+LOWD_DIMS = (8, 16, 24, 32)
+LOWD_CODES = {"float32": 0, "int8": 127, "int4": 7}
+
+
+def lowd_bytes(d: int, storage: str) -> float:
+    """Bytes a frame of a low-d copy: its coordinates, then |y|^2 and the residual norm (float32),
+    and for codes their scale and rounding loss too."""
+    return 4 * d + 8 if storage == "float32" else d * (1 if storage == "int8" else 0.5) + 16
+
+
+def _open_starts(est: np.ndarray, err: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """The starts of ``starts`` (n, T) the 8-bit tier leaves open (as ``scan_reduced`` decides them):
+    within twice the clip's bound ``err`` (n,) of its least estimate, or all where that could be zero."""
+    e = np.where(starts, est, np.inf)
+    least = e.min(axis=1)
+    with np.errstate(invalid="ignore"):
+        near = starts & (e <= (least + 2 * err)[:, None])
+    return np.where((least <= err)[:, None], starts, near)
+
+
+def _timed_scan(index, q: np.ndarray, f: np.ndarray, bias: np.ndarray, pool, scratch: dict) -> float:
+    """Seconds of one query's scan of ``index`` (``SearchIndex._scan``) with the admissible starts ``bias``
+    (``scratch`` keeps its buffer between calls, as a search does between steps)."""
+    t0 = time.perf_counter()
+    index._scan(q[None], [bias], f[None], scratch, pool)
+    return time.perf_counter() - t0
+
+
+def lowd_figures(path: Path, speech: Path | None, steps: int = 9, runs: int = 3) -> None:
+    """Print what a low-dimensional first pass over the pose features could decide, per step, and time it.
+
+    The pass: a PCA basis ``V`` (d of the 96 dimensions) of the frames' deviations from their clip's
+    mean ``c_m``; per frame ``y = V^T (p - c_m)``, stored as float32 or as int8 / int4 codes with a
+    scale (losing ``e = |y - y~|``), and the residual norm ``r = |p - c_m - V y|``; per clip and query
+    ``a = |q - c_m - V V^T (q - c_m)|``. For an orthogonal projection, with ``g = |V^T (q - c_m) - y~|``,
+    ``max(0, g - e)^2 + (a - r)^2 <= |q - p|^2 <= (g + e)^2 + (a + r)^2``. A start whose lower end
+    lies above the least upper end of its clip (over starts not possibly at distance 0) cannot be the
+    clip's nearest; the others are the candidates. Per step of a synthesis of ``speech`` (today's
+    search chooses the path; ``steps`` of its steps, spread over it) it prints, in float64: how many
+    clips' nearest start the pass decides, the candidates' share of the starts, the interval's width
+    at the nearest start over its distance, how many float32 rows today's 8-bit tier then still reads
+    among the candidates (vs on every start, as today), and how many clips the skip rule of
+    ``docs/METHOD.md`` ("Exact arithmetic") would still have to read with the deciding clips known
+    and the audio known exactly at every candidate (or at every start the 8-bit tier leaves open);
+    then the bytes a step as each design would read them (104 a frame of the 8-bit copy, 384 a float32
+    pose row, 448 an audio row).
+    Timings, measured in one run: today's scan of a step, the same scan restricted to the candidates
+    (d = 16, int8; the pass itself not counted), the same scan given each clip's nearest start only
+    (what any first pass that decided every clip would leave) and given the starts today's 8-bit
+    tier leaves open (what its float32 rows add to that), a float32 product over the d = 16
+    coordinates (a stand-in for the pass) and one float32 matrix-vector product over the pose matrix.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from gesturekit.database import MatchingDatabase
+    from gesturekit.datasets.synthetic import generate_demo_take
+    from gesturekit.search.admissible import base_starts
+    from gesturekit.search.reduced import clip_bounds, quantise_query
+    from gesturekit.search.threads import single_threaded_blas
+    from gesturekit.synthesis import synthesize, synthesizer_for
+
+    db = MatchingDatabase.load(path)
+    if speech is None:
+        audio, said = generate_demo_take(seconds=60.0, seed=7, name="query")[0].audio, "60 s of generated demo speech"
+    else:
+        audio, said = speech, f"{speech.name}"
+    res = synthesize(audio, db=db)  # today's search: the path whose steps are measured
+    chosen, plan = res.search, res.plan
+    N, width = chosen.config.segment, chosen.config.table_width
+    P3, F3 = np.asarray(db.P), np.asarray(db.F)
+    M, T, D = P3.shape
+    adm_all = base_starts(np.asarray(db.valid), N, plan.exclude)
+    index = synthesizer_for(db).index
+    red = index.reduced()
+    dmax = max(LOWD_DIMS)
+    # the basis, from the deviations of up to 4096 clips spread over the database
+    sample = np.unique(np.linspace(0, M - 1, min(M, 4096)).astype(int))
+    Xs = np.asarray(P3[sample], np.float64)
+    Xs -= Xs.mean(axis=1, keepdims=True)
+    Z = Xs[adm_all[sample]]
+    w, V = np.linalg.eigh(Z.T @ Z)
+    w, V = w[::-1], V[:, ::-1][:, :dmax]
+    kept = np.cumsum(w) / w.sum()
+    chunk = 2048
+    Y = np.empty((M, T, dmax), np.float32)
+    resid = np.empty((len(LOWD_DIMS), M, T), np.float32)
+    lost32 = np.empty((len(LOWD_DIMS), M, T), np.float32)  # what storing y in float32 loses
+    slack = np.empty((M, T), np.float32)  # bounds the rounding of r: 2e-6 |p - c_m|
+    centre = np.empty((M, D))
+    for c0 in range(0, M, chunk):
+        X = np.asarray(P3[c0 : c0 + chunk], np.float64)
+        cm = X.mean(axis=1)
+        X -= cm[:, None]
+        y = X @ V
+        y32 = y.astype(np.float32)
+        Y[c0 : c0 + chunk], centre[c0 : c0 + chunk] = y32, cm
+        x2, cum = (X**2).sum(-1), np.cumsum(y**2, axis=-1)
+        # the float64 cancellation in |x|^2 - |y|^2 and the float32 storage of r
+        slack[c0 : c0 + chunk] = 2e-6 * np.sqrt(x2)
+        for k, d in enumerate(LOWD_DIMS):
+            resid[k, c0 : c0 + chunk] = np.sqrt(np.maximum(x2 - cum[..., d - 1], 0.0))
+            lost32[k, c0 : c0 + chunk] = np.linalg.norm(y[..., :d] - y32[..., :d], axis=-1) * (1 + 1e-6)
+    variants = [(d, s) for d in LOWD_DIMS for s in LOWD_CODES]
+    picked = np.unique(np.linspace(1, chosen.clip.size - 1, steps).round().astype(int))
+    print(
+        f"low-d first pass on {path}: {M} clips x {T} frames; {said}, {len(picked)} of its {chosen.clip.size} steps; "
+        f"{width} rows listed; basis of {len(sample)} clips' deviations, variance kept "
+        + ", ".join(f"d={d} {kept[d - 1]:.1%}" for d in LOWD_DIMS)
+    )
+    stats: dict = {v: [] for v in variants}
+    today: list = []
+    timed = []
+    for i in picked:
+        q = np.asarray(P3[chosen.clip[i - 1], chosen.start[i - 1] + N - 1], np.float64)
+        f = np.asarray(plan.query[i * N], np.float64)
+        fn = f / np.linalg.norm(f)
+        qc = quantise_query(q.astype(np.float32))
+        d_near, a_near, s_near = np.full(M, np.inf), np.full(M, np.inf), np.zeros(M, np.int64)
+        open_today = np.zeros(M, np.int64)
+        per = {
+            v: {k: np.zeros(M) for k in ("decided", "cand", "lb", "audio", "open", "lb8", "audio8", "width")}
+            for v in variants
+        }
+        cand16, open16 = np.zeros((M, T), bool), np.zeros((M, T), bool)
+        for c0 in range(0, M, chunk):
+            c1 = min(M, c0 + chunk)
+            n, rows = c1 - c0, np.arange(c1 - c0)
+            adm = adm_all[c0:c1]
+            X = np.asarray(P3[c0:c1], np.float64)
+            d2 = ((X - q) ** 2).sum(-1)
+            Fa = np.asarray(F3[c0:c1], np.float64)
+            norm = np.linalg.norm(Fa, axis=-1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                cos = np.where(norm > 0, 1.0 - (Fa @ fn) / norm, 1.0)
+            d2n = np.where(adm & (d2 > 0), d2, np.inf)
+            s = d2n.argmin(axis=1)
+            d_near[c0:c1], s_near[c0:c1] = d2n[rows, s], s
+            a_near[c0:c1] = np.where(np.isfinite(d_near[c0:c1]), cos[rows, s], np.inf)
+            # today's 8-bit estimates and bound, as the scan makes them
+            dot = (red.codes[c0:c1].reshape(-1, D).astype(np.int32) @ qc.codes.astype(np.int32)).reshape(n, T)
+            centred = ((q - red.centre[c0:c1].astype(np.float64)) ** 2).sum(-1)
+            est = red.kappa[c0:c1] + red.coef[c0:c1] * (np.float32(qc.scale) * dot.astype(np.float32))
+            est = np.where(adm, est.astype(np.float64) + centred[:, None], np.inf)
+            err = clip_bounds(red.stats[c0:c1], centred, qc, D)
+            left_today = _open_starts(est, err, adm)
+            open16[c0:c1] = left_today
+            left = left_today.sum(axis=1)
+            open_today[c0:c1] = np.where(left > 1, left, 0)
+            Qc = q - centre[c0:c1]
+            Pq = Qc @ V
+            for k, d in enumerate(LOWD_DIMS):
+                a = np.linalg.norm(Qc - Pq[:, :d] @ V[:, :d].T, axis=-1)[:, None]
+                r = resid[k, c0:c1]
+                # |a - r| and a + r as the exact r could make them
+                apart = np.maximum(np.abs(a - r) - slack[c0:c1] - 1e-12 * a, 0.0)
+                joint = a * (1 + 1e-12) + r + slack[c0:c1]
+                for storage, top in LOWD_CODES.items():
+                    y = Y[c0:c1, :, :d].astype(np.float64)
+                    if top:
+                        scale = np.abs(y).max(axis=-1, keepdims=True) / top
+                        scale[scale == 0] = 1.0
+                        yq = np.clip(np.rint(y / scale), -top, top) * scale
+                        e = np.linalg.norm(y - yq, axis=-1) * (1 + 1e-9) + lost32[k, c0:c1]
+                    else:
+                        yq, e = y, lost32[k, c0:c1]
+                    g = np.linalg.norm(Pq[:, None, :d] - yq, axis=-1)
+                    lo = np.where(adm, np.maximum(g - e, 0.0) ** 2 + apart**2, np.inf)
+                    hi = np.where(adm, (g + e) ** 2 + joint**2, np.inf)
+                    least_hi = np.where(lo > 0, hi, np.inf).min(axis=1)[:, None]
+                    cand = adm & ((lo <= least_hi) | ~np.isfinite(least_hi))
+                    hit = np.isfinite(d_near[c0:c1])
+                    assert cand[rows[hit], s[hit]].all(), "a clip's nearest start fell outside its candidates"
+                    left8 = _open_starts(est, err, cand)
+                    st = per[(d, storage)]
+                    st["decided"][c0:c1] = (cand.sum(1) == 1) & np.isfinite(least_hi[:, 0])
+                    st["cand"][c0:c1] = cand.sum(1)
+                    st["lb"][c0:c1] = lo.min(axis=1)
+                    st["audio"][c0:c1] = np.where(cand, cos, np.inf).min(axis=1)
+                    st["open"][c0:c1] = np.where(left8.sum(1) > 1, left8.sum(1), 0)
+                    st["lb8"][c0:c1] = np.where(left8, np.maximum(lo, est - err[:, None]), np.inf).min(axis=1)
+                    st["audio8"][c0:c1] = np.where(left8, cos, np.inf).min(axis=1)
+                    with np.errstate(invalid="ignore", divide="ignore"):
+                        st["width"][c0:c1] = (hi - lo)[rows, s] / d_near[c0:c1]
+                    if (d, storage) == (16, "int8"):
+                        cand16[c0:c1] = cand
+        alive = np.isfinite(d_near)
+        idx = np.flatnonzero(alive)
+        pose_rank = np.empty(idx.size, np.int64)
+        pose_rank[np.lexsort((idx, d_near[idx]))] = np.arange(idx.size)
+        audio_rank = np.empty(idx.size, np.int64)
+        audio_rank[np.lexsort((idx, a_near[idx]))] = np.arange(idx.size)
+        combined = pose_rank + audio_rank
+        listed = combined <= np.sort(combined)[min(width, idx.size) - 1]
+        d_top, a_top = d_near[idx][listed].max(), a_near[idx][listed].max()
+        n_alive, frames = int(alive.sum()), M * T
+        today.append(
+            {
+                "open": float(np.mean(open_today[alive] > 0)),
+                "rows": int(open_today.sum()),
+                "bytes": 104 * frames + 384 * int(open_today.sum()) + 832 * n_alive,
+            }
+        )
+        for v, st in per.items():
+            read = alive & ~((st["lb"] > d_top) & (st["audio"] > a_top))
+            read8 = alive & ~((st["lb8"] > d_top) & (st["audio8"] > a_top))
+            n_cand = int(st["cand"][alive].sum())
+            a_rows = 104 * n_cand + 384 * int(st["open"].sum()) + 832 * n_alive
+            c_rows = 104 * n_cand + 448 * int(np.where(st["open"] > 0, st["open"], 1)[alive & ~read8].sum())
+            c_rows += 384 * int(st["open"][read8].sum()) + 832 * int(read8.sum())
+            stats[v].append(
+                {
+                    "decided": float(st["decided"][alive].mean()),
+                    "cand": n_cand / int(adm_all.sum()),
+                    "width": float(np.median(st["width"][alive])),
+                    "rows": int(st["open"].sum()),
+                    "left": float(np.where(st["open"] > 0, st["open"], 1)[alive].mean()),
+                    "read": float(read[alive].mean()),
+                    "read8": float(read8[alive].mean()),
+                    "bytes_a": lowd_bytes(*v) * frames + a_rows,
+                    "bytes_c": lowd_bytes(*v) * frames + c_rows,
+                }
+            )
+        s16 = stats[(16, "int8")][-1]
+        print(
+            f"  step {i}: deciding clips up to rank {pose_rank[listed].max()} (pose), {audio_rank[listed].max()} "
+            f"(audio); today the 8-bit tier leaves {today[-1]['open']:.0%} of clips open, {today[-1]['rows']} "
+            f"float32 rows; d=16 int8: nearest start decided for {s16['decided']:.1%} of clips, candidates "
+            f"{s16['cand']:.1%} of starts, then {s16['rows']} float32 rows; clips the skip rule must read "
+            f"{s16['read']:.1%} (audio known at the candidates), {s16['read8']:.1%} (at the starts the 8-bit tier "
+            f"leaves)",
+            flush=True,
+        )
+        if len(timed) < 3:
+            oracle = np.zeros((M, T), bool)
+            oracle[np.flatnonzero(alive), s_near[alive]] = True
+            timed.append((q.astype(np.float32), plan.query[i * N], cand16.ravel(), open16.ravel(), oracle.ravel()))
+
+    def med(xs: list, f: str = "{:.1%}") -> str:
+        x = np.asarray(xs, float)
+        return (f + " [" + f + ".." + f + "]").format(np.median(x), x.min(), x.max())
+
+    print(f"\n  per step, median [min..max] over {len(picked)} steps:")
+    print(
+        f"  today: the 8-bit tier leaves {med([t['open'] for t in today])} of clips open and "
+        f"{med([t['rows'] for t in today], '{:.0f}')} float32 rows to read; "
+        f"{med([t['bytes'] / 1e6 for t in today], '{:.0f}')} MB read"
+    )
+    base = np.asarray([t["bytes"] for t in today], float)
+    for v in variants:
+        x = stats[v]
+
+        def get(k: str, x: list = x) -> list:
+            return [s[k] for s in x]
+
+        mb_a, mb_c = np.asarray(get("bytes_a")), np.asarray(get("bytes_c"))
+        print(
+            f"  d={v[0]:2d} {v[1]:7s} ({lowd_bytes(*v):g} B a frame): nearest start decided {med(get('decided'))}, "
+            f"candidates {med(get('cand'))} of starts, width/distance {med(get('width'), '{:.3f}')}; the 8-bit "
+            f"tier on the candidates leaves {med(get('left'), '{:.1f}')} starts a clip, {med(get('rows'), '{:.0f}')} "
+            f"float32 rows; MB read {med(mb_a / 1e6, '{:.0f}')} = {np.median(base / mb_a):.2f}x fewer than today. "
+            f"With the skip rule, clips to read {med(get('read'))} (audio known at the candidates), "
+            f"{med(get('read8'))} (at the starts the 8-bit tier leaves; then MB read {med(mb_c / 1e6, '{:.0f}')} = "
+            f"{np.median(base / mb_c):.2f}x fewer)"
+        )
+
+    # timings, in one run: each of today's scans and its variants bracketed by matrix-vector products
+    cache: dict = {}
+    _, key = index._admissible(cache, N, chosen.config.mask_rule, -1, None, plan.exclude)
+    bias = index._bias(cache, key)
+    P2 = index._P2
+    gq = np.array(P2[min(12345, P2.shape[0] - 1)], np.float32)
+    out = np.empty(P2.shape[0], np.float32)
+    Y16 = np.ascontiguousarray(Y[..., :16]).reshape(-1, 16)
+    out16 = np.empty(Y16.shape[0], np.float32)
+    pool = ThreadPoolExecutor(index._workers) if index._workers > 1 else None
+    names = ("today", "candidates", "open", "nearest", "pass")
+    times: dict = {k: [] for k in names}
+    gemvs: list = []
+    scratch: dict = {}
+    try:
+        for _ in range(runs):
+            for q32, f32, cand, left, oracle in timed:
+                g0 = best_of(lambda: np.dot(P2, gq, out=out), 3)
+                t_pass = best_of(lambda: np.dot(Y16, gq[:16], out=out16), 3)
+                time.sleep(BLAS_IDLE)
+                biases = [bias] + [np.where(x, bias, np.inf) for x in (cand, left, oracle)]
+                with single_threaded_blas():
+                    t = [_timed_scan(index, q32, f32, b, pool, scratch) for b in biases]
+                g1 = best_of(lambda: np.dot(P2, gq, out=out), 3)
+                gemvs.append(0.5 * (g0 + g1))
+                for k, x in zip(names, (*t, t_pass)):
+                    times[k].append(x / gemvs[-1])
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    r = {k: float(np.median(v)) for k, v in times.items()}
+    new = r["candidates"] + r["pass"]
+    print(
+        f"\n  timed ({runs} runs of {len(timed)} steps, each bracketed by products), as multiples of one float32 "
+        f"matrix-vector product over the pose matrix ({float(np.median(gemvs)) * 1e3:.1f} ms), medians: today's scan "
+        f"of a step {r['today']:.2f}x; the same scan on the d=16 int8 candidates only {r['candidates']:.2f}x, plus "
+        f"the pass (a float32 product over the 16 coordinates, 64 B a frame; int8 codes would read 32) "
+        f"{r['pass']:.2f}x: {new:.2f}x, {r['today'] / new:.2f} times today's speed; given each clip's nearest start "
+        f"only (any first pass that decided every clip) {r['nearest']:.2f}x, given the starts today's 8-bit tier "
+        f"leaves (their float32 rows read) {r['open']:.2f}x; load average "
+        + " ".join(f"{x:.1f}" for x in os.getloadavg())
+    )
+
+
 def tile(src: Path, dst: Path, hours: float) -> Path:
     """``src`` (without its audio and overlapping cut) repeated to at least ``hours`` of clips at ``dst``."""
     from gesturekit.database.folder import CLIP_ARRAYS
@@ -438,7 +760,17 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--search-only", metavar="FOLDER", help="only the search figures of this database folder")
     ap.add_argument("--bounds", metavar="FOLDER", help="only what bounds could leave unread in this database")
     ap.add_argument("--block", type=int, default=8, help="starts per block for --bounds")
+    ap.add_argument("--lowd", metavar="FOLDER", help="only what a low-d first pass could decide in this database")
+    ap.add_argument("--speech", type=Path, default=SPEECH, help="speech for --lowd (default: BEAT from ../shared)")
+    ap.add_argument("--steps", type=int, default=9, help="steps of the speech --lowd measures")
     args = ap.parse_args(argv)
+    if args.lowd:
+        print(machine())
+        speech = args.speech if args.speech is not None and args.speech.exists() else None
+        if speech is None:
+            print(f"(no speech file at {args.speech}: generated demo speech instead)")
+        lowd_figures(Path(args.lowd), speech, steps=args.steps, runs=args.runs)
+        return
     if args.bounds:
         print(machine())
         bound_figures(Path(args.bounds), block=args.block)
