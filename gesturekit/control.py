@@ -202,9 +202,16 @@ class ControlTrack:
                 out[t] = seg.constraints
         return out
 
-    def to_text(self) -> str:
-        """The command-line form, e.g. ``"0-3:left_hand=low,3-6:speed=slow"``."""
-        return ",".join(f"{s.start_s:.15g}-{s.end_s:.15g}:{s.label()}" for s in self.segments)
+    def to_text(self, *, decimals: int | None = None) -> str:
+        """The command-line form, e.g. ``"0-3:left_hand=low,3-6:speed=slow"``.
+
+        ``decimals``: times rounded to that many decimals, for a person to read (``"3.73-6.4"`` for a range
+        snapped to 56/15 to 96/15 s); by default every digit kept, so that the text reads back to this track.
+        """
+        if decimals is None:
+            return ",".join(f"{s.start_s:.15g}-{s.end_s:.15g}:{s.label()}" for s in self.segments)
+        d = int(decimals)
+        return ",".join(f"{round(s.start_s, d):g}-{round(s.end_s, d):g}:{s.label()}" for s in self.segments)
 
     def to_records(self) -> list[dict]:
         """One dict per segment: start_s, end_s, constraint (text)."""

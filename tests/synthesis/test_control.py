@@ -51,6 +51,13 @@ def test_parse_control_text():
     assert not parse_control("")
 
 
+def test_a_track_snapped_to_steps_reads_short_for_a_person_and_whole_for_the_command_line():
+    tr = parse_control(f"{56 / 15:.6f}-{96 / 15:.6f}:both_hands=high,{1 / 3:.6f}-1:speed=fast")
+    assert tr.to_text(decimals=2) == "0.33-1:speed=fast,3.73-6.4:both_hands=high"  # in time order
+    assert tr.to_text() == "0.333333-1:speed=fast,3.733333-6.4:both_hands=high"
+    assert parse_control(tr.to_text()) == tr  # the full form reads back; the short one is for reading
+
+
 @pytest.mark.parametrize(
     "text, message",
     [

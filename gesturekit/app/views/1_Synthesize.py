@@ -401,7 +401,7 @@ def show_result(db: MatchingDatabase, record: dict) -> None:
     c = result.config
     parts = [f"k = {c.k}", f"N = {c.segment}", f"seed {c.seed}", f"initial pose: {c.init}", f"blend: {c.blend}"]
     if result.control:
-        parts.append(f"controls: {display.escape_markdown(result.control.to_text())}")
+        parts.append(f"controls: {display.escape_markdown(result.control.to_text(decimals=2))}")
     if c.pins:
         parts.append(f"{len(c.pins)} pinned step{'s' if len(c.pins) > 1 else ''}")
     if result.refined_motion is not None:

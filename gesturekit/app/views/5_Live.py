@@ -204,7 +204,7 @@ def show_performance(record: dict) -> None:
     fps = result.motion.fps
     parts = [f"{result.n_frames} frames, {result.n_frames / fps:.1f} s"]
     if result.control:
-        parts.append(f"controls: {display.escape_markdown(result.control.to_text())}")
+        parts.append(f"controls: {display.escape_markdown(result.control.to_text(decimals=2))}")
     st.caption(" · ".join(parts))
     display.show_skeletons(result.motion, key="live.result", title=SOURCE, audio=result.audio, height=440)
     nav.link("Retrieval inspector")
