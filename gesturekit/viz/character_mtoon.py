@@ -18,6 +18,7 @@ import numpy as np
 import pyvista as pv
 from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
 
+from .._arguments import checks_arguments
 from ..character.look import AMBIENT, LIGHTS
 from ..character.materials import SkinMaterial
 from ..character.mtoon import MToon
@@ -47,6 +48,7 @@ def _vec3(v) -> str:
     return "vec3(" + ", ".join(f"{float(x):.8f}" for x in v) + ")"
 
 
+@checks_arguments
 def fragment_code(material: SkinMaterial, *, base: bool, shade: bool, camera: np.ndarray, outline: bool = False) -> str:
     """The fragment shader's body (VTK's ``//VTK::TCoord::Impl``) of an MToon material.
 
@@ -114,6 +116,7 @@ def fragment_code(material: SkinMaterial, *, base: bool, shade: bool, camera: np
     return "\n" + "\n".join(lines) + "\n"
 
 
+@checks_arguments
 def outline_points(
     vertices: np.ndarray, normals: np.ndarray, mtoon: MToon, camera: dict, *, out: np.ndarray | None = None
 ) -> np.ndarray:
