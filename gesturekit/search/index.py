@@ -1,36 +1,30 @@
 """The fast exact search: :class:`SearchIndex`, :func:`search`, :func:`search_batch`.
 
-:func:`search` runs the search of the paper (Algorithm 1 of the supplementary
-material, with the authors' choices and ours, see ``docs/METHOD.md`` and
-:mod:`gesturekit.search.reference`) on plain arrays and returns a
-:class:`SearchResult`: the chosen (clip, start) per step, the output frames as
-(clip, frame) indices, and a record of every step's best candidates.
-:func:`search_batch` serves several query sequences (each with its own
+:func:`search` runs the search of the paper (Algorithm 1 of the supplementary material, with the authors'
+choices and ours, see ``docs/METHOD.md`` and :mod:`gesturekit.search.reference`) on plain arrays and returns a
+:class:`SearchResult`: the chosen (clip, start) per step, the output frames as (clip, frame) indices, and a
+record of every step's best candidates. :func:`search_batch` serves several query sequences (each with its own
 configuration) with one scan of the database per step.
 
-Exactness. The result equals :func:`gesturekit.search.reference.search_reference`
-decision for decision. Each step scans the database once. One query's scan reads an
-8-bit copy of the pose features (:mod:`gesturekit.search.reduced`, a few clips at a
-time), whose estimates lie within a proven bound per clip; where that bound leaves a
-clip's nearest start open, the starts that could be nearest are estimated again in
-float32 (``||p||^2 - 2 p.q``), and the nearest start of every clip is. Several
-queries' scan is a float32 matrix product. Per clip the starts whose float32 value
-lies within a proven error bound of the clip's minimum are decided among with the
-exact float64 definitions of :mod:`gesturekit.search.reference`. The same
-bound-and-re-check is applied to the ordering of clips by pose and by audio
-distance, so ties and near-ties are always settled by the exact values.
+Exactness. The result equals :func:`gesturekit.search.reference.search_reference` decision for decision. Each
+step scans the database once. One query's scan reads an 8-bit copy of the pose features
+(:mod:`gesturekit.search.reduced`, a few clips at a time), whose estimates lie within a proven bound per clip;
+where that bound leaves a clip's nearest start open, the starts that could be nearest are estimated again in
+float32 (``||p||^2 - 2 p.q``), and the nearest start of every clip is. Several queries' scan, and every scan on
+a torch device (:mod:`gesturekit.search.device`), is a float32 matrix product. Per clip the starts whose float32
+value lies within a proven error bound of the clip's minimum are decided among with the exact float64
+definitions of :mod:`gesturekit.search.reference`. The same bound-and-re-check is applied to the ordering of
+clips by pose and by audio distance, so ties and near-ties are always settled by the exact values.
 
-Error bound (pose). For a row ``p`` and the query ``q`` (both float32, D = 96
-values), the float32 estimate ``A = fl(np32 + fl(-2 q.p))`` with ``np32`` the
-float32 rounding of ``|p|^2`` satisfies, for any summation order of the
-product (blocked, SIMD, FMA), ``|A + |q|^2 - d2| <= (gamma_D + 3u)(|p|^2 + |q|^2)``
-with ``u = 2**-24`` and ``gamma_D = D u / (1 - D u)``; we use
-``(D + 32) u (max_clip |p|^2 + |q|^2)``, which also covers the float64 rounding
-of the exact value. Features are limited to magnitudes below 1e15 so that no
-float32 product or sum overflows.
+Error bound (pose). For a row ``p`` and the query ``q`` (both float32, D = 96 values), the float32 estimate ``A
+= fl(np32 + fl(-2 q.p))`` with ``np32`` the float32 rounding of ``|p|^2`` satisfies, for any summation order of
+the product (blocked, SIMD, FMA), ``|A + |q|^2 - d2| <= (gamma_D + 3u)(|p|^2 + |q|^2)`` with ``u = 2**-24`` and
+``gamma_D = D u / (1 - D u)``; we use ``(D + 32) u (max_clip |p|^2 + |q|^2)``, which also covers the float64
+rounding of the exact value. Features are limited to magnitudes below 1e15 so that no float32 product or sum
+overflows.
 
-Error bound (audio). The cosine distance is estimated from a float32 dot product
-(any summation order) and float64 norms; its error is below ``(A + 16) u``.
+Error bound (audio). The cosine distance is estimated from a float32 dot product (any summation order) and
+float64 norms; its error is below ``(A + 16) u``.
 """
 
 from __future__ import annotations
@@ -47,6 +41,7 @@ from .._arguments import checks_arguments
 from ..errors import ConfigError, warn
 from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
+from .device import DeviceRows
 from .exact import TINY, audio_err, compiled, initial_order, pose_err_factor, reduce_chunk
 from .plan import SearchPlan, stack_plans
 from .reduced import ReducedPose, compiled_reduced, quantise_query, reduce_pose
@@ -85,16 +80,19 @@ class SearchIndex:
         z-scored audio features (A = 112), kept by reference likewise.
     valid : np.ndarray, shape (M, T), bool
         Frames whose features needed no padding; only these may start a segment.
+    device : str, optional
+        A torch device (``"cuda"``) keeping the pose features, where every scan is one float32 product
+        (:mod:`gesturekit.search.device`); the rest, and the result, as on the CPU (the default).
 
     Notes
     -----
     Extra memory: ``12 M T`` bytes of per-frame norms; from the first single query on,
     the 8-bit copy of the pose features (:meth:`reduced`, ``(D + 8) M T`` bytes and
-    ``4 (D + 8) M`` per clip); per search, a few arrays of ``4 M T`` bytes per control
-    mask in use and a scan buffer of at most 16 MB.
+    ``4 (D + 8) M`` per clip; with a ``device``, each step's ``4 M T B`` bytes of products instead);
+    per search, a few arrays of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
     """
 
-    def __init__(self, P: np.ndarray, F: np.ndarray, valid: np.ndarray) -> None:
+    def __init__(self, P: np.ndarray, F: np.ndarray, valid: np.ndarray, *, device: str | None = None) -> None:
         self.P, self.F, self.valid = validate_db(P, F, valid)
         M, T, D = self.P.shape
         self.shape = (M, T, D, self.F.shape[2])
@@ -113,6 +111,7 @@ class SearchIndex:
         self._scratch = threading.local()
         self._reduced: ReducedPose | None = None
         self._reduced_lock = threading.Lock()
+        self._device = None if device is None else DeviceRows(self._P2, device)  # torch loads only then
 
     def reduced(self) -> ReducedPose:
         """The reduced pose copy one query's scan reads (:mod:`gesturekit.search.reduced`),
@@ -168,7 +167,7 @@ class SearchIndex:
         One query's scan reads the reduced copy (:meth:`reduced`) of the admissible starts
         and, where its bound leaves a clip's nearest start open, the float32 features of
         the few starts that could be nearest (:func:`~gesturekit.search.reduced_kernels.scan_reduced`);
-        several queries' scan is a float32 matrix product of the starts any of them may use.
+        several queries' scan (and every scan on a ``device``) is a float32 matrix product of the starts used.
 
         Returns
         -------
@@ -214,12 +213,14 @@ class SearchIndex:
             if scratch is not None and B == 1:  # a batch's larger buffer is freed before its decisions
                 scratch["product"] = buf
         product = matrix_product(B)
+        on_device = None if self._device is None else self._device.products(W).reshape(M, T, B)  # -2 p.q there
+        reduced_scan = B == 1 and on_device is None
         # per query group and clip: one past the last admissible start (0: none)
-        range_ends = [] if B == 1 else [compiled().admissible_ends(bias.reshape(M, T)) for bias, _, _ in ranges]
+        range_ends = [] if reduced_scan else [compiled().admissible_ends(bias.reshape(M, T)) for bias, _, _ in ranges]
         s0 = np.empty((M, B), np.int64)
         d2 = np.empty((M, B))
         err = np.empty((M, B))
-        if B == 1:
+        if reduced_scan:
             red = self.reduced()
             codes = quantise_query(Qp[0])
             query_codes = (codes.codes, codes.scale, codes.lost, codes.norm)
@@ -236,7 +237,7 @@ class SearchIndex:
             nc = c1 - c0
             r0, r1 = c0 * T, c1 * T
             found = []
-            if B == 1:  # a few clips at a time, reduced while their estimates are in cache
+            if reduced_scan:  # a few clips at a time, reduced while their estimates are in cache
                 G2 = G.reshape(nc, T)
                 bias2 = biases[0][r0:r1].reshape(nc, T)
                 und = np.empty(nc, bool)
@@ -266,7 +267,10 @@ class SearchIndex:
                 err[c0:c1] = 0.0
                 return found
             G3 = G[: nc * L].reshape(nc, L, B)
-            product(self._P3[c0:c1, :L], W, G3)
+            if on_device is None:
+                product(self._P3[c0:c1, :L], W, G3)
+            else:
+                G3[:] = on_device[c0:c1, :L]
             for bias, j0, j1 in ranges:
                 bias2 = bias[r0:r1].reshape(nc, T)[:, :L]
                 s0c, amc, und = reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)

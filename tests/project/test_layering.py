@@ -146,6 +146,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "gesturekit.search.admissible",
             "gesturekit.search.checks",
             "gesturekit.search.compile_cache",
+            "gesturekit.search.device",
             "gesturekit.search.exact",
             "gesturekit.search.explain",
             "gesturekit.search.index",
