@@ -340,8 +340,8 @@ def figures(tmp_path_factory):
         pytest.skip(f"no browser test: {exc}")
 
 
-@pytest.mark.parametrize("picture", ["page", "mp4"])
-def test_the_textured_character_matches_a_plain_gltf_rendering(figures, picture):
+def assert_within_bounds(figures: list[dict], picture: str) -> None:
+    """Every time's row of ``picture`` printed, and each a body (not a speck) within the IoU and colour bounds."""
     rows = [r for r in figures if r["picture"] == picture]
     for r in rows:
         print(_line(r))
@@ -350,6 +350,11 @@ def test_the_textured_character_matches_a_plain_gltf_rendering(figures, picture)
         assert r["pixels"] > 2000, _line(r)  # a body was compared, not a speck
         assert np.isfinite(r["iou"]) and r["iou"] >= MIN_IOU, _line(r)
         assert np.isfinite(r["difference"]) and r["difference"] <= MAX_DIFFERENCE, _line(r)
+
+
+@pytest.mark.parametrize("picture", ["page", "mp4"])
+def test_the_textured_character_matches_a_plain_gltf_rendering(figures, picture):
+    assert_within_bounds(figures, picture)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -41,7 +41,15 @@ import pytest
 from gesturekit.character.glb import read_glb
 from gesturekit.character.materials import materials_glb, read_materials
 from tests import app_browser
-from tests.browser.test_browser_materials import MAX_DIFFERENCE, MIN_IOU, TIMES, Reference, _line, measure
+from tests.browser.test_browser_materials import (
+    MAX_DIFFERENCE,
+    MIN_IOU,
+    TIMES,
+    Reference,
+    _line,
+    assert_within_bounds,
+    measure,
+)
 from tests.character_rigs import RigSpec, rig_files
 
 pytestmark = [
@@ -76,14 +84,7 @@ def figures(request, tmp_path_factory):
 
 @pytest.mark.parametrize("picture", ["page", "mp4"])
 def test_the_toon_shaded_vrm_matches_a_plain_three_vrm_rendering(figures, picture):
-    rows = [r for r in figures if r["picture"] == picture]
-    for r in rows:
-        print(_line(r))
-    assert len(rows) == len(TIMES)
-    for r in rows:
-        assert r["pixels"] > 2000, _line(r)  # a body was compared, not a speck
-        assert np.isfinite(r["iou"]) and r["iou"] >= MIN_IOU, _line(r)
-        assert np.isfinite(r["difference"]) and r["difference"] <= MAX_DIFFERENCE, _line(r)
+    assert_within_bounds(figures, picture)
 
 
 def test_a_renderer_that_ignores_mtoon_fails_the_same_bounds(figures):

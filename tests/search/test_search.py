@@ -27,10 +27,11 @@ from gesturekit.search.reference import cosine_distance, pose_sqdist, search_ref
 SLOW = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
-def run_both(P, F, valid, query, **kw):
-    """(fast, reference) results, or the two ConfigError messages; warnings recorded."""
+def run_both(P, F, valid, query, *, fast=search, **kw):
+    """(fast, reference) results, or the two ConfigError messages; warnings recorded. ``fast`` is called as
+    :func:`search` is (default: it)."""
     out = []
-    for fn in (search, search_reference):
+    for fn in (fast, search_reference):
         with warnings.catch_warnings(record=True) as w:
             warnings.simplefilter("always")
             try:

@@ -7,37 +7,23 @@ no test needs a GPU.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gesturekit.errors import ConfigError, GestureKitWarning
+from gesturekit.errors import ConfigError
 from gesturekit.search import SearchConfig, SearchIndex
 from gesturekit.search.reference import search_reference
 from gesturekit.search.stream import StepSearch
-from tests.search.test_search import assert_same, problems, small_db
+from tests.search.test_search import assert_same, problems, run_both, small_db
 
 torch = pytest.importorskip("torch")
 
 
-def _results(P, F, valid, query, **kw):
-    """(on the device, reference): each a result or its ConfigError's message, with the warnings given."""
-    out = []
-    for fn in (
-        lambda: SearchIndex(P, F, valid, device="cpu").search(query, **kw),
-        lambda: search_reference(P, F, valid, query, **kw),
-    ):
-        with warnings.catch_warnings(record=True) as w:
-            warnings.simplefilter("always")
-            try:
-                r = fn()
-            except ConfigError as exc:
-                r = f"ConfigError: {exc}"
-        out.append((r, [str(x.message) for x in w if issubclass(x.category, GestureKitWarning)]))
-    return out
+def _on_device(P, F, valid, query, **kw):
+    """:func:`gesturekit.search.search` with the scan on torch's CPU device."""
+    return SearchIndex(P, F, valid, device="cpu").search(query, **kw)
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -45,7 +31,7 @@ def _results(P, F, valid, query, **kw):
 def test_the_scan_on_a_device_gives_the_reference_result(problem):
     # ties, duplicated frames, values far from zero, controls, exclusions, pins, k beyond the survivors
     P, F, valid, query, kw = problem
-    assert_same(*_results(P, F, valid, query, **kw))
+    assert_same(*run_both(P, F, valid, query, fast=_on_device, **kw))
 
 
 @pytest.mark.slow
@@ -59,7 +45,9 @@ def test_on_a_larger_database_with_duplicated_clips(seed, k):
     F = rng.standard_normal((M, T, A)).astype(np.float32)
     valid = np.ones((M, T), bool)
     query = rng.standard_normal((20, A)).astype(np.float32)
-    assert_same(*_results(P, F, valid, query, config=SearchConfig(k=k, segment=4, record=3, seed=seed % 7)))
+    assert_same(
+        *run_both(P, F, valid, query, fast=_on_device, config=SearchConfig(k=k, segment=4, record=3, seed=seed % 7))
+    )
 
 
 def test_a_batch_and_a_live_search_on_a_device_equal_the_searches_here():
