@@ -320,10 +320,12 @@ def _cmd_synthesize(args) -> int:
     from ..refine import open_refiner
     from ..search import describe_steps
     from ..synthesis import SynthesisConfig, synthesize_batch
+    from ..synthesis.synthesizer import open_search_device
     from ..workspace import expand_speech, open_database
     from ._character import check_target, read_character_option, write_character_files
 
     formats = _parse_formats(args.format)
+    device = open_search_device(args.search_device)
     character = read_character_option(args, formats)  # None without --character; read before the search
     files = expand_speech(args.speech)
     control = _control_from_arg(args.control) or ""
@@ -373,7 +375,8 @@ def _cmd_synthesize(args) -> int:
         check_target(p, kind, character, overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
     refiner = open_refiner(_refiner_choice(args.refiner, db))
-    results = synthesize_batch(audios, db=db, config=config, refiner=refiner, names=[str(f) for f in files])
+    names, device = [str(f) for f in files], device or "cpu"
+    results = synthesize_batch(audios, db=db, config=config, refiner=refiner, names=names, search_device=device)
     with write_errors(out):
         out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     with contextlib.ExitStack() as held:

@@ -54,6 +54,12 @@ def add_app_parser(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--port", type=int, default=8501, help="port (default 8501)")
     p.add_argument(
+        "--search-device",
+        metavar="DEVICE",
+        help="scan the database on this torch device (cuda, cuda:1) in every synthesis: the same motion, for "
+        "large databases (default: $GESTUREKIT_SEARCH_DEVICE if set, else the CPU)",
+    )
+    p.add_argument(
         "--allow",
         action="append",
         default=[],
@@ -108,6 +114,12 @@ def run(args: argparse.Namespace) -> int:
         )
     argv = streamlit_args(args)
     os.environ[APP_ROOTS_ENV] = app_roots(args.allow, os.environ)
+    if args.search_device:
+        from ..synthesis.synthesizer import SEARCH_DEVICE_ENV, open_search_device
+
+        device = open_search_device(args.search_device)  # an absent one is said now, not at the first synthesis
+        os.environ[SEARCH_DEVICE_ENV] = device or ""
+        print(f"gesturekit: the search scans on {device or 'the CPU'}", flush=True)
     if not _is_loopback(args.address):
         print(
             f"gesturekit: serving to other machines on {args.address}: whoever reaches it can read and write "

@@ -105,6 +105,16 @@ def _add_search(parser, *, seed: str) -> None:
         add_options(parser, cls, names, helps={"seed": f"seed of {seed}"})
 
 
+def _add_search_device(parser) -> None:
+    """``--search-device``: the torch device of the search's scan."""
+    parser.add_argument(
+        "--search-device",
+        metavar="DEVICE",
+        help="scan the database on this torch device (cuda, cuda:1): the same motion, for large databases "
+        "(default: $GESTUREKIT_SEARCH_DEVICE if set, else the CPU)",
+    )
+
+
 def _add_exclusions(parser, *, out_of: str) -> None:
     """``--exclude-take`` and ``--exclude-range``, keeping parts of the database out of ``out_of``."""
     parser.add_argument("--exclude-take", action="append", metavar="TAKE", help=f"keep a database take out of {out_of}")
@@ -257,6 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
         "one for the demo database), else none. The npz keeps both motions",
     )
     add_options(y, SynthesisConfig, ["refiner_keep_hz"])
+    _add_search_device(y)
     y.add_argument(
         "--format",
         default="npz,bvh",

@@ -81,14 +81,16 @@ class SearchIndex:
     valid : np.ndarray, shape (M, T), bool
         Frames whose features needed no padding; only these may start a segment.
     device : str, optional
-        A torch device (``"cuda"``) keeping the pose features, where every scan is one float32 product
-        (:mod:`gesturekit.search.device`); the rest, and the result, as on the CPU (the default).
+        A torch device (``"cuda"``) keeping the pose and audio features, where every scan is one float32
+        product reduced there per clip (:mod:`gesturekit.search.device`); the rest, and the result, as on
+        the CPU (the default).
 
     Notes
     -----
     Extra memory: ``12 M T`` bytes of per-frame norms; from the first single query on,
     the 8-bit copy of the pose features (:meth:`reduced`, ``(D + 8) M T`` bytes and
-    ``4 (D + 8) M`` per clip; with a ``device``, each step's ``4 M T B`` bytes of products instead);
+    ``4 (D + 8) M`` per clip; with a ``device``, a few per-clip arrays a step instead, on the device
+    the features and a step's ``4 M T B`` bytes of products);
     per search, a few arrays of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
     """
 
@@ -111,7 +113,7 @@ class SearchIndex:
         self._scratch = threading.local()
         self._reduced: ReducedPose | None = None
         self._reduced_lock = threading.Lock()
-        self._device = None if device is None else DeviceRows(self._P2, device)  # torch loads only then
+        self._device = None if device is None else DeviceRows(self._P2, self._F2, M, device)  # torch loads only then
 
     def reduced(self) -> ReducedPose:
         """The reduced pose copy one query's scan reads (:mod:`gesturekit.search.reduced`),
@@ -191,6 +193,8 @@ class SearchIndex:
         Every (B, M) array is C-contiguous: a query's decisions read its own rows (a
         column of a (M, B) array would cost a cache line per clip).
         """
+        if self._device is not None:
+            return self._device.scan(Q, biases, fq, (self._npmax, self._pose_c, TINY), self._na2)
         M, T, D, _ = self.shape
         B = Q.shape[0]
         # queries sharing a bias become one contiguous range of columns
@@ -213,8 +217,7 @@ class SearchIndex:
             if scratch is not None and B == 1:  # a batch's larger buffer is freed before its decisions
                 scratch["product"] = buf
         product = matrix_product(B)
-        on_device = None if self._device is None else self._device.products(W).reshape(M, T, B)  # -2 p.q there
-        reduced_scan = B == 1 and on_device is None
+        reduced_scan = B == 1
         # per query group and clip: one past the last admissible start (0: none)
         range_ends = [] if reduced_scan else [compiled().admissible_ends(bias.reshape(M, T)) for bias, _, _ in ranges]
         s0 = np.empty((M, B), np.int64)
@@ -267,10 +270,7 @@ class SearchIndex:
                 err[c0:c1] = 0.0
                 return found
             G3 = G[: nc * L].reshape(nc, L, B)
-            if on_device is None:
-                product(self._P3[c0:c1, :L], W, G3)
-            else:
-                G3[:] = on_device[c0:c1, :L]
+            product(self._P3[c0:c1, :L], W, G3)
             for bias, j0, j1 in ranges:
                 bias2 = bias[r0:r1].reshape(nc, T)[:, :L]
                 s0c, amc, und = reduce_chunk(G3[:, :, j0:j1], bias2, nq[j0:j1], self._npmax[c0:c1], self._pose_c)

@@ -27,7 +27,14 @@ from ..errors import ConfigError
 from ..motion import AUDIO_SR
 from ..search.plan import rest_pose_frame
 from .config import PAPER_SETTINGS, SynthesisConfig
-from .synthesizer import Synthesizer, check_refiner, search_request, synthesizer_for
+from .synthesizer import (
+    SEARCH_DEVICE_ENV,
+    Synthesizer,
+    check_refiner,
+    search_device_default,
+    search_request,
+    synthesizer_for,
+)
 from .types import MotionRefiner, QueryFeatures, Speech, SynthesisResult
 
 __all__ = [
@@ -39,6 +46,8 @@ __all__ = [
     "Speech",
     "Synthesizer",
     "synthesizer_for",
+    "search_device_default",
+    "SEARCH_DEVICE_ENV",
     "search_request",
     "check_refiner",
     "synthesize",
@@ -81,6 +90,7 @@ def synthesize(
     config: SynthesisConfig | None = None,
     control: ControlTrack | str | None = None,
     refiner: MotionRefiner | None = None,
+    search_device: str | None = None,
 ) -> SynthesisResult:
     """Synthesise gesture motion for speech.
 
@@ -97,6 +107,9 @@ def synthesize(
         ``"demo"`` for the one shipped with the demo database, with
         :func:`gesturekit.refine.open_refiner`). It refines the k-NN motion with the
         speech's cGAN audio features; the result is ``refined_motion`` and also ``motion``.
+    search_device : str, optional
+        A torch device (``"cuda"``) for the search's scan: the same result, the scan there
+        (:mod:`gesturekit.search.device`). Default: ``GESTUREKIT_SEARCH_DEVICE`` if set, else the CPU.
 
     Returns
     -------
@@ -120,7 +133,9 @@ def synthesize(
     >>> bool((again.motion.positions == res.motion.positions).all())
     True
     """
-    return synthesize_batch([audio], db=db, config=config, controls=[control], refiner=refiner)[0]
+    return synthesize_batch(
+        [audio], db=db, config=config, controls=[control], refiner=refiner, search_device=search_device
+    )[0]
 
 
 @checks_arguments
@@ -132,6 +147,7 @@ def synthesize_batch(
     controls: Sequence[ControlTrack | str | None] | None = None,
     refiner: MotionRefiner | None = None,
     names: Sequence[str] | None = None,
+    search_device: str | None = None,
 ) -> list[SynthesisResult]:
     """Synthesise several speeches together: one scan of the database per step serves all.
 
@@ -146,6 +162,8 @@ def synthesize_batch(
         As in :func:`synthesize`, applied to every speech.
     names : sequence of str, optional
         What warnings call each speech (default: its file name; nothing for an array).
+    search_device : str, optional
+        As in :func:`synthesize`.
 
     Returns
     -------
@@ -179,7 +197,7 @@ def synthesize_batch(
         raise ConfigError("give one config and one control per speech (or one config for all)")
     if len({(c.exclude_takes, c.exclude_ranges) for c in configs}) > 1:
         raise ConfigError("all speeches of one batch must exclude the same database takes and ranges")
-    syn = synthesizer_for(db, refiner=refiner)
+    syn = synthesizer_for(db, refiner=refiner, search_device=search_device)
     # a given control replaces the config's: the config a result records is the one searched
     configs = [c if ctl is None else c.with_control(ctl) for c, ctl in zip(configs, controls)]
     return syn.run(audios, configs, names=names)

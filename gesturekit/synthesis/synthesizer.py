@@ -42,7 +42,14 @@ if TYPE_CHECKING:
     from ..features import ZScore
     from .config import SynthesisConfig
 
-__all__ = ["Synthesizer", "synthesizer_for", "search_request", "check_refiner"]
+__all__ = [
+    "Synthesizer",
+    "synthesizer_for",
+    "search_request",
+    "check_refiner",
+    "search_device_default",
+    "SEARCH_DEVICE_ENV",
+]
 
 
 @checks_arguments
@@ -105,8 +112,9 @@ class _IndexSlot:
     that ask for it (:meth:`Synthesizer.with_refiner`, :func:`synthesizer_for`). It holds the
     index's arrays, never the database itself, so a cache of slots keeps no database alive."""
 
-    def __init__(self) -> None:
+    def __init__(self, device: str | None = None) -> None:
         self.index: SearchIndex | None = None
+        self.device = device
         self.lock = threading.Lock()
 
 
@@ -124,11 +132,16 @@ class Synthesizer:
         The database searched; the Synthesizer keeps nothing in it.
     refiner : MotionRefiner, optional
         Applied by :meth:`refine` (and :meth:`run`); checked against ``db`` here.
+    search_device : str, optional
+        A torch device (``"cuda"``) for the search's scan (:mod:`gesturekit.search.device`): the
+        same results, the scan there. Default: :func:`search_device_default`, the CPU unless the
+        environment variable ``GESTUREKIT_SEARCH_DEVICE`` names one.
 
     Raises
     ------
     ConfigError
-        ``db`` is no database, or ``refiner`` is no refiner.
+        ``db`` is no database, or ``refiner`` is no refiner; (on first use of the index) the
+        search device is unknown or absent.
     GestureKitError
         The refiner's feature layout does not suit ``db``.
 
@@ -143,8 +156,11 @@ class Synthesizer:
         result = syn.assemble(feats, plan, found, config)
     """
 
-    def __init__(self, db: MatchingDatabase, *, refiner: MotionRefiner | None = None) -> None:
-        self._setup(db, refiner, _IndexSlot())
+    def __init__(
+        self, db: MatchingDatabase, *, refiner: MotionRefiner | None = None, search_device: str | None = None
+    ) -> None:
+        device = search_device_default() if search_device is None else check_search_device(search_device)
+        self._setup(db, refiner, _IndexSlot(device))
 
     def _setup(self, db: MatchingDatabase, refiner: MotionRefiner | None, slot: _IndexSlot) -> None:
         if not isinstance(db, MatchingDatabase):
@@ -186,7 +202,7 @@ class Synthesizer:
         with self._slot.lock:
             if self._slot.index is None:
                 db = self._db
-                self._slot.index = SearchIndex(db.P, db.F, db.valid)
+                self._slot.index = SearchIndex(db.P, db.F, db.valid, device=self._slot.device)
             return self._slot.index
 
     @property
@@ -455,29 +471,83 @@ def _warn_controls_past_the_end(track: ControlTrack, features: QueryFeatures) ->
 #: and the live synthesis (:func:`synthesizer_for`): built on the first call, kept while the
 #: database lives (a weak reference: the cache keeps no database alive, and it holds only
 #: the index, never the database).
-_SHARED_INDEX: weakref.WeakKeyDictionary[MatchingDatabase, _IndexSlot] = weakref.WeakKeyDictionary()
+_SHARED_INDEX: weakref.WeakKeyDictionary[MatchingDatabase, dict[str | None, _IndexSlot]] = weakref.WeakKeyDictionary()
 _SHARED_LOCK = threading.Lock()
+
+#: The environment variable naming the torch device of every search whose device is not given.
+SEARCH_DEVICE_ENV = "GESTUREKIT_SEARCH_DEVICE"
+
+
+def search_device_default() -> str | None:
+    """The search device of a synthesis that names none: ``GESTUREKIT_SEARCH_DEVICE`` if set
+    (``cuda``, ``cuda:1``, ...; empty or ``cpu``: the CPU's own search), else None (the CPU's)."""
+    return check_search_device(os.environ.get(SEARCH_DEVICE_ENV) or None)
+
+
+def check_search_device(device: str | None) -> str | None:
+    """``device`` as a search keeps it: None (the CPU's own 8-bit search) for None, ``""`` or ``"cpu"``.
+
+    Raises
+    ------
+    ConfigError
+        ``device`` is not a string.
+    """
+    if device is None:
+        return None
+    if not isinstance(device, str):
+        raise ConfigError(f"search device must be a torch device name such as 'cuda', got {device!r}")
+    name = device.strip()
+    return None if name in ("", "cpu") else name
+
+
+def open_search_device(given: str | None) -> str | None:
+    """The device a synthesis given ``given`` scans on (None: the CPU's own search), checked now:
+    a command says an absent device before any work.
+
+    Raises
+    ------
+    ConfigError
+        The device is unknown or absent (see :func:`gesturekit.search.device.open_device`).
+    MissingDependencyError
+        A device is named and torch is not installed.
+    """
+    device = search_device_default() if given is None else check_search_device(given)
+    if device is not None:
+        from ..search.device import open_device  # torch loads only then
+
+        open_device(device)
+    return device
 
 
 @checks_arguments
-def synthesizer_for(db: MatchingDatabase, *, refiner: MotionRefiner | None = None) -> Synthesizer:
+def synthesizer_for(
+    db: MatchingDatabase, *, refiner: MotionRefiner | None = None, search_device: str | None = None
+) -> Synthesizer:
     """A Synthesizer of ``db`` that shares the database's cached search index.
 
     Parameters
     ----------
     db : MatchingDatabase
     refiner : MotionRefiner, optional
+    search_device : str, optional
+        A torch device (``"cuda"``) for the search's scan; default :func:`search_device_default`.
+        Each device has an index of its own.
 
     Returns
     -------
     Synthesizer
         A new object each call; the index it builds on first use serves every later call with
-        the same database (:func:`~gesturekit.synthesis.synthesize` uses it), until the database is dropped.
+        the same database and device (:func:`~gesturekit.synthesis.synthesize` uses it), until the
+        database is dropped.
     """
     if not isinstance(db, MatchingDatabase):
         raise ConfigError(f"db must be a MatchingDatabase, got {type(db).__name__}")
+    device = search_device_default() if search_device is None else check_search_device(search_device)
     with _SHARED_LOCK:
-        slot = _SHARED_INDEX.get(db)
+        slots = _SHARED_INDEX.get(db)
+        if slots is None:
+            slots = _SHARED_INDEX[db] = {}
+        slot = slots.get(device)
         if slot is None:
-            slot = _SHARED_INDEX[db] = _IndexSlot()
+            slot = slots[device] = _IndexSlot(device)
     return Synthesizer._sharing(db, refiner, slot)

@@ -74,6 +74,16 @@ def test_errors_are_one_line_with_exit_status_2(tmp_path, capsys):
     assert "no database folder" in capsys.readouterr().err
 
 
+def test_an_absent_search_device_is_said_before_any_work(tmp_path, capsys):
+    pytest.importorskip("torch")
+    speech = tmp_path / "speech.wav"
+    sf.write(speech, np.zeros(16000, np.float32), 16000)
+    out = tmp_path / "out"
+    assert main(["synthesize", str(speech), "--out", str(out), "--search-device", "nowhere:7"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gesturekit: error: search device 'nowhere:7' is not a torch device") and not out.exists()
+
+
 @pytest.mark.slow
 def test_existing_database_needs_force(tmp_path, capsys):
     folder, jm = _positions_folder(tmp_path)

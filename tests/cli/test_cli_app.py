@@ -137,3 +137,23 @@ def test_the_command_serves_the_packaged_app_on_127_0_0_1_from_any_folder(demo_h
     finally:
         app_browser.stop(proc)
     assert proc.returncode in (0, -15), log.read_text(errors="replace")
+
+
+def test_search_device_reaches_the_app_and_an_absent_one_is_said_before_serving(monkeypatch, capsys):
+    pytest.importorskip("torch")
+    import gesturekit.app.launch
+    from gesturekit.synthesis import SEARCH_DEVICE_ENV, search_device_default
+
+    seen = {}
+
+    def serve(argv):
+        seen["device"] = search_device_default()
+        return 0
+
+    monkeypatch.setattr(gesturekit.app.launch, "serve", serve)
+    monkeypatch.delenv(SEARCH_DEVICE_ENV, raising=False)
+    assert main(["app", "--search-device", "cpu:0"]) == 0
+    assert seen["device"] == "cpu:0" and "scans on cpu:0" in capsys.readouterr().out
+    seen.clear()
+    assert main(["app", "--search-device", "nowhere:7"]) == 2
+    assert not seen and "search device 'nowhere:7' is not a torch device" in capsys.readouterr().err

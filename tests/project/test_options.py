@@ -67,6 +67,7 @@ RUN_ARGUMENTS = {
         "exclude_take",
         "exclude_range",
         "refiner",
+        "search_device",  # where the search runs (the same motion on any): how it runs, as --workers
         "format",
         "character",
         "character_map",

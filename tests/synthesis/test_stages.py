@@ -221,3 +221,23 @@ def test_the_modules_that_drive_the_search_import_no_private_names():
                 names = [a.name for a in node.names if a.name.startswith("_") and not a.name.endswith("__")]
                 private += [f"{path.name}: {name}" for name in names]
     assert private == []
+
+
+def test_a_synthesis_with_its_scan_on_a_torch_device_gives_the_same_motion(db, speech, monkeypatch):
+    # torch's CPU device stands in for a GPU: the path and the index are the device's own
+    pytest.importorskip("torch")
+    here = synthesize(speech, db=db, config=CONTROLLED)
+    there = synthesize(speech, db=db, config=CONTROLLED, search_device="cpu:0")
+    _same_result(here, there)
+    assert synthesizer_for(db, search_device="cpu:0").index._device is not None
+    assert synthesizer_for(db).index._device is None  # each device its own index
+    assert synthesizer_for(db, search_device="cpu").index is synthesizer_for(db).index  # "cpu": the CPU's own
+    monkeypatch.setenv("GESTUREKIT_SEARCH_DEVICE", "cpu:0")  # the default of a synthesis naming none
+    assert synthesizer_for(db).index is synthesizer_for(db, search_device="cpu:0").index
+    assert Synthesizer(db).index._device is not None
+    _same_result(synthesize(speech, db=db, config=CONTROLLED), here)
+    monkeypatch.setenv("GESTUREKIT_SEARCH_DEVICE", "abacus")
+    with pytest.raises(ConfigError, match="'abacus' is not a torch device"):
+        synthesize(speech[:16000], db=db)
+    with pytest.raises(ConfigError, match="torch device name"):
+        synthesizer_for(db, search_device=3)
