@@ -375,8 +375,8 @@ def _cmd_synthesize(args) -> int:
         check_target(p, kind, character, overwrite=args.force, inputs=files)
     audios = [load_audio(f) for f in files]
     refiner = open_refiner(_refiner_choice(args.refiner, db))
-    names, device = [str(f) for f in files], device or "cpu"
-    results = synthesize_batch(audios, db=db, config=config, refiner=refiner, names=names, search_device=device)
+    labels, device = [str(f) for f in files], device or "cpu"
+    results = synthesize_batch(audios, db=db, config=config, refiner=refiner, names=labels, search_device=device)
     with write_errors(out):
         out.mkdir(parents=True, exist_ok=True)  # only once there is something to write
     with contextlib.ExitStack() as held:
