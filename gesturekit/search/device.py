@@ -21,6 +21,7 @@ from __future__ import annotations
 import threading
 import time
 import warnings
+import weakref
 from typing import Any
 
 import numpy as np
@@ -65,7 +66,7 @@ class DeviceRows:
         self.audio = self._place(audio)
         M = int(clips)
         self.shape = (M, rows.shape[0] // M, rows.shape[1], audio.shape[1])
-        self._biases: list[tuple[np.ndarray, Any]] = []
+        self._biases: list[tuple[weakref.ref[np.ndarray], Any]] = []
         self._lock = threading.Lock()
         #: Seconds spent in :meth:`scan` so far (the device's work and the copies back included).
         self.scan_seconds = 0.0
@@ -80,10 +81,11 @@ class DeviceRows:
         """``bias`` (M T,) on the device, kept for the next steps that use the same array."""
         with self._lock:
             for host, there in self._biases:
-                if host is bias:
+                if host() is bias:
                     return there
             there = self._place(bias).reshape(self.shape[0], self.shape[1])
-            self._biases = [(bias, there), *self._biases[: _BIASES_KEPT - 1]]
+            # a weak reference: the search's own cache decides how long the host array lives
+            self._biases = [(weakref.ref(bias), there), *self._biases[: _BIASES_KEPT - 1]]
             return there
 
     def products(self, W: np.ndarray) -> np.ndarray:
