@@ -88,16 +88,6 @@ class DeviceRows:
             self._biases = [(weakref.ref(bias), there), *self._biases[: _BIASES_KEPT - 1]]
             return there
 
-    def products(self, W: np.ndarray) -> np.ndarray:
-        """``rows @ W.T`` on the device, on the host: shape (M T, B) float32.
-
-        Parameters
-        ----------
-        W : np.ndarray, shape (B, D), float32
-            The queries' pose features times -2 (exact), so that the product is ``-2 p.q``.
-        """
-        return np.ascontiguousarray(self._products(W).cpu().numpy())
-
     def _products(self, W: np.ndarray) -> Any:
         torch = self._torch
         _check_precision(torch, self.device)  # the setting may have changed since the rows were placed
@@ -131,20 +121,11 @@ class DeviceRows:
 
         Returns
         -------
-        s0 : (B, M) int64
-            Per query and clip the first start of least estimate.
-        d2 : (B, M) float64
-            Its squared pose distance estimate (+inf: no admissible start).
-        err : (B, M) float64
-            The float32 bound of that estimate.
-        nq : (B,) float64
-            ``|q|^2``.
-        undecided : list of B (clips, rows) pairs
-            Clips whose minimum is not decisive (another start within twice the bound, or a
-            possible exact zero) and their rows of estimates ``|p|^2 - 2 p.q`` (n, T) float32.
-        audio : (av, inexact), each (B, M)
-            The cosine distance estimate at ``s0`` (float32 product made there, float64 norms
-            here; NaN where no start is admissible) and whether the audio bound applies to it.
+        tuple
+            What :meth:`SearchIndex._scan <gesturekit.search.index.SearchIndex>` returns: per query
+            and clip the first start of least estimate ``s0`` (B, M), its squared pose distance
+            estimate ``d2`` and float32 bound ``err`` (B, M), ``|q|^2`` (B,), the open clips
+            with their rows of estimates, and the audio estimates at ``s0`` with their exactness.
         """
         torch = self._torch
         t_start = time.perf_counter()

@@ -159,8 +159,7 @@ class Synthesizer:
     def __init__(
         self, db: MatchingDatabase, *, refiner: MotionRefiner | None = None, search_device: str | None = None
     ) -> None:
-        device = search_device_default() if search_device is None else check_search_device(search_device)
-        self._setup(db, refiner, _IndexSlot(device))
+        self._setup(db, refiner, _IndexSlot(_chosen_device(search_device)))
 
     def _setup(self, db: MatchingDatabase, refiner: MotionRefiner | None, slot: _IndexSlot) -> None:
         if not isinstance(db, MatchingDatabase):
@@ -500,6 +499,11 @@ def check_search_device(device: str | None) -> str | None:
     return None if name in ("", "cpu") else name
 
 
+def _chosen_device(given: str | None) -> str | None:
+    """The device a search given ``given`` runs on: the default where None is given."""
+    return search_device_default() if given is None else check_search_device(given)
+
+
 def open_search_device(given: str | None) -> str | None:
     """The device a synthesis given ``given`` scans on (None: the CPU's own search), checked now:
     a command says an absent device before any work.
@@ -511,7 +515,7 @@ def open_search_device(given: str | None) -> str | None:
     MissingDependencyError
         A device is named and torch is not installed.
     """
-    device = search_device_default() if given is None else check_search_device(given)
+    device = _chosen_device(given)
     if device is not None:
         from ..search.device import open_device  # torch loads only then
 
@@ -542,7 +546,7 @@ def synthesizer_for(
     """
     if not isinstance(db, MatchingDatabase):
         raise ConfigError(f"db must be a MatchingDatabase, got {type(db).__name__}")
-    device = search_device_default() if search_device is None else check_search_device(search_device)
+    device = _chosen_device(search_device)
     with _SHARED_LOCK:
         slots = _SHARED_INDEX.get(db)
         if slots is None:

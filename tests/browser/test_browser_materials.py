@@ -357,23 +357,37 @@ def test_the_textured_character_matches_a_plain_gltf_rendering(figures, picture)
     assert_within_bounds(figures, picture)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="A textured character: the page and the MP4 against GLTFLoader.")
+def comparison_parser(description: str) -> argparse.ArgumentParser:
+    """The options of a comparison's command line: ``--size``, ``--out``, ``--every``."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--size", default="1280x800", help="WIDTHxHEIGHT, pixels")
     parser.add_argument("--out", type=Path, default=None, help="a folder for the page's and the MP4's pictures")
     parser.add_argument("--every", action="store_true", help="every picture and its reference, at every time")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def comparison_size(args: argparse.Namespace) -> tuple[int, int] | None:
+    """The picture size of a comparison's command line, its ``--out`` folder made; None (said on
+    stderr) where no browser can measure."""
     reason = app_browser.unavailable()
     if reason:
         print(f"cannot measure: {reason}", file=sys.stderr)
-        return 1
+        return None
     w, h = (int(x) for x in args.size.split("x"))
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
+    return w, h
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = comparison_parser("A textured character: the page and the MP4 against GLTFLoader.").parse_args(argv)
+    size = comparison_size(args)
+    if size is None:
+        return 1
     for drawn in ("own", "vertex"):
         print("in its own materials:" if drawn == "own" else "in one colour per vertex (as before):")
         with tempfile.TemporaryDirectory(prefix="gesturekit-materials-") as tmp:
-            for row in measure(Path(tmp), (w, h), drawn=drawn, out=args.out, every=args.every):
+            for row in measure(Path(tmp), size, drawn=drawn, out=args.out, every=args.every):
                 print("  " + _line(row))
     return 0
 

@@ -29,9 +29,6 @@ it writes the page's and the MP4's pictures at the middle time (``character-mtoo
 
 from __future__ import annotations
 
-import argparse
-import contextlib
-import sys
 import tempfile
 from pathlib import Path
 
@@ -48,6 +45,8 @@ from tests.browser.test_browser_materials import (
     Reference,
     _line,
     assert_within_bounds,
+    comparison_parser,
+    comparison_size,
     measure,
 )
 from tests.character_rigs import RigSpec, rig_files
@@ -153,27 +152,19 @@ def test_our_mtoon_parameters_are_three_vrms(tmp_path, spec):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="A toon-shaded VRM: the page and the MP4 against three-vrm.")
-    parser.add_argument("--size", default="1280x800", help="WIDTHxHEIGHT, pixels")
-    parser.add_argument("--out", type=Path, default=None, help="a folder for the page's and the MP4's pictures")
-    parser.add_argument("--every", action="store_true", help="every picture and its reference, at every time")
+    parser = comparison_parser("A toon-shaded VRM: the page and the MP4 against three-vrm.")
     parser.add_argument("--vrm0", action="store_true", help="the VRM 0.x twin of the character")
     args = parser.parse_args(argv)
-    reason = app_browser.unavailable()
-    if reason:
-        print(f"cannot measure: {reason}", file=sys.stderr)
+    size = comparison_size(args)
+    if size is None:
         return 1
-    w, h = (int(x) for x in args.size.split("x"))
-    if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
     spec = TOON0 if args.vrm0 else TOON
     for drawn in ("own", "no mtoon"):
         print("with its MToon:" if drawn == "own" else "its MToon left out (the glTF materials alone):")
-        with contextlib.ExitStack() as stack:
-            tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="gesturekit-mtoon-")))
+        with tempfile.TemporaryDirectory(prefix="gesturekit-mtoon-") as tmp:
             rows = measure(
-                tmp,
-                (w, h),
+                Path(tmp),
+                size,
                 spec=spec,
                 vrm=True,
                 drawn=drawn,
