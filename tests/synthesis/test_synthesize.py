@@ -511,3 +511,25 @@ def test_zeggs_default_joins_move_like_the_take(zeggs_db, beat_speech):
     ratio = mean_jerk(smooth.motion.positions, fps=zeggs_db.fps) / own
     assert ratio_hard > 1.8 and 0.7 <= ratio <= 1.3, (ratio_hard, ratio)
     np.testing.assert_array_equal(smooth.knn_motion.positions, hard.knn_motion.positions)
+
+
+def test_zeggs_with_the_scan_on_a_torch_device_gives_the_same_motion(zeggs_db, beat_speech):
+    # recorded motion (consecutive frames nearly equal: clips left open for the exact look) and
+    # recorded speech, through the device's per-clip reduction (torch's CPU device stands in for a GPU)
+    pytest.importorskip("torch")
+    from gesturekit.synthesis import synthesizer_for
+
+    cfg = SynthesisConfig(k=2, seed=4, control="2-9:left_hand=high,12-20:speed=slow")
+    here = synthesize(beat_speech, db=zeggs_db, config=cfg)
+    there = synthesize(beat_speech, db=zeggs_db, config=cfg, search_device="cpu:0")
+    for name, x in here.search.array_fields().items():
+        assert np.array_equal(x, there.search.array_fields()[name], equal_nan=x.dtype.kind == "f"), name
+    np.testing.assert_array_equal(here.motion.positions, there.motion.positions)
+    index = synthesizer_for(zeggs_db, search_device="cpu:0").index
+    M, T = zeggs_db.valid.shape
+    q = np.asarray(zeggs_db.P[M // 2, T // 2], np.float32)[None]
+    bias = np.where(zeggs_db.valid.ravel(), index._np32, np.float32(np.inf))
+    opened = index._scan(q, [bias], np.asarray(zeggs_db.F[0, :1], np.float32))[4][0][0]
+    # a step's query is a database frame (the last pose chosen): its own clip's least distance may be
+    # an exact zero, so that clip's row comes back open and is settled exactly
+    assert M // 2 in opened
