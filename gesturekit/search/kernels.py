@@ -120,25 +120,33 @@ def clip_minimum(est: np.ndarray, c: int, offset: float, err: float) -> tuple[in
     Returns the first start of least estimate, that estimate, and whether it is not
     decisive: another start within twice the error bound of it, or a possible exact zero.
     """
-    T = est.shape[1]
+    return clip_minimum_within(est, c, 0, est.shape[1], offset, err)
+
+
+@kernel()
+def clip_minimum_within(
+    est: np.ndarray, c: int, lo: int, hi: int, offset: float, err: float
+) -> tuple[int, float, bool]:
+    """:func:`clip_minimum` of a row whose estimates outside starts ``lo .. hi - 1`` are +inf
+    (the same result, reading only those starts; the first start 0 where none is finite)."""
     inf = np.float32(np.inf)
     # four running minima: one would make a chain of dependent comparisons (the minimum
     # is the same in any order: the estimates are never NaN)
     m0 = m1 = m2 = m3 = inf
-    for s in range(0, T - 3, 4):
+    for s in range(lo, hi - 3, 4):
         m0 = min(m0, est[c, s])
         m1 = min(m1, est[c, s + 1])
         m2 = min(m2, est[c, s + 2])
         m3 = min(m3, est[c, s + 3])
-    for s in range(T - T % 4, T):
+    for s in range(hi - (hi - lo) % 4, hi):
         m0 = min(m0, est[c, s])
     best = min(min(m0, m1), min(m2, m3))
     t32 = threshold(best, err)
     count = 0
-    for s in range(T):
+    for s in range(lo, hi):
         count += est[c, s] <= t32
     arg = 0
-    for s in range(T):  # the first minimum
+    for s in range(lo, hi if best < inf else lo):  # the first minimum
         if est[c, s] == best:
             arg = s
             break

@@ -9,9 +9,48 @@ where its bound leaves a clip's nearest start open. Imported on first use, as
 from __future__ import annotations
 
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from .compile_cache import kernel
-from .kernels import audio_estimate, clip_minimum, dot32_at, threshold
+from .kernels import audio_estimate, clip_minimum, clip_minimum_within, dot32_at, threshold
+
+#: Clips ahead whose scattered float32 rows the scan asks for before it reads them.
+PREFETCH_AHEAD = 8
+#: At most this many rows asked for per open clip (most have a few starts that could be nearest).
+PREFETCH_ROWS = 8
+
+
+@intrinsic
+def _prefetch(typingctx, array, c, s, j):
+    """Ask the processor to bring ``array[c, s, j]``'s cache line in (a hint: no fault, no effect on values)."""
+    if not (isinstance(array, types.Array) and array.ndim == 3):
+        return None
+    sig = types.void(array, types.intp, types.intp, types.intp)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, list(args[1:]), wraparound=False)
+        i8p = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        fn = builder.module.declare_intrinsic(
+            "llvm.prefetch", [i8p], ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32])
+        )
+        # a read, kept in every cache level, of data
+        builder.call(fn, [builder.bitcast(ptr, i8p), ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@kernel()
+def prefetch_row(array: np.ndarray, c: int, s: int) -> None:
+    """Ask for every cache line of row ``array[c, s]`` (M, T, D): it is read soon."""
+    for j in range(0, array.shape[2], max(1, 64 // array.itemsize)):
+        _prefetch(array, c, s, j)  # type: ignore[call-arg]  # numba passes the typing context
 
 
 @kernel()
@@ -159,8 +198,12 @@ def scan_reduced(
     audio, audio_out
         As for :func:`audio_at`, for one query: the clips' audio features and squared norms,
         ``f_t`` and its squared norm; out the estimates at ``best_start`` and their exactness.
+
+    Three passes: the reduced estimates of every clip, read in order; the float32 rows of the
+    starts they leave open; each clip's nearest start in float32 and its audio. The last two
+    read rows scattered over the database, and ask for them a few clips ahead (:func:`prefetch_row`).
     """
-    codes, coef, kappa, centre, stats = reduced
+    centre, stats = reduced[3], reduced[4]
     query_codes, query_scale, query_lost, query_norm = query
     poses, query_pose, q_sqnorm = pose
     clip_max_sqnorm, err_factor, tiny = pose_bound
@@ -170,7 +213,13 @@ def scan_reduced(
     nc, T = est.shape
     inf = np.float32(np.inf)
     qs = np.float32(query_scale)
+    # the clips the reduced estimates leave open, and the first and last start that could be nearest
+    opened = np.empty(nc, np.int64)
+    first = np.empty(nc, np.int64)
+    last = np.empty(nc, np.int64)
+    n_open = 0
     for c in range(nc):
+        undecided[c] = False
         admitted = 0
         for s in range(T):
             admitted += bias[c, s] < inf
@@ -178,7 +227,6 @@ def scan_reduced(
             best_start[c] = 0
             best_d2[c] = np.inf
             best_err[c] = 0.0
-            undecided[c] = False
             continue
         if 4 * admitted < T:  # few admissible starts: the others' rows are not read
             for s in range(T):
@@ -192,32 +240,54 @@ def scan_reduced(
         centred = centred_sqnorm(query_pose, centre, c)
         err = reduced_bound(stats, c, centred, (query_lost, query_norm), err_factor, tiny)
         arg, best, open_ = clip_minimum(est, c, centred, err)
-        undecided[c] = False
         if not open_:
             best_start[c] = arg
             best_d2[c] = np.float64(best) + centred if best < inf else np.inf
             best_err[c] = err
             continue
-        # the starts that could be nearest, again in float32: within twice the bound of the
-        # least estimate, or every admissible start where the least could be an exact zero
+        # the starts that could be nearest: within twice the bound of the least estimate, or
+        # every admissible start where the least could be an exact zero; the others become +inf
         zero = np.float64(best) + centred <= err
         t32 = threshold(best, err)
+        a, b = T, -1
         for s in range(T):
             if est[c, s] < inf and (zero or est[c, s] <= t32):
-                est[c, s] = bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query_pose)
+                a = min(a, s)
+                b = s
             else:
                 est[c, s] = inf
+        opened[n_open], first[n_open], last[n_open] = c, a, b
+        n_open += 1
+    # The float32 rows below are scattered: each loop asks for the rows a few clips ahead
+    # (PREFETCH_AHEAD), so that their loads overlap the work on the clips at hand.
+    # The open clips' starts that could be nearest, again in float32
+    for i in range(n_open):
+        if i + PREFETCH_AHEAD < n_open:
+            ahead = opened[i + PREFETCH_AHEAD]
+            asked = 0
+            for s in range(first[i + PREFETCH_AHEAD], last[i + PREFETCH_AHEAD] + 1):
+                if asked < PREFETCH_ROWS and est[ahead, s] < inf:
+                    prefetch_row(poses, ahead, s)
+                    asked += 1
+        c = opened[i]
+        for s in range(first[i], last[i] + 1):
+            if est[c, s] < inf:
+                est[c, s] = bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query_pose)
         err32 = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
-        arg, best, open_ = clip_minimum(est, c, q_sqnorm, err32)
+        arg, best, open_ = clip_minimum_within(est, c, first[i], last[i] + 1, offset=q_sqnorm, err=err32)
         best_start[c] = arg
         best_d2[c] = np.float64(best) + q_sqnorm
         best_err[c] = err32
         undecided[c] = open_
-    # a loop of its own: the rows are scattered, and the processor can fetch several at once
-    # only when little other work lies between their loads. The nearest start's pose distance
-    # is estimated again in float32, so that the rankings see the float32 bound: the wider
-    # reduced bound would leave far more clips to settle exactly
+    # The nearest start's pose distance is estimated again in float32, so that the rankings
+    # see the float32 bound: the wider reduced bound would leave far more clips to settle
+    # exactly. And its audio estimate.
     for c in range(nc):
+        ahead = c + PREFETCH_AHEAD
+        if ahead < nc and best_d2[ahead] < np.inf:
+            if not undecided[ahead]:
+                prefetch_row(poses, ahead, best_start[ahead])
+            prefetch_row(features, ahead, best_start[ahead])
         if best_d2[c] < np.inf:
             s = best_start[c]
             if not undecided[c]:

@@ -192,3 +192,45 @@ def test_a_batch_does_not_make_the_reduced_copy():
     assert index._reduced is None
     single = index.search(queries[0], config=SearchConfig(segment=3))
     assert index._reduced is not None and single.equals(batch[0])
+
+
+def test_many_open_clips_give_the_reference_result():
+    # the scan settles the open clips and reads the nearest starts in passes that ask for rows
+    # several clips ahead: a database where far more clips than that are left open by the
+    # 8-bit bound (adjacent starts a small step apart) must still give the reference result
+    rng = np.random.default_rng(11)
+    M, T, D, A = 48, 20, 96, 112
+    walk = np.cumsum(0.005 * rng.standard_normal((M, T, D)), axis=1) + rng.standard_normal((M, 1, D))
+    P = walk.astype(np.float32)
+    F = rng.standard_normal((M, T, A)).astype(np.float32)
+    init = P[7, 3] + np.float32(1e-3)
+    est, bound, _, _, _ = _estimates(P, init)
+    open_ = np.count_nonzero(est <= (est.min(axis=1) + 2 * bound)[:, None], axis=1) > 1
+    assert open_.sum() > 2 * compiled_reduced().PREFETCH_AHEAD
+    query = rng.standard_normal((24, A)).astype(np.float32)
+    for k in (0, 3):
+        cfg = SearchConfig(k=k, segment=4, record=5, seed=2, init_pose=tuple(init.tolist()))
+        assert_same(*run_both(P, F, np.ones((M, T), bool), query, config=cfg))
+
+
+@st.composite
+def rows_finite_within(draw):
+    """A (2, T) float32 row pair whose estimates are +inf outside starts lo .. hi - 1."""
+    T = draw(st.integers(1, 40))
+    lo = draw(st.integers(0, T))
+    hi = draw(st.integers(lo, T))
+    values = st.one_of(st.sampled_from([0.0, 1.0, -1.0, np.inf]), st.floats(-1e3, 1e3, width=32))
+    row = np.full(T, np.inf, np.float32)
+    row[lo:hi] = draw(st.lists(values, min_size=hi - lo, max_size=hi - lo))
+    est = np.stack([np.full(T, np.float32(5.0)), row])
+    return est, lo, hi, draw(st.sampled_from([0.0, 1e-3, 2.0])), draw(st.sampled_from([1e-6, 0.5, 3.0]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(rows_finite_within())
+def test_a_clips_minimum_within_its_finite_starts_is_its_minimum(case):
+    # the open clips' float32 tier reduces only the starts that could be nearest; the rest are +inf
+    from gesturekit.search.kernels import clip_minimum, clip_minimum_within
+
+    est, lo, hi, offset, err = case
+    assert clip_minimum_within(est, 1, lo, hi, offset, err) == clip_minimum(est, 1, offset, err)
