@@ -161,6 +161,24 @@ def reduced_bound(
 
 
 @kernel()
+def threshold_above(e32: float, q_sqnorm: float, err32: float, err: float, centred: float) -> np.float32:
+    """A float32 value no reduced estimate of a start nearer than the float32-estimated start lies above.
+
+    ``e32 + q_sqnorm`` (float32 estimate ``|p|^2 - 2 p.q`` and ``|q|^2``) is within ``err32`` of a
+    start's squared distance; a reduced estimate plus ``centred`` is within ``err`` of its start's.
+    So a start at most as far has reduced estimate at most ``e32 + q_sqnorm + err32 + err - centred``:
+    summed in float64 with a margin beyond the sum's rounding, then rounded up to float32.
+    """
+    t64 = np.float64(e32) + q_sqnorm + err32 + err - centred
+    # four float64 roundings, each within 2**-53 of a partial sum no larger than the sum of magnitudes
+    t64 += 1e-12 * (abs(np.float64(e32)) + abs(q_sqnorm) + err32 + err + abs(centred))
+    t32 = np.float32(t64)
+    if t32 < t64:
+        t32 = np.nextafter(t32, np.float32(np.inf))
+    return t32
+
+
+@kernel()
 def scan_reduced(
     est: np.ndarray,
     bias: np.ndarray,
@@ -199,9 +217,11 @@ def scan_reduced(
         As for :func:`audio_at`, for one query: the clips' audio features and squared norms,
         ``f_t`` and its squared norm; out the estimates at ``best_start`` and their exactness.
 
-    Three passes: the reduced estimates of every clip, read in order; the float32 rows of the
-    starts they leave open; each clip's nearest start in float32 and its audio. The last two
-    read rows scattered over the database, and ask for them a few clips ahead (:func:`prefetch_row`).
+    Passes: the reduced estimates of every clip, read in order; for the clips they leave open,
+    the start of least estimate in float32, which narrows the starts that could be nearest
+    (:func:`threshold_above`), then those starts in float32; each clip's nearest start in
+    float32 and its audio. All but the first read rows scattered over the database, and ask
+    for them a few clips ahead (:func:`prefetch_row`).
     """
     centre, stats = reduced[3], reduced[4]
     query_codes, query_scale, query_lost, query_norm = query
@@ -213,10 +233,16 @@ def scan_reduced(
     nc, T = est.shape
     inf = np.float32(np.inf)
     qs = np.float32(query_scale)
-    # the clips the reduced estimates leave open, and the first and last start that could be nearest
+    # the clips the reduced estimates leave open: the first and last start that could be
+    # nearest, the start of least estimate, and what the tighter test below needs
     opened = np.empty(nc, np.int64)
     first = np.empty(nc, np.int64)
     last = np.empty(nc, np.int64)
+    least = np.empty(nc, np.int64)
+    zeros = np.empty(nc, np.bool_)
+    t32s = np.empty(nc, np.float32)
+    bounds = np.empty((nc, 2))
+    tiered = np.zeros(nc, np.bool_)  # the float32 estimate at best_start is made
     n_open = 0
     for c in range(nc):
         undecided[c] = False
@@ -256,41 +282,65 @@ def scan_reduced(
                 b = s
             else:
                 est[c, s] = inf
-        opened[n_open], first[n_open], last[n_open] = c, a, b
+        opened[n_open], first[n_open], last[n_open], least[n_open] = c, a, b, arg
+        zeros[n_open], t32s[n_open] = zero, t32
+        bounds[n_open, 0], bounds[n_open, 1] = err, centred
         n_open += 1
     # The float32 rows below are scattered: each loop asks for the rows a few clips ahead
     # (PREFETCH_AHEAD), so that their loads overlap the work on the clips at hand.
-    # The open clips' starts that could be nearest, again in float32
+    # The open clips, first the start of least reduced estimate in float32. Where no start of
+    # the clip can be at distance zero, that start's distance is at most its float32
+    # estimate plus its bound, and the nearest start's is no larger: a start whose reduced
+    # estimate minus its bound lies above that cannot be nearest (docs/METHOD.md, "Exact arithmetic").
+    err32 = np.empty(nc)
     for i in range(n_open):
         if i + PREFETCH_AHEAD < n_open:
-            ahead = opened[i + PREFETCH_AHEAD]
+            prefetch_row(poses, opened[i + PREFETCH_AHEAD], least[i + PREFETCH_AHEAD])
+        c, b = opened[i], least[i]
+        err32[i] = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
+        e = bias[c, b] + np.float32(-2.0) * dot32_at(poses, c, b, query_pose)
+        if not zeros[i]:
+            t = min(t32s[i], threshold_above(e, q_sqnorm, err32[i], bounds[i, 0], bounds[i, 1]))
+            lo, hi = T, -1
+            for s in range(first[i], last[i] + 1):
+                if est[c, s] < inf and (s == b or est[c, s] <= t):
+                    lo = min(lo, s)
+                    hi = s
+                else:
+                    est[c, s] = inf
+            first[i], last[i] = lo, hi
+        est[c, b] = e
+    # then the other starts that could be nearest, in float32
+    for i in range(n_open):
+        if i + PREFETCH_AHEAD < n_open:
+            ahead, b = opened[i + PREFETCH_AHEAD], least[i + PREFETCH_AHEAD]
             asked = 0
             for s in range(first[i + PREFETCH_AHEAD], last[i + PREFETCH_AHEAD] + 1):
-                if asked < PREFETCH_ROWS and est[ahead, s] < inf:
+                if asked < PREFETCH_ROWS and s != b and est[ahead, s] < inf:
                     prefetch_row(poses, ahead, s)
                     asked += 1
         c = opened[i]
         for s in range(first[i], last[i] + 1):
-            if est[c, s] < inf:
+            if s != least[i] and est[c, s] < inf:
                 est[c, s] = bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query_pose)
-        err32 = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
-        arg, best, open_ = clip_minimum_within(est, c, first[i], last[i] + 1, offset=q_sqnorm, err=err32)
+        arg, best, open_ = clip_minimum_within(est, c, first[i], last[i] + 1, offset=q_sqnorm, err=err32[i])
         best_start[c] = arg
         best_d2[c] = np.float64(best) + q_sqnorm
-        best_err[c] = err32
+        best_err[c] = err32[i]
         undecided[c] = open_
+        tiered[c] = True
     # The nearest start's pose distance is estimated again in float32, so that the rankings
     # see the float32 bound: the wider reduced bound would leave far more clips to settle
     # exactly. And its audio estimate.
     for c in range(nc):
         ahead = c + PREFETCH_AHEAD
         if ahead < nc and best_d2[ahead] < np.inf:
-            if not undecided[ahead]:
+            if not tiered[ahead]:
                 prefetch_row(poses, ahead, best_start[ahead])
             prefetch_row(features, ahead, best_start[ahead])
         if best_d2[c] < np.inf:
             s = best_start[c]
-            if not undecided[c]:
+            if not tiered[c]:
                 est[c, s] = bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query_pose)
                 best_d2[c] = np.float64(est[c, s]) + q_sqnorm
                 best_err[c] = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny

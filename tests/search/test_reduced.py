@@ -234,3 +234,25 @@ def test_a_clips_minimum_within_its_finite_starts_is_its_minimum(case):
 
     est, lo, hi, offset, err = case
     assert clip_minimum_within(est, 1, lo, hi, offset, err) == clip_minimum(est, 1, offset, err)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(-1e30, 1e30).map(np.float32).filter(np.isfinite),
+    st.floats(0, 1e30),
+    st.floats(0, 1e25),
+    st.floats(0, 1e25),
+    st.floats(0, 1e30),
+)
+def test_the_open_clips_threshold_lies_above_the_exact_sum(e32, q_sqnorm, err32, err, centred):
+    # the float32 value below which a start nearer than the float32-estimated one must lie: the
+    # exact (rational) sum of its terms, never above it, however float64 rounds the sum
+    from fractions import Fraction
+
+    t = compiled_reduced().threshold_above(np.float32(e32), q_sqnorm, err32, err, centred)
+    exact = Fraction(float(np.float32(e32))) + Fraction(q_sqnorm) + Fraction(err32) + Fraction(err) - Fraction(centred)
+    assert Fraction(float(t)) >= exact
+    # and not loose: above it by at most the margin and one float32 step
+    magnitude = abs(float(np.float32(e32))) + q_sqnorm + err32 + err + centred
+    slack = Fraction(2e-12 * magnitude) + Fraction(abs(float(np.spacing(np.float32(t)))))
+    assert Fraction(float(t)) - exact <= slack
