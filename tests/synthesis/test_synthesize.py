@@ -533,3 +533,50 @@ def test_zeggs_with_the_scan_on_a_torch_device_gives_the_same_motion(zeggs_db, b
     # a step's query is a database frame (the last pose chosen): its own clip's least distance may be
     # an exact zero, so that clip's row comes back open and is settled exactly
     assert M // 2 in opened
+
+
+def test_zeggs_search_matches_the_reference_on_recorded_motion(zeggs_db, beat_speech):
+    # recorded motion is where the 8-bit bound leaves most clips open (consecutive frames nearly
+    # equal): the scan's float32 passes over those clips, narrowed by each clip's least start,
+    # must choose what the plain float64 loop chooses, step by step, with controls and k > 0
+    from gesturekit.control import step_masks
+    from gesturekit.search import SearchConfig, search
+    from gesturekit.search.reduced import clip_bounds, compiled_reduced, quantise_query, reduce_pose
+    from gesturekit.synthesis.types import load_speech
+
+    P, F, valid = (np.asarray(a) for a in (zeggs_db.P, zeggs_db.F, zeggs_db.valid))
+    fq, _ = zeggs_db.query_features(load_speech(beat_speech)[0])
+    fq = fq[: 8 * 40]
+    masks, smask = step_masks(
+        parse_control("1-8:left_hand=high,10-16:speed=slow"),
+        np.asarray(zeggs_db.attributes),
+        zeggs_db.thresholds,
+        n_frames=len(fq),
+        segment=8,
+    )
+    M, T, D = P.shape
+    init = P[M // 3, 5].copy()
+    # the property this test needs of its input: most clips open, more of them than the scan asks for ahead
+    red, codes = reduce_pose(P), quantise_query(init)
+    k = compiled_reduced()
+    est = np.array(
+        [
+            [
+                k.reduced_estimate(
+                    (red.codes, red.coef, red.kappa, red.centre, red.stats), c, s, codes.codes, np.float32(codes.scale)
+                )
+                for s in range(T)
+            ]
+            for c in range(M)
+        ],
+        np.float64,
+    )
+    centred = ((init.astype(np.float64) - red.centre) ** 2).sum(axis=1)
+    bound = clip_bounds(red.stats, centred, codes, D)
+    open_ = np.count_nonzero(est <= (est.min(axis=1) + 2 * bound)[:, None], axis=1) > 1
+    assert open_.sum() > k.PREFETCH_AHEAD and open_.mean() > 0.5, (open_.sum(), M)
+    cfg = SearchConfig(k=1, seed=3, init_pose=tuple(init.tolist()))
+    kw = dict(config=cfg, masks=masks, step_mask_index=smask)
+    fast, ref = search(P, F, valid, fq, **kw), search_reference(P, F, valid, fq, **kw)
+    for name, x in fast.array_fields().items():
+        assert np.array_equal(x, ref.array_fields()[name], equal_nan=x.dtype.kind == "f"), name
