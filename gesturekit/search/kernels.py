@@ -156,7 +156,12 @@ def clip_minimum_within(
 @kernel()
 def threshold(best: float, err: float) -> np.float32:
     """``best + 2 err`` rounded up to float32: no estimate within twice the bound of ``best`` lies above it."""
-    t64 = np.float64(best) + 2.0 * err
+    return round_up32(np.float64(best) + 2.0 * err)
+
+
+@kernel()
+def round_up32(t64: float) -> np.float32:
+    """The least float32 value not below ``t64``."""
     t32 = np.float32(t64)
     if t32 < t64:
         t32 = np.nextafter(t32, np.float32(np.inf))

@@ -15,7 +15,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from .compile_cache import kernel
-from .kernels import audio_estimate, clip_minimum, clip_minimum_within, dot32_at, threshold
+from .kernels import audio_estimate, clip_minimum, clip_minimum_within, dot32_at, round_up32, threshold
 
 #: Clips ahead whose scattered float32 rows the scan asks for before it reads them.
 PREFETCH_AHEAD = 8
@@ -172,10 +172,13 @@ def threshold_above(e32: float, q_sqnorm: float, err32: float, err: float, centr
     t64 = np.float64(e32) + q_sqnorm + err32 + err - centred
     # four float64 roundings, each within 2**-53 of a partial sum no larger than the sum of magnitudes
     t64 += 1e-12 * (abs(np.float64(e32)) + abs(q_sqnorm) + err32 + err + abs(centred))
-    t32 = np.float32(t64)
-    if t32 < t64:
-        t32 = np.nextafter(t32, np.float32(np.inf))
-    return t32
+    return round_up32(t64)
+
+
+@kernel()
+def estimate32(bias: np.ndarray, poses: np.ndarray, c: int, s: int, query: np.ndarray) -> np.float32:
+    """The float32 scan's estimate ``|p|^2 - 2 p.q`` of start ``s`` of clip ``c`` (+inf where not admissible)."""
+    return bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query)
 
 
 @kernel()
@@ -298,7 +301,7 @@ def scan_reduced(
             prefetch_row(poses, opened[i + PREFETCH_AHEAD], least[i + PREFETCH_AHEAD])
         c, b = opened[i], least[i]
         err32[i] = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
-        e = bias[c, b] + np.float32(-2.0) * dot32_at(poses, c, b, query_pose)
+        e = estimate32(bias, poses, c, b, query_pose)
         if not zeros[i]:
             t = min(t32s[i], threshold_above(e, q_sqnorm, err32[i], bounds[i, 0], bounds[i, 1]))
             lo, hi = T, -1
@@ -322,7 +325,7 @@ def scan_reduced(
         c = opened[i]
         for s in range(first[i], last[i] + 1):
             if s != least[i] and est[c, s] < inf:
-                est[c, s] = bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query_pose)
+                est[c, s] = estimate32(bias, poses, c, s, query_pose)
         arg, best, open_ = clip_minimum_within(est, c, first[i], last[i] + 1, offset=q_sqnorm, err=err32[i])
         best_start[c] = arg
         best_d2[c] = np.float64(best) + q_sqnorm
@@ -341,7 +344,7 @@ def scan_reduced(
         if best_d2[c] < np.inf:
             s = best_start[c]
             if not tiered[c]:
-                est[c, s] = bias[c, s] + np.float32(-2.0) * dot32_at(poses, c, s, query_pose)
+                est[c, s] = estimate32(bias, poses, c, s, query_pose)
                 best_d2[c] = np.float64(est[c, s]) + q_sqnorm
                 best_err[c] = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
             audio_est[c], audio_inexact[c] = audio_estimate(features, sqnorms, c, s, query_audio, query_audio_sqnorm)
