@@ -39,10 +39,12 @@ import numpy as np
 
 from .._arguments import checks_arguments
 from ..errors import ConfigError, warn
+from ..features import LAYOUT
 from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
 from .device import DeviceRows
 from .exact import TINY, audio_err, compiled, initial_order, pose_err_factor, reduce_chunk
+from .frames import FramePose, frame_pose, frame_query
 from .plan import SearchPlan, stack_plans
 from .reduced import ReducedPose, compiled_reduced, quantise_query, reduce_pose
 from .threads import matrix_product, single_threaded_blas, worker_count
@@ -84,17 +86,30 @@ class SearchIndex:
         A torch device (``"cuda"``) keeping the pose and audio features, where every scan is one float32
         product reduced there per clip (:mod:`gesturekit.search.device`); the rest, and the result, as on
         the CPU (the default).
+    pose_offsets : sequence of int, optional
+        The frames ahead that the pose feature's blocks hold (default: gesturekit's layout,
+        ``(0, 2, 4, 6)``, where D is 96). Where the features are built so, one query's scan
+        reads the frame copy (:meth:`frames`); otherwise, or with ``()``, the 8-bit copy.
 
     Notes
     -----
     Extra memory: ``12 M T`` bytes of per-frame norms; from the first single query on,
-    the 8-bit copy of the pose features (:meth:`reduced`, ``(D + 8) M T`` bytes and
+    the frame copy of the pose features (:meth:`frames`, ``(2 D / n + 4) M T`` bytes for
+    ``n`` offsets) or else the 8-bit copy (:meth:`reduced`, ``(D + 8) M T`` bytes and
     ``4 (D + 8) M`` per clip; with a ``device``, a few per-clip arrays a step instead, on the device
     the features and a step's ``4 M T B`` bytes of products);
     per search, a few arrays of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
     """
 
-    def __init__(self, P: np.ndarray, F: np.ndarray, valid: np.ndarray, *, device: str | None = None) -> None:
+    def __init__(
+        self,
+        P: np.ndarray,
+        F: np.ndarray,
+        valid: np.ndarray,
+        *,
+        device: str | None = None,
+        pose_offsets: Sequence[int] | None = None,
+    ) -> None:
         self.P, self.F, self.valid = validate_db(P, F, valid)
         M, T, D = self.P.shape
         self.shape = (M, T, D, self.F.shape[2])
@@ -113,6 +128,11 @@ class SearchIndex:
         self._scratch = threading.local()
         self._reduced: ReducedPose | None = None
         self._reduced_lock = threading.Lock()
+        if pose_offsets is None:
+            pose_offsets = LAYOUT.pose_offsets if D == LAYOUT.pose_dim else ()
+        self._pose_offsets = np.asarray(tuple(pose_offsets), np.int64)
+        self._frames: FramePose | None = None
+        self._frames_made = False
         self._device = None if device is None else DeviceRows(self._P2, self._F2, M, device)  # torch loads only then
 
     def reduced(self) -> ReducedPose:
@@ -122,6 +142,16 @@ class SearchIndex:
             if self._reduced is None:
                 self._reduced = reduce_pose(self._P3, self._workers)
             return self._reduced
+
+    def frames(self) -> FramePose | None:
+        """The frame copy one query's scan reads (:mod:`gesturekit.search.frames`), made on
+        first use; None where the pose features are not built of frames ``pose_offsets`` ahead."""
+        with self._reduced_lock:
+            if not self._frames_made:
+                if self._pose_offsets.size:
+                    self._frames = frame_pose(self._P3, np.asarray(self.valid), self._pose_offsets, self._workers)
+                self._frames_made = True
+            return self._frames
 
     # -- admissibility -------------------------------------------------------------------------
 
@@ -150,7 +180,7 @@ class SearchIndex:
 
     # -- one scan of the database for several queries ------------------------------------------
 
-    def _scan(self, Q, biases, fq, scratch=None, pool=None):
+    def _scan(self, Q, biases, fq, scratch=None, pool=None, window=0):
         """Per query and clip: the nearest start's estimate, its bound, and the rows needing an exact look.
 
         Parameters
@@ -165,8 +195,13 @@ class SearchIndex:
             Keeps a single query's product buffer between steps (fresh pages cost page faults).
         pool : ThreadPoolExecutor, optional
             Threads to share out each chunk's product and reductions by clips.
+        window : int
+            The fewest frames of a window among the queries: from ``max(pose_offsets) + 1`` on,
+            every admissible start is one the frame copy covers.
 
-        One query's scan reads the reduced copy (:meth:`reduced`) of the admissible starts
+        One query's scan reads the frame copy (:meth:`frames`, where the features allow it and
+        ``window`` is long enough; :func:`~gesturekit.search.reduced_kernels.scan_frames`) or
+        the reduced copy (:meth:`reduced`) of the admissible starts
         and, where its bound leaves a clip's nearest start open, the float32 features of
         the few starts that could be nearest (:func:`~gesturekit.search.reduced_kernels.scan_reduced`);
         several queries' scan (and every scan on a ``device``) is a float32 matrix product of the starts used.
@@ -223,7 +258,13 @@ class SearchIndex:
         s0 = np.empty((M, B), np.int64)
         d2 = np.empty((M, B))
         err = np.empty((M, B))
-        if reduced_scan:
+        framed = None
+        if reduced_scan and self._pose_offsets.size and window > int(self._pose_offsets.max()):
+            framed = self.frames()
+        if framed is not None:
+            fqr = frame_query(Qp[0], framed)
+            frame_args = (fqr.weights, fqr.offset, fqr.norm, framed.shift_norm)
+        elif reduced_scan:
             red = self.reduced()
             codes = quantise_query(Qp[0])
             query_codes = (codes.codes, codes.scale, codes.lost, codes.norm)
@@ -244,20 +285,40 @@ class SearchIndex:
                 G2 = G.reshape(nc, T)
                 bias2 = biases[0][r0:r1].reshape(nc, T)
                 und = np.empty(nc, bool)
-                for a in range(0, nc, _SUB_CLIPS):
-                    z = min(nc, a + _SUB_CLIPS)
+                # the frame scan reduces each clip's row as soon as it is made: one call takes all
+                step = nc if framed is not None else _SUB_CLIPS
+                for a in range(0, nc, step):
+                    z = min(nc, a + step)
                     x0, x1 = c0 + a, c0 + z
-                    compiled_reduced().scan_reduced(
-                        G2[a:z],
-                        bias2[a:z],
-                        (red.codes[x0:x1], red.coef[x0:x1], red.kappa[x0:x1], red.centre[x0:x1], red.stats[x0:x1]),
-                        query_codes,
+                    common = (
                         (self._P3[x0:x1], Qp[0], float(nq[0])),
                         (self._npmax[x0:x1], self._pose_c, TINY),
                         (s0[x0:x1, 0], d2[x0:x1, 0], err[x0:x1, 0], und[a:z]),
                         (self._F3[x0:x1], self._na2[x0:x1], fqp[0], float(nbp[0])),
                         (av[x0:x1, 0], inexact[x0:x1, 0]),
                     )
+                    if framed is not None:
+                        compiled_reduced().scan_frames(
+                            G2[a:z],
+                            bias2[a:z],
+                            (
+                                framed.codes[x0:x1],
+                                framed.steps[x0:x1],
+                                framed.kappa[x0:x1],
+                                framed.stats[x0:x1],
+                                framed.offsets,
+                            ),
+                            frame_args,
+                            *common,
+                        )
+                    else:
+                        compiled_reduced().scan_reduced(
+                            G2[a:z],
+                            bias2[a:z],
+                            (red.codes[x0:x1], red.coef[x0:x1], red.kappa[x0:x1], red.centre[x0:x1], red.stats[x0:x1]),
+                            query_codes,
+                            *common,
+                        )
                 ci = np.flatnonzero(und)
                 if ci.size:
                     found.append((ci + c0, np.zeros(ci.size, np.int64), G2[ci]))
@@ -584,7 +645,7 @@ class SearchIndex:
         biases = [self._bias(cache, keys[b]) for b in active]
         fq = np.stack([rows[b] for b in active])
         s0, d2, err, nq, undecided, (av, inexact) = self._scan(
-            poses[active], biases, fq, cache.setdefault("scratch", {}), pool
+            poses[active], biases, fq, cache.setdefault("scratch", {}), pool, min(keys[b][0] for b in active)
         )
 
         def decide(j):

@@ -19,6 +19,10 @@ from .kernels import audio_estimate, clip_minimum, clip_minimum_within, dot32_at
 
 #: Clips ahead whose scattered float32 rows the scan asks for before it reads them.
 PREFETCH_AHEAD = 8
+#: Largest magnitude of a frame copy's code (:func:`frame_clips`).
+FRAME_LEVELS = 32767
+#: Clips ahead whose frame copy :func:`scan_frames` asks for before it reads them.
+FRAME_AHEAD = 4
 #: At most this many rows asked for per open clip (most have a few starts that could be nearest).
 PREFETCH_ROWS = 8
 
@@ -289,13 +293,50 @@ def scan_reduced(
         zeros[n_open], t32s[n_open] = zero, t32
         bounds[n_open, 0], bounds[n_open, 1] = err, centred
         n_open += 1
+    settle_open(
+        est,
+        bias,
+        (poses, query_pose, q_sqnorm),
+        pose_bound,
+        (opened, first, last, least, zeros, t32s, bounds, n_open),
+        scan_out,
+        tiered,
+    )
+    nearest_audio(est, bias, (poses, query_pose, q_sqnorm), pose_bound, scan_out, tiered, True, audio, audio_out)
+
+
+@kernel()
+def settle_open(
+    est: np.ndarray,
+    bias: np.ndarray,
+    pose: tuple[np.ndarray, np.ndarray, float],
+    pose_bound: tuple[np.ndarray, float, float],
+    opened_clips: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int],
+    scan_out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tiered: np.ndarray,
+) -> None:
+    """The float32 tier of the clips a first pass left open (:func:`scan_reduced`, :func:`scan_frames`).
+
+    ``opened_clips`` is ``(opened, first, last, least, zeros, t32s, bounds, n)``: the first ``n``
+    entries name an open clip, the first and last start that could be nearest (``est`` is +inf
+    at the others), its start of least first-pass estimate, whether a start could be at distance
+    zero, the first pass's threshold, and its bound and offset (a first-pass estimate plus the
+    offset is within the bound of its start's squared distance). Writes ``scan_out`` and
+    ``tiered`` for those clips; their ``est`` rows then hold float32 estimates ``|p|^2 - 2 p.q``.
+    """
+    poses, query_pose, q_sqnorm = pose
+    clip_max_sqnorm, err_factor, tiny = pose_bound
+    best_start, best_d2, best_err, undecided = scan_out
+    opened, first, last, least, zeros, t32s, bounds, n_open = opened_clips
+    T = est.shape[1]
+    inf = np.float32(np.inf)
     # The float32 rows below are scattered: each loop asks for the rows a few clips ahead
     # (PREFETCH_AHEAD), so that their loads overlap the work on the clips at hand.
-    # The open clips, first the start of least reduced estimate in float32. Where no start of
-    # the clip can be at distance zero, that start's distance is at most its float32
-    # estimate plus its bound, and the nearest start's is no larger: a start whose reduced
+    # The open clips, first the start of least first-pass estimate in float32. Where no start
+    # of the clip can be at distance zero, that start's distance is at most its float32
+    # estimate plus its bound, and the nearest start's is no larger: a start whose first-pass
     # estimate minus its bound lies above that cannot be nearest (docs/METHOD.md, "Exact arithmetic").
-    err32 = np.empty(nc)
+    err32 = np.empty(max(1, n_open))
     for i in range(n_open):
         if i + PREFETCH_AHEAD < n_open:
             prefetch_row(poses, opened[i + PREFETCH_AHEAD], least[i + PREFETCH_AHEAD])
@@ -332,19 +373,288 @@ def scan_reduced(
         best_err[c] = err32[i]
         undecided[c] = open_
         tiered[c] = True
+
+
+@kernel()
+def nearest_audio(
+    est: np.ndarray,
+    bias: np.ndarray,
+    pose: tuple[np.ndarray, np.ndarray, float],
+    pose_bound: tuple[np.ndarray, float, float],
+    scan_out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tiered: np.ndarray,
+    again: bool,
+    audio: tuple[np.ndarray, np.ndarray, np.ndarray, float],
+    audio_out: tuple[np.ndarray, np.ndarray],
+) -> None:
+    """The last pass of a scan: each clip's audio estimate at its nearest start and, where
+    ``again`` and the float32 tier did not make it, the nearest start's float32 estimate."""
+    poses, query_pose, q_sqnorm = pose
+    clip_max_sqnorm, err_factor, tiny = pose_bound
+    best_start, best_d2, best_err, undecided = scan_out
+    features, sqnorms, query_audio, query_audio_sqnorm = audio
+    audio_est, audio_inexact = audio_out
+    nc = est.shape[0]
     # The nearest start's pose distance is estimated again in float32, so that the rankings
     # see the float32 bound: the wider reduced bound would leave far more clips to settle
     # exactly. And its audio estimate.
     for c in range(nc):
         ahead = c + PREFETCH_AHEAD
         if ahead < nc and best_d2[ahead] < np.inf:
-            if not tiered[ahead]:
+            if again and not tiered[ahead]:
                 prefetch_row(poses, ahead, best_start[ahead])
             prefetch_row(features, ahead, best_start[ahead])
         if best_d2[c] < np.inf:
             s = best_start[c]
-            if not tiered[c]:
+            if again and not tiered[c]:
                 est[c, s] = estimate32(bias, poses, c, s, query_pose)
                 best_d2[c] = np.float64(est[c, s]) + q_sqnorm
                 best_err[c] = err_factor * (clip_max_sqnorm[c] + q_sqnorm) + tiny
             audio_est[c], audio_inexact[c] = audio_estimate(features, sqnorms, c, s, query_audio, query_audio_sqnorm)
+
+
+@kernel()
+def frame_clips(
+    poses: np.ndarray,
+    valid: np.ndarray,
+    offsets: np.ndarray,
+    fit: tuple[np.ndarray, np.ndarray],
+    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+) -> None:
+    """The frame copy of ``poses`` (nc, T, D) float32 (see :mod:`gesturekit.search.frames`).
+
+    ``valid`` (nc, T) bool, ``offsets`` (n,) int64, ``fit`` the map's ``(scale, shift)``, each
+    (n, K) float64; ``out`` is ``(codes, steps, kappa, stats)``: (nc, K, T) int16, (nc, K)
+    float32, (nc, T) float32 and (nc, 2) float64, written. The float64 sums carry relative
+    errors near 1e-16, far inside the float32 terms of the bound.
+    """
+    scale, shift = fit
+    codes, steps, kappa, stats = out
+    nc, T, D = poses.shape
+    n = offsets.shape[0]
+    K = D // n
+    reach = 0
+    for k in range(n):
+        reach = max(reach, offsets[k])
+    covered = T - reach
+    kept = np.empty((K, T))
+    for c in range(nc):
+        for i in range(K):
+            top = 0.0
+            for f in range(T):
+                top = max(top, abs(np.float64(poses[c, f, i])))
+            step = np.float32(top / FRAME_LEVELS)
+            if not step > 0.0:  # the value is 0 at every frame (or underflows): nothing is rounded
+                step = np.float32(1.0)
+            steps[c, i] = step
+            for f in range(T):
+                code = min(FRAME_LEVELS, max(-FRAME_LEVELS, np.rint(np.float64(poses[c, f, i]) / np.float64(step))))
+                codes[c, i, f] = np.int16(code)
+                kept[i, f] = np.float64(step) * code  # exact: a 24-bit step times a 16-bit code
+        lost_max = 0.0
+        norm_max = 0.0
+        for s in range(T):
+            if s >= covered:
+                kappa[c, s] = np.inf
+                continue
+            sq = 0.0
+            lost = 0.0
+            for k in range(n):
+                f = s + offsets[k]
+                for i in range(K):
+                    y = scale[k, i] * kept[i, f] + shift[k, i]
+                    sq += y * y
+                    d = np.float64(poses[c, s, k * K + i]) - y
+                    lost += d * d
+            kappa[c, s] = np.float32(sq)
+            if valid[c, s]:
+                lost_max = max(lost_max, np.sqrt(lost))
+                norm_max = max(norm_max, np.sqrt(sq))
+        stats[c, 0] = lost_max
+        stats[c, 1] = norm_max
+
+
+@kernel()
+def frame_bound(stats: np.ndarray, c: int, query_norm: float, shift_norm: float, factor: float, tiny: float) -> float:
+    """The error bound of clip ``c``'s frame estimates (:func:`gesturekit.search.frames.frame_bounds`)."""
+    lost, top = stats[c, 0], stats[c, 1]
+    return (
+        factor * (top * top + (top + shift_norm) * (top + shift_norm) + query_norm * query_norm)
+        + lost * (2.0 * (top + query_norm) + lost)
+        + tiny
+    )
+
+
+# products along a clip's frames: one rounding per multiply-add is within the bound too
+@kernel(fastmath={"contract"})
+def frame_products(codes: np.ndarray, c: int, weights: np.ndarray, h: np.ndarray) -> None:
+    """``h[k, f] = codes[c, :, f] . weights[k]`` in float32 (the codes exactly converted), for
+    every frame ``f`` of clip ``c``.
+
+    Four blocks and four values are taken per pass over the frames: each value loaded then
+    serves four multiply-adds, and each load and store of ``h`` four (one at a time, the
+    loop would wait on its loads and stores).
+    """
+    n, K = weights.shape
+    T = h.shape[1]
+    for k in range(n):
+        for f in range(T):
+            h[k, f] = np.float32(0.0)
+    fours = n - n % 4
+    whole = K - K % 4
+    for k in range(0, fours, 4):
+        for i in range(0, whole, 4):
+            a0, a1, a2, a3 = weights[k, i], weights[k, i + 1], weights[k, i + 2], weights[k, i + 3]
+            b0, b1, b2, b3 = weights[k + 1, i], weights[k + 1, i + 1], weights[k + 1, i + 2], weights[k + 1, i + 3]
+            c0, c1, c2, c3 = weights[k + 2, i], weights[k + 2, i + 1], weights[k + 2, i + 2], weights[k + 2, i + 3]
+            d0, d1, d2, d3 = weights[k + 3, i], weights[k + 3, i + 1], weights[k + 3, i + 2], weights[k + 3, i + 3]
+            for f in range(T):
+                x0, x1 = np.float32(codes[c, i, f]), np.float32(codes[c, i + 1, f])
+                x2, x3 = np.float32(codes[c, i + 2, f]), np.float32(codes[c, i + 3, f])
+                h[k, f] += (x0 * a0 + x1 * a1) + (x2 * a2 + x3 * a3)
+                h[k + 1, f] += (x0 * b0 + x1 * b1) + (x2 * b2 + x3 * b3)
+                h[k + 2, f] += (x0 * c0 + x1 * c1) + (x2 * c2 + x3 * c3)
+                h[k + 3, f] += (x0 * d0 + x1 * d1) + (x2 * d2 + x3 * d3)
+        for i in range(whole, K):
+            for j in range(k, k + 4):
+                w = weights[j, i]
+                for f in range(T):
+                    h[j, f] += np.float32(codes[c, i, f]) * w
+    for k in range(fours, n):
+        for i in range(K):
+            w = weights[k, i]
+            for f in range(T):
+                h[k, f] += np.float32(codes[c, i, f]) * w
+
+
+@kernel()
+def prefetch_clip(frames: np.ndarray, c: int) -> None:
+    """Ask for every cache line of clip ``frames[c]`` (M, K, T): it is read soon."""
+    for i in range(frames.shape[1]):
+        for f in range(0, frames.shape[2], max(1, 64 // frames.itemsize)):
+            _prefetch(frames, c, i, f)  # type: ignore[call-arg]  # numba passes the typing context
+
+
+@kernel()
+def scan_frames(
+    est: np.ndarray,
+    bias: np.ndarray,
+    framed: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    query: tuple[np.ndarray, float, float, float],
+    pose: tuple[np.ndarray, np.ndarray, float],
+    pose_bound: tuple[np.ndarray, float, float],
+    scan_out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    audio: tuple[np.ndarray, np.ndarray, np.ndarray, float],
+    audio_out: tuple[np.ndarray, np.ndarray],
+) -> None:
+    """The scan of one query over a few clips from the frame copy, as :func:`scan_reduced` is
+    from the 8-bit copy (the same parameters and outputs but these two).
+
+    Parameters
+    ----------
+    framed : (codes, steps, kappa, stats, offsets)
+        The clips' part of the :class:`~gesturekit.search.frames.FramePose`, and its offsets.
+    query : (weights, offset, norm, shift_norm)
+        ``p_{t-1}`` as :class:`~gesturekit.search.frames.FrameQuery` holds it, and ``|b|``.
+
+    A clip's estimates are ``kappa - 2 sum_k h[k, s + o_k]`` (:func:`frame_products` of the
+    clip's codes with the query's weights times the clip's steps); plus the
+    query's offset they lie within :func:`frame_bound` of the squared distances. Where that
+    leaves the nearest start open, the float32 tier settles it as in :func:`scan_reduced`; the
+    clips with an admissible start the copy does not cover go to that tier whole. The nearest
+    start's estimate is kept: its bound is a few times the float32 scan's.
+    """
+    codes, steps, kappa, stats, offsets = framed
+    weights, offset, query_norm, shift_norm = query
+    poses, query_pose, q_sqnorm = pose
+    clip_max_sqnorm, err_factor, tiny = pose_bound
+    best_start, best_d2, best_err, undecided = scan_out
+    nc, T = est.shape
+    n, K = weights.shape
+    inf = np.float32(np.inf)
+    reach = 0
+    for k in range(n):
+        reach = max(reach, offsets[k])
+    covered = T - reach
+    h = np.empty((n, T), np.float32)
+    total = np.empty(T, np.float32)
+    scaled = np.empty(weights.shape, np.float32)
+    opened = np.empty(nc, np.int64)
+    first = np.empty(nc, np.int64)
+    last = np.empty(nc, np.int64)
+    least = np.empty(nc, np.int64)
+    zeros = np.empty(nc, np.bool_)
+    t32s = np.empty(nc, np.float32)
+    bounds = np.empty((nc, 2))
+    tiered = np.zeros(nc, np.bool_)
+    n_open = 0
+    for c in range(nc):
+        undecided[c] = False
+        admitted = 0
+        for s in range(T):
+            admitted += bias[c, s] < inf
+        if admitted == 0:
+            best_start[c] = 0
+            best_d2[c] = np.inf
+            best_err[c] = 0.0
+            continue
+        beyond = 0
+        for s in range(covered, T):
+            beyond += bias[c, s] < inf
+        if beyond > 0:  # a start whose frames run past the clip: every admissible start in float32
+            a, b = T, -1
+            for s in range(T):
+                if bias[c, s] < inf:
+                    est[c, s] = np.float32(0.0)
+                    a = min(a, s)
+                    b = s
+                else:
+                    est[c, s] = inf
+            opened[n_open], first[n_open], last[n_open], least[n_open] = c, a, b, a
+            zeros[n_open], t32s[n_open] = True, inf
+            bounds[n_open, 0], bounds[n_open, 1] = 0.0, 0.0
+            n_open += 1
+            continue
+        if c + FRAME_AHEAD < nc:  # the stream of clips outruns the processor's own prefetch
+            prefetch_clip(codes, c + FRAME_AHEAD)
+        for k in range(n):
+            for i in range(K):
+                scaled[k, i] = weights[k, i] * steps[c, i]
+        frame_products(codes, c, scaled, h)
+        # the blocks' products at their frames, summed block after block (a loop along starts
+        # per block vectorises; one along blocks per start would not)
+        for s in range(covered):
+            total[s] = h[0, s + offsets[0]]
+        for k in range(1, n):
+            o = offsets[k]
+            for s in range(covered):
+                total[s] += h[k, s + o]
+        for s in range(covered):
+            est[c, s] = kappa[c, s] + np.float32(-2.0) * total[s]
+        for s in range(T):
+            if bias[c, s] == inf:
+                est[c, s] = inf
+        err = frame_bound(stats, c, query_norm, shift_norm, err_factor, tiny)
+        arg, best, open_ = clip_minimum(est, c, offset, err)
+        if not open_:
+            best_start[c] = arg
+            best_d2[c] = np.float64(best) + offset
+            best_err[c] = err
+            continue
+        zero = np.float64(best) + offset <= err
+        t32 = threshold(best, err)
+        a, b = T, -1
+        for s in range(T):
+            if est[c, s] < inf and (zero or est[c, s] <= t32):
+                a = min(a, s)
+                b = s
+            else:
+                est[c, s] = inf
+        opened[n_open], first[n_open], last[n_open], least[n_open] = c, a, b, arg
+        zeros[n_open], t32s[n_open] = zero, t32
+        bounds[n_open, 0], bounds[n_open, 1] = err, offset
+        n_open += 1
+    settle_open(
+        est, bias, pose, pose_bound, (opened, first, last, least, zeros, t32s, bounds, n_open), scan_out, tiered
+    )
+    nearest_audio(est, bias, pose, pose_bound, scan_out, tiered, False, audio, audio_out)
