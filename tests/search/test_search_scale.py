@@ -13,17 +13,20 @@ from hypothesis import strategies as st
 from gesturekit.database import BuildConfig, MatchingDatabase
 from gesturekit.search import SearchConfig, SearchIndex
 from tests.conftest import make_take
+from tests.search.test_frames import built_features
 
 T, D, A = 64, 96, 112
 # bytes per database frame the search reads: P and F float32, valid
 SEARCHED_PER_FRAME = 4 * (D + A) + 1
 
 
-def _features(M: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _features(M: int, seed: int = 0, built: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random features, or (``built``) pose features built of frames ahead, as a database's are."""
     rng = np.random.default_rng(seed)
     valid = np.ones((M, T), bool)
     valid[:, -14:] = False
-    return rng.standard_normal((M, T, D), np.float32), rng.standard_normal((M, T, A), np.float32), valid
+    P = built_features(rng, ["walk"] * M, T) if built else rng.standard_normal((M, T, D), np.float32)
+    return P, rng.standard_normal((M, T, A), np.float32), valid
 
 
 @pytest.fixture(scope="module")
@@ -49,9 +52,9 @@ def test_the_index_reads_memory_mapped_features_in_place(mapped):
     assert res.equals(plain)
 
 
-def _allocated(M: int, masks: bool) -> tuple[int, int]:
+def _allocated(M: int, masks: bool, built: bool = False) -> tuple[int, int]:
     """Bytes numpy allocates (traced peak) to prepare an index and to run a 20-step search, on M clips."""
-    P, F, valid = _features(M)
+    P, F, valid = _features(M, built=built)
     rng = np.random.default_rng(1)
     query = rng.standard_normal((160, A), np.float32)
     kw: dict = {}
@@ -74,21 +77,27 @@ def _allocated(M: int, masks: bool) -> tuple[int, int]:
     return prepared, peak
 
 
-@pytest.mark.parametrize("masks", [False, True], ids=["plain", "controls and exclusions"])
-def test_memory_beyond_the_database_grows_by_a_few_bytes_per_frame(masks):
+@pytest.mark.parametrize(
+    "masks, built",
+    [(False, False), (True, False), (False, True)],
+    ids=["plain", "controls and exclusions", "frame copy"],
+)
+def test_memory_beyond_the_database_grows_by_a_few_bytes_per_frame(masks, built):
     # the slope between two sizes is what a hundred hours (5.4 M frames) pays per frame;
     # fixed costs (the query, the record of each step) do not grow with the database
     small, large = 300, 1200
-    _allocated(20, masks)  # compiled kernels load first
-    (p0, s0), (p1, s1) = _allocated(small, masks), _allocated(large, masks)
+    _allocated(20, masks, built)  # compiled kernels load first
+    (p0, s0), (p1, s1) = _allocated(small, masks, built), _allocated(large, masks, built)
     frames = (large - small) * T
     per_frame_index = (p1 - p0) / frames
     per_frame_search = (s1 - s0) / frames
     assert per_frame_index <= 12.5  # float32 and float64 squared norms of each frame
     # the index, admissible starts and biases of the base and of each control in use, a scan buffer
     # (here M T float32; never over 16 MB), the exclusions' window test: about 40 bytes, 5 %; and
-    # the 8-bit copy of the pose features a single query's scan reads: D + 8 bytes
-    assert per_frame_search <= 0.06 * SEARCHED_PER_FRAME + (D + 8)
+    # the copy of the pose features a single query's scan reads: the 8-bit copy's D + 8 bytes, or
+    # the frame copy's 2 D / 4 + 4 where the features are built of four frames ahead
+    copy = 2 * D // 4 + 4 if built else D + 8
+    assert per_frame_search <= 0.06 * SEARCHED_PER_FRAME + copy
     # at 5.4 M frames and with fixed costs of this size, under 25 % of the searched arrays
     at_100h = 5.4e6
     assert s1 + per_frame_search * (at_100h - large * T) < 0.25 * SEARCHED_PER_FRAME * at_100h

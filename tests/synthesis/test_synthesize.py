@@ -538,9 +538,10 @@ def test_zeggs_with_the_scan_on_a_torch_device_gives_the_same_motion(zeggs_db, b
 def test_zeggs_search_matches_the_reference_on_recorded_motion(zeggs_db, beat_speech):
     # recorded motion is where the 8-bit bound leaves most clips open (consecutive frames nearly
     # equal): the scan's float32 passes over those clips, narrowed by each clip's least start,
-    # must choose what the plain float64 loop chooses, step by step, with controls and k > 0
+    # must choose what the plain float64 loop chooses, step by step, with controls and k > 0;
+    # and so must the scan of the frame copy, which the take's features allow
     from gesturekit.control import step_masks
-    from gesturekit.search import SearchConfig, search
+    from gesturekit.search import SearchConfig, SearchIndex
     from gesturekit.search.reduced import clip_bounds, compiled_reduced, quantise_query, reduce_pose
     from gesturekit.synthesis.types import load_speech
 
@@ -577,6 +578,13 @@ def test_zeggs_search_matches_the_reference_on_recorded_motion(zeggs_db, beat_sp
     assert open_.sum() > k.PREFETCH_AHEAD and open_.mean() > 0.5, (open_.sum(), M)
     cfg = SearchConfig(k=1, seed=3, init_pose=tuple(init.tolist()))
     kw = dict(config=cfg, masks=masks, step_mask_index=smask)
-    fast, ref = search(P, F, valid, fq, **kw), search_reference(P, F, valid, fq, **kw)
-    for name, x in fast.array_fields().items():
-        assert np.array_equal(x, ref.array_fields()[name], equal_nan=x.dtype.kind == "f"), name
+    ref = search_reference(P, F, valid, fq, **kw)
+    # the take's features are built of frames ahead: the default scan reads the 16-bit frame copy
+    # (its residual a few 1e-4 of the features' norm); the 8-bit copy where it is turned off
+    framed = SearchIndex(P, F, valid)
+    assert framed.frames() is not None and framed.frames().stats[:, 0].max() < 1e-4 * framed.frames().stats[:, 1].max()
+    for index in (framed, SearchIndex(P, F, valid, pose_offsets=())):
+        fast = index.search(fq, **kw)
+        for name, x in fast.array_fields().items():
+            assert np.array_equal(x, ref.array_fields()[name], equal_nan=x.dtype.kind == "f"), name
+    assert framed._reduced is None  # the frame copy served every step
