@@ -621,16 +621,25 @@ def scan_frames(
             for i in range(K):
                 scaled[k, i] = weights[k, i] * steps[c, i]
         frame_products(codes, c, scaled, h)
-        # the blocks' products at their frames, summed block after block (a loop along starts
-        # per block vectorises; one along blocks per start would not)
-        for s in range(covered):
-            total[s] = h[0, s + offsets[0]]
-        for k in range(1, n):
-            o = offsets[k]
-            for s in range(covered):
-                total[s] += h[k, s + o]
-        for s in range(covered):
-            est[c, s] = kappa[c, s] + np.float32(-2.0) * total[s]
+        # the blocks' products at their frames, summed block after block along starts; unsigned
+        # indices, for which numba adds no test for negative ones (that test stops vectorising).
+        # Four blocks (the layout's) in one loop, other counts block by block.
+        ucov = np.uint64(covered)
+        if n == 4:
+            o0, o1, o2, o3 = np.uint64(offsets[0]), np.uint64(offsets[1]), np.uint64(offsets[2]), np.uint64(offsets[3])
+            for u in range(ucov):
+                acc = ((h[0, u + o0] + h[1, u + o1]) + h[2, u + o2]) + h[3, u + o3]
+                est[c, u] = kappa[c, u] + np.float32(-2.0) * acc
+        else:
+            o = np.uint64(offsets[0])
+            for u in range(ucov):
+                total[u] = h[0, u + o]
+            for k in range(1, n):
+                o = np.uint64(offsets[k])
+                for u in range(ucov):
+                    total[u] += h[k, u + o]
+            for u in range(ucov):
+                est[c, u] = kappa[c, u] + np.float32(-2.0) * total[u]
         for s in range(T):
             if bias[c, s] == inf:
                 est[c, s] = inf

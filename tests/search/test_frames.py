@@ -44,14 +44,20 @@ def _trajectory(kind: str, rng: np.random.Generator, frames: int) -> np.ndarray:
     return rng.standard_normal((frames, K))  # "noise": no motion at all
 
 
-def built_features(rng: np.random.Generator, kinds: list[str], T: int, broken: float = 0.0) -> np.ndarray:
+def built_features(
+    rng: np.random.Generator, kinds: list[str], T: int, broken: float = 0.0, offsets: np.ndarray = OFFSETS
+) -> np.ndarray:
     """Pose features (M, T, D) float32 built as the database builds them: the feature joints at
     ``t + o_k`` (the take going on past each clip's end), z-scored per dimension with statistics
     of every frame, so that each offset's block has its own mean and scale. ``broken``: that much
     noise added to the features afterwards (what the map cannot know)."""
-    reach = int(OFFSETS.max())
-    joints = np.stack([_trajectory(k, rng, T + reach) for k in kinds])  # (M, T + reach, K)
-    raw = np.concatenate([joints[:, o : o + T] for o in OFFSETS], axis=2)
+    reach = int(np.max(offsets))
+    width = LAYOUT.pose_dim // len(offsets)
+    joints = np.stack([_trajectory(k, rng, T + reach)[:, :width] for k in kinds])  # (M, T + reach, width)
+    if width > K:  # fewer offsets: more values a frame
+        extra = np.stack([_trajectory(k, rng, T + reach)[:, : width - K] for k in kinds])
+        joints = np.concatenate([joints, extra], axis=2)
+    raw = np.concatenate([joints[:, o : o + T] for o in offsets], axis=2)
     flat = raw.reshape(-1, raw.shape[2])
     mean, std = flat.mean(axis=0), flat.std(axis=0)
     z = (raw - mean) / np.where(std > 0, std, 1.0)
@@ -298,3 +304,24 @@ def test_a_start_off_the_map_is_found_through_the_residual():
     cfg = SearchConfig(segment=8, record=5, seed=0, init_pose=tuple(q.tolist()))
     query = rng.standard_normal((16, 3)).astype(np.float32)
     assert_same(*run_both(P2, np.ones(P.shape[:2] + (3,), np.float32), valid, query, config=cfg))
+
+
+@pytest.mark.parametrize("offsets", [(0, 3), (0, 2, 5), (0, 1, 2, 3, 4, 5)], ids=["two", "three", "six"])
+def test_other_layouts_of_frames_ahead_give_the_reference_result(offsets):
+    # a database built with other offsets, told to the index: the copy sums its blocks one by one
+    rng = np.random.default_rng(len(offsets))
+    offsets = np.asarray(offsets, np.int64)
+    M, T, A = 6, 32, 5
+    P = built_features(rng, ["walk", "steps", "jitter", "walk", "grid", "still"], T, offsets=offsets)
+    F = rng.standard_normal((M, T, A)).astype(np.float32)
+    valid = rng.random((M, T)) < 0.9
+    index = SearchIndex(P, F, valid, pose_offsets=offsets)
+    framed = index.frames()
+    assert framed is not None and framed.codes.shape == (M, P.shape[2] // offsets.size, T)
+    assert SearchIndex(P, F, valid).frames() is None  # the default layout's offsets do not fit it
+    query = rng.standard_normal((40, A)).astype(np.float32)
+    for k in (0, 2):
+        cfg = SearchConfig(k=k, segment=8, record=4, seed=k, init_pose=tuple((P[1, 4] + 1e-3).tolist()))
+        ref = run_both(P, F, valid, query, config=cfg)[1]
+        assert_same((index.search(query, config=cfg), ref[1]), ref)
+    assert index._reduced is None  # the frame copy served every step
