@@ -34,7 +34,16 @@ from .._arguments import checks_arguments
 from .exact import TINY, pose_err_factor
 from .reduced import compiled_reduced
 
-__all__ = ["FramePose", "FrameQuery", "fit_frame_map", "frame_pose", "frame_query", "frame_bounds", "FIT_CLIPS"]
+__all__ = [
+    "FramePose",
+    "FrameQuery",
+    "fit_frame_map",
+    "frame_pose",
+    "frame_query",
+    "frame_bias",
+    "frame_bounds",
+    "FIT_CLIPS",
+]
 
 #: Clips (evenly spaced) the affine map is fitted and first checked on.
 FIT_CLIPS = 64
@@ -214,6 +223,30 @@ def frame_query(q: np.ndarray, frames: FramePose) -> FrameQuery:
     weights = (frames.scale * q64).astype(np.float32)
     offset = float(np.sum(q64 * q64) - 2.0 * np.sum(frames.shift * q64))
     return FrameQuery(weights=weights, offset=offset, norm=float(np.sqrt(np.sum(q64 * q64))))
+
+
+@checks_arguments
+def frame_bias(frames: FramePose, bias: np.ndarray) -> np.ndarray:
+    """What the frame scan reads of the admissible starts: ``kappa`` where a start is admissible
+    and covered, -inf where it is admissible and not covered, +inf where it is not admissible.
+
+    Parameters
+    ----------
+    frames : FramePose
+    bias : np.ndarray, shape (M T,) or (M, T), float32
+        +inf where a start is not admissible (the scan's ``bias``).
+
+    Returns
+    -------
+    np.ndarray, shape (M, T), float32
+        One array in place of ``kappa`` and the admissible starts: the scan reads 4 bytes a
+        start fewer, and needs no masking (+inf minus a finite product stays +inf).
+    """
+    M, T = frames.kappa.shape
+    admissible = np.asarray(bias).reshape(M, T) < np.inf
+    # kappa is +inf exactly at the starts not covered, or where a start is not valid (never admissible)
+    marked = np.where(np.isinf(frames.kappa), np.float32(-np.inf), frames.kappa)
+    return np.where(admissible, marked, np.float32(np.inf)).astype(np.float32, copy=False)
 
 
 @checks_arguments

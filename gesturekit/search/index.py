@@ -44,7 +44,7 @@ from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
 from .device import DeviceRows
 from .exact import TINY, audio_err, compiled, initial_order, pose_err_factor, reduce_chunk
-from .frames import FramePose, frame_pose, frame_query
+from .frames import FramePose, frame_bias, frame_pose, frame_query
 from .plan import SearchPlan, stack_plans
 from .reduced import ReducedPose, compiled_reduced, quantise_query, reduce_pose
 from .threads import matrix_product, single_threaded_blas, worker_count
@@ -178,6 +178,20 @@ class SearchIndex:
             cache[key] = (adm, bias)
         return bias
 
+    @staticmethod
+    def _frame_bias(framed, bias, scratch):
+        """:func:`~gesturekit.search.frames.frame_bias` of ``bias``, kept in ``scratch`` for the few
+        biases last used (a search's steps mostly share one)."""
+        kept = {} if scratch is None else scratch.setdefault("frame_bias", {})
+        hit = kept.get(id(bias))
+        if hit is not None and hit[0] is bias:
+            return hit[1]
+        marked = frame_bias(framed, bias)
+        if len(kept) >= 4:
+            kept.pop(next(iter(kept)))
+        kept[id(bias)] = (bias, marked)  # the bias is kept with it, so that its id is not reused
+        return marked
+
     # -- one scan of the database for several queries ------------------------------------------
 
     def _scan(self, Q, biases, fq, scratch=None, pool=None, window=0):
@@ -244,7 +258,13 @@ class SearchIndex:
         Qp = Q[perm]
         W = np.float32(-2.0) * Qp  # exact scaling: the product gives -2 q.p directly
         nq = np.einsum("ij,ij->i", Qp.astype(np.float64), Qp.astype(np.float64))
-        per_chunk = max(1, min(M, _CHUNK_BYTES // (4 * T * B)))
+        reduced_scan = B == 1
+        framed = None
+        if reduced_scan and self._pose_offsets.size and window > int(self._pose_offsets.max()):
+            framed = self.frames()
+        # the frame scan makes each clip's row and reduces it at once: one chunk (two threads
+        # waiting for each other once a step), its buffer holding the rows of the clips left open
+        per_chunk = M if framed is not None else max(1, min(M, _CHUNK_BYTES // (4 * T * B)))
         size = per_chunk * T * B
         buf = None if scratch is None else scratch.get("product")
         if buf is None or buf.size < size:
@@ -252,18 +272,15 @@ class SearchIndex:
             if scratch is not None and B == 1:  # a batch's larger buffer is freed before its decisions
                 scratch["product"] = buf
         product = matrix_product(B)
-        reduced_scan = B == 1
         # per query group and clip: one past the last admissible start (0: none)
         range_ends = [] if reduced_scan else [compiled().admissible_ends(bias.reshape(M, T)) for bias, _, _ in ranges]
         s0 = np.empty((M, B), np.int64)
         d2 = np.empty((M, B))
         err = np.empty((M, B))
-        framed = None
-        if reduced_scan and self._pose_offsets.size and window > int(self._pose_offsets.max()):
-            framed = self.frames()
         if framed is not None:
             fqr = frame_query(Qp[0], framed)
             frame_args = (fqr.weights, fqr.offset, fqr.norm, framed.shift_norm)
+            marked = self._frame_bias(framed, biases[0], scratch)
         elif reduced_scan:
             red = self.reduced()
             codes = quantise_query(Qp[0])
@@ -304,7 +321,7 @@ class SearchIndex:
                             (
                                 framed.codes[x0:x1],
                                 framed.steps[x0:x1],
-                                framed.kappa[x0:x1],
+                                marked[x0:x1],
                                 framed.stats[x0:x1],
                                 framed.offsets,
                             ),

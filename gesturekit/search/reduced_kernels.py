@@ -552,8 +552,10 @@ def scan_frames(
 
     Parameters
     ----------
-    framed : (codes, steps, kappa, stats, offsets)
-        The clips' part of the :class:`~gesturekit.search.frames.FramePose`, and its offsets.
+    framed : (codes, steps, marked, stats, offsets)
+        The clips' part of the :class:`~gesturekit.search.frames.FramePose`, with ``kappa``
+        marked by the admissible starts (:func:`~gesturekit.search.frames.frame_bias`: +inf
+        where not admissible, -inf where admissible and not covered), and its offsets.
     query : (weights, offset, norm, shift_norm)
         ``p_{t-1}`` as :class:`~gesturekit.search.frames.FrameQuery` holds it, and ``|b|``.
 
@@ -564,7 +566,7 @@ def scan_frames(
     clips with an admissible start the copy does not cover go to that tier whole. The nearest
     start's estimate is kept: its bound is a few times the float32 scan's.
     """
-    codes, steps, kappa, stats, offsets = framed
+    codes, steps, marked, stats, offsets = framed
     weights, offset, query_norm, shift_norm = query
     poses, query_pose, q_sqnorm = pose
     clip_max_sqnorm, err_factor, tiny = pose_bound
@@ -592,7 +594,7 @@ def scan_frames(
         undecided[c] = False
         admitted = 0
         for s in range(T):
-            admitted += bias[c, s] < inf
+            admitted += marked[c, s] < inf
         if admitted == 0:
             best_start[c] = 0
             best_d2[c] = np.inf
@@ -600,7 +602,7 @@ def scan_frames(
             continue
         beyond = 0
         for s in range(covered, T):
-            beyond += bias[c, s] < inf
+            beyond += marked[c, s] < inf
         if beyond > 0:  # a start whose frames run past the clip: every admissible start in float32
             a, b = T, -1
             for s in range(T):
@@ -629,7 +631,7 @@ def scan_frames(
             o0, o1, o2, o3 = np.uint64(offsets[0]), np.uint64(offsets[1]), np.uint64(offsets[2]), np.uint64(offsets[3])
             for u in range(ucov):
                 acc = ((h[0, u + o0] + h[1, u + o1]) + h[2, u + o2]) + h[3, u + o3]
-                est[c, u] = kappa[c, u] + np.float32(-2.0) * acc
+                est[c, u] = marked[c, u] + np.float32(-2.0) * acc
         else:
             o = np.uint64(offsets[0])
             for u in range(ucov):
@@ -639,10 +641,9 @@ def scan_frames(
                 for u in range(ucov):
                     total[u] += h[k, u + o]
             for u in range(ucov):
-                est[c, u] = kappa[c, u] + np.float32(-2.0) * total[u]
-        for s in range(T):
-            if bias[c, s] == inf:
-                est[c, s] = inf
+                est[c, u] = marked[c, u] + np.float32(-2.0) * total[u]
+        for s in range(covered, T):
+            est[c, s] = inf
         err = frame_bound(stats, c, query_norm, shift_norm, err_factor, tiny)
         arg, best, open_ = clip_minimum(est, c, offset, err)
         if not open_:

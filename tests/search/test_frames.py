@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from gesturekit.features import LAYOUT
 from gesturekit.search import SearchConfig, SearchIndex, exact_pose_sqdist
 from gesturekit.search.exact import TINY, pose_err_factor
-from gesturekit.search.frames import FIT_TOLERANCE, fit_frame_map, frame_bounds, frame_pose, frame_query
+from gesturekit.search.frames import FIT_TOLERANCE, fit_frame_map, frame_bias, frame_bounds, frame_pose, frame_query
 from gesturekit.search.reduced import compiled_reduced
 from tests.search.test_search import assert_same, run_both
 
@@ -87,7 +87,7 @@ def _frame_estimates(P: np.ndarray, q: np.ndarray, valid: np.ndarray):
         k.scan_frames(
             np.empty((M, T), np.float32),
             bias,
-            (framed.codes, framed.steps, framed.kappa, framed.stats, framed.offsets),
+            (framed.codes, framed.steps, frame_bias(framed, bias), framed.stats, framed.offsets),
             (fq.weights, fq.offset, fq.norm, framed.shift_norm),
             (index._P3, q, nq),
             (index._npmax, pose_err_factor(D), TINY),
