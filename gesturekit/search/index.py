@@ -98,7 +98,9 @@ class SearchIndex:
     ``n`` offsets) or else the 8-bit copy (:meth:`reduced`, ``(D + 8) M T`` bytes and
     ``4 (D + 8) M`` per clip; with a ``device``, a few per-clip arrays a step instead, on the device
     the features and a step's ``4 M T B`` bytes of products);
-    per search, a few arrays of ``4 M T`` bytes per control mask in use and a scan buffer of at most 16 MB.
+    per search, a few arrays of ``4 M T`` bytes per control mask in use (with the frame copy, one
+    more each, for at most four masks at a time) and a scan buffer of at most 16 MB (with the frame
+    copy, ``4 M T`` bytes).
     """
 
     def __init__(

@@ -29,15 +29,17 @@ PREFETCH_ROWS = 8
 
 @intrinsic
 def _prefetch(typingctx, array, c, s, j):
-    """Ask the processor to bring ``array[c, s, j]``'s cache line in (a hint: no fault, no effect on values)."""
-    if not (isinstance(array, types.Array) and array.ndim == 3):
+    """Ask the processor to bring ``array[c, s, j]``'s cache line in (``array[c, s]``'s for a 2-d
+    array, ``j`` unused; a hint: no fault, no effect on values)."""
+    if not (isinstance(array, types.Array) and array.ndim in (2, 3)):
         return None
     sig = types.void(array, types.intp, types.intp, types.intp)
 
     def codegen(context, builder, signature, args):
         aryty = signature.args[0]
         ary = context.make_array(aryty)(context, builder, args[0])
-        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, list(args[1:]), wraparound=False)
+        index = list(args[1 : 1 + aryty.ndim])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, index, wraparound=False)
         i8p = ir.IntType(8).as_pointer()
         i32 = ir.IntType(32)
         fn = builder.module.declare_intrinsic(
@@ -404,6 +406,7 @@ def nearest_audio(
             if again and not tiered[ahead]:
                 prefetch_row(poses, ahead, best_start[ahead])
             prefetch_row(features, ahead, best_start[ahead])
+            _prefetch(sqnorms, ahead, best_start[ahead], 0)  # type: ignore[call-arg]  # numba passes the typing context
         if best_d2[c] < np.inf:
             s = best_start[c]
             if again and not tiered[c]:
