@@ -400,6 +400,8 @@ class SearchIndex:
                 undecided.append((mi[sel], rows[sel]))
         else:
             undecided = [(np.zeros(0, np.int64), np.zeros((0, T), np.float32))] * B
+        if B == 1:  # (M, 1) arrays: their transposes are the one C-contiguous row already
+            return s0.T, d2.T, err.T, nq, undecided, (av.T, inexact.T)
         inv = np.empty(B, np.int64)
         inv[perm] = np.arange(B)
         # back to the callers' query order, one C-contiguous row per query
@@ -419,6 +421,7 @@ class SearchIndex:
         scan_audio_est,
         scan_audio_inexact,
         width,
+        pool=None,
     ):
         """Steps 1-4 of Algorithm 1 for one query, after the scan; None when no clip survives.
 
@@ -468,8 +471,10 @@ class SearchIndex:
         out_f = np.empty((2, min(width, n)))
         prefix = _PREFIX
         while True:  # sorted prefixes first; whole orders when they cannot decide
+            # the two orders are independent: with a pool, the audio one is made beside the pose one
+            later = None if pool is None else pool.submit(initial_order, estimates[2], prefix)
             pose_order, n_pose_sorted = initial_order(estimates[0], prefix)
-            audio_order, n_audio_sorted = initial_order(estimates[2], prefix)
+            audio_order, n_audio_sorted = initial_order(estimates[2], prefix) if later is None else later.result()
             if (
                 k.rank_top(
                     estimates,
@@ -670,8 +675,10 @@ class SearchIndex:
         def decide(j):
             b = active[j]
             return self._decide(
-                s0[j], d2[j], err[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j], widths[b]
+                s0[j], d2[j], err[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j], widths[b], lone
             )
+
+        lone = pool if len(active) == 1 else None  # one query: its decisions may share the threads
 
         return dict(zip(active, run(decide, range(len(active)))))
 
