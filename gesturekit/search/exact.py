@@ -160,7 +160,7 @@ def reduce_chunk(
 
 @checks_arguments
 def initial_order(v: np.ndarray, prefix: int) -> tuple[np.ndarray, int]:
-    """The order the rank groups of :meth:`~gesturekit.search.index.SearchIndex._decide` start from.
+    """The order the rank groups of :func:`~gesturekit.search.decide.decide_query` start from.
 
     Returns ``(order, L)``: the survivors with the ``L = min(prefix, n)`` smallest
     estimates first, sorted, the others after them in any order. Any order near the

@@ -42,8 +42,9 @@ from ..errors import ConfigError, warn
 from ..features import LAYOUT
 from .admissible import base_starts, control_starts, draw_initial_frame
 from .checks import SearchOptions, checked_sqnorms, validate_call, validate_db
+from .decide import decide_query
 from .device import DeviceRows
-from .exact import TINY, audio_err, compiled, initial_order, pose_err_factor, reduce_chunk
+from .exact import TINY, audio_err, compiled, pose_err_factor, reduce_chunk
 from .frames import FramePose, frame_bias, frame_pose, frame_query
 from .plan import SearchPlan, stack_plans
 from .reduced import ReducedPose, compiled_reduced, quantise_query, reduce_pose
@@ -61,13 +62,6 @@ _CHUNK_BYTES = 16 << 20
 #: Clips estimated and reduced at a time by one query's scan: their estimates stay in the
 #: processor's cache between the estimates and the reduction.
 _SUB_CLIPS = 1024
-
-#: Survivors sorted first by each ranking in a query's decisions; the rest is only
-#: partitioned off. Enough whenever the top of the combined ranking lies within the
-#: first few hundred of both rankings, as it does unless pose and audio disagree
-#: throughout (or many clips repeat others); otherwise prefixes 8 times longer, up to the
-#: whole orders (same result).
-_PREFIX = 1024
 
 
 class SearchIndex:
@@ -407,108 +401,6 @@ class SearchIndex:
         # back to the callers' query order, one C-contiguous row per query
         return s0.T[inv], d2.T[inv], err.T[inv], nq[inv], undecided, (av.T[inv], inexact.T[inv])
 
-    # -- exact decisions for one query ----------------------------------------------------------
-
-    def _decide(
-        self,
-        best_start,
-        best_d2,
-        best_err,
-        q_sqnorm,
-        undecided,
-        query_pose,
-        query_audio,
-        scan_audio_est,
-        scan_audio_inexact,
-        width,
-        pool=None,
-    ):
-        """Steps 1-4 of Algorithm 1 for one query, after the scan; None when no clip survives.
-
-        Step 1 (per clip the nearest admissible non-zero start) takes the scan's minimum
-        where it is decisive and resolves the other clips exactly, tier by tier.
-        Steps 2-4 rank the survivors by pose and by audio distance: ranks are known up to
-        groups of near-equal estimates, and only groups holding a clip that could make the
-        top ``width`` of the combined ranking are settled with exact values. The compiled
-        loops are in :mod:`gesturekit.search.kernels` (``survivors``, ``rank_top``).
-
-        Returns
-        -------
-        dict
-            ``n`` (survivors) and the table columns (top ``width`` in combined order).
-        """
-        M = self.shape[0]
-        k = compiled()
-        # per-thread scratch, reused between steps: fresh pages for every query cost page faults
-        scratch = getattr(self._scratch, "decide", None)
-        if scratch is None or scratch[0].shape[1] != M:
-            scratch = self._scratch.decide = (np.empty((9, M), np.int64), np.empty((4, M)))
-        work, estimates = scratch
-        windows = work[7:9]  # rows 0-6 are rank_top's scratch
-        undecided_clips, undecided_rows = undecided
-        n = k.survivors(
-            best_start,
-            best_d2,
-            best_err,
-            float(q_sqnorm),
-            (self._npmax, self._pose_c, TINY),
-            undecided_clips,
-            undecided_rows,
-            self._P3,
-            query_pose,
-            self._F3,
-            query_audio,
-            scan_audio_est,
-            scan_audio_inexact,
-            self._audio_e,
-            windows,
-            estimates,
-        )
-        if n == 0:
-            return None
-        windows, estimates = windows[:, :n], estimates[:, :n]
-        out_i = np.empty((5, min(width, n)), np.int64)
-        out_f = np.empty((2, min(width, n)))
-        prefix = _PREFIX
-        while True:  # sorted prefixes first; whole orders when they cannot decide
-            # the two orders are independent: with a pool, the audio one is made beside the pose one
-            later = None if pool is None else pool.submit(initial_order, estimates[2], prefix)
-            pose_order, n_pose_sorted = initial_order(estimates[0], prefix)
-            audio_order, n_audio_sorted = initial_order(estimates[2], prefix) if later is None else later.result()
-            if (
-                k.rank_top(
-                    estimates,
-                    pose_order,
-                    n_pose_sorted,
-                    audio_order,
-                    n_audio_sorted,
-                    windows,
-                    self._P3,
-                    self._F3,
-                    query_pose,
-                    query_audio,
-                    width,
-                    out_i,
-                    out_f,
-                    work,
-                )
-                >= 0
-            ):
-                break
-            if prefix >= n:  # pragma: no cover - whole orders always decide
-                raise RuntimeError("rank_top could not decide with whole orders")
-            prefix = min(n, 8 * prefix)  # longer prefixes first: whole orders cost a full sort each
-        return {
-            "n": n,
-            "cand_clip": out_i[0],
-            "cand_start": out_i[1],
-            "cand_pose_dist": out_f[0],
-            "cand_audio_dist": out_f[1],
-            "cand_pose_rank": out_i[2],
-            "cand_audio_rank": out_i[3],
-            "cand_combined": out_i[4],
-        }
-
     # -- public ---------------------------------------------------------------------------------
 
     def search(self, query: np.ndarray, **options: Unpack[SearchOptions]) -> SearchResult:
@@ -674,8 +566,13 @@ class SearchIndex:
 
         def decide(j):
             b = active[j]
-            return self._decide(
-                s0[j], d2[j], err[j], nq[j], undecided[j], poses[b], fq[j], av[j], inexact[j], widths[b], lone
+            return decide_query(
+                (self._P3, self._F3, self._npmax, self._pose_c, self._audio_e),
+                self._scratch,
+                (s0[j], d2[j], err[j], nq[j], undecided[j], av[j], inexact[j]),
+                (poses[b], fq[j]),
+                widths[b],
+                lone,
             )
 
         lone = pool if len(active) == 1 else None  # one query: its decisions may share the threads

@@ -10,7 +10,7 @@ The scan: :func:`~gesturekit.search.reduced_kernels.scan_reduced` (one query, a 
 at a time, from the reduced copy; in :mod:`gesturekit.search.reduced_kernels`), :func:`reduce_many` and
 :func:`audio_at` (several queries after a matrix product), :func:`admissible_ends`,
 :func:`row_stats` (validation and norms). The exact decisions of one query after the
-scan (see :meth:`gesturekit.search.index.SearchIndex._decide`): :func:`survivors` and
+scan (see :func:`gesturekit.search.decide.decide_query`): :func:`survivors` and
 :func:`rank_top`, with the exact distances of :mod:`gesturekit.search.reference`
 (float64, left to right: :func:`pose_d2`, :func:`cos_d`). Names: ``best_start`` /
 ``best_est`` the scan's per-clip minimum, ``*_est`` an estimate, ``*_err`` its error

@@ -214,14 +214,14 @@ def _prefix_problem(seed: int, offset: float):
 
 
 def _with_prefix(prefix, fn):
-    import gesturekit.search.index as search_module
+    import gesturekit.search.decide as decide_module
 
-    saved = search_module._PREFIX
-    search_module._PREFIX = prefix
+    saved = decide_module._PREFIX
+    decide_module._PREFIX = prefix
     try:
         return fn()
     finally:
-        search_module._PREFIX = saved
+        decide_module._PREFIX = saved
 
 
 @pytest.mark.slow
@@ -235,10 +235,12 @@ def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k
     assert_same(*_with_prefix(prefix, lambda: run_both(P, F, valid, query, config=cfg)))
 
 
-def _spy_kernel(monkeypatch, name, note, loader="compiled"):
+def _spy_kernel(monkeypatch, name, note, loader="compiled", module="gesturekit.search.index"):
     """Make the search call ``note(args, out)`` after each call of its compiled kernel ``name``
-    (of the module that ``loader``, a loader the search module imports, gives)."""
-    import gesturekit.search.index as search_module
+    (of the module that ``loader``, a loader ``module`` imports, gives)."""
+    import importlib
+
+    search_module = importlib.import_module(module)
 
     kernels = getattr(search_module, loader)()
 
@@ -264,7 +266,7 @@ def test_prefixes_decide_when_they_can_and_whole_orders_otherwise(monkeypatch):
         estimates, _, lp, _, la = args[:5]
         seen.append("whole" if min(lp, la) >= estimates.shape[1] else "prefix" if out >= 0 else "retry")
 
-    _spy_kernel(monkeypatch, "rank_top", note)
+    _spy_kernel(monkeypatch, "rank_top", note, module="gesturekit.search.decide")
     P, F, valid, query = _prefix_problem(0, 0.0)
     cfg = SearchConfig(segment=4, record=3)
     results = {}
