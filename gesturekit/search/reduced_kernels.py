@@ -550,7 +550,7 @@ def scan_frames(
     audio: tuple[np.ndarray, np.ndarray, np.ndarray, float],
     audio_out: tuple[np.ndarray, np.ndarray],
 ) -> None:
-    """The scan of one query over a few clips from the frame copy, as :func:`scan_reduced` is
+    """The scan of one query over a range of clips from the frame copy, as :func:`scan_reduced` is
     from the 8-bit copy (the same parameters and outputs but these two).
 
     Parameters
