@@ -15,6 +15,7 @@ from concurrent.futures import Executor
 
 import numpy as np
 
+from .._arguments import checks_arguments
 from .exact import TINY, compiled, initial_order
 
 __all__ = ["decide_query"]
@@ -27,6 +28,7 @@ __all__ = ["decide_query"]
 _PREFIX = 1024
 
 
+@checks_arguments
 def decide_query(
     db: tuple[np.ndarray, np.ndarray, np.ndarray, float, float],
     local: threading.local,
