@@ -130,27 +130,23 @@ def clip_minimum_within(
     """:func:`clip_minimum` of a row whose estimates outside starts ``lo .. hi - 1`` are +inf
     (the same result, reading only those starts; the first start 0 where none is finite)."""
     inf = np.float32(np.inf)
-    # four running minima: one would make a chain of dependent comparisons (the minimum
-    # is the same in any order: the estimates are never NaN)
-    m0 = m1 = m2 = m3 = inf
-    for s in range(lo, hi - 3, 4):
-        m0 = min(m0, est[c, s])
-        m1 = min(m1, est[c, s + 1])
-        m2 = min(m2, est[c, s + 2])
-        m3 = min(m3, est[c, s + 3])
-    for s in range(hi - (hi - lo) % 4, hi):
-        m0 = min(m0, est[c, s])
-    best = min(min(m0, m1), min(m2, m3))
+    # One running minimum by selection and loops without early exits: a clip's row is short,
+    # and a branch that leaves a loop costs more there than the comparisons (the estimates are
+    # never NaN; the first of equal values is kept, as the first minimum is below).
+    best = inf
+    for s in range(lo, hi):
+        v = est[c, s]
+        best = v if v < best else best
+    if not best < inf:
+        return 0, best, False
+    arg = hi
+    for s in range(lo, hi):  # the first minimum
+        arg = min(arg, s if est[c, s] == best else hi)
     t32 = threshold(best, err)
     count = 0
     for s in range(lo, hi):
         count += est[c, s] <= t32
-    arg = 0
-    for s in range(lo, hi if best < inf else lo):  # the first minimum
-        if est[c, s] == best:
-            arg = s
-            break
-    return arg, best, bool(np.isfinite(best) and (count > 1 or np.float64(best) + offset <= err))
+    return arg, best, bool(count > 1 or np.float64(best) + offset <= err)
 
 
 @kernel()

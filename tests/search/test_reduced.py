@@ -236,6 +236,32 @@ def test_a_clips_minimum_within_its_finite_starts_is_its_minimum(case):
     assert clip_minimum_within(est, 1, lo, hi, offset, err) == clip_minimum(est, 1, offset, err)
 
 
+def _plain_clip_minimum(row: np.ndarray, offset: float, err: float) -> tuple[int, float, bool]:
+    """The reduction of one row as its definition says, in numpy and float64."""
+    best = row.min()
+    if not np.isfinite(best):
+        return 0, float(best), False
+    arg = int(np.flatnonzero(row == best)[0])  # the first start of least estimate
+    t = np.float64(best) + 2.0 * err
+    t32 = np.float32(t) if np.float32(t) >= t else np.nextafter(np.float32(t), np.float32(np.inf))
+    near = int(np.count_nonzero(row <= t32))
+    return arg, float(best), near > 1 or np.float64(best) + offset <= err
+
+
+@settings(max_examples=300, deadline=None)
+@given(rows_finite_within())
+def test_a_clips_minimum_is_the_plain_reduction(case):
+    # the compiled reduction (a running minimum by selection, loops without early exits) against
+    # the definition: first start of least estimate, the estimate, and whether it is decisive
+    from gesturekit.search.kernels import clip_minimum_within
+
+    est, lo, hi, offset, err = case
+    arg, best, open_ = clip_minimum_within(est, 1, lo, hi, offset, err)
+    want = _plain_clip_minimum(est[1], offset, err)
+    assert (arg, open_) == (want[0], want[2])
+    assert best == want[1] or (np.isinf(best) and np.isinf(want[1]))
+
+
 @settings(max_examples=300, deadline=None)
 @given(
     st.floats(-1e30, 1e30).map(np.float32).filter(np.isfinite),
