@@ -21,8 +21,6 @@ from .kernels import audio_estimate, clip_minimum, clip_minimum_within, dot32_at
 PREFETCH_AHEAD = 8
 #: Largest magnitude of a frame copy's code (:func:`frame_clips`).
 FRAME_LEVELS = 32767
-#: Clips ahead whose frame copy :func:`scan_frames` asks for before it reads them.
-FRAME_AHEAD = 4
 #: At most this many rows asked for per open clip (most have a few starts that could be nearest).
 PREFETCH_ROWS = 8
 
@@ -514,10 +512,10 @@ def frame_products(codes: np.ndarray, c: int, weights: np.ndarray, h: np.ndarray
             for f in range(T):
                 x0, x1 = np.float32(codes[c, i, f]), np.float32(codes[c, i + 1, f])
                 x2, x3 = np.float32(codes[c, i + 2, f]), np.float32(codes[c, i + 3, f])
-                h[k, f] += (x0 * a0 + x1 * a1) + (x2 * a2 + x3 * a3)
-                h[k + 1, f] += (x0 * b0 + x1 * b1) + (x2 * b2 + x3 * b3)
-                h[k + 2, f] += (x0 * c0 + x1 * c1) + (x2 * c2 + x3 * c3)
-                h[k + 3, f] += (x0 * d0 + x1 * d1) + (x2 * d2 + x3 * d3)
+                h[k, f] = (((h[k, f] + x0 * a0) + x1 * a1) + x2 * a2) + x3 * a3
+                h[k + 1, f] = (((h[k + 1, f] + x0 * b0) + x1 * b1) + x2 * b2) + x3 * b3
+                h[k + 2, f] = (((h[k + 2, f] + x0 * c0) + x1 * c1) + x2 * c2) + x3 * c3
+                h[k + 3, f] = (((h[k + 3, f] + x0 * d0) + x1 * d1) + x2 * d2) + x3 * d3
         for i in range(whole, K):
             for j in range(k, k + 4):
                 w = weights[j, i]
@@ -528,14 +526,6 @@ def frame_products(codes: np.ndarray, c: int, weights: np.ndarray, h: np.ndarray
             w = weights[k, i]
             for f in range(T):
                 h[k, f] += np.float32(codes[c, i, f]) * w
-
-
-@kernel()
-def prefetch_clip(frames: np.ndarray, c: int) -> None:
-    """Ask for every cache line of clip ``frames[c]`` (M, K, T): it is read soon."""
-    for i in range(frames.shape[1]):
-        for f in range(0, frames.shape[2], max(1, 64 // frames.itemsize)):
-            _prefetch(frames, c, i, f)  # type: ignore[call-arg]  # numba passes the typing context
 
 
 @kernel()
@@ -595,14 +585,6 @@ def scan_frames(
     n_open = 0
     for c in range(nc):
         undecided[c] = False
-        admitted = 0
-        for s in range(T):
-            admitted += marked[c, s] < inf
-        if admitted == 0:
-            best_start[c] = 0
-            best_d2[c] = np.inf
-            best_err[c] = 0.0
-            continue
         beyond = 0
         for s in range(covered, T):
             beyond += marked[c, s] < inf
@@ -620,8 +602,6 @@ def scan_frames(
             bounds[n_open, 0], bounds[n_open, 1] = 0.0, 0.0
             n_open += 1
             continue
-        if c + FRAME_AHEAD < nc:  # the stream of clips outruns the processor's own prefetch
-            prefetch_clip(codes, c + FRAME_AHEAD)
         for k in range(n):
             for i in range(K):
                 scaled[k, i] = weights[k, i] * steps[c, i]
@@ -648,7 +628,12 @@ def scan_frames(
         for s in range(covered, T):
             est[c, s] = inf
         err = frame_bound(stats, c, query_norm, shift_norm, err_factor, tiny)
-        arg, best, open_ = clip_minimum(est, c, offset, err)
+        arg, best, open_ = clip_minimum_within(est, c, 0, covered, offset, err)
+        if not best < inf:  # no admissible start
+            best_start[c] = 0
+            best_d2[c] = np.inf
+            best_err[c] = 0.0
+            continue
         if not open_:
             best_start[c] = arg
             best_d2[c] = np.float64(best) + offset
