@@ -216,12 +216,12 @@ def _prefix_problem(seed: int, offset: float):
 def _with_prefix(prefix, fn):
     import gesturekit.search.decide as decide_module
 
-    saved = decide_module._PREFIX
-    decide_module._PREFIX = prefix
+    saved = decide_module._PREFIX, decide_module._PREFIX_SHARE
+    decide_module._PREFIX, decide_module._PREFIX_SHARE = prefix, 0.0
     try:
         return fn()
     finally:
-        decide_module._PREFIX = saved
+        decide_module._PREFIX, decide_module._PREFIX_SHARE = saved
 
 
 @pytest.mark.slow
@@ -233,6 +233,28 @@ def test_short_sorted_prefixes_give_the_reference_result(seed, offset, prefix, k
     P, F, valid, query = _prefix_problem(seed, offset)
     cfg = SearchConfig(k=k, segment=4, record=3, seed=seed % 5)
     assert_same(*_with_prefix(prefix, lambda: run_both(P, F, valid, query, config=cfg)))
+
+
+def test_the_sorted_prefix_grows_with_the_survivors(monkeypatch):
+    # a query's decisions first sort a share of the survivors (at least _PREFIX): the ranks
+    # that decide a step grow with the database, and a prefix too short costs a second attempt
+    import gesturekit.search.decide as decide_module
+
+    P, F, valid, query = _prefix_problem(3, 0.0)
+    asked = []
+    plain = decide_module.initial_order
+
+    def spy(v, prefix):
+        asked.append((v.size, prefix))
+        return plain(v, prefix)
+
+    monkeypatch.setattr(decide_module, "initial_order", spy)
+    monkeypatch.setattr(decide_module, "_PREFIX", 2)
+    monkeypatch.setattr(decide_module, "_PREFIX_SHARE", 0.25)
+    cfg = SearchConfig(k=0, segment=4, record=3, seed=0)
+    SearchIndex(P, F, valid).search(query, config=cfg)
+    assert asked and all(prefix >= max(2, int(0.25 * n)) for n, prefix in asked)
+    assert any(prefix == int(0.25 * n) > 2 for n, prefix in asked)
 
 
 def _spy_kernel(monkeypatch, name, note, loader="compiled", module="gesturekit.search.index"):
