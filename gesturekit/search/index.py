@@ -229,6 +229,7 @@ class SearchIndex:
         undecided : list of B (clips, rows) pairs
             Clips whose minimum is not decisive; ``rows[i]`` holds float32 estimates
             ``|p|^2 - 2 p.q`` of the T starts of clip ``clips[i]`` (+inf: cannot be nearest).
+            Empty for a single query's scan, which resolves such clips itself (``err`` 0).
         audio : (av, inexact)
             ``av[b, m]`` (B, M) float64 is the estimated cosine distance of clip ``m``'s start
             ``s0`` to query ``b``'s audio feature (float32 product, float64 norms; NaN

@@ -15,7 +15,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from .compile_cache import kernel
-from .kernels import audio_estimate, clip_minimum, clip_minimum_within, dot32_at, round_up32, threshold
+from .kernels import audio_estimate, clip_minimum, clip_minimum_within, dot32_at, resolve_clip, round_up32, threshold
 
 #: Clips ahead whose scattered float32 rows the scan asks for before it reads them.
 PREFETCH_AHEAD = 8
@@ -217,9 +217,9 @@ def scan_reduced(
     scan_out : (best_start, best_d2, best_err, undecided), each (nc,)
         Out: per clip a start of least estimate, its squared distance estimated in float32
         (float64, +inf: no admissible start) and that estimate's error bound (the float32
-        scan's); ``undecided``: the float32 tier left a near-tie or a possible zero, and
-        ``est[c]`` holds its float32 estimates ``|p|^2 - 2 p.q`` (+inf at starts that cannot
-        be nearest) for an exact look.
+        scan's; 0 where the clip was resolved exactly, see :func:`settle_open`); ``undecided``:
+        False for every clip (kept for the callers of the batch scan, which leaves such clips
+        to the decisions).
     audio, audio_out
         As for :func:`audio_at`, for one query: the clips' audio features and squared norms,
         ``f_t`` and its squared norm; out the estimates at ``best_start`` and their exactness.
@@ -323,6 +323,10 @@ def settle_open(
     zero, the first pass's threshold, and its bound and offset (a first-pass estimate plus the
     offset is within the bound of its start's squared distance). Writes ``scan_out`` and
     ``tiered`` for those clips; their ``est`` rows then hold float32 estimates ``|p|^2 - 2 p.q``.
+    A clip the float32 tier leaves open (a near-tie, or a start that could be at distance zero)
+    is resolved exactly here (:func:`~gesturekit.search.kernels.resolve_clip`: its nearest
+    non-zero start and float64 distance, error bound 0; +inf where only zeros could be nearest),
+    on the scan's thread while its rows are in cache, rather than by the decisions after the scan.
     """
     poses, query_pose, q_sqnorm = pose
     clip_max_sqnorm, err_factor, tiny = pose_bound
@@ -368,11 +372,16 @@ def settle_open(
             if s != least[i] and est[c, s] < inf:
                 est[c, s] = estimate32(bias, poses, c, s, query_pose)
         arg, best, open_ = clip_minimum_within(est, c, first[i], last[i] + 1, offset=q_sqnorm, err=err32[i])
+        tiered[c] = True
+        if open_:  # exactly, while the clip's rows are in cache (and on the scan's threads)
+            arg, d2 = resolve_clip(est[c], c, q_sqnorm, err32[i], poses, query_pose)
+            best_start[c] = max(arg, 0)
+            best_d2[c] = d2 if arg >= 0 else np.inf  # -1: only starts at distance zero could be nearest
+            best_err[c] = 0.0
+            continue
         best_start[c] = arg
         best_d2[c] = np.float64(best) + q_sqnorm
         best_err[c] = err32[i]
-        undecided[c] = open_
-        tiered[c] = True
 
 
 @kernel()

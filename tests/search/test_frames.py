@@ -242,6 +242,42 @@ def test_held_poses_with_sensor_noise_give_the_reference_result():
         assert_same(*run_both(P, F, valid, query, config=cfg))
 
 
+@pytest.mark.parametrize("copy", ["frames", "8-bit"])
+def test_a_one_query_scan_settles_the_clips_it_leaves_open_exactly(copy):
+    # held poses (exact ties, a query at distance zero from every start of its own clip), grids
+    # and near-ties: the clips no tier decides are resolved by the scan itself, exactly (error
+    # bound 0, the nearest non-zero start, ties to the first), and none is left to the decisions
+    rng = np.random.default_rng(17)
+    T = 64
+    kinds = ["still", "jitter", "grid", "steps", "walk"] * 3
+    P = built_features(rng, kinds, T)
+    M = P.shape[0]
+    P[5] = P[0]  # a duplicated clip: the query's zero distances twice
+    F = rng.standard_normal((M, T, 5)).astype(np.float32)
+    valid = rng.random((M, T)) < 0.9
+    valid[:, T - 7 :] = False
+    index = SearchIndex(P, F, valid, pose_offsets=None if copy == "frames" else ())
+    assert (index.frames() is not None) == (copy == "frames")
+    bias = np.where(valid.ravel(), index._np32, np.float32(np.inf))
+    resolved = 0
+    for q in (P[0, 12], P[1, 30] + np.float32(1e-4), P[2, 7]):
+        s0, d2, err, _, undecided, _ = index._scan(q[None], [bias], F[0, :1], window=8)
+        assert undecided[0][0].size == 0
+        exact = np.where(valid, exact_pose_sqdist(P.reshape(M * T, -1), q).reshape(M, T), np.inf)
+        exact[exact == 0] = np.inf  # Algorithm 1's nearest start is a non-zero one
+        for m in range(M):
+            if not np.isfinite(exact[m]).any():
+                assert not np.isfinite(d2[0, m])
+                continue
+            assert s0[0, m] == int(np.argmin(exact[m]))
+            if err[0, m] == 0:
+                assert d2[0, m] == exact[m].min()
+                resolved += 1
+            else:
+                assert abs(d2[0, m] - exact[m].min()) <= err[0, m]
+    assert resolved > 0
+
+
 @pytest.mark.parametrize("window", [1, 6])
 def test_starts_the_copy_does_not_cover_are_settled_in_float32(window):
     # a scan told the window covers every start, given admissible starts past the covered ones,
