@@ -278,21 +278,7 @@ def scan_reduced(
             best_d2[c] = np.float64(best) + centred if best < inf else np.inf
             best_err[c] = err
             continue
-        # the starts that could be nearest: within twice the bound of the least estimate, or
-        # every admissible start where the least could be an exact zero; the others become +inf
-        zero = np.float64(best) + centred <= err
-        t32 = threshold(best, err)
-        a, b = T, -1
-        for s in range(T):
-            if est[c, s] < inf and (zero or est[c, s] <= t32):
-                a = min(a, s)
-                b = s
-            else:
-                est[c, s] = inf
-        opened[n_open], first[n_open], last[n_open], least[n_open] = c, a, b, arg
-        zeros[n_open], t32s[n_open] = zero, t32
-        bounds[n_open, 0], bounds[n_open, 1] = err, centred
-        n_open += 1
+        n_open = open_clip(est, c, (arg, best, err, centred), (opened, first, last, least, zeros, t32s, bounds), n_open)
     settle_open(
         est,
         bias,
@@ -303,6 +289,42 @@ def scan_reduced(
         tiered,
     )
     nearest_audio(est, bias, (poses, query_pose, q_sqnorm), pose_bound, scan_out, tiered, True, audio, audio_out)
+
+
+@kernel(inline="always")  # numba's own inlining: a call here made the scans' main loops 5% slower
+def open_clip(
+    est: np.ndarray,
+    c: int,
+    least: tuple[int, float, float, float],
+    opened_clips: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    n_open: int,
+) -> int:
+    """Record clip ``c``, left open by a first pass, for :func:`settle_open`; returns ``n_open + 1``.
+
+    ``least`` is ``(arg, best, err, offset)``: the clip's start of least first-pass estimate, that
+    estimate, its bound and offset (estimate plus offset is within the bound of the squared
+    distance). The starts that could be nearest are those within twice the bound of the least
+    estimate, or every admissible start where the least could be an exact zero; the others
+    become +inf in ``est[c]``. ``opened_clips`` are the first seven arrays of
+    :func:`settle_open`'s ``opened_clips``, written at ``n_open``.
+    """
+    arg, best, err, offset = least
+    opened, first, last, least_start, zeros, t32s, bounds = opened_clips
+    T = est.shape[1]
+    inf = np.float32(np.inf)
+    zero = np.float64(best) + offset <= err
+    t32 = threshold(best, err)
+    a, b = T, -1
+    for s in range(T):
+        if est[c, s] < inf and (zero or est[c, s] <= t32):
+            a = min(a, s)
+            b = s
+        else:
+            est[c, s] = inf
+    opened[n_open], first[n_open], last[n_open], least_start[n_open] = c, a, b, arg
+    zeros[n_open], t32s[n_open] = zero, t32
+    bounds[n_open, 0], bounds[n_open, 1] = err, offset
+    return n_open + 1
 
 
 @kernel()
@@ -648,19 +670,7 @@ def scan_frames(
             best_d2[c] = np.float64(best) + offset
             best_err[c] = err
             continue
-        zero = np.float64(best) + offset <= err
-        t32 = threshold(best, err)
-        a, b = T, -1
-        for s in range(T):
-            if est[c, s] < inf and (zero or est[c, s] <= t32):
-                a = min(a, s)
-                b = s
-            else:
-                est[c, s] = inf
-        opened[n_open], first[n_open], last[n_open], least[n_open] = c, a, b, arg
-        zeros[n_open], t32s[n_open] = zero, t32
-        bounds[n_open, 0], bounds[n_open, 1] = err, offset
-        n_open += 1
+        n_open = open_clip(est, c, (arg, best, err, offset), (opened, first, last, least, zeros, t32s, bounds), n_open)
     settle_open(
         est, bias, pose, pose_bound, (opened, first, last, least, zeros, t32s, bounds, n_open), scan_out, tiered
     )
