@@ -6,7 +6,6 @@ the problem; the normalised inputs come back as C-contiguous arrays.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypedDict
 
@@ -15,6 +14,7 @@ import numpy as np
 from .._arguments import checks_arguments
 from ..errors import ConfigError
 from .exact import MAX_ABS, compiled
+from .threads import in_parts
 from .types import SearchConfig
 
 if TYPE_CHECKING:  # typing.Unpack is Python 3.11+; only the type checker reads it
@@ -198,13 +198,7 @@ def checked_sqnorms(x2: np.ndarray, name: str, workers: int = 1) -> np.ndarray:
     """
     out = np.empty(x2.shape[0])
     kernel = compiled().row_stats
-    cuts = np.linspace(0, x2.shape[0], max(1, min(workers, x2.shape[0])) + 1).astype(int)
-    parts = list(zip(cuts[:-1], cuts[1:]))
-    if len(parts) > 1:
-        with ThreadPoolExecutor(len(parts)) as pool:
-            stats = list(pool.map(lambda ab: kernel(x2[ab[0] : ab[1]], out[ab[0] : ab[1]]), parts))
-    else:
-        stats = [kernel(x2, out)]
+    stats = in_parts(x2.shape[0], workers, lambda a, b: kernel(x2[a:b], out[a:b]))
     if not all(ok for ok, _ in stats):
         raise ConfigError(f"{name} features contain NaN or infinite values")
     if max(top for _, top in stats) > MAX_ABS:

@@ -25,7 +25,6 @@ the scan computes ``kappa - 2 sum_k fl(code[s + o_k] . fl(g_k step))`` in float3
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +32,7 @@ import numpy as np
 from .._arguments import checks_arguments
 from .exact import TINY, pose_err_factor
 from .reduced import compiled_reduced
+from .threads import in_parts
 
 __all__ = [
     "FramePose",
@@ -192,10 +192,8 @@ def frame_pose(P3: np.ndarray, valid: np.ndarray, offsets: np.ndarray, workers: 
     )
     kernel = compiled_reduced().frame_clips
     valid = np.ascontiguousarray(valid, dtype=bool)
-    cuts = np.linspace(0, M, max(1, min(workers, M)) + 1).astype(int)
 
-    def part(ab: tuple[int, int]) -> None:
-        a, b = ab
+    def part(a: int, b: int) -> None:
         kernel(
             P3[a:b],
             valid[a:b],
@@ -204,12 +202,7 @@ def frame_pose(P3: np.ndarray, valid: np.ndarray, offsets: np.ndarray, workers: 
             (out.codes[a:b], out.steps[a:b], out.kappa[a:b], out.stats[a:b]),
         )
 
-    parts = list(zip(cuts[:-1], cuts[1:]))
-    if len(parts) > 1:
-        with ThreadPoolExecutor(len(parts)) as pool:
-            list(pool.map(part, parts))
-    else:
-        part(parts[0])
+    in_parts(M, workers, part)
     covered = valid[:, : out.covered]
     if not (np.isfinite(out.stats).all() and np.isfinite(out.kappa[:, : out.covered][covered]).all()):
         return None  # values so large that float32 squares overflow: the 8-bit copy is used

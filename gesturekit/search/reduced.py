@@ -21,7 +21,6 @@ and ``i . i_q`` is an exact integer, so the estimate
 from __future__ import annotations
 
 import functools
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from types import ModuleType
 
@@ -29,6 +28,7 @@ import numpy as np
 
 from .._arguments import checks_arguments
 from .exact import TINY, pose_err_factor
+from .threads import in_parts
 
 __all__ = [
     "ReducedPose",
@@ -115,18 +115,11 @@ def reduce_pose(P3: np.ndarray, workers: int = 1) -> ReducedPose:
         stats=np.empty((M, 4)),
     )
     kernel = compiled_reduced().reduce_clips
-    cuts = np.linspace(0, M, max(1, min(workers, M)) + 1).astype(int)
 
-    def part(ab: tuple[int, int]) -> None:
-        a, b = ab
+    def part(a: int, b: int) -> None:
         kernel(P3[a:b], (out.codes[a:b], out.coef[a:b], out.kappa[a:b], out.centre[a:b], out.stats[a:b]))
 
-    parts = list(zip(cuts[:-1], cuts[1:]))
-    if len(parts) > 1:
-        with ThreadPoolExecutor(len(parts)) as pool:
-            list(pool.map(part, parts))
-    else:
-        part(parts[0])
+    in_parts(M, workers, part)
     return out
 
 

@@ -14,14 +14,17 @@ import os
 import threading
 import warnings
 from collections.abc import Callable, Iterator
-from typing import Any
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar
 
 import numpy as np
 
 from .._arguments import checks_arguments
 from .._optional import loaded, optional
 
-__all__ = ["matrix_product", "single_threaded_blas", "worker_count"]
+__all__ = ["in_parts", "matrix_product", "single_threaded_blas", "worker_count"]
+
+R = TypeVar("R")
 
 
 @checks_arguments
@@ -29,6 +32,24 @@ def worker_count() -> int:
     """Threads a search runs: one per core this process may use, at most 8."""
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     return min(cpus, 8)
+
+
+@checks_arguments
+def in_parts(n: int, workers: int, fn: Callable[[int, int], R]) -> list[R]:
+    """``fn(a, b)`` for ``min(workers, n)`` (at least one) contiguous ranges ``a .. b - 1`` that
+    cover ``0 .. n - 1``, each on a thread of its own when there are several.
+
+    Returns
+    -------
+    list
+        The results, in the ranges' order.
+    """
+    cuts = np.linspace(0, n, max(1, min(workers, n)) + 1).astype(int)
+    parts = [(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]
+    if len(parts) == 1:
+        return [fn(*parts[0])]
+    with ThreadPoolExecutor(len(parts)) as pool:
+        return list(pool.map(lambda ab: fn(*ab), parts))
 
 
 _WARNINGS_LOCK = threading.Lock()

@@ -119,3 +119,21 @@ def test_exclusion_mask_is_the_per_frame_definition(mapped, a, length, take, who
         (ti == names.index(take))[:, None] & (sec >= a) & (sec < a + length)
     )
     np.testing.assert_array_equal(got, want)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 50), st.integers(1, 9))
+def test_work_in_parts_covers_every_row_once_in_order(n, workers):
+    # the index's one-off passes (norms, the 8-bit and frame copies) share rows out this way
+    import threading
+
+    from gesturekit.search.threads import in_parts
+
+    seen = []
+    out = in_parts(n, workers, lambda a, b: (a, b, threading.get_ident()))
+    for a, b, _ in out:
+        seen.extend(range(a, b))
+    assert seen == list(range(n))
+    assert len(out) == max(1, min(workers, n))
+    if len(out) == 1:
+        assert out[0][2] == threading.get_ident()  # one part runs here, no thread started
