@@ -6,4 +6,4 @@ version is written: pyproject.toml reads it from here (``dynamic = ["version"]``
 CHANGELOG.md's newest release names it (tests/project/test_version.py checks both).
 """
 
-__version__ = "0.4.3"
+__version__ = "0.4.4"
