@@ -1,7 +1,8 @@
 """Steps 1-4 of Algorithm 1 for one query, after the scan of a step (:mod:`gesturekit.search.index`).
 
 Step 1 (per clip the nearest admissible non-zero start) takes the scan's minimum where it is
-decisive and resolves the other clips exactly, tier by tier. Steps 2-4 rank the survivors by
+decisive and resolves the other clips exactly, tier by tier (a single query's scan has resolved
+them already, on its threads: then there are none). Steps 2-4 rank the survivors by
 pose and by audio distance: ranks are known up to groups of near-equal estimates, and only
 groups holding a clip that could make the top ``width`` of the combined ranking are settled with
 exact values. The compiled loops are in :mod:`gesturekit.search.kernels` (``survivors``,

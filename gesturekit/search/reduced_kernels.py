@@ -352,7 +352,7 @@ def settle_open(
     """
     poses, query_pose, q_sqnorm = pose
     clip_max_sqnorm, err_factor, tiny = pose_bound
-    best_start, best_d2, best_err, undecided = scan_out
+    best_start, best_d2, best_err, _ = scan_out
     opened, first, last, least, zeros, t32s, bounds, n_open = opened_clips
     T = est.shape[1]
     inf = np.float32(np.inf)
@@ -422,7 +422,7 @@ def nearest_audio(
     ``again`` and the float32 tier did not make it, the nearest start's float32 estimate."""
     poses, query_pose, q_sqnorm = pose
     clip_max_sqnorm, err_factor, tiny = pose_bound
-    best_start, best_d2, best_err, undecided = scan_out
+    best_start, best_d2, best_err, _ = scan_out
     features, sqnorms, query_audio, query_audio_sqnorm = audio
     audio_est, audio_inexact = audio_out
     nc = est.shape[0]
