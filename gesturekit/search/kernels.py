@@ -130,18 +130,33 @@ def clip_minimum_within(
     """:func:`clip_minimum` of a row whose estimates outside starts ``lo .. hi - 1`` are +inf
     (the same result, reading only those starts; the first start 0 where none is finite)."""
     inf = np.float32(np.inf)
-    # One running minimum by selection and loops without early exits: a clip's row is short,
-    # and a branch that leaves a loop costs more there than the comparisons (the estimates are
-    # never NaN; the first of equal values is kept, as the first minimum is below).
-    best = inf
-    for s in range(lo, hi):
-        v = est[c, s]
-        best = v if v < best else best
+    # Four running minima by selection: one would make a chain of dependent comparisons (the
+    # estimates are never NaN, so any order gives the same least value; of equal zeros of either
+    # sign, the first one's value is taken below).
+    m0 = m1 = m2 = m3 = inf
+    s = lo
+    while s + 4 <= hi:
+        v0, v1, v2, v3 = est[c, s], est[c, s + 1], est[c, s + 2], est[c, s + 3]
+        m0 = v0 if v0 < m0 else m0
+        m1 = v1 if v1 < m1 else m1
+        m2 = v2 if v2 < m2 else m2
+        m3 = v3 if v3 < m3 else m3
+        s += 4
+    while s < hi:
+        v0 = est[c, s]
+        m0 = v0 if v0 < m0 else m0
+        s += 1
+    m0 = m1 if m1 < m0 else m0
+    m2 = m3 if m3 < m2 else m2
+    best = m2 if m2 < m0 else m0
     if not best < inf:
         return 0, best, False
-    arg = hi
+    arg = lo
     for s in range(lo, hi):  # the first minimum
-        arg = min(arg, s if est[c, s] == best else hi)
+        if est[c, s] == best:
+            arg = s
+            break
+    best = est[c, arg]
     t32 = threshold(best, err)
     count = 0
     for s in range(lo, hi):
