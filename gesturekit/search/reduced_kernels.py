@@ -620,18 +620,12 @@ def scan_frames(
         for s in range(covered, T):
             beyond += marked[c, s] < inf
         if beyond > 0:  # a start whose frames run past the clip: every admissible start in float32
-            a, b = T, -1
+            # (nothing known of them: each estimate 0 within a bound 0, so any could be at zero)
+            a = T
             for s in range(T):
-                if bias[c, s] < inf:
-                    est[c, s] = np.float32(0.0)
-                    a = min(a, s)
-                    b = s
-                else:
-                    est[c, s] = inf
-            opened[n_open], first[n_open], last[n_open], least[n_open] = c, a, b, a
-            zeros[n_open], t32s[n_open] = True, inf
-            bounds[n_open, 0], bounds[n_open, 1] = 0.0, 0.0
-            n_open += 1
+                est[c, s] = np.float32(0.0) if bias[c, s] < inf else inf
+                a = min(a, s if bias[c, s] < inf else T)
+            n_open = open_clip(est, c, (a, 0.0, 0.0, 0.0), (opened, first, last, least, zeros, t32s, bounds), n_open)
             continue
         for k in range(n):
             for i in range(K):
